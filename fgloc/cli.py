@@ -1,0 +1,77 @@
+"""The ``fgloc`` command line: one typer app, one module per subcommand group.
+
+Each module in :mod:`fgloc.commands` exposes ``register(app)``; this file only
+wires them together and turns :class:`fgloc.errors.FglocError` into a one-line
+message with exit status 2 (never a traceback).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import pkgutil
+import sys
+
+import typer
+
+from fgloc.errors import FglocError
+
+app = typer.Typer(
+    name="fgloc",
+    help="Indoor robot localization without ROS: EKF, GTSAM smoothers, AMCL/KISS-ICP/native scan matching.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _register_all() -> None:
+    import fgloc.commands as pkg
+
+    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda i: i.name):
+        mod = importlib.import_module(f"fgloc.commands.{info.name}")
+        reg = getattr(mod, "register", None)
+        if reg is not None:
+            reg(app)
+
+
+@app.command("version")
+def version() -> None:
+    """Print the fgloc version."""
+    from fgloc import __version__
+
+    print(__version__)
+
+
+_register_all()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: run the app, map user errors to one line on stderr and exit 2."""
+    logging.basicConfig(level=logging.WARNING, format="fgloc: %(levelname)s: %(message)s")
+    try:
+        app(args=argv, standalone_mode=False)
+    except FglocError as e:
+        print(f"fgloc: error: {e}", file=sys.stderr)
+        return 2
+    except (typer.Exit, SystemExit) as e:
+        code = getattr(e, "exit_code", getattr(e, "code", 0))
+        return int(code or 0)
+    except typer.Abort:
+        print("fgloc: aborted", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("fgloc: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # click usage errors
+        import click
+
+        if isinstance(e, click.ClickException):
+            e.show()
+            return e.exit_code
+        raise
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,128 @@
+"""SE(2) helpers on plain numpy arrays.
+
+A pose is a 1-D array ``[x_m, y_m, yaw_rad]`` (index constants ``X, Y, YAW``);
+arrays of poses have shape ``(N, 3)``.  All functions broadcast over leading
+dimensions.  Angles are radians, wrapped to ``[-pi, pi)``.
+
+Frames follow REP 103 (x forward, y left, z up, yaw counter-clockwise).
+``compose(a, b)`` is ``a (+) b``: the pose ``b`` expressed in frame ``a``
+mapped to the parent frame of ``a``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+X, Y, YAW = 0, 1, 2
+
+FloatArray = NDArray[np.float64]
+
+
+def wrap_angle(a: ArrayLike) -> FloatArray | float:
+    """Wrap angle(s) in radians to ``[-pi, pi)``."""
+    w = (np.asarray(a, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """``a (+) b`` for SE(2) poses ``[x, y, yaw]`` (broadcasting)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., YAW]), np.sin(a[..., YAW])
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., X] = a[..., X] + c * b[..., X] - s * b[..., Y]
+    out[..., Y] = a[..., Y] + s * b[..., X] + c * b[..., Y]
+    out[..., YAW] = wrap_angle(a[..., YAW] + b[..., YAW])
+    return out
+
+
+def inverse(a: ArrayLike) -> FloatArray:
+    """Inverse of SE(2) pose(s)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., YAW]), np.sin(a[..., YAW])
+    out = np.empty_like(a)
+    out[..., X] = -c * a[..., X] - s * a[..., Y]
+    out[..., Y] = s * a[..., X] - c * a[..., Y]
+    out[..., YAW] = wrap_angle(-a[..., YAW])
+    return out
+
+
+def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """Relative pose ``a^-1 (+) b`` (b expressed in the frame of a)."""
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: ArrayLike, points: ArrayLike) -> FloatArray:
+    """Map points ``(N, 2)`` from the frame of ``pose`` into its parent frame."""
+    pose = np.asarray(pose, dtype=float)
+    pts = np.asarray(points, dtype=float)
+    c, s = np.cos(pose[YAW]), np.sin(pose[YAW])
+    out = np.empty_like(pts)
+    out[:, 0] = pose[X] + c * pts[:, 0] - s * pts[:, 1]
+    out[:, 1] = pose[Y] + s * pts[:, 0] + c * pts[:, 1]
+    return out
+
+
+def rot2(yaw: float) -> FloatArray:
+    """2x2 rotation matrix."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def to_matrix(pose: ArrayLike) -> FloatArray:
+    """3x3 homogeneous matrix of a pose."""
+    p = np.asarray(pose, dtype=float)
+    m = np.eye(3)
+    m[:2, :2] = rot2(p[YAW])
+    m[:2, 2] = p[:2]
+    return m
+
+
+def from_matrix(m: ArrayLike) -> FloatArray:
+    """Pose ``[x, y, yaw]`` from a 3x3 (or 4x4, z ignored) homogeneous matrix."""
+    m = np.asarray(m, dtype=float)
+    return np.array([m[0, -1], m[1, -1], np.arctan2(m[1, 0], m[0, 0])])
+
+
+def yaw_to_quaternion(yaw: ArrayLike) -> FloatArray:
+    """Quaternion ``[qx, qy, qz, qw]`` of a rotation about z."""
+    yaw = np.asarray(yaw, dtype=float)
+    return np.stack(
+        [np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)], axis=-1
+    )
+
+
+def quaternion_to_yaw(qx: ArrayLike, qy: ArrayLike, qz: ArrayLike, qw: ArrayLike) -> FloatArray | float:
+    """Yaw (rotation about z) of a quaternion, as ROS tf2 ``getYaw`` does."""
+    qx, qy, qz, qw = (np.asarray(v, dtype=float) for v in (qx, qy, qz, qw))
+    y = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return float(y) if np.ndim(y) == 0 else y
+
+
+def rotate_covariance(cov: ArrayLike, yaw: float) -> FloatArray:
+    """Rotate a 3x3 ``[x, y, yaw]`` covariance by ``yaw`` (the xy block only)."""
+    r = np.eye(3)
+    r[:2, :2] = rot2(yaw)
+    c = np.asarray(cov, dtype=float)
+    return r @ c @ r.T
+
+
+def interpolate_poses(stamps: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Linear interpolation of poses at times ``t`` (yaw interpolated on the circle).
+
+    ``stamps`` must be increasing; ``t`` outside ``[stamps[0], stamps[-1]]`` is clamped.
+    """
+    stamps = np.asarray(stamps, dtype=float)
+    poses = np.asarray(poses, dtype=float)
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    tc = np.clip(t, stamps[0], stamps[-1])
+    i1 = np.clip(np.searchsorted(stamps, tc, side="right"), 1, len(stamps) - 1)
+    i0 = i1 - 1
+    dt = stamps[i1] - stamps[i0]
+    f = np.where(dt > 0, (tc - stamps[i0]) / np.where(dt > 0, dt, 1.0), 0.0)
+    out = np.empty((len(t), 3))
+    out[:, :2] = poses[i0, :2] + f[:, None] * (poses[i1, :2] - poses[i0, :2])
+    dyaw = wrap_angle(poses[i1, YAW] - poses[i0, YAW])
+    out[:, YAW] = wrap_angle(poses[i0, YAW] + f * dyaw)
+    return out

@@ -1,0 +1,171 @@
+"""Stamped measurement types and the trajectory type.
+
+Every stamp is seconds (float, the ROS ``header.stamp`` as ``sec + nanosec*1e-9``).
+Frames follow REP 105: ``map`` (global, fixed), ``odom`` (continuous, drifting),
+``base_link`` (robot body), ``laser`` (the scanner).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.geometry import interpolate_poses, wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+# Indices into a body twist vector.
+VX, VY, WZ = 0, 1, 2
+
+
+@dataclass
+class Odometry:
+    """Wheel odometry (``nav_msgs/Odometry``).
+
+    ``twist`` is the body-frame twist ``[vx_mps, vy_mps, wz_radps]`` in ``child_frame``
+    (``base_link``); ``twist_cov`` its 3x3 covariance (None if unknown).
+    ``pose`` is the dead-reckoned pose ``[x, y, yaw]`` in the ``odom`` frame when the
+    source provides one (CARMEN, most ROS drivers), else None.
+    """
+
+    stamp: float
+    twist: FloatArray
+    twist_cov: FloatArray | None = None
+    pose: FloatArray | None = None
+    pose_cov: FloatArray | None = None
+    frame_id: str = "odom"
+    child_frame_id: str = "base_link"
+
+
+@dataclass
+class CompassHeading:
+    """Absolute heading from a compass / IMU (``sensor_msgs/Imu``).
+
+    ``yaw_rad`` is the orientation yaw in the sensor's own north-referenced frame
+    (which may be offset from ``map``); ``yaw_rate_radps`` the z angular velocity.
+    Variances of NaN mean "not provided"; per REP 145 a ``-1`` first covariance
+    element in the message means the field is absent: readers turn that into None.
+    """
+
+    stamp: float
+    yaw_rad: float | None
+    yaw_rate_radps: float | None = None
+    yaw_var: float = float("nan")
+    yaw_rate_var: float = float("nan")
+    frame_id: str = "imu"
+
+
+@dataclass
+class LaserScan:
+    """A planar scan (``sensor_msgs/LaserScan``), REP 117 conventions.
+
+    ``ranges`` are metres, float32; ``+inf`` = no return within range_max,
+    ``-inf`` = too close, NaN = invalid measurement.  Beam ``i`` is at angle
+    ``angle_min + i * angle_increment`` in ``frame_id`` and was measured at
+    ``stamp + i * time_increment``.
+    """
+
+    stamp: float
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: NDArray[np.float32]
+    time_increment: float = 0.0
+    scan_time: float = 0.0
+    intensities: NDArray[np.float32] | None = None
+    frame_id: str = "laser"
+
+    @property
+    def angles(self) -> FloatArray:
+        return self.angle_min + self.angle_increment * np.arange(len(self.ranges))
+
+    def valid_mask(self) -> NDArray[np.bool_]:
+        """Beams with a finite return inside ``[range_min, range_max]``."""
+        r = np.asarray(self.ranges, dtype=float)
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r >= self.range_min) & (r <= self.range_max) & (r > 0)
+
+    def points(self) -> FloatArray:
+        """Valid returns as ``(N, 2)`` points in the laser frame."""
+        m = self.valid_mask()
+        r = np.asarray(self.ranges, dtype=float)[m]
+        a = self.angles[m]
+        return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+@dataclass
+class PoseFix:
+    """A pose with covariance (``geometry_msgs/PoseWithCovarianceStamped``) in ``frame_id``.
+
+    ``cov`` is 3x3 over ``[x, y, yaw]``.  ``quality`` is a front-end score in [0, 1].
+    """
+
+    stamp: float
+    pose: FloatArray
+    cov: FloatArray
+    quality: float = 1.0
+    source: str = ""
+    frame_id: str = "map"
+
+
+@dataclass
+class StaticTransform:
+    """A 2-D static transform ``parent -> child`` (e.g. ``base_link -> laser``), ``[x, y, yaw]``."""
+
+    parent: str
+    child: str
+    pose: FloatArray
+    z: float = 0.0
+
+
+@dataclass
+class Trajectory:
+    """Timestamped SE(2) poses; timestamps are required and strictly increasing.
+
+    ``stamps`` shape ``(N,)`` seconds; ``poses`` shape ``(N, 3)`` ``[x, y, yaw]``.
+    """
+
+    stamps: FloatArray
+    poses: FloatArray
+    frame_id: str = "map"
+    covs: FloatArray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self.stamps = np.asarray(self.stamps, dtype=float).reshape(-1)
+        self.poses = np.asarray(self.poses, dtype=float).reshape(-1, 3)
+        if len(self.stamps) != len(self.poses):
+            raise ValueError(f"trajectory has {len(self.stamps)} stamps but {len(self.poses)} poses")
+        if len(self.stamps) > 1 and not np.all(np.diff(self.stamps) > 0):
+            raise ValueError("trajectory timestamps must be strictly increasing")
+        if not np.all(np.isfinite(self.poses)) or not np.all(np.isfinite(self.stamps)):
+            raise ValueError("trajectory contains non-finite values")
+        self.poses = self.poses.copy()
+        self.poses[:, 2] = wrap_angle(self.poses[:, 2])
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    @property
+    def duration(self) -> float:
+        return float(self.stamps[-1] - self.stamps[0]) if len(self) else 0.0
+
+    def interpolate(self, t: NDArray[np.float64] | float) -> FloatArray:
+        """Poses at times ``t`` by linear interpolation (clamped at the ends)."""
+        return interpolate_poses(self.stamps, self.poses, t)
+
+    def path_length(self) -> float:
+        return float(np.sum(np.linalg.norm(np.diff(self.poses[:, :2], axis=0), axis=1)))
+
+    @staticmethod
+    def from_unsorted(stamps: NDArray[np.float64], poses: NDArray[np.float64], frame_id: str = "map") -> Trajectory:
+        """Sort by time and drop duplicate stamps (keeping the last)."""
+        stamps = np.asarray(stamps, dtype=float)
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        order = np.argsort(stamps, kind="stable")
+        s, p = stamps[order], poses[order]
+        keep = np.ones(len(s), dtype=bool)
+        keep[:-1] = np.diff(s) > 0
+        return Trajectory(s[keep], p[keep], frame_id)

@@ -35,6 +35,11 @@ def _register_all() -> None:
             reg(app)
 
 
+@app.callback()
+def _root() -> None:
+    """Indoor robot localization without ROS."""
+
+
 @app.command("version")
 def version() -> None:
     """Print the fgloc version."""
@@ -63,12 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("fgloc: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # click usage errors
-        import click
-
-        if isinstance(e, click.ClickException):
+    except Exception as e:  # click usage errors (typer vendors click, so match by shape)
+        if hasattr(e, "show") and hasattr(e, "exit_code"):
             e.show()
-            return e.exit_code
+            return int(e.exit_code)
         raise
     return 0
 

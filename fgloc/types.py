@@ -80,7 +80,7 @@ class LaserScan:
 
     @property
     def angles(self) -> FloatArray:
-        return self.angle_min + self.angle_increment * np.arange(len(self.ranges))
+        return np.asarray(self.angle_min + self.angle_increment * np.arange(len(self.ranges)), dtype=np.float64)
 
     def valid_mask(self) -> NDArray[np.bool_]:
         """Beams with a finite return inside ``[range_min, range_max]``."""

@@ -25,7 +25,8 @@ def write_tum(path: str | Path, traj: Trajectory) -> Path:
         f.write("# timestamp x y z qx qy qz qw\n")
         for t, p, qq in zip(traj.stamps, traj.poses, q, strict=True):
             f.write(
-                f"{t:.9f} {p[0]!r} {p[1]!r} 0.0 {qq[0]!r} {qq[1]!r} {qq[2]!r} {qq[3]!r}\n"
+                f"{t:.9f} {float(p[0])!r} {float(p[1])!r} 0.0 "
+                f"{float(qq[0])!r} {float(qq[1])!r} {float(qq[2])!r} {float(qq[3])!r}\n"
             )
     return path
 

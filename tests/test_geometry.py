@@ -1,0 +1,68 @@
+import numpy as np
+import pytest
+
+from fgloc.geometry import (
+    between,
+    compose,
+    from_matrix,
+    interpolate_poses,
+    inverse,
+    quaternion_to_yaw,
+    to_matrix,
+    transform_points,
+    wrap_angle,
+    yaw_to_quaternion,
+)
+
+
+def test_wrap_angle_range_and_values():
+    a = np.linspace(-20, 20, 1001)
+    w = wrap_angle(a)
+    assert np.all(w >= -np.pi) and np.all(w < np.pi)
+    assert np.allclose(np.cos(w), np.cos(a)) and np.allclose(np.sin(w), np.sin(a))
+    assert wrap_angle(np.pi) == pytest.approx(-np.pi)
+    assert wrap_angle(3 * np.pi / 2) == pytest.approx(-np.pi / 2)
+
+
+def test_compose_matches_matrices():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        a = rng.uniform(-5, 5, 3)
+        b = rng.uniform(-5, 5, 3)
+        c = compose(a, b)
+        m = to_matrix(a) @ to_matrix(b)
+        assert np.allclose(c, from_matrix(m) * [1, 1, 1], atol=1e-12) or np.allclose(
+            c[:2], from_matrix(m)[:2]
+        )
+        assert np.isclose(np.cos(c[2]), m[0, 0]) and np.isclose(np.sin(c[2]), m[1, 0])
+
+
+def test_inverse_and_between():
+    rng = np.random.default_rng(2)
+    a = rng.uniform(-5, 5, (20, 3))
+    b = rng.uniform(-5, 5, (20, 3))
+    ident = compose(a, inverse(a))
+    assert np.allclose(ident, 0, atol=1e-12)
+    assert np.allclose(compose(a, between(a, b))[:, :2], b[:, :2])
+    assert np.allclose(wrap_angle(compose(a, between(a, b))[:, 2] - b[:, 2]), 0, atol=1e-12)
+
+
+def test_transform_points_known():
+    pts = transform_points([1.0, 2.0, np.pi / 2], [[1.0, 0.0], [0.0, 1.0]])
+    assert np.allclose(pts, [[1.0, 3.0], [0.0, 2.0]])
+
+
+def test_quaternion_roundtrip():
+    yaw = np.linspace(-3.1, 3.1, 17)
+    q = yaw_to_quaternion(yaw)
+    assert np.allclose(np.linalg.norm(q, axis=1), 1)
+    assert np.allclose(quaternion_to_yaw(q[:, 0], q[:, 1], q[:, 2], q[:, 3]), yaw)
+
+
+def test_interpolate_across_wrap():
+    stamps = np.array([0.0, 1.0])
+    poses = np.array([[0.0, 0.0, np.deg2rad(170)], [2.0, 0.0, np.deg2rad(-170)]])
+    p = interpolate_poses(stamps, poses, [0.5, -1.0, 5.0])
+    assert np.allclose(p[0, :2], [1.0, 0.0])
+    assert abs(wrap_angle(p[0, 2] - np.pi)) < 1e-9  # through 180 deg, not through 0
+    assert np.allclose(p[1], poses[0]) and np.allclose(p[2], poses[1])

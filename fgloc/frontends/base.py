@@ -1,0 +1,316 @@
+"""The scan-to-map front-end interface and the scan preprocessing all front-ends share.
+
+A front-end takes a :class:`~fgloc.types.LaserScan` (laser frame), a prior guess of
+the ``base_link`` pose in ``map`` (``[x_m, y_m, yaw_rad]``) and optionally the
+odometry motion since the previous call (``odom_delta``, base frame,
+``between(prev_odom, cur_odom)``) and returns a :class:`MatchResult`: the
+``base_link`` pose in ``map`` *at the scan stamp* (REP 117: the stamp is the time of
+the first beam), its 3x3 covariance over ``[x, y, yaw]``, a quality score in
+``[0, 1]``, or ``ok=False`` with a human-readable ``reason``.
+
+Front-ends never raise on bad input: scans full of NaN/inf/zero ranges, too few
+valid beams, a guess off the map or in unknown space all give "no fix" with a
+reason (:class:`FrontendBase` turns any unexpected exception into a no-fix too).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import YAW, transform_points, wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, StaticTransform
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "MatchResult",
+    "ScanMatcher",
+    "FrontendBase",
+    "PreprocessOptions",
+    "ScanPreprocessor",
+    "no_fix",
+    "check_guess",
+    "deskew_offsets",
+    "voxel_downsample",
+    "unpack_config",
+]
+
+
+@dataclass
+class MatchResult:
+    """The answer of a front-end.
+
+    ``pose``: ``base_link`` in ``map`` ``[x_m, y_m, yaw_rad]`` at the scan stamp (None if
+    no fix); ``cov``: 3x3 covariance of ``[x, y, yaw]`` in the map frame (m^2, rad^2);
+    ``quality`` in ``[0, 1]`` (front-end specific: inlier fraction or similar);
+    ``reason``: why there is no fix (empty when ``ok``); ``n_inliers``: beams that agreed.
+    """
+
+    ok: bool
+    pose: FloatArray | None
+    cov: FloatArray | None
+    quality: float = 0.0
+    reason: str = ""
+    n_inliers: int = 0
+    info: dict[str, Any] = field(default_factory=dict, repr=False)  # diagnostics (timings, iterations)
+
+
+def no_fix(reason: str, n_inliers: int = 0, quality: float = 0.0, **info: Any) -> MatchResult:
+    """A "no fix" result with its reason."""
+    return MatchResult(False, None, None, quality=quality, reason=reason, n_inliers=n_inliers, info=dict(info))
+
+
+@runtime_checkable
+class ScanMatcher(Protocol):
+    """What the pipeline calls. ``name`` identifies the front-end (``native``, ``kiss``, ``amcl``)."""
+
+    name: str
+
+    def match(
+        self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None
+    ) -> MatchResult: ...
+
+    def reset(self, pose: np.ndarray | None = None) -> None:
+        """Forget internal state; ``pose`` re-initialises, ``None`` = global localization (AMCL)."""
+        ...
+
+
+# ------------------------------------------------------------------ preprocessing
+@dataclass
+class PreprocessOptions:
+    """Scan preprocessing shared by the front-ends (all documented in ``config/frontends.yaml``).
+
+    ``max_beams``: keep at most this many valid beams by uniform striding (0 = all).
+    ``voxel_size_m``: 2-D voxel downsampling of the base-frame points (0 = off).
+    ``deskew``: undo motion distortion per beam when ``time_increment > 0`` and the
+    odometry motion since the last call is given.  ``min_valid_beams``: fewer -> no fix.
+    ``max_deskew_interval_s``: a gap between calls longer than this disables de-skew for
+    that scan (the constant-velocity assumption would not hold).
+    """
+
+    max_beams: int = 0
+    voxel_size_m: float = 0.0
+    deskew: bool = True
+    min_valid_beams: int = 10
+    max_deskew_interval_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.max_beams < 0 or self.voxel_size_m < 0 or self.min_valid_beams < 1:
+            raise ConfigError(
+                f"preprocess: max_beams >= 0, voxel_size_m >= 0, min_valid_beams >= 1 required, got "
+                f"{self.max_beams}, {self.voxel_size_m}, {self.min_valid_beams}"
+            )
+
+
+def _se2_log(delta: FloatArray) -> FloatArray:
+    """Twist ``[vx, vy, w]`` (per unit time) whose exponential is ``delta``."""
+    dx, dy, th = float(delta[0]), float(delta[1]), float(wrap_angle(delta[2]))
+    if abs(th) < 1e-9:
+        return np.array([dx, dy, th])
+    a = np.sin(th) / th
+    b = (1.0 - np.cos(th)) / th
+    det = a * a + b * b
+    return np.array([(a * dx + b * dy) / det, (-b * dx + a * dy) / det, th])
+
+
+def _se2_exp(twist: FloatArray, tau: FloatArray) -> FloatArray:
+    """Poses ``(N, 3)`` reached after time(s) ``tau`` at the constant body twist ``[vx, vy, w]``."""
+    vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
+    th = w * tau
+    out = np.empty((len(tau), 3))
+    if abs(w) < 1e-12:
+        out[:, 0] = vx * tau
+        out[:, 1] = vy * tau
+    else:
+        s, c1 = np.sin(th), 1.0 - np.cos(th)
+        out[:, 0] = (vx * s - vy * c1) / w
+        out[:, 1] = (vx * c1 + vy * s) / w
+    out[:, 2] = th
+    return out
+
+
+def deskew_offsets(
+    n_beams: int, time_increment: float, odom_delta: FloatArray, interval_s: float
+) -> FloatArray:
+    """Per-beam pose of ``base_link`` at beam ``i`` relative to the first beam, ``(n, 3)``.
+
+    Constant-velocity model: the robot moved by ``odom_delta`` (base frame) over the
+    last ``interval_s`` seconds and keeps that twist during the scan; beam ``i`` was
+    measured ``i * time_increment`` after the first beam (REP 117).
+    """
+    twist = _se2_log(np.asarray(odom_delta, dtype=float)) / float(interval_s)
+    tau = np.arange(n_beams, dtype=float) * float(time_increment)
+    return _se2_exp(twist, tau)
+
+
+def voxel_downsample(points: FloatArray, voxel_size: float) -> FloatArray:
+    """Keep the first point of each ``voxel_size`` square (stable order)."""
+    if voxel_size <= 0 or len(points) == 0:
+        return points
+    keys = np.floor(points / voxel_size).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+class ScanPreprocessor:
+    """Valid beams -> (de-skewed) points in ``base_link`` at the scan stamp.
+
+    Stateful only in the stamp of the previous call (the time base of ``odom_delta``).
+    Returns ``(points, "")`` or ``(None, reason)``; never raises on a bad scan.
+    """
+
+    def __init__(self, laser_mount: StaticTransform | np.ndarray | None, options: PreprocessOptions | None = None):
+        if laser_mount is None:
+            mount = np.zeros(3)
+        elif isinstance(laser_mount, StaticTransform):
+            mount = np.asarray(laser_mount.pose, dtype=float).reshape(3)
+        else:
+            mount = np.asarray(laser_mount, dtype=float).reshape(3)
+        self.mount: FloatArray = mount
+        self.options = options or PreprocessOptions()
+        self._last_stamp: float | None = None
+
+    def reset(self) -> None:
+        self._last_stamp = None
+
+    def __call__(
+        self, scan: LaserScan, odom_delta: np.ndarray | None = None
+    ) -> tuple[FloatArray | None, str]:
+        opt = self.options
+        try:
+            ranges = np.asarray(scan.ranges, dtype=float).reshape(-1)
+            stamp = float(scan.stamp)
+            a0, da = float(scan.angle_min), float(scan.angle_increment)
+            rmin, rmax = float(scan.range_min), float(scan.range_max)
+            t_inc = float(scan.time_increment or 0.0)
+        except (TypeError, ValueError, AttributeError) as e:
+            return None, f"malformed scan ({e.__class__.__name__}: {e})"
+        prev, self._last_stamp = self._last_stamp, stamp if np.isfinite(stamp) else None
+        if not (np.isfinite(a0) and np.isfinite(da)):
+            return None, "scan angles are not finite"
+        n = len(ranges)
+        if n == 0:
+            return None, "empty scan"
+        if not np.isfinite(rmin):
+            rmin = 0.0
+        if not (np.isfinite(rmax) and rmax > 0):
+            rmax = np.inf
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(ranges) & (ranges > 0) & (ranges >= rmin) & (ranges <= rmax)
+        idx = np.flatnonzero(valid)
+        if len(idx) < opt.min_valid_beams:
+            return None, f"only {len(idx)} valid beams (< {opt.min_valid_beams}; NaN/inf/zero/out-of-range dropped)"
+        if opt.max_beams and len(idx) > opt.max_beams:
+            stride = int(np.ceil(len(idx) / opt.max_beams))
+            idx = idx[::stride]
+        r = ranges[idx]
+        ang = a0 + da * idx
+        pts = transform_points(self.mount, np.column_stack([r * np.cos(ang), r * np.sin(ang)]))
+        if opt.deskew and t_inc > 0 and np.isfinite(t_inc) and odom_delta is not None:
+            od = np.asarray(odom_delta, dtype=float).reshape(-1)
+            interval = (stamp - prev) if (prev is not None and np.isfinite(stamp)) else float(scan.scan_time or 0.0)
+            if (
+                od.shape == (3,)
+                and np.all(np.isfinite(od))
+                and np.isfinite(interval)
+                and 0 < interval <= opt.max_deskew_interval_s
+            ):
+                offs = deskew_offsets(n, t_inc, od, interval)[idx]
+                c, s = np.cos(offs[:, YAW]), np.sin(offs[:, YAW])
+                pts = np.column_stack(
+                    [offs[:, 0] + c * pts[:, 0] - s * pts[:, 1], offs[:, 1] + s * pts[:, 0] + c * pts[:, 1]]
+                )
+        if opt.voxel_size_m > 0:
+            pts = voxel_downsample(pts, opt.voxel_size_m)
+            if len(pts) < opt.min_valid_beams:
+                return None, f"only {len(pts)} points after voxel downsampling (< {opt.min_valid_beams})"
+        return np.ascontiguousarray(pts), ""
+
+
+def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatArray | None, str]:
+    """Validate a prior guess: finite, on the map and not in unknown space. ``(pose, "")`` or ``(None, reason)``."""
+    try:
+        g = np.asarray(guess, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None, "guess is not a pose [x, y, yaw]"
+    if g.shape != (3,):
+        return None, f"guess must be [x, y, yaw], got shape {g.shape}"
+    if not np.all(np.isfinite(g)):
+        return None, "guess is not finite"
+    if not bool(occ_map.in_bounds(g[None, :2])[0]):
+        return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is off the map"
+    if bool(occ_map.unknown[tuple(occ_map.world_to_grid(g[None, :2])[0])]):
+        return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is in unknown space"
+    g = g.copy()
+    g[YAW] = wrap_angle(g[YAW])
+    return g, ""
+
+
+# ------------------------------------------------------------------ base class
+class FrontendBase:
+    """Common plumbing: the preprocessor, the guess check and the never-raise wrapper.
+
+    Subclasses implement ``_match(points_base, guess, scan)`` with points already in
+    ``base_link`` (de-skewed) and a validated guess.
+    """
+
+    name: str = "base"
+
+    def __init__(
+        self, occ_map: OccupancyMap, laser_mount: StaticTransform | None, preprocess: PreprocessOptions | None
+    ):
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.pre = ScanPreprocessor(laser_mount, preprocess)
+
+    def reset(self, pose: np.ndarray | None = None) -> None:
+        self.pre.reset()
+
+    def match(self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None) -> MatchResult:
+        try:
+            pts, why = self.pre(scan, odom_delta)
+            if pts is None:
+                return no_fix(why)
+            g, why = check_guess(self.map, guess)
+            if g is None:
+                return no_fix(why)
+            return self._match(pts, g, scan)
+        except Exception as e:  # never raise on bad input: report it as a no-fix
+            return no_fix(f"{self.name}: internal error ({e.__class__.__name__}: {e})")
+
+    def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:  # pragma: no cover
+        raise NotImplementedError
+
+
+def unpack_config(section: str, config: dict | None, allowed: set[str]) -> dict[str, Any]:
+    """Check a config section's keys (typos are a :class:`ConfigError`) and return a copy."""
+    cfg = dict(config or {})
+    bad = sorted(set(cfg) - allowed)
+    if bad:
+        raise ConfigError(
+            f"frontends config [{section}]: unknown key(s) {', '.join(bad)}; allowed: {', '.join(sorted(allowed))}"
+        )
+    return cfg
+
+
+def preprocess_from_config(section: str, cfg: dict | None) -> PreprocessOptions:
+    """Build :class:`PreprocessOptions` from a ``preprocess:`` sub-dict."""
+    allowed = {"max_beams", "voxel_size_m", "deskew", "min_valid_beams", "max_deskew_interval_s"}
+    c = unpack_config(f"{section}.preprocess", cfg, allowed)
+    try:
+        return PreprocessOptions(
+            max_beams=int(c.get("max_beams", 0)),
+            voxel_size_m=float(c.get("voxel_size_m", 0.0)),
+            deskew=bool(c.get("deskew", True)),
+            min_valid_beams=int(c.get("min_valid_beams", 10)),
+            max_deskew_interval_s=float(c.get("max_deskew_interval_s", 0.5)),
+        )
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"frontends config [{section}.preprocess]: bad value ({e})") from None
+

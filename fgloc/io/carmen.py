@@ -1,0 +1,333 @@
+"""CARMEN log files (``.clf`` / ``.log``, plain, gzip or bzip2) as a stream of fgloc messages.
+
+Line formats (one message per line, the last three fields are always
+``ipc_timestamp ipc_hostname logger_timestamp``; the ipc timestamp is the message time):
+
+* ``ODOM x y theta tv rv accel ...``                       -> ``("/odom", Odometry)``
+* ``FLASER n r1..rn x y theta odom_x odom_y odom_theta ...`` -> ``("/scan", LaserScan)``
+  (``RLASER`` the same for the rear laser, frame ``rear_laser``)
+* ``ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode
+  n r1..rn m rem1..remm laser_x laser_y laser_theta robot_x robot_y robot_theta
+  tv rv forward_safety side_safety turn_axis ...``            -> ``("/scan", LaserScan)``
+
+Everything else (``#`` comments, ``PARAM``, ``SYNC``, ``NEFF``, ``TRUEPOS``, ...) is skipped
+and counted; malformed lines are skipped and counted too, and one warning with the counts
+is logged at the end (never an exception for a bad line).
+
+Beam geometry of FLASER/RLASER (which carry no angles) follows CARMEN's own
+``carmen_laser_guess_angle_increment``: the first beam is at -90 deg; 180 or 181 beams are
+1 deg apart, 360 or 361 beams 0.5 deg, 400 or 401 beams 0.25 deg, any other count spreads
+``n`` beams over 180 deg (``pi / (n - 1)``).  So a 180-beam scan covers -90 .. +89 deg.
+
+No-return readings (REP 117 ``+inf``): CARMEN writes the laser's maximum code instead of
+"nothing seen" (81.83 / 81.91 m for SICK LMS error codes, 50.00 m in the ACES log, whose
+driver clipped at 50 m).  The threshold is decided per file from the first
+``PEEK_LASER_LINES`` FLASER/RLASER scans: if their largest reading repeats in at least
+``NO_RETURN_FRACTION`` of all beams it is the no-return code; the threshold is that code,
+capped at ``SICK_MAX_RANGE_M`` (a SICK LMS cannot measure beyond 80 m, so anything at or
+above that is an error code).  Readings ``>= threshold`` become ``+inf`` and the scan's
+``range_max`` is the threshold.  Readings ``<= 0`` become NaN (invalid).  ROBOTLASER1 lines
+carry their own maximum range, used the same way.  ``max_range_m`` overrides the detection.
+
+Laser mount: the FLASER pose ``x y theta`` is the laser's pose and ``odom_x odom_y
+odom_theta`` the robot's odometry pose (ROBOTLASER1: laser pose vs robot pose), so
+``base_link -> laser = between(odom_pose, laser_pose)`` of the first laser line.  It is
+emitted once, first, as ``("/tf_static", [StaticTransform, ...])`` (identity when the two
+poses coincide, as in the Radish logs).
+
+Odometry: from ODOM lines (pose ``[x, y, theta]``, twist ``[tv, 0, rv]``).  If the peek
+window (the lines up to the ``PEEK_LASER_LINES``-th laser line) has no ODOM line, odometry
+is taken from every laser line's odometry pose instead (ROBOTLASER1: with its tv / rv; FLASER:
+twist by finite difference of consecutive poses, zero for the first).
+
+The file is read twice, lazily: a short peek (mount, no-return code, ODOM present) and then
+the streaming pass; it is never loaded whole.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import io
+import logging
+import math
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from fgloc.errors import LogError
+from fgloc.geometry import between
+from fgloc.types import LaserScan, Odometry, StaticTransform
+
+log = logging.getLogger(__name__)
+
+PEEK_LASER_LINES = 500
+NO_RETURN_FRACTION = 0.005
+SICK_MAX_RANGE_M = 80.0
+RANGE_MIN_M = 0.0
+
+SCAN_TOPIC = "/scan"
+ODOM_TOPIC = "/odom"
+TF_STATIC_TOPIC = "/tf_static"
+
+LASER_KINDS = ("FLASER", "RLASER", "ROBOTLASER1")
+IGNORED_KINDS = ("PARAM", "SYNC", "NEFF", "TRUEPOS", "NMEAGGA", "NMEARMC", "SONAR", "BUMPER")
+FRAME_OF = {"FLASER": "laser", "RLASER": "rear_laser", "ROBOTLASER1": "laser"}
+
+
+def open_text(path: str | Path) -> IO[str]:
+    """Open a plain, gzip or bzip2 text file (by its magic bytes), decoding leniently."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            magic = f.read(3)
+    except FileNotFoundError:
+        raise LogError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise LogError(f"{path}: is a directory, not a log file") from None
+    except OSError as e:
+        raise LogError(f"{path}: cannot open ({e.strerror or e})") from None
+    raw: IO[bytes] | gzip.GzipFile | bz2.BZ2File
+    if magic[:2] == b"\x1f\x8b":
+        raw = gzip.open(path, "rb")
+    elif magic == b"BZh":
+        raw = bz2.open(path, "rb")
+    else:
+        raw = path.open("rb")
+    return io.TextIOWrapper(raw, encoding="utf-8", errors="replace")
+
+
+def flaser_angle_increment(n: int) -> float:
+    """Beam spacing of an ``n``-beam FLASER/RLASER scan (CARMEN's convention, radians)."""
+    if n in (180, 181):
+        return math.pi / 180.0
+    if n in (360, 361):
+        return math.pi / 360.0
+    if n in (400, 401):
+        return math.pi / 720.0
+    return math.pi / max(n - 1, 1)
+
+
+@dataclass
+class _Laser:
+    kind: str
+    stamp: float
+    ranges: np.ndarray
+    laser_pose: np.ndarray | None
+    odom_pose: np.ndarray | None
+    angle_min: float
+    angle_increment: float
+    max_range: float | None = None  # ROBOTLASER1 only
+    twist: np.ndarray | None = None  # ROBOTLASER1 only (tv, 0, rv)
+
+
+def _parse_odom(tok: list[str]) -> Odometry:
+    # ODOM x y theta tv rv accel ipc_timestamp host logger_timestamp
+    x, y, th, tv, rv = (float(v) for v in tok[1:6])
+    stamp = float(tok[7])
+    return Odometry(
+        stamp=stamp,
+        twist=np.array([tv, 0.0, rv]),
+        pose=np.array([x, y, th]),
+    )
+
+
+def _parse_laser(tok: list[str]) -> _Laser:
+    kind = tok[0]
+    if kind == "ROBOTLASER1":
+        start, _fov, res, max_range = (float(v) for v in tok[2:6])
+        n = int(tok[8])
+        ranges = np.array(tok[9 : 9 + n], dtype=np.float64)
+        i = 9 + n
+        m = int(tok[i])
+        i += 1 + m
+        rest = [float(v) for v in tok[i : i + 11]]
+        if len(rest) < 11 or len(tok) < i + 12 or len(ranges) != n:
+            raise ValueError("short ROBOTLASER1 line")
+        stamp = float(tok[i + 11])
+        return _Laser(
+            kind, stamp, ranges, np.array(rest[0:3]), np.array(rest[3:6]), start, res,
+            max_range=max_range, twist=np.array([rest[6], 0.0, rest[7]]),
+        )
+    n = int(tok[1])
+    ranges = np.array(tok[2 : 2 + n], dtype=np.float64)
+    if len(ranges) != n:
+        raise ValueError("short laser line")
+    tail = tok[2 + n :]
+    laser_pose = odom_pose = None
+    if len(tail) >= 9:  # x y theta odom_x odom_y odom_theta ipc host logger
+        vals = [float(v) for v in tail[:7]]
+        laser_pose, odom_pose, stamp = np.array(vals[0:3]), np.array(vals[3:6]), vals[6]
+    elif len(tail) >= 1:  # old format: ipc host logger only
+        stamp = float(tail[0])
+    else:
+        raise ValueError("laser line without timestamp")
+    return _Laser(kind, stamp, ranges, laser_pose, odom_pose, -math.pi / 2, flaser_angle_increment(n))
+
+
+@dataclass
+class _Peek:
+    mounts: dict[str, np.ndarray] = field(default_factory=dict)
+    has_odom: bool = False
+    no_return_m: float = SICK_MAX_RANGE_M
+    n_laser: int = 0
+
+
+class CarmenReader:
+    """Iterable over ``(topic, message)`` of one CARMEN log; ``stats`` counts the lines.
+
+    ``stats`` (filled while iterating): ``{"ODOM": n, "FLASER": n, ..., "skipped": {kind: n},
+    "malformed": {kind: n}, "odom_from_laser": bool, "no_return_m": float}``.
+    """
+
+    def __init__(self, path: str | Path, max_range_m: float | None = None) -> None:
+        self.path = Path(path)
+        self.max_range_m = max_range_m
+        self.stats: dict = {}
+        self._peek = self._do_peek()
+
+    # -- first, short pass ------------------------------------------------------------------
+    def _do_peek(self) -> _Peek:
+        peek = _Peek()
+        values: list[np.ndarray] = []
+        with open_text(self.path) as f:
+            try:
+                for line in f:
+                    tok = line.split()
+                    if not tok:
+                        continue
+                    if tok[0] == "ODOM":
+                        peek.has_odom = True
+                    elif tok[0] in LASER_KINDS:
+                        try:
+                            las = _parse_laser(tok)
+                        except (ValueError, IndexError):
+                            continue
+                        peek.n_laser += 1
+                        frame = FRAME_OF[las.kind]
+                        if frame not in peek.mounts:
+                            if las.laser_pose is not None and las.odom_pose is not None:
+                                mount = between(las.odom_pose, las.laser_pose)
+                                mount[np.abs(mount) < 1e-9] = 0.0  # float noise of equal poses
+                                peek.mounts[frame] = mount
+                            else:
+                                peek.mounts[frame] = np.zeros(3)
+                        if las.kind != "ROBOTLASER1":
+                            values.append(las.ranges)
+                        if peek.n_laser >= PEEK_LASER_LINES:
+                            break
+            except (OSError, EOFError, UnicodeError) as e:
+                raise LogError(f"{self.path}: cannot read CARMEN log ({e})") from None
+        if peek.n_laser == 0 and not peek.has_odom:
+            raise LogError(f"{self.path}: no ODOM, FLASER, RLASER or ROBOTLASER1 lines (not a CARMEN log?)")
+        if values:
+            allv = np.concatenate(values)
+            top = float(allv.max())
+            if np.count_nonzero(allv == top) >= NO_RETURN_FRACTION * allv.size:
+                peek.no_return_m = min(top, SICK_MAX_RANGE_M)
+        if self.max_range_m is not None:
+            peek.no_return_m = float(self.max_range_m)
+        return peek
+
+    @property
+    def laser_mounts(self) -> list[StaticTransform]:
+        """``base_link -> laser`` (and ``-> rear_laser``) from the first laser line of each."""
+        out = [StaticTransform("base_link", fr, p.copy()) for fr, p in self._peek.mounts.items()]
+        return out or [StaticTransform("base_link", "laser", np.zeros(3))]
+
+    # -- second, streaming pass -------------------------------------------------------------
+    def _scan(self, las: _Laser) -> LaserScan:
+        r = las.ranges
+        if las.max_range is not None:
+            rmax = float(las.max_range)
+            if self.max_range_m is not None:
+                rmax = min(rmax, float(self.max_range_m))
+        else:
+            rmax = self._peek.no_return_m
+        out = r.astype(np.float32)
+        with np.errstate(invalid="ignore"):
+            out[r >= rmax] = np.inf
+            out[r <= 0.0] = np.nan
+        return LaserScan(
+            stamp=las.stamp,
+            angle_min=las.angle_min,
+            angle_increment=las.angle_increment,
+            range_min=RANGE_MIN_M,
+            range_max=rmax,
+            ranges=out,
+            frame_id=FRAME_OF[las.kind],
+        )
+
+    def __iter__(self) -> Iterator[tuple[str, object]]:
+        counts: Counter[str] = Counter()
+        skipped: Counter[str] = Counter()
+        malformed: Counter[str] = Counter()
+        odom_from_laser = not self._peek.has_odom
+        self.stats = {
+            "counts": counts, "skipped": skipped, "malformed": malformed,
+            "odom_from_laser": odom_from_laser, "no_return_m": self._peek.no_return_m,
+        }
+        yield TF_STATIC_TOPIC, self.laser_mounts
+        prev_odom: tuple[float, np.ndarray] | None = None
+        lineno = 0
+        with open_text(self.path) as f:
+            try:
+                for line in f:
+                    lineno += 1
+                    tok = line.split()
+                    if not tok:
+                        continue
+                    kind = tok[0]
+                    if kind == "ODOM":
+                        try:
+                            msg = _parse_odom(tok)
+                        except (ValueError, IndexError):
+                            malformed[kind] += 1
+                            continue
+                        counts[kind] += 1
+                        yield ODOM_TOPIC, msg
+                    elif kind in LASER_KINDS:
+                        try:
+                            las = _parse_laser(tok)
+                        except (ValueError, IndexError):
+                            malformed[kind] += 1
+                            continue
+                        counts[kind] += 1
+                        yield SCAN_TOPIC, self._scan(las)
+                        if odom_from_laser and las.odom_pose is not None and kind != "RLASER":
+                            twist = las.twist
+                            if twist is None:
+                                twist = np.zeros(3)
+                                if prev_odom is not None and las.stamp > prev_odom[0]:
+                                    twist = between(prev_odom[1], las.odom_pose) / (las.stamp - prev_odom[0])
+                            prev_odom = (las.stamp, las.odom_pose)
+                            counts["odom_from_laser"] += 1
+                            yield ODOM_TOPIC, Odometry(stamp=las.stamp, twist=twist, pose=las.odom_pose.copy())
+                    elif kind.startswith("#"):
+                        skipped["#"] += 1
+                    else:
+                        skipped[kind] += 1
+            except (OSError, EOFError, UnicodeError) as e:
+                log.warning("%s: read error after line %d (%s); stopping there", self.path, lineno, e)
+                self.stats["read_error"] = f"after line {lineno}: {e}"
+        unknown = {k: v for k, v in skipped.items() if k != "#" and k not in IGNORED_KINDS}
+        if malformed or unknown:
+            log.warning(
+                "%s: skipped %d malformed line(s) %s and %d unknown line(s) %s",
+                self.path, sum(malformed.values()), dict(malformed), sum(unknown.values()), unknown,
+            )
+        if skipped:
+            log.info("%s: skipped lines by type %s", self.path, dict(skipped))
+
+
+def iter_carmen(path: str | Path, max_range_m: float | None = None) -> Iterator[tuple[str, object]]:
+    """``(topic, message)`` pairs of a CARMEN log, lazily; first ``("/tf_static", [mount])``.
+
+    Raises :class:`LogError` (file missing, unreadable, or no CARMEN lines) before the first
+    message; bad lines later are skipped and counted (see :class:`CarmenReader`).
+    """
+    return iter(CarmenReader(path, max_range_m=max_range_m))

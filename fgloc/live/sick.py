@@ -1,0 +1,503 @@
+"""SICK LMS1xx-class laser scanners over TCP: CoLa-A (ASCII) framing and LMDscandata.
+
+CoLa-A telegrams are ``STX (0x02) <ASCII tokens separated by spaces> ETX (0x03)``.
+The scan telegram (``sSN LMDscandata`` when streamed after ``sEN LMDscandata 1``,
+``sRA LMDscandata`` as the answer to a single ``sRN LMDscandata``) is::
+
+    sSN LMDscandata <version> <device> <serial> <status1> <status2>
+        <telegram_counter> <scan_counter> <time_since_startup_us> <time_of_transmission_us>
+        <inputs1> <inputs2> <outputs1> <outputs2> <reserved> <scan_freq_1/100Hz> <meas_freq_100Hz>
+        <n_encoders> [<enc_pos> <enc_speed>]*n
+        <n_16bit_channels> [<name> <scale f32> <offset f32> <start_angle i32 1/10000deg>
+                            <step u16 1/10000deg> <n_values> <v>*n]*n
+        <n_8bit_channels> [same block layout]*n
+        <position 0|1 ...> <name 0|1 ...> <comment 0|1 ...> <time 0|1 ...> <events 0|1 ...>
+
+Numbers are hexadecimal without leading zeros; the scale factor and offset are the
+IEEE-754 float32 bit pattern in hex (``3F800000`` = 1.0).  Distances (DIST1) are mm
+after scaling; 0 means no echo -> ``+inf`` (REP 117).  The device angle 0 is 90 deg to
+the right of the scanner's forward axis on the LMS1xx, hence the default
+``angle_offset_deg = -90`` to get REP 103 angles (x forward, counter-clockwise).
+
+Parsing is pure (:func:`parse_lmdscandata`, :class:`ColaFramer`); :class:`SickClient`
+is the threaded TCP client with reconnect and back-off.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import struct
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from fgloc.live.clock import ClockSync
+from fgloc.types import LaserScan
+
+log = logging.getLogger(__name__)
+
+STX = 0x02
+ETX = 0x03
+MAX_TELEGRAM = 64 * 1024
+
+
+class TelegramError(ValueError):
+    """A malformed telegram; ``reason`` is a short counter key."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+# ----------------------------------------------------------------------------- framing
+
+
+@dataclass
+class FramerStats:
+    bytes_in: int = 0
+    telegrams: int = 0
+    garbage_bytes: int = 0  # bytes outside STX..ETX
+    truncated: int = 0  # STX seen again before ETX, or telegram too long
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+@dataclass
+class ColaFramer:
+    """Incremental STX/ETX de-framer: ``feed(chunk) -> list[bytes]`` (payloads, no STX/ETX)."""
+
+    max_len: int = MAX_TELEGRAM
+    stats: FramerStats = field(default_factory=FramerStats)
+    _buf: bytearray = field(default_factory=bytearray)
+    _in: bool = False
+
+    def reset(self) -> None:
+        """Forget a partial telegram (e.g. after a reconnect); counted as truncated."""
+        if self._in:
+            self.stats.truncated += 1
+        self._buf.clear()
+        self._in = False
+
+    def feed(self, chunk: bytes | bytearray) -> list[bytes]:
+        self.stats.bytes_in += len(chunk)
+        out: list[bytes] = []
+        data = bytes(chunk)
+        pos = 0
+        n = len(data)
+        while pos < n:
+            if not self._in:
+                j = data.find(b"\x02", pos)
+                if j < 0:
+                    self.stats.garbage_bytes += n - pos
+                    break
+                self.stats.garbage_bytes += j - pos
+                self._in = True
+                self._buf.clear()
+                pos = j + 1
+                continue
+            e = data.find(b"\x03", pos)
+            s = data.find(b"\x02", pos)
+            if s >= 0 and (e < 0 or s < e):
+                # a new STX inside a telegram: the previous one was cut short
+                self.stats.truncated += 1
+                self.stats.garbage_bytes += len(self._buf) + 1 + (s - pos)
+                self._buf.clear()
+                pos = s + 1
+                continue
+            if e < 0:
+                self._buf += data[pos:]
+                pos = n
+                if len(self._buf) > self.max_len:
+                    self.stats.truncated += 1
+                    self.stats.garbage_bytes += len(self._buf) + 1
+                    self._buf.clear()
+                    self._in = False
+                break
+            self._buf += data[pos:e]
+            pos = e + 1
+            self._in = False
+            self.stats.telegrams += 1
+            out.append(bytes(self._buf))
+            self._buf.clear()
+        return out
+
+
+def frame(payload: str | bytes) -> bytes:
+    """Wrap an ASCII command in STX/ETX."""
+    b = payload.encode("ascii") if isinstance(payload, str) else payload
+    return b"\x02" + b + b"\x03"
+
+
+# ----------------------------------------------------------------------------- telegram
+
+
+@dataclass
+class ScanTelegram:
+    """The fields of an LMDscandata telegram this project uses (device units decoded)."""
+
+    command: str  # "sSN" or "sRA"
+    version: int
+    device: int
+    serial: int
+    status: tuple[int, int]
+    telegram_counter: int
+    scan_counter: int
+    time_since_startup_us: int
+    time_of_transmission_us: int
+    scan_freq_hz: float
+    meas_freq_hz: float
+    channel: str
+    scale: float
+    offset: float
+    start_angle_deg: float
+    step_deg: float
+    values: np.ndarray  # raw uint16 values of the distance channel
+
+
+def _hex(tok: bytes, what: str) -> int:
+    try:
+        return int(tok, 16)
+    except ValueError:
+        raise TelegramError("bad_number", f"{what}={tok[:16]!r}") from None
+
+
+def _i32(v: int) -> int:
+    return v - (1 << 32) if v >= (1 << 31) else v
+
+
+def _f32(tok: bytes, what: str) -> float:
+    v = _hex(tok, what)
+    if v >= (1 << 32):
+        raise TelegramError("bad_number", f"{what}={tok[:16]!r}")
+    f = struct.unpack(">f", v.to_bytes(4, "big"))[0]
+    if not math.isfinite(f):
+        raise TelegramError("bad_number", f"{what} not finite")
+    return float(f)
+
+
+def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
+    """Parse one LMDscandata telegram (without STX/ETX).  Raises :class:`TelegramError`."""
+    tok = payload.split()
+    if len(tok) < 2 or tok[1] != b"LMDscandata" or tok[0] not in (b"sSN", b"sRA"):
+        raise TelegramError("not_scan", repr(payload[:24]))
+    if len(tok) < 21:
+        raise TelegramError("truncated", f"{len(tok)} tokens")
+    i = 2
+    version = _hex(tok[i], "version")
+    device = _hex(tok[i + 1], "device")
+    serial = _hex(tok[i + 2], "serial")
+    status = (_hex(tok[i + 3], "status"), _hex(tok[i + 4], "status"))
+    tcount = _hex(tok[i + 5], "telegram_counter")
+    scount = _hex(tok[i + 6], "scan_counter")
+    t_start = _hex(tok[i + 7], "time_since_startup")
+    t_tx = _hex(tok[i + 8], "time_of_transmission")
+    # inputs(2) outputs(2) reserved(1)
+    for k in range(9, 14):
+        _hex(tok[i + k], "io")
+    scan_freq = _hex(tok[i + 14], "scan_freq") / 100.0
+    meas_freq = _hex(tok[i + 15], "meas_freq") * 100.0
+    i += 16
+    n_enc = _hex(tok[i], "n_encoders")
+    i += 1 + 2 * n_enc
+    if i >= len(tok):
+        raise TelegramError("truncated", "after encoders")
+    found: ScanTelegram | None = None
+    for _bits in (16, 8):
+        if i >= len(tok):
+            raise TelegramError("truncated", "channel count")
+        n_ch = _hex(tok[i], "n_channels")
+        i += 1
+        if n_ch > 8:
+            raise TelegramError("bad_count", f"{n_ch} channels")
+        for _ in range(n_ch):
+            if i + 6 > len(tok):
+                raise TelegramError("truncated", "channel header")
+            name = tok[i].decode("ascii", "replace")
+            scale = _f32(tok[i + 1], "scale")
+            offset = _f32(tok[i + 2], "offset")
+            start = _i32(_hex(tok[i + 3], "start_angle"))
+            step = _hex(tok[i + 4], "step")
+            n = _hex(tok[i + 5], "n_values")
+            i += 6
+            if n > 10000:
+                raise TelegramError("bad_count", f"{n} values")
+            if i + n > len(tok):
+                raise TelegramError("wrong_count", f"{name}: {n} announced, {len(tok) - i} left")
+            if name == channel and found is None:
+                try:
+                    vals = np.array([int(t, 16) for t in tok[i : i + n]], dtype=np.int64)
+                except ValueError:
+                    raise TelegramError("bad_number", f"{name} data") from None
+                if n and (vals.max() > 0xFFFF or vals.min() < 0):
+                    raise TelegramError("bad_number", f"{name} value out of 16 bit range")
+                if step == 0 or scale <= 0:
+                    raise TelegramError("bad_number", "zero step or scale")
+                found = ScanTelegram(
+                    command=tok[0].decode(),
+                    version=version,
+                    device=device,
+                    serial=serial,
+                    status=status,
+                    telegram_counter=tcount,
+                    scan_counter=scount,
+                    time_since_startup_us=t_start,
+                    time_of_transmission_us=t_tx,
+                    scan_freq_hz=scan_freq,
+                    meas_freq_hz=meas_freq,
+                    channel=name,
+                    scale=scale,
+                    offset=offset,
+                    start_angle_deg=start / 10000.0,
+                    step_deg=step / 10000.0,
+                    values=vals,
+                )
+            i += n
+    # position, name, comment, time, events: each "0" or "1 <fields>"; only check presence
+    if i + 5 > len(tok):
+        raise TelegramError("wrong_count", "trailing blocks missing")
+    if found is None:
+        raise TelegramError("no_channel", channel)
+    return found
+
+
+def telegram_to_scan(
+    t: ScanTelegram,
+    stamp: float,
+    range_min: float = 0.05,
+    range_max: float = 50.0,
+    angle_offset_deg: float = -90.0,
+    frame_id: str = "laser",
+) -> LaserScan:
+    """LMDscandata -> REP 117 LaserScan: 0 -> +inf, beyond range_max -> +inf."""
+    mm = t.values.astype(np.float64) * t.scale + t.offset
+    r = (mm / 1000.0).astype(np.float32)
+    r[t.values == 0] = np.inf
+    r[r > range_max] = np.inf
+    inc = math.radians(t.step_deg)
+    period = 1.0 / t.scan_freq_hz if t.scan_freq_hz > 0 else 0.0
+    return LaserScan(
+        stamp=stamp,
+        angle_min=math.radians(t.start_angle_deg + angle_offset_deg),
+        angle_increment=inc,
+        range_min=range_min,
+        range_max=range_max,
+        ranges=r,
+        time_increment=period * t.step_deg / 360.0,
+        scan_time=period,
+        frame_id=frame_id,
+    )
+
+
+def _hx(v: int) -> str:
+    return format(int(v) & 0xFFFFFFFF, "X")
+
+
+def encode_lmdscandata(
+    scan: LaserScan,
+    telegram_counter: int,
+    scan_counter: int,
+    time_since_startup_us: int,
+    time_of_transmission_us: int,
+    angle_offset_deg: float = -90.0,
+    command: str = "sSN",
+    serial: int = 0x1234567,
+) -> bytes:
+    """Encode a LaserScan as an LMDscandata payload (no STX/ETX): DIST1 in mm, scale 1 or 2."""
+    r = np.asarray(scan.ranges, dtype=np.float64)
+    finite = np.isfinite(r) & (r > 0)
+    scale = 1.0 if not finite.any() or np.max(r[finite]) * 1000.0 <= 65535 else 2.0
+    vals = np.zeros(len(r), dtype=np.int64)
+    vals[finite] = np.clip(np.round(r[finite] * 1000.0 / scale), 1, 65535).astype(np.int64)
+    start = int(round((math.degrees(scan.angle_min) - angle_offset_deg) * 10000.0))
+    step = int(round(math.degrees(scan.angle_increment) * 10000.0))
+    freq = int(round(100.0 / scan.scan_time)) if scan.scan_time > 0 else 2500
+    scale_hex = struct.unpack(">I", struct.pack(">f", scale))[0]
+    head = [
+        command, "LMDscandata", "1", "1", _hx(serial), "0", "0",
+        _hx(telegram_counter & 0xFFFF), _hx(scan_counter & 0xFFFF),
+        _hx(time_since_startup_us), _hx(time_of_transmission_us),
+        "0", "0", "0", "0", "0", _hx(freq), "21C",
+        "0",  # encoders
+        "1", "DIST1", format(scale_hex, "X"), "0", _hx(start), _hx(step), _hx(len(vals)),
+    ]
+    tail = ["0", "0", "0", "0", "0", "0"]  # 8-bit channels, position, name, comment, time, events
+    return " ".join(head + [format(int(v), "X") for v in vals] + tail).encode("ascii")
+
+
+# ----------------------------------------------------------------------------- client
+
+
+@dataclass
+class SickStats:
+    connects: int = 0
+    disconnects: int = 0
+    connect_failures: int = 0
+    scans: int = 0
+    malformed: int = 0
+    malformed_by_reason: dict[str, int] = field(default_factory=dict)
+    other_telegrams: int = 0  # acks (sEA), errors (sFA), ...
+    device_errors: int = 0  # sFA answers or device status != 0 0
+    scan_counter_gaps: int = 0
+
+    def count_malformed(self, reason: str) -> None:
+        self.malformed += 1
+        self.malformed_by_reason[reason] = self.malformed_by_reason.get(reason, 0) + 1
+
+
+class SickClient:
+    """Threaded CoLa-A client: connect, ``sEN LMDscandata 1``, stream, reconnect with back-off.
+
+    ``on_scan(scan, arrival_host_time)`` is called from the client thread for each valid
+    scan.  Stamps: the scanner's ``time_since_startup`` (scan start) mapped to host time
+    through a :class:`ClockSync` fed with ``(time_of_transmission, arrival)`` pairs; with
+    ``align_clock=False`` the stamp is ``arrival - scan_time`` (host clock only).
+    """
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        on_scan: Callable[[LaserScan, float], None],
+        range_min: float = 0.05,
+        range_max: float = 50.0,
+        angle_offset_deg: float = -90.0,
+        frame_id: str = "laser",
+        align_clock: bool = True,
+        stall_timeout_s: float = 1.0,
+        backoff_min_s: float = 0.1,
+        backoff_max_s: float = 2.0,
+        on_event: Callable[[str], None] | None = None,
+    ) -> None:
+        self.host, self.port = host, port
+        self.on_scan = on_scan
+        self.on_event = on_event or (lambda msg: log.info("%s", msg))
+        self.range_min, self.range_max = range_min, range_max
+        self.angle_offset_deg = angle_offset_deg
+        self.frame_id = frame_id
+        self.align_clock = align_clock
+        self.stall_timeout_s = stall_timeout_s
+        self.backoff_min_s, self.backoff_max_s = backoff_min_s, backoff_max_s
+        self.stats = SickStats()
+        self.framer = ColaFramer()
+        self.clock = ClockSync()
+        self.connected = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        self._t_ext_tx = 0
+        self._last_tx: int | None = None
+        self._last_scan_counter: int | None = None
+
+    # -- lifecycle
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="sick-client", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        sock = self._sock
+        if sock is not None:
+            try:
+                sock.sendall(frame("sEN LMDscandata 0"))
+            except OSError:
+                pass
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    # -- processing (also used directly by tests)
+    def handle_payload(self, payload: bytes, arrival: float) -> LaserScan | None:
+        """Process one de-framed telegram; returns the scan (and calls on_scan) if valid."""
+        head = payload[:16]
+        if not (head.startswith(b"sSN LMDscandata") or head.startswith(b"sRA LMDscandata")):
+            self.stats.other_telegrams += 1
+            if head.startswith(b"sFA"):
+                self.stats.device_errors += 1
+            return None
+        try:
+            t = parse_lmdscandata(payload)
+        except TelegramError as e:
+            self.stats.count_malformed(e.reason)
+            return None
+        if t.status != (0, 0):
+            self.stats.device_errors += 1
+        if self._last_scan_counter is not None:
+            gap = (t.scan_counter - self._last_scan_counter - 1) & 0xFFFF
+            if 0 < gap < 0x8000:
+                self.stats.scan_counter_gaps += gap
+        self._last_scan_counter = t.scan_counter
+        period = 1.0 / t.scan_freq_hz if t.scan_freq_hz > 0 else 0.04
+        if self.align_clock:
+            if self._last_tx is None:
+                self._t_ext_tx = t.time_of_transmission_us
+            else:
+                self._t_ext_tx += (t.time_of_transmission_us - self._last_tx) & 0xFFFFFFFF
+            self._last_tx = t.time_of_transmission_us
+            # device time of the scan start on the same unwrapped axis
+            start_dev = self._t_ext_tx - ((t.time_of_transmission_us - t.time_since_startup_us) & 0xFFFFFFFF)
+            self.clock.update(self._t_ext_tx * 1e-6, arrival)
+            stamp = self.clock.to_host(start_dev * 1e-6, arrival)
+        else:
+            stamp = arrival - period
+        scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, self.angle_offset_deg, self.frame_id)
+        self.stats.scans += 1
+        self.on_scan(scan, arrival)
+        return scan
+
+    def _run(self) -> None:
+        backoff = self.backoff_min_s
+        while not self._stop.is_set():
+            try:
+                sock = socket.create_connection((self.host, self.port), timeout=1.0)
+            except OSError as e:
+                self.stats.connect_failures += 1
+                if self.stats.connect_failures in (1, 10) or self.stats.connect_failures % 50 == 0:
+                    self.on_event(f"laser {self.host}:{self.port}: connect failed ({e}); retrying")
+                self._stop.wait(backoff)
+                backoff = min(backoff * 2.0, self.backoff_max_s)
+                continue
+            backoff = self.backoff_min_s
+            self._sock = sock
+            self.stats.connects += 1
+            self.connected = True
+            self.framer.reset()
+            self._last_tx = None
+            self._last_scan_counter = None
+            self.clock.reset()  # the device may have rebooted: its clock restarts
+            self.on_event(f"laser {self.host}:{self.port}: connected")
+            try:
+                sock.settimeout(0.1)
+                sock.sendall(frame("sEN LMDscandata 1"))
+                last_data = time.monotonic()
+                while not self._stop.is_set():
+                    try:
+                        chunk = sock.recv(65536)
+                    except TimeoutError:
+                        if time.monotonic() - last_data > self.stall_timeout_s:
+                            raise ConnectionError("no data (stalled)") from None
+                        continue
+                    if not chunk:
+                        raise ConnectionError("closed by peer")
+                    now = time.time()
+                    last_data = time.monotonic()
+                    for payload in self.framer.feed(chunk):
+                        self.handle_payload(payload, now)
+                try:
+                    sock.sendall(frame("sEN LMDscandata 0"))
+                except OSError:
+                    pass
+            except (OSError, ConnectionError) as e:
+                self.stats.disconnects += 1
+                self.on_event(f"laser {self.host}:{self.port}: connection lost ({e}); reconnecting")
+            finally:
+                self.connected = False
+                self._sock = None
+                try:
+                    sock.close()
+                except OSError:
+                    pass

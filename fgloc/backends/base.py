@@ -1,0 +1,97 @@
+"""The interface every back-end implements, as :class:`fgloc.pipeline.Localizer` drives it.
+
+Inputs arrive in (nearly) time order: wheel odometry twists, compass headings (in
+the compass's own frame; the back-end owns the compass-to-map offset) and, at each
+scan time, a keyframe with the front-end's map fix if there is one.  The back-end
+answers with a pose guess for the front-end (:meth:`Backend.predict`), the online
+estimate (:meth:`Backend.current`, :meth:`Backend.online_trajectory`) and the
+final, smoothed trajectory (:meth:`Backend.finish`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.types import PoseFix, Trajectory
+
+FloatArray = NDArray[np.float64]
+
+
+def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> FloatArray:
+    """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad."""
+    if cov is not None:
+        c = np.asarray(cov, dtype=float).reshape(3, 3)
+        if np.all(np.isfinite(c)) and np.all(np.diag(c) > 0):
+            return c
+    return np.diag(np.square(default_sigmas))
+
+
+class Backend(ABC):
+    """A state estimator fed by :class:`fgloc.pipeline.Localizer`."""
+
+    name: str = "backend"
+
+    def __init__(self) -> None:
+        self.stats: dict = {"keyframes": 0, "fixes_used": 0, "fixes_rejected": 0, "late": 0}
+        self._online_t: list[float] = []
+        self._online_p: list[FloatArray] = []
+        self._online_c: list[FloatArray] = []
+
+    @property
+    @abstractmethod
+    def initialized(self) -> bool: ...
+
+    @abstractmethod
+    def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        """Start at map pose ``pose`` at time ``t``."""
+
+    @abstractmethod
+    def set_compass_offset(self, offset: float) -> None:
+        """Declare the compass-to-map offset known (``compass_yaw = map_yaw + offset``)."""
+
+    @abstractmethod
+    def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
+        """Body twist ``[vx, vy, wz]`` measured at ``t``."""
+
+    @abstractmethod
+    def add_compass(self, t: float, yaw: float | None, yaw_var: float,
+                    rate: float | None, rate_var: float) -> None:
+        """Compass yaw (compass frame) and yaw rate at ``t``; either may be None."""
+
+    @abstractmethod
+    def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        """A keyframe at scan time ``t`` with the front-end's fix, if any; True if the fix was used."""
+
+    @abstractmethod
+    def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """Pose guess and 3x3 covariance at ``t`` (for the front-end)."""
+
+    @abstractmethod
+    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
+        """Latest (time, pose, cov) estimate, or None before initialization."""
+
+    @abstractmethod
+    def finish(self) -> Trajectory:
+        """The final trajectory at keyframe times (smoothed for the smoothers)."""
+
+    def reset(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        """Re-initialize after a relocalization (kidnapping); default: initialize again."""
+        self.initialize(t, pose, cov)
+
+    # ------------------------------------------------------------------ helpers
+    def _record_online(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        if self._online_t and t <= self._online_t[-1]:
+            return
+        self._online_t.append(float(t))
+        self._online_p.append(np.asarray(pose, dtype=float).copy())
+        self._online_c.append(np.asarray(cov, dtype=float).copy())
+
+    def online_trajectory(self) -> Trajectory:
+        """The online estimate at each keyframe (scan) time, as it was known then."""
+        if not self._online_t:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)))
+        return Trajectory(np.asarray(self._online_t), np.asarray(self._online_p),
+                          covs=np.asarray(self._online_c))

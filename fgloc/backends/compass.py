@@ -1,0 +1,68 @@
+"""Compass-to-map heading offset calibration.
+
+A real compass reads heading against magnetic north (or whatever its last
+recalibration chose), not against the map's x axis; the paper assumes the two
+agree.  We calibrate the offset ``compass_yaw = map_yaw + offset`` from the first
+accepted map fixes: each fix is paired with the compass reading nearest in time
+(within ``max_dt`` s, moved to the fix stamp with the compass yaw rate), and once
+``n_fixes`` pairs are collected the offset is their circular median (robust to a
+bad first fix).  Until then a back-end uses the compass yaw rate only.  The
+smoother keeps estimating the offset online as a slowly varying variable; the
+EKF keeps this fixed value.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from fgloc.geometry import wrap_angle
+
+
+class CompassCalibrator:
+    """Collects (compass, map) heading pairs and returns the offset once calibrated."""
+
+    def __init__(self, n_fixes: int = 5, max_dt: float = 0.1, offset: float | None = None) -> None:
+        self.n_fixes = int(n_fixes)
+        self.max_dt = float(max_dt)
+        self.offset: float | None = offset
+        self._compass: deque[tuple[float, float, float]] = deque(maxlen=200)
+        self._diffs: list[float] = []
+
+    @property
+    def calibrated(self) -> bool:
+        return self.offset is not None
+
+    def add_compass(self, t: float, yaw: float, rate: float | None) -> None:
+        self._compass.append((float(t), float(yaw), float(rate) if rate is not None else 0.0))
+
+    def compass_at(self, t: float) -> float | None:
+        """Compass yaw (compass frame) at ``t`` from the nearest reading within ``max_dt``."""
+        if not self._compass:
+            return None
+        best = min(self._compass, key=lambda c: abs(c[0] - t))
+        if abs(best[0] - t) > self.max_dt:
+            return None
+        return float(wrap_angle(best[1] + best[2] * (t - best[0])))
+
+    def add_fix(self, t: float, map_yaw: float) -> bool:
+        """Pair an accepted map fix with the compass; returns True when this calibrates."""
+        if self.calibrated:
+            return False
+        c = self.compass_at(t)
+        if c is None:
+            return False
+        self._diffs.append(float(wrap_angle(c - map_yaw)))
+        if len(self._diffs) >= self.n_fixes:
+            d = np.asarray(self._diffs)
+            ref = float(np.arctan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
+            self.offset = float(wrap_angle(ref + np.median(wrap_angle(d - ref))))
+            return True
+        return False
+
+    def to_map(self, compass_yaw: float) -> float | None:
+        """Compass yaw converted to the map frame, or None before calibration."""
+        if self.offset is None:
+            return None
+        return float(wrap_angle(compass_yaw - self.offset))

@@ -1,0 +1,255 @@
+"""The paper's Extended Kalman Filter (section 3 of ../shared/paper/PAPER.md), plus an omni variant.
+
+Differential / unicycle model (the paper's), state ``[x_m, y_m, theta_rad, v_mps, w_radps]``
+(indices :data:`X`, :data:`Y`, :data:`TH`, :data:`V`, :data:`W`), map frame pose and body
+velocities::
+
+    x += v dt cos(th);  y += v dt sin(th);  th += w dt;  v, w constant
+
+with the eq. 3 Jacobian :func:`motion_jacobian`.  Measurements, all linear in the state:
+
+=========  ================  ======================
+sensor     z                 H
+=========  ================  ======================
+map fix    [x, y, theta]     rows X, Y, TH of I
+encoder    [v, w]            rows V, W of I
+compass    [theta, w]        rows TH, W of I
+=========  ================  ======================
+
+Predict ``X- = f(X+)``, ``P- = F P+ F^T + Q dt`` (``Q`` is a continuous-time spectral
+density, so the filter is independent of the sensor rates); update
+``K = P- H^T (H P- H^T + R)^-1``, ``X+ = X- + K (z - H X-)``, ``P+ = P- - K H P-`` exactly as
+the paper, with heading innovations wrapped to ``[-pi, pi)`` and each update gated on its
+Mahalanobis distance (chi-square quantile per sensor).  Every measurement is applied after
+predicting to its own stamp; a stamp older than the filter time is applied at the filter
+time (counted in ``stats['late']``), never predicted backwards.
+
+The omni variant (mecanum robots) has state ``[x, y, theta, vx, vy, w]`` (indices
+:data:`OX`... :data:`OW`) and the encoder measures ``[vx, vy, w]``.
+
+Core maths only: no I/O, no printing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.geometry import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+# Paper (differential / unicycle) state indices.
+X, Y, TH, V, W = 0, 1, 2, 3, 4
+# Omni (mecanum) state indices.
+OX, OY, OTH, OVX, OVY, OW = 0, 1, 2, 3, 4, 5
+
+# chi-square 99.9 % quantiles for 1..3 degrees of freedom (the default gates).
+CHI2_999 = {1: 10.828, 2: 13.816, 3: 16.266}
+
+
+def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray:
+    """Constant-velocity motion ``f(X)`` over ``dt`` seconds (unicycle or omni)."""
+    s = np.array(state, dtype=float)
+    th = s[TH]
+    c, sn = np.cos(th), np.sin(th)
+    if omni:
+        vx, vy, w = s[OVX], s[OVY], s[OW]
+        s[OX] += (vx * c - vy * sn) * dt
+        s[OY] += (vx * sn + vy * c) * dt
+        s[OTH] = wrap_angle(th + w * dt)
+    else:
+        v, w = s[V], s[W]
+        s[X] += v * dt * c
+        s[Y] += v * dt * sn
+        s[TH] = wrap_angle(th + w * dt)
+    return s
+
+
+def motion_jacobian(state: FloatArray, dt: float, omni: bool = False) -> FloatArray:
+    """``dF/dX`` of :func:`motion_model`; for the unicycle this is the paper's eq. 3."""
+    th = float(state[TH])
+    c, sn = np.cos(th), np.sin(th)
+    if omni:
+        vx, vy = float(state[OVX]), float(state[OVY])
+        F = np.eye(6)
+        F[OX, OTH] = (-vx * sn - vy * c) * dt
+        F[OY, OTH] = (vx * c - vy * sn) * dt
+        F[OX, OVX] = c * dt
+        F[OX, OVY] = -sn * dt
+        F[OY, OVX] = sn * dt
+        F[OY, OVY] = c * dt
+        F[OTH, OW] = dt
+        return F
+    v = float(state[V])
+    F = np.eye(5)
+    F[X, TH] = -v * dt * sn
+    F[X, V] = dt * c
+    F[Y, TH] = v * dt * c
+    F[Y, V] = dt * sn
+    F[TH, W] = dt
+    return F
+
+
+def selection(rows: list[int], n: int) -> FloatArray:
+    """Rows ``rows`` of the ``n x n`` identity (the paper's H matrices)."""
+    return np.eye(n)[rows]
+
+
+@dataclass
+class EKFConfig:
+    """Noise and gating parameters (defaults documented in config/fgloc.yaml, ``ekf:``).
+
+    ``q_*`` are continuous-time process noise spectral densities (variance per second):
+    ``q_xy`` m^2/s, ``q_theta`` rad^2/s, ``q_v`` (m/s)^2/s, ``q_w`` (rad/s)^2/s.
+    ``gate_*`` are Mahalanobis (squared) thresholds; ``None`` disables that gate.
+    """
+
+    omni: bool = False
+    q_xy: float = 1e-4
+    q_theta: float = 1e-4
+    q_v: float = 0.5
+    q_w: float = 1.0
+    gate_map: float | None = CHI2_999[3]
+    gate_encoder: float | None = None
+    gate_compass: float | None = CHI2_999[1]
+    map_min_sigma_xy: float = 0.005
+    map_min_sigma_theta: float = np.deg2rad(0.2)
+
+
+@dataclass
+class EKF:
+    """The paper's EKF (``omni=False``) or its mecanum variant (``omni=True``)."""
+
+    config: EKFConfig = field(default_factory=EKFConfig)
+    t: float | None = None
+    x: FloatArray = field(default_factory=lambda: np.zeros(5))
+    P: FloatArray = field(default_factory=lambda: np.eye(5))
+    stats: dict = field(default_factory=lambda: {"updates": 0, "gated": {}, "late": 0})
+
+    @property
+    def n(self) -> int:
+        return 6 if self.config.omni else 5
+
+    @property
+    def initialized(self) -> bool:
+        return self.t is not None
+
+    def initialize(self, t: float, pose: FloatArray, pose_cov: FloatArray | None = None,
+                   vel_sigma: float = 0.1) -> None:
+        """Start at ``pose`` (map ``[x, y, yaw]``) with velocity zero."""
+        n = self.n
+        self.t = float(t)
+        self.x = np.zeros(n)
+        self.x[:3] = pose
+        self.x[TH] = wrap_angle(self.x[TH])
+        self.P = np.eye(n) * vel_sigma**2
+        self.P[:3, :3] = pose_cov if pose_cov is not None else np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2])
+
+    # ------------------------------------------------------------------ predict
+    def process_noise(self, dt: float) -> FloatArray:
+        c = self.config
+        if c.omni:
+            q = [c.q_xy, c.q_xy, c.q_theta, c.q_v, c.q_v, c.q_w]
+        else:
+            q = [c.q_xy, c.q_xy, c.q_theta, c.q_v, c.q_w]
+        return np.diag(q) * dt
+
+    def predict(self, t: float) -> None:
+        """Predict to time ``t`` (no-op when ``t`` is not after the filter time)."""
+        assert self.t is not None, "EKF not initialized"
+        dt = float(t) - self.t
+        if dt <= 0.0:
+            return
+        F = motion_jacobian(self.x, dt, self.config.omni)
+        self.x = motion_model(self.x, dt, self.config.omni)
+        self.P = F @ self.P @ F.T + self.process_noise(dt)
+        self.t = float(t)
+
+    def predict_pose(self, t: float) -> tuple[FloatArray, FloatArray]:
+        """Pose and its covariance predicted to ``t`` without changing the filter."""
+        assert self.t is not None, "EKF not initialized"
+        dt = max(0.0, float(t) - self.t)
+        F = motion_jacobian(self.x, dt, self.config.omni)
+        x = motion_model(self.x, dt, self.config.omni)
+        P = F @ self.P @ F.T + self.process_noise(dt)
+        return x[:3].copy(), P[:3, :3].copy()
+
+    # ------------------------------------------------------------------ update
+    def update(self, t: float, z: FloatArray, rows: list[int], R: FloatArray,
+               gate: float | None = None, sensor: str = "") -> bool:
+        """Generic linear update ``z = H X + v`` with ``H = I[rows]``; returns False if gated.
+
+        Innovation components on the heading row are wrapped.
+        """
+        assert self.t is not None, "EKF not initialized"
+        if t < self.t:
+            self.stats["late"] += 1
+        self.predict(t)
+        H = selection(rows, self.n)
+        y = np.asarray(z, dtype=float) - H @ self.x
+        for i, r in enumerate(rows):
+            if r == TH:
+                y[i] = wrap_angle(y[i])
+        S = H @ self.P @ H.T + R
+        if gate is not None:
+            d2 = float(y @ np.linalg.solve(S, y))
+            if not np.isfinite(d2) or d2 > gate:
+                self.stats["gated"][sensor] = self.stats["gated"].get(sensor, 0) + 1
+                return False
+        K = self.P @ H.T @ np.linalg.inv(S)
+        self.x = self.x + K @ y
+        self.x[TH] = wrap_angle(self.x[TH])
+        self.P = self.P - K @ H @ self.P
+        self.P = 0.5 * (self.P + self.P.T)
+        self.stats["updates"] += 1
+        return True
+
+    def update_map(self, t: float, pose: FloatArray, cov: FloatArray, gate: bool = True) -> bool:
+        """Map (scan-matcher) fix ``[x, y, yaw]`` with 3x3 covariance ``cov``."""
+        c = self.config
+        R = np.array(cov, dtype=float).copy()
+        R[0, 0] = max(R[0, 0], c.map_min_sigma_xy**2)
+        R[1, 1] = max(R[1, 1], c.map_min_sigma_xy**2)
+        R[2, 2] = max(R[2, 2], c.map_min_sigma_theta**2)
+        return self.update(t, np.asarray(pose, dtype=float), [X, Y, TH], R,
+                           c.gate_map if gate else None, "map")
+
+    def update_encoder(self, t: float, twist: FloatArray, twist_cov: FloatArray) -> bool:
+        """Encoder body twist ``[vx, vy, wz]`` with 3x3 covariance; the unicycle uses ``[vx, wz]``."""
+        tw = np.asarray(twist, dtype=float)
+        cov = np.asarray(twist_cov, dtype=float)
+        if self.config.omni:
+            return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
+        idx = [0, 2]
+        return self.update(t, tw[idx], [V, W], cov[np.ix_(idx, idx)], self.config.gate_encoder, "encoder")
+
+    def update_compass(self, t: float, theta_map: float | None, var_theta: float,
+                       rate: float | None = None, var_rate: float = 0.0) -> bool:
+        """Compass ``[theta, w]`` (heading already in the map frame); either part may be None."""
+        w_idx = OW if self.config.omni else W
+        z: list[float] = []
+        rows: list[int] = []
+        var: list[float] = []
+        if theta_map is not None:
+            z.append(theta_map)
+            rows.append(TH)
+            var.append(var_theta)
+        if rate is not None:
+            z.append(rate)
+            rows.append(w_idx)
+            var.append(var_rate)
+        if not rows:
+            return False
+        gate = self.config.gate_compass
+        if gate is not None and len(rows) == 2:
+            gate = CHI2_999[2]
+        return self.update(t, np.array(z), rows, np.diag(var), gate, "compass")
+
+    def pose(self) -> FloatArray:
+        return self.x[:3].copy()
+
+    def pose_cov(self) -> FloatArray:
+        return self.P[:3, :3].copy()

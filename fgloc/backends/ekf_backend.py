@@ -1,0 +1,102 @@
+"""The paper's EKF as a :class:`~fgloc.backends.base.Backend`.
+
+Odometry twists are encoder updates, compass readings compass updates (heading
+converted to the map frame with the calibrated offset, rate only until then; when
+the joint ``[theta, w]`` update is gated the rate is applied alone), and keyframe
+fixes map updates.  The online and the final trajectory are the same: the pose
+right after each scan's fix (a filter does not smooth).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fgloc.backends.base import Backend, FloatArray, twist_covariance
+from fgloc.backends.compass import CompassCalibrator
+from fgloc.backends.ekf import EKF, EKFConfig
+from fgloc.types import PoseFix, Trajectory
+
+
+class EKFBackend(Backend):
+    name = "ekf"
+
+    def __init__(self, config: EKFConfig | None = None,
+                 encoder_sigmas: tuple[float, float, float] = (0.01, 0.01, 0.02),
+                 compass_sigma: float = float(np.deg2rad(0.5)),
+                 compass_rate_sigma: float = float(np.deg2rad(1.0)),
+                 use_compass_yaw: bool = True, calibration_fixes: int = 5,
+                 max_rejections: int = 10) -> None:
+        super().__init__()
+        self.ekf = EKF(config or EKFConfig())
+        self.ekf.x = np.zeros(self.ekf.n)
+        self.ekf.P = np.eye(self.ekf.n)
+        self.encoder_sigmas = encoder_sigmas
+        self.compass_sigma = compass_sigma
+        self.compass_rate_sigma = compass_rate_sigma
+        self.use_compass_yaw = use_compass_yaw
+        self.calib = CompassCalibrator(calibration_fixes)
+        self.max_rejections = max_rejections
+        self._consecutive_rejects = 0
+
+    @property
+    def initialized(self) -> bool:
+        return self.ekf.initialized
+
+    def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        self.ekf.initialize(t, pose, cov)
+        self._consecutive_rejects = 0
+        self._record_online(t, self.ekf.pose(), self.ekf.pose_cov())
+
+    def set_compass_offset(self, offset: float) -> None:
+        self.calib.offset = float(offset)
+
+    def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
+        if not self.initialized:
+            return
+        if t < (self.ekf.t or -np.inf):
+            self.stats["late"] += 1
+        self.ekf.update_encoder(t, twist, twist_covariance(twist_cov, self.encoder_sigmas))
+
+    def add_compass(self, t: float, yaw: float | None, yaw_var: float,
+                    rate: float | None, rate_var: float) -> None:
+        if yaw is not None:
+            self.calib.add_compass(t, yaw, rate)
+        if not self.initialized:
+            return
+        th = self.calib.to_map(yaw) if (yaw is not None and self.use_compass_yaw) else None
+        vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
+        vr = rate_var if np.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
+        if not self.ekf.update_compass(t, th, vy, rate, vr) and th is not None and rate is not None:
+            self.ekf.update_compass(t, None, vy, rate, vr)
+
+    def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        if not self.initialized:
+            return False
+        used = False
+        if fix is not None:
+            force = self._consecutive_rejects >= self.max_rejections
+            used = self.ekf.update_map(t, fix.pose, fix.cov, gate=not force)
+            if used:
+                self._consecutive_rejects = 0
+                self.stats["fixes_used"] += 1
+                self.calib.add_fix(t, float(fix.pose[2]))
+            else:
+                self._consecutive_rejects += 1
+                self.stats["fixes_rejected"] += 1
+        else:
+            self.ekf.predict(t)
+        self.stats["keyframes"] += 1
+        self._record_online(self.ekf.t or t, self.ekf.pose(), self.ekf.pose_cov())
+        return used
+
+    def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
+        return self.ekf.predict_pose(t)
+
+    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
+        if not self.initialized:
+            return None
+        return float(self.ekf.t or 0.0), self.ekf.pose(), self.ekf.pose_cov()
+
+    def finish(self) -> Trajectory:
+        self.stats["gated"] = dict(self.ekf.stats["gated"])
+        return self.online_trajectory()

@@ -1,0 +1,144 @@
+"""Factor-graph building blocks shared by the fixed-lag and the batch smoother.
+
+* :func:`integrate_twist` - body twists ``[vx, vy, wz]`` integrated between two
+  keyframes into a relative ``Pose2`` with its covariance propagated in GTSAM's
+  right-perturbation (body) tangent space; works for differential drive (``vy``
+  measured as 0 with a small variance: the non-holonomic constraint) and mecanum
+  alike.  It becomes a plain C++ ``BetweenFactorPose2``.
+* :func:`compass_factor` - a ``CustomFactor`` on (``Pose2`` keyframe, ``Rot2``
+  compass-to-map offset): ``e = wrap(theta + offset - z_compass)``, analytic
+  Jacobians ``[0, 0, 1]`` and ``[1]``.  GTSAM has no C++ factor tying a
+  ``Pose2`` heading to a separate rotation variable, hence the custom factor.
+* :func:`fix_factor` - the front-end's map fix as a C++ ``PriorFactorPose2`` whose
+  Gaussian is the fix covariance rotated into the body frame, wrapped in a robust
+  kernel (Huber or Cauchy) so one wrong fix cannot drag the trajectory.
+
+Conventions: GTSAM's ``Pose2`` tangent vector is ``[dx, dy, dtheta]`` in the body
+frame, ``retract(xi) = pose * Expmap(xi)``.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.geometry import wrap_angle
+
+FloatArray = NDArray[np.float64]
+
+
+# ---------------------------------------------------------------------- SE(2) in numpy
+def se2_exp(xi: FloatArray) -> FloatArray:
+    """``Expmap`` of a tangent vector ``[vx dt, vy dt, w dt]`` -> pose ``[x, y, yaw]``."""
+    vx, vy, w = float(xi[0]), float(xi[1]), float(xi[2])
+    if abs(w) < 1e-9:
+        c, s = 1.0 - w * w / 6.0, w / 2.0  # sin(w)/w, (1-cos w)/w to 2nd order
+    else:
+        c, s = np.sin(w) / w, (1.0 - np.cos(w)) / w
+    return np.array([c * vx - s * vy, s * vx + c * vy, w])
+
+
+def se2_adjoint(p: FloatArray) -> FloatArray:
+    """Adjoint map of pose ``p`` (``Ad_p xi = Log(p Exp(xi) p^-1)`` to first order), as GTSAM's."""
+    c, s = np.cos(p[2]), np.sin(p[2])
+    return np.array([[c, -s, p[1]], [s, c, -p[0]], [0.0, 0.0, 1.0]])
+
+
+def se2_compose(a: FloatArray, b: FloatArray) -> FloatArray:
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
+
+
+def se2_inverse(a: FloatArray) -> FloatArray:
+    c, s = np.cos(a[2]), np.sin(a[2])
+    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+# ---------------------------------------------------------------------- twist integration
+def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0: float, t1: float,
+                    q_slip: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """Relative pose ``[x, y, yaw]`` (in the frame of the pose at ``t0``) and its 3x3 covariance.
+
+    ``stamps`` (N,), ``twists`` (N, 3) ``[vx_mps, vy_mps, wz_radps]``, ``covs`` (N, 3, 3).
+    A wheel-encoder twist stamped ``t_i`` is the mean velocity over ``(t_{i-1}, t_i]``, so it
+    is held backwards over that interval; after the last sample the last twist is held.
+    Each step of length ``dt`` adds ``Sigma_u dt^2 + q_slip dt`` (``q_slip`` a 3-vector of
+    spectral densities for wheel slip / model error), propagated as
+    ``Sigma <- Ad(d^-1) Sigma Ad(d^-1)^T + Sigma_step``.
+    """
+    delta = np.zeros(3)
+    cov = np.zeros((3, 3))
+    if t1 <= t0 or len(stamps) == 0:
+        return delta, cov
+    q = np.zeros(3) if q_slip is None else np.asarray(q_slip, dtype=float)
+    # index of the first sample with stamp > t0 (its twist covers t0)
+    i = int(np.searchsorted(stamps, t0, side="right"))
+    t = t0
+    n = len(stamps)
+    while t < t1 - 1e-12:
+        j = min(i, n - 1)
+        t_next = min(float(stamps[i]), t1) if i < n else t1
+        dt = t_next - t
+        if dt > 0:
+            u = twists[j]
+            d = se2_exp(u * dt)
+            A = se2_adjoint(se2_inverse(d))
+            cov = A @ cov @ A.T + covs[j] * dt * dt + np.diag(q * dt)
+            delta = se2_compose(delta, d)
+        t = t_next
+        i += 1
+    return delta, 0.5 * (cov + cov.T)
+
+
+# ---------------------------------------------------------------------- factors
+def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray,
+                   min_sigma: float = 1e-4) -> gtsam.BetweenFactorPose2:
+    c = np.asarray(cov, dtype=float) + np.eye(3) * min_sigma**2
+    return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(*delta), gtsam.noiseModel.Gaussian.Covariance(c))
+
+
+def robust(base: gtsam.noiseModel.Base, kernel: str, k: float) -> gtsam.noiseModel.Base:
+    if kernel == "huber":
+        return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), base)
+    if kernel == "cauchy":
+        return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), base)
+    return base
+
+
+def body_covariance(pose: FloatArray, cov_map: FloatArray) -> FloatArray:
+    """A map-frame ``[x, y, yaw]`` covariance expressed in the body frame of ``pose``."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    Rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    out = Rt @ np.asarray(cov_map, dtype=float) @ Rt.T
+    return 0.5 * (out + out.T)
+
+
+def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "huber",
+               k: float = 1.345) -> gtsam.PriorFactorPose2:
+    """Scan-to-map fix as a robust ``PriorFactorPose2``."""
+    base = gtsam.noiseModel.Gaussian.Covariance(body_covariance(pose, cov_map))
+    return gtsam.PriorFactorPose2(key, gtsam.Pose2(*pose), robust(base, kernel, k))
+
+
+def compass_error(theta: float, offset: float, z: float) -> float:
+    """Compass residual ``wrap(theta + offset - z)`` (radians)."""
+    return float(wrap_angle(theta + offset - z))
+
+
+def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: float,
+                   kernel: str = "huber", k: float = 1.345) -> gtsam.CustomFactor:
+    """Compass heading on a ``Pose2`` keyframe against a ``Rot2`` compass-to-map offset."""
+    z = float(z_compass)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        pose = values.atPose2(this.keys()[0])
+        off = values.atRot2(this.keys()[1])
+        e = compass_error(pose.theta(), off.theta(), z)
+        if H is not None:
+            H[0] = np.array([[0.0, 0.0, 1.0]])
+            H[1] = np.array([[1.0]])
+        return np.array([e])
+
+    noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, sigma), kernel, k)
+    return gtsam.CustomFactor(noise, [pose_key, offset_key], error)

@@ -1,0 +1,558 @@
+"""Sliding-window smoother on ``gtsam.IncrementalFixedLagSmoother`` and its batch twin.
+
+Graph (variables ``x<i>``: ``Pose2`` keyframes at scan times; ``o<j>``: ``Rot2`` compass-to-map
+offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``):
+
+* encoder twist factors ``x<i-1> - x<i>``: the odometry twists between the two keyframes
+  integrated with propagated covariance (:func:`~fgloc.backends.factors.integrate_twist`),
+  a C++ ``BetweenFactorPose2``;
+* compass factors ``x<i> - o<j>``: the compass readings since the previous keyframe, each
+  carried to the keyframe time by the odometry rotation in between and averaged, a
+  ``CustomFactor`` with analytic Jacobians and a robust kernel;
+* offset random walk ``o<j-1> - o<j>``: ``BetweenFactorRot2`` with sigma
+  ``offset_rw_sigma * sqrt(dt)``;
+* scan-to-map fixes on ``x<i>``: robust ``PriorFactorPose2`` with the front-end covariance,
+  after a loose Mahalanobis gate against the prediction (a fix far outside it is rejected;
+  after ``max_rejections`` in a row the back-end is reset to the fix: kidnapping).
+
+A scan older than the newest keyframe but inside the window (late measurement) gets its own
+keyframe at its own stamp: the twist factor spanning it is removed and replaced by two.
+A late compass reading is attached to the keyframe nearest in time.
+
+``SlidingWindowSmoother`` is the online fixed-lag estimator; the online estimate is the
+newest keyframe right after its update, the smoothed trajectory is each keyframe's estimate
+as it leaves the window (i.e. smoothed over ``lag`` seconds of later data).
+``BatchSmoother`` runs the same estimator online and keeps every factor; ``finish`` then
+optimizes the whole run with Levenberg-Marquardt, initialized from the fixed-lag estimates.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from fgloc.backends.base import Backend, FloatArray, twist_covariance
+from fgloc.backends.compass import CompassCalibrator
+from fgloc.backends.factors import (
+    between_factor,
+    compass_factor,
+    fix_factor,
+    integrate_twist,
+    se2_compose,
+)
+from fgloc.geometry import wrap_angle
+from fgloc.types import PoseFix, Trajectory
+
+
+def X(i: int) -> int:
+    return int(gtsam.symbol("x", i))
+
+
+def O(j: int) -> int:  # noqa: E743
+    return int(gtsam.symbol("o", j))
+
+
+@dataclass
+class SmootherConfig:
+    """Parameters (documented defaults in config/fgloc.yaml, ``smoother:``)."""
+
+    lag: float = 2.0
+    encoder_sigmas: tuple[float, float, float] = (0.01, 0.01, 0.02)
+    q_slip: tuple[float, float, float] = (1e-5, 1e-5, 1e-5)
+    compass_sigma: float = float(np.deg2rad(0.5))
+    compass_kernel: str = "huber"
+    compass_kernel_k: float = 1.345
+    offset_interval: float = 1.0
+    offset_rw_sigma: float = float(np.deg2rad(0.05))  # rad / sqrt(s)
+    offset_prior_sigma: float = float(np.deg2rad(30.0))
+    calibrated_offset_sigma: float = float(np.deg2rad(1.0))
+    fix_kernel: str = "huber"
+    fix_kernel_k: float = 1.345
+    fix_min_sigma_xy: float = 0.003
+    fix_min_sigma_theta: float = float(np.deg2rad(0.1))
+    fix_gate: float | None = 50.0
+    max_rejections: int = 10
+    relinearize_threshold: float = 0.01
+    relinearize_skip: int = 1
+    online_covariance: bool = False
+    max_wait: float = 0.1
+    calibration_fixes: int = 3
+
+
+class SlidingWindowSmoother(Backend):
+    name = "smoother"
+
+    def __init__(self, config: SmootherConfig | None = None) -> None:
+        super().__init__()
+        self.cfg = config or SmootherConfig()
+        self.calib = CompassCalibrator(self.cfg.calibration_fixes)
+        self.next_x = 0  # key counters never restart, so keys stay unique across resets
+        self.next_o = 0
+        self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0})
+        self._reset_state()
+
+    # ------------------------------------------------------------------ state
+    def _reset_state(self) -> None:
+        p = gtsam.ISAM2Params()
+        p.setRelinearizeThreshold(self.cfg.relinearize_threshold)
+        p.relinearizeSkip = self.cfg.relinearize_skip
+        p.findUnusedFactorSlots = False
+        self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag, p)
+        self.kf_t: list[float] = []          # keyframe times, increasing (window + history)
+        self.kf_key: list[int] = []          # keys, same order
+        self.kf_pose: dict[int, FloatArray] = {}   # latest estimate per key
+        self.window: deque[tuple[float, int]] = deque()
+        self.smoothed: dict[int, tuple[float, FloatArray]] = {}
+        self.between_idx: dict[tuple[int, int], int] = {}
+        self.cur_o: int | None = None
+        self.cur_o_t = -np.inf
+        self.odo_t: list[float] = []
+        self.odo_u: list[FloatArray] = []
+        self.odo_c: list[FloatArray] = []
+        self.compass_pending: list[tuple[float, float, float]] = []  # t, yaw (compass), var
+        self.t0: float | None = None
+        self._rejects = 0
+        self._last_cov = np.eye(3) * 1e-2
+        self._init_yaw = 0.0
+        self.pending_kf: list[tuple[float, PoseFix | None]] = []
+
+    @property
+    def initialized(self) -> bool:
+        return self.t0 is not None
+
+    def set_compass_offset(self, offset: float) -> None:
+        self.calib.offset = float(offset)
+
+    def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        keep_odo = (self.odo_t, self.odo_u, self.odo_c)
+        if self.t0 is not None:
+            self._flush_window()
+        smoothed = self.smoothed
+        self._reset_state()
+        self.smoothed = smoothed
+        self.odo_t, self.odo_u, self.odo_c = keep_odo
+        self.t0 = float(t)
+        cov = np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2]) if cov is None else np.asarray(cov)
+        k = self._new_x(t)
+        graph = gtsam.NonlinearFactorGraph()
+        vals = gtsam.Values()
+        pose = np.asarray(pose, dtype=float)
+        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*pose),
+                                         gtsam.noiseModel.Gaussian.Covariance(cov + np.eye(3) * 1e-9)))
+        vals.insert(k, gtsam.Pose2(*pose))
+        ts = {k: float(t)}
+        self._init_yaw = float(pose[2])
+        self._new_offset(t, graph, vals, ts)
+        self._update(graph, vals, ts)
+        self.kf_t.append(float(t))
+        self.kf_key.append(k)
+        self.window.append((float(t), k))
+        self.kf_pose[k] = pose.copy()
+        self._last_cov = cov
+        self._record_online(t, pose, cov)
+
+    def _new_x(self, t: float) -> int:
+        k = X(self.next_x)
+        self.next_x += 1
+        return k
+
+    def _new_offset(self, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                    ts: dict) -> None:
+        o = O(self.next_o)
+        self.next_o += 1
+        if self.cur_o is None:
+            if self.calib.calibrated:
+                guess, sig = float(self.calib.offset or 0.0), self.cfg.calibrated_offset_sigma
+            else:
+                guess, sig = self._offset_guess(), self.cfg.offset_prior_sigma
+            graph.add(gtsam.PriorFactorRot2(o, gtsam.Rot2(guess), gtsam.noiseModel.Isotropic.Sigma(1, sig)))
+        else:
+            guess = self._offset_estimate()
+            dt = max(t - self.cur_o_t, 1e-3)
+            graph.add(gtsam.BetweenFactorRot2(self.cur_o, o, gtsam.Rot2(0.0), gtsam.noiseModel.Isotropic.Sigma(
+                1, self.cfg.offset_rw_sigma * np.sqrt(dt))))
+            ts[self.cur_o] = float(t)
+        vals.insert(o, gtsam.Rot2(guess))
+        ts[o] = float(t)
+        self.cur_o, self.cur_o_t = o, float(t)
+
+    def _offset_guess(self) -> float:
+        if self.calib.offset is not None:
+            return float(self.calib.offset)
+        if self.calib._compass:
+            c = self.calib.compass_at(self.t0 or 0.0)
+            if c is not None:
+                return float(wrap_angle(c - self._init_yaw))
+        return 0.0
+
+    def _offset_estimate(self) -> float:
+        if self.cur_o is None:
+            return self._offset_guess()
+        try:
+            return float(self.isam.calculateEstimateRot2(self.cur_o).theta())
+        except RuntimeError:
+            return self._offset_guess()
+
+    def compass_offset(self) -> float | None:
+        """Current estimate of the compass-to-map offset (radians)."""
+        if self.cur_o is None:
+            return None
+        return self._offset_estimate()
+
+    def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
+                remove: list[int] | None = None) -> list[int]:
+        tsm = gtsam.FixedLagSmootherKeyTimestampMap()
+        for k, t in ts.items():
+            tsm.insert((k, t))
+        self.isam.update(graph, vals, tsm, remove or [])
+        return list(self.isam.getISAM2Result().getNewFactorsIndices())
+
+    # ------------------------------------------------------------------ inputs
+    def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
+        if self.odo_t and t <= self.odo_t[-1]:
+            self.stats["late"] += 1
+            return
+        self.odo_t.append(float(t))
+        self.odo_u.append(np.asarray(twist, dtype=float))
+        self.odo_c.append(twist_covariance(twist_cov, self.cfg.encoder_sigmas))
+        self._process_pending(float(t))
+        # keep a bounded history: the window plus a margin
+        if len(self.odo_t) > 4096 and self.kf_t:
+            horizon = self.kf_t[-1] - self.cfg.lag - 1.0
+            i = int(np.searchsorted(self.odo_t, horizon))
+            if i > 0:
+                del self.odo_t[:i], self.odo_u[:i], self.odo_c[:i]
+
+    def add_compass(self, t: float, yaw: float | None, yaw_var: float,
+                    rate: float | None, rate_var: float) -> None:
+        if yaw is None:
+            return
+        self.calib.add_compass(t, yaw, rate)
+        var = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
+        self.compass_pending.append((float(t), float(yaw), float(var)))
+        self._process_pending(float(t))
+
+    def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
+        if not self.odo_t:
+            return np.zeros(3), np.diag(np.square(self.cfg.encoder_sigmas)) * max(t1 - t0, 1e-3) ** 2
+        return integrate_twist(np.asarray(self.odo_t), np.asarray(self.odo_u), np.asarray(self.odo_c),
+                               t0, t1, np.asarray(self.cfg.q_slip))
+
+    def _rotation_between(self, t0: float, t1: float) -> float:
+        """Odometry heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``)."""
+        if t1 >= t0:
+            return float(self._integrate(t0, t1)[0][2])
+        return -float(self._integrate(t1, t0)[0][2])
+
+    def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
+        assert self.kf_key, "smoother not initialized"
+        k = self.kf_key[-1]
+        d, c = self._integrate(self.kf_t[-1], t)
+        return se2_compose(self.kf_pose[k], d), self._last_cov + c
+
+    def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
+        if self.cfg.fix_gate is None:
+            return True
+        e = fix.pose - pred
+        e[2] = wrap_angle(e[2])
+        S = pred_cov + fix.cov
+        try:
+            d2 = float(e @ np.linalg.solve(S, e))
+        except np.linalg.LinAlgError:
+            return False
+        return bool(np.isfinite(d2) and d2 <= self.cfg.fix_gate)
+
+    def _fix_cov(self, cov: FloatArray) -> FloatArray:
+        c = np.array(cov, dtype=float)
+        c[0, 0] = max(c[0, 0], self.cfg.fix_min_sigma_xy**2)
+        c[1, 1] = max(c[1, 1], self.cfg.fix_min_sigma_xy**2)
+        c[2, 2] = max(c[2, 2], self.cfg.fix_min_sigma_theta**2)
+        return c
+
+    def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float]]
+                             ) -> tuple[float, float] | None:
+        if not readings:
+            return None
+        zs, vs = [], []
+        for tc, yaw, var in readings:
+            zs.append(wrap_angle(yaw + self._rotation_between(tc, t_k)))
+            vs.append(var)
+        z = np.asarray(zs, dtype=float)
+        ref = z[0]
+        mean = float(wrap_angle(ref + np.mean(wrap_angle(z - ref))))
+        return mean, float(np.sqrt(np.mean(vs) / len(vs)))
+
+    # ------------------------------------------------------------------ keyframes
+    def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        """Queue a keyframe; it is added once odometry up to ``t`` has arrived (or ``max_wait`` passed).
+
+        Returns True if the fix passed the gate against the prediction.
+        """
+        if not self.initialized:
+            return False
+        t = float(t)
+        if t <= self.kf_t[-1]:
+            if t == self.kf_t[-1]:
+                return False
+            return self._late_keyframe(t, fix)
+        if any(p[0] == t for p in self.pending_kf):
+            return False
+        pred, pred_cov = self.predict(t)
+        used = False
+        if fix is not None:
+            if self._gate(fix, pred, pred_cov):
+                used = True
+                self._rejects = 0
+            else:
+                self._rejects += 1
+                self.stats["fixes_rejected"] += 1
+                if self._rejects >= self.cfg.max_rejections:
+                    self._process_pending(np.inf)
+                    self.stats["resets"] = self.stats.get("resets", 0) + 1
+                    self.initialize(t, fix.pose, self._fix_cov(fix.cov))
+                    self.stats["keyframes"] += 1
+                    return True
+        self.pending_kf.append((t, fix if used else None))
+        self.pending_kf.sort(key=lambda p: p[0])
+        self._process_pending(t)
+        return used
+
+    def _process_pending(self, now: float) -> None:
+        while self.pending_kf:
+            t = self.pending_kf[0][0]
+            have_odo = bool(self.odo_t) and self.odo_t[-1] >= t - 1e-9
+            if not (have_odo or now - t >= self.cfg.max_wait):
+                return
+            t, fix = self.pending_kf.pop(0)
+            self._add_keyframe_now(t, fix)
+
+    def _add_keyframe_now(self, t: float, fix: PoseFix | None) -> None:
+        pred, _ = self.predict(t)
+        used = fix is not None
+        k_prev, t_prev = self.kf_key[-1], self.kf_t[-1]
+        k = self._new_x(t)
+        graph = gtsam.NonlinearFactorGraph()
+        vals = gtsam.Values()
+        ts: dict[int, float] = {k: t}
+        d, c = self._integrate(t_prev, t)
+        graph.add(between_factor(k_prev, k, d, c))
+        n_between = graph.size() - 1
+        guess = pred if not used else fix.pose  # type: ignore[union-attr]
+        vals.insert(k, gtsam.Pose2(*guess))
+        if t - self.cur_o_t >= self.cfg.offset_interval:
+            self._new_offset(t, graph, vals, ts)
+        # compass readings since the previous keyframe (late ones go to this keyframe too)
+        readings = [r for r in self.compass_pending if r[0] <= t + 1e-9]
+        self.compass_pending = [r for r in self.compass_pending if r[0] > t + 1e-9]
+        m = self._compass_measurement(t, readings)
+        if m is not None:
+            graph.add(compass_factor(k, self.cur_o, m[0], m[1],  # type: ignore[arg-type]
+                                     self.cfg.compass_kernel, self.cfg.compass_kernel_k))
+            ts[self.cur_o] = t  # type: ignore[index]
+            self.stats["compass_factors"] += 1
+        if used:
+            assert fix is not None
+            graph.add(fix_factor(k, fix.pose, self._fix_cov(fix.cov), self.cfg.fix_kernel, self.cfg.fix_kernel_k))
+            self.stats["fixes_used"] += 1
+            self.calib.add_fix(t, float(fix.pose[2]))
+        self._register(graph, vals, ts)
+        idx = self._update(graph, vals, ts)
+        self.between_idx[(k_prev, k)] = idx[n_between]
+        self.kf_t.append(t)
+        self.kf_key.append(k)
+        self.window.append((t, k))
+        self._after_keyframe(t)
+
+    def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
+        """Hook for the batch smoother (keeps a copy of every factor)."""
+
+    def _after_keyframe(self, t: float) -> None:
+        k = self.kf_key[-1]
+        pose = self.isam.calculateEstimatePose2(k)
+        self.kf_pose[k] = np.array([pose.x(), pose.y(), pose.theta()])
+        if self.cfg.online_covariance:
+            try:
+                self._last_cov = np.asarray(self.isam.marginalCovariance(k))
+            except RuntimeError:
+                pass
+        else:
+            self._last_cov = np.diag([0.01**2, 0.01**2, np.deg2rad(0.5) ** 2])
+        self.stats["keyframes"] += 1
+        self._record_online(t, self.kf_pose[k], self._last_cov)
+        # record keyframes about to leave the window (their final smoothed value)
+        horizon = t - self.cfg.lag + 0.1
+        while self.window and self.window[0][0] < horizon:
+            tk, kk = self.window.popleft()
+            p = self.isam.calculateEstimatePose2(kk)
+            self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+            self.kf_pose.pop(kk, None)
+
+    def _late_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        """A scan older than the newest keyframe: own keyframe between its neighbours."""
+        i = int(np.searchsorted(self.kf_t, t))  # kf_t[i-1] < t < kf_t[i]
+        if i == 0 or not self.window or self.kf_t[i - 1] < self.window[0][0]:
+            self.stats["dropped_late"] += 1
+            return False
+        ka, kb = self.kf_key[i - 1], self.kf_key[i]
+        ta, tb = self.kf_t[i - 1], self.kf_t[i]
+        idx_ab = self.between_idx.get((ka, kb))
+        if idx_ab is None or ka not in self.kf_pose:
+            self.stats["dropped_late"] += 1
+            return False
+        k = self._new_x(t)
+        graph = gtsam.NonlinearFactorGraph()
+        vals = gtsam.Values()
+        d1, c1 = self._integrate(ta, t)
+        d2, c2 = self._integrate(t, tb)
+        graph.add(between_factor(ka, k, d1, c1))
+        graph.add(between_factor(k, kb, d2, c2))
+        pa = self.isam.calculateEstimatePose2(ka)
+        guess = se2_compose(np.array([pa.x(), pa.y(), pa.theta()]), d1)
+        vals.insert(k, gtsam.Pose2(*guess))
+        used = False
+        if fix is not None:
+            pred_cov = self._last_cov + c1
+            if self._gate(fix, guess, pred_cov):
+                graph.add(fix_factor(k, fix.pose, self._fix_cov(fix.cov), self.cfg.fix_kernel,
+                                     self.cfg.fix_kernel_k))
+                used = True
+                self.stats["fixes_used"] += 1
+            else:
+                self.stats["fixes_rejected"] += 1
+        ts = {k: t}
+        self._register(graph, vals, ts)
+        self._remove_registered(idx_ab)
+        idx = self._update(graph, vals, ts, remove=[idx_ab])
+        del self.between_idx[(ka, kb)]
+        self.between_idx[(ka, k)] = idx[0]
+        self.between_idx[(k, kb)] = idx[1]
+        self.kf_t.insert(i, t)
+        self.kf_key.insert(i, k)
+        w = list(self.window)
+        j = next((n for n, (tw, _) in enumerate(w) if tw > t), len(w))
+        w.insert(j, (t, k))
+        self.window = deque(w)
+        p = self.isam.calculateEstimatePose2(k)
+        self.kf_pose[k] = np.array([p.x(), p.y(), p.theta()])
+        self.stats["late_scans"] += 1
+        self.stats["keyframes"] += 1
+        return used
+
+    def _remove_registered(self, isam_index: int) -> None:
+        """Hook for the batch smoother."""
+
+    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
+        if not self.kf_key:
+            return None
+        return self.kf_t[-1], self.kf_pose[self.kf_key[-1]].copy(), self._last_cov.copy()
+
+    def _flush_window(self) -> None:
+        for tk, kk in self.window:
+            try:
+                p = self.isam.calculateEstimatePose2(kk)
+            except RuntimeError:
+                continue
+            self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+        self.window.clear()
+
+    def finish(self) -> Trajectory:
+        self._process_pending(np.inf)
+        self._flush_window()
+        if not self.smoothed:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)))
+        items = sorted(self.smoothed.values(), key=lambda v: v[0])
+        return Trajectory.from_unsorted(np.array([v[0] for v in items]), np.array([v[1] for v in items]))
+
+
+class BatchSmoother(SlidingWindowSmoother):
+    """All factors of the run, optimized at :meth:`finish` by Levenberg-Marquardt."""
+
+    name = "batch"
+
+    def __init__(self, config: SmootherConfig | None = None, max_iterations: int = 50) -> None:
+        self.max_iterations = max_iterations
+        self.all_graph: list[gtsam.NonlinearFactor | None] = []
+        self.isam_to_all: dict[int, int] = {}
+        self.key_t: dict[int, float] = {}
+        self.init_vals = gtsam.Values()
+        self._pending_register: list[int] = []
+        super().__init__(config)
+
+    def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        super().initialize(t, pose, cov)
+        # the prior / offset of (re)initialization go into the batch graph too
+        g = self.isam.getFactors()
+        for i in range(g.size()):
+            f = g.at(i)
+            if f is not None:
+                self.all_graph.append(f)
+        for key in self.isam.getLinearizationPoint().keys():
+            if not self.init_vals.exists(key):
+                self.key_t[key] = t
+                if gtsam.Symbol(key).chr() == ord("x"):
+                    self.init_vals.insert(key, self.isam.calculateEstimatePose2(key))
+                else:
+                    self.init_vals.insert(key, self.isam.calculateEstimateRot2(key))
+
+    def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
+        self._pending_register = []
+        for i in range(graph.size()):
+            self._pending_register.append(len(self.all_graph))
+            self.all_graph.append(graph.at(i))
+        for key in vals.keys():
+            if gtsam.Symbol(key).chr() == ord("x"):
+                self.init_vals.insert(key, vals.atPose2(key))
+            else:
+                self.init_vals.insert(key, vals.atRot2(key))
+            self.key_t[key] = ts.get(key, 0.0)
+
+    def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
+                remove: list[int] | None = None) -> list[int]:
+        idx = super()._update(graph, vals, ts, remove)
+        if self._pending_register and len(self._pending_register) == len(idx):
+            for a, b in zip(idx, self._pending_register, strict=True):
+                self.isam_to_all[a] = b
+        self._pending_register = []
+        return idx
+
+    def _remove_registered(self, isam_index: int) -> None:
+        j = self.isam_to_all.get(isam_index)
+        if j is not None:
+            self.all_graph[j] = None
+
+    def _after_keyframe(self, t: float) -> None:
+        super()._after_keyframe(t)
+        # refresh the initial guess with the fixed-lag estimate as keyframes leave the window
+        for kk, (_, p) in list(self.smoothed.items())[-4:]:
+            if self.init_vals.exists(kk):
+                self.init_vals.update(kk, gtsam.Pose2(*p))
+
+    def finish(self) -> Trajectory:
+        fl = super().finish()
+        for kk, (_, p) in self.smoothed.items():
+            if self.init_vals.exists(kk):
+                self.init_vals.update(kk, gtsam.Pose2(*p))
+        graph = gtsam.NonlinearFactorGraph()
+        for f in self.all_graph:
+            if f is not None:
+                graph.add(f)
+        if graph.size() == 0:
+            return fl
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(self.max_iterations)
+        try:
+            result = gtsam.LevenbergMarquardtOptimizer(graph, self.init_vals, params).optimize()
+        except RuntimeError:
+            self.stats["batch_failed"] = 1
+            return fl
+        ts, ps = [], []
+        for key, t in self.key_t.items():
+            if gtsam.Symbol(key).chr() == ord("x") and result.exists(key):
+                rp = result.atPose2(key)
+                ts.append(t)
+                ps.append([rp.x(), rp.y(), rp.theta()])
+        self.stats["batch_error"] = float(graph.error(result))
+        return Trajectory.from_unsorted(np.array(ts), np.array(ps))

@@ -1,0 +1,560 @@
+"""The native 2-D scan-to-map matcher: correlative search + robust Gauss-Newton on a distance field.
+
+Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.base`):
+
+1. **Refine from the guess**: Levenberg-Marquardt on point-to-distance-field
+   residuals ``r_i = D(R p_i + t)``, ``D`` the bilinear-interpolated, *surface
+   corrected* distance field of the map (below), with an annealed robust kernel
+   (Huber or Cauchy; scale shrinking over ``kernel_schedule_m``) and analytic
+   Jacobians ``dr/d[x, y, yaw] = grad D^T [I | dR/dyaw p]``.  Compiled with numba.
+2. **Correlative search** (``search: auto`` when the refinement looks wrong, ``always``,
+   or ``never``): every pose on a grid over the window ``+-search_window_m`` /
+   ``+-search_window_deg`` around the guess is scored on a Gaussian likelihood field
+   ``exp(-D^2 / 2 sigma^2)`` with a subsample of the points; the best
+   ``search_candidates`` (distinct) poses are refined as in 1 and the lowest-cost wins.
+3. **Checks**: too few inliers, degenerate Hessian, a jump from the guess beyond
+   ``max_jump_m`` / ``max_jump_deg`` -> no fix with a reason.
+4. **Covariance**: ``cov_inflation * s^2 (J^T W J)^-1 + diag(cov_floor)`` with
+   ``s^2 = sum w r^2 / (sum w - 3)`` the weighted residual variance.  The
+   Hessian-based covariance assumes independent beams; real (and simulated) scans
+   have errors correlated along a wall (map discretisation, the robot's own
+   motion), so the covariance is inflated by a calibrated factor (see
+   ``config/frontends.yaml`` for the calibration run and its NEES).
+
+The surface correction: ``OccupancyMap.distance_field`` is the distance to the
+nearest occupied cell *centre*, while a beam ends on the cell's *face*, half a
+cell nearer.  The matcher's field is the EDT of the occupancy grid upsampled
+``field_upsample`` times, minus half a fine cell: zero on the faces of occupied
+cells, ``-res/2k`` inside them, so its zero level set is the wall surface (error at
+convex corners below ``0.21 res / k``) and the optimum is unbiased.
+
+``quality`` is the inlier fraction (|r| < ``inlier_dist_m``) of the used points.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import YAW, wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, StaticTransform
+
+from .base import (
+    FloatArray,
+    FrontendBase,
+    MatchResult,
+    PreprocessOptions,
+    no_fix,
+    preprocess_from_config,
+    unpack_config,
+)
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover - numba is a declared dependency
+    def njit(*args, **kwargs):  # type: ignore[no-redef]
+        def deco(f):
+            return f
+        return deco if not (args and callable(args[0])) else args[0]
+
+LOSS_HUBER = 0
+LOSS_CAUCHY = 1
+
+
+# ----------------------------------------------------------------- numba kernels
+@njit(cache=True, fastmath=True)
+def _lookup(field, u, v, far):  # pragma: no cover - compiled
+    """Bilinear value and (d/du, d/dv) of ``field`` at continuous (col, row) with centres at integers."""
+    h, w = field.shape
+    if not (u >= 0.0 and v >= 0.0 and u <= w - 1.0 and v <= h - 1.0):
+        return far, 0.0, 0.0
+    x0 = int(u)
+    y0 = int(v)
+    if x0 > w - 2:
+        x0 = w - 2
+    if y0 > h - 2:
+        y0 = h - 2
+    fx = u - x0
+    fy = v - y0
+    d00 = field[y0, x0]
+    d10 = field[y0, x0 + 1]
+    d01 = field[y0 + 1, x0]
+    d11 = field[y0 + 1, x0 + 1]
+    val = d00 * (1 - fx) * (1 - fy) + d10 * fx * (1 - fy) + d01 * (1 - fx) * fy + d11 * fx * fy
+    du = (1 - fy) * (d10 - d00) + fy * (d11 - d01)
+    dv = (1 - fx) * (d01 - d00) + fx * (d11 - d10)
+    return val, du, dv
+
+
+@njit(cache=True, fastmath=True)
+def _rho_w(r, c, loss, outlier):  # pragma: no cover - compiled
+    """Robust cost and IRLS weight of a residual."""
+    a = abs(r)
+    if a > outlier:
+        if loss == 0:
+            return c * (outlier - 0.5 * c), 0.0
+        return 0.5 * c * c * math.log(1.0 + (outlier / c) ** 2), 0.0
+    if loss == 0:
+        if a <= c:
+            return 0.5 * r * r, 1.0
+        return c * (a - 0.5 * c), c / a
+    q = (r / c) ** 2
+    return 0.5 * c * c * math.log(1.0 + q), 1.0 / (1.0 + q)
+
+
+@njit(cache=True, fastmath=True)
+def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos):  # pragma: no cover - compiled
+    """Residual, map-frame field gradient and whether the point faces the sensor.
+
+    ``(lx, ly)`` is the laser origin in base_link: a point whose field gradient points
+    away from the laser (``cos > backcos``) lies on the back face of a wall that the
+    beam could not have reached, and is not used.
+    """
+    qx = pose[0] + cs * x - sn * y
+    qy = pose[1] + sn * x + cs * y
+    u = A[0, 0] * qx + A[0, 1] * qy + b[0]
+    v = A[1, 0] * qx + A[1, 1] * qy + b[1]
+    r, du, dv = _lookup(field, u, v, far)
+    gx = du * A[0, 0] + dv * A[1, 0]
+    gy = du * A[0, 1] + dv * A[1, 1]
+    bx = qx - (pose[0] + cs * lx - sn * ly)
+    by = qy - (pose[1] + sn * lx + cs * ly)
+    dot = gx * bx + gy * by
+    nrm = math.sqrt((gx * gx + gy * gy) * (bx * bx + by * by))
+    front = not (nrm > 0.0 and dot > backcos * nrm)
+    return r, gx, gy, front
+
+
+@njit(cache=True, fastmath=True)
+def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, H, g):  # pragma: no cover
+    """Fill H = J^T W J, g = J^T W r at ``pose``; return robust cost."""
+    cs = math.cos(pose[2])
+    sn = math.sin(pose[2])
+    for i in range(3):
+        g[i] = 0.0
+        for j in range(3):
+            H[i, j] = 0.0
+    cost = 0.0
+    for k in range(px.shape[0]):
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        if not front:
+            r = far
+        rho, w = _rho_w(r, c, loss, outlier)
+        cost += rho
+        if w == 0.0:
+            continue
+        j0 = gx
+        j1 = gy
+        j2 = gx * (-sn * px[k] - cs * py[k]) + gy * (cs * px[k] - sn * py[k])
+        g[0] += w * j0 * r
+        g[1] += w * j1 * r
+        g[2] += w * j2 * r
+        H[0, 0] += w * j0 * j0
+        H[0, 1] += w * j0 * j1
+        H[0, 2] += w * j0 * j2
+        H[1, 1] += w * j1 * j1
+        H[1, 2] += w * j1 * j2
+        H[2, 2] += w * j2 * j2
+    H[1, 0] = H[0, 1]
+    H[2, 0] = H[0, 2]
+    H[2, 1] = H[1, 2]
+    return cost
+
+
+@njit(cache=True, fastmath=True)
+def _cost(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos):  # pragma: no cover - compiled
+    cs = math.cos(pose[2])
+    sn = math.sin(pose[2])
+    cost = 0.0
+    for k in range(px.shape[0]):
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        if not front:
+            r = far
+        rho, w = _rho_w(r, c, loss, outlier)
+        cost += rho
+    return cost
+
+
+@njit(cache=True, fastmath=True)
+def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, tol, lx, ly, backcos):  # noqa: E501  # pragma: no cover
+    """Levenberg-Marquardt over the annealing stages. Returns (pose, iterations)."""
+    pose = pose0.copy()
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    trial = np.zeros(3)
+    M = np.zeros((3, 3))
+    it_total = 0
+    for s in range(scales.shape[0]):
+        c = scales[s]
+        out = outliers[s]
+        lam = 1e-4
+        cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, H, g)
+        for _it in range(max_iter):
+            it_total += 1
+            improved = False
+            for _try in range(8):
+                for i in range(3):
+                    for j in range(3):
+                        M[i, j] = H[i, j]
+                    M[i, i] += lam * (H[i, i] + 1e-9)
+                det = np.linalg.det(M)
+                if not (abs(det) > 1e-300):
+                    lam *= 10.0
+                    continue
+                d = -np.linalg.solve(M, g)
+                trial[0] = pose[0] + d[0]
+                trial[1] = pose[1] + d[1]
+                trial[2] = pose[2] + d[2]
+                tc = _cost(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos)
+                if tc <= cost:
+                    pose[0] = trial[0]
+                    pose[1] = trial[1]
+                    pose[2] = trial[2]
+                    lam = max(lam * 0.1, 1e-7)
+                    improved = True
+                    break
+                lam *= 10.0
+            if not improved:
+                break
+            step = math.sqrt(d[0] * d[0] + d[1] * d[1]) + abs(d[2])
+            cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, H, g)
+            if step < tol:
+                break
+    return pose, it_total
+
+
+@njit(cache=True, fastmath=True)
+def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, backcos):  # pragma: no cover
+    """Final H (J^T W J), sum w r^2, sum w, inliers, used points."""
+    H = np.zeros((3, 3))
+    cs = math.cos(pose[2])
+    sn = math.sin(pose[2])
+    wr2 = 0.0
+    sw = 0.0
+    n_in = 0
+    n_used = 0
+    for k in range(px.shape[0]):
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        if not front:
+            continue
+        rho, w = _rho_w(r, c, loss, outlier)
+        if abs(r) < inlier:
+            n_in += 1
+        if w == 0.0:
+            continue
+        n_used += 1
+        j0 = gx
+        j1 = gy
+        j2 = gx * (-sn * px[k] - cs * py[k]) + gy * (cs * px[k] - sn * py[k])
+        H[0, 0] += w * j0 * j0
+        H[0, 1] += w * j0 * j1
+        H[0, 2] += w * j0 * j2
+        H[1, 1] += w * j1 * j1
+        H[1, 2] += w * j1 * j2
+        H[2, 2] += w * j2 * j2
+        wr2 += w * r * r
+        sw += w
+    H[1, 0] = H[0, 1]
+    H[2, 0] = H[0, 2]
+    H[2, 1] = H[1, 2]
+    return H, wr2, sw, n_in, n_used
+
+
+@njit(cache=True, fastmath=True)
+def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_best):  # pragma: no cover
+    """Exhaustive correlative search; returns the ``n_best`` poses (rows) and their mean scores."""
+    nl = int(math.floor(lin_win / lin_step + 1e-9))
+    na = int(math.floor(ang_win / ang_step + 1e-9))
+    h, w = lik.shape
+    best_pose = np.zeros((n_best, 3))
+    best_score = np.full(n_best, -1.0)
+    n = px.shape[0]
+    rx = np.empty(n)
+    ry = np.empty(n)
+    for ia in range(-na, na + 1):
+        th = guess[2] + ia * ang_step
+        cs = math.cos(th)
+        sn = math.sin(th)
+        for k in range(n):
+            rx[k] = cs * px[k] - sn * py[k]
+            ry[k] = sn * px[k] + cs * py[k]
+        for ix in range(-nl, nl + 1):
+            tx = guess[0] + ix * lin_step
+            for iy in range(-nl, nl + 1):
+                ty = guess[1] + iy * lin_step
+                s = 0.0
+                for k in range(n):
+                    qx = tx + rx[k]
+                    qy = ty + ry[k]
+                    u = A[0, 0] * qx + A[0, 1] * qy + b[0] + 0.5
+                    v = A[1, 0] * qx + A[1, 1] * qy + b[1] + 0.5
+                    if u >= 0.0 and v >= 0.0 and u < w and v < h:
+                        s += lik[int(v), int(u)]
+                s /= n
+                # insert into the (small, sorted descending) best list
+                if s > best_score[n_best - 1]:
+                    j = n_best - 1
+                    while j > 0 and best_score[j - 1] < s:
+                        best_score[j] = best_score[j - 1]
+                        best_pose[j] = best_pose[j - 1]
+                        j -= 1
+                    best_score[j] = s
+                    best_pose[j, 0] = tx
+                    best_pose[j, 1] = ty
+                    best_pose[j, 2] = th
+    return best_pose, best_score
+
+
+# ----------------------------------------------------------------- the matcher
+def surface_distance_field(occ_map: OccupancyMap, upsample: int = 2, max_dist_m: float = 2.0) -> FloatArray:
+    """Signed distance (m) to the nearest occupied-cell *surface*, on a grid ``upsample`` times finer.
+
+    Fine cell ``(i, j)`` has its centre at continuous map-grid coordinate
+    ``((j + 0.5) / k, (i + 0.5) / k)``.  Outside obstacles: EDT to the nearest fine
+    occupied cell centre minus half a fine cell (so the bilinear interpolation
+    crosses zero on the cell face, where a beam ends); inside: minus the same
+    distance to the nearest non-occupied cell, so a point inside a thick wall is
+    pushed out instead of resting on a flat zero.  Clipped to ``[-max, max]``.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    k = max(int(upsample), 1)
+    occ = occ_map.occupied
+    if k > 1:
+        occ = np.repeat(np.repeat(occ, k, axis=0), k, axis=1)
+    fine = occ_map.resolution / k
+    if not occ.any():
+        return np.full(occ.shape, float(max_dist_m))
+    outside = distance_transform_edt(~occ) * fine - 0.5 * fine
+    if occ.all():
+        inside = np.full(occ.shape, float(max_dist_m))
+    else:
+        inside = distance_transform_edt(occ) * fine - 0.5 * fine
+    d = np.where(occ, -inside, outside)
+    return np.clip(d, -max_dist_m, max_dist_m)
+
+
+class NativeMatcher(FrontendBase):
+    """Correlative search + robust LM on the surface distance field (see the module docstring)."""
+
+    name = "native"
+
+    def __init__(
+        self,
+        occ_map: OccupancyMap,
+        laser_mount: StaticTransform | None = None,
+        *,
+        preprocess: PreprocessOptions | None = None,
+        field_upsample: int = 2,
+        field_max_dist_m: float = 1.0,
+        loss: str = "cauchy",
+        kernel_schedule_m: tuple[float, ...] = (0.3, 0.1, 0.03),
+        outlier_schedule_m: tuple[float, ...] = (1.0, 0.5, 0.2),
+        max_iterations: int = 15,
+        tolerance: float = 1e-6,
+        inlier_dist_m: float = 0.05,
+        min_inliers: int = 30,
+        min_inlier_fraction: float = 0.3,
+        search: str = "auto",
+        search_trigger_inlier_fraction: float = 0.6,
+        search_window_m: float = 0.5,
+        search_window_deg: float = 15.0,
+        search_lin_step_m: float = 0.1,
+        search_ang_step_deg: float = 2.0,
+        search_sigma_m: float = 0.1,
+        search_max_points: int = 120,
+        search_candidates: int = 3,
+        max_jump_m: float = 1.0,
+        max_jump_deg: float = 30.0,
+        min_eigen_ratio: float = 1e-3,
+        cov_inflation: float = 10.0,
+        cov_floor: tuple[float, float, float] = (1e-5, 1e-5, 3e-6),
+        backface_cos: float = 0.1,
+    ):
+        super().__init__(occ_map, laser_mount, preprocess)
+        if loss not in ("huber", "cauchy"):
+            raise ConfigError(f"frontends config [native]: loss must be huber or cauchy, got {loss!r}")
+        if search not in ("auto", "always", "never"):
+            raise ConfigError(f"frontends config [native]: search must be auto, always or never, got {search!r}")
+        if len(kernel_schedule_m) == 0 or len(kernel_schedule_m) != len(outlier_schedule_m):
+            raise ConfigError(
+                "frontends config [native]: kernel_schedule_m and outlier_schedule_m need equal, >0 lengths"
+            )
+        self.loss = LOSS_HUBER if loss == "huber" else LOSS_CAUCHY
+        self.scales = np.asarray(kernel_schedule_m, dtype=float)
+        self.outliers = np.asarray(outlier_schedule_m, dtype=float)
+        self.max_iterations = int(max_iterations)
+        self.tolerance = float(tolerance)
+        self.inlier_dist = float(inlier_dist_m)
+        self.min_inliers = int(min_inliers)
+        self.min_inlier_fraction = float(min_inlier_fraction)
+        self.search = search
+        self.search_trigger = float(search_trigger_inlier_fraction)
+        self.search_window_m = float(search_window_m)
+        self.search_window = math.radians(search_window_deg)
+        self.search_lin_step = float(search_lin_step_m)
+        self.search_ang_step = math.radians(search_ang_step_deg)
+        self.search_max_points = int(search_max_points)
+        self.search_candidates = max(int(search_candidates), 1)
+        self.max_jump_m = float(max_jump_m)
+        self.max_jump = math.radians(max_jump_deg)
+        self.min_eigen_ratio = float(min_eigen_ratio)
+        self.cov_inflation = float(cov_inflation)
+        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
+        self.far = float(field_max_dist_m)
+        self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
+
+        k = max(int(field_upsample), 1)
+        self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far), dtype=np.float64)
+        # map-frame point -> fine-grid continuous coordinate with cell centres at integers
+        c, s = math.cos(occ_map.origin[2]), math.sin(occ_map.origin[2])
+        scale = k / occ_map.resolution
+        self.A = np.array([[c, s], [-s, c]]) * scale
+        self.b = -self.A @ occ_map.origin[:2] - 0.5
+        # coarse likelihood field at map resolution for the correlative search
+        dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * search_sigma_m + occ_map.resolution))
+        self.lik = np.ascontiguousarray(np.exp(-0.5 * (dfc / float(search_sigma_m)) ** 2))
+        self.Ac = np.array([[c, s], [-s, c]]) / occ_map.resolution
+        self.bc = -self.Ac @ occ_map.origin[:2] - 0.5
+
+    # -------------------------------------------------------------- config
+    KEYS = {
+        "preprocess", "field_upsample", "field_max_dist_m", "loss", "kernel_schedule_m", "outlier_schedule_m",
+        "max_iterations", "tolerance", "inlier_dist_m", "min_inliers", "min_inlier_fraction", "search",
+        "search_trigger_inlier_fraction", "search_window_m", "search_window_deg", "search_lin_step_m",
+        "search_ang_step_deg", "search_sigma_m", "search_max_points", "search_candidates", "max_jump_m",
+        "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "backface_cos",
+    }
+
+    @classmethod
+    def from_config(
+        cls, occ_map: OccupancyMap, laser_mount: StaticTransform | None, config: dict[str, Any] | None
+    ) -> NativeMatcher:
+        cfg = unpack_config("native", config, cls.KEYS)
+        pre = preprocess_from_config("native", cfg.pop("preprocess", None))
+        kw: dict[str, Any] = {}
+        try:
+            for key, val in cfg.items():
+                if key in ("kernel_schedule_m", "outlier_schedule_m", "cov_floor"):
+                    kw[key] = tuple(float(v) for v in (val if isinstance(val, (list, tuple)) else [val]))
+                elif key in ("loss", "search"):
+                    kw[key] = str(val)
+                elif key in ("field_upsample", "max_iterations", "min_inliers", "search_max_points",
+                             "search_candidates"):
+                    kw[key] = int(val)
+                else:
+                    kw[key] = float(val)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"frontends config [native]: bad value ({e})") from None
+        return cls(occ_map, laser_mount, preprocess=pre, **kw)
+
+    # -------------------------------------------------------------- matching
+    def _refine_from(self, px: FloatArray, py: FloatArray, start: FloatArray) -> tuple[FloatArray, float]:
+        pose, _ = _refine(
+            self.field, self.A, self.b, self.far, px, py, np.asarray(start, dtype=float),
+            self.scales, self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb,
+        )
+        c, out = self.scales[-1], self.outliers[-1]
+        cost = _cost(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out, *self._lb)
+        return pose, float(cost)
+
+    def _inlier_fraction(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[int, int]:
+        c, out = self.scales[-1], self.outliers[-1]
+        _, _, _, n_in, _ = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
+                                  self.inlier_dist, *self._lb)
+        return int(n_in), len(px)
+
+    def _within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
+        jump = float(np.hypot(pose[0] - guess[0], pose[1] - guess[1]))
+        return jump <= self.max_jump_m and abs(float(wrap_angle(pose[YAW] - guess[YAW]))) <= self.max_jump
+
+    def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
+        t0 = time.perf_counter()
+        px = np.ascontiguousarray(points[:, 0])
+        py = np.ascontiguousarray(points[:, 1])
+        n = len(px)
+        searched = False
+        best: FloatArray | None = None
+        best_cost = np.inf
+        need_search = self.search == "always"
+        if self.search != "always":
+            pose, cost = self._refine_from(px, py, guess)
+            n_in, _ = self._inlier_fraction(px, py, pose)
+            jump_ok = self._within_jump(pose, guess)
+            if jump_ok or self.search == "never":
+                best, best_cost = pose, cost
+            need_search = self.search == "auto" and not (jump_ok and n_in / n >= self.search_trigger)
+        if need_search:
+            searched = True
+            stride = max(1, int(math.ceil(n / max(self.search_max_points, 1))))
+            sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
+            cands, scores = _search(
+                self.lik, self.Ac, self.bc, sx, sy, guess, self.search_window_m, self.search_lin_step,
+                self.search_window, self.search_ang_step, self.search_candidates,
+            )
+            for cand, sc in zip(cands, scores, strict=True):
+                if sc <= 0:
+                    continue
+                pose, cost = self._refine_from(px, py, cand)
+                if cost < best_cost and self._within_jump(pose, guess):
+                    best, best_cost = pose, cost
+        if best is None:
+            return no_fix(
+                f"native: no pose within {self.max_jump_m:.2f} m / {math.degrees(self.max_jump):.0f} deg "
+                "of the guess explains the scan"
+            )
+        pose = best.copy()
+        pose[YAW] = wrap_angle(pose[YAW])
+        c, out = self.scales[-1], self.outliers[-1]
+        H, wr2, sw, n_in, n_used = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
+                                          self.inlier_dist, *self._lb)
+        n_in = int(n_in)
+        quality = n_in / n
+        info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n}
+        if n_in < self.min_inliers or quality < self.min_inlier_fraction:
+            return no_fix(
+                f"native: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
+                n_inliers=n_in, quality=quality, **info,
+            )
+        jump = float(np.hypot(*(pose[:2] - guess[:2])))
+        dyaw = abs(float(wrap_angle(pose[YAW] - guess[YAW])))
+        if jump > self.max_jump_m or dyaw > self.max_jump:
+            return no_fix(
+                f"native: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
+                n_inliers=n_in, quality=quality, **info,
+            )
+        # degeneracy: eigenvalues of H with yaw scaled by a typical range (metres per radian)
+        lever = float(np.sqrt(np.mean(px * px + py * py))) or 1.0
+        S = np.diag([1.0, 1.0, 1.0 / lever])
+        ev = np.linalg.eigvalsh(S @ H @ S)
+        if not (np.all(np.isfinite(ev)) and ev[0] > self.min_eigen_ratio * ev[-1] and ev[-1] > 0):
+            return no_fix(
+                f"native: degenerate geometry (Hessian eigenvalue ratio {ev[0] / max(ev[-1], 1e-300):.1e})",
+                n_inliers=n_in, quality=quality, **info,
+            )
+        sigma2 = wr2 / max(sw - 3.0, 1.0)
+        cov = self.cov_inflation * sigma2 * np.linalg.inv(H) + self.cov_floor
+        cov = 0.5 * (cov + cov.T)
+        info["sigma_m"] = math.sqrt(sigma2)
+        info["time_s"] = time.perf_counter() - t0
+        return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
+
+
+def warmup() -> None:
+    """Compile the numba kernels (cached on disk) on a tiny map."""
+    data = np.zeros((40, 40), dtype=np.int16)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    m = OccupancyMap(data, 0.1)
+    matcher = NativeMatcher(m, None, search="always")
+    ang = np.linspace(-np.pi, np.pi, 200, endpoint=False)
+    r = m.raycast(np.array([2.0, 2.0]), ang, 10.0)
+    scan = LaserScan(0.0, -np.pi, 2 * np.pi / 200, 0.05, 10.0, r.astype(np.float32))
+    matcher.match(scan, np.array([2.0, 2.0, 0.0]))
+
+
+__all__ = ["NativeMatcher", "surface_distance_field", "warmup"]

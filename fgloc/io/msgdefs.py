@@ -1,0 +1,85 @@
+"""ROS 2 message definitions (``ros2msg``) for the types fgloc logs, as rosbag2 stores them.
+
+The field lines are those of the ROS 2 (Humble .. Jazzy) ``.msg`` files (comments left out;
+same-package types written relative, defaults kept).  :func:`full_text` concatenates a type
+and all its dependencies exactly as ``rosbag2_cpp::LocalMessageDefinitionSource`` does: the
+root definition first, then for each dependency (sorted, depth-first, each once) a newline,
+a line of 80 ``=``, a line ``MSG: pkg/Type`` and that type's text.
+"""
+
+from __future__ import annotations
+
+import re
+
+SEPARATOR = "=" * 80
+
+MSG_TEXT: dict[str, str] = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
+    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
+    "geometry_msgs/PoseWithCovarianceStamped": "std_msgs/Header header\nPoseWithCovariance pose\n",
+    "geometry_msgs/Twist": "Vector3  linear\nVector3  angular\n",
+    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
+    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+    "nav_msgs/Odometry": (
+        "std_msgs/Header header\nstring child_frame_id\n"
+        "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n"
+    ),
+    "sensor_msgs/LaserScan": (
+        "std_msgs/Header header\n"
+        "float32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
+        "float32 time_increment\nfloat32 scan_time\n"
+        "float32 range_min\nfloat32 range_max\n"
+        "float32[] ranges\nfloat32[] intensities\n"
+    ),
+    "sensor_msgs/Imu": (
+        "std_msgs/Header header\n"
+        "geometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n"
+        "geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n"
+        "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n"
+    ),
+    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+}
+
+_FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
+_PRIMITIVES = {
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+    "int32", "uint32", "int64", "uint64", "string",
+}
+
+
+def short_name(type_name: str) -> str:
+    """``sensor_msgs/msg/LaserScan`` -> ``sensor_msgs/LaserScan``."""
+    parts = type_name.split("/")
+    return f"{parts[0]}/{parts[-1]}" if len(parts) == 3 else type_name
+
+
+def _deps(name: str) -> list[str]:
+    pkg = name.split("/")[0]
+    out = set()
+    for m in _FIELD_TYPE.finditer(MSG_TEXT[name]):
+        t = m.group(1)
+        if t in _PRIMITIVES:
+            continue
+        out.add(t if "/" in t else f"{pkg}/{t}")
+    return sorted(out)
+
+
+def full_text(type_name: str) -> str:
+    """The complete ``ros2msg`` definition of ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``)."""
+    seen: set[str] = set()
+
+    def rec(name: str) -> str:
+        text = MSG_TEXT[name]
+        for dep in _deps(name):
+            if dep not in seen:
+                seen.add(dep)
+                text += f"\n{SEPARATOR}\nMSG: {dep}\n" + rec(dep)
+        return text
+
+    return rec(short_name(type_name))

@@ -1,0 +1,307 @@
+"""KISS-ICP registration of a scan against the map (``kiss`` front-end).
+
+The map's occupied cells become a *static* ``kiss_icp`` ``VoxelHashMap`` at ``z = 0``:
+each face of an occupied cell that borders a free cell (the surfaces a beam can
+hit) is densified into ``samples_per_face`` points, so the points lie where beam
+endpoints lie, not half a cell behind them at the cell centres.  The scan
+(de-skewed, ``base_link``, ``z = 0``) is aligned with kiss_icp's own point-to-point
+registration (``kiss_icp.registration.Registration.align_points_to_map``, robust
+Geman-McClure kernel) from the prior guess, first on a coarse voxel map with a
+wide correspondence distance (robust to a guess ~0.5 m / 15 deg off), then on the
+fine one.  The 6-DoF result is projected to SE(2) (x, y, yaw).
+
+Covariance: the point-to-point Hessian at the solution, computed here from the
+nearest-neighbour correspondences (a KD-tree over the same surface points):
+``H = sum w J^T J`` with ``J = [I2 | dR/dyaw p]``, ``cov = cov_inflation * s^2 H^-1 +
+diag(cov_floor)``, ``s^2`` the weighted residual variance per axis.  The inflation
+accounts for beams that are not independent (calibrated, see config/frontends.yaml).
+Fixes with too few inliers (correspondences closer than ``inlier_dist_m``), a
+degenerate Hessian or a jump from the guess beyond ``max_jump_*`` are rejected.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import YAW, wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, StaticTransform
+
+from .base import (
+    FloatArray,
+    FrontendBase,
+    MatchResult,
+    PreprocessOptions,
+    no_fix,
+    preprocess_from_config,
+    unpack_config,
+)
+
+
+def surface_points(occ_map: OccupancyMap, samples_per_face: int = 2) -> tuple[FloatArray, FloatArray]:
+    """Points ``(N, 2)`` on the faces of occupied cells that border free cells, and their
+    outward unit normals ``(N, 2)`` (pointing into the free cell), both in the map frame."""
+    occ = occ_map.occupied
+    free = occ_map.free
+    h, w = occ.shape
+    k = max(int(samples_per_face), 1)
+    offs = (np.arange(k) + 0.5) / k  # along the face, in cells
+    cols: list[FloatArray] = []
+    rows: list[FloatArray] = []
+    normals: list[FloatArray] = []
+    # (d_row, d_col) to the free neighbour; the face is half a cell from the centre that way
+    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        nb_free = np.zeros_like(occ)
+        src_r = slice(max(dr, 0), h + min(dr, 0))
+        dst_r = slice(max(-dr, 0), h + min(-dr, 0))
+        src_c = slice(max(dc, 0), w + min(dc, 0))
+        dst_c = slice(max(-dc, 0), w + min(-dc, 0))
+        nb_free[dst_r, dst_c] = free[src_r, src_c]
+        r_idx, c_idx = np.nonzero(occ & nb_free)
+        if len(r_idx) == 0:
+            continue
+        # continuous grid coordinates (cell (r, c) spans [c, c+1) x [r, r+1))
+        if dr != 0:
+            y = r_idx + (1.0 if dr > 0 else 0.0)
+            rows.append(np.repeat(y, k).astype(float))
+            cols.append((c_idx[:, None] + offs[None, :]).reshape(-1))
+        else:
+            x = c_idx + (1.0 if dc > 0 else 0.0)
+            cols.append(np.repeat(x, k).astype(float))
+            rows.append((r_idx[:, None] + offs[None, :]).reshape(-1))
+        normals.append(np.tile([float(dc), float(dr)], (len(r_idx) * k, 1)))
+    if not cols:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    gx = np.concatenate(cols) * occ_map.resolution
+    gy = np.concatenate(rows) * occ_map.resolution
+    c, s = math.cos(occ_map.origin[2]), math.sin(occ_map.origin[2])
+    pts = np.column_stack([occ_map.origin[0] + c * gx - s * gy, occ_map.origin[1] + s * gx + c * gy])
+    ng = np.concatenate(normals)
+    nrm = np.column_stack([c * ng[:, 0] - s * ng[:, 1], s * ng[:, 0] + c * ng[:, 1]])
+    return pts, nrm
+
+
+def _se2_to_mat4(p: FloatArray) -> FloatArray:
+    m = np.eye(4)
+    c, s = math.cos(p[2]), math.sin(p[2])
+    m[:2, :2] = [[c, -s], [s, c]]
+    m[0, 3], m[1, 3] = p[0], p[1]
+    return m
+
+
+def _mat4_to_se2(m: FloatArray) -> FloatArray:
+    return np.array([m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0])])
+
+
+class KissMatcher(FrontendBase):
+    """kiss_icp point-to-point registration against a static voxel map of the occupied surfaces."""
+
+    name = "kiss"
+
+    KEYS = {
+        "preprocess", "samples_per_face", "coarse_voxel_size_m", "coarse_max_points_per_voxel",
+        "coarse_max_correspondence_m", "coarse_kernel_m", "coarse_max_iterations", "coarse_convergence_criterion",
+        "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m", "max_iterations",
+        "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers", "min_inlier_fraction",
+        "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "max_backface_fraction",
+    }
+
+    def __init__(
+        self,
+        occ_map: OccupancyMap,
+        laser_mount: StaticTransform | None = None,
+        *,
+        preprocess: PreprocessOptions | None = None,
+        samples_per_face: int = 2,
+        coarse_voxel_size_m: float = 0.6,
+        coarse_max_points_per_voxel: int = 36,
+        coarse_max_correspondence_m: float = 1.0,
+        coarse_kernel_m: float = 0.3,
+        coarse_max_iterations: int = 50,
+        coarse_convergence_criterion: float = 1e-4,
+        voxel_size_m: float = 0.25,
+        max_points_per_voxel: int = 150,
+        max_correspondence_m: float = 0.25,
+        kernel_m: float = 0.05,
+        max_iterations: int = 50,
+        convergence_criterion: float = 1e-5,
+        max_threads: int = 1,
+        inlier_dist_m: float = 0.05,
+        min_inliers: int = 30,
+        min_inlier_fraction: float = 0.3,
+        max_jump_m: float = 1.0,
+        max_jump_deg: float = 30.0,
+        min_eigen_ratio: float = 1e-3,
+        cov_inflation: float = 1.0,
+        cov_floor: tuple[float, float, float] = (1e-5, 1e-5, 3e-6),
+        max_backface_fraction: float = 0.1,
+    ):
+        super().__init__(occ_map, laser_mount, preprocess)
+        try:
+            from kiss_icp.mapping import VoxelHashMap
+            from kiss_icp.registration import Registration
+        except ImportError as e:  # pragma: no cover - kiss-icp is a declared dependency
+            raise ConfigError(f"front-end 'kiss' needs kiss-icp ({e})") from None
+        from scipy.spatial import cKDTree
+
+        pts2, self.map_normals = surface_points(occ_map, samples_per_face)
+        if len(pts2) == 0:
+            raise ConfigError("front-end 'kiss': the map has no occupied cell bordering free space")
+        pts3 = np.column_stack([pts2, np.zeros(len(pts2))])
+        big = 1e9  # static map: never drop points for distance
+        self.coarse_map = VoxelHashMap(float(coarse_voxel_size_m), big, int(coarse_max_points_per_voxel))
+        self.coarse_map.add_points(pts3)
+        self.fine_map = VoxelHashMap(float(voxel_size_m), big, int(max_points_per_voxel))
+        self.fine_map.add_points(pts3)
+        self.map_points = pts2
+        self.tree = cKDTree(pts2)
+        self._voxel_map_cls = VoxelHashMap
+        self._map_args = (
+            (float(coarse_voxel_size_m), big, int(coarse_max_points_per_voxel)),
+            (float(voxel_size_m), big, int(max_points_per_voxel)),
+        )
+        self.max_backface_fraction = float(max_backface_fraction)
+        self.registration = Registration(int(max_iterations), float(convergence_criterion), int(max_threads))
+        self.coarse_registration = Registration(int(coarse_max_iterations), float(coarse_convergence_criterion),
+                                                int(max_threads))
+        self.coarse_corr = float(coarse_max_correspondence_m)
+        self.coarse_kernel = float(coarse_kernel_m)
+        self.max_corr = float(max_correspondence_m)
+        self.kernel = float(kernel_m)
+        self.inlier_dist = float(inlier_dist_m)
+        self.min_inliers = int(min_inliers)
+        self.min_inlier_fraction = float(min_inlier_fraction)
+        self.max_jump_m = float(max_jump_m)
+        self.max_jump = math.radians(max_jump_deg)
+        self.min_eigen_ratio = float(min_eigen_ratio)
+        self.cov_inflation = float(cov_inflation)
+        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
+
+    @classmethod
+    def from_config(
+        cls, occ_map: OccupancyMap, laser_mount: StaticTransform | None, config: dict[str, Any] | None
+    ) -> KissMatcher:
+        cfg = unpack_config("kiss", config, cls.KEYS)
+        pre = preprocess_from_config("kiss", cfg.pop("preprocess", None))
+        ints = {"samples_per_face", "coarse_max_points_per_voxel", "coarse_max_iterations", "max_points_per_voxel",
+                "max_iterations", "max_threads", "min_inliers"}
+        kw: dict[str, Any] = {}
+        try:
+            for key, val in cfg.items():
+                if key == "cov_floor":
+                    kw[key] = tuple(float(v) for v in val)
+                elif key in ints:
+                    kw[key] = int(val)
+                else:
+                    kw[key] = float(val)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"frontends config [kiss]: bad value ({e})") from None
+        return cls(occ_map, laser_mount, preprocess=pre, **kw)
+
+    def _register(self, pts3: FloatArray, guess: FloatArray, coarse: Any, fine: Any) -> FloatArray | None:
+        T = _se2_to_mat4(guess)
+        if self.coarse_corr > 0:
+            T = self.coarse_registration.align_points_to_map(pts3, coarse, T, self.coarse_corr, self.coarse_kernel)
+        T = self.registration.align_points_to_map(pts3, fine, T, self.max_corr, self.kernel)
+        if not np.all(np.isfinite(T)):
+            return None
+        pose = _mat4_to_se2(T)
+        pose[YAW] = wrap_angle(pose[YAW])
+        return pose
+
+    def _associate(
+        self, points: FloatArray, pose: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+        """World points, NN distances, NN indices, and the back-face fraction among the inliers."""
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        q = np.column_stack([pose[0] + c * points[:, 0] - s * points[:, 1],
+                             pose[1] + s * points[:, 0] + c * points[:, 1]])
+        dist, idx = self.tree.query(q, distance_upper_bound=self.max_corr)
+        inl = dist < self.inlier_dist
+        if not inl.any():
+            return q, dist, idx, 0.0
+        lx, ly = self.pre.mount[0], self.pre.mount[1]
+        origin = np.array([pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly])
+        beam = q[inl] - origin
+        back = np.sum(beam * self.map_normals[idx[inl]], axis=1) > 0
+        return q, dist, idx, float(back.mean())
+
+    def _front_facing_maps(self, guess: FloatArray, reach: float) -> tuple[Any, Any]:
+        """Voxel maps of only the surfaces near the guess that face it (a beam from there can hit them)."""
+        d = self.map_points - guess[:2]
+        keep = (np.sum(d * self.map_normals, axis=1) < 0) & (np.sum(d * d, axis=1) < reach * reach)
+        pts3 = np.column_stack([self.map_points[keep], np.zeros(int(keep.sum()))])
+        maps = []
+        for args in self._map_args:
+            vm = self._voxel_map_cls(*args)
+            vm.add_points(pts3)
+            maps.append(vm)
+        return maps[0], maps[1]
+
+    def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
+        t0 = time.perf_counter()
+        n = len(points)
+        pts3 = np.ascontiguousarray(np.column_stack([points, np.zeros(n)]))
+        pose = self._register(pts3, guess, self.coarse_map, self.fine_map)
+        if pose is None:
+            return no_fix("kiss: registration diverged (non-finite transform)")
+        q, dist, idx, back = self._associate(points, pose)
+        recovered = False
+        if back > self.max_backface_fraction:
+            # landed on the far side of a thin wall: redo against the surfaces facing the guess
+            reach = float(np.sqrt(np.max(np.sum(points * points, axis=1)))) + self.max_jump_m + 1.0
+            coarse, fine = self._front_facing_maps(guess, reach)
+            alt = self._register(pts3, guess, coarse, fine)
+            if alt is not None:
+                q2, dist2, idx2, back2 = self._associate(points, alt)
+                if back2 < back:
+                    pose, q, dist, idx, back, recovered = alt, q2, dist2, idx2, back2, True
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        used = np.isfinite(dist)
+        inl = dist < self.inlier_dist
+        n_in = int(inl.sum())
+        quality = n_in / n
+        info: dict[str, Any] = {"time_s": time.perf_counter() - t0, "n_points": n, "backface": back,
+                                "recovered": recovered}
+        if n_in < self.min_inliers or quality < self.min_inlier_fraction:
+            return no_fix(f"kiss: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
+                          n_inliers=n_in, quality=quality, **info)
+        if back > self.max_backface_fraction:
+            return no_fix(f"kiss: {100 * back:.0f}% of the matched points lie on the back of walls",
+                          n_inliers=n_in, quality=quality, **info)
+        jump = float(np.hypot(pose[0] - guess[0], pose[1] - guess[1]))
+        dyaw = abs(float(wrap_angle(pose[YAW] - guess[YAW])))
+        if jump > self.max_jump_m or dyaw > self.max_jump:
+            return no_fix(f"kiss: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
+                          n_inliers=n_in, quality=quality, **info)
+        e = q[used] - self.map_points[idx[used]]
+        r2 = np.sum(e * e, axis=1)
+        w = (self.kernel ** 2) / (self.kernel + r2) ** 2  # kiss_icp's Geman-McClure weight (same form)
+        w = w / w.max()
+        p = points[used]
+        jy = np.column_stack([-s * p[:, 0] - c * p[:, 1], c * p[:, 0] - s * p[:, 1]])  # d q / d yaw
+        H = np.zeros((3, 3))
+        H[0, 0] = H[1, 1] = w.sum()
+        H[0, 2] = H[2, 0] = float(np.sum(w * jy[:, 0]))
+        H[1, 2] = H[2, 1] = float(np.sum(w * jy[:, 1]))
+        H[2, 2] = float(np.sum(w * np.sum(jy * jy, axis=1)))
+        lever = float(np.sqrt(np.mean(np.sum(p * p, axis=1)))) or 1.0
+        S = np.diag([1.0, 1.0, 1.0 / lever])
+        ev = np.linalg.eigvalsh(S @ H @ S)
+        if not (np.all(np.isfinite(ev)) and ev[-1] > 0 and ev[0] > self.min_eigen_ratio * ev[-1]):
+            return no_fix("kiss: degenerate geometry (point-to-point Hessian near singular)",
+                          n_inliers=n_in, quality=quality, **info)
+        sigma2 = float(np.sum(w * r2)) / max(2.0 * w.sum() - 3.0, 1.0)
+        cov = self.cov_inflation * sigma2 * np.linalg.inv(H) + self.cov_floor
+        cov = 0.5 * (cov + cov.T)
+        info["sigma_m"] = math.sqrt(sigma2)
+        info["time_s"] = time.perf_counter() - t0
+        return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
+
+
+__all__ = ["KissMatcher", "surface_points"]

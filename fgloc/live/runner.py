@@ -1,0 +1,305 @@
+"""The live fusion loop: sensor threads -> one queue -> Localizer, recorder, publisher.
+
+Threads: :class:`SerialLink` and :class:`SickClient` read and decode in their own
+threads and push ``(kind, msg, arrival)`` into a queue; the fusion loop (the caller's
+thread, :meth:`LiveRunner.run`) feeds the :class:`fgloc.pipeline.Localizer`, records
+every received message (MCAP via ``LogWriter``), publishes the fused pose and keeps
+sensor health: a sensor with no message for ``silence_s`` is reported silent (the
+others keep running) and reported back when it returns.
+
+Latency is measured from the host arrival time of a scan (when its last byte was
+read) to the moment the fused pose is available after ``Localizer.on_scan``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
+
+SENSORS = ("odom", "imu", "scan")
+
+
+@dataclass
+class SensorHealth:
+    name: str
+    state: str = "waiting"  # waiting | ok | silent
+    count: int = 0
+    last_arrival: float = float("nan")  # time.monotonic()
+    silent_since: float = float("nan")
+    arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=400))
+
+    def rate_hz(self, now: float, window: float = 2.0) -> float:
+        n = sum(1 for t in self.arrivals if now - t <= window)
+        return n / window
+
+
+@dataclass
+class HealthEvent:
+    t: float  # time.monotonic()
+    sensor: str
+    kind: str  # "silent" | "back"
+    gap_s: float
+
+
+class LiveRunner:
+    """Glue between the sensor threads and the localizer.  Not tied to any I/O itself:
+    ``recorder`` (``write(topic, msg, stamp)``), ``publisher`` (``pose(fix, latency_ms)``,
+    ``status(...)``) and ``status_sink(line)`` are optional callables/objects."""
+
+    def __init__(
+        self,
+        localizer: Any,
+        recorder: Any = None,
+        publisher: Any = None,
+        status_sink: Callable[[str], None] | None = None,
+        event_sink: Callable[[str], None] | None = None,
+        topics: dict[str, str] | None = None,
+        laser_mount: StaticTransform | None = None,
+        silence_s: float = 0.5,
+        status_period_s: float = 0.25,
+        sensors: tuple[str, ...] = SENSORS,
+        reorder_s: float = 0.15,
+    ) -> None:
+        self.loc = localizer
+        self.recorder = recorder
+        self.publisher = publisher
+        self.status_sink = status_sink
+        self.event_sink = event_sink or (lambda s: None)
+        self.topics = {"odom": "/odom", "imu": "/imu", "scan": "/scan", "tf_static": "/tf_static",
+                       "fused": "/fused_pose"}
+        self.topics.update(topics or {})
+        self.laser_mount = laser_mount
+        self.silence_s = silence_s
+        self.status_period_s = status_period_s
+        self.q: queue.Queue[tuple[str, Any, float]] = queue.Queue()
+        self.health = {s: SensorHealth(s) for s in sensors}
+        self.events: list[HealthEvent] = []
+        self.latencies_ms: list[float] = []
+        self.live_stamps: list[float] = []
+        self.live_poses: list[np.ndarray] = []
+        self.counters: dict[str, int] = {"scans_fused": 0, "scans_skipped_backlog": 0, "fixes": 0,
+                                         "record_errors": 0, "localizer_errors": 0}
+        self.sources: dict[str, Callable[[], dict[str, Any]]] = {}  # name -> counters getter
+        self._pending_scans = 0
+        self._lock = threading.Lock()
+        self.stop_event = threading.Event()
+        self._last_status = 0.0
+        self._last_pub_status = 0.0
+        self._recorded_tf = False
+        self.last_fix: PoseFix | None = None
+        self.reorder_s = reorder_s
+        self._reorder: list[tuple[float, int, str, Any]] = []
+        self._seq = 0
+
+    # ---------------------------------------------------------------- producer side
+    def push(self, kind: str, msg: Any, arrival: float) -> None:
+        """Thread-safe: called by the sensor threads."""
+        if kind == "scan":
+            with self._lock:
+                self._pending_scans += 1
+        self.q.put((kind, msg, arrival))
+
+    # ---------------------------------------------------------------- consumer side
+    def _record(self, topic: str, msg: Any, stamp: float) -> None:
+        if self.recorder is None:
+            return
+        try:
+            self.recorder.write(topic, msg, stamp)
+        except Exception:  # noqa: BLE001 - a recorder failure must not stop localization
+            self.counters["record_errors"] += 1
+
+    def _mark(self, kind: str, now: float) -> None:
+        h = self.health.get(kind)
+        if h is None:
+            return
+        if h.state == "silent":
+            gap = now - h.last_arrival
+            self.events.append(HealthEvent(now, kind, "back", gap))
+            self.event_sink(f"{kind}: back after {gap:.2f} s silent")
+        h.state = "ok"
+        h.count += 1
+        h.last_arrival = now
+        h.arrivals.append(now)
+
+    def check_health(self, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        for h in self.health.values():
+            if h.state == "ok" and now - h.last_arrival > self.silence_s:
+                h.state = "silent"
+                h.silent_since = now
+                self.events.append(HealthEvent(now, h.name, "silent", now - h.last_arrival))
+                self.event_sink(f"{h.name}: SILENT (no message for {now - h.last_arrival:.2f} s)")
+
+    def process(self, kind: str, msg: Any, arrival: float) -> None:
+        """Ingest one message: health, recording, then fusion in stamp order.
+
+        Odometry and compass messages wait in a small reorder buffer; a scan first
+        releases every buffered message stamped before it, then is fused at once, so
+        the localizer sees the same time order as ``fgloc run`` on the recording while
+        scan latency is unaffected.  Buffered messages older than ``reorder_s`` (host
+        clock) are released by :meth:`flush_reorder`.
+        """
+        now = time.monotonic()
+        self._mark(kind, now)
+        stamp = float(getattr(msg, "stamp", arrival))
+        if self.recorder is not None and not self._recorded_tf and self.laser_mount is not None:
+            self._record(self.topics["tf_static"], [self.laser_mount], stamp)
+            self._recorded_tf = True
+        self._record(self.topics[kind], msg, stamp)
+        if kind == "scan":
+            with self._lock:
+                self._pending_scans -= 1
+                backlog = self._pending_scans
+            self._release(lambda s: s <= stamp)
+            if backlog > 0:
+                # a newer scan is already queued: fusing this one would only add latency
+                self.counters["scans_skipped_backlog"] += 1
+                return
+            self._fuse_scan(msg, arrival)
+        else:
+            self._seq += 1
+            heapq.heappush(self._reorder, (stamp, self._seq, kind, msg))
+
+    def _release(self, cond: Callable[[float], bool]) -> None:
+        while self._reorder and cond(self._reorder[0][0]):
+            _, _, kind, msg = heapq.heappop(self._reorder)
+            try:
+                if kind == "odom":
+                    self.loc.on_odometry(msg)
+                else:
+                    self.loc.on_compass(msg)
+            except Exception as e:  # noqa: BLE001 - keep running on a bad message, but count it
+                self._loc_error(kind, e)
+
+    def flush_reorder(self, all_: bool = False) -> None:
+        horizon = time.time() - self.reorder_s
+        self._release((lambda s: True) if all_ else (lambda s: s < horizon))
+
+    def _loc_error(self, kind: str, e: Exception) -> None:
+        self.counters["localizer_errors"] += 1
+        if self.counters["localizer_errors"] <= 3:
+            self.event_sink(f"localizer error on {kind}: {type(e).__name__}: {e}")
+
+    def _fuse_scan(self, msg: LaserScan, arrival: float) -> None:
+        try:
+            fix = self.loc.on_scan(msg)
+            cur = self.loc.current()
+        except Exception as e:  # noqa: BLE001
+            self._loc_error("scan", e)
+            return
+        done = time.time()
+        self.counters["scans_fused"] += 1
+        if fix is not None:
+            self.counters["fixes"] += 1
+        if cur is None:
+            return
+        lat = (done - arrival) * 1e3
+        self.latencies_ms.append(lat)
+        self.last_fix = cur
+        if not self.live_stamps or cur.stamp > self.live_stamps[-1]:
+            self.live_stamps.append(float(cur.stamp))
+            self.live_poses.append(np.asarray(cur.pose, dtype=float).copy())
+        if self.publisher is not None:
+            self.publisher.pose(cur, lat)
+        self._record(self.topics["fused"], cur, float(cur.stamp))
+
+    def live_trajectory(self) -> Trajectory:
+        if not self.live_stamps:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)))
+        return Trajectory(np.array(self.live_stamps), np.array(self.live_poses))
+
+    def health_states(self) -> dict[str, str]:
+        return {k: h.state for k, h in self.health.items()}
+
+    def all_counters(self) -> dict[str, Any]:
+        out: dict[str, Any] = dict(self.counters)
+        for name, get in self.sources.items():
+            try:
+                out[name] = get()
+            except Exception:  # noqa: BLE001
+                out[name] = {}
+        stats = getattr(self.loc, "stats", None)
+        if isinstance(stats, dict):
+            out["localizer"] = dict(stats)
+        return out
+
+    def latency_percentiles(self, last: int | None = None) -> tuple[float, float]:
+        lat = self.latencies_ms[-last:] if last else self.latencies_ms
+        if not lat:
+            return float("nan"), float("nan")
+        a = np.asarray(lat)
+        return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+    def status_line(self) -> str:
+        now = time.monotonic()
+        parts = []
+        for k, h in self.health.items():
+            mark = {"ok": "", "waiting": "?", "silent": "!SILENT"}[h.state]
+            parts.append(f"{k} {h.rate_hz(now):5.1f}Hz{mark}")
+        p50, p99 = self.latency_percentiles(last=200)
+        pose = "pose --"
+        if self.last_fix is not None:
+            x, y, yaw = self.last_fix.pose
+            pose = f"pose {x:7.2f} {y:7.2f} {np.degrees(yaw):6.1f}deg"
+        c = self.all_counters()
+        ser = c.get("serial", {})
+        las = c.get("laser", {})
+        err = (f"ser crc {ser.get('crc_errors', 0)} len {ser.get('length_errors', 0)} "
+               f"junk {ser.get('garbage_bytes', 0)}B drop {ser.get('dropped', 0)} | "
+               f"las bad {las.get('malformed', 0)} reconn {las.get('disconnects', 0)}")
+        return (f"{' | '.join(parts)} | lat p50 {p50:4.1f} p99 {p99:4.1f} ms | {pose} | "
+                f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']} | {err}")
+
+    def step(self, timeout: float = 0.02) -> bool:
+        """Process queued messages (up to ~50 ms worth); returns False if nothing came."""
+        got = False
+        t_end = time.monotonic() + 0.05
+        while True:
+            try:
+                kind, msg, arrival = self.q.get(timeout=timeout if not got else 0.0)
+            except queue.Empty:
+                break
+            got = True
+            self.process(kind, msg, arrival)
+            if time.monotonic() > t_end:
+                break
+        self.flush_reorder()
+        self.check_health()
+        now = time.monotonic()
+        if self.status_sink is not None and now - self._last_status >= self.status_period_s:
+            self._last_status = now
+            self.status_sink(self.status_line())
+        if self.publisher is not None and now - self._last_pub_status >= 1.0:
+            self._last_pub_status = now
+            self.publisher.status(time.time(), self.health_states(), self.all_counters())
+        return got
+
+    def run(self, duration: float | None = None, until: Callable[[], bool] | None = None) -> None:
+        """Loop until ``stop_event`` is set, ``duration`` passed or ``until()`` is true."""
+        t0 = time.monotonic()
+        while not self.stop_event.is_set():
+            self.step()
+            if duration is not None and time.monotonic() - t0 >= duration:
+                break
+            if until is not None and until():
+                break
+
+    def drain(self) -> None:
+        """Process whatever is still queued (at shutdown)."""
+        while True:
+            try:
+                kind, msg, arrival = self.q.get_nowait()
+            except queue.Empty:
+                break
+            self.process(kind, msg, arrival)
+        self.flush_reorder(all_=True)

@@ -1,0 +1,285 @@
+"""STM32 serial link: open any pyserial URL, parse frames, turn them into messages.
+
+:class:`FrameConverter` (pure) turns :class:`SensorFrame` s into ``Odometry`` (wheel
+counts -> wheel speeds -> body twist through :mod:`fgloc.kinematics`, integrated to a
+dead-reckoned ``odom`` pose) and ``CompassHeading`` messages stamped in host time
+through :class:`ClockSync`.  :class:`SerialLink` is the reader thread: it opens the
+port with ``serial.serial_for_url`` (``/dev/ttyUSB0``, ``socket://host:port``,
+``loop://``, ``rfc2217://...``), reconnects with back-off when the port goes away,
+and calls ``on_message(topic_kind, msg, arrival)`` for each message.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import wrap_angle
+from fgloc.live.clock import ClockSync
+from fgloc.live.serial_protocol import COUNT_MOD, FrameParser, SensorFrame
+from fgloc.types import CompassHeading, Odometry
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RobotParams:
+    """Drive geometry.  ``drive`` is ``"diff"`` (2 wheels: left, right) or ``"mecanum"``
+    (4 wheels: front-left, front-right, rear-left, rear-right).  ``track_width_m`` is the
+    left-right wheel distance, ``wheelbase_m`` front-rear (mecanum only)."""
+
+    drive: str = "mecanum"
+    wheel_radius_m: float = 0.05
+    track_width_m: float = 0.40
+    wheelbase_m: float = 0.30
+    counts_per_rev: float = 2000.0  # 500 PPR encoder, x4 quadrature
+
+    @property
+    def n_wheels(self) -> int:
+        return 4 if self.drive == "mecanum" else 2
+
+    @staticmethod
+    def from_dict(d: dict[str, Any] | None) -> RobotParams:
+        d = dict(d or {})
+        aliases = {
+            "type": "drive", "kind": "drive", "wheel_radius": "wheel_radius_m",
+            "track_width": "track_width_m", "wheel_separation": "track_width_m",
+            "wheelbase": "wheelbase_m", "counts_per_rev": "counts_per_rev", "cpr": "counts_per_rev",
+        }
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            k2 = aliases.get(k, k)
+            if k2 in RobotParams.__dataclass_fields__:
+                out[k2] = v
+        if "counts_per_rev" not in out and "encoder_ppr" in d:
+            out["counts_per_rev"] = 4.0 * float(d["encoder_ppr"])
+        p = RobotParams(**out)
+        p.drive = {"differential": "diff", "diff_drive": "diff", "omni": "mecanum"}.get(p.drive, p.drive)
+        if p.drive not in ("diff", "mecanum"):
+            raise ConfigError(f"robot drive must be 'diff' or 'mecanum', got {p.drive!r}")
+        if p.wheel_radius_m <= 0 or p.track_width_m <= 0 or p.counts_per_rev <= 0:
+            raise ConfigError("robot wheel_radius_m, track_width_m and counts_per_rev must be positive")
+        return p
+
+
+def _mecanum_matrix(p: RobotParams) -> np.ndarray:
+    """Inverse kinematics matrix: wheel speeds (FL, FR, RL, RR) = M @ [vx, vy, wz]."""
+    k = (p.track_width_m + p.wheelbase_m) / 2.0
+    return np.array([[1.0, -1.0, -k], [1.0, 1.0, k], [1.0, 1.0, -k], [1.0, -1.0, k]]) / p.wheel_radius_m
+
+
+def _kin(name: str) -> Any:
+    """A function of :mod:`fgloc.kinematics` if that module provides it, else None."""
+    try:
+        import importlib
+
+        mod = importlib.import_module("fgloc.kinematics")
+    except ImportError:
+        return None
+    return getattr(mod, name, None)
+
+
+def wheel_speeds_to_twist(p: RobotParams, omega_radps: np.ndarray) -> np.ndarray:
+    """Wheel angular speeds -> body twist ``[vx, vy, wz]`` by forward kinematics."""
+    omega = np.asarray(omega_radps, dtype=float)
+    if p.drive == "mecanum":
+        return np.linalg.pinv(_mecanum_matrix(p)) @ omega
+    v_l, v_r = omega * p.wheel_radius_m
+    return np.array([(v_l + v_r) / 2.0, 0.0, (v_r - v_l) / p.track_width_m])
+
+
+def twist_to_wheel_speeds(p: RobotParams, twist: np.ndarray) -> np.ndarray:
+    """Body twist -> wheel angular speeds (inverse kinematics; used by the emulator)."""
+    t = np.asarray(twist, dtype=float)
+    if p.drive == "mecanum":
+        return _mecanum_matrix(p) @ t
+    v = t[0]
+    w = t[2]
+    return np.array([v - w * p.track_width_m / 2.0, v + w * p.track_width_m / 2.0]) / p.wheel_radius_m
+
+
+def _se2_exp(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
+    """Integrate a constant body twist over ``dt`` from ``pose`` (exact on SE(2))."""
+    vx, vy, wz = twist * dt
+    if abs(wz) < 1e-9:
+        dx, dy = vx, vy
+    else:
+        s, c = math.sin(wz), math.cos(wz)
+        dx = (s * vx - (1 - c) * vy) / wz
+        dy = ((1 - c) * vx + s * vy) / wz
+    c0, s0 = math.cos(pose[2]), math.sin(pose[2])
+    return np.array([pose[0] + c0 * dx - s0 * dy, pose[1] + s0 * dx + c0 * dy, float(wrap_angle(pose[2] + wz))])
+
+
+class FrameConverter:
+    """SensorFrame -> ``("odom", Odometry)`` / ``("imu", CompassHeading)``, host-time stamped."""
+
+    def __init__(
+        self,
+        robot: RobotParams,
+        compass_clockwise: bool = False,
+        twist_var: tuple[float, float, float] = (0.02**2, 0.02**2, 0.03**2),
+        yaw_var: float = math.radians(1.0) ** 2,
+        yaw_rate_var: float = math.radians(0.5) ** 2,
+        align_clock: bool = True,
+    ) -> None:
+        self.robot = robot
+        self.compass_sign = -1.0 if compass_clockwise else 1.0
+        self.twist_cov = np.diag(np.asarray(twist_var, dtype=float))
+        self.yaw_var = yaw_var
+        self.yaw_rate_var = yaw_rate_var
+        self.align_clock = align_clock
+        self.clock = ClockSync()
+        self.wrong_wheel_count = 0
+        self.bad_dt = 0
+        self._prev: tuple[float, tuple[int, ...]] | None = None
+        self._pose = np.zeros(3)
+        self._last_stamp = -math.inf
+
+    def convert(self, f: SensorFrame, arrival: float) -> list[tuple[str, object]]:
+        out: list[tuple[str, object]] = []
+        if f.reset:
+            self.clock.reset()
+            self._prev = None
+        t_dev = f.t_us_unwrapped * 1e-6
+        if self.align_clock:
+            self.clock.update(t_dev, arrival)
+            stamp = self.clock.to_host(t_dev, arrival)
+        else:
+            stamp = arrival
+        if stamp <= self._last_stamp:
+            stamp = self._last_stamp + 1e-6
+        self._last_stamp = stamp
+        if f.has_counts:
+            if len(f.counts) != self.robot.n_wheels:
+                self.wrong_wheel_count += 1
+            elif self._prev is not None:
+                t0, c0 = self._prev
+                dt = t_dev - t0
+                if dt <= 0 or dt > 1.0:
+                    self.bad_dt += 1
+                else:
+                    dc = np.array(
+                        [((c - p + (1 << 31)) % COUNT_MOD) - (1 << 31) for c, p in zip(f.counts, c0, strict=True)],
+                        dtype=float,
+                    )
+                    omega = dc * (2.0 * math.pi / self.robot.counts_per_rev) / dt
+                    twist = wheel_speeds_to_twist(self.robot, omega)
+                    self._pose = _se2_exp(self._pose, twist, dt)
+                    out.append(
+                        ("odom", Odometry(stamp=stamp, twist=twist, twist_cov=self.twist_cov.copy(),
+                                          pose=self._pose.copy()))
+                    )
+            if len(f.counts) == self.robot.n_wheels:
+                self._prev = (t_dev, f.counts)
+        if f.has_heading and f.heading_ddeg is not None:
+            yaw = float(wrap_angle(self.compass_sign * math.radians(f.heading_ddeg / 10.0)))
+            rate = None if f.gyro_cdps is None else self.compass_sign * math.radians(f.gyro_cdps / 100.0)
+            out.append(
+                ("imu", CompassHeading(stamp=stamp, yaw_rad=yaw, yaw_rate_radps=rate, yaw_var=self.yaw_var,
+                                       yaw_rate_var=self.yaw_rate_var if rate is not None else float("nan")))
+            )
+        return out
+
+
+class SerialLink:
+    """Reader thread on a pyserial URL (or an already open port object)."""
+
+    def __init__(
+        self,
+        url: str | None,
+        converter: FrameConverter,
+        on_message: Callable[[str, object, float], None],
+        baudrate: int = 115200,
+        port: Any = None,
+        backoff_min_s: float = 0.1,
+        backoff_max_s: float = 2.0,
+        on_event: Callable[[str], None] | None = None,
+    ) -> None:
+        self.url = url
+        self.converter = converter
+        self.parser = FrameParser()
+        self.on_message = on_message
+        self.on_event = on_event or (lambda msg: log.info("%s", msg))
+        self.baudrate = baudrate
+        self._port = port
+        self.backoff_min_s, self.backoff_max_s = backoff_min_s, backoff_max_s
+        self.opens = 0
+        self.open_failures = 0
+        self.disconnects = 0
+        self.connected = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="serial-link", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def feed(self, data: bytes, arrival: float) -> int:
+        """Parse bytes and dispatch messages; returns the number of frames decoded."""
+        frames = self.parser.feed(data)
+        for f in frames:
+            for kind, msg in self.converter.convert(f, arrival):
+                self.on_message(kind, msg, arrival)
+        return len(frames)
+
+    def _open(self) -> Any:
+        if self._port is not None:
+            return self._port
+        import serial
+
+        return serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.05)
+
+    def _run(self) -> None:
+        import serial
+
+        backoff = self.backoff_min_s
+        while not self._stop.is_set():
+            try:
+                port = self._open()
+            except (serial.SerialException, OSError, ValueError) as e:
+                self.open_failures += 1
+                if self.open_failures in (1, 10) or self.open_failures % 50 == 0:
+                    self.on_event(f"serial {self.url}: open failed ({e}); retrying")
+                self._stop.wait(backoff)
+                backoff = min(backoff * 2.0, self.backoff_max_s)
+                continue
+            backoff = self.backoff_min_s
+            self.opens += 1
+            self.connected = True
+            self.on_event(f"serial {self.url or port}: open")
+            try:
+                while not self._stop.is_set():
+                    n = getattr(port, "in_waiting", 0) or 1
+                    data = port.read(min(max(n, 1), 4096))
+                    if data:
+                        self.feed(data, time.time())
+            except (serial.SerialException, OSError) as e:
+                self.disconnects += 1
+                self.on_event(f"serial {self.url}: lost ({e}); reopening")
+                self._port = None if self.url else self._port
+            finally:
+                self.connected = False
+                if self.url:
+                    try:
+                        port.close()
+                    except Exception:  # noqa: BLE001 - a dying port may raise anything
+                        pass
+            if self._port is not None and not self.url:
+                # an externally supplied port that failed: nothing to reopen
+                if self._stop.is_set():
+                    break
+                self._stop.wait(backoff)

@@ -82,3 +82,39 @@ def synth_clean() -> Synth:
 @pytest.fixture(scope="session")
 def synth_noisy() -> Synth:
     return make_synth(noise=True, seed=1)
+
+
+def feed(backend, s: Synth, fix_sigma=(0.02, 0.02, np.deg2rad(0.5)), fixes=True, init_cov=1e-4,
+         late_every: int = 0):
+    """Drive a back-end with a synthetic run (scans before odometry at equal stamps).
+
+    ``late_every``: every n-th scan is delivered one scan late (out of order).
+    """
+    from fgloc.types import PoseFix
+
+    ev = [(t, 0, i) for i, t in enumerate(s.t_odo)] + [(t, 1, i) for i, t in enumerate(s.t_compass)]
+    for i, t in enumerate(s.t_scan):
+        if i > 0:
+            t_deliver = s.t_scan[min(i + 1, len(s.t_scan) - 1)] + 1e-4 if late_every and i % late_every == 0 else t
+            ev.append((t_deliver, 2, i))
+    ev.sort(key=lambda e: (e[0], -e[1]))
+    backend.initialize(s.t_scan[0], s.fixes[0], np.eye(3) * init_cov)
+    cov = np.diag(np.square(fix_sigma))
+    for _, kind, i in ev:
+        if kind == 0:
+            backend.add_odometry(s.t_odo[i], s.twist[i], None)
+        elif kind == 1:
+            backend.add_compass(s.t_compass[i], s.compass[i], np.nan, None, np.nan)
+        else:
+            fix = PoseFix(s.t_scan[i], s.fixes[i], cov) if fixes else None
+            backend.add_keyframe(s.t_scan[i], fix)
+    return backend.finish()
+
+
+def errors(traj, s: Synth) -> tuple[float, float]:
+    """Position RMSE (m) and heading RMSE (deg) against the synthetic truth."""
+    idx = np.searchsorted(s.t_gt, traj.stamps - 1e-9)
+    gt = s.gt[np.clip(idx, 0, len(s.t_gt) - 1)]
+    e = np.linalg.norm(traj.poses[:, :2] - gt[:, :2], axis=1)
+    eh = np.angle(np.exp(1j * (traj.poses[:, 2] - gt[:, 2])))
+    return float(np.sqrt(np.mean(e**2))), float(np.rad2deg(np.sqrt(np.mean(eh**2))))

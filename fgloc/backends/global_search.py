@@ -1,0 +1,88 @@
+"""Coarse global localization: where in the map does this scan fit?
+
+Used by :class:`fgloc.pipeline.Localizer` when no initial pose is given and after a
+kidnapping (too many scans in a row without an accepted fix), for front-ends without
+a global mode of their own (native, kiss; AMCL spreads its particles instead).
+
+Method: candidate positions on a grid over the map's free space (``step_m``, cells at
+least ``clearance_m`` from obstacles), ``n_yaw`` headings each; every candidate scores
+the scan's (subsampled) points against the map's distance field with a Gaussian
+likelihood ``mean(exp(-d^2 / 2 sigma^2))`` (a pure numpy, vectorized correlative
+search).  The best ``n_best`` distinct candidates are returned, best first; the caller
+refines them with its scan matcher and keeps the one that matches best.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.maps import OccupancyMap
+
+FloatArray = NDArray[np.float64]
+
+
+class GlobalSearch:
+    def __init__(self, occ_map: OccupancyMap, step_m: float = 0.4, n_yaw: int = 72,
+                 sigma_m: float = 0.15, max_points: int = 60, clearance_m: float = 0.2,
+                 n_best: int = 8, max_candidates: int = 4000, seed: int = 0) -> None:
+        self.map = occ_map
+        self.n_yaw = int(n_yaw)
+        self.sigma = float(sigma_m)
+        self.max_points = int(max_points)
+        self.n_best = int(n_best)
+        df = np.minimum(occ_map.distance_field, 3.0 * sigma_m * 4)
+        self._df = np.where(np.isfinite(df), df, 3.0 * sigma_m * 4)
+        free = occ_map.free & (occ_map.distance_field >= clearance_m)
+        rows, cols = np.nonzero(free)
+        stride = max(1, int(round(step_m / occ_map.resolution)))
+        keep = (rows % stride == 0) & (cols % stride == 0)
+        cand = occ_map.grid_to_world(rows[keep], cols[keep])
+        if len(cand) > max_candidates:
+            rng = np.random.default_rng(seed)
+            cand = cand[rng.choice(len(cand), max_candidates, replace=False)]
+        self.candidates = cand
+
+    def _lookup(self, pts: FloatArray) -> FloatArray:
+        g = self.map.world_to_grid_continuous(pts.reshape(-1, 2))
+        c = np.floor(g[:, 0]).astype(np.int64)
+        r = np.floor(g[:, 1]).astype(np.int64)
+        ok = (r >= 0) & (r < self.map.height) & (c >= 0) & (c < self.map.width)
+        out = np.full(len(g), self._df.max())
+        out[ok] = self._df[r[ok], c[ok]]
+        return out.reshape(pts.shape[:-1])
+
+    def search(self, points_base: FloatArray) -> list[tuple[FloatArray, float]]:
+        """Best candidate poses ``[x, y, yaw]`` with their scores in ``[0, 1]``, best first.
+
+        ``points_base``: the scan's valid returns in the robot (``base_link``) frame, ``(N, 2)``.
+        """
+        pts = np.asarray(points_base, dtype=float)
+        if len(pts) == 0 or len(self.candidates) == 0:
+            return []
+        if len(pts) > self.max_points:
+            pts = pts[np.linspace(0, len(pts) - 1, self.max_points).astype(int)]
+        yaws = np.linspace(-np.pi, np.pi, self.n_yaw, endpoint=False)
+        c, s = np.cos(yaws), np.sin(yaws)
+        # rotated points for each yaw: (n_yaw, P, 2)
+        rx = c[:, None] * pts[None, :, 0] - s[:, None] * pts[None, :, 1]
+        ry = s[:, None] * pts[None, :, 0] + c[:, None] * pts[None, :, 1]
+        scores = np.empty((len(self.candidates), self.n_yaw))
+        chunk = max(1, 200_000 // (self.n_yaw * len(pts)))
+        for i in range(0, len(self.candidates), chunk):
+            cc = self.candidates[i:i + chunk]
+            wx = cc[:, 0, None, None] + rx[None]
+            wy = cc[:, 1, None, None] + ry[None]
+            d = self._lookup(np.stack([wx, wy], axis=-1))
+            scores[i:i + chunk] = np.mean(np.exp(-0.5 * (d / self.sigma) ** 2), axis=-1)
+        order = np.argsort(scores, axis=None)[::-1]
+        out: list[tuple[FloatArray, float]] = []
+        for flat in order:
+            ci, yi = divmod(int(flat), self.n_yaw)
+            pose = np.array([self.candidates[ci, 0], self.candidates[ci, 1], yaws[yi]])
+            if all(np.hypot(*(pose[:2] - p[:2])) > 1.0 or abs(np.angle(np.exp(1j * (pose[2] - p[2])))) > 0.5
+                   for p, _ in out):
+                out.append((pose, float(scores[ci, yi])))
+            if len(out) >= self.n_best:
+                break
+        return out

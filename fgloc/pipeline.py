@@ -1,0 +1,369 @@
+"""The online localizer: a scan-to-map front-end feeding a back-end (EKF or smoother).
+
+:class:`Localizer` is what ``fgloc run`` (offline, from a log) and ``fgloc live`` (a
+robot) drive, one message at a time:
+
+* ``on_odometry`` - wheel twist -> back-end (encoder factor / update), and the
+  dead-reckoned odom pose used for the front-end's ``odom_delta``;
+* ``on_compass`` - compass heading -> back-end (the back-end owns the compass offset);
+* ``on_scan`` - the front-end matches the scan from the back-end's predicted pose; the
+  fix (if any) and a keyframe at the scan stamp go to the back-end.  Returns the fix.
+
+Start-up: with ``initial_pose`` the first scan is matched from it.  Without, the
+localizer searches globally: AMCL spreads its particles (its own global mode) and the
+first fix with a small covariance is taken; the other front-ends use a coarse
+correlative search over the map's free space (:mod:`fgloc.backends.global_search`)
+whose best candidates are refined by the front-end, best match wins.  After
+``relocalize_after`` scans in a row without an accepted fix (kidnapping, or lost),
+the same global search runs again and the back-end is reset to its result.
+
+Without a map (``occ_map=None``) encoder and compass are fused alone in an ``odom``
+frame that starts at the origin with the compass heading (as robot_localization's
+odom-frame EKF does with an absolute IMU yaw); keyframes are placed at scan stamps when
+there are scans, else every ``odom_keyframe_interval`` seconds.
+
+Robustness: every input is checked; a NaN/inf stamp or value, or a stamp that goes
+backwards on its own stream, is counted in ``stats['skipped']`` and ignored, never
+raised.  Messages slightly out of order across streams are fine (the back-ends wait
+for odometry up to a keyframe's stamp).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fgloc.backends import make_backend
+from fgloc.backends.base import Backend, FloatArray
+from fgloc.backends.factors import se2_compose, se2_exp
+from fgloc.errors import ConfigError
+from fgloc.geometry import between, transform_points
+from fgloc.maps import OccupancyMap
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
+
+DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[1] / "config" / "fgloc.yaml"
+
+
+def _deep_merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def load_config(path: str | Path | None = None) -> dict[str, Any]:
+    """The effective configuration: ``config/fgloc.yaml`` (if present) overlaid with ``path``.
+
+    Raises :class:`ConfigError` naming the file when it is missing or does not parse.
+    """
+    base: dict[str, Any] = {}
+    if DEFAULT_CONFIG_PATH.exists():
+        base = yaml.safe_load(DEFAULT_CONFIG_PATH.read_text()) or {}
+    if path is None:
+        return base
+    p = Path(path)
+    try:
+        user = yaml.safe_load(p.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: config file not found") from None
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"{p}: config does not parse ({e.__class__.__name__})") from None
+    if user is None:
+        return base
+    if not isinstance(user, dict):
+        raise ConfigError(f"{p}: config must be a mapping of sections (pipeline, ekf, smoother, batch)")
+    return _deep_merge(base, user)
+
+
+DEFAULT_PIPELINE: dict[str, Any] = {
+    "relocalize_after": 10,          # scans in a row without an accepted fix -> global search
+    "initial_sigma_xy": 0.1,         # m, prior on an --initial-pose (or a global-search result)
+    "initial_sigma_yaw_deg": 5.0,
+    "odom_keyframe_interval": 0.1,   # s, keyframe spacing without scans
+    "global_max_tries": 50,          # scans spent in global search before giving up for now
+    "global_min_quality": 0.5,       # front-end quality needed to accept a global candidate
+    "amcl_max_sigma_xy": 0.15,       # m, AMCL global mode: accept its first fix tighter than this
+    "amcl_max_sigma_yaw_deg": 5.0,
+    "global_search": {},             # GlobalSearch keyword arguments
+    "frontend_every": 1,             # match every n-th scan (others: keyframe only)
+}
+
+
+class Localizer:
+    """Online localization from odometry, compass and scans (see the module docstring)."""
+
+    def __init__(self, occ_map: OccupancyMap | None, laser_mount: StaticTransform,
+                 backend: str = "smoother", frontend: str = "native",
+                 initial_pose: np.ndarray | None = None, config: dict | None = None) -> None:
+        config = dict(config or {})
+        self.config = config
+        self.pcfg = dict(DEFAULT_PIPELINE)
+        self.pcfg.update(config.get("pipeline") or {})
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.backend_name = backend
+        self.frontend_name = frontend if occ_map is not None else "none"
+        self.backend: Backend = make_backend(backend, config)
+        self.frontend = None
+        if occ_map is not None:
+            from fgloc.frontends import make_frontend
+
+            self.frontend = make_frontend(frontend, occ_map, laser_mount, config.get("frontends"))
+        self.initial_pose = None if initial_pose is None else np.asarray(initial_pose, dtype=float).reshape(3)
+        self.odom_mode = occ_map is None
+        self.stats: dict[str, Any] = {
+            "scans": 0, "odometry": 0, "compass": 0, "fixes": 0, "no_fix": 0, "rejected": 0,
+            "gated": 0, "skipped": 0, "skipped_reasons": {}, "relocalizations": 0, "global_searches": 0,
+        }
+        self.no_fix_reasons: dict[str, int] = {}
+        self.fixes: list[PoseFix] = []
+        self._last_stamp: dict[str, float] = {}
+        self._odom_pose = np.zeros(3)
+        self._odom_t: float | None = None
+        self._last_twist = np.zeros(3)
+        self._odom_at_last_scan: FloatArray | None = None
+        self._bad_streak = 0
+        self._global_tries = 0
+        self._global: Any = None
+        self._last_compass: tuple[float, float] | None = None
+        self._first_odom_t: float | None = None
+        self._last_kf_t = -math.inf
+        self._scan_count = 0
+        self._lost = initial_pose is None and not self.odom_mode
+        if self._lost and self.frontend is not None and self.frontend_name == "amcl":
+            self.frontend.reset(None)
+
+    # ------------------------------------------------------------------ input checks
+    def _skip(self, reason: str) -> None:
+        self.stats["skipped"] += 1
+        r = self.stats["skipped_reasons"]
+        r[reason] = r.get(reason, 0) + 1
+
+    def _monotonic(self, stream: str, t: float) -> bool:
+        if not math.isfinite(t):
+            self._skip(f"{stream}: non-finite stamp")
+            return False
+        last = self._last_stamp.get(stream)
+        if last is not None and t <= last:
+            self._skip(f"{stream}: time went backwards" if t < last else f"{stream}: repeated stamp")
+            return False
+        self._last_stamp[stream] = t
+        return True
+
+    # ------------------------------------------------------------------ inputs
+    def on_odometry(self, msg: Odometry) -> None:
+        t = float(msg.stamp)
+        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
+        if tw.shape != (3,) or not np.all(np.isfinite(tw)):
+            self._skip("odometry: non-finite twist")
+            return
+        if not self._monotonic("odometry", t):
+            return
+        self.stats["odometry"] += 1
+        # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
+        if self._odom_t is not None:
+            self._odom_pose = se2_compose(self._odom_pose, se2_exp(tw * (t - self._odom_t)))
+        self._odom_t = t
+        self._last_twist = tw
+        if self._first_odom_t is None:
+            self._first_odom_t = t
+        cov = msg.twist_cov
+        if cov is not None and not np.all(np.isfinite(np.asarray(cov, dtype=float))):
+            cov = None
+        self.backend.add_odometry(t, tw, cov)
+        if self.odom_mode:
+            self._odom_mode_step(t, scan=False)
+
+    def on_compass(self, msg: CompassHeading) -> None:
+        t = float(msg.stamp)
+        yaw = msg.yaw_rad if msg.yaw_rad is not None and math.isfinite(msg.yaw_rad) else None
+        rate = msg.yaw_rate_radps if msg.yaw_rate_radps is not None and math.isfinite(msg.yaw_rate_radps) else None
+        if yaw is None and rate is None:
+            self._skip("compass: no finite heading or rate")
+            return
+        if not self._monotonic("compass", t):
+            return
+        self.stats["compass"] += 1
+        if yaw is not None:
+            self._last_compass = (t, float(yaw))
+        self.backend.add_compass(t, yaw, float(msg.yaw_var), rate, float(msg.yaw_rate_var))
+
+    def on_scan(self, msg: LaserScan) -> PoseFix | None:
+        t = float(msg.stamp)
+        if not self._monotonic("scan", t):
+            return None
+        self.stats["scans"] += 1
+        if self.odom_mode:
+            self._odom_mode_step(t, scan=True)
+            return None
+        assert self.frontend is not None
+        odom_delta = None
+        if self._odom_at_last_scan is not None:
+            odom_delta = between(self._odom_at_last_scan, self._odom_pose)
+        self._odom_at_last_scan = self._odom_pose.copy()
+        if not self.backend.initialized or self._lost:
+            return self._localize_globally(msg, odom_delta)
+        self._scan_count += 1
+        if self._scan_count % max(1, int(self.pcfg["frontend_every"])) != 0:
+            self.backend.add_keyframe(t, None)
+            return None
+        guess, _ = self.backend.predict(t)
+        res = self.frontend.match(msg, guess, odom_delta)
+        fix = None
+        if res.ok and res.pose is not None and res.cov is not None and np.all(np.isfinite(res.pose)) \
+                and np.all(np.isfinite(res.cov)):
+            fix = PoseFix(t, np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float),
+                          quality=float(res.quality), source=self.frontend_name)
+            self.fixes.append(fix)
+            self.stats["fixes"] += 1
+        else:
+            self.stats["no_fix"] += 1
+            reason = (res.reason or "no fix").split(":")[0][:60]
+            self.no_fix_reasons[reason] = self.no_fix_reasons.get(reason, 0) + 1
+        used = self.backend.add_keyframe(t, fix)
+        if fix is not None and not used:
+            self.stats["rejected"] += 1
+        self._bad_streak = 0 if used else self._bad_streak + 1
+        if self._bad_streak >= int(self.pcfg["relocalize_after"]):
+            self._lost = True
+            self._global_tries = 0
+            self.stats["relocalizations"] += 1
+            if self.frontend_name == "amcl":
+                self.frontend.reset(None)
+        return fix
+
+    # ------------------------------------------------------------------ start-up / recovery
+    def _initial_cov(self) -> FloatArray:
+        sxy = float(self.pcfg["initial_sigma_xy"])
+        syaw = math.radians(float(self.pcfg["initial_sigma_yaw_deg"]))
+        return np.diag([sxy**2, sxy**2, syaw**2])
+
+    def _start(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        if self.backend.initialized:
+            self.backend.reset(t, pose, cov)
+        else:
+            self.backend.initialize(t, pose, cov)
+        self._lost = False
+        self._bad_streak = 0
+        if self.frontend is not None and self.frontend_name == "amcl":
+            self.frontend.reset(pose)
+
+    def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
+        assert self.frontend is not None
+        t = float(msg.stamp)
+        if self.initial_pose is not None and not self.backend.initialized:
+            res = self.frontend.match(msg, self.initial_pose, odom_delta)
+            if res.ok and res.pose is not None and res.cov is not None:
+                fix = PoseFix(t, np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float),
+                              quality=float(res.quality), source=self.frontend_name)
+                self.fixes.append(fix)
+                self.stats["fixes"] += 1
+                self._start(t, fix.pose, np.maximum(fix.cov, 0) + np.diag([1e-6, 1e-6, 1e-6]))
+                return fix
+            self._start(t, self.initial_pose, self._initial_cov())
+            return None
+        self._global_tries += 1
+        if self.frontend_name == "amcl":
+            guess = self.backend.predict(t)[0] if self.backend.initialized else np.zeros(3)
+            res = self.frontend.match(msg, guess, odom_delta)
+            if res.ok and res.pose is not None and res.cov is not None:
+                sxy = math.sqrt(max(res.cov[0, 0], res.cov[1, 1]))
+                syaw = math.sqrt(res.cov[2, 2])
+                if sxy <= float(self.pcfg["amcl_max_sigma_xy"]) and \
+                        syaw <= math.radians(float(self.pcfg["amcl_max_sigma_yaw_deg"])):
+                    fix = PoseFix(t, np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float),
+                                  quality=float(res.quality), source=self.frontend_name)
+                    self.fixes.append(fix)
+                    self.stats["fixes"] += 1
+                    self._start(t, fix.pose, fix.cov + np.diag([1e-6, 1e-6, 1e-6]))
+                    return fix
+            if self.backend.initialized:
+                self.backend.add_keyframe(t, None)
+            return None
+        gfix = self._global_search(msg)
+        if gfix is not None:
+            self.fixes.append(gfix)
+            self.stats["fixes"] += 1
+            self._start(t, gfix.pose, gfix.cov + np.diag([1e-6, 1e-6, 1e-6]))
+            return gfix
+        if self.backend.initialized:
+            self.backend.add_keyframe(t, None)
+        return None
+
+    def _global_search(self, msg: LaserScan) -> PoseFix | None:
+        from fgloc.backends.global_search import GlobalSearch
+
+        assert self.frontend is not None and self.map is not None
+        if self._global is None:
+            self._global = GlobalSearch(self.map, **dict(self.pcfg.get("global_search") or {}))
+        self.stats["global_searches"] += 1
+        pts = msg.points()
+        if len(pts) < 10:
+            return None
+        pts_base = transform_points(self.laser_mount.pose, pts)
+        best: tuple[float, PoseFix] | None = None
+        for cand, _score in self._global.search(pts_base):
+            res = self.frontend.match(msg, cand, None)
+            if not (res.ok and res.pose is not None and res.cov is not None):
+                continue
+            q = float(res.quality)
+            if best is None or q > best[0]:
+                best = (q, PoseFix(float(msg.stamp), np.asarray(res.pose, dtype=float),
+                                   np.asarray(res.cov, dtype=float), quality=q, source=self.frontend_name))
+        if best is None or best[0] < float(self.pcfg["global_min_quality"]):
+            return None
+        return best[1]
+
+    # ------------------------------------------------------------------ odom-only mode
+    def _odom_mode_step(self, t: float, scan: bool) -> None:
+        if not self.backend.initialized:
+            # wait up to 0.5 s for a compass heading to align the odom frame with it
+            if self._last_compass is None and (self._first_odom_t is None or t - self._first_odom_t < 0.5):
+                return
+            yaw = self._last_compass[1] if self._last_compass is not None else 0.0
+            self.backend.set_compass_offset(0.0)
+            self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
+            self._last_kf_t = t
+            return
+        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= float(self.pcfg["odom_keyframe_interval"])):
+            self.backend.add_keyframe(t, None)
+            self._last_kf_t = t
+
+    # ------------------------------------------------------------------ outputs
+    def current(self) -> PoseFix | None:
+        """Latest fused pose and covariance, predicted to the newest odometry stamp."""
+        cur = self.backend.current()
+        if cur is None:
+            return None
+        t, pose, cov = cur
+        if self._odom_t is not None and self._odom_t > t:
+            pose, cov = self.backend.predict(self._odom_t)
+            t = self._odom_t
+        return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map")
+
+    def online_trajectory(self) -> Trajectory:
+        """Fused pose at each scan (keyframe) time, as known online."""
+        tr = self.backend.online_trajectory()
+        tr.frame_id = "odom" if self.odom_mode else "map"
+        return tr
+
+    def finish(self) -> Trajectory:
+        """Smoothed trajectory (fixed-lag or batch; the EKF's online one for the EKF)."""
+        tr = self.backend.finish()
+        tr.frame_id = "odom" if self.odom_mode else "map"
+        self.stats["gated"] = int(self.backend.stats.get("fixes_rejected", 0))
+        self.stats["backend"] = dict(self.backend.stats)
+        if self.no_fix_reasons:
+            self.stats["no_fix_reasons"] = dict(self.no_fix_reasons)
+        return tr
+
+    def fixes_trajectory(self) -> Trajectory:
+        """The front-end's fixes as a trajectory (map frame)."""
+        if not self.fixes:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)))
+        return Trajectory.from_unsorted(np.array([f.stamp for f in self.fixes]),
+                                        np.array([f.pose for f in self.fixes]))

@@ -1,0 +1,83 @@
+"""Fixed-lag and batch smoothers on synthetic runs with a known trajectory."""
+
+from __future__ import annotations
+
+import numpy as np
+from conftest import errors, feed, make_synth
+
+from fgloc.backends import make_backend
+from fgloc.backends.ekf import EKFConfig
+from fgloc.backends.ekf_backend import EKFBackend
+from fgloc.backends.smoother import BatchSmoother, SlidingWindowSmoother, SmootherConfig
+from fgloc.types import PoseFix
+
+
+def test_smoother_recovers_known_trajectory_from_noise_free_inputs(synth_clean):
+    sm = SlidingWindowSmoother()
+    tr = feed(sm, synth_clean)
+    pos, head = errors(tr, synth_clean)
+    assert len(tr) == len(synth_clean.t_scan)
+    assert pos < 1e-5 and head < 1e-2
+    on_pos, _ = errors(sm.online_trajectory(), synth_clean)
+    assert on_pos < 1e-5
+    # the compass offset is estimated online
+    assert abs(sm.compass_offset() - synth_clean.offset) < 1e-4
+
+
+def test_smoother_recovers_trajectory_from_odometry_and_compass_alone(synth_clean):
+    sm = SlidingWindowSmoother()
+    tr = feed(sm, synth_clean, fixes=False, init_cov=1e-10)
+    pos, head = errors(tr, synth_clean)
+    assert pos < 1e-4 and head < 1e-2
+
+
+def test_smoother_beats_ekf_and_matches_batch_on_noisy_run(synth_noisy):
+    ekf = feed(EKFBackend(EKFConfig(omni=True)), synth_noisy)
+    sm = feed(SlidingWindowSmoother(), synth_noisy)
+    bt = feed(BatchSmoother(), synth_noisy)
+    e_ekf, e_sm, e_bt = errors(ekf, synth_noisy)[0], errors(sm, synth_noisy)[0], errors(bt, synth_noisy)[0]
+    assert e_sm < 0.7 * e_ekf
+    assert e_sm < 1.2 * e_bt and e_bt < 0.005
+
+
+def test_late_scans_get_their_own_keyframe(synth_noisy):
+    sm = SlidingWindowSmoother()
+    tr = feed(sm, synth_noisy, late_every=7)
+    assert sm.stats["late_scans"] > 30 and sm.stats["dropped_late"] == 0
+    assert len(tr) == len(synth_noisy.t_scan)
+    assert errors(tr, synth_noisy)[0] < 0.005
+    bt = BatchSmoother()
+    trb = feed(bt, synth_noisy, late_every=7)
+    assert len(trb) == len(synth_noisy.t_scan) and errors(trb, synth_noisy)[0] < 0.005
+
+
+def test_wrong_fixes_do_not_drag_the_trajectory():
+    s = make_synth(noise=True, seed=2)
+    s.fixes = s.fixes.copy()
+    bad = np.arange(50, len(s.fixes), 25)
+    s.fixes[bad, 0] += 0.5  # 0.5 m off, within no gate (gate disabled)
+    plain = errors(feed(SlidingWindowSmoother(SmootherConfig(fix_gate=None, fix_kernel="none")), s), s)[0]
+    huber = errors(feed(SlidingWindowSmoother(SmootherConfig(fix_gate=None)), s), s)[0]
+    gated = errors(feed(SlidingWindowSmoother(SmootherConfig()), s), s)[0]
+    assert plain > 0.015  # 4 % of fixes 0.5 m off drag a plain least-squares smoother
+    assert huber < 0.4 * plain  # the Huber kernel bounds their pull
+    assert gated < 0.0035  # and the Mahalanobis gate removes them
+
+
+def test_kidnap_reset_after_consistent_rejections(synth_clean):
+    sm = SlidingWindowSmoother(SmootherConfig(max_rejections=5))
+    sm.initialize(0.0, np.zeros(3), np.eye(3) * 1e-4)
+    for i in range(1, 20):
+        t = i * 0.04
+        sm.add_odometry(t, np.zeros(3), None)
+        sm.add_keyframe(t, PoseFix(t, np.array([5.0, 5.0, 1.0]), np.eye(3) * 1e-4))
+    assert sm.stats["resets"] >= 1
+    assert np.allclose(sm.current()[1], [5.0, 5.0, 1.0], atol=1e-3)
+
+
+def test_make_backend_reads_config_sections():
+    b = make_backend("batch", {"smoother": {"lag": 3.0, "compass_sigma_deg": 1.0}, "batch": {"max_iterations": 7}})
+    assert isinstance(b, BatchSmoother) and b.cfg.lag == 3.0 and b.max_iterations == 7
+    assert np.isclose(b.cfg.compass_sigma, np.deg2rad(1.0))
+    e = make_backend("ekf", {"ekf": {"omni": True, "compass_sigma_deg": 2.0}})
+    assert isinstance(e, EKFBackend) and e.ekf.config.omni and np.isclose(e.compass_sigma, np.deg2rad(2.0))

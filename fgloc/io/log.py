@@ -662,7 +662,7 @@ class LogReader:
                               f"all {self._n} messages intact")
         if w.broke is not None:
             self.truncated = w.broke.describe()
-        if self.truncated:
+        if self.truncated and self._n:
             log.warning("%s: truncated log: %s; reading the messages before the break", self.path, self.truncated)
 
     # -- queries -----------------------------------------------------------------------------

@@ -1,0 +1,56 @@
+"""``fgloc import`` (ROS 1 bag / CARMEN -> MCAP) and ``fgloc info`` (what a log holds)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+
+def _fmt_time(t: float | None) -> str:
+    return "-" if t is None else f"{t:.3f}"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("import")
+    def import_cmd(
+        src: Annotated[Path, typer.Argument(help="ROS 1 .bag or CARMEN .clf/.log (also .gz/.bz2)")],
+        output: Annotated[Path, typer.Option("-o", "--output", help="MCAP log to write")],
+        scan_topic: Annotated[str, typer.Option(help="LaserScan topic in a bag")] = "/scan",
+        odom_topic: Annotated[str, typer.Option(help="Odometry topic in a bag")] = "/odom",
+        imu_topic: Annotated[str, typer.Option(help="Imu (compass) topic in a bag")] = "/imu",
+        tf_static_topic: Annotated[str, typer.Option(help="static tf topic in a bag")] = "/tf_static",
+        tf_topic: Annotated[str, typer.Option(help="tf topic in a bag")] = "/tf",
+        ground_truth_topic: Annotated[str, typer.Option(help="ground-truth Odometry topic in a bag")] = (
+            "/ground_truth"),
+        max_range: Annotated[float | None, typer.Option(
+            help="CARMEN: readings at or beyond this (m) are 'no return' (default: detected)")] = None,
+    ) -> None:
+        """Convert a ROS 1 bag or a CARMEN log into fgloc's ROS 2 MCAP form (/scan, /odom, /imu, /tf_static)."""
+        from fgloc.io.convert import import_log
+        from fgloc.io.log import Topics
+
+        topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic, tf_static=tf_static_topic,
+                        tf=tf_topic, ground_truth=ground_truth_topic)
+        res = import_log(src, output, topics, max_range_m=max_range)
+        parts = ", ".join(f"{t}: {n}" for t, n in sorted(res.counts.items()))
+        print(f"{res.dst}: imported {res.format} {res.src.name} in {res.seconds:.1f} s ({parts})")
+
+    @app.command("info")
+    def info_cmd(
+        log_path: Annotated[Path, typer.Argument(help="MCAP log")],
+    ) -> None:
+        """Per-topic message counts and types, time span, and where a truncated log broke."""
+        from fgloc.io.log import LogReader
+
+        r = LogReader(log_path)
+        s = r.summary()
+        print(f"{s['path']}: {s['messages']} messages, {s['duration']:.3f} s "
+              f"({_fmt_time(s['start'])} .. {_fmt_time(s['end'])}), "
+              f"{'indexed' if s['indexed'] else 'not indexed'}")
+        width = max((len(t) for t in s["topics"]), default=5)
+        for topic, ti in s["topics"].items():
+            print(f"  {topic:<{width}}  {ti['count']:>8}  {ti['type']}")
+        if s["truncated"]:
+            print(f"TRUNCATED: {s['truncated']}")

@@ -1,0 +1,104 @@
+"""ROS 1 ``.bag`` files (read with ``rosbags``) as a stream of fgloc messages.
+
+Topics of the types fgloc reads are converted with the same rules as the MCAP reader
+(:mod:`fgloc.io.log`): ``sensor_msgs/LaserScan``, ``nav_msgs/Odometry`` (odometry and
+ground truth), ``sensor_msgs/Imu`` (compass), ``tf2_msgs/TFMessage`` (``/tf``,
+``/tf_static``) and ``geometry_msgs/PoseWithCovarianceStamped``.
+
+Source topic names come from :class:`Topics` (the ``--*-topic`` options of ``fgloc import``);
+when a role's topic is not in the bag but exactly one topic of that role's type is (other
+than the ones already chosen), that one is used and logged.  Output names are always
+fgloc's defaults (``/scan``, ``/odom``, ...), so imported logs need no renaming later.
+Messages come in bag order (record time); their stamps are the header stamps.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+from fgloc.errors import LogError
+from fgloc.io.log import FROM_ROS, ROLE_TYPES, Topics
+
+log = logging.getLogger(__name__)
+
+ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+
+
+def is_rosbag1(path: str | Path) -> bool:
+    try:
+        with Path(path).open("rb") as f:
+            return f.read(len(ROSBAG1_MAGIC)) == ROSBAG1_MAGIC
+    except OSError:
+        return False
+
+
+def _choose_topics(available: dict[str, str], topics: Topics) -> dict[str, str]:
+    """``{source topic: role}`` for the roles whose topic (or a unique same-type topic) exists."""
+    chosen: dict[str, str] = {}
+    default = Topics()
+    for f in fields(Topics):
+        role, name = f.name, getattr(topics, f.name)
+        want = ROLE_TYPES[role]
+        if available.get(name) == want:
+            chosen[name] = role
+            continue
+        if name in available:
+            log.warning("topic %s has type %s, expected %s for %s; skipped", name, available[name], want, role)
+            continue
+        if name != getattr(default, role) or role in ("tf", "tf_static", "ground_truth", "fused"):
+            continue  # explicitly named but absent, or roles that are never guessed
+        same = [t for t, ty in available.items() if ty == want and t not in chosen and t not in
+                {getattr(topics, g.name) for g in fields(Topics)}]
+        if len(same) == 1:
+            log.info("using %s (%s) as the %s topic", same[0], want, role)
+            chosen[same[0]] = role
+    return chosen
+
+
+def iter_rosbag1(path: str | Path, topics: Topics | None = None,
+                 counter: list[int] | None = None) -> Iterator[tuple[str, object]]:
+    """``(output topic, message)`` of a ROS 1 bag, lazily, in bag order.
+
+    ``counter`` (optional one-element list) gets the total message count of the chosen
+    topics before the first message, for a progress bar.
+    """
+    from rosbags.rosbag1 import Reader, ReaderError
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    path = Path(path)
+    topics = topics or Topics()
+    out_names = {f.name: getattr(Topics(), f.name) for f in fields(Topics)}
+    if not path.exists():
+        raise LogError(f"{path}: bag file not found")
+    try:
+        reader = Reader(path)
+        reader.open()
+    except (ReaderError, OSError, ValueError) as e:
+        raise LogError(f"{path}: cannot read ROS 1 bag ({e})") from None
+    try:
+        store = get_typestore(Stores.ROS1_NOETIC)
+        available = {c.topic: c.msgtype for c in reader.connections}
+        chosen = _choose_topics(available, topics)
+        if not chosen:
+            have = ", ".join(f"{t} ({ty})" for t, ty in sorted(available.items())) or "none"
+            raise LogError(f"{path}: no scan, odometry, IMU or tf topic to import (topics: {have})")
+        conns = [c for c in reader.connections if c.topic in chosen]
+        for c in conns:  # types the store lacks come with the bag's own definitions
+            if c.msgtype not in store.fielddefs and c.msgdef.data:
+                store.register(get_types_from_msg(c.msgdef.data, c.msgtype))
+        if counter is not None:
+            counter.append(sum(c.msgcount for c in conns))
+        convs: dict[str, Any] = {t: FROM_ROS[ROLE_TYPES[r]] for t, r in chosen.items()}
+        try:
+            for conn, _t, raw in reader.messages(connections=conns):
+                msg = store.deserialize_ros1(raw, conn.msgtype)
+                role = chosen[conn.topic]
+                yield out_names[role], convs[conn.topic](msg, out_names[role])
+        except ReaderError as e:
+            log.warning("%s: bag data unreadable (%s); stopping there", path, e)
+    finally:
+        reader.close()

@@ -133,7 +133,7 @@ class KissMatcher(FrontendBase):
         max_threads: int = 1,
         inlier_dist_m: float = 0.05,
         min_inliers: int = 30,
-        min_inlier_fraction: float = 0.3,
+        min_inlier_fraction: float = 0.5,
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,

@@ -359,7 +359,7 @@ class NativeMatcher(FrontendBase):
         tolerance: float = 1e-6,
         inlier_dist_m: float = 0.05,
         min_inliers: int = 30,
-        min_inlier_fraction: float = 0.3,
+        min_inlier_fraction: float = 0.5,
         search: str = "auto",
         search_trigger_inlier_fraction: float = 0.6,
         search_window_m: float = 0.5,

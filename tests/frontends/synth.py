@@ -62,3 +62,34 @@ def free_poses(m: OccupancyMap, n: int, rng: np.random.Generator, clearance: flo
         if m.is_free(p[None, :2])[0] and m.distance_at(p[None, :2])[0] > clearance:
             out.append(p)
     return np.array(out)
+
+
+def make_moving_scan(
+    m: OccupancyMap,
+    pose0: np.ndarray,
+    twist: np.ndarray,
+    rng: np.random.Generator | None = None,
+    n_beams: int = 541,
+    fov_deg: float = 270.0,
+    scan_period: float = 0.04,
+    range_max: float = 20.0,
+    range_sigma: float = 0.008,
+    mount: StaticTransform = MOUNT,
+    stamp: float = 0.0,
+) -> LaserScan:
+    """A motion-distorted scan: beam ``i`` cast from the pose at ``stamp + i * time_increment``
+    while the robot moves at the constant body ``twist`` [vx, vy, wz] from ``pose0`` (first beam)."""
+    from fgloc.frontends.base import _se2_exp
+
+    rng = rng or np.random.default_rng(0)
+    fov = np.radians(fov_deg)
+    inc = fov / (n_beams - 1)
+    t_inc = scan_period * (fov_deg / 360.0) / (n_beams - 1)
+    angles = -fov / 2 + inc * np.arange(n_beams)
+    offs = _se2_exp(np.asarray(twist, dtype=float), t_inc * np.arange(n_beams))
+    poses = compose(pose0[None, :], offs)
+    lp = compose(poses, mount.pose[None, :])
+    r = m.raycast(lp[:, :2], lp[:, 2] + angles, range_max)
+    r = r + rng.normal(0.0, range_sigma, n_beams) * np.isfinite(r)
+    return LaserScan(stamp, -fov / 2, inc, 0.05, range_max, r.astype(np.float32), time_increment=t_inc,
+                     scan_time=scan_period)

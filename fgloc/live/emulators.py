@@ -450,16 +450,17 @@ class SickEmulator:
                 payload = encode_lmdscandata(scaled, k, k, self._dev_us(h_start), self._dev_us(h_send),
                                              self.angle_offset_deg)
                 out = frame(payload)
-                if self.malformed_prob and self.rng.random() < self.malformed_prob:
+                bad = self.malformed_prob > 0 and self.rng.random() < self.malformed_prob
+                if bad:
                     cut = payload[: self.rng.randint(20, max(21, len(payload) - 5))]
                     out = frame(cut) + out
-                    self.stats.malformed += 1
                 with self._lock:
                     c, on = self._client, self._streaming
                     if c is not None and on:
                         try:
                             c.sendall(out)
                             self.sent_scans += 1
+                            self.stats.malformed += int(bad)
                         except OSError:
                             pass
                 self.stats.frames += 1

@@ -1,0 +1,146 @@
+"""A ROS 1 bag written with rosbags' own writer and serializer converts with equal values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fgloc.cli import main
+from fgloc.geometry import yaw_to_quaternion
+from fgloc.io.convert import import_log
+from fgloc.io.log import LogReader
+from fgloc.types import CompassHeading, LaserScan, Odometry
+
+N = 15
+T0 = 1_600_000_000
+
+
+def _write_bag(path, scan_topic="/base_scan"):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    T = ts.types
+    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    Point, Pose = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Pose"]
+
+    def quat(yaw):
+        q = yaw_to_quaternion(yaw)
+        return Q(x=q[0], y=q[1], z=q[2], w=q[3])
+
+    def hdr(sec, nsec, frame):
+        return Header(seq=0, stamp=Time(sec=sec, nanosec=nsec), frame_id=frame)
+
+    def tf(sec, parent, child, x, y, z, yaw):
+        return T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
+            header=hdr(sec, 0, parent), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](translation=V3(x=x, y=y, z=z), rotation=quat(yaw)))])
+
+    expected = []
+    with Writer(path) as w:
+        c = {
+            "scan": w.add_connection(scan_topic, "sensor_msgs/msg/LaserScan", typestore=ts),
+            "odom": w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts),
+            "imu": w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts),
+            "tfs": w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts, latching=1),
+            "tf": w.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=ts),
+        }
+
+        def put(key, sec, nsec, msg):
+            w.write(c[key], sec * 10**9 + nsec, ts.serialize_ros1(msg, msg.__msgtype__))
+
+        put("tfs", T0, 0, tf(T0, "base_link", "laser", 0.3, -0.05, 0.2, 0.1))
+        for i in range(N):
+            sec, nsec = T0 + i, 123_456_789 + i
+            ranges = np.linspace(0.5, 8.0, 91).astype(np.float32)
+            ranges[3], ranges[4], ranges[5] = np.inf, -np.inf, np.nan
+            scan = T["sensor_msgs/msg/LaserScan"](
+                header=hdr(sec, nsec, "laser"), angle_min=-1.5, angle_max=1.5, angle_increment=3.0 / 90,
+                time_increment=1e-4, scan_time=0.1, range_min=0.1, range_max=30.0,
+                ranges=ranges, intensities=np.zeros(0, np.float32))
+            put("scan", sec, nsec, scan)
+            pcov = np.zeros(36)
+            pcov[0], pcov[7], pcov[35] = 0.01, 0.02, 0.03
+            tcov = np.zeros(36)
+            tcov[0], tcov[7], tcov[35], tcov[5], tcov[30] = 1e-3, 2e-3, 3e-3, 1e-4, 1e-4
+            odom = T["nav_msgs/msg/Odometry"](
+                header=hdr(sec, nsec + 1000, "odom"), child_frame_id="base_link",
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=Pose(position=Point(x=0.1 * i, y=1.0, z=0.0), orientation=quat(0.05 * i)),
+                    covariance=pcov),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](linear=V3(x=0.5, y=0.01, z=0.0),
+                                                       angular=V3(x=0.0, y=0.0, z=0.05)),
+                    covariance=tcov))
+            put("odom", sec, nsec + 1000, odom)
+            ocov = np.zeros(9)
+            ocov[8] = 4e-4
+            wcov = np.zeros(9)
+            wcov[8] = 1e-6
+            imu = T["sensor_msgs/msg/Imu"](
+                header=hdr(sec, nsec + 2000, "imu"), orientation=quat(-0.2 + 0.01 * i),
+                orientation_covariance=ocov, angular_velocity=V3(x=0.0, y=0.0, z=0.05),
+                angular_velocity_covariance=wcov, linear_acceleration=V3(x=0.0, y=0.0, z=9.8),
+                linear_acceleration_covariance=np.full(9, -1.0) * np.eye(3).ravel())
+            put("imu", sec, nsec + 2000, imu)
+            put("tf", sec, nsec + 3000, tf(sec, "odom", "base_link", 0.1 * i, 1.0, 0.0, 0.05 * i))
+            expected.append((sec, nsec, ranges, i))
+    return expected
+
+
+def test_bag_converts_with_equal_values(tmp_path):
+    bag = tmp_path / "run.bag"
+    expected = _write_bag(bag)
+    from fgloc.io.log import Topics
+
+    res = import_log(bag, tmp_path / "run.mcap", Topics(scan="/base_scan"), progress=False)
+    assert res.format == "rosbag1"
+    assert res.counts == {"/scan": N, "/odom": N, "/imu": N, "/tf_static": 1, "/tf": N}
+    r = LogReader(res.dst)
+    scans = [m for t, m in r.messages({"/scan"})]
+    odoms = [m for t, m in r.messages({"/odom"})]
+    imus = [m for t, m in r.messages({"/imu"})]
+    for (sec, nsec, ranges, i), s, o, c in zip(expected, scans, odoms, imus, strict=True):
+        assert isinstance(s, LaserScan) and isinstance(o, Odometry) and isinstance(c, CompassHeading)
+        assert s.stamp == sec + nsec * 1e-9
+        np.testing.assert_array_equal(s.ranges, ranges)
+        assert (s.angle_min, s.range_max, s.frame_id) == (-1.5, 30.0, "laser")
+        assert s.angle_increment == pytest.approx(3.0 / 90, rel=1e-7)
+        assert s.intensities is None
+        assert o.stamp == sec + (nsec + 1000) * 1e-9
+        assert o.pose == pytest.approx([0.1 * i, 1.0, 0.05 * i], abs=1e-12)
+        assert o.twist == pytest.approx([0.5, 0.01, 0.05])
+        np.testing.assert_allclose(o.twist_cov, [[1e-3, 0, 1e-4], [0, 2e-3, 0], [1e-4, 0, 3e-3]])
+        np.testing.assert_allclose(o.pose_cov, np.diag([0.01, 0.02, 0.03]))
+        assert c.yaw_rad == pytest.approx(-0.2 + 0.01 * i, abs=1e-12)
+        assert (c.yaw_rate_radps, c.yaw_var, c.yaw_rate_var) == (0.05, 4e-4, 1e-6)
+    mount = r.laser_mount()
+    assert (mount.parent, mount.child) == ("base_link", "laser")
+    assert mount.pose == pytest.approx([0.3, -0.05, 0.1]) and mount.z == pytest.approx(0.2)
+
+
+def test_bag_scan_topic_guessed_and_cli(tmp_path, capsys):
+    bag = tmp_path / "run.bag"
+    _write_bag(bag, scan_topic="/front_laser")
+    out = tmp_path / "o.mcap"
+    assert main(["import", str(bag), "-o", str(out)]) == 0  # the only LaserScan topic is used
+    stdout = capsys.readouterr().out
+    assert f"/scan: {N}" in stdout and "rosbag1" in stdout
+    assert LogReader(out).summary()["topics"]["/scan"]["count"] == N
+
+
+def test_bag_without_usable_topics(tmp_path, capsys):
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "chatter.bag"
+    with Writer(bag) as w:
+        c = w.add_connection("/chatter", "std_msgs/msg/String", typestore=ts)
+        w.write(c, 1, ts.serialize_ros1(ts.types["std_msgs/msg/String"](data="hi"), "std_msgs/msg/String"))
+    assert main(["import", str(bag), "-o", str(tmp_path / "o.mcap")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/chatter (std_msgs/msg/String)" in err and str(bag) in err

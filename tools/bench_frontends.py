@@ -164,7 +164,8 @@ def main() -> None:
     ap.add_argument("--noise-m", type=float, default=0.05)
     ap.add_argument("--noise-deg", type=float, default=2.0)
     ap.add_argument("--synthetic", action="store_true", help="use the synthetic room instead of the simulator")
-    ap.add_argument("--skip", default="", help="comma-separated rows to skip (native,kiss,amcl,kiss-icp,small-gicp,open3d)")
+    ap.add_argument("--skip", default="",
+                    help="comma-separated rows to skip (native,kiss,amcl,kiss-icp,small-gicp,open3d)")
     args = ap.parse_args()
     skip = set(filter(None, args.skip.split(",")))
 

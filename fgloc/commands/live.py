@@ -16,7 +16,7 @@ def register(app: typer.Typer) -> None:
     def live(
         serial: str = typer.Option(None, "--serial", help="pyserial URL: /dev/ttyUSB0, socket://H:P, loop://, rfc2217://"),
         laser: str = typer.Option(None, "--laser", help="SICK scanner HOST:PORT (CoLa-A, usually port 2111)"),
-        map_yaml: Path = typer.Option(..., "--map", help="map_server MAP.yaml"),
+        map_yaml: Path = typer.Option(None, "--map", help="map_server MAP.yaml (without: odometry + compass only)"),
         backend: str = typer.Option("smoother", "--backend", help="smoother | ekf"),
         frontend: str = typer.Option("native", "--frontend", help="scan matcher: native | amcl | kiss"),
         initial_pose: tuple[float, float, float] = typer.Option(
@@ -48,7 +48,7 @@ def register(app: typer.Typer) -> None:
         cfg = load_config(config)
         if not any(math.isnan(v) for v in laser_mount):
             cfg["laser"]["mount"] = list(laser_mount)
-        occ = load_map(map_yaml)
+        occ = load_map(map_yaml) if map_yaml is not None else None
         init = None if any(math.isnan(v) for v in initial_pose) else np.array(initial_pose, dtype=float)
 
         from fgloc.pipeline import Localizer

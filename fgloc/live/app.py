@@ -31,10 +31,10 @@ _BUILTIN: dict[str, Any] = {
     "robot": {"drive": "mecanum", "wheel_radius_m": 0.05, "track_width_m": 0.40, "wheelbase_m": 0.30,
               "counts_per_rev": 2000},
     "serial": {"baudrate": 115200, "align_clock": True, "compass_clockwise": False,
-               "twist_std": [0.02, 0.02, 0.03], "compass_std_deg": 1.0, "gyro_std_dps": 0.5},
+               "twist_std": None, "compass_std_deg": None, "gyro_std_dps": None},
     "laser": {"range_min_m": 0.5, "range_max_m": 50.0, "angle_offset_deg": -90.0, "align_clock": True,
               "stall_timeout_s": 1.0, "mount": [0.0, 0.0, 0.0]},
-    "health": {"silence_s": 0.5},
+    "health": {"silence_s": 0.4},
     "localizer": {},
 }
 
@@ -123,15 +123,15 @@ class LiveSession:
         self.runner = LiveRunner(
             localizer, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
             event_sink=ev, laser_mount=self.laser_mount,
-            silence_s=float(cfg.get("health", {}).get("silence_s", 0.5)),
+            silence_s=float(cfg.get("health", {}).get("silence_s", 0.4)),
         )
-        ts = sc.get("twist_std", [0.02, 0.02, 0.03])
+        ts, cs, gs = sc.get("twist_std"), sc.get("compass_std_deg"), sc.get("gyro_std_dps")
         conv = FrameConverter(
             robot,
             compass_clockwise=bool(sc.get("compass_clockwise", False)),
-            twist_var=tuple(float(v) ** 2 for v in ts),  # type: ignore[arg-type]
-            yaw_var=math.radians(float(sc.get("compass_std_deg", 1.0))) ** 2,
-            yaw_rate_var=math.radians(float(sc.get("gyro_std_dps", 0.5))) ** 2,
+            twist_var=None if ts is None else tuple(float(v) ** 2 for v in ts),  # type: ignore[arg-type]
+            yaw_var=float("nan") if cs is None else math.radians(float(cs)) ** 2,
+            yaw_rate_var=float("nan") if gs is None else math.radians(float(gs)) ** 2,
             align_clock=bool(sc.get("align_clock", True)),
         )
         self.serial: SerialLink | None = None

@@ -65,7 +65,7 @@ class LiveRunner:
         event_sink: Callable[[str], None] | None = None,
         topics: dict[str, str] | None = None,
         laser_mount: StaticTransform | None = None,
-        silence_s: float = 0.5,
+        silence_s: float = 0.4,
         status_period_s: float = 0.25,
         sensors: tuple[str, ...] = SENSORS,
         reorder_s: float = 0.15,

@@ -126,14 +126,15 @@ class FrameConverter:
         self,
         robot: RobotParams,
         compass_clockwise: bool = False,
-        twist_var: tuple[float, float, float] = (0.02**2, 0.02**2, 0.03**2),
-        yaw_var: float = math.radians(1.0) ** 2,
-        yaw_rate_var: float = math.radians(0.5) ** 2,
+        twist_var: tuple[float, float, float] | None = None,
+        yaw_var: float = float("nan"),
+        yaw_rate_var: float = float("nan"),
         align_clock: bool = True,
     ) -> None:
         self.robot = robot
         self.compass_sign = -1.0 if compass_clockwise else 1.0
-        self.twist_cov = np.diag(np.asarray(twist_var, dtype=float))
+        # None / NaN = unknown: the localizer's configured encoder / compass sigmas apply
+        self.twist_cov = None if twist_var is None else np.diag(np.asarray(twist_var, dtype=float))
         self.yaw_var = yaw_var
         self.yaw_rate_var = yaw_rate_var
         self.align_clock = align_clock
@@ -175,7 +176,8 @@ class FrameConverter:
                     twist = wheel_speeds_to_twist(self.robot, omega)
                     self._pose = _se2_exp(self._pose, twist, dt)
                     out.append(
-                        ("odom", Odometry(stamp=stamp, twist=twist, twist_cov=self.twist_cov.copy(),
+                        ("odom", Odometry(stamp=stamp, twist=twist,
+                                          twist_cov=None if self.twist_cov is None else self.twist_cov.copy(),
                                           pose=self._pose.copy()))
                     )
             if len(f.counts) == self.robot.n_wheels:
@@ -185,7 +187,7 @@ class FrameConverter:
             rate = None if f.gyro_cdps is None else self.compass_sign * math.radians(f.gyro_cdps / 100.0)
             out.append(
                 ("imu", CompassHeading(stamp=stamp, yaw_rad=yaw, yaw_rate_radps=rate, yaw_var=self.yaw_var,
-                                       yaw_rate_var=self.yaw_rate_var if rate is not None else float("nan")))
+                                       yaw_rate_var=self.yaw_rate_var))
             )
         return out
 

@@ -31,6 +31,7 @@ for odometry up to a keyframe's stamp).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -367,3 +368,33 @@ class Localizer:
             return Trajectory(np.zeros(0), np.zeros((0, 3)))
         return Trajectory.from_unsorted(np.array([f.stamp for f in self.fixes]),
                                         np.array([f.pose for f in self.fixes]))
+
+
+def run_messages(loc: Localizer, messages: Iterable[tuple[str, object]], topics: Any = None,
+                 on_message: Callable[[str, object], None] | None = None,
+                 on_fused: Callable[[PoseFix, PoseFix | None], None] | None = None) -> Trajectory:
+    """Feed ``(topic, message)`` pairs (as ``LogReader.messages`` or ``SimResult.messages`` give)
+    to ``loc`` and return ``loc.finish()``.
+
+    ``topics`` (a :class:`fgloc.io.log.Topics`, default names if None) says which topic is
+    the odometry, compass and scan; ``/ground_truth`` and unknown topics are ignored.
+    ``on_message(topic, msg)`` sees every message; ``on_fused(fused, fix)`` is called after
+    each scan with the fused pose and the front-end fix (for writing ``/fused_pose``).
+    """
+    scan_t = getattr(topics, "scan", "/scan")
+    odom_t = getattr(topics, "odom", "/odom")
+    imu_t = getattr(topics, "imu", "/imu")
+    for topic, msg in messages:
+        if on_message is not None:
+            on_message(topic, msg)
+        if topic == odom_t and isinstance(msg, Odometry):
+            loc.on_odometry(msg)
+        elif topic == imu_t and isinstance(msg, CompassHeading):
+            loc.on_compass(msg)
+        elif topic == scan_t and isinstance(msg, LaserScan):
+            fix = loc.on_scan(msg)
+            if on_fused is not None:
+                cur = loc.current()
+                if cur is not None:
+                    on_fused(cur, fix)
+    return loc.finish()

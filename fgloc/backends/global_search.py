@@ -4,8 +4,9 @@ Used by :class:`fgloc.pipeline.Localizer` when no initial pose is given and afte
 kidnapping (too many scans in a row without an accepted fix), for front-ends without
 a global mode of their own (native, kiss; AMCL spreads its particles instead).
 
-Method: candidate positions on a grid over the map's free space (``step_m``, cells at
-least ``clearance_m`` from obstacles), ``n_yaw`` headings each; every candidate scores
+Method: candidate positions on a grid over the map's free space (``step_m``, coarser on
+large maps so there are about ``max_candidates``; cells at least ``clearance_m`` from
+obstacles), ``n_yaw`` headings each; every candidate scores
 the scan's (subsampled) points against the map's distance field with a Gaussian
 likelihood ``mean(exp(-d^2 / 2 sigma^2))`` (a pure numpy, vectorized correlative
 search).  The best ``n_best`` distinct candidates are returned, best first; the caller
@@ -23,9 +24,9 @@ FloatArray = NDArray[np.float64]
 
 
 class GlobalSearch:
-    def __init__(self, occ_map: OccupancyMap, step_m: float = 0.4, n_yaw: int = 72,
+    def __init__(self, occ_map: OccupancyMap, step_m: float = 0.25, n_yaw: int = 72,
                  sigma_m: float = 0.15, max_points: int = 60, clearance_m: float = 0.2,
-                 n_best: int = 8, max_candidates: int = 4000, seed: int = 0) -> None:
+                 n_best: int = 20, max_candidates: int = 4000, seed: int = 0) -> None:
         self.map = occ_map
         self.n_yaw = int(n_yaw)
         self.sigma = float(sigma_m)
@@ -35,13 +36,16 @@ class GlobalSearch:
         self._df = np.where(np.isfinite(df), df, 3.0 * sigma_m * 4)
         free = occ_map.free & (occ_map.distance_field >= clearance_m)
         rows, cols = np.nonzero(free)
-        stride = max(1, int(round(step_m / occ_map.resolution)))
+        # coarser grid on large maps so the candidate count stays near max_candidates
+        step = max(step_m, float(np.sqrt(len(rows) / max(1, max_candidates))) * occ_map.resolution)
+        stride = max(1, int(round(step / occ_map.resolution)))
         keep = (rows % stride == 0) & (cols % stride == 0)
         cand = occ_map.grid_to_world(rows[keep], cols[keep])
-        if len(cand) > max_candidates:
+        if len(cand) > 2 * max_candidates:
             rng = np.random.default_rng(seed)
-            cand = cand[rng.choice(len(cand), max_candidates, replace=False)]
+            cand = cand[rng.choice(len(cand), 2 * max_candidates, replace=False)]
         self.candidates = cand
+        self.step_m = stride * occ_map.resolution
 
     def _lookup(self, pts: FloatArray) -> FloatArray:
         g = self.map.world_to_grid_continuous(pts.reshape(-1, 2))

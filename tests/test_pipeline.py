@@ -1,0 +1,233 @@
+"""The Localizer and `fgloc run`: a small self-made world, then the simulated paper run."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fgloc.geometry import compose, inverse, wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.pipeline import Localizer, load_config, run_messages
+from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
+
+MOUNT = StaticTransform("base_link", "laser", np.array([0.2, 0.05, 0.0]))
+
+
+def room_map(res: float = 0.05) -> OccupancyMap:
+    """14 m x 9 m room with boxes (asymmetric, so global localization is unique)."""
+    w, h = int(14 / res), int(9 / res)
+    d = np.zeros((h, w), dtype=np.int16)
+    d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
+
+    def box(x0, y0, x1, y1):
+        d[int(y0 / res):int(y1 / res), int(x0 / res):int(x1 / res)] = 100
+
+    box(3.0, 3.0, 3.6, 3.6)
+    box(8.5, 5.5, 10.5, 5.8)
+    box(6.0, 0.0, 6.2, 1.5)
+    box(12.0, 2.0, 12.5, 4.0)
+    box(1.0, 7.0, 2.5, 7.4)
+    return OccupancyMap(d, res, origin=np.array([0.0, 0.0, 0.0]))
+
+
+def loop_truth(duration: float, dt: float = 0.002, kidnap_at: float | None = None) -> Trajectory:
+    """A smooth loop around the room's centre (x in 2.5..11.5, y in 1.8..7.2).
+
+    ``kidnap_at``: the robot is carried a quarter loop ahead at that time (odometry sees nothing).
+    """
+    t = np.arange(0.0, duration + 1e-9, dt)
+    a = 2 * np.pi * t / 40.0
+    if kidnap_at is not None:
+        a = a + np.where(t >= kidnap_at, np.pi / 2, 0.0)
+    x = 7.0 + 4.5 * np.sin(a)
+    y = 4.5 - 2.7 * np.cos(a)
+    yaw = np.arctan2(np.gradient(y), np.gradient(x))
+    return Trajectory(t, np.column_stack([x, y, yaw]))
+
+
+def world_messages(m: OccupancyMap, gt: Trajectory, seed: int = 0, offset: float = 0.3,
+                   kidnap_at: float | None = None) -> list[tuple[str, object]]:
+    rng = np.random.default_rng(seed)
+    msgs: list[tuple[float, int, str, object]] = []
+    p, s = gt.poses, gt.stamps
+    step_o = 10  # 50 Hz
+    for i in range(step_o, len(s), step_o):
+        a, b = p[i - step_o], p[i]
+        c, sn = math.cos(a[2]), math.sin(a[2])
+        dx, dy = b[0] - a[0], b[1] - a[1]
+        dt = s[i] - s[i - step_o]
+        tw = np.array([(c * dx + sn * dy) / dt, (-sn * dx + c * dy) / dt, wrap_angle(b[2] - a[2]) / dt])
+        if kidnap_at is not None and s[i - step_o] < kidnap_at <= s[i]:
+            tw = np.zeros(3)
+        tw = tw + rng.normal(0, [0.005, 0.005, 0.005])
+        msgs.append((s[i], 0, "/odom", Odometry(s[i], tw)))
+        yaw = wrap_angle(p[i, 2] + offset + rng.normal(0, np.deg2rad(0.3)))
+        msgs.append((s[i] + 0.003, 1, "/imu", CompassHeading(s[i] + 0.003, yaw, tw[2])))
+    fov = np.radians(270.0)
+    n = 271
+    inc = fov / (n - 1)
+    ang = -fov / 2 + inc * np.arange(n)
+    for i in range(0, len(s), 20):  # 25 Hz
+        lp = compose(p[i], MOUNT.pose)
+        r = m.raycast(lp[:2], lp[2] + ang, 30.0)
+        r = r + rng.normal(0, 0.008, n) * np.isfinite(r)
+        r[rng.random(n) < 0.02] = np.inf
+        msgs.append((s[i] + 0.001, 2, "/scan", LaserScan(s[i] + 0.001, -fov / 2, inc, 0.05, 30.0,
+                                                         r.astype(np.float32))))
+    msgs.sort(key=lambda e: (e[0], e[1]))
+    return [(topic, msg) for _, _, topic, msg in msgs]
+
+
+@pytest.fixture(scope="module")
+def world():
+    m = room_map()
+    gt = loop_truth(16.0)
+    return m, gt, world_messages(m, gt)
+
+
+def _rmse(tr: Trajectory, gt: Trajectory) -> float:
+    e = tr.poses[:, :2] - gt.interpolate(tr.stamps)[:, :2]
+    return float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+@pytest.mark.parametrize("backend", ["ekf", "smoother", "batch"])
+def test_localizer_tracks_in_small_world(world, backend):
+    m, gt, msgs = world
+    loc = Localizer(m, MOUNT, backend=backend, frontend="native", initial_pose=gt.poses[0] + [0.1, -0.1, 0.05],
+                    config=load_config())
+    final = run_messages(loc, msgs)
+    assert loc.stats["fixes"] > 0.9 * loc.stats["scans"]
+    assert _rmse(final, gt) < 0.03
+    assert len(loc.online_trajectory()) >= loc.stats["scans"] - 1
+    cur = loc.current()
+    assert cur is not None and cur.cov.shape == (3, 3)
+
+
+def test_global_localization_without_initial_pose(world):
+    m, gt, msgs = world
+    loc = Localizer(m, MOUNT, backend="smoother", frontend="native", config=load_config())
+    final = run_messages(loc, msgs)
+    assert loc.stats["global_searches"] >= 1
+    # localized at the first scan, and right
+    assert final.stamps[0] < 0.1
+    assert _rmse(final, gt) < 0.01
+
+
+def test_kidnapped_robot_is_recovered_within_5_s():
+    m = room_map()
+    gt = loop_truth(14.0, kidnap_at=6.0)
+    msgs = world_messages(m, gt, seed=3, kidnap_at=6.0)
+    loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=gt.poses[0],
+                    config=load_config())
+    run_messages(loc, msgs)
+    on = loc.online_trajectory()
+    err = np.linalg.norm(on.poses[:, :2] - gt.interpolate(on.stamps)[:, :2], axis=1)
+    after = on.stamps >= 6.0
+    assert err[after].max() > 1.0  # the kidnap happened
+    good_from = on.stamps[after][np.nonzero(err[after] >= 0.2)[0][-1] + 1]
+    assert good_from - 6.0 < 5.0
+    assert loc.stats["relocalizations"] >= 1
+
+
+def test_odometry_and_compass_alone_without_map(world):
+    m, gt, msgs = world
+    loc = Localizer(None, MOUNT, backend="smoother", config=load_config())
+    final = run_messages(loc, msgs)
+    assert loc.frontend_name == "none" and final.frame_id == "odom"
+    # starts at the origin with the compass heading (truth yaw + 0.3 rad offset)
+    assert np.allclose(final.poses[0, :2], 0.0, atol=1e-6)
+    assert abs(wrap_angle(final.poses[0, 2] - (gt.poses[0, 2] + 0.3))) < np.deg2rad(1.0)
+    # the truth expressed in that odom frame matches (dead reckoning + absolute compass heading)
+    g0 = gt.interpolate(final.stamps[0])[0]
+    T = compose(final.poses[0], inverse(g0))
+    gt_odom = compose(T, gt.interpolate(final.stamps))
+    err = np.linalg.norm(final.poses[:, :2] - gt_odom[:, :2], axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.05
+    assert np.max(np.abs(wrap_angle(final.poses[:, 2] - gt_odom[:, 2]))) < np.deg2rad(1.0)
+
+
+def test_bad_and_out_of_order_input_is_counted_not_raised(world):
+    m, gt, msgs = world
+    msgs = list(msgs[:600])
+    bad: list[tuple[str, object]] = []
+    went_back = False
+    for i, (topic, msg) in enumerate(msgs):
+        bad.append((topic, msg))
+        if i == 100:
+            bad.append(("/odom", Odometry(float("nan"), np.zeros(3))))
+            bad.append(("/odom", Odometry(msg.stamp + 0.001, np.array([np.nan, 0.0, 0.0]))))
+            bad.append(("/imu", CompassHeading(1.0, None, None)))
+        if i >= 200 and topic == "/odom" and not went_back:
+            went_back = True
+            bad.append(("/odom", Odometry(msg.stamp - 1.0, np.zeros(3))))  # time going backwards
+    loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=gt.poses[0],
+                    config=load_config())
+    final = run_messages(loc, bad)
+    assert loc.stats["skipped"] >= 4
+    assert any("backwards" in k for k in loc.stats["skipped_reasons"])
+    assert _rmse(final, gt) < 0.01
+    # a scan full of NaN / inf gives no fix, never an exception
+    scan = next(msg for topic, msg in msgs if topic == "/scan")
+    junk = LaserScan(100.0, scan.angle_min, scan.angle_increment, 0.05, 30.0,
+                     np.full(len(scan.ranges), np.nan, dtype=np.float32))
+    assert loc.on_scan(junk) is None and loc.stats["no_fix"] >= 1
+
+
+@pytest.fixture(scope="module")
+def world_log(world, tmp_path_factory):
+    from fgloc.io.log import LogWriter
+
+    m, gt, msgs = world
+    d = tmp_path_factory.mktemp("world")
+    m.save(d / "map.yaml")
+    with LogWriter(d / "log.mcap") as w:
+        w.write("/tf_static", [MOUNT], stamp=0.0)
+        gi = 0
+        for topic, msg in msgs:
+            t = msg.stamp  # type: ignore[attr-defined]
+            while gi < len(gt) and gt.stamps[gi] <= t:
+                if gi % 10 == 0:
+                    w.write("/ground_truth", Odometry(gt.stamps[gi], np.zeros(3), pose=gt.poses[gi], frame_id="map"))
+                gi += 1
+            w.write(topic, msg)
+    return d
+
+
+def test_fgloc_run_writes_outputs_and_evaluates(world_log, tmp_path, capsys):
+    from fgloc.cli import main
+    from fgloc.io.log import LogReader
+    from fgloc.io.tum import read_tum
+
+    out = tmp_path / "out"
+    rc = main(["run", str(world_log / "log.mcap"), "--map", str(world_log / "map.yaml"), "--backend", "ekf",
+               "--initial-pose", "7.0", "1.8", "0.0", "-o", str(out), "-q"])
+    assert rc == 0
+    for f in ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml"):
+        assert (out / f).exists(), f
+    text = capsys.readouterr().out
+    assert "position RMSE" in text and "fixes" in text
+    tr = read_tum(out / "trajectory.tum")
+    gt = LogReader(world_log / "log.mcap").ground_truth()
+    assert gt is not None and _rmse(tr, gt) < 0.01
+    fused = [m for t, m in LogReader(out / "run.mcap").messages() if t == "/fused_pose"]
+    assert len(fused) >= 390 and fused[-1].cov.shape == (3, 3)
+    import yaml
+    cfg = yaml.safe_load((out / "config.yaml").read_text())
+    assert cfg["run"]["backend"] == "ekf" and "smoother" in cfg
+
+
+def test_fgloc_run_without_map_and_with_bad_config(world_log, tmp_path, capsys):
+    from fgloc.cli import main
+    from fgloc.io.tum import read_tum
+
+    out = tmp_path / "odom"
+    assert main(["run", str(world_log / "log.mcap"), "-o", str(out), "-q"]) == 0
+    tr = read_tum(out / "trajectory.tum")
+    assert np.allclose(tr.poses[0, :2], 0.0, atol=1e-6)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("smoother: {lag: [unclosed\n")
+    assert main(["run", str(world_log / "log.mcap"), "--config", str(bad), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "bad.yaml" in err and err.count("\n") == 1

@@ -19,6 +19,8 @@ frame, ``retract(xi) = pose * Expmap(xi)``.
 
 from __future__ import annotations
 
+import math
+
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
@@ -67,28 +69,58 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
     spectral densities for wheel slip / model error), propagated as
     ``Sigma <- Ad(d^-1) Sigma Ad(d^-1)^T + Sigma_step``.
     """
-    delta = np.zeros(3)
-    cov = np.zeros((3, 3))
     if t1 <= t0 or len(stamps) == 0:
-        return delta, cov
-    q = np.zeros(3) if q_slip is None else np.asarray(q_slip, dtype=float)
+        return np.zeros(3), np.zeros((3, 3))
+    qx, qy, qt = (0.0, 0.0, 0.0) if q_slip is None else (float(q_slip[0]), float(q_slip[1]), float(q_slip[2]))
     # index of the first sample with stamp > t0 (its twist covers t0)
     i = int(np.searchsorted(stamps, t0, side="right"))
-    t = t0
     n = len(stamps)
+    t = t0
+    x = y = th = 0.0
+    cov = np.zeros((3, 3))
+    A = np.eye(3)
     while t < t1 - 1e-12:
         j = min(i, n - 1)
         t_next = min(float(stamps[i]), t1) if i < n else t1
         dt = t_next - t
         if dt > 0:
             u = twists[j]
-            d = se2_exp(u * dt)
-            A = se2_adjoint(se2_inverse(d))
-            cov = A @ cov @ A.T + covs[j] * dt * dt + np.diag(q * dt)
-            delta = se2_compose(delta, d)
+            vx, vy, w = float(u[0]) * dt, float(u[1]) * dt, float(u[2]) * dt
+            if abs(w) < 1e-9:
+                a, b = 1.0 - w * w / 6.0, w / 2.0
+            else:
+                a, b = math.sin(w) / w, (1.0 - math.cos(w)) / w
+            dx, dy = a * vx - b * vy, b * vx + a * vy
+            c, s = math.cos(w), math.sin(w)
+            # Ad(d^-1) with d^-1 = (-c dx - s dy, s dx - c dy, -w)
+            ix, iy = -c * dx - s * dy, s * dx - c * dy
+            A[0, 0], A[0, 1], A[0, 2] = c, s, iy
+            A[1, 0], A[1, 1], A[1, 2] = -s, c, -ix
+            cov = A @ cov @ A.T + covs[j] * (dt * dt)
+            cov[0, 0] += qx * dt
+            cov[1, 1] += qy * dt
+            cov[2, 2] += qt * dt
+            ct, st = math.cos(th), math.sin(th)
+            x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
         t = t_next
         i += 1
-    return delta, 0.5 * (cov + cov.T)
+    return np.array([x, y, math.remainder(th, 2 * math.pi)]), 0.5 * (cov + cov.T)
+
+
+def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:
+    """Heading change (rad, unwrapped) from ``t0`` to ``t1``, same hold as :func:`integrate_twist`."""
+    if t1 <= t0 or len(stamps) == 0:
+        return 0.0
+    i = int(np.searchsorted(stamps, t0, side="right"))
+    n = len(stamps)
+    t, th = t0, 0.0
+    while t < t1 - 1e-12:
+        j = min(i, n - 1)
+        t_next = min(float(stamps[i]), t1) if i < n else t1
+        th += float(twists[j][2]) * (t_next - t)
+        t = t_next
+        i += 1
+    return th
 
 
 # ---------------------------------------------------------------------- factors

@@ -28,6 +28,7 @@ optimizes the whole run with Levenberg-Marquardt, initialized from the fixed-lag
 
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
 
@@ -40,6 +41,7 @@ from fgloc.backends.factors import (
     between_factor,
     compass_factor,
     fix_factor,
+    integrate_heading,
     integrate_twist,
     se2_compose,
 )
@@ -89,6 +91,7 @@ class SlidingWindowSmoother(Backend):
         super().__init__()
         self.cfg = config or SmootherConfig()
         self.calib = CompassCalibrator(self.cfg.calibration_fixes)
+        self._q_slip = np.asarray(self.cfg.q_slip, dtype=float)
         self.next_x = 0  # key counters never restart, so keys stay unique across resets
         self.next_o = 0
         self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0})
@@ -238,14 +241,21 @@ class SlidingWindowSmoother(Backend):
     def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
         if not self.odo_t:
             return np.zeros(3), np.diag(np.square(self.cfg.encoder_sigmas)) * max(t1 - t0, 1e-3) ** 2
-        return integrate_twist(np.asarray(self.odo_t), np.asarray(self.odo_u), np.asarray(self.odo_c),
-                               t0, t1, np.asarray(self.cfg.q_slip))
+        # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
+        i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
+        i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
+        return integrate_twist(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]),
+                               np.asarray(self.odo_c[i0:i1]), t0, t1, self._q_slip)
 
     def _rotation_between(self, t0: float, t1: float) -> float:
         """Odometry heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``)."""
-        if t1 >= t0:
-            return float(self._integrate(t0, t1)[0][2])
-        return -float(self._integrate(t1, t0)[0][2])
+        if not self.odo_t or t0 == t1:
+            return 0.0
+        a, b = (t0, t1) if t1 > t0 else (t1, t0)
+        i0 = max(bisect_right(self.odo_t, a) - 1, 0)
+        i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
+        th = integrate_heading(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]), a, b)
+        return th if t1 > t0 else -th
 
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
         assert self.kf_key, "smoother not initialized"
@@ -330,7 +340,6 @@ class SlidingWindowSmoother(Backend):
             self._add_keyframe_now(t, fix)
 
     def _add_keyframe_now(self, t: float, fix: PoseFix | None) -> None:
-        pred, _ = self.predict(t)
         used = fix is not None
         k_prev, t_prev = self.kf_key[-1], self.kf_t[-1]
         k = self._new_x(t)
@@ -338,6 +347,7 @@ class SlidingWindowSmoother(Backend):
         vals = gtsam.Values()
         ts: dict[int, float] = {k: t}
         d, c = self._integrate(t_prev, t)
+        pred = se2_compose(self.kf_pose[k_prev], d)
         graph.add(between_factor(k_prev, k, d, c))
         n_between = graph.size() - 1
         guess = pred if not used else fix.pose  # type: ignore[union-attr]

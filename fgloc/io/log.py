@@ -282,7 +282,9 @@ def _odom_from_ros(m: Any, topic: str) -> Odometry:
 
 def _compass_from_ros(m: Any, topic: str) -> CompassHeading:
     ocov, wcov = m.orientation_covariance, m.angular_velocity_covariance
-    no_yaw, no_rate = ocov[0] == -1, wcov[0] == -1
+    q = m.orientation
+    no_yaw = ocov[0] == -1 or (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) < 1e-12  # REP 145 / zero quaternion
+    no_rate = wcov[0] == -1
     return CompassHeading(
         stamp=_stamp(m.header),
         yaw_rad=None if no_yaw else _yaw(m.orientation),
@@ -594,6 +596,8 @@ class LogReader:
         with p.open("rb") as f:
             magic = f.read(len(MCAP_MAGIC))
         if magic != MCAP_MAGIC:
+            if magic.startswith(b"#ROSBAG"):
+                raise LogError(f"{p}: a ROS 1 bag, not an MCAP log; convert it with 'fgloc import'")
             raise LogError(f"{p}: not an MCAP file (bad magic bytes)")
         summary = self._read_summary()
         if summary is not None and summary.statistics is not None and summary.chunk_indexes:

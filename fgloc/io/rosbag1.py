@@ -36,8 +36,11 @@ def is_rosbag1(path: str | Path) -> bool:
         return False
 
 
-def _choose_topics(available: dict[str, str], topics: Topics) -> dict[str, str]:
-    """``{source topic: role}`` for the roles whose topic (or a unique same-type topic) exists."""
+def _choose_topics(available: dict[str, str], topics: Topics, path: Path) -> dict[str, str]:
+    """``{source topic: role}`` for the roles whose topic (or a unique same-type topic) exists.
+
+    A topic named explicitly (not the default) that is not in the bag is an error.
+    """
     chosen: dict[str, str] = {}
     default = Topics()
     for f in fields(Topics):
@@ -49,8 +52,11 @@ def _choose_topics(available: dict[str, str], topics: Topics) -> dict[str, str]:
         if name in available:
             log.warning("topic %s has type %s, expected %s for %s; skipped", name, available[name], want, role)
             continue
-        if name != getattr(default, role) or role in ("tf", "tf_static", "ground_truth", "fused"):
-            continue  # explicitly named but absent, or roles that are never guessed
+        if name != getattr(default, role):
+            have = ", ".join(sorted(available)) or "none"
+            raise LogError(f"{path}: {role} topic '{name}' not in bag (topics: {have})")
+        if role in ("tf", "tf_static", "ground_truth", "fused"):
+            continue  # never guessed
         same = [t for t, ty in available.items() if ty == want and t not in chosen and t not in
                 {getattr(topics, g.name) for g in fields(Topics)}]
         if len(same) == 1:
@@ -82,7 +88,7 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
     try:
         store = get_typestore(Stores.ROS1_NOETIC)
         available = {c.topic: c.msgtype for c in reader.connections}
-        chosen = _choose_topics(available, topics)
+        chosen = _choose_topics(available, topics, path)
         if not chosen:
             have = ", ".join(f"{t} ({ty})" for t, ty in sorted(available.items())) or "none"
             raise LogError(f"{path}: no scan, odometry, IMU or tf topic to import (topics: {have})")
@@ -94,8 +100,16 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
             counter.append(sum(c.msgcount for c in conns))
         convs: dict[str, Any] = {t: FROM_ROS[ROLE_TYPES[r]] for t, r in chosen.items()}
         try:
+            bad: set[str] = set()
             for conn, _t, raw in reader.messages(connections=conns):
-                msg = store.deserialize_ros1(raw, conn.msgtype)
+                try:
+                    msg = store.deserialize_ros1(raw, conn.msgtype)
+                except Exception as e:  # noqa: BLE001 - an undecodable message is skipped
+                    if conn.topic not in bad:
+                        bad.add(conn.topic)
+                        log.warning("%s: cannot decode %s (%s): %s; skipping such messages",
+                                    path, conn.topic, conn.msgtype, e)
+                    continue
                 role = chosen[conn.topic]
                 yield out_names[role], convs[conn.topic](msg, out_names[role])
         except ReaderError as e:

@@ -144,3 +144,14 @@ def test_bag_without_usable_topics(tmp_path, capsys):
     assert main(["import", str(bag), "-o", str(tmp_path / "o.mcap")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "/chatter (std_msgs/msg/String)" in err and str(bag) in err
+
+
+def test_bag_named_topic_missing(tmp_path, capsys):
+    bag = tmp_path / "run.bag"
+    _write_bag(bag)
+    assert main(["import", str(bag), "-o", str(tmp_path / "o.mcap"), "--scan-topic", "/laser_front"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert str(bag) in err and "'/laser_front'" in err and "/base_scan, /imu, /odom, /tf, /tf_static" in err
+    assert main(["info", str(bag)]) == 2
+    assert "fgloc import" in capsys.readouterr().err

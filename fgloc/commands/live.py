@@ -51,12 +51,13 @@ def register(app: typer.Typer) -> None:
         occ = load_map(map_yaml) if map_yaml is not None else None
         init = None if any(math.isnan(v) for v in initial_pose) else np.array(initial_pose, dtype=float)
 
+        from fgloc.live.harness import localizer_config
         from fgloc.pipeline import Localizer
         from fgloc.types import StaticTransform
 
         mount = StaticTransform("base_link", "laser", np.asarray(cfg["laser"]["mount"], dtype=float))
         loc = Localizer(occ, mount, backend=backend, frontend=frontend, initial_pose=init,
-                        config=cfg.get("localizer") or None)
+                        config=localizer_config(cfg))
         tty = sys.stderr.isatty()
         last_len = [0]
 

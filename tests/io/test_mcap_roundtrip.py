@@ -171,3 +171,32 @@ def test_schema_is_rosbag2_ros2msg(tmp_path):
         (chan,) = s.channels.values()
     assert (schema.name, schema.encoding, chan.message_encoding) == ("nav_msgs/msg/Odometry", "ros2msg", "cdr")
     assert schema.data.decode() == text
+
+
+def test_independent_decoder_reads_our_cdr(tmp_path):
+    """rosbags (a separate CDR implementation) decodes every message and parses every schema."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    msgs = _messages(3)
+    path = tmp_path / "x.mcap"
+    with LogWriter(path) as w:
+        for topic, m in msgs:
+            w.write(topic, m)
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    n = n_odom = 0
+    with path.open("rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            assert schema is not None
+            types = get_types_from_msg(schema.data.decode(), schema.name)
+            assert schema.name in types and "builtin_interfaces/msg/Time" in types
+            ros = ts.deserialize_cdr(message.data, schema.name)
+            if channel.topic == "/scan":
+                src = next(m for t, m in msgs if t == "/scan" and stamp_to_ns(m.stamp) == message.log_time)
+                np.testing.assert_array_equal(ros.ranges, src.ranges)  # type: ignore[attr-defined]
+                assert ros.header.stamp.sec * 10**9 + ros.header.stamp.nanosec == message.log_time
+            if channel.topic == "/odom" and message.log_time == stamp_to_ns(msgs[2][1].stamp):  # type: ignore[attr-defined]
+                assert ros.twist.twist.linear.x == 0.8 and ros.twist.covariance[0] == 1e-3
+                n_odom += 1
+            n += 1
+    assert n == len(msgs) and n_odom == 1

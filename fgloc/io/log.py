@@ -56,6 +56,7 @@ import numpy as np
 
 from fgloc.errors import LogError
 from fgloc.geometry import compose, quaternion_to_yaw, yaw_to_quaternion
+from fgloc.io.fastcdr import decode_scan, encode_scan
 from fgloc.io.msgdefs import full_text
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
 
@@ -168,6 +169,31 @@ def _scan_to_ros(m: LaserScan, stamp: float) -> dict:
         "ranges": np.asarray(m.ranges, dtype=np.float32).tolist(),
         "intensities": [] if m.intensities is None else np.asarray(m.intensities, dtype=np.float32).tolist(),
     }
+
+
+def _scan_to_cdr(m: LaserScan, stamp: float) -> bytes:
+    n = len(m.ranges)
+    sec, nsec = stamp_to_sec_nsec(stamp)
+    floats = (m.angle_min, m.angle_min + m.angle_increment * max(n - 1, 0), m.angle_increment,
+              m.time_increment, m.scan_time, m.range_min, m.range_max)
+    return encode_scan(sec, nsec, m.frame_id, floats, m.ranges, m.intensities)
+
+
+def _already_encoded(payload: bytes) -> bytes:
+    return payload
+
+
+def _scan_from_cdr(data: bytes, topic: str) -> LaserScan | None:
+    d = decode_scan(data)
+    if d is None:
+        return None
+    amin, _amax, inc, tinc, stime, rmin, rmax = d["floats"]
+    inten = d["intensities"]
+    return LaserScan(
+        stamp=sec_nsec_to_stamp(d["sec"], d["nanosec"]), angle_min=amin, angle_increment=inc,
+        range_min=rmin, range_max=rmax, ranges=d["ranges"], time_increment=tinc, scan_time=stime,
+        intensities=inten if len(inten) else None, frame_id=d["frame_id"],
+    )
 
 
 def _odom_to_ros(m: Odometry, stamp: float) -> dict:
@@ -359,6 +385,9 @@ class LogWriter:
             raise LogError(f"{self.path}: cannot write log ({e.strerror or e})") from None
         self._writer = Writer(self._file, chunk_size=chunk_size)
         self._schemas: dict[str, Any] = {}
+        # scans go through the vectorized codec (byte-identical, see fastcdr) when the
+        # mcap_ros2 writer exposes its per-schema encoder table
+        self._fast_scans = isinstance(getattr(self._writer, "_encoders", None), dict)
         self._pending_tf: list[tuple[str, object]] = []
         self._last_stamp: float | None = None
         self.count = 0
@@ -368,13 +397,15 @@ class LogWriter:
         if s is None:
             s = self._writer.register_msgdef(type_name, full_text(type_name))
             self._schemas[type_name] = s
+            if type_name == LASER_SCAN and self._fast_scans:
+                self._writer._encoders[s.id] = _already_encoded
         return s
 
     def write(self, topic: str, msg: object, stamp: float | None = None) -> None:
         """Write one message; ``stamp`` overrides ``msg.stamp`` (header and log time)."""
-        data: Callable[[Any, float], dict]
+        data: Callable[[Any, float], dict | bytes]
         if isinstance(msg, LaserScan):
-            t, st, data = LASER_SCAN, msg.stamp, _scan_to_ros
+            t, st, data = LASER_SCAN, msg.stamp, (_scan_to_cdr if self._fast_scans else _scan_to_ros)
         elif isinstance(msg, Odometry):
             t, st, data = ODOMETRY, msg.stamp, _odom_to_ros
         elif isinstance(msg, CompassHeading):
@@ -399,7 +430,7 @@ class LogWriter:
         payload: Any = msg
         self._emit(topic, t, data(payload, st), st)
 
-    def _emit(self, topic: str, type_name: str, ros: dict, stamp: float) -> None:
+    def _emit(self, topic: str, type_name: str, ros: dict | bytes, stamp: float) -> None:
         self._writer.write_message(topic, self._schema(type_name), ros, log_time=max(stamp_to_ns(stamp), 0),
                                    sequence=self.count)
         self._last_stamp = stamp
@@ -758,6 +789,11 @@ class LogReader:
             if conv is None:
                 continue
             dec, fn = conv
+            if fn is _scan_from_ros and channel.message_encoding == "cdr":
+                scan = _scan_from_cdr(message.data, channel.topic)
+                if scan is not None:
+                    yield channel.topic, scan
+                    continue
             yield channel.topic, fn(dec(message.data), channel.topic)
 
     def _raw(self, want: set[str]) -> Iterator[tuple[Any, Any, Any]]:

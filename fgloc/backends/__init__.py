@@ -69,7 +69,7 @@ def make_backend(name: str, config: dict | None = None) -> Backend:
     sec = dict(cfg)
     max_iter = int(sec.pop("max_iterations", 50))
     for k in ("compass_sigma", "offset_rw_sigma", "offset_prior_sigma", "calibrated_offset_sigma",
-              "fix_min_sigma_theta"):
+              "fix_min_sigma_theta", "fix_gate_theta"):
         _deg(sec, k)
     sm_cfg = SmootherConfig(**_dataclass_kwargs(SmootherConfig, sec, name))
     if name == "batch":

@@ -124,10 +124,12 @@ def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: flo
 
 
 # ---------------------------------------------------------------------- factors
-def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray,
-                   min_sigma: float = 1e-4) -> gtsam.BetweenFactorPose2:
+def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray, min_sigma: float = 1e-4,
+                   kernel: str = "none", k: float = 1.345) -> gtsam.BetweenFactorPose2:
+    """Integrated-twist factor (C++ ``BetweenFactorPose2``), optionally robust (wheel slip)."""
     c = np.asarray(cov, dtype=float) + np.eye(3) * min_sigma**2
-    return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(*delta), gtsam.noiseModel.Gaussian.Covariance(c))
+    noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
+    return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(*delta), noise)
 
 
 def robust(base: gtsam.noiseModel.Base, kernel: str, k: float) -> gtsam.noiseModel.Base:

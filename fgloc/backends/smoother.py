@@ -11,9 +11,14 @@ offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``)
   ``CustomFactor`` with analytic Jacobians and a robust kernel;
 * offset random walk ``o<j-1> - o<j>``: ``BetweenFactorRot2`` with sigma
   ``offset_rw_sigma * sqrt(dt)``;
-* scan-to-map fixes on ``x<i>``: robust ``PriorFactorPose2`` with the front-end covariance,
-  after a loose Mahalanobis gate against the prediction (a fix far outside it is rejected;
-  after ``max_rejections`` in a row the back-end is reset to the fix: kidnapping).
+* scan-to-map fixes on ``x<i>``: robust (Huber) ``PriorFactorPose2`` with the front-end
+  covariance, after a coarse gate against the prediction (``fix_gate_m``, ``fix_gate_theta``;
+  an optional Mahalanobis gate ``fix_gate``).  The gate is deliberately loose: a tight gate
+  against an odometry prediction locks out the good fixes once the wheels slip; the robust
+  kernel bounds the pull of a wrong fix instead.  After ``max_rejections`` in a row the
+  back-end is reset to the fix (the pipeline normally relocalizes first).
+* the compass factors use a Cauchy kernel (redescending): a magnetic disturbance of tens of
+  degrees is ignored rather than averaged in.
 
 A scan older than the newest keyframe but inside the window (late measurement) gets its own
 keyframe at its own stamp: the twist factor spanning it is removed and replaced by two.
@@ -64,8 +69,10 @@ class SmootherConfig:
     lag: float = 2.0
     encoder_sigmas: tuple[float, float, float] = (0.01, 0.01, 0.02)
     q_slip: tuple[float, float, float] = (1e-5, 1e-5, 1e-5)
+    odom_kernel: str = "huber"
+    odom_kernel_k: float = 1.345
     compass_sigma: float = float(np.deg2rad(0.5))
-    compass_kernel: str = "huber"
+    compass_kernel: str = "cauchy"
     compass_kernel_k: float = 1.345
     offset_interval: float = 1.0
     offset_rw_sigma: float = float(np.deg2rad(0.05))  # rad / sqrt(s)
@@ -75,7 +82,9 @@ class SmootherConfig:
     fix_kernel_k: float = 1.345
     fix_min_sigma_xy: float = 0.003
     fix_min_sigma_theta: float = float(np.deg2rad(0.1))
-    fix_gate: float | None = 50.0
+    fix_gate: float | None = None
+    fix_gate_m: float | None = 1.0
+    fix_gate_theta: float | None = float(np.deg2rad(30.0))
     max_rejections: int = 10
     relinearize_threshold: float = 0.01
     relinearize_skip: int = 1
@@ -264,10 +273,14 @@ class SlidingWindowSmoother(Backend):
         return se2_compose(self.kf_pose[k], d), self._last_cov + c
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
-        if self.cfg.fix_gate is None:
-            return True
         e = fix.pose - pred
         e[2] = wrap_angle(e[2])
+        if self.cfg.fix_gate_m is not None and float(np.hypot(e[0], e[1])) > self.cfg.fix_gate_m:
+            return False
+        if self.cfg.fix_gate_theta is not None and abs(float(e[2])) > self.cfg.fix_gate_theta:
+            return False
+        if self.cfg.fix_gate is None:
+            return True
         S = pred_cov + fix.cov
         try:
             d2 = float(e @ np.linalg.solve(S, e))
@@ -348,9 +361,9 @@ class SlidingWindowSmoother(Backend):
         ts: dict[int, float] = {k: t}
         d, c = self._integrate(t_prev, t)
         pred = se2_compose(self.kf_pose[k_prev], d)
-        graph.add(between_factor(k_prev, k, d, c))
+        graph.add(between_factor(k_prev, k, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
         n_between = graph.size() - 1
-        guess = pred if not used else fix.pose  # type: ignore[union-attr]
+        guess = pred  # odometry prediction: robust weights start from a consistent linearization
         vals.insert(k, gtsam.Pose2(*guess))
         if t - self.cur_o_t >= self.cfg.offset_interval:
             self._new_offset(t, graph, vals, ts)
@@ -417,8 +430,8 @@ class SlidingWindowSmoother(Backend):
         vals = gtsam.Values()
         d1, c1 = self._integrate(ta, t)
         d2, c2 = self._integrate(t, tb)
-        graph.add(between_factor(ka, k, d1, c1))
-        graph.add(between_factor(k, kb, d2, c2))
+        graph.add(between_factor(ka, k, d1, c1, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
+        graph.add(between_factor(k, kb, d2, c2, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
         pa = self.isam.calculateEstimatePose2(ka)
         guess = se2_compose(np.array([pa.x(), pa.y(), pa.theta()]), d1)
         vals.insert(k, gtsam.Pose2(*guess))

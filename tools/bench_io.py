@@ -74,6 +74,18 @@ def main() -> None:
         tracemalloc.stop()
         rows.append(("peak memory while reading", "", f"Python heap peak {peak / 1e6:.1f} MB for a "
                      f"{size / 1e6:.1f} MB file ({peak / size:.2f} x)"))
+        cut = Path(d) / "cut.mcap"  # a recorder killed at 90 %: no index, streamed
+        with big.open("rb") as f, cut.open("wb") as g:
+            g.write(f.read(int(size * 0.9)))
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        rc = LogReader(cut)
+        mc = sum(1 for _ in rc.messages())
+        tc = time.perf_counter() - t0
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        rows.append(("read truncated at 90 % (traced)", f"{tc:.1f} s",
+                     f"{mc} msgs, heap peak {peak / 1e6:.1f} MB; {rc.truncated}"))
         t0 = time.perf_counter()
         ns = sum(1 for _ in r.messages({"/scan"}))
         ts = time.perf_counter() - t0

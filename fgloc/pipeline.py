@@ -42,7 +42,7 @@ from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.factors import se2_compose, se2_exp
 from fgloc.errors import ConfigError
-from fgloc.geometry import between, transform_points
+from fgloc.geometry import between, transform_points, wrap_angle
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
 
@@ -90,6 +90,7 @@ DEFAULT_PIPELINE: dict[str, Any] = {
     "amcl_max_sigma_xy": 0.15,       # m, AMCL global mode: accept its first fix tighter than this
     "amcl_max_sigma_yaw_deg": 5.0,
     "global_search": {},             # GlobalSearch keyword arguments
+    "global_compass_tolerance_deg": 30.0,  # candidates further from the compass heading are dropped
     "frontend_every": 1,             # match every n-th scan (others: keyframe only)
 }
 
@@ -228,7 +229,12 @@ class Localizer:
         used = self.backend.add_keyframe(t, fix)
         if fix is not None and not used:
             self.stats["rejected"] += 1
-        self._bad_streak = 0 if used else self._bad_streak + 1
+        # a scan with too few returns (blackout, blocked laser) says nothing about being lost
+        informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
+        if used:
+            self._bad_streak = 0
+        elif informative:
+            self._bad_streak += 1
         if self._bad_streak >= int(self.pcfg["relocalize_after"]):
             self._lost = True
             self._global_tries = 0
@@ -306,8 +312,18 @@ class Localizer:
         if len(pts) < 10:
             return None
         pts_base = transform_points(self.laser_mount.pose, pts)
+        # the compass (once its offset is known) rules out headings, e.g. the mirror image
+        # of a symmetric hall
+        heading = None
+        off = self.backend.compass_offset()
+        if off is not None and self._last_compass is not None and \
+                abs(float(msg.stamp) - self._last_compass[0]) < 1.0:
+            heading = float(wrap_angle(self._last_compass[1] - off))
+        max_dyaw = math.radians(float(self.pcfg["global_compass_tolerance_deg"]))
         best: tuple[float, PoseFix] | None = None
         for cand, _score in self._global.search(pts_base):
+            if heading is not None and abs(float(wrap_angle(cand[2] - heading))) > max_dyaw:
+                continue
             res = self.frontend.match(msg, cand, None)
             if not (res.ok and res.pose is not None and res.cov is not None):
                 continue

@@ -77,6 +77,10 @@ class Backend(ABC):
     def finish(self) -> Trajectory:
         """The final trajectory at keyframe times (smoothed for the smoothers)."""
 
+    def compass_offset(self) -> float | None:
+        """The compass-to-map offset (rad) once known, else None."""
+        return None
+
     def reset(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
         """Re-initialize after a relocalization (kidnapping); default: initialize again."""
         self.initialize(t, pose, cov)

@@ -50,6 +50,9 @@ class EKFBackend(Backend):
     def set_compass_offset(self, offset: float) -> None:
         self.calib.offset = float(offset)
 
+    def compass_offset(self) -> float | None:
+        return self.calib.offset
+
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
         if not self.initialized:
             return

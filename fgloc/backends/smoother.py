@@ -209,9 +209,9 @@ class SlidingWindowSmoother(Backend):
             return self._offset_guess()
 
     def compass_offset(self) -> float | None:
-        """Current estimate of the compass-to-map offset (radians)."""
+        """Current estimate of the compass-to-map offset (radians), None before any is known."""
         if self.cur_o is None:
-            return None
+            return self.calib.offset
         return self._offset_estimate()
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,

@@ -200,3 +200,33 @@ def test_independent_decoder_reads_our_cdr(tmp_path):
                 n_odom += 1
             n += 1
     assert n == len(msgs) and n_odom == 1
+
+
+def _mount_log(path, statics, dynamics, frame="laser"):
+    with LogWriter(path) as w:
+        if statics:
+            w.write("/tf_static", statics)
+        for i in range(3):
+            if dynamics:
+                w.write("/tf", dynamics, stamp=float(i))
+            w.write("/scan", LaserScan(float(i) + 0.5, -1.0, 0.1, 0.1, 10.0, np.ones(21, np.float32),
+                                       frame_id=frame))
+    return LogReader(path)
+
+
+def test_laser_mount_chain_tf_fallback_and_identity(tmp_path, caplog):
+    a = StaticTransform("base_link", "mast", np.array([0.1, 0.0, math.pi / 2]), z=0.3)
+    b = StaticTransform("mast", "laser_link", np.array([0.2, 0.0, 0.0]), z=0.1)
+    r = _mount_log(tmp_path / "chain.mcap", [a, b], None, frame="laser_link")
+    m = r.laser_mount()  # composed through the scan's frame_id
+    assert (m.parent, m.child) == ("base_link", "laser_link")
+    assert m.pose == pytest.approx([0.1, 0.2, math.pi / 2]) and m.z == pytest.approx(0.4)
+    odom_tf = StaticTransform("odom", "base_link", np.array([5.0, 5.0, 1.0]))
+    laser_tf = StaticTransform("base_link", "laser", np.array([-0.2, 0.05, math.pi]))
+    r = _mount_log(tmp_path / "tf.mcap", None, [odom_tf, laser_tf])  # only on /tf (old drivers)
+    assert r.laser_mount().pose == pytest.approx([-0.2, 0.05, -math.pi])
+    r = _mount_log(tmp_path / "none.mcap", None, None)
+    with caplog.at_level("WARNING"):
+        m = r.laser_mount()
+    assert m.pose == pytest.approx([0, 0, 0]) and (m.parent, m.child) == ("base_link", "laser")
+    assert any("no transform base_link -> laser" in rec.message for rec in caplog.records)

@@ -169,3 +169,12 @@ def test_not_carmen_and_missing(tmp_path, capsys):
     assert not (tmp_path / "o.mcap").exists()
     with pytest.raises(LogError, match="not found"):
         iter_carmen(tmp_path / "missing.clf")
+
+
+def test_fr079_mount_matches_frontlaser_offset_param(shared_data):
+    path = shared_data / "radish" / "fr079.clf.bz2"
+    with bz2.open(path, "rt") as f:
+        offset = next(float(ln.split()[2]) for ln in f if ln.startswith("PARAM robot_frontlaser_offset"))
+    assert offset == -0.04
+    (mount,) = CarmenReader(path).laser_mounts  # from FLASER laser pose vs odometry pose
+    assert mount.pose == pytest.approx([offset, 0.0, 0.0], abs=1e-6)

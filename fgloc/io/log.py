@@ -16,6 +16,10 @@ topic               ROS 2 type                                    fgloc type
 
 :meth:`LogReader.messages` yields ``(topic, message)`` with ``topic`` the name in the file
 (compare it with ``reader.topics.scan`` etc.); messages on other topics are ignored.
+The order is MCAP log time (fgloc writes log time = header stamp; a ROS recorder writes
+its receive time, so stamps there can be slightly out of order across topics).  Indexed
+files are read chunk by chunk through the index (memory bounded by the chunks that
+overlap in time), never whole.
 
 Conventions of the conversion (both directions):
 

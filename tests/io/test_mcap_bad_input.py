@@ -140,3 +140,33 @@ def test_missing_topic_names_file_topic_and_existing(full_log):
     assert "\n" not in msg
     assert str(full_log) in msg and "'/base_scan'" in msg
     assert "/imu, /odom, /scan, /tf_static" in msg
+
+
+@pytest.mark.parametrize("chunked", [False, True])
+def test_unindexed_mcap_is_streamed_not_truncated(tmp_path, chunked):
+    """A complete MCAP without summary/index (other writers' option) reads fully, in order."""
+    from mcap.writer import CompressionType, IndexType
+    from mcap.writer import Writer as McapWriter
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from fgloc.io.log import ODOMETRY, _odom_to_ros
+    from fgloc.io.msgdefs import full_text
+
+    path = tmp_path / "plain.mcap"
+    enc = serialize_dynamic(ODOMETRY, full_text(ODOMETRY))[ODOMETRY]
+    with path.open("wb") as f:
+        w = McapWriter(f, chunk_size=2048, compression=CompressionType.NONE, index_types=IndexType.NONE,
+                       use_chunking=chunked, use_statistics=False, use_summary_offsets=False,
+                       repeat_channels=False, repeat_schemas=False)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(ODOMETRY, "ros2msg", full_text(ODOMETRY).encode())
+        cid = w.register_channel("/odom", "cdr", sid)
+        for i in range(50):
+            m = Odometry(10.0 + 0.1 * i, np.array([0.1 * i, 0.0, 0.0]))
+            w.add_message(cid, int(m.stamp * 1e9), enc(_odom_to_ros(m, m.stamp)), int(m.stamp * 1e9))
+        w.finish()
+    r = LogReader(path)
+    assert r.truncated is None and not r.summary()["indexed"]
+    got = [m for _, m in r.messages()]
+    assert len(got) == 50 and r.summary()["topics"]["/odom"]["count"] == 50
+    assert [o.twist[0] for o in got] == pytest.approx([0.1 * i for i in range(50)])  # type: ignore[attr-defined]

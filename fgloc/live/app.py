@@ -33,7 +33,8 @@ _BUILTIN: dict[str, Any] = {
     "serial": {"baudrate": 115200, "align_clock": True, "compass_clockwise": False,
                "twist_std": None, "compass_std_deg": None, "gyro_std_dps": None},
     "laser": {"range_min_m": 0.5, "range_max_m": 50.0, "angle_offset_deg": -90.0, "align_clock": True,
-              "stall_timeout_s": 1.0, "mount": [0.0, 0.0, 0.0]},
+              "stall_timeout_s": 1.0, "mount": [0.0, 0.0, 0.0],
+              "time_increment_from": "measurement_frequency"},
     "health": {"silence_s": 0.4},
     "localizer": {},
 }
@@ -147,6 +148,7 @@ class LiveSession:
                 host, port, on_scan=lambda scan, arrival: self.runner.push("scan", scan, arrival),
                 range_min=float(lc.get("range_min_m", 0.5)), range_max=float(lc.get("range_max_m", 50.0)),
                 angle_offset_deg=float(lc.get("angle_offset_deg", -90.0)),
+                time_increment_from=str(lc.get("time_increment_from", "measurement_frequency")),
                 align_clock=bool(lc.get("align_clock", True)),
                 stall_timeout_s=float(lc.get("stall_timeout_s", 1.0)), on_event=ev,
             )

@@ -273,14 +273,25 @@ def telegram_to_scan(
     range_max: float = 50.0,
     angle_offset_deg: float = -90.0,
     frame_id: str = "laser",
+    time_increment_from: str = "measurement_frequency",
 ) -> LaserScan:
-    """LMDscandata -> REP 117 LaserScan: 0 -> +inf, beyond range_max -> +inf."""
+    """LMDscandata -> REP 117 LaserScan: 0 -> +inf, beyond range_max -> +inf.
+
+    ``time_increment`` (time between beams, used to de-skew motion): with
+    ``"measurement_frequency"`` it is ``1 / measurement frequency`` (0 when the field is 0,
+    i.e. the device gives no beam timing); with ``"rotation"`` it is
+    ``scan_time * step / 360 deg`` (the mirror's rotation).
+    """
     mm = t.values.astype(np.float64) * t.scale + t.offset
     r = (mm / 1000.0).astype(np.float32)
     r[t.values == 0] = np.inf
     r[r > range_max] = np.inf
     inc = math.radians(t.step_deg)
     period = 1.0 / t.scan_freq_hz if t.scan_freq_hz > 0 else 0.0
+    if time_increment_from == "rotation":
+        dt_beam = period * t.step_deg / 360.0
+    else:
+        dt_beam = 1.0 / t.meas_freq_hz if t.meas_freq_hz > 0 else 0.0
     return LaserScan(
         stamp=stamp,
         angle_min=math.radians(t.start_angle_deg + angle_offset_deg),
@@ -288,7 +299,7 @@ def telegram_to_scan(
         range_min=range_min,
         range_max=range_max,
         ranges=r,
-        time_increment=period * t.step_deg / 360.0,
+        time_increment=dt_beam,
         scan_time=period,
         frame_id=frame_id,
     )
@@ -317,12 +328,14 @@ def encode_lmdscandata(
     start = int(round((math.degrees(scan.angle_min) - angle_offset_deg) * 10000.0))
     step = int(round(math.degrees(scan.angle_increment) * 10000.0))
     freq = int(round(100.0 / scan.scan_time)) if scan.scan_time > 0 else 2500
+    # measurement frequency in 100 Hz: 1 / time_increment (0 = no beam timing, instantaneous scan)
+    mfreq = int(round(0.01 / scan.time_increment)) if scan.time_increment > 0 else 0
     scale_hex = struct.unpack(">I", struct.pack(">f", scale))[0]
     head = [
         command, "LMDscandata", "1", "1", _hx(serial), "0", "0",
         _hx(telegram_counter & 0xFFFF), _hx(scan_counter & 0xFFFF),
         _hx(time_since_startup_us), _hx(time_of_transmission_us),
-        "0", "0", "0", "0", "0", _hx(freq), "21C",
+        "0", "0", "0", "0", "0", _hx(freq), _hx(mfreq),
         "0",  # encoders
         "1", "DIST1", format(scale_hex, "X"), "0", _hx(start), _hx(step), _hx(len(vals)),
     ]
@@ -368,6 +381,7 @@ class SickClient:
         range_max: float = 50.0,
         angle_offset_deg: float = -90.0,
         frame_id: str = "laser",
+        time_increment_from: str = "measurement_frequency",
         align_clock: bool = True,
         stall_timeout_s: float = 1.0,
         backoff_min_s: float = 0.1,
@@ -380,6 +394,7 @@ class SickClient:
         self.range_min, self.range_max = range_min, range_max
         self.angle_offset_deg = angle_offset_deg
         self.frame_id = frame_id
+        self.time_increment_from = time_increment_from
         self.align_clock = align_clock
         self.stall_timeout_s = stall_timeout_s
         self.backoff_min_s, self.backoff_max_s = backoff_min_s, backoff_max_s
@@ -444,7 +459,8 @@ class SickClient:
             stamp = self.clock.to_host(start_dev * 1e-6, arrival)
         else:
             stamp = arrival - period
-        scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, self.angle_offset_deg, self.frame_id)
+        scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, self.angle_offset_deg, self.frame_id,
+                                self.time_increment_from)
         self.stats.scans += 1
         self.on_scan(scan, arrival)
         return scan

@@ -37,6 +37,9 @@ def test_parse_hand_written_telegram():
     assert np.isposinf(s.ranges[1])  # 0 = no echo -> +inf (REP 117)
     assert np.isposinf(s.ranges[3])  # 65.535 m > range_max -> +inf
     assert s.scan_time == pytest.approx(0.02)
+    assert s.time_increment == pytest.approx(1 / 36000)  # measurement frequency 0x168 x 100 Hz
+    rot = telegram_to_scan(t, stamp=10.0, time_increment_from="rotation")
+    assert rot.time_increment == pytest.approx(0.02 * 0.5 / 360)
 
 
 def _scan(n=541, seed=0):
@@ -44,7 +47,7 @@ def _scan(n=541, seed=0):
     r = rng.uniform(0.5, 30.0, n).astype(np.float32)
     r[::17] = np.inf
     return LaserScan(stamp=0.0, angle_min=math.radians(-135), angle_increment=math.radians(0.5),
-                     range_min=0.05, range_max=50.0, ranges=r, scan_time=0.04)
+                     range_min=0.05, range_max=50.0, ranges=r, scan_time=0.04, time_increment=1 / 18000)
 
 
 def test_encode_parse_roundtrip():
@@ -59,6 +62,7 @@ def test_encode_parse_roundtrip():
     assert back.angle_min == pytest.approx(s.angle_min, abs=1e-6)
     assert back.angle_increment == pytest.approx(s.angle_increment, abs=1e-7)
     assert back.scan_time == pytest.approx(0.04)
+    assert back.time_increment == pytest.approx(1 / 18000)  # carried as the measurement frequency
 
 
 def test_framer_garbage_and_truncation():

@@ -43,7 +43,9 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
     msgs = synthetic_messages(duration=7.0)
     cfg = load_config()
     robot = RobotParams.from_dict(cfg["robot"])
-    pair = EmulatorPair.create(msgs, robot, mode="pty", speed=1.0, lead_s=0.5)
+    pair = EmulatorPair.create(msgs, robot, mode="pty", speed=1.0, lead_s=0.5,
+                               stm32_kw={"corrupt_prob": 0.05, "garbage_prob": 0.05},
+                               sick_kw={"malformed_prob": 0.1})
     udp = _udp_listener()
     loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
     rec = tmp_path / "live.mcap"
@@ -74,7 +76,11 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
     assert scan_arrivals > 0.8 * 25 * 6
     assert sess.laser is not None and sess.laser.stats.connects >= 2
     assert summary.counters["serial"]["dropped"] > 0  # the pause shows up as a sequence gap
-    assert summary.counters["serial"]["crc_errors"] == 0
+    # injected faults are all counted, and shown on the status line
+    assert summary.counters["serial"]["crc_errors"] == pair.stm32.stats.corrupted > 0
+    assert summary.counters["laser"]["malformed"] == pair.sick.stats.malformed > 0
+    line = r.status_line()
+    assert f"crc {pair.stm32.stats.corrupted} " in line and f"bad {pair.sick.stats.malformed} " in line
 
     # the recording is complete and valid: every received message is in it
     reader = LogReader(rec)

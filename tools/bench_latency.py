@@ -34,6 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--t-start", type=float, default=0.0)
     p.add_argument("--speed", type=float, default=1.0)
     p.add_argument("--mode", choices=("pty", "tcp"), default="pty")
+    p.add_argument("--warmup", type=int, default=25, help="first N fused scans left out of the percentiles")
     args = p.parse_args(argv)
 
     from fgloc.live.harness import replay_live
@@ -68,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         res = replay_live(msgs, occ, mount, robot=robot, backend=backend, frontend=args.frontend,
                           initial_pose=init, t_start=s0, duration=args.duration or None, speed=args.speed,
                           mode=args.mode)
-        lat = np.asarray(res.session.runner.latencies_ms)
+        lat_all = np.asarray(res.session.runner.latencies_ms)
+        lat = lat_all[args.warmup:]  # the first scans pay for JIT compilation (numba) and cache fills
         c = res.summary.counters
         rmse = float("nan")
         if gt is not None and len(res.live_run) > 1:
@@ -77,14 +79,16 @@ def main(argv: list[str] | None = None) -> int:
             rmse = evaluate(res.live_run, gt).position_rmse_m
         rows.append((backend, c.get("laser", {}).get("scans", 0), c["scans_fused"], c["scans_skipped_backlog"],
                      *(np.percentile(lat, q) if len(lat) else float("nan") for q in (50, 90, 99)),
-                     float(lat.max()) if len(lat) else float("nan"), rmse))
+                     float(lat.max()) if len(lat) else float("nan"),
+                     float(np.percentile(lat_all, 99)) if len(lat_all) else float("nan"), rmse))
     print(f"\nscan arrival -> fused pose ({args.frontend} front-end, {args.mode}, speed {args.speed}, "
           f"{args.duration or 'all'} s of the run)\n")
-    print("| backend | scans in | fused | skipped (backlog) | p50 ms | p90 ms | p99 ms | max ms | live RMSE m |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print(f"| backend | scans in | fused | skipped (backlog) | p50 ms | p90 ms | p99 ms | max ms "
+          f"| p99 incl. first {args.warmup} ms | live RMSE m |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r_ in rows:
         print(f"| {r_[0]} | {r_[1]} | {r_[2]} | {r_[3]} | {r_[4]:.2f} | {r_[5]:.2f} | {r_[6]:.2f} | {r_[7]:.2f} "
-              f"| {r_[8]:.4f} |")
+              f"| {r_[8]:.2f} | {r_[9]:.4f} |")
     print("\ntarget: p99 <= 10 ms")
     return 0
 

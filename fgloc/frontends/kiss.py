@@ -44,10 +44,11 @@ from .base import (
 
 
 def surface_points(occ_map: OccupancyMap, samples_per_face: int = 2) -> tuple[FloatArray, FloatArray]:
-    """Points ``(N, 2)`` on the faces of occupied cells that border free cells, and their
-    outward unit normals ``(N, 2)`` (pointing into the free cell), both in the map frame."""
+    """Points ``(N, 2)`` on the faces of occupied cells that border non-occupied (free or
+    unknown) cells, and their outward unit normals ``(N, 2)`` (pointing out of the
+    obstacle), both in the map frame.  Off-grid neighbours count as non-occupied."""
     occ = occ_map.occupied
-    free = occ_map.free
+    free = ~occ
     h, w = occ.shape
     k = max(int(samples_per_face), 1)
     offs = (np.arange(k) + 0.5) / k  # along the face, in cells
@@ -56,7 +57,7 @@ def surface_points(occ_map: OccupancyMap, samples_per_face: int = 2) -> tuple[Fl
     normals: list[FloatArray] = []
     # (d_row, d_col) to the free neighbour; the face is half a cell from the centre that way
     for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        nb_free = np.zeros_like(occ)
+        nb_free = np.ones_like(occ)
         src_r = slice(max(dr, 0), h + min(dr, 0))
         dst_r = slice(max(-dr, 0), h + min(-dr, 0))
         src_c = slice(max(dc, 0), w + min(dc, 0))
@@ -118,10 +119,10 @@ class KissMatcher(FrontendBase):
         *,
         preprocess: PreprocessOptions | None = None,
         samples_per_face: int = 2,
-        coarse_voxel_size_m: float = 0.6,
-        coarse_max_points_per_voxel: int = 36,
-        coarse_max_correspondence_m: float = 1.0,
-        coarse_kernel_m: float = 0.3,
+        coarse_voxel_size_m: float = 0.8,
+        coarse_max_points_per_voxel: int = 64,
+        coarse_max_correspondence_m: float = 1.5,
+        coarse_kernel_m: float = 0.5,
         coarse_max_iterations: int = 50,
         coarse_convergence_criterion: float = 1e-4,
         voxel_size_m: float = 0.25,

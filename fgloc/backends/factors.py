@@ -25,8 +25,6 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import wrap_angle
-
 FloatArray = NDArray[np.float64]
 
 
@@ -48,8 +46,19 @@ def se2_adjoint(p: FloatArray) -> FloatArray:
 
 
 def se2_compose(a: FloatArray, b: FloatArray) -> FloatArray:
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap_angle(a[2] + b[2])])
+    """``a (+) b`` for single poses (scalar maths: fast for the per-keyframe hot path)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    c, s = math.cos(a2), math.sin(a2)
+    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, _wrap(a2 + b2)])
+
+
+def _wrap(a: float) -> float:
+    """Wrap to ``[-pi, pi)`` (scalar)."""
+    w = math.fmod(a + math.pi, 2.0 * math.pi)
+    if w < 0:
+        w += 2.0 * math.pi
+    return w - math.pi
 
 
 def se2_inverse(a: FloatArray) -> FloatArray:
@@ -104,7 +113,7 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
             x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
         t = t_next
         i += 1
-    return np.array([x, y, math.remainder(th, 2 * math.pi)]), 0.5 * (cov + cov.T)
+    return np.array([x, y, _wrap(th)]), 0.5 * (cov + cov.T)
 
 
 def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:
@@ -157,7 +166,7 @@ def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "h
 
 def compass_error(theta: float, offset: float, z: float) -> float:
     """Compass residual ``wrap(theta + offset - z)`` (radians)."""
-    return float(wrap_angle(theta + offset - z))
+    return _wrap(theta + offset - z)
 
 
 def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: float,

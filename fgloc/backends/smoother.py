@@ -33,6 +33,7 @@ optimizes the whole run with Levenberg-Marquardt, initialized from the fixed-lag
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_left, bisect_right
 from collections import deque
 from dataclasses import dataclass
@@ -43,6 +44,7 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.factors import (
+    _wrap,
     between_factor,
     compass_factor,
     fix_factor,
@@ -130,6 +132,7 @@ class SlidingWindowSmoother(Backend):
         self._last_cov = np.eye(3) * 1e-2
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
+        self._pred_cache: tuple | None = None
 
     @property
     def initialized(self) -> bool:
@@ -269,8 +272,13 @@ class SlidingWindowSmoother(Backend):
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
         assert self.kf_key, "smoother not initialized"
         k = self.kf_key[-1]
+        key = (k, float(t), len(self.odo_t))
+        if self._pred_cache is not None and self._pred_cache[0] == key:
+            return self._pred_cache[1], self._pred_cache[2]
         d, c = self._integrate(self.kf_t[-1], t)
-        return se2_compose(self.kf_pose[k], d), self._last_cov + c
+        pose, cov = se2_compose(self.kf_pose[k], d), self._last_cov + c
+        self._pred_cache = (key, pose, cov)
+        return pose, cov
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
         e = fix.pose - pred
@@ -297,16 +305,21 @@ class SlidingWindowSmoother(Backend):
 
     def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float]]
                              ) -> tuple[float, float] | None:
+        """Readings carried to ``t_k`` by the odometry rotation and averaged (circularly)."""
         if not readings:
             return None
-        zs, vs = [], []
-        for tc, yaw, var in readings:
-            zs.append(wrap_angle(yaw + self._rotation_between(tc, t_k)))
-            vs.append(var)
-        z = np.asarray(zs, dtype=float)
-        ref = z[0]
-        mean = float(wrap_angle(ref + np.mean(wrap_angle(z - ref))))
-        return mean, float(np.sqrt(np.mean(vs) / len(vs)))
+        ref = None
+        acc = 0.0
+        var = 0.0
+        for tc, yaw, v in readings:
+            z = yaw + self._rotation_between(tc, t_k)
+            if ref is None:
+                ref = z
+            acc += _wrap(z - ref)
+            var += v
+        n = len(readings)
+        assert ref is not None
+        return _wrap(ref + acc / n), math.sqrt(var / n / n)
 
     # ------------------------------------------------------------------ keyframes
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:

@@ -86,8 +86,8 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
     n = len(stamps)
     t = t0
     x = y = th = 0.0
-    cov = np.zeros((3, 3))
-    A = np.eye(3)
+    # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
+    p00 = p01 = p02 = p11 = p12 = p22 = 0.0
     while t < t1 - 1e-12:
         j = min(i, n - 1)
         t_next = min(float(stamps[i]), t1) if i < n else t1
@@ -101,19 +101,33 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
                 a, b = math.sin(w) / w, (1.0 - math.cos(w)) / w
             dx, dy = a * vx - b * vy, b * vx + a * vy
             c, s = math.cos(w), math.sin(w)
-            # Ad(d^-1) with d^-1 = (-c dx - s dy, s dx - c dy, -w)
+            # A = Ad(d^-1) = [[c, s, iy], [-s, c, -ix], [0, 0, 1]], d^-1 = (ix, iy, -w)
             ix, iy = -c * dx - s * dy, s * dx - c * dy
-            A[0, 0], A[0, 1], A[0, 2] = c, s, iy
-            A[1, 0], A[1, 1], A[1, 2] = -s, c, -ix
-            cov = A @ cov @ A.T + covs[j] * (dt * dt)
-            cov[0, 0] += qx * dt
-            cov[1, 1] += qy * dt
-            cov[2, 2] += qt * dt
+            # B = A P
+            b00 = c * p00 + s * p01 + iy * p02
+            b01 = c * p01 + s * p11 + iy * p12
+            b02 = c * p02 + s * p12 + iy * p22
+            b10 = -s * p00 + c * p01 - ix * p02
+            b11 = -s * p01 + c * p11 - ix * p12
+            b12 = -s * p02 + c * p12 - ix * p22
+            # P' = B A^T + Sigma_u dt^2 + q dt
+            cu = covs[j]
+            dt2 = dt * dt
+            n00 = b00 * c + b01 * s + b02 * iy
+            n01 = -b00 * s + b01 * c - b02 * ix
+            n11 = -b10 * s + b11 * c - b12 * ix
+            p00 = n00 + float(cu[0, 0]) * dt2 + qx * dt
+            p01 = n01 + float(cu[0, 1]) * dt2
+            p02 = b02 + float(cu[0, 2]) * dt2
+            p11 = n11 + float(cu[1, 1]) * dt2 + qy * dt
+            p12 = b12 + float(cu[1, 2]) * dt2
+            p22 = p22 + float(cu[2, 2]) * dt2 + qt * dt
             ct, st = math.cos(th), math.sin(th)
             x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
         t = t_next
         i += 1
-    return np.array([x, y, _wrap(th)]), 0.5 * (cov + cov.T)
+    cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
+    return np.array([x, y, _wrap(th)]), cov
 
 
 def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:

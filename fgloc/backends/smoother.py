@@ -91,6 +91,7 @@ class SmootherConfig:
     relinearize_threshold: float = 0.01
     relinearize_skip: int = 1
     online_covariance: bool = False
+    update_every: int = 1
     max_wait: float = 0.1
     calibration_fixes: int = 3
 
@@ -133,6 +134,7 @@ class SlidingWindowSmoother(Backend):
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
         self._pred_cache: tuple | None = None
+        self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
 
     @property
     def initialized(self) -> bool:
@@ -144,6 +146,7 @@ class SlidingWindowSmoother(Backend):
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
         keep_odo = (self.odo_t, self.odo_u, self.odo_c)
         if self.t0 is not None:
+            self._flush_acc()
             self._flush_window()
         smoothed = self.smoothed
         self._reset_state()
@@ -206,6 +209,8 @@ class SlidingWindowSmoother(Backend):
     def _offset_estimate(self) -> float:
         if self.cur_o is None:
             return self._offset_guess()
+        if self._acc is not None and self._acc[1].exists(self.cur_o):
+            return float(self._acc[1].atRot2(self.cur_o).theta())
         try:
             return float(self.isam.calculateEstimateRot2(self.cur_o).theta())
         except RuntimeError:
@@ -222,6 +227,8 @@ class SlidingWindowSmoother(Backend):
         tsm = gtsam.FixedLagSmootherKeyTimestampMap()
         for k, t in ts.items():
             tsm.insert((k, t))
+        if ts:
+            self._capture_leaving(max(ts.values()))
         self.isam.update(graph, vals, tsm, remove or [])
         return list(self.isam.getISAM2Result().getNewFactorsIndices())
 
@@ -369,15 +376,16 @@ class SlidingWindowSmoother(Backend):
         used = fix is not None
         k_prev, t_prev = self.kf_key[-1], self.kf_t[-1]
         k = self._new_x(t)
-        graph = gtsam.NonlinearFactorGraph()
-        vals = gtsam.Values()
-        ts: dict[int, float] = {k: t}
+        if self._acc is None:
+            self._acc = (gtsam.NonlinearFactorGraph(), gtsam.Values(), {}, [], [])
+        graph, vals, ts, pairs, keys = self._acc
+        ts[k] = t
         d, c = self._integrate(t_prev, t)
         pred = se2_compose(self.kf_pose[k_prev], d)
         graph.add(between_factor(k_prev, k, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
-        n_between = graph.size() - 1
-        guess = pred  # odometry prediction: robust weights start from a consistent linearization
-        vals.insert(k, gtsam.Pose2(*guess))
+        pairs.append(((k_prev, k), graph.size() - 1))
+        # initial value: the odometry prediction, so robust weights start from a consistent point
+        vals.insert(k, gtsam.Pose2(*pred))
         if t - self.cur_o_t >= self.cfg.offset_interval:
             self._new_offset(t, graph, vals, ts)
         # compass readings since the previous keyframe (late ones go to this keyframe too)
@@ -394,13 +402,31 @@ class SlidingWindowSmoother(Backend):
             graph.add(fix_factor(k, fix.pose, self._fix_cov(fix.cov), self.cfg.fix_kernel, self.cfg.fix_kernel_k))
             self.stats["fixes_used"] += 1
             self.calib.add_fix(t, float(fix.pose[2]))
-        self._register(graph, vals, ts)
-        idx = self._update(graph, vals, ts)
-        self.between_idx[(k_prev, k)] = idx[n_between]
         self.kf_t.append(t)
         self.kf_key.append(k)
         self.window.append((t, k))
-        self._after_keyframe(t)
+        self.kf_pose[k] = pred
+        keys.append(k)
+        if len(keys) >= max(1, int(self.cfg.update_every)):
+            self._flush_acc()
+        else:  # online estimate until the next solver update: the odometry prediction
+            self.stats["keyframes"] += 1
+            self._record_online(t, pred, self._last_cov + c)
+
+    def _flush_acc(self) -> None:
+        """Hand the accumulated keyframes' factors to iSAM2 (one update)."""
+        if self._acc is None:
+            return
+        graph, vals, ts, pairs, keys = self._acc
+        self._acc = None
+        self._register(graph, vals, ts)
+        idx = self._update(graph, vals, ts)
+        for pair, pos in pairs:
+            self.between_idx[pair] = idx[pos]
+        for kk in keys[:-1]:
+            p = self.isam.calculateEstimatePose2(kk)
+            self.kf_pose[kk] = np.array([p.x(), p.y(), p.theta()])
+        self._after_keyframe(self.kf_t[-1])
 
     def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
         """Hook for the batch smoother (keeps a copy of every factor)."""
@@ -418,16 +444,23 @@ class SlidingWindowSmoother(Backend):
             self._last_cov = np.diag([0.01**2, 0.01**2, np.deg2rad(0.5) ** 2])
         self.stats["keyframes"] += 1
         self._record_online(t, self.kf_pose[k], self._last_cov)
-        # record keyframes about to leave the window (their final smoothed value)
-        horizon = t - self.cfg.lag + 0.1
+
+    def _capture_leaving(self, t_new: float) -> None:
+        """Record the keyframes the next update will marginalize (their final smoothed value)."""
+        horizon = t_new - self.cfg.lag + 1e-6
         while self.window and self.window[0][0] < horizon:
             tk, kk = self.window.popleft()
-            p = self.isam.calculateEstimatePose2(kk)
-            self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+            try:
+                p = self.isam.calculateEstimatePose2(kk)
+                self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+            except (RuntimeError, IndexError):
+                if kk in self.kf_pose:
+                    self.smoothed[kk] = (tk, self.kf_pose[kk].copy())
             self.kf_pose.pop(kk, None)
 
     def _late_keyframe(self, t: float, fix: PoseFix | None) -> bool:
         """A scan older than the newest keyframe: own keyframe between its neighbours."""
+        self._flush_acc()
         i = int(np.searchsorted(self.kf_t, t))  # kf_t[i-1] < t < kf_t[i]
         if i == 0 or not self.window or self.kf_t[i - 1] < self.window[0][0]:
             self.stats["dropped_late"] += 1
@@ -489,13 +522,14 @@ class SlidingWindowSmoother(Backend):
         for tk, kk in self.window:
             try:
                 p = self.isam.calculateEstimatePose2(kk)
-            except RuntimeError:
+            except (RuntimeError, IndexError):
                 continue
             self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
         self.window.clear()
 
     def finish(self) -> Trajectory:
         self._process_pending(np.inf)
+        self._flush_acc()
         self._flush_window()
         if not self.smoothed:
             return Trajectory(np.zeros(0), np.zeros((0, 3)))

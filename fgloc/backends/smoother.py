@@ -92,6 +92,7 @@ class SmootherConfig:
     relinearize_skip: int = 1
     online_covariance: bool = False
     update_every: int = 1
+    min_keyframe_dt: float = 0.005
     max_wait: float = 0.1
     calibration_fixes: int = 3
 
@@ -341,7 +342,10 @@ class SlidingWindowSmoother(Backend):
             if t == self.kf_t[-1]:
                 return False
             return self._late_keyframe(t, fix)
-        if any(p[0] == t for p in self.pending_kf):
+        last = self.pending_kf[-1][0] if self.pending_kf else self.kf_t[-1]
+        if t - last < self.cfg.min_keyframe_dt:
+            # a scan right on top of the previous keyframe adds nothing but conditioning trouble
+            self.stats["merged_keyframes"] = self.stats.get("merged_keyframes", 0) + 1
             return False
         pred, pred_cov = self.predict(t)
         used = False
@@ -420,7 +424,16 @@ class SlidingWindowSmoother(Backend):
         graph, vals, ts, pairs, keys = self._acc
         self._acc = None
         self._register(graph, vals, ts)
-        idx = self._update(graph, vals, ts)
+        try:
+            idx = self._update(graph, vals, ts)
+        except RuntimeError:
+            # an ill-conditioned system (e.g. degenerate input): restart from the prediction
+            self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
+            t_last, k_last = self.kf_t[-1], keys[-1]
+            pose = self.kf_pose[k_last].copy()
+            self.window = deque(w for w in self.window if w[1] not in keys)
+            self.initialize(t_last, pose, self._last_cov * 4.0)
+            return
         for pair, pos in pairs:
             self.between_idx[pair] = idx[pos]
         for kk in keys[:-1]:

@@ -105,6 +105,7 @@ def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str 
         "poses": len(final), "online_poses": len(online), "fixes": len(fixes),
         "stats": _yaml_ready(loc.stats), "wall_s": wall, "log_s": sim_s,
         "truncated": reader.truncated, "outdir": str(outdir),
+        "written": [p.name for p in written] + ["run.mcap", "config.yaml"],
     }
     gt = reader.ground_truth() if reader.has(topics.ground_truth) else None
     if gt is not None and len(final) > 1:
@@ -145,7 +146,7 @@ def _print_run_summary(r: dict[str, Any]) -> None:
                                                                     if r["mode"] == "odom" else ""), extra=False))
     if r.get("eval_error"):
         con.print(f"  evaluation skipped: {r['eval_error']}")
-    con.print(f"  wrote {r['outdir']}/trajectory.tum, online.tum, fixes.tum, run.mcap, config.yaml")
+    con.print(f"  wrote {r['outdir']}/: {', '.join(r['written'])}")
 
 
 # ---------------------------------------------------------------------- bench helpers

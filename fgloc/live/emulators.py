@@ -182,6 +182,17 @@ class Stm32Emulator:
         """Go silent (frames generated meanwhile are lost, the sequence counter keeps going)."""
         self._pause_until = time.time() + seconds
 
+    def drop_connection(self) -> None:
+        """TCP mode: close the client's connection (it may connect again)."""
+        if self._tcp is not None and self._tcp.client is not None:
+            try:
+                self._tcp.client.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            self._tcp.client.close()
+            self._tcp.client = None
+            self.stats.dropped_connections += 1
+
     def start(self) -> None:
         self._thread = threading.Thread(target=self.run, name="emu-stm32", daemon=True)
         self._thread.start()
@@ -247,8 +258,8 @@ class Stm32Emulator:
             for h, f in self.frames():
                 if not _wait_until(h, self._stop):
                     return
-                if self._tcp is not None:
-                    self._tcp.poll_accept() if self._tcp.client is None else None
+                if self._tcp is not None and self._tcp.client is None:
+                    self._tcp.poll_accept()
                 self.stats.frames += 1
                 if time.time() < self._pause_until:
                     self.stats.paused_frames += 1

@@ -124,3 +124,23 @@ def test_sick_stream_reconnect_and_malformed(synth):
         fin = np.isfinite(ref.ranges)
         assert np.array_equal(fin, np.isfinite(s.ranges))
         assert np.max(np.abs(s.ranges[fin] - ref.ranges[fin])) < 0.001
+
+
+def test_socket_url_reconnects_after_drop(synth):
+    robot = RobotParams()
+    emu = Stm32Emulator(synth, robot, mode="tcp", speed=1.0, start_host=time.time() + 0.5)
+    got = []
+    link = SerialLink(emu.url, FrameConverter(robot), lambda k, m, a: got.append((k, m, a)))
+    link.start()
+    emu.start()
+    assert _wait(lambda: len(got) > 50)
+    emu.drop_connection()
+    n_before = len(got)
+    assert _wait(lambda: link.opens >= 2 and len(got) > n_before + 50)
+    assert emu.done.wait(10)
+    link.stop()
+    emu.stop()
+    assert link.disconnects >= 1 and link.opens >= 2
+    assert link.parser.stats.crc_errors == 0
+    # frames sent while nobody was connected are lost; the sequence gap says how many
+    assert link.parser.stats.frames_ok + link.parser.stats.dropped == emu.stats.frames

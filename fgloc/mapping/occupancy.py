@@ -1,0 +1,129 @@
+"""Ray-traced log-odds occupancy grids from scans at known poses.
+
+Each beam lowers the log-odds of the cells it passes through and raises the
+one it ends in; beams with no return (``+inf``, or at/over ``range_max``)
+carve free space up to ``carve_range_m`` but add no hit.  The result is an
+:class:`fgloc.maps.OccupancyMap` (trinary: 100 occupied, 0 free, -1 unknown).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from fgloc.maps import OccupancyMap
+
+FloatArray = NDArray[np.float64]
+
+L_OCC = 0.85
+L_FREE = -0.4
+L_MIN, L_MAX = -4.0, 4.0
+
+
+@njit(cache=True)
+def _integrate(logodds, x0, y0, res, ox, oy, ex, ey, hit, l_occ, l_free, lmin, lmax):  # pragma: no cover
+    """Trace beams from (ox, oy) to (ex, ey) (map frame, metres) with a DDA."""
+    h, w = logodds.shape
+    for k in range(ox.shape[0]):
+        sx = (ox[k] - x0) / res
+        sy = (oy[k] - y0) / res
+        gx = (ex[k] - x0) / res
+        gy = (ey[k] - y0) / res
+        cx, cy = int(np.floor(sx)), int(np.floor(sy))
+        tx, ty = int(np.floor(gx)), int(np.floor(gy))
+        dx, dy = gx - sx, gy - sy
+        length = np.sqrt(dx * dx + dy * dy)
+        if length < 1e-9:
+            continue
+        step_x = 1 if dx > 0 else -1
+        step_y = 1 if dy > 0 else -1
+        if dx != 0.0:
+            tdx = abs(1.0 / dx)
+            tmx = ((cx + 1 - sx) if dx > 0 else (sx - cx)) * tdx
+        else:
+            tdx = np.inf
+            tmx = np.inf
+        if dy != 0.0:
+            tdy = abs(1.0 / dy)
+            tmy = ((cy + 1 - sy) if dy > 0 else (sy - cy)) * tdy
+        else:
+            tdy = np.inf
+            tmy = np.inf
+        nmax = abs(tx - cx) + abs(ty - cy) + 2
+        for _ in range(nmax):
+            if cx == tx and cy == ty:
+                break
+            if 0 <= cx < w and 0 <= cy < h:
+                v = logodds[cy, cx] + l_free
+                logodds[cy, cx] = v if v > lmin else lmin
+            if tmx < tmy:
+                cx += step_x
+                tmx += tdx
+            else:
+                cy += step_y
+                tmy += tdy
+        if 0 <= tx < w and 0 <= ty < h:
+            if hit[k]:
+                v = logodds[ty, tx] + l_occ
+                logodds[ty, tx] = v if v < lmax else lmax
+            else:
+                v = logodds[ty, tx] + l_free
+                logodds[ty, tx] = v if v > lmin else lmin
+
+
+def scan_endpoints(
+    ranges: NDArray[np.float32],
+    angles: FloatArray,
+    range_min: float,
+    range_max: float,
+    max_range_m: float,
+    carve_range_m: float,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Beam end points ``(N, 2)`` in the laser frame and whether each is a hit.
+
+    Returns within ``[range_min, min(range_max, max_range_m))`` are hits; ``+inf``
+    or ``>= range_max`` (no return) are carved to ``carve_range_m`` without a hit;
+    NaN, ``-inf`` and too-short readings are dropped.
+    """
+    r = np.asarray(ranges, dtype=float)
+    a = np.asarray(angles, dtype=float)
+    with np.errstate(invalid="ignore"):
+        hit = np.isfinite(r) & (r >= max(range_min, 1e-3)) & (r < min(range_max, max_range_m))
+        noret = (np.isposinf(r) | (np.isfinite(r) & (r >= range_max))) & ~hit
+        longret = np.isfinite(r) & (r >= max_range_m) & (r < range_max)
+    carve = noret | longret
+    rr = np.where(hit, r, np.minimum(carve_range_m, np.where(np.isfinite(r), r, carve_range_m)))
+    keep = hit | carve
+    pts = np.column_stack([rr[keep] * np.cos(a[keep]), rr[keep] * np.sin(a[keep])])
+    return pts, hit[keep]
+
+
+class LogOddsGrid:
+    """A growing-free log-odds grid with fixed bounds (map frame, axis-aligned)."""
+
+    def __init__(self, xmin: float, ymin: float, xmax: float, ymax: float, resolution: float = 0.05):
+        self.resolution = float(resolution)
+        self.x0 = float(np.floor(xmin / resolution) * resolution)
+        self.y0 = float(np.floor(ymin / resolution) * resolution)
+        w = int(np.ceil((xmax - self.x0) / resolution)) + 1
+        h = int(np.ceil((ymax - self.y0) / resolution)) + 1
+        self.logodds = np.zeros((h, w), dtype=np.float32)
+
+    def add_beams(self, origin_xy: FloatArray, ends_xy: FloatArray, hit: NDArray[np.bool_]) -> None:
+        """Integrate beams from one origin ``(2,)`` (or ``(N, 2)``) to end points ``(N, 2)`` (map frame)."""
+        ends = np.asarray(ends_xy, dtype=float).reshape(-1, 2)
+        org = np.broadcast_to(np.asarray(origin_xy, dtype=float).reshape(-1, 2), ends.shape)
+        _integrate(
+            self.logodds, self.x0, self.y0, self.resolution,
+            np.ascontiguousarray(org[:, 0]), np.ascontiguousarray(org[:, 1]),
+            np.ascontiguousarray(ends[:, 0]), np.ascontiguousarray(ends[:, 1]),
+            np.ascontiguousarray(hit, dtype=np.bool_), L_OCC, L_FREE, L_MIN, L_MAX,
+        )
+
+    def to_map(self, occ_logodds: float = 0.62, free_logodds: float = -1.0) -> OccupancyMap:
+        """Trinary map: occupied above ``occ_logodds``, free below ``free_logodds``, else unknown."""
+        data = np.full(self.logodds.shape, -1, dtype=np.int16)
+        data[self.logodds < free_logodds] = 0
+        data[self.logodds > occ_logodds] = 100
+        return OccupancyMap(data=data, resolution=self.resolution, origin=np.array([self.x0, self.y0, 0.0]))

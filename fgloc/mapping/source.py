@@ -1,0 +1,126 @@
+"""Turn a log (CARMEN or MCAP) into scans paired with odometry poses.
+
+Reading belongs to :mod:`fgloc.io` (``iter_carmen`` / ``LogReader``); this
+module only pairs each scan with the wheel-odometry pose at its stamp.
+Messages are taken in file order; a scan's odometry is interpolated between
+the odometry messages just before and just after it in the file when their
+stamps bracket the scan stamp, else the latest earlier one is used (real logs,
+e.g. intel, have stamps that jump backwards).  Odometry without a pose is
+dead-reckoned from its twist.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fgloc.errors import LogError
+from fgloc.geometry import compose, interpolate_poses
+from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
+
+CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
+
+
+@dataclass
+class ScanRecord:
+    """One scan with the odometry pose ``[x, y, yaw]`` (odom frame) at its stamp."""
+
+    stamp: float
+    odom: FloatArray
+    scan: LaserScan
+    index: int  # order of the scan in the log (0-based)
+
+
+def is_carmen(path: str | Path) -> bool:
+    name = str(path).lower()
+    return any(name.endswith(s) for s in CARMEN_SUFFIXES)
+
+
+def log_messages(
+    path: str | Path, scan_topic: str = "/scan", odom_topic: str = "/odom"
+) -> Iterator[tuple[str, object]]:
+    """``(topic, msg)`` from a CARMEN file (via ``iter_carmen``) or an MCAP log (via ``LogReader``).
+
+    Topics are normalised to ``/scan``, ``/odom`` and ``/tf_static``.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise LogError(f"{p}: log file not found")
+    if is_carmen(p):
+        from fgloc.io.carmen import iter_carmen
+
+        yield from iter_carmen(p)
+        return
+    from fgloc.io.log import LogReader, Topics
+
+    reader = LogReader(p, Topics(scan=scan_topic, odom=odom_topic))
+    yield "/tf_static", [reader.laser_mount()]
+    rename = {scan_topic: "/scan", odom_topic: "/odom"}
+    for topic, msg in reader.messages({scan_topic, odom_topic}):
+        yield rename.get(topic, topic), msg
+
+
+def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord], StaticTransform]:
+    """Collect scans with odometry poses and the ``base_link -> laser`` mount (identity if absent)."""
+    mount = StaticTransform("base_link", "laser", np.zeros(3))
+    events: list[tuple[int, object]] = []  # (kind 0 odom / 1 scan, msg)
+    odo_stamps: list[float] = []
+    odo_poses: list[FloatArray] = []
+    dead = np.zeros(3)
+    last_t: float | None = None
+    for topic, msg in messages:
+        if topic == "/tf_static" and isinstance(msg, list):
+            for tf in msg:
+                if isinstance(tf, StaticTransform) and "laser" in tf.child and "rear" not in tf.child:
+                    mount = tf
+        elif topic == "/odom" and isinstance(msg, Odometry):
+            if msg.pose is not None and np.all(np.isfinite(msg.pose)):
+                pose = np.asarray(msg.pose, dtype=float)
+            else:
+                tw = np.asarray(msg.twist, dtype=float)
+                if last_t is not None and np.all(np.isfinite(tw)):
+                    dt = min(max(msg.stamp - last_t, 0.0), 1.0)
+                    dead = compose(dead, np.array([tw[0] * dt, tw[1] * dt, tw[2] * dt]))
+                pose = dead.copy()
+            last_t = msg.stamp
+            odo_stamps.append(float(msg.stamp))
+            odo_poses.append(pose)
+            events.append((0, len(odo_stamps) - 1))
+        elif topic == "/scan" and isinstance(msg, LaserScan):
+            if np.isfinite(msg.stamp) and "rear" not in msg.frame_id:
+                events.append((1, msg))
+    if not odo_stamps:
+        raise LogError("log has no odometry messages")
+    st = np.asarray(odo_stamps)
+    po = np.asarray(odo_poses)
+    recs: list[ScanRecord] = []
+    prev_odo = -1
+    pending: list[tuple[int, LaserScan]] = []
+
+    def flush(next_odo: int) -> None:
+        for pi, sc in pending:
+            t = sc.stamp
+            if pi < 0:
+                pose = po[0] if next_odo < 0 else po[next_odo]
+            elif next_odo >= 0 and st[pi] <= t <= st[next_odo] and st[next_odo] > st[pi]:
+                pose = interpolate_poses(st[[pi, next_odo]], po[[pi, next_odo]], t)[0]
+            else:
+                pose = po[pi]
+            recs.append(ScanRecord(float(t), np.asarray(pose, dtype=float), sc, len(recs)))
+        pending.clear()
+
+    for kind, item in events:
+        if kind == 0:
+            assert isinstance(item, int)
+            flush(item)
+            prev_odo = item
+        else:
+            assert isinstance(item, LaserScan)
+            pending.append((prev_odo, item))
+    flush(-1)
+    if not recs:
+        raise LogError("log has no laser scans")
+    return recs, mount

@@ -1,0 +1,255 @@
+"""``fgloc eval``: error metrics of estimated trajectories against a reference, or relation errors.
+
+    fgloc eval EST.tum GT.tum [--plots DIR] [--json]
+    fgloc eval EKF.tum SMOOTHER.tum GT.tum --plots DIR      # several estimates, one reference (last)
+    fgloc eval --relations FILE TRAJ.tum                    # Kuemmerle et al. relations metric
+    fgloc eval --reference REF.tum TRAJ.tum                 # relations built from a reference trajectory
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from fgloc.errors import FglocError, LogError
+
+# (Metrics key, label, unit, format) in display order; None key = section break
+_TABLE_ROWS: list[tuple[str, str, str, str] | None] = [
+    ("n", "associated poses", "", "d"),
+    ("n_unassociated", "unassociated poses", "", "d"),
+    ("duration_s", "time span", "s", ".2f"),
+    ("path_length_m", "reference path length", "m", ".2f"),
+    None,
+    ("position_rmse_m", "position RMSE (eq. 11)", "m", ".4f"),
+    ("heading_rmse_deg", "heading RMSE (eq. 12)", "deg", ".4f"),
+    ("max_abs_x_m", "max |x error|", "m", ".4f"),
+    ("max_abs_y_m", "max |y error|", "m", ".4f"),
+    ("max_abs_heading_deg", "max |heading error|", "deg", ".3f"),
+    ("position_p95_m", "position error p95", "m", ".4f"),
+    ("heading_p95_deg", "|heading error| p95", "deg", ".3f"),
+    None,
+    ("along_rms_m", "along-track RMS", "m", ".4f"),
+    ("along_mean_abs_m", "along-track mean |.|", "m", ".4f"),
+    ("along_max_abs_m", "along-track max |.|", "m", ".4f"),
+    ("cross_rms_m", "cross-track RMS", "m", ".4f"),
+    ("cross_mean_abs_m", "cross-track mean |.|", "m", ".4f"),
+    ("cross_max_abs_m", "cross-track max |.|", "m", ".4f"),
+    None,
+    ("ape_rmse_m", "APE rmse", "m", ".4f"),
+    ("ape_mean_m", "APE mean", "m", ".4f"),
+    ("ape_median_m", "APE median", "m", ".4f"),
+    ("ape_std_m", "APE std", "m", ".4f"),
+    ("ape_min_m", "APE min", "m", ".4f"),
+    ("ape_max_m", "APE max", "m", ".4f"),
+    None,
+    ("rpe_dist_pairs", "RPE per {rpe_dist_delta_m:g} m: pairs", "", "d"),
+    ("rpe_dist_trans_rmse_m", "RPE per {rpe_dist_delta_m:g} m: trans. RMSE", "m", ".4f"),
+    ("rpe_dist_trans_max_m", "RPE per {rpe_dist_delta_m:g} m: trans. max", "m", ".4f"),
+    ("rpe_dist_rot_rmse_deg", "RPE per {rpe_dist_delta_m:g} m: rot. RMSE", "deg", ".3f"),
+    ("rpe_dist_rot_max_deg", "RPE per {rpe_dist_delta_m:g} m: rot. max", "deg", ".3f"),
+    ("rpe_time_pairs", "RPE per {rpe_time_delta_s:g} s: pairs", "", "d"),
+    ("rpe_time_trans_rmse_m", "RPE per {rpe_time_delta_s:g} s: trans. RMSE", "m", ".4f"),
+    ("rpe_time_trans_max_m", "RPE per {rpe_time_delta_s:g} s: trans. max", "m", ".4f"),
+    ("rpe_time_rot_rmse_deg", "RPE per {rpe_time_delta_s:g} s: rot. RMSE", "deg", ".3f"),
+    ("rpe_time_rot_max_deg", "RPE per {rpe_time_delta_s:g} s: rot. max", "deg", ".3f"),
+]
+
+
+def _fmt(v: Any, fmt: str) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float) and v != v:  # NaN
+        return "-"
+    return format(v, fmt)
+
+
+def _labels(paths: list[Path]) -> list[str]:
+    stems = [p.stem for p in paths]
+    if len(set(stems)) == len(stems):
+        return stems
+    return [f"{p.parent.name}/{p.stem}" if p.parent.name else str(p) for p in paths]
+
+
+def _metrics_table(results: dict[str, Any], ref_name: str, paper: bool):
+    from rich.table import Table
+
+    from fgloc.eval import paper as P
+
+    paper_vals = {r.key: r.paper for r in P.PAPER_ROWS}
+    first = next(iter(results.values()))
+    table = Table(title=f"Errors against {ref_name} (estimate - reference, no alignment)"
+                  if not first.aligned else f"Errors against {ref_name} (after SE(2) alignment)")
+    table.add_column("metric")
+    table.add_column("unit")
+    if paper:
+        table.add_column("paper", justify="right")
+    for name in results:
+        table.add_column(name, justify="right", no_wrap=True)
+    ctx = first.to_dict()
+    rows = _TABLE_ROWS
+    for i, row in enumerate(rows):
+        if row is None:
+            continue
+        key, label, unit, fmt = row
+        cells = [label.format(**ctx), unit]
+        if paper:
+            pv = paper_vals.get(key)
+            cells.append("-" if pv is None else f"{pv:g}")
+        cells += [_fmt(getattr(m, key), fmt) for m in results.values()]
+        end = i + 1 < len(rows) and rows[i + 1] is None
+        table.add_row(*cells, end_section=end)
+    return table
+
+
+def _relations_cmd(
+    traj_path: Path, relations: Path | None, reference: Path | None, max_assoc_dt: float, as_json: bool
+) -> None:
+    import importlib
+
+    try:
+        R = importlib.import_module("fgloc.eval.relations")
+    except ModuleNotFoundError as e:
+        if e.name in ("fgloc.eval.relations",):
+            raise FglocError("relations evaluator not available (fgloc.eval.relations is missing)") from None
+        raise
+    from fgloc.io.tum import read_tum
+
+    traj = read_tum(traj_path)
+    if relations is not None:
+        if not relations.is_file():
+            raise LogError(f"{relations}: relations file not found")
+        rels = R.read_relations(relations)
+        source = {"relations": str(relations)}
+    else:
+        assert reference is not None
+        ref = read_tum(reference)
+        rels = R.relations_from_reference(ref)
+        source = {"reference": str(reference)}
+    if not rels:
+        raise LogError(f"{relations or reference}: no relations to evaluate")
+    res = dict(R.evaluate_relations(traj, rels, max_assoc_dt=max_assoc_dt))
+    if not res.get("n"):
+        raise LogError(
+            f"{traj_path}: none of the {len(rels)} relations matched a pose within {max_assoc_dt:g} s"
+        )
+    if as_json:
+        print(json.dumps({"trajectory": str(traj_path), **source, **res}, indent=2, default=float))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"Relation errors of {traj_path.name} ({next(iter(source.values()))})")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    table.add_row("relations used", str(res.get("n")))
+    table.add_row("unmatched relations", str(res.get("unmatched", "-")))
+    table.add_row("translation error [m]", f"{res['trans_mean']:.4f} ± {res['trans_std']:.4f}")
+    table.add_row("rotation error [deg]", f"{res['rot_mean_deg']:.3f} ± {res['rot_std_deg']:.3f}")
+    Console().print(table)
+
+
+def eval_cmd(
+    files: Annotated[
+        list[Path],
+        typer.Argument(
+            help="EST.tum [EST2.tum ...] GT.tum (the last file is the reference), "
+            "or one TRAJ.tum with --relations / --reference",
+            show_default=False,
+        ),
+    ],
+    plots: Annotated[
+        Path | None, typer.Option("--plots", help="Write PNG plots (paper figs. 6-10 + overview) here")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table")] = False,
+    relations: Annotated[
+        Path | None, typer.Option("--relations", help="Relations file 't1 t2 x y z roll pitch yaw'")
+    ] = None,
+    reference: Annotated[
+        Path | None, typer.Option("--reference", help="Build relations from this reference trajectory (TUM)")
+    ] = None,
+    max_gap: Annotated[
+        float, typer.Option("--max-gap", help="Do not interpolate the reference across gaps longer than this [s]")
+    ] = 0.5,
+    align: Annotated[
+        bool, typer.Option("--align", help="Rigidly align (SE(2), Umeyama) before computing errors")
+    ] = False,
+    rpe_delta: Annotated[float, typer.Option("--rpe-delta", help="RPE distance between poses [m]")] = 1.0,
+    rpe_delta_s: Annotated[float, typer.Option("--rpe-delta-s", help="RPE time between poses [s]")] = 1.0,
+    fixes: Annotated[
+        Path | None, typer.Option("--fixes", help="Front-end fixes (TUM) drawn as dots on the path plot")
+    ] = None,
+    map_yaml: Annotated[
+        Path | None, typer.Option("--map", help="map_server YAML drawn under the path plot")
+    ] = None,
+    paper: Annotated[bool, typer.Option("--paper", help="Show the paper's reported values beside ours")] = False,
+    max_assoc_dt: Annotated[
+        float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose [s]")
+    ] = 0.05,
+) -> None:
+    """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE.
+
+    The reference is interpolated at each estimated stamp (linear in position, shortest
+    arc in yaw), only inside its time span and not across gaps longer than --max-gap.
+    """
+    if relations is not None or reference is not None:
+        if relations is not None and reference is not None:
+            raise typer.BadParameter("give --relations or --reference, not both")
+        if len(files) != 1:
+            raise typer.BadParameter("with --relations / --reference give exactly one TRAJ.tum")
+        _relations_cmd(files[0], relations, reference, max_assoc_dt, as_json)
+        return
+    if len(files) < 2:
+        raise typer.BadParameter("give EST.tum and GT.tum (the reference last)")
+
+    from fgloc.eval.metrics import AssociationError, evaluate
+    from fgloc.io.tum import read_tum
+
+    gt_path, est_paths = files[-1], files[:-1]
+    gt = read_tum(gt_path)
+    ests = {lab: read_tum(p) for lab, p in zip(_labels(est_paths), est_paths, strict=True)}
+    results = {}
+    for (lab, est), p in zip(ests.items(), est_paths, strict=True):
+        try:
+            results[lab] = evaluate(
+                est, gt, max_gap=max_gap, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s
+            )
+        except AssociationError as e:
+            raise LogError(f"{p} vs {gt_path}: {e}") from None
+
+    written: list[Path] = []
+    if plots is not None:
+        from fgloc.eval.plots import plot_all
+
+        fx = read_tum(fixes) if fixes is not None else None
+        occ = None
+        if map_yaml is not None:
+            from fgloc.maps import load_map
+
+            occ = load_map(map_yaml)
+        written = plot_all(ests, gt, plots, fixes=fx, occ_map=occ, max_gap=max_gap)
+
+    if as_json:
+        docs = [
+            {"label": lab, "estimate": str(p), "reference": str(gt_path), "metrics": m.to_dict()}
+            for (lab, m), p in zip(results.items(), est_paths, strict=True)
+        ]
+        out: Any = docs[0] if len(docs) == 1 else docs
+        if written:
+            for d in docs:
+                d["plots"] = [str(w) for w in written]
+        print(json.dumps(out, indent=2))
+        return
+
+    from rich.console import Console
+
+    console = Console()
+    console.print(_metrics_table(results, gt_path.name, paper))
+    if written:
+        console.print(f"plots: {len(written)} PNG files in {plots}")
+
+
+def register(app: typer.Typer) -> None:
+    app.command("eval")(eval_cmd)

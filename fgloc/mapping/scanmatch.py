@@ -46,7 +46,12 @@ def build_distance_grid(
     points: FloatArray, resolution: float = 0.05, dmax_m: float = 0.3, margin_m: float = 1.0
 ) -> DistanceGrid:
     """Distance grid over the bounding box of ``points`` (frame F) plus ``dmax_m + margin_m``."""
-    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(pts) > 0:  # overlapping scans repeat points: keep one per half cell
+        keys = np.floor(pts / (0.5 * resolution)).astype(np.int64)
+        _, idx = np.unique(keys[:, 0] * 4_000_037 + keys[:, 1], return_index=True)
+        pts = pts[idx]
+    pts = np.ascontiguousarray(pts)
     if len(pts) == 0:
         return DistanceGrid(np.full((2, 2), dmax_m, np.float32), 0.0, 0.0, resolution, dmax_m)
     pad = dmax_m + margin_m
@@ -115,6 +120,14 @@ def _correlative(dist, x0, y0, res, dmax, pts, cx, cy, cth, nlin, lin_step, nang
     n = pts.shape[0]
     scores = np.zeros((2 * nang + 1, 2 * nlin + 1, 2 * nlin + 1))
     inv2s2 = 1.0 / (2.0 * sigma * sigma)
+    h, w = dist.shape
+    nlut = 512
+    lut = np.empty(nlut + 1)
+    for i in range(nlut + 1):
+        d = dmax * i / nlut
+        lut[i] = np.exp(-d * d * inv2s2)
+    qs = nlut / dmax
+    s_out = lut[nlut]
     for a in range(2 * nang + 1):
         th = cth + (a - nang) * ang_step
         c, s = np.cos(th), np.sin(th)
@@ -129,8 +142,13 @@ def _correlative(dist, x0, y0, res, dmax, pts, cx, cy, cth, nlin, lin_step, nang
                 tx = cx + (ix - nlin) * lin_step
                 acc = 0.0
                 for k in range(n):
-                    d = _lookup_nearest(dist, x0, y0, res, dmax, rx[k] + tx, ry[k] + ty)
-                    acc += np.exp(-d * d * inv2s2)
+                    jx = int(np.floor((rx[k] + tx - x0) / res))
+                    jy = int(np.floor((ry[k] + ty - y0) / res))
+                    if jx < 0 or jy < 0 or jx >= w or jy >= h:
+                        acc += s_out
+                    else:
+                        q = int(dist[jy, jx] * qs + 0.5)
+                        acc += lut[q if q < nlut else nlut]
                 scores[a, iy, ix] = acc / max(n, 1)
     return scores
 

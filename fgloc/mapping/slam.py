@@ -75,6 +75,8 @@ class MapperConfig:
     loop_max_ambiguity: float = 0.92  # second-best distinct peak / best
     loop_cauchy_k: float = 1.0
     final_batch: bool = True
+    final_refine: bool = False        # re-align every scan to the optimized keyframes around it
+    refine_half: int = 6              # ... keyframes k-N .. k+N (its own keyframe excluded)
 
     @staticmethod
     def from_dict(d: dict | None) -> MapperConfig:
@@ -136,6 +138,7 @@ class GraphSlam:
         self.scan_kf: list[int] = []             # keyframe each scan is attached to
         self.scan_rel: list[FloatArray] = []      # offset from that keyframe (frontend)
         self.scan_stamps: list[float] = []
+        self.scan_points: list[FloatArray] = []   # match points of every scan (base frame)
         self._pose: FloatArray | None = None      # current tracked pose
         self._odom_prev: FloatArray | None = None
         self._grid: DistanceGrid | None = None
@@ -221,6 +224,7 @@ class GraphSlam:
             self.scan_kf.append(len(self.keyframes) - 1)
             self.scan_rel.append(rel)
             self.scan_stamps.append(rec.stamp)
+            self.scan_points.append(mpts)
 
     def _new_keyframe(self, rec: ScanRecord, pts: FloatArray, mpts: FloatArray, info: FloatArray | None) -> None:
         cfg = self.cfg
@@ -231,6 +235,7 @@ class GraphSlam:
         self.scan_kf.append(k)
         self.scan_rel.append(np.zeros(3))
         self.scan_stamps.append(rec.stamp)
+        self.scan_points.append(mpts)
         self.stats["keyframes"] += 1
         if k == 0:
             self._add_factor(gtsam.PriorFactorPose2(0, gtsam.Pose2(0.0, 0.0, 0.0),
@@ -295,9 +300,9 @@ class GraphSlam:
             self.stats["loop_tries"] += 1
             grid = self._submap_around(j)
             pred = between(self._est[j], guess)
-            coarse_pts = mpts if len(mpts) <= 120 else mpts[:: int(np.ceil(len(mpts) / 120))]
+            coarse_pts = mpts if len(mpts) <= 80 else mpts[:: int(np.ceil(len(mpts) / 80))]
             sr = correlative_search(grid, coarse_pts, pred, cfg.loop_window_m, np.radians(cfg.loop_window_deg),
-                                    0.1, np.radians(1.5), 0.15, far_m=0.6, far_rad=np.radians(10))
+                                    0.12, np.radians(2.0), 0.15, far_m=0.6, far_rad=np.radians(10))
             fr = correlative_search(grid, mpts, sr.pose, 0.1, np.radians(2.0), 0.025, np.radians(0.5), 0.05)
             rr = refine(grid, mpts, fr.pose, cfg.huber_m)
             ok = (fr.score >= cfg.loop_min_score and rr.inlier_frac >= cfg.loop_min_inliers
@@ -314,6 +319,33 @@ class GraphSlam:
             self.stats["loops"] += 1
 
     # ------------------------------------------------------------ results
+    def _refine_scans(self, poses: FloatArray, kf_idx: np.ndarray, scan_poses: FloatArray) -> FloatArray:
+        """Align each scan to a map of the optimized keyframes around its own (itself excluded)."""
+        cfg = self.cfg
+        out = scan_poses.copy()
+        order = np.argsort(kf_idx, kind="stable")
+        bounds = np.searchsorted(kf_idx[order], np.arange(len(self.keyframes) + 1))
+        h = cfg.refine_half
+        n_ok = 0
+        for k in range(len(self.keyframes)):
+            members = order[bounds[k]:bounds[k + 1]]
+            if len(members) == 0:
+                continue
+            nb = [i for i in range(max(0, k - h), min(len(self.keyframes), k + h + 1)) if i != k]
+            pts = np.concatenate([transform_points(poses[i], self.keyframes[i].points) for i in nb])
+            grid = build_distance_grid(pts, cfg.submap_resolution, cfg.dmax_m, 0.5)
+            for m in members:
+                mp = self.scan_points[m]
+                if len(mp) < 20:
+                    continue
+                rr = refine(grid, mp, scan_poses[m], cfg.huber_m)
+                d = between(scan_poses[m], rr.pose)
+                if rr.inlier_frac >= 0.7 and np.hypot(d[0], d[1]) < 0.1 and abs(d[2]) < np.radians(3):
+                    out[m] = rr.pose
+                    n_ok += 1
+        self.stats["refined"] = n_ok
+        return out
+
     def finish(self) -> SlamResult:
         if not self.keyframes:
             raise ValueError("no scans were added")
@@ -330,6 +362,8 @@ class GraphSlam:
         kf_idx = np.asarray(self.scan_kf)
         rel = np.asarray(self.scan_rel).reshape(-1, 3)
         scan_poses = compose(poses[kf_idx], rel)
+        if self.cfg.final_refine and len(self.keyframes) > 2:
+            scan_poses = self._refine_scans(poses, kf_idx, scan_poses)
         scan_traj = Trajectory.from_unsorted(np.asarray(self.scan_stamps), scan_poses)
         kf_traj = Trajectory.from_unsorted(np.array([kf.stamp for kf in self.keyframes]), poses)
         return SlamResult(self.keyframes, poses, scan_traj, kf_traj, self.loops, dict(self.stats))

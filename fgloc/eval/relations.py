@@ -71,8 +71,8 @@ def write_relations(path: str | Path, relations: list[Relation]) -> None:
     with path.open("w") as f:
         f.write("# t1 t2 x y z roll pitch yaw\n")
         for r in relations:
-            d = np.asarray(r.delta, dtype=float)
-            f.write(f"{r.t1:.6f} {r.t2:.6f} {d[0]!r} {d[1]!r} 0 0 0 {d[2]!r}\n")
+            d = [float(v) for v in np.asarray(r.delta, dtype=float)]
+            f.write(f"{float(r.t1):.6f} {float(r.t2):.6f} {d[0]!r} {d[1]!r} 0 0 0 {d[2]!r}\n")
 
 
 def relations_from_reference(

@@ -1,0 +1,76 @@
+"""Scan matcher and ray-traced occupancy on synthetic geometry with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fgloc.geometry import between, compose, inverse, transform_points
+from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
+from fgloc.mapping.scanmatch import build_distance_grid, correlative_search, match_covariance, refine
+
+
+def _room_points(step=0.02):
+    """An L-shaped room outline with a pillar: walls as dense points (map frame)."""
+    segs = [((-3, -2), (4, -2)), ((4, -2), (4, 1)), ((4, 1), (1, 1)), ((1, 1), (1, 3)), ((1, 3), (-3, 3)),
+            ((-3, 3), (-3, -2)), ((0.0, 0.0), (0.4, 0.0)), ((0.4, 0.0), (0.4, 0.4))]
+    pts = []
+    for (x0, y0), (x1, y1) in segs:
+        n = int(np.hypot(x1 - x0, y1 - y0) / step) + 1
+        t = np.linspace(0, 1, n)
+        pts.append(np.column_stack([x0 + t * (x1 - x0), y0 + t * (y1 - y0)]))
+    return np.concatenate(pts)
+
+
+def test_refine_recovers_known_offset():
+    world = _room_points()
+    grid = build_distance_grid(world, 0.04, 0.3)
+    true = np.array([0.7, -0.4, 0.3])
+    scan = transform_points(inverse(true), world[::3])  # the room seen from `true`
+    guess = compose(true, np.array([0.08, -0.06, np.radians(3.0)]))
+    rr = refine(grid, scan, guess)
+    err = between(true, rr.pose)
+    assert np.hypot(err[0], err[1]) < 0.005
+    assert abs(err[2]) < np.radians(0.1)
+    assert rr.inlier_frac > 0.99
+    cov = match_covariance(rr.info, 0.05)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_correlative_search_finds_large_offset_and_reports_ambiguity():
+    world = _room_points()
+    grid = build_distance_grid(world, 0.04, 0.5)
+    true = np.array([-1.0, 0.5, -0.8])
+    scan = transform_points(inverse(true), world[::4])
+    guess = compose(true, np.array([0.6, -0.5, np.radians(12.0)]))
+    sr = correlative_search(grid, scan, guess, 1.0, np.radians(20), 0.1, np.radians(2.0), 0.15)
+    err = between(true, sr.pose)
+    assert np.hypot(err[0], err[1]) < 0.15 and abs(err[2]) < np.radians(3)
+    assert sr.score > 0.8 and sr.ambiguity < 0.9
+    # a featureless corridor (two parallel walls) is ambiguous along its axis
+    xs = np.arange(-10, 10, 0.02)
+    corridor = np.concatenate([np.column_stack([xs, np.full_like(xs, -1.0)]),
+                               np.column_stack([xs, np.full_like(xs, 1.0)])])
+    cg = build_distance_grid(corridor, 0.04, 0.5)
+    local = corridor[np.abs(corridor[:, 0]) < 4][::3]
+    sc = correlative_search(cg, local, np.zeros(3), 1.0, np.radians(5), 0.1, np.radians(1.0), 0.15)
+    assert sc.ambiguity > 0.95
+
+
+def test_raytraced_beam_free_then_hit_and_inf_carves_without_hit():
+    g = LogOddsGrid(-1.0, -1.0, 6.0, 6.0, 0.1)
+    ranges = np.array([3.0, np.inf, np.nan], dtype=np.float32)
+    angles = np.array([0.0, np.pi / 2, np.pi])
+    ends, hit = scan_endpoints(ranges, angles, 0.1, 30.0, 25.0, 4.0)
+    assert ends.shape == (2, 2) and hit.tolist() == [True, False]
+    for _ in range(3):
+        g.add_beams(np.array([0.05, 0.05]), ends, hit)
+    m = g.to_map()
+    row0 = int((0.05 - g.y0) / 0.1)
+    col_hit = int((3.05 - g.x0) / 0.1)
+    assert m.data[row0, col_hit] == 100                      # the return
+    assert np.all(m.data[row0, int((0.5 - g.x0) / 0.1):col_hit - 1] == 0)  # free along the beam
+    col0 = int((0.05 - g.x0) / 0.1)
+    up = m.data[int((0.5 - g.y0) / 0.1):int((3.9 - g.y0) / 0.1), col0]
+    assert np.all(up == 0)                                   # +inf beam carved free ...
+    assert not np.any(m.data[:, col0] == 100)                # ... with no hit anywhere
+    assert m.data[int((5.0 - g.y0) / 0.1), col0] == -1       # beyond the carve cap: unknown

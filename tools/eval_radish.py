@@ -1,0 +1,246 @@
+"""Map the real Radish logs (intel, fr079, aces), score against GMapping-corrected references,
+and localize with ``fgloc run`` on a part of the log against a map built from another part.
+
+    /work/venv/bin/python tools/eval_radish.py [--out eval_radish] [--datasets intel fr079 aces]
+                                               [--no-localize]
+
+Reference association (the corrected logs' timestamps are *not* the raw logs'):
+every FLASER line of the corrected log is matched to the raw log's scan with
+*identical range readings* (all beams equal after the same no-return coding), taking
+the first such raw scan after the previously matched one (order preserved).  The
+reference pose of a matched scan is stamped with *our* (raw ipc) stamp of that scan,
+so relations built from it are compared on exactly the same scans.  Corrected lines
+with no identical raw scan are dropped and counted.  FLASER ``x y theta`` in the
+corrected log is the laser pose; it is converted to base_link with the laser mount.
+
+Relations (Kuemmerle et al. 2009) from the reference: every reference pose paired
+with the first one 1-2 s later (intel's corrected log keeps only every ~3 s a
+scan, so intel uses 1-6 s), plus loop-closure pairs (<= 1 m apart, >= 30 s apart).
+Prints one table; writes PNG maps and trajectories under --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fgloc.eval.relations import evaluate_relations, relations_from_reference, write_relations
+from fgloc.geometry import compose, inverse
+from fgloc.io.carmen import open_text
+from fgloc.io.tum import read_tum, write_tum
+from fgloc.mapping.build import build_map, load_records
+from fgloc.mapping.source import ScanRecord
+from fgloc.types import StaticTransform, Trajectory
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+LOGS = {
+    "intel": DATA / "radish" / "intel.clf.bz2",
+    "fr079": DATA / "radish" / "fr079.clf.bz2",
+    "aces": DATA / "radish" / "aces.clf.bz2",
+}
+REFS = {
+    "intel": DATA / "radish-reference" / "intel-corrected.log.gz",
+    "fr079": DATA / "radish-reference" / "freiburg-079-corrected.log.gz",
+}
+REL_DT = {"intel": (1.0, 6.0), "fr079": (1.0, 2.0)}
+
+
+def _key(ranges: np.ndarray, rmax: float) -> bytes:
+    r = np.asarray(ranges, dtype=np.float32).copy()
+    r[~np.isfinite(r) | (r >= rmax)] = np.float32(-1.0)
+    return r.tobytes()
+
+
+def reference_trajectory(ref_path: Path, recs: list[ScanRecord], mount: StaticTransform
+                         ) -> tuple[Trajectory, dict]:
+    """Corrected FLASER poses matched to our scans by identical ranges (see module docstring)."""
+    by_key: dict[bytes, list[int]] = {}
+    for i, r in enumerate(recs):
+        by_key.setdefault(_key(r.scan.ranges, r.scan.range_max), []).append(i)
+    rmax = recs[0].scan.range_max
+    inv_mount = inverse(np.asarray(mount.pose, dtype=float))
+    stamps, poses = [], []
+    last = -1
+    n_ref = dropped = 0
+    with open_text(ref_path) as f:
+        for line in f:
+            tok = line.split()
+            if not tok or tok[0] != "FLASER":
+                continue
+            n_ref += 1
+            n = int(tok[1])
+            rng = np.array(tok[2:2 + n], dtype=np.float32)
+            laser = np.array(tok[2 + n:5 + n], dtype=float)
+            cand = [i for i in by_key.get(_key(rng, rmax), []) if i > last]
+            if not cand:
+                dropped += 1
+                continue
+            last = cand[0]
+            stamps.append(recs[last].stamp)
+            poses.append(compose(laser, inv_mount))
+    traj = Trajectory.from_unsorted(np.array(stamps), np.array(poses))
+    return traj, {"ref_scans": n_ref, "matched": len(stamps), "dropped": dropped, "unique_stamps": len(traj)}
+
+
+def _run(cmd: list[str]) -> str:
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {p.stderr.strip()[-500:]}")
+    return p.stdout
+
+
+def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_scans: Trajectory,
+             out: Path, ref: Trajectory | None) -> dict:
+    """Map the first half, localize the second half with ``fgloc run`` (smoother + native)."""
+    from fgloc.eval.metrics import evaluate
+    from fgloc.io.log import LogWriter
+    from fgloc.mapping.slam import MapperConfig
+
+    half = len(recs) // 2
+    map_dir = out / f"{name}_firsthalf"
+    mo = build_map(LOGS[name], map_dir, MapperConfig(), end=0.5)
+    second = recs[half:]
+    mcap = out / f"{name}_secondhalf.mcap"
+    with LogWriter(mcap) as w:
+        w.write("/tf_static", [mount], stamp=second[0].stamp - 0.01)
+        last = -np.inf
+        from fgloc.types import Odometry
+        for r in second:
+            if r.stamp <= last:
+                continue
+            last = r.stamp
+            w.write("/odom", Odometry(r.stamp - 1e-4, np.zeros(3), pose=r.odom), stamp=r.stamp - 1e-4)
+            w.write("/scan", r.scan, stamp=r.stamp)
+    p0 = full_scans.interpolate(second[0].stamp)[0]
+    run_dir = out / f"{name}_localize"
+    t0 = time.perf_counter()
+    _run([sys.executable, "-m", "fgloc.cli", "run", str(mcap), "--map", str(map_dir / "map.yaml"),
+          "--initial-pose", *(f"{v:.6f}" for v in p0), "-o", str(run_dir), "-q"])
+    wall = time.perf_counter() - t0
+    est = read_tum(run_dir / "trajectory.tum")
+    res: dict = {"map_scans": mo.n_scans, "loc_scans": len(second), "loc_wall_s": wall}
+    m = evaluate(est, full_scans, align=False)
+    res["vs_slam_rmse_m"] = float(getattr(m, "position_rmse_m", np.nan) if not isinstance(m, dict)
+                                  else m["position_rmse_m"])
+    res["vs_slam_heading_deg"] = float(getattr(m, "heading_rmse_deg", np.nan) if not isinstance(m, dict)
+                                       else m["heading_rmse_deg"])
+    if ref is not None:
+        lo, hi = REL_DT[name]
+        rels = relations_from_reference(ref, lo, hi)
+        res["relations"] = evaluate_relations(est, rels, max_assoc_dt=0.05)
+    _plot_localization(run_dir / "localization.png", map_dir / "map.yaml", est, full_scans, name)
+    return res
+
+
+def _plot_localization(path: Path, map_yaml: Path, est: Trajectory, slam: Trajectory, name: str) -> None:
+    from fgloc.mapping.render import render_map_png
+    from fgloc.maps import OccupancyMap
+
+    occ = OccupancyMap.load(map_yaml)
+    render_map_png(path, occ, est.poses[:, :2], f"{name}: fgloc run (second half) on the first-half map")
+
+
+EXCERPTS = {"intel": 1200, "fr079": 600}  # first N scans of each log
+
+
+def make_excerpts(dest: Path) -> None:
+    """Write data/radish/<name>-head.clf.bz2 (the raw log up to scan N) and <name>-head-reference.tum
+    (the corrected poses of those scans, stamped with the raw scans' stamps)."""
+    import bz2
+
+    dest.mkdir(parents=True, exist_ok=True)
+    for name, n in EXCERPTS.items():
+        lines = []
+        k = 0
+        with open_text(LOGS[name]) as f:
+            for line in f:
+                if line.startswith("FLASER"):
+                    if k == n:
+                        break
+                    k += 1
+                lines.append(line)
+        out = dest / f"{name}-head.clf.bz2"
+        with bz2.open(out, "wt") as g:
+            g.writelines(lines)
+        recs, mount = load_records(LOGS[name])
+        ref, _ = reference_trajectory(REFS[name], recs, mount)
+        tmax = recs[n - 1].stamp
+        keep = ref.stamps <= tmax
+        write_tum(dest / f"{name}-head-reference.tum", Trajectory(ref.stamps[keep], ref.poses[keep]))
+        print(f"wrote {out} ({out.stat().st_size} bytes) and its reference ({int(keep.sum())} poses)")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("eval_radish"))
+    ap.add_argument("--make-excerpts", type=Path, default=None, metavar="DIR",
+                    help="only write the test excerpts (data/radish) and exit")
+    ap.add_argument("--datasets", nargs="+", default=["intel", "fr079", "aces"])
+    ap.add_argument("--no-localize", action="store_true")
+    args = ap.parse_args()
+    if args.make_excerpts is not None:
+        make_excerpts(args.make_excerpts)
+        return 0
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for name in args.datasets:
+        t0 = time.perf_counter()
+        mo = build_map(LOGS[name], out / name)
+        t_map = time.perf_counter() - t0
+        row: dict = {"dataset": name, "scans": mo.n_scans, "keyframes": len(mo.slam.keyframes),
+                     "loops": len(mo.slam.loops), "map_s": t_map, "png": str(out / name / "map.png")}
+        recs, mount = load_records(LOGS[name])
+        ref = None
+        if name in REFS:
+            ref, info = reference_trajectory(REFS[name], recs, mount)
+            write_tum(out / name / "reference.tum", ref)
+            lo, hi = REL_DT[name]
+            rels = relations_from_reference(ref, lo, hi)
+            write_relations(out / name / "relations.txt", rels)
+            row["ref"] = info
+            row["rel"] = evaluate_relations(mo.slam.scan_trajectory, rels)
+        if not args.no_localize:
+            try:
+                row["loc"] = localize(name, recs, mount, mo.slam.scan_trajectory, out, ref)
+            except Exception as e:  # report, keep going
+                row["loc_error"] = f"{e.__class__.__name__}: {e}"[:300]
+        rows.append(row)
+        print(f"done {name} in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    _print_table(rows)
+    return 0
+
+
+def _fmt_rel(r: dict | None) -> str:
+    if not r or not r.get("n"):
+        return "-"
+    return (f"{r['trans_mean']:.3f} +- {r['trans_std']:.3f} m, {r['rot_mean_deg']:.2f} +- {r['rot_std_deg']:.2f} deg"
+            f" (n={r['n']})")
+
+
+def _print_table(rows: list[dict]) -> None:
+    print("| dataset | scans | keyframes | loops | map time | SLAM relation error vs reference | "
+          "localization (2nd half on 1st-half map) | PNG |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        loc = r.get("loc")
+        if loc:
+            ls = (f"{loc['loc_scans']} scans, {loc['loc_wall_s']:.0f} s; vs SLAM RMSE {loc['vs_slam_rmse_m']:.3f} m "
+                  f"/ {loc['vs_slam_heading_deg']:.2f} deg; relations {_fmt_rel(loc.get('relations'))}")
+        else:
+            ls = r.get("loc_error", "-")
+        ref = r.get("ref")
+        rel = _fmt_rel(r.get("rel"))
+        if ref:
+            rel += f" [ref {ref['matched']}/{ref['ref_scans']} scans matched]"
+        print(f"| {r['dataset']} | {r['scans']} | {r['keyframes']} | {r['loops']} | {r['map_s']:.1f} s | {rel} "
+              f"| {ls} | {r['png']} |")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

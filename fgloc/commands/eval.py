@@ -146,8 +146,12 @@ def _relations_cmd(
     table.add_column("value", justify="right")
     table.add_row("relations used", str(res.get("n")))
     table.add_row("unmatched relations", str(res.get("unmatched", "-")))
-    table.add_row("translation error [m]", f"{res['trans_mean']:.4f} ± {res['trans_std']:.4f}")
-    table.add_row("rotation error [deg]", f"{res['rot_mean_deg']:.3f} ± {res['rot_std_deg']:.3f}")
+    table.add_row("translation error (m)", f"{res['trans_mean']:.4f} ± {res['trans_std']:.4f}")
+    table.add_row("rotation error (deg)", f"{res['rot_mean_deg']:.3f} ± {res['rot_std_deg']:.3f}")
+    if "trans_max" in res:
+        table.add_row("max translation error (m)", _fmt(res.get("trans_max"), ".4f"))
+    if "rot_max_deg" in res:
+        table.add_row("max rotation error (deg)", _fmt(res.get("rot_max_deg"), ".3f"))
     Console().print(table)
 
 

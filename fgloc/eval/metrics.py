@@ -102,8 +102,9 @@ class Metrics:
     ``position_rmse_m`` is the paper's eq. 11, ``heading_rmse_deg`` its eq. 12 (wrapped
     differences).  ``ape_*`` are evo's APE on the translation part (population std);
     ``ape_rmse_m == position_rmse_m``.  ``rpe_dist_*``: relative pose error between pose
-    pairs ``delta_m`` of reference path apart (evo's ``--delta 1 --delta_unit m``
-    pairing: consecutive, non-overlapping); ``rpe_time_*`` the same for pairs
+    pairs ``delta_m`` of reference path apart (consecutive, non-overlapping pairs on the
+    reference's path: evo's ``--delta 1 --delta_unit m --pairs_from_reference``; evo 1.38 pairs on
+    the estimate's path unless that flag is given); ``rpe_time_*`` the same for pairs
     ``delta_s`` apart.  Statistics that cannot be computed (too short a trajectory for
     an RPE pair) are NaN (``None`` in :meth:`to_dict`).
     """
@@ -214,6 +215,11 @@ def associate(
         )
     t = tc[idx]
     gt_at = interpolate_poses(gs, gt.poses, t)
+    # a stamp that hits a reference stamp takes that pose bit for bit (no rounding)
+    k = np.clip(np.searchsorted(gs, t), 0, len(gs) - 1)
+    k = np.where((k > 0) & (np.abs(gs[k - 1] - t) < np.abs(gs[k] - t)), k - 1, k)
+    hit = np.abs(gs[k] - t) <= _EXACT_S
+    gt_at[hit] = gt.poses[k[hit]]
     # direction of travel from the reference's displacement over [t - h, t + h]
     ta = np.clip(t - tangent_dt, gs[0], gs[-1])
     tb = np.clip(t + tangent_dt, gs[0], gs[-1])
@@ -311,13 +317,20 @@ def pairs_by_time(stamps: FloatArray, delta_s: float) -> list[tuple[int, int]]:
 
 
 def relative_errors(est: FloatArray, gt: FloatArray, pairs: list[tuple[int, int]]) -> tuple[FloatArray, FloatArray]:
-    """RPE per pair: ``E = (gt_i^-1 gt_j)^-1 (est_i^-1 est_j)``; returns (|t(E)| m, |yaw(E)| rad)."""
+    """RPE per pair: ``E = (gt_i^-1 gt_j)^-1 (est_i^-1 est_j)``; returns (|t(E)| m, |yaw(E)| rad).
+
+    With ``G = gt_i^-1 gt_j`` and ``P = est_i^-1 est_j``, ``t(E) = R(G)^T (t(P) - t(G))`` so
+    ``|t(E)| = |t(P) - t(G)|`` and ``yaw(E) = wrap(yaw(P) - yaw(G))``; computed that way the
+    error of identical trajectories is exactly zero.
+    """
     if not pairs:
         return np.zeros(0), np.zeros(0)
     i = np.array([p[0] for p in pairs])
     j = np.array([p[1] for p in pairs])
-    e = between(between(gt[i], gt[j]), between(est[i], est[j]))
-    return np.hypot(e[:, 0], e[:, 1]), np.abs(e[:, YAW])
+    g = between(gt[i], gt[j])
+    p = between(est[i], est[j])
+    dyaw = np.asarray(wrap_angle(p[:, YAW] - g[:, YAW]), dtype=float)
+    return np.hypot(p[:, 0] - g[:, 0], p[:, 1] - g[:, 1]), np.abs(dyaw)
 
 
 def _rms(v: FloatArray) -> float:

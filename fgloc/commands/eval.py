@@ -162,6 +162,7 @@ def eval_cmd(
             help="EST.tum [EST2.tum ...] GT.tum (the last file is the reference), "
             "or one TRAJ.tum with --relations / --reference",
             show_default=False,
+            metavar="FILES",
         ),
     ],
     plots: Annotated[
@@ -175,13 +176,13 @@ def eval_cmd(
         Path | None, typer.Option("--reference", help="Build relations from this reference trajectory (TUM)")
     ] = None,
     max_gap: Annotated[
-        float, typer.Option("--max-gap", help="Do not interpolate the reference across gaps longer than this [s]")
+        float, typer.Option("--max-gap", help="Do not interpolate the reference across gaps longer than this (s)")
     ] = 0.5,
     align: Annotated[
         bool, typer.Option("--align", help="Rigidly align (SE(2), Umeyama) before computing errors")
     ] = False,
-    rpe_delta: Annotated[float, typer.Option("--rpe-delta", help="RPE distance between poses [m]")] = 1.0,
-    rpe_delta_s: Annotated[float, typer.Option("--rpe-delta-s", help="RPE time between poses [s]")] = 1.0,
+    rpe_delta: Annotated[float, typer.Option("--rpe-delta", help="RPE distance between poses (m)")] = 1.0,
+    rpe_delta_s: Annotated[float, typer.Option("--rpe-delta-s", help="RPE time between poses (s)")] = 1.0,
     fixes: Annotated[
         Path | None, typer.Option("--fixes", help="Front-end fixes (TUM) drawn as dots on the path plot")
     ] = None,
@@ -190,7 +191,7 @@ def eval_cmd(
     ] = None,
     paper: Annotated[bool, typer.Option("--paper", help="Show the paper's reported values beside ours")] = False,
     max_assoc_dt: Annotated[
-        float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose [s]")
+        float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose (s)")
     ] = 0.05,
 ) -> None:
     """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE.

@@ -4,6 +4,7 @@
     fgloc eval EKF.tum SMOOTHER.tum GT.tum --plots DIR      # several estimates, one reference (last)
     fgloc eval --relations FILE TRAJ.tum                    # Kuemmerle et al. relations metric
     fgloc eval --reference REF.tum TRAJ.tum                 # relations built from a reference trajectory
+    fgloc eval EST.tum GT.tum --t-offset -1000.0            # estimate stamps shifted before association
 """
 
 from __future__ import annotations
@@ -189,6 +190,9 @@ def eval_cmd(
     map_yaml: Annotated[
         Path | None, typer.Option("--map", help="map_server YAML drawn under the path plot")
     ] = None,
+    t_offset: Annotated[
+        float, typer.Option("--t-offset", help="Add this to the estimates' stamps before association (s)")
+    ] = 0.0,
     paper: Annotated[bool, typer.Option("--paper", help="Show the paper's reported values beside ours")] = False,
     max_assoc_dt: Annotated[
         float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose (s)")
@@ -211,10 +215,13 @@ def eval_cmd(
 
     from fgloc.eval.metrics import AssociationError, evaluate
     from fgloc.io.tum import read_tum
+    from fgloc.types import Trajectory
 
     gt_path, est_paths = files[-1], files[:-1]
     gt = read_tum(gt_path)
     ests = {lab: read_tum(p) for lab, p in zip(_labels(est_paths), est_paths, strict=True)}
+    if t_offset:
+        ests = {lab: Trajectory(tr.stamps + t_offset, tr.poses, tr.frame_id) for lab, tr in ests.items()}
     results = {}
     for (lab, est), p in zip(ests.items(), est_paths, strict=True):
         try:

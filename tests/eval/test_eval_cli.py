@@ -92,6 +92,15 @@ def test_eval_no_overlap_is_one_line_error(files, capsys):
     assert "\n" not in err and "late.tum" in err and "do not overlap" in err
 
 
+def test_eval_time_offset(files, capsys):
+    gt = rectangle(width=6.0, height=4.0)
+    write_tum(files / "late.tum", Trajectory(gt.stamps + 1000.0, gt.poses))
+    assert main(["eval", str(files / "late.tum"), str(files / "gt.tum"), "--t-offset", "-1000", "--json"]) == 0
+    m = json.loads(capsys.readouterr().out)["metrics"]
+    assert m["position_rmse_m"] == pytest.approx(0.0, abs=1e-6)
+    assert m["n"] >= len(gt) - 1
+
+
 def test_eval_too_few_poses(files, capsys):
     write_tum(files / "one.tum", Trajectory([1.0], [[0.0, 0.0, 0.0]]))
     assert main(["eval", str(files / "one.tum"), str(files / "gt.tum")]) == 2

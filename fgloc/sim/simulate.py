@@ -1,0 +1,355 @@
+"""The simulator: a robot driven along a route in a continuous world, with the paper's sensors.
+
+Sensors (defaults follow the paper's Table 2; every number is in the scenario):
+
+* wheel encoders: 500 pulses/rev read in quadrature (2000 counts/rev) on every
+  wheel, each wheel's effective radius off by a seeded ``wheel_radius_error``
+  (relative, 1 sigma); counts are latched at ``odom.rate_hz`` and turned into a body
+  twist by forward kinematics with the nominal radius, published on ``/odom`` with
+  the dead-reckoned odom-frame pose, as a ROS odometry node does;
+* compass: heading as an integer number of 0.1 deg (int16, 0..3599, counter-clockwise,
+  REP 103), ``heading = map yaw + offset + noise``, the offset a fixed angle between
+  compass north and the map x axis; a gyro yaw rate with bias and noise; ``/imu``;
+* laser: 270 deg, 0.5 deg steps (541 beams), 0.5-50 m, Gaussian range noise of
+  ``range_sigma_m`` (4 mm: the datasheet's +-8 mm read as 2 sigma; 5 mm beyond 30 m),
+  angular noise ``angle_sigma_deg``, 25 Hz with a period jitter uniform in +-5 %,
+  beam ``i`` measured at ``stamp + i * time_increment`` while the robot moves (motion
+  distortion, as a real scanner), REP 117: no return -> +inf, closer than range_min
+  -> -inf; mounted off the robot's centre (``/tf_static`` base_link -> laser);
+* every sensor has its own clock phase (unsynchronized).
+
+Faults: wheel slip (the wheels turn ``fraction`` faster than the ground moves),
+compass disturbance (an added heading offset), laser blackout (no scans), kidnapping
+(a jump of the true pose that odometry does not see), unmapped moving obstacles
+(circles the laser sees but the map does not have).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import compose, interpolate_poses, inverse, wrap_angle
+from fgloc.kinematics import QuadratureEncoder, make_kinematics
+from fgloc.maps import FREE, OCCUPIED, OccupancyMap, load_map
+from fgloc.sim.motion import Plan, plan_route
+from fgloc.sim.world import PAPER_ROUTE, World, paper_hall
+from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
+
+FloatArray = NDArray[np.float64]
+
+DEFAULT_SCENARIO: dict[str, Any] = {
+    "name": "paper",
+    "map": "hall",
+    "map_resolution_m": 0.05,
+    "route": PAPER_ROUTE.tolist(),
+    "loops": 1,
+    "drive": "mecanum",
+    "speed_mps": 0.8,
+    "accel_mps2": 0.5,
+    "yaw_rate_radps": 0.8,
+    "yaw_accel_radps2": 1.5,
+    "robot": {"wheel_radius_m": 0.076, "half_wheelbase_m": 0.25, "half_track_m": 0.28},
+    "odom": {"rate_hz": 50.0, "pulses_per_rev": 500, "wheel_radius_error": 0.001, "twist_sigma": [0.01, 0.01, 0.03]},
+    "compass": {"rate_hz": 20.0, "offset_deg": None, "sigma_deg": 0.2, "gyro_sigma_radps": 0.005,
+                "gyro_bias_radps": 0.002},
+    "laser": {"mount": [0.25, 0.03, 0.0], "rate_hz": 25.0, "jitter": 0.05, "fov_deg": 270.0, "step_deg": 0.5,
+              "range_min_m": 0.5, "range_max_m": 50.0, "range_sigma_m": 0.004, "range_sigma_far_m": 0.005,
+              "angle_sigma_deg": 0.02},
+    "ground_truth_rate_hz": 100.0,
+    "faults": {},
+}
+
+
+@dataclass
+class SimResult:
+    """A simulated run: the map, the time-ordered messages, the truth and the parameters used."""
+
+    map: OccupancyMap
+    messages: list[tuple[str, object]]
+    ground_truth: Trajectory
+    laser_mount: StaticTransform
+    compass_offset_rad: float
+    robot: dict
+    scenario: dict = field(default_factory=dict)
+
+    def topic(self, name: str) -> list:
+        """All messages of one topic, in time order."""
+        return [m for t, m in self.messages if t == name]
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def load_scenario(path_or_dict: str | Path | dict) -> dict:
+    """A scenario dict merged over the defaults; relative map paths resolve against the YAML's folder."""
+    if isinstance(path_or_dict, dict):
+        return _merge(DEFAULT_SCENARIO, path_or_dict)
+    path = Path(path_or_dict)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: scenario file not found") from None
+    except yaml.YAMLError:
+        raise ConfigError(f"{path}: scenario YAML does not parse") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: scenario must be a YAML mapping")
+    m = data.get("map", "hall")
+    if isinstance(m, str) and m != "hall" and not Path(m).is_absolute():
+        cand = [path.parent / m, Path.cwd() / m]
+        data["map"] = str(next((c for c in cand if c.exists()), cand[0]))
+    return _merge(DEFAULT_SCENARIO, data)
+
+
+# ------------------------------------------------------------------- worlds
+class GridWorld:
+    """A world made from a map_server map: every cell that is not free is solid."""
+
+    def __init__(self, occ: OccupancyMap):
+        solid = ~occ.free
+        self.solid_map = OccupancyMap(np.where(solid, OCCUPIED, FREE).astype(np.int16), occ.resolution, occ.origin)
+        self.circles = np.zeros((0, 3))
+
+    def raycast(self, origins: FloatArray, angles: FloatArray, max_range: float,
+                extra_circles: FloatArray | None = None) -> FloatArray:
+        r = self.solid_map.raycast(origins, angles, max_range)
+        if extra_circles is not None and len(extra_circles):
+            from fgloc.sim.world import raycast_geometry
+
+            r = np.minimum(r, raycast_geometry(origins, angles, np.zeros((0, 4)), extra_circles, max_range))
+        return r
+
+
+def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
+    if sc["map"] == "hall":
+        w = paper_hall()
+        return w, w.rasterize(float(sc.get("map_resolution_m", 0.05)))
+    occ = load_map(sc["map"])
+    gw = GridWorld(occ)
+    # The robot's map: free cells stay free, solid cells bordering free space are walls.
+    from scipy.ndimage import binary_dilation
+
+    border = binary_dilation(occ.free, iterations=1) & ~occ.free
+    data = np.full(occ.data.shape, -1, dtype=np.int16)
+    data[occ.free] = FREE
+    data[border | occ.occupied] = OCCUPIED
+    return gw, OccupancyMap(data, occ.resolution, occ.origin)
+
+
+# -------------------------------------------------------------------- motion
+def _true_motion(sc: dict) -> Plan:
+    route = np.asarray(sc["route"], dtype=float)
+    loops = int(sc.get("loops", 1))
+    if loops > 1:
+        route = np.vstack([route] + [route[1:]] * (loops - 1))
+    plan = plan_route(route, float(sc["speed_mps"]), float(sc["accel_mps2"]), float(sc["yaw_rate_radps"]),
+                      float(sc["yaw_accel_radps2"]), initial_yaw=sc.get("initial_yaw"))
+    kid = sc.get("faults", {}).get("kidnap")
+    if kid:
+        tk = float(kid["time"])
+        after = plan.t >= tk
+        if "skip_s" in kid:  # jump ahead along the route: truth(t) = plan(t + skip)
+            skip = float(kid["skip_s"])
+            src_t = np.where(after, plan.t + skip, plan.t)
+            keep = src_t <= plan.t[-1]
+            idx = np.clip(np.searchsorted(plan.t, src_t[keep]), 0, len(plan.t) - 1)
+            plan = Plan(plan.t[keep], plan.poses[idx], plan.twist[idx])
+        else:  # teleport to a pose and keep driving the same body motion from there
+            to = np.asarray(kid["to"], dtype=float)
+            k = int(np.searchsorted(plan.t, tk))
+            T = compose(to, inverse(plan.poses[k]))
+            poses = plan.poses.copy()
+            poses[after] = compose(T, plan.poses[after])
+            plan = Plan(plan.t, poses, plan.twist)
+    return plan
+
+
+def _in_window(t: FloatArray, w: dict | None) -> NDArray[np.bool_]:
+    if not w:
+        return np.zeros(np.shape(t), dtype=bool)
+    s = float(w["start"])
+    return (t >= s) & (t < s + float(w["duration"]))
+
+
+# ------------------------------------------------------------------- sensors
+def _odometry(sc: dict, plan: Plan, rng: np.random.Generator) -> list[tuple[str, object]]:
+    kin = make_kinematics({"drive": sc["drive"], **sc["robot"]})
+    enc = QuadratureEncoder(int(sc["odom"]["pulses_per_rev"]))
+    wheel = kin.inverse(plan.twist)  # rad/s with the nominal radius
+    slip = sc.get("faults", {}).get("wheel_slip")
+    if slip:
+        wheel = wheel * np.where(_in_window(plan.t, slip), 1.0 + float(slip["fraction"]), 1.0)[:, None]
+    # the true radius differs from the nominal one: the wheel turns r_nom/r_true times as fast
+    rad_err = 1.0 + rng.normal(0.0, float(sc["odom"]["wheel_radius_error"]), kin.n_wheels)
+    wheel = wheel / rad_err[None, :]
+    dt = np.diff(plan.t, prepend=plan.t[0])
+    angle = np.cumsum(wheel * dt[:, None], axis=0)
+    rate = float(sc["odom"]["rate_hz"])
+    t_odom = plan.t[0] + rng.uniform(0, 1 / rate) + np.arange(0, plan.t[-1] - plan.t[0], 1 / rate)
+    t_odom = t_odom[t_odom <= plan.t[-1]]
+    ang = np.column_stack([np.interp(t_odom, plan.t, angle[:, i]) for i in range(kin.n_wheels)])
+    counts = enc.angle_to_counts(ang)
+    sig = np.asarray(sc["odom"]["twist_sigma"], dtype=float)
+    cov = np.diag(sig**2)
+    out: list[tuple[str, object]] = []
+    pose = np.zeros(3)
+    for k in range(1, len(t_odom)):
+        dtk = t_odom[k] - t_odom[k - 1]
+        tw = kin.forward(enc.counts_to_angle(counts[k] - counts[k - 1]) / dtk)
+        # midpoint integration of the odom-frame pose
+        th = pose[2] + 0.5 * tw[2] * dtk
+        pose = np.array([pose[0] + (tw[0] * np.cos(th) - tw[1] * np.sin(th)) * dtk,
+                         pose[1] + (tw[0] * np.sin(th) + tw[1] * np.cos(th)) * dtk,
+                         float(wrap_angle(pose[2] + tw[2] * dtk))])
+        out.append(("/odom", Odometry(float(t_odom[k]), tw, cov.copy(), pose.copy())))
+    return out
+
+
+def _compass(sc: dict, plan: Plan, offset: float, rng: np.random.Generator) -> list[tuple[str, object]]:
+    c = sc["compass"]
+    rate = float(c["rate_hz"])
+    t = plan.t[0] + rng.uniform(0, 1 / rate) + np.arange(0, plan.t[-1] - plan.t[0], 1 / rate)
+    yaw_true = interpolate_poses(plan.t, plan.poses, t)[:, 2]
+    heading = yaw_true + offset + rng.normal(0, np.deg2rad(float(c["sigma_deg"])), len(t))
+    dist = sc.get("faults", {}).get("compass_disturbance")
+    if dist:
+        heading = heading + np.where(_in_window(t, dist), np.deg2rad(float(dist["offset_deg"])), 0.0)
+    deci = np.round(np.rad2deg(np.mod(heading, 2 * np.pi)) * 10).astype(np.int64) % 3600  # int16 on the wire
+    yaw_meas = wrap_angle(np.deg2rad(deci.astype(np.int16) / 10.0))
+    wz = np.interp(t, plan.t, plan.twist[:, 2])
+    rate_meas = wz + float(c["gyro_bias_radps"]) + rng.normal(0, float(c["gyro_sigma_radps"]), len(t))
+    yaw_var = np.deg2rad(max(float(c["sigma_deg"]), 0.05)) ** 2 + np.deg2rad(0.1) ** 2 / 12
+    return [("/imu", CompassHeading(float(t[k]), float(yaw_meas[k]), float(rate_meas[k]), float(yaw_var),
+                                    float(c["gyro_sigma_radps"]) ** 2)) for k in range(len(t))]
+
+
+def _moving_obstacles(sc: dict, t: float) -> FloatArray:
+    obs = sc.get("faults", {}).get("moving_obstacles") or []
+    out = []
+    for o in obs:
+        a = np.asarray(o["path"][0], dtype=float)
+        b = np.asarray(o["path"][1], dtype=float)
+        length = float(np.hypot(*(b - a)))
+        s = (float(o.get("speed_mps", 0.5)) * max(t - float(o.get("start", 0.0)), 0.0)) % (2 * length)
+        s = s if s <= length else 2 * length - s
+        p = a + (b - a) * (s / max(length, 1e-9))
+        out.append([p[0], p[1], float(o.get("radius_m", 0.3))])
+    return np.asarray(out, dtype=float).reshape(-1, 3)
+
+
+def _laser(sc: dict, plan: Plan, world: Any, rng: np.random.Generator) -> list[tuple[str, object]]:
+    L = sc["laser"]
+    mount = np.asarray(L["mount"], dtype=float)
+    rate = float(L["rate_hz"])
+    n = int(round(float(L["fov_deg"]) / float(L["step_deg"]))) + 1
+    inc = np.deg2rad(float(L["step_deg"]))
+    amin = -np.deg2rad(float(L["fov_deg"])) / 2
+    beam_angles = amin + inc * np.arange(n)
+    rmin, rmax = float(L["range_min_m"]), float(L["range_max_m"])
+    blackout = sc.get("faults", {}).get("laser_blackout")
+    out: list[tuple[str, object]] = []
+    t = plan.t[0] + rng.uniform(0, 1 / rate)
+    while True:
+        period = (1.0 / rate) * (1.0 + rng.uniform(-float(L["jitter"]), float(L["jitter"])))
+        tinc = period / (360.0 / float(L["step_deg"]))  # the mirror turns 360 deg per period
+        tb = t + tinc * np.arange(n)
+        if tb[-1] > plan.t[-1]:
+            break
+        if not (blackout and _in_window(np.array([t]), blackout)[0]):
+            base = interpolate_poses(plan.t, plan.poses, tb)
+            lp = compose(base, mount)
+            ang = lp[:, 2] + beam_angles + rng.normal(0, np.deg2rad(float(L["angle_sigma_deg"])), n)
+            r = world.raycast(lp[:, :2], ang, rmax + 0.1, extra_circles=_moving_obstacles(sc, t))
+            sig = np.where(r < 30.0, float(L["range_sigma_m"]), float(L["range_sigma_far_m"]))
+            with np.errstate(invalid="ignore"):
+                r = r + rng.normal(0, 1, n) * sig
+            r = np.where(r > rmax, np.inf, r)
+            r = np.where(r < rmin, -np.inf, r)
+            out.append(("/scan", LaserScan(float(t), float(amin), float(inc), rmin, rmax, r.astype(np.float32),
+                                           time_increment=float(tinc), scan_time=float(period))))
+        t += period
+    return out
+
+
+# --------------------------------------------------------------------- API
+def run_scenario(path_or_dict: str | Path | dict, seed: int = 0, progress: bool = False) -> SimResult:
+    """Simulate a scenario (YAML path or dict over :data:`DEFAULT_SCENARIO`), deterministic per seed."""
+    sc = load_scenario(path_or_dict)
+    rng = np.random.default_rng(seed)
+    rngs = rng.spawn(4)
+    world, occ = _build_world(sc)
+    plan = _true_motion(sc)
+    if sc["map"] == "hall" and not world.is_free(plan.poses[:, :2], clearance=0.3).all():
+        raise ConfigError("scenario route runs into an obstacle")
+    off_deg = sc["compass"].get("offset_deg")
+    offset = float(np.deg2rad(off_deg)) if off_deg is not None else float(
+        np.deg2rad(rngs[0].uniform(5.0, 25.0) * rngs[0].choice([-1.0, 1.0])))
+    mount = StaticTransform("base_link", "laser", np.asarray(sc["laser"]["mount"], dtype=float), z=0.2)
+    msgs: list[tuple[str, object]] = [("/tf_static", [mount])]
+    msgs += _odometry(sc, plan, rngs[1])
+    msgs += _compass(sc, plan, offset, rngs[2])
+    msgs += _laser(sc, plan, world, rngs[3])
+    gt_rate = float(sc["ground_truth_rate_hz"])
+    t_gt = np.arange(plan.t[0], plan.t[-1], 1.0 / gt_rate)
+    gt_poses = interpolate_poses(plan.t, plan.poses, t_gt)
+    gt_twist = np.column_stack([np.interp(t_gt, plan.t, plan.twist[:, i]) for i in range(3)])
+    for k in range(len(t_gt)):
+        msgs.append(("/ground_truth", Odometry(float(t_gt[k]), gt_twist[k], None, gt_poses[k], frame_id="map")))
+    first = msgs[0]
+    rest = sorted(msgs[1:], key=lambda m: m[1].stamp)  # type: ignore[attr-defined]
+    robot = {"drive": sc["drive"], **sc["robot"], "pulses_per_rev": sc["odom"]["pulses_per_rev"]}
+    return SimResult(occ, [first] + rest, Trajectory(t_gt, gt_poses), mount, offset, robot, sc)
+
+
+def simulate_paper(seed: int = 0, **overrides: Any) -> SimResult:
+    """The paper's experiment: a mecanum robot at 0.8 m/s once around a 78 m rectangle in a hall."""
+    return run_scenario(dict(overrides), seed=seed)
+
+
+def write_sim(result: SimResult, outdir: str | Path) -> Path:
+    """Write ``log.mcap``, ``map.yaml`` + ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` into outdir."""
+    from fgloc.io.log import LogWriter
+    from fgloc.io.tum import write_tum
+
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    with LogWriter(out / "log.mcap") as w:
+        for i, (topic, msg) in enumerate(result.messages):
+            w.write(topic, msg, stamp=0.0 if i == 0 and topic == "/tf_static" else None)
+    result.map.save(out / "map.yaml")
+    write_tum(out / "ground_truth.tum", result.ground_truth)
+    info = dict(result.scenario)
+    info["effective"] = {
+        "compass_offset_deg": float(np.rad2deg(result.compass_offset_rad)),
+        "laser_mount": [float(v) for v in result.laser_mount.pose],
+        "duration_s": float(result.ground_truth.duration),
+        "path_length_m": float(result.ground_truth.path_length()),
+    }
+    (out / "scenario.yaml").write_text(yaml.safe_dump(_plain(info), sort_keys=False))
+    return out
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return x

@@ -19,7 +19,9 @@ from fgloc.geometry import wrap_angle
 FloatArray = NDArray[np.float64]
 
 
-def trapezoid(distance: float, vmax: float, amax: float, t: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+def trapezoid(
+    distance: float, vmax: float, amax: float, t: NDArray[np.floating]
+) -> tuple[FloatArray, FloatArray, float]:
     """Position and speed along a rest-to-rest trapezoidal (or triangular) profile; returns (s, v, duration)."""
     distance = abs(distance)
     if distance <= 0:

@@ -40,7 +40,7 @@ from fgloc.geometry import compose, interpolate_poses, inverse, wrap_angle
 from fgloc.kinematics import QuadratureEncoder, make_kinematics
 from fgloc.maps import FREE, OCCUPIED, OccupancyMap, load_map
 from fgloc.sim.motion import Plan, plan_route
-from fgloc.sim.world import PAPER_ROUTE, World, paper_hall
+from fgloc.sim.world import PAPER_ROUTE, paper_hall
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
 
 FloatArray = NDArray[np.float64]
@@ -229,7 +229,7 @@ def _compass(sc: dict, plan: Plan, offset: float, rng: np.random.Generator) -> l
     if dist:
         heading = heading + np.where(_in_window(t, dist), np.deg2rad(float(dist["offset_deg"])), 0.0)
     deci = np.round(np.rad2deg(np.mod(heading, 2 * np.pi)) * 10).astype(np.int64) % 3600  # int16 on the wire
-    yaw_meas = wrap_angle(np.deg2rad(deci.astype(np.int16) / 10.0))
+    yaw_meas = np.asarray(wrap_angle(np.deg2rad(deci.astype(np.int16) / 10.0)))
     wz = np.interp(t, plan.t, plan.twist[:, 2])
     rate_meas = wz + float(c["gyro_bias_radps"]) + rng.normal(0, float(c["gyro_sigma_radps"]), len(t))
     yaw_var = np.deg2rad(max(float(c["sigma_deg"]), 0.05)) ** 2 + np.deg2rad(0.1) ** 2 / 12

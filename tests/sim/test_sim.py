@@ -1,0 +1,196 @@
+"""The simulator's Must-show properties, measured on the paper run (seed 0)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fgloc.geometry import compose, wrap_angle
+from fgloc.sim import run_scenario, simulate_paper
+
+SCEN = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+
+
+def dead_reckon(odom, start_pose, t_end):
+    p = np.array(start_pose, dtype=float)
+    out = []
+    for a, b in zip(odom[:-1], odom[1:], strict=True):
+        if b.stamp > t_end:
+            break
+        dt = b.stamp - a.stamp
+        vx, vy, wz = b.twist
+        th = p[2] + 0.5 * wz * dt
+        p = p + [(vx * np.cos(th) - vy * np.sin(th)) * dt, (vx * np.sin(th) + vy * np.cos(th)) * dt, wz * dt]
+        out.append((b.stamp, p.copy()))
+    return out
+
+
+def test_paper_run_shape(paper_sim):
+    gt = paper_sim.ground_truth
+    assert gt.path_length() == pytest.approx(78.0, abs=0.05)
+    assert 100 < gt.duration < 125
+    speed = np.hypot(*np.diff(gt.poses[:, :2], axis=0).T) / np.diff(gt.stamps)
+    assert speed.max() == pytest.approx(0.8, abs=0.01)
+    scans = paper_sim.topic("/scan")
+    assert len(scans[0].ranges) == 541
+    assert np.rad2deg(scans[0].angle_max if hasattr(scans[0], "angle_max") else
+                      scans[0].angle_min + 540 * scans[0].angle_increment) == pytest.approx(135.0)
+    periods = np.diff([s.stamp for s in scans])
+    assert 0.0375 < periods.min() and periods.max() < 0.0425  # 25 Hz +- 5 %
+    assert periods.std() > 0.0005  # jitter present
+    stamps = [m.stamp for _, m in paper_sim.messages[1:]]
+    assert np.all(np.diff(stamps) >= 0)
+
+
+def test_dead_reckoning_first_10s_within_5cm(paper_sim):
+    odom = paper_sim.topic("/odom")
+    gt = paper_sim.ground_truth
+    start = gt.interpolate(odom[0].stamp)[0]
+    track = dead_reckon(odom, start, odom[0].stamp + 10.0)
+    err = max(np.hypot(*(p[:2] - gt.interpolate(t)[0, :2])) for t, p in track)
+    assert err < 0.05
+    # and the robot really moved: 10 s includes acceleration to 0.8 m/s
+    assert np.hypot(*(track[-1][1][:2] - start[:2])) > 5.0
+
+
+def test_scans_land_on_occupied_cells(paper_sim):
+    m, gt, mount = paper_sim.map, paper_sim.ground_truth, paper_sim.laser_mount.pose
+    dists = []
+    for s in paper_sim.topic("/scan")[::25]:
+        n = len(s.ranges)
+        lp = compose(gt.interpolate(s.stamp + s.time_increment * np.arange(n)), mount)  # per-beam motion
+        ok = np.isfinite(s.ranges)
+        a = lp[:, 2] + s.angles
+        pts = (lp[:, :2] + s.ranges[:, None] * np.column_stack([np.cos(a), np.sin(a)]))[ok]
+        rc = m.world_to_grid(pts)
+        inside = m.occupied[rc[:, 0], rc[:, 1]]
+        d = np.maximum(m.distance_at(pts) - m.resolution / 2, 0.0)  # to the cell's edge, 0 inside
+        d[inside] = 0.0
+        dists.append(d)
+    d = np.concatenate(dists)
+    assert np.median(d) < 0.02
+    assert np.percentile(d, 95) < 0.05
+
+
+def test_compass_is_map_yaw_plus_offset(paper_sim):
+    gt = paper_sim.ground_truth
+    imu = paper_sim.topic("/imu")
+    t = np.array([m.stamp for m in imu])
+    yaw = np.array([m.yaw_rad for m in imu])
+    err = wrap_angle(yaw - gt.interpolate(t)[:, 2] - paper_sim.compass_offset_rad)
+    assert np.rad2deg(np.sqrt(np.mean(err**2))) < 0.4
+    assert 5.0 <= abs(np.rad2deg(paper_sim.compass_offset_rad)) <= 25.0
+    # 0.1 deg integer steps on the wire
+    deci = np.rad2deg(np.mod(yaw, 2 * np.pi)) * 10
+    assert np.allclose(deci, np.round(deci), atol=1e-6)
+
+
+def test_rep117_infinities(paper_sim):
+    r = np.concatenate([s.ranges for s in paper_sim.topic("/scan")[::50]])
+    finite = r[np.isfinite(r)]
+    assert finite.min() >= 0.5 and finite.max() <= 50.0
+    # the hall is closed: all beams return, no +inf on the paper run; a too-close obstacle gives -inf
+    res = simulate_paper(seed=0, route=[[1.0, 10.0], [1.0, 12.0]], loops=1)
+    rr = np.concatenate([s.ranges for s in res.topic("/scan")])
+    assert np.isneginf(rr).any()
+
+
+def test_deterministic_per_seed():
+    a = simulate_paper(seed=3, route=[[3.0, 3.0], [6.0, 3.0]])
+    b = simulate_paper(seed=3, route=[[3.0, 3.0], [6.0, 3.0]])
+    c = simulate_paper(seed=4, route=[[3.0, 3.0], [6.0, 3.0]])
+    sa, sb, sc = (x.topic("/scan")[5].ranges for x in (a, b, c))
+    assert np.array_equal(sa, sb)
+    assert not np.array_equal(sa, sc)
+    assert a.compass_offset_rad == b.compass_offset_rad != c.compass_offset_rad
+
+
+LEG = [[2.5, 3.0], [27.5, 3.0]]  # one 25 m leg (~34 s) keeps the fault tests quick
+
+
+def test_shipped_scenarios_load():
+    from fgloc.sim import load_scenario
+
+    names = {p.stem for p in SCEN.glob("*.yaml")}
+    assert {"paper", "compass_disturbance", "wheel_slip", "kidnap", "willow", "obstacles", "blackout"} <= names
+    for p in SCEN.glob("*.yaml"):
+        sc = load_scenario(p)
+        assert sc["route"] and sc["laser"]["rate_hz"] == 25.0
+    assert load_scenario(SCEN / "wheel_slip.yaml")["faults"]["wheel_slip"]["fraction"] == 0.3
+    assert load_scenario(SCEN / "compass_disturbance.yaml")["faults"]["compass_disturbance"]["offset_deg"] == 25.0
+
+
+def test_willow_scenario_runs_in_the_real_map(shared_data):
+    r = run_scenario(SCEN / "willow.yaml", seed=0)
+    assert r.map.resolution == pytest.approx(0.1)
+    assert r.ground_truth.path_length() > 50
+    s = r.topic("/scan")[100]
+    assert np.isfinite(s.ranges).mean() > 0.5
+
+
+def test_fault_wheel_slip_only_inside_window():
+    r = run_scenario({"route": LEG, "faults": {"wheel_slip": {"start": 12.0, "duration": 3.0, "fraction": 0.3}}})
+    gt = r.ground_truth
+    odom = r.topic("/odom")
+    t = np.array([o.stamp for o in odom])
+    v_odom = np.array([o.twist[0] for o in odom])
+    v_true = np.interp(t, gt.stamps, np.r_[0, np.hypot(*np.diff(gt.poses[:, :2], axis=0).T) / np.diff(gt.stamps)])
+    inside = (t > 12.2) & (t < 14.8) & (v_true > 0.5)
+    outside = (t > 16) & (t < 30) & (v_true > 0.5)
+    assert np.median(v_odom[inside] / v_true[inside]) == pytest.approx(1.3, abs=0.02)
+    assert np.median(v_odom[outside] / v_true[outside]) == pytest.approx(1.0, abs=0.01)
+
+
+def test_fault_compass_blackout_kidnap():
+    r = run_scenario({"route": LEG, "faults": {"compass_disturbance": {"start": 10.0, "duration": 5.0,
+                                                                       "offset_deg": 25.0}}})
+    imu = r.topic("/imu")
+    t = np.array([m.stamp for m in imu])
+    err = np.rad2deg(wrap_angle(np.array([m.yaw_rad for m in imu]) - r.ground_truth.interpolate(t)[:, 2]
+                                - r.compass_offset_rad))
+    assert np.median(err[(t > 10.2) & (t < 14.8)]) == pytest.approx(25.0, abs=0.5)
+    assert abs(np.median(err[(t > 16) & (t < 30)])) < 0.2
+
+    r = run_scenario({"route": LEG, "faults": {"laser_blackout": {"start": 15.0, "duration": 4.0}}})
+    ts = np.array([s.stamp for s in r.topic("/scan")])
+    assert not np.any((ts >= 15.0) & (ts < 19.0))
+    assert np.any((ts > 10) & (ts < 15)) and np.any((ts > 19) & (ts < 24))
+
+    r = run_scenario({"route": LEG + [[27.5, 17.0]], "faults": {"kidnap": {"time": 20.0, "skip_s": 8.0}}})
+    gt = r.ground_truth
+    jumps = np.hypot(*np.diff(gt.poses[:, :2], axis=0).T)
+    k = int(np.argmax(jumps))
+    assert jumps[k] > 5.0 and gt.stamps[k] == pytest.approx(20.0, abs=0.02)
+    odom = r.topic("/odom")
+    op = np.array([o.pose[:2] for o in odom])
+    assert np.hypot(*np.diff(op, axis=0).T).max() < 0.05  # odometry never jumps
+
+
+def test_moving_obstacles_seen_by_laser_not_in_map():
+    base = simulate_paper(seed=0, route=LEG)
+    obs = run_scenario({"route": LEG, "faults": {"moving_obstacles": [
+        {"path": [[14.0, 1.5], [14.0, 18.5]], "speed_mps": 0.9, "radius_m": 0.3}]}}, seed=0)
+    assert np.array_equal(base.map.data, obs.map.data)
+    short = 0
+    for a, b in zip(base.topic("/scan")[::10], obs.topic("/scan")[::10], strict=True):
+        ok = np.isfinite(a.ranges) & np.isfinite(b.ranges)
+        short += int(np.sum(b.ranges[ok] < a.ranges[ok] - 0.3))
+    assert short > 50
+
+
+def test_simulate_cli_writes_files(tmp_path, capsys):
+    from fgloc.cli import main
+    from fgloc.io.log import LogReader
+    from fgloc.io.tum import read_tum
+    from fgloc.maps import load_map
+
+    scen = tmp_path / "short.yaml"
+    scen.write_text("route: [[3.0, 3.0], [8.0, 3.0]]\n")
+    assert main(["simulate", "scenario", str(scen), "-o", str(tmp_path / "out"), "--seed", "2"]) == 0
+    out = tmp_path / "out"
+    assert load_map(out / "map.yaml").occupied.sum() > 1000
+    gt = read_tum(out / "ground_truth.tum")
+    assert gt.path_length() == pytest.approx(5.0, abs=0.01)
+    counts = LogReader(out / "log.mcap").summary()
+    assert "/scan" in str(counts) and "/ground_truth" in str(counts)
+    assert "compass offset" in capsys.readouterr().out

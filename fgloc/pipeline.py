@@ -91,7 +91,7 @@ DEFAULT_PIPELINE: dict[str, Any] = {
     "amcl_max_sigma_yaw_deg": 5.0,
     "global_search": {},             # GlobalSearch keyword arguments
     "global_compass_tolerance_deg": 30.0,  # candidates further from the compass heading are dropped
-    "frontend_every": 1,             # match every n-th scan (others: keyframe only)
+    "frontend_every": 2,             # match every n-th scan (a keyframe each; others: prediction)
 }
 
 
@@ -160,7 +160,7 @@ class Localizer:
     def on_odometry(self, msg: Odometry) -> None:
         t = float(msg.stamp)
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
-        if tw.shape != (3,) or not np.all(np.isfinite(tw)):
+        if tw.shape != (3,) or not math.isfinite(float(tw[0]) + float(tw[1]) + float(tw[2])):
             self._skip("odometry: non-finite twist")
             return
         if not self._monotonic("odometry", t):
@@ -174,7 +174,7 @@ class Localizer:
         if self._first_odom_t is None:
             self._first_odom_t = t
         cov = msg.twist_cov
-        if cov is not None and not np.all(np.isfinite(np.asarray(cov, dtype=float))):
+        if cov is not None and not math.isfinite(float(np.sum(cov))):
             cov = None
         self.backend.add_odometry(t, tw, cov)
         if self.odom_mode:
@@ -203,16 +203,20 @@ class Localizer:
             self._odom_mode_step(t, scan=True)
             return None
         assert self.frontend is not None
+        matching = self.backend.initialized and not self._lost
+        if matching:
+            self._scan_count += 1
+            if self._scan_count % max(1, int(self.pcfg["frontend_every"])) != 0:
+                # not matched: no keyframe either, the online pose is the odometry prediction
+                self.backend.record_prediction(t)
+                return None
+        # odometry motion since the previous front-end call (for its de-skew / motion model)
         odom_delta = None
         if self._odom_at_last_scan is not None:
             odom_delta = between(self._odom_at_last_scan, self._odom_pose)
         self._odom_at_last_scan = self._odom_pose.copy()
-        if not self.backend.initialized or self._lost:
+        if not matching:
             return self._localize_globally(msg, odom_delta)
-        self._scan_count += 1
-        if self._scan_count % max(1, int(self.pcfg["frontend_every"])) != 0:
-            self.backend.add_keyframe(t, None)
-            return None
         guess, _ = self.backend.predict(t)
         res = self.frontend.match(msg, guess, odom_delta)
         fix = None

@@ -20,13 +20,19 @@ from fgloc.types import PoseFix, Trajectory
 FloatArray = NDArray[np.float64]
 
 
+_DEFAULT_COV: dict[tuple[float, float, float], FloatArray] = {}
+
+
 def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> FloatArray:
     """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad."""
     if cov is not None:
         c = np.asarray(cov, dtype=float).reshape(3, 3)
-        if np.all(np.isfinite(c)) and np.all(np.diag(c) > 0):
+        if c[0, 0] > 0 and c[1, 1] > 0 and c[2, 2] > 0 and np.isfinite(c.sum()):
             return c
-    return np.diag(np.square(default_sigmas))
+    d = _DEFAULT_COV.get(default_sigmas)
+    if d is None:
+        d = _DEFAULT_COV[default_sigmas] = np.diag(np.square(default_sigmas))
+    return d
 
 
 class Backend(ABC):
@@ -76,6 +82,12 @@ class Backend(ABC):
     @abstractmethod
     def finish(self) -> Trajectory:
         """The final trajectory at keyframe times (smoothed for the smoothers)."""
+
+    def record_prediction(self, t: float) -> None:
+        """Add the odometry prediction at ``t`` to the online trajectory (a scan without keyframe)."""
+        if self.initialized:
+            pose, cov = self.predict(t)
+            self._record_online(t, pose, cov)
 
     def compass_offset(self) -> float | None:
         """The compass-to-map offset (rad) once known, else None."""

@@ -91,7 +91,10 @@ class PreprocessOptions:
     ``deskew``: undo motion distortion per beam when ``time_increment > 0`` and the
     odometry motion since the last call is given.  ``min_valid_beams``: fewer -> no fix.
     ``max_deskew_interval_s``: a gap between calls longer than this disables de-skew for
-    that scan (the constant-velocity assumption would not hold).
+    that scan (the constant-velocity assumption would not hold).  ``deskew_extrapolate``:
+    the twist during the scan is extrapolated linearly from the last two odometry
+    intervals to the middle of the sweep (accounts for acceleration: the last interval
+    ends where the scan starts), instead of holding the last interval's mean twist.
     """
 
     max_beams: int = 0
@@ -99,6 +102,7 @@ class PreprocessOptions:
     deskew: bool = True
     min_valid_beams: int = 10
     max_deskew_interval_s: float = 0.5
+    deskew_extrapolate: bool = True
 
     def __post_init__(self) -> None:
         if self.max_beams < 0 or self.voxel_size_m < 0 or self.min_valid_beams < 1:
@@ -145,8 +149,13 @@ def deskew_offsets(
     measured ``i * time_increment`` after the first beam (REP 117).
     """
     twist = _se2_log(np.asarray(odom_delta, dtype=float)) / float(interval_s)
+    return deskew_offsets_twist(n_beams, time_increment, twist)
+
+
+def deskew_offsets_twist(n_beams: int, time_increment: float, twist: FloatArray) -> FloatArray:
+    """Per-beam pose relative to the first beam for a constant body ``twist`` [vx, vy, wz]."""
     tau = np.arange(n_beams, dtype=float) * float(time_increment)
-    return _se2_exp(twist, tau)
+    return _se2_exp(np.asarray(twist, dtype=float), tau)
 
 
 def voxel_downsample(points: FloatArray, voxel_size: float) -> FloatArray:
@@ -161,7 +170,8 @@ def voxel_downsample(points: FloatArray, voxel_size: float) -> FloatArray:
 class ScanPreprocessor:
     """Valid beams -> (de-skewed) points in ``base_link`` at the scan stamp.
 
-    Stateful only in the stamp of the previous call (the time base of ``odom_delta``).
+    State: the stamp of the previous call (the time base of ``odom_delta``) and the
+    previous interval's twist (for the acceleration-aware extrapolation).
     Returns ``(points, "")`` or ``(None, reason)``; never raises on a bad scan.
     """
 
@@ -175,9 +185,11 @@ class ScanPreprocessor:
         self.mount: FloatArray = mount
         self.options = options or PreprocessOptions()
         self._last_stamp: float | None = None
+        self._last_twist: tuple[float, FloatArray] | None = None  # (mid-interval time, twist)
 
     def reset(self) -> None:
         self._last_stamp = None
+        self._last_twist = None
 
     def __call__(
         self, scan: LaserScan, odom_delta: np.ndarray | None = None
@@ -212,7 +224,8 @@ class ScanPreprocessor:
         r = ranges[idx]
         ang = a0 + da * idx
         pts = transform_points(self.mount, np.column_stack([r * np.cos(ang), r * np.sin(ang)]))
-        if opt.deskew and t_inc > 0 and np.isfinite(t_inc) and odom_delta is not None:
+        prev_twist, self._last_twist = self._last_twist, None
+        if odom_delta is not None:
             od = np.asarray(odom_delta, dtype=float).reshape(-1)
             interval = (stamp - prev) if (prev is not None and np.isfinite(stamp)) else float(scan.scan_time or 0.0)
             if (
@@ -221,11 +234,19 @@ class ScanPreprocessor:
                 and np.isfinite(interval)
                 and 0 < interval <= opt.max_deskew_interval_s
             ):
-                offs = deskew_offsets(n, t_inc, od, interval)[idx]
-                c, s = np.cos(offs[:, YAW]), np.sin(offs[:, YAW])
-                pts = np.column_stack(
-                    [offs[:, 0] + c * pts[:, 0] - s * pts[:, 1], offs[:, 1] + s * pts[:, 0] + c * pts[:, 1]]
-                )
+                twist = _se2_log(od) / interval
+                mid = stamp - 0.5 * interval
+                self._last_twist = (mid, twist)
+                if opt.deskew and t_inc > 0 and np.isfinite(t_inc):
+                    if opt.deskew_extrapolate and prev_twist is not None and \
+                            0 < mid - prev_twist[0] <= opt.max_deskew_interval_s:
+                        slope = (twist - prev_twist[1]) / (mid - prev_twist[0])
+                        twist = twist + slope * (stamp + 0.5 * (n - 1) * t_inc - mid)
+                    offs = deskew_offsets_twist(n, t_inc, twist)[idx]
+                    c, s = np.cos(offs[:, YAW]), np.sin(offs[:, YAW])
+                    pts = np.column_stack(
+                        [offs[:, 0] + c * pts[:, 0] - s * pts[:, 1], offs[:, 1] + s * pts[:, 0] + c * pts[:, 1]]
+                    )
         if opt.voxel_size_m > 0:
             pts = voxel_downsample(pts, opt.voxel_size_m)
             if len(pts) < opt.min_valid_beams:
@@ -301,7 +322,7 @@ def unpack_config(section: str, config: dict | None, allowed: set[str]) -> dict[
 
 def preprocess_from_config(section: str, cfg: dict | None) -> PreprocessOptions:
     """Build :class:`PreprocessOptions` from a ``preprocess:`` sub-dict."""
-    allowed = {"max_beams", "voxel_size_m", "deskew", "min_valid_beams", "max_deskew_interval_s"}
+    allowed = {"max_beams", "voxel_size_m", "deskew", "min_valid_beams", "max_deskew_interval_s", "deskew_extrapolate"}
     c = unpack_config(f"{section}.preprocess", cfg, allowed)
     try:
         return PreprocessOptions(
@@ -310,6 +331,7 @@ def preprocess_from_config(section: str, cfg: dict | None) -> PreprocessOptions:
             deskew=bool(c.get("deskew", True)),
             min_valid_beams=int(c.get("min_valid_beams", 10)),
             max_deskew_interval_s=float(c.get("max_deskew_interval_s", 0.5)),
+            deskew_extrapolate=bool(c.get("deskew_extrapolate", True)),
         )
     except (TypeError, ValueError) as e:
         raise ConfigError(f"frontends config [{section}.preprocess]: bad value ({e})") from None

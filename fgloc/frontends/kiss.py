@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, wrap_angle
+from fgloc.geometry import YAW, compose, wrap_angle
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -110,6 +110,7 @@ class KissMatcher(FrontendBase):
         "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m", "max_iterations",
         "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers", "min_inlier_fraction",
         "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "max_backface_fraction",
+        "retry_inlier_fraction", "retry_offset_m", "retry_offset_deg",
     }
 
     def __init__(
@@ -138,9 +139,12 @@ class KissMatcher(FrontendBase):
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,
-        cov_inflation: float = 1.0,
-        cov_floor: tuple[float, float, float] = (1e-5, 1e-5, 3e-6),
+        cov_inflation: tuple[float, float] = (5.5, 45.0),
+        cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
         max_backface_fraction: float = 0.1,
+        retry_inlier_fraction: float = 0.9,
+        retry_offset_m: float = 0.15,
+        retry_offset_deg: float = 5.0,
     ):
         super().__init__(occ_map, laser_mount, preprocess)
         try:
@@ -167,6 +171,10 @@ class KissMatcher(FrontendBase):
             (float(voxel_size_m), big, int(max_points_per_voxel)),
         )
         self.max_backface_fraction = float(max_backface_fraction)
+        self.retry_fraction = float(retry_inlier_fraction)
+        dm, da = float(retry_offset_m), math.radians(float(retry_offset_deg))
+        self.retry_offsets = [np.array(v) for v in (
+            (0.0, 0.0, da), (0.0, 0.0, -da), (dm, 0.0, 0.0), (-dm, 0.0, 0.0), (0.0, dm, 0.0), (0.0, -dm, 0.0))]
         self.registration = Registration(int(max_iterations), float(convergence_criterion), int(max_threads))
         self.coarse_registration = Registration(int(coarse_max_iterations), float(coarse_convergence_criterion),
                                                 int(max_threads))
@@ -180,7 +188,11 @@ class KissMatcher(FrontendBase):
         self.max_jump_m = float(max_jump_m)
         self.max_jump = math.radians(max_jump_deg)
         self.min_eigen_ratio = float(min_eigen_ratio)
-        self.cov_inflation = float(cov_inflation)
+        infl = np.broadcast_to(np.asarray(cov_inflation, dtype=float).reshape(-1), (2,))
+        if not np.all(infl > 0):
+            raise ConfigError(f"frontends config [{self.name}]: cov_inflation must be positive, got {cov_inflation}")
+        self.cov_inflation = (float(infl[0]), float(infl[1]))
+        self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
         self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
 
     @classmethod
@@ -194,7 +206,7 @@ class KissMatcher(FrontendBase):
         kw: dict[str, Any] = {}
         try:
             for key, val in cfg.items():
-                if key == "cov_floor":
+                if key in ("cov_floor", "cov_inflation"):
                     kw[key] = tuple(float(v) for v in val)
                 elif key in ints:
                     kw[key] = int(val)
@@ -262,13 +274,30 @@ class KissMatcher(FrontendBase):
                 q2, dist2, idx2, back2 = self._associate(points, alt)
                 if back2 < back:
                     pose, q, dist, idx, back, recovered = alt, q2, dist2, idx2, back2, True
+        restarts = 0
+        if np.count_nonzero(dist < self.inlier_dist) < self.retry_fraction * n:
+            # a doubtful optimum (ICP's local minima): restart from perturbed guesses, keep the best
+            best = (int(np.count_nonzero(dist < self.inlier_dist)), pose, q, dist, idx, back)
+            for d in self.retry_offsets:
+                start = compose(guess, d)
+                alt = self._register(pts3, start, self.coarse_map, self.fine_map)
+                restarts += 1
+                if alt is None:
+                    continue
+                q2, dist2, idx2, back2 = self._associate(points, alt)
+                n2 = int(np.count_nonzero(dist2 < self.inlier_dist))
+                if n2 > best[0] and back2 <= self.max_backface_fraction:
+                    best = (n2, alt, q2, dist2, idx2, back2)
+                if n2 >= self.retry_fraction * n:
+                    break
+            _, pose, q, dist, idx, back = best
         c, s = math.cos(pose[2]), math.sin(pose[2])
         used = np.isfinite(dist)
         inl = dist < self.inlier_dist
         n_in = int(inl.sum())
         quality = n_in / n
         info: dict[str, Any] = {"time_s": time.perf_counter() - t0, "n_points": n, "backface": back,
-                                "recovered": recovered}
+                                "recovered": recovered, "restarts": restarts}
         if n_in < self.min_inliers or quality < self.min_inlier_fraction:
             return no_fix(f"kiss: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
                           n_inliers=n_in, quality=quality, **info)
@@ -298,7 +327,7 @@ class KissMatcher(FrontendBase):
             return no_fix("kiss: degenerate geometry (point-to-point Hessian near singular)",
                           n_inliers=n_in, quality=quality, **info)
         sigma2 = float(np.sum(w * r2)) / max(2.0 * w.sum() - 3.0, 1.0)
-        cov = self.cov_inflation * sigma2 * np.linalg.inv(H) + self.cov_floor
+        cov = self._cov_scale @ (sigma2 * np.linalg.inv(H)) @ self._cov_scale + self.cov_floor
         cov = 0.5 * (cov + cov.T)
         info["sigma_m"] = math.sqrt(sigma2)
         info["time_s"] = time.perf_counter() - t0

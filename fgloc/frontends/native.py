@@ -372,8 +372,8 @@ class NativeMatcher(FrontendBase):
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,
-        cov_inflation: float = 10.0,
-        cov_floor: tuple[float, float, float] = (1e-5, 1e-5, 3e-6),
+        cov_inflation: tuple[float, float] = (2.5, 15.0),
+        cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
         backface_cos: float = 0.1,
     ):
         super().__init__(occ_map, laser_mount, preprocess)
@@ -404,7 +404,11 @@ class NativeMatcher(FrontendBase):
         self.max_jump_m = float(max_jump_m)
         self.max_jump = math.radians(max_jump_deg)
         self.min_eigen_ratio = float(min_eigen_ratio)
-        self.cov_inflation = float(cov_inflation)
+        infl = np.broadcast_to(np.asarray(cov_inflation, dtype=float).reshape(-1), (2,))
+        if not np.all(infl > 0):
+            raise ConfigError(f"frontends config [{self.name}]: cov_inflation must be positive, got {cov_inflation}")
+        self.cov_inflation = (float(infl[0]), float(infl[1]))
+        self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
         self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
         self.far = float(field_max_dist_m)
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
@@ -440,7 +444,7 @@ class NativeMatcher(FrontendBase):
         kw: dict[str, Any] = {}
         try:
             for key, val in cfg.items():
-                if key in ("kernel_schedule_m", "outlier_schedule_m", "cov_floor"):
+                if key in ("kernel_schedule_m", "outlier_schedule_m", "cov_floor", "cov_inflation"):
                     kw[key] = tuple(float(v) for v in (val if isinstance(val, (list, tuple)) else [val]))
                 elif key in ("loss", "search"):
                     kw[key] = str(val)
@@ -538,7 +542,7 @@ class NativeMatcher(FrontendBase):
                 n_inliers=n_in, quality=quality, **info,
             )
         sigma2 = wr2 / max(sw - 3.0, 1.0)
-        cov = self.cov_inflation * sigma2 * np.linalg.inv(H) + self.cov_floor
+        cov = self._cov_scale @ (sigma2 * np.linalg.inv(H)) @ self._cov_scale + self.cov_floor
         cov = 0.5 * (cov + cov.T)
         info["sigma_m"] = math.sqrt(sigma2)
         info["time_s"] = time.perf_counter() - t0

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fgloc.geometry import wrap_angle
-from fgloc.live.serial_link import RobotParams, twist_to_wheel_speeds
+from fgloc.live.serial_link import RobotParams, kinematics_of
 from fgloc.live.serial_protocol import FLAG_COUNTS, FLAG_GYRO, FLAG_HEADING, encode_sensor_frame
 from fgloc.live.sick import encode_lmdscandata, frame
 from fgloc.types import CompassHeading, LaserScan, Odometry
@@ -226,6 +226,7 @@ class Stm32Emulator:
     def frames(self) -> Iterable[tuple[float, bytes]]:
         """``(host_send_time, frame bytes)`` for the whole replay (no corruption)."""
         n = self.robot.n_wheels
+        kin = kinematics_of(self.robot)
         phi = np.zeros(n)  # wheel angles, rad
         last_s: float | None = None
         seq = 0
@@ -235,10 +236,10 @@ class Stm32Emulator:
             t_mcu = int(round(self.mcu_t0_us + (h - self.clock.start_host) * (1.0 + self.drift) * 1e6))
             if isinstance(m, Odometry):
                 if last_s is not None and s > last_s:
-                    phi += twist_to_wheel_speeds(self.robot, np.asarray(m.twist, dtype=float)) * (s - last_s)
+                    phi += np.asarray(kin.inverse(np.asarray(m.twist, dtype=float))) * (s - last_s)
                 last_s = s
-                counts = [self.count0 + int(math.floor(p * self.robot.counts_per_rev / (2 * math.pi)))
-                          for p in phi]
+                # round, not floor: a source whose twists came from integer counts is reproduced exactly
+                counts = [self.count0 + int(round(p * self.robot.counts_per_rev / (2 * math.pi))) for p in phi]
                 f = encode_sensor_frame(seq, t_mcu, counts, None, None, FLAG_COUNTS)
             else:
                 assert isinstance(m, CompassHeading)
@@ -451,8 +452,6 @@ class SickEmulator:
                 period = sc.scan_time if sc.scan_time > 0 else 0.04
                 h_start = float(self.clock.to_host(sc.stamp))
                 h_send = h_start + period / self.speed
-                if not _wait_until(h_send, self._stop):
-                    return
                 scaled = LaserScan(
                     stamp=sc.stamp, angle_min=sc.angle_min, angle_increment=sc.angle_increment,
                     range_min=sc.range_min, range_max=sc.range_max, ranges=sc.ranges,
@@ -465,6 +464,9 @@ class SickEmulator:
                 if bad:
                     cut = payload[: self.rng.randint(20, max(21, len(payload) - 5))]
                     out = frame(cut) + out
+                # encoded ahead, sent on time: "time of transmission" is when the bytes leave
+                if not _wait_until(h_send, self._stop):
+                    return
                 with self._lock:
                     c, on = self._client, self._streaming
                     if c is not None and on:

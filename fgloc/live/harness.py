@@ -18,7 +18,7 @@ import numpy as np
 from fgloc.live.app import LiveSession, LiveSummary, load_config
 from fgloc.live.emulators import EmulatorPair, ReplayClock
 from fgloc.live.serial_link import RobotParams
-from fgloc.types import LaserScan, StaticTransform, Trajectory
+from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
 
 
 def localizer_config(live_cfg: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -65,6 +65,17 @@ def replay_live(
                   "wheelbase_m": rp.wheelbase_m, "counts_per_rev": rp.counts_per_rev},
         "laser": {"mount": [float(v) for v in laser_mount.pose]},
     }
+    # the robot's sensor noise, as its spec sheet would give it to the live config
+    odom = next((m for t, m in messages if t == "/odom" and isinstance(m, Odometry)), None)
+    if odom is not None and odom.twist_cov is not None:
+        over["serial"] = {"twist_std": [float(v) for v in np.sqrt(np.diag(odom.twist_cov))]}
+    imu = next((m for t, m in messages if t == "/imu" and isinstance(m, CompassHeading)), None)
+    if imu is not None:
+        ser = over.setdefault("serial", {})
+        if np.isfinite(imu.yaw_var):
+            ser["compass_std_deg"] = float(np.degrees(np.sqrt(imu.yaw_var)))
+        if np.isfinite(imu.yaw_rate_var):
+            ser["gyro_std_dps"] = float(np.degrees(np.sqrt(imu.yaw_rate_var)))
     scans = [m for t, m in messages if t == "/scan" and isinstance(m, LaserScan)]
     if scans:
         over["laser"]["range_min_m"] = float(scans[0].range_min)

@@ -59,8 +59,14 @@ class RobotParams:
             k2 = aliases.get(k, k)
             if k2 in RobotParams.__dataclass_fields__:
                 out[k2] = v
-        if "counts_per_rev" not in out and "encoder_ppr" in d:
-            out["counts_per_rev"] = 4.0 * float(d["encoder_ppr"])
+        # the names fgloc.kinematics / SimResult.robot use: half distances, pulses per revolution
+        if "half_track_m" in d:
+            out["track_width_m"] = 2.0 * float(d["half_track_m"])
+        if "half_wheelbase_m" in d:
+            out["wheelbase_m"] = 2.0 * float(d["half_wheelbase_m"])
+        for key in ("pulses_per_rev", "encoder_ppr"):
+            if "counts_per_rev" not in out and key in d:
+                out["counts_per_rev"] = 4.0 * float(d[key])  # quadrature decoding
         p = RobotParams(**out)
         p.drive = {"differential": "diff", "diff_drive": "diff", "omni": "mecanum"}.get(p.drive, p.drive)
         if p.drive not in ("diff", "mecanum"):
@@ -70,40 +76,22 @@ class RobotParams:
         return p
 
 
-def _mecanum_matrix(p: RobotParams) -> np.ndarray:
-    """Inverse kinematics matrix: wheel speeds (FL, FR, RL, RR) = M @ [vx, vy, wz]."""
-    k = (p.track_width_m + p.wheelbase_m) / 2.0
-    return np.array([[1.0, -1.0, -k], [1.0, 1.0, k], [1.0, 1.0, -k], [1.0, -1.0, k]]) / p.wheel_radius_m
+def kinematics_of(p: RobotParams) -> Any:
+    """The :mod:`fgloc.kinematics` model of these parameters."""
+    from fgloc.kinematics import make_kinematics
 
-
-def _kin(name: str) -> Any:
-    """A function of :mod:`fgloc.kinematics` if that module provides it, else None."""
-    try:
-        import importlib
-
-        mod = importlib.import_module("fgloc.kinematics")
-    except ImportError:
-        return None
-    return getattr(mod, name, None)
+    return make_kinematics({"drive": p.drive, "wheel_radius_m": p.wheel_radius_m,
+                            "half_track_m": p.track_width_m / 2.0, "half_wheelbase_m": p.wheelbase_m / 2.0})
 
 
 def wheel_speeds_to_twist(p: RobotParams, omega_radps: np.ndarray) -> np.ndarray:
-    """Wheel angular speeds -> body twist ``[vx, vy, wz]`` by forward kinematics."""
-    omega = np.asarray(omega_radps, dtype=float)
-    if p.drive == "mecanum":
-        return np.linalg.pinv(_mecanum_matrix(p)) @ omega
-    v_l, v_r = omega * p.wheel_radius_m
-    return np.array([(v_l + v_r) / 2.0, 0.0, (v_r - v_l) / p.track_width_m])
+    """Wheel angular speeds (rad/s) -> body twist ``[vx, vy, wz]`` by forward kinematics."""
+    return np.asarray(kinematics_of(p).forward(np.asarray(omega_radps, dtype=float)), dtype=float)
 
 
 def twist_to_wheel_speeds(p: RobotParams, twist: np.ndarray) -> np.ndarray:
     """Body twist -> wheel angular speeds (inverse kinematics; used by the emulator)."""
-    t = np.asarray(twist, dtype=float)
-    if p.drive == "mecanum":
-        return _mecanum_matrix(p) @ t
-    v = t[0]
-    w = t[2]
-    return np.array([v - w * p.track_width_m / 2.0, v + w * p.track_width_m / 2.0]) / p.wheel_radius_m
+    return np.asarray(kinematics_of(p).inverse(np.asarray(twist, dtype=float)), dtype=float)
 
 
 def _se2_exp(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
@@ -132,6 +120,7 @@ class FrameConverter:
         align_clock: bool = True,
     ) -> None:
         self.robot = robot
+        self._kin = kinematics_of(robot)
         self.compass_sign = -1.0 if compass_clockwise else 1.0
         # None / NaN = unknown: the localizer's configured encoder / compass sigmas apply
         self.twist_cov = None if twist_var is None else np.diag(np.asarray(twist_var, dtype=float))
@@ -173,7 +162,7 @@ class FrameConverter:
                         dtype=float,
                     )
                     omega = dc * (2.0 * math.pi / self.robot.counts_per_rev) / dt
-                    twist = wheel_speeds_to_twist(self.robot, omega)
+                    twist = np.asarray(self._kin.forward(omega), dtype=float)
                     self._pose = _se2_exp(self._pose, twist, dt)
                     out.append(
                         ("odom", Odometry(stamp=stamp, twist=twist,

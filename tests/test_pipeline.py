@@ -233,3 +233,76 @@ def test_fgloc_run_without_map_and_with_bad_config(world_log, tmp_path, capsys):
     assert main(["run", str(world_log / "log.mcap"), "--config", str(bad), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
     assert "bad.yaml" in err and err.count("\n") == 1
+
+
+# ---------------------------------------------------------------------- the simulated paper run
+def test_paper_replica_smoother_vs_ekf(paper_sim):
+    """The accuracy claims on one seed (the 20-seed table comes from `fgloc bench paper`)."""
+    from fgloc.commands.run import localize_sim
+    from fgloc.eval.metrics import evaluate
+
+    cfg = load_config()
+    ekf, *_ = localize_sim(paper_sim, "ekf", "native", cfg)
+    sm, online, loc, _ = localize_sim(paper_sim, "smoother", "native", cfg)
+    m_ekf = evaluate(ekf, paper_sim.ground_truth)
+    m_sm = evaluate(sm, paper_sim.ground_truth)
+    m_on = evaluate(online, paper_sim.ground_truth)
+    assert m_sm.position_rmse_m <= 0.010 and m_sm.heading_rmse_deg <= 0.30
+    assert m_sm.position_rmse_m <= 0.7 * m_ekf.position_rmse_m
+    assert m_on.position_rmse_m <= 0.010
+    assert loc.stats["relocalizations"] == 0 and loc.stats["skipped"] == 0
+    # the compass offset (5-25 deg, unknown to the localizer) is estimated online
+    off = loc.backend.compass_offset()
+    assert abs(wrap_angle(off - paper_sim.compass_offset_rad)) < np.deg2rad(0.5)
+
+
+SHORT_ROUTE = [[2.5, 3.0], [27.5, 3.0], [27.5, 17.0]]  # half the paper's rectangle, ~50 s
+
+
+@pytest.fixture(scope="module")
+def short_runs():
+    from fgloc.sim import run_scenario
+
+    faults = {
+        "none": {},
+        "wheel_slip": {"wheel_slip": {"start": 20.0, "duration": 3.0, "fraction": 0.3}},
+        "compass_disturbance": {"compass_disturbance": {"start": 25.0, "duration": 5.0, "offset_deg": 25.0}},
+        "kidnap": {"kidnap": {"time": 30.0, "skip_s": 8.0}},
+    }
+    return {k: run_scenario({"route": SHORT_ROUTE, "faults": f}, seed=1) for k, f in faults.items()}
+
+
+def test_fixed_lag_within_1_2x_of_batch(short_runs):
+    from fgloc.commands.run import localize_sim
+    from fgloc.eval.metrics import evaluate
+
+    sim = short_runs["none"]
+    fl, *_ = localize_sim(sim, "smoother", "native", load_config())
+    bt, *_ = localize_sim(sim, "batch", "native", load_config())
+    e_fl = evaluate(fl, sim.ground_truth).position_rmse_m
+    e_bt = evaluate(bt, sim.ground_truth).position_rmse_m
+    assert e_fl <= 1.2 * e_bt and e_bt <= 0.010
+
+
+@pytest.mark.parametrize("fault", ["wheel_slip", "compass_disturbance"])
+def test_faults_raise_position_rmse_by_less_than_2_cm(short_runs, fault):
+    from fgloc.commands.run import localize_sim
+    from fgloc.eval.metrics import evaluate
+
+    base, *_ = localize_sim(short_runs["none"], "smoother", "native", load_config())
+    e0 = evaluate(base, short_runs["none"].ground_truth).position_rmse_m
+    sim = short_runs[fault]
+    tr, *_ = localize_sim(sim, "smoother", "native", load_config())
+    e = evaluate(tr, sim.ground_truth).position_rmse_m
+    assert e - e0 < 0.02
+
+
+def test_kidnapped_robot_recovered_within_5_s_on_paper_hall(short_runs):
+    from fgloc.commands.run import kidnap_recovery, localize_sim
+
+    sim = short_runs["kidnap"]
+    _, online, loc, _ = localize_sim(sim, "smoother", "native", load_config())
+    rec = kidnap_recovery(sim, online, tol=0.2)
+    assert rec["jump_m"] > 2.0
+    assert rec["recovery_s"] is not None and rec["recovery_s"] < 5.0
+    assert loc.stats["relocalizations"] >= 1

@@ -8,8 +8,8 @@ Method: candidate positions on a grid over the map's free space (``step_m``, coa
 large maps so there are about ``max_candidates``; cells at least ``clearance_m`` from
 obstacles), ``n_yaw`` headings each; every candidate scores
 the scan's (subsampled) points against the map's distance field with a Gaussian
-likelihood ``mean(exp(-d^2 / 2 sigma^2))`` (a pure numpy, vectorized correlative
-search).  The best ``n_best`` distinct candidates are returned, best first; the caller
+likelihood ``mean(exp(-d^2 / 2 sigma^2))`` (a correlative search, compiled with
+numba).  The best ``n_best`` distinct candidates are returned, best first; the caller
 refines them with its scan matcher and keeps the one that matches best.
 """
 
@@ -20,7 +20,34 @@ from numpy.typing import NDArray
 
 from fgloc.maps import OccupancyMap
 
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*args, **kwargs):  # type: ignore[no-redef]
+        def deco(f):
+            return f
+        return deco if not (args and callable(args[0])) else args[0]
+
 FloatArray = NDArray[np.float64]
+
+
+@njit(cache=True)
+def _score_all(lik, cx, cy, px, py):  # pragma: no cover - compiled
+    """Mean likelihood of points (grid units, per yaw: px/py shape (Y, P)) at each candidate."""
+    h, w = lik.shape
+    n_c = cx.shape[0]
+    n_y, n_p = px.shape
+    out = np.zeros((n_c, n_y))
+    for i in range(n_c):
+        for j in range(n_y):
+            acc = 0.0
+            for k in range(n_p):
+                c = int(np.floor(cx[i] + px[j, k]))
+                r = int(np.floor(cy[i] + py[j, k]))
+                if 0 <= r < h and 0 <= c < w:
+                    acc += lik[r, c]
+            out[i, j] = acc / n_p
+    return out
 
 
 class GlobalSearch:
@@ -34,6 +61,7 @@ class GlobalSearch:
         self.n_best = int(n_best)
         df = np.minimum(occ_map.distance_field, 3.0 * sigma_m * 4)
         self._df = np.where(np.isfinite(df), df, 3.0 * sigma_m * 4)
+        self._lik = np.ascontiguousarray(np.exp(-0.5 * (self._df / self.sigma) ** 2))
         free = occ_map.free & (occ_map.distance_field >= clearance_m)
         rows, cols = np.nonzero(free)
         # coarser grid on large maps so the candidate count stays near max_candidates
@@ -46,15 +74,6 @@ class GlobalSearch:
             cand = cand[rng.choice(len(cand), 2 * max_candidates, replace=False)]
         self.candidates = cand
         self.step_m = stride * occ_map.resolution
-
-    def _lookup(self, pts: FloatArray) -> FloatArray:
-        g = self.map.world_to_grid_continuous(pts.reshape(-1, 2))
-        c = np.floor(g[:, 0]).astype(np.int64)
-        r = np.floor(g[:, 1]).astype(np.int64)
-        ok = (r >= 0) & (r < self.map.height) & (c >= 0) & (c < self.map.width)
-        out = np.full(len(g), self._df.max())
-        out[ok] = self._df[r[ok], c[ok]]
-        return out.reshape(pts.shape[:-1])
 
     def search(self, points_base: FloatArray) -> list[tuple[FloatArray, float]]:
         """Best candidate poses ``[x, y, yaw]`` with their scores in ``[0, 1]``, best first.
@@ -71,14 +90,14 @@ class GlobalSearch:
         # rotated points for each yaw: (n_yaw, P, 2)
         rx = c[:, None] * pts[None, :, 0] - s[:, None] * pts[None, :, 1]
         ry = s[:, None] * pts[None, :, 0] + c[:, None] * pts[None, :, 1]
-        scores = np.empty((len(self.candidates), self.n_yaw))
-        chunk = max(1, 200_000 // (self.n_yaw * len(pts)))
-        for i in range(0, len(self.candidates), chunk):
-            cc = self.candidates[i:i + chunk]
-            wx = cc[:, 0, None, None] + rx[None]
-            wy = cc[:, 1, None, None] + ry[None]
-            d = self._lookup(np.stack([wx, wy], axis=-1))
-            scores[i:i + chunk] = np.mean(np.exp(-0.5 * (d / self.sigma) ** 2), axis=-1)
+        # everything in continuous grid coordinates (the map origin may be rotated)
+        res = self.map.resolution
+        oc, os_ = np.cos(self.map.origin[2]), np.sin(self.map.origin[2])
+        gpx = (oc * rx + os_ * ry) / res
+        gpy = (-os_ * rx + oc * ry) / res
+        cg = self.map.world_to_grid_continuous(self.candidates)
+        scores = _score_all(self._lik, np.ascontiguousarray(cg[:, 0]), np.ascontiguousarray(cg[:, 1]),
+                            np.ascontiguousarray(gpx), np.ascontiguousarray(gpy))
         order = np.argsort(scores, axis=None)[::-1]
         out: list[tuple[FloatArray, float]] = []
         for flat in order:

@@ -6,7 +6,8 @@ agree.  We calibrate the offset ``compass_yaw = map_yaw + offset`` from the firs
 accepted map fixes: each fix is paired with the compass reading nearest in time
 (within ``max_dt`` s, moved to the fix stamp with the compass yaw rate), and once
 ``n_fixes`` pairs are collected the offset is their circular median (robust to a
-bad first fix).  Until then a back-end uses the compass yaw rate only.  The
+bad first fix); later fixes keep refining it as a running mean (the last ~500 fixes).
+Until then a back-end uses the compass yaw rate only.  The
 smoother keeps estimating the offset online as a slowly varying variable; the
 EKF keeps this fixed value.
 """
@@ -23,8 +24,13 @@ from fgloc.geometry import wrap_angle
 class CompassCalibrator:
     """Collects (compass, map) heading pairs and returns the offset once calibrated."""
 
-    def __init__(self, n_fixes: int = 5, max_dt: float = 0.1, offset: float | None = None) -> None:
+    def __init__(self, n_fixes: int = 5, max_dt: float = 0.1, offset: float | None = None,
+                 refine: bool = True, max_window: int = 500, gate: float = float(np.deg2rad(3.0))) -> None:
+        self.gate = float(gate)
         self.n_fixes = int(n_fixes)
+        self.refine = bool(refine)
+        self.max_window = int(max_window)
+        self._n = 0
         self.max_dt = float(max_dt)
         self.offset: float | None = offset
         self._compass: deque[tuple[float, float, float]] = deque(maxlen=200)
@@ -47,17 +53,28 @@ class CompassCalibrator:
         return float(wrap_angle(best[1] + best[2] * (t - best[0])))
 
     def add_fix(self, t: float, map_yaw: float) -> bool:
-        """Pair an accepted map fix with the compass; returns True when this calibrates."""
-        if self.calibrated:
-            return False
+        """Pair an accepted map fix with the compass; returns True when this calibrates.
+
+        After calibration every further pair refines the offset as a running mean (weight
+        ``1/n``, at least ``1/max_window``: slow drift is followed), unless ``refine`` is off.
+        """
         c = self.compass_at(t)
         if c is None:
             return False
-        self._diffs.append(float(wrap_angle(c - map_yaw)))
+        d = float(wrap_angle(c - map_yaw))
+        if self.calibrated:
+            # a pair far from the current offset is a disturbance, not drift: ignored
+            if self.refine and self.offset is not None and abs(float(wrap_angle(d - self.offset))) < self.gate:
+                self._n += 1
+                w = max(1.0 / self._n, 1.0 / self.max_window)
+                self.offset = float(wrap_angle(self.offset + w * float(wrap_angle(d - self.offset))))
+            return False
+        self._diffs.append(d)
         if len(self._diffs) >= self.n_fixes:
             d = np.asarray(self._diffs)
             ref = float(np.arctan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
             self.offset = float(wrap_angle(ref + np.median(wrap_angle(d - ref))))
+            self._n = len(self._diffs)
             return True
         return False
 

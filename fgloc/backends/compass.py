@@ -71,9 +71,9 @@ class CompassCalibrator:
             return False
         self._diffs.append(d)
         if len(self._diffs) >= self.n_fixes:
-            d = np.asarray(self._diffs)
-            ref = float(np.arctan2(np.mean(np.sin(d)), np.mean(np.cos(d))))
-            self.offset = float(wrap_angle(ref + np.median(wrap_angle(d - ref))))
+            ds = np.asarray(self._diffs)
+            ref = float(np.arctan2(np.mean(np.sin(ds)), np.mean(np.cos(ds))))
+            self.offset = float(wrap_angle(ref + np.median(wrap_angle(ds - ref))))
             self._n = len(self._diffs)
             return True
         return False

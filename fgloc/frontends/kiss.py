@@ -276,10 +276,10 @@ class KissMatcher(FrontendBase):
                     pose, q, dist, idx, back, recovered = alt, q2, dist2, idx2, back2, True
         restarts = 0
         if np.count_nonzero(dist < self.inlier_dist) < self.retry_fraction * n:
-            # a doubtful optimum (ICP's local minima): restart from perturbed guesses, keep the best
+            # a doubtful optimum (ICP's local minima): restart around it (yaw, then x, y offsets), keep the best
             best = (int(np.count_nonzero(dist < self.inlier_dist)), pose, q, dist, idx, back)
             for d in self.retry_offsets:
-                start = compose(guess, d)
+                start = compose(pose, d)  # around the doubtful optimum
                 alt = self._register(pts3, start, self.coarse_map, self.fine_map)
                 restarts += 1
                 if alt is None:

@@ -132,6 +132,7 @@ class SlidingWindowSmoother(Backend):
         self.t0: float | None = None
         self._rejects = 0
         self._last_cov = np.eye(3) * 1e-2
+        self._cov_stale: int | None = None
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
         self._pred_cache: tuple | None = None
@@ -448,13 +449,9 @@ class SlidingWindowSmoother(Backend):
         k = self.kf_key[-1]
         pose = self.isam.calculateEstimatePose2(k)
         self.kf_pose[k] = np.array([pose.x(), pose.y(), pose.theta()])
+        self._cov_stale = k
         if self.cfg.online_covariance:
-            try:
-                self._last_cov = np.asarray(self.isam.marginalCovariance(k))
-            except RuntimeError:
-                pass
-        else:
-            self._last_cov = np.diag([0.01**2, 0.01**2, np.deg2rad(0.5) ** 2])
+            self._update_covariance()
         self.stats["keyframes"] += 1
         self._record_online(t, self.kf_pose[k], self._last_cov)
 
@@ -526,9 +523,25 @@ class SlidingWindowSmoother(Backend):
     def _remove_registered(self, isam_index: int) -> None:
         """Hook for the batch smoother."""
 
+    def _update_covariance(self) -> None:
+        """Marginal covariance of the newest solved keyframe, rotated into the map frame."""
+        k = self._cov_stale
+        if k is None or k not in self.kf_pose:
+            return
+        self._cov_stale = None
+        try:
+            body = np.asarray(self.isam.marginalCovariance(k))
+        except (RuntimeError, IndexError):
+            return
+        c, s_ = math.cos(self.kf_pose[k][2]), math.sin(self.kf_pose[k][2])
+        R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        self._last_cov = R @ body @ R.T
+
     def current(self) -> tuple[float, FloatArray, FloatArray] | None:
+        """Newest keyframe estimate; its covariance is computed here on demand (iSAM2 marginal)."""
         if not self.kf_key:
             return None
+        self._update_covariance()
         return self.kf_t[-1], self.kf_pose[self.kf_key[-1]].copy(), self._last_cov.copy()
 
     def _flush_window(self) -> None:

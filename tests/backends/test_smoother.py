@@ -99,3 +99,12 @@ def test_compass_disturbance_and_wheel_slip_barely_move_the_estimate():
     e_comp = errors(feed(SlidingWindowSmoother(), comp), comp)
     assert e_slip[0] - clean[0] < 0.02
     assert e_comp[0] - clean[0] < 0.002 and e_comp[1] < clean[1] + 0.05
+
+
+def test_online_covariance_is_the_marginal_in_the_map_frame(synth_noisy):
+    sm = SlidingWindowSmoother()
+    feed(sm, synth_noisy)
+    t, pose, cov = sm.current()
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    # with 2 cm fixes at 25 Hz and good odometry the marginal is well under the fix covariance
+    assert 1e-4 < np.sqrt(cov[0, 0]) < 0.02 and np.sqrt(cov[2, 2]) < np.deg2rad(0.5)

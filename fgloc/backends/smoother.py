@@ -22,7 +22,10 @@ offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``)
 
 A scan older than the newest keyframe but inside the window (late measurement) gets its own
 keyframe at its own stamp: the twist factor spanning it is removed and replaced by two.
-A late compass reading is attached to the keyframe nearest in time.
+A keyframe waits (at most ``max_wait`` s) for the odometry that covers its stamp, so
+odometry arriving after the scan is still integrated exactly.  Compass readings are
+carried to the next keyframe's stamp by the odometry rotation in between (a late one
+from further back too), so each reading counts at its own time.
 
 ``SlidingWindowSmoother`` is the online fixed-lag estimator; the online estimate is the
 newest keyframe right after its update, the smoothed trajectory is each keyframe's estimate

@@ -14,6 +14,11 @@ from numpy.typing import NDArray
 
 from fgloc.maps import FREE, OCCUPIED, UNKNOWN, OccupancyMap
 
+try:  # numba is a declared dependency (fgloc.maps uses it too); numpy is the fallback
+    from numba import njit
+except ImportError:  # pragma: no cover
+    njit = None
+
 FloatArray = NDArray[np.float64]
 
 
@@ -27,6 +32,24 @@ class World:
     polygons: list[FloatArray]
     circles: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     bounds: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    interior: FloatArray | None = None  # polygon of the free interior (default: the bounds rectangle)
+
+    def rotated(self, yaw: float, center: tuple[float, float]) -> World:
+        """The same world rotated by ``yaw`` about ``center`` (bounds grow to hold it)."""
+        c, s = np.cos(yaw), np.sin(yaw)
+        R = np.array([[c, -s], [s, c]])
+        ctr = np.asarray(center, dtype=float)
+
+        def rot(p: FloatArray) -> FloatArray:
+            return (np.asarray(p, dtype=float) - ctr) @ R.T + ctr
+
+        xmin, ymin, xmax, ymax = self.bounds
+        interior = rot(_rect(xmin, ymin, xmax, ymax) if self.interior is None else self.interior)
+        circles = self.circles.copy()
+        if len(circles):
+            circles[:, :2] = rot(circles[:, :2])
+        lo, hi = interior.min(axis=0), interior.max(axis=0)
+        return World([rot(p) for p in self.polygons], circles, (lo[0], lo[1], hi[0], hi[1]), interior)
 
     def __post_init__(self) -> None:
         segs = []
@@ -44,26 +67,62 @@ class World:
         return raycast_geometry(origins, angles, self.segments, circles, max_range)
 
     def rasterize(self, resolution: float = 0.05, margin: float = 1.0) -> OccupancyMap:
-        """Occupancy map: a cell is occupied when its centre is inside a solid, free inside ``bounds``."""
+        """The robot's occupancy map of this world.
+
+        A cell is occupied when it *intersects* a solid (shares interior area with it:
+        merely touching along an edge does not count), free when its centre is inside
+        ``bounds`` and it is not occupied, unknown otherwise.  The grid's origin is a
+        multiple of ``resolution``, so walls on multiples of 0.05 m coincide with cell
+        boundaries.  Polygons must be convex (separating-axis test).
+        """
         xmin, ymin, xmax, ymax = self.bounds
         x0 = np.floor((xmin - margin) / resolution) * resolution
         y0 = np.floor((ymin - margin) / resolution) * resolution
         w = int(np.ceil((xmax + margin - x0) / resolution))
         h = int(np.ceil((ymax + margin - y0) / resolution))
+        occ = np.zeros((h, w), dtype=bool)
+        half = resolution / 2
+        eps = 1e-9
+
+        def window(bx0: float, by0: float, bx1: float, by1: float):
+            c0 = max(int(np.floor((bx0 - x0) / resolution)) - 1, 0)
+            c1 = min(int(np.ceil((bx1 - x0) / resolution)) + 1, w)
+            r0 = max(int(np.floor((by0 - y0) / resolution)) - 1, 0)
+            r1 = min(int(np.ceil((by1 - y0) / resolution)) + 1, h)
+            cx = x0 + (np.arange(c0, c1) + 0.5) * resolution
+            cy = y0 + (np.arange(r0, r1) + 0.5) * resolution
+            gx, gy = np.meshgrid(cx, cy)
+            return (slice(r0, r1), slice(c0, c1)), gx, gy
+
+        for poly in self.polygons:
+            p = np.asarray(poly, dtype=float)
+            sl, gx, gy = window(p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max())
+            # separating axes: x, y (the cell's) and each polygon edge normal
+            hit = (gx + half > p[:, 0].min() + eps) & (gx - half < p[:, 0].max() - eps)
+            hit &= (gy + half > p[:, 1].min() + eps) & (gy - half < p[:, 1].max() - eps)
+            e = np.roll(p, -1, axis=0) - p
+            for nx, ny in np.column_stack([-e[:, 1], e[:, 0]]):
+                norm = np.hypot(nx, ny)
+                if norm == 0:
+                    continue
+                nx, ny = nx / norm, ny / norm
+                proj = p[:, 0] * nx + p[:, 1] * ny
+                c = gx * nx + gy * ny
+                rad = half * (abs(nx) + abs(ny))
+                hit &= (c + rad > proj.min() + eps) & (c - rad < proj.max() - eps)
+            occ[sl] |= hit
+        for x, y, r in self.circles:
+            sl, gx, gy = window(x - r, y - r, x + r, y + r)
+            dx = np.maximum(np.abs(gx - x) - half, 0.0)
+            dy = np.maximum(np.abs(gy - y) - half, 0.0)
+            occ[sl] |= dx * dx + dy * dy < r * r - eps
         cx = x0 + (np.arange(w) + 0.5) * resolution
         cy = y0 + (np.arange(h) + 0.5) * resolution
-        gx, gy = np.meshgrid(cx, cy)
-        pts = np.column_stack([gx.ravel(), gy.ravel()])
-        occ = np.zeros(len(pts), dtype=bool)
-        for poly in self.polygons:
-            occ |= points_in_polygon(pts, np.asarray(poly, dtype=float))
-        for x, y, r in self.circles:
-            occ |= (pts[:, 0] - x) ** 2 + (pts[:, 1] - y) ** 2 <= r * r
-        inside = (pts[:, 0] > xmin) & (pts[:, 0] < xmax) & (pts[:, 1] > ymin) & (pts[:, 1] < ymax)
-        data = np.full(len(pts), UNKNOWN, dtype=np.int16)
+        inside = ((cx[None, :] > xmin) & (cx[None, :] < xmax)) & ((cy[:, None] > ymin) & (cy[:, None] < ymax))
+        data = np.full((h, w), UNKNOWN, dtype=np.int16)
         data[inside] = FREE
         data[occ] = OCCUPIED
-        return OccupancyMap(data.reshape(h, w), resolution, np.array([x0, y0, 0.0]))
+        return OccupancyMap(data, resolution, np.array([x0, y0, 0.0]))
 
     def is_free(self, points: FloatArray, clearance: float = 0.0) -> NDArray[np.bool_]:
         """True where points are inside the bounds, outside every solid and at least ``clearance`` from one."""
@@ -107,7 +166,62 @@ def points_in_polygon(pts: FloatArray, poly: FloatArray) -> NDArray[np.bool_]:
 
 def raycast_geometry(origins: FloatArray, angles: FloatArray, segments: FloatArray, circles: FloatArray,
                      max_range: float) -> FloatArray:
-    """Vectorized exact ray casting against segments ``(S, 4)`` and circles ``(C, 3)``."""
+    """Exact ray casting against segments ``(S, 4)`` and circles ``(C, 3)`` (ray starts outside solids).
+
+    Returns the distance to the first surface along each ray, ``+inf`` beyond ``max_range``.
+    Compiled with numba (one pass over rays x surfaces); :func:`raycast_geometry_numpy`
+    is the vectorized numpy reference implementation.
+    """
+    o = np.asarray(origins, dtype=float).reshape(-1, 2)
+    a = np.asarray(angles, dtype=float).reshape(-1)
+    if len(o) == 1 and len(a) > 1:
+        o = np.broadcast_to(o, (len(a), 2))
+    if njit is None:
+        return raycast_geometry_numpy(o, a, segments, circles, max_range)
+    return _raycast_nb(np.ascontiguousarray(o[:, 0]), np.ascontiguousarray(o[:, 1]), np.cos(a), np.sin(a),
+                       np.ascontiguousarray(segments, dtype=float).reshape(-1, 4),
+                       np.ascontiguousarray(circles, dtype=float).reshape(-1, 3), float(max_range))
+
+
+def _raycast_kernel(ox, oy, dx, dy, segs, circles, max_range):  # pragma: no cover - compiled
+    n = ox.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        best = np.inf
+        for j in range(segs.shape[0]):
+            sx = segs[j, 2] - segs[j, 0]
+            sy = segs[j, 3] - segs[j, 1]
+            den = dx[k] * sy - dy[k] * sx
+            if abs(den) <= 1e-12:
+                continue
+            qx = segs[j, 0] - ox[k]
+            qy = segs[j, 1] - oy[k]
+            t = (qx * sy - qy * sx) / den
+            if t <= 1e-9 or t >= best:
+                continue
+            u = (qx * dy[k] - qy * dx[k]) / den
+            if 0.0 <= u <= 1.0:
+                best = t
+        for j in range(circles.shape[0]):
+            cx = circles[j, 0] - ox[k]
+            cy = circles[j, 1] - oy[k]
+            r = circles[j, 2]
+            b = cx * dx[k] + cy * dy[k]
+            disc = b * b - (cx * cx + cy * cy - r * r)
+            if disc >= 0.0:
+                t = b - np.sqrt(disc)
+                if 1e-9 < t < best:
+                    best = t
+        out[k] = best if best <= max_range else np.inf
+    return out
+
+
+_raycast_nb = njit(cache=True, nogil=True)(_raycast_kernel) if njit is not None else _raycast_kernel
+
+
+def raycast_geometry_numpy(origins: FloatArray, angles: FloatArray, segments: FloatArray, circles: FloatArray,
+                           max_range: float) -> FloatArray:
+    """Vectorized numpy ray casting (rays x surfaces matrices); same result as :func:`raycast_geometry`."""
     o = np.asarray(origins, dtype=float).reshape(-1, 2)
     a = np.asarray(angles, dtype=float).reshape(-1)
     if len(o) == 1 and len(a) > 1:
@@ -147,8 +261,7 @@ def paper_hall() -> World:
     """The paper replica's hall: 30 m x 20 m, 0.2 m walls, pillars, cabinets and alcoves.
 
     The 78 m route (a 25 m x 14 m rectangle with corners (2.5, 3), (27.5, 3),
-    (27.5, 17), (2.5, 17)) keeps at least 1 m from every obstacle.  Surfaces lie on
-    multiples of 0.05 m so they coincide with the 0.05 m map's cell boundaries.
+    (27.5, 17), (2.5, 17)) keeps at least 1 m from every obstacle.
     """
     wt = 0.2
     polys = [

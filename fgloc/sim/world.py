@@ -17,7 +17,7 @@ from fgloc.maps import FREE, OCCUPIED, UNKNOWN, OccupancyMap
 try:  # numba is a declared dependency (fgloc.maps uses it too); numpy is the fallback
     from numba import njit
 except ImportError:  # pragma: no cover
-    njit = None
+    njit = None  # type: ignore[assignment]
 
 FloatArray = NDArray[np.float64]
 

@@ -65,7 +65,7 @@ class MapperConfig:
     odom_sigma_yaw: tuple[float, float] = (0.05, 0.5)    # sigma = a + b * |dyaw|
     loop_radius_m: float = 5.0        # candidates within this distance of the estimate
     loop_min_gap_kf: int = 40         # ... and at least this many keyframes older
-    loop_every_kf: int = 2            # try loop closures every N keyframes
+    loop_every_kf: int = 3            # try loop closures every N keyframes
     loop_max_candidates: int = 2
     loop_submap_half: int = 12        # candidate submap = keyframes j-N .. j+N
     loop_window_m: float = 1.5        # correlative window around the predicted relative pose
@@ -74,6 +74,9 @@ class MapperConfig:
     loop_min_inliers: float = 0.6     # fraction of points within 0.1 m after refinement
     loop_max_ambiguity: float = 0.92  # second-best distinct peak / best
     loop_cauchy_k: float = 1.0
+    loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
+    loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
+    loop_grid_cache_kf: int = 20      # reuse a loop submap grid for this many keyframes
     final_batch: bool = True
     final_refine: bool = False        # re-align every scan to the optimized keyframes around it
     refine_half: int = 6              # ... keyframes k-N .. k+N (its own keyframe excluded)
@@ -147,6 +150,7 @@ class GraphSlam:
         self._new_f = gtsam.NonlinearFactorGraph()
         self._new_v = gtsam.Values()
         self._est: FloatArray = np.zeros((0, 3))
+        self._loop_grids: dict[int, tuple[int, DistanceGrid]] = {}
         self.stats = {"scans": 0, "tracked": 0, "track_fail": 0, "stationary": 0, "keyframes": 0,
                       "loop_tries": 0, "loops": 0, "loop_rejected": 0}
 
@@ -266,18 +270,24 @@ class GraphSlam:
         self._new_f = gtsam.NonlinearFactorGraph()
         self._new_v = gtsam.Values()
         est = self._isam.calculateEstimate()
-        n = len(self.keyframes)
-        self._est = np.array([[est.atPose2(i).x(), est.atPose2(i).y(), est.atPose2(i).theta()]
-                              for i in range(n)]) if n else np.zeros((0, 3))
+        self._est = np.asarray(gtsam.utilities.extractPose2(est), dtype=float).reshape(-1, 3)
 
     # ------------------------------------------------------------ loops
-    def _submap_around(self, j: int) -> DistanceGrid:
+    def _submap_around(self, j: int, k: int) -> DistanceGrid:
+        """Grid of keyframes j-N..j+N in the frame of keyframe j (cached for a few keyframes)."""
+        hit = self._loop_grids.get(j)
+        if hit is not None and k - hit[0] <= self.cfg.loop_grid_cache_kf:
+            return hit[1]
         h = self.cfg.loop_submap_half
         lo, hi = max(0, j - h), min(len(self._est), j + h + 1)
         pj = self._est[j]
         pts = np.concatenate([transform_points(between(pj, self._est[i]), self.keyframes[i].points)
                               for i in range(lo, hi)])
-        return build_distance_grid(pts, self.cfg.submap_resolution, 0.5, 0.5)
+        grid = build_distance_grid(pts, self.cfg.submap_resolution, self.cfg.loop_dmax_m, 0.5)
+        if len(self._loop_grids) > 64:
+            self._loop_grids = {a: b for a, b in self._loop_grids.items() if k - b[0] <= self.cfg.loop_grid_cache_kf}
+        self._loop_grids[j] = (k, grid)
+        return grid
 
     def _close_loops(self, k: int, guess: FloatArray) -> None:
         cfg = self.cfg
@@ -291,16 +301,17 @@ class GraphSlam:
         for j in order:
             if d[j] > cfg.loop_radius_m or len(chosen) >= cfg.loop_max_candidates:
                 break
-            if all(abs(int(j) - c) > cfg.loop_submap_half for c in chosen):
-                chosen.append(int(j))
+            ja = int(j) - int(j) % cfg.loop_anchor_step
+            if all(abs(ja - c) > cfg.loop_submap_half for c in chosen):
+                chosen.append(ja)
         mpts = self.keyframes[k].match_points
         if len(mpts) < 30:
             return
         for j in chosen:
             self.stats["loop_tries"] += 1
-            grid = self._submap_around(j)
+            grid = self._submap_around(j, k)
             pred = between(self._est[j], guess)
-            coarse_pts = mpts if len(mpts) <= 80 else mpts[:: int(np.ceil(len(mpts) / 80))]
+            coarse_pts = mpts if len(mpts) <= 70 else mpts[:: int(np.ceil(len(mpts) / 70))]
             sr = correlative_search(grid, coarse_pts, pred, cfg.loop_window_m, np.radians(cfg.loop_window_deg),
                                     0.12, np.radians(2.0), 0.15, far_m=0.6, far_rad=np.radians(10))
             fr = correlative_search(grid, mpts, sr.pose, 0.1, np.radians(2.0), 0.025, np.radians(0.5), 0.05)

@@ -1,32 +1,62 @@
-"""``fgloc simulate paper|scenario``: write a simulated run (log.mcap, map, ground truth)."""
+"""``fgloc simulate paper|scenario``: write a simulated run (log.mcap, map, ground truth).
+
+Usage::
+
+    fgloc simulate paper -o DIR [--seed N]
+    fgloc simulate scenario config/scenarios/wheel_slip.yaml -o DIR [--seed N]
+
+DIR gets ``log.mcap`` (/scan, /odom, /imu, /tf_static, /ground_truth), ``map.yaml`` +
+``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` (the effective parameters).
+"""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import typer
 
 simulate_app = typer.Typer(help="Simulate the paper's experiment or a YAML scenario.", no_args_is_help=True)
 
 
-def _write(result, out: Path) -> None:
+@contextmanager
+def _progress(text: str):
+    """A rich progress bar on stderr; yields a callback taking the done fraction (0..1)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                  TimeElapsedColumn(), console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(text, total=1.0)
+
+        def update(frac: float) -> None:
+            bar.update(task, completed=frac)
+
+        yield update
+        bar.update(task, completed=1.0)
+
+
+def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: str, out: Path) -> None:
     from fgloc.sim import write_sim
 
-    with _spinner(f"writing {out}"):
+    t0 = time.perf_counter()
+    with _progress(f"simulating {label}") as update:
+        result = run(update)
+    t_sim = time.perf_counter() - t0
+    with _progress(f"writing {out}") as update:
         write_sim(result, out)
+        update(1.0)
     counts: dict[str, int] = {}
     for topic, _ in result.messages:
         counts[topic] = counts.get(topic, 0) + 1
     gt = result.ground_truth
     print(f"{out}: {gt.duration:.1f} s, {gt.path_length():.1f} m, "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
-          + f"; compass offset {float(result.compass_offset_rad) * 57.29577951308232:.2f} deg")
-
-
-def _spinner(text: str):
-    from rich.console import Console
-
-    return Console(stderr=True).status(text)
+          + f"; compass offset {float(result.compass_offset_rad) * 57.29577951308232:.2f} deg"
+          + f"; simulated in {t_sim:.1f} s")
 
 
 @simulate_app.command("paper")
@@ -37,9 +67,7 @@ def paper(
     """The paper's run: mecanum robot, 78 m rectangle at 0.8 m/s, encoders + compass + 270 deg laser."""
     from fgloc.sim import simulate_paper
 
-    with _spinner("simulating the paper run"):
-        result = simulate_paper(seed=seed)
-    _write(result, out)
+    _simulate_and_write(lambda cb: simulate_paper(seed=seed, progress=cb), "the paper run", out)
 
 
 @simulate_app.command("scenario")
@@ -51,9 +79,7 @@ def scenario(
     """A YAML scenario: map, route, drive, noise and faults."""
     from fgloc.sim import run_scenario
 
-    with _spinner(f"simulating {file}"):
-        result = run_scenario(file, seed=seed)
-    _write(result, out)
+    _simulate_and_write(lambda cb: run_scenario(file, seed=seed, progress=cb), str(file), out)
 
 
 def register(app: typer.Typer) -> None:

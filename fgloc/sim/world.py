@@ -71,7 +71,7 @@ class World:
 
         A cell is occupied when it *intersects* a solid (shares interior area with it:
         merely touching along an edge does not count), free when its centre is inside
-        ``bounds`` and it is not occupied, unknown otherwise.  The grid's origin is a
+        ``interior`` (or ``bounds``) and it is not occupied, unknown otherwise.  The grid's origin is a
         multiple of ``resolution``, so walls on multiples of 0.05 m coincide with cell
         boundaries.  Polygons must be convex (separating-axis test).
         """
@@ -118,7 +118,12 @@ class World:
             occ[sl] |= dx * dx + dy * dy < r * r - eps
         cx = x0 + (np.arange(w) + 0.5) * resolution
         cy = y0 + (np.arange(h) + 0.5) * resolution
-        inside = ((cx[None, :] > xmin) & (cx[None, :] < xmax)) & ((cy[:, None] > ymin) & (cy[:, None] < ymax))
+        if self.interior is None:
+            inside = ((cx[None, :] > xmin) & (cx[None, :] < xmax)) & ((cy[:, None] > ymin) & (cy[:, None] < ymax))
+        else:
+            gx, gy = np.meshgrid(cx, cy)
+            inside = points_in_polygon(np.column_stack([gx.ravel(), gy.ravel()]),
+                                       np.asarray(self.interior, dtype=float)).reshape(h, w)
         data = np.full((h, w), UNKNOWN, dtype=np.int16)
         data[inside] = FREE
         data[occ] = OCCUPIED
@@ -130,6 +135,8 @@ class World:
         xmin, ymin, xmax, ymax = self.bounds
         ok = (p[:, 0] > xmin + clearance) & (p[:, 0] < xmax - clearance)
         ok &= (p[:, 1] > ymin + clearance) & (p[:, 1] < ymax - clearance)
+        if self.interior is not None:
+            ok &= points_in_polygon(p, np.asarray(self.interior, dtype=float))
         for poly in self.polygons:
             ok &= ~points_in_polygon(p, np.asarray(poly, dtype=float))
         if len(self.segments) and clearance > 0:

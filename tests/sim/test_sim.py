@@ -78,7 +78,9 @@ def test_compass_is_map_yaw_plus_offset(paper_sim):
     t = np.array([m.stamp for m in imu])
     yaw = np.array([m.yaw_rad for m in imu])
     err = wrap_angle(yaw - gt.interpolate(t)[:, 2] - paper_sim.compass_offset_rad)
-    assert np.rad2deg(np.sqrt(np.mean(err**2))) < 0.4
+    # noise 0.3 deg plus the position-dependent magnetic distortion (amplitude 1 deg)
+    assert 0.3 < np.rad2deg(np.sqrt(np.mean(err**2))) < 1.2
+    assert abs(np.rad2deg(np.median(err))) < 0.5
     assert 5.0 <= abs(np.rad2deg(paper_sim.compass_offset_rad)) <= 25.0
     # 0.1 deg integer steps on the wire
     deci = np.rad2deg(np.mod(yaw, 2 * np.pi)) * 10
@@ -129,7 +131,8 @@ def test_willow_scenario_runs_in_the_real_map(shared_data):
 
 
 def test_fault_wheel_slip_only_inside_window():
-    r = run_scenario({"route": LEG, "faults": {"wheel_slip": {"start": 12.0, "duration": 3.0, "fraction": 0.3}}})
+    r = run_scenario({"route": LEG, "laser": {"enabled": False},
+                      "faults": {"wheel_slip": {"start": 12.0, "duration": 3.0, "fraction": 0.3}}})
     gt = r.ground_truth
     odom = r.topic("/odom")
     t = np.array([o.stamp for o in odom])
@@ -142,8 +145,8 @@ def test_fault_wheel_slip_only_inside_window():
 
 
 def test_fault_compass_blackout_kidnap():
-    r = run_scenario({"route": LEG, "faults": {"compass_disturbance": {"start": 10.0, "duration": 5.0,
-                                                                       "offset_deg": 25.0}}})
+    r = run_scenario({"route": LEG, "laser": {"enabled": False}, "faults": {"compass_disturbance": {
+        "start": 10.0, "duration": 5.0, "offset_deg": 25.0}}})
     imu = r.topic("/imu")
     t = np.array([m.stamp for m in imu])
     err = np.rad2deg(wrap_angle(np.array([m.yaw_rad for m in imu]) - r.ground_truth.interpolate(t)[:, 2]
@@ -194,3 +197,49 @@ def test_simulate_cli_writes_files(tmp_path, capsys):
     counts = LogReader(out / "log.mcap").summary()
     assert "/scan" in str(counts) and "/ground_truth" in str(counts)
     assert "compass offset" in capsys.readouterr().out
+
+
+def test_robot_paper_yaml_matches_defaults():
+    import yaml
+
+    from fgloc.sim import DEFAULT_SCENARIO
+
+    cfg = yaml.safe_load((SCEN.parent / "robot_paper.yaml").read_text())
+    for section in ("odom", "compass", "laser"):
+        for k, v in cfg[section].items():
+            assert DEFAULT_SCENARIO[section][k] == v, (section, k)
+    for k, v in cfg["robot"].items():
+        assert (DEFAULT_SCENARIO["drive"] if k == "drive" else DEFAULT_SCENARIO["robot"][k]) == v
+    for k, v in cfg["motion"].items():
+        assert DEFAULT_SCENARIO[k] == v
+
+
+def test_rep117_plus_inf_beyond_range_max():
+    # a 10 m scanner in the 30 m hall: long beams have no return -> +inf, never a finite value > 10 m
+    r = simulate_paper(seed=0, route=[[3.0, 3.0], [5.0, 3.0]], laser={"range_max_m": 10.0})
+    rr = np.concatenate([s.ranges for s in r.topic("/scan")])
+    assert np.isposinf(rr).mean() > 0.2
+    assert rr[np.isfinite(rr)].max() <= 10.0
+    assert r.topic("/scan")[0].range_max == 10.0
+
+
+def test_kidnap_to_pose_and_diff_drive_odometry():
+    to = [15.0, 10.5, np.pi / 2]  # carried onto the middle of the hall, facing north
+    r = run_scenario({"route": [[3.0, 3.0], [9.0, 3.0]], "drive": "diff", "laser": {"enabled": False},
+                      "faults": {"kidnap": {"time": 5.0, "to": to}}})
+    gt = r.ground_truth
+    k = int(np.searchsorted(gt.stamps, 5.0))
+    assert np.allclose(gt.poses[k], to, atol=1e-9)
+    assert np.hypot(*(gt.poses[k - 1][:2] - to[:2])) > 5.0  # a real jump
+    odom = r.topic("/odom")
+    assert all(o.twist[1] == 0.0 for o in odom)  # a differential drive never slides sideways
+    op = np.array([o.pose[:2] for o in odom])
+    assert np.hypot(*np.diff(op, axis=0).T).max() < 0.05
+    assert r.topic("/scan") == []
+
+
+def test_paper_yaml_is_simulate_paper():
+    from fgloc.sim import DEFAULT_SCENARIO, load_scenario
+
+    sc = load_scenario(SCEN / "paper.yaml")
+    assert sc == DEFAULT_SCENARIO

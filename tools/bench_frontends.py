@@ -174,6 +174,9 @@ def main() -> None:
 
     occ_map, mount, scans, gt, deltas, idx, source = load_data(args.scans, args.synthetic)
     guesses = guesses_for(gt, args.offset, args.noise_m, args.noise_deg)
+    # the synthetic room's scans are ray cast on the grid itself: beams end on the cells' faces
+    depth = {"surface_depth_cells": 0.0} if source.startswith("synthetic") else {}
+    fe_cfg = {"native": dict(depth), "kiss": dict(depth)}
     guess_txt = "0.3 m / 10 deg off" if args.offset else f"N(0, {args.noise_m} m), N(0, {args.noise_deg} deg) off"
     rows: list[Row] = []
     pre = ScanPreprocessor(mount)
@@ -197,7 +200,7 @@ def main() -> None:
     for name in ("native", "kiss"):
         if name in skip:
             continue
-        fe = make_frontend(name, occ_map, mount, None)
+        fe = make_frontend(name, occ_map, mount, fe_cfg[name])
         row = Row(f"{name} (fgloc)", "scan-to-map, Hessian cov")
 
         def fn(i: int, fe=fe) -> np.ndarray | None:
@@ -240,7 +243,7 @@ def main() -> None:
             row.note = f"not available ({e.__class__.__name__}: {str(e)[:60]})"
         rows.append(row)
 
-    surf, _ = surface_points(occ_map, 2)
+    surf, _ = surface_points(occ_map, 2, fe_cfg["kiss"].get("surface_depth_cells", 0.5))
     surf3 = np.column_stack([surf, np.zeros(len(surf))])
 
     if "kiss-icp" not in skip:

@@ -43,10 +43,13 @@ from .base import (
 )
 
 
-def surface_points(occ_map: OccupancyMap, samples_per_face: int = 2) -> tuple[FloatArray, FloatArray]:
+def surface_points(
+    occ_map: OccupancyMap, samples_per_face: int = 2, depth_cells: float = 0.0
+) -> tuple[FloatArray, FloatArray]:
     """Points ``(N, 2)`` on the faces of occupied cells that border non-occupied (free or
     unknown) cells, and their outward unit normals ``(N, 2)`` (pointing out of the
-    obstacle), both in the map frame.  Off-grid neighbours count as non-occupied."""
+    obstacle), both in the map frame.  Off-grid neighbours count as non-occupied.
+    ``depth_cells`` moves the points that far into the cell (0.5: the cell centre line)."""
     occ = occ_map.occupied
     free = ~occ
     h, w = occ.shape
@@ -84,6 +87,7 @@ def surface_points(occ_map: OccupancyMap, samples_per_face: int = 2) -> tuple[Fl
     pts = np.column_stack([occ_map.origin[0] + c * gx - s * gy, occ_map.origin[1] + s * gx + c * gy])
     ng = np.concatenate(normals)
     nrm = np.column_stack([c * ng[:, 0] - s * ng[:, 1], s * ng[:, 0] + c * ng[:, 1]])
+    pts = pts - float(depth_cells) * occ_map.resolution * nrm
     return pts, nrm
 
 
@@ -105,12 +109,12 @@ class KissMatcher(FrontendBase):
     name = "kiss"
 
     KEYS = {
-        "preprocess", "samples_per_face", "coarse_voxel_size_m", "coarse_max_points_per_voxel",
-        "coarse_max_correspondence_m", "coarse_kernel_m", "coarse_max_iterations", "coarse_convergence_criterion",
-        "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m", "max_iterations",
-        "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers", "min_inlier_fraction",
-        "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "max_backface_fraction",
-        "retry_inlier_fraction", "retry_offset_m", "retry_offset_deg",
+        "preprocess", "samples_per_face", "surface_depth_cells", "coarse_voxel_size_m",
+        "coarse_max_points_per_voxel", "coarse_max_correspondence_m", "coarse_kernel_m", "coarse_max_iterations",
+        "coarse_convergence_criterion", "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m",
+        "max_iterations", "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers",
+        "min_inlier_fraction", "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor",
+        "max_backface_fraction", "retry_inlier_fraction", "retry_offset_m", "retry_offset_deg",
     }
 
     def __init__(
@@ -120,6 +124,7 @@ class KissMatcher(FrontendBase):
         *,
         preprocess: PreprocessOptions | None = None,
         samples_per_face: int = 2,
+        surface_depth_cells: float = 0.5,
         coarse_voxel_size_m: float = 0.8,
         coarse_max_points_per_voxel: int = 64,
         coarse_max_correspondence_m: float = 1.5,
@@ -139,7 +144,7 @@ class KissMatcher(FrontendBase):
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,
-        cov_inflation: tuple[float, float] = (5.5, 45.0),
+        cov_inflation: tuple[float, float] = (17.0, 36.0),
         cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
         max_backface_fraction: float = 0.1,
         retry_inlier_fraction: float = 0.9,
@@ -154,7 +159,7 @@ class KissMatcher(FrontendBase):
             raise ConfigError(f"front-end 'kiss' needs kiss-icp ({e})") from None
         from scipy.spatial import cKDTree
 
-        pts2, self.map_normals = surface_points(occ_map, samples_per_face)
+        pts2, self.map_normals = surface_points(occ_map, samples_per_face, surface_depth_cells)
         if len(pts2) == 0:
             raise ConfigError("front-end 'kiss': the map has no occupied cell bordering free space")
         pts3 = np.column_stack([pts2, np.zeros(len(pts2))])

@@ -21,12 +21,15 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    motion), so the covariance is inflated by a calibrated factor (see
    ``config/frontends.yaml`` for the calibration run and its NEES).
 
-The surface correction: ``OccupancyMap.distance_field`` is the distance to the
-nearest occupied cell *centre*, while a beam ends on the cell's *face*, half a
-cell nearer.  The matcher's field is the EDT of the occupancy grid upsampled
-``field_upsample`` times, minus half a fine cell: zero on the faces of occupied
-cells, ``-res/2k`` inside them, so its zero level set is the wall surface (error at
-convex corners below ``0.21 res / k``) and the optimum is unbiased.
+Where is the wall?  ``OccupancyMap.distance_field`` is the distance to the nearest
+occupied cell *centre*.  The matcher's field is a signed distance to the occupied
+cells' *faces* (the EDT of the occupancy grid upsampled ``field_upsample`` times,
+minus half a fine cell; negative inside obstacles), shifted by
+``surface_depth_cells``: 0 puts the surface on the faces (a map whose scans were
+ray cast on the grid itself: a beam ends on the face of the first occupied cell),
+0.5 (default) on the centres of the boundary cells (SLAM maps and rasterized worlds:
+a cell is occupied because beam endpoints fall inside it, on average at its centre
+line).  Either way the optimum is unbiased for that convention.
 
 ``quality`` is the inlier fraction (|r| < ``inlier_dist_m``) of the used points.
 """
@@ -311,7 +314,9 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
 
 
 # ----------------------------------------------------------------- the matcher
-def surface_distance_field(occ_map: OccupancyMap, upsample: int = 2, max_dist_m: float = 2.0) -> FloatArray:
+def surface_distance_field(
+    occ_map: OccupancyMap, upsample: int = 2, max_dist_m: float = 2.0, surface_depth_m: float = 0.0
+) -> FloatArray:
     """Signed distance (m) to the nearest occupied-cell *surface*, on a grid ``upsample`` times finer.
 
     Fine cell ``(i, j)`` has its centre at continuous map-grid coordinate
@@ -319,7 +324,9 @@ def surface_distance_field(occ_map: OccupancyMap, upsample: int = 2, max_dist_m:
     occupied cell centre minus half a fine cell (so the bilinear interpolation
     crosses zero on the cell face, where a beam ends); inside: minus the same
     distance to the nearest non-occupied cell, so a point inside a thick wall is
-    pushed out instead of resting on a flat zero.  Clipped to ``[-max, max]``.
+    pushed out instead of resting on a flat zero.  ``surface_depth_m`` moves the zero
+    level that far into the obstacle (``res/2``: the surface runs through the centres of
+    the boundary cells).  Clipped to ``[-max, max]``.
     """
     from scipy.ndimage import distance_transform_edt
 
@@ -335,7 +342,7 @@ def surface_distance_field(occ_map: OccupancyMap, upsample: int = 2, max_dist_m:
         inside = np.full(occ.shape, float(max_dist_m))
     else:
         inside = distance_transform_edt(occ) * fine - 0.5 * fine
-    d = np.where(occ, -inside, outside)
+    d = np.where(occ, -inside, outside) + float(surface_depth_m)
     return np.clip(d, -max_dist_m, max_dist_m)
 
 
@@ -351,6 +358,7 @@ class NativeMatcher(FrontendBase):
         *,
         preprocess: PreprocessOptions | None = None,
         field_upsample: int = 2,
+        surface_depth_cells: float = 0.5,
         field_max_dist_m: float = 1.0,
         loss: str = "cauchy",
         kernel_schedule_m: tuple[float, ...] = (0.3, 0.1, 0.03),
@@ -372,7 +380,7 @@ class NativeMatcher(FrontendBase):
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,
-        cov_inflation: tuple[float, float] = (2.5, 15.0),
+        cov_inflation: tuple[float, float] = (5.3, 9.5),
         cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
         backface_cos: float = 0.1,
     ):
@@ -414,23 +422,24 @@ class NativeMatcher(FrontendBase):
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
 
         k = max(int(field_upsample), 1)
-        self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far), dtype=np.float64)
+        depth = float(surface_depth_cells) * occ_map.resolution
+        self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far, depth), dtype=np.float64)
         # map-frame point -> fine-grid continuous coordinate with cell centres at integers
         c, s = math.cos(occ_map.origin[2]), math.sin(occ_map.origin[2])
         scale = k / occ_map.resolution
         self.A = np.array([[c, s], [-s, c]]) * scale
         self.b = -self.A @ occ_map.origin[:2] - 0.5
         # coarse likelihood field at map resolution for the correlative search
-        dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * search_sigma_m + occ_map.resolution))
+        dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * search_sigma_m + occ_map.resolution, depth))
         self.lik = np.ascontiguousarray(np.exp(-0.5 * (dfc / float(search_sigma_m)) ** 2))
         self.Ac = np.array([[c, s], [-s, c]]) / occ_map.resolution
         self.bc = -self.Ac @ occ_map.origin[:2] - 0.5
 
     # -------------------------------------------------------------- config
     KEYS = {
-        "preprocess", "field_upsample", "field_max_dist_m", "loss", "kernel_schedule_m", "outlier_schedule_m",
-        "max_iterations", "tolerance", "inlier_dist_m", "min_inliers", "min_inlier_fraction", "search",
-        "search_trigger_inlier_fraction", "search_window_m", "search_window_deg", "search_lin_step_m",
+        "preprocess", "field_upsample", "surface_depth_cells", "field_max_dist_m", "loss", "kernel_schedule_m",
+        "outlier_schedule_m", "max_iterations", "tolerance", "inlier_dist_m", "min_inliers", "min_inlier_fraction",
+        "search", "search_trigger_inlier_fraction", "search_window_m", "search_window_deg", "search_lin_step_m",
         "search_ang_step_deg", "search_sigma_m", "search_max_points", "search_candidates", "max_jump_m",
         "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "backface_cos",
     }

@@ -14,6 +14,8 @@ from fgloc.types import LaserScan
 from .synth import MOUNT, free_poses, make_map, make_moving_scan, make_scan
 
 NAMES = ["native", "kiss"]
+# the synthetic scans are ray cast on the grid itself: a beam ends on the face of the first occupied cell
+FACES = {"surface_depth_cells": 0.0}
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +25,7 @@ def world():
 
 @pytest.fixture(scope="module")
 def matchers(world):
-    return {n: make_frontend(n, world, MOUNT, None) for n in NAMES}
+    return {n: make_frontend(n, world, MOUNT, FACES) for n in NAMES}
 
 
 def _err(res: MatchResult, truth: np.ndarray) -> tuple[float, float]:
@@ -56,7 +58,7 @@ def test_deskew_removes_motion_distortion(world, name):
     twist, dt = np.array([0.8, 0.0, 1.0]), 0.04
     errs = {}
     for deskew in (False, True):
-        fe = make_frontend(name, world, MOUNT, {"preprocess": {"deskew": deskew}})
+        fe = make_frontend(name, world, MOUNT, {**FACES, "preprocess": {"deskew": deskew}})
         e = []
         for p in free_poses(world, 12, rng, clearance=0.8):
             fe.reset()
@@ -146,7 +148,7 @@ def test_native_rejects_degenerate_corridor():
     data[30, :] = 100
     data[11:30, :] = 0
     corridor = OccupancyMap(data, 0.05)
-    fe = make_frontend("native", corridor, MOUNT, {"search": "never"})
+    fe = make_frontend("native", corridor, MOUNT, {**FACES, "search": "never"})
     scan = make_scan(corridor, np.array([40.0, 1.0, 0.0]), range_max=10.0)
     res = fe.match(scan, np.array([40.05, 1.0, 0.0]))
     assert not res.ok and "degenerate" in res.reason

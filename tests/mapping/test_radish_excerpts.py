@@ -104,3 +104,22 @@ def test_fgloc_map_missing_log_is_one_line_error(tmp_path, capsys):
     assert rc == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nope.clf" in err[0]
+
+
+def test_scans_localize_on_the_built_map(slam_runs):
+    """The fr079 excerpt's map supports scan-to-map tracking: re-localizing its own scans from
+    odometry stays within a few cm of the SLAM trajectory, and matches almost every scan."""
+    from fgloc.mapping.localize import track_on_map
+    from fgloc.mapping.slam import build_occupancy
+
+    recs, mount, _, res = slam_runs["fr079"]
+    occ = build_occupancy(res, recs, mount)
+    seg = recs[300:600]
+    p0 = res.scan_trajectory.interpolate(seg[0].stamp)[0]
+    traj, stats = track_on_map(seg, occ, mount, p0)
+    assert stats["matched"] >= 0.95 * stats["scans"]
+    slam = res.scan_trajectory.interpolate(traj.stamps)
+    d = np.hypot(traj.poses[:, 0] - slam[:, 0], traj.poses[:, 1] - slam[:, 1])
+    dyaw = np.abs(np.angle(np.exp(1j * (traj.poses[:, 2] - slam[:, 2]))))
+    assert np.sqrt(np.mean(d**2)) < 0.05
+    assert np.degrees(np.sqrt(np.mean(dyaw**2))) < 1.0

@@ -18,6 +18,19 @@ Sensors (defaults follow the paper's Table 2; every number is in the scenario):
   -> -inf; mounted off the robot's centre (``/tf_static`` base_link -> laser);
 * every sensor has its own clock phase (unsynchronized).
 
+World and motion: the builtin hall is continuous geometry (polygons, circles; laser
+ranges by exact ray intersection, compiled with numba), rotated ``world_rotation_deg``
+against the map grid, with ``map_changes`` (furniture moved since mapping); the robot's
+map is its 0.05 m rasterization (a cell is occupied when it intersects a solid).  A
+map_server YAML as ``map`` makes a grid world instead: every cell that is not free is
+solid (the Willow Garage map stores walls as grey "unknown" pixels), ray cast with
+:meth:`OccupancyMap.raycast`.  The robot drives the route's legs facing the direction of
+travel (0.8 m/s, 0.5 m/s^2), stops at each waypoint and turns in place to the next leg's
+heading (0.8 rad/s, 1.5 rad/s^2): the heading changes at the rectangle's corners.  The
+true motion is sampled at 500 Hz (wheel angles are integrated at that rate);
+``/ground_truth`` (nav_msgs/Odometry, pose in ``map``) and ``SimResult.ground_truth`` are
+at ``ground_truth_rate_hz`` (100 Hz).  Stamps start at 0 s.
+
 Faults: wheel slip (the wheels turn ``fraction`` faster than the ground moves),
 compass disturbance (an added heading offset), laser blackout (no scans), kidnapping
 (a jump of the true pose that odometry does not see), unmapped moving obstacles

@@ -105,6 +105,12 @@ def test_deterministic_per_seed():
     assert np.array_equal(sa, sb)
     assert not np.array_equal(sa, sc)
     assert a.compass_offset_rad == b.compass_offset_rad != c.compass_offset_rad
+    for topic in ("/odom", "/imu", "/scan"):
+        ta, tb = a.topic(topic), b.topic(topic)
+        assert [m.stamp for m in ta] == [m.stamp for m in tb]
+    assert all(np.array_equal(x.twist, y.twist) for x, y in zip(a.topic("/odom"), b.topic("/odom"), strict=True))
+    assert [m.yaw_rad for m in a.topic("/imu")] == [m.yaw_rad for m in b.topic("/imu")]
+    assert [m.yaw_rad for m in a.topic("/imu")] != [m.yaw_rad for m in c.topic("/imu")]
 
 
 LEG = [[2.5, 3.0], [27.5, 3.0]]  # one 25 m leg (~34 s) keeps the fault tests quick

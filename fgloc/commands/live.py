@@ -29,7 +29,9 @@ def register(app: typer.Typer) -> None:
         laser_mount: tuple[float, float, float] = typer.Option(
             (float("nan"), float("nan"), float("nan")), "--laser-mount", help="base_link->laser X Y YAW"
         ),
-        out: Path = typer.Option(None, "--out", help="write the live fused trajectory as TUM"),
+        out: Path = typer.Option(None, "--out", help="write the live fused trajectory (online poses) as TUM"),
+        out_smoothed: Path = typer.Option(None, "--out-smoothed",
+                                          help="write the localizer's smoothed trajectory at exit as TUM"),
         quiet: bool = typer.Option(False, "--quiet", help="no status line"),
     ) -> None:
         """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP."""
@@ -107,6 +109,10 @@ def register(app: typer.Typer) -> None:
             from fgloc.io.tum import write_tum
 
             write_tum(out, traj)
+        if out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
+            from fgloc.io.tum import write_tum
+
+            write_tum(out_smoothed, session.smoothed)
         report = {
             "duration_s": round(summary.duration_s, 2),
             "poses": summary.n_poses,

@@ -162,6 +162,7 @@ class LiveSession:
             }
         self._t0 = time.monotonic()
         self.closed = False
+        self.smoothed: Trajectory | None = None  # Localizer.finish() at close (fixed-lag / batch result)
 
     def start(self) -> None:
         self._t0 = time.monotonic()
@@ -182,6 +183,10 @@ class LiveSession:
             if self.serial is not None:
                 self.serial.stop()
             self.runner.drain()
+            try:
+                self.smoothed = self.runner.loc.finish()
+            except Exception as e:  # noqa: BLE001 - the live trajectory is already safe
+                self.events.append(f"smoothing at shutdown failed: {type(e).__name__}: {e}")
             if self.recorder is not None:
                 if hasattr(self.recorder, "__exit__"):
                     self.recorder.__exit__(None, None, None)

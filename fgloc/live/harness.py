@@ -36,6 +36,7 @@ class LiveReplay:
     clock: ReplayClock
     live_host: Trajectory  # fused poses, host time
     live_run: Trajectory  # the same, stamps mapped back to run time
+    smoothed_run: Trajectory | None  # Localizer.finish() at shutdown, run time
     emulators: EmulatorPair
 
 
@@ -56,6 +57,7 @@ def replay_live(
     live_overrides: dict[str, Any] | None = None,
     lead_s: float = 1.0,
     status_sink: Any = None,
+    warmup: bool = True,
 ) -> LiveReplay:
     from fgloc.pipeline import Localizer
 
@@ -81,6 +83,8 @@ def replay_live(
         over["laser"]["range_min_m"] = float(scans[0].range_min)
         over["laser"]["range_max_m"] = float(scans[0].range_max)
     cfg = load_config(overrides=_deep(over, live_overrides or {}))
+    if warmup and occ_map is not None:
+        _warm_up(messages, occ_map, laser_mount, backend, frontend, initial_pose, localizer_config(cfg), t_start)
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
                     config=localizer_config(cfg))
     pair = EmulatorPair.create(messages, rp, mode=mode, speed=speed, t_start=t_start, duration=duration,
@@ -97,7 +101,29 @@ def replay_live(
     pair.stop()
     host = sess.live_trajectory()
     run = Trajectory(np.asarray(pair.clock.to_run(host.stamps)), host.poses) if len(host) else host
-    return LiveReplay(sess, summary, pair.clock, host, run, pair)
+    sm = sess.smoothed
+    sm_run = Trajectory(np.asarray(pair.clock.to_run(sm.stamps)), sm.poses) if sm is not None and len(sm) else None
+    return LiveReplay(sess, summary, pair.clock, host, run, sm_run, pair)
+
+
+def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: StaticTransform, backend: str,
+             frontend: str, initial_pose: np.ndarray | None, config: dict[str, Any], t_start: float | None) -> None:
+    """Run a throwaway localizer over the first scans so JIT compilation (numba) and caches are
+    done before the replay clock starts, as they would be on a robot that has run once before."""
+    from fgloc.pipeline import Localizer, run_messages
+
+    first: list[tuple[str, object]] = []
+    n_scans = 0
+    for topic, m in messages:
+        if t_start is not None and float(getattr(m, "stamp", t_start)) < t_start:
+            continue
+        first.append((topic, m))
+        n_scans += topic == "/scan"
+        if n_scans >= 5:
+            break
+    loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
+                    config=config)
+    run_messages(loc, first)
 
 
 def _deep(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:

@@ -490,17 +490,21 @@ class SickClient:
                 sock.settimeout(0.1)
                 sock.sendall(frame("sEN LMDscandata 1"))
                 last_data = time.monotonic()
+                got_any = False
                 while not self._stop.is_set():
                     try:
                         chunk = sock.recv(65536)
                     except TimeoutError:
-                        if time.monotonic() - last_data > self.stall_timeout_s:
+                        # a scanner still spinning up gets longer before it counts as stalled
+                        limit = self.stall_timeout_s if got_any else max(self.stall_timeout_s, 5.0)
+                        if time.monotonic() - last_data > limit:
                             raise ConnectionError("no data (stalled)") from None
                         continue
                     if not chunk:
                         raise ConnectionError("closed by peer")
                     now = time.time()
                     last_data = time.monotonic()
+                    got_any = True
                     for payload in self.framer.feed(chunk):
                         self.handle_payload(payload, now)
                 try:

@@ -1,6 +1,16 @@
-"""Runs through the emulators (pty + TCP) into the live localizer, against `fgloc run`."""
+"""Runs replayed through the emulators (pty / socket:// + TCP) into the live localizer,
+compared with `fgloc run` on a log of exactly the replayed messages, and the live
+recording re-run through `fgloc run`.
+
+Compared like with like: the live online poses (published as they happen) with
+`fgloc run`'s online trajectory, the live session's smoothed trajectory
+(``Localizer.finish()`` at shutdown) with `fgloc run`'s smoothed one.  The full paper
+run is measured by ``tools/bench_latency.py --duration 0``.
+"""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,82 +31,70 @@ try:
 except ImportError:
     HAVE_SIM = False
 
-WINDOW_S = 25.0  # seconds of the paper run replayed in real time (the full run: tools/bench_latency.py)
+
+def _write_log(path: Path, msgs, mount) -> Path:
+    with LogWriter(path) as w:
+        w.write("/tf_static", [mount], msgs[0][1].stamp)
+        for topic, m in msgs:
+            if topic in ("/odom", "/imu", "/scan"):
+                w.write(topic, m)
+    return path
 
 
-def _window(traj: Trajectory, t0: float, t1: float) -> Trajectory:
-    m = (traj.stamps >= t0) & (traj.stamps <= t1)
-    return Trajectory(traj.stamps[m], traj.poses[m])
+def _host_to_run(traj: Trajectory, clock) -> Trajectory:
+    return Trajectory(np.asarray(clock.to_run(traj.stamps)), traj.poses)
+
+
+def _compare(msgs, occ, mount, gt, robot, tmp_path, speed, mode, slack_m):
+    """Replay live, run offline, re-run the recording; return the RMSEs (m)."""
+    init = gt.interpolate(float(msgs[0][1].stamp))[0]
+    log = _write_log(tmp_path / "replayed.mcap", msgs, mount)
+    map_yaml = occ.save(tmp_path / "map.yaml")
+    rec = tmp_path / "live.mcap"
+    res = replay_live(msgs, occ, mount, robot=robot, backend="smoother", initial_pose=init, speed=speed,
+                      mode=mode, record=rec)
+    c = res.summary.counters
+    assert c["serial"]["crc_errors"] == 0 and c["serial"]["dropped"] == 0
+    assert c["laser"]["malformed"] == 0 and c["localizer_errors"] == 0
+    n_scans = sum(1 for t, _ in msgs if t == "/scan")
+    assert c["laser"]["scans"] == n_scans and c["scans_fused"] >= 0.95 * n_scans, (c, res.summary.events)
+
+    run_log(log, tmp_path / "run", map_yaml=map_yaml, backend="smoother", initial_pose=list(init), quiet=True)
+    out = run_log(rec, tmp_path / "rerun", map_yaml=map_yaml, backend="smoother", initial_pose=list(init),
+                  quiet=True)
+    assert out["truncated"] is None  # the recording was closed properly
+    r = {
+        "live_online": evaluate(res.live_run, gt).position_rmse_m,
+        "live_smoothed": evaluate(res.smoothed_run, gt).position_rmse_m,
+        "run_online": evaluate(read_tum(tmp_path / "run" / "online.tum"), gt).position_rmse_m,
+        "run_smoothed": evaluate(read_tum(tmp_path / "run" / "trajectory.tum"), gt).position_rmse_m,
+        "rerun_online": evaluate(_host_to_run(read_tum(tmp_path / "rerun" / "online.tum"), res.clock),
+                                 gt).position_rmse_m,
+        "rerun_smoothed": evaluate(_host_to_run(read_tum(tmp_path / "rerun" / "trajectory.tum"), res.clock),
+                                   gt).position_rmse_m,
+    }
+    print("\n" + "  ".join(f"{k} {v * 1e3:.3f} mm" for k, v in r.items()))
+    # live within 1.5x of fgloc run (plus `slack_m` of clock-alignment error: the live stamps
+    # carry the unobservable minimum transport delay, ~0.1-0.2 ms here)
+    assert r["live_online"] <= 1.5 * r["run_online"] + slack_m
+    assert r["live_smoothed"] <= 1.5 * r["run_smoothed"] + slack_m
+    # the recording gives the same result through fgloc run
+    for k in ("online", "smoothed"):
+        assert abs(r[f"rerun_{k}"] - r[f"run_{k}"]) <= 0.25 * r[f"run_{k}"] + slack_m
+    return r
 
 
 def test_world_live_vs_fgloc_run_and_recording(tmp_path):
-    """A self-made world (no simulator needed), replayed at 2x through socket:// + TCP."""
-    occ, mount, gt, msgs = world(duration=12.0)
-    log = tmp_path / "world.mcap"
-    with LogWriter(log) as w:
-        w.write("/tf_static", [mount], msgs[0][1].stamp)  # type: ignore[attr-defined]
-        for topic, m in msgs:
-            w.write(topic, m)
-    map_yaml = occ.save(tmp_path / "map.yaml")
-    init = gt.poses[0]
-    rec = tmp_path / "live.mcap"
-    res = replay_live(msgs, occ, mount, robot={"drive": "mecanum"}, backend="smoother", initial_pose=init,
-                      speed=2.0, mode="tcp", record=rec)
-    c = res.summary.counters
-    assert c["serial"]["crc_errors"] == 0 and c["laser"]["malformed"] == 0 and c["localizer_errors"] == 0
-    assert c["scans_fused"] >= 0.95 * len([1 for t, _ in msgs if t == "/scan"])
-    live = evaluate(res.live_run, gt)
-    run_log(log, tmp_path / "run", map_yaml=map_yaml, backend="smoother", initial_pose=list(init), quiet=True)
-    run_online = evaluate(read_tum(tmp_path / "run" / "online.tum"), gt)
-    run_final = evaluate(read_tum(tmp_path / "run" / "trajectory.tum"), gt)
-    print(f"\nworld: live {live.position_rmse_m * 1e3:.2f} mm, fgloc run online "
-          f"{run_online.position_rmse_m * 1e3:.2f} mm, smoothed {run_final.position_rmse_m * 1e3:.2f} mm")
-    # errors here are ~1 mm, so allow 1 mm of clock-alignment error (0.5 ms at 1 m/s) on top
-    assert live.position_rmse_m <= 1.5 * run_online.position_rmse_m + 0.001
-    out = run_log(rec, tmp_path / "rerun", map_yaml=map_yaml, backend="smoother", initial_pose=list(init),
-                  quiet=True)
-    assert out["truncated"] is None
-    rerun = read_tum(tmp_path / "rerun" / "trajectory.tum")
-    rerun_m = evaluate(Trajectory(np.asarray(res.clock.to_run(rerun.stamps)), rerun.poses), gt)
-    print(f"world: recorded MCAP through fgloc run {rerun_m.position_rmse_m * 1e3:.2f} mm")
-    assert rerun_m.position_rmse_m <= 1.5 * run_final.position_rmse_m + 0.001
+    """A self-made room (no simulator needed), replayed at 2x through socket:// and TCP."""
+    occ, mount, gt, msgs = world(duration=10.0)
+    _compare(msgs, occ, mount, gt, {"drive": "mecanum"}, tmp_path, speed=2.0, mode="tcp", slack_m=0.0005)
 
 
 @pytest.mark.skipif(not HAVE_SIM, reason="fgloc.sim has not landed yet")
-def test_paper_run_live_vs_fgloc_run_and_recording(paper_sim, paper_dir, tmp_path):
+def test_paper_run_live_vs_fgloc_run_and_recording(paper_sim, tmp_path):
+    """The first 20 s of the simulated paper run, real time, serial over a pty."""
     sim = paper_sim
-    gt = sim.ground_truth
-    stamps = [float(m.stamp) for _, m in sim.messages if hasattr(m, "stamp")]
-    s0 = min(stamps)
-    init = gt.interpolate(s0)[0]
-    rec = tmp_path / "live.mcap"
-    res = replay_live(sim.messages, sim.map, sim.laser_mount, robot=sim.robot, backend="smoother",
-                      initial_pose=init, t_start=s0, duration=WINDOW_S, speed=1.0, mode="pty", record=rec)
-    c = res.summary.counters
-    assert c["serial"]["crc_errors"] == 0 and c["laser"]["malformed"] == 0
-    assert c["scans_fused"] >= 0.95 * c["laser"]["scans"] > 0
-    t_end = float(res.live_run.stamps[-1])
-    live = evaluate(res.live_run, gt)
-
-    # fgloc run on the simulated log, same start pose, scored on the same window
-    out = run_log(paper_dir / "log.mcap", tmp_path / "run", map_yaml=paper_dir / "map.yaml",
-                  backend="smoother", initial_pose=list(init), quiet=True)
-    run_final = evaluate(_window(read_tum(tmp_path / "run" / "trajectory.tum"), s0, t_end), gt)
-    run_online = evaluate(_window(read_tum(tmp_path / "run" / "online.tum"), s0, t_end), gt)
-    assert out["poses"] > 0
-    print(f"\nlive RMSE {live.position_rmse_m:.4f} m over {live.n} poses; fgloc run: smoothed "
-          f"{run_final.position_rmse_m:.4f} m, online {run_online.position_rmse_m:.4f} m")
-    assert live.position_rmse_m <= 1.5 * run_final.position_rmse_m
-    assert live.position_rmse_m <= 1.5 * run_online.position_rmse_m
-
-    # the live recording re-runs through fgloc run to the same accuracy (host time -> run time)
-    init_host = init
-    out2 = run_log(rec, tmp_path / "rerun", map_yaml=paper_dir / "map.yaml", backend="smoother",
-                   initial_pose=list(init_host), quiet=True)
-    assert out2["truncated"] is None and out2["poses"] > 0
-    rerun = read_tum(tmp_path / "rerun" / "trajectory.tum")
-    rerun_run = Trajectory(np.asarray(res.clock.to_run(rerun.stamps)), rerun.poses)
-    rerun_m = evaluate(rerun_run, gt)
-    print(f"recorded MCAP through fgloc run: {rerun_m.position_rmse_m:.4f} m")
-    assert rerun_m.position_rmse_m <= 1.2 * run_final.position_rmse_m + 0.002
-    assert abs(rerun_m.position_rmse_m - run_final.position_rmse_m) <= 0.25 * run_final.position_rmse_m + 0.002
+    s0 = min(float(m.stamp) for _, m in sim.messages if hasattr(m, "stamp"))
+    msgs = [(t, m) for t, m in sim.messages if t in ("/odom", "/imu", "/scan") and m.stamp <= s0 + 20.0]
+    _compare(msgs, sim.map, sim.laser_mount, sim.ground_truth, sim.robot, tmp_path, speed=1.0, mode="pty",
+             slack_m=0.0002)

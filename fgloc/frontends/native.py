@@ -364,7 +364,7 @@ class NativeMatcher(FrontendBase):
         kernel_schedule_m: tuple[float, ...] = (0.3, 0.1, 0.03),
         outlier_schedule_m: tuple[float, ...] = (1.0, 0.5, 0.2),
         max_iterations: int = 15,
-        tolerance: float = 1e-6,
+        tolerance: float = 1e-4,
         inlier_dist_m: float = 0.05,
         min_inliers: int = 30,
         min_inlier_fraction: float = 0.5,

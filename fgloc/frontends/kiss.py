@@ -12,9 +12,12 @@ fine one.  The 6-DoF result is projected to SE(2) (x, y, yaw).
 
 Covariance: the point-to-point Hessian at the solution, computed here from the
 nearest-neighbour correspondences (a KD-tree over the same surface points):
-``H = sum w J^T J`` with ``J = [I2 | dR/dyaw p]``, ``cov = cov_inflation * s^2 H^-1 +
-diag(cov_floor)``, ``s^2`` the weighted residual variance per axis.  The inflation
-accounts for beams that are not independent (calibrated, see config/frontends.yaml).
+``H = sum w J^T J`` with ``J = [I2 | dR/dyaw p]``, ``cov = S s^2 H^-1 S + diag(cov_floor)``,
+``s^2`` the weighted residual variance per axis, ``S = diag(sqrt(kxy), sqrt(kxy),
+sqrt(kyaw))`` from ``cov_inflation = [kxy, kyaw]``: beams are not independent, so the
+inflation is calibrated (see config/frontends.yaml).  A doubtful optimum (inlier
+fraction below ``retry_inlier_fraction``) is re-registered from starts around it and
+the start with most inliers wins.
 Fixes with too few inliers (correspondences closer than ``inlier_dist_m``), a
 degenerate Hessian or a jump from the guess beyond ``max_jump_*`` are rejected.
 """

@@ -7,6 +7,8 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    corrected* distance field of the map (below), with an annealed robust kernel
    (Huber or Cauchy; scale shrinking over ``kernel_schedule_m``) and analytic
    Jacobians ``dr/d[x, y, yaw] = grad D^T [I | dR/dyaw p]``.  Compiled with numba.
+   Points whose field gradient points away from the laser (the back face of a thin
+   wall, which the beam could not have reached) are ignored (``backface_cos``).
 2. **Correlative search** (``search: auto`` when the refinement looks wrong, ``always``,
    or ``never``): every pose on a grid over the window ``+-search_window_m`` /
    ``+-search_window_deg`` around the guess is scored on a Gaussian likelihood field
@@ -14,12 +16,12 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    ``search_candidates`` (distinct) poses are refined as in 1 and the lowest-cost wins.
 3. **Checks**: too few inliers, degenerate Hessian, a jump from the guess beyond
    ``max_jump_m`` / ``max_jump_deg`` -> no fix with a reason.
-4. **Covariance**: ``cov_inflation * s^2 (J^T W J)^-1 + diag(cov_floor)`` with
-   ``s^2 = sum w r^2 / (sum w - 3)`` the weighted residual variance.  The
-   Hessian-based covariance assumes independent beams; real (and simulated) scans
-   have errors correlated along a wall (map discretisation, the robot's own
-   motion), so the covariance is inflated by a calibrated factor (see
-   ``config/frontends.yaml`` for the calibration run and its NEES).
+4. **Covariance**: ``S s^2 (J^T W J)^-1 S + diag(cov_floor)`` with ``s^2 = sum w r^2 /
+   (sum w - 3)`` the weighted residual variance and ``S = diag(sqrt(kxy), sqrt(kxy),
+   sqrt(kyaw))``, ``cov_inflation = [kxy, kyaw]``.  The Hessian covariance assumes
+   independent beams; real (and simulated) scans have errors correlated along a wall
+   (the map's raster, de-skew), so it is inflated per axis by calibrated factors (the
+   calibration run and its NEES are in ``config/frontends.yaml``).
 
 Where is the wall?  ``OccupancyMap.distance_field`` is the distance to the nearest
 occupied cell *centre*.  The matcher's field is a signed distance to the occupied

@@ -175,7 +175,7 @@ def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
     # The robot's map: free cells stay free, solid cells bordering free space are walls.
     from scipy.ndimage import binary_dilation
 
-    border = binary_dilation(occ.free, iterations=1) & ~occ.free
+    border = binary_dilation(occ.free, structure=np.ones((3, 3), dtype=bool)) & ~occ.free  # 8-connected
     data = np.full(occ.data.shape, -1, dtype=np.int16)
     data[occ.free] = FREE
     data[border | occ.occupied] = OCCUPIED

@@ -97,6 +97,23 @@ def _run(cmd: list[str]) -> str:
     return p.stdout
 
 
+def _covered_segment(recs: list[ScanRecord], full: Trajectory, map_stamps: np.ndarray, lo: int, hi: int,
+                     n: int) -> int:
+    """Start index in [lo, hi] of the n-scan segment whose poses (full-log SLAM) lie most often
+    within 1 m of a pose the map was built from: a revisit, not a drive into unmapped rooms."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(full.interpolate(map_stamps)[:, :2])
+    stamps = np.array([r.stamp for r in recs])
+    near = tree.query(full.interpolate(stamps)[:, :2])[0] < 1.0
+    best, best_cov = lo, -1.0
+    for s0 in range(lo, max(hi, lo) + 1, 50):
+        cov = float(near[s0:s0 + n].mean())
+        if cov > best_cov:
+            best, best_cov = s0, cov
+    return best
+
+
 def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_scans: Trajectory,
              out: Path, ref: Trajectory | None, max_scans: int | None = None,
              config: Path | None = None, map_second_half: bool = False) -> dict:
@@ -113,14 +130,15 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
 
     half = len(recs) // 2
     n_loc = len(recs) - half if max_scans is None else min(max_scans, len(recs) - half)
-    if map_second_half:  # the map from the second half, the segment is the start of the log
-        start = 0
+    if map_second_half:  # the map from the second half, the segment from the first
         map_dir = out / f"{name}_secondhalf"
         mo = build_map(LOGS[name], map_dir, start=0.5)
-    else:  # the map from the first half, the segment is the end of the log
-        start = len(recs) - n_loc
+        lo_s, hi_s = 0, half - n_loc
+    else:  # the map from the first half, the segment from the second
         map_dir = out / f"{name}_firsthalf"
         mo = build_map(LOGS[name], map_dir, end=0.5)
+        lo_s, hi_s = half, len(recs) - n_loc
+    start = _covered_segment(recs, full_scans, mo.slam.scan_trajectory.stamps, lo_s, hi_s, n_loc)
     stop = start + n_loc
     mcap = out / f"{name}_segment.mcap"
     n_scan = 0

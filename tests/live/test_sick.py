@@ -118,6 +118,8 @@ def test_malformed_telegrams_interleaved_all_counted():
     assert len(scans) == client.stats.scans == n_good
     assert client.stats.malformed == n_bad
     assert set(client.stats.malformed_by_reason) <= {"truncated", "bad_number", "wrong_count", "bad_count"}
+    print(f"laser fuzz: {n_good} valid + {n_bad} malformed telegrams, {len(stream)} bytes; "
+          f"by reason {client.stats.malformed_by_reason}, framing {client.framer.stats.as_dict()}")
 
 
 def test_parse_errors_are_typed():

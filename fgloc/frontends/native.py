@@ -113,7 +113,7 @@ def _rho_w(r, c, loss, outlier):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos):  # pragma: no cover - compiled
+def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pragma: no cover - compiled
     """Residual, map-frame field gradient and whether the point faces the sensor.
 
     ``(lx, ly)`` is the laser origin in base_link: a point whose field gradient points
@@ -125,6 +125,7 @@ def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos):  # pragma:
     u = A[0, 0] * qx + A[0, 1] * qy + b[0]
     v = A[1, 0] * qx + A[1, 1] * qy + b[1]
     r, du, dv = _lookup(field, u, v, far)
+    r += off
     gx = du * A[0, 0] + dv * A[1, 0]
     gy = du * A[0, 1] + dv * A[1, 1]
     bx = qx - (pose[0] + cs * lx - sn * ly)
@@ -136,7 +137,7 @@ def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos):  # pragma:
 
 
 @njit(cache=True, fastmath=True)
-def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, H, g):  # pragma: no cover
+def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off, H, g):  # pragma: no cover
     """Fill H = J^T W J, g = J^T W r at ``pose``; return robust cost."""
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
@@ -146,7 +147,7 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, H
             H[i, j] = 0.0
     cost = 0.0
     for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
         if not front:
             r = far
         rho, w = _rho_w(r, c, loss, outlier)
@@ -172,12 +173,12 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, H
 
 
 @njit(cache=True, fastmath=True)
-def _cost(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos):  # pragma: no cover - compiled
+def _cost(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off):  # pragma: no cover - compiled
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
     cost = 0.0
     for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
         if not front:
             r = far
         rho, w = _rho_w(r, c, loss, outlier)
@@ -186,7 +187,7 @@ def _cost(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos):  #
 
 
 @njit(cache=True, fastmath=True)
-def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, tol, lx, ly, backcos):  # noqa: E501  # pragma: no cover
+def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, tol, lx, ly, backcos, off):  # noqa: E501  # pragma: no cover
     """Levenberg-Marquardt over the annealing stages. Returns (pose, iterations)."""
     pose = pose0.copy()
     H = np.zeros((3, 3))
@@ -198,7 +199,7 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
         c = scales[s]
         out = outliers[s]
         lam = 1e-4
-        cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, H, g)
+        cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, off, H, g)
         for _it in range(max_iter):
             it_total += 1
             improved = False
@@ -215,7 +216,7 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
                 trial[0] = pose[0] + d[0]
                 trial[1] = pose[1] + d[1]
                 trial[2] = pose[2] + d[2]
-                tc = _cost(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos)
+                tc = _cost(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos, off)
                 if tc <= cost:
                     pose[0] = trial[0]
                     pose[1] = trial[1]
@@ -227,15 +228,15 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
             if not improved:
                 break
             step = math.sqrt(d[0] * d[0] + d[1] * d[1]) + abs(d[2])
-            cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, H, g)
+            cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, off, H, g)
             if step < tol:
                 break
     return pose, it_total
 
 
 @njit(cache=True, fastmath=True)
-def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, backcos):  # pragma: no cover
-    """Final H (J^T W J), sum w r^2, sum w, inliers, used points."""
+def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, backcos, off):  # pragma: no cover
+    """Final H (J^T W J), sum w r^2, sum w, inliers, used points, sum of inlier residuals."""
     H = np.zeros((3, 3))
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
@@ -243,13 +244,15 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     sw = 0.0
     n_in = 0
     n_used = 0
+    sr = 0.0
     for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos)
+        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
         if not front:
             continue
         rho, w = _rho_w(r, c, loss, outlier)
         if abs(r) < inlier:
             n_in += 1
+            sr += r
         if w == 0.0:
             continue
         n_used += 1
@@ -267,7 +270,7 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     H[1, 0] = H[0, 1]
     H[2, 0] = H[0, 2]
     H[2, 1] = H[1, 2]
-    return H, wr2, sw, n_in, n_used
+    return H, wr2, sw, n_in, n_used, sr
 
 
 @njit(cache=True, fastmath=True)
@@ -360,7 +363,7 @@ class NativeMatcher(FrontendBase):
         *,
         preprocess: PreprocessOptions | None = None,
         field_upsample: int = 2,
-        surface_depth_cells: float = 0.5,
+        surface_depth_cells: float | str = "auto",
         field_max_dist_m: float = 1.0,
         loss: str = "cauchy",
         kernel_schedule_m: tuple[float, ...] = (0.3, 0.1, 0.03),
@@ -385,6 +388,8 @@ class NativeMatcher(FrontendBase):
         cov_inflation: tuple[float, float] = (5.3, 9.5),
         cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
         backface_cos: float = 0.1,
+        depth_window: int = 100,
+        depth_min_quality: float = 0.8,
     ):
         super().__init__(occ_map, laser_mount, preprocess)
         if loss not in ("huber", "cauchy"):
@@ -421,11 +426,20 @@ class NativeMatcher(FrontendBase):
         self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
         self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
         self.far = float(field_max_dist_m)
+        self.depth_min_quality = float(depth_min_quality)
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
 
         k = max(int(field_upsample), 1)
-        depth = float(surface_depth_cells) * occ_map.resolution
-        self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far, depth), dtype=np.float64)
+        # the field is zero on the faces; the surface depth is added per residual (adaptive in auto mode)
+        self.auto_depth = isinstance(surface_depth_cells, str)
+        if self.auto_depth and surface_depth_cells != "auto":
+            raise ConfigError(f"frontends config [native]: surface_depth_cells must be a number or auto, "
+                              f"got {surface_depth_cells!r}")
+        depth = 0.5 * occ_map.resolution if self.auto_depth else float(surface_depth_cells) * occ_map.resolution
+        self.depth_m = depth
+        self._depth_updates = 0
+        self.depth_window = int(depth_window)
+        self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far, 0.0), dtype=np.float64)
         # map-frame point -> fine-grid continuous coordinate with cell centres at integers
         c, s = math.cos(occ_map.origin[2]), math.sin(occ_map.origin[2])
         scale = k / occ_map.resolution
@@ -443,7 +457,8 @@ class NativeMatcher(FrontendBase):
         "outlier_schedule_m", "max_iterations", "tolerance", "inlier_dist_m", "min_inliers", "min_inlier_fraction",
         "search", "search_trigger_inlier_fraction", "search_window_m", "search_window_deg", "search_lin_step_m",
         "search_ang_step_deg", "search_sigma_m", "search_max_points", "search_candidates", "max_jump_m",
-        "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "backface_cos",
+        "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor", "backface_cos", "depth_window",
+        "depth_min_quality",
     }
 
     @classmethod
@@ -459,8 +474,10 @@ class NativeMatcher(FrontendBase):
                     kw[key] = tuple(float(v) for v in (val if isinstance(val, (list, tuple)) else [val]))
                 elif key in ("loss", "search"):
                     kw[key] = str(val)
+                elif key == "surface_depth_cells":
+                    kw[key] = "auto" if str(val).strip().lower() == "auto" else float(val)
                 elif key in ("field_upsample", "max_iterations", "min_inliers", "search_max_points",
-                             "search_candidates"):
+                             "search_candidates", "depth_window"):
                     kw[key] = int(val)
                 else:
                     kw[key] = float(val)
@@ -472,16 +489,16 @@ class NativeMatcher(FrontendBase):
     def _refine_from(self, px: FloatArray, py: FloatArray, start: FloatArray) -> tuple[FloatArray, float]:
         pose, _ = _refine(
             self.field, self.A, self.b, self.far, px, py, np.asarray(start, dtype=float),
-            self.scales, self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb,
+            self.scales, self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m,
         )
         c, out = self.scales[-1], self.outliers[-1]
-        cost = _cost(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out, *self._lb)
+        cost = _cost(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out, *self._lb, self.depth_m)
         return pose, float(cost)
 
     def _inlier_fraction(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[int, int]:
         c, out = self.scales[-1], self.outliers[-1]
-        _, _, _, n_in, _ = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
-                                  self.inlier_dist, *self._lb)
+        _, _, _, n_in, _, _ = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
+                                  self.inlier_dist, *self._lb, self.depth_m)
         return int(n_in), len(px)
 
     def _within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
@@ -526,8 +543,8 @@ class NativeMatcher(FrontendBase):
         pose = best.copy()
         pose[YAW] = wrap_angle(pose[YAW])
         c, out = self.scales[-1], self.outliers[-1]
-        H, wr2, sw, n_in, n_used = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
-                                          self.inlier_dist, *self._lb)
+        H, wr2, sw, n_in, n_used, sum_r = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
+                                          self.inlier_dist, *self._lb, self.depth_m)
         n_in = int(n_in)
         quality = n_in / n
         info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n}
@@ -556,6 +573,14 @@ class NativeMatcher(FrontendBase):
         cov = self._cov_scale @ (sigma2 * np.linalg.inv(H)) @ self._cov_scale + self.cov_floor
         cov = 0.5 * (cov + cov.T)
         info["sigma_m"] = math.sqrt(sigma2)
+        info["surface_depth_m"] = self.depth_m
+        if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:
+            # the mean signed inlier residual says how far the walls are from where the map puts
+            # them; a running mean over good fixes (a map property, kept across reset())
+            self._depth_updates += 1
+            est = self.depth_m - sum_r / n_in
+            self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
+            self.depth_m = float(np.clip(self.depth_m, 0.0, self.map.resolution))
         info["time_s"] = time.perf_counter() - t0
         return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
 

@@ -152,3 +152,16 @@ def test_native_rejects_degenerate_corridor():
     scan = make_scan(corridor, np.array([40.0, 1.0, 0.0]), range_max=10.0)
     res = fe.match(scan, np.array([40.05, 1.0, 0.0]))
     assert not res.ok and "degenerate" in res.reason
+
+
+def test_native_learns_the_surface_depth(world):
+    """auto: starts at the cell centres (0.5), learns that this world's beams end on the faces (0)."""
+    fe = make_frontend("native", world, MOUNT, {"surface_depth_cells": "auto"})
+    assert fe.depth_m == pytest.approx(0.5 * world.resolution)  # type: ignore[attr-defined]
+    rng = np.random.default_rng(4)
+    errs = []
+    for p in free_poses(world, 30, rng):
+        res = fe.match(make_scan(world, p, rng), p + np.array([0.03, -0.02, 0.01]))
+        errs.append(_err(res, p)[0])
+    assert fe.depth_m < 0.1 * world.resolution  # type: ignore[attr-defined]
+    assert np.median(errs[10:]) < 0.002

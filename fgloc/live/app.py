@@ -28,7 +28,7 @@ from fgloc.types import StaticTransform, Trajectory
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "live.yaml"
 
 _BUILTIN: dict[str, Any] = {
-    "robot": {"drive": "mecanum", "wheel_radius_m": 0.05, "track_width_m": 0.40, "wheelbase_m": 0.30,
+    "robot": {"drive": "mecanum", "wheel_radius_m": 0.076, "track_width_m": 0.56, "wheelbase_m": 0.50,
               "counts_per_rev": 2000},
     "serial": {"baudrate": 115200, "align_clock": True, "compass_clockwise": False,
                "twist_std": None, "compass_std_deg": None, "gyro_std_dps": None},

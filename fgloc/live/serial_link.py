@@ -37,9 +37,9 @@ class RobotParams:
     left-right wheel distance, ``wheelbase_m`` front-rear (mecanum only)."""
 
     drive: str = "mecanum"
-    wheel_radius_m: float = 0.05
-    track_width_m: float = 0.40
-    wheelbase_m: float = 0.30
+    wheel_radius_m: float = 0.076
+    track_width_m: float = 0.56
+    wheelbase_m: float = 0.50
     counts_per_rev: float = 2000.0  # 500 PPR encoder, x4 quadrature
 
     @property

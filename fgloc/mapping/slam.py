@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from fgloc.geometry import between, compose, rotate_covariance, transform_points, wrap_angle
+from fgloc.geometry import between, compose, rotate_covariance, transform_points
 from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
 from fgloc.mapping.scanmatch import (
     DistanceGrid,
@@ -89,7 +89,22 @@ class MapperConfig:
                 from fgloc.errors import ConfigError
 
                 raise ConfigError(f"unknown mapping option '{k}'")
-            setattr(cfg, k, type(getattr(cfg, k))(v) if not isinstance(v, list) else tuple(v))
+            cur = getattr(cfg, k)
+            if isinstance(cur, bool):
+                if not isinstance(v, bool):
+                    from fgloc.errors import ConfigError
+
+                    raise ConfigError(f"mapping option '{k}' must be true or false, got {v!r}")
+                setattr(cfg, k, v)
+            elif isinstance(cur, tuple):
+                setattr(cfg, k, tuple(float(x) for x in v))
+            else:
+                try:
+                    setattr(cfg, k, type(cur)(v))
+                except (TypeError, ValueError):
+                    from fgloc.errors import ConfigError
+
+                    raise ConfigError(f"mapping option '{k}': bad value {v!r}") from None
         return cfg
 
 
@@ -412,6 +427,3 @@ def build_occupancy(result: SlamResult, records: Sequence[ScanRecord], mount: St
         grid.add_beams(org, ends, hit)
     return grid.to_map()
 
-
-def wrap(a: float) -> float:
-    return float(wrap_angle(a))

@@ -348,6 +348,10 @@ class SickEmulator:
         with self._lock:
             self.stats.dropped_connections += 1
             self._refuse_until = time.time() + refuse_s
+            if refuse_s > 0 and self._srv is not None:
+                # listener first, so a quick reconnect is refused rather than reset
+                self._srv.close()
+                self._srv = None
             if self._client is not None:
                 try:
                     self._client.shutdown(socket.SHUT_RDWR)
@@ -356,9 +360,6 @@ class SickEmulator:
                 self._client.close()
                 self._client = None
                 self._streaming = False
-            if refuse_s > 0 and self._srv is not None:
-                self._srv.close()
-                self._srv = None
 
     def start(self) -> None:
         for target, name in ((self._serve, "emu-sick-serve"), (self._stream, "emu-sick-stream")):

@@ -140,7 +140,9 @@ class LiveSession:
             self.serial = SerialLink(serial_url, conv, self.runner.push, baudrate=int(sc.get("baudrate", 115200)),
                                      port=serial_port, on_event=ev)
             s = self.serial
-            self.runner.sources["serial"] = lambda: {**s.parser.stats.as_dict(), "disconnects": s.disconnects}
+            self.runner.sources["serial"] = lambda: {**s.parser.stats.as_dict(), "disconnects": s.disconnects,
+                                                     "wrong_wheel_count": s.converter.wrong_wheel_count,
+                                                     "bad_dt": s.converter.bad_dt}
         self.laser: SickClient | None = None
         if laser:
             host, port = parse_host_port(laser)

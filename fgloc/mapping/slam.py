@@ -51,11 +51,11 @@ class MapperConfig:
     kf_angle_deg: float = 12.0        # ... or this much rotation
     max_range_m: float = 25.0         # returns beyond are not used as hits
     carve_range_m: float = 8.0        # no-return beams carve free space up to here
-    match_voxel_m: float = 0.05       # scan point subsampling for matching
+    match_voxel_m: float = 0.0        # scan point subsampling for matching (0: every return)
     submap_keyframes: int = 25        # local submap = last N keyframes
-    submap_resolution: float = 0.04   # distance-field cell size for matching
+    submap_resolution: float = 0.025  # distance-field cell size for matching
     dmax_m: float = 0.3               # distance field clip
-    huber_m: float = 0.05             # Gauss-Newton robust kernel width
+    huber_m: float = 0.02             # Gauss-Newton robust kernel width
     match_sigma_m: float = 0.05       # per-point noise for match covariances
     match_cov_inflation: float = 4.0  # points are correlated: inflate Hessian covariance
     track_min_inliers: float = 0.5    # below: tracking falls back to odometry

@@ -233,8 +233,13 @@ class Localizer:
         used = self.backend.add_keyframe(t, fix)
         if fix is not None and not used:
             self.stats["rejected"] += 1
-        # a scan with too few returns (blackout, blocked laser) says nothing about being lost
-        informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
+        # a scan with too few returns (blackout, blocked laser) says nothing about being lost;
+        # neither does AMCL skipping an update (its motion thresholds) or converging again
+        # after its own recovery: AMCL counts only when it gives a fix the back-end rejects
+        if self.frontend_name == "amcl":
+            informative = fix is not None
+        else:
+            informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
         if used:
             self._bad_streak = 0
         elif informative:

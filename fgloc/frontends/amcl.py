@@ -1,0 +1,492 @@
+"""AMCL: adaptive Monte Carlo localization on an occupancy map (nav2_amcl semantics).
+
+A particle filter over ``base_link`` poses ``[x_m, y_m, yaw_rad]`` in ``map``:
+
+* **motion model** (nav2 ``DifferentialMotionModel`` / ``OmniMotionModel``): the odometry
+  motion since the last filter update (base frame) is sampled per particle with noise
+  ``alpha1`` (rot from rot), ``alpha2`` (rot from trans), ``alpha3`` (trans from trans),
+  ``alpha4`` (trans from rot), ``alpha5`` (strafe from trans, omni only);
+* **sensor model**: likelihood field.  Beam endpoints (evenly subsampled to at most
+  ``laser_max_beams`` valid beams, de-skewed by the shared preprocessor) are projected
+  per particle; ``z`` = distance to the nearest wall *surface* (the map's distance field to
+  occupied cell centres minus half a cell, bilinear, clipped to
+  ``laser_likelihood_max_dist``; endpoints off the grid get the maximum);
+  ``pz = z_hit exp(-z^2 / 2 sigma_hit^2) + z_rand / range_max``.  ``laser_model_type``
+  ``likelihood_field`` combines beams as nav2 does, ``w = 1 + sum pz^3``;
+  ``likelihood_field_prob`` multiplies them, ``w = prod pz`` (log space), tempered by
+  ``beam_correlation`` (log-likelihood divided by it: neighbouring beams are not
+  independent).  Per REP 117 +inf (no return), -inf (too close), NaN and zero ranges are
+  dropped (max-range readings ignored, as nav2 does);
+* **KLD-adaptive resampling** (Fox 2003, as nav2 ``pf_resample_limit``: ``pf_z`` is used
+  directly as the normal quantile, as nav2 does) with low-variance (systematic) resampling
+  every ``resample_interval`` updates, histogram bins ``kld_bin_xy`` x ``kld_bin_yaw``;
+* **augmented MCL recovery**: running averages ``w_slow``/``w_fast`` of the mean raw
+  weight (``recovery_alpha_slow``/``recovery_alpha_fast``, 0 = off); with probability
+  ``max(0, 1 - w_fast/w_slow)`` a resampled particle is replaced by a random free-space pose;
+* **update thresholds** ``update_min_d`` / ``update_min_a``: the filter updates only
+  after that much odometry motion (the first scan after a reset always updates);
+* **global localization** (``reset(None)``): ``global_particles`` poses uniform over the
+  map's free cells; the KLD cap stays at ``global_particles`` until the KLD count first
+  falls to ``max_particles``.
+
+The fix is the weighted mean (circular mean for yaw) with the weighted particle
+covariance, ``cov = cov_scale * cov_particles + diag(cov_floor)`` (see
+``AMCL_DEFAULTS``).  "No fix" (with a reason) when the cloud has not converged (position
+std above ``converged_xy_std`` or yaw std above ``converged_yaw_std``), when no update ran
+(thresholds not met, unless ``fix_without_update``), on bad scans and when an
+uninitialised filter gets a guess off the map.  Never raises on bad input.
+
+All per-particle work is vectorized numpy or compiled numba; no Python loop over particles.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.errors import ConfigError
+from fgloc.geometry import wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, StaticTransform
+
+from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix, unpack_config
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*args, **kwargs):  # type: ignore[no-redef]
+        def deco(f):
+            return f
+        return deco if not (args and callable(args[0])) else args[0]
+
+FloatArray = NDArray[np.float64]
+
+#: Documented defaults (nav2_amcl where sensible).  ``config/frontends.yaml``'s ``amcl:``
+#: section lists the same values; ``AMCL.from_config`` accepts exactly these keys.
+AMCL_DEFAULTS: dict[str, Any] = {
+    # motion model: "differential" (nav2 DifferentialMotionModel) or "omni" (OmniMotionModel)
+    "robot_model_type": "omni",  # the paper robot is mecanum; nav2 default differential
+    "alpha1": 0.05,  # nav2 0.2 (paper sim odometry is better)  # rotation noise from rotation
+    "alpha2": 0.05,  # rotation noise from translation
+    "alpha3": 0.05,  # translation noise from translation
+    "alpha4": 0.05,  # translation noise from rotation
+    "alpha5": 0.05,  # strafe noise from translation (omni only)
+    # sensor model
+    "laser_model_type": "likelihood_field_prob",  # nav2 default likelihood_field (1 + sum pz^3): cloud too wide
+    "z_hit": 0.5,
+    "z_rand": 0.5,
+    "sigma_hit": 0.05,  # m (nav2 0.2)
+    "laser_max_beams": 60,
+    "laser_likelihood_max_dist": 2.0,  # m
+    "laser_max_range": -1.0,  # m; <= 0: the scan's range_max
+    "beam_correlation": 8.0,  # likelihood_field_prob only: log-likelihood divided by this
+    # particle filter
+    "min_particles": 500,
+    "max_particles": 2000,
+    "global_particles": 60000,  # particles spread over free space by reset(None)
+    "pf_err": 0.05,
+    "pf_z": 0.99,
+    "kld_bin_xy": 0.5,  # m
+    "kld_bin_yaw_deg": 10.0,
+    "resample_interval": 1,
+    "recovery_alpha_slow": 0.0,
+    "recovery_alpha_fast": 0.0,
+    "update_min_d": 0.1,  # m (nav2 0.25)
+    "update_min_a": 0.2,  # rad
+    "init_cov": [0.25, 0.25, 0.0685],  # reset(pose) without cov: nav2 initial_cov_xx/yy/aa (m^2, rad^2)
+    # output
+    "converged_xy_std": 0.25,  # m: larger cloud std -> no fix
+    "converged_yaw_std": 0.2,  # rad
+    "fix_without_update": False,  # thresholds not met: report the propagated estimate anyway
+    "cov_scale": 0.25,  # particle covariance is ~4x too large on the paper run (NEES 0.6 -> ~2.4)
+    "cov_floor": [0.0, 0.0, 0.0],  # m^2, m^2, rad^2 added to the particle covariance
+    "min_valid_beams": 10,
+    "deskew": True,
+    "seed": 0,
+}
+
+
+# ------------------------------------------------------------------ compiled kernels
+@njit(cache=True)
+def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, z_hit, z_rand_mult,
+                    inv_2s2, model, inv_corr):  # pragma: no cover - compiled
+    """Per-particle likelihood: model 0 = nav2 (1 + sum pz^3), 1 = sum log pz (tempered)."""
+    n = px.shape[0]
+    m = bx.shape[0]
+    h, w = field.shape
+    out = np.empty(n)
+    for i in range(n):
+        c = math.cos(pyaw[i])
+        s = math.sin(pyaw[i])
+        acc = 0.0
+        for j in range(m):
+            gx = (px[i] + c * bx[j] - s * by[j] - ox) * inv_res - 0.5
+            gy = (py[i] + s * bx[j] + c * by[j] - oy) * inv_res - 0.5
+            if gx < 0.0 or gy < 0.0 or gx > w - 1 or gy > h - 1:
+                z = zmax
+            else:
+                x0 = int(gx)
+                y0 = int(gy)
+                if x0 > w - 2:
+                    x0 = w - 2
+                if y0 > h - 2:
+                    y0 = h - 2
+                fx = gx - x0
+                fy = gy - y0
+                z = (field[y0, x0] * (1 - fx) * (1 - fy) + field[y0, x0 + 1] * fx * (1 - fy)
+                     + field[y0 + 1, x0] * (1 - fx) * fy + field[y0 + 1, x0 + 1] * fx * fy)
+            pz = z_hit * math.exp(-z * z * inv_2s2) + z_rand_mult
+            if model == 0:
+                acc += pz * pz * pz
+            else:
+                acc += math.log(pz)
+        out[i] = 1.0 + acc if model == 0 else acc * inv_corr
+    return out
+
+
+# ------------------------------------------------------------------ motion models
+def sample_motion(particles: FloatArray, delta: FloatArray, model: str, alphas: FloatArray,
+                  rng: np.random.Generator) -> FloatArray:
+    """Propagate ``particles (N, 3)`` by the base-frame odometry ``delta`` with nav2's noise.
+
+    ``model``: ``differential`` (rot1-trans-rot2) or ``omni`` (trans, strafe, rot).
+    ``alphas``: ``[alpha1..alpha5]``.  Returns a new array.
+    """
+    a1, a2, a3, a4, a5 = (float(a) for a in alphas)
+    n = len(particles)
+    dx, dy, dth = float(delta[0]), float(delta[1]), float(wrap_angle(delta[2]))
+    trans = math.hypot(dx, dy)
+    out = particles.copy()
+    yaw = particles[:, 2]
+    if model == "omni":
+        bearing = math.atan2(dy, dx) if trans > 0 else 0.0
+        sd_t = math.sqrt(a3 * trans**2 + a1 * dth**2)
+        sd_r = math.sqrt(a4 * dth**2 + a2 * trans**2)
+        sd_s = math.sqrt(a1 * dth**2 + a5 * trans**2)
+        t_hat = trans + rng.normal(0.0, 1.0, n) * sd_t
+        r_hat = dth + rng.normal(0.0, 1.0, n) * sd_r
+        s_hat = rng.normal(0.0, 1.0, n) * sd_s
+        b = yaw + bearing
+        cb, sb = np.cos(b), np.sin(b)
+        out[:, 0] += t_hat * cb + s_hat * sb
+        out[:, 1] += t_hat * sb - s_hat * cb
+        out[:, 2] = wrap_angle(yaw + r_hat)
+        return out
+    rot1 = 0.0 if trans < 0.01 else math.atan2(dy, dx)
+    rot2 = float(wrap_angle(dth - rot1))
+    # nav2: noise from the smaller of the forward and backward rotation (reversing robots)
+    r1n = min(abs(float(wrap_angle(rot1))), abs(float(wrap_angle(rot1 - math.pi))))
+    r2n = min(abs(float(wrap_angle(rot2))), abs(float(wrap_angle(rot2 - math.pi))))
+    r1_hat = rot1 - rng.normal(0.0, 1.0, n) * math.sqrt(a1 * r1n**2 + a2 * trans**2)
+    t_hat = trans - rng.normal(0.0, 1.0, n) * math.sqrt(a3 * trans**2 + a4 * r1n**2 + a4 * r2n**2)
+    r2_hat = rot2 - rng.normal(0.0, 1.0, n) * math.sqrt(a1 * r2n**2 + a2 * trans**2)
+    out[:, 0] += t_hat * np.cos(yaw + r1_hat)
+    out[:, 1] += t_hat * np.sin(yaw + r1_hat)
+    out[:, 2] = wrap_angle(yaw + r1_hat + r2_hat)
+    return out
+
+
+def kld_limit(k: NDArray[Any] | int, pf_err: float, pf_z: float, n_min: int, n_max: int) -> NDArray[np.int64]:
+    """nav2 ``pf_resample_limit``: particles needed for ``k`` occupied histogram bins."""
+    kk = np.asarray(k, dtype=float)
+    km1 = np.maximum(kk - 1.0, 1.0)
+    b = 2.0 / (9.0 * km1)
+    x = 1.0 - b + np.sqrt(b) * pf_z
+    n = np.ceil(km1 / (2.0 * pf_err) * x**3)
+    n = np.where(kk <= 1, n_max, n)
+    return np.clip(n, n_min, n_max).astype(np.int64)
+
+
+def systematic_resample(weights: FloatArray, n: int, rng: np.random.Generator) -> NDArray[np.int64]:
+    """Low-variance (systematic) resampling: ``n`` indices drawn with one random offset."""
+    c = np.cumsum(weights)
+    c /= c[-1]
+    u = (rng.random() + np.arange(n)) / n
+    return np.minimum(np.searchsorted(c, u, side="right"), len(weights) - 1).astype(np.int64)
+
+
+def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Weighted mean (circular for yaw) and 3x3 covariance of particles ``(N, 3)``."""
+    w = w / w.sum()
+    mean = np.empty(3)
+    mean[:2] = w @ p[:, :2]
+    mean[2] = math.atan2(float(w @ np.sin(p[:, 2])), float(w @ np.cos(p[:, 2])))
+    d = p - mean
+    d[:, 2] = wrap_angle(d[:, 2])
+    cov = (d * w[:, None]).T @ d
+    return mean, 0.5 * (cov + cov.T)
+
+
+class AMCL:
+    """Adaptive Monte Carlo localization front-end (``name = "amcl"``); see the module docstring."""
+
+    name = "amcl"
+
+    def __init__(
+        self,
+        occ_map: OccupancyMap,
+        laser_mount: StaticTransform | None = None,
+        *,
+        robot_model_type: str = "omni",
+        alpha1: float = 0.05, alpha2: float = 0.05, alpha3: float = 0.05, alpha4: float = 0.05, alpha5: float = 0.05,
+        laser_model_type: str = "likelihood_field_prob",
+        z_hit: float = 0.5, z_rand: float = 0.5, sigma_hit: float = 0.05,
+        laser_max_beams: int = 60, laser_likelihood_max_dist: float = 2.0, laser_max_range: float = -1.0,
+        beam_correlation: float = 8.0,
+        min_particles: int = 500, max_particles: int = 2000, global_particles: int = 60000,
+        pf_err: float = 0.05, pf_z: float = 0.99, kld_bin_xy: float = 0.5, kld_bin_yaw_deg: float = 10.0,
+        resample_interval: int = 1, recovery_alpha_slow: float = 0.0, recovery_alpha_fast: float = 0.0,
+        update_min_d: float = 0.1, update_min_a: float = 0.2,
+        init_cov: tuple[float, float, float] | list[float] = (0.25, 0.25, 0.0685),
+        converged_xy_std: float = 0.25, converged_yaw_std: float = 0.2, fix_without_update: bool = False,
+        cov_scale: float = 0.25, cov_floor: tuple[float, float, float] | list[float] = (0.0, 0.0, 0.0),
+        min_valid_beams: int = 10, deskew: bool = True, seed: int = 0,
+    ) -> None:
+        if robot_model_type not in ("differential", "omni"):
+            raise ConfigError(f"amcl: robot_model_type must be differential or omni, got {robot_model_type!r}")
+        if laser_model_type not in ("likelihood_field", "likelihood_field_prob"):
+            raise ConfigError(f"amcl: laser_model_type must be likelihood_field or likelihood_field_prob, "
+                              f"got {laser_model_type!r}")
+        if not (0 < min_particles <= max_particles) or global_particles < 1:
+            raise ConfigError(f"amcl: need 0 < min_particles <= max_particles and global_particles > 0, got "
+                              f"{min_particles}, {max_particles}, {global_particles}")
+        if sigma_hit <= 0 or laser_max_beams < 1 or resample_interval < 1 or beam_correlation <= 0:
+            raise ConfigError("amcl: sigma_hit > 0, laser_max_beams >= 1, resample_interval >= 1, "
+                              "beam_correlation > 0 required")
+        if pf_err <= 0 or kld_bin_xy <= 0 or kld_bin_yaw_deg <= 0:
+            raise ConfigError("amcl: pf_err, kld_bin_xy and kld_bin_yaw_deg must be positive")
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.robot_model_type = robot_model_type
+        self.alphas = np.array([alpha1, alpha2, alpha3, alpha4, alpha5], dtype=float)
+        self.laser_model_type = laser_model_type
+        self.z_hit, self.z_rand, self.sigma_hit = float(z_hit), float(z_rand), float(sigma_hit)
+        self.laser_max_beams = int(laser_max_beams)
+        self.max_dist = float(laser_likelihood_max_dist)
+        self.laser_max_range = float(laser_max_range)
+        self.beam_correlation = float(beam_correlation)
+        self.min_particles, self.max_particles = int(min_particles), int(max_particles)
+        self.global_particles = int(global_particles)
+        self.pf_err, self.pf_z = float(pf_err), float(pf_z)
+        self.kld_bin = np.array([kld_bin_xy, kld_bin_xy, np.radians(kld_bin_yaw_deg)], dtype=float)
+        self.resample_interval = int(resample_interval)
+        self.alpha_slow, self.alpha_fast = float(recovery_alpha_slow), float(recovery_alpha_fast)
+        self.update_min_d, self.update_min_a = float(update_min_d), float(update_min_a)
+        self.init_cov = np.diag(np.asarray(init_cov, dtype=float).reshape(3))
+        self.converged_xy_std, self.converged_yaw_std = float(converged_xy_std), float(converged_yaw_std)
+        self.fix_without_update = bool(fix_without_update)
+        self.cov_scale = float(cov_scale)
+        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float).reshape(3))
+        self.rng = np.random.default_rng(seed)
+        self.pre = ScanPreprocessor(
+            laser_mount, PreprocessOptions(max_beams=self.laser_max_beams, deskew=bool(deskew),
+                                           min_valid_beams=int(min_valid_beams)))
+        # likelihood field: distance to the wall surface (half a cell short of the occupied centre)
+        df = np.asarray(occ_map.distance_field, dtype=float)
+        self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
+        self._free = occ_map.free_cell_centers()
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self.initialized = False
+        self._global = False
+        self._w_slow = 0.0
+        self._w_fast = 0.0
+        self._acc = np.zeros(3)
+        self._force_update = True
+        self._n_updates = 0
+        self.last_kld_k = 0
+
+    # ------------------------------------------------------------------ config
+    @classmethod
+    def from_config(cls, occ_map: OccupancyMap, laser_mount: StaticTransform | None,
+                    config: dict | None = None) -> AMCL:
+        """Unpack the ``amcl:`` config section (keys of :data:`AMCL_DEFAULTS`) into constructor args."""
+        cfg = {**AMCL_DEFAULTS, **unpack_config("amcl", config, set(AMCL_DEFAULTS))}
+        try:
+            ints = {"laser_max_beams", "min_particles", "max_particles", "global_particles",
+                    "resample_interval", "min_valid_beams", "seed"}
+            args: dict[str, Any] = {}
+            for k, v in cfg.items():
+                if k in ints:
+                    args[k] = int(v)
+                elif k in ("robot_model_type", "laser_model_type"):
+                    args[k] = str(v)
+                elif k in ("fix_without_update", "deskew"):
+                    if not isinstance(v, bool):
+                        raise ValueError(f"{k} must be true or false")
+                    args[k] = v
+                elif k in ("init_cov", "cov_floor"):
+                    args[k] = [float(x) for x in v]
+                    if len(args[k]) != 3:
+                        raise ValueError(f"{k} needs 3 numbers")
+                else:
+                    args[k] = float(v)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"frontends config [amcl]: bad value ({e})") from None
+        return cls(occ_map, laser_mount, **args)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, pose: np.ndarray | None = None, cov: np.ndarray | None = None) -> None:
+        """Re-initialise: Gaussian around ``pose`` (``cov`` or ``init_cov``), or ``None`` = global."""
+        self.pre.reset()
+        self._w_slow = self._w_fast = 0.0
+        self._acc = np.zeros(3)
+        self._force_update = True
+        self._n_updates = 0
+        if pose is None:
+            self.particles = self._random_free(self.global_particles)
+            self._global = True
+        else:
+            p = np.asarray(pose, dtype=float).reshape(3)
+            c = self.init_cov if cov is None else np.asarray(cov, dtype=float).reshape(3, 3)
+            n = self.max_particles
+            self.particles = p + self.rng.multivariate_normal(np.zeros(3), c, n, method="eigh")
+            self.particles[:, 2] = wrap_angle(self.particles[:, 2])
+            self._global = False
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+        self.initialized = True
+
+    def _random_free(self, n: int) -> FloatArray:
+        if len(self._free) == 0:
+            raise ConfigError("amcl: the map has no free cells for global localization")
+        idx = self.rng.integers(0, len(self._free), n)
+        half = 0.5 * self.map.resolution
+        out = np.empty((n, 3))
+        out[:, :2] = self._free[idx] + self.rng.uniform(-half, half, (n, 2))
+        out[:, 2] = self.rng.uniform(-np.pi, np.pi, n)
+        return out
+
+    # ------------------------------------------------------------------ filter steps
+    def _likelihood(self, pts: FloatArray, range_max: float) -> FloatArray:
+        rmax = self.laser_max_range if self.laser_max_range > 0 else range_max
+        z_rand_mult = 1.0 / rmax if np.isfinite(rmax) and rmax > 0 else 0.0
+        c, s = math.cos(self.map.origin[2]), math.sin(self.map.origin[2])
+        p = self.particles
+        if abs(s) > 1e-12:  # rotated map origin: express particles in the grid-aligned frame
+            dx, dy = p[:, 0] - self.map.origin[0], p[:, 1] - self.map.origin[1]
+            px, py, pyaw = c * dx + s * dy, -s * dx + c * dy, p[:, 2] - self.map.origin[2]
+            ox = oy = 0.0
+        else:
+            px, py, pyaw = p[:, 0], p[:, 1], p[:, 2]
+            ox, oy = float(self.map.origin[0]), float(self.map.origin[1])
+        model = 0 if self.laser_model_type == "likelihood_field" else 1
+        return _weights_kernel(
+            np.ascontiguousarray(px), np.ascontiguousarray(py), np.ascontiguousarray(pyaw),
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), self._field,
+            ox, oy, 1.0 / self.map.resolution, self.max_dist, self.z_hit, self.z_rand * z_rand_mult,
+            1.0 / (2.0 * self.sigma_hit**2), model, 1.0 / self.beam_correlation)
+
+    def _resample(self) -> None:
+        w = self.weights
+        cap = self.global_particles if self._global else self.max_particles
+        cap = max(cap, self.min_particles)
+        # KLD: draw cap candidates, visit them in random order and stop once the count
+        # reaches the limit for the histogram bins seen so far (nav2 pf_update_resample)
+        cand = self.particles[systematic_resample(w, cap, self.rng)]
+        cand = cand[self.rng.permutation(cap)]
+        keys = np.floor(cand / self.kld_bin).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        is_new = np.zeros(cap, dtype=bool)
+        is_new[first] = True
+        k = np.cumsum(is_new)
+        lim = kld_limit(k, self.pf_err, self.pf_z, self.min_particles, cap)
+        stop = np.flatnonzero(np.arange(1, cap + 1) > lim)
+        n = int(stop[0]) + 1 if len(stop) else cap
+        n = max(n, self.min_particles)
+        self.last_kld_k = int(k[n - 1])
+        new = self.particles[systematic_resample(w, n, self.rng)]
+        if self.alpha_slow > 0 and self.alpha_fast > 0 and self._w_slow > 0:
+            p_rand = max(0.0, 1.0 - self._w_fast / self._w_slow)
+            if p_rand > 0:
+                inject = self.rng.random(n) < p_rand
+                if inject.any():
+                    new[inject] = self._random_free(int(inject.sum()))
+                    self._w_slow = self._w_fast = 0.0  # nav2 resets the averages after injecting
+        self.particles = new
+        self.weights = np.full(n, 1.0 / n)
+        if self._global and n <= self.max_particles:
+            self._global = False
+
+    # ------------------------------------------------------------------ front-end API
+    def match(self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None) -> MatchResult:
+        """One scan: motion update by ``odom_delta``, sensor update and resampling when due."""
+        try:
+            return self._match(scan, guess, odom_delta)
+        except Exception as e:  # never raise on bad input: report it as a no-fix
+            return no_fix(f"amcl: internal error ({e.__class__.__name__}: {e})")
+
+    def _match(self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None) -> MatchResult:
+        if not self.initialized:
+            g, why = check_guess(self.map, guess)
+            if g is None:
+                return no_fix(f"amcl not initialised: {why}")
+            self.reset(g)
+        od = None
+        if odom_delta is not None:
+            od = np.asarray(odom_delta, dtype=float).reshape(-1)
+            if od.shape != (3,) or not np.all(np.isfinite(od)):
+                return no_fix("odometry delta is not a finite [dx, dy, dyaw]")
+            # the filter moves with the odometry even when the scan is unusable
+            self._acc = _compose1(self._acc, od)
+        pts, why = self.pre(scan, od)
+        if pts is None:
+            return no_fix(why)
+        moved_d = math.hypot(self._acc[0], self._acc[1])
+        moved_a = abs(float(self._acc[2]))
+        if not (self._force_update or moved_d >= self.update_min_d or moved_a >= self.update_min_a):
+            if not self.fix_without_update:
+                return no_fix(f"update thresholds not met (moved {moved_d:.3f} m, {moved_a:.3f} rad)",
+                              n_inliers=len(pts))
+            mean, cov = weighted_mean_cov(self.particles, self.weights)
+            return self._result(_compose1(mean, self._acc), cov, len(pts), updated=False)
+        if np.any(self._acc != 0):
+            self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
+                                           self.rng)
+        self._acc = np.zeros(3)
+        self._force_update = False
+        lik = self._likelihood(pts, float(scan.range_max))
+        if self.laser_model_type == "likelihood_field":
+            w_raw = self.weights * lik
+            mean_lik = float(np.mean(lik))
+        else:
+            mx = float(np.max(lik))
+            w_raw = self.weights * np.exp(lik - mx)
+            mean_lik = float(np.mean(np.exp(lik / max(len(pts), 1))))  # per-beam geometric mean
+        total = float(w_raw.sum())
+        if not np.isfinite(total) or total <= 0:
+            self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+        else:
+            self.weights = w_raw / total
+        if self.alpha_slow > 0 and self.alpha_fast > 0:
+            if self._w_slow == 0.0:
+                self._w_slow = self._w_fast = mean_lik
+            else:
+                self._w_slow += self.alpha_slow * (mean_lik - self._w_slow)
+                self._w_fast += self.alpha_fast * (mean_lik - self._w_fast)
+        mean, cov = weighted_mean_cov(self.particles, self.weights)
+        self._n_updates += 1
+        if self._n_updates % self.resample_interval == 0:
+            self._resample()
+        return self._result(mean, cov, len(pts), updated=True)
+
+    def _result(self, mean: FloatArray, cov: FloatArray, n_pts: int, updated: bool) -> MatchResult:
+        sx = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        sa = math.sqrt(max(float(cov[2, 2]), 0.0))
+        info = {"particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
+                "kld_bins": self.last_kld_k}
+        if not bool(self.map.in_bounds(mean[None, :2])[0]):
+            return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
+        if sx > self.converged_xy_std or sa > self.converged_yaw_std:
+            return no_fix(f"not converged (cloud std {sx:.2f} m, {math.degrees(sa):.1f} deg)",
+                          n_inliers=n_pts, **info)
+        out_cov = self.cov_scale * cov + self.cov_floor
+        quality = float(max(0.0, 1.0 - sx / self.converged_xy_std))
+        return MatchResult(True, mean, out_cov, quality=quality, n_inliers=n_pts, info=info)
+
+
+def _compose1(a: FloatArray, b: FloatArray) -> FloatArray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])

@@ -106,7 +106,8 @@ def _metrics_table(results: dict[str, Any], ref_name: str, paper: bool):
 
 
 def _relations_cmd(
-    traj_path: Path, relations: Path | None, reference: Path | None, max_assoc_dt: float, as_json: bool
+    traj_path: Path, relations: Path | None, reference: Path | None, max_assoc_dt: float, as_json: bool,
+    min_dt: float = 1.0, max_dt: float = 2.0,
 ) -> None:
     import importlib
 
@@ -127,7 +128,7 @@ def _relations_cmd(
     else:
         assert reference is not None
         ref = read_tum(reference)
-        rels = R.relations_from_reference(ref)
+        rels = R.relations_from_reference(ref, min_dt=min_dt, max_dt=max_dt)
         source = {"reference": str(reference)}
     if not rels:
         raise LogError(f"{relations or reference}: no relations to evaluate")
@@ -197,6 +198,12 @@ def eval_cmd(
     max_assoc_dt: Annotated[
         float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose (s)")
     ] = 0.05,
+    min_dt: Annotated[
+        float, typer.Option("--min-dt", help="--reference: shortest time between the two poses of a relation (s)")
+    ] = 1.0,
+    max_dt: Annotated[
+        float, typer.Option("--max-dt", help="--reference: longest time between the two poses of a relation (s)")
+    ] = 2.0,
 ) -> None:
     """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE.
 
@@ -208,7 +215,7 @@ def eval_cmd(
             raise typer.BadParameter("give --relations or --reference, not both")
         if len(files) != 1:
             raise typer.BadParameter("with --relations / --reference give exactly one TRAJ.tum")
-        _relations_cmd(files[0], relations, reference, max_assoc_dt, as_json)
+        _relations_cmd(files[0], relations, reference, max_assoc_dt, as_json, min_dt, max_dt)
         return
     if len(files) < 2:
         raise typer.BadParameter("give EST.tum and GT.tum (the reference last)")

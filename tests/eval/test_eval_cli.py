@@ -140,3 +140,16 @@ def test_eval_relations_file(files, capsys):
     assert doc["trans_mean"] == pytest.approx(0.0, abs=1e-9)  # a constant offset has no relation error
     assert main(["eval", "--relations", str(files / "missing.txt"), str(files / "est.tum")]) == 2
     assert "missing.txt" in capsys.readouterr().err
+
+
+def test_eval_reference_relation_spacing(files, capsys):
+    pytest.importorskip("fgloc.eval.relations")
+    args = ["eval", "--reference", str(files / "gt.tum"), str(files / "gt.tum"), "--json"]
+    assert main(args) == 0
+    n_default = json.loads(capsys.readouterr().out)["n"]
+    assert main(args + ["--min-dt", "5", "--max-dt", "6"]) == 0
+    n_wide = json.loads(capsys.readouterr().out)["n"]
+    assert 0 < n_wide < n_default  # poses in the last 5 s find no partner
+    assert main(args + ["--min-dt", "1e6", "--max-dt", "2e6"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no relations" in err

@@ -1,0 +1,183 @@
+"""AMCL: tracking, global localization (paper hall and Willow Garage), NEES, bad input, motion noise, KLD."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fgloc.frontends.amcl import AMCL, AMCL_DEFAULTS, kld_limit, sample_motion
+from fgloc.geometry import between, wrap_angle
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, Odometry
+
+from .conftest import odom_poses_at
+
+
+def _run(amcl: AMCL, scans, truth, deltas, n=None):
+    """Feed scans; returns (index, MatchResult) for every fix."""
+    out = []
+    for i, s in enumerate(scans[:n]):
+        r = amcl.match(s, truth[0], deltas[i])
+        assert r.ok or r.reason
+        if r.ok:
+            out.append((i, r))
+    return out
+
+
+def _errors(fixes, truth):
+    e = np.array([r.pose - truth[i] for i, r in fixes])
+    e[:, 2] = wrap_angle(e[:, 2])
+    return e
+
+
+@pytest.fixture(scope="module")
+def paper_tracking(paper_scans):
+    d = paper_scans
+    a = AMCL.from_config(d.map, d.laser_mount, {})
+    a.reset(d.truth[0])
+    return _run(a, d.scans, d.truth, d.odom_deltas)
+
+
+def test_tracks_paper_run_under_5cm(paper_scans, paper_tracking):
+    e = _errors(paper_tracking, paper_scans.truth)
+    rmse = float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1))))
+    assert len(paper_tracking) > 300  # one fix per 0.1 m of the 78 m route
+    assert rmse < 0.05, rmse
+
+
+def test_nees_paper_run(paper_scans, paper_tracking):
+    e = _errors(paper_tracking, paper_scans.truth)
+    nees = [float(ei @ np.linalg.solve(r.cov, ei)) for ei, (_, r) in zip(e, paper_tracking, strict=True)]
+    assert 1.5 <= float(np.mean(nees)) <= 6.0, np.mean(nees)
+
+
+def _global_convergence_time(occ_map, mount, scans, truth, deltas, cfg, hold_s=5.0):
+    """Seconds from the first scan until the first fix within 0.2 m of the truth after which
+    every fix of the next ``hold_s`` seconds stays within 0.2 m (inf if never)."""
+    a = AMCL.from_config(occ_map, mount, cfg)
+    a.reset(None)
+    t0 = scans[0].stamp
+    t_conv = None
+    for i, s in enumerate(scans):
+        r = a.match(s, truth[0], deltas[i])
+        if not r.ok:
+            continue
+        good = np.hypot(*(r.pose[:2] - truth[i, :2])) < 0.2
+        if t_conv is None and good:
+            t_conv = s.stamp - t0
+        elif t_conv is not None and not good:
+            t_conv = None
+        if t_conv is not None and s.stamp - t0 > t_conv + hold_s:
+            return t_conv, a
+    return np.inf, a
+
+
+def test_global_localization_paper(paper_scans):
+    d = paper_scans
+    t, a = _global_convergence_time(d.map, d.laser_mount, d.scans, d.truth, d.odom_deltas,
+                                    {"global_particles": 20000})
+    assert t <= 10.0, t
+    assert len(a.particles) <= a.max_particles  # KLD shrank the cloud from 20000
+
+
+def test_global_localization_willow():
+    from fgloc.sim import run_scenario
+
+    sim = run_scenario("config/scenarios/willow.yaml", seed=0)
+    scans = [m for _, m in sim.messages if isinstance(m, LaserScan)]
+    odoms = [m for tp, m in sim.messages if isinstance(m, Odometry) and tp != "/ground_truth"]
+    st = np.array([s.stamp for s in scans])
+    truth = sim.ground_truth.interpolate(st)
+    od = odom_poses_at(odoms, st)
+    deltas = [None] + [between(od[i - 1], od[i]) for i in range(1, len(scans))]
+    t, _ = _global_convergence_time(sim.map, sim.laser_mount, scans, truth, deltas,
+                                    {"robot_model_type": "differential", "global_particles": 60000})
+    assert t <= 10.0, t
+
+
+def _box_map() -> OccupancyMap:
+    g = np.zeros((100, 140), dtype=np.int16)
+    g[0, :] = g[-1, :] = 100
+    g[:, 0] = g[:, -1] = 100
+    g[30:45, 60:70] = 100
+    return OccupancyMap(g, 0.05)
+
+
+def _scan(ranges) -> LaserScan:
+    r = np.asarray(ranges, dtype=np.float32)
+    return LaserScan(0.0, -2.35, 4.7 / (len(r) - 1), 0.05, 30.0, r)
+
+
+def test_bad_input_gives_no_fix():
+    m = _box_map()
+    a = AMCL(m, None)
+    pose = np.array([2.0, 3.0, 0.3])
+    ang = -2.35 + 4.7 / 540 * np.arange(541) + pose[2]
+    good = m.raycast(pose[:2], ang, 30.0)
+    # off-map guess before initialisation
+    r = a.match(_scan(good), np.array([50.0, 50.0, 0.0]))
+    assert not r.ok and "off the map" in r.reason
+    for bad in (np.full(541, np.nan), np.full(541, np.inf), np.full(541, -np.inf), np.zeros(541),
+                np.where(np.arange(541) < 5, good, np.nan)):
+        r = a.match(_scan(bad), pose)
+        assert not r.ok and "valid beams" in r.reason
+    r = a.match(_scan(good), pose, np.array([np.nan, 0, 0]))
+    assert not r.ok and "odometry" in r.reason
+    a.reset(pose, np.diag([0.01, 0.01, 0.003]))
+    r = a.match(_scan(good), pose)
+    assert r.ok and np.hypot(*(r.pose[:2] - pose[:2])) < 0.1
+    r = a.match(_scan(good), pose, np.zeros(3))
+    assert not r.ok and "thresholds" in r.reason
+
+
+@pytest.mark.parametrize("model", ["differential", "omni"])
+def test_motion_noise_matches_alphas(model):
+    rng = np.random.default_rng(1)
+    al = np.array([0.1, 0.2, 0.05, 0.05, 0.15])  # small a3: |trans| never folds
+    n = 200000
+    p0 = np.zeros((n, 3))
+    delta = np.array([1.0, 0.0, 0.5]) if model == "differential" else np.array([0.6, 0.8, 0.5])
+    p = sample_motion(p0, delta, model, al, rng)
+    trans, rot = np.hypot(*delta[:2]), delta[2]
+    if model == "differential":
+        # rot1 = 0, rot2 = 0.5: yaw noise var = 2 * alpha2 trans^2 + alpha1 rot2^2
+        assert np.std(p[:, 2]) == pytest.approx(np.sqrt(2 * al[1] * trans**2 + al[0] * rot**2), rel=0.02)
+        d = np.hypot(p[:, 0], p[:, 1])
+        assert np.std(d) == pytest.approx(np.sqrt(al[2] * trans**2 + al[3] * rot**2), rel=0.03)
+        assert np.mean(p[:, 2]) == pytest.approx(rot, abs=0.01)
+    else:
+        assert np.std(p[:, 2]) == pytest.approx(np.sqrt(al[3] * rot**2 + al[1] * trans**2), rel=0.02)
+        u = delta[:2] / trans
+        along = p[:, :2] @ u
+        across = p[:, :2] @ np.array([u[1], -u[0]])
+        assert np.std(along) == pytest.approx(np.sqrt(al[2] * trans**2 + al[0] * rot**2), rel=0.02)
+        assert np.std(across) == pytest.approx(np.sqrt(al[0] * rot**2 + al[4] * trans**2), rel=0.02)
+        assert np.mean(along) == pytest.approx(trans, abs=0.01)
+
+
+def test_kld_count_shrinks_as_cloud_converges():
+    assert kld_limit(1, 0.05, 0.99, 10, 5000) == 5000
+    ks = kld_limit(np.array([2, 10, 100, 1000]), 0.05, 0.99, 1, 10**6)
+    assert np.all(np.diff(ks) > 0)
+    m = _box_map()
+    a = AMCL(m, None, global_particles=8000, min_particles=100, max_particles=2000)
+    a.reset(None)
+    pose = np.array([2.0, 3.0, 0.3])
+    counts = [len(a.particles)]
+    for k in range(8):
+        p = pose + np.array([0.05 * k, 0.0, 0.0])
+        ang = -2.35 + 4.7 / 540 * np.arange(541) + p[2]
+        s = _scan(m.raycast(p[:2], ang, 30.0))
+        a.match(s, p, None if k == 0 else np.array([0.05, 0.0, 0.0]))
+        counts.append(len(a.particles))
+    assert counts[0] == 8000  # spread over free space
+    assert counts[-1] < 500 and counts[-1] <= min(counts)  # converged: few bins, few particles
+
+
+def test_defaults_match_constructor():
+    import inspect
+
+    sig = inspect.signature(AMCL.__init__)
+    for k, v in AMCL_DEFAULTS.items():
+        d = sig.parameters[k].default
+        assert (list(d) if isinstance(d, tuple) else d) == v, k

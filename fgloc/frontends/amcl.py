@@ -26,8 +26,10 @@ A particle filter over ``base_link`` poses ``[x_m, y_m, yaw_rad]`` in ``map``:
 * **update thresholds** ``update_min_d`` / ``update_min_a``: the filter updates only
   after that much odometry motion (the first scan after a reset always updates);
 * **global localization** (``reset(None)``): ``global_particles`` poses uniform over the
-  map's free cells; the KLD cap stays at ``global_particles`` until the KLD count first
-  falls to ``max_particles``.
+  map's free cells.  Until the cloud is one blob (position std < ``converged_xy_std``) the
+  filter is in its global phase: KLD cap ``global_particles``, floor ``max_particles``, and the
+  sensor model uses the wider ``global_sigma_hit`` (sparse particles are rarely within
+  ``sigma_hit`` of the truth: a narrow model kills the right hypothesis early).
 
 The fix is the weighted mean (circular mean for yaw) with the weighted particle
 covariance, ``cov = cov_scale * cov_particles + diag(cov_floor)`` (see
@@ -87,6 +89,7 @@ AMCL_DEFAULTS: dict[str, Any] = {
     "min_particles": 500,
     "max_particles": 2000,
     "global_particles": 60000,  # particles spread over free space by reset(None)
+    "global_sigma_hit": 0.2,  # m: sigma_hit while globally localizing (smoother, fewer premature collapses)
     "pf_err": 0.05,
     "pf_z": 0.99,
     "kld_bin_xy": 0.5,  # m
@@ -237,6 +240,7 @@ class AMCL:
         laser_max_beams: int = 60, laser_likelihood_max_dist: float = 2.0, laser_max_range: float = -1.0,
         beam_correlation: float = 8.0,
         min_particles: int = 500, max_particles: int = 2000, global_particles: int = 60000,
+        global_sigma_hit: float = 0.2,
         pf_err: float = 0.05, pf_z: float = 0.99, kld_bin_xy: float = 0.5, kld_bin_yaw_deg: float = 10.0,
         resample_interval: int = 1, recovery_alpha_slow: float = 0.0, recovery_alpha_fast: float = 0.0,
         update_min_d: float = 0.1, update_min_a: float = 0.2,
@@ -253,9 +257,9 @@ class AMCL:
         if not (0 < min_particles <= max_particles) or global_particles < 1:
             raise ConfigError(f"amcl: need 0 < min_particles <= max_particles and global_particles > 0, got "
                               f"{min_particles}, {max_particles}, {global_particles}")
-        if sigma_hit <= 0 or laser_max_beams < 1 or resample_interval < 1 or beam_correlation <= 0:
-            raise ConfigError("amcl: sigma_hit > 0, laser_max_beams >= 1, resample_interval >= 1, "
-                              "beam_correlation > 0 required")
+        if min(sigma_hit, global_sigma_hit, beam_correlation) <= 0 or min(laser_max_beams, resample_interval) < 1:
+            raise ConfigError("amcl: sigma_hit, global_sigma_hit, beam_correlation > 0, laser_max_beams >= 1, "
+                              "resample_interval >= 1 required")
         if pf_err <= 0 or kld_bin_xy <= 0 or kld_bin_yaw_deg <= 0:
             raise ConfigError("amcl: pf_err, kld_bin_xy and kld_bin_yaw_deg must be positive")
         self.map = occ_map
@@ -270,6 +274,7 @@ class AMCL:
         self.beam_correlation = float(beam_correlation)
         self.min_particles, self.max_particles = int(min_particles), int(max_particles)
         self.global_particles = int(global_particles)
+        self.global_sigma_hit = float(global_sigma_hit)
         self.pf_err, self.pf_z = float(pf_err), float(pf_z)
         self.kld_bin = np.array([kld_bin_xy, kld_bin_xy, np.radians(kld_bin_yaw_deg)], dtype=float)
         self.resample_interval = int(resample_interval)
@@ -372,12 +377,13 @@ class AMCL:
         else:
             px, py, pyaw = p[:, 0], p[:, 1], p[:, 2]
             ox, oy = float(self.map.origin[0]), float(self.map.origin[1])
+        sigma = self.global_sigma_hit if self._global else self.sigma_hit
         model = 0 if self.laser_model_type == "likelihood_field" else 1
         return _weights_kernel(
             np.ascontiguousarray(px), np.ascontiguousarray(py), np.ascontiguousarray(pyaw),
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), self._field,
             ox, oy, 1.0 / self.map.resolution, self.max_dist, self.z_hit, self.z_rand * z_rand_mult,
-            1.0 / (2.0 * self.sigma_hit**2), model, 1.0 / self.beam_correlation)
+            1.0 / (2.0 * sigma**2), model, 1.0 / self.beam_correlation)
 
     def _resample(self) -> None:
         w = self.weights
@@ -392,10 +398,11 @@ class AMCL:
         is_new = np.zeros(cap, dtype=bool)
         is_new[first] = True
         k = np.cumsum(is_new)
-        lim = kld_limit(k, self.pf_err, self.pf_z, self.min_particles, cap)
+        n_min = self.max_particles if self._global else self.min_particles
+        lim = kld_limit(k, self.pf_err, self.pf_z, n_min, cap)
         stop = np.flatnonzero(np.arange(1, cap + 1) > lim)
         n = int(stop[0]) + 1 if len(stop) else cap
-        n = max(n, self.min_particles)
+        n = max(n, n_min)
         self.last_kld_k = int(k[n - 1])
         new = self.particles[systematic_resample(w, n, self.rng)]
         if self.alpha_slow > 0 and self.alpha_fast > 0 and self._w_slow > 0:
@@ -407,8 +414,10 @@ class AMCL:
                     self._w_slow = self._w_fast = 0.0  # nav2 resets the averages after injecting
         self.particles = new
         self.weights = np.full(n, 1.0 / n)
-        if self._global and n <= self.max_particles:
-            self._global = False
+        if self._global:  # global phase ends once the cloud is one tight blob
+            _, c = weighted_mean_cov(self.particles, self.weights)
+            if np.sqrt(max(float(np.linalg.eigvalsh(c[:2, :2])[-1]), 0.0)) < self.converged_xy_std:
+                self._global = False
 
     # ------------------------------------------------------------------ front-end API
     def match(self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None) -> MatchResult:

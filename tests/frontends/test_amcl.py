@@ -75,9 +75,9 @@ def _global_convergence_time(occ_map, mount, scans, truth, deltas, cfg, hold_s=5
 def test_global_localization_paper(paper_scans):
     d = paper_scans
     t, a = _global_convergence_time(d.map, d.laser_mount, d.scans, d.truth, d.odom_deltas,
-                                    {"global_particles": 20000})
+                                    {})
     assert t <= 10.0, t
-    assert len(a.particles) <= a.max_particles  # KLD shrank the cloud from 20000
+    assert len(a.particles) <= a.max_particles  # KLD shrank the cloud from 60000
 
 
 def test_global_localization_willow():
@@ -91,7 +91,7 @@ def test_global_localization_willow():
     od = odom_poses_at(odoms, st)
     deltas = [None] + [between(od[i - 1], od[i]) for i in range(1, len(scans))]
     t, _ = _global_convergence_time(sim.map, sim.laser_mount, scans, truth, deltas,
-                                    {"robot_model_type": "differential", "global_particles": 60000})
+                                    {"robot_model_type": "differential"})
     assert t <= 10.0, t
 
 

@@ -113,7 +113,7 @@ AMCL_DEFAULTS: dict[str, Any] = {
 
 
 # ------------------------------------------------------------------ compiled kernels
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, z_hit, z_rand_mult,
                     inv_2s2, model, inv_corr):  # pragma: no cover - compiled
     """Per-particle likelihood: model 0 = nav2 (1 + sum pz^3), 1 = sum log pz (tempered)."""

@@ -84,6 +84,9 @@ AMCL_DEFAULTS: dict[str, Any] = {
     "laser_max_beams": 60,
     "laser_likelihood_max_dist": 2.0,  # m
     "laser_max_range": -1.0,  # m; <= 0: the scan's range_max
+    # cells the likelihood field measures distance to: "occupied" (nav2), or "occupied+unknown_edge"
+    # (also unknown cells bordering free space: maps that store walls as grey, e.g. willow-2010-02-18)
+    "field_walls": "occupied",
     "beam_correlation": 8.0,  # likelihood_field_prob only: log-likelihood divided by this
     # particle filter
     "min_particles": 500,
@@ -142,6 +145,8 @@ def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, z_hit, z
                 z = (field[y0, x0] * (1 - fx) * (1 - fy) + field[y0, x0 + 1] * fx * (1 - fy)
                      + field[y0 + 1, x0] * (1 - fx) * fy + field[y0 + 1, x0 + 1] * fx * fy)
             pz = z_hit * math.exp(-z * z * inv_2s2) + z_rand_mult
+            if pz < 1e-30:  # z_rand = 0 or an infinite range_max: keep log finite
+                pz = 1e-30
             if model == 0:
                 acc += pz * pz * pz
             else:
@@ -238,7 +243,7 @@ class AMCL:
         laser_model_type: str = "likelihood_field_prob",
         z_hit: float = 0.5, z_rand: float = 0.5, sigma_hit: float = 0.05,
         laser_max_beams: int = 60, laser_likelihood_max_dist: float = 2.0, laser_max_range: float = -1.0,
-        beam_correlation: float = 8.0,
+        beam_correlation: float = 8.0, field_walls: str = "occupied",
         min_particles: int = 500, max_particles: int = 2000, global_particles: int = 60000,
         global_sigma_hit: float = 0.2,
         pf_err: float = 0.05, pf_z: float = 0.99, kld_bin_xy: float = 0.5, kld_bin_yaw_deg: float = 10.0,
@@ -290,7 +295,16 @@ class AMCL:
             laser_mount, PreprocessOptions(max_beams=self.laser_max_beams, deskew=bool(deskew),
                                            min_valid_beams=int(min_valid_beams)))
         # likelihood field: distance to the wall surface (half a cell short of the occupied centre)
-        df = np.asarray(occ_map.distance_field, dtype=float)
+        if field_walls == "occupied":
+            df = np.asarray(occ_map.distance_field, dtype=float)
+        elif field_walls == "occupied+unknown_edge":
+            from scipy.ndimage import binary_dilation, distance_transform_edt
+
+            walls = occ_map.occupied | (occ_map.unknown & binary_dilation(occ_map.free, np.ones((3, 3), bool)))
+            df = distance_transform_edt(~walls) * occ_map.resolution if walls.any() else \
+                np.full(walls.shape, np.inf)
+        else:
+            raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {field_walls!r}")
         self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
         self._free = occ_map.free_cell_centers()
         self.particles = np.zeros((0, 3))
@@ -317,7 +331,7 @@ class AMCL:
             for k, v in cfg.items():
                 if k in ints:
                     args[k] = int(v)
-                elif k in ("robot_model_type", "laser_model_type"):
+                elif k in ("robot_model_type", "laser_model_type", "field_walls"):
                     args[k] = str(v)
                 elif k in ("fix_without_update", "deskew"):
                     if not isinstance(v, bool):

@@ -181,3 +181,24 @@ def test_defaults_match_constructor():
     for k, v in AMCL_DEFAULTS.items():
         d = sig.parameters[k].default
         assert (list(d) if isinstance(d, tuple) else d) == v, k
+
+
+def test_grey_wall_map_needs_unknown_edges(shared_data):
+    """The raw 2010 Willow Garage map stores most walls as grey (unknown) pixels: only ~544 cells are
+    occupied at the 0.65 threshold.  With field_walls=occupied+unknown_edge AMCL tracks on it anyway."""
+    from fgloc.sim import run_scenario
+
+    raw = OccupancyMap.load(shared_data / "maps" / "willow-2010-02-18-0.10.yaml")
+    assert raw.occupied.sum() < 1000
+    sim = run_scenario("config/scenarios/willow.yaml", seed=0)
+    scans = [m for _, m in sim.messages if isinstance(m, LaserScan)][:400]
+    odoms = [m for tp, m in sim.messages if isinstance(m, Odometry) and tp != "/ground_truth"]
+    st = np.array([s.stamp for s in scans])
+    truth = sim.ground_truth.interpolate(st)
+    od = odom_poses_at(odoms, st)
+    deltas = [None] + [between(od[i - 1], od[i]) for i in range(1, len(scans))]
+    a = AMCL(raw, sim.laser_mount, robot_model_type="differential", field_walls="occupied+unknown_edge")
+    a.reset(truth[0])
+    e = _errors(_run(a, scans, truth, deltas), truth)
+    assert len(e) > 50
+    assert float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1)))) < 0.1

@@ -71,7 +71,7 @@ FloatArray = NDArray[np.float64]
 AMCL_DEFAULTS: dict[str, Any] = {
     # motion model: "differential" (nav2 DifferentialMotionModel) or "omni" (OmniMotionModel)
     "robot_model_type": "omni",  # the paper robot is mecanum; nav2 default differential
-    "alpha1": 0.05,  # nav2 0.2 (paper sim odometry is better)  # rotation noise from rotation
+    "alpha1": 0.05,  # rotation noise from rotation (nav2 0.2 for all five; the paper odometry is better)
     "alpha2": 0.05,  # rotation noise from translation
     "alpha3": 0.05,  # translation noise from translation
     "alpha4": 0.05,  # translation noise from rotation

@@ -88,7 +88,8 @@ class PreprocessOptions:
 
     ``max_beams``: keep at most this many valid beams by uniform striding (0 = all).
     ``voxel_size_m``: 2-D voxel downsampling of the base-frame points (0 = off).
-    ``deskew``: undo motion distortion per beam when ``time_increment > 0`` and the
+    ``deskew``: undo motion distortion per beam when ``time_increment != 0`` (negative:
+    the beams are listed against the sweep, REP 117 timing still holds) and the
     odometry motion since the last call is given.  ``min_valid_beams``: fewer -> no fix.
     ``max_deskew_interval_s``: a gap between calls longer than this disables de-skew for
     that scan (the constant-velocity assumption would not hold).  ``deskew_extrapolate``:
@@ -237,7 +238,7 @@ class ScanPreprocessor:
                 twist = _se2_log(od) / interval
                 mid = stamp - 0.5 * interval
                 self._last_twist = (mid, twist)
-                if opt.deskew and t_inc > 0 and np.isfinite(t_inc):
+                if opt.deskew and t_inc != 0 and np.isfinite(t_inc):
                     if opt.deskew_extrapolate and prev_twist is not None and \
                             0 < mid - prev_twist[0] <= opt.max_deskew_interval_s:
                         slope = (twist - prev_twist[1]) / (mid - prev_twist[0])

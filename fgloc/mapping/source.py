@@ -64,8 +64,15 @@ def log_messages(
 
 
 def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord], StaticTransform]:
-    """Collect scans with odometry poses and the ``base_link -> laser`` mount (identity if absent)."""
+    """Collect scans with odometry poses and the ``base_link -> laser`` mount (identity if absent).
+
+    The mount is the transform whose child is the scans' ``frame_id`` (REP 105 frame names
+    vary: ``base_scan``, ``laser_link``, ...); failing that, the last one to a ``*laser*``
+    frame (CARMEN's front laser).
+    """
     mount = StaticTransform("base_link", "laser", np.zeros(3))
+    by_child: dict[str, StaticTransform] = {}
+    scan_frame: str | None = None
     events: list[tuple[int, object]] = []  # (kind 0 odom / 1 scan, msg)
     odo_stamps: list[float] = []
     odo_poses: list[FloatArray] = []
@@ -74,7 +81,10 @@ def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord]
     for topic, msg in messages:
         if topic == "/tf_static" and isinstance(msg, list):
             for tf in msg:
-                if isinstance(tf, StaticTransform) and "laser" in tf.child and "rear" not in tf.child:
+                if not isinstance(tf, StaticTransform):
+                    continue
+                by_child[tf.child.lstrip("/")] = tf
+                if "laser" in tf.child and "rear" not in tf.child:
                     mount = tf
         elif topic == "/odom" and isinstance(msg, Odometry):
             if msg.pose is not None and np.all(np.isfinite(msg.pose)):
@@ -92,6 +102,10 @@ def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord]
         elif topic == "/scan" and isinstance(msg, LaserScan):
             if np.isfinite(msg.stamp) and "rear" not in msg.frame_id:
                 events.append((1, msg))
+                if scan_frame is None:
+                    scan_frame = msg.frame_id.lstrip("/")
+    if scan_frame is not None and scan_frame in by_child:
+        mount = by_child[scan_frame]
     if not odo_stamps:
         raise LogError("log has no odometry messages")
     st = np.asarray(odo_stamps)

@@ -1,0 +1,526 @@
+"""Conformance: fgloc on logs written by *other* tools, the way a rosbag2 recording looks.
+
+The logs here are built WITHOUT fgloc's LogWriter: ``mcap_ros2.writer.Writer`` with the
+standard ROS 2 message definitions (as ``rosbag2`` stores them, comments included), log time
+= the recorder's receive time (each sensor with its own latency), and then transformed the
+way other stacks differ from fgloc's simulator (REP 103/105/117/145):
+
+* stamps offset by 1.7e9 s (wall-clock epoch stamps);
+* the laser frame called ``base_scan`` with its mount only on ``/tf`` (re-published, with
+  ``odom -> base_footprint`` interleaved), or on ``/tf_static`` as the chain
+  ``base_footprint -> base_link -> base_scan``;
+* an Imu without orientation (``orientation_covariance[0] = -1``, REP 145), or one whose yaw
+  carries a different compass offset; odometry with all-zero covariances;
+* scans reversed (``angle_min > 0``, negative ``angle_increment``), from a 360 deg scanner,
+  or with 1081 beams at 0.25 deg; NaN / -inf / +inf / 0 ranges;
+* messages out of order, duplicated, stamps going backwards; a truncated file.
+
+Every variant is localized with ``fgloc run`` (through ``fgloc.cli.main``) and its position
+RMSE against the simulator's ground truth is compared with the clean foreign log's.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from fgloc.cli import main
+from fgloc.eval.metrics import evaluate
+from fgloc.io.tum import read_tum
+from fgloc.types import CompassHeading, LaserScan, Trajectory
+
+# A short run with one corner (about 20 s) keeps every `fgloc run` here to a few seconds.
+ROUTE = [[2.5, 3.0], [14.5, 3.0], [14.5, 5.0]]
+EPOCH = 1.7e9
+SEP = "=" * 80
+
+# ---------------------------------------------------------------------------------------------
+# standard ROS 2 message definitions, as rosbag2 stores them (root text, then each dependency)
+_TIME = "# Time indicates a specific point in time, relative to a clock's 0 point.\nint32 sec\nuint32 nanosec\n"
+_HEADER = ("# Standard metadata for higher-level stamped data types.\n"
+           "builtin_interfaces/Time stamp\n\n# Transform frame with which this data is associated.\n"
+           "string frame_id\n")
+_DEFS = {
+    "builtin_interfaces/Time": _TIME,
+    "std_msgs/Header": _HEADER,
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
+    "geometry_msgs/PoseWithCovariance": "Pose pose\n\n# Row-major 6x6 covariance\nfloat64[36] covariance\n",
+    "geometry_msgs/Twist": "Vector3  linear\nVector3  angular\n",
+    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
+    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+}
+_ROOTS = {
+    "sensor_msgs/msg/LaserScan": (
+        "# Single scan from a planar laser range-finder\n\nstd_msgs/Header header # timestamp in the header "
+        "is the acquisition time of\n                             # the first ray in the scan.\n\n"
+        "float32 angle_min            # start angle of the scan [rad]\nfloat32 angle_max            # end angle "
+        "of the scan [rad]\nfloat32 angle_increment      # angular distance between measurements [rad]\n\n"
+        "float32 time_increment       # time between measurements [seconds]\nfloat32 scan_time            "
+        "# time between scans [seconds]\n\nfloat32 range_min            # minimum range value [m]\n"
+        "float32 range_max            # maximum range value [m]\n\nfloat32[] ranges             "
+        "# range data [m]\nfloat32[] intensities        # intensity data [device-specific units].\n",
+        ["builtin_interfaces/Time", "std_msgs/Header"]),
+    "nav_msgs/msg/Odometry": (
+        "# This represents an estimate of a position and velocity in free space.\n"
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+        "geometry_msgs/TwistWithCovariance twist\n",
+        ["builtin_interfaces/Time", "geometry_msgs/Point", "geometry_msgs/Pose", "geometry_msgs/PoseWithCovariance",
+         "geometry_msgs/Quaternion", "geometry_msgs/Twist", "geometry_msgs/TwistWithCovariance",
+         "geometry_msgs/Vector3", "std_msgs/Header"]),
+    "sensor_msgs/msg/Imu": (
+        "# This is a message to hold data from an IMU (Inertial Measurement Unit)\n"
+        "# If you have no estimate for one of the data elements, please set element 0 of the associated\n"
+        "# covariance matrix to -1\n\nstd_msgs/Header header\n\ngeometry_msgs/Quaternion orientation\n"
+        "float64[9] orientation_covariance # Row major about x, y, z axes\n\n"
+        "geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\n"
+        "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n",
+        ["builtin_interfaces/Time", "geometry_msgs/Quaternion", "geometry_msgs/Vector3", "std_msgs/Header"]),
+    "tf2_msgs/msg/TFMessage": (
+        "geometry_msgs/TransformStamped[] transforms\n",
+        ["builtin_interfaces/Time", "geometry_msgs/Quaternion", "geometry_msgs/Transform",
+         "geometry_msgs/TransformStamped", "geometry_msgs/Vector3", "std_msgs/Header"]),
+}
+
+
+def _msgdef(name: str) -> str:
+    root, deps = _ROOTS[name]
+    return root + "".join(f"\n{SEP}\nMSG: {d}\n{_DEFS[d]}" for d in deps)
+
+
+# ---------------------------------------------------------------------------------------------
+# fgloc objects -> plain ROS 2 dicts (written independently of fgloc.io.log)
+def _st(t: float) -> dict:
+    sec = math.floor(t)
+    ns = int(round((t - sec) * 1e9))
+    if ns >= 1_000_000_000:
+        sec, ns = sec + 1, ns - 1_000_000_000
+    return {"sec": int(sec), "nanosec": ns}
+
+
+def _q(yaw: float) -> dict:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+
+
+def _tf(t: float, parent: str, child: str, x: float, y: float, yaw: float, z: float = 0.0) -> dict:
+    return {"header": {"stamp": _st(t), "frame_id": parent}, "child_frame_id": child,
+            "transform": {"translation": {"x": x, "y": y, "z": z}, "rotation": _q(yaw)}}
+
+
+def _cov36(c3: np.ndarray | None) -> list[float]:
+    c = np.zeros((6, 6))
+    if c3 is not None:
+        c[np.ix_((0, 1, 5), (0, 1, 5))] = c3
+    return c.ravel().tolist()
+
+
+def _scan_ros(m: LaserScan, t: float, frame: str, v: dict, rng: np.random.Generator) -> dict:
+    r = np.asarray(m.ranges, dtype=np.float32).copy()
+    amin, inc = float(m.angle_min), float(m.angle_increment)
+    tinc = float(m.time_increment)
+    if v.get("bad_ranges"):
+        idx = rng.choice(len(r), size=12, replace=False)
+        r[idx[0:3]] = np.nan
+        r[idx[3:6]] = -np.inf
+        r[idx[6:9]] = np.inf
+        r[idx[9:12]] = 0.0
+    layout = v.get("scan", "normal")
+    if layout == "360":  # a 360 deg scanner: -pi .. pi at the same step, no return where we have none
+        n_full = int(round(2 * math.pi / inc))
+        full = np.full(n_full, np.inf, dtype=np.float32)
+        off = int(round((amin + math.pi) / inc))
+        full[off:off + len(r)] = r
+        r, amin = full, -math.pi
+        t -= off * tinc  # the header stamp is the first listed ray's time (REP 117)
+    elif layout == "1081":  # 0.25 deg beams: ours on every other beam, NaN between
+        full = np.full(2 * len(r) - 1, np.nan, dtype=np.float32)
+        full[::2] = r
+        r, inc, tinc = full, inc / 2, tinc / 2
+    if layout == "reversed" or v.get("reversed"):
+        # the same beams listed from the last to the first (an upside-down or clockwise scanner);
+        # the header stamp stays the first *measured* ray, i.e. the first listed one
+        # REP 117: the stamp is the time of the first listed ray, beam i at stamp + i * time_increment,
+        # so the physical sweep read backwards has a negative time_increment
+        amin = amin + inc * (len(r) - 1)
+        t += tinc * (len(r) - 1)
+        inc, tinc = -inc, -tinc
+        r = r[::-1].copy()
+    if v.get("no_time_increment"):  # many drivers leave time_increment at 0
+        tinc = 0.0
+    return {
+        "header": {"stamp": _st(t), "frame_id": frame},
+        "angle_min": amin, "angle_max": amin + inc * (len(r) - 1), "angle_increment": inc,
+        "time_increment": tinc, "scan_time": float(m.scan_time),
+        "range_min": float(m.range_min), "range_max": float(m.range_max),
+        "ranges": r.tolist(), "intensities": [],
+    }
+
+
+def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
+    """Write ``sim.messages`` the way a rosbag2 recording of another robot would look.
+
+    Options: ``epoch`` (stamp offset, s), ``laser_frame``, ``mount`` ("static" | "tf" |
+    "chain"), ``imu`` ("normal" | "no_orientation" | "offset"), ``imu_offset_rad``,
+    ``zero_cov``, ``scan`` ("normal" | "reversed" | "360" | "1081"), ``bad_ranges``,
+    ``disorder`` (swap / duplicate / backwards messages), ``scan_latency`` (s between a scan's
+    stamp and its arrival at the recorder), ``no_time_increment``, ``ground_truth``.
+    Returns counts of what was injected.
+    """
+    from mcap_ros2.writer import Writer
+
+    rng = np.random.default_rng(1)
+    epoch = float(v.get("epoch", EPOCH))
+    laser_frame = v.get("laser_frame", "base_scan")
+    mount = sim.laser_mount
+    mx, my, myaw = (float(a) for a in mount.pose)
+    mode = v.get("mount", "static")
+    records: list[tuple[int, str, str, dict]] = []  # (log_time ns, topic, type, msg)
+    latency = {"/scan": float(v.get("scan_latency", 0.030)), "/odom": 0.004, "/imu": 0.011, "/tf": 0.002,
+               "/ground_truth": 0.0}
+    injected = {"duplicates": 0, "backwards": 0}
+
+    def add(topic: str, typ: str, msg: dict, stamp: float, lat: float | None = None) -> None:
+        lt = stamp + (latency.get(topic, 0.0) if lat is None else lat) + float(rng.uniform(0, 0.003))
+        records.append((int(round(lt * 1e9)), topic, typ, msg))
+
+    t_first = sim.messages[0][1].stamp if not isinstance(sim.messages[0][1], list) else 0.0
+    t_first = epoch + float(t_first)
+    if mode == "static":
+        add("/tf_static", "tf2_msgs/msg/TFMessage",
+            {"transforms": [_tf(t_first, "base_link", laser_frame, mx, my, myaw, mount.z)]}, t_first, 0.0)
+    elif mode == "chain":
+        add("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": [
+            _tf(t_first, "base_footprint", "base_link", 0.0, 0.0, 0.0, 0.05),
+            _tf(t_first, "base_link", laser_frame, mx, my, myaw, mount.z - 0.05)]}, t_first, 0.0)
+    imu_off = float(v.get("imu_offset_rad", 0.0))
+    last_tf = -1.0
+    for topic, m in sim.messages:
+        if isinstance(m, list):
+            continue
+        t = epoch + float(m.stamp)
+        if topic == "/scan":
+            add("/scan", "sensor_msgs/msg/LaserScan", _scan_ros(m, t, laser_frame, v, rng), t)
+        elif topic == "/odom":
+            pose = np.zeros(3) if m.pose is None else m.pose
+            tcov = None if v.get("zero_cov") else m.twist_cov
+            add("/odom", "nav_msgs/msg/Odometry", {
+                "header": {"stamp": _st(t), "frame_id": "odom"}, "child_frame_id": "base_footprint",
+                "pose": {"pose": {"position": {"x": float(pose[0]), "y": float(pose[1]), "z": 0.0},
+                                  "orientation": _q(float(pose[2]))}, "covariance": _cov36(None)},
+                "twist": {"twist": {"linear": {"x": float(m.twist[0]), "y": float(m.twist[1]), "z": 0.0},
+                                    "angular": {"x": 0.0, "y": 0.0, "z": float(m.twist[2])}},
+                          "covariance": _cov36(tcov)}}, t)
+            if mode == "tf" and t - last_tf >= 0.1:  # a robot_state_publisher-less robot: mount on /tf
+                last_tf = t
+                add("/tf", "tf2_msgs/msg/TFMessage", {"transforms": [
+                    _tf(t, "odom", "base_footprint", float(pose[0]), float(pose[1]), float(pose[2])),
+                    _tf(t, "base_footprint", laser_frame, mx, my, myaw, mount.z)]}, t)
+        elif topic == "/imu":
+            assert isinstance(m, CompassHeading)
+            kind = v.get("imu", "normal")
+            yaw = 0.0 if m.yaw_rad is None else float(m.yaw_rad)
+            ocov = [0.0] * 9
+            ocov[8] = float(m.yaw_var) if math.isfinite(m.yaw_var) else 0.0
+            if kind == "no_orientation":
+                yaw, ocov = 0.0, [-1.0] + [0.0] * 8
+            elif kind == "offset":
+                yaw = math.atan2(math.sin(yaw + imu_off), math.cos(yaw + imu_off))
+            wcov = [0.0] * 9
+            wcov[8] = float(m.yaw_rate_var) if math.isfinite(m.yaw_rate_var) else 0.0
+            add("/imu", "sensor_msgs/msg/Imu", {
+                "header": {"stamp": _st(t), "frame_id": "imu_link"},
+                "orientation": _q(yaw) if kind != "no_orientation" else {"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0},
+                "orientation_covariance": ocov,
+                "angular_velocity": {"x": 0.0, "y": 0.0, "z": float(m.yaw_rate_radps or 0.0)},
+                "angular_velocity_covariance": wcov,
+                "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 9.81},
+                "linear_acceleration_covariance": [-1.0] + [0.0] * 8}, t)
+        elif topic == "/ground_truth" and v.get("ground_truth", False):
+            p = m.pose
+            add("/ground_truth", "nav_msgs/msg/Odometry", {
+                "header": {"stamp": _st(t), "frame_id": "map"}, "child_frame_id": "base_link",
+                "pose": {"pose": {"position": {"x": float(p[0]), "y": float(p[1]), "z": 0.0},
+                                  "orientation": _q(float(p[2]))}, "covariance": _cov36(None)},
+                "twist": {"twist": {"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                    "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}, "covariance": _cov36(None)}}, t)
+    records.sort(key=lambda r: r[0])
+    if v.get("disorder"):
+        # a recorder on a busy machine: some messages swapped with their neighbour, some
+        # written twice (a DDS re-delivery), and a few odometry / imu messages re-sent late
+        # with their old stamp (time going backwards in the stream)
+        out: list[tuple[int, str, str, dict]] = []
+        for i, rec in enumerate(records):
+            out.append(rec)
+            if i % 97 == 50:
+                out.append((rec[0], rec[1], rec[2], rec[3]))
+                injected["duplicates"] += 1
+            if i % 211 == 100 and rec[1] in ("/odom", "/imu", "/scan") and i + 40 < len(records):
+                late = records[i + 40][0]
+                out.append((late, rec[1], rec[2], rec[3]))
+                injected["backwards"] += 1
+        for i in range(5, len(out) - 1, 53):  # neighbours received in swapped order
+            a, b = out[i], out[i + 1]
+            out[i], out[i + 1] = (b[0], *a[1:]), (a[0], *b[1:])
+        records = sorted(out, key=lambda r: r[0])
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=256 * 1024)
+        schemas = {name: w.register_msgdef(name, _msgdef(name)) for name in _ROOTS}
+        for seq, (lt, topic, typ, msg) in enumerate(records):
+            w.write_message(topic, schemas[typ], msg, log_time=lt, publish_time=lt, sequence=seq)
+        w.finish()
+    return injected
+
+
+# ---------------------------------------------------------------------------------------------
+# fixtures and helpers
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    """The short simulated run, its map on disk and the ground truth shifted to epoch stamps."""
+    from fgloc.sim import simulate_paper
+
+    sim = simulate_paper(seed=0, route=ROUTE)
+    d = tmp_path_factory.mktemp("conformance")
+    sim.map.save(d / "map.yaml")
+    gt = sim.ground_truth
+    return {"sim": sim, "dir": d, "map": d / "map.yaml",
+            "gt": Trajectory(gt.stamps + EPOCH, gt.poses), "gt0": gt}
+
+
+def _run(world: dict, log: Path, name: str, capsys, *extra: str, initial: bool = True,
+         use_map: bool = True) -> tuple[int, str, str, Path]:
+    out = world["dir"] / f"out_{name}"
+    args = ["run", str(log), "-o", str(out), "-q", *extra]
+    if use_map:
+        args += ["--map", str(world["map"])]
+    if initial:
+        args += ["--initial-pose", *(repr(float(a)) for a in world["gt0"].poses[0])]
+    capsys.readouterr()
+    rc = main(args)
+    o, e = capsys.readouterr()
+    assert "Traceback" not in o + e
+    return rc, o, e, out
+
+
+def _rmse(out: Path, gt: Trajectory, align: bool = False) -> tuple[float, int]:
+    tr = read_tum(out / "trajectory.tum")
+    return evaluate(tr, gt, align=align).position_rmse_m, len(tr)
+
+
+def _stats_line(stdout: str) -> str:
+    return " ".join(stdout.split())  # rich wraps lines at the terminal width
+
+
+@pytest.fixture(scope="module")
+def clean(world, tmp_path_factory):
+    """The clean foreign log (epoch stamps, base_scan on /tf_static) localized once."""
+    import io
+    from contextlib import redirect_stdout
+
+    log = world["dir"] / "clean.mcap"
+    write_foreign(log, world["sim"])
+    out = world["dir"] / "out_clean"
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        rc = main(["run", str(log), "--map", str(world["map"]), "-o", str(out), "-q", "--initial-pose",
+                   *(repr(float(a)) for a in world["gt0"].poses[0])])
+    assert rc == 0
+    rmse, n = _rmse(out, world["gt"])
+    return {"log": log, "rmse": rmse, "n": n}
+
+
+def _bound(clean_rmse: float) -> float:
+    """Allowed RMSE of a variant: twice the clean log's, or 5 mm above it if that is larger."""
+    return max(2.0 * clean_rmse, clean_rmse + 0.005)
+
+
+# ---------------------------------------------------------------------------------------------
+# localization on foreign logs
+def test_clean_foreign_log_localizes(clean, world):
+    # measured: 2.0 mm position RMSE over 315 keyframes of the 25 s run
+    assert clean["rmse"] < 0.006
+    assert clean["n"] >= 300
+    assert clean["log"].stat().st_size > 100_000
+
+
+VARIANTS: dict[str, dict[str, Any]] = {
+    # measured RMSE (mm) on the foreign log beside each: clean 2.0
+    "mount_on_tf": {"mount": "tf"},                                   # 2.0
+    "tf_static_chain": {"mount": "chain"},                            # 2.0
+    "imu_without_orientation": {"imu": "no_orientation"},             # 2.1
+    "imu_compass_offset": {"imu": "offset", "imu_offset_rad": 2.0},   # 2.0
+    "odom_zero_covariance": {"zero_cov": True},                       # 2.0
+    "reversed_scan": {"scan": "reversed"},                            # 2.0 (9.3 before de-skew fix)
+    "scanner_360deg": {"scan": "360"},                                # 2.0
+    "scan_1081_beams": {"scan": "1081"},                              # 2.0
+    "nan_inf_zero_ranges": {"bad_ranges": True},                      # 2.1
+    "late_scans_250ms": {"scan_latency": 0.25},
+    "disorder": {"disorder": True},                                   # 2.0
+    "everything": {"mount": "chain", "imu": "offset", "imu_offset_rad": -1.3, "zero_cov": True,
+                   "scan": "reversed", "bad_ranges": True, "disorder": True},
+}
+
+
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_foreign_variant_localizes(name, world, clean, capsys):
+    log = world["dir"] / f"{name}.mcap"
+    injected = write_foreign(log, world["sim"], **VARIANTS[name])
+    rc, out, err, outdir = _run(world, log, name, capsys)
+    assert rc == 0, err
+    rmse, n = _rmse(outdir, world["gt"])
+    print(f"{name}: RMSE {rmse * 1000:.2f} mm (clean {clean['rmse'] * 1000:.2f} mm), {n} poses")
+    assert rmse <= _bound(clean["rmse"]), f"{name}: {rmse:.4f} m vs clean {clean['rmse']:.4f} m"
+    assert n >= 0.95 * clean["n"]
+    line = _stats_line(out)
+    m = re.search(r"skipped (\d+)", line)
+    assert m, line
+    skipped = int(m.group(1))
+    if VARIANTS[name].get("disorder"):
+        # every duplicate and every late re-sent message is skipped, counted and explained
+        assert skipped >= injected["duplicates"] + injected["backwards"] > 5
+        assert "repeated stamp" in line and "time went backwards" in line
+    else:
+        assert skipped == 0
+
+
+def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):
+    """1.7e9 s stamps (float64 keeps ~0.2 us) give the same trajectory as stamps from 0."""
+    log0 = world["dir"] / "epoch0.mcap"
+    write_foreign(log0, world["sim"], epoch=0.0, laser_frame="laser")
+    rc, _, err, out0 = _run(world, log0, "epoch0", capsys, "--backend", "ekf")
+    assert rc == 0, err
+    rc, _, err, out1 = _run(world, clean["log"], "epoch_ekf", capsys, "--backend", "ekf")
+    assert rc == 0, err
+    r0, n0 = _rmse(out0, world["gt0"])
+    r1, n1 = _rmse(out1, world["gt"])
+    assert n0 == n1
+    assert abs(r0 - r1) < 1e-4  # measured 8.05 mm both
+    a, b = read_tum(out0 / "trajectory.tum"), read_tum(out1 / "trajectory.tum")
+    assert np.max(np.abs(b.stamps - EPOCH - a.stamps)) < 1e-6
+    assert np.max(np.abs(a.poses[:, :2] - b.poses[:, :2])) < 1e-3
+
+
+def test_amcl_on_foreign_log(world, capsys):
+    log = world["dir"] / "amcl.mcap"
+    write_foreign(log, world["sim"], mount="tf", scan="reversed", bad_ranges=True)
+    rc, _, err, out = _run(world, log, "amcl", capsys, "--frontend", "amcl", "--backend", "ekf")
+    assert rc == 0, err
+    rmse, _ = _rmse(out, world["gt"])
+    assert rmse < 0.05  # measured 25 mm (AMCL is the coarse front-end)
+
+
+def test_global_localization_on_foreign_log(world, clean, capsys):
+    rc, _, err, out = _run(world, clean["log"], "global", capsys, initial=False)
+    assert rc == 0, err
+    rmse, _ = _rmse(out, world["gt"])
+    assert rmse <= _bound(clean["rmse"])  # measured 2.0 mm: found at the first scan
+
+
+def test_odometry_only_on_foreign_log(world, capsys):
+    log = world["dir"] / "odom_only.mcap"
+    write_foreign(log, world["sim"], imu="offset", imu_offset_rad=0.9, zero_cov=True, disorder=True)
+    rc, out, err, outdir = _run(world, log, "odom_only", capsys, use_map=False, initial=False)
+    assert rc == 0, err
+    assert "odom frame" in _stats_line(out)
+    rmse, n = _rmse(outdir, world["gt"], align=True)
+    assert n > 100
+    assert rmse < 0.05  # measured 13 mm after SE(2) alignment over the 17 m run
+
+
+def test_truncated_foreign_log(world, clean, capsys):
+    data = clean["log"].read_bytes()
+    log = world["dir"] / "cut.mcap"
+    log.write_bytes(data[: int(0.6 * len(data))])
+    capsys.readouterr()
+    assert main(["info", str(log)]) == 0
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err
+    trunc = [ln for ln in out.splitlines() if ln.startswith("TRUNCATED:")]
+    assert len(trunc) == 1 and str(len(data[: int(0.6 * len(data))])) in trunc[0]
+    rc, out, err, outdir = _run(world, log, "cut", capsys)
+    assert rc == 0, err
+    assert "log truncated" in out
+    rmse, n = _rmse(outdir, world["gt"])
+    assert rmse <= _bound(clean["rmse"])
+    assert 0.3 * clean["n"] < n < 0.8 * clean["n"]
+
+
+def test_map_from_foreign_log(world, capsys):
+    """`fgloc map` on a TurtleBot-style log (base_scan under a tf_static chain, reversed scans)."""
+    log = world["dir"] / "for_map.mcap"
+    write_foreign(log, world["sim"], mount="chain", scan="reversed", bad_ranges=True, disorder=True)
+    out = world["dir"] / "built_map"
+    capsys.readouterr()
+    rc = main(["map", str(log), "-o", str(out), "--no-progress"])
+    o, e = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in o + e, e
+    rmse, n = _rmse(out, world["gt"], align=True)
+    assert n > 30
+    # measured 8.5 mm (99 mm when the mount to 'base_scan' was ignored)
+    assert rmse < 0.02
+    from fgloc.maps import OccupancyMap
+
+    occ = OccupancyMap.load(out / "map.yaml")
+    assert occ.resolution == pytest.approx(0.05)
+
+
+def test_eval_on_epoch_trajectories(world, clean, capsys):
+    from fgloc.io.tum import write_tum
+
+    gt_path = write_tum(world["dir"] / "gt_epoch.tum", world["gt"])
+    capsys.readouterr()
+    assert main(["eval", str(world["dir"] / "out_clean" / "trajectory.tum"), str(gt_path), "--json"]) == 0
+    out, _ = capsys.readouterr()
+    m = re.search(r'"position_rmse_m": ([0-9.e-]+)', out)
+    assert m and float(m.group(1)) == pytest.approx(clean["rmse"], rel=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# bad foreign logs: one line naming the file and the problem, exit 2
+def _bad(world: dict, log: Path, capsys) -> str:
+    rc, out, err, _ = _run(world, log, "bad", capsys)
+    assert rc == 2, out + err
+    lines = [ln for ln in err.splitlines() if ln.startswith("fgloc: error:")]
+    assert len(lines) == 1, err
+    assert str(log) in lines[0]
+    return lines[0]
+
+
+def test_not_an_mcap(world, capsys):
+    log = world["dir"] / "garbage.mcap"
+    log.write_bytes(b"%YAML 1.2\n" * 100)
+    assert "not an MCAP" in _bad(world, log, capsys)
+
+
+def test_cut_before_first_message(world, clean, capsys):
+    log = world["dir"] / "tiny.mcap"
+    log.write_bytes(clean["log"].read_bytes()[:300])
+    line = _bad(world, log, capsys)
+    assert "empty log" in line and "byte 300" in line
+
+
+def _write_string_scan(path: Path) -> None:
+    from mcap_ros2.writer import Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        s = w.register_msgdef("std_msgs/msg/String", "string data\n")
+        for i in range(10):
+            w.write_message("/scan", s, {"data": "x"}, log_time=int((EPOCH + i) * 1e9))
+        w.finish()
+
+
+@pytest.mark.xfail(strict=True, reason="fgloc run: a /scan of the wrong type is skipped with a warning and "
+                   "the run 'succeeds' with 0 poses (commands/run.py should refuse it, exit 2)")
+def test_scan_topic_of_wrong_type(world, capsys):
+    log = world["dir"] / "wrong_type.mcap"
+    _write_string_scan(log)
+    line = _bad(world, log, capsys)
+    assert "std_msgs/msg/String" in line

@@ -352,6 +352,25 @@ def _tf_from_ros(m: Any, topic: str) -> list[StaticTransform]:
     return out
 
 
+def _tf_flips(m: Any) -> list[bool]:
+    """Per transform of a decoded TFMessage: is the child's z axis pointing down (a scanner
+    mounted upside down, rolled or pitched by pi)?  Its rotation is then ``Rz(yaw) Rx(pi)``
+    with ``yaw`` as :func:`_yaw` gives it."""
+    out = []
+    for t in m.transforms:
+        q = t.transform.rotation
+        n = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
+        out.append(n > 0 and 1.0 - 2.0 * (q.x * q.x + q.y * q.y) / n < 0.0)
+    return out
+
+
+def _mirror_scan(scan: LaserScan) -> LaserScan:
+    """The scan of an upside-down scanner as an upright one sees it: angles negated (timing kept)."""
+    scan.angle_min = -scan.angle_min
+    scan.angle_increment = -scan.angle_increment
+    return scan
+
+
 FROM_ROS: dict[str, Callable[[Any, str], object]] = {
     LASER_SCAN: _scan_from_ros,
     ODOMETRY: _odom_from_ros,
@@ -616,6 +635,8 @@ class LogReader:
         self._start_ns: int | None = None
         self._end_ns: int | None = None
         self._n = 0
+        self._tf_flip: dict[tuple[str, str], bool] = {}   # (parent, child) -> child upside down
+        self._mirror_frames: set[str] = set()             # scan frames read mirrored (laser_mount)
         self._open()
 
     # -- opening -----------------------------------------------------------------------------
@@ -793,11 +814,22 @@ class LogReader:
             if conv is None:
                 continue
             dec, fn = conv
-            if fn is _scan_from_ros and channel.message_encoding == "cdr":
-                scan = _scan_from_cdr(message.data, channel.topic)
-                if scan is not None:
-                    yield channel.topic, scan
-                    continue
+            if fn is _scan_from_ros:
+                scan = _scan_from_cdr(message.data, channel.topic) if channel.message_encoding == "cdr" else None
+                if scan is None:
+                    scan = _scan_from_ros(dec(message.data), channel.topic)
+                if self._mirror_frames and scan.frame_id.lstrip("/") in self._mirror_frames:
+                    scan = _mirror_scan(scan)
+                yield channel.topic, scan
+                continue
+            if fn is _tf_from_ros:
+                ros = dec(message.data)
+                tfs = _tf_from_ros(ros, channel.topic)
+                for tr, flip in zip(tfs, _tf_flips(ros), strict=True):
+                    if flip:
+                        self._tf_flip[(tr.parent, tr.child)] = True
+                yield channel.topic, tfs
+                continue
             yield channel.topic, fn(dec(message.data), channel.topic)
 
     def _raw(self, want: set[str]) -> Iterator[tuple[Any, Any, Any]]:
@@ -843,7 +875,10 @@ class LogReader:
         """``base_link -> <scan frame>`` from /tf_static (or the first /tf), identity if absent.
 
         The scan's ``frame_id`` (of the first scan) names the laser frame; a chain of
-        transforms from ``base_link`` (or ``base_footprint``) to it is composed.
+        transforms from ``base_link`` (or ``base_footprint``) to it is composed.  A scanner
+        mounted upside down (its z axis pointing down, as tf2 would transform its beams) is
+        returned as the equivalent upright mount, and from then on :meth:`messages` yields
+        its scans mirrored (``angle_min`` and ``angle_increment`` negated), as nav2 does.
         """
         frame = "laser"
         if self.has(self.topics.scan):
@@ -860,25 +895,38 @@ class LogReader:
                 n += 1
                 found = self._chain(parents, frame)
                 if found is not None:
-                    return found
+                    return self._use_mount(found, frame)
                 if src == self.topics.tf and n >= 2000:
                     break
         found = self._chain(parents, frame)
         if found is not None:
-            return found
+            return self._use_mount(found, frame)
         log.warning("%s: no transform base_link -> %s in %s; assuming the laser at the robot centre",
                     self.path, frame, " or ".join(sources) or "the log (no tf topics)")
         return StaticTransform("base_link", frame, np.zeros(3))
 
-    @staticmethod
-    def _chain(parents: dict[str, StaticTransform], frame: str) -> StaticTransform | None:
-        pose, z, cur = np.zeros(3), 0.0, frame
+    def _use_mount(self, found: tuple[StaticTransform, bool], frame: str) -> StaticTransform:
+        mount, mirrored = found
+        if mirrored:
+            self._mirror_frames.add(frame)
+            log.info("%s: laser %s is mounted upside down; its scans are read mirrored", self.path, frame)
+        return mount
+
+    def _chain(self, parents: dict[str, StaticTransform], frame: str) -> tuple[StaticTransform, bool] | None:
+        """``(base -> frame, mirrored)``: the 2-D mount and whether an odd number of the
+        transforms on the way turn the z axis down."""
+        pose, z, cur, mirrored = np.zeros(3), 0.0, frame, False
         for _ in range(32):
             if cur in ("base_link", "base_footprint"):
-                return StaticTransform(cur, frame, pose, z)
+                return StaticTransform(cur, frame, pose, z), mirrored
             tr = parents.get(cur)
             if tr is None:
                 return None
+            if self._tf_flip.get((tr.parent, tr.child), False):
+                # R = Rz(yaw) Rx(pi): a child pose (x, y, th) is (x, -y, -th) before the yaw
+                pose = np.array([pose[0], -pose[1], -pose[2]])
+                z = -z
+                mirrored = not mirrored
             pose = compose(tr.pose, pose)
             z += tr.z
             cur = tr.parent

@@ -40,7 +40,7 @@ import yaml
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.backends.factors import se2_compose, se2_exp
+from fgloc.backends.factors import se2_compose, se2_exp, se2_log
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, transform_points, wrap_angle
 from fgloc.maps import OccupancyMap
@@ -92,6 +92,10 @@ DEFAULT_PIPELINE: dict[str, Any] = {
     "global_search": {},             # GlobalSearch keyword arguments
     "global_compass_tolerance_deg": 30.0,  # candidates further from the compass heading are dropped
     "frontend_every": 2,             # match every n-th scan (a keyframe each; others: prediction)
+    "pose_deltas": "auto",           # odometry twist from pose increments: auto | always | never
+    "pose_delta_sigmas": [0.01, 0.01, 0.02],  # m/s, m/s, rad/s: base noise of a pose-derived twist
+    "pose_delta_rel": 0.1,           # + this fraction of the speed (per unit speed)
+    "pose_delta_tolerance": [0.002, 0.1],  # m, deg (+10 %): twist vs pose increment agreement (auto)
 }
 
 
@@ -127,6 +131,7 @@ class Localizer:
         self._odom_pose = np.zeros(3)
         self._odom_t: float | None = None
         self._last_twist = np.zeros(3)
+        self._prev_odom_pose: tuple[float, FloatArray] | None = None
         self._odom_at_last_scan: FloatArray | None = None
         self._bad_streak = 0
         self._global_tries = 0
@@ -166,6 +171,13 @@ class Localizer:
         if not self._monotonic("odometry", t):
             return
         self.stats["odometry"] += 1
+        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        if pose is not None and (pose.shape != (3,) or not np.all(np.isfinite(pose))):
+            pose = None
+        cov = msg.twist_cov
+        if cov is not None and not math.isfinite(float(np.sum(cov))):
+            cov = None
+        tw, cov = self._odometry_twist(t, tw, cov, pose)
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
         if self._odom_t is not None:
             self._odom_pose = se2_compose(self._odom_pose, se2_exp(tw * (t - self._odom_t)))
@@ -173,12 +185,48 @@ class Localizer:
         self._last_twist = tw
         if self._first_odom_t is None:
             self._first_odom_t = t
-        cov = msg.twist_cov
-        if cov is not None and not math.isfinite(float(np.sum(cov))):
-            cov = None
         self.backend.add_odometry(t, tw, cov)
         if self.odom_mode:
             self._odom_mode_step(t, scan=False)
+
+    def _odometry_twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None
+                        ) -> tuple[FloatArray, FloatArray | None]:
+        """The body twist to integrate: the message's, or the dead-reckoned pose's differential.
+
+        robot_localization's differential mode: when the source carries poses and its twist is
+        disagrees with the pose increment (CARMEN logs that leave tv = rv = 0, or rv = 0 while
+        the pose turns) by more than ``pose_delta_tolerance`` (+10 %), or ``pose_deltas: always``,
+        the twist is ``log(between(prev_pose, pose)) / dt`` (held over ``(t_prev, t]`` like an
+        encoder twist, so integrating it reproduces the pose increment exactly).  Its covariance
+        then grows with the motion (``pose_delta_sigmas`` + ``pose_delta_rel`` * |twist|): the
+        poses' stamps are often where the error is (bursty logger stamps).
+        """
+        prev = self._prev_odom_pose
+        self._prev_odom_pose = None if pose is None else (t, pose)
+        mode = str(self.pcfg["pose_deltas"])
+        if pose is None or prev is None or mode == "never":
+            return tw, cov
+        dt = t - prev[0]
+        if not dt > 0:
+            return tw, cov
+        delta = between(prev[1], pose)
+        if mode != "always":
+            # auto: keep the twist while it agrees with the pose increment (a simulator, a good
+            # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
+            d_tw = se2_exp(tw * dt)
+            lin, rot = float(np.hypot(delta[0], delta[1])), abs(float(delta[2]))
+            tol_lin = float(self.pcfg["pose_delta_tolerance"][0]) + 0.1 * lin
+            tol_rot = math.radians(float(self.pcfg["pose_delta_tolerance"][1])) + 0.1 * rot
+            if float(np.hypot(d_tw[0] - delta[0], d_tw[1] - delta[1])) <= tol_lin and \
+                    abs(float(wrap_angle(d_tw[2] - delta[2]))) <= tol_rot:
+                return tw, cov
+        u = se2_log(delta) / dt
+        self.stats["odometry_from_poses"] = self.stats.get("odometry_from_poses", 0) + 1
+        s0 = np.asarray(self.pcfg["pose_delta_sigmas"], dtype=float).reshape(3)
+        rel = float(self.pcfg["pose_delta_rel"])
+        speed = float(np.hypot(u[0], u[1]))
+        sig = s0 + rel * np.array([speed, speed, abs(float(u[2])) + speed])
+        return u, np.diag(sig**2)
 
     def on_compass(self, msg: CompassHeading) -> None:
         t = float(msg.stamp)

@@ -39,6 +39,17 @@ def se2_exp(xi: FloatArray) -> FloatArray:
     return np.array([c * vx - s * vy, s * vx + c * vy, w])
 
 
+def se2_log(p: FloatArray) -> FloatArray:
+    """``Logmap`` of a pose ``[x, y, yaw]`` -> tangent ``[vx dt, vy dt, w dt]`` (inverse of :func:`se2_exp`)."""
+    x, y, w = float(p[0]), float(p[1]), math.atan2(math.sin(float(p[2])), math.cos(float(p[2])))
+    if abs(w) < 1e-9:
+        c, s = 1.0 - w * w / 6.0, w / 2.0
+    else:
+        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
+    det = c * c + s * s
+    return np.array([(c * x + s * y) / det, (-s * x + c * y) / det, w])
+
+
 def se2_adjoint(p: FloatArray) -> FloatArray:
     """Adjoint map of pose ``p`` (``Ad_p xi = Log(p Exp(xi) p^-1)`` to first order), as GTSAM's."""
     c, s = np.cos(p[2]), np.sin(p[2])

@@ -81,7 +81,12 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
 
 
 DEFAULT_PIPELINE: dict[str, Any] = {
-    "relocalize_after": 10,          # scans in a row without an accepted fix -> global search
+    "relocalize_after": 10,          # matched scans in a row without an accepted fix -> global search
+    "relocalize_search_every": 4,    # ... every n-th such scan (tracking goes on meanwhile)
+    "relocalize_min_quality": 0.7,   # inlier fraction a relocalization candidate needs (every scan)
+    "relocalize_margin": 0.15,       # a candidate's quality must beat the tracked match's by this
+    "relocalize_ambiguity": 0.1,     # another distinct candidate this close in quality: ambiguous, no jump
+    "relocalize_confirm": 2,         # scans the candidate must match again (odometry-carried) to be taken
     "initial_sigma_xy": 0.1,         # m, prior on an --initial-pose (or a global-search result)
     "initial_sigma_yaw_deg": 5.0,
     "odom_keyframe_interval": 0.1,   # s, keyframe spacing without scans
@@ -134,6 +139,8 @@ class Localizer:
         self._prev_odom_pose: tuple[float, FloatArray] | None = None
         self._odom_at_last_scan: FloatArray | None = None
         self._bad_streak = 0
+        self._pending: tuple[FloatArray, FloatArray, int] | None = None  # relocalization candidate
+        self._reloc_tick = 0
         self._global_tries = 0
         self._global: Any = None
         self._last_compass: tuple[float, float] | None = None
@@ -290,15 +297,69 @@ class Localizer:
             informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
         if used:
             self._bad_streak = 0
+            self._pending = None
         elif informative:
             self._bad_streak += 1
         if self._bad_streak >= int(self.pcfg["relocalize_after"]):
-            self._lost = True
-            self._global_tries = 0
-            self.stats["relocalizations"] += 1
             if self.frontend_name == "amcl":
+                self._lost = True
+                self._global_tries = 0
+                self.stats["relocalizations"] += 1
                 self.frontend.reset(None)
+            else:
+                self._check_relocalization(msg, res, guess, odom_delta)
         return fix
+
+    def _check_relocalization(self, msg: LaserScan, local: Any, guess: FloatArray,
+                              odom_delta: FloatArray | None) -> None:
+        """Tracking has had no accepted fix for ``relocalize_after`` scans: look for a better place.
+
+        Tracking goes on meanwhile.  A global candidate (every ``relocalize_search_every``-th
+        such scan) becomes *pending* only when it is consistent and unambiguous: quality at
+        least ``relocalize_min_quality``, ``relocalize_margin`` better than the tracked pose's match
+        (unless it is the tracked match itself), and no other candidate more than 1 m / 20 deg
+        away within ``relocalize_ambiguity`` of it.  A pending pose is carried along by odometry
+        and must match again on ``relocalize_confirm`` further scans before the back-end is reset
+        to it; one failed match drops it.  So repetitive buildings (similar rooms, corridors)
+        and fixes merely rejected for a while do not make the robot jump.
+        """
+        assert self.frontend is not None
+        t = float(msg.stamp)
+        if self._pending is not None:
+            pose = se2_compose(self._pending[0], odom_delta) if odom_delta is not None else self._pending[0]
+            res = self.frontend.match(msg, pose, None)
+            if res.ok and res.pose is not None and res.cov is not None and \
+                    float(res.quality) >= float(self.pcfg["relocalize_min_quality"]):
+                count = self._pending[2] + 1
+                self._pending = (np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float), count)
+                if count > int(self.pcfg["relocalize_confirm"]):
+                    self.stats["relocalizations"] += 1
+                    self._pending = None
+                    self._start(t, np.asarray(res.pose, dtype=float),
+                                np.asarray(res.cov, dtype=float) + np.diag([1e-6, 1e-6, 1e-6]))
+            else:
+                self._pending = None
+            return
+        self._reloc_tick += 1
+        if (self._reloc_tick - 1) % max(1, int(self.pcfg["relocalize_search_every"])) != 0:
+            return
+        cands = self._global_candidates(msg)
+        if not cands:
+            return
+        best_q, best = cands[0]
+        if best_q < float(self.pcfg["relocalize_min_quality"]):
+            return
+        local_q = float(getattr(local, "quality", 0.0) or 0.0)
+        near_local = local.ok and local.pose is not None and \
+            _close(best.pose, np.asarray(local.pose, dtype=float), 0.3, math.radians(5.0))
+        if not near_local and best_q < local_q + float(self.pcfg["relocalize_margin"]):
+            return
+        amb = float(self.pcfg["relocalize_ambiguity"])
+        for q, c in cands[1:]:
+            if q >= best_q - amb and not _close(c.pose, best.pose, 1.0, math.radians(20.0)):
+                self.stats["ambiguous_relocalizations"] = self.stats.get("ambiguous_relocalizations", 0) + 1
+                return
+        self._pending = (best.pose.copy(), best.cov.copy(), 1)
 
     # ------------------------------------------------------------------ start-up / recovery
     def _initial_cov(self) -> FloatArray:
@@ -313,6 +374,8 @@ class Localizer:
             self.backend.initialize(t, pose, cov)
         self._lost = False
         self._bad_streak = 0
+        self._pending = None
+        self._reloc_tick = 0
         if self.frontend is not None and self.frontend_name == "amcl":
             self.frontend.reset(pose)
 
@@ -359,6 +422,13 @@ class Localizer:
         return None
 
     def _global_search(self, msg: LaserScan) -> PoseFix | None:
+        cands = self._global_candidates(msg)
+        if not cands or cands[0][0] < float(self.pcfg["global_min_quality"]):
+            return None
+        return cands[0][1]
+
+    def _global_candidates(self, msg: LaserScan) -> list[tuple[float, PoseFix]]:
+        """Front-end-refined global search candidates, best quality first."""
         from fgloc.backends.global_search import GlobalSearch
 
         assert self.frontend is not None and self.map is not None
@@ -367,7 +437,7 @@ class Localizer:
         self.stats["global_searches"] += 1
         pts = msg.points()
         if len(pts) < 10:
-            return None
+            return []
         pts_base = transform_points(self.laser_mount.pose, pts)
         # the compass (once its offset is known) rules out headings, e.g. the mirror image
         # of a symmetric hall
@@ -377,7 +447,7 @@ class Localizer:
                 abs(float(msg.stamp) - self._last_compass[0]) < 1.0:
             heading = float(wrap_angle(self._last_compass[1] - off))
         max_dyaw = math.radians(float(self.pcfg["global_compass_tolerance_deg"]))
-        best: tuple[float, PoseFix] | None = None
+        out: list[tuple[float, PoseFix]] = []
         for cand, _score in self._global.search(pts_base):
             if heading is not None and abs(float(wrap_angle(cand[2] - heading))) > max_dyaw:
                 continue
@@ -385,12 +455,10 @@ class Localizer:
             if not (res.ok and res.pose is not None and res.cov is not None):
                 continue
             q = float(res.quality)
-            if best is None or q > best[0]:
-                best = (q, PoseFix(float(msg.stamp), np.asarray(res.pose, dtype=float),
-                                   np.asarray(res.cov, dtype=float), quality=q, source=self.frontend_name))
-        if best is None or best[0] < float(self.pcfg["global_min_quality"]):
-            return None
-        return best[1]
+            out.append((q, PoseFix(float(msg.stamp), np.asarray(res.pose, dtype=float),
+                                   np.asarray(res.cov, dtype=float), quality=q, source=self.frontend_name)))
+        out.sort(key=lambda qc: -qc[0])
+        return out
 
     # ------------------------------------------------------------------ odom-only mode
     def _odom_mode_step(self, t: float, scan: bool) -> None:
@@ -441,6 +509,10 @@ class Localizer:
             return Trajectory(np.zeros(0), np.zeros((0, 3)))
         return Trajectory.from_unsorted(np.array([f.stamp for f in self.fixes]),
                                         np.array([f.pose for f in self.fixes]))
+
+
+def _close(a: FloatArray, b: FloatArray, dist_m: float, dyaw_rad: float) -> bool:
+    return float(np.hypot(a[0] - b[0], a[1] - b[1])) <= dist_m and abs(float(wrap_angle(a[2] - b[2]))) <= dyaw_rad
 
 
 def run_messages(loc: Localizer, messages: Iterable[tuple[str, object]], topics: Any = None,

@@ -612,6 +612,32 @@ class _Walker:
 
 # --------------------------------------------------------------------------------------------
 # reader
+def _bag_file(folder: Path) -> Path:
+    """The MCAP file of a rosbag2 folder (``ros2 bag record -s mcap``: metadata.yaml + one .mcap)."""
+    files: list[Path] = []
+    meta = folder / "metadata.yaml"
+    if meta.is_file():
+        try:
+            import yaml
+
+            info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information") or {}
+            files = [folder / str(f) for f in info.get("relative_file_paths") or []]
+        except Exception:  # noqa: BLE001 - a broken metadata.yaml: look at the files themselves
+            files = []
+        files = [f for f in files if f.is_file()]
+    if not files:
+        files = sorted(folder.glob("*.mcap"))
+    if len(files) == 1 and files[0].suffix == ".mcap":
+        return files[0]
+    if len(files) > 1:
+        raise LogError(f"{folder}: a split rosbag2 recording ({len(files)} files); merge it into one MCAP "
+                       f"first (e.g. 'ros2 bag convert' or 'mcap merge')")
+    if any(folder.glob("*.db3")) or (files and files[0].suffix == ".db3"):
+        raise LogError(f"{folder}: a rosbag2 SQLite (.db3) bag, not MCAP; convert it with "
+                       f"'ros2 bag convert' to storage mcap")
+    raise LogError(f"{folder}: is a directory without an MCAP log (no .mcap file in it)")
+
+
 @dataclass
 class _TopicInfo:
     type: str
@@ -645,7 +671,7 @@ class LogReader:
         if not p.exists():
             raise LogError(f"{p}: log file not found")
         if p.is_dir():
-            raise LogError(f"{p}: is a directory, not an MCAP log")
+            p = self.path = _bag_file(p)
         size = p.stat().st_size
         if size == 0:
             raise LogError(f"{p}: empty file (0 bytes), not an MCAP log")

@@ -180,7 +180,7 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
     stamp and its arrival at the recorder), ``no_time_increment``, ``flip_laser`` (scanner
     mounted upside down), ``intensities``, ``pose_only_odom`` (twist left zero), ``drop``
     (topics left out), ``scan_clock_offset`` (scans stamped by another clock), ``compression``,
-    ``chunk_size``, ``ground_truth``.
+    ``chunk_size``, ``writer`` ("rosbags": a rosbag2 folder written by rosbags), ``ground_truth``.
     Returns counts of what was injected.
     """
     from mcap_ros2.writer import Writer
@@ -285,6 +285,9 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
             a, b = out[i], out[i + 1]
             out[i], out[i + 1] = (b[0], *a[1:]), (a[0], *b[1:])
         records = sorted(out, key=lambda r: r[0])
+    if v.get("writer") == "rosbags":
+        _write_rosbags(path, records)
+        return injected
     with open(path, "wb") as f:
         from mcap.writer import CompressionType
 
@@ -449,6 +452,24 @@ def test_scans_on_another_clock_are_reported(world, capsys):
     assert (rc == 2 and "clock" in err) or (rc == 0 and m is not None and int(m.group(1)) >= 600)
 
 
+def test_rosbag2_folder_written_by_rosbags(world, clean, capsys):
+    """`ros2 bag record -s mcap` leaves a folder; fgloc info / run take it like the .mcap inside."""
+    bag = world["dir"] / "rosbag2_folder"
+    write_foreign(bag, world["sim"], writer="rosbags", mount="tf", scan="360", imu="no_orientation")
+    assert (bag / "metadata.yaml").is_file()
+    capsys.readouterr()
+    assert main(["info", str(bag)]) == 0
+    out, _ = capsys.readouterr()
+    assert re.search(r"/scan\s+630\s+sensor_msgs/msg/LaserScan", out), out
+    rc, _, err, outdir = _run(world, bag, "rosbag2_folder", capsys)
+    assert rc == 0, err
+    rmse, _ = _rmse(outdir, world["gt"])
+    assert rmse <= _bound(clean["rmse"])  # measured 2.0 mm
+    empty = world["dir"] / "empty_folder"
+    empty.mkdir()
+    assert "no .mcap file" in _bad(world, empty, capsys)
+
+
 def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):
     """1.7e9 s stamps (float64 keeps ~0.2 us) give the same trajectory as stamps from 0."""
     log0 = world["dir"] / "epoch0.mcap"
@@ -583,3 +604,33 @@ def test_scan_topic_of_wrong_type(world, capsys):
     _write_string_scan(log)
     line = _bad(world, log, capsys)
     assert "std_msgs/msg/String" in line
+
+
+def _write_rosbags(folder: Path, records: list[tuple[int, str, str, dict]]) -> None:
+    """A rosbag2 folder (metadata.yaml + .mcap) written by ``rosbags`` (its own CDR encoder and
+    message definitions), as ``ros2 bag record -s mcap`` leaves it."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+
+    def build(typ: str, d: Any) -> Any:
+        kwargs = {}
+        for name, (node, spec) in ts.fielddefs[typ][1]:
+            val = d[name]
+            if node.name == "NAME":
+                kwargs[name] = build(spec, val)
+            elif node.name == "SEQUENCE" and spec[0][0].name == "NAME":
+                kwargs[name] = [build(spec[0][1], x) for x in val]
+            elif node.name in ("SEQUENCE", "ARRAY"):
+                kwargs[name] = np.asarray(val, dtype=np.float32 if spec[0][1][0] == "float32" else np.float64)
+            else:
+                kwargs[name] = val
+        return ts.types[typ](**kwargs)
+
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns: dict[str, Any] = {}
+        for lt, topic, typ, msg in records:
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, typ, typestore=ts)
+            w.write(conns[topic], lt, ts.serialize_cdr(build(typ, msg), typ))

@@ -10,6 +10,10 @@ when a role's topic is not in the bag but exactly one topic of that role's type 
 than the ones already chosen), that one is used and logged.  Output names are always
 fgloc's defaults (``/scan``, ``/odom``, ...), so imported logs need no renaming later.
 Messages come in bag order (record time); their stamps are the header stamps.
+A scanner mounted upside down (a transform on its tf chain turns the z axis down) cannot be
+expressed by the 2-D transforms written out, so its scans are written mirrored (angles
+negated), as the upright scanner in the same place would see them (as :class:`LogReader`
+does for MCAP logs).
 """
 
 from __future__ import annotations
@@ -21,7 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from fgloc.errors import LogError
-from fgloc.io.log import FROM_ROS, ROLE_TYPES, Topics
+from fgloc.io.log import FROM_ROS, ROLE_TYPES, Topics, _mirror_scan, _tf_flips
+from fgloc.types import LaserScan
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +104,18 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
         if counter is not None:
             counter.append(sum(c.msgcount for c in conns))
         convs: dict[str, Any] = {t: FROM_ROS[ROLE_TYPES[r]] for t, r in chosen.items()}
+        parent_of: dict[str, str] = {}    # tf child frame -> parent frame
+        flipped: dict[str, bool] = {}     # tf child frame -> its transform turns z down
+
+        def mirrored(frame: str) -> bool:
+            odd, cur = False, frame
+            for _ in range(32):
+                if cur not in parent_of:
+                    break
+                odd ^= flipped.get(cur, False)
+                cur = parent_of[cur]
+            return odd
+
         try:
             bad: set[str] = set()
             for conn, _t, raw in reader.messages(connections=conns):
@@ -111,7 +128,14 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
                                     path, conn.topic, conn.msgtype, e)
                     continue
                 role = chosen[conn.topic]
-                yield out_names[role], convs[conn.topic](msg, out_names[role])
+                out = convs[conn.topic](msg, out_names[role])
+                if role in ("tf", "tf_static"):
+                    for tr, flip in zip(out, _tf_flips(msg), strict=True):
+                        parent_of[tr.child] = tr.parent
+                        flipped[tr.child] = flip
+                elif isinstance(out, LaserScan) and mirrored(out.frame_id.lstrip("/")):
+                    out = _mirror_scan(out)
+                yield out_names[role], out
         except ReaderError as e:
             log.warning("%s: bag data unreadable (%s); stopping there", path, e)
     finally:

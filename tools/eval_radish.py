@@ -30,12 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from fgloc.eval.relations import evaluate_relations, relations_from_reference, write_relations
-from fgloc.geometry import between, compose, inverse
+from fgloc.geometry import compose, inverse
 from fgloc.io.carmen import open_text
 from fgloc.io.tum import read_tum, write_tum
 from fgloc.mapping.build import build_map, load_records
 from fgloc.mapping.source import ScanRecord
-from fgloc.types import Odometry, StaticTransform, Trajectory
+from fgloc.types import StaticTransform, Trajectory
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 LOGS = {
@@ -145,7 +145,6 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
     mcap = out / f"{name}_segment.mcap"
     n_scan = 0
     started = False
-    prev_odo: Odometry | None = None
     with LogWriter(mcap) as w:
         for topic, msg in log_messages(LOGS[name]):
             if topic == "/tf_static":
@@ -156,15 +155,8 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
                 started = start < n_scan <= stop
                 if n_scan > stop:
                     break
-            if topic == "/odom" and isinstance(msg, Odometry) and msg.pose is not None:
-                # some Radish logs carry zero tv/rv (aces): give the localizer the twist of the
-                # logged odometry poses (finite differences, body frame) instead
-                if prev_odo is not None and msg.stamp > prev_odo.stamp:
-                    d = between(prev_odo.pose, msg.pose) / (msg.stamp - prev_odo.stamp)
-                    if not np.any(msg.twist) or np.all(np.isfinite(d)):
-                        msg = Odometry(msg.stamp, d, msg.twist_cov, msg.pose, msg.pose_cov,
-                                       msg.frame_id, msg.child_frame_id)
-                prev_odo = msg
+            # the raw CARMEN odometry as it is (aces / intel: tv = rv = 0; fr079: rv = 0):
+            # fgloc run takes the motion from the odometry poses then
             if started:
                 w.write(topic, msg)
     # the half-log map has its own frame (its own optimization): hand the full-log SLAM pose
@@ -177,14 +169,16 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
     p0 = compose(to_half, p_start)
     run_dir = out / f"{name}_localize"
     t0 = time.perf_counter()
-    _run([sys.executable, "-m", "fgloc.cli", "run", str(mcap), "--map", str(map_dir / "map.yaml"),
-          "--initial-pose", *(f"{v:.6f}" for v in p0), "-o", str(run_dir), "-q",
-          *(["--config", str(config)] if config is not None else [])])
+    from fgloc.commands.run import run_log  # what `fgloc run LOG --map M --initial-pose ...` does
+
+    run_res = run_log(mcap, run_dir, map_dir / "map.yaml", initial_pose=[float(v) for v in p0],
+                      config_path=config, quiet=True)
     wall = time.perf_counter() - t0
     est = read_tum(run_dir / "trajectory.tum")
     res: dict = {"map": "whole log" if map_whole_log else "first half", "seg_start": start,
                  "map_scans": len(recs) if mo is None else mo.n_scans, "loc_scans": n_loc, "loc_wall_s": wall,
-                 "poses": len(est)}
+                 "poses": len(est), "relocalizations": int(run_res["stats"].get("relocalizations", 0)),
+                 "fixes": int(run_res["stats"].get("fixes", 0)), "no_fix": int(run_res["stats"].get("no_fix", 0))}
     inseg = (full_scans.stamps >= recs[start].stamp - 1.0) & (full_scans.stamps <= est.stamps[-1] + 1.0)
     slam_part = Trajectory(full_scans.stamps[inseg], full_scans.poses[inseg])
     slam_part = Trajectory(slam_part.stamps, compose(to_half, slam_part.poses))
@@ -284,9 +278,8 @@ def main() -> int:
     ap.add_argument("--datasets", nargs="+", default=["intel", "fr079", "aces"])
     ap.add_argument("--no-localize", action="store_true")
     ap.add_argument("--loc-scans", type=int, default=1500, help="localize the last N scans (within the second half)")
-    ap.add_argument("--relocalize", action="store_true",
-                    help="keep fgloc run's global relocalization on (off by default: it jumps in these"
-                         " self-similar buildings)")
+    ap.add_argument("--no-relocalize", action="store_true",
+                    help="turn fgloc run's global relocalization off (on by default, as fgloc run)")
     args = ap.parse_args()
     if args.make_excerpts is not None:
         make_excerpts(args.make_excerpts)
@@ -313,7 +306,7 @@ def main() -> int:
         if not args.no_localize:
             try:
                 cfg_path = None
-                if not args.relocalize:
+                if args.no_relocalize:
                     cfg_path = out / "run-no-relocalize.yaml"
                     cfg_path.write_text("pipeline:\n  relocalize_after: 1000000\n")
                 row["loc"] = localize(name, recs, mount, mo.slam.scan_trajectory, out, ref, args.loc_scans,
@@ -342,7 +335,8 @@ def _print_table(rows: list[dict]) -> None:
         if loc:
             ls = (f"map: {loc['map']}; {loc['loc_scans']} scans from #{loc['seg_start']}, "
                   f"{loc['loc_wall_s']:.0f} s; vs SLAM RMSE {loc['vs_slam_rmse_m']:.3f} m "
-                  f"/ {loc['vs_slam_heading_deg']:.2f} deg; relations vs SLAM "
+                  f"/ {loc['vs_slam_heading_deg']:.2f} deg, {loc['relocalizations']} relocalizations, "
+                  f"{loc['fixes']} fixes / {loc['no_fix']} no-fix; relations vs SLAM "
                   f"{_fmt_rel(loc.get('relations_vs_slam'))}; vs reference {_fmt_rel(loc.get('relations'))}")
             ls += (f"<br>own scan-to-map tracker: vs SLAM RMSE {loc['track_vs_slam_rmse_m']:.3f} m / "
                    f"{loc['track_vs_slam_heading_deg']:.2f} deg, {loc['track_stats']['matched']}/"

@@ -34,8 +34,8 @@ from fgloc.eval.metrics import evaluate
 from fgloc.io.tum import read_tum
 from fgloc.types import CompassHeading, LaserScan, Trajectory
 
-# A short run with one corner (about 20 s) keeps every `fgloc run` here to a few seconds.
-ROUTE = [[2.5, 3.0], [14.5, 3.0], [14.5, 5.0]]
+# A short run with one corner (20 s, 505 scans) keeps every `fgloc run` here to a few seconds.
+ROUTE = [[2.5, 3.0], [10.5, 3.0], [10.5, 5.0]]
 EPOCH = 1.7e9
 SEP = "=" * 80
 
@@ -179,7 +179,8 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
     ``disorder`` (swap / duplicate / backwards messages), ``scan_latency`` (s between a scan's
     stamp and its arrival at the recorder), ``no_time_increment``, ``flip_laser`` (scanner
     mounted upside down), ``intensities``, ``pose_only_odom`` (twist left zero), ``drop``
-    (topics left out), ``scan_clock_offset`` (scans stamped by another clock), ``compression``,
+    (topics left out), ``every`` ({topic: n}: every n-th message only), ``scan_clock_offset``
+    (scans stamped by another clock), ``compression``,
     ``chunk_size``, ``writer`` ("rosbags": a rosbag2 folder written by rosbags; "rosbag1": a
     ROS 1 bag), ``ground_truth``.
     Returns counts of what was injected.
@@ -214,8 +215,13 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
     imu_off = float(v.get("imu_offset_rad", 0.0))
     last_tf = -1.0
     drop = set(v.get("drop", ()))
+    every: dict[str, int] = dict(v.get("every", {}))  # keep every n-th message of a topic (slower sensors)
+    seen: dict[str, int] = {}
     for topic, m in sim.messages:
         if isinstance(m, list) or topic in drop:
+            continue
+        seen[topic] = seen.get(topic, -1) + 1
+        if seen[topic] % every.get(topic, 1):
             continue
         t = epoch + float(m.stamp)
         if topic == "/scan":
@@ -366,28 +372,28 @@ def _bound(clean_rmse: float) -> float:
 # ---------------------------------------------------------------------------------------------
 # localization on foreign logs
 def test_clean_foreign_log_localizes(clean, world):
-    # measured: 2.0 mm position RMSE over 315 keyframes of the 25 s run
+    # measured: about 2 mm position RMSE, a keyframe at every 2nd scan
     assert clean["rmse"] < 0.006
-    assert clean["n"] >= 300
+    assert clean["n"] >= 0.45 * len(world["sim"].topic("/scan"))
     assert clean["log"].stat().st_size > 100_000
 
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    # measured RMSE (mm) on the foreign log beside each: clean 2.0
-    "mount_on_tf": {"mount": "tf"},                                   # 2.0
-    "imu_no_orientation_odom_zero_cov": {"imu": "no_orientation", "zero_cov": True},  # 2.1
-    "imu_compass_offset": {"imu": "offset", "imu_offset_rad": 2.0},   # 2.0
-    "reversed_scan": {"scan": "reversed"},                            # 2.0 (9.3 before de-skew fix)
-    "scanner_360deg": {"scan": "360"},                                # 2.0
-    "scan_1081_beams": {"scan": "1081"},                              # 2.0
-    "nan_inf_zero_ranges": {"bad_ranges": True},                      # 2.1
-    "late_scans_250ms": {"scan_latency": 0.25},                       # 2.6
-    "disorder": {"disorder": True},                                   # 2.0
-    "upside_down_laser": {"flip_laser": True, "mount": "chain"},      # 2.0 (8 m before the io fix)
-    "upside_down_laser_on_tf": {"flip_laser": True, "mount": "tf", "scan": "reversed"},  # 2.0
-    "lz4_small_chunks_intensities": {"compression": "lz4", "chunk_size": 4096, "intensities": True},  # 2.0
-    "no_imu": {"drop": ["/imu"]},                                     # 2.1
-    "everything": {"mount": "chain", "imu": "offset", "imu_offset_rad": -1.3, "zero_cov": True,  # 2.1
+    # measured RMSE (mm) on the foreign log beside each: clean 2.3
+    "mount_on_tf": {"mount": "tf"},  # 2.3
+    "imu_no_orientation_odom_zero_cov": {"imu": "no_orientation", "zero_cov": True},  # 2.4
+    "imu_compass_offset": {"imu": "offset", "imu_offset_rad": 2.0},  # 2.3
+    "reversed_scan": {"scan": "reversed"},  # 2.3 (the 25 s run: 9.3 -> 2.0 by the de-skew fix)
+    "scanner_360deg": {"scan": "360"},  # 2.4
+    "scan_1081_beams": {"scan": "1081"},  # 2.3
+    "nan_inf_zero_ranges": {"bad_ranges": True},  # 2.4
+    "late_scans_250ms": {"scan_latency": 0.25},  # 2.9
+    "disorder": {"disorder": True},  # 2.4
+    "upside_down_laser": {"flip_laser": True, "mount": "chain"},  # 2.3 (8 m before the io fix)
+    "upside_down_laser_on_tf": {"flip_laser": True, "mount": "tf", "scan": "reversed"},  # 2.3
+    "lz4_small_chunks_intensities": {"compression": "lz4", "chunk_size": 4096, "intensities": True},  # 2.3
+    "no_imu": {"drop": ["/imu"]},  # 2.4
+    "everything": {"mount": "chain", "imu": "offset", "imu_offset_rad": -1.3, "zero_cov": True,  # 2.3
                    "scan": "reversed", "bad_ranges": True, "disorder": True},
 }
 
@@ -430,14 +436,14 @@ def test_upside_down_mount_is_read_as_mirrored_scans(world):
     np.testing.assert_allclose(scan.angles, first.angles, atol=1e-6)  # mirrored back to upright
 
 
-def test_laser_without_odometry(world, capsys):
+def test_laser_without_odometry(world, clean, capsys):
     """A laser + IMU robot (no wheel odometry): degraded (no motion prior, no de-skew) but bounded."""
     log = world["dir"] / "no_odom.mcap"
     write_foreign(log, world["sim"], drop=["/odom"])
     rc, _, err, out = _run(world, log, "no_odom", capsys)
     assert rc == 0, err
     rmse, n = _rmse(out, world["gt"])
-    assert n >= 300
+    assert n >= 0.95 * clean["n"]
     assert rmse < 0.03  # measured 12.8 mm
 
 
@@ -460,7 +466,8 @@ def test_rosbag2_folder_written_by_rosbags(world, clean, capsys):
     capsys.readouterr()
     assert main(["info", str(bag)]) == 0
     out, _ = capsys.readouterr()
-    assert re.search(r"/scan\s+630\s+sensor_msgs/msg/LaserScan", out), out
+    n_scans = len(world["sim"].topic("/scan"))
+    assert re.search(rf"/scan\s+{n_scans}\s+sensor_msgs/msg/LaserScan", out), out
     rc, _, err, outdir = _run(world, bag, "rosbag2_folder", capsys)
     assert rc == 0, err
     rmse, _ = _rmse(outdir, world["gt"])
@@ -478,11 +485,35 @@ def test_ros1_bag_import(world, clean, capsys):
     capsys.readouterr()
     assert main(["import", str(bag), "-o", str(log)]) == 0
     out, _ = capsys.readouterr()
-    assert "/scan: 630" in out and "/odom: 1258" in out
+    sim = world["sim"]
+    assert f"/scan: {len(sim.topic('/scan'))}," in out and f"/odom: {len(sim.topic('/odom'))}" in out
     rc, _, err, outdir = _run(world, log, "ros1", capsys)
     assert rc == 0, err
     rmse, _ = _rmse(outdir, world["gt"])
     assert rmse <= _bound(clean["rmse"])  # measured 2.0 mm (117 mm before the import kept the flip)
+
+
+def test_slower_sensors(world, clean, capsys):
+    """Scans at 12.5 Hz, odometry at 10 Hz, IMU at 5 Hz (every 2nd / 5th / 4th message)."""
+    log = world["dir"] / "slow.mcap"
+    write_foreign(log, world["sim"], every={"/scan": 2, "/odom": 5, "/imu": 4})
+    rc, _, err, out = _run(world, log, "slow", capsys)
+    assert rc == 0, err
+    rmse, n = _rmse(out, world["gt"])
+    assert n >= 0.45 * clean["n"]
+    assert rmse <= _bound(clean["rmse"])  # measured 2.8 mm
+
+
+@pytest.mark.xfail(strict=True, reason="odometry at 5 Hz under a 25 Hz laser: pipeline.Localizer.on_scan passes the "
+                   "front-end an odom_delta up to the last odometry message, not to the scan stamp, so de-skew "
+                   "gets 0 or 5 scan periods of motion (11.8 mm, the same as with de-skew off)")
+def test_odometry_slower_than_the_laser(world, clean, capsys):
+    log = world["dir"] / "slow_odom.mcap"
+    write_foreign(log, world["sim"], every={"/odom": 10})
+    rc, _, err, out = _run(world, log, "slow_odom", capsys)
+    assert rc == 0, err
+    rmse, _ = _rmse(out, world["gt"])
+    assert rmse <= _bound(clean["rmse"])
 
 
 def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):
@@ -518,14 +549,14 @@ def test_global_localization_on_foreign_log(world, clean, capsys):
     assert rmse <= _bound(clean["rmse"])  # measured 2.0 mm: found at the first scan
 
 
-def test_odometry_only_on_foreign_log(world, capsys):
+def test_odometry_only_on_foreign_log(world, clean, capsys):
     log = world["dir"] / "odom_only.mcap"
     write_foreign(log, world["sim"], imu="offset", imu_offset_rad=0.9, zero_cov=True, disorder=True)
     rc, out, err, outdir = _run(world, log, "odom_only", capsys, use_map=False, initial=False)
     assert rc == 0, err
     assert "odom frame" in _stats_line(out)
     rmse, n = _rmse(outdir, world["gt"], align=True)
-    assert n > 100
+    assert n > 0.3 * clean["n"]
     assert rmse < 0.05  # measured 13 mm after SE(2) alignment over the 17 m run
 
 
@@ -547,7 +578,7 @@ def test_truncated_foreign_log(world, clean, capsys):
     assert 0.3 * clean["n"] < n < 0.8 * clean["n"]
 
 
-def test_map_from_foreign_log(world, capsys):
+def test_map_from_foreign_log(world, clean, capsys):
     """`fgloc map` on a TurtleBot-style log (base_scan under a tf_static chain, reversed scans)."""
     log = world["dir"] / "for_map.mcap"
     write_foreign(log, world["sim"], mount="chain", scan="reversed", bad_ranges=True, disorder=True)
@@ -557,7 +588,7 @@ def test_map_from_foreign_log(world, capsys):
     o, e = capsys.readouterr()
     assert rc == 0 and "Traceback" not in o + e, e
     rmse, n = _rmse(out, world["gt"], align=True)
-    assert n > 30
+    assert n > 0.1 * clean["n"]
     # measured 8.5 mm (99 mm when the mount to 'base_scan' was ignored)
     assert rmse < 0.02
     from fgloc.maps import OccupancyMap

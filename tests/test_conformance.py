@@ -382,7 +382,6 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # measured RMSE (mm) on the foreign log beside each: clean 2.3
     "mount_on_tf": {"mount": "tf"},  # 2.3
     "imu_no_orientation_odom_zero_cov": {"imu": "no_orientation", "zero_cov": True},  # 2.4
-    "imu_compass_offset": {"imu": "offset", "imu_offset_rad": 2.0},  # 2.3
     "reversed_scan": {"scan": "reversed"},  # 2.3 (the 25 s run: 9.3 -> 2.0 by the de-skew fix)
     "scanner_360deg": {"scan": "360"},  # 2.4
     "scan_1081_beams": {"scan": "1081"},  # 2.3
@@ -514,6 +513,18 @@ def test_odometry_slower_than_the_laser(world, clean, capsys):
     assert rc == 0, err
     rmse, _ = _rmse(out, world["gt"])
     assert rmse <= _bound(clean["rmse"])
+
+
+@pytest.mark.xfail(strict=True, reason="EKF back-end: a scan fix that arrives late (recorder receive order, 100 ms "
+                   "laser latency) is applied at the filter's newer time instead of being moved forward by the "
+                   "odometry since its stamp: 53 mm (250 ms: 137 mm) vs 7.3 mm on time; the smoother is unaffected")
+def test_ekf_with_late_scans(world, capsys):
+    log = world["dir"] / "late_ekf.mcap"
+    write_foreign(log, world["sim"], scan_latency=0.10)
+    rc, _, err, out = _run(world, log, "late_ekf", capsys, "--backend", "ekf")
+    assert rc == 0, err
+    rmse, _ = _rmse(out, world["gt"])
+    assert rmse <= 0.015  # 2x the EKF's 7.3 mm on the same log with 30 ms latency
 
 
 def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):

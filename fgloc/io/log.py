@@ -663,6 +663,7 @@ class LogReader:
         self._n = 0
         self._tf_flip: dict[tuple[str, str], bool] = {}   # (parent, child) -> child upside down
         self._mirror_frames: set[str] = set()             # scan frames read mirrored (laser_mount)
+        self.undecodable: dict[str, int] = {}             # topic -> messages that failed to decode
         self._open()
 
     # -- opening -----------------------------------------------------------------------------
@@ -825,38 +826,60 @@ class LogReader:
                 if fn is None:
                     log.warning("%s: topic %s has type %s, which fgloc does not read; skipped",
                                 self.path, channel.topic, tname)
+                elif channel.message_encoding != "cdr":
+                    log.warning("%s: topic %s has message encoding %s, not cdr; skipped",
+                                self.path, channel.topic, channel.message_encoding)
                 else:
-                    try:
-                        dec = factory.decoder_for(channel.message_encoding, schema)
-                    except Exception as e:  # noqa: BLE001
-                        dec = None
-                        log.warning("%s: cannot decode topic %s (%s); skipped", self.path, channel.topic, e)
-                    if dec is None:
-                        log.warning("%s: topic %s has encoding %s, not cdr/ros2msg; skipped",
-                                    self.path, channel.topic, channel.message_encoding)
-                    else:
+                    dec = self._decoder(factory, schema, tname, channel.topic)
+                    if dec is not None:
                         conv = (dec, fn)
                 converters[channel.id] = conv
             if conv is None:
                 continue
             dec, fn = conv
-            if fn is _scan_from_ros:
-                scan = _scan_from_cdr(message.data, channel.topic) if channel.message_encoding == "cdr" else None
-                if scan is None:
-                    scan = _scan_from_ros(dec(message.data), channel.topic)
-                if self._mirror_frames and scan.frame_id.lstrip("/") in self._mirror_frames:
-                    scan = _mirror_scan(scan)
-                yield channel.topic, scan
+            try:
+                if fn is _scan_from_ros:
+                    scan = _scan_from_cdr(message.data, channel.topic)
+                    if scan is None:
+                        scan = _scan_from_ros(dec(message.data), channel.topic)
+                    if self._mirror_frames and scan.frame_id.lstrip("/") in self._mirror_frames:
+                        scan = _mirror_scan(scan)
+                    out: object = scan
+                elif fn is _tf_from_ros:
+                    ros = dec(message.data)
+                    tfs = _tf_from_ros(ros, channel.topic)
+                    for tr, flip in zip(tfs, _tf_flips(ros), strict=True):
+                        if flip:
+                            self._tf_flip[(tr.parent, tr.child)] = True
+                    out = tfs
+                else:
+                    out = fn(dec(message.data), channel.topic)
+            except Exception as e:  # noqa: BLE001 - one undecodable message is skipped, not fatal
+                n = self.undecodable.get(channel.topic, 0)
+                self.undecodable[channel.topic] = n + 1
+                if n == 0:
+                    log.warning("%s: cannot decode a message on %s (%s: %s); skipping such messages",
+                                self.path, channel.topic, type(e).__name__, e)
                 continue
-            if fn is _tf_from_ros:
-                ros = dec(message.data)
-                tfs = _tf_from_ros(ros, channel.topic)
-                for tr, flip in zip(tfs, _tf_flips(ros), strict=True):
-                    if flip:
-                        self._tf_flip[(tr.parent, tr.child)] = True
-                yield channel.topic, tfs
-                continue
-            yield channel.topic, fn(dec(message.data), channel.topic)
+            yield channel.topic, out
+
+    def _decoder(self, factory: Any, schema: Any, tname: str, topic: str) -> Callable[[bytes], Any] | None:
+        """The CDR decoder of a topic of a type fgloc reads.  A schema that is missing, empty or
+        not ``ros2msg`` (rosbag2 writes ``ros2idl`` or an empty definition when it cannot find
+        the ``.msg``) is replaced by the standard ROS 2 definition of ``tname``: the CDR layout
+        of a standard message is fixed by its type."""
+        from mcap.records import Schema
+
+        if schema is None or schema.encoding != "ros2msg" or not bytes(schema.data).strip():
+            log.info("%s: topic %s has no ros2msg definition (%s); decoding it as the standard %s",
+                     self.path, topic, "none" if schema is None else schema.encoding or "empty", tname)
+            schema = Schema(id=0 if schema is None else schema.id, name=tname, encoding="ros2msg",
+                            data=full_text(tname).encode())
+        try:
+            return factory.decoder_for("cdr", schema)  # type: ignore[no-any-return]
+        except Exception as e:  # noqa: BLE001
+            log.warning("%s: cannot decode topic %s (%s); skipped", self.path, topic, e)
+            return None
 
     def _raw(self, want: set[str]) -> Iterator[tuple[Any, Any, Any]]:
         if self._indexed:

@@ -255,8 +255,12 @@ class ScanPreprocessor:
         return np.ascontiguousarray(pts), ""
 
 
+UNKNOWN_GUESS_RADIUS_M = 0.4  # a guess in unknown space this close to free space is still matched
+
+
 def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatArray | None, str]:
-    """Validate a prior guess: finite, on the map and not in unknown space. ``(pose, "")`` or ``(None, reason)``."""
+    """Validate a prior guess: finite, on the map and not deep in unknown space (more than
+    ``UNKNOWN_GUESS_RADIUS_M`` from free space). ``(pose, "")`` or ``(None, reason)``."""
     try:
         g = np.asarray(guess, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -267,8 +271,18 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
         return None, "guess is not finite"
     if not bool(occ_map.in_bounds(g[None, :2])[0]):
         return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is off the map"
-    if bool(occ_map.unknown[tuple(occ_map.world_to_grid(g[None, :2])[0])]):
-        return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is in unknown space"
+    ij = occ_map.world_to_grid(g[None, :2])[0]
+    if bool(occ_map.unknown[tuple(ij)]):
+        # a map built by SLAM leaves unknown specks and ragged edges where the robot drove
+        # (doorways, glass, the edge of what one half of a log saw): a guess there is fine
+        # when free space is within UNKNOWN_GUESS_RADIUS_M; deep in unknown space it is not
+        r = int(np.ceil(UNKNOWN_GUESS_RADIUS_M / occ_map.resolution))
+        i0, j0 = max(int(ij[0]) - r, 0), max(int(ij[1]) - r, 0)
+        win = occ_map.free[i0:int(ij[0]) + r + 1, j0:int(ij[1]) + r + 1]
+        ii, jj = np.nonzero(win)
+        d2 = (ii + i0 - int(ij[0])) ** 2 + (jj + j0 - int(ij[1])) ** 2
+        if not (len(d2) and float(np.sqrt(d2.min())) * occ_map.resolution <= UNKNOWN_GUESS_RADIUS_M):
+            return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is in unknown space"
     g = g.copy()
     g[YAW] = wrap_angle(g[YAW])
     return g, ""

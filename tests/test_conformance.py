@@ -32,7 +32,7 @@ import pytest
 from fgloc.cli import main
 from fgloc.eval.metrics import evaluate
 from fgloc.io.tum import read_tum
-from fgloc.types import CompassHeading, LaserScan, Trajectory
+from fgloc.types import CompassHeading, LaserScan, Odometry, Trajectory
 
 # A short run with one corner (20 s, 505 scans) keeps every `fgloc run` here to a few seconds.
 ROUTE = [[2.5, 3.0], [10.5, 3.0], [10.5, 5.0]]
@@ -525,6 +525,46 @@ def test_ekf_with_late_scans(world, capsys):
     assert rc == 0, err
     rmse, _ = _rmse(out, world["gt"])
     assert rmse <= 0.015  # 2x the EKF's 7.3 mm on the same log with 30 ms latency
+
+
+def _reschema(src: Path, dst: Path, mode: str) -> None:
+    """Copy an MCAP with every schema replaced: "empty" (ros2msg without text, what rosbag2 writes
+    when it cannot find a definition) or "idl" (a ros2idl schema)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer as McapWriter
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        w = McapWriter(g)
+        w.start(profile="ros2", library="conformance-test")
+        smap: dict[int, int] = {}
+        cmap: dict[int, int] = {}
+        for schema, channel, msg in make_reader(f).iter_messages():
+            if schema.id not in smap:
+                enc, data = ("ros2msg", b"") if mode == "empty" else ("ros2idl", b"module sensor_msgs { };")
+                smap[schema.id] = w.register_schema(schema.name, enc, data)
+            if channel.id not in cmap:
+                cmap[channel.id] = w.register_channel(channel.topic, "cdr", smap[schema.id])
+            w.add_message(cmap[channel.id], msg.log_time, msg.data, msg.publish_time)
+        w.finish()
+
+
+@pytest.mark.parametrize("mode", ["empty", "idl"])
+def test_schema_without_ros2msg_definition(world, clean, mode):
+    log = world["dir"] / f"schema_{mode}.mcap"
+    _reschema(clean["log"], log, mode)
+    from fgloc.io.log import LogReader
+
+    # was an AttributeError traceback (empty) / every topic skipped and an empty run (idl)
+    got, ref = list(LogReader(log).messages()), list(LogReader(clean["log"]).messages())
+    assert len(got) == len(ref) > 1500
+    assert [t for t, _ in got] == [t for t, _ in ref]
+    for (_, a), (_, b) in zip(got, ref, strict=True):
+        if isinstance(a, Odometry):
+            assert isinstance(b, Odometry) and a.stamp == b.stamp
+            np.testing.assert_array_equal(a.twist, b.twist)
+        elif isinstance(a, CompassHeading):
+            assert isinstance(b, CompassHeading) and a.yaw_rad == b.yaw_rad
+    assert LogReader(log).laser_mount().pose == pytest.approx(world["sim"].laser_mount.pose)
 
 
 def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):

@@ -664,6 +664,7 @@ class LogReader:
         self._tf_flip: dict[tuple[str, str], bool] = {}   # (parent, child) -> child upside down
         self._mirror_frames: set[str] = set()             # scan frames read mirrored (laser_mount)
         self.undecodable: dict[str, int] = {}             # topic -> messages that failed to decode
+        self._last_log_ns = 0                             # log time of the message _iter yielded last
         self._open()
 
     # -- opening -----------------------------------------------------------------------------
@@ -817,6 +818,7 @@ class LogReader:
                 log.warning("%s: %s", self.path, self.truncated)
                 return
             schema, channel, message = item
+            self._last_log_ns = int(message.log_time)
             if channel.id in converters:
                 conv = converters[channel.id]
             else:
@@ -920,6 +922,37 @@ class LogReader:
             yield s, c, m
 
     # -- derived -----------------------------------------------------------------------------
+    def clock_offsets(self, topics: Iterable[str]) -> dict[str, float]:
+        """``{topic: header stamp - log time}`` (s) of the first message of each topic present.
+
+        A recorder stamps log time on its own clock; sensors on one clock show (nearly) the same
+        offset, whatever that clock is (wall time, sim time, or equal for fgloc's own logs).
+        """
+        out: dict[str, float] = {}
+        for t in topics:
+            if not self.has(t):
+                continue
+            for _, m in self._iter({t}):
+                st = getattr(m, "stamp", None)
+                if st is not None and math.isfinite(float(st)):
+                    out[t] = float(st) - self._last_log_ns * 1e-9
+                break
+        return out
+
+    def clock_skew(self, topics: Iterable[str], tolerance_s: float = 10.0) -> str | None:
+        """None, or a one-line description of topics stamped by different clocks: their
+        :meth:`clock_offsets` differ by more than ``tolerance_s`` (e.g. a laser driver on
+        sim time or its own device clock while the odometry is on wall time)."""
+        off = self.clock_offsets(topics)
+        if len(off) < 2:
+            return None
+        lo, hi = min(off, key=lambda t: off[t]), max(off, key=lambda t: off[t])
+        d = off[hi] - off[lo]
+        if d <= tolerance_s:
+            return None
+        return (f"{hi} and {lo} are stamped by different clocks: relative to the recording time their "
+                f"header stamps differ by {d:.1f} s")
+
     def laser_mount(self) -> StaticTransform:
         """``base_link -> <scan frame>`` from /tf_static (or the first /tf), identity if absent.
 

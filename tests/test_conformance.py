@@ -225,8 +225,10 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
             continue
         t = epoch + float(m.stamp)
         if topic == "/scan":
-            t -= float(v.get("scan_clock_offset", 0.0))
-            add("/scan", "sensor_msgs/msg/LaserScan", _scan_ros(m, t, laser_frame, v, rng), t)
+            # a laser stamped by another clock: its header stamps move, the recorder's receive time not
+            off = float(v.get("scan_clock_offset", 0.0))
+            t -= off
+            add("/scan", "sensor_msgs/msg/LaserScan", _scan_ros(m, t, laser_frame, v, rng), t, latency["/scan"] + off)
         elif topic == "/odom":
             pose = np.zeros(3) if m.pose is None else m.pose
             tcov = None if v.get("zero_cov") else m.twist_cov

@@ -57,6 +57,9 @@ def log_messages(
     from fgloc.io.log import LogReader, Topics
 
     reader = LogReader(p, Topics(scan=scan_topic, odom=odom_topic))
+    skew = reader.clock_skew([scan_topic, odom_topic])
+    if skew is not None:  # scans would be paired with odometry from another time
+        raise LogError(f"{reader.path}: {skew}")
     yield "/tf_static", [reader.laser_mount()]
     rename = {scan_topic: "/scan", odom_topic: "/odom"}
     for topic, msg in reader.messages({scan_topic, odom_topic}):

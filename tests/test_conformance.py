@@ -448,11 +448,22 @@ def test_laser_without_odometry(world, clean, capsys):
     assert rmse < 0.03  # measured 12.8 mm
 
 
+def test_map_refuses_scans_on_another_clock(world, capsys):
+    log = world["dir"] / "clock.mcap"
+    write_foreign(log, world["sim"], scan_clock_offset=EPOCH)
+    capsys.readouterr()
+    assert main(["map", str(log), "-o", str(world["dir"] / "clock_map"), "--no-progress"]) == 2
+    _, err = capsys.readouterr()
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert str(log) in err and "different clocks" in err
+
+
 @pytest.mark.xfail(strict=True, reason="scans stamped by another clock (1.7e9 s away from /odom and /imu) are "
                    "matched anyway and the run reports success; pipeline/run should refuse or count them")
 def test_scans_on_another_clock_are_reported(world, capsys):
     log = world["dir"] / "clock.mcap"
-    write_foreign(log, world["sim"], scan_clock_offset=EPOCH)
+    if not log.exists():
+        write_foreign(log, world["sim"], scan_clock_offset=EPOCH)
     rc, out, err, _ = _run(world, log, "clock", capsys)
     line = _stats_line(out)
     m = re.search(r"skipped (\d+)", line)

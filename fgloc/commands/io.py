@@ -15,7 +15,8 @@ def _fmt_time(t: float | None) -> str:
 def register(app: typer.Typer) -> None:
     @app.command("import")
     def import_cmd(
-        src: Annotated[Path, typer.Argument(help="ROS 1 .bag or CARMEN .clf/.log (also .gz/.bz2)")],
+        src: Annotated[Path, typer.Argument(
+            help="ROS 1 .bag, ROS 2 bag folder (.db3 or split .mcap) or CARMEN .clf/.log (also .gz/.bz2)")],
         output: Annotated[Path, typer.Option("-o", "--output", help="MCAP log to write")],
         scan_topic: Annotated[str, typer.Option(help="LaserScan topic in a bag")] = "/scan",
         odom_topic: Annotated[str, typer.Option(help="Odometry topic in a bag")] = "/odom",
@@ -27,7 +28,7 @@ def register(app: typer.Typer) -> None:
         max_range: Annotated[float | None, typer.Option(
             help="CARMEN: readings at or beyond this (m) are 'no return' (default: detected)")] = None,
     ) -> None:
-        """Convert a ROS 1 bag or a CARMEN log into fgloc's ROS 2 MCAP form (/scan, /odom, /imu, /tf_static)."""
+        """Convert a ROS 1 bag, a ROS 2 bag folder or a CARMEN log into fgloc's ROS 2 MCAP form."""
         from fgloc.io.convert import import_log
         from fgloc.io.log import Topics
 

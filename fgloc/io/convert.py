@@ -1,4 +1,5 @@
-"""``import_log``: ROS 1 bags and CARMEN logs into fgloc's ROS 2 MCAP form."""
+"""``import_log``: ROS 1 bags, ROS 2 bag folders (SQLite .db3 or split MCAP) and CARMEN logs
+into fgloc's ROS 2 MCAP form."""
 
 from __future__ import annotations
 
@@ -24,17 +25,22 @@ class ImportResult:
 
 
 def detect_format(src: str | Path) -> str:
-    """``"rosbag1"``, ``"mcap"`` or ``"carmen"`` (anything else is tried as CARMEN text)."""
+    """``"rosbag1"``, ``"rosbag2"`` (a bag folder or its .db3), ``"mcap"`` or ``"carmen"``
+    (anything else is tried as CARMEN text)."""
     from fgloc.io.rosbag1 import ROSBAG1_MAGIC
 
     p = Path(src)
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file() or any(p.glob("*.db3")) or any(p.glob("*.mcap")):
+            return "rosbag2"
+        raise LogError(f"{p}: is a directory without a ROS 2 bag (no metadata.yaml, .db3 or .mcap)")
+    if p.suffix == ".db3":
+        return "rosbag2"
     try:
         with p.open("rb") as f:
             head = f.read(16)
     except FileNotFoundError:
         raise LogError(f"{p}: file not found") from None
-    except IsADirectoryError:
-        raise LogError(f"{p}: is a directory (ROS 2 bag folders are not supported; give the .mcap)") from None
     except OSError as e:
         raise LogError(f"{p}: cannot open ({e.strerror or e})") from None
     if head.startswith(ROSBAG1_MAGIC):
@@ -46,7 +52,8 @@ def detect_format(src: str | Path) -> str:
 
 def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
                progress: bool | None = None, max_range_m: float | None = None) -> ImportResult:
-    """Convert a ROS 1 ``.bag`` or a CARMEN ``.clf/.log`` (plain/gz/bz2) into ``dst`` (MCAP).
+    """Convert a ROS 1 ``.bag``, a ROS 2 bag folder or a CARMEN ``.clf/.log`` (plain/gz/bz2) into
+    ``dst`` (MCAP).
 
     ``topics`` names the source topics of a bag (outputs use the default names).
     ``progress``: a tqdm bar on stderr (None = only when stderr is a terminal).
@@ -63,6 +70,10 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
         from fgloc.io.rosbag1 import iter_rosbag1
 
         it = iter_rosbag1(src, topics, counter=total)
+    elif fmt == "rosbag2":
+        from fgloc.io.rosbag1 import iter_rosbag2
+
+        it = iter_rosbag2(src, topics, counter=total)
     elif fmt == "mcap":
         raise LogError(f"{src}: already an MCAP log; nothing to import")
     else:

@@ -630,11 +630,11 @@ def _bag_file(folder: Path) -> Path:
     if len(files) == 1 and files[0].suffix == ".mcap":
         return files[0]
     if len(files) > 1:
-        raise LogError(f"{folder}: a split rosbag2 recording ({len(files)} files); merge it into one MCAP "
-                       f"first (e.g. 'ros2 bag convert' or 'mcap merge')")
+        raise LogError(f"{folder}: a split rosbag2 recording ({len(files)} files); convert it into one "
+                       f"MCAP with 'fgloc import {folder} -o LOG.mcap'")
     if any(folder.glob("*.db3")) or (files and files[0].suffix == ".db3"):
         raise LogError(f"{folder}: a rosbag2 SQLite (.db3) bag, not MCAP; convert it with "
-                       f"'ros2 bag convert' to storage mcap")
+                       f"'fgloc import {folder} -o LOG.mcap'")
     raise LogError(f"{folder}: is a directory without an MCAP log (no .mcap file in it)")
 
 

@@ -78,11 +78,8 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
     topics before the first message, for a progress bar.
     """
     from rosbags.rosbag1 import Reader, ReaderError
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     path = Path(path)
-    topics = topics or Topics()
-    out_names = {f.name: getattr(Topics(), f.name) for f in fields(Topics)}
     if not path.exists():
         raise LogError(f"{path}: bag file not found")
     try:
@@ -90,8 +87,38 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
         reader.open()
     except (ReaderError, OSError, ValueError) as e:
         raise LogError(f"{path}: cannot read ROS 1 bag ({e})") from None
+    yield from _iter_bag(path, reader, ReaderError, False, topics, counter)
+
+
+def iter_rosbag2(path: str | Path, topics: Topics | None = None,
+                 counter: list[int] | None = None) -> Iterator[tuple[str, object]]:
+    """``(output topic, message)`` of a ROS 2 bag folder (``metadata.yaml`` with SQLite ``.db3``
+    or MCAP files, split bags too), read with ``rosbags``: the default storage of ROS 2 Humble
+    (sqlite3) needs no ROS install to import."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    path = Path(path)
+    if path.is_file():  # a .db3 / .mcap inside the folder: the bag is the folder
+        path = path.parent
+    if not path.exists():
+        raise LogError(f"{path}: bag folder not found")
     try:
-        store = get_typestore(Stores.ROS1_NOETIC)
+        reader = Reader(path)
+        reader.open()
+    except (ReaderError, OSError, ValueError) as e:
+        raise LogError(f"{path}: cannot read ROS 2 bag ({e})") from None
+    yield from _iter_bag(path, reader, ReaderError, True, topics, counter)
+
+
+def _iter_bag(path: Path, reader: Any, reader_error: type[Exception], ros2: bool, topics: Topics | None,
+              counter: list[int] | None) -> Iterator[tuple[str, object]]:
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    topics = topics or Topics()
+    out_names = {f.name: getattr(Topics(), f.name) for f in fields(Topics)}
+    try:
+        store = get_typestore(Stores.ROS2_HUMBLE if ros2 else Stores.ROS1_NOETIC)
         available = {c.topic: c.msgtype for c in reader.connections}
         chosen = _choose_topics(available, topics, path)
         if not chosen:
@@ -99,8 +126,10 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
             raise LogError(f"{path}: no scan, odometry, IMU or tf topic to import (topics: {have})")
         conns = [c for c in reader.connections if c.topic in chosen]
         for c in conns:  # types the store lacks come with the bag's own definitions
-            if c.msgtype not in store.fielddefs and c.msgdef.data:
-                store.register(get_types_from_msg(c.msgdef.data, c.msgtype))
+            msgdef = getattr(getattr(c, "msgdef", None), "data", "")
+            if c.msgtype not in store.fielddefs and msgdef:
+                store.register(get_types_from_msg(msgdef, c.msgtype))
+        deserialize = store.deserialize_cdr if ros2 else store.deserialize_ros1
         if counter is not None:
             counter.append(sum(c.msgcount for c in conns))
         convs: dict[str, Any] = {t: FROM_ROS[ROLE_TYPES[r]] for t, r in chosen.items()}
@@ -120,7 +149,7 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
             bad: set[str] = set()
             for conn, _t, raw in reader.messages(connections=conns):
                 try:
-                    msg = store.deserialize_ros1(raw, conn.msgtype)
+                    msg = deserialize(raw, conn.msgtype)
                 except Exception as e:  # noqa: BLE001 - an undecodable message is skipped
                     if conn.topic not in bad:
                         bad.add(conn.topic)
@@ -136,7 +165,7 @@ def iter_rosbag1(path: str | Path, topics: Topics | None = None,
                 elif isinstance(out, LaserScan) and mirrored(out.frame_id.lstrip("/")):
                     out = _mirror_scan(out)
                 yield out_names[role], out
-        except ReaderError as e:
+        except reader_error as e:
             log.warning("%s: bag data unreadable (%s); stopping there", path, e)
     finally:
         reader.close()

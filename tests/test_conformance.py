@@ -181,8 +181,8 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
     mounted upside down), ``intensities``, ``pose_only_odom`` (twist left zero), ``drop``
     (topics left out), ``every`` ({topic: n}: every n-th message only), ``scan_clock_offset``
     (scans stamped by another clock), ``compression``,
-    ``chunk_size``, ``writer`` ("rosbags": a rosbag2 folder written by rosbags; "rosbag1": a
-    ROS 1 bag), ``ground_truth``.
+    ``chunk_size``, ``writer`` ("rosbags": a rosbag2 folder written by rosbags; "db3": the same
+    with SQLite storage, ROS 2 Humble's default; "rosbag1": a ROS 1 bag), ``ground_truth``.
     Returns counts of what was injected.
     """
     from mcap_ros2.writer import Writer
@@ -294,8 +294,8 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
             a, b = out[i], out[i + 1]
             out[i], out[i + 1] = (b[0], *a[1:]), (a[0], *b[1:])
         records = sorted(out, key=lambda r: r[0])
-    if v.get("writer") in ("rosbags", "rosbag1"):
-        _write_rosbags(path, records, ros1=v["writer"] == "rosbag1")
+    if v.get("writer") in ("rosbags", "rosbag1", "db3"):
+        _write_rosbags(path, records, ros1=v["writer"] == "rosbag1", db3=v["writer"] == "db3")
         return injected
     with open(path, "wb") as f:
         from mcap.writer import CompressionType
@@ -580,6 +580,23 @@ def test_schema_without_ros2msg_definition(world, clean, mode):
     assert LogReader(log).laser_mount().pose == pytest.approx(world["sim"].laser_mount.pose)
 
 
+def test_rosbag2_sqlite_folder(world, clean, capsys):
+    """ROS 2 Humble's default storage (.db3): a one-line hint from run, converted by fgloc import."""
+    bag = world["dir"] / "humble_db3"
+    write_foreign(bag, world["sim"], writer="db3", mount="chain", imu="offset", imu_offset_rad=0.4)
+    line = _bad(world, bag, capsys)
+    assert ".db3" in line and "fgloc import" in line
+    log = world["dir"] / "humble.mcap"
+    capsys.readouterr()
+    assert main(["import", str(bag), "-o", str(log)]) == 0
+    out, _ = capsys.readouterr()
+    assert f"/scan: {len(world['sim'].topic('/scan'))}," in out
+    rc, _, err, outdir = _run(world, log, "humble", capsys)
+    assert rc == 0, err
+    rmse, _ = _rmse(outdir, world["gt"])
+    assert rmse <= _bound(clean["rmse"])
+
+
 def test_epoch_stamps_do_not_change_the_result(world, clean, capsys):
     """1.7e9 s stamps (float64 keeps ~0.2 us) give the same trajectory as stamps from 0."""
     log0 = world["dir"] / "epoch0.mcap"
@@ -716,7 +733,8 @@ def test_scan_topic_of_wrong_type(world, capsys):
     assert "std_msgs/msg/String" in line
 
 
-def _write_rosbags(path: Path, records: list[tuple[int, str, str, dict]], ros1: bool = False) -> None:
+def _write_rosbags(path: Path, records: list[tuple[int, str, str, dict]], ros1: bool = False,
+                   db3: bool = False) -> None:
     """A rosbag2 folder (metadata.yaml + .mcap) written by ``rosbags`` (its own CDR encoder and
     message definitions), as ``ros2 bag record -s mcap`` leaves it; or (``ros1``) a ROS 1 bag."""
     from rosbags.typesys import Stores, get_typestore
@@ -753,7 +771,7 @@ def _write_rosbags(path: Path, records: list[tuple[int, str, str, dict]], ros1: 
         return
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3 if db3 else StoragePlugin.MCAP) as w:
         conns: dict[str, Any] = {}
         for lt, topic, typ, msg in records:
             if topic not in conns:

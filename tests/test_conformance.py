@@ -175,7 +175,7 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
 
     Options: ``epoch`` (stamp offset, s), ``laser_frame``, ``mount`` ("static" | "tf" |
     "chain"), ``imu`` ("normal" | "no_orientation" | "offset"), ``imu_offset_rad``,
-    ``zero_cov``, ``scan`` ("normal" | "reversed" | "360" | "1081"), ``bad_ranges``,
+    ``zero_cov`` (odometry), ``imu_zero_cov``, ``scan`` ("normal" | "reversed" | "360" | "1081"), ``bad_ranges``,
     ``disorder`` (swap / duplicate / backwards messages), ``scan_latency`` (s between a scan's
     stamp and its arrival at the recorder), ``no_time_increment``, ``flip_laser`` (scanner
     mounted upside down), ``intensities``, ``pose_only_odom`` (twist left zero), ``drop``
@@ -253,12 +253,14 @@ def write_foreign(path: Path, sim: Any, **v: Any) -> dict:
             yaw = 0.0 if m.yaw_rad is None else float(m.yaw_rad)
             ocov = [0.0] * 9
             ocov[8] = float(m.yaw_var) if math.isfinite(m.yaw_var) else 0.0
+            if v.get("imu_zero_cov"):  # "covariance unknown" (all zeros), as many IMU drivers publish
+                ocov = [0.0] * 9
             if kind == "no_orientation":
                 yaw, ocov = 0.0, [-1.0] + [0.0] * 8
             elif kind == "offset":
                 yaw = math.atan2(math.sin(yaw + imu_off), math.cos(yaw + imu_off))
             wcov = [0.0] * 9
-            wcov[8] = float(m.yaw_rate_var) if math.isfinite(m.yaw_rate_var) else 0.0
+            wcov[8] = float(m.yaw_rate_var) if math.isfinite(m.yaw_rate_var) and not v.get("imu_zero_cov") else 0.0
             add("/imu", "sensor_msgs/msg/Imu", {
                 "header": {"stamp": _st(t), "frame_id": "imu_link"},
                 "orientation": _q(yaw) if kind != "no_orientation" else {"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0},
@@ -395,6 +397,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "lz4_small_chunks_intensities": {"compression": "lz4", "chunk_size": 4096, "intensities": True},  # 2.3
     "no_imu": {"drop": ["/imu"]},  # 2.4
     "everything": {"mount": "chain", "imu": "offset", "imu_offset_rad": -1.3, "zero_cov": True,  # 2.3
+                   "imu_zero_cov": True,
                    "scan": "reversed", "bad_ranges": True, "disorder": True},
 }
 

@@ -396,6 +396,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "upside_down_laser_on_tf": {"flip_laser": True, "mount": "tf", "scan": "reversed"},  # 2.3
     "lz4_small_chunks_intensities": {"compression": "lz4", "chunk_size": 4096, "intensities": True},  # 2.3
     "no_imu": {"drop": ["/imu"]},  # 2.4
+    "odometry_pose_only": {"pose_only_odom": True},  # 2.8 (twist left zero: motion from the poses)
     "everything": {"mount": "chain", "imu": "offset", "imu_offset_rad": -1.3, "zero_cov": True,  # 2.3
                    "imu_zero_cov": True,
                    "scan": "reversed", "bad_ranges": True, "disorder": True},

@@ -83,10 +83,11 @@ def load_config(path: str | Path | None = None) -> dict[str, Any]:
 DEFAULT_PIPELINE: dict[str, Any] = {
     "relocalize_after": 10,          # matched scans in a row without an accepted fix -> global search
     "relocalize_search_every": 4,    # ... every n-th such scan (tracking goes on meanwhile)
-    "relocalize_min_quality": 0.7,   # inlier fraction a relocalization candidate needs (every scan)
+    "relocalize_min_quality": 0.8,   # inlier fraction a relocalization candidate needs (every scan)
     "relocalize_margin": 0.15,       # a candidate's quality must beat the tracked match's by this
     "relocalize_ambiguity": 0.1,     # another distinct candidate this close in quality: ambiguous, no jump
     "relocalize_confirm": 2,         # scans the candidate must match again (odometry-carried) to be taken
+    "relocalize_confirm_s": 1.0,     # ... over at least this long (bursts of scans are not independent)
     "initial_sigma_xy": 0.1,         # m, prior on an --initial-pose (or a global-search result)
     "initial_sigma_yaw_deg": 5.0,
     "odom_keyframe_interval": 0.1,   # s, keyframe spacing without scans
@@ -139,7 +140,7 @@ class Localizer:
         self._prev_odom_pose: tuple[float, FloatArray] | None = None
         self._odom_at_last_scan: FloatArray | None = None
         self._bad_streak = 0
-        self._pending: tuple[FloatArray, FloatArray, int] | None = None  # relocalization candidate
+        self._pending: tuple[FloatArray, FloatArray, int, float] | None = None  # relocalization candidate
         self._reloc_tick = 0
         self._global_tries = 0
         self._global: Any = None
@@ -319,8 +320,9 @@ class Localizer:
         least ``relocalize_min_quality``, ``relocalize_margin`` better than the tracked pose's match
         (unless it is the tracked match itself), and no other candidate more than 1 m / 20 deg
         away within ``relocalize_ambiguity`` of it.  A pending pose is carried along by odometry
-        and must match again on ``relocalize_confirm`` further scans before the back-end is reset
-        to it; one failed match drops it.  So repetitive buildings (similar rooms, corridors)
+        and must match again on ``relocalize_confirm`` further scans spanning at least
+        ``relocalize_confirm_s`` (scans logged in a burst are not independent evidence) before
+        the back-end is reset to it; one failed match drops it.  So repetitive buildings (similar rooms, corridors)
         and fixes merely rejected for a while do not make the robot jump.
         """
         assert self.frontend is not None
@@ -331,8 +333,10 @@ class Localizer:
             if res.ok and res.pose is not None and res.cov is not None and \
                     float(res.quality) >= float(self.pcfg["relocalize_min_quality"]):
                 count = self._pending[2] + 1
-                self._pending = (np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float), count)
-                if count > int(self.pcfg["relocalize_confirm"]):
+                t_first = self._pending[3]
+                self._pending = (np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float), count, t_first)
+                if count > int(self.pcfg["relocalize_confirm"]) and \
+                        t - t_first >= float(self.pcfg["relocalize_confirm_s"]):
                     self.stats["relocalizations"] += 1
                     self._pending = None
                     self._start(t, np.asarray(res.pose, dtype=float),
@@ -359,7 +363,7 @@ class Localizer:
             if q >= best_q - amb and not _close(c.pose, best.pose, 1.0, math.radians(20.0)):
                 self.stats["ambiguous_relocalizations"] = self.stats.get("ambiguous_relocalizations", 0) + 1
                 return
-        self._pending = (best.pose.copy(), best.cov.copy(), 1)
+        self._pending = (best.pose.copy(), best.cov.copy(), 1, t)
 
     # ------------------------------------------------------------------ start-up / recovery
     def _initial_cov(self) -> FloatArray:

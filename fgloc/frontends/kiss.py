@@ -117,7 +117,8 @@ class KissMatcher(FrontendBase):
         "coarse_convergence_criterion", "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m",
         "max_iterations", "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers",
         "min_inlier_fraction", "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor",
-        "max_backface_fraction", "retry_inlier_fraction", "retry_offset_m", "retry_offset_deg",
+        "max_backface_fraction", "retry_backface_fraction", "retry_inlier_fraction", "retry_offset_m",
+        "retry_offset_deg",
     }
 
     def __init__(
@@ -141,15 +142,16 @@ class KissMatcher(FrontendBase):
         max_iterations: int = 50,
         convergence_criterion: float = 1e-5,
         max_threads: int = 1,
-        inlier_dist_m: float = 0.05,
+        inlier_dist_m: float = 0.1,
         min_inliers: int = 30,
-        min_inlier_fraction: float = 0.5,
+        min_inlier_fraction: float = 0.4,
         max_jump_m: float = 1.0,
         max_jump_deg: float = 30.0,
         min_eigen_ratio: float = 1e-3,
         cov_inflation: tuple[float, float] = (17.0, 36.0),
         cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
-        max_backface_fraction: float = 0.1,
+        max_backface_fraction: float = 0.5,
+        retry_backface_fraction: float = 0.1,
         retry_inlier_fraction: float = 0.9,
         retry_offset_m: float = 0.15,
         retry_offset_deg: float = 5.0,
@@ -179,6 +181,7 @@ class KissMatcher(FrontendBase):
             (float(voxel_size_m), big, int(max_points_per_voxel)),
         )
         self.max_backface_fraction = float(max_backface_fraction)
+        self.retry_backface_fraction = float(retry_backface_fraction)
         self.retry_fraction = float(retry_inlier_fraction)
         dm, da = float(retry_offset_m), math.radians(float(retry_offset_deg))
         self.retry_offsets = [np.array(v) for v in (
@@ -273,7 +276,7 @@ class KissMatcher(FrontendBase):
             return no_fix("kiss: registration diverged (non-finite transform)")
         q, dist, idx, back = self._associate(points, pose)
         recovered = False
-        if back > self.max_backface_fraction:
+        if back > self.retry_backface_fraction:
             # landed on the far side of a thin wall: redo against the surfaces facing the guess
             reach = float(np.sqrt(np.max(np.sum(points * points, axis=1)))) + self.max_jump_m + 1.0
             coarse, fine = self._front_facing_maps(guess, reach)
@@ -294,7 +297,7 @@ class KissMatcher(FrontendBase):
                     continue
                 q2, dist2, idx2, back2 = self._associate(points, alt)
                 n2 = int(np.count_nonzero(dist2 < self.inlier_dist))
-                if n2 > best[0] and back2 <= self.max_backface_fraction:
+                if n2 > best[0] and back2 <= max(back, self.retry_backface_fraction):
                     best = (n2, alt, q2, dist2, idx2, back2)
                 if n2 >= self.retry_fraction * n:
                     break

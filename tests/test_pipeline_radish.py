@@ -23,8 +23,8 @@ from fgloc.mapping.source import log_messages
 from fgloc.pipeline import Localizer, load_config, run_messages
 
 CASES = {  # name: (position RMSE m, heading RMSE deg, relation dt window, relation trans m, rot deg)
-    "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.034 m, 0.39 deg; 0.050 m, 0.76 deg
-    "fr079": (0.035, 0.5, (1.0, 2.0), 0.03, 0.3),  # reached: 0.020 m, 0.27 deg; 0.010 m, 0.09 deg
+    "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.033 m, 0.38 deg; 0.054 m, 0.86 deg
+    "fr079": (0.035, 0.5, (1.0, 2.0), 0.03, 0.3),  # reached: 0.024 m, 0.25 deg; 0.012 m, 0.07 deg
 }
 
 

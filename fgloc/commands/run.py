@@ -33,6 +33,19 @@ def _yaml_ready(obj: Any) -> Any:
     return obj
 
 
+def _check_inputs(reader: Any, log: Path, roles: tuple[tuple[str, str], ...]) -> None:
+    """One-line errors for inputs that cannot be localized with: a role's topic of another type
+    (it would be skipped and the run would 'succeed' empty) or topics stamped by different clocks."""
+    types = reader.topic_types()
+    for topic, want in roles:
+        have = types.get(topic)
+        if have is not None and reader.has(topic) and have != want:
+            raise LogError(f"{log}: topic '{topic}' has type {have}, expected {want} (rename with --*-topic)")
+    skew = reader.clock_skew([t for t, _ in roles])
+    if skew is not None:
+        raise LogError(f"{log}: {skew}")
+
+
 def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str = "smoother",
             frontend: str = "native", initial_pose: list[float] | None = None,
             config_path: Path | None = None, scan_topic: str = "/scan", odom_topic: str = "/odom",
@@ -41,7 +54,7 @@ def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str 
 
     Returns a summary dict (also what the CLI prints).
     """
-    from fgloc.io.log import LogReader, LogWriter, Topics
+    from fgloc.io.log import IMU, LASER_SCAN, ODOMETRY, LogReader, LogWriter, Topics
     from fgloc.io.tum import write_tum
     from fgloc.maps import OccupancyMap
     from fgloc.pipeline import Localizer, load_config, run_messages
@@ -54,6 +67,7 @@ def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str 
     n_scan, n_odom, n_imu = counts.get(scan_topic, 0), counts.get(odom_topic, 0), counts.get(imu_topic, 0)
     if n_odom == 0 and n_imu == 0 and n_scan == 0:
         raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with")
+    _check_inputs(reader, log, ((scan_topic, LASER_SCAN), (odom_topic, ODOMETRY), (imu_topic, IMU)))
     occ_map = OccupancyMap.load(map_yaml) if map_yaml is not None else None
     mode = "map"
     if occ_map is None or n_scan == 0:

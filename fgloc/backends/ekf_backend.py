@@ -3,7 +3,8 @@
 Odometry twists are encoder updates, compass readings compass updates (heading
 converted to the map frame with the calibrated offset, rate only until then; when
 the joint ``[theta, w]`` update is gated the rate is applied alone), and keyframe
-fixes map updates.  The online and the final trajectory are the same: the pose
+fixes map updates (a late fix, older than the filter time, is first carried forward by the
+filter's velocities).  The online and the final trajectory are the same: the pose
 right after each scan's fix (a filter does not smooth).
 """
 
@@ -13,7 +14,7 @@ import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
-from fgloc.backends.ekf import EKF, EKFConfig
+from fgloc.backends.ekf import EKF, EKFConfig, motion_model
 from fgloc.types import PoseFix, Trajectory
 
 
@@ -78,11 +79,21 @@ class EKFBackend(Backend):
         used = False
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
-            used = self.ekf.update_map(t, fix.pose, fix.cov, gate=not force)
+            pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)
+            if self.ekf.t is not None and t < self.ekf.t:
+                # a late fix (the scan arrived after newer odometry): carried forward to the filter
+                # time by the filter's own velocities, with their motion noise, not applied as if new
+                dt = self.ekf.t - t
+                s = self.ekf.x.copy()
+                s[:3] = pose
+                pose = motion_model(s, dt, self.ekf.config.omni)[:3]
+                cov = cov + self.ekf.process_noise(dt)[:3, :3]
+                t = self.ekf.t
+            used = self.ekf.update_map(t, pose, cov, gate=not force)
             if used:
                 self._consecutive_rejects = 0
                 self.stats["fixes_used"] += 1
-                self.calib.add_fix(t, float(fix.pose[2]))
+                self.calib.add_fix(t, float(pose[2]))
             else:
                 self._consecutive_rejects += 1
                 self.stats["fixes_rejected"] += 1

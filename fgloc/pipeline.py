@@ -98,6 +98,7 @@ DEFAULT_PIPELINE: dict[str, Any] = {
     "global_search": {},             # GlobalSearch keyword arguments
     "global_compass_tolerance_deg": 30.0,  # candidates further from the compass heading are dropped
     "frontend_every": 2,             # match every n-th scan (a keyframe each; others: prediction)
+    "odom_extrapolate_max_s": 0.5,   # carry the odometry to the scan stamp over at most this gap
     "pose_deltas": "auto",           # odometry twist from pose increments: auto | always | never
     "pose_delta_sigmas": [0.01, 0.01, 0.02],  # m/s, m/s, rad/s: base noise of a pose-derived twist
     "pose_delta_rel": 0.1,           # + this fraction of the speed (per unit speed)
@@ -267,10 +268,18 @@ class Localizer:
                 self.backend.record_prediction(t)
                 return None
         # odometry motion since the previous front-end call (for its de-skew / motion model)
+        # the dead-reckoned odom pose *at the scan stamp*: the last odometry message carried on
+        # (or back) with its twist, so slow or late odometry does not hand the front-end a
+        # stale motion (0 or several scan periods of it) for its de-skew (AMCL keeps the
+        # odometry as it came: its motion model and update thresholds were tuned on that)
+        odom_now = self._odom_pose
+        if self._odom_t is not None and self.frontend_name != "amcl" and \
+                abs(t - self._odom_t) <= float(self.pcfg["odom_extrapolate_max_s"]):
+            odom_now = se2_compose(self._odom_pose, se2_exp(self._last_twist * (t - self._odom_t)))
         odom_delta = None
         if self._odom_at_last_scan is not None:
-            odom_delta = between(self._odom_at_last_scan, self._odom_pose)
-        self._odom_at_last_scan = self._odom_pose.copy()
+            odom_delta = between(self._odom_at_last_scan, odom_now)
+        self._odom_at_last_scan = np.array(odom_now, dtype=float)
         if not matching:
             return self._localize_globally(msg, odom_delta)
         guess, _ = self.backend.predict(t)

@@ -65,6 +65,8 @@ def test_pty_replay_with_corruption_counts_everything(synth):
     link.start()
     emu.start()
     assert emu.done.wait(10)
+    st = link.parser.stats
+    _wait(lambda: st.frames_ok + st.crc_errors >= emu.stats.frames)  # bytes still in the pty
     time.sleep(0.2)
     link.stop()
     emu.stop()
@@ -89,7 +91,7 @@ def test_socket_url_replay(synth):
     time.sleep(0.3)  # let pyserial connect before the replay starts
     emu.start()
     assert emu.done.wait(10)
-    time.sleep(0.2)
+    _wait(lambda: link.parser.stats.frames_ok >= emu.stats.frames)  # bytes still in the socket
     link.stop()
     emu.stop()
     assert link.parser.stats.frames_ok == emu.stats.frames
@@ -108,7 +110,7 @@ def test_sick_stream_reconnect_and_malformed(synth):
     n_before = len(scans)
     assert _wait(lambda: cl.stats.connects >= 2 and len(scans) > n_before + 10)
     assert emu.done.wait(10)
-    time.sleep(0.2)
+    _wait(lambda: cl.stats.scans >= emu.sent_scans and cl.stats.malformed >= emu.stats.malformed)
     cl.stop()
     emu.stop()
     assert cl.stats.disconnects >= 1 and cl.stats.connects >= 2
@@ -138,6 +140,9 @@ def test_socket_url_reconnects_after_drop(synth):
     n_before = len(got)
     assert _wait(lambda: link.opens >= 2 and len(got) > n_before + 50)
     assert emu.done.wait(10)
+    # the last frame may still be in the socket when the emulator reports done: let it arrive
+    st = link.parser.stats
+    _wait(lambda: st.frames_ok + st.dropped >= emu.stats.frames)
     link.stop()
     emu.stop()
     assert link.disconnects >= 1 and link.opens >= 2

@@ -10,27 +10,15 @@ from typing import Any
 
 import numpy as np
 import typer
-import yaml
 
 from fgloc.errors import ConfigError, LogError
+from fgloc.io.yamlio import write_yaml, yaml_ready
 
 
 def _progress(total: int | None, desc: str, disable: bool = False):
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="msg", disable=disable, leave=False, mininterval=0.5)
-
-
-def _yaml_ready(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _yaml_ready(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_yaml_ready(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return obj
 
 
 def _check_inputs(reader: Any, log: Path, roles: tuple[tuple[str, str], ...]) -> None:
@@ -112,12 +100,12 @@ def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str 
         "frontend": loc.frontend_name, "initial_pose": None if pose0 is None else pose0.tolist(),
         "topics": {"scan": scan_topic, "odom": odom_topic, "imu": imu_topic},
     }
-    (outdir / "config.yaml").write_text(yaml.safe_dump(_yaml_ready(effective), sort_keys=False))
+    write_yaml(outdir / "config.yaml", effective)
     sim_s = float(final.duration) if len(final) else float(summ.get("duration") or 0.0)
     result: dict[str, Any] = {
         "mode": mode, "frame": frame, "backend": backend, "frontend": loc.frontend_name,
         "poses": len(final), "online_poses": len(online), "fixes": len(fixes),
-        "stats": _yaml_ready(loc.stats), "wall_s": wall, "log_s": sim_s,
+        "stats": yaml_ready(loc.stats), "wall_s": wall, "log_s": sim_s,
         "truncated": reader.truncated, "outdir": str(outdir),
         "written": [p.name for p in written] + ["run.mcap", "config.yaml"],
     }
@@ -246,7 +234,7 @@ def bench_paper(seeds: int, outdir: Path | None, variants=PAPER_VARIANTS, config
         (outdir / "table.md").write_text(comparison_text(rows, title=f"paper replica, {seeds} seeds") + "\n")
         summary = {label: {k: [m.to_dict()[k] for m in ms] for k in ("position_rmse_m", "heading_rmse_deg")}
                    for label, ms in rows.items()}
-        (outdir / "metrics.yaml").write_text(yaml.safe_dump(_yaml_ready(summary), sort_keys=False))
+        write_yaml(outdir / "metrics.yaml", summary)
     return {"rows": rows, "walls": walls, "files": files, "seeds": seeds}
 
 

@@ -375,6 +375,7 @@ def write_sim(result: SimResult, outdir: str | Path) -> Path:
     """Write ``log.mcap``, ``map.yaml`` + ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` into outdir."""
     from fgloc.io.log import LogWriter
     from fgloc.io.tum import write_tum
+    from fgloc.io.yamlio import write_yaml
 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -390,17 +391,5 @@ def write_sim(result: SimResult, outdir: str | Path) -> Path:
         "duration_s": float(result.ground_truth.duration),
         "path_length_m": float(result.ground_truth.path_length()),
     }
-    (out / "scenario.yaml").write_text(yaml.safe_dump(_plain(info), sort_keys=False))
+    write_yaml(out / "scenario.yaml", info)
     return out
-
-
-def _plain(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return x

@@ -11,6 +11,8 @@ mapped to the parent frame of ``a``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -53,6 +55,72 @@ def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
     return compose(inverse(a), b)
 
 
+def wrap_scalar(a: float) -> float:
+    """Wrap one angle in radians to ``[-pi, pi)`` (scalar maths: fast on hot paths)."""
+    w = math.fmod(a + math.pi, 2.0 * math.pi)
+    if w < 0:
+        w += 2.0 * math.pi
+    return w - math.pi
+
+
+def compose1(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a (+) b`` for single poses (scalar maths: fast for per-message hot paths)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    c, s = math.cos(a2), math.sin(a2)
+    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, wrap_scalar(a2 + b2)])
+
+
+def exp(xi: FloatArray) -> FloatArray:
+    """SE(2) exponential of a tangent vector ``[vx dt, vy dt, w dt]`` -> pose ``[x, y, yaw]``.
+
+    The pose reached by holding a constant body twist for ``dt`` (GTSAM's ``Pose2.Expmap``).
+    """
+    vx, vy, w = float(xi[0]), float(xi[1]), float(xi[2])
+    if abs(w) < 1e-9:
+        c, s = 1.0 - w * w / 6.0, w / 2.0  # sin(w)/w, (1-cos w)/w to 2nd order
+    else:
+        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
+    return np.array([c * vx - s * vy, s * vx + c * vy, w])
+
+
+def log(p: FloatArray) -> FloatArray:
+    """SE(2) logarithm of a pose ``[x, y, yaw]`` -> tangent ``[vx dt, vy dt, w dt]`` (inverse of :func:`exp`)."""
+    x, y = float(p[0]), float(p[1])
+    w = math.atan2(math.sin(float(p[2])), math.cos(float(p[2])))
+    if abs(w) < 1e-9:
+        c, s = 1.0 - w * w / 6.0, w / 2.0
+    else:
+        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
+    det = c * c + s * s
+    return np.array([(c * x + s * y) / det, (-s * x + c * y) / det, w])
+
+
+def exp_along(twist: ArrayLike, tau: ArrayLike) -> FloatArray:
+    """Poses ``(N, 3)`` reached after times ``tau`` (N,) at the constant body twist ``[vx, vy, w]``."""
+    tw = np.asarray(twist, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    vx, vy, w = float(tw[0]), float(tw[1]), float(tw[2])
+    th = w * tau
+    out = np.empty((len(tau), 3))
+    if abs(w) < 1e-12:
+        out[:, 0] = vx * tau
+        out[:, 1] = vy * tau
+    else:
+        s, c1 = np.sin(th), 1.0 - np.cos(th)
+        out[:, 0] = (vx * s - vy * c1) / w
+        out[:, 1] = (vx * c1 + vy * s) / w
+    out[:, 2] = th
+    return out
+
+
+def adjoint(p: ArrayLike) -> FloatArray:
+    """Adjoint map of pose ``p`` (``Ad_p xi = Log(p Exp(xi) p^-1)`` to first order), as GTSAM's."""
+    p = np.asarray(p, dtype=float)
+    c, s = np.cos(p[2]), np.sin(p[2])
+    return np.array([[c, -s, p[1]], [s, c, -p[0]], [0.0, 0.0, 1.0]])
+
+
 def transform_points(pose: ArrayLike, points: ArrayLike) -> FloatArray:
     """Map points ``(N, 2)`` from the frame of ``pose`` into its parent frame."""
     pose = np.asarray(pose, dtype=float)
@@ -76,6 +144,16 @@ def to_matrix(pose: ArrayLike) -> FloatArray:
     m = np.eye(3)
     m[:2, :2] = rot2(p[YAW])
     m[:2, 2] = p[:2]
+    return m
+
+
+def to_matrix4(pose: ArrayLike) -> FloatArray:
+    """4x4 homogeneous matrix of a planar pose (z = 0, rotation about z)."""
+    p = np.asarray(pose, dtype=float)
+    m = np.eye(4)
+    c, s = math.cos(float(p[YAW])), math.sin(float(p[YAW]))
+    m[:2, :2] = [[c, -s], [s, c]]
+    m[0, 3], m[1, 3] = p[X], p[Y]
     return m
 
 

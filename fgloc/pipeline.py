@@ -40,9 +40,10 @@ import yaml
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.backends.factors import se2_compose, se2_exp, se2_log
 from fgloc.errors import ConfigError
-from fgloc.geometry import between, transform_points, wrap_angle
+from fgloc.geometry import between, compose1, transform_points, wrap_angle
+from fgloc.geometry import exp as se2_exp
+from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
 
@@ -189,7 +190,7 @@ class Localizer:
         tw, cov = self._odometry_twist(t, tw, cov, pose)
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
         if self._odom_t is not None:
-            self._odom_pose = se2_compose(self._odom_pose, se2_exp(tw * (t - self._odom_t)))
+            self._odom_pose = compose1(self._odom_pose, se2_exp(tw * (t - self._odom_t)))
         self._odom_t = t
         self._last_twist = tw
         if self._first_odom_t is None:
@@ -275,7 +276,7 @@ class Localizer:
         odom_now = self._odom_pose
         if self._odom_t is not None and self.frontend_name != "amcl" and \
                 abs(t - self._odom_t) <= float(self.pcfg["odom_extrapolate_max_s"]):
-            odom_now = se2_compose(self._odom_pose, se2_exp(self._last_twist * (t - self._odom_t)))
+            odom_now = compose1(self._odom_pose, se2_exp(self._last_twist * (t - self._odom_t)))
         odom_delta = None
         if self._odom_at_last_scan is not None:
             odom_delta = between(self._odom_at_last_scan, odom_now)
@@ -337,7 +338,7 @@ class Localizer:
         assert self.frontend is not None
         t = float(msg.stamp)
         if self._pending is not None:
-            pose = se2_compose(self._pending[0], odom_delta) if odom_delta is not None else self._pending[0]
+            pose = compose1(self._pending[0], odom_delta) if odom_delta is not None else self._pending[0]
             res = self.frontend.match(msg, pose, None)
             if res.ok and res.pose is not None and res.cov is not None and \
                     float(res.quality) >= float(self.pcfg["relocalize_min_quality"]):

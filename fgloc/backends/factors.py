@@ -25,56 +25,9 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.geometry import wrap_scalar
+
 FloatArray = NDArray[np.float64]
-
-
-# ---------------------------------------------------------------------- SE(2) in numpy
-def se2_exp(xi: FloatArray) -> FloatArray:
-    """``Expmap`` of a tangent vector ``[vx dt, vy dt, w dt]`` -> pose ``[x, y, yaw]``."""
-    vx, vy, w = float(xi[0]), float(xi[1]), float(xi[2])
-    if abs(w) < 1e-9:
-        c, s = 1.0 - w * w / 6.0, w / 2.0  # sin(w)/w, (1-cos w)/w to 2nd order
-    else:
-        c, s = np.sin(w) / w, (1.0 - np.cos(w)) / w
-    return np.array([c * vx - s * vy, s * vx + c * vy, w])
-
-
-def se2_log(p: FloatArray) -> FloatArray:
-    """``Logmap`` of a pose ``[x, y, yaw]`` -> tangent ``[vx dt, vy dt, w dt]`` (inverse of :func:`se2_exp`)."""
-    x, y, w = float(p[0]), float(p[1]), math.atan2(math.sin(float(p[2])), math.cos(float(p[2])))
-    if abs(w) < 1e-9:
-        c, s = 1.0 - w * w / 6.0, w / 2.0
-    else:
-        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
-    det = c * c + s * s
-    return np.array([(c * x + s * y) / det, (-s * x + c * y) / det, w])
-
-
-def se2_adjoint(p: FloatArray) -> FloatArray:
-    """Adjoint map of pose ``p`` (``Ad_p xi = Log(p Exp(xi) p^-1)`` to first order), as GTSAM's."""
-    c, s = np.cos(p[2]), np.sin(p[2])
-    return np.array([[c, -s, p[1]], [s, c, -p[0]], [0.0, 0.0, 1.0]])
-
-
-def se2_compose(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``a (+) b`` for single poses (scalar maths: fast for the per-keyframe hot path)."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    c, s = math.cos(a2), math.sin(a2)
-    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, _wrap(a2 + b2)])
-
-
-def _wrap(a: float) -> float:
-    """Wrap to ``[-pi, pi)`` (scalar)."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w < 0:
-        w += 2.0 * math.pi
-    return w - math.pi
-
-
-def se2_inverse(a: FloatArray) -> FloatArray:
-    c, s = np.cos(a[2]), np.sin(a[2])
-    return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
 
 
 # ---------------------------------------------------------------------- twist integration
@@ -138,7 +91,7 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
         t = t_next
         i += 1
     cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
-    return np.array([x, y, _wrap(th)]), cov
+    return np.array([x, y, wrap_scalar(th)]), cov
 
 
 def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:
@@ -191,7 +144,7 @@ def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "h
 
 def compass_error(theta: float, offset: float, z: float) -> float:
     """Compass residual ``wrap(theta + offset - z)`` (radians)."""
-    return _wrap(theta + offset - z)
+    return wrap_scalar(theta + offset - z)
 
 
 def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: float,

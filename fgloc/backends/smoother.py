@@ -47,15 +47,13 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.factors import (
-    _wrap,
     between_factor,
     compass_factor,
     fix_factor,
     integrate_heading,
     integrate_twist,
-    se2_compose,
 )
-from fgloc.geometry import wrap_angle
+from fgloc.geometry import compose1, wrap_angle, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
 
@@ -288,7 +286,7 @@ class SlidingWindowSmoother(Backend):
         if self._pred_cache is not None and self._pred_cache[0] == key:
             return self._pred_cache[1], self._pred_cache[2]
         d, c = self._integrate(self.kf_t[-1], t)
-        pose, cov = se2_compose(self.kf_pose[k], d), self._last_cov + c
+        pose, cov = compose1(self.kf_pose[k], d), self._last_cov + c
         self._pred_cache = (key, pose, cov)
         return pose, cov
 
@@ -327,11 +325,11 @@ class SlidingWindowSmoother(Backend):
             z = yaw + self._rotation_between(tc, t_k)
             if ref is None:
                 ref = z
-            acc += _wrap(z - ref)
+            acc += wrap_scalar(z - ref)
             var += v
         n = len(readings)
         assert ref is not None
-        return _wrap(ref + acc / n), math.sqrt(var / n / n)
+        return wrap_scalar(ref + acc / n), math.sqrt(var / n / n)
 
     # ------------------------------------------------------------------ keyframes
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
@@ -389,7 +387,7 @@ class SlidingWindowSmoother(Backend):
         graph, vals, ts, pairs, keys = self._acc
         ts[k] = t
         d, c = self._integrate(t_prev, t)
-        pred = se2_compose(self.kf_pose[k_prev], d)
+        pred = compose1(self.kf_pose[k_prev], d)
         graph.add(between_factor(k_prev, k, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
@@ -492,7 +490,7 @@ class SlidingWindowSmoother(Backend):
         graph.add(between_factor(ka, k, d1, c1, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
         graph.add(between_factor(k, kb, d2, c2, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
         pa = self.isam.calculateEstimatePose2(ka)
-        guess = se2_compose(np.array([pa.x(), pa.y(), pa.theta()]), d1)
+        guess = compose1(np.array([pa.x(), pa.y(), pa.theta()]), d1)
         vals.insert(k, gtsam.Pose2(*guess))
         used = False
         if fix is not None:

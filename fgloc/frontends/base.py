@@ -22,7 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, transform_points, wrap_angle
+from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle
+from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -113,33 +114,6 @@ class PreprocessOptions:
             )
 
 
-def _se2_log(delta: FloatArray) -> FloatArray:
-    """Twist ``[vx, vy, w]`` (per unit time) whose exponential is ``delta``."""
-    dx, dy, th = float(delta[0]), float(delta[1]), float(wrap_angle(delta[2]))
-    if abs(th) < 1e-9:
-        return np.array([dx, dy, th])
-    a = np.sin(th) / th
-    b = (1.0 - np.cos(th)) / th
-    det = a * a + b * b
-    return np.array([(a * dx + b * dy) / det, (-b * dx + a * dy) / det, th])
-
-
-def _se2_exp(twist: FloatArray, tau: FloatArray) -> FloatArray:
-    """Poses ``(N, 3)`` reached after time(s) ``tau`` at the constant body twist ``[vx, vy, w]``."""
-    vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
-    th = w * tau
-    out = np.empty((len(tau), 3))
-    if abs(w) < 1e-12:
-        out[:, 0] = vx * tau
-        out[:, 1] = vy * tau
-    else:
-        s, c1 = np.sin(th), 1.0 - np.cos(th)
-        out[:, 0] = (vx * s - vy * c1) / w
-        out[:, 1] = (vx * c1 + vy * s) / w
-    out[:, 2] = th
-    return out
-
-
 def deskew_offsets(
     n_beams: int, time_increment: float, odom_delta: FloatArray, interval_s: float
 ) -> FloatArray:
@@ -149,14 +123,14 @@ def deskew_offsets(
     last ``interval_s`` seconds and keeps that twist during the scan; beam ``i`` was
     measured ``i * time_increment`` after the first beam (REP 117).
     """
-    twist = _se2_log(np.asarray(odom_delta, dtype=float)) / float(interval_s)
+    twist = se2_log(np.asarray(odom_delta, dtype=float)) / float(interval_s)
     return deskew_offsets_twist(n_beams, time_increment, twist)
 
 
 def deskew_offsets_twist(n_beams: int, time_increment: float, twist: FloatArray) -> FloatArray:
     """Per-beam pose relative to the first beam for a constant body ``twist`` [vx, vy, wz]."""
     tau = np.arange(n_beams, dtype=float) * float(time_increment)
-    return _se2_exp(np.asarray(twist, dtype=float), tau)
+    return exp_along(np.asarray(twist, dtype=float), tau)
 
 
 def voxel_downsample(points: FloatArray, voxel_size: float) -> FloatArray:
@@ -235,7 +209,7 @@ class ScanPreprocessor:
                 and np.isfinite(interval)
                 and 0 < interval <= opt.max_deskew_interval_s
             ):
-                twist = _se2_log(od) / interval
+                twist = se2_log(od) / interval
                 mid = stamp - 0.5 * interval
                 self._last_twist = (mid, twist)
                 if opt.deskew and t_inc != 0 and np.isfinite(t_inc):

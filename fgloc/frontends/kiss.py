@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, compose, wrap_angle
+from fgloc.geometry import YAW, compose, from_matrix, to_matrix4, wrap_angle
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -92,18 +92,6 @@ def surface_points(
     nrm = np.column_stack([c * ng[:, 0] - s * ng[:, 1], s * ng[:, 0] + c * ng[:, 1]])
     pts = pts - float(depth_cells) * occ_map.resolution * nrm
     return pts, nrm
-
-
-def _se2_to_mat4(p: FloatArray) -> FloatArray:
-    m = np.eye(4)
-    c, s = math.cos(p[2]), math.sin(p[2])
-    m[:2, :2] = [[c, -s], [s, c]]
-    m[0, 3], m[1, 3] = p[0], p[1]
-    return m
-
-
-def _mat4_to_se2(m: FloatArray) -> FloatArray:
-    return np.array([m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0])])
 
 
 class KissMatcher(FrontendBase):
@@ -228,13 +216,13 @@ class KissMatcher(FrontendBase):
         return cls(occ_map, laser_mount, preprocess=pre, **kw)
 
     def _register(self, pts3: FloatArray, guess: FloatArray, coarse: Any, fine: Any) -> FloatArray | None:
-        T = _se2_to_mat4(guess)
+        T = to_matrix4(guess)
         if self.coarse_corr > 0:
             T = self.coarse_registration.align_points_to_map(pts3, coarse, T, self.coarse_corr, self.coarse_kernel)
         T = self.registration.align_points_to_map(pts3, fine, T, self.max_corr, self.kernel)
         if not np.all(np.isfinite(T)):
             return None
-        pose = _mat4_to_se2(T)
+        pose = from_matrix(T)
         pose[YAW] = wrap_angle(pose[YAW])
         return pose
 

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from fgloc.errors import ConfigError
-from fgloc.geometry import wrap_angle
+from fgloc.geometry import compose1, wrap_angle
+from fgloc.geometry import exp as se2_exp
 from fgloc.live.clock import ClockSync
 from fgloc.live.serial_protocol import COUNT_MOD, FrameParser, SensorFrame
 from fgloc.types import CompassHeading, Odometry
@@ -94,19 +95,6 @@ def twist_to_wheel_speeds(p: RobotParams, twist: np.ndarray) -> np.ndarray:
     return np.asarray(kinematics_of(p).inverse(np.asarray(twist, dtype=float)), dtype=float)
 
 
-def _se2_exp(pose: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-    """Integrate a constant body twist over ``dt`` from ``pose`` (exact on SE(2))."""
-    vx, vy, wz = twist * dt
-    if abs(wz) < 1e-9:
-        dx, dy = vx, vy
-    else:
-        s, c = math.sin(wz), math.cos(wz)
-        dx = (s * vx - (1 - c) * vy) / wz
-        dy = ((1 - c) * vx + s * vy) / wz
-    c0, s0 = math.cos(pose[2]), math.sin(pose[2])
-    return np.array([pose[0] + c0 * dx - s0 * dy, pose[1] + s0 * dx + c0 * dy, float(wrap_angle(pose[2] + wz))])
-
-
 class FrameConverter:
     """SensorFrame -> ``("odom", Odometry)`` / ``("imu", CompassHeading)``, host-time stamped."""
 
@@ -163,7 +151,7 @@ class FrameConverter:
                     )
                     omega = dc * (2.0 * math.pi / self.robot.counts_per_rev) / dt
                     twist = np.asarray(self._kin.forward(omega), dtype=float)
-                    self._pose = _se2_exp(self._pose, twist, dt)
+                    self._pose = compose1(self._pose, se2_exp(twist * dt))
                     out.append(
                         ("odom", Odometry(stamp=stamp, twist=twist,
                                           twist_cov=None if self.twist_cov is None else self.twist_cov.copy(),

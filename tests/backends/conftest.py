@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from fgloc.backends.factors import se2_compose, se2_exp
+from fgloc.geometry import compose1 as se2_compose
+from fgloc.geometry import exp as se2_exp
 
 
 @dataclass

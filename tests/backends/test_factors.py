@@ -10,9 +10,9 @@ from fgloc.backends.factors import (
     compass_factor,
     fix_factor,
     integrate_twist,
-    se2_adjoint,
-    se2_exp,
 )
+from fgloc.geometry import adjoint as se2_adjoint
+from fgloc.geometry import exp as se2_exp
 
 
 def _numerical_factor_jacobians(factor, values, keys, eps=1e-6):

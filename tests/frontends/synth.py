@@ -79,14 +79,14 @@ def make_moving_scan(
 ) -> LaserScan:
     """A motion-distorted scan: beam ``i`` cast from the pose at ``stamp + i * time_increment``
     while the robot moves at the constant body ``twist`` [vx, vy, wz] from ``pose0`` (first beam)."""
-    from fgloc.frontends.base import _se2_exp
+    from fgloc.geometry import exp_along
 
     rng = rng or np.random.default_rng(0)
     fov = np.radians(fov_deg)
     inc = fov / (n_beams - 1)
     t_inc = scan_period * (fov_deg / 360.0) / (n_beams - 1)
     angles = -fov / 2 + inc * np.arange(n_beams)
-    offs = _se2_exp(np.asarray(twist, dtype=float), t_inc * np.arange(n_beams))
+    offs = exp_along(np.asarray(twist, dtype=float), t_inc * np.arange(n_beams))
     poses = compose(pose0[None, :], offs)
     lp = compose(poses, mount.pose[None, :])
     r = m.raycast(lp[:, :2], lp[:, 2] + angles, range_max)

@@ -139,10 +139,7 @@ class LiveSession:
         if serial_url or serial_port is not None:
             self.serial = SerialLink(serial_url, conv, self.runner.push, baudrate=int(sc.get("baudrate", 115200)),
                                      port=serial_port, on_event=ev)
-            s = self.serial
-            self.runner.sources["serial"] = lambda: {**s.parser.stats.as_dict(), "disconnects": s.disconnects,
-                                                     "wrong_wheel_count": s.converter.wrong_wheel_count,
-                                                     "bad_dt": s.converter.bad_dt}
+            self.runner.sources["serial"] = self.serial.counters
         self.laser: SickClient | None = None
         if laser:
             host, port = parse_host_port(laser)
@@ -154,14 +151,7 @@ class LiveSession:
                 align_clock=bool(lc.get("align_clock", True)),
                 stall_timeout_s=float(lc.get("stall_timeout_s", 1.0)), on_event=ev,
             )
-            la = self.laser
-            self.runner.sources["laser"] = lambda: {
-                "scans": la.stats.scans, "malformed": la.stats.malformed,
-                "malformed_by_reason": dict(la.stats.malformed_by_reason),
-                "garbage_bytes": la.framer.stats.garbage_bytes, "truncated": la.framer.stats.truncated,
-                "connects": la.stats.connects, "disconnects": la.stats.disconnects,
-                "scan_gaps": la.stats.scan_counter_gaps, "device_errors": la.stats.device_errors,
-            }
+            self.runner.sources["laser"] = self.laser.counters
         self._t0 = time.monotonic()
         self.closed = False
         self.smoothed: Trajectory | None = None  # Localizer.finish() at close (fixed-lag / batch result)

@@ -122,6 +122,9 @@ class FrameConverter:
         self._pose = np.zeros(3)
         self._last_stamp = -math.inf
 
+    def counters(self) -> dict[str, int]:
+        return {"wrong_wheel_count": self.wrong_wheel_count, "bad_dt": self.bad_dt}
+
     def convert(self, f: SensorFrame, arrival: float) -> list[tuple[str, object]]:
         out: list[tuple[str, object]] = []
         if f.reset:
@@ -195,6 +198,8 @@ class SerialLink:
         self.open_failures = 0
         self.disconnects = 0
         self.connected = False
+        self.internal_errors = 0
+        self._failure: str | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -208,12 +213,43 @@ class SerialLink:
             self._thread.join(timeout)
 
     def feed(self, data: bytes, arrival: float) -> int:
-        """Parse bytes and dispatch messages; returns the number of frames decoded."""
-        frames = self.parser.feed(data)
+        """Parse bytes and dispatch messages; returns the number of frames decoded.
+
+        Never raises: an unexpected exception while parsing a chunk or converting a frame
+        (a bug, not bad input: bad input is counted by the parser and the converter) is
+        counted in ``internal_errors``, reported the first few times, and the stream goes on.
+        """
+        try:
+            frames = self.parser.feed(data)
+        except Exception as e:  # noqa: BLE001 - a parser bug must not stop the serial link
+            self.parser.reset_buffer()
+            self._internal_error("chunk", e)
+            return 0
         for f in frames:
-            for kind, msg in self.converter.convert(f, arrival):
+            try:
+                msgs = self.converter.convert(f, arrival)
+            except Exception as e:  # noqa: BLE001
+                self._internal_error(f"frame seq {f.seq}", e)
+                continue
+            for kind, msg in msgs:
                 self.on_message(kind, msg, arrival)
         return len(frames)
+
+    def _internal_error(self, what: str, e: Exception) -> None:
+        self.internal_errors += 1
+        if self.internal_errors <= 3:
+            self.on_event(f"serial {self.url}: {what} skipped ({type(e).__name__}: {e})")
+        log.debug("serial %s", what, exc_info=True)
+
+    @property
+    def failure(self) -> str | None:
+        """Why the reader thread died (``None`` while it runs or after a clean stop)."""
+        return self._failure
+
+    def counters(self) -> dict[str, Any]:
+        """Every serial counter (parser, converter, link), for the status line and the summary."""
+        return {**self.parser.stats.as_dict(), **self.converter.counters(), "disconnects": self.disconnects,
+                "internal_errors": self.internal_errors, "thread_failure": self._failure}
 
     def _open(self) -> Any:
         if self._port is not None:
@@ -223,6 +259,16 @@ class SerialLink:
         return serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.05)
 
     def _run(self) -> None:
+        try:
+            self.serve()
+        except BaseException as e:  # noqa: BLE001 - recorded and reported: the session must see it
+            self._failure = f"{type(e).__name__}: {e}"
+            self.connected = False
+            self.on_event(f"serial {self.url}: reader thread died ({self._failure})")
+            log.debug("serial reader thread", exc_info=True)
+
+    def serve(self) -> None:
+        """The reader loop (open, read, reopen) until :meth:`stop`; runs in the thread."""
         import serial
 
         backoff = self.backoff_min_s

@@ -167,6 +167,10 @@ class FrameParser:
     def pending(self) -> int:
         return len(self._buf)
 
+    def reset_buffer(self) -> None:
+        """Discard the bytes still waiting for the rest of a frame (counted as garbage)."""
+        self._discard(len(self._buf))
+
     def _discard(self, n: int) -> None:
         if n <= 0:
             return

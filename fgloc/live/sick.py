@@ -27,12 +27,14 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import socket
 import struct
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -160,11 +162,20 @@ class ScanTelegram:
     values: np.ndarray  # raw uint16 values of the distance channel
 
 
-def _hex(tok: bytes, what: str) -> int:
-    try:
-        return int(tok, 16)
-    except ValueError:
-        raise TelegramError("bad_number", f"{what}={tok[:16]!r}") from None
+_HEX_TOKEN = re.compile(rb"[0-9A-Fa-f]{1,8}")
+_U16_RUN = re.compile(rb"(?:[0-9A-Fa-f]{1,4} )*[0-9A-Fa-f]{1,4}")
+
+
+def _uint(tok: bytes, what: str, bits: int = 32) -> int:
+    """A CoLa-A unsigned hex field of at most ``bits`` bits.  Anything else (a sign, ``0x``,
+    ``_``, more than 8 digits, a value wider than the field) is ``bad_number``: Python's
+    ``int(tok, 16)`` alone accepts all of those and returns integers of any size."""
+    if _HEX_TOKEN.fullmatch(tok) is None:
+        raise TelegramError("bad_number", f"{what}={tok[:24]!r}")
+    v = int(tok, 16)
+    if v >> bits:
+        raise TelegramError("bad_number", f"{what}={tok[:24]!r} wider than {bits} bits")
+    return v
 
 
 def _i32(v: int) -> int:
@@ -172,38 +183,54 @@ def _i32(v: int) -> int:
 
 
 def _f32(tok: bytes, what: str) -> float:
-    v = _hex(tok, what)
-    if v >= (1 << 32):
-        raise TelegramError("bad_number", f"{what}={tok[:16]!r}")
+    v = _uint(tok, what, 32)
     f = struct.unpack(">f", v.to_bytes(4, "big"))[0]
     if not math.isfinite(f):
         raise TelegramError("bad_number", f"{what} not finite")
     return float(f)
 
 
+def _u16_values(tok: list[bytes], what: str) -> np.ndarray:
+    """``n`` u16 hex tokens -> int64 array; one regex pass over the joined tokens."""
+    if not tok:
+        return np.zeros(0, dtype=np.int64)
+    joined = b" ".join(tok)
+    if _U16_RUN.fullmatch(joined) is None:
+        raise TelegramError("bad_number", f"{what} data not u16 hex")
+    return np.array([int(t, 16) for t in tok], dtype=np.int64)
+
+
 def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
-    """Parse one LMDscandata telegram (without STX/ETX).  Raises :class:`TelegramError`."""
+    """Parse one LMDscandata telegram (without STX/ETX).
+
+    Raises :class:`TelegramError` (and nothing else) for any malformed input: every
+    number is checked to be unsigned hex no wider than its field, counts are bounded
+    before they are used as indices, the distance channel needs a positive finite scale,
+    a finite offset, a positive angular step and at least one value.
+    """
     tok = payload.split()
     if len(tok) < 2 or tok[1] != b"LMDscandata" or tok[0] not in (b"sSN", b"sRA"):
         raise TelegramError("not_scan", repr(payload[:24]))
     if len(tok) < 21:
         raise TelegramError("truncated", f"{len(tok)} tokens")
     i = 2
-    version = _hex(tok[i], "version")
-    device = _hex(tok[i + 1], "device")
-    serial = _hex(tok[i + 2], "serial")
-    status = (_hex(tok[i + 3], "status"), _hex(tok[i + 4], "status"))
-    tcount = _hex(tok[i + 5], "telegram_counter")
-    scount = _hex(tok[i + 6], "scan_counter")
-    t_start = _hex(tok[i + 7], "time_since_startup")
-    t_tx = _hex(tok[i + 8], "time_of_transmission")
-    # inputs(2) outputs(2) reserved(1)
+    version = _uint(tok[i], "version", 16)
+    device = _uint(tok[i + 1], "device", 16)
+    serial = _uint(tok[i + 2], "serial", 32)
+    status = (_uint(tok[i + 3], "status", 8), _uint(tok[i + 4], "status", 8))
+    tcount = _uint(tok[i + 5], "telegram_counter", 16)
+    scount = _uint(tok[i + 6], "scan_counter", 16)
+    t_start = _uint(tok[i + 7], "time_since_startup", 32)
+    t_tx = _uint(tok[i + 8], "time_of_transmission", 32)
+    # inputs(2) outputs(2) reserved / layer angle(1)
     for k in range(9, 14):
-        _hex(tok[i + k], "io")
-    scan_freq = _hex(tok[i + 14], "scan_freq") / 100.0
-    meas_freq = _hex(tok[i + 15], "meas_freq") * 100.0
+        _uint(tok[i + k], "io", 16)
+    scan_freq = _uint(tok[i + 14], "scan_freq", 32) / 100.0
+    meas_freq = _uint(tok[i + 15], "meas_freq", 32) * 100.0
     i += 16
-    n_enc = _hex(tok[i], "n_encoders")
+    n_enc = _uint(tok[i], "n_encoders", 16)
+    if n_enc > 8:
+        raise TelegramError("bad_count", f"{n_enc} encoders")
     i += 1 + 2 * n_enc
     if i >= len(tok):
         raise TelegramError("truncated", "after encoders")
@@ -211,7 +238,7 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
     for _bits in (16, 8):
         if i >= len(tok):
             raise TelegramError("truncated", "channel count")
-        n_ch = _hex(tok[i], "n_channels")
+        n_ch = _uint(tok[i], "n_channels", 16)
         i += 1
         if n_ch > 8:
             raise TelegramError("bad_count", f"{n_ch} channels")
@@ -221,23 +248,20 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
             name = tok[i].decode("ascii", "replace")
             scale = _f32(tok[i + 1], "scale")
             offset = _f32(tok[i + 2], "offset")
-            start = _i32(_hex(tok[i + 3], "start_angle"))
-            step = _hex(tok[i + 4], "step")
-            n = _hex(tok[i + 5], "n_values")
+            start = _i32(_uint(tok[i + 3], "start_angle", 32))
+            step = _uint(tok[i + 4], "step", 16)
+            n = _uint(tok[i + 5], "n_values", 16)
             i += 6
             if n > 10000:
                 raise TelegramError("bad_count", f"{n} values")
             if i + n > len(tok):
                 raise TelegramError("wrong_count", f"{name}: {n} announced, {len(tok) - i} left")
             if name == channel and found is None:
-                try:
-                    vals = np.array([int(t, 16) for t in tok[i : i + n]], dtype=np.int64)
-                except ValueError:
-                    raise TelegramError("bad_number", f"{name} data") from None
-                if n and (vals.max() > 0xFFFF or vals.min() < 0):
-                    raise TelegramError("bad_number", f"{name} value out of 16 bit range")
-                if step == 0 or scale <= 0:
-                    raise TelegramError("bad_number", "zero step or scale")
+                if n == 0:
+                    raise TelegramError("bad_count", f"{name}: no values")
+                if step == 0 or not scale > 0:
+                    raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
+                vals = _u16_values(tok[i : i + n], name)
                 found = ScanTelegram(
                     command=tok[0].decode(),
                     version=version,
@@ -408,6 +432,7 @@ class SickClient:
         self._t_ext_tx = 0
         self._last_tx: int | None = None
         self._last_scan_counter: int | None = None
+        self._failure: str | None = None
 
     # -- lifecycle
     def start(self) -> None:
@@ -427,7 +452,23 @@ class SickClient:
 
     # -- processing (also used directly by tests)
     def handle_payload(self, payload: bytes, arrival: float) -> LaserScan | None:
-        """Process one de-framed telegram; returns the scan (and calls on_scan) if valid."""
+        """Process one de-framed telegram; returns the scan (and calls on_scan) if valid.
+
+        Never raises: a malformed telegram is counted per reason (``stats.malformed_by_reason``);
+        an unexpected exception while decoding one (a parser bug) is counted as
+        ``internal_error`` and reported through ``on_event`` (the first few times), and the
+        stream goes on with the next telegram.
+        """
+        try:
+            return self._handle(payload, arrival)
+        except Exception as e:  # noqa: BLE001 - one bad telegram must never stop the laser
+            self.stats.count_malformed("internal_error")
+            if self.stats.malformed_by_reason["internal_error"] <= 3:
+                self.on_event(f"laser {self.host}:{self.port}: telegram skipped ({type(e).__name__}: {e})")
+            log.debug("telegram %r", payload[:80], exc_info=True)
+            return None
+
+    def _handle(self, payload: bytes, arrival: float) -> LaserScan | None:
         head = payload[:16]
         if not (head.startswith(b"sSN LMDscandata") or head.startswith(b"sRA LMDscandata")):
             self.stats.other_telegrams += 1
@@ -465,7 +506,32 @@ class SickClient:
         self.on_scan(scan, arrival)
         return scan
 
+    @property
+    def failure(self) -> str | None:
+        """Why the client thread died (``None`` while it runs or after a clean stop)."""
+        return self._failure
+
+    def counters(self) -> dict[str, Any]:
+        """Every laser counter, for the status line and the summary."""
+        st = self.stats
+        return {
+            "scans": st.scans, "malformed": st.malformed, "malformed_by_reason": dict(st.malformed_by_reason),
+            "garbage_bytes": self.framer.stats.garbage_bytes, "truncated": self.framer.stats.truncated,
+            "connects": st.connects, "disconnects": st.disconnects, "scan_gaps": st.scan_counter_gaps,
+            "device_errors": st.device_errors, "thread_failure": self._failure,
+        }
+
     def _run(self) -> None:
+        try:
+            self.serve()
+        except BaseException as e:  # noqa: BLE001 - recorded and reported: the session must see it
+            self._failure = f"{type(e).__name__}: {e}"
+            self.connected = False
+            self.on_event(f"laser {self.host}:{self.port}: client thread died ({self._failure})")
+            log.debug("laser client thread", exc_info=True)
+
+    def serve(self) -> None:
+        """The client loop (connect, stream, reconnect) until :meth:`stop`; runs in the thread."""
         backoff = self.backoff_min_s
         while not self._stop.is_set():
             try:

@@ -129,3 +129,52 @@ def test_parse_errors_are_typed():
     with pytest.raises(TelegramError) as e:
         parse_lmdscandata(b"sEA LMDscandata 1")
     assert e.value.reason == "not_scan"
+
+
+# --------------------------------------------------------------------------- issue 12 item 8
+# One telegram with a negative scale, negative counts or an over-long hex field raised
+# OverflowError / IndexError / ValueError out of the parser and killed the client thread.
+
+NASTY = [b"-1", b"-3F800000", b"-5", b"123456789ABCDEF01234", b"FFFFFFFFF", b"0x10", b"+5", b"1_0", b"G",
+         b"BF800000", b"7F800000", b"7FC00000", b"0", b"FFFF", b"FFFFFFFF", b"10000"]
+
+
+def _small_telegram(n=10):
+    r = np.linspace(1.0, 3.0, n).astype(np.float32)
+    s = LaserScan(stamp=0.0, angle_min=math.radians(-135), angle_increment=math.radians(0.5), range_min=0.05,
+                  range_max=50.0, ranges=r, scan_time=0.04, time_increment=1 / 18000)
+    return encode_lmdscandata(s, 1, 1, 100, 200)
+
+
+@pytest.mark.parametrize("index, token", [(21, b"-3F800000"), (21, b"BF800000"), (25, b"-5"), (18, b"-1"),
+                                          (19, b"-1"), (24, b"-1"), (26, b"123456789ABCDEF012345"),
+                                          (9, b"123456789ABCDEF01234"), (27, b"-1"), (27, b"10000")])
+def test_reported_overflow_telegrams_are_typed_errors(index, token):
+    tok = _small_telegram().split(b" ")
+    tok[index] = token
+    with pytest.raises(TelegramError):
+        parse_lmdscandata(b" ".join(tok))
+
+
+def test_every_token_replaced_by_nasty_values_never_escapes():
+    """Each token of a valid telegram replaced by each nasty token: the client counts or accepts
+    every one and never raises; an accepted one has sane geometry."""
+    good = _small_telegram()
+    tok = good.split(b" ")
+    scans: list[LaserScan] = []
+    client = SickClient("127.0.0.1", 1, on_scan=lambda s, t: scans.append(s), align_clock=False)
+    n = 0
+    for i in range(len(tok)):
+        for bad in NASTY:
+            t = list(tok)
+            t[i] = bad
+            client.handle_payload(b" ".join(t), 1000.0 + n * 0.04)
+            n += 1
+    st = client.stats
+    assert st.scans + st.malformed + st.other_telegrams == n
+    assert st.malformed > 0 and st.scans > 0
+    for s in scans:
+        assert s.angle_increment > 0 and len(s.ranges) == 10
+        fin = s.ranges[np.isfinite(s.ranges)]
+        assert np.all(fin >= 0)
+    assert "internal_error" not in st.malformed_by_reason  # all caught by the parser's own checks

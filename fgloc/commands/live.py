@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import threading
 from pathlib import Path
 
 import typer
+
+EXIT_THREAD_DIED = 1  # a sensor thread died: the session stopped (the summary is still printed)
 
 
 def register(app: typer.Typer) -> None:
@@ -41,6 +42,7 @@ def register(app: typer.Typer) -> None:
 
         from fgloc.errors import ConfigError
         from fgloc.live.app import LiveSession, load_config
+        from fgloc.live.publish import dumps
         from fgloc.maps import load_map
 
         if not serial and not laser:
@@ -95,9 +97,15 @@ def register(app: typer.Typer) -> None:
         if threading.current_thread() is threading.main_thread():
             for s in (signal.SIGINT, signal.SIGTERM):
                 old[s] = signal.signal(s, on_signal)
+        def dead_workers() -> list[str]:
+            """Sensor threads that died (a bug: bad input is counted, never fatal)."""
+            return [f"{name} thread died ({w.failure})" for name, w in (("serial", session.serial),
+                                                                         ("laser", session.laser))
+                    if w is not None and w.failure]
+
         try:
             session.start()
-            session.runner.run(duration=duration)
+            session.runner.run(duration=duration, until=lambda: bool(dead_workers()))
         finally:
             summary = session.close()
             for s, h in old.items():
@@ -120,5 +128,9 @@ def register(app: typer.Typer) -> None:
             "health": summary.health,
             "counters": summary.counters,
             "record": str(record) if record else None,
+            "failed_threads": dead_workers(),
         }
-        print(json.dumps(report, default=float, indent=1))
+        print(dumps(report, indent=1))  # standard JSON: unknown numbers (NaN) are null
+        if report["failed_threads"]:
+            sys.stderr.write(f"fgloc live: error: {'; '.join(report['failed_threads'])}; stopped\n")
+            raise SystemExit(EXIT_THREAD_DIED)

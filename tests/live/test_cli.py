@@ -1,0 +1,51 @@
+"""`fgloc live` in-process: exit status when a sensor thread dies, strict JSON summary."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+from fgloc.cli import main
+from fgloc.live.sick import SickClient
+
+
+def _strict_json(text: str):
+    def no_constant(name: str):
+        raise ValueError(f"not JSON: {name}")
+
+    return json.loads(text, parse_constant=no_constant)
+
+
+def test_dead_laser_thread_is_reported_and_exit_is_nonzero(monkeypatch, capsys):
+    """Issue 12 item 8: a worker thread that dies (here: a forced bug in the client loop)
+    stops `fgloc live` at once with a one-line report and a non-zero exit status."""
+
+    def broken_serve(self):
+        raise RuntimeError("forced failure")
+
+    monkeypatch.setattr(SickClient, "serve", broken_serve)
+    t0 = time.monotonic()
+    code = main(["live", "--laser", "127.0.0.1:9", "--backend", "ekf", "--duration", "20", "--quiet"])
+    elapsed = time.monotonic() - t0
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert elapsed < 10.0  # stopped when the thread died, not after --duration
+    assert "laser thread died (RuntimeError: forced failure)" in err
+    report = _strict_json(out)
+    assert report["failed_threads"] == ["laser thread died (RuntimeError: forced failure)"]
+    assert report["counters"]["laser"]["thread_failure"] == "RuntimeError: forced failure"
+
+
+@pytest.mark.parametrize("flag", ["--serial", "--laser"])
+def test_summary_is_strict_json_with_an_absent_sensor(flag, capsys):
+    """Issue 12 item 7: no messages at all -> latency percentiles are unknown: null, not NaN."""
+    target = "loop://" if flag == "--serial" else "127.0.0.1:9"  # port 9: nothing listens
+    code = main(["live", flag, target, "--backend", "ekf", "--duration", "0.5", "--quiet"])
+    out, _ = capsys.readouterr()
+    assert code == 0
+    report = _strict_json(out)
+    assert report["poses"] == 0
+    assert report["latency_ms"] == {"p50": None, "p99": None}
+    assert report["failed_threads"] == []

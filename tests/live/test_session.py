@@ -124,3 +124,39 @@ def test_cli_sigint_closes_recording(tmp_path):
     assert topics.count("/scan") == report["counters"]["laser"]["scans"]
     lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
     assert len(lines) == report["poses"] > 20
+
+
+def test_udp_publisher_binds_to_the_destination_interface():
+    """Issue 12 item 14: the pose socket was bound to 0.0.0.0 (every interface)."""
+    from fgloc.live.publish import UdpPublisher
+    from fgloc.types import PoseFix
+
+    udp = _udp_listener()
+    pub = UdpPublisher([f"udp://127.0.0.1:{udp.getsockname()[1]}"])
+    assert [a for a, _ in pub.local_addresses()] == ["127.0.0.1"]
+    pub.pose(PoseFix(1.0, np.array([1.0, 2.0, 0.5]), np.eye(3) * np.nan))
+    time.sleep(0.05)
+    data, src = udp.recvfrom(65536)
+    assert src == pub.local_addresses()[0]
+    msg = json.loads(data)
+    assert msg["x"] == 1.0 and msg["cov"] == [None] * 9  # NaN covariance -> null
+    pub.close()
+
+
+def test_udp_publisher_ipv6_loopback():
+    import pytest
+
+    from fgloc.live.publish import UdpPublisher
+
+    try:
+        s = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+        s.bind(("::1", 0))
+    except OSError:
+        pytest.skip("no IPv6 loopback on this machine")
+    pub = UdpPublisher([f"udp://[::1]:{s.getsockname()[1]}"])
+    assert [a for a, _ in pub.local_addresses()] == ["::1"]
+    pub.status(1.0, {"scan": "ok"}, {"n": float("inf")})
+    time.sleep(0.05)
+    assert json.loads(s.recv(65536))["counters"] == {"n": None}
+    pub.close()
+    s.close()

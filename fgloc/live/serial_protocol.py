@@ -32,6 +32,8 @@ FLAG_GYRO = 0x04  # gyro rate is valid
 FLAG_COMPASS_FAULT = 0x08  # compass reports an error (heading not trusted)
 
 INT16_ABSENT = 0x7FFF  # heading / gyro field value meaning "not present"
+HEADING_MIN_DDEG = -1800  # heading range: -1800..1799 (signed yaw) or 0..3599 (a 0-360 deg bearing)
+HEADING_MAX_DDEG = 3599
 
 SEQ_MOD = 1 << 16
 T_MOD = 1 << 32
@@ -141,6 +143,8 @@ class ParserStats:
     seq_resets: int = 0  # sequence jumped backwards (MCU reboot) -> not counted as drops
     seq_wraps: int = 0
     time_wraps: int = 0
+    time_backwards: int = 0  # the MCU clock stepped back (not a u32 wrap): unwrapped time steps back too
+    bad_heading: int = 0  # a fresh heading outside -1800..3599: heading dropped, the rest of the frame kept
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -229,8 +233,7 @@ class FrameParser:
     def _sensor_len_ok(plen: int) -> bool:
         return plen in (sensor_payload_len(2), sensor_payload_len(4))
 
-    @staticmethod
-    def _decode_sensor(buf: bytearray, plen: int) -> SensorFrame | None:
+    def _decode_sensor(self, buf: bytearray, plen: int) -> SensorFrame | None:
         seq, t_us = struct.unpack_from("<HI", buf, 4)
         n = buf[HEADER_LEN]
         if n not in (2, 4) or plen != sensor_payload_len(n):
@@ -238,11 +241,16 @@ class FrameParser:
         vals = struct.unpack_from(f"<{n}ihhB", buf, HEADER_LEN + 1)
         counts = tuple(int(v) for v in vals[:n])
         h, g, flags = vals[n], vals[n + 1], vals[n + 2]
+        heading = None if h == INT16_ABSENT else int(h)
+        if heading is not None and not HEADING_MIN_DDEG <= heading <= HEADING_MAX_DDEG:
+            heading = None
+            if flags & FLAG_HEADING:
+                self.stats.bad_heading += 1
         return SensorFrame(
             seq=seq,
             t_us=t_us,
             counts=counts,
-            heading_ddeg=None if h == INT16_ABSENT else int(h),
+            heading_ddeg=heading,
             gyro_cdps=None if (g == INT16_ABSENT or not flags & FLAG_GYRO) else int(g),
             flags=int(flags),
         )
@@ -267,8 +275,13 @@ class FrameParser:
         if self._last_t is None:
             self._t_ext = f.t_us
         else:
-            dt = (f.t_us - self._last_t) % T_MOD
-            if f.t_us < self._last_t:
+            # signed modular difference: a step of less than half the u32 range forward is
+            # time going on (a wrap if the raw value went down), a step back is the clock
+            # stepping back (jitter or a resync on the MCU), not a 71.6 min wrap
+            dt = ((f.t_us - self._last_t + T_MOD // 2) % T_MOD) - T_MOD // 2
+            if dt < 0:
+                self.stats.time_backwards += 1
+            elif f.t_us < self._last_t:
                 self.stats.time_wraps += 1
             self._t_ext += dt
         self._last_t = f.t_us

@@ -146,3 +146,35 @@ def test_fuzz_pure_random_bytes_never_crash():
     s = p.stats
     assert s.bytes_in == 100_000
     assert s.frame_bytes_ok + s.garbage_bytes + p.pending == s.bytes_in
+
+
+# --------------------------------------------------------------------------- issue 12 item 13
+
+
+def test_heading_outside_range_rejected_and_counted():
+    """A CRC-valid frame whose heading is outside -1800..3599 (0.1 deg) keeps its counts but
+    loses the heading, counted ``bad_heading``; the extremes of the range are accepted."""
+    p = FrameParser()
+    bad = [3600, -1801, 5000, 0x7FFE, -32768]
+    good = [-1800, 0, 1799, 3599]
+    data = b"".join(encode_sensor_frame(k, k * 10_000, [k, 2 * k], h) for k, h in enumerate(bad + good))
+    got = p.feed(data)
+    assert len(got) == len(bad) + len(good) and p.stats.bad_heading == len(bad)
+    assert [g.heading_ddeg for g in got] == [None] * len(bad) + good
+    assert not any(g.has_heading for g in got[: len(bad)]) and all(g.has_heading for g in got[len(bad):])
+    assert [g.counts for g in got] == [(k, 2 * k) for k in range(len(got))]  # the counts still count
+
+
+def test_mcu_clock_step_back_is_not_a_71_minute_wrap():
+    """A 1 ms step back of the MCU clock is a backwards step (counted), not +2^32 us; a real
+    wrap (u32 overflow) still unwraps forward."""
+    p = FrameParser()
+    t = [1_000_000, 1_010_000, 1_009_000, 1_019_000]
+    got = p.feed(b"".join(encode_sensor_frame(k, tk, [0, 0], None) for k, tk in enumerate(t)))
+    assert [g.t_us_unwrapped - got[0].t_us_unwrapped for g in got] == [0, 10_000, 9_000, 19_000]
+    assert p.stats.time_backwards == 1 and p.stats.time_wraps == 0
+    p2 = FrameParser()
+    t2 = [(1 << 32) - 5_000, 5_000]
+    got2 = p2.feed(b"".join(encode_sensor_frame(k, tk, [0, 0], None) for k, tk in enumerate(t2)))
+    assert got2[1].t_us_unwrapped - got2[0].t_us_unwrapped == 10_000
+    assert p2.stats.time_wraps == 1 and p2.stats.time_backwards == 0

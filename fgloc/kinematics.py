@@ -15,6 +15,11 @@ from above, ``lx`` half the wheelbase (front-rear), ``ly`` half the track
     w_RR = (vx - vy + (lx + ly) wz) / r
 
 Differential drive order: ``LEFT, RIGHT``; ``ly`` is half the track width.
+
+Skid steer (Husky, Jackal, most outdoor bases): four wheels in ``FL, FR, RL, RR`` order, the
+two of a side driven together, differential-drive kinematics on the wheels' mean; the
+wheels scrub sideways when the base turns, so the yaw rate their speeds imply (with the
+geometric track) is larger than the true one (the simulator's ``scrub`` factor).
 """
 
 from __future__ import annotations
@@ -84,7 +89,39 @@ class DiffDriveKinematics:
         return np.stack([vx, np.zeros_like(vx), wz], axis=-1)
 
 
-Kinematics = MecanumKinematics | DiffDriveKinematics
+@dataclass(frozen=True)
+class SkidSteerKinematics:
+    """Four wheels, two per side turning together; ``vy`` is always 0 (FL, FR, RL, RR order)."""
+
+    wheel_radius_m: float
+    half_track_m: float
+    half_wheelbase_m: float = 0.0
+    n_wheels: int = 4
+
+    def inverse(self, twist: ArrayLike) -> FloatArray:
+        """Body twist ``(..., 3)`` -> wheel speeds ``(..., 4)`` rad/s (no scrub); vy is ignored."""
+        t = np.asarray(twist, dtype=float)
+        vx, wz = t[..., VX], t[..., WZ]
+        left = (vx - self.half_track_m * wz) / self.wheel_radius_m
+        right = (vx + self.half_track_m * wz) / self.wheel_radius_m
+        return np.stack([left, right, left, right], axis=-1)
+
+    def forward(self, wheel_speeds: ArrayLike) -> FloatArray:
+        """Wheel speeds ``(..., 4)`` rad/s -> body twist ``(..., 3)`` (each side's mean)."""
+        w = np.asarray(wheel_speeds, dtype=float)
+        r = self.wheel_radius_m
+        left = 0.5 * (w[..., FL] + w[..., RL])
+        right = 0.5 * (w[..., FR] + w[..., RR])
+        vx = r / 2 * (left + right)
+        wz = r / (2 * self.half_track_m) * (right - left)
+        return np.stack([vx, np.zeros_like(vx), wz], axis=-1)
+
+
+Kinematics = MecanumKinematics | DiffDriveKinematics | SkidSteerKinematics
+
+#: drive names that have a lateral velocity (the omni state of the back-ends)
+HOLONOMIC_DRIVES = ("mecanum", "omni", "omnidirectional", "holonomic")
+
 
 
 @dataclass(frozen=True)
@@ -118,7 +155,7 @@ def counts_to_twist(kin: Kinematics, enc: QuadratureEncoder, delta_counts: Array
 
 
 def make_kinematics(cfg: dict) -> Kinematics:
-    """Build kinematics from a config dict ``{drive: mecanum|diff, wheel_radius_m, half_wheelbase_m, half_track_m}``."""
+    """Kinematics from ``{drive: mecanum|diff|skid, wheel_radius_m, half_wheelbase_m, half_track_m}``."""
     drive = str(cfg.get("drive", "mecanum")).lower()
     try:
         r = float(cfg["wheel_radius_m"])
@@ -127,6 +164,8 @@ def make_kinematics(cfg: dict) -> Kinematics:
             return MecanumKinematics(r, float(cfg["half_wheelbase_m"]), ly)
         if drive in ("diff", "differential", "diff_drive"):
             return DiffDriveKinematics(r, ly)
+        if drive in ("skid", "skid_steer", "skid-steer"):
+            return SkidSteerKinematics(r, ly, float(cfg.get("half_wheelbase_m", 0.0)))
     except KeyError as e:
         raise ConfigError(f"kinematics config lacks {e.args[0]}") from None
-    raise ConfigError(f"unknown drive '{drive}' (mecanum or diff)")
+    raise ConfigError(f"unknown drive '{drive}' (mecanum, diff or skid)")

@@ -58,6 +58,28 @@ class CompassHeading:
 
 
 @dataclass
+class Imu:
+    """A whole ``sensor_msgs/Imu`` in its own frame ``frame_id`` (REP 145), nothing dropped.
+
+    ``orientation_xyzw`` ``(4,)`` is the sensor frame's orientation in the IMU's world frame
+    (ENU, north-referenced: offset from ``map``), ``angular_velocity_radps`` ``(3,)`` the body
+    rates about the sensor's own x, y, z axes, ``linear_acceleration_mps2`` ``(3,)``.  Each
+    ``*_cov`` is the message's 3x3 covariance, or None when all zero ("unknown").  A field the
+    sensor does not provide (covariance element 0 == -1) is None.  The mount (``/tf_static``
+    ``base_link -> frame_id``) rotates both into ``base_link``.
+    """
+
+    stamp: float
+    orientation_xyzw: FloatArray | None
+    angular_velocity_radps: FloatArray | None
+    orientation_cov: FloatArray | None = None
+    angular_velocity_cov: FloatArray | None = None
+    linear_acceleration_mps2: FloatArray | None = None
+    linear_acceleration_cov: FloatArray | None = None
+    frame_id: str = "imu_link"
+
+
+@dataclass
 class LaserScan:
     """A planar scan (``sensor_msgs/LaserScan``), REP 117 conventions.
 
@@ -119,6 +141,18 @@ class StaticTransform:
     child: str
     pose: FloatArray
     z: float = 0.0
+
+
+@dataclass
+class Transform3D(StaticTransform):
+    """A static transform with its whole 3-D rotation ``rotation_xyzw`` ``[qx, qy, qz, qw]``.
+
+    Still a :class:`StaticTransform` (``pose`` holds ``[x, y, yaw]`` of the same rotation,
+    ``z`` the height), so code that knows only the planar transform keeps working; an IMU
+    mounted upside down or turned about x needs the whole rotation.
+    """
+
+    rotation_xyzw: FloatArray | None = None
 
 
 @dataclass

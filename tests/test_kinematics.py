@@ -47,3 +47,14 @@ def test_make_kinematics_errors():
         make_kinematics({"drive": "mecanum", "wheel_radius_m": 0.1, "half_track_m": 0.2})
     with pytest.raises(ConfigError, match="unknown drive"):
         make_kinematics({"drive": "tank", "wheel_radius_m": 0.1, "half_track_m": 0.2})
+
+
+def test_skid_steer_is_diff_drive_on_each_sides_mean():
+    from fgloc.kinematics import SkidSteerKinematics
+
+    k = make_kinematics({"drive": "skid", "wheel_radius_m": 0.165, "half_track_m": 0.28, "half_wheelbase_m": 0.26})
+    assert isinstance(k, SkidSteerKinematics) and k.n_wheels == 4
+    tw = np.array([[0.7, 0.0, 0.4], [-0.2, 0.0, -1.0]])
+    assert np.allclose(k.forward(k.inverse(tw)), tw)
+    w = k.inverse([0.0, 0.0, 1.0])  # turning left in place: left wheels back, right forward
+    assert w[0] == w[2] == pytest.approx(-0.28 / 0.165) and w[1] == w[3] == pytest.approx(0.28 / 0.165)

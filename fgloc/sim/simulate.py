@@ -31,6 +31,26 @@ true motion is sampled at 500 Hz (wheel angles are integrated at that rate);
 ``/ground_truth`` (nav_msgs/Odometry, pose in ``map``) and ``SimResult.ground_truth`` are
 at ``ground_truth_rate_hz`` (100 Hz).  Stamps start at 0 s.
 
+Robots beyond the paper's (every key in the scenario):
+
+* ``drive: skid`` - a four-wheel skid-steer base with differential-drive kinematics whose
+  wheels scrub when it turns: ``odom.scrub_factor: [lo, hi]`` makes the odometry's yaw rate
+  the true one times a factor growing from ``lo`` (driving straight) to ``hi`` (turning at
+  ``odom.scrub_ref_radps`` or faster), while the messages keep claiming ``twist_sigma``;
+  ``odom.speed_scale`` makes every wheel report that much more speed than the ground moves;
+* ``imu:`` - a ``sensor_msgs/Imu`` (:class:`~fgloc.types.Imu`) instead of the compass: a
+  9-axis unit mounted with ``mount_rpy_deg`` (``/tf_static`` base_link -> ``frame_id`` as a
+  :class:`~fgloc.types.Transform3D`), orientation = base orientation + north offset +
+  distortion + noise rotated through the mount, angular velocity in its own axes with a gyro
+  bias about base_link z, covariances in its own frame; ``burst_period_s`` delivers the
+  messages in bursts (their arrival order, the stamps stay true);
+* ``laser.stamp_delay_s`` stamps every scan that much after it was measured (a late driver);
+* ``turn_radii_m`` drives the corners on arcs instead of stop-turn-go; ``strafe_legs`` drives
+  those legs sideways keeping the heading (mecanum).
+
+``SimResult.messages`` is in arrival order (the stamp, unless a sensor is delivered late or
+in bursts).
+
 Faults: wheel slip (the wheels turn ``fraction`` faster than the ground moves),
 compass disturbance (an added heading offset), laser blackout (no scans), kidnapping
 (a jump of the true pose that odometry does not see), unmapped moving obstacles
@@ -47,15 +67,16 @@ from typing import Any
 
 import numpy as np
 import yaml
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from fgloc.backends.imu import imu_message
 from fgloc.errors import ConfigError
 from fgloc.geometry import compose, interpolate_poses, inverse, wrap_angle
 from fgloc.kinematics import QuadratureEncoder, make_kinematics
 from fgloc.maps import FREE, OCCUPIED, OccupancyMap, load_map
 from fgloc.sim.motion import Plan, plan_route
 from fgloc.sim.world import PAPER_ROUTE, World, paper_hall
-from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, StaticTransform, Trajectory, Transform3D
 
 FloatArray = NDArray[np.float64]
 
@@ -75,17 +96,37 @@ DEFAULT_SCENARIO: dict[str, Any] = {
     "accel_mps2": 0.5,
     "yaw_rate_radps": 0.8,
     "yaw_accel_radps2": 1.5,
+    "turn_radii_m": None,            # corners on arcs of this radius (one value or one per corner); None: stop-turn-go
+    "strafe_legs": [],               # legs driven sideways keeping the heading (mecanum)
     "robot": {"wheel_radius_m": 0.076, "half_wheelbase_m": 0.25, "half_track_m": 0.28},
-    "odom": {"rate_hz": 50.0, "pulses_per_rev": 500, "wheel_radius_error": 0.003, "twist_sigma": [0.01, 0.01, 0.03]},
+    "odom": {"rate_hz": 50.0, "pulses_per_rev": 500, "wheel_radius_error": 0.003, "twist_sigma": [0.01, 0.01, 0.03],
+             "scrub_factor": None, "scrub_ref_radps": 0.8, "speed_scale": 1.0},
     # distortion_deg: amplitude of a smooth position-dependent heading error (indoor magnetic
     # fields from steel and cables bend the compass by a degree or more).
     "compass": {"rate_hz": 20.0, "offset_deg": None, "sigma_deg": 0.3, "distortion_deg": 1.0,
                 "gyro_sigma_radps": 0.005, "gyro_bias_radps": 0.002},
     "laser": {"mount": [0.25, 0.03, 0.0], "rate_hz": 25.0, "jitter": 0.05, "fov_deg": 270.0, "step_deg": 0.5,
               "range_min_m": 0.5, "range_max_m": 50.0, "range_sigma_m": 0.004, "range_sigma_far_m": 0.005,
-              "angle_sigma_deg": 0.02, "enabled": True},
+              "angle_sigma_deg": 0.02, "enabled": True, "stamp_delay_s": 0.0},
+    "imu": None,                     # a sensor_msgs/Imu section (see IMU_DEFAULTS) replaces the compass
     "ground_truth_rate_hz": 100.0,
     "faults": {},
+}
+
+
+IMU_DEFAULTS: dict[str, Any] = {
+    "rate_hz": 100.0,
+    "frame_id": "imu_link",
+    "mount_xyz_m": [0.0, 0.0, 0.1],
+    "mount_rpy_deg": [0.0, 0.0, 0.0],   # base_link -> imu_link, roll pitch yaw (fixed axes x, y, z)
+    "orientation": True,                 # 9-axis (magnetometer): orientation published; false: -1 covariance
+    "offset_deg": None,                  # IMU north vs map x axis; None: seeded 5-25 deg either sign
+    "yaw_sigma_deg": 0.5,
+    "distortion_deg": 1.0,
+    "roll_pitch_sigma_deg": 0.1,
+    "gyro_sigma_radps": 0.005,           # per axis, white
+    "gyro_bias_radps": 0.002,            # about base_link z
+    "burst_period_s": 0.0,               # > 0: delivered in bursts at the end of each period
 }
 
 
@@ -100,6 +141,7 @@ class SimResult:
     compass_offset_rad: float
     robot: dict
     scenario: dict = field(default_factory=dict)
+    imu_mount: Transform3D | None = None
 
     def topic(self, name: str) -> list:
         """All messages of one topic, in time order."""
@@ -188,8 +230,13 @@ def _true_motion(sc: dict) -> Plan:
     loops = int(sc.get("loops", 1))
     if loops > 1:
         route = np.vstack([route] + [route[1:]] * (loops - 1))
+    radii = sc.get("turn_radii_m")
+    n0 = len(sc["route"]) - 2  # corners of one loop
+    if radii is not None and np.ndim(radii) > 0 and loops > 1 and len(radii) == n0:
+        radii = (list(radii) + [0.0]) * (loops - 1) + list(radii)  # a stop where a loop closes
     plan = plan_route(route, float(sc["speed_mps"]), float(sc["accel_mps2"]), float(sc["yaw_rate_radps"]),
-                      float(sc["yaw_accel_radps2"]), initial_yaw=sc.get("initial_yaw"))
+                      float(sc["yaw_accel_radps2"]), initial_yaw=sc.get("initial_yaw"),
+                      turn_radii_m=radii, strafe_legs=tuple(sc.get("strafe_legs") or ()))
     kid = sc.get("faults", {}).get("kidnap")
     if kid:
         tk = float(kid["time"])
@@ -221,7 +268,17 @@ def _in_window(t: FloatArray, w: dict | None) -> NDArray[np.bool_]:
 def _odometry(sc: dict, plan: Plan, rng: np.random.Generator) -> list[tuple[str, object]]:
     kin = make_kinematics({"drive": sc["drive"], **sc["robot"]})
     enc = QuadratureEncoder(int(sc["odom"]["pulses_per_rev"]))
-    wheel = kin.inverse(plan.twist)  # rad/s with the nominal radius
+    twist = plan.twist
+    scrub = sc["odom"].get("scrub_factor")
+    if scrub is not None:
+        # skid steer: the wheels turn further than the base does (they scrub sideways), more so
+        # the faster it turns
+        lo, hi = (float(scrub), float(scrub)) if np.ndim(scrub) == 0 else (float(scrub[0]), float(scrub[1]))
+        ref = float(sc["odom"].get("scrub_ref_radps", 0.8))
+        f = lo + (hi - lo) * np.clip(np.abs(twist[:, 2]) / ref, 0.0, 1.0)
+        twist = twist.copy()
+        twist[:, 2] = twist[:, 2] * f
+    wheel = kin.inverse(twist) * float(sc["odom"].get("speed_scale", 1.0))  # rad/s with the nominal radius
     slip = sc.get("faults", {}).get("wheel_slip")
     if slip:
         wheel = wheel * np.where(_in_window(plan.t, slip), 1.0 + float(slip["fraction"]), 1.0)[:, None]
@@ -274,6 +331,71 @@ def _compass(sc: dict, plan: Plan, offset: float, rng: np.random.Generator) -> l
                                     float(c["gyro_sigma_radps"]) ** 2)) for k in range(len(t))]
 
 
+def scrub_factor(sc: dict, wz_radps: ArrayLike) -> FloatArray:
+    """The simulated skid-steer odometry's yaw-rate factor at true yaw rate ``wz_radps`` (1 without scrub)."""
+    w = np.abs(np.asarray(wz_radps, dtype=float))
+    scrub = sc["odom"].get("scrub_factor")
+    if scrub is None:
+        return np.ones_like(w)
+    lo, hi = (float(scrub), float(scrub)) if np.ndim(scrub) == 0 else (float(scrub[0]), float(scrub[1]))
+    return np.asarray(lo + (hi - lo) * np.clip(w / float(sc["odom"].get("scrub_ref_radps", 0.8)), 0.0, 1.0))
+
+
+def imu_mount_transform(sc: dict) -> Transform3D:
+    """``/tf_static`` base_link -> imu frame of the scenario's IMU."""
+    from scipy.spatial.transform import Rotation
+
+    c = {**IMU_DEFAULTS, **(sc.get("imu") or {})}
+    rot = Rotation.from_euler("xyz", np.deg2rad(np.asarray(c["mount_rpy_deg"], dtype=float)))
+    R = rot.as_matrix()
+    xyz = np.asarray(c["mount_xyz_m"], dtype=float)
+    return Transform3D("base_link", str(c["frame_id"]), np.array([xyz[0], xyz[1], float(np.arctan2(R[1, 0], R[0, 0]))]),
+                       z=float(xyz[2]), rotation_xyzw=np.asarray(rot.as_quat(), dtype=float))
+
+
+def _imu(sc: dict, plan: Plan, offset: float, mount: Transform3D,
+         rng: np.random.Generator) -> list[tuple[float, str, object]]:
+    """``sensor_msgs/Imu`` messages ``(arrival, topic, msg)`` of a 9-axis IMU mounted with ``mount``."""
+    from scipy.spatial.transform import Rotation
+
+    from fgloc.backends.imu import mount_rotation
+
+    c = {**IMU_DEFAULTS, **(sc.get("imu") or {})}
+    rate = float(c["rate_hz"])
+    t = plan.t[0] + rng.uniform(0, 1 / rate) + np.arange(0, plan.t[-1] - plan.t[0], 1 / rate)
+    poses = interpolate_poses(plan.t, plan.poses, t)
+    amp = np.deg2rad(float(c.get("distortion_deg", 0.0)))
+    xy = poses[:, :2]
+    field_err = amp * (0.6 * np.sin(0.45 * xy[:, 0] + 0.3) * np.cos(0.35 * xy[:, 1] - 0.7)
+                       + 0.4 * np.sin(0.21 * xy[:, 0] - 0.5 * xy[:, 1] + 1.1))
+    ysig = np.deg2rad(float(c["yaw_sigma_deg"]))
+    yaw = poses[:, 2] + offset + field_err + rng.normal(0, ysig, len(t))
+    dist = sc.get("faults", {}).get("compass_disturbance")
+    if dist:
+        yaw = yaw + np.where(_in_window(t, dist), np.deg2rad(float(dist["offset_deg"])), 0.0)
+    rp_sig = np.deg2rad(float(c["roll_pitch_sigma_deg"]))
+    roll = rng.normal(0, rp_sig, len(t))
+    pitch = rng.normal(0, rp_sig, len(t))
+    R_wb = Rotation.from_euler("ZYX", np.column_stack([yaw, pitch, roll])).as_matrix()
+    wz = np.interp(t, plan.t, plan.twist[:, 2])
+    gsig = float(c["gyro_sigma_radps"])
+    R_bi = mount_rotation(mount)
+    w_base = np.column_stack([np.zeros(len(t)), np.zeros(len(t)), wz + float(c["gyro_bias_radps"])])
+    ocov = np.diag([rp_sig**2, rp_sig**2, ysig**2 + 0.5 * amp**2])
+    wcov = np.eye(3) * gsig**2
+    burst = float(c.get("burst_period_s") or 0.0)
+    out: list[tuple[float, str, object]] = []
+    for k in range(len(t)):
+        msg = imu_message(float(t[k]), R_wb[k], w_base[k], R_bi, ocov, wcov, frame_id=str(c["frame_id"]),
+                          with_orientation=bool(c["orientation"]))
+        # white gyro noise on the sensor's own axes
+        assert msg.angular_velocity_radps is not None
+        msg.angular_velocity_radps = msg.angular_velocity_radps + rng.normal(0, gsig, 3)
+        arrival = (np.floor(t[k] / burst) + 1.0) * burst if burst > 0 else float(t[k])
+        out.append((float(arrival), "/imu", msg))
+    return out
+
+
 def _moving_obstacles(sc: dict, t: float) -> FloatArray:
     obs = sc.get("faults", {}).get("moving_obstacles") or []
     out = []
@@ -301,6 +423,7 @@ def _laser(sc: dict, plan: Plan, world: Any, rng: np.random.Generator,
     beam_angles = amin + inc * np.arange(n)
     rmin, rmax = float(L["range_min_m"]), float(L["range_max_m"])
     blackout = sc.get("faults", {}).get("laser_blackout")
+    delay = float(L.get("stamp_delay_s") or 0.0)  # a late driver: stamped after the measurement
     out: list[tuple[str, object]] = []
     t = plan.t[0] + rng.uniform(0, 1 / rate)
     while True:
@@ -319,8 +442,9 @@ def _laser(sc: dict, plan: Plan, world: Any, rng: np.random.Generator,
                 r = r + rng.normal(0, 1, n) * sig
             r = np.where(r > rmax, np.inf, r)
             r = np.where(r < rmin, -np.inf, r)
-            out.append(("/scan", LaserScan(float(t), float(amin), float(inc), rmin, rmax, r.astype(np.float32),
-                                           time_increment=float(tinc), scan_time=float(period))))
+            out.append(("/scan", LaserScan(float(t) + delay, float(amin), float(inc), rmin, rmax,
+                                           r.astype(np.float32), time_increment=float(tinc),
+                                           scan_time=float(period))))
         t += period
         if progress is not None:
             progress(min((t - plan.t[0]) / max(plan.t[-1] - plan.t[0], 1e-9), 1.0))
@@ -345,9 +469,20 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
     offset = float(np.deg2rad(off_deg)) if off_deg is not None else float(
         np.deg2rad(rngs[0].uniform(5.0, 25.0) * rngs[0].choice([-1.0, 1.0])))
     mount = StaticTransform("base_link", "laser", np.asarray(sc["laser"]["mount"], dtype=float), z=0.2)
-    msgs: list[tuple[str, object]] = [("/tf_static", [mount])]
+    tf: list[StaticTransform] = [mount]
+    imu_mount = None
+    timed: list[tuple[float, str, object]] = []
+    if sc.get("imu") is not None:
+        imu_off = sc["imu"].get("offset_deg")
+        if imu_off is not None:
+            offset = float(np.deg2rad(imu_off))
+        imu_mount = imu_mount_transform(sc)
+        tf.append(imu_mount)
+        timed += _imu(sc, plan, offset, imu_mount, rngs[2])
+    msgs: list[tuple[str, object]] = [("/tf_static", tf)]
     msgs += _odometry(sc, plan, rngs[1])
-    msgs += _compass(sc, plan, offset, rngs[2])
+    if sc.get("imu") is None:
+        msgs += _compass(sc, plan, offset, rngs[2])
     msgs += _laser(sc, plan, world, rngs[3], progress)
     gt_rate = float(sc["ground_truth_rate_hz"])
     t_gt = np.arange(plan.t[0], plan.t[-1], 1.0 / gt_rate)
@@ -356,9 +491,12 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
     for k in range(len(t_gt)):
         msgs.append(("/ground_truth", Odometry(float(t_gt[k]), gt_twist[k], None, gt_poses[k], frame_id="map")))
     first = msgs[0]
-    rest = sorted(msgs[1:], key=lambda m: m[1].stamp)  # type: ignore[attr-defined]
+    # arrival order: the stamp, unless a sensor arrives late (IMU bursts)
+    arr = [(float(m[1].stamp), m[0], m[1]) for m in msgs[1:]] + timed  # type: ignore[attr-defined]
+    arr.sort(key=lambda a: a[0])
+    rest = [(topic, msg) for _, topic, msg in arr]
     robot = {"drive": sc["drive"], **sc["robot"], "pulses_per_rev": sc["odom"]["pulses_per_rev"]}
-    return SimResult(occ, [first] + rest, Trajectory(t_gt, gt_poses), mount, offset, robot, sc)
+    return SimResult(occ, [first] + rest, Trajectory(t_gt, gt_poses), mount, offset, robot, sc, imu_mount)
 
 
 def simulate_paper(seed: int = 0, **overrides: Any) -> SimResult:
@@ -379,8 +517,17 @@ def write_sim(result: SimResult, outdir: str | Path) -> Path:
 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
+    imu_as_heading = False
     with LogWriter(out / "log.mcap") as w:
         for i, (topic, msg) in enumerate(result.messages):
+            if isinstance(msg, Imu):
+                try:
+                    w.write(topic, msg)
+                    continue
+                except TypeError:
+                    # a log writer without sensor_msgs/Imu in full: the reading in base_link
+                    msg = _imu_as_heading(msg, result.imu_mount)
+                    imu_as_heading = True
             w.write(topic, msg, stamp=0.0 if i == 0 and topic == "/tf_static" else None)
     result.map.save(out / "map.yaml")
     write_tum(out / "ground_truth.tum", result.ground_truth)
@@ -391,5 +538,14 @@ def write_sim(result: SimResult, outdir: str | Path) -> Path:
         "duration_s": float(result.ground_truth.duration),
         "path_length_m": float(result.ground_truth.path_length()),
     }
+    if imu_as_heading:
+        info["effective"]["imu_written_as"] = "yaw and yaw rate in base_link (the log writer takes no full Imu)"
     write_yaml(out / "scenario.yaml", info)
     return out
+
+
+def _imu_as_heading(msg: Imu, mount: StaticTransform | None) -> CompassHeading:
+    from fgloc.backends.imu import imu_in_base, mount_rotation
+
+    b, _ = imu_in_base(msg, mount_rotation(mount))
+    return CompassHeading(b.stamp, b.yaw_rad, b.yaw_rate_radps, b.yaw_var, b.yaw_rate_var, frame_id="base_link")

@@ -1,0 +1,138 @@
+"""An IMU as an IMU: ``sensor_msgs/Imu`` rotated through its mount into ``base_link``.
+
+REP 145: the message's orientation is the sensor frame's orientation in the IMU's own world
+frame (ENU, referenced to magnetic north or to wherever its yaw started), its angular
+velocity is about the sensor's own axes, and its covariances are expressed in the sensor
+frame.  With ``R_bi`` the mount rotation (``/tf_static`` ``base_link -> imu_link``: a vector in
+the IMU frame is ``R_bi @ v`` in base_link)::
+
+    R_world_base = R_world_imu @ R_bi^T          (the base's orientation)
+    w_base       = R_bi @ w_imu                  (body rates in base_link)
+    C_base       = R_bi @ C_imu @ R_bi^T         (each covariance, as robot_localization does)
+
+and the planar back-ends take the base's yaw (``atan2(R[1, 0], R[0, 0])``) and yaw rate
+(``w_base[2]``) with the zz elements of the rotated covariances.  Any 3-D mount works: yawed,
+upside down, turned 90 deg about x (the IMU's y axis then measures the base's yaw rate).
+
+Bad input is never an exception: a quaternion of zeros or not of unit length (beyond
+``QUATERNION_NORM_TOLERANCE``) drops the orientation, a covariance with a NaN or negative
+diagonal drops its field, and :func:`imu_in_base` says why.  Core maths only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from fgloc.types import Imu, StaticTransform
+
+FloatArray = NDArray[np.float64]
+
+#: |‖q‖ - 1| above this: the quaternion is not a rotation (a driver bug), the orientation is skipped
+QUATERNION_NORM_TOLERANCE = 0.01
+
+
+@dataclass
+class BaseImu:
+    """One IMU reading in ``base_link``: yaw (IMU world frame) and yaw rate, either may be None.
+
+    Variances are NaN when the message did not say ("unknown": the back-end's default applies).
+    """
+
+    stamp: float
+    yaw_rad: float | None
+    yaw_var: float
+    yaw_rate_radps: float | None
+    yaw_rate_var: float
+
+
+def mount_rotation(tf: StaticTransform | None) -> FloatArray:
+    """``R_bi`` (3x3) of a ``base_link -> imu`` transform; identity when there is none.
+
+    A :class:`~fgloc.types.Transform3D` gives its whole rotation; a planar
+    :class:`~fgloc.types.StaticTransform` its yaw only.
+    """
+    if tf is None:
+        return np.eye(3)
+    q = getattr(tf, "rotation_xyzw", None)
+    if q is not None:
+        qa = np.asarray(q, dtype=float).reshape(4)
+        n = float(np.linalg.norm(qa))
+        if math.isfinite(n) and n > 1e-9:
+            return np.asarray(Rotation.from_quat(qa / n).as_matrix(), dtype=float)
+    return np.asarray(Rotation.from_euler("z", float(tf.pose[2])).as_matrix(), dtype=float)
+
+
+def _cov_ok(c: FloatArray | None) -> str | None:
+    """None if the covariance is usable (or absent), else why not."""
+    if c is None:
+        return None
+    d = np.diag(np.asarray(c, dtype=float).reshape(3, 3))
+    if not np.all(np.isfinite(d)):
+        return "covariance with a NaN/inf diagonal"
+    if np.any(d < 0):
+        return "covariance with a negative diagonal"
+    return None
+
+
+def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
+    """The reading rotated into base_link, and the reasons for every part that was dropped."""
+    problems: list[str] = []
+    yaw: float | None = None
+    yaw_var = float("nan")
+    q = msg.orientation_xyzw
+    if q is not None:
+        qa = np.asarray(q, dtype=float).reshape(-1)
+        n = float(np.linalg.norm(qa)) if qa.shape == (4,) else float("nan")
+        why = _cov_ok(msg.orientation_cov)
+        if not math.isfinite(n) or n < 1e-9:
+            problems.append("imu: orientation quaternion all zeros / not finite")
+        elif abs(n - 1.0) > QUATERNION_NORM_TOLERANCE:
+            problems.append("imu: orientation quaternion not unit length")
+        elif why is not None:
+            problems.append(f"imu: orientation {why}")
+        else:
+            R_wi = Rotation.from_quat(qa / n).as_matrix()
+            R_wb = R_wi @ R_bi.T
+            yaw = float(math.atan2(R_wb[1, 0], R_wb[0, 0]))
+            if msg.orientation_cov is not None:
+                c = np.asarray(msg.orientation_cov, dtype=float).reshape(3, 3)
+                yaw_var = float((R_bi @ c @ R_bi.T)[2, 2])
+                if not yaw_var > 0:
+                    yaw_var = float("nan")
+    rate: float | None = None
+    rate_var = float("nan")
+    w = msg.angular_velocity_radps
+    if w is not None:
+        wa = np.asarray(w, dtype=float).reshape(-1)
+        why = _cov_ok(msg.angular_velocity_cov)
+        if wa.shape != (3,) or not np.all(np.isfinite(wa)):
+            problems.append("imu: angular velocity not finite")
+        elif why is not None:
+            problems.append(f"imu: angular velocity {why}")
+        else:
+            rate = float((R_bi @ wa)[2])
+            if msg.angular_velocity_cov is not None:
+                c = np.asarray(msg.angular_velocity_cov, dtype=float).reshape(3, 3)
+                rate_var = float((R_bi @ c @ R_bi.T)[2, 2])
+                if not rate_var > 0:
+                    rate_var = float("nan")
+    return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var), problems
+
+
+def imu_message(stamp: float, R_world_base: FloatArray, w_base: FloatArray, R_bi: FloatArray,
+                orientation_cov_base: FloatArray | None, angular_velocity_cov_base: FloatArray | None,
+                frame_id: str = "imu_link", with_orientation: bool = True) -> Imu:
+    """The :class:`Imu` message a sensor mounted with ``R_bi`` publishes for a base state
+    (the inverse of :func:`imu_in_base`; the simulator uses it)."""
+    R_wi = np.asarray(R_world_base, dtype=float) @ R_bi
+    q = Rotation.from_matrix(R_wi).as_quat() if with_orientation else None
+    w_imu = R_bi.T @ np.asarray(w_base, dtype=float)
+    oc = None if orientation_cov_base is None else R_bi.T @ np.asarray(orientation_cov_base) @ R_bi
+    wc = None if angular_velocity_cov_base is None else R_bi.T @ np.asarray(angular_velocity_cov_base) @ R_bi
+    return Imu(float(stamp), None if q is None else np.asarray(q, dtype=float), w_imu,
+               None if q is None else oc, wc, frame_id=frame_id)

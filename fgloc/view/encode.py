@@ -1,0 +1,197 @@
+"""fgloc data -> Foxglove messages (``foxglove.messages``, protobuf-encoded by the SDK).
+
+Pure functions, no I/O; importing this module needs foxglove-sdk (``pip install
+"fgloc[view]"``).  Stamps are seconds (float) -> ``foxglove.Timestamp``; planar poses
+``[x, y, yaw]`` -> 3-D poses in the z = 0 plane (the laser at its mount height).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from foxglove import messages as fm
+from numpy.typing import NDArray
+
+from fgloc.geometry import yaw_to_quaternion
+from fgloc.io.log import stamp_to_sec_nsec
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, PoseFix, StaticTransform
+
+FloatArray = NDArray[np.float64]
+
+GRID_FIELDS = ("red", "green", "blue", "alpha", "occupancy")  # byte offsets 0..4 of a cell
+GRID_CELL_STRIDE = 5
+COVARIANCE_SIGMAS = 2.0          # the ellipse is drawn at this many standard deviations
+ELLIPSE_POINTS = 48
+WEDGE_LENGTH_M = 0.6
+
+
+def timestamp(stamp: float) -> Any:
+    sec, nsec = stamp_to_sec_nsec(max(float(stamp), 0.0) if math.isfinite(stamp) else 0.0)
+    return fm.Timestamp(sec, nsec)
+
+
+def pose3(pose: FloatArray, z: float = 0.0) -> Any:
+    q = yaw_to_quaternion(float(pose[2]))
+    return fm.Pose(position=fm.Vector3(x=float(pose[0]), y=float(pose[1]), z=float(z)),
+                   orientation=fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+
+
+def grid_cells(occ_map: OccupancyMap) -> NDArray[np.uint8]:
+    """``(H, W, 5)`` bytes per cell: grey level (free light, occupied black), alpha (unknown
+    translucent) and the occupancy value itself as int8 (-1 unknown, 0..100)."""
+    v = np.asarray(occ_map.data, dtype=np.int16)
+    unknown = v < 0
+    occ = np.clip(v, 0, 100).astype(np.float64)
+    grey = np.where(unknown, 128, np.round(235.0 * (1.0 - occ / 100.0))).astype(np.uint8)
+    out = np.empty(v.shape + (GRID_CELL_STRIDE,), dtype=np.uint8)
+    out[..., 0] = grey
+    out[..., 1] = grey
+    out[..., 2] = grey
+    out[..., 3] = np.where(unknown, 80, 255).astype(np.uint8)
+    out[..., 4] = np.clip(v, -1, 100).astype(np.int8).view(np.uint8)
+    return out
+
+
+def grid_message(occ_map: OccupancyMap, stamp: float, frame_id: str = "map") -> Any:
+    """The map as a ``foxglove.Grid``: row 0 is the bottom row (smallest y), as in the map."""
+    cells = grid_cells(occ_map)
+    u8, i8 = fm.PackedElementFieldNumericType.Uint8, fm.PackedElementFieldNumericType.Int8
+    fields = [fm.PackedElementField(name=n, offset=i, type=(i8 if n == "occupancy" else u8))
+              for i, n in enumerate(GRID_FIELDS)]
+    res = float(occ_map.resolution)
+    return fm.Grid(timestamp=timestamp(stamp), frame_id=frame_id, pose=pose3(occ_map.origin),
+                   column_count=int(occ_map.width), cell_size=fm.Vector2(x=res, y=res),
+                   row_stride=int(occ_map.width) * GRID_CELL_STRIDE, cell_stride=GRID_CELL_STRIDE,
+                   fields=fields, data=cells.tobytes())
+
+
+def scan_message(scan: LaserScan) -> Any:
+    """The scan in its own frame; beams the localizer does not use (no return, out of
+    [range_min, range_max], NaN) are NaN so the view shows what was matched."""
+    n = len(scan.ranges)
+    r = np.where(scan.valid_mask(), np.asarray(scan.ranges, dtype=np.float64), np.nan)
+    end = float(scan.angle_min + scan.angle_increment * max(n - 1, 0))
+    kw: dict[str, Any] = {}
+    if scan.intensities is not None and len(scan.intensities) == n:
+        kw["intensities"] = np.asarray(scan.intensities, dtype=np.float64).tolist()
+    return fm.LaserScan(timestamp=timestamp(scan.stamp), frame_id=scan.frame_id or "laser", pose=pose3(np.zeros(3)),
+                        start_angle=float(scan.angle_min), end_angle=end, ranges=r.tolist(), **kw)
+
+
+def transforms_message(transforms: list[StaticTransform], stamp: float) -> Any:
+    ts = timestamp(stamp)
+    out = []
+    for tr in transforms:
+        q = yaw_to_quaternion(float(tr.pose[2]))
+        out.append(fm.FrameTransform(
+            timestamp=ts, parent_frame_id=tr.parent, child_frame_id=tr.child,
+            translation=fm.Vector3(x=float(tr.pose[0]), y=float(tr.pose[1]), z=float(tr.z)),
+            rotation=fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))))
+    return fm.FrameTransforms(transforms=out)
+
+
+def pose_message(fix: PoseFix, frame_id: str | None = None) -> Any:
+    return fm.PoseInFrame(timestamp=timestamp(fix.stamp), frame_id=frame_id or fix.frame_id, pose=pose3(fix.pose))
+
+
+def poses_message(stamp: float, frame_id: str, poses: FloatArray) -> Any:
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    half = 0.5 * p[:, 2]
+    qz, qw = np.sin(half).tolist(), np.cos(half).tolist()
+    xs, ys = p[:, 0].tolist(), p[:, 1].tolist()
+    out = [fm.Pose(position=fm.Vector3(x=x, y=y, z=0.0), orientation=fm.Quaternion(x=0.0, y=0.0, z=z, w=w))
+           for x, y, z, w in zip(xs, ys, qz, qw, strict=True)]
+    return fm.PosesInFrame(timestamp=timestamp(stamp), frame_id=frame_id, poses=out)
+
+
+def covariance_ellipse(cov: FloatArray, sigmas: float = COVARIANCE_SIGMAS, n: int = ELLIPSE_POINTS) -> FloatArray:
+    """``(n, 2)`` points of the ``sigmas``-sigma ellipse of the xy block of ``cov`` (centred at 0)."""
+    c = np.asarray(cov, dtype=float)[:2, :2]
+    c = 0.5 * (c + c.T)
+    w, v = np.linalg.eigh(c)
+    w = np.sqrt(np.maximum(w, 0.0)) * sigmas
+    a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    unit = np.column_stack([np.cos(a) * w[0], np.sin(a) * w[1]])
+    return unit @ v.T
+
+
+def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:
+    """The fused pose's uncertainty: the 2-sigma xy ellipse and the +-2-sigma yaw wedge."""
+    cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
+    x, y, yaw = (float(v) for v in fused.pose)
+    color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
+    ell = covariance_ellipse(cov) if np.all(np.isfinite(cov)) else np.zeros((0, 2))
+    lines = []
+    if len(ell):
+        pts = [fm.Point3(x=x + float(px), y=y + float(py), z=0.02) for px, py in ell]
+        lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,
+                                      points=pts, color=color))
+    s_yaw = math.sqrt(max(float(cov[2, 2]), 0.0)) * COVARIANCE_SIGMAS if math.isfinite(float(cov[2, 2])) else 0.0
+    s_yaw = min(s_yaw, math.pi)
+    wedge = [fm.Point3(x=x, y=y, z=0.02)]
+    for a in np.linspace(yaw - s_yaw, yaw + s_yaw, 9):
+        wedge.append(fm.Point3(x=x + WEDGE_LENGTH_M * math.cos(a), y=y + WEDGE_LENGTH_M * math.sin(a), z=0.02))
+    wedge.append(fm.Point3(x=x, y=y, z=0.02))
+    lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
+                                  points=wedge, color=color))
+    ent = fm.SceneEntity(timestamp=timestamp(fused.stamp), frame_id=frame_id or fused.frame_id,
+                         id="fused_covariance", lines=lines)
+    return fm.SceneUpdate(entities=[ent])
+
+
+def sigmas(cov: FloatArray) -> tuple[float | None, float | None, float | None]:
+    d = np.diag(np.asarray(cov, dtype=float).reshape(3, 3))
+    out = [math.sqrt(v) if math.isfinite(v) and v >= 0 else None for v in (float(d[0]), float(d[1]), float(d[2]))]
+    return out[0], out[1], (None if out[2] is None else math.degrees(out[2]))
+
+
+def fused_json(fused: PoseFix) -> dict[str, Any]:
+    sx, sy, syaw = sigmas(fused.cov)
+    return {"stamp": float(fused.stamp), "frame_id": fused.frame_id, "source": fused.source,
+            "x_m": float(fused.pose[0]), "y_m": float(fused.pose[1]), "yaw_deg": math.degrees(float(fused.pose[2])),
+            "sigma_x_m": sx, "sigma_y_m": sy, "sigma_yaw_deg": syaw,
+            "cov": [float(c) for c in np.asarray(fused.cov, dtype=float).reshape(-1)]}
+
+
+def fix_json(stamp: float, status: str, reason: str, fix: PoseFix | None, fused: PoseFix | None) -> dict[str, Any]:
+    """The front-end result of one scan; ``offset_from_fused_*``: the fix minus the fused pose."""
+    out: dict[str, Any] = {"stamp": float(stamp), "status": status, "reason": reason}
+    if fix is not None:
+        sx, sy, syaw = sigmas(fix.cov)
+        out.update({"source": fix.source, "quality": float(fix.quality), "x_m": float(fix.pose[0]),
+                    "y_m": float(fix.pose[1]), "yaw_deg": math.degrees(float(fix.pose[2])),
+                    "sigma_x_m": sx, "sigma_y_m": sy, "sigma_yaw_deg": syaw})
+        if fused is not None:
+            dx, dy = float(fix.pose[0] - fused.pose[0]), float(fix.pose[1] - fused.pose[1])
+            dyaw = math.remainder(float(fix.pose[2] - fused.pose[2]), 2.0 * math.pi)
+            out.update({"offset_from_fused_m": math.hypot(dx, dy), "offset_from_fused_deg": math.degrees(dyaw)})
+    return out
+
+
+# JSON schemas of the JSON channels (what Foxglove's plot / raw-message panels list)
+_NUM = {"type": ["number", "null"]}
+FUSED_SCHEMA: dict[str, Any] = {
+    "type": "object", "title": "fgloc.Fused",
+    "properties": {"stamp": {"type": "number"}, "frame_id": {"type": "string"}, "source": {"type": "string"},
+                   "x_m": _NUM, "y_m": _NUM, "yaw_deg": _NUM, "sigma_x_m": _NUM, "sigma_y_m": _NUM,
+                   "sigma_yaw_deg": _NUM, "cov": {"type": "array", "items": {"type": "number"}}},
+}
+FIX_SCHEMA: dict[str, Any] = {
+    "type": "object", "title": "fgloc.Fix",
+    "properties": {"stamp": {"type": "number"}, "status": {"type": "string"}, "reason": {"type": "string"},
+                   "source": {"type": "string"}, "quality": _NUM, "x_m": _NUM, "y_m": _NUM, "yaw_deg": _NUM,
+                   "sigma_x_m": _NUM, "sigma_y_m": _NUM, "sigma_yaw_deg": _NUM,
+                   "offset_from_fused_m": _NUM, "offset_from_fused_deg": _NUM},
+}
+_SOURCE = {"type": "object", "properties": {"count": {"type": "integer"}, "rate_hz": _NUM,
+                                            "skipped": {"type": "integer"}}}
+HEALTH_SCHEMA: dict[str, Any] = {
+    "type": "object", "title": "fgloc.Health",
+    "properties": {"stamp": {"type": "number"}, "frame_id": {"type": "string"},
+                   "sources": {"type": "object", "properties": {"scan": _SOURCE, "odom": _SOURCE, "imu": _SOURCE}},
+                   "localizer": {"type": "object"}, "backend": {"type": "object"}, "frontend": {"type": "string"},
+                   "view": {"type": "object"}},
+}

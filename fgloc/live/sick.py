@@ -282,9 +282,21 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
                     values=vals,
                 )
             i += n
-    # position, name, comment, time, events: each "0" or "1 <fields>"; only check presence
-    if i + 5 > len(tok):
-        raise TelegramError("wrong_count", "trailing blocks missing")
+    # position, name, comment, time, events: each "0" (absent) or "1 <fields>".  When all five
+    # are absent the telegram must end there: tokens left over mean a count above was too
+    # small (the values it did not announce would otherwise be read as these blocks).  After
+    # a "1" the block's contents are not parsed (their layout varies by device).
+    for block in ("position", "name", "comment", "time", "events"):
+        if i >= len(tok):
+            raise TelegramError("wrong_count", f"{block} block missing")
+        if tok[i] == b"1":
+            break
+        if tok[i] != b"0":
+            raise TelegramError("bad_number", f"{block} flag={tok[i][:16]!r}")
+        i += 1
+    else:
+        if i != len(tok):
+            raise TelegramError("wrong_count", f"{len(tok) - i} tokens after the last block")
     if found is None:
         raise TelegramError("no_channel", channel)
     return found

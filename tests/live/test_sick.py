@@ -178,3 +178,20 @@ def test_every_token_replaced_by_nasty_values_never_escapes():
         fin = s.ranges[np.isfinite(s.ranges)]
         assert np.all(fin >= 0)
     assert "internal_error" not in st.malformed_by_reason  # all caught by the parser's own checks
+
+
+@pytest.mark.parametrize("less", [1, 2, 5])
+def test_value_count_too_small_is_not_accepted_with_fewer_beams(less):
+    """N announced smaller than the values sent: the values left over used to be read as the
+    trailing presence flags and the scan accepted with fewer beams (a silent wrong scan)."""
+    inf = np.inf  # sent as 0 (no echo), as common in real data as any value
+    r = np.array([inf, 1.0, inf, 2.0, inf, inf, 3.0], dtype=np.float32)
+    s = LaserScan(stamp=0.0, angle_min=-1.0, angle_increment=0.01, range_min=0.05, range_max=50.0, ranges=r,
+                  scan_time=0.04)
+    tok = encode_lmdscandata(s, 1, 1, 100, 200).split(b" ")
+    i = tok.index(b"DIST1") + 5
+    assert int(tok[i], 16) == 7
+    tok[i] = format(7 - less, "X").encode()
+    with pytest.raises(TelegramError) as e:
+        parse_lmdscandata(b" ".join(tok))
+    assert e.value.reason in ("wrong_count", "bad_count", "bad_number")

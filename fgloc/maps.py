@@ -24,14 +24,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from fgloc.errors import MapError
-
-try:  # numba is a declared dependency; the fallback keeps imports working while it compiles elsewhere
-    from numba import njit
-except ImportError:  # pragma: no cover
-    def njit(*args, **kwargs):  # type: ignore[no-redef]
-        def deco(f):
-            return f
-        return deco if not (args and callable(args[0])) else args[0]
+from fgloc.gridmath import raycast_grid
 
 OCCUPIED = 100
 FREE = 0
@@ -204,7 +197,7 @@ class OccupancyMap:
         g = self.world_to_grid_continuous(org)
         local = ang - self.origin[2]
         blocked = self.occupied | (self.unknown if unknown_is_obstacle else False)
-        return _raycast_grid(
+        return raycast_grid(
             np.ascontiguousarray(blocked, dtype=np.bool_),
             np.ascontiguousarray(g[:, 0]),
             np.ascontiguousarray(g[:, 1]),
@@ -230,54 +223,6 @@ class OccupancyMap:
             and abs(self.resolution - other.resolution) <= atol
             and bool(np.allclose(self.origin, other.origin, atol=atol))
         )
-
-
-@njit(cache=True)
-def _raycast_grid(blocked, gx, gy, dx, dy, max_cells):  # pragma: no cover - compiled
-    h, w = blocked.shape
-    n = gx.shape[0]
-    out = np.empty(n)
-    for k in range(n):
-        x, y = gx[k], gy[k]
-        ddx, ddy = dx[k], dy[k]
-        out[k] = np.inf
-        if not (0.0 <= x < w and 0.0 <= y < h):
-            continue
-        cx, cy = int(np.floor(x)), int(np.floor(y))
-        if blocked[cy, cx]:
-            out[k] = 0.0
-            continue
-        step_x = 1 if ddx > 0 else -1
-        step_y = 1 if ddy > 0 else -1
-        if ddx != 0.0:
-            t_delta_x = abs(1.0 / ddx)
-            t_max_x = ((cx + 1 - x) if ddx > 0 else (x - cx)) * t_delta_x
-        else:
-            t_delta_x = np.inf
-            t_max_x = np.inf
-        if ddy != 0.0:
-            t_delta_y = abs(1.0 / ddy)
-            t_max_y = ((cy + 1 - y) if ddy > 0 else (y - cy)) * t_delta_y
-        else:
-            t_delta_y = np.inf
-            t_max_y = np.inf
-        while True:
-            if t_max_x < t_max_y:
-                t = t_max_x
-                cx += step_x
-                t_max_x += t_delta_x
-            else:
-                t = t_max_y
-                cy += step_y
-                t_max_y += t_delta_y
-            if t > max_cells:
-                break
-            if cx < 0 or cy < 0 or cx >= w or cy >= h:
-                break
-            if blocked[cy, cx]:
-                out[k] = t
-                break
-    return out
 
 
 # ---------------------------------------------------------------- map files

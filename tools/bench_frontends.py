@@ -151,9 +151,11 @@ def run_row(row: Row, fn: Callable[[int], np.ndarray | None], idx: np.ndarray, g
         if j < warmup:
             continue
         row.times.append(dt)
+        if gt is None:
+            continue
         if pose is None:
             row.fails += 1
-        elif gt is not None:
+        else:
             e = np.asarray(pose, dtype=float) - gt[i]
             e[2] = wrap_angle(e[2])
             row.errs.append(e)
@@ -168,7 +170,7 @@ def main() -> None:
     ap.add_argument("--noise-deg", type=float, default=2.0)
     ap.add_argument("--synthetic", action="store_true", help="use the synthetic room instead of the simulator")
     ap.add_argument("--skip", default="",
-                    help="comma-separated rows to skip (native,kiss,amcl,kiss-icp,small-gicp,open3d)")
+                    help="comma-separated rows to skip (native,kiss,amcl,raycast,kiss-icp,small-gicp,open3d)")
     args = ap.parse_args()
     skip = set(filter(None, args.skip.split(",")))
 
@@ -225,22 +227,47 @@ def main() -> None:
                 raise ImportError("AMCL could not be built")
             fe_a.reset(gt[0])
             ts: list[float] = []
+            upd = Row("AMCL 2000, updates only", "calls that ran the filter (motion, weights, resampling)")
             for i in range(len(scans)):
                 t0 = time.perf_counter()
                 r = fe_a.match(scans[i], guesses[i], deltas[i])
                 dt = time.perf_counter() - t0
                 if i >= args.warmup:
                     ts.append(dt)
+                    if r.info.get("updated"):
+                        upd.times.append(dt)
                     if r.ok and r.pose is not None:
                         e = r.pose - gt[i]
                         e[2] = wrap_angle(e[2])
                         row.errs.append(e)
+                        if r.info.get("updated"):
+                            upd.errs.append(e)
                     else:
                         row.fails += 1
+                        upd.fails += bool(r.info.get("updated"))
             row.times = ts
         except Exception as e:  # noqa: BLE001 - report, do not crash the benchmark
             row.available = False
             row.note = f"not available ({e.__class__.__name__}: {str(e)[:60]})"
+            upd = None
+        rows.append(row)
+        if upd is not None and upd.times:
+            rows.append(upd)
+
+    if "raycast" not in skip:
+        # the simulator's and the map's grid DDA (fgloc.gridmath.raycast_grid): one scan's beams per call
+        row = Row("ray cast, one scan (map DDA)", "OccupancyMap.raycast of every beam from the true laser pose")
+        n_beams = len(scans[0].ranges)
+        mount_pose = np.asarray(getattr(mount, "pose", np.zeros(3)), dtype=float)
+
+        def fn_rc(i: int) -> np.ndarray | None:
+            lp = compose(gt[i], mount_pose)
+            ang = lp[2] + float(scans[i].angle_min) + float(scans[i].angle_increment) * np.arange(n_beams)
+            occ_map.raycast(lp[:2], ang, float(scans[i].range_max))
+            return None
+
+        run_row(row, fn_rc, idx, None, args.warmup)  # type: ignore[arg-type]
+        row.fails = 0
         rows.append(row)
 
     surf, _ = surface_points(occ_map, 2, fe_cfg["kiss"].get("surface_depth_cells", 0.5))

@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from fgloc.gridmath import dda_init, dda_next
 from fgloc.maps import OccupancyMap
 
 FloatArray = NDArray[np.float64]
@@ -30,26 +31,12 @@ def _integrate(logodds, x0, y0, res, ox, oy, ex, ey, hit, l_occ, l_free, lmin, l
         sy = (oy[k] - y0) / res
         gx = (ex[k] - x0) / res
         gy = (ey[k] - y0) / res
-        cx, cy = int(np.floor(sx)), int(np.floor(sy))
         tx, ty = int(np.floor(gx)), int(np.floor(gy))
         dx, dy = gx - sx, gy - sy
         length = np.sqrt(dx * dx + dy * dy)
         if length < 1e-9:
             continue
-        step_x = 1 if dx > 0 else -1
-        step_y = 1 if dy > 0 else -1
-        if dx != 0.0:
-            tdx = abs(1.0 / dx)
-            tmx = ((cx + 1 - sx) if dx > 0 else (sx - cx)) * tdx
-        else:
-            tdx = np.inf
-            tmx = np.inf
-        if dy != 0.0:
-            tdy = abs(1.0 / dy)
-            tmy = ((cy + 1 - sy) if dy > 0 else (sy - cy)) * tdy
-        else:
-            tdy = np.inf
-            tmy = np.inf
+        cx, cy, step_x, step_y, tmx, tmy, tdx, tdy = dda_init(sx, sy, dx, dy)
         nmax = abs(tx - cx) + abs(ty - cy) + 2
         for _ in range(nmax):
             if cx == tx and cy == ty:
@@ -57,12 +44,7 @@ def _integrate(logodds, x0, y0, res, ox, oy, ex, ey, hit, l_occ, l_free, lmin, l
             if 0 <= cx < w and 0 <= cy < h:
                 v = logodds[cy, cx] + l_free
                 logodds[cy, cx] = v if v > lmin else lmin
-            if tmx < tmy:
-                cx += step_x
-                tmx += tdx
-            else:
-                cy += step_y
-                tmy += tdy
+            cx, cy, tmx, tmy, _t = dda_next(cx, cy, step_x, step_y, tmx, tmy, tdx, tdy)
         if 0 <= tx < w and 0 <= ty < h:
             if hit[k]:
                 v = logodds[ty, tx] + l_occ

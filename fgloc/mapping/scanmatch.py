@@ -24,6 +24,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from fgloc.gridmath import bilinear_grad_world as _lookup_bilinear
+
 FloatArray = NDArray[np.float64]
 
 
@@ -91,28 +93,6 @@ def _lookup_nearest(dist, x0, y0, res, dmax, x, y):  # pragma: no cover - compil
     if ix < 0 or iy < 0 or ix >= w or iy >= h:
         return dmax
     return dist[iy, ix]
-
-
-@njit(cache=True)
-def _lookup_bilinear(dist, x0, y0, res, dmax, x, y):  # pragma: no cover - compiled
-    """Distance and its gradient (d/dx, d/dy) by bilinear interpolation of cell centres."""
-    h, w = dist.shape
-    u = (x - x0) / res - 0.5
-    v = (y - y0) / res - 0.5
-    if u < 0.0 or v < 0.0 or u >= w - 1 or v >= h - 1:
-        return dmax, 0.0, 0.0
-    i = int(np.floor(u))
-    j = int(np.floor(v))
-    fu = u - i
-    fv = v - j
-    d00 = dist[j, i]
-    d10 = dist[j, i + 1]
-    d01 = dist[j + 1, i]
-    d11 = dist[j + 1, i + 1]
-    d = d00 * (1 - fu) * (1 - fv) + d10 * fu * (1 - fv) + d01 * (1 - fu) * fv + d11 * fu * fv
-    gu = (d10 - d00) * (1 - fv) + (d11 - d01) * fv
-    gv = (d01 - d00) * (1 - fu) + (d11 - d10) * fu
-    return d, gu / res, gv / res
 
 
 @njit(cache=True)

@@ -36,75 +36,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.errors import ConfigError
+from fgloc.config import FglocConfig, parse_config
+from fgloc.config import load_config as _load_config
 from fgloc.geometry import between, compose1, transform_points, wrap_angle
 from fgloc.geometry import exp as se2_exp
 from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[1] / "config" / "fgloc.yaml"
 
-
-def _deep_merge(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def load_config(path: str | Path | None = None) -> dict[str, Any]:
-    """The effective configuration: ``config/fgloc.yaml`` (if present) overlaid with ``path``.
-
-    Raises :class:`ConfigError` naming the file when it is missing or does not parse.
-    """
-    base: dict[str, Any] = {}
-    if DEFAULT_CONFIG_PATH.exists():
-        base = yaml.safe_load(DEFAULT_CONFIG_PATH.read_text()) or {}
-    if path is None:
-        return base
-    p = Path(path)
-    try:
-        user = yaml.safe_load(p.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: config file not found") from None
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"{p}: config does not parse ({e.__class__.__name__})") from None
-    if user is None:
-        return base
-    if not isinstance(user, dict):
-        raise ConfigError(f"{p}: config must be a mapping of sections (pipeline, ekf, smoother, batch)")
-    return _deep_merge(base, user)
-
-
-DEFAULT_PIPELINE: dict[str, Any] = {
-    "relocalize_after": 10,          # matched scans in a row without an accepted fix -> global search
-    "relocalize_search_every": 4,    # ... every n-th such scan (tracking goes on meanwhile)
-    "relocalize_min_quality": 0.8,   # inlier fraction a relocalization candidate needs (every scan)
-    "relocalize_margin": 0.15,       # a candidate's quality must beat the tracked match's by this
-    "relocalize_ambiguity": 0.1,     # another distinct candidate this close in quality: ambiguous, no jump
-    "relocalize_confirm": 2,         # scans the candidate must match again (odometry-carried) to be taken
-    "relocalize_confirm_s": 1.0,     # ... over at least this long (bursts of scans are not independent)
-    "initial_sigma_xy": 0.1,         # m, prior on an --initial-pose (or a global-search result)
-    "initial_sigma_yaw_deg": 5.0,
-    "odom_keyframe_interval": 0.1,   # s, keyframe spacing without scans
-    "global_max_tries": 50,          # scans spent in global search before giving up for now
-    "global_min_quality": 0.5,       # front-end quality needed to accept a global candidate
-    "amcl_max_sigma_xy": 0.15,       # m, AMCL global mode: accept its first fix tighter than this
-    "amcl_max_sigma_yaw_deg": 5.0,
-    "global_search": {},             # GlobalSearch keyword arguments
-    "global_compass_tolerance_deg": 30.0,  # candidates further from the compass heading are dropped
-    "frontend_every": 2,             # match every n-th scan (a keyframe each; others: prediction)
-    "odom_extrapolate_max_s": 0.5,   # carry the odometry to the scan stamp over at most this gap
-    "pose_deltas": "auto",           # odometry twist from pose increments: auto | always | never
-    "pose_delta_sigmas": [0.01, 0.01, 0.02],  # m/s, m/s, rad/s: base noise of a pose-derived twist
-    "pose_delta_rel": 0.1,           # + this fraction of the speed (per unit speed)
-    "pose_delta_tolerance": [0.002, 0.1],  # m, deg (+10 %): twist vs pose increment agreement (auto)
-}
+def load_config(path: str | Path | None = None) -> FglocConfig:
+    """The effective configuration (kept for old callers: see :func:`fgloc.config.load_config`)."""
+    return _load_config(path)
 
 
 class Localizer:
@@ -112,11 +58,10 @@ class Localizer:
 
     def __init__(self, occ_map: OccupancyMap | None, laser_mount: StaticTransform,
                  backend: str = "smoother", frontend: str = "native",
-                 initial_pose: np.ndarray | None = None, config: dict | None = None) -> None:
-        config = dict(config or {})
+                 initial_pose: np.ndarray | None = None, config: FglocConfig | Any = None) -> None:
+        config = parse_config(config)
         self.config = config
-        self.pcfg = dict(DEFAULT_PIPELINE)
-        self.pcfg.update(config.get("pipeline") or {})
+        self.pcfg = config.pipeline
         self.map = occ_map
         self.laser_mount = laser_mount
         self.backend_name = backend
@@ -126,7 +71,7 @@ class Localizer:
         if occ_map is not None:
             from fgloc.frontends import make_frontend
 
-            self.frontend = make_frontend(frontend, occ_map, laser_mount, config.get("frontends"))
+            self.frontend = make_frontend(frontend, occ_map, laser_mount, config)
         self.initial_pose = None if initial_pose is None else np.asarray(initial_pose, dtype=float).reshape(3)
         self.odom_mode = occ_map is None
         self.stats: dict[str, Any] = {
@@ -213,7 +158,7 @@ class Localizer:
         """
         prev = self._prev_odom_pose
         self._prev_odom_pose = None if pose is None else (t, pose)
-        mode = str(self.pcfg["pose_deltas"])
+        mode = str(self.pcfg.pose_deltas)
         if pose is None or prev is None or mode == "never":
             return tw, cov
         dt = t - prev[0]
@@ -225,15 +170,15 @@ class Localizer:
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             d_tw = se2_exp(tw * dt)
             lin, rot = float(np.hypot(delta[0], delta[1])), abs(float(delta[2]))
-            tol_lin = float(self.pcfg["pose_delta_tolerance"][0]) + 0.1 * lin
-            tol_rot = math.radians(float(self.pcfg["pose_delta_tolerance"][1])) + 0.1 * rot
+            tol_lin = float(self.pcfg.pose_delta_tolerance_m) + 0.1 * lin
+            tol_rot = math.radians(float(self.pcfg.pose_delta_tolerance_deg)) + 0.1 * rot
             if float(np.hypot(d_tw[0] - delta[0], d_tw[1] - delta[1])) <= tol_lin and \
                     abs(float(wrap_angle(d_tw[2] - delta[2]))) <= tol_rot:
                 return tw, cov
         u = se2_log(delta) / dt
         self.stats["odometry_from_poses"] = self.stats.get("odometry_from_poses", 0) + 1
-        s0 = np.asarray(self.pcfg["pose_delta_sigmas"], dtype=float).reshape(3)
-        rel = float(self.pcfg["pose_delta_rel"])
+        s0 = np.asarray(self.pcfg.pose_delta_sigmas, dtype=float).reshape(3)
+        rel = float(self.pcfg.pose_delta_rel)
         speed = float(np.hypot(u[0], u[1]))
         sig = s0 + rel * np.array([speed, speed, abs(float(u[2])) + speed])
         return u, np.diag(sig**2)
@@ -264,7 +209,7 @@ class Localizer:
         matching = self.backend.initialized and not self._lost
         if matching:
             self._scan_count += 1
-            if self._scan_count % max(1, int(self.pcfg["frontend_every"])) != 0:
+            if self._scan_count % max(1, int(self.pcfg.frontend_every)) != 0:
                 # not matched: no keyframe either, the online pose is the odometry prediction
                 self.backend.record_prediction(t)
                 return None
@@ -275,7 +220,7 @@ class Localizer:
         # odometry as it came: its motion model and update thresholds were tuned on that)
         odom_now = self._odom_pose
         if self._odom_t is not None and self.frontend_name != "amcl" and \
-                abs(t - self._odom_t) <= float(self.pcfg["odom_extrapolate_max_s"]):
+                abs(t - self._odom_t) <= float(self.pcfg.odom_extrapolate_max_s):
             odom_now = compose1(self._odom_pose, se2_exp(self._last_twist * (t - self._odom_t)))
         odom_delta = None
         if self._odom_at_last_scan is not None:
@@ -311,7 +256,7 @@ class Localizer:
             self._pending = None
         elif informative:
             self._bad_streak += 1
-        if self._bad_streak >= int(self.pcfg["relocalize_after"]):
+        if self._bad_streak >= int(self.pcfg.relocalize_after):
             if self.frontend_name == "amcl":
                 self._lost = True
                 self._global_tries = 0
@@ -341,12 +286,12 @@ class Localizer:
             pose = compose1(self._pending[0], odom_delta) if odom_delta is not None else self._pending[0]
             res = self.frontend.match(msg, pose, None)
             if res.ok and res.pose is not None and res.cov is not None and \
-                    float(res.quality) >= float(self.pcfg["relocalize_min_quality"]):
+                    float(res.quality) >= float(self.pcfg.relocalize_min_quality):
                 count = self._pending[2] + 1
                 t_first = self._pending[3]
                 self._pending = (np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float), count, t_first)
-                if count > int(self.pcfg["relocalize_confirm"]) and \
-                        t - t_first >= float(self.pcfg["relocalize_confirm_s"]):
+                if count > int(self.pcfg.relocalize_confirm) and \
+                        t - t_first >= float(self.pcfg.relocalize_confirm_s):
                     self.stats["relocalizations"] += 1
                     self._pending = None
                     self._start(t, np.asarray(res.pose, dtype=float),
@@ -355,20 +300,20 @@ class Localizer:
                 self._pending = None
             return
         self._reloc_tick += 1
-        if (self._reloc_tick - 1) % max(1, int(self.pcfg["relocalize_search_every"])) != 0:
+        if (self._reloc_tick - 1) % max(1, int(self.pcfg.relocalize_search_every)) != 0:
             return
         cands = self._global_candidates(msg)
         if not cands:
             return
         best_q, best = cands[0]
-        if best_q < float(self.pcfg["relocalize_min_quality"]):
+        if best_q < float(self.pcfg.relocalize_min_quality):
             return
         local_q = float(getattr(local, "quality", 0.0) or 0.0)
         near_local = local.ok and local.pose is not None and \
             _close(best.pose, np.asarray(local.pose, dtype=float), 0.3, math.radians(5.0))
-        if not near_local and best_q < local_q + float(self.pcfg["relocalize_margin"]):
+        if not near_local and best_q < local_q + float(self.pcfg.relocalize_margin):
             return
-        amb = float(self.pcfg["relocalize_ambiguity"])
+        amb = float(self.pcfg.relocalize_ambiguity)
         for q, c in cands[1:]:
             if q >= best_q - amb and not _close(c.pose, best.pose, 1.0, math.radians(20.0)):
                 self.stats["ambiguous_relocalizations"] = self.stats.get("ambiguous_relocalizations", 0) + 1
@@ -377,8 +322,8 @@ class Localizer:
 
     # ------------------------------------------------------------------ start-up / recovery
     def _initial_cov(self) -> FloatArray:
-        sxy = float(self.pcfg["initial_sigma_xy"])
-        syaw = math.radians(float(self.pcfg["initial_sigma_yaw_deg"]))
+        sxy = float(self.pcfg.initial_sigma_xy_m)
+        syaw = math.radians(float(self.pcfg.initial_sigma_yaw_deg))
         return np.diag([sxy**2, sxy**2, syaw**2])
 
     def _start(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
@@ -414,8 +359,8 @@ class Localizer:
             if res.ok and res.pose is not None and res.cov is not None:
                 sxy = math.sqrt(max(res.cov[0, 0], res.cov[1, 1]))
                 syaw = math.sqrt(res.cov[2, 2])
-                if sxy <= float(self.pcfg["amcl_max_sigma_xy"]) and \
-                        syaw <= math.radians(float(self.pcfg["amcl_max_sigma_yaw_deg"])):
+                if sxy <= float(self.pcfg.global_max_sigma_xy_m) and \
+                        syaw <= math.radians(float(self.pcfg.global_max_sigma_yaw_deg)):
                     fix = PoseFix(t, np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float),
                                   quality=float(res.quality), source=self.frontend_name)
                     self.fixes.append(fix)
@@ -437,7 +382,7 @@ class Localizer:
 
     def _global_search(self, msg: LaserScan) -> PoseFix | None:
         cands = self._global_candidates(msg)
-        if not cands or cands[0][0] < float(self.pcfg["global_min_quality"]):
+        if not cands or cands[0][0] < float(self.pcfg.global_min_quality):
             return None
         return cands[0][1]
 
@@ -447,7 +392,7 @@ class Localizer:
 
         assert self.frontend is not None and self.map is not None
         if self._global is None:
-            self._global = GlobalSearch(self.map, **dict(self.pcfg.get("global_search") or {}))
+            self._global = GlobalSearch(self.map, self.pcfg.global_search)
         self.stats["global_searches"] += 1
         pts = msg.points()
         if len(pts) < 10:
@@ -460,7 +405,7 @@ class Localizer:
         if off is not None and self._last_compass is not None and \
                 abs(float(msg.stamp) - self._last_compass[0]) < 1.0:
             heading = float(wrap_angle(self._last_compass[1] - off))
-        max_dyaw = math.radians(float(self.pcfg["global_compass_tolerance_deg"]))
+        max_dyaw = math.radians(float(self.pcfg.global_compass_tolerance_deg))
         out: list[tuple[float, PoseFix]] = []
         for cand, _score in self._global.search(pts_base):
             if heading is not None and abs(float(wrap_angle(cand[2] - heading))) > max_dyaw:
@@ -485,7 +430,7 @@ class Localizer:
             self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
             self._last_kf_t = t
             return
-        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= float(self.pcfg["odom_keyframe_interval"])):
+        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= float(self.pcfg.odom_keyframe_interval_s)):
             self.backend.add_keyframe(t, None)
             self._last_kf_t = t
 

@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from fgloc.config import load_config
 from fgloc.geometry import compose, inverse, wrap_angle
 from fgloc.maps import OccupancyMap
-from fgloc.pipeline import Localizer, load_config, run_messages
+from fgloc.pipeline import Localizer, run_messages
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
 
 MOUNT = StaticTransform("base_link", "laser", np.array([0.2, 0.05, 0.0]))
@@ -98,7 +99,7 @@ def test_localizer_tracks_in_small_world(world, backend):
     loc = Localizer(m, MOUNT, backend=backend, frontend="native", initial_pose=gt.poses[0] + [0.1, -0.1, 0.05],
                     config=load_config())
     final = run_messages(loc, msgs)
-    every = load_config()["pipeline"]["frontend_every"]
+    every = load_config().pipeline.frontend_every
     assert loc.stats["fixes"] > 0.9 * loc.stats["scans"] / every
     assert _rmse(final, gt) < 0.03
     assert len(loc.online_trajectory()) >= loc.stats["scans"] - 1
@@ -163,8 +164,7 @@ def test_bad_and_out_of_order_input_is_counted_not_raised(world):
         if i >= 200 and topic == "/odom" and not went_back:
             went_back = True
             bad.append(("/odom", Odometry(msg.stamp - 1.0, np.zeros(3))))  # time going backwards
-    cfg = load_config()
-    cfg["pipeline"]["frontend_every"] = 1
+    cfg = load_config(overrides={"pipeline": {"frontend_every": 1}})
     loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=gt.poses[0], config=cfg)
     final = run_messages(loc, bad)
     assert loc.stats["skipped"] >= 4

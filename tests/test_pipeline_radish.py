@@ -14,13 +14,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fgloc.config import load_config
 from fgloc.eval.relations import evaluate_relations, relations_from_reference
 from fgloc.geometry import wrap_angle
 from fgloc.io.tum import read_tum
 from fgloc.mapping.build import load_records
 from fgloc.mapping.slam import MapperConfig, build_occupancy, run_slam
 from fgloc.mapping.source import log_messages
-from fgloc.pipeline import Localizer, load_config, run_messages
+from fgloc.pipeline import Localizer, run_messages
 
 CASES = {  # name: (position RMSE m, heading RMSE deg, relation dt window, relation trans m, rot deg)
     "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.033 m, 0.38 deg; 0.054 m, 0.86 deg

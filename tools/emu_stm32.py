@@ -19,7 +19,6 @@ from _emu_common import add_common, load_messages, make_clock
 
 from fgloc.live.app import load_config
 from fgloc.live.emulators import Stm32Emulator
-from fgloc.live.serial_link import RobotParams
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -35,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     msgs = load_messages(args)
     clock = make_clock(args, msgs)
-    robot = RobotParams.from_dict(load_config(args.config)["robot"])
+    robot = load_config(args.config).robot
     emu = Stm32Emulator(msgs, robot, mode="tcp" if args.tcp is not None else "pty", port=args.tcp or 0,
                         speed=args.speed, t_start=clock.s0, duration=args.duration, clock=clock,
                         drift_ppm=args.drift_ppm, corrupt_prob=args.corrupt, garbage_prob=args.garbage)

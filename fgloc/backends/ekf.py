@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.config.schema import setting
 from fgloc.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -100,23 +101,44 @@ def selection(rows: list[int], n: int) -> FloatArray:
 
 @dataclass
 class EKFConfig:
-    """Noise and gating parameters (defaults documented in config/fgloc.yaml, ``ekf:``).
+    """``ekf:`` section: noise and gating of the paper's EKF (the defaults are here and only here).
 
     ``q_*`` are continuous-time process noise spectral densities (variance per second):
     ``q_xy`` m^2/s, ``q_theta`` rad^2/s, ``q_v`` (m/s)^2/s, ``q_w`` (rad/s)^2/s.
     ``gate_*`` are Mahalanobis (squared) thresholds; ``None`` disables that gate.
+    Angles are configured in degrees; the ``*_sigma_theta`` / ``*_sigma`` properties give radians.
     """
 
-    omni: bool = False
-    q_xy: float = 1e-4
-    q_theta: float = 1e-4
-    q_v: float = 0.5
-    q_w: float = 1.0
-    gate_map: float | None = CHI2_999[3]
-    gate_encoder: float | None = None
-    gate_compass: float | None = CHI2_999[1]
-    map_min_sigma_xy: float = 0.005
-    map_min_sigma_theta: float = np.deg2rad(0.2)
+    omni: bool = setting(False, "true: mecanum variant with a lateral velocity state [x, y, theta, vx, vy, w]")
+    q_xy: float = setting(1e-4, "process noise spectral density of x, y (m^2/s)", min=0)
+    q_theta: float = setting(1e-4, "process noise spectral density of the heading (rad^2/s)", min=0)
+    q_v: float = setting(0.5, "how fast the speed may change ((m/s)^2/s)", min=0)
+    q_w: float = setting(1.0, "how fast the yaw rate may change ((rad/s)^2/s)", min=0)
+    gate_map: float | None = setting(16.27, "chi-square 99.9 % (3 dof) Mahalanobis gate on map fixes; null = none",
+                                     gt=0)
+    gate_encoder: float | None = setting(None, "Mahalanobis gate on the encoder twist; null = none", gt=0)
+    gate_compass: float | None = setting(10.83, "chi-square 99.9 % (1 dof) gate on the compass; null = none", gt=0)
+    map_min_sigma_xy: float = setting(0.005, "m, floor on the front-end's position sigma", min=0)
+    map_min_sigma_theta_deg: float = setting(0.2, "deg, floor on the front-end's heading sigma", min=0)
+    encoder_sigmas: tuple[float, float, float] = setting(
+        (0.01, 0.01, 0.02), "[vx m/s, vy m/s, w rad/s] twist noise when /odom carries no covariance", gt=0)
+    compass_sigma_deg: float = setting(0.5, "compass heading noise when /imu carries no covariance", gt=0)
+    compass_rate_sigma_deg: float = setting(1.0, "compass yaw-rate noise (deg/s)", gt=0)
+    use_compass_yaw: bool = setting(True, "use the compass heading (false: only its yaw rate)")
+    calibration_fixes: int = setting(5, "map fixes used to calibrate the compass offset", min=1)
+    max_rejections: int = setting(10, "fixes gated in a row before one is forced in", min=1)
+
+    @property
+    def map_min_sigma_theta(self) -> float:
+        return float(np.deg2rad(self.map_min_sigma_theta_deg))
+
+    @property
+    def compass_sigma(self) -> float:
+        return float(np.deg2rad(self.compass_sigma_deg))
+
+    @property
+    def compass_rate_sigma(self) -> float:
+        return float(np.deg2rad(self.compass_rate_sigma_deg))
 
 
 @dataclass

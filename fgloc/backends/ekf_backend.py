@@ -21,22 +21,18 @@ from fgloc.types import PoseFix, Trajectory
 class EKFBackend(Backend):
     name = "ekf"
 
-    def __init__(self, config: EKFConfig | None = None,
-                 encoder_sigmas: tuple[float, float, float] = (0.01, 0.01, 0.02),
-                 compass_sigma: float = float(np.deg2rad(0.5)),
-                 compass_rate_sigma: float = float(np.deg2rad(1.0)),
-                 use_compass_yaw: bool = True, calibration_fixes: int = 5,
-                 max_rejections: int = 10) -> None:
+    def __init__(self, config: EKFConfig | None = None) -> None:
         super().__init__()
-        self.ekf = EKF(config or EKFConfig())
+        c = config or EKFConfig()
+        self.ekf = EKF(c)
         self.ekf.x = np.zeros(self.ekf.n)
         self.ekf.P = np.eye(self.ekf.n)
-        self.encoder_sigmas = encoder_sigmas
-        self.compass_sigma = compass_sigma
-        self.compass_rate_sigma = compass_rate_sigma
-        self.use_compass_yaw = use_compass_yaw
-        self.calib = CompassCalibrator(calibration_fixes)
-        self.max_rejections = max_rejections
+        self.encoder_sigmas = c.encoder_sigmas
+        self.compass_sigma = c.compass_sigma
+        self.compass_rate_sigma = c.compass_rate_sigma
+        self.use_compass_yaw = c.use_compass_yaw
+        self.calib = CompassCalibrator(c.calibration_fixes)
+        self.max_rejections = c.max_rejections
         self._consecutive_rejects = 0
 
     @property

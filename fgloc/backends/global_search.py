@@ -15,9 +15,13 @@ refines them with its scan matcher and keeps the one that matches best.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.config.schema import setting, with_overrides
 from fgloc.maps import OccupancyMap
 
 try:
@@ -50,10 +54,26 @@ def _score_all(lik, cx, cy, px, py):  # pragma: no cover - compiled
     return out
 
 
+@dataclass(frozen=True)
+class GlobalSearchConfig:
+    """``pipeline.global_search``: the coarse correlative global search (native / kiss)."""
+
+    step_m: float = setting(0.25, "candidate grid spacing over free space (coarser on big maps)", gt=0)
+    max_candidates: int = setting(4000, "positions scored at most (about)", min=1)
+    n_yaw: int = setting(72, "headings per candidate position (72 = 5 deg)", min=1)
+    sigma_m: float = setting(0.15, "width of the Gaussian likelihood a point scores with", gt=0)
+    max_points: int = setting(60, "scan points scored (uniform stride)", min=1)
+    n_best: int = setting(20, "candidates refined by the front-end; the best quality wins", min=1)
+    clearance_m: float = setting(0.2, "candidates at least this far from obstacles", min=0)
+    seed: int = setting(0, "random subsampling of candidates on very large maps")
+
+
 class GlobalSearch:
-    def __init__(self, occ_map: OccupancyMap, step_m: float = 0.25, n_yaw: int = 72,
-                 sigma_m: float = 0.15, max_points: int = 60, clearance_m: float = 0.2,
-                 n_best: int = 20, max_candidates: int = 4000, seed: int = 0) -> None:
+    def __init__(self, occ_map: OccupancyMap, config: GlobalSearchConfig | None = None, **overrides: Any) -> None:
+        c = with_overrides(GlobalSearchConfig, config, overrides)
+        step_m, n_yaw, sigma_m, max_points = c.step_m, c.n_yaw, c.sigma_m, c.max_points
+        clearance_m, n_best, max_candidates, seed = c.clearance_m, c.n_best, c.max_candidates, c.seed
+        self.config = c
         self.map = occ_map
         self.n_yaw = int(n_yaw)
         self.sigma = float(sigma_m)

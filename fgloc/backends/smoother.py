@@ -53,6 +53,7 @@ from fgloc.backends.factors import (
     integrate_heading,
     integrate_twist,
 )
+from fgloc.config.schema import setting
 from fgloc.geometry import compose1, wrap_angle, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
@@ -65,37 +66,79 @@ def O(j: int) -> int:  # noqa: E743
     return int(gtsam.symbol("o", j))
 
 
+KERNELS = ("huber", "cauchy", "none")
+
+
 @dataclass
 class SmootherConfig:
-    """Parameters (documented defaults in config/fgloc.yaml, ``smoother:``)."""
+    """``smoother:`` section (the defaults are here and only here; angles in degrees, see the properties)."""
 
-    lag: float = 2.0
-    encoder_sigmas: tuple[float, float, float] = (0.01, 0.01, 0.02)
-    q_slip: tuple[float, float, float] = (1e-5, 1e-5, 1e-5)
-    odom_kernel: str = "huber"
-    odom_kernel_k: float = 1.345
-    compass_sigma: float = float(np.deg2rad(0.5))
-    compass_kernel: str = "cauchy"
-    compass_kernel_k: float = 1.345
-    offset_interval: float = 1.0
-    offset_rw_sigma: float = float(np.deg2rad(0.05))  # rad / sqrt(s)
-    offset_prior_sigma: float = float(np.deg2rad(30.0))
-    calibrated_offset_sigma: float = float(np.deg2rad(1.0))
-    fix_kernel: str = "huber"
-    fix_kernel_k: float = 1.345
-    fix_min_sigma_xy: float = 0.003
-    fix_min_sigma_theta: float = float(np.deg2rad(0.1))
-    fix_gate: float | None = None
-    fix_gate_m: float | None = 1.0
-    fix_gate_theta: float | None = float(np.deg2rad(30.0))
-    max_rejections: int = 10
-    relinearize_threshold: float = 0.01
-    relinearize_skip: int = 1
-    online_covariance: bool = False
-    update_every: int = 1
-    min_keyframe_dt: float = 0.005
-    max_wait: float = 0.1
-    calibration_fixes: int = 3
+    lag_s: float = setting(2.0, "smoothing window of the fixed-lag smoother", gt=0)
+    encoder_sigmas: tuple[float, float, float] = setting(
+        (0.01, 0.01, 0.02), "[vx m/s, vy m/s, w rad/s] twist noise when /odom carries no covariance", gt=0)
+    q_slip: tuple[float, float, float] = setting(
+        (1e-5, 1e-5, 1e-5), "extra spectral density on integrated twist (slip, model error)", min=0)
+    odom_kernel: str = setting("huber", "robust kernel on twist factors (wheel slip)", choices=KERNELS)
+    odom_kernel_k: float = setting(1.345, "its scale", gt=0)
+    compass_sigma_deg: float = setting(0.5, "per reading; readings between keyframes are averaged", gt=0)
+    compass_kernel: str = setting("cauchy", "robust kernel on compass factors (cauchy ignores magnetic disturbances)",
+                                  choices=KERNELS)
+    compass_kernel_k: float = setting(1.345, "its scale", gt=0)
+    offset_interval_s: float = setting(1.0, "one compass-offset variable per interval", gt=0)
+    offset_rw_sigma_deg: float = setting(0.05, "deg/sqrt(s), random walk of the compass-to-map offset", gt=0)
+    offset_prior_sigma_deg: float = setting(30.0, "prior on the compass offset when it is unknown", gt=0)
+    calibrated_offset_sigma_deg: float = setting(1.0, "prior on the compass offset when it is known", gt=0)
+    fix_kernel: str = setting("huber", "robust kernel on scan-to-map fixes", choices=KERNELS)
+    fix_kernel_k: float = setting(1.345, "its scale", gt=0)
+    fix_min_sigma_xy: float = setting(0.003, "m, floor on the front-end's position sigma", min=0)
+    fix_min_sigma_theta_deg: float = setting(0.1, "floor on the front-end's heading sigma", min=0)
+    fix_gate: float | None = setting(None, "optional Mahalanobis (squared) gate of a fix against the prediction",
+                                     gt=0)
+    fix_gate_m: float | None = setting(1.0, "reject a fix this far from the prediction (null: no gate)", gt=0)
+    fix_gate_theta_deg: float | None = setting(30.0, "... or this far in heading; the robust kernel does the rest",
+                                               gt=0)
+    max_rejections: int = setting(1000000, "fixes gated in a row before the back-end is reset to one (the "
+                                  "localizer relocalizes first: pipeline.relocalize_after)", min=1)
+    relinearize_threshold: float = setting(0.01, "iSAM2 relinearization threshold", gt=0)
+    relinearize_skip: int = setting(1, "iSAM2 relinearize every n-th update", min=1)
+    online_covariance: bool = setting(False, "marginal covariance at every keyframe; false: only when asked "
+                                      "(each /fused_pose)")
+    update_every: int = setting(1, "keyframes per iSAM2 update (2 halves solver time; the keyframe in between "
+                                "is reported as its odometry prediction)", min=1)
+    min_keyframe_dt_s: float = setting(0.005, "a scan closer than this to the previous keyframe gets none", min=0)
+    max_wait_s: float = setting(0.1, "wait this long for odometry to reach a keyframe stamp", min=0)
+    calibration_fixes: int = setting(3, "map fixes used to calibrate the compass offset", min=1)
+
+    @property
+    def compass_sigma(self) -> float:
+        return float(np.deg2rad(self.compass_sigma_deg))
+
+    @property
+    def offset_rw_sigma(self) -> float:
+        return float(np.deg2rad(self.offset_rw_sigma_deg))
+
+    @property
+    def offset_prior_sigma(self) -> float:
+        return float(np.deg2rad(self.offset_prior_sigma_deg))
+
+    @property
+    def calibrated_offset_sigma(self) -> float:
+        return float(np.deg2rad(self.calibrated_offset_sigma_deg))
+
+    @property
+    def fix_min_sigma_theta(self) -> float:
+        return float(np.deg2rad(self.fix_min_sigma_theta_deg))
+
+    @property
+    def fix_gate_theta(self) -> float | None:
+        return None if self.fix_gate_theta_deg is None else float(np.deg2rad(self.fix_gate_theta_deg))
+
+
+@dataclass
+class BatchConfig:
+    """``batch:`` section: the batch smoother uses the ``smoother:`` factors, then this."""
+
+    max_iterations: int = setting(50, "Levenberg-Marquardt iterations over the whole run", min=1)
 
 
 class SlidingWindowSmoother(Backend):
@@ -117,7 +160,7 @@ class SlidingWindowSmoother(Backend):
         p.setRelinearizeThreshold(self.cfg.relinearize_threshold)
         p.relinearizeSkip = self.cfg.relinearize_skip
         p.findUnusedFactorSlots = False
-        self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag, p)
+        self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag_s, p)
         self.kf_t: list[float] = []          # keyframe times, increasing (window + history)
         self.kf_key: list[int] = []          # keys, same order
         self.kf_pose: dict[int, FloatArray] = {}   # latest estimate per key
@@ -246,7 +289,7 @@ class SlidingWindowSmoother(Backend):
         self._process_pending(float(t))
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
-            horizon = self.kf_t[-1] - self.cfg.lag - 1.0
+            horizon = self.kf_t[-1] - self.cfg.lag_s - 1.0
             i = int(np.searchsorted(self.odo_t, horizon))
             if i > 0:
                 del self.odo_t[:i], self.odo_u[:i], self.odo_c[:i]
@@ -345,7 +388,7 @@ class SlidingWindowSmoother(Backend):
                 return False
             return self._late_keyframe(t, fix)
         last = self.pending_kf[-1][0] if self.pending_kf else self.kf_t[-1]
-        if t - last < self.cfg.min_keyframe_dt:
+        if t - last < self.cfg.min_keyframe_dt_s:
             # a scan right on top of the previous keyframe adds nothing but conditioning trouble
             self.stats["merged_keyframes"] = self.stats.get("merged_keyframes", 0) + 1
             return False
@@ -373,7 +416,7 @@ class SlidingWindowSmoother(Backend):
         while self.pending_kf:
             t = self.pending_kf[0][0]
             have_odo = bool(self.odo_t) and self.odo_t[-1] >= t - 1e-9
-            if not (have_odo or now - t >= self.cfg.max_wait):
+            if not (have_odo or now - t >= self.cfg.max_wait_s):
                 return
             t, fix = self.pending_kf.pop(0)
             self._add_keyframe_now(t, fix)
@@ -392,7 +435,7 @@ class SlidingWindowSmoother(Backend):
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
         vals.insert(k, gtsam.Pose2(*pred))
-        if t - self.cur_o_t >= self.cfg.offset_interval:
+        if t - self.cur_o_t >= self.cfg.offset_interval_s:
             self._new_offset(t, graph, vals, ts)
         # compass readings since the previous keyframe (late ones go to this keyframe too)
         readings = [r for r in self.compass_pending if r[0] <= t + 1e-9]
@@ -458,7 +501,7 @@ class SlidingWindowSmoother(Backend):
 
     def _capture_leaving(self, t_new: float) -> None:
         """Record the keyframes the next update will marginalize (their final smoothed value)."""
-        horizon = t_new - self.cfg.lag + 1e-6
+        horizon = t_new - self.cfg.lag_s + 1e-6
         while self.window and self.window[0][0] < horizon:
             tk, kk = self.window.popleft()
             try:
@@ -569,8 +612,8 @@ class BatchSmoother(SlidingWindowSmoother):
 
     name = "batch"
 
-    def __init__(self, config: SmootherConfig | None = None, max_iterations: int = 50) -> None:
-        self.max_iterations = max_iterations
+    def __init__(self, config: SmootherConfig | None = None, batch: BatchConfig | None = None) -> None:
+        self.max_iterations = (batch or BatchConfig()).max_iterations
         self.all_graph: list[gtsam.NonlinearFactor | None] = []
         self.isam_to_all: dict[int, int] = {}
         self.key_t: dict[int, float] = {}

@@ -51,17 +51,17 @@ def register(app: typer.Typer) -> None:
             raise ConfigError(f"--backend {backend}: expected smoother or ekf")
         cfg = load_config(config)
         if not any(math.isnan(v) for v in laser_mount):
-            cfg["laser"]["mount"] = list(laser_mount)
+            from fgloc.config import parse_config
+
+            cfg = parse_config({"laser": {"mount": list(laser_mount)}}, source="--laser-mount", base=cfg)
         occ = load_map(map_yaml) if map_yaml is not None else None
         init = None if any(math.isnan(v) for v in initial_pose) else np.array(initial_pose, dtype=float)
 
-        from fgloc.live.harness import localizer_config
         from fgloc.pipeline import Localizer
         from fgloc.types import StaticTransform
 
-        mount = StaticTransform("base_link", "laser", np.asarray(cfg["laser"]["mount"], dtype=float))
-        loc = Localizer(occ, mount, backend=backend, frontend=frontend, initial_pose=init,
-                        config=localizer_config(cfg))
+        mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
+        loc = Localizer(occ, mount, backend=backend, frontend=frontend, initial_pose=init, config=cfg)
         tty = sys.stderr.isatty()
         last_len = [0]
 

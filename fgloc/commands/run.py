@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import copy
 import math
 import time
+from importlib.resources import as_file
 from pathlib import Path
 from typing import Any
 
@@ -94,7 +94,9 @@ def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str 
         written.append(write_tum(outdir / "online.tum", online))
     if len(fixes):
         written.append(write_tum(outdir / "fixes.tum", fixes))
-    effective = copy.deepcopy(config)
+    from fgloc.config.schema import to_dict
+
+    effective = to_dict(config)
     effective["run"] = {
         "log": str(log), "map": str(map_yaml) if map_yaml else None, "mode": mode, "backend": backend,
         "frontend": loc.frontend_name, "initial_pose": None if pose0 is None else pose0.tolist(),
@@ -152,7 +154,7 @@ def _print_run_summary(r: dict[str, Any]) -> None:
 
 
 # ---------------------------------------------------------------------- bench helpers
-def localize_sim(sim: Any, backend: str, frontend: str, config: dict | None = None,
+def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
                  initial_pose: np.ndarray | None = None, use_initial: bool = True) -> tuple[Any, Any, Any, float]:
     """Run one back-end/front-end on a simulated run; returns (final, online, localizer, wall_s)."""
     from fgloc.pipeline import Localizer, run_messages
@@ -278,18 +280,19 @@ def bench_faults(backend: str = "smoother", frontend: str = "native", seeds: int
     from fgloc.sim import run_scenario, simulate_paper
 
     config = load_config(config_path)
-    scen_dir = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+    from fgloc.config import scenario_path
     out = []
     for seed in range(seeds):
         base = simulate_paper(seed=seed)
         f0, *_ = localize_sim(base, backend, frontend, config)
         rmse0 = evaluate(f0, base.ground_truth).position_rmse_m
         for name in FAULTS:
-            path = scen_dir / f"{name}.yaml"
-            if not path.exists():
-                out.append({"seed": seed, "scenario": name, "error": f"{path} missing"})
+            res = scenario_path(name)
+            if not res.is_file():
+                out.append({"seed": seed, "scenario": name, "error": f"scenario {name} not shipped"})
                 continue
-            sim = run_scenario(path, seed=seed)
+            with as_file(res) as path:
+                sim = run_scenario(path, seed=seed)
             final, online, loc, _ = localize_sim(sim, backend, frontend, config)
             m = evaluate(final, sim.ground_truth)
             row: dict[str, Any] = {"seed": seed, "scenario": name, "rmse0": rmse0, "rmse": m.position_rmse_m,

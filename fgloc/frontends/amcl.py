@@ -44,18 +44,20 @@ All per-particle work is vectorized numpy or compiled numba; no Python loop over
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import wrap_angle
-from fgloc.gridmath import bilinear
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
-from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix, unpack_config
+from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
 
 try:
     from numba import njit
@@ -67,154 +69,46 @@ except ImportError:  # pragma: no cover
 
 FloatArray = NDArray[np.float64]
 
-#: Documented defaults (nav2_amcl where sensible).  ``config/frontends.yaml``'s ``amcl:``
-#: section lists the same values; ``AMCL.from_config`` accepts exactly these keys.
-AMCL_DEFAULTS: dict[str, Any] = {
-    # motion model: "differential" (nav2 DifferentialMotionModel) or "omni" (OmniMotionModel)
-    "robot_model_type": "omni",  # the paper robot is mecanum; nav2 default differential
-    "alpha1": 0.05,  # rotation noise from rotation (nav2 0.2 for all five; the paper odometry is better)
-    "alpha2": 0.05,  # rotation noise from translation
-    "alpha3": 0.05,  # translation noise from translation
-    "alpha4": 0.05,  # translation noise from rotation
-    "alpha5": 0.05,  # strafe noise from translation (omni only)
-    # sensor model
-    "laser_model_type": "likelihood_field_prob",  # nav2 default likelihood_field (1 + sum pz^3): cloud too wide
-    "z_hit": 0.5,
-    "z_rand": 0.5,
-    "sigma_hit": 0.05,  # m (nav2 0.2)
-    "laser_max_beams": 60,
-    "laser_likelihood_max_dist": 2.0,  # m
-    "laser_max_range": -1.0,  # m; <= 0: the scan's range_max
-    # cells the likelihood field measures distance to: "occupied" (nav2), or "occupied+unknown_edge"
-    # (also unknown cells bordering free space: maps that store walls as grey, e.g. willow-2010-02-18)
-    "field_walls": "occupied",
-    "beam_correlation": 8.0,  # likelihood_field_prob only: log-likelihood divided by this
-    # particle filter
-    "min_particles": 500,
-    "max_particles": 2000,
-    "global_particles": 60000,  # particles spread over free space by reset(None)
-    "global_sigma_hit": 0.2,  # m: sigma_hit while globally localizing (smoother, fewer premature collapses)
-    "pf_err": 0.05,
-    "pf_z": 0.99,
-    "kld_bin_xy": 0.5,  # m
-    "kld_bin_yaw_deg": 10.0,
-    "resample_interval": 1,
-    "recovery_alpha_slow": 0.0,
-    "recovery_alpha_fast": 0.0,
-    "update_min_d": 0.1,  # m (nav2 0.25)
-    "update_min_a": 0.2,  # rad
-    "init_cov": [0.25, 0.25, 0.0685],  # reset(pose) without cov: nav2 initial_cov_xx/yy/aa (m^2, rad^2)
-    # output
-    "converged_xy_std": 0.25,  # m: larger cloud std -> no fix
-    "converged_yaw_std": 0.2,  # rad
-    "fix_without_update": False,  # thresholds not met: report the propagated estimate anyway
-    "cov_scale": 0.25,  # particle covariance is ~4x too large on the paper run (NEES 0.6 -> ~2.4)
-    "cov_floor": [0.0, 0.0, 0.0],  # m^2, m^2, rad^2 added to the particle covariance
-    "min_valid_beams": 10,
-    "deskew": True,
-    "seed": 0,
-}
 
 
 # ------------------------------------------------------------------ compiled kernels
 @njit(cache=True, fastmath=True)
-def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, table, inv_step):  # pragma: no cover
-    """Per-particle sum over beams of ``table(z)``, ``z`` the field at the beam endpoint.
-
-    ``field`` holds the surface distance at cell centres (bilinear); endpoints off the
-    grid get ``zmax``.  ``table``: the per-beam term of the sensor model sampled every
-    ``1 / inv_step`` metres of ``z`` (see :func:`beam_term_table`), linearly interpolated.
-    """
+def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, z_hit, z_rand_mult,
+                    inv_2s2, model, inv_corr):  # pragma: no cover - compiled
+    """Per-particle likelihood: model 0 = nav2 (1 + sum pz^3), 1 = sum log pz (tempered)."""
     n = px.shape[0]
     m = bx.shape[0]
-    last = table.shape[0] - 2
+    h, w = field.shape
     out = np.empty(n)
     for i in range(n):
         c = math.cos(pyaw[i])
         s = math.sin(pyaw[i])
-        # particle pose in grid units, cell centres at integers
-        gx0 = (px[i] - ox) * inv_res - 0.5
-        gy0 = (py[i] - oy) * inv_res - 0.5
-        cr = c * inv_res
-        sr = s * inv_res
         acc = 0.0
         for j in range(m):
-            z = bilinear(field, gx0 + cr * bx[j] - sr * by[j], gy0 + sr * bx[j] + cr * by[j], zmax)
-            t = z * inv_step
-            k = int(t)
-            if k > last:
-                k = last
-            acc += table[k] + (t - k) * (table[k + 1] - table[k])
-        out[i] = acc
+            gx = (px[i] + c * bx[j] - s * by[j] - ox) * inv_res - 0.5
+            gy = (py[i] + s * bx[j] + c * by[j] - oy) * inv_res - 0.5
+            if gx < 0.0 or gy < 0.0 or gx > w - 1 or gy > h - 1:
+                z = zmax
+            else:
+                x0 = int(gx)
+                y0 = int(gy)
+                if x0 > w - 2:
+                    x0 = w - 2
+                if y0 > h - 2:
+                    y0 = h - 2
+                fx = gx - x0
+                fy = gy - y0
+                z = (field[y0, x0] * (1 - fx) * (1 - fy) + field[y0, x0 + 1] * fx * (1 - fy)
+                     + field[y0 + 1, x0] * (1 - fx) * fy + field[y0 + 1, x0 + 1] * fx * fy)
+            pz = z_hit * math.exp(-z * z * inv_2s2) + z_rand_mult
+            if pz < 1e-30:  # z_rand = 0 or an infinite range_max: keep log finite
+                pz = 1e-30
+            if model == 0:
+                acc += pz * pz * pz
+            else:
+                acc += math.log(pz)
+        out[i] = 1.0 + acc if model == 0 else acc * inv_corr
     return out
-
-
-def beam_term_table(model: int, z_hit: float, z_rand_mult: float, sigma: float, zmax: float
-                    ) -> tuple[FloatArray, float]:
-    """The sensor model's per-beam term as a table over the endpoint distance ``z in [0, zmax]``.
-
-    ``pz = z_hit exp(-z^2 / 2 sigma^2) + z_rand_mult``; model 0 (nav2 ``likelihood_field``)
-    sums ``pz^3``, model 1 (``likelihood_field_prob``) sums ``log max(pz, 1e-30)``.  Step
-    ``sigma / 100``: linear interpolation is then within ~2.5e-5 of the exact term per beam
-    (``h^2/8 max|f''|``, ``|f''| <= 2 / sigma^2`` for the log), far below what separates
-    particles, and replaces an ``exp`` and a ``log`` per beam and particle (2/3 of the
-    update's time).  Returns ``(table, 1 / step)``.
-    """
-    step = max(sigma / 100.0, zmax / 100_000.0, 1e-9)
-    z = np.arange(int(math.ceil(zmax / step)) + 2, dtype=float) * step
-    pz = z_hit * np.exp(-0.5 * (z / sigma) ** 2) + z_rand_mult
-    term = pz**3 if model == 0 else np.log(np.maximum(pz, 1e-30))
-    return np.ascontiguousarray(term), 1.0 / step
-
-
-@njit(cache=True)
-def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
-    """nav2 ``pf_update_resample``'s stopping rule over candidates in visiting order.
-
-    ``keys (cap, 3)``: histogram bin of each candidate.  Returns ``(n, k)``: the first
-    count ``n`` that exceeds the KLD limit for the ``k`` distinct bins among the first
-    ``n`` candidates (``cap`` when never), and ``k``.  Distinct bins are counted with an
-    open-addressing hash set.
-    """
-    size = 1
-    while size < 2 * cap:
-        size *= 2
-    mask = size - 1
-    used = np.zeros(size, dtype=np.bool_)
-    tab = np.empty((size, 3), dtype=np.int64)
-    k = 0
-    n = cap
-    for j in range(cap):
-        a, b, c = keys[j, 0], keys[j, 1], keys[j, 2]
-        h = (a * 73856093) ^ (b * 19349663) ^ (c * 83492791)
-        slot = h & mask
-        while True:
-            if not used[slot]:
-                used[slot] = True
-                tab[slot, 0] = a
-                tab[slot, 1] = b
-                tab[slot, 2] = c
-                k += 1
-                break
-            if tab[slot, 0] == a and tab[slot, 1] == b and tab[slot, 2] == c:
-                break
-            slot = (slot + 1) & mask
-        # kld_limit(k) for the bins seen so far
-        if k <= 1:
-            lim = cap
-        else:
-            km1 = k - 1.0
-            bb = 2.0 / (9.0 * km1)
-            x = 1.0 - bb + math.sqrt(bb) * pf_z
-            lim = int(math.ceil(km1 / (2.0 * pf_err) * x * x * x))
-            if lim < n_min:
-                lim = n_min
-            if lim > cap:
-                lim = cap
-        if j + 1 > lim:
-            n = j + 1
-            break
-    return n, k
 
 
 # ------------------------------------------------------------------ motion models
@@ -290,32 +184,109 @@ def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatAr
     return mean, 0.5 * (cov + cov.T)
 
 
+@dataclass(frozen=True)
+class AMCLConfig:
+    """``frontends.amcl``: the particle filter (nav2_amcl names and units: rad where nav2 has rad).
+
+    The defaults are here and only here (nav2_amcl's where sensible; see the docs).
+    """
+
+    robot_model_type: str = setting("omni", "motion model: omni (nav2 OmniMotionModel, mecanum) | differential",
+                                    choices=("omni", "differential"))
+    alpha1: float = setting(0.05, "rotation noise from rotation (nav2 0.2 for all five)", min=0)
+    alpha2: float = setting(0.05, "rotation noise from translation", min=0)
+    alpha3: float = setting(0.05, "translation noise from translation", min=0)
+    alpha4: float = setting(0.05, "translation noise from rotation", min=0)
+    alpha5: float = setting(0.05, "strafe noise from translation (omni only)", min=0)
+    laser_model_type: str = setting("likelihood_field_prob", "prod pz (log space, tempered); likelihood_field = "
+                                    "nav2's 1 + sum pz^3", choices=("likelihood_field", "likelihood_field_prob"))
+    z_hit: float = setting(0.5, "pz = z_hit exp(-z^2 / 2 sigma_hit^2) + z_rand / range_max", min=0)
+    z_rand: float = setting(0.5, "see z_hit", min=0)
+    sigma_hit: float = setting(0.05, "m (nav2 0.2)", gt=0)
+    laser_max_beams: int = setting(60, "valid beams kept, evenly strided; +inf/-inf/NaN/0 dropped (REP 117)", min=1)
+    laser_likelihood_max_dist: float = setting(2.0, "m, distance-field clip; endpoints off the grid get this", gt=0)
+    laser_max_range: float = setting(-1.0, "m; <= 0: the scan's range_max (for z_rand)")
+    beam_correlation: float = setting(8.0, "likelihood_field_prob: log-likelihood divided by this", gt=0)
+    field_walls: str = setting("occupied", "cells the likelihood field measures distance to (occupied+unknown_edge: "
+                               "maps storing walls as grey pixels)", choices=("occupied", "occupied+unknown_edge"))
+    min_particles: int = setting(500, "KLD sampling lower bound", min=1)
+    max_particles: int = setting(2000, "KLD sampling upper bound", min=1)
+    global_particles: int = setting(60000, "reset(None): uniform over free cells", min=1)
+    global_sigma_hit: float = setting(0.2, "m: sigma_hit until the cloud is one blob", gt=0)
+    pf_err: float = setting(0.05, "KLD error bound", gt=0)
+    pf_z: float = setting(0.99, "KLD normal quantile, used directly as nav2 does", gt=0)
+    kld_bin_xy: float = setting(0.5, "m", gt=0)
+    kld_bin_yaw_deg: float = setting(10.0, "KLD histogram heading bin", gt=0)
+    resample_interval: int = setting(1, "low-variance (systematic) resampling every N updates", min=1)
+    recovery_alpha_slow: float = setting(0.0, "augmented MCL; 0 = off (nav2 default)", min=0)
+    recovery_alpha_fast: float = setting(0.0, "augmented MCL; 0 = off", min=0)
+    update_min_d: float = setting(0.1, "m of odometry motion before a filter update (nav2 0.25)", min=0)
+    update_min_a: float = setting(0.2, "rad of odometry rotation before a filter update (nav2 units)", min=0)
+    init_cov: tuple[float, float, float] = setting((0.25, 0.25, 0.0685), "reset(pose) without cov (m^2, m^2, rad^2)",
+                                                   min=0)
+    converged_xy_std: float = setting(0.25, "m: larger cloud std -> no fix 'not converged'", gt=0)
+    converged_yaw_std: float = setting(0.2, "rad: larger cloud heading std -> no fix", gt=0)
+    fix_without_update: bool = setting(False, "thresholds not met -> no fix (true: the propagated estimate)")
+    cov_scale: float = setting(0.25, "output cov = cov_scale * particle cov + diag(cov_floor)", gt=0)
+    cov_floor: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m^2, m^2, rad^2 added", min=0)
+    min_valid_beams: int = setting(10, "fewer valid beams -> no fix", min=1)
+    deskew: bool = setting(True, "per-beam de-skew from the odometry motion")
+    seed: int = setting(0, "random seed of the filter")
+
+
 class AMCL:
     """Adaptive Monte Carlo localization front-end (``name = "amcl"``); see the module docstring."""
 
     name = "amcl"
+    is_particle_filter = True  # capabilities the localizer reads (see fgloc.frontends.base.FrontendBase)
+    supports_global = True
 
     def __init__(
         self,
         occ_map: OccupancyMap,
         laser_mount: StaticTransform | None = None,
-        *,
-        robot_model_type: str = "omni",
-        alpha1: float = 0.05, alpha2: float = 0.05, alpha3: float = 0.05, alpha4: float = 0.05, alpha5: float = 0.05,
-        laser_model_type: str = "likelihood_field_prob",
-        z_hit: float = 0.5, z_rand: float = 0.5, sigma_hit: float = 0.05,
-        laser_max_beams: int = 60, laser_likelihood_max_dist: float = 2.0, laser_max_range: float = -1.0,
-        beam_correlation: float = 8.0, field_walls: str = "occupied",
-        min_particles: int = 500, max_particles: int = 2000, global_particles: int = 60000,
-        global_sigma_hit: float = 0.2,
-        pf_err: float = 0.05, pf_z: float = 0.99, kld_bin_xy: float = 0.5, kld_bin_yaw_deg: float = 10.0,
-        resample_interval: int = 1, recovery_alpha_slow: float = 0.0, recovery_alpha_fast: float = 0.0,
-        update_min_d: float = 0.1, update_min_a: float = 0.2,
-        init_cov: tuple[float, float, float] | list[float] = (0.25, 0.25, 0.0685),
-        converged_xy_std: float = 0.25, converged_yaw_std: float = 0.2, fix_without_update: bool = False,
-        cov_scale: float = 0.25, cov_floor: tuple[float, float, float] | list[float] = (0.0, 0.0, 0.0),
-        min_valid_beams: int = 10, deskew: bool = True, seed: int = 0,
+        config: AMCLConfig | None = None,
+        **overrides: Any,
     ) -> None:
+        conf = with_overrides(AMCLConfig, config, overrides)
+        self.config = conf
+        robot_model_type = conf.robot_model_type
+        alpha1 = conf.alpha1
+        alpha2 = conf.alpha2
+        alpha3 = conf.alpha3
+        alpha4 = conf.alpha4
+        alpha5 = conf.alpha5
+        laser_model_type = conf.laser_model_type
+        z_hit = conf.z_hit
+        z_rand = conf.z_rand
+        sigma_hit = conf.sigma_hit
+        laser_max_beams = conf.laser_max_beams
+        laser_likelihood_max_dist = conf.laser_likelihood_max_dist
+        laser_max_range = conf.laser_max_range
+        beam_correlation = conf.beam_correlation
+        field_walls = conf.field_walls
+        min_particles = conf.min_particles
+        max_particles = conf.max_particles
+        global_particles = conf.global_particles
+        global_sigma_hit = conf.global_sigma_hit
+        pf_err = conf.pf_err
+        pf_z = conf.pf_z
+        kld_bin_xy = conf.kld_bin_xy
+        kld_bin_yaw_deg = conf.kld_bin_yaw_deg
+        resample_interval = conf.resample_interval
+        recovery_alpha_slow = conf.recovery_alpha_slow
+        recovery_alpha_fast = conf.recovery_alpha_fast
+        update_min_d = conf.update_min_d
+        update_min_a = conf.update_min_a
+        init_cov = conf.init_cov
+        converged_xy_std = conf.converged_xy_std
+        converged_yaw_std = conf.converged_yaw_std
+        fix_without_update = conf.fix_without_update
+        cov_scale = conf.cov_scale
+        cov_floor = conf.cov_floor
+        min_valid_beams = conf.min_valid_beams
+        deskew = conf.deskew
+        seed = conf.seed
         if robot_model_type not in ("differential", "omni"):
             raise ConfigError(f"amcl: robot_model_type must be differential or omni, got {robot_model_type!r}")
         if laser_model_type not in ("likelihood_field", "likelihood_field_prob"):
@@ -369,9 +340,6 @@ class AMCL:
             raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {field_walls!r}")
         self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
         self._free = occ_map.free_cell_centers()
-        self._table_key: tuple[int, float, float] | None = None
-        self._table = np.zeros(2)
-        self._table_inv_step = 1.0
         self.particles = np.zeros((0, 3))
         self.weights = np.zeros(0)
         self.initialized = False
@@ -386,31 +354,11 @@ class AMCL:
     # ------------------------------------------------------------------ config
     @classmethod
     def from_config(cls, occ_map: OccupancyMap, laser_mount: StaticTransform | None,
-                    config: dict | None = None) -> AMCL:
-        """Unpack the ``amcl:`` config section (keys of :data:`AMCL_DEFAULTS`) into constructor args."""
-        cfg = {**AMCL_DEFAULTS, **unpack_config("amcl", config, set(AMCL_DEFAULTS))}
-        try:
-            ints = {"laser_max_beams", "min_particles", "max_particles", "global_particles",
-                    "resample_interval", "min_valid_beams", "seed"}
-            args: dict[str, Any] = {}
-            for k, v in cfg.items():
-                if k in ints:
-                    args[k] = int(v)
-                elif k in ("robot_model_type", "laser_model_type", "field_walls"):
-                    args[k] = str(v)
-                elif k in ("fix_without_update", "deskew"):
-                    if not isinstance(v, bool):
-                        raise ValueError(f"{k} must be true or false")
-                    args[k] = v
-                elif k in ("init_cov", "cov_floor"):
-                    args[k] = [float(x) for x in v]
-                    if len(args[k]) != 3:
-                        raise ValueError(f"{k} needs 3 numbers")
-                else:
-                    args[k] = float(v)
-        except (TypeError, ValueError) as e:
-            raise ConfigError(f"frontends config [amcl]: bad value ({e})") from None
-        return cls(occ_map, laser_mount, **args)
+                    config: AMCLConfig | Mapping[str, Any] | None = None) -> AMCL:
+        """Build from the ``frontends.amcl`` section (typed, or a mapping checked like YAML)."""
+        if config is None or isinstance(config, AMCLConfig):
+            return cls(occ_map, laser_mount, config)
+        return cls(occ_map, laser_mount, parse(AMCLConfig, config, where="frontends.amcl"))
 
     # ------------------------------------------------------------------ state
     def reset(self, pose: np.ndarray | None = None, cov: np.ndarray | None = None) -> None:
@@ -458,16 +406,11 @@ class AMCL:
             ox, oy = float(self.map.origin[0]), float(self.map.origin[1])
         sigma = self.global_sigma_hit if self._global else self.sigma_hit
         model = 0 if self.laser_model_type == "likelihood_field" else 1
-        key = (model, sigma, self.z_rand * z_rand_mult)
-        if self._table_key != key:
-            self._table, self._table_inv_step = beam_term_table(model, self.z_hit, key[2], sigma, self.max_dist)
-            self._table_key = key
-        acc = _weights_kernel(
+        return _weights_kernel(
             np.ascontiguousarray(px), np.ascontiguousarray(py), np.ascontiguousarray(pyaw),
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), self._field,
-            ox, oy, 1.0 / self.map.resolution, self.max_dist, self._table, self._table_inv_step)
-        # nav2 likelihood_field: w = 1 + sum pz^3; likelihood_field_prob: tempered sum of log pz
-        return acc + 1.0 if model == 0 else acc / self.beam_correlation
+            ox, oy, 1.0 / self.map.resolution, self.max_dist, self.z_hit, self.z_rand * z_rand_mult,
+            1.0 / (2.0 * sigma**2), model, 1.0 / self.beam_correlation)
 
     def _resample(self) -> None:
         w = self.weights
@@ -478,11 +421,16 @@ class AMCL:
         cand = self.particles[systematic_resample(w, cap, self.rng)]
         cand = cand[self.rng.permutation(cap)]
         keys = np.floor(cand / self.kld_bin).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        is_new = np.zeros(cap, dtype=bool)
+        is_new[first] = True
+        k = np.cumsum(is_new)
         n_min = self.max_particles if self._global else self.min_particles
-        n, k_n = _kld_count(keys, self.pf_err, self.pf_z, n_min, cap)
-        if n < n_min:  # (the limit is clipped to n_min, so this only guards the rule's contract)
-            n = n_min
-        self.last_kld_k = int(k_n)
+        lim = kld_limit(k, self.pf_err, self.pf_z, n_min, cap)
+        stop = np.flatnonzero(np.arange(1, cap + 1) > lim)
+        n = int(stop[0]) + 1 if len(stop) else cap
+        n = max(n, n_min)
+        self.last_kld_k = int(k[n - 1])
         new = self.particles[systematic_resample(w, n, self.rng)]
         if self.alpha_slow > 0 and self.alpha_fast > 0 and self._w_slow > 0:
             p_rand = max(0.0, 1.0 - self._w_fast / self._w_slow)
@@ -578,3 +526,7 @@ class AMCL:
 def _compose1(a: FloatArray, b: FloatArray) -> FloatArray:
     c, s = math.cos(a[2]), math.sin(a[2])
     return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
+
+
+#: the defaults as a plain mapping (derived from :class:`AMCLConfig`)
+AMCL_DEFAULTS: dict[str, Any] = to_dict(AMCLConfig())

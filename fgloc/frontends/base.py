@@ -21,6 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle
 from fgloc.geometry import log as se2_log
@@ -72,6 +73,8 @@ class ScanMatcher(Protocol):
     """What the pipeline calls. ``name`` identifies the front-end (``native``, ``kiss``, ``amcl``)."""
 
     name: str
+    is_particle_filter: bool  # see FrontendBase
+    supports_global: bool
 
     def match(
         self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None
@@ -83,28 +86,25 @@ class ScanMatcher(Protocol):
 
 
 # ------------------------------------------------------------------ preprocessing
-@dataclass
+@dataclass(frozen=True)
 class PreprocessOptions:
-    """Scan preprocessing shared by the front-ends (all documented in ``config/frontends.yaml``).
+    """``frontends.<name>.preprocess``: the scan preprocessing every front-end shares.
 
-    ``max_beams``: keep at most this many valid beams by uniform striding (0 = all).
-    ``voxel_size_m``: 2-D voxel downsampling of the base-frame points (0 = off).
-    ``deskew``: undo motion distortion per beam when ``time_increment != 0`` (negative:
-    the beams are listed against the sweep, REP 117 timing still holds) and the
-    odometry motion since the last call is given.  ``min_valid_beams``: fewer -> no fix.
-    ``max_deskew_interval_s``: a gap between calls longer than this disables de-skew for
-    that scan (the constant-velocity assumption would not hold).  ``deskew_extrapolate``:
-    the twist during the scan is extrapolated linearly from the last two odometry
-    intervals to the middle of the sweep (accounts for acceleration: the last interval
-    ends where the scan starts), instead of holding the last interval's mean twist.
+    De-skew undoes motion distortion per beam when ``time_increment != 0`` (negative: the
+    beams are listed against the sweep, REP 117 timing still holds) and the odometry motion
+    since the last call is given.  With ``deskew_extrapolate`` the twist during the scan is
+    extrapolated linearly from the last two odometry intervals to the middle of the sweep
+    (accelerating robots: the last interval ends where the scan starts).
     """
 
-    max_beams: int = 0
-    voxel_size_m: float = 0.0
-    deskew: bool = True
-    min_valid_beams: int = 10
-    max_deskew_interval_s: float = 0.5
-    deskew_extrapolate: bool = True
+    max_beams: int = setting(0, "keep at most N valid beams by uniform striding (0 = all)", min=0)
+    voxel_size_m: float = setting(0.0, "2-D voxel downsampling of the base-frame points (0 = off)", min=0)
+    deskew: bool = setting(True, "per-beam motion de-skew from the odometry motion since the previous scan")
+    min_valid_beams: int = setting(10, "fewer valid (finite, inside [range_min, range_max]) beams -> no fix", min=1)
+    max_deskew_interval_s: float = setting(0.5, "a longer gap since the previous scan -> that scan is not "
+                                           "de-skewed (constant velocity would not hold)", min=0)
+    deskew_extrapolate: bool = setting(True, "extrapolate the twist to the middle of the sweep from the last two "
+                                       "odometry intervals (false: hold the last interval's mean twist)")
 
     def __post_init__(self) -> None:
         if self.max_beams < 0 or self.voxel_size_m < 0 or self.min_valid_beams < 1:
@@ -271,6 +271,13 @@ class FrontendBase:
     """
 
     name: str = "base"
+    #: keeps its own pose belief (particles): re-seeded by ``reset(pose)`` whenever the localizer
+    #: resets its back-end, given the odometry as it came (its motion model), and a scan it skips
+    #: (update thresholds) says nothing about being lost
+    is_particle_filter: bool = False
+    #: has its own global localization mode, ``reset(None)`` (else the localizer runs its
+    #: correlative global search and refines the candidates with ``match``)
+    supports_global: bool = False
 
     def __init__(
         self, occ_map: OccupancyMap, laser_mount: StaticTransform | None, preprocess: PreprocessOptions | None

@@ -1,24 +1,27 @@
-"""``make_frontend``: build a scan-to-map front-end by name from a config dict.
+"""``make_frontend``: build a scan-to-map front-end by name from its typed config section.
 
-``config`` may be either the section for that front-end (``{"max_iterations": 20,
-...}``) or the whole ``config/frontends.yaml`` mapping (``{"native": {...}, "kiss":
-{...}, "amcl": {...}}``); in the latter case the section named like the front-end
-is used.  Missing keys take the documented defaults (the constructor defaults, the
-same values ``config/frontends.yaml`` lists).  Unknown keys raise ``ConfigError``.
+The ``frontends:`` section of :class:`fgloc.config.FglocConfig` is a
+:class:`FrontendsConfig` with one sub-section per front-end (``native``, ``kiss``,
+``amcl``), each a dataclass defined beside its front-end (:class:`NativeConfig`,
+:class:`KissConfig`, :class:`AMCLConfig`) holding the only copy of its defaults.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from fgloc.config.schema import parse, section, suggest, to_dict
 from fgloc.errors import ConfigError
 from fgloc.maps import OccupancyMap
 from fgloc.types import StaticTransform
 
+from .amcl import AMCLConfig
 from .base import ScanMatcher
+from .kiss import KissConfig
+from .native import NativeConfig
 
 #: accepted names -> canonical section name
 ALIASES: dict[str, str] = {
@@ -31,61 +34,74 @@ ALIASES: dict[str, str] = {
 }
 FRONTENDS = ("native", "kiss", "amcl")
 
-DEFAULT_CONFIG_PATH = Path(__file__).resolve().parents[2] / "config" / "frontends.yaml"
+
+@dataclass(frozen=True)
+class FrontendsConfig:
+    """``frontends:`` one sub-section per scan-to-map front-end."""
+
+    native: NativeConfig = section(NativeConfig, "native matcher: robust LM on the map's surface distance field "
+                                   "after a correlative search")
+    kiss: KissConfig = section(KissConfig, "KISS-ICP registration against the map as a static voxel map")
+    amcl: AMCLConfig = section(AMCLConfig, "AMCL particle filter (nav2_amcl names)")
 
 
-def load_frontends_config(path: str | Path | None = None) -> dict[str, Any]:
-    """Read a front-ends YAML (default ``config/frontends.yaml``); ``{}`` if the default is absent."""
-    p = Path(path) if path is not None else DEFAULT_CONFIG_PATH
-    if not p.exists():
-        if path is None:
-            return {}
-        raise ConfigError(f"{p}: front-ends config not found")
-    try:
-        data = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"{p}: front-ends config does not parse ({e.__class__.__name__})") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{p}: front-ends config must be a mapping of front-end name -> settings")
-    return data
+def canonical_name(name: str) -> str:
+    """``native``, ``kiss`` or ``amcl`` for an accepted name; :class:`ConfigError` otherwise."""
+    key = str(name).strip().lower()
+    canonical = ALIASES.get(key)
+    if canonical is None:
+        raise ConfigError(f"unknown front-end '{name}' (choose native, kiss or amcl){suggest(key, ALIASES)}")
+    return canonical
 
 
-def _section(canonical: str, config: dict | None) -> dict[str, Any]:
-    if not config:
-        return {}
-    if not isinstance(config, dict):
-        raise ConfigError(f"front-end config must be a mapping, got {type(config).__name__}")
-    if any(k in FRONTENDS for k in config):
-        sec = config.get(canonical) or {}
-        if not isinstance(sec, dict):
-            raise ConfigError(f"frontends config [{canonical}] must be a mapping")
-        return dict(sec)
-    return dict(config)
+def _section(canonical: str, config: Any) -> Any:
+    """The typed section of front-end ``canonical`` from whatever the caller holds."""
+    if config is None:
+        return None
+    if hasattr(config, "frontends") and not isinstance(config, Mapping):  # the whole FglocConfig
+        config = config.frontends
+    if isinstance(config, FrontendsConfig):
+        return getattr(config, canonical)
+    if isinstance(config, (NativeConfig, KissConfig, AMCLConfig)):
+        return config
+    if isinstance(config, Mapping):
+        if any(k in FRONTENDS for k in config):  # {"native": {...}, "kiss": {...}}
+            return getattr(parse(FrontendsConfig, config, where="frontends"), canonical)
+        cls = {"native": NativeConfig, "kiss": KissConfig, "amcl": AMCLConfig}[canonical]
+        return parse(cls, config, where=f"frontends.{canonical}")
+    raise ConfigError(f"front-end config must be a config section, got {type(config).__name__}")
 
 
-def make_frontend(
-    name: str, occ_map: OccupancyMap, laser_mount: StaticTransform, config: dict | None = None
-) -> ScanMatcher:
+def make_frontend(name: str, occ_map: OccupancyMap, laser_mount: StaticTransform, config: Any = None) -> ScanMatcher:
     """A front-end by name: ``native``, ``kiss`` (aliases ``kiss-icp``, ``kiss_icp``) or ``amcl``.
 
+    ``config``: :class:`fgloc.config.FglocConfig`, :class:`FrontendsConfig`, the front-end's
+    own section, or ``None`` (the defaults).  A plain mapping is checked like a YAML file.
     Raises :class:`ConfigError` for an unknown name or a bad config value.
     """
-    canonical = ALIASES.get(str(name).strip().lower())
-    if canonical is None:
-        raise ConfigError(f"unknown front-end '{name}' (choose native, kiss or amcl)")
-    section = _section(canonical, config)
+    canonical = canonical_name(name)
+    sec = _section(canonical, config)
     if canonical == "native":
         from .native import NativeMatcher
 
-        return NativeMatcher.from_config(occ_map, laser_mount, section)
+        return NativeMatcher(occ_map, laser_mount, sec)
     if canonical == "kiss":
         from .kiss import KissMatcher
 
-        return KissMatcher.from_config(occ_map, laser_mount, section)
-    try:
-        from .amcl import AMCL
-    except ImportError as e:
-        raise ConfigError(f"front-end 'amcl' is not available ({e})") from None
-    return AMCL.from_config(occ_map, laser_mount, section)  # type: ignore[no-any-return]
+        return KissMatcher(occ_map, laser_mount, sec)
+    from .amcl import AMCL
+
+    return AMCL(occ_map, laser_mount, sec)  # type: ignore[return-value]
+
+
+def load_frontends_config(path: str | Path | None = None) -> dict[str, Any]:
+    """The ``frontends:`` section as a plain mapping: the defaults, or ``path`` (a YAML file with a
+    ``frontends:`` section or the bare per-front-end sections) checked and overlaid on them."""
+    if path is None:
+        return to_dict(FrontendsConfig())
+    from fgloc.config import load_config
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: config file not found")
+    return to_dict(load_config(p).frontends)

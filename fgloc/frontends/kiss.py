@@ -26,10 +26,12 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from fgloc.config.schema import section, setting, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, compose, from_matrix, to_matrix4, wrap_angle
 from fgloc.maps import OccupancyMap
@@ -41,8 +43,6 @@ from .base import (
     MatchResult,
     PreprocessOptions,
     no_fix,
-    preprocess_from_config,
-    unpack_config,
 )
 
 
@@ -94,56 +94,88 @@ def surface_points(
     return pts, nrm
 
 
+@dataclass(frozen=True)
+class KissConfig:
+    """``frontends.kiss``: kiss_icp registration against the map (defaults here and only here)."""
+
+    preprocess: PreprocessOptions = section(PreprocessOptions, "scan preprocessing shared by the front-ends")
+    samples_per_face: int = setting(2, "map points per face of an occupied cell bordering a non-occupied one", min=1)
+    surface_depth_cells: float = setting(0.5, "the map points moved this far into the cell (as native, fixed)",
+                                         min=0, max=1)
+    coarse_voxel_size_m: float = setting(0.8, "coarse stage (robust to a guess ~0.5 m / 15 deg off)", gt=0)
+    coarse_max_points_per_voxel: int = setting(64, "coarse stage", min=1)
+    coarse_max_correspondence_m: float = setting(1.5, "coarse stage; 0 skips it", min=0)
+    coarse_kernel_m: float = setting(0.5, "coarse stage robust kernel", gt=0)
+    coarse_max_iterations: int = setting(50, "coarse stage", min=1)
+    coarse_convergence_criterion: float = setting(1e-4, "coarse stage", gt=0)
+    voxel_size_m: float = setting(0.25, "fine stage voxel size", gt=0)
+    max_points_per_voxel: int = setting(150, "fine stage", min=1)
+    max_correspondence_m: float = setting(0.25, "fine stage", gt=0)
+    kernel_m: float = setting(0.05, "fine stage robust kernel", gt=0)
+    max_iterations: int = setting(50, "fine stage", min=1)
+    convergence_criterion: float = setting(1e-5, "fine stage", gt=0)
+    max_threads: int = setting(1, "kiss_icp TBB threads (0 = all cores)", min=0)
+    inlier_dist_m: float = setting(0.1, "|residual| below this is an inlier", gt=0)
+    min_inliers: int = setting(30, "fewer inliers -> no fix", min=0)
+    min_inlier_fraction: float = setting(0.4, "smaller inlier fraction -> no fix", min=0, max=1)
+    max_jump_m: float = setting(1.0, "farther from the guess -> no fix", gt=0)
+    max_jump_deg: float = setting(30.0, "more heading change from the guess -> no fix", gt=0)
+    min_eigen_ratio: float = setting(1e-3, "smallest/largest Hessian eigenvalue below this -> no fix", min=0)
+    cov_inflation: tuple[float, ...] = setting((17.0, 36.0), "[kxy, kyaw] as for native", gt=0)
+    cov_floor: tuple[float, float, float] = setting((1e-8, 1e-8, 1e-9), "m^2, m^2, rad^2 added", min=0)
+    max_backface_fraction: float = setting(0.5, "still more inliers on the back of walls after the retry -> no fix",
+                                           min=0, max=1)
+    retry_backface_fraction: float = setting(0.1, "more inliers on the back of walls -> retry on front-facing "
+                                             "surfaces", min=0, max=1)
+    retry_inlier_fraction: float = setting(0.9, "fewer inliers -> restart from the optimum moved by the offsets",
+                                           min=0, max=1)
+    retry_offset_m: float = setting(0.15, "restart offset in x and y (base frame)", min=0)
+    retry_offset_deg: float = setting(5.0, "restart offset in yaw", min=0)
+
+
 class KissMatcher(FrontendBase):
     """kiss_icp point-to-point registration against a static voxel map of the occupied surfaces."""
 
     name = "kiss"
 
-    KEYS = {
-        "preprocess", "samples_per_face", "surface_depth_cells", "coarse_voxel_size_m",
-        "coarse_max_points_per_voxel", "coarse_max_correspondence_m", "coarse_kernel_m", "coarse_max_iterations",
-        "coarse_convergence_criterion", "voxel_size_m", "max_points_per_voxel", "max_correspondence_m", "kernel_m",
-        "max_iterations", "convergence_criterion", "max_threads", "inlier_dist_m", "min_inliers",
-        "min_inlier_fraction", "max_jump_m", "max_jump_deg", "min_eigen_ratio", "cov_inflation", "cov_floor",
-        "max_backface_fraction", "retry_backface_fraction", "retry_inlier_fraction", "retry_offset_m",
-        "retry_offset_deg",
-    }
-
     def __init__(
         self,
         occ_map: OccupancyMap,
         laser_mount: StaticTransform | None = None,
-        *,
-        preprocess: PreprocessOptions | None = None,
-        samples_per_face: int = 2,
-        surface_depth_cells: float = 0.5,
-        coarse_voxel_size_m: float = 0.8,
-        coarse_max_points_per_voxel: int = 64,
-        coarse_max_correspondence_m: float = 1.5,
-        coarse_kernel_m: float = 0.5,
-        coarse_max_iterations: int = 50,
-        coarse_convergence_criterion: float = 1e-4,
-        voxel_size_m: float = 0.25,
-        max_points_per_voxel: int = 150,
-        max_correspondence_m: float = 0.25,
-        kernel_m: float = 0.05,
-        max_iterations: int = 50,
-        convergence_criterion: float = 1e-5,
-        max_threads: int = 1,
-        inlier_dist_m: float = 0.1,
-        min_inliers: int = 30,
-        min_inlier_fraction: float = 0.4,
-        max_jump_m: float = 1.0,
-        max_jump_deg: float = 30.0,
-        min_eigen_ratio: float = 1e-3,
-        cov_inflation: tuple[float, float] = (17.0, 36.0),
-        cov_floor: tuple[float, float, float] = (1e-8, 1e-8, 1e-9),
-        max_backface_fraction: float = 0.5,
-        retry_backface_fraction: float = 0.1,
-        retry_inlier_fraction: float = 0.9,
-        retry_offset_m: float = 0.15,
-        retry_offset_deg: float = 5.0,
+        config: KissConfig | None = None,
+        **overrides: Any,
     ):
+        conf = with_overrides(KissConfig, config, overrides)
+        self.config = conf
+        preprocess = conf.preprocess
+        samples_per_face = conf.samples_per_face
+        surface_depth_cells = conf.surface_depth_cells
+        coarse_voxel_size_m = conf.coarse_voxel_size_m
+        coarse_max_points_per_voxel = conf.coarse_max_points_per_voxel
+        coarse_max_correspondence_m = conf.coarse_max_correspondence_m
+        coarse_kernel_m = conf.coarse_kernel_m
+        coarse_max_iterations = conf.coarse_max_iterations
+        coarse_convergence_criterion = conf.coarse_convergence_criterion
+        voxel_size_m = conf.voxel_size_m
+        max_points_per_voxel = conf.max_points_per_voxel
+        max_correspondence_m = conf.max_correspondence_m
+        kernel_m = conf.kernel_m
+        max_iterations = conf.max_iterations
+        convergence_criterion = conf.convergence_criterion
+        max_threads = conf.max_threads
+        inlier_dist_m = conf.inlier_dist_m
+        min_inliers = conf.min_inliers
+        min_inlier_fraction = conf.min_inlier_fraction
+        max_jump_m = conf.max_jump_m
+        max_jump_deg = conf.max_jump_deg
+        min_eigen_ratio = conf.min_eigen_ratio
+        cov_inflation = conf.cov_inflation
+        cov_floor = conf.cov_floor
+        max_backface_fraction = conf.max_backface_fraction
+        retry_backface_fraction = conf.retry_backface_fraction
+        retry_inlier_fraction = conf.retry_inlier_fraction
+        retry_offset_m = conf.retry_offset_m
+        retry_offset_deg = conf.retry_offset_deg
         super().__init__(occ_map, laser_mount, preprocess)
         try:
             from kiss_icp.mapping import VoxelHashMap
@@ -193,27 +225,6 @@ class KissMatcher(FrontendBase):
         self.cov_inflation = (float(infl[0]), float(infl[1]))
         self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
         self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
-
-    @classmethod
-    def from_config(
-        cls, occ_map: OccupancyMap, laser_mount: StaticTransform | None, config: dict[str, Any] | None
-    ) -> KissMatcher:
-        cfg = unpack_config("kiss", config, cls.KEYS)
-        pre = preprocess_from_config("kiss", cfg.pop("preprocess", None))
-        ints = {"samples_per_face", "coarse_max_points_per_voxel", "coarse_max_iterations", "max_points_per_voxel",
-                "max_iterations", "max_threads", "min_inliers"}
-        kw: dict[str, Any] = {}
-        try:
-            for key, val in cfg.items():
-                if key in ("cov_floor", "cov_inflation"):
-                    kw[key] = tuple(float(v) for v in val)
-                elif key in ints:
-                    kw[key] = int(val)
-                else:
-                    kw[key] = float(val)
-        except (TypeError, ValueError) as e:
-            raise ConfigError(f"frontends config [kiss]: bad value ({e})") from None
-        return cls(occ_map, laser_mount, preprocess=pre, **kw)
 
     def _register(self, pts3: FloatArray, guess: FloatArray, coarse: Any, fine: Any) -> FloatArray | None:
         T = to_matrix4(guess)

@@ -8,62 +8,66 @@ returns the summary.
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import yaml
 
+from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
 from fgloc.live.publish import UdpPublisher
 from fgloc.live.runner import LiveRunner
-from fgloc.live.serial_link import FrameConverter, RobotParams, SerialLink
+from fgloc.live.serial_link import FrameConverter, SerialLink
 from fgloc.live.sick import SickClient
 from fgloc.types import StaticTransform, Trajectory
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "config" / "live.yaml"
+if TYPE_CHECKING:
+    from fgloc.config import FglocConfig
 
-_BUILTIN: dict[str, Any] = {
-    "robot": {"drive": "mecanum", "wheel_radius_m": 0.076, "track_width_m": 0.56, "wheelbase_m": 0.50,
-              "counts_per_rev": 2000},
-    "serial": {"baudrate": 115200, "align_clock": True, "compass_clockwise": False,
-               "twist_std": None, "compass_std_deg": None, "gyro_std_dps": None},
-    "laser": {"range_min_m": 0.5, "range_max_m": 50.0, "angle_offset_deg": -90.0, "align_clock": True,
-              "stall_timeout_s": 1.0, "mount": [0.0, 0.0, 0.0],
-              "time_increment_from": "measurement_frequency"},
-    "health": {"silence_s": 0.4},
-    "localizer": {},
-}
+@dataclass(frozen=True)
+class SerialConfig:
+    """``serial:`` the STM32 serial link (``fgloc live --serial``)."""
 
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(base)
-    for k, v in (over or {}).items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = v
-    return out
+    baudrate: int = setting(115200, "serial baud rate", min=1)
+    align_clock: bool = setting(True, "MCU timestamps -> host time (min-delay filter); false = arrival time")
+    compass_clockwise: bool = setting(False, "true if the firmware sends a clockwise (north-east) heading")
+    twist_std: tuple[float, float, float] | None = setting(
+        None, "[vx m/s, vy m/s, wz rad/s] noise put into /odom; null = unknown (the back-end's sigmas apply)", gt=0)
+    compass_std_deg: float | None = setting(None, "compass heading noise put into /imu; null = unknown", gt=0)
+    gyro_std_dps: float | None = setting(None, "yaw-rate noise (deg/s) put into /imu; null = unknown", gt=0)
 
 
-def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Built-in defaults, then ``config/live.yaml`` (if present), then ``path``, then overrides."""
-    cfg = copy.deepcopy(_BUILTIN)
-    for p in ([DEFAULT_CONFIG] if DEFAULT_CONFIG.is_file() else []) + ([Path(path)] if path else []):
-        try:
-            data = yaml.safe_load(Path(p).read_text()) or {}
-        except FileNotFoundError:
-            raise ConfigError(f"{p}: config file not found") from None
-        except yaml.YAMLError as e:
-            raise ConfigError(f"{p}: invalid YAML ({str(e).splitlines()[0]})") from None
-        if not isinstance(data, dict):
-            raise ConfigError(f"{p}: expected a mapping at the top level")
-        cfg = _merge(cfg, data)
-    return _merge(cfg, overrides or {})
+@dataclass(frozen=True)
+class LaserConfig:
+    """``laser:`` the SICK LMS1xx-class scanner over TCP (``fgloc live --laser``)."""
+
+    range_min_m: float = setting(0.5, "shorter ranges are invalid (paper Table 2: 0.5-50 m)", min=0)
+    range_max_m: float = setting(50.0, "longer ranges are invalid", gt=0)
+    angle_offset_deg: float = setting(-90.0, "LMS1xx device angle 0 is the scanner's right side")
+    align_clock: bool = setting(True, "device 'time since startup' -> host time")
+    time_increment_from: str = setting(
+        "measurement_frequency", "beam timing for de-skew: 1 / measurement frequency, or rotation: scan_time * "
+        "angular step / 360 deg", choices=("measurement_frequency", "rotation"))
+    stall_timeout_s: float = setting(1.0, "reconnect when connected but silent this long", gt=0)
+    mount: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "base_link -> laser [x_m, y_m, yaw_rad]")
+
+
+@dataclass(frozen=True)
+class HealthConfig:
+    """``health:`` sensor monitoring in ``fgloc live``."""
+
+    silence_s: float = setting(0.4, "a sensor with no message this long is reported silent (checked every "
+                               "~20 ms)", gt=0)
+
+
+def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> FglocConfig:
+    """The one fgloc config (:func:`fgloc.config.load_config`); kept here for old callers."""
+    from fgloc.config import load_config as load
+
+    return load(path, overrides)
 
 
 def parse_host_port(s: str) -> tuple[str, int]:
@@ -92,18 +96,20 @@ class LiveSession:
         localizer: Any,
         serial_url: str | None,
         laser: str | None,
-        config: dict[str, Any] | None = None,
+        config: FglocConfig | None = None,
         record: str | Path | None = None,
         publish: list[str] | None = None,
         status_sink: Any = None,
         event_sink: Any = None,
         serial_port: Any = None,
     ) -> None:
-        cfg = config if config is not None else load_config()
+        from fgloc.config import parse_config
+
+        cfg = parse_config(config)
         self.cfg = cfg
-        robot = RobotParams.from_dict(cfg.get("robot"))
-        sc, lc = cfg.get("serial", {}), cfg.get("laser", {})
-        mount = np.asarray(lc.get("mount", [0, 0, 0]), dtype=float)
+        robot = cfg.robot
+        sc, lc = cfg.serial, cfg.laser
+        mount = np.asarray(lc.mount, dtype=float)
         self.laser_mount = StaticTransform("base_link", "laser", mount)
         self.recorder: Any = None
         self.record_path = Path(record) if record else None
@@ -124,20 +130,20 @@ class LiveSession:
         self.runner = LiveRunner(
             localizer, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
             event_sink=ev, laser_mount=self.laser_mount,
-            silence_s=float(cfg.get("health", {}).get("silence_s", 0.4)),
+            silence_s=cfg.health.silence_s,
         )
-        ts, cs, gs = sc.get("twist_std"), sc.get("compass_std_deg"), sc.get("gyro_std_dps")
+        ts, cs, gs = sc.twist_std, sc.compass_std_deg, sc.gyro_std_dps
         conv = FrameConverter(
             robot,
-            compass_clockwise=bool(sc.get("compass_clockwise", False)),
-            twist_var=None if ts is None else tuple(float(v) ** 2 for v in ts),  # type: ignore[arg-type]
-            yaw_var=float("nan") if cs is None else math.radians(float(cs)) ** 2,
-            yaw_rate_var=float("nan") if gs is None else math.radians(float(gs)) ** 2,
-            align_clock=bool(sc.get("align_clock", True)),
+            compass_clockwise=sc.compass_clockwise,
+            twist_var=None if ts is None else (ts[0] ** 2, ts[1] ** 2, ts[2] ** 2),
+            yaw_var=float("nan") if cs is None else math.radians(cs) ** 2,
+            yaw_rate_var=float("nan") if gs is None else math.radians(gs) ** 2,
+            align_clock=sc.align_clock,
         )
         self.serial: SerialLink | None = None
         if serial_url or serial_port is not None:
-            self.serial = SerialLink(serial_url, conv, self.runner.push, baudrate=int(sc.get("baudrate", 115200)),
+            self.serial = SerialLink(serial_url, conv, self.runner.push, baudrate=sc.baudrate,
                                      port=serial_port, on_event=ev)
             self.runner.sources["serial"] = self.serial.counters
         self.laser: SickClient | None = None
@@ -145,11 +151,9 @@ class LiveSession:
             host, port = parse_host_port(laser)
             self.laser = SickClient(
                 host, port, on_scan=lambda scan, arrival: self.runner.push("scan", scan, arrival),
-                range_min=float(lc.get("range_min_m", 0.5)), range_max=float(lc.get("range_max_m", 50.0)),
-                angle_offset_deg=float(lc.get("angle_offset_deg", -90.0)),
-                time_increment_from=str(lc.get("time_increment_from", "measurement_frequency")),
-                align_clock=bool(lc.get("align_clock", True)),
-                stall_timeout_s=float(lc.get("stall_timeout_s", 1.0)), on_event=ev,
+                range_min=lc.range_min_m, range_max=lc.range_max_m, angle_offset_deg=lc.angle_offset_deg,
+                time_increment_from=lc.time_increment_from, align_clock=lc.align_clock,
+                stall_timeout_s=lc.stall_timeout_s, on_event=ev,
             )
             self.runner.sources["laser"] = self.laser.counters
         self._t0 = time.monotonic()

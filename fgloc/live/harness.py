@@ -21,12 +21,9 @@ from fgloc.live.serial_link import RobotParams
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
 
 
-def localizer_config(live_cfg: dict[str, Any] | None = None) -> dict[str, Any]:
-    """``config/fgloc.yaml`` (what ``fgloc run`` uses) overlaid with the live config's ``localizer``."""
-    from fgloc.live.app import _merge
-    from fgloc.pipeline import load_config as load_pipeline_config
-
-    return _merge(load_pipeline_config(), dict((live_cfg or {}).get("localizer") or {}))
+def localizer_config(live_cfg: Any = None) -> Any:
+    """The one fgloc config: the live sections and the localizer's sections in one (``fgloc.config``)."""
+    return live_cfg if live_cfg is not None else load_config()
 
 
 @dataclass
@@ -82,7 +79,11 @@ def replay_live(
     if scans:
         over["laser"]["range_min_m"] = float(scans[0].range_min)
         over["laser"]["range_max_m"] = float(scans[0].range_max)
-    cfg = load_config(overrides=_deep(over, live_overrides or {}))
+    cfg = load_config(overrides=over)
+    if live_overrides:
+        from fgloc.config import parse_config
+
+        cfg = parse_config(live_overrides, source="overrides", base=cfg)
     if warmup and occ_map is not None:
         _warm_up(messages, occ_map, laser_mount, backend, frontend, initial_pose, localizer_config(cfg), t_start)
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
@@ -124,9 +125,3 @@ def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: Stat
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
                     config=config)
     run_messages(loc, first)
-
-
-def _deep(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
-    from fgloc.live.app import _merge
-
-    return _merge(a, b)

@@ -62,7 +62,7 @@ def test_predict_matches_hand_computation():
 
 
 def test_map_update_matches_scalar_kalman():
-    ekf = EKF(EKFConfig(gate_map=None, map_min_sigma_xy=0.0, map_min_sigma_theta=0.0))
+    ekf = EKF(EKFConfig(gate_map=None, map_min_sigma_xy=0.0, map_min_sigma_theta_deg=0.0))
     ekf.initialize(0.0, np.array([1.0, 2.0, 0.3]))
     ekf.P = np.diag([0.04, 0.09, 0.01, 0.25, 0.16])
     z = np.array([1.2, 1.9, 0.35])

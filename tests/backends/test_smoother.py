@@ -77,8 +77,8 @@ def test_kidnap_reset_after_consistent_rejections(synth_clean):
 
 
 def test_make_backend_reads_config_sections():
-    b = make_backend("batch", {"smoother": {"lag": 3.0, "compass_sigma_deg": 1.0}, "batch": {"max_iterations": 7}})
-    assert isinstance(b, BatchSmoother) and b.cfg.lag == 3.0 and b.max_iterations == 7
+    b = make_backend("batch", {"smoother": {"lag_s": 3.0, "compass_sigma_deg": 1.0}, "batch": {"max_iterations": 7}})
+    assert isinstance(b, BatchSmoother) and b.cfg.lag_s == 3.0 and b.max_iterations == 7
     assert np.isclose(b.cfg.compass_sigma, np.deg2rad(1.0))
     e = make_backend("ekf", {"ekf": {"omni": True, "compass_sigma_deg": 2.0}})
     assert isinstance(e, EKFBackend) and e.ekf.config.omni and np.isclose(e.compass_sigma, np.deg2rad(2.0))

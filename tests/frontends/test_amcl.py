@@ -175,12 +175,11 @@ def test_kld_count_shrinks_as_cloud_converges():
 
 
 def test_defaults_match_constructor():
-    import inspect
+    """The defaults live in AMCLConfig only (fgloc.config convention); AMCL_DEFAULTS is derived from it."""
+    from fgloc.config.schema import to_dict
+    from fgloc.frontends.amcl import AMCLConfig
 
-    sig = inspect.signature(AMCL.__init__)
-    for k, v in AMCL_DEFAULTS.items():
-        d = sig.parameters[k].default
-        assert (list(d) if isinstance(d, tuple) else d) == v, k
+    assert AMCL_DEFAULTS == to_dict(AMCLConfig()) and AMCL_DEFAULTS["max_particles"] == 2000
 
 
 def test_grey_wall_map_needs_unknown_edges(shared_data):

@@ -16,7 +16,6 @@ import numpy as np
 from fgloc.io.log import LogReader
 from fgloc.live.app import LiveSession, load_config
 from fgloc.live.emulators import EmulatorPair
-from fgloc.live.serial_link import RobotParams
 from fgloc.pipeline import Localizer
 from fgloc.types import StaticTransform
 
@@ -42,7 +41,7 @@ def _drain(sock):
 def test_silence_reported_and_recovered_record_and_publish(tmp_path):
     msgs = synthetic_messages(duration=7.0)
     cfg = load_config()
-    robot = RobotParams.from_dict(cfg["robot"])
+    robot = cfg.robot
     pair = EmulatorPair.create(msgs, robot, mode="pty", speed=1.0, lead_s=0.5,
                                stm32_kw={"corrupt_prob": 0.05, "garbage_prob": 0.05},
                                sick_kw={"malformed_prob": 0.1})
@@ -102,7 +101,7 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
 
 def test_cli_sigint_closes_recording(tmp_path):
     msgs = synthetic_messages(duration=30.0)
-    robot = RobotParams.from_dict(load_config()["robot"])
+    robot = load_config().robot
     pair = EmulatorPair.create(msgs, robot, mode="pty", speed=1.0, lead_s=1.5)
     rec = tmp_path / "cli.mcap"
     out = tmp_path / "live.tum"

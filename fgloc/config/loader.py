@@ -1,0 +1,100 @@
+"""The one fgloc configuration: every section composed, loaded from YAML, written back.
+
+:class:`FglocConfig` holds one typed section per concern; each section class lives in
+the module that uses it, with the only copy of its defaults.  ``load_config(path)``
+overlays a user YAML file on the defaults and checks it (types, ranges, unknown keys and
+section names with a "did you mean" suggestion): every problem is one
+:class:`~fgloc.errors.ConfigError` line naming the file and the key.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fgloc.backends.ekf import EKFConfig
+from fgloc.backends.smoother import BatchConfig, SmootherConfig
+from fgloc.config.schema import parse, section, to_yaml
+from fgloc.errors import ConfigError
+from fgloc.frontends.factory import FrontendsConfig
+from fgloc.live.app import HealthConfig, LaserConfig, SerialConfig
+from fgloc.live.serial_link import RobotParams
+from fgloc.localization.config import PipelineConfig
+
+
+@dataclass(frozen=True)
+class FglocConfig:
+    """Everything ``fgloc run``, ``fgloc live``, ``fgloc bench`` and the library read."""
+
+    pipeline: PipelineConfig = section(PipelineConfig, "the localizer: tracking, relocalization, odometry handling")
+    frontends: FrontendsConfig = section(FrontendsConfig, "scan-to-map front-ends (--frontend picks one)")
+    ekf: EKFConfig = section(EKFConfig, "the paper's EKF back-end (--backend ekf), state [x, y, theta, v, w]")
+    smoother: SmootherConfig = section(SmootherConfig, "the fixed-lag iSAM2 smoother (--backend smoother, the "
+                                       "default); Pose2 keyframes at scan times")
+    batch: BatchConfig = section(BatchConfig, "the batch smoother (--backend batch): the smoother's factors over "
+                                 "the whole run, Levenberg-Marquardt at the end")
+    robot: RobotParams = section(RobotParams, "fgloc live: the robot's drive geometry (wheel counts -> twist)")
+    serial: SerialConfig = section(SerialConfig, "fgloc live: the STM32 serial link")
+    laser: LaserConfig = section(LaserConfig, "fgloc live: the SICK laser")
+    health: HealthConfig = section(HealthConfig, "fgloc live: sensor health monitoring")
+
+
+SECTIONS = tuple(f.name for f in fields(FglocConfig))
+
+HEADER = """fgloc configuration.  Every key is listed with its default; keep only the keys you
+change (the others keep their defaults).  Units are in the names (_m, _s, _deg, _hz);
+angles are in degrees unless the key says rad.  Check a file with
+`fgloc config show --config FILE`."""
+
+
+def parse_config(data: Any, source: str = "config", base: FglocConfig | None = None) -> FglocConfig:
+    """A :class:`FglocConfig` from a mapping of sections (as read from YAML), overlaid on ``base``."""
+    if isinstance(data, FglocConfig):
+        return data
+    if data is None:
+        return base or FglocConfig()
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{source}: config must be a mapping of sections ({', '.join(SECTIONS)})")
+    for key in data:
+        if key not in SECTIONS:
+            from fgloc.config.schema import unknown_key_error
+
+            raise unknown_key_error(source, "", str(key), SECTIONS, what="section")
+    return parse(FglocConfig, data, source=source, base=base)
+
+
+def read_yaml(path: str | Path) -> Any:
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: config file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{p}: is a folder, expected a YAML config file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{p}: cannot read ({e.__class__.__name__})") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{p}: config does not parse as YAML{where}") from None
+
+
+def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> FglocConfig:
+    """The effective configuration: the defaults, overlaid with the YAML file ``path``, then ``overrides``."""
+    cfg = FglocConfig()
+    if path is not None:
+        cfg = parse_config(read_yaml(path), source=str(path), base=cfg)
+    if overrides:
+        cfg = parse_config(overrides, source="overrides", base=cfg)
+    return cfg
+
+
+def config_yaml(cfg: FglocConfig | None = None, comments: bool = True, header: str = HEADER) -> str:
+    """``cfg`` (default: the defaults) as YAML, every key documented when ``comments``."""
+    return to_yaml(cfg or FglocConfig(), comments=comments, header=header if comments else "")

@@ -1,0 +1,309 @@
+"""The one place where ``fgloc batch`` calls the single-log library code: one function per job kind.
+
+``localize_log`` (what ``fgloc run`` does), ``map_log`` (``fgloc map``) and
+``bench_paper_seed`` (one seed of ``fgloc bench paper``) take plain arguments and return
+a small typed outcome.  When the library functions move (``fgloc.app`` /
+``fgloc.bench``), only this module changes; nothing else in :mod:`fgloc.batch` imports
+``fgloc.commands``, ``fgloc.mapping`` or ``fgloc.pipeline``.
+
+Nothing here prints, and the only files written are the single-log commands' own
+outputs in ``outdir``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fgloc.errors import ConfigError
+
+#: one column of the paper benchmark: (label, backend, frontend, which trajectory: final | online)
+Variant = tuple[str, str, str, str]
+
+
+@dataclass
+class LocalizeOutcome:
+    """What one ``fgloc run`` produced (files are in its output folder)."""
+
+    mode: str                      # "map" or "odom"
+    poses: int
+    log_s: float                   # duration of the final trajectory (log time)
+    wall_s: float                  # localization wall time (as ``fgloc run`` prints it)
+    fix_stamps_s: list[float]      # stamps of the front-end's fixes (for the lost time)
+    t_start_s: float | None        # first / last pose stamp of the final trajectory
+    t_end_s: float | None
+    position_rmse_m: float | None = None
+    heading_rmse_deg: float | None = None
+    note: str | None = None        # e.g. why the ground-truth evaluation was skipped
+    written: list[str] = field(default_factory=list)
+
+
+@dataclass
+class MapOutcome:
+    """What one ``fgloc map`` produced."""
+
+    scans: int
+    keyframes: int
+    loops: int
+    duration_s: float              # log time spanned by the mapped scans
+    wall_s: float                  # total mapping time (read, SLAM, occupancy, write)
+    position_rmse_m: float | None = None   # of the scan trajectory vs /ground_truth (SE(2)-aligned)
+    heading_rmse_deg: float | None = None
+    written: list[str] = field(default_factory=list)
+
+
+@dataclass
+class SeedOutcome:
+    """One seed of the paper benchmark: per-variant metrics (``Metrics.to_dict()``) and wall times."""
+
+    seed: int
+    metrics: dict[str, dict[str, Any]]
+    wall_s: dict[str, float]
+    duration_s: float
+    poses: dict[str, int]
+    written: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------- localize
+def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: list[float] | None,
+                 config_path: Path | None, backend: str, frontend: str,
+                 scan_topic: str, odom_topic: str, imu_topic: str) -> LocalizeOutcome:
+    """``fgloc run LOG [--map] [--initial-pose] ... -o OUTDIR`` as a library call (no progress bar)."""
+    from fgloc.commands.run import run_log
+    from fgloc.io.tum import read_tum
+
+    if backend not in ("ekf", "smoother", "batch"):
+        raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
+    r = run_log(log, outdir, map_yaml, backend, frontend, initial_pose, config_path,
+                scan_topic, odom_topic, imu_topic, quiet=True)
+    fix_stamps: list[float] = []
+    if (outdir / "fixes.tum").exists():
+        fix_stamps = read_tum(outdir / "fixes.tum").stamps.tolist()
+    t0 = t1 = None
+    if (outdir / "trajectory.tum").exists():
+        st = read_tum(outdir / "trajectory.tum").stamps
+        t0, t1 = float(st[0]), float(st[-1])
+    out = LocalizeOutcome(mode=r["mode"], poses=int(r["poses"]), log_s=float(r["log_s"]),
+                          wall_s=float(r["wall_s"]), fix_stamps_s=fix_stamps, t_start_s=t0, t_end_s=t1,
+                          note=r.get("eval_error"), written=list(r["written"]))
+    m = r.get("metrics")
+    if m is not None:
+        out.position_rmse_m = float(m.position_rmse_m)
+        out.heading_rmse_deg = float(m.heading_rmse_deg)
+    return out
+
+
+# ---------------------------------------------------------------------------- map
+def mapper_options(config_path: Path | None) -> dict[str, Any]:
+    """The mapping options of a ``--config`` YAML (its ``mapping:`` section or the whole file),
+    as ``fgloc map`` reads them."""
+    import yaml
+
+    if config_path is None:
+        return {}
+    try:
+        opts = yaml.safe_load(Path(config_path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"{config_path}: cannot read mapping config ({e.__class__.__name__})") from None
+    if not isinstance(opts, dict):
+        raise ConfigError(f"{config_path}: mapping config must be a mapping")
+    return dict(opts.get("mapping", opts))
+
+
+def map_log(log: Path, outdir: Path, resolution: float, config_path: Path | None,
+            start: float | None, end: float | None, scan_topic: str, odom_topic: str) -> MapOutcome:
+    """``fgloc map LOG -o OUTDIR [--resolution] [--config] [--start] [--end]`` as a library call."""
+    from fgloc.mapping.build import build_map
+    from fgloc.mapping.slam import MapperConfig
+
+    if not (resolution > 0):
+        raise ConfigError(f"resolution must be positive, got {resolution}")
+    opts = mapper_options(config_path)
+    opts["resolution"] = resolution
+    cfg = MapperConfig.from_dict(opts)
+    out = build_map(log, outdir, cfg, start, end, None, scan_topic, odom_topic)
+    traj = out.slam.scan_trajectory
+    res = MapOutcome(scans=out.n_scans, keyframes=int(out.slam.stats.get("keyframes", len(out.slam.keyframes))),
+                     loops=len(out.slam.loops), duration_s=float(traj.duration),
+                     wall_s=float(out.timings["total_s"]),
+                     written=["map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_scans.tum",
+                              "mapping.yaml"])
+    gt = _ground_truth(log, scan_topic, odom_topic)
+    if gt is not None and len(traj) > 1:
+        from fgloc.errors import LogError
+        from fgloc.eval.metrics import evaluate
+
+        try:
+            m = evaluate(traj, gt, align=True)
+            res.position_rmse_m, res.heading_rmse_deg = float(m.position_rmse_m), float(m.heading_rmse_deg)
+        except LogError:
+            pass
+    return res
+
+
+def _ground_truth(log: Path, scan_topic: str, odom_topic: str):
+    """``/ground_truth`` of an MCAP log, None for CARMEN logs and logs without it."""
+    from fgloc.mapping.source import is_carmen
+
+    if is_carmen(log):
+        return None
+    from fgloc.io.log import LogReader, Topics
+
+    reader = LogReader(log, Topics(scan=scan_topic, odom=odom_topic))
+    return reader.ground_truth() if reader.has(reader.topics.ground_truth) else None
+
+
+# ---------------------------------------------------------------------------- paper bench
+def paper_variants(no_amcl: bool = False, only: list[str] | None = None) -> list[Variant]:
+    """The columns of ``fgloc bench paper`` (without EKF+AMCL when asked or when AMCL is missing),
+    optionally only those whose label is in ``only``."""
+    from fgloc.commands.run import PAPER_VARIANTS
+
+    have_amcl = amcl_available()
+    out = [tuple(v) for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl")]
+    if only:
+        labels = [v[0] for v in out]
+        bad = [o for o in only if o not in labels]
+        if bad:
+            raise ConfigError(f"unknown variant {bad[0]!r} (choose from {', '.join(labels)})")
+        out = [v for v in out if v[0] in only]
+    return [(str(a), str(b), str(c), str(d)) for a, b, c, d in out]
+
+
+def amcl_available() -> bool:
+    """Whether the AMCL front-end imports (``fgloc bench paper`` leaves its column out otherwise)."""
+    import importlib
+
+    try:
+        importlib.import_module("fgloc.frontends.amcl")
+    except ImportError:
+        return False
+    return True
+
+
+def bench_paper_seed(seed: int, variants: list[Variant], config_path: Path | None, outdir: Path,
+                     keep: bool) -> SeedOutcome:
+    """One seed of ``fgloc bench paper``: simulate the paper run with ``seed`` and localize it with
+    each variant (one localization per back-end/front-end pair, as the single command does).
+
+    Writes ``outdir/metrics.json`` (per variant: every :class:`Metrics` field, wall time, poses);
+    with ``keep`` also each variant's trajectory (``<label>.tum``), ``ground_truth.tum`` and the
+    map, from which the batch draws the same plots as ``fgloc bench paper -o``.
+
+    Local adapter for the private ``fgloc.commands.run._bench_one_seed`` (same calls, same order).
+    """
+    from fgloc.commands.run import localize_sim
+    from fgloc.eval.metrics import evaluate
+    from fgloc.io.tum import write_tum
+    from fgloc.pipeline import load_config
+    from fgloc.sim import simulate_paper
+
+    config = load_config(config_path)
+    sim = simulate_paper(seed=seed)
+    metrics: dict[str, dict[str, Any]] = {}
+    walls: dict[str, float] = {}
+    poses: dict[str, int] = {}
+    trajs: dict[str, Any] = {}
+    cache: dict[tuple[str, str], Any] = {}
+    for label, backend, frontend, which in variants:
+        key = (backend, frontend)
+        if key not in cache:
+            cache[key] = localize_sim(sim, backend, frontend, config)
+        final, online, _loc, wall = cache[key]
+        tr = online if which == "online" else final
+        metrics[label] = evaluate(tr, sim.ground_truth).to_dict()
+        walls[label] = float(wall)
+        poses[label] = len(tr)
+        trajs[label] = tr
+    outdir.mkdir(parents=True, exist_ok=True)
+    written = ["metrics.json"]
+    if keep:
+        for label, tr in trajs.items():
+            written.append(write_tum(outdir / f"{variant_slug(label)}.tum", tr).name)
+        written.append(write_tum(outdir / "ground_truth.tum", sim.ground_truth).name)
+        sim.map.save(outdir / "map.yaml")
+        written += ["map.yaml", "map.pgm"]
+    doc = {"seed": seed, "duration_s": float(sim.ground_truth.duration),
+           "variants": [list(v) for v in variants],
+           "metrics": metrics, "wall_s": walls, "poses": poses}
+    # JSON keeps every float exactly (repr round trip); NaN is stored as null by Metrics.to_dict
+    (outdir / "metrics.json").write_text(json.dumps(doc, indent=1) + "\n")
+    return SeedOutcome(seed, metrics, walls, float(sim.ground_truth.duration), poses, written)
+
+
+def variant_slug(label: str) -> str:
+    """A file name for a variant label ('smoother fixed-lag' -> 'smoother_fixed-lag')."""
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in label).strip("_")
+
+
+def load_seed_metrics(outdir: Path) -> dict[str, Any]:
+    """``metrics.json`` of a finished seed, metrics turned back into :class:`Metrics` objects."""
+    from fgloc.eval.metrics import Metrics
+
+    doc = json.loads((outdir / "metrics.json").read_text())
+    out: dict[str, Metrics] = {}
+    for k, d in doc["metrics"].items():
+        fields: dict[str, Any] = {f: (math.nan if v is None else v) for f, v in d.items()}
+        out[k] = Metrics(**fields)
+    doc["metrics"] = out
+    return doc
+
+
+def paper_table(rows: dict[str, list[Any]], seeds: int) -> str:
+    """The Markdown table ``fgloc bench paper`` prints (same title, same cells)."""
+    from fgloc.eval.paper import comparison_text
+
+    return comparison_text(rows, title=f"paper replica: {seeds} seed(s), mean ± std over seeds")
+
+
+def paper_outputs(rows: dict[str, list[Any]], seeds: int, outdir: Path, seed0_dir: Path | None,
+                  variants: list[Variant]) -> list[Path]:
+    """What ``fgloc bench paper -o OUTDIR`` writes: table.md, metrics.yaml and (from seed 0) the plots."""
+    from fgloc.eval.paper import comparison_text
+    from fgloc.io.yamlio import write_yaml
+
+    outdir.mkdir(parents=True, exist_ok=True)
+    (outdir / "table.md").write_text(comparison_text(rows, title=f"paper replica, {seeds} seeds") + "\n")
+    summary = {label: {k: [m.to_dict()[k] for m in ms] for k in ("position_rmse_m", "heading_rmse_deg")}
+               for label, ms in rows.items()}
+    write_yaml(outdir / "metrics.yaml", summary)
+    files = [outdir / "table.md", outdir / "metrics.yaml"]
+    if seed0_dir is not None and (seed0_dir / "ground_truth.tum").exists():
+        from fgloc.eval.plots import plot_all
+        from fgloc.io.tum import read_tum
+        from fgloc.maps import OccupancyMap
+
+        trajs = {label: read_tum(seed0_dir / f"{variant_slug(label)}.tum") for label, *_ in variants
+                 if (seed0_dir / f"{variant_slug(label)}.tum").exists()}
+        gt = read_tum(seed0_dir / "ground_truth.tum")
+        occ = OccupancyMap.load(seed0_dir / "map.yaml")
+        files += plot_all(trajs, gt, outdir, occ_map=occ, title="paper replica, seed 0")
+    return files
+
+
+def paper_claims(rows: dict[str, list[Any]]) -> list[str]:
+    """The target lines ``fgloc bench paper`` prints under its table.
+
+    Local adapter for the private ``fgloc.commands.run._claims`` (same lines).
+    """
+    import numpy as np
+
+    def mean(label: str, key: str) -> float:
+        return float(np.mean([getattr(m, key) for m in rows[label]]))
+
+    out = []
+    if "smoother fixed-lag" in rows:
+        p, h = mean("smoother fixed-lag", "position_rmse_m"), mean("smoother fixed-lag", "heading_rmse_deg")
+        out.append(f"smoother fixed-lag: position RMSE {p:.4f} m (target <= 0.010), "
+                   f"heading RMSE {h:.3f} deg (target <= 0.30)")
+        for ekf in ("EKF+AMCL (paper)", "EKF+native"):
+            if ekf in rows:
+                e = mean(ekf, "position_rmse_m")
+                out.append(f"smoother vs {ekf}: {100 * (1 - p / e):.0f} % lower position RMSE (target >= 30 %)")
+        if "batch" in rows:
+            b = mean("batch", "position_rmse_m")
+            out.append(f"fixed-lag / batch position RMSE: {p / b:.2f}x (target <= 1.2x)")
+    return out

@@ -1,0 +1,340 @@
+"""Where batch jobs run: in this process, in a local process pool, or on Ray.
+
+Every engine runs ``fn(job, blobs)`` (normally :func:`fgloc.batch.jobs.execute`) for each job
+and yields ``(index, JobResult)`` as jobs finish, in any order.  ``blobs`` is None when the
+inputs go by path, and the input files' bytes when they are shipped (``ship=True``).
+
+* :class:`InlineEngine`: one after the other in this process (the benchmark's baseline).
+* :class:`LocalEngine` (``--engine local``, ``-j N``): N worker processes (spawned, so
+  nothing of the driver's threads is inherited), each running one job at a time and reused
+  for the next (imports and numba caches are paid once per worker).  A worker that dies
+  (segfault, out of memory) fails only its own job and is replaced.  Workers ignore SIGINT:
+  on Ctrl-C the driver terminates them and the interrupted jobs leave no completion marker.
+* :class:`RayEngine` (``--engine ray``): one Ray task per job (1 CPU each).  Without an
+  address (and no ``RAY_ADDRESS``) it starts a private local Ray instance with ``num_cpus``
+  = ``-j`` or all cores and shuts it down at the end; with ``--address HOST:PORT`` or
+  ``RAY_ADDRESS`` it joins that cluster (fgloc must be installed on its nodes; inputs by
+  path need shared storage, ``--ship-inputs`` does not).  At most twice the cluster's CPUs
+  are in flight, so shipped inputs do not fill the object store.  A task whose worker
+  crashes is retried once by Ray, then reported as that job's error.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import signal
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+from fgloc.batch.jobs import Blob, Job, JobResult, read_blob
+from fgloc.errors import ConfigError
+
+JobFn = Callable[[Job, "dict[str, Blob] | None"], JobResult]
+
+RAY_HINT = 'the ray engine needs Ray: pip install "fgloc[cluster]"'
+
+
+def shipped_inputs(job: Job) -> dict[str, Blob]:
+    """Read a job's input files for shipping (driver side); OSError for a missing input."""
+    return {role: read_blob(role, path) for role, path in job.inputs.items()}
+
+
+def _ship_or_error(job: Job, ship: bool) -> tuple[dict[str, Blob] | None, JobResult | None]:
+    if not ship:
+        return None, None
+    try:
+        return shipped_inputs(job), None
+    except OSError as e:
+        path = e.filename or next(iter(job.inputs.values()), "")
+        return None, JobResult(job.name, False, error=f"{path}: cannot read input to ship ({e.strerror or e})")
+
+
+def crash_result(job: Job, exitcode: int | None) -> JobResult:
+    """The result of a job whose worker process died under it."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            how = signal.Signals(-exitcode).name
+        except ValueError:
+            how = f"signal {-exitcode}"
+        msg = f"worker process died ({how}) while running this log"
+    else:
+        msg = f"worker process exited (status {exitcode}) while running this log"
+    return JobResult(job.name, False, error=msg)
+
+
+class InlineEngine:
+    """Jobs one after the other in this process (no isolation from crashes)."""
+
+    name = "inline"
+
+    def describe(self) -> str:
+        return "inline (this process)"
+
+    def run(self, fn: JobFn, jobs: list[Job], ship: bool = False) -> Iterator[tuple[int, JobResult]]:
+        for i, job in enumerate(jobs):
+            blobs, err = _ship_or_error(job, ship)
+            yield i, err if err is not None else fn(job, blobs)
+
+
+# ---------------------------------------------------------------------------- local pool
+def _worker_main(conn: Connection, fn: JobFn) -> None:
+    """A pool worker: run jobs from ``conn`` until told to stop (None) or the pipe closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides what Ctrl-C stops
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg is None:
+            return
+        i, job, blobs = msg
+        conn.send((i, fn(job, blobs)))
+
+
+@dataclass
+class _Slot:
+    proc: Any
+    conn: Connection
+    current: tuple[int, Job] | None = None
+
+
+class LocalEngine:
+    """A pool of ``jobs`` worker processes on this machine."""
+
+    name = "local"
+
+    def __init__(self, jobs: int | None = None) -> None:
+        self.jobs = max(1, int(jobs or os.cpu_count() or 1))
+
+    def describe(self) -> str:
+        return f"local process pool, {self.jobs} worker(s)"
+
+    def _start(self, ctx: Any, fn: JobFn) -> _Slot:
+        parent, child = ctx.Pipe()
+        p = ctx.Process(target=_worker_main, args=(child, fn), daemon=True, name="fgloc-batch-worker")
+        p.start()
+        child.close()
+        return _Slot(p, parent)
+
+    def run(self, fn: JobFn, jobs: list[Job], ship: bool = False) -> Iterator[tuple[int, JobResult]]:
+        if not jobs:
+            return
+        ctx = mp.get_context("spawn")
+        queue: deque[tuple[int, Job]] = deque(enumerate(jobs))
+        slots: list[_Slot] = []
+        try:
+            slots = [self._start(ctx, fn) for _ in range(min(self.jobs, len(jobs)))]
+            while queue or any(s.current is not None for s in slots):
+                for s in slots:
+                    while s.current is None and queue:
+                        i, job = queue.popleft()
+                        blobs, err = _ship_or_error(job, ship)
+                        if err is not None:
+                            yield i, err
+                            continue
+                        try:
+                            s.conn.send((i, job, blobs))
+                            s.current = (i, job)
+                        except (BrokenPipeError, OSError):  # died while idle: retry the job on a new one
+                            queue.appendleft((i, job))
+                            self._replace(ctx, fn, slots, s)
+                            break
+                busy = [s for s in slots if s.current is not None]
+                if not busy:
+                    continue
+                ready = wait([s.conn for s in busy] + [s.proc.sentinel for s in busy])
+                for s in busy:
+                    if s.conn not in ready and s.proc.sentinel not in ready:
+                        continue
+                    assert s.current is not None
+                    got, eof = None, False
+                    try:
+                        if s.conn.poll():
+                            got = s.conn.recv()
+                    except (EOFError, OSError):
+                        eof = True
+                    if got is not None:
+                        s.current = None
+                        yield got
+                        continue
+                    if not eof and s.proc.sentinel not in ready:
+                        continue
+                    s.proc.join(timeout=5)  # the pipe closed or the process ended: it died
+                    i, job = s.current
+                    s.current = None
+                    yield i, crash_result(job, s.proc.exitcode)
+                    self._replace(ctx, fn, slots, s)
+        finally:
+            self._stop(slots)
+
+    def _replace(self, ctx: Any, fn: JobFn, slots: list[_Slot], dead: _Slot) -> None:
+        dead.conn.close()
+        if dead.proc.is_alive():
+            dead.proc.kill()
+        dead.proc.join(timeout=5)
+        k = slots.index(dead)
+        slots[k] = self._start(ctx, fn)
+
+    @staticmethod
+    def _stop(slots: list[_Slot]) -> None:
+        """Idle workers are told to stop; busy ones (Ctrl-C, an error in the driver) are terminated."""
+        for s in slots:
+            try:
+                if s.current is None and s.proc.is_alive():
+                    s.conn.send(None)
+                else:
+                    s.proc.terminate()
+            except (BrokenPipeError, OSError):
+                pass
+        for s in slots:
+            s.proc.join(timeout=5)
+            if s.proc.is_alive():
+                s.proc.kill()
+                s.proc.join(timeout=5)
+            s.conn.close()
+
+
+# ---------------------------------------------------------------------------- Ray
+def import_ray() -> Any:
+    """``ray`` or a one-line :class:`ConfigError` with the install hint."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(RAY_HINT) from None
+    return ray
+
+
+def _ray_task(fn: JobFn, job: Job, roles: list[str], *blobs: Blob) -> JobResult:
+    """The Ray task: shipped inputs arrive as top-level arguments (Ray resolves them from the
+    object store before the call)."""
+    return fn(job, dict(zip(roles, blobs, strict=True)) if roles or blobs else None)
+
+
+class RayEngine:
+    """One Ray task per job, on a private local Ray instance or an existing cluster."""
+
+    name = "ray"
+
+    def __init__(self, jobs: int | None = None, address: str | None = None) -> None:
+        self.jobs = jobs
+        self.address = address or os.environ.get("RAY_ADDRESS") or None
+        self.ray = import_ray()
+        self._started = False
+
+    def describe(self) -> str:
+        if self.address:
+            return f"Ray cluster at {self.address}"
+        return f"local Ray instance, {self.jobs or os.cpu_count()} CPU(s)"
+
+    def connect(self) -> None:
+        """Join the cluster, or start a private local instance (address 'local': never attaches
+        to another Ray instance running on this machine)."""
+        ray = self.ray
+        if ray.is_initialized():
+            return
+        kw: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": False,
+                              "configure_logging": True}
+        try:
+            if self.address:
+                ray.init(address=self.address, **kw)
+            else:
+                ray.init(address="local", num_cpus=int(self.jobs or os.cpu_count() or 1),
+                         include_dashboard=False, **kw)
+                self._started = True
+        except (ConnectionError, RuntimeError, ValueError) as e:
+            where = self.address or "a local instance"
+            raise ConfigError(f"Ray: cannot connect to {where} ({str(e).strip().splitlines()[0]})") from None
+
+    def shutdown(self) -> None:
+        if self.ray.is_initialized():
+            self.ray.shutdown()
+        self._started = False
+
+    def run(self, fn: JobFn, jobs: list[Job], ship: bool = False) -> Iterator[tuple[int, JobResult]]:
+        if not jobs:
+            return
+        ray = self.ray
+        owns = not ray.is_initialized()
+        self.connect()
+        task = ray.remote(num_cpus=1, max_retries=1)(_ray_task)
+        cpus = int(ray.cluster_resources().get("CPU", 1)) or 1
+        cap = 2 * cpus
+        queue: deque[tuple[int, Job]] = deque(enumerate(jobs))
+        pending: dict[Any, tuple[int, Job]] = {}
+        refs: dict[tuple[str, str], Any] = {}     # shipped input -> object ref (a shared map is put once)
+        users: dict[tuple[str, str], int] = {}    # jobs still needing that input
+        if ship:
+            for _, job in queue:
+                for key in job.inputs.items():
+                    users[key] = users.get(key, 0) + 1
+        try:
+            while queue or pending:
+                while queue and len(pending) < cap:
+                    i, job = queue.popleft()
+                    roles, args = [], []
+                    if ship:
+                        try:
+                            for role, path in job.inputs.items():
+                                if (role, path) not in refs:
+                                    refs[(role, path)] = ray.put(read_blob(role, path))
+                                roles.append(role)
+                                args.append(refs[(role, path)])
+                        except OSError as e:
+                            self._release(job, refs, users)
+                            yield i, JobResult(job.name, False, error=f"{e.filename}: cannot read input to ship "
+                                                                     f"({e.strerror or e})")
+                            continue
+                    pending[task.remote(fn, job, roles, *args)] = (i, job)
+                done, _ = ray.wait(list(pending), num_returns=1)
+                for ref in done:
+                    i, job = pending.pop(ref)
+                    if ship:
+                        self._release(job, refs, users)
+                    try:
+                        res = ray.get(ref)
+                    except ray.exceptions.RayError as e:
+                        res = JobResult(job.name, False, error=_ray_error(e))
+                    yield i, res
+        finally:
+            for ref in pending:
+                try:
+                    ray.cancel(ref, force=True)
+                except Exception:  # noqa: BLE001 - best effort on the way out
+                    pass
+            refs.clear()
+            if owns:
+                self.shutdown()
+
+    @staticmethod
+    def _release(job: Job, refs: dict, users: dict) -> None:
+        for key in job.inputs.items():
+            users[key] = users.get(key, 1) - 1
+            if users[key] <= 0:
+                refs.pop(key, None)
+
+
+def _ray_error(e: BaseException) -> str:
+    name = e.__class__.__name__
+    text = str(e).strip().splitlines()
+    first = next((t for t in text if t.strip()), "")
+    if "WorkerCrashed" in name or "died" in first.lower():
+        return f"Ray worker died while running this log ({name})"
+    return f"{name}: {first}"[:300]
+
+
+def make_engine(engine: str, jobs: int | None = None, address: str | None = None):
+    """``local`` / ``ray`` / ``inline`` by name (``address`` only for Ray)."""
+    if engine == "local":
+        if address:
+            raise ConfigError("--address is for --engine ray")
+        return LocalEngine(jobs)
+    if engine == "ray":
+        return RayEngine(jobs, address)
+    if engine == "inline":
+        return InlineEngine()
+    raise ConfigError(f"unknown engine '{engine}' (choose local or ray)")

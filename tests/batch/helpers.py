@@ -1,0 +1,45 @@
+"""Helpers of the batch tests: the four logs' names, the CLI in-process, byte comparison."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+
+#: short legs along the paper route's first side, all starting at (2.5, 3.0) heading east
+ROUTES = {"alpha": [[2.5, 3.0], [7.5, 3.0]], "bravo": [[2.5, 3.0], [8.5, 3.0]], "charlie": [[2.5, 3.0], [6.5, 3.0]]}
+START = (2.5, 3.0, 0.0)
+CORRUPT = "delta"
+OUTPUTS = ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
+
+
+def fgloc_cli(*args) -> tuple[int, str, str]:
+    """``fgloc ARGS`` in this process: (exit status, stdout, stderr)."""
+    from fgloc.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main([str(a) for a in args])
+    return rc, out.getvalue(), err.getvalue()
+
+
+def assert_identical(outdir: Path, ref: Path, names) -> None:
+    """Every output file of the batch equals the single run's, byte for byte."""
+    for name in names:
+        for f in OUTPUTS:
+            a, b = outdir / name / f, ref / name / f
+            assert a.read_bytes() == b.read_bytes(), f"{name}/{f} differs from the single run"
+
+
+def crash_or_count(job, blobs):
+    """A worker function for the engine tests: the job named ``boom`` kills its own process
+    (as a segfault or the OOM killer would); the others report how many bytes were shipped."""
+    import os
+    import signal
+
+    from fgloc.batch import JobResult
+
+    if job.name == "boom":
+        os.kill(os.getpid(), signal.SIGKILL)
+    size = sum(len(b) for files in (blobs or {}).values() for _, b in files)
+    return JobResult(job.name, True, row={"poses": size}, host=str(os.getpid()))

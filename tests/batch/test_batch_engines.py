@@ -1,0 +1,117 @@
+"""Engines, inputs and summary pieces of ``fgloc batch``: crash isolation, shipping, names, manifests."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from fgloc.batch import EngineOptions, InlineEngine, Job, LocalEngine, batch_run, run_batch
+from fgloc.batch.inputs import discover_logs, read_manifest, unique_names
+from fgloc.batch.jobs import lost_time_s
+from fgloc.batch.runner import read_marker
+from fgloc.errors import ConfigError
+
+from .helpers import CORRUPT, OUTPUTS, ROUTES, START, crash_or_count, fgloc_cli
+
+
+def test_a_crashed_worker_fails_only_its_own_job(tmp_path):
+    """A worker killed by SIGKILL mid-job: that job is reported, the pool replaces the worker and
+    every other job (also those queued behind it) finishes; shipped bytes arrive whole."""
+    data = tmp_path / "in.bin"
+    data.write_bytes(b"x" * 12345)
+    jobs = [Job("run", n, str(tmp_path / n), {"log": str(data)}) for n in ("a", "boom", "b", "c", "d")]
+    got = dict(LocalEngine(2).run(crash_or_count, jobs, ship=True))
+    assert sorted(got) == [0, 1, 2, 3, 4]
+    assert not got[1].ok and "SIGKILL" in (got[1].error or "")
+    assert all(got[i].ok and got[i].row["poses"] == 12345 for i in (0, 2, 3, 4))
+
+
+def test_force_reruns_and_a_lost_output_file_invalidates_the_marker(batch_logs, tmp_path):
+    from fgloc.batch.inputs import run_jobs
+
+    jobs = run_jobs([batch_logs["logs"] / "charlie.mcap"], tmp_path, batch_logs["map"], list(START))
+    rep = run_batch(jobs, tmp_path, InlineEngine(), progress=False)
+    assert rep.ran == 1 and rep.ok and read_marker(jobs[0]) is not None
+    assert run_batch(jobs, tmp_path, InlineEngine(), progress=False).skipped == 1
+    assert run_batch(jobs, tmp_path, InlineEngine(), force=True, progress=False).ran == 1
+    (tmp_path / "charlie" / "fixes.tum").unlink()
+    assert read_marker(jobs[0]) is None  # incomplete outputs: not done
+    other = run_jobs([batch_logs["logs"] / "charlie.mcap"], tmp_path, batch_logs["map"], [2.5, 3.0, 0.1])
+    assert other[0].fingerprint() != jobs[0].fingerprint()  # other options: run again
+
+
+def test_shipped_inputs_give_the_same_outputs(batch_logs, references, tmp_path):
+    """--ship-inputs with a map whose YAML names its image by absolute path in another folder: the
+    worker runs on temporary copies, the outputs equal the single run's and name the original paths."""
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    text = batch_logs["map"].read_text()
+    img = batch_logs["map"].with_suffix(".pgm").resolve()
+    yaml_path = maps / "hall.yaml"
+    yaml_path.write_text("\n".join(f"image: {img}" if line.startswith("image:") else line
+                                   for line in text.splitlines()) + "\n")
+    rep = batch_run([str(batch_logs["logs"] / "alpha.mcap")], tmp_path / "out",
+                    EngineOptions("inline", ship=True, progress=False), map_yaml=yaml_path, initial_pose=list(START))
+    assert rep.ok
+    for f in OUTPUTS[:-1]:
+        assert (tmp_path / "out" / "alpha" / f).read_bytes() == (references["dir"] / "alpha" / f).read_bytes()
+    cfg = (tmp_path / "out" / "alpha" / "config.yaml").read_text()
+    assert str(yaml_path.resolve()) in cfg and str((batch_logs["logs"] / "alpha.mcap").resolve()) in cfg
+    assert "fgloc-batch-" not in cfg
+
+
+def test_log_discovery_and_names(tmp_path):
+    for p in ("day1/run.mcap", "day2/run.mcap", "day2/other.mcap", "notes.txt", "out/x/run.mcap"):
+        (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / p).write_bytes(b"")
+    found = discover_logs([str(tmp_path)], exclude=tmp_path / "out")
+    assert [p.relative_to(tmp_path).as_posix() for p in found] == ["day1/run.mcap", "day2/other.mcap",
+                                                                   "day2/run.mcap"]
+    assert unique_names(found) == ["day1_run", "other", "day2_run"]
+    assert discover_logs([str(tmp_path / "day*" / "run.mcap"), str(tmp_path / "day1/run.mcap")]) == \
+        [(tmp_path / "day1/run.mcap").resolve(), (tmp_path / "day2/run.mcap").resolve()]
+    assert unique_names([Path("/a/intel.clf.bz2"), Path("/b/fr079.clf")]) == ["intel", "fr079"]
+    with pytest.raises(ConfigError, match="matches no file"):
+        discover_logs([str(tmp_path / "nope*.mcap")])
+    with pytest.raises(ConfigError, match="not found"):
+        discover_logs([str(tmp_path / "missing.mcap")])
+
+
+def test_manifest(tmp_path):
+    m = tmp_path / "m.csv"
+    m.write_text("log,map,x,y,yaw\nlogs/a.mcap,maps/a.yaml,1,2,0.5\n/abs/b.mcap,,,,\n\n")
+    rows = read_manifest(m)
+    assert rows[0] == {"log": (tmp_path / "logs/a.mcap").resolve(), "map": (tmp_path / "maps/a.yaml").resolve(),
+                       "pose": [1.0, 2.0, 0.5]}
+    assert rows[1] == {"log": Path("/abs/b.mcap"), "map": None, "pose": None}
+    for body, msg in (("log,x,y\na,1,2\n", "header"), ("log,map,x,y,yaw\na,,1,,\n", ":2: give all"),
+                      ("log,map,x,y,yaw\na,,1,two,3\n", ":2: x, y, yaw must be numbers"),
+                      ("log,map,x,y,yaw\n", "no rows")):
+        m.write_text(body)
+        with pytest.raises(ConfigError, match=msg):
+            read_manifest(m)
+
+
+def test_lost_time():
+    assert lost_time_s([0.0, 0.5, 1.0, 4.0, 4.5], 0.0, 5.0) == pytest.approx(3.0)  # 1.0 -> 4.0
+    assert lost_time_s([], 10.0, 12.5) == pytest.approx(2.5)
+    assert lost_time_s([2.0], 0.0, 2.5) == pytest.approx(2.0)  # before the first fix
+
+
+def test_without_ray_a_one_line_hint(batch_logs, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if Ray were not installed
+    rc, _, err = fgloc_cli("batch", "run", batch_logs["logs"] / "alpha.mcap", "-o", tmp_path, "--engine", "ray")
+    assert rc == 2
+    assert err.strip() == 'fgloc: error: the ray engine needs Ray: pip install "fgloc[cluster]"'
+
+
+def test_usage_errors_are_one_line(batch_logs, tmp_path):
+    rc, _, err = fgloc_cli("batch", "run", "-o", tmp_path)
+    assert rc == 2 and "give LOGS" in err
+    rc, _, err = fgloc_cli("batch", "run", batch_logs["logs"], "-o", tmp_path, "--engine", "spark")
+    assert rc == 2 and "unknown engine 'spark'" in err
+    rc, _, err = fgloc_cli("batch", "run", batch_logs["logs"], "-o", tmp_path, "--address", "1.2.3.4:1")
+    assert rc == 2 and "--address is for --engine ray" in err
+    assert {CORRUPT, *ROUTES} == set(batch_logs["names"])

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import bz2
 import gzip
+import heapq
 import io
 import logging
 import math
@@ -61,6 +62,9 @@ import numpy as np
 
 from fgloc.errors import LogError
 from fgloc.geometry import between
+from fgloc.io.ros import stamp_to_ns
+from fgloc.io.source import LogSource, Record, TopicInfo
+from fgloc.io.topics import LASER_SCAN, ODOMETRY, TF_MESSAGE, Topics
 from fgloc.types import LaserScan, Odometry, StaticTransform
 
 log = logging.getLogger(__name__)
@@ -125,10 +129,27 @@ class _Laser:
     twist: np.ndarray | None = None  # ROBOTLASER1 only (tv, 0, rv)
 
 
+MAX_STAMP_S = 1e10  # a plausible ipc timestamp (unix time before the year 2286)
+
+
+def _stamp(text: str) -> float:
+    """An ipc timestamp; ValueError for inf, nan, negative or absurd values."""
+    t = float(text)
+    if not 0.0 <= t < MAX_STAMP_S:
+        raise ValueError(f"timestamp {text} out of range")
+    return t
+
+
+def _finite(vals: list[float]) -> list[float]:
+    if not all(math.isfinite(v) for v in vals):
+        raise ValueError("non-finite value")
+    return vals
+
+
 def _parse_odom(tok: list[str]) -> Odometry:
     # ODOM x y theta tv rv accel ipc_timestamp host logger_timestamp
-    x, y, th, tv, rv = (float(v) for v in tok[1:6])
-    stamp = float(tok[7])
+    x, y, th, tv, rv = _finite([float(v) for v in tok[1:6]])
+    stamp = _stamp(tok[7])
     return Odometry(
         stamp=stamp,
         twist=np.array([tv, 0.0, rv]),
@@ -139,31 +160,37 @@ def _parse_odom(tok: list[str]) -> Odometry:
 def _parse_laser(tok: list[str]) -> _Laser:
     kind = tok[0]
     if kind == "ROBOTLASER1":
-        start, _fov, res, max_range = (float(v) for v in tok[2:6])
+        start, _fov, res, max_range = _finite([float(v) for v in tok[2:6]])
         n = int(tok[8])
+        if not 0 < n <= len(tok):
+            raise ValueError("bad beam count")
         ranges = np.array(tok[9 : 9 + n], dtype=np.float64)
         i = 9 + n
         m = int(tok[i])
+        if not 0 <= m <= len(tok):
+            raise ValueError("bad remission count")
         i += 1 + m
-        rest = [float(v) for v in tok[i : i + 11]]
-        if len(rest) < 11 or len(tok) < i + 12 or len(ranges) != n:
+        rest = _finite([float(v) for v in tok[i : i + 11]])
+        if len(rest) < 11 or len(tok) < i + 12 or len(ranges) != n or max_range <= 0.0:
             raise ValueError("short ROBOTLASER1 line")
-        stamp = float(tok[i + 11])
+        stamp = _stamp(tok[i + 11])
         return _Laser(
             kind, stamp, ranges, np.array(rest[0:3]), np.array(rest[3:6]), start, res,
             max_range=max_range, twist=np.array([rest[6], 0.0, rest[7]]),
         )
     n = int(tok[1])
+    if not 0 < n <= len(tok):
+        raise ValueError("bad beam count")
     ranges = np.array(tok[2 : 2 + n], dtype=np.float64)
     if len(ranges) != n:
         raise ValueError("short laser line")
     tail = tok[2 + n :]
     laser_pose = odom_pose = None
     if len(tail) >= 9:  # x y theta odom_x odom_y odom_theta ipc host logger
-        vals = [float(v) for v in tail[:7]]
-        laser_pose, odom_pose, stamp = np.array(vals[0:3]), np.array(vals[3:6]), vals[6]
+        vals = _finite([float(v) for v in tail[:6]])
+        laser_pose, odom_pose, stamp = np.array(vals[0:3]), np.array(vals[3:6]), _stamp(tail[6])
     elif len(tail) >= 1:  # old format: ipc host logger only
-        stamp = float(tail[0])
+        stamp = _stamp(tail[0])
     else:
         raise ValueError("laser line without timestamp")
     return _Laser(kind, stamp, ranges, laser_pose, odom_pose, -math.pi / 2, flaser_angle_increment(n))
@@ -205,7 +232,7 @@ class CarmenReader:
                     elif tok[0] in LASER_KINDS:
                         try:
                             las = _parse_laser(tok)
-                        except (ValueError, IndexError):
+                        except (ValueError, IndexError, OverflowError):
                             continue
                         peek.n_laser += 1
                         frame = FRAME_OF[las.kind]
@@ -285,7 +312,7 @@ class CarmenReader:
                     if kind == "ODOM":
                         try:
                             msg = _parse_odom(tok)
-                        except (ValueError, IndexError):
+                        except (ValueError, IndexError, OverflowError):
                             malformed[kind] += 1
                             continue
                         counts[kind] += 1
@@ -293,7 +320,7 @@ class CarmenReader:
                     elif kind in LASER_KINDS:
                         try:
                             las = _parse_laser(tok)
-                        except (ValueError, IndexError):
+                        except (ValueError, IndexError, OverflowError):
                             malformed[kind] += 1
                             continue
                         counts[kind] += 1
@@ -331,3 +358,71 @@ def iter_carmen(path: str | Path, max_range_m: float | None = None) -> Iterator[
     message; bad lines later are skipped and counted (see :class:`CarmenReader`).
     """
     return iter(CarmenReader(path, max_range_m=max_range_m))
+
+
+class CarmenSource(LogSource):
+    """A CARMEN log as a :class:`~fgloc.io.source.LogSource` (topics ``/scan``, ``/odom``,
+    ``/tf_static``).
+
+    Log time is each line's ipc timestamp (the ``/tf_static`` mount gets the first message's),
+    and messages come in log-time order, ties in file order, as they read back from the MCAP
+    that ``fgloc import`` writes: a first pass parses the file for the counts and stamps (real
+    logs have stamps that jump backwards), the second yields the messages, holding back only
+    those a later line's earlier stamp must precede.
+    """
+
+    format = "carmen"
+
+    def __init__(self, path: str | Path, topics: Topics | None = None, max_range_m: float | None = None) -> None:
+        super().__init__(path, topics)
+        self._reader = CarmenReader(self.path, max_range_m=max_range_m)
+        keys: list[int] = []
+        first: int | None = None
+        for topic, msg in self._reader:
+            if topic == TF_STATIC_TOPIC:
+                keys.append(-1)
+            else:
+                keys.append(stamp_to_ns(msg.stamp))  # type: ignore[attr-defined]
+                first = keys[-1] if first is None else first
+            info = self._topic_info.setdefault(topic, TopicInfo(TF_MESSAGE if topic == TF_STATIC_TOPIC else
+                                                                LASER_SCAN if topic == SCAN_TOPIC else ODOMETRY))
+            info.count += 1
+        first_ns = 0 if first is None else first
+        self._keys = np.array([first_ns if k < 0 else k for k in keys], dtype=np.int64)
+        self._n = len(keys)
+        if self._n:
+            self._start_ns, self._end_ns = int(self._keys.min()), int(self._keys.max())
+        self._sorted = bool(np.all(np.diff(self._keys) >= 0))
+        # the smallest key from message i on: what every message held back is compared with
+        self._suffix_min = np.minimum.accumulate(self._keys[::-1])[::-1]
+        st = self._reader.stats
+        self.skipped = {**{f"malformed {k}": v for k, v in st.get("malformed", {}).items()},
+                        **{k: v for k, v in st.get("skipped", {}).items() if k != "#" and k not in IGNORED_KINDS}}
+        if st.get("read_error"):
+            self.truncated = f"read error {st['read_error']}"
+
+    def laser_mount(self) -> StaticTransform:
+        frame = self.scan_frame()
+        for m in self._reader.laser_mounts:
+            if m.child == frame:
+                return m
+        return super().laser_mount()
+
+    def _records(self, want: set[str]) -> Iterator[Record]:
+        keys, suffix = self._keys.tolist(), self._suffix_min.tolist()
+        n = len(keys)
+        heap: list[tuple[int, int, Record]] = []
+        for i, (topic, msg) in enumerate(self._reader):
+            if i >= n:
+                break
+            if topic in want:
+                rec = Record(topic, msg, keys[i])
+                if self._sorted:
+                    yield rec
+                    continue
+                heapq.heappush(heap, (keys[i], i, rec))
+            nxt = suffix[i + 1] if i + 1 < n else None
+            while heap and (nxt is None or heap[0][0] <= nxt):
+                yield heapq.heappop(heap)[2]
+        while heap:
+            yield heapq.heappop(heap)[2]

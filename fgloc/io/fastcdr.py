@@ -1,61 +1,392 @@
-"""Vectorized CDR (little-endian XCDR1, as ROS 2 writes it) for ``sensor_msgs/msg/LaserScan``.
+"""Fixed-layout CDR codecs (little-endian XCDR1, as ROS 2 writes it) for the types fgloc reads.
 
-The generic ``mcap_ros2`` codec converts each beam in Python; scans are most of a log's
-bytes, so they get this numpy codec.  The bytes are identical to the generic encoder's
-(tested), and :func:`decode_scan` returns None for anything it does not handle (then the
-generic decoder is used).
+The generic ``mcap_ros2`` codec walks every field in Python; for the standard layouts of
+``sensor_msgs/msg/LaserScan``, ``nav_msgs/msg/Odometry``, ``sensor_msgs/msg/Imu``,
+``tf2_msgs/msg/TFMessage`` and ``geometry_msgs/msg/PoseWithCovarianceStamped`` the byte
+offsets follow from two string lengths, so these codecs read and write them with ``struct``
+and numpy, decoding a whole batch of messages (one MCAP chunk's messages of one channel) at
+once.  Their results are identical to the generic codec's followed by :mod:`fgloc.io.ros`'s
+conversion (tested on every message of the bundled and foreign logs), and the encoders'
+bytes are identical to the generic encoder's.
 
-Layout after the 4-byte encapsulation header ``00 01 00 00`` (alignment counted from the
-end of that header): ``int32 sec, uint32 nanosec, uint32 len(frame_id)+1, frame_id, NUL,
-pad to 4, 7 x float32 (angle_min, angle_max, angle_increment, time_increment, scan_time,
-range_min, range_max), uint32 n, n x float32 ranges, uint32 m, m x float32 intensities``.
+A decoder returns None for a message it does not handle (big-endian or another
+representation, a buffer too short for the layout, a string that is not UTF-8): the caller
+then uses the generic codec, which reads it correctly or reports it as undecodable.  Whether
+a schema has the standard layout at all is decided by :func:`fgloc.io.msgdefs.is_standard`.
+
+Layouts after the 4-byte encapsulation header ``00 01 00 00`` (alignment counted from the
+end of that header; ``header`` = ``int32 sec, uint32 nanosec, uint32 len(frame_id)+1,
+frame_id, NUL``):
+
+* LaserScan: ``header``, pad to 4, 7 x float32 (angle_min, angle_max, angle_increment,
+  time_increment, scan_time, range_min, range_max), uint32 n, n x float32 ranges, uint32 m,
+  m x float32 intensities.
+* Odometry: ``header``, pad to 4, child_frame_id string, pad to 8, 85 x float64 (position 3,
+  orientation 4, pose covariance 36, linear 3, angular 3, twist covariance 36).
+* Imu: ``header``, pad to 8, 37 x float64 (orientation 4, covariance 9, angular velocity 3,
+  covariance 9, linear acceleration 3, covariance 9).
+* PoseWithCovarianceStamped: ``header``, pad to 8, 43 x float64 (position, orientation, cov).
+* TFMessage: uint32 count, then per transform: pad to 4, ``header``, pad to 4, child_frame_id
+  string, pad to 8, 7 x float64 (translation 3, rotation 4).
 """
 
 from __future__ import annotations
 
+import math
 import struct
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+
 CDR_LE = b"\x00\x01\x00\x00"
 _F7 = struct.Struct("<7f")
+_HDR = struct.Struct("<iII")
+_U32 = struct.Struct("<I")
+_D7 = struct.Struct("<7d")
+COV_IDX9 = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])  # [x, y, yaw] rows/columns of a 6x6, flattened
+
+Buffer = bytes | bytearray | memoryview
 
 
+# --------------------------------------------------------------------------------------------
+# stamps (the same arithmetic as fgloc.io.ros, kept here so this module has no generic imports)
+def _sec_nsec(stamp: float) -> tuple[int, int]:
+    sec = math.floor(stamp)
+    nsec = round((stamp - sec) * 1e9)
+    if nsec >= 1_000_000_000:
+        sec, nsec = sec + 1, nsec - 1_000_000_000
+    return int(sec), int(nsec)
+
+
+def _pad(n: int, align: int) -> int:
+    """Bytes of padding after ``n`` bytes of payload (offsets relative to the CDR header)."""
+    return (-n) % align
+
+
+def _header_bytes(stamp: float, frame_id: str) -> bytes:
+    sec, nsec = _sec_nsec(stamp)
+    fid = frame_id.encode() + b"\x00"
+    return _HDR.pack(sec, nsec, len(fid)) + fid
+
+
+def _string_bytes(pos: int, s: str) -> bytes:
+    """A CDR string starting at payload offset ``pos`` (padding to 4 included)."""
+    b = s.encode() + b"\x00"
+    return b"\x00" * _pad(pos, 4) + _U32.pack(len(b)) + b
+
+
+def _cov6_flat(cov3: Any, first: float | None = None) -> list[float]:
+    c6 = np.zeros(36)
+    if cov3 is not None:
+        c6[COV_IDX9] = np.asarray(cov3, dtype=float).reshape(9)
+    if first is not None:
+        c6[0] = first
+    return c6.tolist()
+
+
+def _quat(yaw: float) -> tuple[float, float, float, float]:
+    q = yaw_to_quaternion(yaw)
+    return float(q[0]), float(q[1]), float(q[2]), float(q[3])
+
+
+# --------------------------------------------------------------------------------------------
+# encoders (byte-identical to mcap_ros2's generic encoder; tested)
 def encode_scan(stamp_sec: int, stamp_nsec: int, frame_id: str, floats7: tuple[float, ...],
                 ranges: np.ndarray, intensities: np.ndarray | None) -> bytes:
     fid = frame_id.encode() + b"\x00"
-    head = struct.pack("<iII", stamp_sec, stamp_nsec, len(fid)) + fid
+    head = _HDR.pack(stamp_sec, stamp_nsec, len(fid)) + fid
     pad = (-len(head)) % 4
     r = np.ascontiguousarray(ranges, dtype="<f4")
     i = np.zeros(0, "<f4") if intensities is None else np.ascontiguousarray(intensities, dtype="<f4")
     return b"".join([
         CDR_LE, head, b"\x00" * pad, _F7.pack(*floats7),
-        struct.pack("<I", r.size), r.tobytes(), struct.pack("<I", i.size), i.tobytes(),
+        _U32.pack(r.size), r.tobytes(), _U32.pack(i.size), i.tobytes(),
     ])
 
 
-def decode_scan(data: bytes | memoryview) -> dict[str, Any] | None:
+def encode_laser_scan(m: LaserScan, stamp: float) -> bytes:
+    n = len(m.ranges)
+    sec, nsec = _sec_nsec(stamp)
+    floats = (m.angle_min, m.angle_min + m.angle_increment * max(n - 1, 0), m.angle_increment,
+              m.time_increment, m.scan_time, m.range_min, m.range_max)
+    return encode_scan(sec, nsec, m.frame_id, floats, m.ranges, m.intensities)
+
+
+def encode_odometry(m: Odometry, stamp: float) -> bytes:
+    head = _header_bytes(stamp, m.frame_id)
+    child = _string_bytes(len(head), m.child_frame_id)
+    n = len(head) + len(child)
+    pose = (0.0, 0.0, 0.0) if m.pose is None else tuple(float(v) for v in m.pose)
+    tw = [float(v) for v in m.twist]
+    vals = [pose[0], pose[1], 0.0, *_quat(pose[2]),
+            *_cov6_flat(m.pose_cov, -1.0 if m.pose is None else None),
+            tw[0], tw[1], 0.0, 0.0, 0.0, tw[2], *_cov6_flat(m.twist_cov)]
+    return b"".join([CDR_LE, head, child, b"\x00" * _pad(n, 8), struct.pack("<85d", *vals)])
+
+
+def _cov9(var: float, absent: bool) -> list[float]:
+    c = [0.0] * 9
+    if absent:
+        c[0] = -1.0
+    elif not math.isnan(var):
+        c[8] = float(var)
+    return c
+
+
+def encode_compass(m: CompassHeading, stamp: float) -> bytes:
+    head = _header_bytes(stamp, m.frame_id)
+    vals = [*_quat(0.0 if m.yaw_rad is None else float(m.yaw_rad)),
+            *_cov9(m.yaw_var, m.yaw_rad is None),
+            0.0, 0.0, 0.0 if m.yaw_rate_radps is None else float(m.yaw_rate_radps),
+            *_cov9(m.yaw_rate_var, m.yaw_rate_radps is None),
+            0.0, 0.0, 0.0, *_cov9(float("nan"), True)]
+    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<37d", *vals)])
+
+
+def encode_pose_fix(m: PoseFix, stamp: float) -> bytes:
+    head = _header_bytes(stamp, m.frame_id)
+    p = [float(v) for v in m.pose]
+    vals = [p[0], p[1], 0.0, *_quat(p[2]), *_cov6_flat(m.cov)]
+    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<43d", *vals)])
+
+
+def encode_tf(m: Sequence[StaticTransform], stamp: float) -> bytes:
+    parts = [CDR_LE, _U32.pack(len(m))]
+    n = 4
+    for t in m:
+        head = b"\x00" * _pad(n, 4) + _header_bytes(stamp, t.parent)
+        n += len(head)
+        child = _string_bytes(n, t.child)
+        n += len(child)
+        pad = b"\x00" * _pad(n, 8)
+        n += len(pad) + 56
+        vals = (float(t.pose[0]), float(t.pose[1]), float(t.z), *_quat(float(t.pose[2])))
+        parts += [head, child, pad, _D7.pack(*vals)]
+    return b"".join(parts)
+
+
+# --------------------------------------------------------------------------------------------
+# decoders
+def _string_at(buf: Buffer, p: int) -> tuple[str, int]:
+    """The CDR string whose length field is at ``p`` (already aligned); ``(text, end)``.
+
+    As the generic decoder: the length counts the NUL, which is dropped."""
+    (n,) = _U32.unpack_from(buf, p)
+    end = p + 4 + n
+    if end > len(buf):
+        raise ValueError("string overruns the message")
+    return bytes(buf[p + 4 : end - 1 if n else end]).decode(), end
+
+
+def _aligned(p: int, align: int) -> int:
+    return p + (-(p - 4)) % align
+
+
+def decode_scan(data: Buffer) -> dict[str, Any] | None:
     """The fields of a LaserScan CDR message, or None if it is not little-endian CDR."""
     buf = memoryview(data)
     if bytes(buf[:2]) != CDR_LE[:2]:
         return None
     try:
-        sec, nsec, slen = struct.unpack_from("<iII", buf, 4)
-        p = 16
-        frame_id = bytes(buf[p : p + slen - 1]).decode()
-        p += slen
-        p += (-(p - 4)) % 4
+        sec, nsec, _ = _HDR.unpack_from(buf, 4)
+        frame_id, p = _string_at(buf, 12)
+        p = _aligned(p, 4)
         f7 = _F7.unpack_from(buf, p)
         p += 28
-        (n,) = struct.unpack_from("<I", buf, p)
+        (n,) = _U32.unpack_from(buf, p)
         p += 4
         ranges = np.frombuffer(buf, dtype="<f4", count=n, offset=p).astype(np.float32)
         p += 4 * n
-        (m,) = struct.unpack_from("<I", buf, p)
+        (m,) = _U32.unpack_from(buf, p)
         p += 4
         inten = np.frombuffer(buf, dtype="<f4", count=m, offset=p).astype(np.float32)
     except (struct.error, ValueError, UnicodeDecodeError):
         return None
     return {"sec": sec, "nanosec": nsec, "frame_id": frame_id, "floats": f7, "ranges": ranges,
             "intensities": inten}
+
+
+def decode_laser_scans(datas: Sequence[Buffer]) -> list[LaserScan | None]:
+    out: list[LaserScan | None] = []
+    for data in datas:
+        d = decode_scan(data)
+        if d is None:
+            out.append(None)
+            continue
+        amin, _amax, inc, tinc, stime, rmin, rmax = d["floats"]
+        inten = d["intensities"]
+        out.append(LaserScan(
+            stamp=float(d["sec"]) + float(d["nanosec"]) * 1e-9, angle_min=amin, angle_increment=inc,
+            range_min=rmin, range_max=rmax, ranges=d["ranges"], time_increment=tinc, scan_time=stime,
+            intensities=inten if len(inten) else None, frame_id=d["frame_id"],
+        ))
+    return out
+
+
+def _layout(data: Buffer, strings: int, align: int, n_doubles: int) -> tuple[tuple[str, ...], int] | None:
+    """``(strings, offset of the doubles)`` of a header(+child string) message, or None."""
+    if len(data) < 16 or data[0] != 0 or data[1] != 1:
+        return None
+    try:
+        s0, p = _string_at(data, 12)
+        texts: tuple[str, ...] = (s0,)
+        if strings == 2:
+            s1, p = _string_at(data, _aligned(p, 4))
+            texts = (s0, s1)
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    p = _aligned(p, align)
+    if p + 8 * n_doubles > len(data):
+        return None
+    return texts, p
+
+
+def _columns(datas: Sequence[Buffer], strings: int, n_doubles: int
+             ) -> tuple[list[int], list[tuple[str, ...]], np.ndarray, np.ndarray] | None:
+    """Decode a batch's fixed part: ``(indices decoded, strings, stamps, doubles (k, n))``."""
+    idx: list[int] = []
+    texts: list[tuple[str, ...]] = []
+    rows: list[Buffer] = []
+    stamps: list[float] = []
+    for i, data in enumerate(datas):
+        lay = _layout(data, strings, 8, n_doubles)
+        if lay is None:
+            continue
+        t, p = lay
+        sec, nsec, _ = _HDR.unpack_from(data, 4)
+        idx.append(i)
+        texts.append(t)
+        stamps.append(float(sec) + float(nsec) * 1e-9)
+        rows.append(data[p : p + 8 * n_doubles])
+    if not idx:
+        return None
+    vals = np.frombuffer(b"".join(rows), dtype="<f8").reshape(len(idx), n_doubles).astype(np.float64)
+    return idx, texts, np.asarray(stamps), vals
+
+
+def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(k, 3, 3)`` covariances and whether each 6x6 is all zero ("unknown")."""
+    return c36[:, COV_IDX9].reshape(-1, 3, 3), ~np.any(c36 != 0.0, axis=1)
+
+
+def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
+    out: list[Odometry | None] = [None] * len(datas)
+    cols = _columns(datas, 2, 85)
+    if cols is None:
+        return out
+    idx, texts, stamps, v = cols
+    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
+    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    twists = v[:, (43, 44, 48)].copy()
+    pcov, pzero = _cov3s(v[:, 7:43])
+    tcov, tzero = _cov3s(v[:, 49:85])
+    no_pose = v[:, 7] == -1.0
+    stamp_l = stamps.tolist()
+    for k, i in enumerate(idx):
+        has_pose = not no_pose[k]
+        out[i] = Odometry(
+            stamp=stamp_l[k], twist=twists[k], twist_cov=None if tzero[k] else tcov[k],
+            pose=poses[k] if has_pose else None,
+            pose_cov=pcov[k] if has_pose and not pzero[k] else None,
+            frame_id=texts[k][0], child_frame_id=texts[k][1])
+    return out
+
+
+def decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
+    out: list[CompassHeading | None] = [None] * len(datas)
+    cols = _columns(datas, 1, 37)
+    if cols is None:
+        return out
+    idx, texts, stamps, v = cols
+    qx, qy, qz, qw = v[:, 0], v[:, 1], v[:, 2], v[:, 3]
+    yaw = np.asarray(quaternion_to_yaw(qx, qy, qz, qw)).tolist()
+    no_yaw = ((v[:, 4] == -1.0) | ((qx * qx + qy * qy + qz * qz + qw * qw) < 1e-12)).tolist()
+    no_rate = (v[:, 16] == -1.0).tolist()
+    ovar = np.where(np.any(v[:, 4:13] != 0.0, axis=1), v[:, 12], np.nan).tolist()
+    wvar = np.where(np.any(v[:, 16:25] != 0.0, axis=1), v[:, 24], np.nan).tolist()
+    rate = v[:, 15].tolist()
+    stamp_l = stamps.tolist()
+    nan = float("nan")
+    for k, i in enumerate(idx):
+        ny, nr = no_yaw[k], no_rate[k]
+        out[i] = CompassHeading(
+            stamp=stamp_l[k], yaw_rad=None if ny else yaw[k], yaw_rate_radps=None if nr else rate[k],
+            yaw_var=nan if ny else ovar[k], yaw_rate_var=nan if nr else wvar[k], frame_id=texts[k][0])
+    return out
+
+
+def decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
+    out: list[PoseFix | None] = [None] * len(datas)
+    cols = _columns(datas, 1, 43)
+    if cols is None:
+        return out
+    idx, texts, stamps, v = cols
+    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
+    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    cov, zero = _cov3s(v[:, 7:43])
+    stamp_l = stamps.tolist()
+    for k, i in enumerate(idx):
+        out[i] = PoseFix(stamp=stamp_l[k], pose=poses[k], cov=np.zeros((3, 3)) if zero[k] else cov[k],
+                         source=topic, frame_id=texts[k][0])
+    return out
+
+
+def _tf_layout(data: Buffer) -> list[tuple[str, str, int]] | None:
+    """``[(parent, child, offset of the 7 doubles)]`` of a TFMessage, or None."""
+    if len(data) < 8 or data[0] != 0 or data[1] != 1:
+        return None
+    try:
+        (n,) = _U32.unpack_from(data, 4)
+        if 40 * n > len(data):  # each transform takes at least 40 bytes: not this layout
+            return None
+        p = 8
+        out = []
+        for _ in range(n):
+            p = _aligned(p, 4)
+            parent, p = _string_at(data, p + 8)
+            child, p = _string_at(data, _aligned(p, 4))
+            p = _aligned(p, 8)
+            if p + 56 > len(data):
+                return None
+            out.append((parent, child, p))
+            p += 56
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    return out
+
+
+def decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransform], list[bool]] | None]:
+    """Per message: ``(transforms, upside-down flags)`` (see :func:`fgloc.io.ros.tf_flips`)."""
+    out: list[tuple[list[StaticTransform], list[bool]] | None] = [None] * len(datas)
+    lays: list[tuple[int, list[tuple[str, str, int]]]] = []
+    rows: list[Buffer] = []
+    for i, data in enumerate(datas):
+        lay = _tf_layout(data)
+        if lay is None:
+            continue
+        lays.append((i, lay))
+        rows += [data[p : p + 56] for _, _, p in lay]
+    if not lays:
+        return out
+    v = np.frombuffer(b"".join(rows), dtype="<f8").reshape(-1, 7).astype(np.float64)
+    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6]) if len(v) else np.zeros(0)
+    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    vl = v.tolist()
+    k = 0
+    for i, lay in lays:
+        tfs, flips = [], []
+        for parent, child, _ in lay:
+            x, y, z, qx, qy, qz, qw = vl[k]
+            tfs.append(StaticTransform(parent=parent.lstrip("/"), child=child.lstrip("/"), pose=poses[k], z=z))
+            nq = qx * qx + qy * qy + qz * qz + qw * qw
+            flips.append(nq > 0 and 1.0 - 2.0 * (qx * qx + qy * qy) / nq < 0.0)
+            k += 1
+        out[i] = (tfs, flips)
+    return out
+
+
+BatchDecoder = Callable[[Sequence[Buffer]], list[Any]]

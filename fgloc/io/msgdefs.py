@@ -83,3 +83,50 @@ def full_text(type_name: str) -> str:
         return text
 
     return rec(short_name(type_name))
+
+
+def _sections(text: str, root: str) -> dict[str, tuple[str, ...]]:
+    """``{pkg/Type: (normalized field lines)}`` of a ``ros2msg`` definition (comments, blank
+    lines, constants and default values dropped; relative types made absolute)."""
+    out: dict[str, tuple[str, ...]] = {}
+    name, lines = short_name(root), list[str]()
+    for raw in text.splitlines() + [SEPARATOR]:
+        line = raw.split("#", 1)[0].strip()
+        if line.startswith("=" * 10):
+            out[name] = tuple(lines)
+            name, lines = "", []
+            continue
+        if not line:
+            continue
+        if line.startswith("MSG:"):
+            name = short_name(line[4:].strip())
+            continue
+        tok = line.split()
+        if len(tok) < 2 or "=" in tok[1] or (len(tok) > 2 and tok[2].startswith("=")):
+            continue  # a constant: no bytes on the wire
+        typ, field = tok[0], tok[1]
+        base, arr = (typ.split("[", 1) + [""])[:2]
+        if base not in _PRIMITIVES and "/" not in base and base != "Header":
+            base = f"{name.split('/')[0]}/{base}"
+        elif base == "Header":
+            base = "std_msgs/Header"
+        lines.append(f"{short_name(base)}{'[' + arr if arr else ''} {field}")
+    return out
+
+
+def is_standard(type_name: str, encoding: str, data: bytes) -> bool:
+    """Does a schema define the standard layout of ``type_name`` (one of :data:`MSG_TEXT`'s)?
+
+    An empty schema or one that is not ``ros2msg`` counts as standard: the reader then decodes
+    it with the standard definition anyway.  Otherwise every type the definition reaches must
+    have exactly the standard fields (comments, constants and defaults aside)."""
+    if short_name(type_name) not in MSG_TEXT:
+        return False
+    if encoding != "ros2msg" or not bytes(data).strip():
+        return True
+    try:
+        got = _sections(bytes(data).decode(), type_name)
+    except UnicodeDecodeError:
+        return False
+    want = _sections(full_text(type_name), type_name)
+    return all(got.get(k) == v for k, v in want.items()) and set(got) <= set(want) | {""}

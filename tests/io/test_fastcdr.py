@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fgloc.io.fastcdr import decode_scan
-from fgloc.io.log import LASER_SCAN, _scan_from_cdr, _scan_from_ros, _scan_to_cdr, _scan_to_ros
+from fgloc.io.fastcdr import decode_laser_scans, decode_scan, encode_laser_scan
 from fgloc.io.msgdefs import full_text
+from fgloc.io.ros import scan_from_ros, scan_to_ros
+from fgloc.io.topics import LASER_SCAN
 from fgloc.types import LaserScan
 
 
@@ -24,10 +25,10 @@ def test_bytes_equal_generic_codec(frame, n, with_int):
         r[:3] = [np.inf, -np.inf, np.nan]
     scan = LaserScan(1234.000000567, -2.35, 0.0043633, 0.05, 40.0, r, 1e-5, 0.04,
                      rng.uniform(0, 1, n).astype(np.float32) if with_int else None, frame)
-    fast = _scan_to_cdr(scan, scan.stamp)
-    assert fast == enc(_scan_to_ros(scan, scan.stamp))
-    a = _scan_from_cdr(fast, "/scan")
-    b = _scan_from_ros(dec(fast), "/scan")
+    fast = encode_laser_scan(scan, scan.stamp)
+    assert fast == enc(scan_to_ros(scan, scan.stamp))
+    (a,) = decode_laser_scans([fast])
+    b = scan_from_ros(dec(fast), "/scan")
     assert a is not None
     for f in ("stamp", "angle_min", "angle_increment", "range_min", "range_max", "time_increment",
               "scan_time", "frame_id"):

@@ -149,8 +149,9 @@ def test_unindexed_mcap_is_streamed_not_truncated(tmp_path, chunked):
     from mcap.writer import Writer as McapWriter
     from mcap_ros2._dynamic import serialize_dynamic
 
-    from fgloc.io.log import ODOMETRY, _odom_to_ros
     from fgloc.io.msgdefs import full_text
+    from fgloc.io.ros import odom_to_ros
+    from fgloc.io.topics import ODOMETRY
 
     path = tmp_path / "plain.mcap"
     enc = serialize_dynamic(ODOMETRY, full_text(ODOMETRY))[ODOMETRY]
@@ -163,7 +164,7 @@ def test_unindexed_mcap_is_streamed_not_truncated(tmp_path, chunked):
         cid = w.register_channel("/odom", "cdr", sid)
         for i in range(50):
             m = Odometry(10.0 + 0.1 * i, np.array([0.1 * i, 0.0, 0.0]))
-            w.add_message(cid, int(m.stamp * 1e9), enc(_odom_to_ros(m, m.stamp)), int(m.stamp * 1e9))
+            w.add_message(cid, int(m.stamp * 1e9), enc(odom_to_ros(m, m.stamp)), int(m.stamp * 1e9))
         w.finish()
     r = LogReader(path)
     assert r.truncated is None and not r.summary()["indexed"]

@@ -1,0 +1,125 @@
+"""What ROS 1 bags and rosbag2 folders share: read with ``rosbags`` (no ROS install needed).
+
+Topics of the types fgloc reads are converted with the same rules as the MCAP reader
+(:mod:`fgloc.io.ros`).  Messages come in record-time order (the bag's log time); a type the
+bag defines that the type store lacks is registered from the bag's own definition.  A ROS 2
+bag's messages keep their CDR bytes for copying (:class:`fgloc.io.source.Record`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from fgloc.errors import LogError
+from fgloc.io.ros import FROM_ROS, tf_flips
+from fgloc.io.source import ChannelInfo, LogSource, Record, TopicInfo
+from fgloc.io.topics import TF_MESSAGE, Topics, normalize_type
+
+log = logging.getLogger(__name__)
+
+
+class BagSource(LogSource):
+    """Base of :class:`~fgloc.io.rosbag1.Rosbag1Source` and :class:`~fgloc.io.rosbag2.Rosbag2Source`."""
+
+    ros2: bool = True
+    what = "bag"
+
+    def __init__(self, path: str | Path, topics: Topics | None = None) -> None:
+        super().__init__(path, topics)
+        self._store: Any = None
+        reader = self._open_reader()
+        try:
+            self._conns = list(reader.connections)
+            for c in self._conns:
+                info = self._topic_info.setdefault(c.topic, TopicInfo(normalize_type(c.msgtype)))
+                info.count += int(c.msgcount)
+            self._n = sum(int(c.msgcount) for c in self._conns)
+            if self._n:
+                self._start_ns, self._end_ns = int(reader.start_time), int(reader.end_time)
+        finally:
+            reader.close()
+        if self._n == 0:
+            raise LogError(f"{self.path}: empty {self.what} (no messages)")
+
+    # -- subclass hooks ----------------------------------------------------------------------
+    def _reader(self) -> Any:
+        raise NotImplementedError
+
+    def _reader_errors(self) -> tuple[type[Exception], ...]:
+        raise NotImplementedError
+
+    def _open_reader(self) -> Any:
+        try:
+            reader = self._reader()
+            reader.open()
+        except (OSError, ValueError, KeyError, *self._reader_errors()) as e:  # type: ignore[misc]
+            raise LogError(f"{self.path}: cannot read {self.what} ({e})") from None
+        return reader
+
+    # -- decoding ----------------------------------------------------------------------------
+    def _typestore(self) -> Any:
+        if self._store is None:
+            from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+            store = get_typestore(Stores.ROS2_HUMBLE if self.ros2 else Stores.ROS1_NOETIC)
+            for c in self._conns:  # types the store lacks come with the bag's own definitions
+                msgdef = getattr(getattr(c, "msgdef", None), "data", "")
+                if c.msgtype not in store.fielddefs and msgdef:
+                    try:
+                        store.register(get_types_from_msg(msgdef, c.msgtype))
+                    except Exception as e:  # noqa: BLE001 - that topic will be undecodable
+                        log.warning("%s: cannot parse the definition of %s (%s)", self.path, c.msgtype, e)
+            self._store = store
+        return self._store
+
+    def _channel_info(self, c: Any) -> ChannelInfo:
+        if not self.ros2:
+            return ChannelInfo(c.topic, normalize_type(c.msgtype))
+        md = getattr(c, "msgdef", None)
+        fmt = getattr(getattr(md, "format", None), "name", "NONE")
+        text = getattr(md, "data", "") or ""
+        enc = {"MSG": "ros2msg", "IDL": "ros2idl"}.get(fmt, "") if text else ""
+        return ChannelInfo(c.topic, normalize_type(c.msgtype), c.msgtype, enc, text.encode(), "cdr")
+
+    def _records(self, want: set[str]) -> Iterator[Record]:
+        store = self._typestore()
+        deserialize = store.deserialize_cdr if self.ros2 else store.deserialize_ros1
+        conns = [c for c in self._conns if c.topic in want]
+        convs: dict[int, Any] = {}
+        infos: dict[int, ChannelInfo] = {}
+        for c in conns:
+            fn = FROM_ROS.get(normalize_type(c.msgtype))
+            if fn is None:
+                log.warning("%s: topic %s has type %s, which fgloc does not read; skipped",
+                            self.path, c.topic, c.msgtype)
+            convs[c.id] = fn
+            infos[c.id] = self._channel_info(c)
+        if not conns:
+            return
+        reader = self._open_reader()
+        try:
+            for conn, t, raw in reader.messages(connections=conns):
+                fn = convs.get(conn.id)
+                if fn is None:
+                    continue
+                try:
+                    ros = deserialize(raw, conn.msgtype)
+                    out = fn(ros, conn.topic)
+                    if normalize_type(conn.msgtype) == TF_MESSAGE:
+                        self._note_tf(out, tf_flips(ros))
+                except Exception as e:  # noqa: BLE001 - an undecodable message is skipped
+                    n = self.undecodable.get(conn.topic, 0)
+                    self.undecodable[conn.topic] = n + 1
+                    if n == 0:
+                        log.warning("%s: cannot decode %s (%s): %s; skipping such messages",
+                                    self.path, conn.topic, conn.msgtype, e)
+                    continue
+                yield Record(conn.topic, out, int(t), bytes(raw) if self.ros2 else None, infos[conn.id])
+        except self._reader_errors() as e:
+            self.truncated = f"{self.what} data unreadable after the messages read so far ({e})"
+            log.warning("%s: %s; stopping there", self.path, self.truncated)
+        finally:
+            reader.close()

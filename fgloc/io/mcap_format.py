@@ -1,0 +1,283 @@
+"""MCAP records at byte level: chunks, their records, and the summary section.
+
+The reader (:mod:`fgloc.io.mcap_reader`) and the salvage walker (:mod:`fgloc.io.salvage`)
+parse chunks here with ``struct`` (the ``mcap`` package's per-record objects cost more than
+decoding the message), check each chunk's CRC, and read the summary only when its CRC (if
+the writer set one) matches and every chunk index points at a chunk record of its length.
+Anything inconsistent raises :class:`McapFormatError` (a damaged chunk) or returns None (an
+unusable summary: the caller falls back to a linear scan).
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
+OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_STATISTICS, OP_DATA_END = 0x07, 0x08, 0x0B, 0x0F
+FOOTER_LEN = 1 + 8 + 20  # opcode, length, summary_start, summary_offset_start, summary_crc
+MAX_DECOMPRESSED = 1 << 31
+
+_REC = struct.Struct("<BQ")
+_MSG = struct.Struct("<HIQQ")
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, len(compression)
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+
+
+class McapFormatError(ValueError):
+    """A chunk or record that cannot be read as the format says."""
+
+
+@dataclass(frozen=True)
+class SchemaRec:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass(frozen=True)
+class ChannelRec:
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+
+
+# (log_time_ns, index in its chunk, channel id, data)
+MessageRec = tuple[int, int, int, bytes]
+
+
+@dataclass
+class Parsed:
+    """The records of one chunk (or a run of records outside chunks)."""
+
+    schemas: list[SchemaRec] = field(default_factory=list)
+    channels: list[ChannelRec] = field(default_factory=list)
+    messages: list[MessageRec] = field(default_factory=list)
+    end: int = 0  # bytes consumed (a partial buffer stops at the first incomplete record)
+
+
+def _string(buf: bytes, p: int) -> tuple[str, int]:
+    (n,) = _U32.unpack_from(buf, p)
+    end = p + 4 + n
+    if end > len(buf):
+        raise McapFormatError("string overruns its record")
+    return buf[p + 4 : end].decode(), end
+
+
+def parse_schema(body: bytes) -> SchemaRec:
+    (sid,) = _U16.unpack_from(body, 0)
+    name, p = _string(body, 2)
+    enc, p = _string(body, p)
+    (n,) = _U32.unpack_from(body, p)
+    if p + 4 + n > len(body):
+        raise McapFormatError("schema data overruns its record")
+    return SchemaRec(sid, name, enc, bytes(body[p + 4 : p + 4 + n]))
+
+
+def parse_channel(body: bytes) -> ChannelRec:
+    cid, sid = struct.unpack_from("<HH", body, 0)
+    topic, p = _string(body, 4)
+    enc, p = _string(body, p)
+    return ChannelRec(cid, sid, topic, enc)
+
+
+def parse_records(buf: bytes, want: set[int] | None, complete: bool = True) -> Parsed:
+    """Schemas, channels and the messages of channels in ``want`` (None = all) in ``buf``.
+
+    ``complete``: a record running past the end is an error (a whole chunk); otherwise
+    parsing stops before it (the readable part of a cut chunk)."""
+    out = Parsed()
+    msgs = out.messages
+    pos, n, idx = 0, len(buf), 0
+    rec, msg = _REC.unpack_from, _MSG.unpack_from
+    while pos + 9 <= n:
+        op, length = rec(buf, pos)
+        body = pos + 9
+        end = body + length
+        if end > n:
+            if complete:
+                raise McapFormatError("record overruns its chunk")
+            break
+        if op == OP_MESSAGE:
+            if length < 22:
+                raise McapFormatError("message record too short")
+            ch, _seq, log_time, _pub = msg(buf, body)
+            if want is None or ch in want:
+                msgs.append((log_time, idx, ch, buf[body + 22 : end]))
+        elif op == OP_SCHEMA:
+            out.schemas.append(parse_schema(buf[body:end]))
+        elif op == OP_CHANNEL:
+            out.channels.append(parse_channel(buf[body:end]))
+        elif op == 0 or (0x10 < op < 0x80):
+            raise McapFormatError(f"corrupt record (opcode {op:#x})")
+        pos = end
+        idx += 1
+    if complete and pos != n:
+        raise McapFormatError("trailing bytes in chunk")
+    out.end = pos
+    return out
+
+
+def decompress(compression: str, data: bytes, size: int, partial: bool = False) -> bytes:
+    if compression == "":
+        return data
+    if compression == "zstd":
+        import zstandard
+
+        if partial:
+            return zstandard.ZstdDecompressor().decompressobj().decompress(data)  # type: ignore[no-any-return]
+        return zstandard.ZstdDecompressor().decompress(  # type: ignore[no-any-return]
+            data, max_output_size=min(max(size, 1), MAX_DECOMPRESSED))
+    if compression == "lz4":
+        import lz4.frame
+
+        if partial:
+            return lz4.frame.LZ4FrameDecompressor().decompress(data)  # type: ignore[no-any-return]
+        return lz4.frame.decompress(data)  # type: ignore[no-any-return]
+    raise McapFormatError(f"unsupported chunk compression '{compression[:20]}'")
+
+
+@dataclass
+class ChunkHead:
+    start_ns: int
+    end_ns: int
+    size: int          # uncompressed
+    crc: int
+    compression: str
+    data: bytes        # compressed records (possibly cut short)
+    complete: bool
+
+
+def parse_chunk_body(body: bytes, complete: bool = True) -> ChunkHead:
+    if len(body) < 40:
+        raise McapFormatError("chunk header cut short")
+    start, end, usize, crc, clen = _CHUNK_HEAD.unpack_from(body, 0)
+    if clen > 16 or 32 + clen + 8 > len(body):
+        raise McapFormatError("corrupt chunk header")
+    comp = body[32 : 32 + clen].decode(errors="replace")
+    (dlen,) = _U64.unpack_from(body, 32 + clen)
+    p = 40 + clen
+    if complete and p + dlen != len(body):
+        raise McapFormatError("chunk data length disagrees with the record length")
+    return ChunkHead(start, end, usize, crc, comp, body[p : p + dlen], complete and p + dlen <= len(body))
+
+
+def chunk_records(head: ChunkHead, want: set[int] | None) -> Parsed:
+    """Decompress, check the CRC and parse a chunk; :class:`McapFormatError` if damaged."""
+    if not head.complete:
+        try:
+            buf = decompress(head.compression, head.data, head.size, partial=True)
+        except Exception:  # noqa: BLE001 - nothing readable in the cut part
+            return Parsed()
+        return parse_records(buf, want, complete=False)
+    try:
+        buf = decompress(head.compression, head.data, head.size)
+    except McapFormatError:
+        raise
+    except Exception as e:  # noqa: BLE001 - zstd/lz4 errors on corrupt data
+        raise McapFormatError(f"cannot decompress ({type(e).__name__})") from None
+    if len(buf) != head.size:
+        raise McapFormatError("decompressed size differs from the chunk header")
+    if head.crc and zlib.crc32(buf) != head.crc:
+        raise McapFormatError("CRC mismatch")
+    return parse_records(buf, want, complete=True)
+
+
+# --------------------------------------------------------------------------------------------
+# summary
+@dataclass
+class ChunkRef:
+    start_ns: int
+    end_ns: int
+    offset: int
+    length: int
+    channels: frozenset[int] | None   # channels with messages in it (None: unknown)
+
+
+@dataclass
+class Summary:
+    schemas: dict[int, SchemaRec]
+    channels: dict[int, ChannelRec]
+    chunks: list[ChunkRef]
+    message_count: int
+    start_ns: int
+    end_ns: int
+    channel_counts: dict[int, int]
+
+
+def read_summary(f: IO[bytes], size: int) -> Summary | None:
+    """The summary section, or None if absent, cut, or inconsistent with the file.
+
+    A summary whose CRC (written by the writer) matches is trusted; without a CRC every chunk
+    index must point at a chunk record of its length."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import ChunkIndex, Statistics
+
+    if size < 2 * len(MCAP_MAGIC) + FOOTER_LEN:
+        return None
+    f.seek(size - len(MCAP_MAGIC) - FOOTER_LEN)
+    tail = f.read()
+    if tail[-len(MCAP_MAGIC):] != MCAP_MAGIC or tail[0] != OP_FOOTER:
+        return None
+    start, _offsets, crc = struct.unpack_from("<QQI", tail, 9)
+    foot = size - len(MCAP_MAGIC) - FOOTER_LEN
+    if start == 0 or not len(MCAP_MAGIC) < start <= foot:
+        return None
+    f.seek(start)
+    section = f.read(foot - start)
+    if crc and zlib.crc32(tail[: FOOTER_LEN - 4], zlib.crc32(section)) != crc:
+        return None
+    schemas: dict[int, SchemaRec] = {}
+    channels: dict[int, ChannelRec] = {}
+    chunks: list[ChunkRef] = []
+    stats: Any = None
+    pos = 0
+    try:
+        while pos + 9 <= len(section):
+            op, length = _REC.unpack_from(section, pos)
+            body = section[pos + 9 : pos + 9 + length]
+            if len(body) != length:
+                return None
+            if op == OP_SCHEMA:
+                s = parse_schema(body)
+                schemas[s.id] = s
+            elif op == OP_CHANNEL:
+                c = parse_channel(body)
+                channels[c.id] = c
+            elif op == OP_CHUNK_INDEX:
+                ci = ChunkIndex.read(ReadDataStream(io.BytesIO(body)))
+                chunks.append(ChunkRef(ci.message_start_time, ci.message_end_time, ci.chunk_start_offset,
+                                       ci.chunk_length,
+                                       frozenset(ci.message_index_offsets) if ci.message_index_offsets else None))
+            elif op == OP_STATISTICS:
+                stats = Statistics.read(ReadDataStream(io.BytesIO(body)))
+            pos += 9 + length
+    except Exception:  # noqa: BLE001 - a summary we cannot parse is no summary
+        return None
+    if stats is None or not chunks and stats.message_count:
+        return None
+    for ref in chunks:  # every index must point at a chunk record of its length
+        if ref.offset + ref.length > start or ref.length < 9 + 40:
+            return None
+        if crc:  # the summary is intact: a chunk that disagrees with it is a damaged chunk
+            continue
+        f.seek(ref.offset)
+        head = f.read(9)
+        op, length = _REC.unpack_from(head, 0)
+        if op != OP_CHUNK or 9 + length != ref.length:
+            return None
+    return Summary(schemas, channels, chunks, stats.message_count, stats.message_start_time,
+                   stats.message_end_time, dict(stats.channel_message_counts))
+
+
+def read_chunk(f: IO[bytes], ref: ChunkRef) -> ChunkHead:
+    f.seek(ref.offset + 9)
+    return parse_chunk_body(f.read(ref.length - 9))

@@ -1,0 +1,170 @@
+"""Reading what can be read of an MCAP without a usable summary: cut, unindexed or damaged files.
+
+:class:`Walker` goes through the records in file order.  A chunk that fails its checks
+(decompression, CRC, record structure) is skipped and counted; a record header that makes no
+sense (an opcode that does not exist, a length past the end of the file) is either damage —
+when a complete chunk follows later, found by scanning forward for one that passes every
+check — or the point where a cut file ends (``broke`` then says where and why; the readable
+records of a cut chunk are still returned).
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from fgloc.io.mcap_format import (
+    MCAP_MAGIC,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_DATA_END,
+    OP_FOOTER,
+    OP_HEADER,
+    OP_MESSAGE,
+    OP_SCHEMA,
+    McapFormatError,
+    Parsed,
+    chunk_records,
+    parse_chunk_body,
+    parse_records,
+)
+
+RESYNC_LIMIT = 1 << 30  # bytes searched forward for the next chunk after a damaged record
+
+
+@dataclass
+class Break:
+    offset: int
+    size: int
+    messages: int
+    last_time_ns: int | None
+    reason: str
+
+    def describe(self) -> str:
+        t = "" if self.last_time_ns is None else f", the last at t={self.last_time_ns * 1e-9:.3f} s"
+        where = f"file ends at byte {self.size}" if self.offset < self.size else f"at byte {self.offset}"
+        return f"{where}: {self.reason} starting at byte {self.offset}; {self.messages} complete messages read{t}"
+
+
+@dataclass
+class Block:
+    """The records of one chunk, or one record outside chunks, at ``offset`` in the file;
+    ``start_ns`` is the chunk's first log time (messages are in time order across blocks
+    once every block with an earlier start has been read)."""
+
+    offset: int
+    start_ns: int
+    parsed: Parsed
+
+
+class Walker:
+    """Walk an MCAP's data section in file order (see the module doc)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.broke: Break | None = None
+        self.damaged: list[tuple[int, str]] = []  # (offset, reason) of each damaged chunk / record
+        self.complete = False                      # reached DataEnd / Footer
+        self.n_messages = 0
+        self.last_time: int | None = None
+
+    def blocks(self) -> Iterator[Block]:
+        size = os.path.getsize(self.path)
+        with self.path.open("rb") as f:
+            if size <= len(MCAP_MAGIC):
+                self._break(size, size, "no records")
+                return
+            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+                yield from self._walk(mm, size)
+
+    def _walk(self, mm: mmap.mmap, size: int) -> Iterator[Block]:
+        pos = len(MCAP_MAGIC)
+        while True:
+            if pos + 9 > size:
+                self._break(pos, size, "cut inside a record header" if pos < size else "no end-of-data record")
+                return
+            op = mm[pos]
+            length = int.from_bytes(mm[pos + 1 : pos + 9], "little")
+            end = pos + 9 + length
+            if op in (OP_FOOTER, OP_DATA_END):
+                self.complete = True
+                return
+            sane = op != 0 and not (0x10 < op < 0x80) and end <= size
+            if op == OP_CHUNK and end > size:
+                nxt = self._resync(mm, pos + 1, size)
+                if nxt is None:  # the file ends inside this chunk: read what is complete in it
+                    try:
+                        parsed = chunk_records(parse_chunk_body(mm[pos + 9 : size], complete=False), None)
+                        yield self._count(Block(pos, 0, parsed))
+                    except McapFormatError:
+                        pass
+                    self._break(pos, size, "cut inside a chunk")
+                    return
+                self.damaged.append((pos, "chunk length past the end of the file"))
+                pos = nxt
+                continue
+            if not sane:
+                nxt = self._resync(mm, pos + 1, size)
+                if nxt is None:
+                    reason = "cut inside a record" if end > size and op != 0 and not (0x10 < op < 0x80) \
+                        else f"corrupt record (opcode {op:#x})"
+                    self._break(pos, size, reason)
+                    return
+                self.damaged.append((pos, f"corrupt record (opcode {op:#x})"))
+                pos = nxt
+                continue
+            if op == OP_CHUNK:
+                try:
+                    head = parse_chunk_body(mm[pos + 9 : end])
+                    parsed = chunk_records(head, None)
+                except McapFormatError as e:
+                    self.damaged.append((pos, str(e)))
+                    nxt = self._resync(mm, pos + 1, size)
+                    if nxt is None or nxt >= end:  # the chunk's length still looks right: go past it
+                        pos = end
+                    else:
+                        pos = nxt
+                    continue
+                yield self._count(Block(pos, head.start_ns, parsed))
+            elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
+                try:
+                    parsed = parse_records(mm[pos:end], None)
+                except (McapFormatError, ValueError, UnicodeDecodeError) as e:
+                    self.damaged.append((pos, f"corrupt record ({e})"))
+                    pos = end
+                    continue
+                start = parsed.messages[0][0] if parsed.messages else 0
+                yield self._count(Block(pos, start, parsed))
+            elif op == OP_HEADER and pos != len(MCAP_MAGIC):
+                self.damaged.append((pos, "a second header record"))
+            pos = end
+
+    def _resync(self, mm: mmap.mmap, start: int, size: int) -> int | None:
+        """Offset of the next complete, intact chunk at or after ``start``, or None."""
+        q = start
+        stop = min(size, start + RESYNC_LIMIT)
+        while True:
+            q = mm.find(bytes([OP_CHUNK]), q, stop)
+            if q < 0 or q + 9 + 40 > size:
+                return None
+            length = int.from_bytes(mm[q + 1 : q + 9], "little")
+            end = q + 9 + length
+            if 40 <= length and end <= size:
+                try:
+                    chunk_records(parse_chunk_body(mm[q + 9 : end]), set())
+                    return q
+                except McapFormatError:
+                    pass
+            q += 1
+
+    def _count(self, block: Block) -> Block:
+        for m in block.parsed.messages:
+            self.n_messages += 1
+            self.last_time = m[0] if self.last_time is None else max(self.last_time, m[0])
+        return block
+
+    def _break(self, pos: int, size: int, reason: str) -> None:
+        self.broke = Break(pos, size, self.n_messages, self.last_time, reason)

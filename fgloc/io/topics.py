@@ -1,0 +1,98 @@
+"""Topic roles, their ROS 2 types, and the choice of a log's topics for each role.
+
+==================  ============================================  ==========================
+topic (default)     ROS 2 type                                    fgloc type
+==================  ============================================  ==========================
+``/scan``           ``sensor_msgs/msg/LaserScan``                 :class:`LaserScan`
+``/odom``           ``nav_msgs/msg/Odometry``                     :class:`Odometry`
+``/imu``            ``sensor_msgs/msg/Imu``                       :class:`CompassHeading`
+``/tf_static``      ``tf2_msgs/msg/TFMessage``                    ``list[StaticTransform]``
+``/tf``             ``tf2_msgs/msg/TFMessage``                    ``list[StaticTransform]``
+``/ground_truth``   ``nav_msgs/msg/Odometry`` (map frame)         :class:`Odometry`
+``/fused_pose``     ``geometry_msgs/msg/PoseWithCovarianceStamped``  :class:`PoseFix`
+==================  ============================================  ==========================
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from fgloc.errors import LogError
+
+log = logging.getLogger(__name__)
+
+LASER_SCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+IMU = "sensor_msgs/msg/Imu"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+READ_TYPES = (LASER_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED)
+
+
+@dataclass
+class Topics:
+    """Topic names of each role; every one can be renamed on the command line."""
+
+    scan: str = "/scan"
+    odom: str = "/odom"
+    imu: str = "/imu"
+    tf_static: str = "/tf_static"
+    tf: str = "/tf"
+    ground_truth: str = "/ground_truth"
+    fused: str = "/fused_pose"
+
+    def roles(self) -> dict[str, str]:
+        """``{topic name: role}``."""
+        return {getattr(self, f.name): f.name for f in fields(self)}
+
+
+ROLE_TYPES = {
+    "scan": LASER_SCAN,
+    "odom": ODOMETRY,
+    "imu": IMU,
+    "tf_static": TF_MESSAGE,
+    "tf": TF_MESSAGE,
+    "ground_truth": ODOMETRY,
+    "fused": POSE_COV_STAMPED,
+}
+
+
+def normalize_type(name: str) -> str:
+    """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+
+
+def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -> dict[str, str]:
+    """``{source topic: role}`` for the roles whose topic (or a unique same-type topic) exists.
+
+    ``available`` is ``{topic: type}`` of a log.  A topic named explicitly (not the default)
+    that is not in the log is an error; when a role's default topic is absent but exactly one
+    topic of that role's type is (other than the ones named), that one is used and logged
+    (never for tf, ground truth or fused poses).
+    """
+    chosen: dict[str, str] = {}
+    default = Topics()
+    named = {getattr(topics, g.name) for g in fields(Topics)}
+    for f in fields(Topics):
+        role, name = f.name, getattr(topics, f.name)
+        want = ROLE_TYPES[role]
+        if normalize_type(available.get(name, "")) == want:
+            chosen[name] = role
+            continue
+        if name in available:
+            log.warning("topic %s has type %s, expected %s for %s; skipped", name, available[name], want, role)
+            continue
+        if name != getattr(default, role):
+            have = ", ".join(sorted(available)) or "none"
+            raise LogError(f"{path}: {role} topic '{name}' not in log (topics: {have})")
+        if role in ("tf", "tf_static", "ground_truth", "fused"):
+            continue  # never guessed
+        same = [t for t, ty in available.items()
+                if normalize_type(ty) == want and t not in chosen and t not in named]
+        if len(same) == 1:
+            log.info("using %s (%s) as the %s topic", same[0], want, role)
+            chosen[same[0]] = role
+    return chosen

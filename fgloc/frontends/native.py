@@ -47,7 +47,8 @@ import numpy as np
 
 from fgloc.config.schema import section, setting, with_overrides
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, wrap_angle
+from fgloc.geometry import YAW, wrap_scalar
+from fgloc.gridmath import bilinear_grad
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -72,30 +73,6 @@ LOSS_CAUCHY = 1
 
 
 # ----------------------------------------------------------------- numba kernels
-@njit(cache=True, fastmath=True)
-def _lookup(field, u, v, far):  # pragma: no cover - compiled
-    """Bilinear value and (d/du, d/dv) of ``field`` at continuous (col, row) with centres at integers."""
-    h, w = field.shape
-    if not (u >= 0.0 and v >= 0.0 and u <= w - 1.0 and v <= h - 1.0):
-        return far, 0.0, 0.0
-    x0 = int(u)
-    y0 = int(v)
-    if x0 > w - 2:
-        x0 = w - 2
-    if y0 > h - 2:
-        y0 = h - 2
-    fx = u - x0
-    fy = v - y0
-    d00 = field[y0, x0]
-    d10 = field[y0, x0 + 1]
-    d01 = field[y0 + 1, x0]
-    d11 = field[y0 + 1, x0 + 1]
-    val = d00 * (1 - fx) * (1 - fy) + d10 * fx * (1 - fy) + d01 * (1 - fx) * fy + d11 * fx * fy
-    du = (1 - fy) * (d10 - d00) + fy * (d11 - d01)
-    dv = (1 - fx) * (d01 - d00) + fx * (d11 - d10)
-    return val, du, dv
-
-
 @njit(cache=True, fastmath=True)
 def _rho_w(r, c, loss, outlier):  # pragma: no cover - compiled
     """Robust cost and IRLS weight of a residual."""
@@ -124,77 +101,120 @@ def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pr
     qy = pose[1] + sn * x + cs * y
     u = A[0, 0] * qx + A[0, 1] * qy + b[0]
     v = A[1, 0] * qx + A[1, 1] * qy + b[1]
-    r, du, dv = _lookup(field, u, v, far)
+    r, du, dv = bilinear_grad(field, u, v, far)
     r += off
     gx = du * A[0, 0] + dv * A[1, 0]
     gy = du * A[0, 1] + dv * A[1, 1]
-    bx = qx - (pose[0] + cs * lx - sn * ly)
-    by = qy - (pose[1] + sn * lx + cs * ly)
+    bx = cs * (x - lx) - sn * (y - ly)
+    by = sn * (x - lx) + cs * (y - ly)
     dot = gx * bx + gy * by
+    if backcos >= 0.0:
+        if dot <= 0.0:
+            return r, gx, gy, True
+        # cos = dot / (|g| |b|) > backcos  <=>  dot^2 > backcos^2 |g|^2 |b|^2 (for dot > 0): no sqrt
+        return r, gx, gy, not (dot * dot > backcos * backcos * (gx * gx + gy * gy) * (bx * bx + by * by))
     nrm = math.sqrt((gx * gx + gy * gy) * (bx * bx + by * by))
-    front = not (nrm > 0.0 and dot > backcos * nrm)
-    return r, gx, gy, front
+    return r, gx, gy, not (nrm > 0.0 and dot > backcos * nrm)
 
 
 @njit(cache=True, fastmath=True)
 def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off, H, g):  # pragma: no cover
-    """Fill H = J^T W J, g = J^T W r at ``pose``; return robust cost."""
+    """Fill H = J^T W J, g = J^T W r at ``pose``; return the robust cost (as :func:`_rho_w` sums it).
+
+    The Cauchy cost ``c^2/2 sum log(1 + q)`` is summed as the log of running products over
+    blocks of 64 points (each factor <= 1 + (outlier/c)^2, no overflow): one log per block
+    instead of one per point.
+    """
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
-    for i in range(3):
-        g[i] = 0.0
-        for j in range(3):
-            H[i, j] = 0.0
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    g0 = g1 = g2 = 0.0
     cost = 0.0
+    rho_out, _w = _rho_w(2.0 * outlier + 1.0, c, loss, outlier)
+    inv_c2 = 1.0 / (c * c)
+    prod = 1.0
+    n_prod = 0
     for k in range(px.shape[0]):
         r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
-        if not front:
-            r = far
-        rho, w = _rho_w(r, c, loss, outlier)
-        cost += rho
-        if w == 0.0:
+        if not front or abs(r) > outlier:
+            cost += rho_out
             continue
-        j0 = gx
-        j1 = gy
+        if loss == 1:
+            q1 = 1.0 + r * r * inv_c2
+            prod *= q1
+            n_prod += 1
+            if n_prod == 64:
+                cost += 0.5 * c * c * math.log(prod)
+                prod = 1.0
+                n_prod = 0
+            w = 1.0 / q1
+        else:
+            rho, w = _rho_w(r, c, loss, outlier)
+            cost += rho
         j2 = gx * (-sn * px[k] - cs * py[k]) + gy * (cs * px[k] - sn * py[k])
-        g[0] += w * j0 * r
-        g[1] += w * j1 * r
-        g[2] += w * j2 * r
-        H[0, 0] += w * j0 * j0
-        H[0, 1] += w * j0 * j1
-        H[0, 2] += w * j0 * j2
-        H[1, 1] += w * j1 * j1
-        H[1, 2] += w * j1 * j2
-        H[2, 2] += w * j2 * j2
-    H[1, 0] = H[0, 1]
-    H[2, 0] = H[0, 2]
-    H[2, 1] = H[1, 2]
+        wx = w * gx
+        wy = w * gy
+        w2 = w * j2
+        g0 += wx * r
+        g1 += wy * r
+        g2 += w2 * r
+        h00 += wx * gx
+        h01 += wx * gy
+        h02 += wx * j2
+        h11 += wy * gy
+        h12 += wy * j2
+        h22 += w2 * j2
+    if n_prod > 0:
+        cost += 0.5 * c * c * math.log(prod)
+    H[0, 0] = h00
+    H[0, 1] = H[1, 0] = h01
+    H[0, 2] = H[2, 0] = h02
+    H[1, 1] = h11
+    H[1, 2] = H[2, 1] = h12
+    H[2, 2] = h22
+    g[0] = g0
+    g[1] = g1
+    g[2] = g2
     return cost
 
 
 @njit(cache=True, fastmath=True)
-def _cost(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off):  # pragma: no cover - compiled
-    cs = math.cos(pose[2])
-    sn = math.sin(pose[2])
-    cost = 0.0
-    for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
-        if not front:
-            r = far
-        rho, w = _rho_w(r, c, loss, outlier)
-        cost += rho
-    return cost
+def _solve3(M, g, d):  # pragma: no cover - compiled
+    """``d = -M^-1 g`` for a symmetric 3x3 ``M`` (Cramer's rule); False when singular."""
+    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
+    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
+    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
+    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
+    if not (abs(det) > 1e-300):
+        return False
+    c11 = M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]
+    c12 = M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2]
+    c22 = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+    inv = 1.0 / det
+    d[0] = -(c00 * g[0] + c01 * g[1] + c02 * g[2]) * inv
+    d[1] = -(c01 * g[0] + c11 * g[1] + c12 * g[2]) * inv
+    d[2] = -(c02 * g[0] + c12 * g[1] + c22 * g[2]) * inv
+    return True
 
 
 @njit(cache=True, fastmath=True)
 def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, tol, lx, ly, backcos, off):  # noqa: E501  # pragma: no cover
-    """Levenberg-Marquardt over the annealing stages. Returns (pose, iterations)."""
+    """Levenberg-Marquardt over the annealing stages.
+
+    Returns ``(pose, iterations, cost)``, the cost robust under the last stage's kernel.
+    One pass over the points per trial step: the normal equations at the trial pose are
+    built with its cost and kept when the step is accepted.
+    """
     pose = pose0.copy()
     H = np.zeros((3, 3))
     g = np.zeros(3)
+    Ht = np.zeros((3, 3))
+    gt = np.zeros(3)
     trial = np.zeros(3)
     M = np.zeros((3, 3))
+    d = np.zeros(3)
     it_total = 0
+    cost = 0.0
     for s in range(scales.shape[0]):
         c = scales[s]
         out = outliers[s]
@@ -208,19 +228,20 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
                     for j in range(3):
                         M[i, j] = H[i, j]
                     M[i, i] += lam * (H[i, i] + 1e-9)
-                det = np.linalg.det(M)
-                if not (abs(det) > 1e-300):
+                if not _solve3(M, g, d):
                     lam *= 10.0
                     continue
-                d = -np.linalg.solve(M, g)
                 trial[0] = pose[0] + d[0]
                 trial[1] = pose[1] + d[1]
                 trial[2] = pose[2] + d[2]
-                tc = _cost(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos, off)
+                tc = _system(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos, off, Ht, gt)
                 if tc <= cost:
-                    pose[0] = trial[0]
-                    pose[1] = trial[1]
-                    pose[2] = trial[2]
+                    for i in range(3):
+                        pose[i] = trial[i]
+                        g[i] = gt[i]
+                        for j in range(3):
+                            H[i, j] = Ht[i, j]
+                    cost = tc
                     lam = max(lam * 0.1, 1e-7)
                     improved = True
                     break
@@ -228,10 +249,9 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
             if not improved:
                 break
             step = math.sqrt(d[0] * d[0] + d[1] * d[1]) + abs(d[2])
-            cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, off, H, g)
             if step < tol:
                 break
-    return pose, it_total
+    return pose, it_total, cost
 
 
 @njit(cache=True, fastmath=True)
@@ -316,6 +336,41 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
                     best_pose[j, 1] = ty
                     best_pose[j, 2] = th
     return best_pose, best_score
+
+
+@njit(cache=True, fastmath=True)
+def _conditioning(H, px, py):  # pragma: no cover - compiled
+    """Smallest and largest eigenvalue of ``S H S`` (yaw scaled by the RMS point range, metres per
+    radian) and ``H^-1`` (NaN when singular)."""
+    n = px.shape[0]
+    s2 = 0.0
+    for k in range(n):
+        s2 += px[k] * px[k] + py[k] * py[k]
+    lever = math.sqrt(s2 / n) if n > 0 else 1.0
+    if not lever > 0.0:
+        lever = 1.0
+    S = np.array([1.0, 1.0, 1.0 / lever])
+    M = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = S[i] * H[i, j] * S[j]
+    Hinv = np.full((3, 3), np.nan)
+    if not np.all(np.isfinite(M)):
+        return np.nan, np.nan, Hinv
+    ev = np.linalg.eigvalsh(M)
+    c00 = H[1, 1] * H[2, 2] - H[1, 2] * H[2, 1]
+    c01 = H[1, 2] * H[2, 0] - H[1, 0] * H[2, 2]
+    c02 = H[1, 0] * H[2, 1] - H[1, 1] * H[2, 0]
+    det = H[0, 0] * c00 + H[0, 1] * c01 + H[0, 2] * c02
+    if abs(det) > 1e-300:
+        inv = 1.0 / det
+        Hinv[0, 0] = c00 * inv
+        Hinv[0, 1] = Hinv[1, 0] = c01 * inv
+        Hinv[0, 2] = Hinv[2, 0] = c02 * inv
+        Hinv[1, 1] = (H[0, 0] * H[2, 2] - H[0, 2] * H[2, 0]) * inv
+        Hinv[1, 2] = Hinv[2, 1] = (H[0, 2] * H[1, 0] - H[0, 0] * H[1, 2]) * inv
+        Hinv[2, 2] = (H[0, 0] * H[1, 1] - H[0, 1] * H[1, 0]) * inv
+    return ev[0], ev[2], Hinv
 
 
 # ----------------------------------------------------------------- the matcher
@@ -497,23 +552,21 @@ class NativeMatcher(FrontendBase):
 
     # -------------------------------------------------------------- matching
     def _refine_from(self, px: FloatArray, py: FloatArray, start: FloatArray) -> tuple[FloatArray, float]:
-        pose, _ = _refine(
+        """LM from ``start``; the pose and its robust cost under the last stage's kernel."""
+        pose, _, cost = _refine(
             self.field, self.A, self.b, self.far, px, py, np.asarray(start, dtype=float),
             self.scales, self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m,
         )
-        c, out = self.scales[-1], self.outliers[-1]
-        cost = _cost(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out, *self._lb, self.depth_m)
         return pose, float(cost)
 
-    def _inlier_fraction(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[int, int]:
+    def _stats_at(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[Any, ...]:
         c, out = self.scales[-1], self.outliers[-1]
-        _, _, _, n_in, _, _ = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
-                                  self.inlier_dist, *self._lb, self.depth_m)
-        return int(n_in), len(px)
+        return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
+                      self.inlier_dist, *self._lb, self.depth_m)
 
     def _within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
-        jump = float(np.hypot(pose[0] - guess[0], pose[1] - guess[1]))
-        return jump <= self.max_jump_m and abs(float(wrap_angle(pose[YAW] - guess[YAW]))) <= self.max_jump
+        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
+        return jump <= self.max_jump_m and abs(wrap_scalar(pose[YAW] - guess[YAW])) <= self.max_jump
 
     def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
         t0 = time.perf_counter()
@@ -523,14 +576,15 @@ class NativeMatcher(FrontendBase):
         searched = False
         best: FloatArray | None = None
         best_cost = np.inf
+        best_stats: tuple[Any, ...] | None = None  # _stats at ``best`` when already computed
         need_search = self.search == "always"
         if self.search != "always":
             pose, cost = self._refine_from(px, py, guess)
-            n_in, _ = self._inlier_fraction(px, py, pose)
+            stats = self._stats_at(px, py, pose)
             jump_ok = self._within_jump(pose, guess)
             if jump_ok or self.search == "never":
-                best, best_cost = pose, cost
-            need_search = self.search == "auto" and not (jump_ok and n_in / n >= self.search_trigger)
+                best, best_cost, best_stats = pose, cost, stats
+            need_search = self.search == "auto" and not (jump_ok and stats[3] / n >= self.search_trigger)
         if need_search:
             searched = True
             stride = max(1, int(math.ceil(n / max(self.search_max_points, 1))))
@@ -544,17 +598,17 @@ class NativeMatcher(FrontendBase):
                     continue
                 pose, cost = self._refine_from(px, py, cand)
                 if cost < best_cost and self._within_jump(pose, guess):
-                    best, best_cost = pose, cost
+                    best, best_cost, best_stats = pose, cost, None
         if best is None:
             return no_fix(
                 f"native: no pose within {self.max_jump_m:.2f} m / {math.degrees(self.max_jump):.0f} deg "
                 "of the guess explains the scan"
             )
+        if best_stats is None:
+            best_stats = self._stats_at(px, py, best)
         pose = best.copy()
-        pose[YAW] = wrap_angle(pose[YAW])
-        c, out = self.scales[-1], self.outliers[-1]
-        H, wr2, sw, n_in, n_used, sum_r = _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,
-                                          self.inlier_dist, *self._lb, self.depth_m)
+        pose[YAW] = wrap_scalar(pose[YAW])
+        H, wr2, sw, n_in, n_used, sum_r = best_stats
         n_in = int(n_in)
         quality = n_in / n
         info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n}
@@ -563,24 +617,22 @@ class NativeMatcher(FrontendBase):
                 f"native: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
                 n_inliers=n_in, quality=quality, **info,
             )
-        jump = float(np.hypot(*(pose[:2] - guess[:2])))
-        dyaw = abs(float(wrap_angle(pose[YAW] - guess[YAW])))
+        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
+        dyaw = abs(wrap_scalar(pose[YAW] - guess[YAW]))
         if jump > self.max_jump_m or dyaw > self.max_jump:
             return no_fix(
                 f"native: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
                 n_inliers=n_in, quality=quality, **info,
             )
         # degeneracy: eigenvalues of H with yaw scaled by a typical range (metres per radian)
-        lever = float(np.sqrt(np.mean(px * px + py * py))) or 1.0
-        S = np.diag([1.0, 1.0, 1.0 / lever])
-        ev = np.linalg.eigvalsh(S @ H @ S)
-        if not (np.all(np.isfinite(ev)) and ev[0] > self.min_eigen_ratio * ev[-1] and ev[-1] > 0):
+        ev0, ev2, Hinv = _conditioning(H, px, py)
+        if not (math.isfinite(ev0) and math.isfinite(ev2) and ev0 > self.min_eigen_ratio * ev2 and ev2 > 0):
             return no_fix(
-                f"native: degenerate geometry (Hessian eigenvalue ratio {ev[0] / max(ev[-1], 1e-300):.1e})",
+                f"native: degenerate geometry (Hessian eigenvalue ratio {ev0 / max(ev2, 1e-300):.1e})",
                 n_inliers=n_in, quality=quality, **info,
             )
         sigma2 = wr2 / max(sw - 3.0, 1.0)
-        cov = self._cov_scale @ (sigma2 * np.linalg.inv(H)) @ self._cov_scale + self.cov_floor
+        cov = self._cov_scale @ (sigma2 * Hinv) @ self._cov_scale + self.cov_floor
         cov = 0.5 * (cov + cov.T)
         info["sigma_m"] = math.sqrt(sigma2)
         info["surface_depth_m"] = self.depth_m

@@ -85,8 +85,9 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
     ``topics`` names the source topics of a bag (outputs use the default names; a role whose
     default topic is absent takes the only topic of its type).  Each message keeps its log
     time (a bag's record time, a CARMEN line's timestamp), so the MCAP reads back in the order
-    the source reads.  ``progress``: a tqdm bar on stderr (None = only when stderr is a
-    terminal).  ``max_range_m``: CARMEN no-return threshold override (see
+    the source reads; ROS 2 bags' messages are copied as their CDR bytes with their schemas
+    (lossless), others are converted (:mod:`fgloc.io.ros`).  ``progress``: a tqdm bar on
+    stderr (None = only when stderr is a terminal).  ``max_range_m``: CARMEN no-return threshold override (see
     :mod:`fgloc.io.carmen`).  The output is written to ``dst`` through a temporary file and
     renamed at the end, so a failed import leaves no half-written log; an output that is the
     input, or an existing file fgloc did not write (unless ``force``), is refused.
@@ -121,7 +122,9 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
                                        disable=(None if progress is None else not progress), leave=False) as bar:
             for rec in source.records(set(chosen)):
                 name = out_name[rec.topic]
-                if isinstance(rec.msg, list):
+                if rec.data is not None and rec.channel is not None:  # ROS 2 CDR: copied as it is
+                    w.copy(rec, topic=name)
+                elif isinstance(rec.msg, list):
                     w.write(name, rec.msg, stamp=rec.log_time_ns * 1e-9, log_time_ns=rec.log_time_ns)
                 else:
                     w.write(name, rec.msg, log_time_ns=rec.log_time_ns)

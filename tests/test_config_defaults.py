@@ -14,7 +14,7 @@ import pytest
 from fgloc.cli import main
 from fgloc.config import FglocConfig, load_config, parse_config
 from fgloc.errors import ConfigError
-from fgloc.pipeline import Localizer, run_messages
+from fgloc.localization import Localizer, Session
 from fgloc.sim import simulate_paper
 
 
@@ -91,7 +91,7 @@ def test_defaults_reach_the_localizer(short_run):
     for cfg in (None, load_config(), {"frontends": {"native": {"cov_inflation": [50.0, 90.0]}}}):
         loc = Localizer(short_run.map, short_run.laser_mount, backend="smoother", frontend="native",
                         initial_pose=short_run.ground_truth.poses[0], config=cfg)
-        out.append(run_messages(loc, short_run.messages))
+        out.append(Session(loc).run(short_run.messages))
     assert len(out[0]) > 50
     assert np.allclose(out[0].poses, out[1].poses, atol=1e-12)
     assert not np.allclose(out[0].poses, out[2].poses, atol=1e-9)

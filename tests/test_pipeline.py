@@ -9,8 +9,8 @@ import pytest
 
 from fgloc.config import load_config
 from fgloc.geometry import compose, inverse, wrap_angle
+from fgloc.localization import Localizer, Session
 from fgloc.maps import OccupancyMap
-from fgloc.pipeline import Localizer, run_messages
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
 
 MOUNT = StaticTransform("base_link", "laser", np.array([0.2, 0.05, 0.0]))
@@ -98,7 +98,7 @@ def test_localizer_tracks_in_small_world(world, backend):
     m, gt, msgs = world
     loc = Localizer(m, MOUNT, backend=backend, frontend="native", initial_pose=gt.poses[0] + [0.1, -0.1, 0.05],
                     config=load_config())
-    final = run_messages(loc, msgs)
+    final = Session(loc).run(msgs)
     every = load_config().pipeline.frontend_every
     assert loc.stats["fixes"] > 0.9 * loc.stats["scans"] / every
     assert _rmse(final, gt) < 0.03
@@ -110,7 +110,7 @@ def test_localizer_tracks_in_small_world(world, backend):
 def test_global_localization_without_initial_pose(world):
     m, gt, msgs = world
     loc = Localizer(m, MOUNT, backend="smoother", frontend="native", config=load_config())
-    final = run_messages(loc, msgs)
+    final = Session(loc).run(msgs)
     assert loc.stats["global_searches"] >= 1
     # localized at the first scan, and right
     assert final.stamps[0] < 0.1
@@ -123,7 +123,7 @@ def test_kidnapped_robot_is_recovered_within_5_s():
     msgs = world_messages(m, gt, seed=3, kidnap_at=6.0)
     loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=gt.poses[0],
                     config=load_config())
-    run_messages(loc, msgs)
+    Session(loc).run(msgs)
     on = loc.online_trajectory()
     err = np.linalg.norm(on.poses[:, :2] - gt.interpolate(on.stamps)[:, :2], axis=1)
     after = on.stamps >= 6.0
@@ -136,7 +136,7 @@ def test_kidnapped_robot_is_recovered_within_5_s():
 def test_odometry_and_compass_alone_without_map(world):
     m, gt, msgs = world
     loc = Localizer(None, MOUNT, backend="smoother", config=load_config())
-    final = run_messages(loc, msgs)
+    final = Session(loc).run(msgs)
     assert loc.frontend_name == "none" and final.frame_id == "odom"
     # starts at the origin with the compass heading (truth yaw + 0.3 rad offset)
     assert np.allclose(final.poses[0, :2], 0.0, atol=1e-6)
@@ -166,7 +166,7 @@ def test_bad_and_out_of_order_input_is_counted_not_raised(world):
             bad.append(("/odom", Odometry(msg.stamp - 1.0, np.zeros(3))))  # time going backwards
     cfg = load_config(overrides={"pipeline": {"frontend_every": 1}})
     loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=gt.poses[0], config=cfg)
-    final = run_messages(loc, bad)
+    final = Session(loc).run(bad)
     assert loc.stats["skipped"] >= 4
     assert any("backwards" in k for k in loc.stats["skipped_reasons"])
     assert _rmse(final, gt) < 0.01
@@ -238,7 +238,7 @@ def test_fgloc_run_without_map_and_with_bad_config(world_log, tmp_path, capsys):
 # ---------------------------------------------------------------------- the simulated paper run
 def test_paper_replica_smoother_vs_ekf(paper_sim):
     """The accuracy claims on one seed (the 20-seed table comes from `fgloc bench paper`)."""
-    from fgloc.commands.run import localize_sim
+    from fgloc.bench import localize_sim
     from fgloc.eval.metrics import evaluate
 
     cfg = load_config()
@@ -277,7 +277,7 @@ def short_runs():
 
 
 def test_fixed_lag_within_1_2x_of_batch(short_runs):
-    from fgloc.commands.run import localize_sim
+    from fgloc.bench import localize_sim
     from fgloc.eval.metrics import evaluate
 
     sim = short_runs["none"]
@@ -290,7 +290,7 @@ def test_fixed_lag_within_1_2x_of_batch(short_runs):
 
 @pytest.mark.parametrize("fault", ["wheel_slip", "compass_disturbance"])
 def test_faults_raise_position_rmse_by_less_than_2_cm(short_runs, fault):
-    from fgloc.commands.run import localize_sim
+    from fgloc.bench import localize_sim
     from fgloc.eval.metrics import evaluate
 
     base, *_ = localize_sim(short_runs["none"], "smoother", "native", load_config())
@@ -302,7 +302,7 @@ def test_faults_raise_position_rmse_by_less_than_2_cm(short_runs, fault):
 
 
 def test_kidnapped_robot_recovered_within_5_s_on_paper_hall(short_runs):
-    from fgloc.commands.run import kidnap_recovery, localize_sim
+    from fgloc.bench import kidnap_recovery, localize_sim
 
     sim = short_runs["kidnap"]
     _, online, loc, _ = localize_sim(sim, "smoother", "native", load_config())

@@ -18,10 +18,10 @@ from fgloc.config import load_config
 from fgloc.eval.relations import evaluate_relations, relations_from_reference
 from fgloc.geometry import wrap_angle
 from fgloc.io.tum import read_tum
+from fgloc.localization import Localizer, Session
 from fgloc.mapping.build import load_records
 from fgloc.mapping.slam import MapperConfig, build_occupancy, run_slam
 from fgloc.mapping.source import log_messages
-from fgloc.pipeline import Localizer, run_messages
 
 CASES = {  # name: (position RMSE m, heading RMSE deg, relation dt window, relation trans m, rot deg)
     "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.033 m, 0.38 deg; 0.054 m, 0.86 deg
@@ -43,7 +43,7 @@ def localized(request, repo_data):
     msgs.sort(key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
     p0 = slam.scan_trajectory.interpolate(np.array([t0]))[0]
     loc = Localizer(occ, mount, "smoother", "native", initial_pose=p0, config=load_config())
-    est = run_messages(loc, msgs)
+    est = Session(loc).run(msgs)
     ref = read_tum(repo_data / "radish" / f"{name}-head-reference.tum")
     return name, loc, est, slam.scan_trajectory, ref
 

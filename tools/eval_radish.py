@@ -169,10 +169,10 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
     p0 = compose(to_half, p_start)
     run_dir = out / f"{name}_localize"
     t0 = time.perf_counter()
-    from fgloc.commands.run import run_log  # what `fgloc run LOG --map M --initial-pose ...` does
+    from fgloc.app.run import RunRequest, run_log  # what `fgloc run LOG --map M --initial-pose ...` does
 
-    run_res = run_log(mcap, run_dir, map_dir / "map.yaml", initial_pose=[float(v) for v in p0],
-                      config_path=config, quiet=True)
+    run_res = run_log(RunRequest(mcap, run_dir, map_dir / "map.yaml", initial_pose=tuple(float(v) for v in p0),
+                                 config=config)).as_dict()
     wall = time.perf_counter() - t0
     est = read_tum(run_dir / "trajectory.tum")
     res: dict = {"map": "whole log" if map_whole_log else "first half", "seg_start": start,

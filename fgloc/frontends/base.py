@@ -26,7 +26,7 @@ from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle
 from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
-from fgloc.types import LaserScan, StaticTransform
+from fgloc.types import LaserScan, PoseFix, StaticTransform
 
 FloatArray = NDArray[np.float64]
 
@@ -61,6 +61,21 @@ class MatchResult:
     reason: str = ""
     n_inliers: int = 0
     info: dict[str, Any] = field(default_factory=dict, repr=False)  # diagnostics (timings, iterations)
+
+    def to_fix(self, stamp: float, source: str) -> PoseFix | None:
+        """The fix as a :class:`~fgloc.types.PoseFix` (map frame), or None unless ok and finite."""
+        if not self.ok or self.pose is None or self.cov is None:
+            return None
+        pose = np.asarray(self.pose, dtype=float)
+        cov = np.asarray(self.cov, dtype=float)
+        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(cov))):
+            return None
+        return PoseFix(float(stamp), pose, cov, quality=float(self.quality), source=source)
+
+    @property
+    def why(self) -> str:
+        """The no-fix reason (empty for a fix)."""
+        return "" if self.ok else (self.reason or "no fix")
 
 
 def no_fix(reason: str, n_inliers: int = 0, quality: float = 0.0, **info: Any) -> MatchResult:

@@ -1,11 +1,12 @@
-"""The live fusion loop: sensor threads -> one queue -> Localizer, recorder, publisher.
+"""The live fusion loop: sensor threads -> one queue -> a localization session and its sinks.
 
 Threads: :class:`SerialLink` and :class:`SickClient` read and decode in their own
 threads and push ``(kind, msg, arrival)`` into a queue; the fusion loop (the caller's
-thread, :meth:`LiveRunner.run`) feeds the :class:`fgloc.pipeline.Localizer`, records
-every received message (MCAP via ``LogWriter``), publishes the fused pose and keeps
-sensor health: a sensor with no message for ``silence_s`` is reported silent (the
-others keep running) and reported back when it returns.
+thread, :meth:`LiveRunner.run`) feeds a :class:`fgloc.localization.Session` (the same
+one ``fgloc run`` drives) whose sinks record every received message and the fused pose
+(MCAP via ``LogWriter``) and publish the fused pose (UDP); the runner keeps sensor
+health: a sensor with no message for ``silence_s`` is reported silent (the others keep
+running) and reported back when it returns.
 
 Latency is measured from the host arrival time of a scan (when its last byte was
 read) to the moment the fused pose is available after ``Localizer.on_scan``.
@@ -24,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from fgloc.localization.session import BaseSink, RecorderSink, Session, UdpSink
 from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
 
 SENSORS = ("odom", "imu", "scan")
@@ -51,10 +53,32 @@ class HealthEvent:
     gap_s: float
 
 
+class _LiveTrack(BaseSink):
+    """The runner's own sink: latency, the live trajectory and the fix count of each fused scan."""
+
+    def __init__(self, runner: LiveRunner) -> None:
+        self.r = runner
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        r = self.r
+        r.counters["scans_fused"] += 1
+        if isinstance(fix_or_reason, PoseFix):
+            r.counters["fixes"] += 1
+        if fused is None:
+            return
+        r.last_latency_ms = (time.time() - r.scan_arrival) * 1e3
+        r.latencies_ms.append(r.last_latency_ms)
+        r.last_fix = fused
+        if not r.live_stamps or fused.stamp > r.live_stamps[-1]:
+            r.live_stamps.append(float(fused.stamp))
+            r.live_poses.append(np.asarray(fused.pose, dtype=float).copy())
+
+
 class LiveRunner:
-    """Glue between the sensor threads and the localizer.  Not tied to any I/O itself:
+    """Glue between the sensor threads and the localization session.  Not tied to any I/O itself:
     ``recorder`` (``write(topic, msg, stamp)``), ``publisher`` (``pose(fix, latency_ms)``,
-    ``status(...)``) and ``status_sink(line)`` are optional callables/objects."""
+    ``status(...)``) and ``status_sink(line)`` are optional callables/objects; ``sinks`` are
+    more :class:`fgloc.localization.Sink` s (a viewer)."""
 
     def __init__(
         self,
@@ -69,6 +93,7 @@ class LiveRunner:
         status_period_s: float = 0.25,
         sensors: tuple[str, ...] = SENSORS,
         reorder_s: float = 0.15,
+        sinks: list[Any] | None = None,
     ) -> None:
         self.loc = localizer
         self.recorder = recorder
@@ -100,6 +125,16 @@ class LiveRunner:
         self.reorder_s = reorder_s
         self._reorder: list[tuple[float, int, str, Any]] = []
         self._seq = 0
+        self.scan_arrival = 0.0  # host arrival time of the scan being fused (for its latency)
+        self.last_latency_ms = float("nan")
+        self._rec_sink = RecorderSink(recorder, self.topics["fused"], tolerate=(Exception,)) \
+            if recorder is not None else None
+        out: list[Any] = [_LiveTrack(self)]
+        if self._rec_sink is not None:
+            out.append(self._rec_sink)
+        if publisher is not None:
+            out.append(UdpSink(publisher, lambda: self.last_latency_ms, close_publisher=False))
+        self.session = Session(localizer, sinks=out + list(sinks or []))
 
     # ---------------------------------------------------------------- producer side
     def push(self, kind: str, msg: Any, arrival: float) -> None:
@@ -117,6 +152,11 @@ class LiveRunner:
             self.recorder.write(topic, msg, stamp)
         except Exception:  # noqa: BLE001 - a recorder failure must not stop localization
             self.counters["record_errors"] += 1
+
+    def _sync_record_errors(self) -> None:
+        if self._rec_sink is not None:
+            self.counters["record_errors"] += self._rec_sink.errors
+            self._rec_sink.errors = 0
 
     def _mark(self, kind: str, now: float) -> None:
         h = self.health.get(kind)
@@ -155,7 +195,8 @@ class LiveRunner:
         if self.recorder is not None and not self._recorded_tf and self.laser_mount is not None:
             self._record(self.topics["tf_static"], [self.laser_mount], stamp)
             self._recorded_tf = True
-        self._record(self.topics[kind], msg, stamp)
+        self.session.observe(self.topics[kind], msg)
+        self._sync_record_errors()
         if kind == "scan":
             with self._lock:
                 self._pending_scans -= 1
@@ -174,10 +215,7 @@ class LiveRunner:
         while self._reorder and cond(self._reorder[0][0]):
             _, _, kind, msg = heapq.heappop(self._reorder)
             try:
-                if kind == "odom":
-                    self.loc.on_odometry(msg)
-                else:
-                    self.loc.on_compass(msg)
+                self.session.dispatch(kind, msg)
             except Exception as e:  # noqa: BLE001 - keep running on a bad message, but count it
                 self._loc_error(kind, e)
 
@@ -191,27 +229,12 @@ class LiveRunner:
             self.event_sink(f"localizer error on {kind}: {type(e).__name__}: {e}")
 
     def _fuse_scan(self, msg: LaserScan, arrival: float) -> None:
+        self.scan_arrival = arrival
         try:
-            fix = self.loc.on_scan(msg)
-            cur = self.loc.current()
+            self.session.dispatch("scan", msg)
         except Exception as e:  # noqa: BLE001
             self._loc_error("scan", e)
-            return
-        done = time.time()
-        self.counters["scans_fused"] += 1
-        if fix is not None:
-            self.counters["fixes"] += 1
-        if cur is None:
-            return
-        lat = (done - arrival) * 1e3
-        self.latencies_ms.append(lat)
-        self.last_fix = cur
-        if not self.live_stamps or cur.stamp > self.live_stamps[-1]:
-            self.live_stamps.append(float(cur.stamp))
-            self.live_poses.append(np.asarray(cur.pose, dtype=float).copy())
-        if self.publisher is not None:
-            self.publisher.pose(cur, lat)
-        self._record(self.topics["fused"], cur, float(cur.stamp))
+        self._sync_record_errors()
 
     def live_trajectory(self) -> Trajectory:
         if not self.live_stamps:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fgloc.commands.run import run_log
+from fgloc.app.run import RunRequest, run_log
 from fgloc.eval.metrics import evaluate
 from fgloc.io.log import LogWriter
 from fgloc.io.tum import read_tum
@@ -59,10 +59,10 @@ def _compare(msgs, occ, mount, gt, robot, tmp_path, speed, mode, slack_m):
     n_scans = sum(1 for t, _ in msgs if t == "/scan")
     assert c["laser"]["scans"] == n_scans and c["scans_fused"] >= 0.95 * n_scans, (c, res.summary.events)
 
-    run_log(log, tmp_path / "run", map_yaml=map_yaml, backend="smoother", initial_pose=list(init), quiet=True)
-    out = run_log(rec, tmp_path / "rerun", map_yaml=map_yaml, backend="smoother", initial_pose=list(init),
-                  quiet=True)
-    assert out["truncated"] is None  # the recording was closed properly
+    run_log(RunRequest(log, tmp_path / "run", map_yaml=map_yaml, backend="smoother", initial_pose=tuple(init)))
+    out = run_log(RunRequest(rec, tmp_path / "rerun", map_yaml=map_yaml, backend="smoother",
+                             initial_pose=tuple(init)))
+    assert out.truncated is None  # the recording was closed properly
     r = {
         "live_online": evaluate(res.live_run, gt).position_rmse_m,
         "live_smoothed": evaluate(res.smoothed_run, gt).position_rmse_m,

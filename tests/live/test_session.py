@@ -16,7 +16,7 @@ import numpy as np
 from fgloc.io.log import LogReader
 from fgloc.live.app import LiveSession, load_config
 from fgloc.live.emulators import EmulatorPair
-from fgloc.pipeline import Localizer
+from fgloc.localization import Localizer
 from fgloc.types import StaticTransform
 
 from .streams import synthetic_messages

@@ -1,0 +1,38 @@
+"""What every benchmark does: localize a simulated run with one back-end and front-end."""
+
+from __future__ import annotations
+
+import importlib
+import time
+from typing import Any
+
+import numpy as np
+
+
+def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
+                 initial_pose: np.ndarray | None = None, use_initial: bool = True) -> tuple[Any, Any, Any, float]:
+    """Run one back-end/front-end on a simulated run; returns (final, online, localizer, wall_s).
+
+    ``initial_pose`` defaults to the ground truth's first pose (``use_initial=False``: none,
+    global localization).  ``config``: a :class:`fgloc.config.FglocConfig` (None: the defaults).
+    """
+    from fgloc.localization import Localizer, Session
+
+    pose0 = initial_pose
+    if pose0 is None and use_initial:
+        pose0 = sim.ground_truth.poses[0]
+    loc = Localizer(sim.map, sim.laser_mount, backend=backend, frontend=frontend, initial_pose=pose0,
+                    config=config)
+    t0 = time.perf_counter()
+    final = Session(loc).run(sim.messages)
+    wall = time.perf_counter() - t0
+    return final, loc.online_trajectory(), loc, wall
+
+
+def frontend_available(name: str) -> bool:
+    """Whether front-end module ``name`` imports (AMCL's dependencies may be missing)."""
+    try:
+        importlib.import_module(f"fgloc.frontends.{name}")
+    except ImportError:
+        return False
+    return True

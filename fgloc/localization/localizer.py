@@ -1,0 +1,351 @@
+"""The online localizer: a scan-to-map front-end feeding a back-end (EKF or smoother).
+
+:class:`Localizer` is what a :class:`~fgloc.localization.session.Session` drives (``fgloc
+run`` offline, ``fgloc live`` on a robot, the benches), one message at a time:
+
+* ``on_odometry`` - wheel twist -> back-end (encoder factor / update); the dead-reckoned
+  odom pose for the front-end's ``odom_delta`` (:mod:`fgloc.localization.odometry`);
+* ``on_compass`` - compass heading -> back-end (the back-end owns the compass offset);
+* ``on_scan`` - tracking: the front-end matches the scan from the back-end's predicted
+  pose; the fix (if any) and a keyframe at the scan stamp go to the back-end.  Returns
+  the fix; :attr:`last_reason` says why there was none.
+
+Start-up: with ``initial_pose`` the first scan is matched from it.  Without, the
+localizer searches globally: a front-end with its own global mode (``supports_global``,
+AMCL) spreads its particles and the first fix with a small covariance is taken; for the
+others the correlative search of :mod:`fgloc.localization.relocalization` runs, its best
+candidates refined by the front-end.  After ``relocalize_after`` scans in a row without
+an accepted fix (kidnapping, or lost), the relocalizer looks again and the back-end is
+reset to a confirmed candidate.
+
+Without a map (``occ_map=None``) encoder and compass are fused alone in an ``odom`` frame
+that starts at the origin with the compass heading (as robot_localization's odom-frame EKF
+does with an absolute IMU yaw); keyframes are placed at scan stamps when there are scans,
+else every ``odom_keyframe_interval_s``.
+
+Robustness: every input is checked; a NaN/inf stamp or value, or a stamp that goes
+backwards on its own stream, is counted in ``stats['skipped']`` and ignored, never raised.
+Messages slightly out of order across streams are fine (the back-ends wait for odometry up
+to a keyframe's stamp).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fgloc.backends import make_backend
+from fgloc.backends.base import Backend, FloatArray
+from fgloc.geometry import between
+from fgloc.localization.odometry import OdometryTracker
+from fgloc.localization.relocalization import Relocalizer
+from fgloc.maps import OccupancyMap
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
+
+if TYPE_CHECKING:
+    from fgloc.config import FglocConfig
+
+EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
+
+
+class Localizer:
+    """Online localization from odometry, compass and scans (see the module docstring).
+
+    ``config``: the :class:`~fgloc.config.FglocConfig` (``None``: the defaults; a mapping is
+    checked like a YAML file).  ``frontend_name`` is ``"none"`` without a map.
+    """
+
+    def __init__(self, occ_map: OccupancyMap | None, laser_mount: StaticTransform,
+                 backend: str = "smoother", frontend: str = "native",
+                 initial_pose: np.ndarray | None = None, config: FglocConfig | Any = None) -> None:
+        from fgloc.config import parse_config
+
+        config = parse_config(config)
+        self.config = config
+        self.pcfg = config.pipeline
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.backend_name = backend
+        self.backend: Backend = make_backend(backend, config)
+        self.frontend: Any = None
+        if occ_map is not None:
+            from fgloc.frontends import make_frontend
+
+            self.frontend = make_frontend(frontend, occ_map, laser_mount, config)
+        self.frontend_name = self.frontend.name if self.frontend is not None else "none"
+        self.initial_pose = None if initial_pose is None else np.asarray(initial_pose, dtype=float).reshape(3)
+        self.odom_mode = occ_map is None
+        self.stats: dict[str, Any] = {
+            "scans": 0, "odometry": 0, "compass": 0, "fixes": 0, "no_fix": 0, "rejected": 0,
+            "gated": 0, "skipped": 0, "skipped_reasons": {}, "relocalizations": 0, "global_searches": 0,
+        }
+        self.no_fix_reasons: dict[str, int] = {}
+        self.fixes: list[PoseFix] = []
+        self.last_reason = ""
+        self.odom = OdometryTracker(self.pcfg)
+        self.reloc: Relocalizer | None = None
+        if self.frontend is not None and occ_map is not None:
+            self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)
+        self._last_stamp: dict[str, float] = {}
+        self._odom_at_last_scan: FloatArray | None = None
+        self._bad_streak = 0
+        self._global_tries = 0
+        self._last_compass: tuple[float, float] | None = None
+        self._last_kf_t = -math.inf
+        self._scan_count = 0
+        self._lost = initial_pose is None and not self.odom_mode
+        if self._lost and self.frontend is not None and self.frontend.supports_global:
+            self.frontend.reset(None)
+
+    # ------------------------------------------------------------------ input checks
+    def _skip(self, reason: str) -> None:
+        self.stats["skipped"] += 1
+        r = self.stats["skipped_reasons"]
+        r[reason] = r.get(reason, 0) + 1
+
+    def _monotonic(self, stream: str, t: float) -> bool:
+        if not math.isfinite(t):
+            self._skip(f"{stream}: non-finite stamp")
+            return False
+        last = self._last_stamp.get(stream)
+        if last is not None and t <= last:
+            self._skip(f"{stream}: time went backwards" if t < last else f"{stream}: repeated stamp")
+            return False
+        self._last_stamp[stream] = t
+        return True
+
+    # ------------------------------------------------------------------ inputs
+    def on_odometry(self, msg: Odometry) -> None:
+        t = float(msg.stamp)
+        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
+        if tw.shape != (3,) or not math.isfinite(float(tw[0]) + float(tw[1]) + float(tw[2])):
+            self._skip("odometry: non-finite twist")
+            return
+        if not self._monotonic("odometry", t):
+            return
+        self.stats["odometry"] += 1
+        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        if pose is not None and (pose.shape != (3,) or not np.all(np.isfinite(pose))):
+            pose = None
+        cov = msg.twist_cov
+        if cov is not None and not math.isfinite(float(np.sum(cov))):
+            cov = None
+        tw, cov = self.odom.step(t, tw, cov, pose)
+        if self.odom.from_poses:
+            self.stats["odometry_from_poses"] = self.odom.from_poses
+        self.backend.add_odometry(t, tw, cov)
+        if self.odom_mode:
+            self._odom_mode_step(t, scan=False)
+
+    def on_compass(self, msg: CompassHeading) -> None:
+        t = float(msg.stamp)
+        yaw = msg.yaw_rad if msg.yaw_rad is not None and math.isfinite(msg.yaw_rad) else None
+        rate = msg.yaw_rate_radps if msg.yaw_rate_radps is not None and math.isfinite(msg.yaw_rate_radps) else None
+        if yaw is None and rate is None:
+            self._skip("compass: no finite heading or rate")
+            return
+        if not self._monotonic("compass", t):
+            return
+        self.stats["compass"] += 1
+        if yaw is not None:
+            self._last_compass = (t, float(yaw))
+            if self.reloc is not None:
+                self.reloc.last_compass = self._last_compass
+        self.backend.add_compass(t, yaw, float(msg.yaw_var), rate, float(msg.yaw_rate_var))
+
+    def on_scan(self, msg: LaserScan) -> PoseFix | None:
+        """Track one scan; the front-end's fix, or None (:attr:`last_reason` says why)."""
+        t = float(msg.stamp)
+        self.last_reason = ""
+        if not self._monotonic("scan", t):
+            self.last_reason = "scan skipped (bad or repeated stamp)"
+            return None
+        self.stats["scans"] += 1
+        if self.odom_mode:
+            self._odom_mode_step(t, scan=True)
+            self.last_reason = "no map"
+            return None
+        fe = self.frontend
+        matching = self.backend.initialized and not self._lost
+        if matching:
+            self._scan_count += 1
+            if self._scan_count % self.pcfg.frontend_every != 0:
+                # not matched: no keyframe either, the online pose is the odometry prediction
+                self.backend.record_prediction(t)
+                self.last_reason = "not matched (frontend_every)"
+                return None
+        # odometry motion since the previous front-end call (for its de-skew / motion model):
+        # a particle filter keeps the odometry as it came (its motion model and update
+        # thresholds were tuned on that); the others get it carried to the scan stamp
+        odom_now = self.odom.pose if fe.is_particle_filter else self.odom.pose_at(t)
+        odom_delta = None
+        if self._odom_at_last_scan is not None:
+            odom_delta = between(self._odom_at_last_scan, odom_now)
+        self._odom_at_last_scan = np.array(odom_now, dtype=float)
+        if not matching:
+            return self._localize_globally(msg, odom_delta)
+        guess, _ = self.backend.predict(t)
+        res = fe.match(msg, guess, odom_delta)
+        fix = res.to_fix(t, fe.name)
+        if fix is not None:
+            self.fixes.append(fix)
+            self.stats["fixes"] += 1
+        else:
+            self.stats["no_fix"] += 1
+            self.last_reason = res.why
+            reason = self.last_reason.split(":")[0][:60]
+            self.no_fix_reasons[reason] = self.no_fix_reasons.get(reason, 0) + 1
+        used = self.backend.add_keyframe(t, fix)
+        if fix is not None and not used:
+            self.stats["rejected"] += 1
+            self.last_reason = "fix rejected by the back-end"
+        # a scan with too few returns (blackout, blocked laser) says nothing about being lost;
+        # neither does a particle filter skipping an update (its motion thresholds) or
+        # converging again after its own recovery: it counts only when the back-end rejects its fix
+        if fe.is_particle_filter:
+            informative = fix is not None
+        else:
+            informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
+        if used:
+            self._bad_streak = 0
+            assert self.reloc is not None
+            self.reloc.pending = None
+        elif informative:
+            self._bad_streak += 1
+        if self._bad_streak >= self.pcfg.relocalize_after:
+            if fe.supports_global:
+                self._lost = True
+                self._global_tries = 0
+                self.stats["relocalizations"] += 1
+                fe.reset(None)
+            else:
+                assert self.reloc is not None
+                found = self.reloc.check(msg, res, odom_delta)
+                if found is not None:
+                    self.stats["relocalizations"] += 1
+                    self._start(t, found.pose, found.cov + EPS_COV)
+        return fix
+
+    # ------------------------------------------------------------------ start-up / recovery
+    def _initial_cov(self) -> FloatArray:
+        sxy = self.pcfg.initial_sigma_xy_m
+        syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)
+        return np.diag([sxy**2, sxy**2, syaw**2])
+
+    def _start(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        if self.backend.initialized:
+            self.backend.reset(t, pose, cov)
+        else:
+            self.backend.initialize(t, pose, cov)
+        self._lost = False
+        self._bad_streak = 0
+        if self.reloc is not None:
+            self.reloc.reset()
+        if self.frontend is not None and self.frontend.is_particle_filter:
+            self.frontend.reset(pose)
+
+    def _accept(self, fix: PoseFix) -> PoseFix:
+        self.fixes.append(fix)
+        self.stats["fixes"] += 1
+        return fix
+
+    def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
+        fe = self.frontend
+        t = float(msg.stamp)
+        if self.initial_pose is not None and not self.backend.initialized:
+            res = fe.match(msg, self.initial_pose, odom_delta)
+            fix = res.to_fix(t, fe.name)
+            if fix is not None:
+                self._accept(fix)
+                self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)
+                return fix
+            self.last_reason = f"initial pose: {res.why}"
+            self._start(t, self.initial_pose, self._initial_cov())
+            return None
+        self._global_tries += 1
+        if fe.supports_global:
+            guess = self.backend.predict(t)[0] if self.backend.initialized else np.zeros(3)
+            res = fe.match(msg, guess, odom_delta)
+            fix = res.to_fix(t, fe.name)
+            if fix is not None:
+                sxy = math.sqrt(max(fix.cov[0, 0], fix.cov[1, 1]))
+                syaw = math.sqrt(fix.cov[2, 2])
+                if sxy <= self.pcfg.global_max_sigma_xy_m and \
+                        syaw <= math.radians(self.pcfg.global_max_sigma_yaw_deg):
+                    self._accept(fix)
+                    self._start(t, fix.pose, fix.cov + EPS_COV)
+                    return fix
+                self.last_reason = "global localization: not converged yet"
+            else:
+                self.last_reason = f"global localization: {res.why}"
+            if self.backend.initialized:
+                self.backend.add_keyframe(t, None)
+            return None
+        assert self.reloc is not None
+        gfix = self.reloc.search(msg)
+        if gfix is not None:
+            self._accept(gfix)
+            self._start(t, gfix.pose, gfix.cov + EPS_COV)
+            return gfix
+        self.last_reason = "global localization: no candidate good enough"
+        if self.backend.initialized:
+            self.backend.add_keyframe(t, None)
+        return None
+
+    # ------------------------------------------------------------------ odom-only mode
+    def _odom_mode_step(self, t: float, scan: bool) -> None:
+        if not self.backend.initialized:
+            # wait up to 0.5 s for a compass heading to align the odom frame with it
+            first = self.odom.first_t
+            if self._last_compass is None and (first is None or t - first < 0.5):
+                return
+            yaw = self._last_compass[1] if self._last_compass is not None else 0.0
+            self.backend.set_compass_offset(0.0)
+            self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
+            self._last_kf_t = t
+            return
+        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= self.pcfg.odom_keyframe_interval_s):
+            self.backend.add_keyframe(t, None)
+            self._last_kf_t = t
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def lost(self) -> bool:
+        """Searching globally (no pose yet, or the front-end's own global mode after losing track)."""
+        return self._lost
+
+    def current(self) -> PoseFix | None:
+        """Latest fused pose and covariance, predicted to the newest odometry stamp."""
+        cur = self.backend.current()
+        if cur is None:
+            return None
+        t, pose, cov = cur
+        if self.odom.t is not None and self.odom.t > t:
+            pose, cov = self.backend.predict(self.odom.t)
+            t = self.odom.t
+        return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map")
+
+    def online_trajectory(self) -> Trajectory:
+        """Fused pose at each scan (keyframe) time, as known online."""
+        tr = self.backend.online_trajectory()
+        tr.frame_id = "odom" if self.odom_mode else "map"
+        return tr
+
+    def finish(self) -> Trajectory:
+        """Smoothed trajectory (fixed-lag or batch; the EKF's online one for the EKF)."""
+        tr = self.backend.finish()
+        tr.frame_id = "odom" if self.odom_mode else "map"
+        self.stats["gated"] = int(self.backend.stats.get("fixes_rejected", 0))
+        self.stats["backend"] = dict(self.backend.stats)
+        if self.no_fix_reasons:
+            self.stats["no_fix_reasons"] = dict(self.no_fix_reasons)
+        return tr
+
+    def fixes_trajectory(self) -> Trajectory:
+        """The front-end's fixes as a trajectory (map frame)."""
+        if not self.fixes:
+            return Trajectory(np.zeros(0), np.zeros((0, 3)))
+        return Trajectory.from_unsorted(np.array([f.stamp for f in self.fixes]),
+                                        np.array([f.pose for f in self.fixes]))

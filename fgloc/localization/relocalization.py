@@ -1,0 +1,143 @@
+"""Global localization and relocalization: where in the map is the robot, when tracking cannot say.
+
+:class:`Relocalizer` owns the coarse correlative :class:`~fgloc.backends.global_search.GlobalSearch`
+(for front-ends without a global mode of their own) and the relocalization state:
+
+* :meth:`candidates` - global-search candidates refined by the front-end, best quality first
+  (the compass, once its offset is known, rules out headings: the mirror image of a
+  symmetric hall);
+* :meth:`search` - the best candidate if it is good enough (start-up without a pose, lost);
+* :meth:`check` - while tracking has had no accepted fix for a while: a candidate becomes
+  *pending* only when it is consistent and unambiguous, and is taken only after it matched
+  again on further scans spanning some time (see the method).
+
+Core logic only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from fgloc.backends.base import Backend, FloatArray
+from fgloc.geometry import compose1, transform_points, wrap_angle
+from fgloc.localization.config import PipelineConfig
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, PoseFix, StaticTransform
+
+
+def close(a: FloatArray, b: FloatArray, dist_m: float, dyaw_rad: float) -> bool:
+    """Whether poses ``a`` and ``b`` are within ``dist_m`` and ``dyaw_rad`` of each other."""
+    return float(np.hypot(a[0] - b[0], a[1] - b[1])) <= dist_m and abs(float(wrap_angle(a[2] - b[2]))) <= dyaw_rad
+
+
+class Relocalizer:
+    """Global search and the pending relocalization candidate (see the module docstring)."""
+
+    def __init__(self, cfg: PipelineConfig, occ_map: OccupancyMap, laser_mount: StaticTransform,
+                 frontend: Any, backend: Backend, stats: dict[str, Any]) -> None:
+        self.cfg = cfg
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.frontend = frontend
+        self.backend = backend
+        self.stats = stats
+        self.pending: tuple[FloatArray, FloatArray, int, float] | None = None  # pose, cov, matches, t_first
+        self.tick = 0
+        self._global: Any = None
+        self.last_compass: tuple[float, float] | None = None  # (stamp, compass yaw)
+
+    def reset(self) -> None:
+        """Forget the pending candidate (a fix was accepted, or the back-end was reset)."""
+        self.pending = None
+        self.tick = 0
+
+    # ------------------------------------------------------------------ search
+    def candidates(self, msg: LaserScan) -> list[tuple[float, PoseFix]]:
+        """Front-end-refined global search candidates, best quality first."""
+        from fgloc.backends.global_search import GlobalSearch
+
+        if self._global is None:
+            self._global = GlobalSearch(self.map, self.cfg.global_search)
+        self.stats["global_searches"] += 1
+        pts = msg.points()
+        if len(pts) < 10:
+            return []
+        pts_base = transform_points(self.laser_mount.pose, pts)
+        heading = None
+        off = self.backend.compass_offset()
+        if off is not None and self.last_compass is not None and \
+                abs(float(msg.stamp) - self.last_compass[0]) < 1.0:
+            heading = float(wrap_angle(self.last_compass[1] - off))
+        max_dyaw = math.radians(self.cfg.global_compass_tolerance_deg)
+        out: list[tuple[float, PoseFix]] = []
+        for cand, _score in self._global.search(pts_base):
+            if heading is not None and abs(float(wrap_angle(cand[2] - heading))) > max_dyaw:
+                continue
+            fix = self.frontend.match(msg, cand, None).to_fix(float(msg.stamp), self.frontend.name)
+            if fix is not None:
+                out.append((fix.quality, fix))
+        out.sort(key=lambda qc: -qc[0])
+        return out
+
+    def search(self, msg: LaserScan) -> PoseFix | None:
+        """The best global candidate, if its quality reaches ``global_min_quality``."""
+        cands = self.candidates(msg)
+        if not cands or cands[0][0] < self.cfg.global_min_quality:
+            return None
+        return cands[0][1]
+
+    # ------------------------------------------------------------------ relocalization
+    def check(self, msg: LaserScan, local: Any, odom_delta: FloatArray | None) -> PoseFix | None:
+        """Tracking has had no accepted fix for ``relocalize_after`` scans: look for a better place.
+
+        Tracking goes on meanwhile.  A global candidate (every ``relocalize_search_every``-th
+        such scan) becomes *pending* only when it is consistent and unambiguous: quality at
+        least ``relocalize_min_quality``, ``relocalize_margin`` better than the tracked pose's
+        match (unless it is the tracked match itself), and no other candidate more than 1 m /
+        20 deg away within ``relocalize_ambiguity`` of it.  A pending pose is carried along by
+        odometry and must match again on ``relocalize_confirm`` further scans spanning at least
+        ``relocalize_confirm_s`` (scans logged in a burst are not independent evidence) before
+        it is returned (the caller resets the back-end to it); one failed match drops it.  So
+        repetitive buildings (similar rooms, corridors) and fixes merely rejected for a while
+        do not make the robot jump.
+        """
+        t = float(msg.stamp)
+        cfg = self.cfg
+        if self.pending is not None:
+            pose = compose1(self.pending[0], odom_delta) if odom_delta is not None else self.pending[0]
+            res = self.frontend.match(msg, pose, None)
+            if res.ok and res.pose is not None and res.cov is not None and \
+                    float(res.quality) >= cfg.relocalize_min_quality:
+                count = self.pending[2] + 1
+                t_first = self.pending[3]
+                self.pending = (np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float), count, t_first)
+                if count > cfg.relocalize_confirm and t - t_first >= cfg.relocalize_confirm_s:
+                    self.pending = None
+                    return PoseFix(t, np.asarray(res.pose, dtype=float), np.asarray(res.cov, dtype=float),
+                                   quality=float(res.quality), source=self.frontend.name)
+            else:
+                self.pending = None
+            return None
+        self.tick += 1
+        if (self.tick - 1) % cfg.relocalize_search_every != 0:
+            return None
+        cands = self.candidates(msg)
+        if not cands:
+            return None
+        best_q, best = cands[0]
+        if best_q < cfg.relocalize_min_quality:
+            return None
+        local_q = float(getattr(local, "quality", 0.0) or 0.0)
+        near_local = local.ok and local.pose is not None and \
+            close(best.pose, np.asarray(local.pose, dtype=float), 0.3, math.radians(5.0))
+        if not near_local and best_q < local_q + cfg.relocalize_margin:
+            return None
+        for q, c in cands[1:]:
+            if q >= best_q - cfg.relocalize_ambiguity and not close(c.pose, best.pose, 1.0, math.radians(20.0)):
+                self.stats["ambiguous_relocalizations"] = self.stats.get("ambiguous_relocalizations", 0) + 1
+                return None
+        self.pending = (best.pose.copy(), best.cov.copy(), 1, t)
+        return None

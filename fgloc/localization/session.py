@@ -1,0 +1,245 @@
+"""One localization session: input routing in, sinks out.
+
+A :class:`Session` wraps a :class:`~fgloc.localization.localizer.Localizer`.  It takes
+``(topic, message)`` pairs (:meth:`Session.feed`; a log, a simulation) or ``(kind, message)``
+(:meth:`Session.dispatch`; the live runner, whose sensor threads know what they read), routes
+them to the localizer and tells every sink what happened.  ``fgloc run``, ``fgloc live`` and
+the benches all drive the same session; only the sinks differ.
+
+Routing (:class:`Routes`) is a table ``topic -> kind`` plus ``kind -> handler``: the default
+kinds are ``odom`` (``nav_msgs/Odometry``), ``imu`` (``sensor_msgs/Imu`` as a compass) and
+``scan`` (``sensor_msgs/LaserScan``).  A different input layout (several odometry or IMU
+sources, robot_localization style) swaps in another table or registers more kinds
+(:meth:`Session.register`), without touching the session.
+
+The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what you need):
+
+``on_message(topic, msg)``
+    every input message, before it is routed (recording, progress);
+``on_scan(stamp, scan, fix_or_reason, fused)``
+    after each scan was localized: ``fix_or_reason`` is the front-end's
+    :class:`~fgloc.types.PoseFix`, or a ``str`` saying why there is none; ``fused`` is the
+    localizer's fused pose (``PoseFix`` in ``map`` / ``odom``) or None before start-up;
+``close()``
+    once, at the end (:meth:`Session.finish`).
+
+A sink must not raise; if one does, the session counts it in ``sink_errors`` and goes on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+from fgloc.localization.localizer import Localizer
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, Trajectory
+
+DEFAULT_TOPICS = {"scan": "/scan", "odom": "/odom", "imu": "/imu"}
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """What a session feeds (see the module docstring)."""
+
+    def on_message(self, topic: str, msg: object) -> None: ...
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class BaseSink:
+    """A sink that does nothing: override the methods you need."""
+
+    def on_message(self, topic: str, msg: object) -> None:
+        pass
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@dataclass
+class Routes:
+    """Which input kind each topic is.  ``Routes.default(topics)`` maps the scan/odom/imu topic
+    names of a :class:`fgloc.io.log.Topics` (or a mapping ``kind -> topic``) to their kinds."""
+
+    table: dict[str, str] = field(default_factory=lambda: {v: k for k, v in DEFAULT_TOPICS.items()})
+
+    @classmethod
+    def default(cls, topics: Any = None) -> Routes:
+        names = dict(DEFAULT_TOPICS)
+        if isinstance(topics, dict):
+            names.update({k: v for k, v in topics.items() if k in names})
+        elif topics is not None:
+            names.update({k: getattr(topics, k) for k in names if hasattr(topics, k)})
+        return cls({topic: kind for kind, topic in names.items()})
+
+    def kind(self, topic: str) -> str | None:
+        return self.table.get(topic)
+
+    def topics(self) -> set[str]:
+        return set(self.table)
+
+
+class Session:
+    """A localizer, its input routing and its sinks (see the module docstring)."""
+
+    def __init__(self, localizer: Localizer, routes: Routes | None = None, sinks: Iterable[Sink] = ()) -> None:
+        self.loc = localizer
+        self.routes = routes or Routes.default()
+        self.sinks: list[Sink] = list(sinks)
+        self.sink_errors = 0
+        self.closed = False
+        self.last_fused: PoseFix | None = None
+        self.handlers: dict[str, Callable[[object], None]] = {
+            "odom": self._odometry, "imu": self._compass, "scan": self._scan,
+        }
+
+    def register(self, kind: str, handler: Callable[[object], None]) -> None:
+        """Handle messages of ``kind`` with ``handler(msg)`` (route topics to it with :class:`Routes`)."""
+        self.handlers[kind] = handler
+
+    def add_sink(self, sink: Sink) -> None:
+        self.sinks.append(sink)
+
+    # ------------------------------------------------------------------ input
+    def feed(self, topic: str, msg: object) -> None:
+        """One input message by topic: shown to the sinks, then routed (unrouted topics: sinks only)."""
+        self.observe(topic, msg)
+        kind = self.routes.kind(topic)
+        if kind is not None:
+            self.dispatch(kind, msg)
+
+    def observe(self, topic: str, msg: object) -> None:
+        """Show a message to the sinks without localizing with it (e.g. a recorded, skipped scan)."""
+        for s in self.sinks:
+            try:
+                s.on_message(topic, msg)
+            except Exception:  # noqa: BLE001 - a sink must never stop localization
+                self.sink_errors += 1
+
+    def dispatch(self, kind: str, msg: object) -> None:
+        """One input message by kind (``odom``, ``imu``, ``scan`` or a registered one)."""
+        h = self.handlers.get(kind)
+        if h is not None:
+            h(msg)
+
+    def run(self, messages: Iterable[tuple[str, object]]) -> Trajectory:
+        """Feed every ``(topic, message)`` pair, then :meth:`finish`."""
+        for topic, msg in messages:
+            self.feed(topic, msg)
+        return self.finish()
+
+    def finish(self) -> Trajectory:
+        """The localizer's final (smoothed) trajectory; closes the sinks."""
+        tr = self.loc.finish()
+        self.close()
+        return tr
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        for s in self.sinks:
+            try:
+                s.close()
+            except Exception:  # noqa: BLE001
+                self.sink_errors += 1
+
+    # ------------------------------------------------------------------ handlers
+    def _odometry(self, msg: object) -> None:
+        if isinstance(msg, Odometry):
+            self.loc.on_odometry(msg)
+
+    def _compass(self, msg: object) -> None:
+        if isinstance(msg, CompassHeading):
+            self.loc.on_compass(msg)
+
+    def _scan(self, msg: object) -> None:
+        if not isinstance(msg, LaserScan):
+            return
+        fix = self.loc.on_scan(msg)
+        if not self.sinks:
+            return  # nobody asks for the fused pose (its covariance is not free for a smoother)
+        fused = self.loc.current()
+        self.last_fused = fused
+        what: PoseFix | str = fix if fix is not None else (self.loc.last_reason or "no fix")
+        for s in self.sinks:
+            try:
+                s.on_scan(float(msg.stamp), msg, what, fused)
+            except Exception:  # noqa: BLE001
+                self.sink_errors += 1
+
+
+# ---------------------------------------------------------------------- sinks
+class RecorderSink(BaseSink):
+    """Writes every input and the fused pose (``fused_topic``) to a writer with
+    ``write(topic, msg, stamp=None)`` (an :class:`fgloc.io.log.LogWriter`); closes it if asked."""
+
+    def __init__(self, writer: Any, fused_topic: str = "/fused_pose", close_writer: bool = False,
+                 tolerate: tuple[type[BaseException], ...] = (TypeError, ValueError)) -> None:
+        self.writer = writer
+        self.fused_topic = fused_topic
+        self.close_writer = close_writer
+        self.tolerate = tolerate  # write errors counted in ``errors`` (others raise)
+        self.errors = 0
+
+    def on_message(self, topic: str, msg: object) -> None:
+        try:
+            self.writer.write(topic, msg, getattr(msg, "stamp", None))
+        except self.tolerate:  # e.g. a message the writer has no schema for
+            self.errors += 1
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        if fused is not None:
+            try:
+                self.writer.write(self.fused_topic, fused, float(fused.stamp))
+            except self.tolerate:
+                self.errors += 1
+
+    def close(self) -> None:
+        if self.close_writer:
+            if hasattr(self.writer, "__exit__"):
+                self.writer.__exit__(None, None, None)
+            elif hasattr(self.writer, "close"):
+                self.writer.close()
+
+
+class CallbackSink(BaseSink):
+    """Calls ``on_message(topic, msg)`` / ``on_scan(stamp, scan, fix_or_reason, fused)`` if given."""
+
+    def __init__(self, on_message: Callable[[str, object], None] | None = None,
+                 on_scan: Callable[[float, LaserScan, PoseFix | str, PoseFix | None], None] | None = None) -> None:
+        self._m = on_message
+        self._s = on_scan
+
+    def on_message(self, topic: str, msg: object) -> None:
+        if self._m is not None:
+            self._m(topic, msg)
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        if self._s is not None:
+            self._s(stamp, scan, fix_or_reason, fused)
+
+
+class UdpSink(BaseSink):
+    """Publishes each fused pose with a :class:`fgloc.live.publish.UdpPublisher` (``pose(fix,
+    latency_ms)``); ``latency_ms()`` gives the latency of the scan just fused (live runner)."""
+
+    def __init__(self, publisher: Any, latency_ms: Callable[[], float] | None = None,
+                 close_publisher: bool = True) -> None:
+        self.publisher = publisher
+        self.latency_ms = latency_ms or (lambda: float("nan"))
+        self.close_publisher = close_publisher
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        if fused is not None:
+            self.publisher.pose(fused, self.latency_ms())
+
+    def close(self) -> None:
+        if self.close_publisher:
+            self.publisher.close()

@@ -15,6 +15,9 @@ Conventions (as ``nav2_map_server`` / ``map_server``):
 
 from __future__ import annotations
 
+import re
+import struct
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -226,24 +229,47 @@ class OccupancyMap:
 
 
 # ---------------------------------------------------------------- map files
+#: largest grid (cells) a map image may claim: 10,000 x 10,000 (500 m x 500 m at 5 cm); the
+#: front-ends hold several float fields of this size (the native one at 2x resolution)
+MAX_MAP_CELLS = 100_000_000
+
+# what a malformed image makes PIL raise (besides its own errors): headers it cannot parse,
+# truncated data, absurd sizes
+_IMAGE_ERRORS = (OSError, SyntaxError, ValueError, EOFError, IndexError, TypeError, KeyError,
+                 ZeroDivisionError, OverflowError, MemoryError, struct.error)
+
+
 def _read_image(path: Path) -> NDArray[np.uint8]:
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     try:
-        with Image.open(path) as im:
-            im.load()
-            if im.mode in ("RGB", "RGBA", "P", "LA"):
-                # map_server averages the colour channels (alpha ignored)
-                arr = np.asarray(im.convert("RGB"), dtype=np.float64).mean(axis=2)
-                return np.round(arr).astype(np.uint8)
-            if im.mode in ("I;16", "I;16B", "I"):
-                arr = np.asarray(im, dtype=np.float64)
-                return np.round(arr * 255.0 / max(arr.max(), 1.0)).astype(np.uint8)
-            return np.asarray(im.convert("L"), dtype=np.uint8)
+        with warnings.catch_warnings():
+            # PIL warns above ~89M pixels; the limit that matters here is MAX_MAP_CELLS
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as im:
+                w, h = im.size  # read from the header only: nothing decoded yet
+                if w * h > MAX_MAP_CELLS:
+                    raise MapError(f"{path}: map image claims {w} x {h} pixels, more than the "
+                                   f"{MAX_MAP_CELLS:,} cells a map may have")
+                im.load()
+                if im.mode in ("RGB", "RGBA", "P", "LA", "PA", "RGBX", "CMYK", "YCbCr"):
+                    # map_server averages the colour channels (alpha ignored)
+                    arr = np.asarray(im.convert("RGB"), dtype=np.float64).mean(axis=2)
+                    return np.round(arr).astype(np.uint8)
+                if im.mode in ("I;16", "I;16B", "I;16L", "I", "F"):
+                    arr = np.nan_to_num(np.asarray(im, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+                    return np.round(np.clip(arr, 0.0, None) * 255.0 / max(float(arr.max()), 1.0)).astype(np.uint8)
+                return np.asarray(im.convert("L"), dtype=np.uint8)
     except FileNotFoundError:
         raise MapError(f"{path}: map image not found") from None
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as e:
-        raise MapError(f"{path}: cannot read map image ({e.__class__.__name__}: {e})") from None
+    except Image.DecompressionBombError as e:  # PIL refuses sizes above 2x its own limit at open()
+        m = re.search(r"\((\d+) pixels\)", str(e))
+        claim = f"{int(m.group(1)):,} pixels" if m else "too many pixels"
+        raise MapError(f"{path}: map image claims {claim}, more than the {MAX_MAP_CELLS:,} cells a map may have") \
+            from None
+    except _IMAGE_ERRORS as e:
+        msg = " ".join(str(e).split())[:200]
+        raise MapError(f"{path}: cannot read map image ({e.__class__.__name__}: {msg})") from None
 
 
 def load_map(yaml_path: str | Path) -> OccupancyMap:
@@ -261,6 +287,8 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
         line = getattr(getattr(e, "problem_mark", None), "line", None)
         where = f" at line {line + 1}" if line is not None else ""
         raise MapError(f"{yaml_path}: map YAML does not parse{where}") from None
+    except (RecursionError, ValueError, TypeError, OverflowError) as e:  # e.g. absurdly deep nesting
+        raise MapError(f"{yaml_path}: map YAML does not parse ({e.__class__.__name__})") from None
     if not isinstance(meta, dict):
         raise MapError(f"{yaml_path}: map YAML must be a mapping with image, resolution and origin")
     for key in ("image", "resolution", "origin"):
@@ -277,8 +305,8 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
         occ_t = float(meta.get("occupied_thresh", 0.65))
         free_t = float(meta.get("free_thresh", 0.196))
         mode = str(meta.get("mode", "trinary")).lower()
-    except (TypeError, ValueError) as e:
-        raise MapError(f"{yaml_path}: bad value in map YAML ({e})") from None
+    except (TypeError, ValueError, OverflowError) as e:
+        raise MapError(f"{yaml_path}: bad value in map YAML ({' '.join(str(e).split())[:200]})") from None
     if not (np.isfinite(resolution) and resolution > 0):
         raise MapError(f"{yaml_path}: resolution must be a positive number, got {meta['resolution']!r}")
     if not all(np.isfinite(origin)):

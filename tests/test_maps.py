@@ -118,3 +118,104 @@ def test_map_info_cli(capsys, shared_data):
     assert main(["map-info", str(shared_data / "maps" / "willow-2010-02-18-0.10.yaml")]) == 0
     out = capsys.readouterr().out
     assert "566 x 608 cells" in out and "occupied 544" in out
+
+
+def _png_header_only(w: int, h: int) -> bytes:
+    """A PNG whose IHDR claims ``w x h`` grey pixels, followed by a tiny IDAT (a 'decompression bomb' header)."""
+    import struct
+    import zlib
+
+    def chunk(t: bytes, d: bytes) -> bytes:
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\0" * 100)) + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("name,content", [
+    ("huge.pgm", b"P5\n100000 100000\n255\n" + b"\0" * 1000),   # PIL: DecompressionBombError
+    ("huge.png", _png_header_only(100000, 100000)),
+    ("big.pgm", b"P5\n11000 11000\n255\n" + b"\0" * 1000),      # under PIL's limit, over ours
+])
+def test_image_claiming_too_many_pixels_is_one_line(tmp_path, capsys, name, content):
+    (tmp_path / name).write_bytes(content)
+    y = tmp_path / "map.yaml"
+    y.write_text(f"image: {name}\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(MapError, match="claims .* pixels, more than the 100,000,000 cells"):
+        load_map(y)
+    assert main(["map-info", str(y)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fgloc: error:") and "\n" not in err and "Traceback" not in err
+
+
+def test_fuzz_map_yaml_and_image_headers(tmp_path):
+    """Random map YAML values and PGM/PNG headers (with truncated or random pixel data): load_map
+    returns a map or raises MapError, nothing else escapes (bounded to ~5 s)."""
+    import io
+    import warnings
+
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+    from PIL import Image
+
+    scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**30, 10**30), st.text(max_size=12),
+                        st.floats(allow_nan=True, allow_infinity=True),
+                        st.sampled_from(["1e400", "-.inf", ".nan", "0x1F", "[", "{a: 1}", "~", "'", "&a *a"]))
+    values = st.one_of(scalars, st.lists(scalars, max_size=4), st.dictionaries(st.text(max_size=4), scalars,
+                                                                               max_size=2))
+    dims = st.one_of(st.integers(0, 40), st.sampled_from([2**31, 2**32 + 5, 10**6, 65536, -1]))
+
+    @st.composite
+    def image_bytes(draw):
+        kind = draw(st.sampled_from(["pgm", "png", "pgm_ascii", "junk", "valid"]))
+        w, h = draw(dims), draw(dims)
+        tail = draw(st.binary(max_size=64))
+        if kind == "pgm":
+            maxval = draw(st.sampled_from([1, 255, 256, 65535, 65536, 0, -3]))
+            return f"P5\n{w} {h}\n{maxval}\n".encode() + tail
+        if kind == "pgm_ascii":
+            return f"P2\n{w} {h}\n255\n".encode() + b" ".join(str(b).encode() for b in tail)
+        if kind == "png":
+            data = _png_header_only(min(max(w, 0), 2**31 - 1), min(max(h, 0), 2**31 - 1))
+            cut = draw(st.integers(8, len(data)))
+            return data[:cut] + tail
+        if kind == "valid":
+            buf = io.BytesIO()
+            mode = draw(st.sampled_from(["L", "RGB", "RGBA", "1", "I", "F", "P", "LA"]))
+            Image.new(mode, (max(min(w, 40), 1), max(min(h, 40), 1))).save(
+                buf, format="TIFF" if mode in ("I", "F") else "PNG")
+            return buf.getvalue()
+        return tail
+
+    @st.composite
+    def map_yaml(draw):
+        meta = {"image": "m.img", "resolution": 0.05, "origin": [0.0, 0.0, 0.0]}
+        for key in draw(st.lists(st.sampled_from(["image", "resolution", "origin", "negate", "occupied_thresh",
+                                                  "free_thresh", "mode"]), max_size=3)):
+            meta[key] = draw(values)
+        for key in draw(st.lists(st.sampled_from(["image", "resolution", "origin"]), max_size=1)):
+            meta.pop(key, None)
+        return meta
+
+    counter = iter(range(10**9))
+
+    @settings(max_examples=250, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(meta=map_yaml(), img=image_bytes(), raw_text=st.one_of(st.none(), st.text(max_size=60)))
+    def check(meta, img, raw_text):
+        d = tmp_path / f"case{next(counter)}"
+        d.mkdir()
+        (d / "m.img").write_bytes(img)
+        text = raw_text if raw_text is not None else yaml.safe_dump(meta)
+        (d / "map.yaml").write_text(text)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no stray warnings either
+            try:
+                m = load_map(d / "map.yaml")
+            except MapError as e:
+                assert "\n" not in str(e)
+                return
+        assert isinstance(m, OccupancyMap) and m.data.ndim == 2 and m.data.size > 0
+
+    import yaml
+
+    check()

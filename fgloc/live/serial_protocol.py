@@ -136,6 +136,7 @@ class ParserStats:
     frame_bytes_ok: int = 0
     crc_errors: int = 0
     length_errors: int = 0  # len byte out of range or inconsistent with the payload
+    truncated: int = 0  # a frame cut short: a complete valid frame began before its end
     unknown_type: int = 0  # CRC-valid frame of a type this parser does not know
     resyncs: int = 0  # times bytes were discarded to find the next sync
     garbage_bytes: int = 0  # bytes discarded (noise, bad frames' bytes)
@@ -206,7 +207,13 @@ class FrameParser:
                 continue
             total = HEADER_LEN + plen + CRC_LEN
             if len(buf) < total:
-                break
+                # a frame cut short (bytes lost on the wire) must not hold back a complete
+                # frame that follows it until enough later bytes arrive to fail its CRC
+                if self._complete_frame_after(buf, total) is None:
+                    break
+                self.stats.truncated += 1
+                self._discard(buf.find(SYNC, 1))  # up to the next candidate, which is checked in turn
+                continue
             body = bytes(buf[2 : HEADER_LEN + plen])
             (crc_rx,) = struct.unpack_from("<H", buf, HEADER_LEN + plen)
             if crc16(body) != crc_rx:
@@ -228,6 +235,24 @@ class FrameParser:
             self._track(frame)
             out.append(frame)
         return out
+
+    def _complete_frame_after(self, buf: bytearray, total: int) -> int | None:
+        """Position of a later sync, inside the first ``total`` bytes, that starts a complete
+        CRC-valid frame; such a frame cannot lie inside a real frame starting at 0 (a frame's
+        byte 2 is its length, never a sync byte, and no payload holds a whole frame), so the
+        candidate at 0 was cut short."""
+        k = buf.find(SYNC, 1)
+        while 0 < k < total:
+            if len(buf) - k < HEADER_LEN:
+                return None
+            plen = buf[k + 2]
+            end = k + HEADER_LEN + plen + CRC_LEN
+            if plen <= MAX_PAYLOAD and end <= len(buf):
+                (crc_rx,) = struct.unpack_from("<H", buf, k + HEADER_LEN + plen)
+                if crc16(buf[k + 2 : k + HEADER_LEN + plen]) == crc_rx:
+                    return k
+            k = buf.find(SYNC, k + 1)
+        return None
 
     @staticmethod
     def _sensor_len_ok(plen: int) -> bool:

@@ -163,7 +163,8 @@ class ScanTelegram:
 
 
 _HEX_TOKEN = re.compile(rb"[0-9A-Fa-f]{1,8}")
-_U16_RUN = re.compile(rb"(?:[0-9A-Fa-f]{1,4} )*[0-9A-Fa-f]{1,4}")
+_HEX_RUNS = {bits: re.compile(rb"(?:[0-9A-Fa-f]{1,%d} )*[0-9A-Fa-f]{1,%d}" % (bits // 4, bits // 4))
+             for bits in (8, 16, 32)}
 
 
 def _uint(tok: bytes, what: str, bits: int = 32) -> int:
@@ -190,13 +191,15 @@ def _f32(tok: bytes, what: str) -> float:
     return float(f)
 
 
+def _check_run(tok: list[bytes], bits: int, what: str) -> None:
+    """Every token is unsigned hex of at most ``bits`` bits (one regex pass over the joined tokens)."""
+    if tok and _HEX_RUNS[bits].fullmatch(b" ".join(tok)) is None:
+        raise TelegramError("bad_number", f"{what} not u{bits} hex")
+
+
 def _u16_values(tok: list[bytes], what: str) -> np.ndarray:
-    """``n`` u16 hex tokens -> int64 array; one regex pass over the joined tokens."""
-    if not tok:
-        return np.zeros(0, dtype=np.int64)
-    joined = b" ".join(tok)
-    if _U16_RUN.fullmatch(joined) is None:
-        raise TelegramError("bad_number", f"{what} data not u16 hex")
+    """``n`` u16 hex tokens -> int64 array."""
+    _check_run(tok, 16, what)
     return np.array([int(t, 16) for t in tok], dtype=np.int64)
 
 
@@ -231,11 +234,12 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
     n_enc = _uint(tok[i], "n_encoders", 16)
     if n_enc > 8:
         raise TelegramError("bad_count", f"{n_enc} encoders")
+    _check_run(tok[i + 1 : i + 1 + 2 * n_enc], 32, "encoder")  # position u32, speed u16
     i += 1 + 2 * n_enc
     if i >= len(tok):
         raise TelegramError("truncated", "after encoders")
     found: ScanTelegram | None = None
-    for _bits in (16, 8):
+    for bits in (16, 8):
         if i >= len(tok):
             raise TelegramError("truncated", "channel count")
         n_ch = _uint(tok[i], "n_channels", 16)
@@ -281,6 +285,8 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
                     step_deg=step / 10000.0,
                     values=vals,
                 )
+            else:
+                _check_run(tok[i : i + n], bits, name)  # a channel not used is still checked
             i += n
     # position, name, comment, time, events: each "0" (absent) or "1 <fields>".  When all five
     # are absent the telegram must end there: tokens left over mean a count above was too

@@ -178,3 +178,15 @@ def test_mcu_clock_step_back_is_not_a_71_minute_wrap():
     got2 = p2.feed(b"".join(encode_sensor_frame(k, tk, [0, 0], None) for k, tk in enumerate(t2)))
     assert got2[1].t_us_unwrapped - got2[0].t_us_unwrapped == 10_000
     assert p2.stats.time_wraps == 1 and p2.stats.time_backwards == 0
+
+
+def test_frame_cut_short_does_not_hold_back_the_next_frame():
+    """Bytes lost mid-frame: the cut frame's length reaches into the next (complete) frame; that
+    frame is delivered at once (it waited for later bytes to fail the cut one's CRC, and at the
+    end of a stream it was never delivered)."""
+    cut = encode_sensor_frame(0, 5, [1, 2, 3, 4], 0)[:7]  # 4 wheels: 34 bytes announced, 7 + 26 < 34
+    whole = encode_sensor_frame(1, 10_005, [5, 6], 100)  # 2 wheels: 26 bytes
+    p = FrameParser()
+    got = p.feed(cut + whole)
+    assert [g.seq for g in got] == [1] and p.stats.truncated == 1 and p.pending == 0
+    assert p.stats.bytes_in == p.stats.frame_bytes_ok + p.stats.garbage_bytes

@@ -88,16 +88,16 @@ class BenchReport:
 
 
 def batch_bench_paper(seeds: int, outdir: Path, opts: EngineOptions, config: Path | None = None,
-                      no_amcl: bool = False, only: list[str] | None = None) -> BenchReport:
+                      no_amcl: bool = False, only: list[str] | None = None, plots: bool = True) -> BenchReport:
     """``fgloc bench paper --seeds N`` as a batch: one job per seed, resumable, on any engine.
 
     Writes ``outdir/seed-NNN/metrics.json`` per seed, then (over the finished seeds) the same
-    ``table.md``, ``metrics.yaml`` and seed-0 plots as ``fgloc bench paper -o``.
+    ``table.md``, ``metrics.yaml`` and (``plots``) seed-0 plots as ``fgloc bench paper -o``.
     """
     import numpy as np
 
     variants = adapter.paper_variants(no_amcl, only)
-    jobs = bench_paper_jobs(seeds, outdir, variants, config)
+    jobs = bench_paper_jobs(seeds, outdir, variants, config, keep_seed0=plots)
     rep = _run(jobs, outdir, opts, "seeds")
     done = [j for j in jobs if any(r.log == j.name and r.status in ("ok", "done") for r in rep.rows)]
     docs = [adapter.load_seed_metrics(Path(j.outdir)) for j in done]
@@ -109,6 +109,6 @@ def batch_bench_paper(seeds: int, outdir: Path, opts: EngineOptions, config: Pat
     n = len(docs)
     out.table = adapter.paper_table(out.rows, n)
     out.claims = adapter.paper_claims(out.rows)
-    seed0 = next((Path(j.outdir) for j in done if j.params.get("keep")), None)
+    seed0 = next((Path(j.outdir) for j in done if j.params.get("keep")), None) if plots else None
     out.files = adapter.paper_outputs(out.rows, n, Path(outdir), seed0, variants)
     return out

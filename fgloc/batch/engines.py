@@ -16,7 +16,9 @@ inputs go by path, and the input files' bytes when they are shipped (``ship=True
   ``RAY_ADDRESS`` it joins that cluster (fgloc must be installed on its nodes; inputs by
   path need shared storage, ``--ship-inputs`` does not).  At most twice the cluster's CPUs
   are in flight, so shipped inputs do not fill the object store.  A task whose worker
-  crashes is retried once by Ray, then reported as that job's error.
+  crashes is retried once by Ray, then reported as that job's error.  A cluster with token
+  authentication (what ``ray start`` sets up when a token exists) is joined as by any Ray
+  client: ``RAY_AUTH_MODE=token`` and the token in ``RAY_AUTH_TOKEN`` or ``~/.ray/auth_token``.
 """
 
 from __future__ import annotations
@@ -237,7 +239,7 @@ class RayEngine:
         ray = self.ray
         if ray.is_initialized():
             return
-        kw: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": False,
+        kw: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
                               "configure_logging": True}
         try:
             if self.address:
@@ -248,7 +250,11 @@ class RayEngine:
                 self._started = True
         except (ConnectionError, RuntimeError, ValueError) as e:
             where = self.address or "a local instance"
-            raise ConfigError(f"Ray: cannot connect to {where} ({str(e).strip().splitlines()[0]})") from None
+            hint = ""
+            if self.address and os.environ.get("RAY_AUTH_MODE", "").lower() != "token":
+                hint = ("; a cluster with token authentication needs RAY_AUTH_MODE=token and its token "
+                        "(RAY_AUTH_TOKEN or ~/.ray/auth_token)")
+            raise ConfigError(f"Ray: cannot connect to {where} ({str(e).strip().splitlines()[0]}){hint}") from None
 
     def shutdown(self) -> None:
         if self.ray.is_initialized():

@@ -238,8 +238,8 @@ def map_jobs(logs: list[Path], outdir: Path, resolution: float = 0.05, config: P
 
 
 def bench_paper_jobs(seeds: int, outdir: Path, variants: list[tuple[str, str, str, str]],
-                     config: Path | None = None) -> list[Job]:
-    """One job per seed 0..N-1 of the paper benchmark; seed 0 keeps its trajectories (plots)."""
+                     config: Path | None = None, keep_seed0: bool = True) -> list[Job]:
+    """One job per seed 0..N-1 of the paper benchmark; seed 0 keeps its trajectories (for the plots)."""
     if seeds < 1:
         raise ConfigError("--seeds must be at least 1")
     out = Path(outdir).resolve()
@@ -249,5 +249,5 @@ def bench_paper_jobs(seeds: int, outdir: Path, variants: list[tuple[str, str, st
         name = f"seed-{s:0{width}d}"
         inputs = {"config": _abs(config) or ""} if config is not None else {}
         jobs.append(Job("bench-paper", name, str(out / name), inputs,
-                        {"seed": s, "variants": [list(v) for v in variants], "keep": s == 0}))
+                        {"seed": s, "variants": [list(v) for v in variants], "keep": keep_seed0 and s == 0}))
     return jobs

@@ -117,6 +117,7 @@ def bench_paper_cmd(
     no_amcl: Annotated[bool, typer.Option("--no-amcl", help="skip the EKF+AMCL column")] = False,
     only: Annotated[list[str] | None, typer.Option("--only", help="only this column (repeatable), "
                                                                    "e.g. 'EKF+native'")] = None,
+    no_plots: Annotated[bool, typer.Option("--no-plots", help="no seed-0 trajectories and plots")] = False,
     engine: Annotated[str, ENGINE] = "local",
     jobs: Annotated[int | None, JOBS] = None,
     address: Annotated[str | None, ADDRESS] = None,
@@ -134,7 +135,7 @@ def bench_paper_cmd(
     if not amcl_available() and not no_amcl:
         con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
     res = batch_bench_paper(seeds, outdir, _opts(engine, jobs, address, ship_inputs, force, quiet), config,
-                            no_amcl, list(only) if only else None)
+                            no_amcl, list(only) if only else None, not no_plots)
     if res.table:
         # plain Markdown, as `fgloc bench paper` prints it
         print(res.table)
@@ -142,6 +143,8 @@ def bench_paper_cmd(
             con.print("  " + line)
         con.print("  wall time per run: " + ", ".join(f"{k} {v:.1f} s" for k, v in res.walls.items()))
         con.print(f"  wrote {outdir}/table.md, metrics.yaml and {max(0, len(res.files) - 2)} plots")
+    elif not res.batch.interrupted:
+        con.print("[red]no seed finished[/red]: no table")
     _report(res.batch, f"fgloc batch bench paper: {seeds} seed(s)")
 
 

@@ -43,3 +43,11 @@ def crash_or_count(job, blobs):
         os.kill(os.getpid(), signal.SIGKILL)
     size = sum(len(b) for files in (blobs or {}).values() for _, b in files)
     return JobResult(job.name, True, row={"poses": size}, host=str(os.getpid()))
+
+
+def single_run_here(log: Path, map_yaml: Path, outdir: Path) -> Path:
+    """``fgloc run`` in this process (the code the in-process engine runs), absolute paths."""
+    rc, _, err = fgloc_cli("run", log.resolve(), "--map", map_yaml.resolve(), "--initial-pose", *map(str, START),
+                           "-o", outdir, "-q")
+    assert rc == 0, err
+    return outdir

@@ -13,7 +13,7 @@ from fgloc.batch.jobs import lost_time_s
 from fgloc.batch.runner import read_marker
 from fgloc.errors import ConfigError
 
-from .helpers import CORRUPT, OUTPUTS, ROUTES, START, crash_or_count, fgloc_cli
+from .helpers import CORRUPT, OUTPUTS, ROUTES, START, crash_or_count, fgloc_cli, single_run_here
 
 
 def test_a_crashed_worker_fails_only_its_own_job(tmp_path):
@@ -42,7 +42,7 @@ def test_force_reruns_and_a_lost_output_file_invalidates_the_marker(batch_logs, 
     assert other[0].fingerprint() != jobs[0].fingerprint()  # other options: run again
 
 
-def test_shipped_inputs_give_the_same_outputs(batch_logs, references, tmp_path):
+def test_shipped_inputs_give_the_same_outputs(batch_logs, tmp_path):
     """--ship-inputs with a map whose YAML names its image by absolute path in another folder: the
     worker runs on temporary copies, the outputs equal the single run's and name the original paths."""
     maps = tmp_path / "maps"
@@ -55,8 +55,9 @@ def test_shipped_inputs_give_the_same_outputs(batch_logs, references, tmp_path):
     rep = batch_run([str(batch_logs["logs"] / "alpha.mcap")], tmp_path / "out",
                     EngineOptions("inline", ship=True, progress=False), map_yaml=yaml_path, initial_pose=list(START))
     assert rep.ok
+    ref = single_run_here(batch_logs["logs"] / "alpha.mcap", batch_logs["map"], tmp_path / "ref")
     for f in OUTPUTS[:-1]:
-        assert (tmp_path / "out" / "alpha" / f).read_bytes() == (references["dir"] / "alpha" / f).read_bytes()
+        assert (tmp_path / "out" / "alpha" / f).read_bytes() == (ref / f).read_bytes()
     cfg = (tmp_path / "out" / "alpha" / "config.yaml").read_text()
     assert str(yaml_path.resolve()) in cfg and str((batch_logs["logs"] / "alpha.mcap").resolve()) in cfg
     assert "fgloc-batch-" not in cfg

@@ -14,7 +14,7 @@ import pytest
 
 from fgloc.batch import MARKER, read_summary_csv
 
-from .helpers import CORRUPT, ROUTES, START, assert_identical, fgloc_cli
+from .helpers import CORRUPT, ROUTES, START, assert_identical, fgloc_cli, single_run_here
 
 
 def check_summary(outdir: Path, batch_logs, references, ok_status=("ok",)) -> dict[str, dict[str, str]]:
@@ -115,7 +115,7 @@ def test_ctrl_c_keeps_finished_logs(batch_logs, references, tmp_path):
     assert_identical(out, references["dir"], ROUTES)
 
 
-def test_manifest_rows_give_their_own_map_and_start(batch_logs, references, tmp_path):
+def test_manifest_rows_give_their_own_map_and_start(batch_logs, tmp_path):
     """A manifest with relative paths, one row without a pose (the --initial-pose default), run
     in-process on the inline engine: the same files as the single runs."""
     from fgloc.batch import EngineOptions, batch_run
@@ -124,7 +124,9 @@ def test_manifest_rows_give_their_own_map_and_start(batch_logs, references, tmp_
     man.write_text("log,map,x,y,yaw\n"
                    f"logs/alpha.mcap,map.yaml,{START[0]},{START[1]},{START[2]}\n"
                    "logs/charlie.mcap,,,,\n")
-    rep = batch_run([], tmp_path, EngineOptions("inline", progress=False), manifest=man,
+    rep = batch_run([], tmp_path / "out", EngineOptions("inline", progress=False), manifest=man,
                     map_yaml=batch_logs["map"], initial_pose=list(START))
     assert [r.log for r in rep.rows] == ["alpha", "charlie"] and rep.ok
-    assert_identical(tmp_path, references["dir"], ["alpha", "charlie"])
+    for name in ("alpha", "charlie"):
+        single_run_here(batch_logs["logs"] / f"{name}.mcap", batch_logs["map"], tmp_path / "ref" / name)
+    assert_identical(tmp_path / "out", tmp_path / "ref", ["alpha", "charlie"])

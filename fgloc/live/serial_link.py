@@ -44,6 +44,10 @@ class RobotParams:
     track_width_m: float = setting(0.56, "left-right wheel distance", gt=0)
     wheelbase_m: float = setting(0.50, "front-rear axle distance (mecanum only)", gt=0)
     counts_per_rev: float = setting(2000.0, "encoder counts per wheel revolution (500 PPR x4 quadrature)", gt=0)
+    max_speed_mps: float = setting(2.0, "the robot's top speed; odometry faster than 1.5x this is rejected "
+                                   "(counted implausible_twist)", gt=0)
+    max_yaw_rate_dps: float = setting(180.0, "the robot's top turn rate; odometry or gyro faster than 1.5x this is "
+                                      "rejected (implausible_twist / implausible_rate)", gt=0)
 
     @property
     def n_wheels(self) -> int:
@@ -97,8 +101,22 @@ def twist_to_wheel_speeds(p: RobotParams, twist: np.ndarray) -> np.ndarray:
     return np.asarray(kinematics_of(p).inverse(np.asarray(twist, dtype=float)), dtype=float)
 
 
+PLAUSIBILITY_MARGIN = 1.5  # x the robot's configured top speed / turn rate
+REBASE_AFTER = 3  # consecutive implausible count steps before the counts are taken as the new baseline
+
+
 class FrameConverter:
-    """SensorFrame -> ``("odom", Odometry)`` / ``("imu", CompassHeading)``, host-time stamped."""
+    """SensorFrame -> ``("odom", Odometry)`` / ``("imu", CompassHeading)``, host-time stamped.
+
+    Plausibility: a twist faster than ``PLAUSIBILITY_MARGIN`` x the robot's ``max_speed_mps``
+    (translation) or ``max_yaw_rate_dps`` (rotation) is rejected (``implausible_twist``): a
+    CRC-valid frame whose counter jumped (a firmware or bus fault) would otherwise give a
+    twist of millions of m/s.  The previous counts stay the baseline, so the next good frame
+    covers the skipped interval (the counts are cumulative); after ``REBASE_AFTER`` rejections
+    in a row the counts are taken as the new baseline (``counts_rebased``: the counter was
+    reset without an MCU restart).  A gyro rate beyond the turn-rate limit is dropped
+    (``implausible_rate``), the heading of that frame kept.
+    """
 
     def __init__(
         self,
@@ -120,12 +138,25 @@ class FrameConverter:
         self.clock = ClockSync()
         self.wrong_wheel_count = 0
         self.bad_dt = 0
+        self.implausible_twist = 0
+        self.implausible_rate = 0
+        self.counts_rebased = 0
+        self._rejected_in_row = 0
+        self.max_speed_mps = PLAUSIBILITY_MARGIN * float(robot.max_speed_mps)
+        self.max_yaw_rate_radps = PLAUSIBILITY_MARGIN * math.radians(float(robot.max_yaw_rate_dps))
         self._prev: tuple[float, tuple[int, ...]] | None = None
         self._pose = np.zeros(3)
         self._last_stamp = -math.inf
 
     def counters(self) -> dict[str, int]:
-        return {"wrong_wheel_count": self.wrong_wheel_count, "bad_dt": self.bad_dt}
+        return {"wrong_wheel_count": self.wrong_wheel_count, "bad_dt": self.bad_dt,
+                "implausible_twist": self.implausible_twist, "implausible_rate": self.implausible_rate,
+                "counts_rebased": self.counts_rebased}
+
+    def plausible(self, twist: np.ndarray) -> bool:
+        """Whether a body twist ``[vx, vy, wz]`` is within the robot's limits (with the margin)."""
+        return bool(math.hypot(twist[0], twist[1]) <= self.max_speed_mps
+                    and abs(twist[2]) <= self.max_yaw_rate_radps)
 
     def convert(self, f: SensorFrame, arrival: float) -> list[tuple[str, object]]:
         out: list[tuple[str, object]] = []
@@ -144,34 +175,50 @@ class FrameConverter:
         if f.has_counts:
             if len(f.counts) != self.robot.n_wheels:
                 self.wrong_wheel_count += 1
-            elif self._prev is not None:
-                t0, c0 = self._prev
-                dt = t_dev - t0
-                if dt <= 0 or dt > 1.0:
-                    self.bad_dt += 1
-                else:
-                    dc = np.array(
-                        [((c - p + (1 << 31)) % COUNT_MOD) - (1 << 31) for c, p in zip(f.counts, c0, strict=True)],
-                        dtype=float,
-                    )
-                    omega = dc * (2.0 * math.pi / self.robot.counts_per_rev) / dt
-                    twist = np.asarray(self._kin.forward(omega), dtype=float)
-                    self._pose = compose1(self._pose, se2_exp(twist * dt))
-                    out.append(
-                        ("odom", Odometry(stamp=stamp, twist=twist,
-                                          twist_cov=None if self.twist_cov is None else self.twist_cov.copy(),
-                                          pose=self._pose.copy()))
-                    )
-            if len(f.counts) == self.robot.n_wheels:
-                self._prev = (t_dev, f.counts)
+            else:
+                odom = self._counts_to_odometry(f.counts, t_dev, stamp)
+                if odom is not None:
+                    out.append(("odom", odom))
         if f.has_heading and f.heading_ddeg is not None:
             yaw = float(wrap_angle(self.compass_sign * math.radians(f.heading_ddeg / 10.0)))
             rate = None if f.gyro_cdps is None else self.compass_sign * math.radians(f.gyro_cdps / 100.0)
+            if rate is not None and abs(rate) > self.max_yaw_rate_radps:
+                self.implausible_rate += 1
+                rate = None
             out.append(
                 ("imu", CompassHeading(stamp=stamp, yaw_rad=yaw, yaw_rate_radps=rate, yaw_var=self.yaw_var,
                                        yaw_rate_var=self.yaw_rate_var))
             )
         return out
+
+    def _counts_to_odometry(self, counts: tuple[int, ...], t_dev: float, stamp: float) -> Odometry | None:
+        """Twist from the counts since the baseline; the baseline moves on unless rejected."""
+        if self._prev is None:
+            self._prev = (t_dev, counts)
+            return None
+        t0, c0 = self._prev
+        dt = t_dev - t0
+        if dt <= 0 or dt > 1.0:
+            self.bad_dt += 1
+            self._prev = (t_dev, counts)
+            return None
+        dc = np.array([((c - p + (1 << 31)) % COUNT_MOD) - (1 << 31) for c, p in zip(counts, c0, strict=True)],
+                      dtype=float)
+        omega = dc * (2.0 * math.pi / self.robot.counts_per_rev) / dt
+        twist = np.asarray(self._kin.forward(omega), dtype=float)
+        if not self.plausible(twist):
+            self.implausible_twist += 1
+            self._rejected_in_row += 1
+            if self._rejected_in_row >= REBASE_AFTER:
+                self.counts_rebased += 1
+                self._rejected_in_row = 0
+                self._prev = (t_dev, counts)
+            return None
+        self._rejected_in_row = 0
+        self._prev = (t_dev, counts)
+        self._pose = compose1(self._pose, se2_exp(twist * dt))
+        return Odometry(stamp=stamp, twist=twist, twist_cov=None if self.twist_cov is None else self.twist_cov.copy(),
+                        pose=self._pose.copy())
 
 
 class SerialLink:

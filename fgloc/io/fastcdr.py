@@ -210,20 +210,61 @@ def decode_scan(data: Buffer) -> dict[str, Any] | None:
             "intensities": inten}
 
 
+def _scan_layout(data: Buffer) -> tuple[str, int, int, int] | None:
+    """``(frame_id, offset of the 7 floats, beams, intensities)`` of a LaserScan, or None."""
+    if len(data) < 16 or data[0] != 0 or data[1] != 1:
+        return None
+    try:
+        frame_id, p = _string_at(data, 12)
+        p = _aligned(p, 4)
+        (n,) = _U32.unpack_from(data, p + 28)
+        q = p + 32 + 4 * n
+        (m,) = _U32.unpack_from(data, q)
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    if q + 4 + 4 * m > len(data):
+        return None
+    return frame_id, p, n, m
+
+
 def decode_laser_scans(datas: Sequence[Buffer]) -> list[LaserScan | None]:
-    out: list[LaserScan | None] = []
-    for data in datas:
-        d = decode_scan(data)
-        if d is None:
-            out.append(None)
+    """LaserScans of a batch (None where the layout does not apply).  Scans of one layout
+    (length, frame id, beam counts) are read as one strided array; each scan gets its own
+    copy of its ranges (a kept scan never holds a whole chunk's memory)."""
+    out: list[LaserScan | None] = [None] * len(datas)
+    groups: dict[tuple[int, bytes, int, int], tuple[list[int], str, int]] = {}
+    key: tuple[int, bytes, int, int] | None = None
+    cur: list[int] = []
+    P = Q = 0  # offsets of the 7 floats and the intensity count in the current layout
+    for i, data in enumerate(datas):
+        if key is not None and len(data) == key[0] and data[12:P] == key[1] and data[0] == 0 and data[1] == 1 \
+                and _U32.unpack_from(data, P + 28)[0] == key[2] and _U32.unpack_from(data, Q)[0] == key[3]:
+            cur.append(i)
             continue
-        amin, _amax, inc, tinc, stime, rmin, rmax = d["floats"]
-        inten = d["intensities"]
-        out.append(LaserScan(
-            stamp=float(d["sec"]) + float(d["nanosec"]) * 1e-9, angle_min=amin, angle_increment=inc,
-            range_min=rmin, range_max=rmax, ranges=d["ranges"], time_increment=tinc, scan_time=stime,
-            intensities=inten if len(inten) else None, frame_id=d["frame_id"],
-        ))
+        lay = _scan_layout(data)
+        if lay is None:
+            continue
+        frame_id, P, n, m = lay
+        Q = P + 32 + 4 * n
+        key = (len(data), bytes(data[12:P]), n, m)
+        g = groups.get(key)
+        if g is None:
+            g = groups[key] = ([], frame_id, P)
+        cur = g[0]
+        cur.append(i)
+    for (L, _, n, m), (members, frame_id, p) in groups.items():
+        buf = b"".join(bytes(datas[i]) for i in members)
+        k = len(members)
+        sec = np.ndarray((k,), dtype="<i4", buffer=buf, offset=4, strides=(L,)).astype(np.float64)
+        nsec = np.ndarray((k,), dtype="<u4", buffer=buf, offset=8, strides=(L,)).astype(np.float64)
+        stamps = (sec + nsec * 1e-9).tolist()
+        f7 = np.ndarray((k, 7), dtype="<f4", buffer=buf, offset=p, strides=(L, 4)).astype(np.float64).tolist()
+        ranges = np.ndarray((k, n), dtype="<f4", buffer=buf, offset=p + 32, strides=(L, 4))
+        inten = np.ndarray((k, m), dtype="<f4", buffer=buf, offset=p + 36 + 4 * n, strides=(L, 4)) if m else None
+        for j, i in enumerate(members):
+            amin, _amax, inc, tinc, stime, rmin, rmax = f7[j]
+            out[i] = LaserScan(stamps[j], amin, inc, rmin, rmax, ranges[j].astype(np.float32),
+                               tinc, stime, None if inten is None else inten[j].astype(np.float32), frame_id)
     return out
 
 
@@ -247,25 +288,45 @@ def _layout(data: Buffer, strings: int, align: int, n_doubles: int) -> tuple[tup
 
 def _columns(datas: Sequence[Buffer], strings: int, n_doubles: int
              ) -> tuple[list[int], list[tuple[str, ...]], np.ndarray, np.ndarray] | None:
-    """Decode a batch's fixed part: ``(indices decoded, strings, stamps, doubles (k, n))``."""
-    idx: list[int] = []
-    texts: list[tuple[str, ...]] = []
-    rows: list[Buffer] = []
-    stamps: list[float] = []
+    """Decode a batch's fixed part: ``(indices decoded, strings, stamps, doubles (k, n))``.
+
+    Messages with the same length and the same bytes from the frame id to the doubles (a
+    channel's messages, as a rule) share one layout and are read as one strided array."""
+    groups: dict[tuple[int, bytes], tuple[list[int], tuple[str, ...], int]] = {}
+    L = P = -1
+    pref = b""
+    cur: list[int] = []
     for i, data in enumerate(datas):
+        if len(data) == L and data[12:P] == pref and data[0] == 0 and data[1] == 1:
+            cur.append(i)
+            continue
         lay = _layout(data, strings, 8, n_doubles)
         if lay is None:
             continue
-        t, p = lay
-        sec, nsec, _ = _HDR.unpack_from(data, 4)
-        idx.append(i)
-        texts.append(t)
-        stamps.append(float(sec) + float(nsec) * 1e-9)
-        rows.append(data[p : p + 8 * n_doubles])
-    if not idx:
+        texts, P = lay
+        L, pref = len(data), bytes(data[12:P])
+        g = groups.get((L, pref))
+        if g is None:
+            g = groups[(L, pref)] = ([], texts, P)
+        cur = g[0]
+        cur.append(i)
+    if not groups:
         return None
-    vals = np.frombuffer(b"".join(rows), dtype="<f8").reshape(len(idx), n_doubles).astype(np.float64)
-    return idx, texts, np.asarray(stamps), vals
+    idx: list[int] = []
+    text_l: list[tuple[str, ...]] = []
+    stamps, vals = [], []
+    for (n, _), (members, texts, p) in groups.items():
+        buf = b"".join(bytes(datas[i]) for i in members)
+        k = len(members)
+        sec = np.ndarray((k,), dtype="<i4", buffer=buf, offset=4, strides=(n,)).astype(np.float64)
+        nsec = np.ndarray((k,), dtype="<u4", buffer=buf, offset=8, strides=(n,)).astype(np.float64)
+        stamps.append(sec + nsec * 1e-9)
+        vals.append(np.ndarray((k, n_doubles), dtype="<f8", buffer=buf, offset=p, strides=(n, 8)).astype(np.float64))
+        idx += members
+        text_l += [texts] * k
+    if len(groups) == 1:
+        return idx, text_l, stamps[0], vals[0]
+    return idx, text_l, np.concatenate(stamps), np.concatenate(vals)
 
 
 def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -274,6 +335,11 @@ def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
+    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
+        return _decode_odometries(datas)
+
+
+def _decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     out: list[Odometry | None] = [None] * len(datas)
     cols = _columns(datas, 2, 85)
     if cols is None:
@@ -284,19 +350,23 @@ def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     twists = v[:, (43, 44, 48)].copy()
     pcov, pzero = _cov3s(v[:, 7:43])
     tcov, tzero = _cov3s(v[:, 49:85])
-    no_pose = v[:, 7] == -1.0
+    no_pose = (v[:, 7] == -1.0).tolist()
+    pz, tz = pzero.tolist(), tzero.tolist()
     stamp_l = stamps.tolist()
     for k, i in enumerate(idx):
         has_pose = not no_pose[k]
-        out[i] = Odometry(
-            stamp=stamp_l[k], twist=twists[k], twist_cov=None if tzero[k] else tcov[k],
-            pose=poses[k] if has_pose else None,
-            pose_cov=pcov[k] if has_pose and not pzero[k] else None,
-            frame_id=texts[k][0], child_frame_id=texts[k][1])
+        t = texts[k]
+        out[i] = Odometry(stamp_l[k], twists[k], None if tz[k] else tcov[k], poses[k] if has_pose else None,
+                          pcov[k] if has_pose and not pz[k] else None, t[0], t[1])
     return out
 
 
 def decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
+    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
+        return _decode_compasses(datas)
+
+
+def _decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
     out: list[CompassHeading | None] = [None] * len(datas)
     cols = _columns(datas, 1, 37)
     if cols is None:
@@ -313,13 +383,17 @@ def decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
     nan = float("nan")
     for k, i in enumerate(idx):
         ny, nr = no_yaw[k], no_rate[k]
-        out[i] = CompassHeading(
-            stamp=stamp_l[k], yaw_rad=None if ny else yaw[k], yaw_rate_radps=None if nr else rate[k],
-            yaw_var=nan if ny else ovar[k], yaw_rate_var=nan if nr else wvar[k], frame_id=texts[k][0])
+        out[i] = CompassHeading(stamp_l[k], None if ny else yaw[k], None if nr else rate[k],
+                                nan if ny else ovar[k], nan if nr else wvar[k], texts[k][0])
     return out
 
 
 def decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
+    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
+        return _decode_pose_fixes(datas, topic)
+
+
+def _decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
     out: list[PoseFix | None] = [None] * len(datas)
     cols = _columns(datas, 1, 43)
     if cols is None:
@@ -328,9 +402,10 @@ def decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix 
     yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
     poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
     cov, zero = _cov3s(v[:, 7:43])
+    zl = zero.tolist()
     stamp_l = stamps.tolist()
     for k, i in enumerate(idx):
-        out[i] = PoseFix(stamp=stamp_l[k], pose=poses[k], cov=np.zeros((3, 3)) if zero[k] else cov[k],
+        out[i] = PoseFix(stamp=stamp_l[k], pose=poses[k], cov=np.zeros((3, 3)) if zl[k] else cov[k],
                          source=topic, frame_id=texts[k][0])
     return out
 
@@ -360,6 +435,11 @@ def _tf_layout(data: Buffer) -> list[tuple[str, str, int]] | None:
 
 
 def decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransform], list[bool]] | None]:
+    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
+        return _decode_tf_messages(datas)
+
+
+def _decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransform], list[bool]] | None]:
     """Per message: ``(transforms, upside-down flags)`` (see :func:`fgloc.io.ros.tf_flips`)."""
     out: list[tuple[list[StaticTransform], list[bool]] | None] = [None] * len(datas)
     lays: list[tuple[int, list[tuple[str, str, int]]]] = []

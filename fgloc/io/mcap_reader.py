@@ -259,8 +259,12 @@ class McapSource(LogSource):
         """Records of one chunk's messages, sorted by (log time, position)."""
         by_ch: dict[int, list[MessageRec]] = {}
         for m in msgs:
-            by_ch.setdefault(m[2], []).append(m)
+            g = by_ch.get(m[2])
+            if g is None:
+                g = by_ch[m[2]] = []
+            g.append(m)
         out: list[Entry] = []
+        append = out.append
         for cid, group in by_ch.items():
             ch = self._channel(cid)
             if ch is None or not ch.usable:
@@ -282,8 +286,8 @@ class McapSource(LogSource):
                 elif is_tf:
                     self._note_tf(*obj)
                     obj = obj[0]
-                out.append((lt, offset, idx, Record(topic, obj, lt, data, info)))
-        out.sort(key=_entry_key)
+                append((lt, offset, idx, Record(topic, obj, lt, data, info)))
+        out.sort()  # (log time, offset, index) are unique: records are never compared
         return out
 
     def _load_parsed(self, f: IO[bytes], ref: ChunkRef, want_ids: set[int] | None) -> list[MessageRec] | None:
@@ -346,7 +350,3 @@ class McapSource(LogSource):
             yield heapq.heappop(heap)[3]
         for off, reason in w.damaged:
             self._damage(off, reason)
-
-
-def _entry_key(e: Entry) -> tuple[int, int]:
-    return e[0], e[2]

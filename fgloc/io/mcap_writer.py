@@ -68,6 +68,7 @@ class LogWriter:
         self._writer.start(profile="ros2", library=LIBRARY)
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[tuple[str, int, str], int] = {}
+        self._std: dict[tuple[str, str], int] = {}  # (topic, type) -> channel of fgloc's own schemas
         self._pending_tf: list[tuple[str, list[StaticTransform]]] = []
         self._last_stamp: float | None = None
         self.count = 0
@@ -88,7 +89,11 @@ class LogWriter:
         return cid
 
     def _std_channel(self, topic: str, type_name: str) -> int:
-        return self._channel_id(topic, self._schema_id(type_name, "ros2msg", full_text(type_name).encode()))
+        cid = self._std.get((topic, type_name))
+        if cid is None:
+            sid = self._schema_id(type_name, "ros2msg", full_text(type_name).encode())
+            cid = self._std[(topic, type_name)] = self._channel_id(topic, sid)
+        return cid
 
     # -- writing -----------------------------------------------------------------------------
     def write(self, topic: str, msg: object, stamp: float | None = None, log_time_ns: int | None = None) -> None:

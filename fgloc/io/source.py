@@ -166,8 +166,10 @@ class LogSource:
         return ((r.topic, r.msg) for r in self.records(topics))
 
     def records(self, topics: Iterable[str] | None = None) -> Iterator[Record]:
-        """:class:`Record` s in log-time order (see :meth:`messages`)."""
-        return self._mirrored(self._records(self._wanted(topics)))
+        """:class:`Record` s in log-time order (see :meth:`messages`).  Scans of a frame that
+        :meth:`laser_mount` found upside down (before this call) come mirrored."""
+        it = self._records(self._wanted(topics))
+        return self._mirrored(it) if self._mirror_frames else it
 
     def _mirrored(self, it: Iterator[Record]) -> Iterator[Record]:
         for rec in it:

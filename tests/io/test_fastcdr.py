@@ -1,42 +1,308 @@
-"""The vectorized LaserScan codec is byte-identical to mcap_ros2's generic CDR codec."""
+"""The fixed-layout CDR codecs against the generic ones.
+
+Encoders: byte-identical to mcap_ros2's generic encoder.  Decoders: field-identical (every
+float bit, every NaN, every dtype) to mcap_ros2's generic decoder followed by fgloc.io.ros's
+conversion, on every message of fgloc's own logs, the bundled Radish excerpts, and foreign logs
+written by mcap_ros2 and by rosbags (the conformance generators), including empty arrays, odd
+string lengths, and big-endian CDR (which the fixed layouts decline and the generic codec
+reads).
+"""
 
 from __future__ import annotations
+
+import io
+import math
+import struct
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from fgloc.io.fastcdr import decode_laser_scans, decode_scan, encode_laser_scan
+from fgloc.io import fastcdr, open_log
 from fgloc.io.msgdefs import full_text
-from fgloc.io.ros import scan_from_ros, scan_to_ros
-from fgloc.io.topics import LASER_SCAN
-from fgloc.types import LaserScan
+from fgloc.io.ros import FROM_ROS, compass_to_ros, fix_to_ros, odom_to_ros, scan_to_ros, tf_flips, tf_to_ros
+from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import test_conformance as conf  # noqa: E402 - the foreign-log generators
+
+FAST: dict[str, Callable[[list[bytes]], list[Any]]] = {
+    LASER_SCAN: fastcdr.decode_laser_scans,
+    ODOMETRY: fastcdr.decode_odometries,
+    IMU: fastcdr.decode_compasses,
+    TF_MESSAGE: fastcdr.decode_tf_messages,
+    POSE_COV_STAMPED: lambda d: fastcdr.decode_pose_fixes(d, "/t"),
+}
+ENCODE = {
+    LASER_SCAN: (fastcdr.encode_laser_scan, scan_to_ros),
+    ODOMETRY: (fastcdr.encode_odometry, odom_to_ros),
+    IMU: (fastcdr.encode_compass, compass_to_ros),
+    TF_MESSAGE: (fastcdr.encode_tf, tf_to_ros),
+    POSE_COV_STAMPED: (fastcdr.encode_pose_fix, fix_to_ros),
+}
 
 
-@pytest.mark.parametrize("frame", ["", "l", "la", "las", "laser", "base_laser_link"])
-@pytest.mark.parametrize("n,with_int", [(0, False), (1, True), (181, False), (1081, True)])
-def test_bytes_equal_generic_codec(frame, n, with_int):
-    from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+def _generic_decoder(type_name: str, schema_text: str | None = None) -> Callable[[bytes], Any]:
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
 
-    enc = serialize_dynamic(LASER_SCAN, full_text(LASER_SCAN))[LASER_SCAN]
-    dec = generate_dynamic(LASER_SCAN, full_text(LASER_SCAN))[LASER_SCAN]
-    rng = np.random.default_rng(n)
-    r = rng.uniform(0, 30, n).astype(np.float32)
-    if n > 3:
-        r[:3] = [np.inf, -np.inf, np.nan]
-    scan = LaserScan(1234.000000567, -2.35, 0.0043633, 0.05, 40.0, r, 1e-5, 0.04,
-                     rng.uniform(0, 1, n).astype(np.float32) if with_int else None, frame)
-    fast = encode_laser_scan(scan, scan.stamp)
-    assert fast == enc(scan_to_ros(scan, scan.stamp))
-    (a,) = decode_laser_scans([fast])
-    b = scan_from_ros(dec(fast), "/scan")
-    assert a is not None
-    for f in ("stamp", "angle_min", "angle_increment", "range_min", "range_max", "time_increment",
-              "scan_time", "frame_id"):
-        assert getattr(a, f) == getattr(b, f)
-    np.testing.assert_array_equal(a.ranges, b.ranges)
-    assert (a.intensities is None) == (b.intensities is None) == (not with_int or n == 0)
+    text = schema_text if schema_text and schema_text.strip() else full_text(type_name)
+    dec = DecoderFactory().decoder_for("cdr", Schema(id=1, name=type_name, encoding="ros2msg", data=text.encode()))
+    assert dec is not None
+    return dec  # type: ignore[no-any-return]
 
 
-def test_big_endian_falls_back():
-    assert decode_scan(b"\x00\x00\x00\x00" + bytes(40)) is None
-    assert decode_scan(b"\x00\x01\x00\x00" + bytes(5)) is None
+def _generic(type_name: str, data: bytes, dec: Callable[[bytes], Any], topic: str = "/t") -> Any:
+    ros = dec(data)
+    out = FROM_ROS[type_name](ros, topic)
+    return (out, tf_flips(ros)) if type_name == TF_MESSAGE else out
+
+
+def _same_float(a: float, b: float) -> bool:
+    return struct.pack("<d", a) == struct.pack("<d", b) or (math.isnan(a) and math.isnan(b))
+
+
+def assert_identical(a: Any, b: Any, where: str = "") -> None:
+    """Field-identical: same types, same bits of every float, same arrays (dtype, NaNs)."""
+    assert type(a) is type(b), where
+    if isinstance(a, list | tuple):
+        assert len(a) == len(b), where
+        for x, y in zip(a, b, strict=True):
+            assert_identical(x, y, where)
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape, where
+        assert a.tobytes() == b.tobytes() or np.array_equal(a, b, equal_nan=True), where
+    elif isinstance(a, float):
+        assert _same_float(a, b), (where, a, b)
+    elif hasattr(a, "__dataclass_fields__"):
+        for f in a.__dataclass_fields__:
+            assert_identical(getattr(a, f), getattr(b, f), f"{where}.{f}")
+    else:
+        assert a == b, (where, a, b)
+
+
+def check_all(type_name: str, datas: list[bytes], schema_text: str | None = None) -> int:
+    """Fast (as one batch and one by one) == generic on every message; returns how many the
+    fast decoder took (the rest it declined, and the generic one must read them)."""
+    dec = _generic_decoder(type_name, schema_text)
+    batch = FAST[type_name](datas)
+    taken = 0
+    for i, data in enumerate(datas):
+        (single,) = FAST[type_name]([data])
+        assert_identical(batch[i], single, f"{type_name} #{i} batch vs single")
+        if batch[i] is None:
+            continue
+        taken += 1
+        assert_identical(batch[i], _generic(type_name, data, dec), f"{type_name} #{i}")
+    return taken
+
+
+# ---------------------------------------------------------------------------------------------
+# generic encoding through mcap_ros2's public writer, read back with mcap's reader
+def _generic_bytes(type_name: str, ros: list[dict]) -> list[bytes]:
+    from mcap.reader import make_reader
+    from mcap_ros2.writer import Writer
+
+    buf = io.BytesIO()
+    w = Writer(buf)
+    schema = w.register_msgdef(type_name, full_text(type_name))
+    for i, d in enumerate(ros):
+        w.write_message("/t", schema, d, log_time=i)
+    w.finish()
+    buf.seek(0)
+    return [m.data for _, _, m in make_reader(buf).iter_messages(log_time_order=False)]
+
+
+FRAMES = ["", "l", "la", "las", "lase", "laser", "base_laser_link", "ü/frame"]
+
+
+def _samples(rng: np.random.Generator) -> dict[str, list[tuple[object, float]]]:
+    out: dict[str, list[tuple[object, float]]] = {t: [] for t in ENCODE}
+    for k, frame in enumerate(FRAMES):
+        st = 1_700_000_000.0 + k + (k * 1_000_003 + 7) * 1e-9
+        for n, inten in ((0, False), (1, True), (181, False), (1081, True)):
+            r = rng.uniform(0, 30, n).astype(np.float32)
+            if n > 3:
+                r[:3] = [np.inf, -np.inf, np.nan]
+            out[LASER_SCAN].append((LaserScan(st, -2.35, 0.0043633, 0.05, 40.0, r, 1e-5, 0.04,
+                                              rng.uniform(0, 1, n).astype(np.float32) if inten else None,
+                                              frame), st))
+        c = np.diag(rng.uniform(1e-4, 1e-2, 3))
+        c[0, 2] = c[2, 0] = 1e-5
+        out[ODOMETRY] += [
+            (Odometry(st, rng.normal(size=3), c, rng.normal(size=3), c * 2, frame, FRAMES[-1 - k]), st),
+            (Odometry(st, rng.normal(size=3), None, None, None, frame, ""), st),      # no pose, unknown cov
+            (Odometry(st, np.zeros(3), None, np.array([1.0, 2.0, math.pi]), None, "odom", frame), st),
+        ]
+        out[IMU] += [
+            (CompassHeading(st, float(rng.uniform(-3, 3)), float(rng.normal()), 1e-4, 1e-6, frame), st),
+            (CompassHeading(st, None, 0.3, frame_id=frame), st),
+            (CompassHeading(st, 1.0, None, frame_id=frame), st),
+            (CompassHeading(st, -math.pi, 0.0, float("nan"), float("nan"), frame), st),
+        ]
+        out[POSE_COV_STAMPED] += [(PoseFix(st, rng.normal(size=3), c, frame_id=frame), st),
+                                  (PoseFix(st, rng.normal(size=3), np.zeros((3, 3)), frame_id=frame), st)]
+        out[TF_MESSAGE] += [
+            ([StaticTransform(frame, FRAMES[j % len(FRAMES)], rng.normal(size=3), float(rng.normal()))
+              for j in range(k)], st),  # 0 .. 7 transforms
+        ]
+    return out
+
+
+@pytest.fixture(scope="module")
+def samples() -> dict[str, list[tuple[object, float]]]:
+    return _samples(np.random.default_rng(3))
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_encoders_byte_identical_to_generic(type_name, samples):
+    enc, to_ros = ENCODE[type_name]
+    msgs = samples[type_name]
+    fast = [enc(m, st) for m, st in msgs]
+    assert fast == _generic_bytes(type_name, [to_ros(m, st) for m, st in msgs])  # type: ignore[operator]
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_decoders_identical_to_generic_on_fgloc_bytes(type_name, samples):
+    enc, _ = ENCODE[type_name]
+    datas = [enc(m, st) for m, st in samples[type_name]]  # type: ignore[operator]
+    assert check_all(type_name, datas) == len(datas)  # all standard little-endian: none declined
+
+
+# ---------------------------------------------------------------------------------------------
+# big-endian, other representations, garbage: declined (None), never misread
+def _big_endian(type_name: str, ros_msgs: list[Any]) -> list[bytes]:
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    if type_name not in ts.types:
+        from rosbags.typesys import get_types_from_msg
+
+        ts.register(get_types_from_msg(full_text(type_name), type_name))
+    out = []
+    for le in ros_msgs:
+        msg = ts.deserialize_cdr(le, type_name)
+        out.append(bytes(ts.serialize_cdr(msg, type_name, little_endian=False)))
+    return out
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_big_endian_is_declined_and_read_by_the_generic_codec(type_name, samples, tmp_path):
+    enc, _ = ENCODE[type_name]
+    le = [enc(m, st) for m, st in samples[type_name]]  # type: ignore[operator]
+    be = _big_endian(type_name, le)
+    assert all(b[:2] == b"\x00\x00" for b in be)
+    assert FAST[type_name](be) == [None] * len(be)
+    dec = _generic_decoder(type_name)
+    for a, b in zip(le, be, strict=True):  # the generic codec reads both to the same values
+        assert_identical(_generic(type_name, a, dec), _generic(type_name, b, dec))
+    # and the reader uses it: a log of big-endian messages reads as the little-endian one
+    from mcap.writer import Writer
+
+    for name, datas in (("le", le), ("be", be)):
+        with (tmp_path / f"{name}.mcap").open("wb") as f:
+            w = Writer(f)
+            w.start(profile="ros2", library="test")
+            sid = w.register_schema(type_name, "ros2msg", full_text(type_name).encode())
+            cid = w.register_channel("/t", "cdr", sid)
+            for i, d in enumerate(datas):
+                w.add_message(cid, i, d, i)
+            w.finish()
+    got = [[r.msg for r in open_log(tmp_path / f"{n}.mcap").records({"/t"})] for n in ("le", "be")]
+    assert len(got[0]) == len(got[1]) == len(le)
+    for a, b in zip(*got, strict=True):
+        if type_name == POSE_COV_STAMPED:
+            a.source = b.source = ""  # type: ignore[union-attr]
+        assert_identical(a, b)
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_garbage_is_declined_not_misread(type_name, samples):
+    enc, _ = ENCODE[type_name]
+    data = enc(*samples[type_name][-1])  # type: ignore[operator]
+    s = 16 if type_name == TF_MESSAGE else 12  # the first string length
+    bad = [b"", b"\x00\x01", b"\x00\x01\x00\x00", data[: len(data) // 2], b"\x00\x03" + data[2:],
+           data[:s] + b"\xff\xff\xff\x7f" + data[s + 4:]]  # a frame id length far past the end
+    assert FAST[type_name](bad) == [None] * len(bad)
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_damaged_bytes_never_decode_differently(type_name, samples):
+    """Any byte changed anywhere: the fixed layout declines, or gives what the generic codec gives."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as hs
+
+    enc, _ = ENCODE[type_name]
+    datas = [enc(m, st) for m, st in samples[type_name][:12]]  # type: ignore[operator]
+    dec = _generic_decoder(type_name)
+
+    @settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(hs.integers(0, len(datas) - 1), hs.integers(0, 10**6), hs.integers(0, 255), hs.booleans())
+    def check(k: int, pos: int, value: int, cut: bool) -> None:
+        d = bytearray(datas[k])
+        pos %= max(len(d), 1)
+        d[pos] = value
+        data = bytes(d[:pos] if cut else d)
+        (fast,) = FAST[type_name]([data])
+        if fast is None:
+            return
+        try:
+            ref = _generic(type_name, data, dec)
+        except Exception:  # noqa: BLE001 - the generic codec fails: the fast one must have declined
+            pytest.fail(f"fixed layout read bytes the generic codec rejects (byte {pos} = {value}, cut {cut})")
+        assert_identical(fast, ref)
+
+    check()
+
+
+# ---------------------------------------------------------------------------------------------
+# every message of real and foreign logs
+def _by_channel(path: Path) -> dict[tuple[str, str, str], list[bytes]]:
+    out: dict[tuple[str, str, str], list[bytes]] = {}
+    src = open_log(path)
+    for rec in src.records(src.topic_types()):
+        ch = rec.channel
+        assert rec.data is not None and ch is not None
+        out.setdefault((ch.topic, ch.type, ch.schema_data.decode()), []).append(rec.data)
+    return out
+
+
+@pytest.fixture(scope="module")
+def foreign_logs(tmp_path_factory) -> list[Path]:
+    from fgloc.io.convert import import_log
+    from fgloc.sim import simulate_paper, write_sim
+
+    d = tmp_path_factory.mktemp("fastcdr")
+    sim = simulate_paper(seed=0, route=conf.ROUTE)
+    logs = []
+    for name, v in (("clean", {}), ("everything", conf.VARIANTS["everything"]),
+                    ("lz4", conf.VARIANTS["lz4_small_chunks_intensities"]),
+                    ("upside_down", conf.VARIANTS["upside_down_laser_on_tf"]),
+                    ("rosbags_mcap", {"writer": "rosbags", "mount": "tf", "scan": "360", "imu": "no_orientation"}),
+                    ("rosbags_db3", {"writer": "db3", "mount": "chain", "ground_truth": True})):
+        p = d / (f"{name}.mcap" if "writer" not in v else name)
+        conf.write_foreign(p, sim, **v)
+        logs.append(p)
+    write_sim(sim, d / "sim")
+    logs += sorted((d / "sim").glob("*.mcap"))
+    here = Path(__file__).resolve().parents[2] / "data" / "radish"
+    for clf in sorted(here.glob("*.clf.bz2")):
+        logs.append(import_log(clf, d / (clf.name + ".mcap"), progress=False).dst)
+    return logs
+
+
+def test_every_message_of_foreign_and_bundled_logs(foreign_logs):
+    seen: dict[str, int] = {}
+    for path in foreign_logs:
+        for (topic, type_name, schema), datas in _by_channel(path).items():
+            if type_name not in FAST:
+                continue
+            taken = check_all(type_name, datas, schema)
+            assert taken == len(datas), f"{path.name} {topic}: {len(datas) - taken} declined"
+            seen[type_name] = seen.get(type_name, 0) + taken
+    assert set(seen) >= {LASER_SCAN, ODOMETRY, IMU, TF_MESSAGE}
+    assert seen[LASER_SCAN] > 3000 and seen[ODOMETRY] > 5000 and seen[IMU] > 2000

@@ -1,10 +1,10 @@
 """The one place where ``fgloc batch`` calls the single-log library code: one function per job kind.
 
-``localize_log`` (what ``fgloc run`` does), ``map_log`` (``fgloc map``) and
-``bench_paper_seed`` (one seed of ``fgloc bench paper``) take plain arguments and return
-a small typed outcome.  When the library functions move (``fgloc.app`` /
-``fgloc.bench``), only this module changes; nothing else in :mod:`fgloc.batch` imports
-``fgloc.commands``, ``fgloc.mapping`` or ``fgloc.pipeline``.
+``localize_log`` (:func:`fgloc.app.run.run_log`, what ``fgloc run`` does), ``map_log``
+(:func:`fgloc.mapping.build.build_map`, ``fgloc map``) and ``bench_paper_seed`` (one seed of
+:mod:`fgloc.bench.paper`) take plain arguments and return a small typed outcome.  When a
+library function moves, only this module changes; nothing else in :mod:`fgloc.batch` imports
+``fgloc.app``, ``fgloc.bench`` or ``fgloc.mapping``.
 
 Nothing here prints, and the only files written are the single-log commands' own
 outputs in ``outdir``.
@@ -72,13 +72,15 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
                  config_path: Path | None, backend: str, frontend: str,
                  scan_topic: str, odom_topic: str, imu_topic: str) -> LocalizeOutcome:
     """``fgloc run LOG [--map] [--initial-pose] ... -o OUTDIR`` as a library call (no progress bar)."""
-    from fgloc.commands.run import run_log
+    from fgloc.app.run import RunRequest, run_log
     from fgloc.io.tum import read_tum
 
     if backend not in ("ekf", "smoother", "batch"):
         raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
-    r = run_log(log, outdir, map_yaml, backend, frontend, initial_pose, config_path,
-                scan_topic, odom_topic, imu_topic, quiet=True)
+    pose = None if initial_pose is None else (float(initial_pose[0]), float(initial_pose[1]), float(initial_pose[2]))
+    r = run_log(RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
+                           initial_pose=pose, config=config_path, scan_topic=scan_topic, odom_topic=odom_topic,
+                           imu_topic=imu_topic))
     fix_stamps: list[float] = []
     if (outdir / "fixes.tum").exists():
         fix_stamps = read_tum(outdir / "fixes.tum").stamps.tolist()
@@ -86,13 +88,12 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
     if (outdir / "trajectory.tum").exists():
         st = read_tum(outdir / "trajectory.tum").stamps
         t0, t1 = float(st[0]), float(st[-1])
-    out = LocalizeOutcome(mode=r["mode"], poses=int(r["poses"]), log_s=float(r["log_s"]),
-                          wall_s=float(r["wall_s"]), fix_stamps_s=fix_stamps, t_start_s=t0, t_end_s=t1,
-                          note=r.get("eval_error"), written=list(r["written"]))
-    m = r.get("metrics")
-    if m is not None:
-        out.position_rmse_m = float(m.position_rmse_m)
-        out.heading_rmse_deg = float(m.heading_rmse_deg)
+    out = LocalizeOutcome(mode=r.mode, poses=int(r.poses), log_s=float(r.log_s), wall_s=float(r.wall_s),
+                          fix_stamps_s=fix_stamps, t_start_s=t0, t_end_s=t1, note=r.eval_error,
+                          written=list(r.written))
+    if r.metrics is not None:
+        out.position_rmse_m = float(r.metrics.position_rmse_m)
+        out.heading_rmse_deg = float(r.metrics.heading_rmse_deg)
     return out
 
 
@@ -160,7 +161,7 @@ def _ground_truth(log: Path, scan_topic: str, odom_topic: str):
 def paper_variants(no_amcl: bool = False, only: list[str] | None = None) -> list[Variant]:
     """The columns of ``fgloc bench paper`` (without EKF+AMCL when asked or when AMCL is missing),
     optionally only those whose label is in ``only``."""
-    from fgloc.commands.run import PAPER_VARIANTS
+    from fgloc.bench import PAPER_VARIANTS
 
     have_amcl = amcl_available()
     out = [tuple(v) for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl")]
@@ -175,13 +176,9 @@ def paper_variants(no_amcl: bool = False, only: list[str] | None = None) -> list
 
 def amcl_available() -> bool:
     """Whether the AMCL front-end imports (``fgloc bench paper`` leaves its column out otherwise)."""
-    import importlib
+    from fgloc.bench import frontend_available
 
-    try:
-        importlib.import_module("fgloc.frontends.amcl")
-    except ImportError:
-        return False
-    return True
+    return frontend_available("amcl")
 
 
 def bench_paper_seed(seed: int, variants: list[Variant], config_path: Path | None, outdir: Path,
@@ -193,12 +190,12 @@ def bench_paper_seed(seed: int, variants: list[Variant], config_path: Path | Non
     with ``keep`` also each variant's trajectory (``<label>.tum``), ``ground_truth.tum`` and the
     map, from which the batch draws the same plots as ``fgloc bench paper -o``.
 
-    Local adapter for the private ``fgloc.commands.run._bench_one_seed`` (same calls, same order).
+    Local adapter for the private ``fgloc.bench.paper._bench_one_seed`` (same calls, same order).
     """
-    from fgloc.commands.run import localize_sim
+    from fgloc.bench import localize_sim
+    from fgloc.config import load_config
     from fgloc.eval.metrics import evaluate
     from fgloc.io.tum import write_tum
-    from fgloc.pipeline import load_config
     from fgloc.sim import simulate_paper
 
     config = load_config(config_path)
@@ -285,25 +282,7 @@ def paper_outputs(rows: dict[str, list[Any]], seeds: int, outdir: Path, seed0_di
 
 
 def paper_claims(rows: dict[str, list[Any]]) -> list[str]:
-    """The target lines ``fgloc bench paper`` prints under its table.
+    """The target lines ``fgloc bench paper`` prints under its table."""
+    from fgloc.bench import claims
 
-    Local adapter for the private ``fgloc.commands.run._claims`` (same lines).
-    """
-    import numpy as np
-
-    def mean(label: str, key: str) -> float:
-        return float(np.mean([getattr(m, key) for m in rows[label]]))
-
-    out = []
-    if "smoother fixed-lag" in rows:
-        p, h = mean("smoother fixed-lag", "position_rmse_m"), mean("smoother fixed-lag", "heading_rmse_deg")
-        out.append(f"smoother fixed-lag: position RMSE {p:.4f} m (target <= 0.010), "
-                   f"heading RMSE {h:.3f} deg (target <= 0.30)")
-        for ekf in ("EKF+AMCL (paper)", "EKF+native"):
-            if ekf in rows:
-                e = mean(ekf, "position_rmse_m")
-                out.append(f"smoother vs {ekf}: {100 * (1 - p / e):.0f} % lower position RMSE (target >= 30 %)")
-        if "batch" in rows:
-            b = mean("batch", "position_rmse_m")
-            out.append(f"fixed-lag / batch position RMSE: {p / b:.2f}x (target <= 1.2x)")
-    return out
+    return claims(rows)

@@ -12,7 +12,7 @@ VARIANT = ("EKF+native", "ekf", "native", "final")
 def test_batch_bench_paper_reproduces_bench_paper(tmp_path):
     """One seed, one column (to stay quick): the metrics of every row equal ``bench_paper``'s to the
     last bit, the printed table is the same text, and a second run reuses the finished seed."""
-    from fgloc.commands.run import bench_paper
+    from fgloc.bench import bench_paper
     from fgloc.eval.paper import comparison_text
 
     ref = bench_paper(1, None, variants=(VARIANT,), jobs=1, quiet=True)

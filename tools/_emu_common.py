@@ -9,7 +9,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fgloc.live.emulators import ReplayClock  # noqa: E402
+from fgloc.testing.emulators import ReplayClock  # noqa: E402
 
 
 def add_common(p: argparse.ArgumentParser) -> None:

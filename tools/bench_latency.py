@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=int, default=25, help="first N fused scans left out of the percentiles")
     args = p.parse_args(argv)
 
-    from fgloc.live.harness import replay_live
+    from fgloc.testing.harness import replay_live
 
     gt = None
     if args.log is None:

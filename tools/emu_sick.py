@@ -18,7 +18,7 @@ import time
 
 from _emu_common import add_common, load_messages, make_clock
 
-from fgloc.live.emulators import SickEmulator
+from fgloc.testing.emulators import SickEmulator
 
 
 def main(argv: list[str] | None = None) -> int:

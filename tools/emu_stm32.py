@@ -18,7 +18,7 @@ import time
 from _emu_common import add_common, load_messages, make_clock
 
 from fgloc.live.app import load_config
-from fgloc.live.emulators import Stm32Emulator
+from fgloc.testing.emulators import Stm32Emulator
 
 
 def main(argv: list[str] | None = None) -> int:

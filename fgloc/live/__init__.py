@@ -6,7 +6,8 @@
 * :mod:`fgloc.live.clock` - device clock -> host clock (minimum-delay offset + drift)
 * :mod:`fgloc.live.runner` / :mod:`fgloc.live.app` - the fusion loop and session wiring
 * :mod:`fgloc.live.publish` - fused poses as UDP JSON lines
-* :mod:`fgloc.live.emulators` / :mod:`fgloc.live.harness` - hardware emulators, replays
+
+Hardware emulators and the replay harness (test support) live in :mod:`fgloc.testing`.
 
 Protocols and schemas: ``docs/serial-protocol.md``.  Command line: ``fgloc live``.
 """

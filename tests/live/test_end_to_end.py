@@ -19,7 +19,7 @@ from fgloc.app.run import RunRequest, run_log
 from fgloc.eval.metrics import evaluate
 from fgloc.io.log import LogWriter
 from fgloc.io.tum import read_tum
-from fgloc.live.harness import replay_live
+from fgloc.testing.harness import replay_live
 from fgloc.types import Trajectory
 
 from .streams import world

@@ -8,10 +8,10 @@ import time
 import numpy as np
 import serial
 
-from fgloc.live.emulators import SickEmulator, Stm32Emulator
 from fgloc.live.serial_link import FrameConverter, RobotParams, SerialLink, twist_to_wheel_speeds
 from fgloc.live.serial_protocol import encode_sensor_frame
 from fgloc.live.sick import SickClient
+from fgloc.testing.emulators import SickEmulator, Stm32Emulator
 
 
 def _wait(cond, timeout=10.0):

@@ -15,8 +15,8 @@ import numpy as np
 
 from fgloc.io.log import LogReader
 from fgloc.live.app import LiveSession, load_config
-from fgloc.live.emulators import EmulatorPair
 from fgloc.localization import Localizer
+from fgloc.testing.emulators import EmulatorPair
 from fgloc.types import StaticTransform
 
 from .streams import synthetic_messages

@@ -16,14 +16,9 @@ from typing import Any
 import numpy as np
 
 from fgloc.live.app import LiveSession, LiveSummary, load_config
-from fgloc.live.emulators import EmulatorPair, ReplayClock
 from fgloc.live.serial_link import RobotParams
+from fgloc.testing.emulators import EmulatorPair, ReplayClock
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
-
-
-def localizer_config(live_cfg: Any = None) -> Any:
-    """The one fgloc config: the live sections and the localizer's sections in one (``fgloc.config``)."""
-    return live_cfg if live_cfg is not None else load_config()
 
 
 @dataclass
@@ -56,7 +51,7 @@ def replay_live(
     status_sink: Any = None,
     warmup: bool = True,
 ) -> LiveReplay:
-    from fgloc.pipeline import Localizer
+    from fgloc.localization import Localizer
 
     rp = robot if isinstance(robot, RobotParams) else RobotParams.from_dict(robot)
     over: dict[str, Any] = {
@@ -85,9 +80,9 @@ def replay_live(
 
         cfg = parse_config(live_overrides, source="overrides", base=cfg)
     if warmup and occ_map is not None:
-        _warm_up(messages, occ_map, laser_mount, backend, frontend, initial_pose, localizer_config(cfg), t_start)
+        _warm_up(messages, occ_map, laser_mount, backend, frontend, initial_pose, cfg, t_start)
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
-                    config=localizer_config(cfg))
+                    config=cfg)
     pair = EmulatorPair.create(messages, rp, mode=mode, speed=speed, t_start=t_start, duration=duration,
                                lead_s=lead_s)
     sess = LiveSession(loc, pair.stm32.url, pair.sick.address, config=cfg, record=record, publish=publish,
@@ -108,10 +103,11 @@ def replay_live(
 
 
 def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: StaticTransform, backend: str,
-             frontend: str, initial_pose: np.ndarray | None, config: dict[str, Any], t_start: float | None) -> None:
+             frontend: str, initial_pose: np.ndarray | None, config: Any, t_start: float | None) -> None:
     """Run a throwaway localizer over the first scans so JIT compilation (numba) and caches are
     done before the replay clock starts, as they would be on a robot that has run once before."""
-    from fgloc.pipeline import Localizer, run_messages
+    from fgloc.localization import Localizer
+    from fgloc.pipeline import run_messages
 
     first: list[tuple[str, object]] = []
     n_scans = 0

@@ -1,25 +1,25 @@
 """What the view shows, taken from a running localizer: the sink interface and its feed.
 
-:class:`ViewFeed` watches a :class:`fgloc.pipeline.Localizer` through the callbacks the
-run loops already have (``on_message(topic, msg)`` before a message is fused,
-``on_fused(fused, fix)`` after each scan) and hands each sink plain data:
+:class:`ViewFeed` is a :class:`fgloc.localization.Session` sink: it sees every input
+message (``on_message(topic, msg)``, before the localizer) and each localized scan
+(``on_scan(stamp, scan, fix_or_reason, fused)``), and hands each view sink plain data:
 
 * ``on_map(occ_map, stamp)`` once;
-* ``on_scan(view)`` after each scan: the scan, the front-end result (accepted, rejected,
-  no fix, ... with the reason), the fused pose and covariance, and the frame transforms
-  ``map -> odom -> base_link -> laser`` at the fused pose's stamp;
-* ``on_particles(stamp, frame_id, poses)`` after each scan when AMCL runs;
+* ``on_scan(view)`` after each scan (a :class:`ScanView`): the scan, the front-end result
+  (accepted, rejected, no fix, ... with the reason), the fused pose and covariance, and the
+  frame transforms ``map -> odom -> base_link -> laser`` at the fused pose's stamp;
+* ``on_particles(stamp, frame_id, poses)`` after each scan when a particle filter (AMCL) runs;
 * ``on_trajectory(stamp, frame_id, poses)`` the fused trajectory so far (decimated),
   every second of log time or less often as it grows;
 * ``on_health(stamp, health)`` once a second of log time: per-source rates and counts,
   gated fixes, the back-end's statistics and estimates (compass offset, ...);
 * ``close()``.
 
-The feed only reads the localizer's public state (``stats``, ``no_fix_reasons``,
-``fixes``, ``backend.stats``, ``backend.compass_offset()``, AMCL's ``particles``) and
+The feed only reads the localizer's public state (``stats``, ``fixes``, ``last_reason``,
+``backend.stats``, ``backend.compass_offset()``, a particle filter's ``particles``) and
 never calls anything that could change it: the poses are the same with or without a
-view.  It is cheap (a few dict reads and one SE(2) step per message); sinks that do
-real work (encoding, sockets) do it on their own thread (:mod:`fgloc.view.server`).
+view.  It is cheap (a few counter reads and one SE(2) step per message); sinks that do
+real work (encoding, sockets) do it elsewhere (:mod:`fgloc.view.server`: another process).
 
 ``odom -> base_link`` is the odometry's own pose when the messages carry one, else the
 twist integrated as the localizer does; ``map -> odom = map->base (fused) (-) odom->base``
@@ -29,7 +29,6 @@ at the same stamp, as a ROS localizer publishes it.
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -54,7 +53,6 @@ SKIPPED = "skipped"          # the localizer refused the scan (bad or repeated s
 ODOM_ONLY = "odom_only"      # no map: scans only place keyframes
 
 ODOM_EXTRAPOLATE_MAX_S = 0.5  # carry the last odometry to a stamp at most this far
-RATE_WINDOW_S = 2.0           # per-source rates over this much log time
 
 
 @dataclass
@@ -84,6 +82,9 @@ class ViewSink(Protocol):
     def on_health(self, stamp: float, health: dict[str, Any]) -> None: ...
 
     def close(self) -> None: ...
+
+    # optional: ``wants_scan() -> bool``: False to skip this scan (a display thinned to its
+    # frame rate); the feed then does not even build it, and sends the last skipped one at close
 
 
 class TrajectoryDecimator:
@@ -148,14 +149,15 @@ class ViewFeed:
         self.trajectory = TrajectoryDecimator()
         self.counts: dict[str, int] = {"scan": 0, "odom": 0, "imu": 0}
         self.status_counts: dict[str, int] = {}
-        self._arrivals: dict[str, deque[float]] = {k: deque() for k in self.counts}
-        self._pending: tuple[LaserScan, dict[str, Any]] | None = None
+        self._rate_mark: tuple[float, dict[str, int]] | None = None
+        self._pending: tuple[LaserScan, tuple[int, ...]] | None = None
         self._odom_pose: FloatArray | None = None
         self._odom_t: float | None = None
         self._twist = np.zeros(3)
         self._last_health = -math.inf
         self._last_stamp = 0.0
-        self._particles_id: int | None = None
+        self._last_view: tuple[LaserScan, str, str, PoseFix | None, PoseFix | None] | None = None
+        self._skipped_last: list[ViewSink] = []
         self._closed = False
         if loc.map is not None:
             for s in self.sinks:
@@ -165,21 +167,21 @@ class ViewFeed:
     def on_message(self, topic: str, msg: object) -> None:
         """Every input message, before the localizer sees it."""
         if self._pending is not None:
-            self._emit_scan(None, None)  # the previous scan gave no fused pose (not started)
-        if topic == self.scan_topic and isinstance(msg, LaserScan):
-            self._count("scan", msg.stamp)
-            self._pending = (msg, self._snapshot())
-        elif topic == self.odom_topic and isinstance(msg, Odometry):
-            self._count("odom", msg.stamp)
+            self._emit_scan(None, "not localized (a newer scan was already waiting)")
+        if topic == self.odom_topic and isinstance(msg, Odometry):
+            self.counts["odom"] += 1
             self._odometry(msg)
+        elif topic == self.scan_topic and isinstance(msg, LaserScan):
+            self.counts["scan"] += 1
+            self._pending = (msg, self._snapshot())
         elif topic == self.imu_topic:
-            self._count("imu", getattr(msg, "stamp", math.nan))
+            self.counts["imu"] += 1
 
-    def on_fused(self, fused: PoseFix, fix: PoseFix | None = None) -> None:
-        """After each scan, with the fused pose (``Localizer.current()``) and the scan's fix."""
-        if self._pending is None:
-            return
-        self._emit_scan(fused, fix)
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        """After each localized scan (the session sink protocol)."""
+        if self._pending is None or self._pending[0] is not scan:
+            self._pending = (scan, self._pending[1] if self._pending is not None else self._snapshot())
+        self._emit_scan(fused, fix_or_reason)
 
     def close(self) -> None:
         """Flush the last scan, send the final trajectory and health, close every sink."""
@@ -189,6 +191,10 @@ class ViewFeed:
         try:
             if self._pending is not None:
                 self._emit_scan(None, None)
+            if self._skipped_last and self._last_view is not None:
+                view = self._view(*self._last_view)  # the final state, for sinks that thinned it out
+                for s in self._skipped_last:
+                    s.on_scan(view)
             if len(self.trajectory):
                 for s in self.sinks:
                     s.on_trajectory(self._last_stamp, self.frame, self.trajectory.poses())
@@ -202,18 +208,18 @@ class ViewFeed:
     # ------------------------------------------------------------------ odometry
     def _odometry(self, msg: Odometry) -> None:
         t = float(msg.stamp)
-        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
-        if not math.isfinite(t) or tw.shape != (3,) or not np.all(np.isfinite(tw)):
+        if not math.isfinite(t) or (self._odom_t is not None and t <= self._odom_t):
             return
-        if self._odom_t is not None and t <= self._odom_t:
+        tw = msg.twist
+        if len(tw) != 3 or not math.isfinite(float(tw[0]) + float(tw[1]) + float(tw[2])):
             return
-        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
-        if pose is not None and pose.shape == (3,) and np.all(np.isfinite(pose)):
-            self._odom_pose = pose.copy()
+        pose = msg.pose
+        if pose is not None and len(pose) == 3 and math.isfinite(float(pose[0]) + float(pose[1]) + float(pose[2])):
+            self._odom_pose = np.array(pose, dtype=float)
         elif self._odom_pose is None:
             self._odom_pose = np.zeros(3)
         elif self._odom_t is not None:
-            self._odom_pose = compose1(self._odom_pose, se2_exp(tw * (t - self._odom_t)))
+            self._odom_pose = compose1(self._odom_pose, se2_exp(np.asarray(tw, dtype=float) * (t - self._odom_t)))
         self._odom_t = t
         self._twist = tw
 
@@ -224,7 +230,7 @@ class ViewFeed:
         dt = t - self._odom_t
         if dt == 0.0 or abs(dt) > ODOM_EXTRAPOLATE_MAX_S:
             return self._odom_pose
-        return compose1(self._odom_pose, se2_exp(self._twist * dt))
+        return compose1(self._odom_pose, se2_exp(np.asarray(self._twist, dtype=float) * dt))
 
     def transforms(self, fused: PoseFix | None, stamp: float, laser_frame: str) -> list[StaticTransform]:
         """``map -> odom``, ``odom -> base_link`` (when known) and ``base_link -> laser``."""
@@ -248,40 +254,40 @@ class ViewFeed:
         return out
 
     # ------------------------------------------------------------------ scans
-    def _snapshot(self) -> dict[str, Any]:
+    def _snapshot(self) -> tuple[int, ...]:
         st = self.loc.stats
-        return {"scans": st.get("scans", 0), "fixes": st.get("fixes", 0), "no_fix": st.get("no_fix", 0),
-                "rejected": st.get("rejected", 0), "global_searches": st.get("global_searches", 0),
-                "skipped": st.get("skipped", 0), "relocalizations": st.get("relocalizations", 0),
-                "n_fixes": len(getattr(self.loc, "fixes", ())),
-                "no_fix_reasons": dict(getattr(self.loc, "no_fix_reasons", {}) or {}),
-                "skipped_reasons": dict(st.get("skipped_reasons", {}) or {})}
+        return (st.get("scans", 0), st.get("fixes", 0), st.get("no_fix", 0), st.get("rejected", 0),
+                st.get("global_searches", 0), st.get("skipped", 0), st.get("relocalizations", 0),
+                len(getattr(self.loc, "fixes", ())))
 
-    def _status(self, before: dict[str, Any], fix: PoseFix | None) -> tuple[str, str, PoseFix | None]:
-        after = self._snapshot()
-        if after["scans"] == before["scans"]:
-            return SKIPPED, _grown_key(before["skipped_reasons"], after["skipped_reasons"]) or "refused", None
+    def _status(self, before: tuple[int, ...], what: PoseFix | str | None) -> tuple[str, str, PoseFix | None]:
+        scans0, fixes0, no_fix0, rejected0, global0, _, reloc0, n_fixes0 = before
+        scans, fixes, no_fix, rejected, global_, _, reloc, n_fixes = self._snapshot()
+        fix = what if isinstance(what, PoseFix) else None
+        told = what if isinstance(what, str) else str(getattr(self.loc, "last_reason", "") or "")
+        if scans == scans0:
+            return SKIPPED, told or "scan skipped (bad or repeated stamp)", None
         if self.odom_mode:
-            return ODOM_ONLY, "no map", None
-        if after["n_fixes"] > before["n_fixes"]:
+            return ODOM_ONLY, told or "no map", None
+        if fix is None and n_fixes > n_fixes0:
             fix = self.loc.fixes[-1]
-        if after["fixes"] > before["fixes"]:
-            if after["rejected"] > before["rejected"]:
-                return REJECTED, "gated by the back-end (inconsistent with the fused estimate)", fix
-            if after["global_searches"] > before["global_searches"]:
+        if fix is not None and fixes > fixes0:
+            if rejected > rejected0:
+                return REJECTED, told or "fix rejected by the back-end", fix
+            if global_ > global0:
                 return ACCEPTED, "global localization", fix
-            if after["relocalizations"] > before["relocalizations"]:
+            if reloc > reloc0:
                 return ACCEPTED, "relocalization", fix
             return ACCEPTED, "", fix
-        if after["no_fix"] > before["no_fix"]:
-            return NO_FIX, _grown_key(before["no_fix_reasons"], after["no_fix_reasons"]) or "no fix", None
-        if after["global_searches"] > before["global_searches"]:
-            return SEARCHING, "global localization: no candidate yet", None
-        if after["relocalizations"] > before["relocalizations"]:
-            return SEARCHING, "lost: global localization restarted", None
-        return PREDICTED, "not matched (frontend_every): odometry prediction", None
+        if no_fix > no_fix0:
+            return NO_FIX, told or "no fix", None
+        if global_ > global0 or told.startswith("global") or told.startswith("initial"):
+            return SEARCHING, told or "global localization: no candidate yet", None
+        if reloc > reloc0:
+            return SEARCHING, told or "lost: global localization restarted", None
+        return PREDICTED, told or "not matched (frontend_every): odometry prediction", None
 
-    def _emit_scan(self, fused: PoseFix | None, fix: PoseFix | None) -> None:
+    def _emit_scan(self, fused: PoseFix | None, fix: PoseFix | str | None) -> None:
         assert self._pending is not None
         scan, before = self._pending
         self._pending = None
@@ -290,10 +296,16 @@ class ViewFeed:
         stamp = float(scan.stamp)
         if math.isfinite(stamp):
             self._last_stamp = max(self._last_stamp, stamp)
-        view = ScanView(stamp, scan, status, reason, fix, fused,
-                        self.transforms(fused, stamp, scan.frame_id or self.mount.child))
+        wanting: list[ViewSink] = []
+        self._skipped_last = []
         for s in self.sinks:
-            s.on_scan(view)
+            wants = getattr(s, "wants_scan", None)
+            (wanting if wants is None or wants() else self._skipped_last).append(s)
+        self._last_view = (scan, status, reason, fix, fused)
+        if wanting:
+            view = self._view(*self._last_view)
+            for s in wanting:
+                s.on_scan(view)
         if fused is not None:
             self.trajectory.add(float(fused.stamp), fused.pose)
             if self.trajectory.due(stamp):
@@ -307,9 +319,16 @@ class ViewFeed:
             for s in self.sinks:
                 s.on_health(stamp, health)
 
+    def _view(self, scan: LaserScan, status: str, reason: str, fix: PoseFix | None,
+              fused: PoseFix | None) -> ScanView:
+        stamp = float(scan.stamp)
+        return ScanView(stamp, scan, status, reason, fix, fused,
+                        self.transforms(fused, stamp, scan.frame_id or self.mount.child))
+
     def _particles(self, stamp: float) -> None:
         fe = getattr(self.loc, "frontend", None)
-        p = getattr(fe, "particles", None) if self.loc.frontend_name == "amcl" else None
+        pf = bool(getattr(fe, "is_particle_filter", False)) or getattr(self.loc, "frontend_name", "") == "amcl"
+        p = getattr(fe, "particles", None) if pf else None
         if not isinstance(p, np.ndarray) or p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
             return
         step = max(1, -(-len(p) // self.max_particles))
@@ -318,19 +337,13 @@ class ViewFeed:
             s.on_particles(stamp, MAP_FRAME, sub)
 
     # ------------------------------------------------------------------ health
-    def _count(self, source: str, stamp: float) -> None:
-        self.counts[source] += 1
-        if not math.isfinite(stamp):
-            return
-        q = self._arrivals[source]
-        q.append(float(stamp))
-        while q and q[0] < stamp - RATE_WINDOW_S:
-            q.popleft()
-
-    def rate_hz(self, source: str, now: float) -> float:
-        q = self._arrivals[source]
-        n = sum(1 for t in q if now - RATE_WINDOW_S < t <= now)
-        return n / RATE_WINDOW_S
+    def rates_hz(self, stamp: float) -> dict[str, float | None]:
+        """Messages per second of log time per source since the previous call (None: too soon)."""
+        prev = self._rate_mark
+        self._rate_mark = (stamp, dict(self.counts))
+        if prev is None or not stamp - prev[0] > 0:
+            return {k: None for k in self.counts}
+        return {k: (n - prev[1].get(k, 0)) / (stamp - prev[0]) for k, n in self.counts.items()}
 
     def health(self, stamp: float) -> dict[str, Any]:
         """Per-source health at log time ``stamp`` (JSON-ready)."""
@@ -342,13 +355,14 @@ class ViewFeed:
             return int(sum(v for k, v in skipped.items() if str(k).startswith(prefix)))
 
         offset = be.compass_offset() if be is not None and hasattr(be, "compass_offset") else None
+        rates = self.rates_hz(stamp)
         sources = {
-            "scan": {"count": self.counts["scan"], "rate_hz": self.rate_hz("scan", stamp), "skipped": skips("scan"),
+            "scan": {"count": self.counts["scan"], "rate_hz": rates["scan"], "skipped": skips("scan"),
                      "fixes": int(st.get("fixes", 0)), "no_fix": int(st.get("no_fix", 0)),
                      "rejected": int(st.get("rejected", 0)), "status": dict(self.status_counts)},
-            "odom": {"count": self.counts["odom"], "rate_hz": self.rate_hz("odom", stamp),
+            "odom": {"count": self.counts["odom"], "rate_hz": rates["odom"],
                      "skipped": skips("odometry"), "from_poses": int(st.get("odometry_from_poses", 0))},
-            "imu": {"count": self.counts["imu"], "rate_hz": self.rate_hz("imu", stamp), "skipped": skips("compass"),
+            "imu": {"count": self.counts["imu"], "rate_hz": rates["imu"], "skipped": skips("compass"),
                     "compass_offset_deg": None if offset is None else math.degrees(float(offset))},
         }
         return json_ready({

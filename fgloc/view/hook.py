@@ -1,9 +1,9 @@
 """What a localization run attaches to show itself: ``fgloc run/live --view`` and run.mcap's view channels.
 
-::
+A :class:`fgloc.localization.Session` sink::
 
     with ViewHook(loc, topics, view="127.0.0.1:8765", record_to=writer) as hook:
-        run_messages(loc, paced(messages, realtime), topics, hook.on_message, hook.on_fused)
+        Session(loc, routes, [recorder, hook]).run(paced(messages, realtime))
 
 ``view`` (``[HOST:]PORT``) starts the Foxglove WebSocket server; ``record_to`` is where the
 same channels are recorded: an object with ``write_raw`` (the run's MCAP writer) or a path
@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from fgloc.types import PoseFix
+from fgloc.types import LaserScan, PoseFix
 from fgloc.view.feed import ViewFeed, ViewSink
 
 
@@ -86,7 +86,7 @@ class ViewHook:
         time.sleep(min(0.5, max(0.0, deadline - time.monotonic())))
         return True
 
-    # ------------------------------------------------------------------ callbacks (run_messages)
+    # ------------------------------------------------------------------ session sink
     def _failed(self, e: Exception) -> None:
         self.errors += 1
         if self.first_error is None:
@@ -99,10 +99,10 @@ class ViewHook:
             except Exception as e:  # noqa: BLE001 - the view must never stop the localizer
                 self._failed(e)
 
-    def on_fused(self, fused: PoseFix, fix: PoseFix | None = None) -> None:
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
         if self.feed is not None:
             try:
-                self.feed.on_fused(fused, fix)
+                self.feed.on_scan(stamp, scan, fix_or_reason, fused)
             except Exception as e:  # noqa: BLE001
                 self._failed(e)
 

@@ -2,10 +2,10 @@
 
 :class:`McapViewRecorder` is a :class:`fgloc.view.feed.ViewSink` that encodes
 synchronously (a recording must be complete, so nothing is dropped) and writes through
-any object with ``write_raw(topic, schema_name, schema_encoding, schema_data,
-message_encoding, data, log_time_ns)``: :class:`McapFile` (a file of its own, e.g.
-``view.mcap``) or a log writer that offers the same method (so the channels land in
-``run.mcap`` next to the ROS topics).  Opened in Foxglove with the layout in
+any object with ``write_raw(topic, schema_name, schema_data, data, log_time_ns,
+schema_encoding=..., message_encoding=...)``: the run's :class:`fgloc.io.LogWriter` (so
+the channels land in ``run.mcap`` beside the ROS topics) or :class:`McapFile` (a file of
+its own).  Opened in Foxglove with the layout in
 ``docs/foxglove/``, a recording shows the same picture as the live view.
 
 Particles are recorded at most every ``particles_period_s`` of log time (the live view
@@ -28,8 +28,8 @@ from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready
 
 
 class RawMcapWriter(Protocol):
-    def write_raw(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes,
-                  message_encoding: str, data: bytes, log_time_ns: int) -> None: ...
+    def write_raw(self, topic: str, schema_name: str, schema_data: bytes, data: bytes, log_time_ns: int,
+                  schema_encoding: str = ..., message_encoding: str = ...) -> None: ...
 
 
 class McapFile:
@@ -50,8 +50,8 @@ class McapFile:
         self._seq = 0
         self.count = 0
 
-    def write_raw(self, topic: str, schema_name: str, schema_encoding: str, schema_data: bytes,
-                  message_encoding: str, data: bytes, log_time_ns: int) -> None:
+    def write_raw(self, topic: str, schema_name: str, schema_data: bytes, data: bytes, log_time_ns: int,
+                  schema_encoding: str = "protobuf", message_encoding: str = "protobuf") -> None:
         key = (schema_name, schema_encoding)
         sid = self._schemas.get(key)
         if sid is None:
@@ -107,8 +107,8 @@ class McapViewRecorder:
     def _write(self, topic: str, msg: Any, stamp: float) -> None:
         try:
             schema = type(msg).get_schema()
-            self.writer.write_raw(topic, schema.name, schema.encoding, bytes(schema.data), "protobuf",
-                                  msg.encode(), self._ns(stamp))
+            self.writer.write_raw(topic, schema.name, bytes(schema.data), msg.encode(), self._ns(stamp),
+                                  schema_encoding=schema.encoding, message_encoding="protobuf")
             self.count += 1
         except (TypeError, ValueError, OverflowError):
             self.errors += 1
@@ -116,8 +116,8 @@ class McapViewRecorder:
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
         schema = self._json_schemas[topic]
         data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
-        self.writer.write_raw(topic, str(schema.get("title", topic)), "jsonschema", json.dumps(schema).encode(),
-                              "json", data, self._ns(stamp))
+        self.writer.write_raw(topic, str(schema.get("title", topic)), json.dumps(schema).encode(), data,
+                              self._ns(stamp), schema_encoding="jsonschema", message_encoding="json")
         self.count += 1
 
     # ------------------------------------------------------------------ ViewSink

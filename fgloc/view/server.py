@@ -35,6 +35,7 @@ from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
+STOP_TIMEOUT_S = 2.0
 INSTALL_HINT = 'the Foxglove view needs foxglove-sdk: pip install "fgloc[view]"'
 
 
@@ -103,7 +104,7 @@ class FoxgloveServerSink:
     """
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, name: str = "fgloc",
-                 queue_size: int = 256, backlog: int = 256) -> None:
+                 queue_size: int = 256, backlog: int = 256, max_rate_hz: float = 30.0) -> None:
         foxglove = require_foxglove()
         from foxglove import channels as fch
         from foxglove.websocket import Capability, ServerListener
@@ -113,13 +114,17 @@ class FoxgloveServerSink:
         self._enc = encode
         self.stats: dict[str, int] = {"queued": 0, "published": 0, "dropped": 0, "encode_errors": 0,
                                       "map_sent": 0, "client_outbox_full": 0, "clients_connected": 0,
-                                      "clients_disconnected": 0, "client_errors": 0, "subscriptions": 0}
+                                      "clients_disconnected": 0, "client_errors": 0, "subscriptions": 0,
+                                      "thinned": 0, "stop_timed_out": 0}
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=max(1, int(queue_size)))
         self._map_msg: Any = None
         self._map_wanted = threading.Event()
         self._map_lock = threading.Lock()
         self._closed = False
         self._last_ns = 0
+        self._min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
+        self._last_scan_t = -math.inf
+        self._scan_sent = False
         self.ctx = foxglove.Context()
         c = self.ctx
         self.ch_map = fch.GridChannel(ch.MAP, context=c)
@@ -190,11 +195,23 @@ class FoxgloveServerSink:
         self._map_wanted.set()
         self._wake()
 
+    def wants_scan(self) -> bool:
+        """At most ``max_rate_hz`` scans a second (wall clock) reach the viewer: a replay as fast as
+        possible would otherwise spend the localizer's time on frames nobody can see."""
+        now = time.monotonic()
+        self._scan_sent = now - self._last_scan_t >= self._min_period_s and not self._closed
+        if self._scan_sent:
+            self._last_scan_t = now
+        else:
+            self.stats["thinned"] += 1
+        return self._scan_sent
+
     def on_scan(self, view: ScanView) -> None:
         self._put(("scan", view))
 
     def on_particles(self, stamp: float, frame_id: str, poses: np.ndarray) -> None:
-        self._put(("poses", self.ch_particles, stamp, frame_id, poses))
+        if self._scan_sent:  # with the scan they belong to
+            self._put(("poses", self.ch_particles, stamp, frame_id, poses))
 
     def on_trajectory(self, stamp: float, frame_id: str, poses: np.ndarray) -> None:
         self._put(("poses", self.ch_traj, stamp, frame_id, poses))
@@ -216,9 +233,14 @@ class FoxgloveServerSink:
                 if time.monotonic() > deadline:
                     break
         self._thread.join(timeout=max(0.1, deadline - time.monotonic()))
-        try:
-            self.server.stop()
-        finally:
+        # the SDK's stop() waits for every client's outbox to drain: a viewer that stopped
+        # reading would hold it (and Ctrl-C) forever, so it gets STOP_TIMEOUT_S and is left behind
+        stopper = threading.Thread(target=self.server.stop, name="fgloc-view-stop", daemon=True)
+        stopper.start()
+        stopper.join(STOP_TIMEOUT_S)
+        if stopper.is_alive():
+            self.stats["stop_timed_out"] = 1
+        else:
             self._restore_logging()
 
     def __enter__(self) -> FoxgloveServerSink:

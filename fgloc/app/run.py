@@ -40,6 +40,9 @@ class RunRequest:
     odom_topic: str = "/odom"
     imu_topic: str = "/imu"
     force: bool = False  # overwrite output files that fgloc did not write
+    view: str | None = None  # [HOST:]PORT: serve a Foxglove WebSocket view while localizing (fgloc.view)
+    realtime: float | None = None  # replay at this factor of real time (None: as fast as possible)
+    view_channels: bool = True  # record the view's Foxglove channels into run.mcap (needs foxglove-sdk)
 
 
 @dataclass
@@ -96,11 +99,13 @@ def _initial_pose(values: Any) -> np.ndarray | None:
     return pose0
 
 
-def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None) -> RunResult:
+def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None,
+            announce: Callable[[str], None] | None = None) -> RunResult:
     """Localize ``req.log`` and write the outputs into ``req.outdir`` (see the module docstring).
 
     ``progress(total)``: optional factory of a progress bar (an object with ``update(n)`` and
-    context-manager methods, e.g. tqdm) over the messages read.
+    context-manager methods, e.g. tqdm) over the messages read.  ``announce(line)``: where the
+    Foxglove view says where it serves (``req.view``).
     """
     from fgloc.io.log import IMU, LASER_SCAN, ODOMETRY, LogReader, LogWriter, Topics
     from fgloc.io.tum import write_tum
@@ -133,14 +138,21 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     want = {t for t in (scan_topic, odom_topic, imu_topic, topics.tf_static) if reader.has(t)}
     total = sum(counts.get(t, 0) for t in want)
     t_wall = time.perf_counter()
-    with LogWriter(outdir / "run.mcap") as writer:
+    from fgloc.view import ViewHook, check_rate, paced
+
+    realtime = check_rate(req.realtime)
+    with LogWriter(outdir / "run.mcap") as writer, \
+            ViewHook(loc, topics, view=req.view, record_to=writer if req.view_channels else None,
+                     announce=announce) as view:
         sinks: list[Any] = [RecorderSink(writer, topics.fused)]
+        if view.active:
+            sinks.append(view)  # the Foxglove view and its channels in run.mcap (fgloc.view)
         bar = progress(total) if progress is not None else None
         if bar is not None:
             sinks.append(CallbackSink(on_message=lambda topic, msg: bar.update(1)))
         session = Session(loc, Routes.default(topics), sinks)
         try:
-            final = session.run(reader.messages(want))
+            final = session.run(paced(reader.messages(want), realtime))
         finally:
             if bar is not None and hasattr(bar, "close"):
                 bar.close()

@@ -42,6 +42,12 @@ def _progress(quiet: bool):
     return make
 
 
+def _announce(line: str) -> None:
+    import sys
+
+    print(f"fgloc: {line}", file=sys.stderr, flush=True)
+
+
 def _print_run_summary(r: RunResult) -> None:
     from rich.console import Console
 
@@ -89,14 +95,19 @@ def register(app: typer.Typer) -> None:
         imu_topic: str = typer.Option("/imu", "--imu-topic"),
         outdir: Path = typer.Option(..., "-o", "--output", help="output folder"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
+        view: str | None = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
+                                        "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
+        realtime: float | None = typer.Option(None, "--realtime", help="replay at R x real time "
+                                              "(default: as fast as possible)"),
     ) -> None:
-        """Localize a log: trajectory.tum, fixes.tum, run.mcap (/fused_pose), config.yaml."""
+        """Localize a log: trajectory.tum, fixes.tum, run.mcap (/fused_pose + the view's channels), config.yaml."""
         if backend not in ("ekf", "smoother", "batch"):
             raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
         req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                          initial_pose=tuple(initial_pose) if initial_pose else None, config=config,
-                         scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic)
-        r = run_request(req, progress=_progress(quiet))
+                         scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
+                         view=view, realtime=realtime)
+        r = run_request(req, progress=_progress(quiet), announce=_announce)
         _print_run_summary(r)
 
     bench = typer.Typer(help="Benchmarks: the paper replica, fault scenarios.", no_args_is_help=True)

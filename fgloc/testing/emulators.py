@@ -132,6 +132,7 @@ class Stm32Emulator:
         odom_topic: str = "/odom",
         imu_topic: str = "/imu",
         clock: ReplayClock | None = None,
+        inject: dict[int, bytes] | None = None,
     ) -> None:
         msgs: list[tuple[str, Odometry | CompassHeading]] = [
             (t, m) for t, m in messages if t in (odom_topic, imu_topic) and isinstance(m, Odometry | CompassHeading)
@@ -156,6 +157,8 @@ class Stm32Emulator:
         self.garbage_prob = garbage_prob
         self.rng = random.Random(seed)
         self.stats = InjectStats()
+        self.inject = dict(inject or {})  # frame index -> raw bytes written just before that frame
+        self.sent: list[tuple[str, int]] = []  # ("odom" | "imu", index in self.msgs) of every intact frame written
         self.done = threading.Event()
         self._stop = threading.Event()
         self._pause_until = 0.0
@@ -225,12 +228,17 @@ class Stm32Emulator:
 
     def frames(self) -> Iterable[tuple[float, bytes]]:
         """``(host_send_time, frame bytes)`` for the whole replay (no corruption)."""
+        for h, f, _ in self.frames_with_source():
+            yield h, f
+
+    def frames_with_source(self) -> Iterable[tuple[float, bytes, int]]:
+        """``(host_send_time, frame bytes, index in self.msgs)`` for the whole replay."""
         n = self.robot.n_wheels
         kin = kinematics_of(self.robot)
         phi = np.zeros(n)  # wheel angles, rad
         last_s: float | None = None
         seq = 0
-        for _topic, m in self.msgs:
+        for i, (_topic, m) in enumerate(self.msgs):
             s = float(m.stamp)
             h = float(self.clock.to_host(s))
             t_mcu = int(round(self.mcu_t0_us + (h - self.clock.start_host) * (1.0 + self.drift) * 1e6))
@@ -252,11 +260,11 @@ class Stm32Emulator:
                 counts = [0] * n
                 f = encode_sensor_frame(seq, t_mcu, counts, hd, g, flags)
             seq += 1
-            yield h, f
+            yield h, f, i
 
     def run(self) -> None:
         try:
-            for h, f in self.frames():
+            for k, (h, f, i) in enumerate(self.frames_with_source()):
                 if not _wait_until(h, self._stop):
                     return
                 if self._tcp is not None and self._tcp.client is None:
@@ -266,16 +274,23 @@ class Stm32Emulator:
                     self.stats.paused_frames += 1
                     continue
                 data = f
+                intact = True
                 if self.corrupt_prob and self.rng.random() < self.corrupt_prob:
                     b = bytearray(f)
                     b[self.rng.randint(4, len(b) - 1)] ^= self.rng.randint(1, 255)
                     data = bytes(b)
                     self.stats.corrupted += 1
+                    intact = False
                 if self.garbage_prob and self.rng.random() < self.garbage_prob:
                     g = bytes(self.rng.getrandbits(8) for _ in range(self.rng.randint(1, 32)))
                     self.stats.garbage_bytes += len(g)
                     data = g + data
+                if k in self.inject:
+                    self.stats.garbage_bytes += len(self.inject[k])
+                    data = self.inject[k] + data
                 self._write(data)
+                if intact:
+                    self.sent.append(("odom" if isinstance(self.msgs[i][1], Odometry) else "imu", i))
         finally:
             self.done.set()
 
@@ -298,6 +313,7 @@ class SickEmulator:
         seed: int = 0,
         scan_topic: str = "/scan",
         clock: ReplayClock | None = None,
+        inject: dict[int, bytes] | None = None,
     ) -> None:
         scans = [m for t, m in messages if t == scan_topic and isinstance(m, LaserScan)]
         scans.sort(key=lambda m: m.stamp)
@@ -318,7 +334,9 @@ class SickEmulator:
         self.malformed_prob = malformed_prob
         self.rng = random.Random(seed)
         self.stats = InjectStats()
+        self.inject = dict(inject or {})  # scan index -> raw bytes sent just before that scan's telegram
         self.sent_scans = 0
+        self.sent: list[int] = []  # indices (in self.scans) of the scans whose telegrams were sent
         self.done = threading.Event()
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -465,6 +483,7 @@ class SickEmulator:
                 if bad:
                     cut = payload[: self.rng.randint(20, max(21, len(payload) - 5))]
                     out = frame(cut) + out
+                out = self.inject.get(k, b"") + out
                 # encoded ahead, sent on time: "time of transmission" is when the bytes leave
                 if not _wait_until(h_send, self._stop):
                     return
@@ -474,6 +493,7 @@ class SickEmulator:
                         try:
                             c.sendall(out)
                             self.sent_scans += 1
+                            self.sent.append(k)
                             self.stats.malformed += int(bad)
                         except OSError:
                             pass

@@ -34,6 +34,8 @@ def register(app: typer.Typer) -> None:
         out_smoothed: Path = typer.Option(None, "--out-smoothed",
                                           help="write the localizer's smoothed trajectory at exit as TUM"),
         quiet: bool = typer.Option(False, "--quiet", help="no status line"),
+        view: str = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
+                                 "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
     ) -> None:
         """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP."""
         import math
@@ -84,6 +86,16 @@ def register(app: typer.Typer) -> None:
 
         session = LiveSession(loc, serial, laser, config=cfg, record=record, publish=publish or None,
                               status_sink=status, event_sink=event)
+        viewer = None
+        if view is not None:  # the Foxglove view (fgloc.view), also recorded into --record
+            from fgloc.view import ViewHook
+
+            try:
+                viewer = ViewHook(loc, None, view=view, record_to=session.recorder, announce=event)
+            except BaseException:
+                session.close()
+                raise
+            session.runner.session.add_sink(viewer)
         stop = session.runner.stop_event
         hits = [0]
 
@@ -107,6 +119,9 @@ def register(app: typer.Typer) -> None:
             session.start()
             session.runner.run(duration=duration, until=lambda: bool(dead_workers()))
         finally:
+            if viewer is not None:
+                session.runner.drain()  # the backlog reaches the view (and its channels the recording)
+                viewer.close()
             summary = session.close()
             for s, h in old.items():
                 signal.signal(s, h)
@@ -130,6 +145,8 @@ def register(app: typer.Typer) -> None:
             "record": str(record) if record else None,
             "failed_threads": dead_workers(),
         }
+        if viewer is not None:
+            report["view"] = viewer.stats()
         print(dumps(report, indent=1))  # standard JSON: unknown numbers (NaN) are null
         if report["failed_threads"]:
             sys.stderr.write(f"fgloc live: error: {'; '.join(report['failed_threads'])}; stopped\n")

@@ -119,8 +119,8 @@ class ViewHook:
             out["notes"] = list(self.notes)
         return out
 
-    def close(self) -> dict[str, Any]:
-        """Flush and close the sinks (the server stops); idempotent.  Returns :meth:`stats`."""
+    def close(self) -> None:
+        """Flush and close the sinks (the server stops); idempotent.  Counters: :meth:`stats`."""
         try:
             if self.feed is not None:
                 feed, self.feed = self.feed, None
@@ -134,7 +134,6 @@ class ViewHook:
             if self._own_file is not None:
                 self._own_file.close()
                 self._own_file = None
-        return self.stats()
 
     def __enter__(self) -> ViewHook:
         return self

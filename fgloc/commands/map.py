@@ -1,7 +1,11 @@
-"""``fgloc map LOG -o MAPDIR``: build a map_server map and trajectory from a log by pose-graph SLAM.
+"""``fgloc map LOG -o MAPDIR``: build a map_server map and trajectory from a log by pose-graph SLAM,
+then check the map against itself; ``fgloc map-check MAP.yaml LOG``: the same check for any map
+and log (a mapping log, or a localization log with its trajectory: where the world changed).
 
     fgloc map intel.clf.bz2 -o maps/intel [--resolution 0.05] [--config config/mapping.yaml]
     fgloc map run.mcap -o maps/run --start 0 --end 0.5      # only the first half of the scans
+    fgloc map-check maps/intel/map.yaml intel.clf.bz2        # re-check a mapping run
+    fgloc map-check maps/office/map.yaml today.mcap --trajectory run/trajectory.tum -o check/
 """
 
 from __future__ import annotations
@@ -12,20 +16,37 @@ from typing import Annotated
 import typer
 
 
+def _bars(no_progress: bool):
+    from tqdm import tqdm
+
+    bars: list = []
+
+    def factory(n: int, what: str = "mapping"):
+        for b in bars:  # one bar at a time: the previous stage is done
+            b.close()
+        unit = "scan" if what == "mapping" else "test"
+        bar = tqdm(total=n or None, unit=unit, desc=what, disable=no_progress, leave=True)
+        bars.append(bar)
+        return bar.update
+
+    return bars, factory
+
+
 def map_cmd(
     log: Annotated[Path, typer.Argument(help="CARMEN .clf/.log(.gz/.bz2) or ROS 2 MCAP log")],
-    outdir: Annotated[Path, typer.Option("-o", "--output", help="output folder (map.yaml/.pgm/.png, TUMs)")],
+    outdir: Annotated[Path, typer.Option("-o", "--output", help="output folder (map.yaml/.pgm/.png, TUMs, check)")],
     resolution: Annotated[float, typer.Option(help="map cell size (m)")] = 0.05,
     config: Annotated[Path | None, typer.Option(help="YAML with mapping options (MapperConfig fields)")] = None,
     start: Annotated[float | None, typer.Option(help="first fraction of the scans to use (0..1)")] = None,
     end: Annotated[float | None, typer.Option(help="last fraction of the scans to use (0..1)")] = None,
     scan_topic: Annotated[str, typer.Option(help="scan topic (MCAP)")] = "/scan",
     odom_topic: Annotated[str, typer.Option(help="odometry topic (MCAP)")] = "/odom",
+    no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
 ) -> None:
-    """Build a map (ray-traced log-odds occupancy) and the optimized trajectory from a log."""
+    """Build a map (ray-traced log-odds occupancy) and the optimized trajectory from a log, and
+    self-check it: re-match the scans of every place against the map of the other passes."""
     import yaml
-    from tqdm import tqdm
 
     from fgloc.errors import ConfigError
     from fgloc.mapping.build import build_map
@@ -44,15 +65,9 @@ def map_cmd(
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")
     cfg = MapperConfig.from_dict(opts)
-    bars: list = []
-
-    def factory(n: int):
-        bar = tqdm(total=n, unit="scan", desc="mapping", disable=no_progress, leave=True)
-        bars.append(bar)
-        return bar.update
-
+    bars, factory = _bars(no_progress)
     try:
-        out = build_map(log, outdir, cfg, start, end, factory, scan_topic, odom_topic)
+        out = build_map(log, outdir, cfg, start, end, factory, scan_topic, odom_topic, self_check=not no_check)
     finally:
         for b in bars:
             b.close()
@@ -60,10 +75,51 @@ def map_cmd(
     t = out.timings
     typer.echo(
         f"{out.n_scans} scans, {s['keyframes']} keyframes, {s['loops']} loop closures "
-        f"({s['loop_tries']} tried); {t['total_s']:.1f} s (SLAM {t['slam_s']:.1f} s)"
+        f"({s['loop_tries']} tried); {t['total_s']:.1f} s (SLAM {t['slam_s']:.1f} s, check {t['check_s']:.1f} s)"
     )
-    typer.echo(f"wrote {outdir}/map.yaml, map.pgm, map.png, trajectory.tum, trajectory_scans.tum")
+    for w in out.warnings:
+        typer.echo(f"warning: {w}", err=True)
+    files = "map.yaml, map.pgm, map.png, trajectory.tum (every scan), trajectory_keyframes.tum, mapping.yaml"
+    if out.check is not None:
+        typer.echo(out.check.verdict)
+        for line in out.check.suspects:
+            typer.echo(f"  {line}")
+        files += ", check.yaml, check.png"
+    typer.echo(f"wrote {outdir}/: {files}")
+
+
+def map_check_cmd(
+    map_yaml: Annotated[Path, typer.Argument(help="map_server YAML (fgloc map's map.yaml or any other)")],
+    log: Annotated[Path, typer.Argument(help="the log: the mapping log, or a localization log")],
+    outdir: Annotated[Path | None, typer.Option("-o", "--output", help="where check.yaml/.png go "
+                                                "(default: the map's folder)")] = None,
+    trajectory: Annotated[Path | None, typer.Option(help="TUM poses of the log's scans (default: trajectory.tum "
+                                                    "next to the map, i.e. the mapping run's own)")] = None,
+    mode: Annotated[str, typer.Option(help="consistency (passes vs each other), localization (log vs map, "
+                                      "changed world) or auto (localization when --trajectory is given)")] = "auto",
+    scan_topic: Annotated[str, typer.Option(help="scan topic (MCAP)")] = "/scan",
+    odom_topic: Annotated[str, typer.Option(help="odometry topic (MCAP)")] = "/odom",
+    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+) -> None:
+    """Check a map against a log: which regions disagree between passes (and which loop closures
+    are suspect), or where the world no longer matches the map.  Exit 0 when it passes, 1 when
+    it flags something."""
+    from fgloc.mapping.build import map_check
+
+    bars, factory = _bars(no_progress)
+    try:
+        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, scan_topic, odom_topic)
+    finally:
+        for b in bars:
+            b.close()
+    typer.echo(res.verdict)
+    for line in res.suspects:
+        typer.echo(f"  {line}")
+    typer.echo(f"wrote {outdir if outdir is not None else map_yaml.parent}/check.yaml, check.png")
+    if not res.passed:
+        raise typer.Exit(1)
 
 
 def register(app: typer.Typer) -> None:
     app.command("map")(map_cmd)
+    app.command("map-check")(map_check_cmd)

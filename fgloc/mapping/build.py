@@ -1,6 +1,8 @@
-"""``fgloc map``'s work: read a log, run the SLAM, write map.yaml/.pgm, trajectory TUMs, map.png.
+"""``fgloc map`` and ``fgloc map-check``'s work: read a log, run the SLAM and the self-check, write
+map.yaml/.pgm, map.png, trajectory TUMs, check.png/check.yaml, mapping.yaml.
 
-Thin I/O around :mod:`fgloc.mapping.slam`; the caller passes a progress callback.
+Thin I/O around :mod:`fgloc.mapping.slam` and :mod:`fgloc.mapping.selfcheck`; the caller passes
+progress callbacks.
 """
 
 from __future__ import annotations
@@ -13,13 +15,16 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fgloc.errors import LogError
-from fgloc.io.tum import write_tum
-from fgloc.mapping.render import render_map_png
+from fgloc.errors import LogError, MapError
+from fgloc.io.tum import read_tum, write_tum
+from fgloc.mapping.render import render_check_png, render_map_png
+from fgloc.mapping.selfcheck import CheckConfig, CheckResult, LoopInfo, check_against_map, check_consistency
 from fgloc.mapping.slam import MapperConfig, SlamResult, build_occupancy, run_slam
 from fgloc.mapping.source import ScanRecord, log_messages, pair_scans
 from fgloc.maps import OccupancyMap
-from fgloc.types import StaticTransform
+from fgloc.types import StaticTransform, Trajectory
+
+ProgressFactory = Callable[[int, str], Callable[[int], None]]
 
 
 @dataclass
@@ -29,6 +34,8 @@ class MapOutput:
     slam: SlamResult
     n_scans: int
     timings: dict = field(default_factory=dict)
+    check: CheckResult | None = None
+    warnings: list[str] = field(default_factory=list)
 
 
 def load_records(log: str | Path, start: float | None = None, end: float | None = None,
@@ -46,41 +53,149 @@ def load_records(log: str | Path, start: float | None = None, end: float | None 
     return recs, mount
 
 
+def loop_infos(slam: SlamResult) -> list[LoopInfo]:
+    kp = slam.keyframe_poses
+    return [LoopInfo(float(slam.keyframes[lc.i].stamp), float(slam.keyframes[lc.j].stamp), kp[lc.i, :2].copy(),
+                     kp[lc.j, :2].copy()) for lc in slam.loops]
+
+
+def _progress(factory: ProgressFactory | None, n: int, what: str) -> Callable[[int], None] | None:
+    return factory(n, what) if factory is not None else None
+
+
 def build_map(
     log: str | Path,
     outdir: str | Path,
     config: MapperConfig | None = None,
     start: float | None = None,
     end: float | None = None,
-    progress_factory: Callable[[int], Callable[[int], None]] | None = None,
+    progress_factory: ProgressFactory | None = None,
     scan_topic: str = "/scan",
     odom_topic: str = "/odom",
+    self_check: bool = True,
+    check_config: CheckConfig | None = None,
 ) -> MapOutput:
-    """Map ``log`` into ``outdir`` (map.yaml, map.pgm, map.png, trajectory.tum, trajectory_scans.tum,
-    mapping.yaml with statistics)."""
+    """Map ``log`` into ``outdir``: map.yaml/.pgm, map.png, trajectory.tum (every scan),
+    trajectory_keyframes.tum, mapping.yaml (statistics, loop closures, warnings) and, with
+    ``self_check``, check.yaml and check.png."""
     cfg = config or MapperConfig()
     outdir = Path(outdir)
     t0 = time.perf_counter()
     recs, mount = load_records(log, start, end, scan_topic, odom_topic)
     t1 = time.perf_counter()
-    progress = progress_factory(len(recs)) if progress_factory else None
-    res = run_slam(recs, mount, cfg, progress)
+    res = run_slam(recs, mount, cfg, _progress(progress_factory, len(recs), "mapping"))
     t2 = time.perf_counter()
     occ = build_occupancy(res, recs, mount, cfg)
     t3 = time.perf_counter()
     outdir.mkdir(parents=True, exist_ok=True)
     occ.save(outdir / "map.yaml")
-    write_tum(outdir / "trajectory.tum", res.keyframe_trajectory)
-    write_tum(outdir / "trajectory_scans.tum", res.scan_trajectory)
+    write_tum(outdir / "trajectory.tum", res.scan_trajectory)
+    write_tum(outdir / "trajectory_keyframes.tum", res.keyframe_trajectory)
     kp = res.keyframe_poses
     segs = np.array([[kp[lc.i, :2], kp[lc.j, :2]] for lc in res.loops]).reshape(-1, 2, 2)
     render_map_png(outdir / "map.png", occ, res.scan_trajectory.poses[:, :2],
-                   f"{Path(log).name}: {len(res.keyframes)} keyframes, {len(res.loops)} loop closures", segs)
+                   f"{Path(log).name}: {len(res.scan_trajectory)} scans, {len(res.keyframes)} keyframes, "
+                   f"{len(res.loops)} loop closures", segs)
     t4 = time.perf_counter()
-    timings = {"read_s": t1 - t0, "slam_s": t2 - t1, "occupancy_s": t3 - t2, "write_s": t4 - t3, "total_s": t4 - t0}
+    loops = loop_infos(res)
+    check = None
+    if self_check:
+        check = check_consistency(recs, np.asarray(mount.pose), res.scan_trajectory, loops, check_config,
+                                  _progress(progress_factory, 0, "self-check"))
+        write_check(outdir, check, occ, res.scan_trajectory, f"{Path(log).name}: self-check")
+    t5 = time.perf_counter()
+    timings = {"read_s": t1 - t0, "slam_s": t2 - t1, "occupancy_s": t3 - t2, "write_s": t4 - t3,
+               "check_s": t5 - t4, "total_s": t5 - t0}
     stats = {k: int(v) for k, v in res.stats.items()}
+    warnings = list(res.warnings)
     (outdir / "mapping.yaml").write_text(yaml.safe_dump({
         "log": str(log), "scans": len(recs), "stats": stats,
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
-    }, sort_keys=False))
-    return MapOutput(outdir, occ, res, len(recs), timings)
+        "warnings": warnings,
+        "self_check": check.verdict if check is not None else "not run",
+        "loop_closures": [[round(lp.t_old, 6), round(lp.t_new, 6), *[round(float(v), 4) for v in lp.xy_old],
+                           *[round(float(v), 4) for v in lp.xy_new]] for lp in loops],
+    }, sort_keys=False, width=200))
+    return MapOutput(outdir, occ, res, len(recs), timings, check, warnings)
+
+
+def write_check(outdir: Path, check: CheckResult, occ: OccupancyMap, trajectory: Trajectory | None,
+                title: str) -> None:
+    """check.yaml (verdict, per-region scores, suspects, changes) and check.png."""
+    outdir.mkdir(parents=True, exist_ok=True)
+    t0 = check.t_first
+    regions = [{
+        "center_m": [round(float(r.center[0]), 2), round(float(r.center[1]), 2)], "size_m": r.size_m,
+        "score": None if not np.isfinite(r.score) else round(float(r.score), 3), "flagged": bool(r.flagged),
+        "tests": r.n_tests, "checked": r.n_checked, "inconsistent": r.n_bad,
+        "passes_s": [[round(p.t0 - t0, 1), round(p.t1 - t0, 1), p.n_checked, p.n_bad] for p in r.passes],
+        "offset_m": round(r.offset_m, 3), "offset_deg": round(r.offset_deg, 2),
+    } for r in check.regions]
+    changes = [{"kind": c.kind, "center_m": [round(float(v), 2) for v in c.center],
+                "bbox_m": [round(float(v), 2) for v in c.bbox], "cells": c.cells, "returns": c.observations}
+               for c in check.changes]
+    doc = {"verdict": check.verdict, "passed": bool(check.passed), "mode": check.mode,
+           "times": "seconds after the log's first scan", "first_scan_stamp": float(t0),
+           "stats": {k: int(v) for k, v in check.stats.items()}, "suspects": check.suspects,
+           "changes": changes, "regions": regions}
+    (outdir / "check.yaml").write_text(yaml.safe_dump(doc, sort_keys=False, width=200))
+    xy = trajectory.poses[:, :2] if trajectory is not None and len(trajectory) else None
+    render_check_png(outdir / "check.png", occ, check, xy, title)
+
+
+def read_loops(mapping_yaml: Path) -> list[LoopInfo]:
+    """Loop closures listed in a mapping.yaml (empty when absent or unreadable)."""
+    try:
+        doc = yaml.safe_load(mapping_yaml.read_text()) or {}
+        rows = doc.get("loop_closures") or []
+        return [LoopInfo(float(r[0]), float(r[1]), np.array(r[2:4], dtype=float), np.array(r[4:6], dtype=float))
+                for r in rows if len(r) >= 6]
+    except (OSError, yaml.YAMLError, TypeError, ValueError, AttributeError):
+        return []
+
+
+def map_check(
+    map_yaml: str | Path,
+    log: str | Path,
+    outdir: str | Path | None = None,
+    trajectory: str | Path | None = None,
+    mode: str = "auto",
+    config: CheckConfig | None = None,
+    progress_factory: ProgressFactory | None = None,
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+) -> CheckResult:
+    """Self-check ``log`` against the map ``map_yaml``; writes check.yaml / check.png to ``outdir``
+    (default: the map's folder).
+
+    ``mode`` "consistency" re-matches the log's scans against its other passes (a mapping log with
+    the map's own trajectory, ``trajectory.tum`` next to the map unless ``trajectory`` is given);
+    "localization" compares the log's scans at the poses of ``trajectory`` (e.g. ``fgloc run``'s
+    trajectory.tum) with the map and reports changed-world regions; "auto" picks consistency
+    when no trajectory is given, localization otherwise.
+    """
+    map_yaml = Path(map_yaml)
+    occ = OccupancyMap.load(map_yaml)
+    if mode not in ("auto", "consistency", "localization"):
+        raise MapError(f"unknown check mode '{mode}' (auto, consistency or localization)")
+    if mode == "auto":
+        mode = "consistency" if trajectory is None else "localization"
+    tpath = Path(trajectory) if trajectory is not None else map_yaml.parent / "trajectory.tum"
+    if not tpath.exists():
+        raise LogError(f"{tpath}: trajectory not found (give --trajectory, e.g. fgloc run's trajectory.tum)")
+    traj = read_tum(tpath)
+    if len(traj) == 0:
+        raise LogError(f"{tpath}: trajectory has no poses")
+    recs, mount = load_records(log, scan_topic=scan_topic, odom_topic=odom_topic)
+    out = Path(outdir) if outdir is not None else map_yaml.parent
+    if mode == "consistency":
+        loops = read_loops(map_yaml.parent / "mapping.yaml")
+        res = check_consistency(recs, np.asarray(mount.pose), traj, loops, config,
+                                _progress(progress_factory, 0, "self-check"))
+    else:
+        res = check_against_map(recs, np.asarray(mount.pose), traj, occ, config,
+                                _progress(progress_factory, 0, "map-check"))
+    if res.stats.get("posed_scans", 0) == 0:
+        raise LogError(f"{log}: no scan lies within the time span of {tpath} (is it this log's trajectory?)")
+    write_check(out, res, occ, traj, f"{Path(log).name} vs {map_yaml.name} ({res.mode})")
+    return res

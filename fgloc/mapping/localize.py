@@ -14,8 +14,7 @@ import numpy as np
 
 from fgloc.geometry import between, compose, transform_points
 from fgloc.mapping.occupancy import scan_endpoints
-from fgloc.mapping.scanmatch import build_distance_grid, correlative_search, refine
-from fgloc.mapping.slam import _voxel_subsample
+from fgloc.mapping.scanmatch import build_distance_grid, correlative_search, refine, voxel_subsample
 from fgloc.mapping.source import ScanRecord
 from fgloc.maps import OccupancyMap
 from fgloc.types import FloatArray, StaticTransform, Trajectory
@@ -41,7 +40,7 @@ def track_on_map(records: Sequence[ScanRecord], occ: OccupancyMap, mount: Static
         odom_prev = rec.odom
         sc = rec.scan
         ends, hit = scan_endpoints(sc.ranges, sc.angles, sc.range_min, sc.range_max, max_range_m, 8.0)
-        pts = _voxel_subsample(transform_points(mnt, ends[hit]), 0.05)
+        pts = voxel_subsample(transform_points(mnt, ends[hit]), 0.05)
         ok = False
         if len(pts) >= 20:
             sr = correlative_search(grid, pts, pose, window_m, np.radians(window_deg), 0.03, np.radians(1.0), 0.05)

@@ -43,3 +43,70 @@ def render_map_png(path: str | Path, occ: OccupancyMap, trajectory_xy: FloatArra
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
+
+
+def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy: FloatArray | None = None,
+                     title: str = "", dpi: int = 110) -> Path:
+    """Write ``path``: the map with the self-check drawn on it (a :class:`fgloc.mapping.selfcheck.CheckResult`).
+
+    Regions seen by several passes (or by the log) are outlined green when consistent, filled red
+    when flagged, with the inconsistent scans as red arrows (own pose -> where they fit, 3x);
+    change regions are boxed: orange "added" (objects not in the map), blue "removed" (map
+    structure not seen)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from fgloc.geometry import compose
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    img = np.full(occ.data.shape, 0.75)
+    img[occ.free] = 1.0
+    img[occ.occupied] = 0.0
+    x0, x1, y0, y1 = occ.extent
+    h, w = occ.data.shape
+    scale = max(w, h) / 900.0
+    fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) + 1), max(4.0, h / 100 / scale + 1.4)))
+    ax.imshow(img, cmap="gray", vmin=0, vmax=1, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
+    if trajectory_xy is not None and len(trajectory_xy):
+        ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.4, alpha=0.5)
+    for r in result.regions:
+        if r.n_checked == 0:
+            continue
+        lo = r.center - 0.5 * r.size_m
+        if r.flagged:
+            ax.add_patch(Rectangle(tuple(lo), r.size_m, r.size_m, facecolor="red", alpha=0.30, edgecolor="red", lw=1.2))
+        else:
+            ax.add_patch(Rectangle(tuple(lo), r.size_m, r.size_m, fill=False, edgecolor="tab:green", lw=0.5,
+                                   alpha=0.6))
+    bad = [c for c in result.scans if c.status == "inconsistent"]
+    if bad:
+        p0 = np.array([c.pose for c in bad])
+        p1 = np.array([compose(c.pose, np.array([3 * c.offset[0], 3 * c.offset[1], 3 * c.offset[2]])) for c in bad])
+        ax.quiver(p0[:, 0], p0[:, 1], p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1], color="red", angles="xy",
+                  scale_units="xy", scale=1.0, width=0.003)
+    if len(result.added_xy):
+        ax.plot(result.added_xy[:, 0], result.added_xy[:, 1], "s", color="tab:orange", ms=1.5)
+    if len(result.removed_xy):
+        ax.plot(result.removed_xy[:, 0], result.removed_xy[:, 1], "s", color="tab:cyan", ms=1.5)
+    for c in result.changes:
+        b = c.bbox
+        ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, lw=1.2,
+                               edgecolor="tab:orange" if c.kind == "added" else "tab:cyan"))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal")
+    ax.set_title((title + "\n" if title else "") + _wrap(result.verdict, 110), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def _wrap(text: str, width: int) -> str:
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, width))

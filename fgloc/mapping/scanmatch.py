@@ -269,3 +269,116 @@ def match_covariance(info: FloatArray, sigma_m: float, floor_xy_m: float = 0.01,
     cov[1, 1] += floor_xy_m**2
     cov[2, 2] += floor_yaw_rad**2
     return cov
+
+
+@njit(cache=True)
+def _distances(dist, x0, y0, res, dmax, pts, px, py, pth):  # pragma: no cover - compiled
+    n = pts.shape[0]
+    out = np.empty(n)
+    c, s = np.cos(pth), np.sin(pth)
+    for k in range(n):
+        lx, ly = pts[k, 0], pts[k, 1]
+        out[k] = _lookup_nearest(dist, x0, y0, res, dmax, px + c * lx - s * ly, py + s * lx + c * ly)
+    return out
+
+
+def point_distances(grid: DistanceGrid, points: FloatArray, pose: FloatArray) -> FloatArray:
+    """Distance (m, clipped at ``grid.dmax_m``) from each of ``points`` (robot frame) placed at
+    ``pose`` to the grid's point set (nearest-cell lookup)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    return _distances(grid.dist, grid.x0, grid.y0, grid.resolution, grid.dmax_m, pts,
+                      float(pose[0]), float(pose[1]), float(pose[2]))
+
+
+def voxel_subsample(points: FloatArray, voxel_m: float) -> FloatArray:
+    """One point per ``voxel_m`` square (the first in input order); all points when ``voxel_m <= 0``."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if len(pts) == 0 or voxel_m <= 0:
+        return pts
+    keys = np.floor(pts / voxel_m).astype(np.int64)
+    _, idx = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
+    return pts[np.sort(idx)]
+
+
+class GrowingDistanceGrid:
+    """A distance field that point sets are stamped into one after another (a submap being built).
+
+    Cells keep the distance to the nearest point stamped so far (clipped at ``dmax_m``); the
+    bounds grow (by at least ``grow_m``) when new points fall outside.  Adding a point set costs
+    its own points only, not a rebuild of everything stamped before.
+    """
+
+    def __init__(self, resolution: float = 0.05, dmax_m: float = 0.3, grow_m: float = 5.0):
+        self.resolution = float(resolution)
+        self.dmax_m = float(dmax_m)
+        self.grow_m = float(grow_m)
+        self.dist: NDArray[np.float32] | None = None
+        self.ix0 = 0  # lower-left cell index of the grid on the global lattice (x0 = ix0 * resolution)
+        self.iy0 = 0
+        self.count = 0  # point sets added
+
+    @property
+    def nbytes(self) -> int:
+        return 0 if self.dist is None else int(self.dist.nbytes)
+
+    def add(self, points: FloatArray) -> None:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        self.count += 1
+        if len(pts) == 0:
+            return
+        res = self.resolution
+        keys = np.floor(pts / (0.5 * res)).astype(np.int64)
+        _, idx = np.unique(keys[:, 0] * 4_000_037 + keys[:, 1], return_index=True)
+        pts = np.ascontiguousarray(pts[idx])
+        pad = self.dmax_m + res
+        lo = np.floor((pts.min(axis=0) - pad) / res).astype(np.int64)
+        hi = np.ceil((pts.max(axis=0) + pad) / res).astype(np.int64)
+        if self.dist is None:
+            g = int(np.ceil(self.grow_m / res))
+            self.ix0, self.iy0 = int(lo[0] - g), int(lo[1] - g)
+            h, w = int(hi[1] + g - self.iy0), int(hi[0] + g - self.ix0)
+            self.dist = np.full((h, w), self.dmax_m, dtype=np.float32)
+        else:
+            h, w = self.dist.shape
+            if lo[0] < self.ix0 or lo[1] < self.iy0 or hi[0] > self.ix0 + w or hi[1] > self.iy0 + h:
+                g = int(np.ceil(self.grow_m / res))
+                nx0 = min(self.ix0, int(lo[0]) - g) if lo[0] < self.ix0 else self.ix0
+                ny0 = min(self.iy0, int(lo[1]) - g) if lo[1] < self.iy0 else self.iy0
+                nx1 = max(self.ix0 + w, int(hi[0]) + g) if hi[0] > self.ix0 + w else self.ix0 + w
+                ny1 = max(self.iy0 + h, int(hi[1]) + g) if hi[1] > self.iy0 + h else self.iy0 + h
+                new = np.full((ny1 - ny0, nx1 - nx0), self.dmax_m, dtype=np.float32)
+                new[self.iy0 - ny0:self.iy0 - ny0 + h, self.ix0 - nx0:self.ix0 - nx0 + w] = self.dist
+                self.dist, self.ix0, self.iy0 = new, nx0, ny0
+        _stamp(self.dist, pts, self.ix0 * res, self.iy0 * res, res, self.dmax_m)
+
+    def grid(self) -> DistanceGrid:
+        """The field as a :class:`DistanceGrid` (a view: later ``add`` calls change it)."""
+        if self.dist is None:
+            return DistanceGrid(np.full((2, 2), self.dmax_m, np.float32), 0.0, 0.0, self.resolution, self.dmax_m)
+        return DistanceGrid(self.dist, self.ix0 * self.resolution, self.iy0 * self.resolution, self.resolution,
+                            self.dmax_m)
+
+
+def coarsen_grid(grid: DistanceGrid, factor: int) -> DistanceGrid:
+    """The grid at ``factor`` times the cell size, each coarse cell holding the minimum of its fine
+    cells (an optimistic distance: for coarse correlative search, where it keeps the true peak)."""
+    f = max(int(factor), 1)
+    if f == 1:
+        return grid
+    return DistanceGrid(_minpool(grid.dist, f, np.float32(grid.dmax_m)), grid.x0, grid.y0, grid.resolution * f,
+                        grid.dmax_m)
+
+
+@njit(cache=True)
+def _minpool(dist, f, dmax):  # pragma: no cover - compiled
+    h, w = dist.shape
+    hh = (h + f - 1) // f
+    ww = (w + f - 1) // f
+    out = np.full((hh, ww), dmax, dtype=np.float32)
+    for i in range(h):
+        oi = i // f
+        for j in range(w):
+            v = dist[i, j]
+            if v < out[oi, j // f]:
+                out[oi, j // f] = v
+    return out

@@ -32,10 +32,13 @@ from fgloc.geometry import between, compose, rotate_covariance, transform_points
 from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
 from fgloc.mapping.scanmatch import (
     DistanceGrid,
+    GrowingDistanceGrid,
     build_distance_grid,
+    coarsen_grid,
     correlative_search,
     match_covariance,
     refine,
+    voxel_subsample,
 )
 from fgloc.mapping.source import ScanRecord
 from fgloc.maps import OccupancyMap
@@ -52,7 +55,8 @@ class MapperConfig:
     max_range_m: float = 25.0         # returns beyond are not used as hits
     carve_range_m: float = 8.0        # no-return beams carve free space up to here
     match_voxel_m: float = 0.0        # scan point subsampling for matching (0: every return)
-    submap_keyframes: int = 25        # local submap = last N keyframes
+    submap_keyframes: int = 25        # local submaps of N keyframes, a new one every N/2 (tracking
+                                      # matches against the older one: the last N/2..N keyframes)
     submap_resolution: float = 0.025  # distance-field cell size for matching
     dmax_m: float = 0.3               # distance field clip
     huber_m: float = 0.02             # Gauss-Newton robust kernel width
@@ -61,6 +65,9 @@ class MapperConfig:
     track_min_inliers: float = 0.5    # below: tracking falls back to odometry
     kf_search_m: float = 0.15         # keyframe correlative window
     kf_search_deg: float = 6.0
+    kf_search_below: float = 0.85     # ... searched only when refining from odometry leaves fewer inliers
+    odom_jump_m: float = 1.0          # an odometry step longer than this + max_speed * dt is a jump ...
+    odom_max_speed: float = 3.0       # ... (m/s) and is ignored (the scan matching bridges it)
     odom_sigma_xy: tuple[float, float] = (0.05, 0.2)     # sigma = a + b * distance (loose: real odometry is biased)
     odom_sigma_yaw: tuple[float, float] = (0.05, 0.5)    # sigma = a + b * |dyaw|
     loop_radius_m: float = 5.0        # candidates within this distance of the estimate
@@ -77,6 +84,7 @@ class MapperConfig:
     loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
     loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
     loop_grid_cache_kf: int = 20      # reuse a loop submap grid for this many keyframes
+    loop_grid_cache_mb: float = 96.0  # ... within this memory (oldest dropped first)
     final_batch: bool = True
     final_refine: bool = False        # re-align every scan to the optimized keyframes around it
     refine_half: int = 6              # ... keyframes k-N .. k+N (its own keyframe excluded)
@@ -135,14 +143,7 @@ class SlamResult:
     keyframe_trajectory: Trajectory
     loops: list[LoopClosure]
     stats: dict = field(default_factory=dict)
-
-
-def _voxel_subsample(pts: FloatArray, voxel: float) -> FloatArray:
-    if len(pts) == 0 or voxel <= 0:
-        return pts
-    keys = np.floor(pts / voxel).astype(np.int64)
-    _, idx = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
-    return pts[np.sort(idx)]
+    warnings: list[str] = field(default_factory=list)  # one line each: what the map may lack, and why
 
 
 class GraphSlam:
@@ -159,15 +160,21 @@ class GraphSlam:
         self.scan_points: list[FloatArray] = []   # match points of every scan (base frame)
         self._pose: FloatArray | None = None      # current tracked pose
         self._odom_prev: FloatArray | None = None
+        self._odom_fix = np.zeros(3)              # odometry jumps removed: corrected = compose(fix, raw)
+        self._stamp_prev: float | None = None
         self._grid: DistanceGrid | None = None
+        self._submaps: list[tuple[int, GrowingDistanceGrid]] = []  # (first keyframe, field), oldest first
+        self.jumps: list[tuple[float, float]] = []  # (stamp, length m) of ignored odometry jumps
         self._isam = gtsam.ISAM2(gtsam.ISAM2Params())
         self._graph = gtsam.NonlinearFactorGraph()   # all factors (for the final batch)
         self._new_f = gtsam.NonlinearFactorGraph()
         self._new_v = gtsam.Values()
         self._est: FloatArray = np.zeros((0, 3))
-        self._loop_grids: dict[int, tuple[int, DistanceGrid]] = {}
+        self._loop_grids: dict[int, tuple[int, DistanceGrid, DistanceGrid]] = {}  # j -> (k, fine, coarse)
+        self._loops_seen = 0
         self.stats = {"scans": 0, "tracked": 0, "track_fail": 0, "stationary": 0, "keyframes": 0,
-                      "loop_tries": 0, "loops": 0, "loop_rejected": 0}
+                      "kf_searches": 0, "loop_tries": 0, "loops": 0, "loop_rejected": 0, "odom_jumps": 0,
+                      "empty_scans": 0}
 
     # ------------------------------------------------------------ helpers
     def _scan_points(self, rec: ScanRecord) -> FloatArray:
@@ -188,31 +195,58 @@ class GraphSlam:
         self._graph.add(f)
         self._new_f.add(f)
 
-    def _rebuild_submap(self) -> None:
-        kfs = self.keyframes[-self.cfg.submap_keyframes:]
-        pts = np.concatenate([transform_points(kf.frontend, kf.points) for kf in kfs])
-        self._grid = build_distance_grid(pts, self.cfg.submap_resolution, self.cfg.dmax_m, 0.5)
+    def _insert_submaps(self, kf: Keyframe) -> None:
+        """Stamp the new keyframe into the open submaps (starting one every N/2 keyframes, closing
+        them at N); tracking matches against the oldest open one."""
+        n = max(int(self.cfg.submap_keyframes), 2)
+        k = len(self.keyframes) - 1
+        if not self._submaps or k - self._submaps[-1][0] >= n // 2:
+            self._submaps.append((k, GrowingDistanceGrid(self.cfg.submap_resolution, self.cfg.dmax_m)))
+        world = transform_points(kf.frontend, kf.points)
+        for _, sm in self._submaps:
+            sm.add(world)
+        while len(self._submaps) > 1 and k - self._submaps[0][0] + 1 >= n:
+            self._submaps.pop(0)
+        self._grid = self._submaps[0][1].grid()
 
     # ------------------------------------------------------------ main step
     def add(self, rec: ScanRecord) -> None:
         cfg = self.cfg
         self.stats["scans"] += 1
-        odom = np.asarray(rec.odom, dtype=float)
+        raw = np.asarray(rec.odom, dtype=float)
+        if not np.all(np.isfinite(raw)):  # no usable odometry: carry the last one on
+            raw = self._odom_prev if self._odom_prev is not None else np.zeros(3)
+        odom = compose(self._odom_fix, raw)
         pts = self._scan_points(rec)
-        mpts = _voxel_subsample(pts, cfg.match_voxel_m)
+        mpts = voxel_subsample(pts, cfg.match_voxel_m)
+        if len(pts) == 0:
+            self.stats["empty_scans"] += 1
         if self._pose is None or self._odom_prev is None:
             self._pose = np.zeros(3)
             self._odom_prev = odom
-            self._new_keyframe(rec, pts, mpts, None)
+            self._stamp_prev = rec.stamp
+            self._new_keyframe(rec, pts, mpts, None, odom)
             return
         d_odom = between(self._odom_prev, odom)
+        jumped = False
+        dt = abs(rec.stamp - self._stamp_prev) if self._stamp_prev is not None else 0.0
+        step = float(np.hypot(d_odom[0], d_odom[1]))
+        if step > cfg.odom_jump_m + cfg.odom_max_speed * min(dt, 10.0):
+            # an odometry jump (reset, glitch): ignore it, the scan matching bridges the step
+            self.jumps.append((float(rec.stamp), step))
+            self.stats["odom_jumps"] += 1
+            self._odom_fix = compose(self._odom_prev, between(raw, np.zeros(3)))
+            odom = compose(self._odom_fix, raw)
+            d_odom = between(self._odom_prev, odom)
+            jumped = True
         self._odom_prev = odom
+        self._stamp_prev = rec.stamp
         pred = compose(self._pose, d_odom)
         last_kf = self.keyframes[-1]
         rel_pred = between(last_kf.frontend, pred)
         is_kf = (np.hypot(rel_pred[0], rel_pred[1]) >= cfg.kf_dist_m
                  or abs(rel_pred[2]) >= np.radians(cfg.kf_angle_deg))
-        stationary = np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5
+        stationary = np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5 and not jumped
         info = None
         assert self._grid is not None
         if stationary and not is_kf:
@@ -222,12 +256,14 @@ class GraphSlam:
             pose = pred
             self.stats["track_fail"] += 1
         else:
-            guess = pred
-            if is_kf:
+            rr = refine(self._grid, mpts, pred, cfg.huber_m)
+            if is_kf and rr.inlier_frac < cfg.kf_search_below:
+                self.stats["kf_searches"] += 1
                 sr = correlative_search(self._grid, mpts, pred, cfg.kf_search_m, np.radians(cfg.kf_search_deg),
                                         0.03, np.radians(1.0), 0.05)
-                guess = sr.pose
-            rr = refine(self._grid, mpts, guess, cfg.huber_m)
+                rs = refine(self._grid, mpts, sr.pose, cfg.huber_m)
+                if rs.inlier_frac > rr.inlier_frac:
+                    rr = rs
             if rr.inlier_frac >= cfg.track_min_inliers and np.hypot(*(rr.pose[:2] - pred[:2])) < 0.5:
                 pose = rr.pose
                 info = rr.info
@@ -238,23 +274,26 @@ class GraphSlam:
         self._pose = pose
         rel = between(last_kf.frontend, pose)
         if np.hypot(rel[0], rel[1]) >= cfg.kf_dist_m or abs(rel[2]) >= np.radians(cfg.kf_angle_deg):
-            self._new_keyframe(rec, pts, mpts, info)
+            self._new_keyframe(rec, pts, mpts, info, odom)
         else:
             self.scan_kf.append(len(self.keyframes) - 1)
             self.scan_rel.append(rel)
             self.scan_stamps.append(rec.stamp)
-            self.scan_points.append(mpts)
+            if cfg.final_refine:
+                self.scan_points.append(mpts)
 
-    def _new_keyframe(self, rec: ScanRecord, pts: FloatArray, mpts: FloatArray, info: FloatArray | None) -> None:
+    def _new_keyframe(self, rec: ScanRecord, pts: FloatArray, mpts: FloatArray, info: FloatArray | None,
+                      odom: FloatArray) -> None:
         cfg = self.cfg
         assert self._pose is not None
         k = len(self.keyframes)
-        kf = Keyframe(rec.index, rec.stamp, np.asarray(rec.odom, dtype=float), self._pose.copy(), pts, mpts)
+        kf = Keyframe(rec.index, rec.stamp, np.asarray(odom, dtype=float), self._pose.copy(), pts, mpts)
         self.keyframes.append(kf)
         self.scan_kf.append(k)
         self.scan_rel.append(np.zeros(3))
         self.scan_stamps.append(rec.stamp)
-        self.scan_points.append(mpts)
+        if cfg.final_refine:
+            self.scan_points.append(mpts)
         self.stats["keyframes"] += 1
         if k == 0:
             self._add_factor(gtsam.PriorFactorPose2(0, gtsam.Pose2(0.0, 0.0, 0.0),
@@ -277,32 +316,47 @@ class GraphSlam:
             self._new_v.insert(k, gtsam.Pose2(*guess))
             if k % cfg.loop_every_kf == 0:
                 self._close_loops(k, guess)
-        self._update()
-        self._rebuild_submap()
+        n_loops = self.stats["loops"]
+        self._update(full=(k + 1) % cfg.loop_every_kf == 0 or self.stats["loops"] != self._loops_seen or k < 2)
+        self._loops_seen = n_loops
+        self._insert_submaps(kf)
 
-    def _update(self) -> None:
+    def _update(self, full: bool = True) -> None:
+        """Update iSAM2; ``full`` re-reads every pose, else only the newest is appended (the older
+        ones change little until the next loop-closure search reads them all)."""
         self._isam.update(self._new_f, self._new_v)
         self._new_f = gtsam.NonlinearFactorGraph()
         self._new_v = gtsam.Values()
-        est = self._isam.calculateEstimate()
-        self._est = np.asarray(gtsam.utilities.extractPose2(est), dtype=float).reshape(-1, 3)
+        k = len(self.keyframes) - 1
+        if full or len(self._est) != k:
+            est = self._isam.calculateEstimate()
+            self._est = np.asarray(gtsam.utilities.extractPose2(est), dtype=float).reshape(-1, 3)
+        else:
+            p = self._isam.calculateEstimatePose2(k)
+            self._est = np.vstack([self._est, [[p.x(), p.y(), p.theta()]]])
 
     # ------------------------------------------------------------ loops
-    def _submap_around(self, j: int, k: int) -> DistanceGrid:
-        """Grid of keyframes j-N..j+N in the frame of keyframe j (cached for a few keyframes)."""
+    def _submap_around(self, j: int, k: int) -> tuple[DistanceGrid, DistanceGrid]:
+        """Grid of keyframes j-N..j+N in the frame of keyframe j, and its 4x coarser minimum
+        (cached for a few keyframes, within a memory budget)."""
         hit = self._loop_grids.get(j)
         if hit is not None and k - hit[0] <= self.cfg.loop_grid_cache_kf:
-            return hit[1]
+            return hit[1], hit[2]
         h = self.cfg.loop_submap_half
         lo, hi = max(0, j - h), min(len(self._est), j + h + 1)
         pj = self._est[j]
         pts = np.concatenate([transform_points(between(pj, self._est[i]), self.keyframes[i].points)
                               for i in range(lo, hi)])
         grid = build_distance_grid(pts, self.cfg.submap_resolution, self.cfg.loop_dmax_m, 0.5)
-        if len(self._loop_grids) > 64:
-            self._loop_grids = {a: b for a, b in self._loop_grids.items() if k - b[0] <= self.cfg.loop_grid_cache_kf}
-        self._loop_grids[j] = (k, grid)
-        return grid
+        coarse = coarsen_grid(grid, 4)
+        self._loop_grids = {a: b for a, b in self._loop_grids.items() if k - b[0] <= self.cfg.loop_grid_cache_kf}
+        budget = self.cfg.loop_grid_cache_mb * 1e6 - grid.dist.nbytes - coarse.dist.nbytes
+        for a in sorted(self._loop_grids, key=lambda a: self._loop_grids[a][0]):  # oldest first
+            if sum(g.dist.nbytes + c.dist.nbytes for _, g, c in self._loop_grids.values()) <= budget:
+                break
+            del self._loop_grids[a]
+        self._loop_grids[j] = (k, grid, coarse)
+        return grid, coarse
 
     def _close_loops(self, k: int, guess: FloatArray) -> None:
         cfg = self.cfg
@@ -324,10 +378,10 @@ class GraphSlam:
             return
         for j in chosen:
             self.stats["loop_tries"] += 1
-            grid = self._submap_around(j, k)
+            grid, coarse = self._submap_around(j, k)
             pred = between(self._est[j], guess)
             coarse_pts = mpts if len(mpts) <= 70 else mpts[:: int(np.ceil(len(mpts) / 70))]
-            sr = correlative_search(grid, coarse_pts, pred, cfg.loop_window_m, np.radians(cfg.loop_window_deg),
+            sr = correlative_search(coarse, coarse_pts, pred, cfg.loop_window_m, np.radians(cfg.loop_window_deg),
                                     0.12, np.radians(2.0), 0.15, far_m=0.6, far_rad=np.radians(10))
             fr = correlative_search(grid, mpts, sr.pose, 0.1, np.radians(2.0), 0.025, np.radians(0.5), 0.05)
             rr = refine(grid, mpts, fr.pose, cfg.huber_m)
@@ -392,7 +446,35 @@ class GraphSlam:
             scan_poses = self._refine_scans(poses, kf_idx, scan_poses)
         scan_traj = Trajectory.from_unsorted(np.asarray(self.scan_stamps), scan_poses)
         kf_traj = Trajectory.from_unsorted(np.array([kf.stamp for kf in self.keyframes]), poses)
-        return SlamResult(self.keyframes, poses, scan_traj, kf_traj, self.loops, dict(self.stats))
+        return SlamResult(self.keyframes, poses, scan_traj, kf_traj, self.loops, dict(self.stats), self.warnings())
+
+    def warnings(self) -> list[str]:
+        """What the map may lack, one line each (empty for a healthy run)."""
+        st = self.stats
+        n = max(st["scans"], 1)
+        t0 = self.scan_stamps[0] if self.scan_stamps else 0.0
+        out = []
+        if st["empty_scans"] == st["scans"]:
+            out.append("no scan has a return within range (every beam at max range or invalid): the map has "
+                       "no walls, only the free space the beams carve, and the trajectory is the odometry")
+        elif st["empty_scans"] > 0.2 * n:
+            out.append(f"{100 * st['empty_scans'] / n:.0f} % of the scans have no return within range: "
+                       "the trajectory follows the odometry there")
+        if st["scans"] < 50 or st["keyframes"] < 5:
+            out.append(f"only {st['scans']} scans ({st['keyframes']} keyframes): too short a log for loop closures "
+                       "or a self-check")
+        matched = st["scans"] - st["stationary"] - st["empty_scans"] - (1 if st["scans"] else 0)
+        if st["empty_scans"] < st["scans"] and matched > 0 and st["track_fail"] - st["empty_scans"] > 0.2 * matched:
+            out.append(f"{100 * (st['track_fail'] - st['empty_scans']) / matched:.0f} % of the scans did not fit "
+                       "the local map: the trajectory follows the odometry there")
+        if self.jumps:
+            big = max(self.jumps, key=lambda j: j[1])
+            out.append(f"the odometry jumped {len(self.jumps)} time(s) (largest {big[1]:.1f} m at "
+                       f"t={big[0] - t0:.1f} s after the first scan): ignored, the scan matching bridged the step")
+        if not self.loops and st["keyframes"] > self.cfg.loop_min_gap_kf:
+            out.append("no loop closure: no place was recognised on a second pass, so drift along the path is not "
+                       "corrected")
+        return out
 
 
 def run_slam(records: Sequence[ScanRecord], mount: StaticTransform, config: MapperConfig | None = None,

@@ -87,14 +87,15 @@ def test_fgloc_map_cli_writes_outputs(repo_data, tmp_path):
     rc = main(["map", str(repo_data / "radish" / "fr079-head.clf.bz2"), "-o", str(out), "--no-progress",
                "--end", "0.5", "--resolution", "0.1"])
     assert rc == 0
-    for f in ("map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_scans.tum"):
+    for f in ("map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_keyframes.tum", "check.yaml", "check.png"):
         assert (out / f).is_file()
     m = OccupancyMap.load(out / "map.yaml")
     assert m.resolution == pytest.approx(0.1)
     assert m.occupied.sum() > 100 and m.free.sum() > 10 * m.occupied.sum()
-    kf = read_tum(out / "trajectory.tum")
-    scans = read_tum(out / "trajectory_scans.tum")
+    kf = read_tum(out / "trajectory_keyframes.tum")
+    scans = read_tum(out / "trajectory.tum")  # every scan has a pose
     assert 30 < len(kf) < len(scans) <= 300
+    assert len(scans) == 300
 
 
 def test_fgloc_map_missing_log_is_one_line_error(tmp_path, capsys):

@@ -16,7 +16,6 @@ from numpy.typing import NDArray
 
 from fgloc.geometry import yaw_to_quaternion
 from fgloc.io.log import stamp_to_sec_nsec
-from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
 FloatArray = NDArray[np.float64]
@@ -39,7 +38,7 @@ def pose3(pose: FloatArray, z: float = 0.0) -> Any:
                    orientation=fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
 
 
-def grid_cells(occ_map: OccupancyMap) -> NDArray[np.uint8]:
+def grid_cells(occ_map: Any) -> NDArray[np.uint8]:
     """``(H, W, 5)`` bytes per cell: grey level (free light, occupied black), alpha (unknown
     translucent) and the occupancy value itself as int8 (-1 unknown, 0..100)."""
     v = np.asarray(occ_map.data, dtype=np.int16)
@@ -55,16 +54,18 @@ def grid_cells(occ_map: OccupancyMap) -> NDArray[np.uint8]:
     return out
 
 
-def grid_message(occ_map: OccupancyMap, stamp: float, frame_id: str = "map") -> Any:
-    """The map as a ``foxglove.Grid``: row 0 is the bottom row (smallest y), as in the map."""
+def grid_message(occ_map: Any, stamp: float, frame_id: str = "map") -> Any:
+    """The map (an :class:`~fgloc.maps.OccupancyMap`, or anything with its ``data``, ``resolution``
+    and ``origin``) as a ``foxglove.Grid``: row 0 is the bottom row (smallest y), as in the map."""
     cells = grid_cells(occ_map)
+    width = int(cells.shape[1])
     u8, i8 = fm.PackedElementFieldNumericType.Uint8, fm.PackedElementFieldNumericType.Int8
     fields = [fm.PackedElementField(name=n, offset=i, type=(i8 if n == "occupancy" else u8))
               for i, n in enumerate(GRID_FIELDS)]
     res = float(occ_map.resolution)
     return fm.Grid(timestamp=timestamp(stamp), frame_id=frame_id, pose=pose3(occ_map.origin),
-                   column_count=int(occ_map.width), cell_size=fm.Vector2(x=res, y=res),
-                   row_stride=int(occ_map.width) * GRID_CELL_STRIDE, cell_stride=GRID_CELL_STRIDE,
+                   column_count=width, cell_size=fm.Vector2(x=res, y=res),
+                   row_stride=width * GRID_CELL_STRIDE, cell_stride=GRID_CELL_STRIDE,
                    fields=fields, data=cells.tobytes())
 
 

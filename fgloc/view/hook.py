@@ -26,7 +26,7 @@ from fgloc.view.feed import ViewFeed, ViewSink
 class ViewHook:
     def __init__(self, loc: Any, topics: Any = None, view: str | None = None, record_to: Any = None,
                  wait_for_viewer_s: float = 0.0, announce: Callable[[str], None] | None = None,
-                 queue_size: int = 256) -> None:
+                 server_options: dict[str, Any] | None = None) -> None:
         self.server: Any = None
         self.recorder: Any = None
         self.notes: list[str] = []
@@ -35,11 +35,10 @@ class ViewHook:
         self._own_file: Any = None
         sinks: list[ViewSink] = []
         if view is not None:
-            from fgloc.view.server import FoxgloveServerSink, parse_view_address, require_foxglove
+            from fgloc.view.server import FoxgloveServerSink, parse_view_address
 
             host, port = parse_view_address(view)
-            require_foxglove()
-            self.server = FoxgloveServerSink(host, port, queue_size=queue_size)
+            self.server = FoxgloveServerSink(host, port, **(server_options or {}))
             sinks.append(self.server)
             if announce is not None:
                 announce(f"Foxglove view on {self.server.url} (Foxglove: Open connection -> Foxglove WebSocket; "
@@ -81,9 +80,11 @@ class ViewHook:
         deadline = time.monotonic() + timeout_s
         while self.server.stats["subscriptions"] == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
+            self.server.poll()
         if self.server.stats["subscriptions"] == 0:
             return False
         time.sleep(min(0.5, max(0.0, deadline - time.monotonic())))
+        self.server.poll()
         return True
 
     # ------------------------------------------------------------------ session sink

@@ -110,7 +110,11 @@ def test_cli_sigint_closes_recording(tmp_path):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     pair.start()
-    time.sleep(5.0)
+    # stop once the CLI has been streaming for a while (its start-up may take seconds on a loaded machine)
+    t0 = time.monotonic()
+    while pair.sick.sent_scans < 60 and time.monotonic() - t0 < 25.0:
+        time.sleep(0.05)
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=30)
     pair.stop()

@@ -275,7 +275,8 @@ class CarmenReader:
                 rmax = min(rmax, float(self.max_range_m))
         else:
             rmax = self._peek.no_return_m
-        out = r.astype(np.float32)
+        with np.errstate(over="ignore", invalid="ignore"):  # 1e300 -> inf, at or beyond range_max anyway
+            out = r.astype(np.float32)
         with np.errstate(invalid="ignore"):
             out[r >= rmax] = np.inf
             out[r <= 0.0] = np.nan

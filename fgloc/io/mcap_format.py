@@ -173,22 +173,31 @@ def parse_chunk_body(body: bytes, complete: bool = True) -> ChunkHead:
 def chunk_records(head: ChunkHead, want: set[int] | None) -> Parsed:
     """Decompress, check the CRC and parse a chunk; :class:`McapFormatError` if damaged."""
     if not head.complete:
-        try:
-            buf = decompress(head.compression, head.data, head.size, partial=True)
-        except Exception:  # noqa: BLE001 - nothing readable in the cut part
-            return Parsed()
-        return parse_records(buf, want, complete=False)
-    try:
-        buf = decompress(head.compression, head.data, head.size)
-    except McapFormatError:
-        raise
-    except Exception as e:  # noqa: BLE001 - zstd/lz4 errors on corrupt data
-        raise McapFormatError(f"cannot decompress ({type(e).__name__})") from None
-    if len(buf) != head.size:
+        cut = _decompressed(head.compression, head.data, head.size, partial=True)
+        return Parsed() if cut is None else parse_records(cut, want, complete=False)
+    buf = _decompressed(head.compression, head.data, head.size)
+    if head.crc:
+        if buf is None or zlib.crc32(buf) != head.crc:
+            # the size or the compression name may be what is damaged: the CRC tells a right guess
+            for comp in ("zstd", "lz4", ""):
+                alt = _decompressed(comp, head.data, head.size, True)
+                if alt is not None and zlib.crc32(alt) == head.crc:
+                    buf = alt
+                    break
+            else:
+                raise McapFormatError("CRC mismatch" if buf is not None else "cannot decompress")
+    elif buf is None:
+        raise McapFormatError(f"cannot decompress ({head.compression[:20]})")
+    elif len(buf) != head.size:
         raise McapFormatError("decompressed size differs from the chunk header")
-    if head.crc and zlib.crc32(buf) != head.crc:
-        raise McapFormatError("CRC mismatch")
     return parse_records(buf, want, complete=True)
+
+
+def _decompressed(compression: str, data: bytes, size: int, partial: bool = False) -> bytes | None:
+    try:
+        return decompress(compression, data, size, partial)
+    except Exception:  # noqa: BLE001 - zstd/lz4 errors on corrupt data, unknown compression
+        return None
 
 
 # --------------------------------------------------------------------------------------------

@@ -183,17 +183,23 @@ class McapSource(LogSource):
 
     def _scan_stream(self) -> None:
         w = Walker(self.path)
+        orphans = 0
         for block in w.blocks():
             self._learn(block.parsed.schemas, block.parsed.channels)
             for lt, _i, cid, _d in block.parsed.messages:
                 ch = self._channel_recs.get(cid)
                 if ch is not None:
                     self._topic_info[ch.topic].count += 1
+                else:  # its channel was defined in a damaged chunk: unreadable
+                    orphans += 1
                 self._n += 1
                 self._start_ns = lt if self._start_ns is None else min(self._start_ns, lt)
                 self._end_ns = lt if self._end_ns is None else max(self._end_ns, lt)
-        for off, reason in w.damaged:
-            self._damage(off, reason)
+        self._walk_damage(w)
+        if orphans:
+            log.warning("%s: %d messages whose channel was defined in a damaged chunk cannot be read",
+                        self.path, orphans)
+            self.lost_messages = orphans
         if w.broke is not None:
             self.truncated = w.broke.describe()
         elif not self._footer_ok():
@@ -348,5 +354,11 @@ class McapSource(LogSource):
                 heapq.heappush(heap, e)
         while heap:
             yield heapq.heappop(heap)[3]
-        for off, reason in w.damaged:
-            self._damage(off, reason)
+        self._walk_damage(w)
+
+    def _walk_damage(self, w: Walker) -> None:
+        for off, reason, lost in w.damaged:
+            if lost:
+                self._damage(off, reason)
+            else:
+                log.warning("%s: damaged record at byte %d (%s); no data lost", self.path, off, reason)

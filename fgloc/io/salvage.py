@@ -22,7 +22,6 @@ from fgloc.io.mcap_format import (
     OP_CHUNK,
     OP_DATA_END,
     OP_FOOTER,
-    OP_HEADER,
     OP_MESSAGE,
     OP_SCHEMA,
     McapFormatError,
@@ -66,7 +65,7 @@ class Walker:
     def __init__(self, path: Path) -> None:
         self.path = path
         self.broke: Break | None = None
-        self.damaged: list[tuple[int, str]] = []  # (offset, reason) of each damaged chunk / record
+        self.damaged: list[tuple[int, str, bool]] = []  # (offset, reason, data lost) of damaged records
         self.complete = False                      # reached DataEnd / Footer
         self.n_messages = 0
         self.last_time: int | None = None
@@ -89,13 +88,57 @@ class Walker:
             op = mm[pos]
             length = int.from_bytes(mm[pos + 1 : pos + 9], "little")
             end = pos + 9 + length
-            if op in (OP_FOOTER, OP_DATA_END):
+            if (op, length) in ((OP_FOOTER, 20), (OP_DATA_END, 4)) and end <= size:
                 self.complete = True
                 return
-            sane = op != 0 and not (0x10 < op < 0x80) and end <= size
-            if op == OP_CHUNK and end > size:
-                nxt = self._resync(mm, pos + 1, size)
-                if nxt is None:  # the file ends inside this chunk: read what is complete in it
+            if op == OP_CHUNK and end <= size:
+                try:
+                    head = parse_chunk_body(mm[pos + 9 : end])
+                    parsed = chunk_records(head, None)
+                except McapFormatError as e:
+                    found = self._chunk_at(mm, pos, size)  # the framing may be all that is wrong
+                    if found is not None:
+                        yield self._count(found[0])
+                        pos = found[1]
+                        continue
+                    self.damaged.append((pos, str(e), True))
+                    nxt = self._resync(mm, pos + 1, size)
+                    pos = end if nxt is None or nxt >= end else nxt
+                    continue
+                yield self._count(Block(pos, head.start_ns, parsed))
+                pos = end
+                continue
+            if op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE) and end <= size:
+                found = self._chunk_at(mm, pos, size)  # a chunk whose opcode byte was damaged?
+                if found is not None:
+                    yield self._count(found[0])
+                    pos = found[1]
+                    continue
+                try:
+                    parsed = parse_records(mm[pos:end], None)
+                except (McapFormatError, ValueError, UnicodeDecodeError) as e:
+                    self.damaged.append((pos, f"corrupt record ({e})", op == OP_MESSAGE))
+                    pos = end
+                    continue
+                start = parsed.messages[0][0] if parsed.messages else 0
+                yield self._count(Block(pos, start, parsed))
+                pos = end
+                continue
+            # another record (index, attachment, metadata, ...: nothing fgloc reads), or one that
+            # makes no sense: either may be a chunk whose opcode or length field was damaged (read
+            # it through its own inner lengths and CRC), damage before a later chunk, or the cut
+            found = self._chunk_at(mm, pos, size)
+            if found is not None:
+                yield self._count(found[0])
+                pos = found[1]
+                continue
+            sane = op != 0 and not (0x10 < op < 0x80) and op not in (OP_FOOTER, OP_DATA_END) and end <= size
+            if sane:
+                pos = end
+                continue
+            nxt = self._resync(mm, pos + 1, size)
+            if nxt is None:
+                if op == OP_CHUNK:  # the file ends inside this chunk: read what is complete in it
                     try:
                         parsed = chunk_records(parse_chunk_body(mm[pos + 9 : size], complete=False), None)
                         yield self._count(Block(pos, 0, parsed))
@@ -103,44 +146,31 @@ class Walker:
                         pass
                     self._break(pos, size, "cut inside a chunk")
                     return
-                self.damaged.append((pos, "chunk length past the end of the file"))
-                pos = nxt
-                continue
-            if not sane:
-                nxt = self._resync(mm, pos + 1, size)
-                if nxt is None:
-                    reason = "cut inside a record" if end > size and op != 0 and not (0x10 < op < 0x80) \
-                        else f"corrupt record (opcode {op:#x})"
-                    self._break(pos, size, reason)
-                    return
-                self.damaged.append((pos, f"corrupt record (opcode {op:#x})"))
-                pos = nxt
-                continue
-            if op == OP_CHUNK:
-                try:
-                    head = parse_chunk_body(mm[pos + 9 : end])
-                    parsed = chunk_records(head, None)
-                except McapFormatError as e:
-                    self.damaged.append((pos, str(e)))
-                    nxt = self._resync(mm, pos + 1, size)
-                    if nxt is None or nxt >= end:  # the chunk's length still looks right: go past it
-                        pos = end
-                    else:
-                        pos = nxt
-                    continue
-                yield self._count(Block(pos, head.start_ns, parsed))
-            elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
-                try:
-                    parsed = parse_records(mm[pos:end], None)
-                except (McapFormatError, ValueError, UnicodeDecodeError) as e:
-                    self.damaged.append((pos, f"corrupt record ({e})"))
-                    pos = end
-                    continue
-                start = parsed.messages[0][0] if parsed.messages else 0
-                yield self._count(Block(pos, start, parsed))
-            elif op == OP_HEADER and pos != len(MCAP_MAGIC):
-                self.damaged.append((pos, "a second header record"))
-            pos = end
+                cut = end > size and op != 0 and not (0x10 < op < 0x80)
+                self._break(pos, size, "cut inside a record" if cut else f"corrupt record (opcode {op:#x})")
+                return
+            self.damaged.append((pos, f"corrupt record header (opcode {op:#x})", op == OP_CHUNK))
+            pos = nxt
+
+    def _chunk_at(self, mm: mmap.mmap, pos: int, size: int) -> tuple[Block, int] | None:
+        """A complete, intact chunk at ``pos`` whatever its opcode and record length say
+        (its own header gives the lengths); ``(block, end)`` or None."""
+        if pos + 9 + 40 > size:
+            return None
+        try:
+            clen = int.from_bytes(mm[pos + 9 + 28 : pos + 9 + 32], "little")
+            if clen > 16 or pos + 9 + 40 + clen > size:
+                return None
+            dlen = int.from_bytes(mm[pos + 9 + 32 + clen : pos + 9 + 40 + clen], "little")
+            end = pos + 9 + 40 + clen + dlen
+            if end > size:
+                return None
+            head = parse_chunk_body(mm[pos + 9 : end])
+            if not head.crc:
+                return None  # nothing to tell an intact chunk from a damaged one
+            return Block(pos, head.start_ns, chunk_records(head, None)), end
+        except McapFormatError:
+            return None
 
     def _resync(self, mm: mmap.mmap, start: int, size: int) -> int | None:
         """Offset of the next complete, intact chunk at or after ``start``, or None."""

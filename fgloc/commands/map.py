@@ -116,8 +116,8 @@ def map_check_cmd(
     for line in res.suspects:
         typer.echo(f"  {line}")
     typer.echo(f"wrote {outdir if outdir is not None else map_yaml.parent}/check.yaml, check.png")
-    if not res.passed:
-        raise typer.Exit(1)
+    if not res.passed:  # SystemExit: fgloc.cli runs click with standalone_mode=False, which swallows typer.Exit codes
+        raise SystemExit(1)
 
 
 def register(app: typer.Typer) -> None:

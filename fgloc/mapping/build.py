@@ -137,6 +137,7 @@ def write_check(outdir: Path, check: CheckResult, occ: OccupancyMap, trajectory:
     doc = {"verdict": check.verdict, "passed": bool(check.passed), "mode": check.mode,
            "times": "seconds after the log's first scan", "first_scan_stamp": float(t0),
            "stats": {k: int(v) for k, v in check.stats.items()}, "suspects": check.suspects,
+           "passes_off_s": [[round(a - t0, 1), round(b - t0, 1)] for a, b in check.culprits],
            "changes": changes, "regions": regions}
     (outdir / "check.yaml").write_text(yaml.safe_dump(doc, sort_keys=False, width=200))
     xy = trajectory.poses[:, :2] if trajectory is not None and len(trajectory) else None

@@ -153,6 +153,7 @@ class CheckResult:
     passed: bool
     t_first: float = 0.0                # stamp of the log's first scan (times in texts are relative)
     changes: list[ChangeRegion] = field(default_factory=list)
+    culprits: list[tuple[float, float]] = field(default_factory=list)  # (t0, t1) stamps of passes found off
     added_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     removed_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     stats: dict = field(default_factory=dict)
@@ -412,14 +413,15 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
         return k if fb[k] >= 0.5 and ok_others else None
 
     regions = _summarize_regions(checks, cfg)
-    suspects = _suspects(regions, checks, loops, cfg, t_first, culprit)
+    suspects, culprits = _suspects(regions, checks, loops, cfg, t_first, culprit)
     verdict, passed = _verdict_consistency(regions, checks, t_first)
     stats = {"scans": len(records), "posed_scans": int(len(idx)), "tests": len(checks), "grids": n_grids[0],
              "checked": sum(c.status != NO_OVERLAP for c in checks),
              "inconsistent": sum(c.status == BAD for c in checks), "regions": len(regions),
              "regions_checked": sum(r.n_checked >= cfg.region_min_checked for r in regions),
              "regions_flagged": sum(r.flagged for r in regions)}
-    return CheckResult("consistency", checks, regions, suspects, verdict, passed, t_first, stats=stats)
+    return CheckResult("consistency", checks, regions, suspects, verdict, passed, t_first, stats=stats,
+                       culprits=culprits)
 
 
 def _fmt_t(t: float, t0: float) -> str:
@@ -466,10 +468,12 @@ def _clusters(regions: list[RegionCheck]) -> list[list[RegionCheck]]:
 def _suspects(regions: list[RegionCheck], checks: list[ScanCheck], loops: Sequence[LoopInfo],
               cfg: CheckConfig, t0: float,
               culprit: Callable[[list[RegionCheck], list[tuple[float, float, float, float]]], int | None] | None = None
-              ) -> list[str]:
+              ) -> tuple[list[str], list[tuple[float, float]]]:
     """One line per cluster of flagged regions: which passes disagree, which one is the odd one out
-    (when a third pass can tell), and the loop closures that tie the disagreeing passes."""
+    (when a third pass can tell), and the loop closures that tie the disagreeing passes; and the
+    time spans of the passes found off."""
     out: list[str] = []
+    culprits: list[tuple[float, float]] = []
     for comp in _clusters(regions):
         keys = {r.key for r in comp}
         bad = [c for c in checks if c.region in keys and c.status == BAD]
@@ -478,11 +482,15 @@ def _suspects(regions: list[RegionCheck], checks: list[ScanCheck], loops: Sequen
         off_m = float(np.median([np.hypot(c.offset[0], c.offset[1]) for c in bad])) if bad else 0.0
         off_deg = float(np.degrees(np.median([abs(c.offset[2]) for c in bad]))) if bad else 0.0
         ep_txt = ", ".join(f"t={_fmt_t(a, t0)}-{_fmt_t(b, t0)} s" for a, b, _, _ in eps)
-        line = (f"around ({center[0]:.1f}, {center[1]:.1f}) m ({len(comp)} regions): the passes at {ep_txt} "
-                f"disagree by {off_m:.2f} m / {off_deg:.1f} deg")
+        what = f"the passes at {ep_txt} disagree" if len(eps) > 1 else f"the pass at {ep_txt} disagrees with the others"
+        line = (f"around ({center[0]:.1f}, {center[1]:.1f}) m ({len(comp)} regions): {what} "
+                f"by {off_m:.2f} m / {off_deg:.1f} deg")
         k = culprit(comp, eps) if culprit is not None and len(eps) >= 2 else None
         spans = [(a, b) for a, b, _, _ in eps]
-        if k is not None:
+        if len(eps) == 1:  # the other passes agree with each other, this one does not
+            culprits.append(spans[0])
+        elif k is not None:
+            culprits.append(spans[k])
             a, b = eps[k][:2]
             line += (f"; the odd one out is the pass at t={_fmt_t(a, t0)}-{_fmt_t(b, t0)} s "
                      "(the others agree without it)")
@@ -503,7 +511,7 @@ def _suspects(regions: list[RegionCheck], checks: list[ScanCheck], loops: Sequen
         elif loops:
             line += "; no loop closure ties these passes here (a missed loop closure, or drift between them)"
         out.append(line)
-    return out
+    return out, culprits
 
 
 def _verdict_consistency(regions: list[RegionCheck], checks: list[ScanCheck], t0: float) -> tuple[str, bool]:
@@ -584,8 +592,8 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
     suspects += [f"region ({r.center[0]:.1f}, {r.center[1]:.1f}) m: {r.n_bad}/{r.n_checked} scans fit the map "
                  f"better {r.offset_m:.2f} m / {r.offset_deg:.1f} deg away from the trajectory"
                  for r in regions if r.flagged]
-    return CheckResult("localization", checks, regions, suspects, verdict, passed, t_first, changes,
-                       pts_out["added"], pts_out["removed"], stats)
+    return CheckResult("localization", checks, regions, suspects, verdict, passed, t_first, changes=changes,
+                       added_xy=pts_out["added"], removed_xy=pts_out["removed"], stats=stats)
 
 
 def _beam_changes(rec: ScanRecord, mount: FloatArray, pose: FloatArray, occ: OccupancyMap, grid: DistanceGrid,

@@ -87,7 +87,8 @@ def test_fgloc_map_cli_writes_outputs(repo_data, tmp_path):
     rc = main(["map", str(repo_data / "radish" / "fr079-head.clf.bz2"), "-o", str(out), "--no-progress",
                "--end", "0.5", "--resolution", "0.1"])
     assert rc == 0
-    for f in ("map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_keyframes.tum", "check.yaml", "check.png"):
+    for f in ("map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_keyframes.tum", "check.yaml",
+              "check.png"):
         assert (out / f).is_file()
     m = OccupancyMap.load(out / "map.yaml")
     assert m.resolution == pytest.approx(0.1)

@@ -26,17 +26,23 @@ A particle filter over ``base_link`` poses ``[x_m, y_m, yaw_rad]`` in ``map``:
 * **update thresholds** ``update_min_d`` / ``update_min_a``: the filter updates only
   after that much odometry motion (the first scan after a reset always updates);
 * **global localization** (``reset(None)``): ``global_particles`` poses uniform over the
-  map's free cells.  Until the cloud is one blob (position std < ``converged_xy_std``) the
-  filter is in its global phase: KLD cap ``global_particles``, floor ``max_particles``, and the
-  sensor model uses the wider ``global_sigma_hit`` (sparse particles are rarely within
-  ``sigma_hit`` of the truth: a narrow model kills the right hypothesis early).
+  map's free cells.  The filter stays in its global phase (KLD cap ``global_particles``, floor
+  ``max_particles``, the wider ``global_sigma_hit``: sparse particles are rarely within
+  ``sigma_hit`` of the truth and a narrow model kills the right hypothesis early) until the
+  posterior is one mode the tracking filter can hold: its occupied KLD bins need at most
+  ``max_particles`` and one connected cluster of them holds ``converged_cluster_weight``.
 
-The fix is the weighted mean (circular mean for yaw) with the weighted particle
-covariance, ``cov = cov_scale * cov_particles + diag(cov_floor)`` (see
-``AMCL_DEFAULTS``).  "No fix" (with a reason) when the cloud has not converged (position
-std above ``converged_xy_std`` or yaw std above ``converged_yaw_std``), when no update ran
-(thresholds not met, unless ``fix_without_update``), on bad scans and when an
-uninitialised filter gets a guess off the map.  Never raises on bad input.
+Convergence is judged on the filter's own evidence, not on a width in metres (nav2's
+defaults keep a 0.3-0.6 m wide cloud whose estimate is good): particles are clustered
+by connected KLD bins (as nav2's ``pf_cluster_stats``); a fix needs the heaviest cluster to
+hold ``converged_cluster_weight`` of the weight, and reports that cluster's weighted mean
+(circular for yaw) -- ``estimate: refined`` moves it to the maximum of the configured
+sensor model on the same scan (a few Gauss-Newton steps; kept within 3 sigma of the
+cluster: the filter's mean lags behind a weak sensor model) -- with the cluster's
+covariance, ``cov = cov_scale * cov_cluster + diag(cov_floor)``, however wide: the back-end
+weighs the fix by it.  "No fix" (with a reason) during the global phase, when no cluster
+dominates, when no update ran (thresholds not met, unless ``fix_without_update``), on bad
+scans and when an uninitialised filter gets a guess off the map.  Never raises on bad input.
 
 All per-particle work is vectorized numpy or compiled numba; no Python loop over particles.
 """
@@ -54,7 +60,7 @@ from numpy.typing import NDArray
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import wrap_angle
-from fgloc.gridmath import bilinear
+from fgloc.gridmath import bilinear, bilinear_grad
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -173,6 +179,172 @@ def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
     return n, k
 
 
+@njit(cache=True)
+def _clusters(keys, weights, n_yaw):  # pragma: no cover - compiled
+    """Connected clusters of occupied histogram bins (nav2 ``pf_cluster_stats``).
+
+    ``keys (N, 3)``: each particle's bin ``(ix, iy, iyaw)`` with ``iyaw`` in ``[0, n_yaw)``
+    (heading wraps around); bins touching in any of the 26 directions join one cluster.
+    Returns ``(label per particle, total weight per label)``; labels are ``0 .. K-1``.
+    """
+    n = keys.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    mask = size - 1
+    slot_bin = np.full(size, -1, dtype=np.int64)
+    bins = np.empty((n, 3), dtype=np.int64)
+    of = np.empty(n, dtype=np.int64)
+    nb = 0
+    for i in range(n):
+        a, b, c = keys[i, 0], keys[i, 1], keys[i, 2]
+        sl = ((a * 73856093) ^ (b * 19349663) ^ (c * 83492791)) & mask
+        while True:
+            j = slot_bin[sl]
+            if j < 0:
+                slot_bin[sl] = nb
+                bins[nb, 0] = a
+                bins[nb, 1] = b
+                bins[nb, 2] = c
+                of[i] = nb
+                nb += 1
+                break
+            if bins[j, 0] == a and bins[j, 1] == b and bins[j, 2] == c:
+                of[i] = j
+                break
+            sl = (sl + 1) & mask
+    parent = np.arange(nb)
+    for j in range(nb):
+        for da in range(-1, 2):
+            for db in range(-1, 2):
+                for dc in range(-1, 2):
+                    if da == 0 and db == 0 and dc == 0:
+                        continue
+                    a = bins[j, 0] + da
+                    b = bins[j, 1] + db
+                    c = (bins[j, 2] + dc) % n_yaw
+                    sl = ((a * 73856093) ^ (b * 19349663) ^ (c * 83492791)) & mask
+                    while slot_bin[sl] >= 0:
+                        k = slot_bin[sl]
+                        if bins[k, 0] == a and bins[k, 1] == b and bins[k, 2] == c:
+                            ra = j
+                            while parent[ra] != ra:
+                                ra = parent[ra]
+                            rb = k
+                            while parent[rb] != rb:
+                                rb = parent[rb]
+                            if ra != rb:
+                                parent[max(ra, rb)] = min(ra, rb)
+                            break
+                        sl = (sl + 1) & mask
+    root_label = np.full(nb, -1, dtype=np.int64)
+    n_lab = 0
+    for j in range(nb):
+        r = j
+        while parent[r] != r:
+            r = parent[r]
+        if root_label[r] < 0:
+            root_label[r] = n_lab
+            n_lab += 1
+        root_label[j] = root_label[r]
+    labels = np.empty(n, dtype=np.int64)
+    wsum = np.zeros(n_lab)
+    for i in range(n):
+        labels[i] = root_label[of[i]]
+        wsum[labels[i]] += weights[i]
+    return labels, wsum
+
+
+#: endpoints closer than RUN_GAP_M in scan order, over at most RUN_LENGTH_M, form one "run": a
+#: stretch of one wall whose map error (raster, wall thickness) all its beams share
+RUN_GAP_M = 0.3
+RUN_LENGTH_M = 1.0
+
+
+@njit(cache=True, fastmath=True)
+def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mult, sigma, model,
+                   max_iter):  # pragma: no cover - compiled
+    """Maximise the sensor model's score of one scan over the pose, from ``pose0``.
+
+    Score: ``sum pz^3`` (model 0, nav2 likelihood_field) or ``sum log pz`` (model 1), ``z``
+    the bilinear field at each endpoint.  Iteratively reweighted Gauss-Newton (the score is
+    a sum of ``-rho(z)`` with IRLS weight ``rho'(z) / z``; endpoints off the grid or at the
+    field's clip distance carry no gradient).  Returns ``(pose, H)``, ``H`` the final
+    weighted normal matrix (0 rows when no beam contributed), ``sum w z^2`` and ``sum w``.
+    """
+    pose = pose0.copy()
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    inv_s2 = 1.0 / (sigma * sigma)
+    wr2 = 0.0
+    sw = 0.0
+    n_runs = 0
+    for _it in range(max_iter):
+        wr2 = 0.0
+        sw = 0.0
+        n_runs = 0
+        run_len = 0.0
+        lastx = 1e300
+        lasty = 1e300
+        c = math.cos(pose[2])
+        s = math.sin(pose[2])
+        for a in range(3):
+            g[a] = 0.0
+            for b in range(3):
+                H[a, b] = 0.0
+        for j in range(bx.shape[0]):
+            qx = pose[0] + c * bx[j] - s * by[j]
+            qy = pose[1] + s * bx[j] + c * by[j]
+            z, du, dv = bilinear_grad(field, (qx - ox) * inv_res - 0.5, (qy - oy) * inv_res - 0.5, zmax)
+            if not (z < zmax):
+                continue
+            e = math.exp(-0.5 * z * z * inv_s2)
+            pz = z_hit * e + z_rand_mult
+            if model == 0:
+                w = 3.0 * pz * pz * z_hit * e * inv_s2
+            else:
+                w = z_hit * e * inv_s2 / max(pz, 1e-30)
+            gx = du * inv_res
+            gy = dv * inv_res
+            j2 = gx * (-s * bx[j] - c * by[j]) + gy * (c * bx[j] - s * by[j])
+            wx = w * gx
+            wy = w * gy
+            w2 = w * j2
+            g[0] += wx * z
+            g[1] += wy * z
+            g[2] += w2 * z
+            wr2 += w * z * z
+            sw += w
+            # runs of neighbouring endpoints (one wall stretch <= RUN_LENGTH_M): their map errors are shared
+            step = math.hypot(bx[j] - lastx, by[j] - lasty)
+            if step > RUN_GAP_M or run_len + step > RUN_LENGTH_M:
+                n_runs += 1
+                run_len = 0.0
+            else:
+                run_len += step
+            lastx = bx[j]
+            lasty = by[j]
+            H[0, 0] += wx * gx
+            H[0, 1] += wx * gy
+            H[0, 2] += wx * j2
+            H[1, 1] += wy * gy
+            H[1, 2] += wy * j2
+            H[2, 2] += w2 * j2
+        H[1, 0] = H[0, 1]
+        H[2, 0] = H[0, 2]
+        H[2, 1] = H[1, 2]
+        M = H.copy()
+        for a in range(3):
+            M[a, a] += 1e-9 + 1e-3 * H[a, a]
+        if abs(np.linalg.det(M)) < 1e-300:
+            break
+        d = np.linalg.solve(M, -g)
+        pose += d
+        if abs(d[0]) + abs(d[1]) + abs(d[2]) < 1e-6:
+            break
+    return pose, H, wr2, sw, n_runs
+
+
 # ------------------------------------------------------------------ motion models
 def sample_motion(particles: FloatArray, delta: FloatArray, model: str, alphas: FloatArray,
                   rng: np.random.Generator) -> FloatArray:
@@ -286,10 +458,16 @@ class AMCLConfig:
     update_min_a: float = setting(0.2, "rad of odometry rotation before a filter update (nav2 units)", min=0)
     init_cov: tuple[float, float, float] = setting((0.25, 0.25, 0.0685), "reset(pose) without cov (m^2, m^2, rad^2)",
                                                    min=0)
-    converged_xy_std: float = setting(0.25, "m: larger cloud std -> no fix 'not converged'", gt=0)
-    converged_yaw_std: float = setting(0.2, "rad: larger cloud heading std -> no fix", gt=0)
+    converged_cluster_weight: float = setting(
+        0.9, "a fix needs this share of the weight in one connected cluster of the filter's own KLD bins "
+        "(otherwise 'not converged'); the global phase also ends only when its bins need <= max_particles",
+        gt=0, max=1)
+    estimate: str = setting(
+        "refined", "the fix: mean = weighted mean of the heaviest cluster (nav2); refined = that mean moved to "
+        "the maximum of the configured sensor model on this scan (kept within 3 sigma of the cluster)",
+        choices=("mean", "refined"))
     fix_without_update: bool = setting(False, "thresholds not met -> no fix (true: the propagated estimate)")
-    cov_scale: float = setting(0.25, "output cov = cov_scale * particle cov + diag(cov_floor)", gt=0)
+    cov_scale: float = setting(0.25, "output cov = cov_scale * cluster cov + diag(cov_floor)", gt=0)
     cov_floor: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m^2, m^2, rad^2 added", min=0)
     min_valid_beams: int = setting(10, "fewer valid beams -> no fix", min=1)
     deskew: bool = setting(True, "per-beam de-skew from the odometry motion")
@@ -341,8 +519,6 @@ class AMCL:
         update_min_d = conf.update_min_d
         update_min_a = conf.update_min_a
         init_cov = conf.init_cov
-        converged_xy_std = conf.converged_xy_std
-        converged_yaw_std = conf.converged_yaw_std
         fix_without_update = conf.fix_without_update
         cov_scale = conf.cov_scale
         cov_floor = conf.cov_floor
@@ -381,7 +557,9 @@ class AMCL:
         self.alpha_slow, self.alpha_fast = float(recovery_alpha_slow), float(recovery_alpha_fast)
         self.update_min_d, self.update_min_a = float(update_min_d), float(update_min_a)
         self.init_cov = np.diag(np.asarray(init_cov, dtype=float).reshape(3))
-        self.converged_xy_std, self.converged_yaw_std = float(converged_xy_std), float(converged_yaw_std)
+        self.converged_cluster_weight = float(conf.converged_cluster_weight)
+        self.estimate = conf.estimate
+        self._n_yaw_bins = max(int(math.ceil(2.0 * math.pi / self.kld_bin[2] - 1e-9)), 1)
         self.fix_without_update = bool(fix_without_update)
         self.cov_scale = float(cov_scale)
         self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float).reshape(3))
@@ -403,6 +581,8 @@ class AMCL:
         self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
         self._free = occ_map.free_cell_centers()
         self._table_key: tuple[int, float, float] | None = None
+        self._last_refine: tuple[Any, ...] | None = None
+        self._refined_cov = np.eye(3)
         self._table = np.zeros(2)
         self._table_inv_step = 1.0
         self.particles = np.zeros((0, 3))
@@ -506,9 +686,13 @@ class AMCL:
                     self._w_slow = self._w_fast = 0.0  # nav2 resets the averages after injecting
         self.particles = new
         self.weights = np.full(n, 1.0 / n)
-        if self._global:  # global phase ends once the cloud is one tight blob
-            _, c = weighted_mean_cov(self.particles, self.weights)
-            if np.sqrt(max(float(np.linalg.eigvalsh(c[:2, :2])[-1]), 0.0)) < self.converged_xy_std:
+        if self._global:
+            # the global phase ends once the posterior is one mode small enough for the tracking
+            # filter: its histogram bins need at most max_particles (KLD) and one connected cluster
+            # of them holds converged_cluster_weight of the particles
+            need = int(kld_limit(self.last_kld_k, self.pf_err, self.pf_z, 1, 2**62))
+            if need <= self.max_particles and self._cluster(self.particles, self.weights)[1] \
+                    >= self.converged_cluster_weight:
                 self._global = False
 
     # ------------------------------------------------------------------ front-end API
@@ -541,8 +725,9 @@ class AMCL:
             if not self.fix_without_update:
                 return no_fix(f"update thresholds not met (moved {moved_d:.3f} m, {moved_a:.3f} rad)",
                               n_inliers=len(pts))
-            mean, cov = weighted_mean_cov(self.particles, self.weights)
-            return self._result(_compose1(mean, self._acc), cov, len(pts), updated=False)
+            mask, share = self._cluster(self.particles, self.weights)
+            mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+            return self._result(_compose1(mean, self._acc), cov, share, len(pts), updated=False)
         if np.any(self._acc != 0):
             self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
                                            self.rng)
@@ -567,25 +752,85 @@ class AMCL:
             else:
                 self._w_slow += self.alpha_slow * (mean_lik - self._w_slow)
                 self._w_fast += self.alpha_fast * (mean_lik - self._w_fast)
-        mean, cov = weighted_mean_cov(self.particles, self.weights)
+        # the estimate: the heaviest connected cluster of the weighted cloud (nav2 publishes the same)
+        mask, share = self._cluster(self.particles, self.weights)
+        mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+        refined = False
+        if self.estimate == "refined" and not self._global:
+            mean, refined = self._refine(mean, cov, pts, float(scan.range_max))
         self._n_updates += 1
         if self._n_updates % self.resample_interval == 0:
             self._resample()
-        return self._result(mean, cov, len(pts), updated=True)
+        return self._result(mean, cov, share, len(pts), updated=True, refined=refined)
 
-    def _result(self, mean: FloatArray, cov: FloatArray, n_pts: int, updated: bool) -> MatchResult:
+    def _cluster(self, particles: FloatArray, weights: FloatArray) -> tuple[NDArray[np.bool_], float]:
+        """The particles of the heaviest connected cluster of KLD bins and its share of the weight."""
+        keys = np.floor(particles / self.kld_bin).astype(np.int64)
+        keys[:, 2] %= self._n_yaw_bins
+        labels, wsum = _clusters(keys, weights, self._n_yaw_bins)
+        best = int(np.argmax(wsum))
+        total = float(wsum.sum())
+        return labels == best, (float(wsum[best]) / total if total > 0 else 0.0)
+
+    def _refine(self, mean: FloatArray, cov: FloatArray, pts: FloatArray, range_max: float
+                ) -> tuple[FloatArray, bool]:
+        """``mean`` moved to the maximum of the configured sensor model's score of this scan
+        (:func:`_refine_kernel`); kept only within 3 sigma (chi2, 3 dof, 99.7 %) of the cluster."""
+        rmax = self.laser_max_range if self.laser_max_range > 0 else range_max
+        z_rand_mult = self.z_rand / rmax if np.isfinite(rmax) and rmax > 0 else 0.0
+        o = self.map.origin
+        c, s = math.cos(o[2]), math.sin(o[2])
+        dx, dy = mean[0] - o[0], mean[1] - o[1]
+        start = np.array([c * dx + s * dy, -s * dx + c * dy, mean[2] - o[2]])  # grid-aligned frame
+        model = 0 if self.laser_model_type == "likelihood_field" else 1
+        p, H, wr2, sw, n_runs = _refine_kernel(self._field, 0.0, 0.0, 1.0 / self.map.resolution, self.max_dist,
+                              np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), start,
+                              self.z_hit, z_rand_mult, self.sigma_hit, model, 20)
+        out = np.array([o[0] + c * p[0] - s * p[1], o[1] + s * p[0] + c * p[1], wrap_angle(p[2] + o[2])])
+        d = out - mean
+        d[2] = wrap_angle(d[2])
+        if not np.all(np.isfinite(out)):
+            return mean, False
+        try:
+            m2 = float(d @ np.linalg.solve(cov + 1e-12 * np.eye(3), d))
+        except np.linalg.LinAlgError:
+            return mean, False
+        self._last_refine = (H, wr2, sw, c, s, n_runs)
+        if m2 > 14.16 or n_runs < 1 or sw <= 3.0:
+            return mean, False
+        # its covariance from the scan itself: residual variance plus the map raster's
+        # (uniform within a cell: res^2 / 12), shared by the beams of each run of neighbouring
+        # endpoints (one wall stretch): (s^2 + res^2/12) (sum w / runs) H^-1, rotated to the map
+        try:
+            Hinv = np.linalg.inv(H)
+        except np.linalg.LinAlgError:
+            return mean, False
+        var = wr2 / (sw - 3.0) + self.map.resolution ** 2 / 12.0
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        cov_r = var * (sw / n_runs) * (rot @ Hinv @ rot.T)
+        if not (np.all(np.isfinite(cov_r)) and np.all(np.linalg.eigvalsh(0.5 * (cov_r + cov_r.T)) > 0)):
+            return mean, False
+        self._refined_cov = 0.5 * (cov_r + cov_r.T)
+        return out, True
+
+    def _result(self, mean: FloatArray, cov: FloatArray, share: float, n_pts: int, updated: bool,
+                refined: bool = False) -> MatchResult:
         sx = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
         sa = math.sqrt(max(float(cov[2, 2]), 0.0))
         info = {"particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
-                "kld_bins": self.last_kld_k}
+                "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined}
         if not bool(self.map.in_bounds(mean[None, :2])[0]):
             return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
-        if sx > self.converged_xy_std or sa > self.converged_yaw_std:
-            return no_fix(f"not converged (cloud std {sx:.2f} m, {math.degrees(sa):.1f} deg)",
+        if self._global:
+            return no_fix(f"not converged (global localization: cloud std {sx:.2f} m, {math.degrees(sa):.0f} deg)",
                           n_inliers=n_pts, **info)
-        out_cov = self.cov_scale * cov + self.cov_floor
-        quality = float(max(0.0, 1.0 - sx / self.converged_xy_std))
-        return MatchResult(True, mean, out_cov, quality=quality, n_inliers=n_pts, info=info)
+        if share < self.converged_cluster_weight:
+            return no_fix(f"not converged ({100 * share:.0f} % of the weight in the heaviest cluster)",
+                          n_inliers=n_pts, **info)
+        # refined: the covariance of the scan fit (see _refine); else the cluster's, however
+        # wide: the back-end weighs the fix by it
+        out_cov = (self._refined_cov if refined else self.cov_scale * cov) + self.cov_floor
+        return MatchResult(True, mean, out_cov, quality=float(share), n_inliers=n_pts, info=info)
 
 
 def _compose1(a: FloatArray, b: FloatArray) -> FloatArray:

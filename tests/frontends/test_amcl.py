@@ -201,3 +201,79 @@ def test_grey_wall_map_needs_unknown_edges(shared_data):
     e = _errors(_run(a, scans, truth, deltas), truth)
     assert len(e) > 50
     assert float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1)))) < 0.1
+
+
+#: nav2_bringup's default amcl parameters (nav2_params.yaml), in fgloc's key names
+NAV2_DEFAULTS = {
+    "robot_model_type": "differential", "alpha1": 0.2, "alpha2": 0.2, "alpha3": 0.2, "alpha4": 0.2, "alpha5": 0.2,
+    "laser_model_type": "likelihood_field", "z_hit": 0.5, "z_rand": 0.5, "sigma_hit": 0.2, "laser_max_beams": 60,
+    "laser_likelihood_max_dist": 2.0, "laser_max_range": 100.0, "min_particles": 500, "max_particles": 2000,
+    "pf_err": 0.05, "pf_z": 0.99, "resample_interval": 1, "recovery_alpha_slow": 0.0, "recovery_alpha_fast": 0.0,
+    "update_min_d": 0.25, "update_min_a": 0.2,
+}
+
+
+def test_nav2_defaults_give_a_fix_per_update(paper_scans):
+    """With nav2's defaults the cloud stays 0.3-0.6 m wide: a gate on a width in metres (0.25 m) gave
+    0-4 fixes per log.  Convergence is judged by the filter's own clusters: every update gives a fix,
+    the estimate is refined on the scan, and its covariance is the scan fit's (NEES near 3)."""
+    d = paper_scans
+    a = AMCL.from_config(d.map, d.laser_mount, NAV2_DEFAULTS)
+    a.reset(d.truth[0])
+    fixes, updates = [], 0
+    for i, s in enumerate(d.scans):
+        r = a.match(s, d.truth[0], d.odom_deltas[i])
+        updates += bool(r.info.get("updated"))
+        if r.ok:
+            fixes.append((i, r))
+    assert updates > 250 and len(fixes) >= 0.95 * updates
+    assert float(np.median([r.info["std_xy"] for _, r in fixes])) > 0.25  # the wide cloud nav2 keeps
+    e = _errors(fixes, d.truth)
+    assert float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1)))) < 0.04
+    nees = [float(ei @ np.linalg.solve(r.cov, ei)) for ei, (_, r) in zip(e, fixes, strict=True)]
+    assert 1.0 <= float(np.median(nees)) <= 6.0
+
+
+def test_estimate_mean_is_the_cluster_mean(paper_scans):
+    d = paper_scans
+    a = AMCL.from_config(d.map, d.laser_mount, {**NAV2_DEFAULTS, "estimate": "mean"})
+    a.reset(d.truth[0])
+    fixes = _run(a, d.scans, d.truth, d.odom_deltas, n=600)
+    assert len(fixes) > 40 and not any(r.info["refined"] for _, r in fixes)
+    # the weak nav2 sensor model leaves the cloud mean lagging by ~0.1 m; the cloud covariance says so
+    e = _errors(fixes, d.truth)
+    nees = [float(ei @ np.linalg.solve(r.cov, ei)) for ei, (_, r) in zip(e, fixes, strict=True)]
+    assert float(np.median(nees)) < 3.0
+
+
+def test_two_modes_are_not_converged_one_wide_mode_is(paper_scans):
+    d = paper_scans
+    a = AMCL.from_config(d.map, d.laser_mount, {"estimate": "mean"})
+    rng = np.random.default_rng(4)
+    p = d.truth[100]
+    # one wide Gaussian (0.4 m, 8 deg): one connected cluster of 0.5 m / 10 deg bins -> a fix with that width
+    a.reset(p, np.diag([0.4**2, 0.4**2, np.radians(8) ** 2]))
+    a._force_update = False
+    r = a.match(d.scans[100], p, np.zeros(3))
+    assert r.reason.startswith("update thresholds")  # nothing moved: no update, no fix
+    a2 = AMCL.from_config(d.map, d.laser_mount, {"estimate": "mean", "fix_without_update": True})
+    a2.reset(p, np.diag([0.4**2, 0.4**2, np.radians(8) ** 2]))
+    a2._force_update = False
+    r = a2.match(d.scans[100], p, np.zeros(3))
+    assert r.ok and r.info["cluster_share"] > 0.99 and r.info["std_xy"] > 0.3
+    # two tight blobs 3 m apart, equal weight: the heaviest cluster holds half -> not converged
+    blob = rng.normal(0, 0.05, (1000, 3))
+    a2.particles = np.vstack([p + blob, p + [3.0, 0.0, 0.0] + blob])
+    a2.weights = np.full(2000, 1 / 2000)
+    r = a2.match(d.scans[100], p, np.zeros(3))
+    assert not r.ok and "not converged" in r.reason and 0.4 < r.info["cluster_share"] < 0.6
+
+
+def test_clusters_join_across_the_heading_wrap():
+    from fgloc.frontends.amcl import _clusters
+
+    n_yaw = 36
+    keys = np.array([[0, 0, 0], [0, 0, 35], [5, 5, 10], [0, 1, 1]], dtype=np.int64)
+    labels, wsum = _clusters(keys, np.array([0.1, 0.2, 0.3, 0.4]), n_yaw)
+    assert labels[0] == labels[1] == labels[3] != labels[2]  # -pi and +pi neighbours, diagonal neighbour
+    assert sorted(np.round(wsum, 6)) == [0.3, 0.7]

@@ -136,6 +136,7 @@ def register(app: typer.Typer) -> None:
             from fgloc.io.tum import write_tum
 
             write_tum(out_smoothed, session.smoothed)
+        failed = dead_workers()
         report = {
             "duration_s": round(summary.duration_s, 2),
             "poses": summary.n_poses,
@@ -143,11 +144,11 @@ def register(app: typer.Typer) -> None:
             "health": summary.health,
             "counters": summary.counters,
             "record": str(record) if record else None,
-            "failed_threads": dead_workers(),
+            "failed_threads": failed,
         }
         if viewer is not None:
             report["view"] = viewer.stats()
         print(dumps(report, indent=1))  # standard JSON: unknown numbers (NaN) are null
-        if report["failed_threads"]:
-            sys.stderr.write(f"fgloc live: error: {'; '.join(report['failed_threads'])}; stopped\n")
+        if failed:
+            sys.stderr.write(f"fgloc live: error: {'; '.join(failed)}; stopped\n")
             raise SystemExit(EXIT_THREAD_DIED)

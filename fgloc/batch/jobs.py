@@ -177,56 +177,73 @@ def _materialize(job: Job, blobs: dict[str, Blob], tmp: Path) -> dict[str, str]:
     return local
 
 
-def _unlocalize(text: str, local: dict[str, str], job: Job) -> str:
-    for role, lp in local.items():
-        if lp != job.inputs[role]:
-            text = text.replace(lp, job.inputs[role])
+def _replacements(local: dict[str, str], job: Job) -> list[tuple[str, str]]:
+    """(temporary path, original path) pairs of the shipped inputs."""
+    return [(lp, job.inputs[role]) for role, lp in local.items() if lp != job.inputs[role]]
+
+
+def _unlocalize(text: str, pairs: list[tuple[str, str]]) -> str:
+    for a, b in pairs:
+        text = text.replace(a, b)
     return text
+
+
+def staging_prefix(job: Job) -> str:
+    """Name prefix of the folders a job's outputs are written into before they are moved in place."""
+    return f".{job.name}.partial-"
 
 
 # ---------------------------------------------------------------------------- the worker
 def execute(job: Job, blobs: dict[str, Blob] | None = None) -> JobResult:
-    """Run one job (in a worker process): never raises for a failing log, returns its error."""
+    """Run one job (in a worker process): never raises for a failing log, returns its error.
+
+    The job writes into a fresh staging folder (shipped: in the worker's temporary folder; by
+    path: ``OUTDIR/.<name>.partial-<host>-<pid>``, same file system), so its outputs are exactly
+    the files found there; on success they are moved into ``job.outdir`` (by path) or returned
+    as bytes (shipped).  Text outputs (YAML, JSON) that name the temporary paths get the
+    original ones.
+    """
     t0 = time.perf_counter()
     host = f"{socket.gethostname()}:{os.getpid()}"
+    final = Path(job.outdir)
     tmp = Path(tempfile.mkdtemp(prefix="fgloc-batch-")) if blobs is not None else None
+    stage = tmp / "out" if tmp is not None else final.parent / f"{staging_prefix(job)}{host.replace(':', '-')}"
     local = dict(job.inputs)
+    pairs: list[tuple[str, str]] = []
     try:
         if tmp is not None:
             local = _materialize(job, blobs or {}, tmp)
-            outdir = tmp / "out"
-        else:
-            outdir = Path(job.outdir)
-        row, written = _run_kind(job, {k: Path(v) for k, v in local.items()}, outdir)
+        pairs = _replacements(local, job) + [(str(stage), str(final))]
+        shutil.rmtree(stage, ignore_errors=True)
+        row = _run_kind(job, {k: Path(v) for k, v in local.items()}, stage)
+        written = sorted(str(f.relative_to(stage)) for f in stage.rglob("*") if f.is_file())
+        for rel in written:
+            if rel.endswith((".yaml", ".json", ".txt", ".md")):
+                text = (stage / rel).read_text()
+                fixed = _unlocalize(text, pairs)
+                if fixed != text:
+                    (stage / rel).write_text(fixed)
         files = None
         if tmp is not None:
-            _fix_paths_in_outputs(outdir, written, local, job)
-            files = {rel: (outdir / rel).read_bytes() for rel in written if (outdir / rel).is_file()}
+            files = {rel: (stage / rel).read_bytes() for rel in written}
+        else:
+            for rel in written:
+                (final / rel).parent.mkdir(parents=True, exist_ok=True)
+                os.replace(stage / rel, final / rel)
         return JobResult(job.name, True, row=row, written=written, files=files, host=host,
                          wall_s=time.perf_counter() - t0)
     except KeyboardInterrupt:
         raise
     except BaseException as e:  # noqa: BLE001 - failure isolation: every error becomes a row
-        msg = _unlocalize(one_line(e), local, job)
-        tb = None if isinstance(e, FglocError) else _unlocalize(traceback.format_exc(), local, job)
+        msg = _unlocalize(one_line(e), pairs or _replacements(local, job))
+        tb = None if isinstance(e, FglocError) else _unlocalize(traceback.format_exc(), pairs)
         return JobResult(job.name, False, error=msg, traceback=tb, host=host, wall_s=time.perf_counter() - t0)
     finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(tmp if tmp is not None else stage, ignore_errors=True)
 
 
-def _fix_paths_in_outputs(outdir: Path, written: list[str], local: dict[str, str], job: Job) -> None:
-    """Shipped run: the text outputs that record input paths get the original paths back."""
-    for rel in written:
-        if rel.endswith((".yaml", ".json")) and (outdir / rel).is_file():
-            text = (outdir / rel).read_text()
-            fixed = _unlocalize(text, local, job)
-            if fixed != text:
-                (outdir / rel).write_text(fixed)
-
-
-def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> tuple[dict[str, Any], list[str]]:
-    """Call the adapter function of ``job.kind``; return (summary row, written files)."""
+def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]:
+    """Call the adapter function of ``job.kind`` with outputs into ``outdir``; return the summary row."""
     p = job.params
     if job.kind == "run":
         pose = p.get("initial_pose")
@@ -240,14 +257,14 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> tuple[dict[str
         row = {"duration_s": r.log_s, "poses": r.poses, "x_real_time": _ratio(r.log_s, r.wall_s),
                "lost_time_s": lost, "rmse_m": r.position_rmse_m, "heading_rmse_deg": r.heading_rmse_deg,
                "mode": r.mode, "note": r.note}
-        return row, list(r.written)
+        return row
     if job.kind == "map":
         m = adapter.map_log(inputs["log"], outdir, float(p.get("resolution", 0.05)), inputs.get("config"),
                             p.get("start"), p.get("end"), p.get("scan_topic", "/scan"), p.get("odom_topic", "/odom"))
         row = {"duration_s": m.duration_s, "poses": m.scans, "x_real_time": _ratio(m.duration_s, m.wall_s),
                "lost_time_s": None, "rmse_m": m.position_rmse_m, "heading_rmse_deg": m.heading_rmse_deg,
                "mode": f"{m.keyframes} keyframes, {m.loops} loops", "note": None}
-        return row, list(m.written)
+        return row
     if job.kind == "bench-paper":
         variants = [tuple(v) for v in p["variants"]]
         s = adapter.bench_paper_seed(int(p["seed"]), variants, inputs.get("config"), outdir,  # type: ignore[arg-type]
@@ -258,7 +275,7 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> tuple[dict[str
         row = {"duration_s": s.duration_s, "poses": s.poses[main], "x_real_time": _ratio(s.duration_s, wall),
                "lost_time_s": None, "rmse_m": mm["position_rmse_m"], "heading_rmse_deg": mm["heading_rmse_deg"],
                "mode": main, "note": None}
-        return row, list(s.written)
+        return row
     raise FglocError(f"unknown batch job kind '{job.kind}' (one of {', '.join(KINDS)})")
 
 

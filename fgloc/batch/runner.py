@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fgloc.batch.jobs import Job, JobResult, execute
+from fgloc.batch.jobs import Job, JobResult, execute, staging_prefix
 from fgloc.batch.summary import SummaryRow, write_summary_csv
 
 MARKER = "batch-done.json"
@@ -87,11 +87,20 @@ def write_marker(job: Job, res: JobResult) -> None:
 
 
 def clear_marker(job: Job) -> None:
+    """Before a job runs: its old marker and error go, and so do staging folders that an
+    interrupted run left behind (``OUTDIR/.<name>.partial-*``)."""
+    import shutil
+
     for p in (marker_path(job), Path(job.outdir) / "error.txt"):
         try:
             p.unlink()
         except FileNotFoundError:
             pass
+    parent = Path(job.outdir).parent
+    if parent.is_dir():
+        for d in parent.iterdir():
+            if d.name.startswith(staging_prefix(job)) and d.is_dir():
+                shutil.rmtree(d, ignore_errors=True)
 
 
 def _store(job: Job, res: JobResult) -> JobResult:

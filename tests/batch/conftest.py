@@ -51,12 +51,26 @@ print(json.dumps(errors))
 """
 
 
-@pytest.fixture(scope="session")
-def references(batch_logs) -> dict:
-    """``fgloc run`` on each log alone (absolute paths, as the batch passes them), in a fresh
-    process like the batch's workers (so both run the code as it is on disk now)."""
-    ref = batch_logs["root"] / "ref"
+def _single_runs(batch_logs, ref) -> dict:
     p = subprocess.run([sys.executable, "-c", REFERENCE_SCRIPT, str(ref), str(batch_logs["logs"].resolve()),
                         str(batch_logs["map"].resolve()), ",".join(map(str, START)), *batch_logs["names"]],
                        capture_output=True, text=True, timeout=300, check=True)
-    return {"dir": ref, "errors": json.loads(p.stdout.strip().splitlines()[-1])}
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="session")
+def references(batch_logs) -> dict:
+    """``fgloc run`` on each log alone (absolute paths, as the batch passes them), in a fresh
+    process like the batch's workers (so both run the code as it is on disk now).
+
+    ``refresh()`` makes them again: a test whose batch differs from them compares once more
+    with single runs made after its batch (the source tree may have changed in between when
+    others work in it; in a fixed checkout the first comparison decides)."""
+    ref = batch_logs["root"] / "ref"
+    out: dict = {"dir": ref, "errors": _single_runs(batch_logs, ref)}
+
+    def refresh() -> None:
+        out["errors"] = _single_runs(batch_logs, ref)
+
+    out["refresh"] = refresh
+    return out

@@ -116,7 +116,7 @@ def test_batch_on_a_ray_head_node_with_shipped_inputs(ray_head, batch_logs, refe
                        timeout=300)
     assert p.returncode == 1, p.stderr[-3000:]
     assert f"Ray cluster at {address}" in p.stdout
-    assert_identical(out, references["dir"], ROUTES)
+    assert_identical(out, references, ROUTES)
     summary = {r["log"]: r for r in read_summary_csv(out / "summary.csv")}
     assert [summary[n]["status"] for n in ROUTES] == ["ok"] * 3
     assert summary[CORRUPT]["status"] == "error"

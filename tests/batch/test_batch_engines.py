@@ -116,3 +116,23 @@ def test_usage_errors_are_one_line(batch_logs, tmp_path):
     rc, _, err = fgloc_cli("batch", "run", batch_logs["logs"], "-o", tmp_path, "--address", "1.2.3.4:1")
     assert rc == 2 and "--address is for --engine ray" in err
     assert {CORRUPT, *ROUTES} == set(batch_logs["names"])
+
+
+def test_batch_map_writes_what_fgloc_map_writes(batch_logs, tmp_path):
+    """``fgloc batch map`` (in-process engine, by path) vs ``fgloc map`` on the same log: the map and
+    trajectories are the same bytes, every file ``fgloc map`` wrote is there, the row has the
+    scans and an SE(2)-aligned RMSE against /ground_truth."""
+    from fgloc.batch import batch_map
+
+    log = batch_logs["logs"] / "charlie.mcap"
+    rc, _, err = fgloc_cli("map", log.resolve(), "-o", tmp_path / "single", "--no-progress")
+    assert rc == 0, err
+    rep = batch_map([str(log)], tmp_path / "out", EngineOptions("inline", progress=False))
+    assert rep.ok and rep.rows[0].log == "charlie"
+    single = {p.name for p in (tmp_path / "single").iterdir()}
+    assert single <= {p.name for p in (tmp_path / "out" / "charlie").iterdir()}
+    for f in ("map.yaml", "map.pgm", "trajectory.tum"):
+        assert (tmp_path / "out" / "charlie" / f).read_bytes() == (tmp_path / "single" / f).read_bytes()
+    row = rep.rows[0]
+    assert row.poses is not None and row.poses > 100 and row.rmse_m is not None and row.rmse_m < 0.05
+    assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no staging left

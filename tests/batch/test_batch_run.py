@@ -50,7 +50,7 @@ def test_local_pool_matches_single_runs_and_resumes(batch_logs, references):
     rc, stdout, _ = fgloc_cli(*args)
     assert rc == 1  # one log failed
     assert set(references["errors"]) == {CORRUPT}
-    assert_identical(out, references["dir"], ROUTES)
+    assert_identical(out, references, ROUTES)
     check_summary(out, batch_logs, references)
     assert "3/4 done" in stdout and "1 failed" in stdout
     assert not (out / CORRUPT / MARKER).exists()
@@ -70,7 +70,7 @@ def test_ray_local_instance_matches_single_runs(batch_logs, references):
                               *map(str, START), "-o", out, "--engine", "ray", "-j", "2", "-q")
     assert rc == 1
     assert "local Ray instance, 2 CPU(s)" in stdout
-    assert_identical(out, references["dir"], ROUTES)
+    assert_identical(out, references, ROUTES)
     rows = check_summary(out, batch_logs, references)
     # the jobs ran in Ray worker processes, not in this one
     assert all(r["host"] and not r["host"].endswith(f":{os.getpid()}") for r in rows.values())
@@ -112,7 +112,7 @@ def test_ctrl_c_keeps_finished_logs(batch_logs, references, tmp_path):
     assert not alive  # ... and are gone with the driver
     rc, stdout, _ = fgloc_cli(*args)
     assert rc == 1 and f"{len(finished)} already done" in stdout
-    assert_identical(out, references["dir"], ROUTES)
+    assert_identical(out, references, ROUTES)
 
 
 def test_manifest_rows_give_their_own_map_and_start(batch_logs, tmp_path):

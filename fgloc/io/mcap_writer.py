@@ -1,5 +1,5 @@
 """Write ROS 2 MCAP logs (profile ``ros2``, ``cdr`` messages, ``ros2msg`` schemas as rosbag2
-stores them), through ``mcap``'s public Writer API.
+stores them), through :class:`fgloc.io.mcap_format.StreamWriter` (chunked, indexed, CRCs).
 
 :meth:`LogWriter.write` encodes fgloc objects with the fixed-layout encoders of
 :mod:`fgloc.io.fastcdr` (byte-identical to mcap_ros2's generic encoder); the MCAP log time
@@ -19,6 +19,7 @@ from typing import IO, Any
 
 from fgloc.errors import LogError
 from fgloc.io import fastcdr
+from fgloc.io.mcap_format import StreamWriter
 from fgloc.io.msgdefs import MSG_TEXT, full_text, short_name
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.source import Record
@@ -54,8 +55,6 @@ class LogWriter:
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 1024 * 1024, compression: str = "zstd") -> None:
-        from mcap.writer import CompressionType, Writer
-
         self.path = Path(path)
         try:
             if self.path.parent != Path(""):
@@ -63,9 +62,9 @@ class LogWriter:
             self._file: IO[bytes] = self.path.open("wb")
         except OSError as e:
             raise LogError(f"{self.path}: cannot write log ({e.strerror or e})") from None
-        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
-        self._writer.start(profile="ros2", library=LIBRARY)
+        comp = {"zstd": "zstd", "lz4": "lz4", "none": ""}[compression]
+        self._writer = StreamWriter(self._file, profile="ros2", library=LIBRARY, chunk_size=chunk_size,
+                                    compression=comp)
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[tuple[str, int, str], int] = {}
         self._std: dict[tuple[str, str], int] = {}  # (topic, type) -> channel of fgloc's own schemas
@@ -78,14 +77,14 @@ class LogWriter:
         key = (name, encoding, data)
         sid = self._schemas.get(key)
         if sid is None:
-            sid = self._schemas[key] = self._writer.register_schema(name, encoding, data)
+            sid = self._schemas[key] = self._writer.add_schema(name, encoding, data)
         return sid
 
     def _channel_id(self, topic: str, schema_id: int, message_encoding: str = "cdr") -> int:
         key = (topic, schema_id, message_encoding)
         cid = self._channels.get(key)
         if cid is None:
-            cid = self._channels[key] = self._writer.register_channel(topic, message_encoding, schema_id)
+            cid = self._channels[key] = self._writer.add_channel(topic, message_encoding, schema_id)
         return cid
 
     def _std_channel(self, topic: str, type_name: str) -> int:
@@ -124,8 +123,7 @@ class LogWriter:
 
     def _emit(self, topic: str, type_name: str, data: bytes, stamp: float, log_time_ns: int | None) -> None:
         lt = max(stamp_to_ns(stamp), 0) if log_time_ns is None else int(log_time_ns)
-        self._writer.add_message(self._std_channel(topic, type_name), log_time=lt, data=data, publish_time=lt,
-                                 sequence=self.count)
+        self._writer.add_message(self._std_channel(topic, type_name), lt, data, lt, self.count)
         self._last_stamp = stamp
         self.count += 1
 
@@ -141,8 +139,7 @@ class LogWriter:
             self._schema_id(schema_name, schema_encoding, bytes(schema_data))
         cid = self._channel_id(topic, sid, message_encoding)
         lt = int(log_time_ns)
-        self._writer.add_message(cid, log_time=lt, data=data, publish_time=lt if publish_time_ns is None
-                                 else int(publish_time_ns), sequence=self.count)
+        self._writer.add_message(cid, lt, data, lt if publish_time_ns is None else int(publish_time_ns), self.count)
         self.count += 1
 
     def copy(self, rec: Record, topic: str | None = None) -> None:

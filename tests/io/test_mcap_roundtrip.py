@@ -230,3 +230,36 @@ def test_laser_mount_chain_tf_fallback_and_identity(tmp_path, caplog):
         m = r.laser_mount()
     assert m.pose == pytest.approx([0, 0, 0]) and (m.parent, m.child) == ("base_link", "laser")
     assert any("no transform base_link -> laser" in rec.message for rec in caplog.records)
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_written_file_passes_mcaps_own_reader_with_crcs(tmp_path, compression):
+    """fgloc's MCAP writer (its own chunk builder) against the mcap package's reader: CRCs, summary,
+    statistics, chunk and message indexes, message order and bytes; raw copies keep their schema."""
+    from mcap.reader import NonSeekingReader, make_reader
+
+    msgs = _messages(30)
+    path = tmp_path / f"w_{compression}.mcap"
+    with LogWriter(path, chunk_size=16 * 1024, compression=compression) as w:
+        for topic, m in msgs:
+            w.write(topic, m)
+        w.write_raw("/other", "my/Type", b"int32 a\n", b"\x00\x01\x00\x00\x07\x00\x00\x00", 5, publish_time_ns=6)
+    with path.open("rb") as f:
+        rd = make_reader(f, validate_crcs=True)
+        s = rd.get_summary()
+        assert s is not None and s.statistics is not None
+        assert s.statistics.message_count == len(msgs) + 1 == sum(s.statistics.channel_message_counts.values())
+        assert s.statistics.chunk_count == len(s.chunk_indexes) > 3
+        assert all(ci.message_index_offsets for ci in s.chunk_indexes)
+        got = list(rd.iter_messages(log_time_order=True))
+    times = [m.log_time for _, _, m in got]
+    assert times == sorted(times) and len(got) == len(msgs) + 1
+    other = [(s_, c, m) for s_, c, m in got if c.topic == "/other"]
+    assert other[0][0].name == "my/Type" and other[0][2].data == b"\x00\x01\x00\x00\x07\x00\x00\x00"
+    assert other[0][2].publish_time == 6
+    with path.open("rb") as f:  # the data section streamed (the non-seeking reader checks chunk CRCs)
+        assert sum(1 for _ in NonSeekingReader(f, validate_crcs=True).iter_messages()) == len(msgs) + 1
+    r = LogReader(path)
+    for (ta, a), (tb, b) in zip(msgs, r.messages(), strict=False):
+        assert ta == tb
+        _assert_equal(a, b)

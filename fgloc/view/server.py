@@ -144,8 +144,8 @@ class FoxgloveServerSink:
         """The next JSON line from the server process (blocking up to ``timeout_s``), or None."""
         deadline = time.monotonic() + timeout_s
         while b"\n" not in self._out_buf:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([self._out], [], [], left)[0]:
+            left = max(0.0, deadline - time.monotonic())
+            if not select.select([self._out], [], [], left)[0]:
                 return None
             try:
                 chunk = os.read(self._out, 65536)

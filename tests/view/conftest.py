@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import json
 import os
-import re
 import socket
 import time
 from pathlib import Path
@@ -40,6 +39,24 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def _frame(buf: bytes) -> tuple[int, bytes, bytes] | None:
+    """One unmasked server WebSocket frame off ``buf``: (opcode, payload, rest), or None if incomplete."""
+    if len(buf) < 2:
+        return None
+    n, i = buf[1] & 0x7F, 2
+    if n == 126:
+        if len(buf) < 4:
+            return None
+        n, i = int.from_bytes(buf[2:4], "big"), 4
+    elif n == 127:
+        if len(buf) < 10:
+            return None
+        n, i = int.from_bytes(buf[2:10], "big"), 10
+    if len(buf) < i + n:
+        return None
+    return buf[0] & 0x0F, buf[i:i + n], buf[i + n:]
+
+
 def stalled_viewer(port: int, timeout_s: float = 20.0) -> socket.socket:
     """A Foxglove client that connects, subscribes to every advertised channel and then
     never reads again (a 4 KiB receive buffer, so the server's sends back up at once)."""
@@ -59,16 +76,36 @@ def stalled_viewer(port: int, timeout_s: float = 20.0) -> socket.socket:
     s.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
                f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
                "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n").encode())
-    buf = b""
     s.settimeout(timeout_s)
-    while b'"op":"advertise"' not in buf:
+    buf = b""
+    while b"\r\n\r\n" not in buf:
         chunk = s.recv(65536)
-        assert chunk, "server closed the connection before advertising"
+        assert chunk, "server closed the connection during the handshake"
         buf += chunk
-    assert b"101 Switching Protocols" in buf and b"foxglove.sdk.v1" in buf
-    ids = sorted({int(x) for x in re.findall(rb'"id":(\d+),"topic"', buf)})
-    assert ids
-    payload = json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i} for i in ids]}).encode()
+    head, _, buf = buf.partition(b"\r\n\r\n")
+    assert b"101 Switching Protocols" in head and b"foxglove.sdk.v1" in head
+    ids: set[int] = set()
+    s.settimeout(0.5)
+    while True:  # text frames (serverInfo, advertise ...) until the server has nothing more to say
+        frame = _frame(buf)
+        if frame is None:
+            try:
+                chunk = s.recv(65536)
+            except TimeoutError:
+                if ids:
+                    break
+                continue
+            assert chunk, "server closed the connection before advertising"
+            buf += chunk
+            continue
+        opcode, payload, buf = frame
+        if opcode == 1:
+            msg = json.loads(payload)
+            if msg.get("op") == "advertise":
+                ids.update(int(c["id"]) for c in msg["channels"])
+    s.settimeout(timeout_s)
+    payload = json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": i}
+                                                              for i in sorted(ids)]}).encode()
     mask = os.urandom(4)
     n = len(payload)
     hdr = bytes([0x81, 0x80 | 126]) + n.to_bytes(2, "big") if n >= 126 else bytes([0x81, 0x80 | n])

@@ -138,6 +138,17 @@ def test_run_view_speaks_foxglove_and_shows_the_run(short_dir, short_sim, tmp_pa
     assert all(f["reason"] for f in fixes if f["status"] != "accepted")
     health = [m.message for m in session.by_topic(ch.HEALTH)]
     assert health and health[-1]["sources"]["scan"]["count"] > 0 and "view" in health[-1]
+    # run.mcap holds the same channels with the same schemas (next to the ROS topics)
+    from mcap.reader import make_reader
+
+    with (out / "run.mcap").open("rb") as f:
+        summ = make_reader(f).get_summary()
+    in_file = {c.topic: summ.schemas[c.schema_id] for c in summ.channels.values()}
+    for topic, c in adv.items():
+        if topic in (ch.FIX_REJECTED, ch.PARTICLES):  # none in this run
+            continue
+        assert in_file[topic].name == c["schemaName"] and in_file[topic].encoding == c["schemaEncoding"]
+    assert "/scan" in in_file and "/fused_pose" in in_file
 
 
 def test_ctrl_c_stops_the_run_and_its_server_cleanly(short_dir, tmp_path):

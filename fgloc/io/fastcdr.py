@@ -444,10 +444,25 @@ def _decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransf
     out: list[tuple[list[StaticTransform], list[bool]] | None] = [None] * len(datas)
     lays: list[tuple[int, list[tuple[str, str, int]]]] = []
     rows: list[Buffer] = []
+    prev: list[tuple[str, str, int]] | None = None
+    L = 0
+    spans: list[tuple[int, int]] = []
+    sig = b""
     for i, data in enumerate(datas):
-        lay = _tf_layout(data)
-        if lay is None:
-            continue
+        # a message with the previous one's length, count and string bytes has its layout
+        if prev is not None and len(data) == L and data[0] == 0 and data[1] == 1 \
+                and b"".join([data[x:y] for x, y in spans]) == sig:
+            lay = prev
+        else:
+            lay = _tf_layout(data)
+            if lay is None:
+                prev = None
+                continue
+            prev, L = lay, len(data)
+            # the bytes from each transform's frame id length to its doubles, and the count
+            starts = ([8] + [p + 56 for _, _, p in lay[:-1]])[: len(lay)]
+            spans = [(4, 8)] + [(_aligned(q, 4) + 8, p) for q, (_, _, p) in zip(starts, lay, strict=True)]
+            sig = b"".join([data[x:y] for x, y in spans])
         lays.append((i, lay))
         rows += [data[p : p + 56] for _, _, p in lay]
     if not lays:

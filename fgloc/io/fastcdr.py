@@ -454,11 +454,12 @@ def _decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransf
                 and b"".join([data[x:y] for x, y in spans]) == sig:
             lay = prev
         else:
-            lay = _tf_layout(data)
-            if lay is None:
+            found = _tf_layout(data)
+            if found is None:
                 prev = None
                 continue
-            prev, L = lay, len(data)
+            lay = prev = found
+            L = len(data)
             # the bytes from each transform's frame id length to its doubles, and the count
             starts = ([8] + [p + 56 for _, _, p in lay[:-1]])[: len(lay)]
             spans = [(4, 8)] + [(_aligned(q, 4) + 8, p) for q, (_, _, p) in zip(starts, lay, strict=True)]

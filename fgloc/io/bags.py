@@ -109,7 +109,7 @@ class BagSource(LogSource):
                     ros = deserialize(raw, conn.msgtype)
                     out = fn(ros, conn.topic)
                     if normalize_type(conn.msgtype) == TF_MESSAGE:
-                        self._note_tf(out, tf_flips(ros))
+                        self.note_tf(out, tf_flips(ros))
                 except Exception as e:  # noqa: BLE001 - an undecodable message is skipped
                     n = self.undecodable.get(conn.topic, 0)
                     self.undecodable[conn.topic] = n + 1

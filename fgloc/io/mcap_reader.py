@@ -121,7 +121,7 @@ class _Channel:
         ros = dec(data)
         out = self._convert(ros, self.topic)
         if self.info.type == TF_MESSAGE:
-            source._note_tf(out, tf_flips(ros))  # type: ignore[arg-type]
+            source.note_tf(out, tf_flips(ros))  # type: ignore[arg-type]
         return out
 
 
@@ -290,7 +290,7 @@ class McapSource(LogSource):
                                         self.path, topic, type(e).__name__, e)
                         continue
                 elif is_tf:
-                    self._note_tf(*obj)
+                    self.note_tf(*obj)
                     obj = obj[0]
                 append((lt, offset, idx, Record(topic, obj, lt, data, info)))
         out.sort()  # (log time, offset, index) are unique: records are never compared

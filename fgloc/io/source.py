@@ -74,7 +74,7 @@ class LogSource:
     """Base of every log format's reader (see the module doc).  Subclasses fill
     ``_topic_info``, ``_start_ns``, ``_end_ns``, ``_n`` when opened and implement
     :meth:`_records` (decoded records of the wanted topics in log-time order, scans not yet
-    mirrored); tf messages they decode go through :meth:`_note_tf` (upside-down flags)."""
+    mirrored); tf messages they decode go through :meth:`note_tf` (upside-down flags)."""
 
     format: ClassVar[str] = "?"
 
@@ -181,7 +181,7 @@ class LogSource:
     def _records(self, want: set[str]) -> Iterator[Record]:
         raise NotImplementedError
 
-    def _note_tf(self, transforms: list[StaticTransform], flips: list[bool]) -> None:
+    def note_tf(self, transforms: list[StaticTransform], flips: list[bool]) -> None:
         for tr, flip in zip(transforms, flips, strict=True):
             if flip:
                 self._tf.flipped[(tr.parent, tr.child)] = True

@@ -23,7 +23,7 @@ FloatArray = NDArray[np.float64]
 GRID_FIELDS = ("red", "green", "blue", "alpha", "occupancy")  # byte offsets 0..4 of a cell
 GRID_CELL_STRIDE = 5
 COVARIANCE_SIGMAS = 2.0          # the ellipse is drawn at this many standard deviations
-ELLIPSE_POINTS = 48
+ELLIPSE_POINTS = 32
 WEDGE_LENGTH_M = 0.6
 
 
@@ -84,13 +84,13 @@ def scan_message(scan: LaserScan) -> Any:
 
 def transforms_message(transforms: list[StaticTransform], stamp: float) -> Any:
     ts = timestamp(stamp)
+    q = yaw_to_quaternion(np.array([float(tr.pose[2]) for tr in transforms])).reshape(-1, 4).tolist()
     out = []
-    for tr in transforms:
-        q = yaw_to_quaternion(float(tr.pose[2]))
+    for tr, (qx, qy, qz, qw) in zip(transforms, q, strict=True):
         out.append(fm.FrameTransform(
             timestamp=ts, parent_frame_id=tr.parent, child_frame_id=tr.child,
             translation=fm.Vector3(x=float(tr.pose[0]), y=float(tr.pose[1]), z=float(tr.z)),
-            rotation=fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))))
+            rotation=fm.Quaternion(x=qx, y=qy, z=qz, w=qw)))
     return fm.FrameTransforms(transforms=out)
 
 
@@ -100,8 +100,8 @@ def pose_message(fix: PoseFix, frame_id: str | None = None) -> Any:
 
 def poses_message(stamp: float, frame_id: str, poses: FloatArray) -> Any:
     p = np.asarray(poses, dtype=float).reshape(-1, 3)
-    half = 0.5 * p[:, 2]
-    qz, qw = np.sin(half).tolist(), np.cos(half).tolist()
+    q = yaw_to_quaternion(p[:, 2]).reshape(-1, 4)
+    qz, qw = q[:, 2].tolist(), q[:, 3].tolist()
     xs, ys = p[:, 0].tolist(), p[:, 1].tolist()
     out = [fm.Pose(position=fm.Vector3(x=x, y=y, z=0.0), orientation=fm.Quaternion(x=0.0, y=0.0, z=z, w=w))
            for x, y, z, w in zip(xs, ys, qz, qw, strict=True)]
@@ -127,15 +127,13 @@ def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:
     ell = covariance_ellipse(cov) if np.all(np.isfinite(cov)) else np.zeros((0, 2))
     lines = []
     if len(ell):
-        pts = [fm.Point3(x=x + float(px), y=y + float(py), z=0.02) for px, py in ell]
+        pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in (ell + (x, y)).tolist()]
         lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,
                                       points=pts, color=color))
     s_yaw = math.sqrt(max(float(cov[2, 2]), 0.0)) * COVARIANCE_SIGMAS if math.isfinite(float(cov[2, 2])) else 0.0
-    s_yaw = min(s_yaw, math.pi)
-    wedge = [fm.Point3(x=x, y=y, z=0.02)]
-    for a in np.linspace(yaw - s_yaw, yaw + s_yaw, 9):
-        wedge.append(fm.Point3(x=x + WEDGE_LENGTH_M * math.cos(a), y=y + WEDGE_LENGTH_M * math.sin(a), z=0.02))
-    wedge.append(fm.Point3(x=x, y=y, z=0.02))
+    a = np.linspace(yaw - min(s_yaw, math.pi), yaw + min(s_yaw, math.pi), 7)
+    arc = np.column_stack([x + WEDGE_LENGTH_M * np.cos(a), y + WEDGE_LENGTH_M * np.sin(a)]).tolist()
+    wedge = [fm.Point3(x=px, y=py, z=0.02) for px, py in [[x, y], *arc, [x, y]]]
     lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
                                   points=wedge, color=color))
     ent = fm.SceneEntity(timestamp=timestamp(fused.stamp), frame_id=frame_id or fused.frame_id,

@@ -94,7 +94,10 @@ class McapViewRecorder:
         self.particles_period_s = float(particles_period_s)
         self.max_particles = int(max_particles)
         self._last_particles = -math.inf
-        self._json_schemas = {ch.FUSED: encode.FUSED_SCHEMA, ch.FIX: encode.FIX_SCHEMA, ch.HEALTH: encode.HEALTH_SCHEMA}
+        self._json_schemas = {t: (str(sch["title"]), json.dumps(sch).encode()) for t, sch in
+                              ((ch.FUSED, encode.FUSED_SCHEMA), (ch.FIX, encode.FIX_SCHEMA),
+                               (ch.HEALTH, encode.HEALTH_SCHEMA))}
+        self._schemas: dict[Any, tuple[str, str, bytes]] = {}
         self._last_ns = 0
         self.count = 0
         self.errors = 0
@@ -104,20 +107,31 @@ class McapViewRecorder:
         self._last_ns = max(self._last_ns, ns)
         return ns
 
+    def _schema(self, cls: Any) -> tuple[str, str, bytes]:
+        # one bytes object per schema: the writer keys its schemas by their bytes (hash cached)
+        s = self._schemas.get(cls)
+        if s is None:
+            sch = cls.get_schema()
+            s = self._schemas[cls] = (sch.name, sch.encoding, bytes(sch.data))
+        return s
+
     def _write(self, topic: str, msg: Any, stamp: float) -> None:
         try:
-            schema = type(msg).get_schema()
-            self.writer.write_raw(topic, schema.name, bytes(schema.data), msg.encode(), self._ns(stamp),
-                                  schema_encoding=schema.encoding, message_encoding="protobuf")
+            name, encoding, data = self._schema(type(msg))
+            self.writer.write_raw(topic, name, data, msg.encode(), self._ns(stamp),
+                                  schema_encoding=encoding, message_encoding="protobuf")
             self.count += 1
         except (TypeError, ValueError, OverflowError):
             self.errors += 1
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
-        schema = self._json_schemas[topic]
-        data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
-        self.writer.write_raw(topic, str(schema.get("title", topic)), json.dumps(schema).encode(), data,
-                              self._ns(stamp), schema_encoding="jsonschema", message_encoding="json")
+        name, schema = self._json_schemas[topic]
+        try:
+            data = json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+        except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
+            data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
+        self.writer.write_raw(topic, name, schema, data, self._ns(stamp), schema_encoding="jsonschema",
+                              message_encoding="json")
         self.count += 1
 
     # ------------------------------------------------------------------ ViewSink

@@ -376,14 +376,20 @@ class ViewFeed:
             "backend": {"name": getattr(self.loc, "backend_name", ""),
                         **(dict(be.stats) if be is not None and isinstance(getattr(be, "stats", None), dict) else {})},
             "frontend": getattr(self.loc, "frontend_name", ""),
+            # a back-end's online calibration (wheel scale, gyro bias, latencies ...), if it offers one
+            "estimates": _estimates(be),
         })
 
 
-def _grown_key(before: dict[str, Any], after: dict[str, Any]) -> str | None:
-    for k, v in after.items():
-        if v != before.get(k, 0):
-            return str(k)
-    return None
+def _estimates(backend: Any) -> dict[str, Any]:
+    get = getattr(backend, "estimates", None)
+    if not callable(get):
+        return {}
+    try:
+        out = get()
+    except Exception:  # noqa: BLE001 - the view must not fail on a back-end's report
+        return {}
+    return dict(out) if isinstance(out, dict) else {}
 
 
 def json_ready(v: Any) -> Any:

@@ -54,7 +54,7 @@ def test_run_view_speaks_foxglove_and_shows_the_run(short_dir, short_sim, tmp_pa
     pytest.importorskip("websockets")
     port = free_port()
     out = tmp_path / "out"
-    proc = subprocess.Popen(_run_args(short_dir, out, port, realtime=2.0), stdout=subprocess.PIPE,
+    proc = subprocess.Popen(_run_args(short_dir, out, port, realtime=4.0), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=_env())
     try:
         want = {ch.MAP, ch.SCAN, ch.POSE, ch.TF, ch.FIX, ch.HEALTH}

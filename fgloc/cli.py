@@ -51,6 +51,23 @@ def version() -> None:
 _register_all()
 
 
+#: options whose usage errors get a message that names the values and their units
+OPTION_HINTS = {
+    "--initial-pose": "--initial-pose needs three values X Y YAW (m, m, rad; base_link in the map frame), "
+                      "e.g. --initial-pose 2.5 3.0 0.0",
+    "--laser-mount": "--laser-mount needs three values X Y YAW (m, m, rad; base_link -> laser)",
+}
+
+
+def _option_hint(e: Exception) -> str | None:
+    fmt = getattr(e, "format_message", None)
+    text = fmt() if callable(fmt) else str(e)
+    for opt, hint in OPTION_HINTS.items():
+        if opt in text:
+            return f"{hint} ({text.strip().rstrip('.')})"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app, map user errors to one line on stderr and exit 2."""
     logging.basicConfig(level=logging.WARNING, format="fgloc: %(levelname)s: %(message)s")
@@ -70,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except Exception as e:  # click usage errors (typer vendors click, so match by shape)
         if hasattr(e, "show") and hasattr(e, "exit_code"):
+            hint = _option_hint(e)
+            if hint is not None:
+                print(f"fgloc: error: {hint}", file=sys.stderr)
+                return 2
             e.show()
             return int(e.exit_code)
         raise

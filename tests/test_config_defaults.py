@@ -102,3 +102,21 @@ def test_overrides_are_checked_like_files():
     assert cfg.frontends.amcl.max_particles == 3000 and cfg.frontends.amcl.min_particles == 500
     with pytest.raises(ConfigError, match="overrides: pipeline.relocalize_after: must be >= 1"):
         load_config(overrides={"pipeline": {"relocalize_after": 0}})
+
+
+@pytest.mark.parametrize("text,message", [
+    ("faults:\n  wheel_slp: {start: 1.0, duration: 2.0, fraction: 0.3}\n",
+     "faults.wheel_slp: unknown key (did you mean wheel_slip?)"),
+    ("faults:\n  kidnap: {tme: 5.0, skip_s: 3.0}\n", "faults.kidnap.tme: unknown key (did you mean time?)"),
+    ("odom:\n  rate_hzz: 20\n", "odom.rate_hzz: unknown key (did you mean rate_hz?)"),
+    ("speed_mp: 1.0\n", "speed_mp: unknown key (did you mean speed_mps?)"),
+])
+def test_scenario_typos_are_one_line_with_a_suggestion(tmp_path, text, message):
+    """Issue 12 item 6 for simulator scenarios: misspelled fault names and keys."""
+    from fgloc.sim import run_scenario
+
+    bad = tmp_path / "scenario.yaml"
+    bad.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        run_scenario(bad)
+    assert str(e.value) == f"{bad}: {message}"

@@ -310,3 +310,143 @@ def test_kidnapped_robot_recovered_within_5_s_on_paper_hall(short_runs):
     assert rec["jump_m"] > 2.0
     assert rec["recovery_s"] is not None and rec["recovery_s"] < 5.0
     assert loc.stats["relocalizations"] >= 1
+
+
+# ---------------------------------------------------------------------- issue 12: lost, honest exit codes
+def _recovered_at(loc, gt, tol=0.2):
+    on = loc.online_trajectory()
+    err = np.linalg.norm(on.poses[:, :2] - gt.interpolate(on.stamps)[:, :2], axis=1)
+    bad = np.nonzero(err >= tol)[0]
+    if len(bad) == 0:
+        return float(on.stamps[0])
+    return float(on.stamps[bad[-1] + 1]) if bad[-1] + 1 < len(on.stamps) else math.inf
+
+
+def test_wrong_initial_pose_5m_90deg_is_corrected_within_5_s(world):
+    """Issue 12 item 1: an initial pose 5 m / 90 deg off inside the map (it gave 0 fixes, exit 0):
+    the compass offset the back-end guessed from the wrong heading must not veto the right place."""
+    m, gt, msgs = world
+    p0 = gt.poses[0] + np.array([-4.0, 3.0, np.pi / 2])
+    assert m.free[tuple(m.world_to_grid(p0[None, :2])[0])]
+    loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=p0, config=load_config())
+    Session(loc).run(msgs)
+    assert _recovered_at(loc, gt) < 5.0
+    assert loc.stats["relocalizations"] + loc.stats["lost_events"] >= 1
+    assert 0.0 < loc.stats["lost_s"] < 5.0 and not loc.stats["ended_lost"]
+
+
+def test_lost_detection_searches_globally_and_reports_lost_time(world):
+    """No accepted fix for lost_after_s: global search as at start-up (the relocalization that
+    needs a margin over the tracked match is switched off here by an impossible quality)."""
+    m, gt, msgs = world
+    cfg = load_config(overrides={"pipeline": {"relocalize_min_quality": 1.0, "lost_after_s": 1.0}})
+    p0 = gt.poses[0] + np.array([-4.0, 3.0, np.pi / 2])
+    loc = Localizer(m, MOUNT, backend="smoother", frontend="native", initial_pose=p0, config=cfg)
+    Session(loc).run(msgs)
+    assert loc.stats["lost_events"] >= 1 and loc.stats["relocalizations"] == 0
+    assert _recovered_at(loc, gt) < 5.0
+    assert 1.0 <= loc.stats["lost_s"] < 5.0 and not loc.stats["ended_lost"]
+
+
+def test_no_fix_reasons_grouped_by_kind():
+    """Issue 12 item 2: one key per kind, not per number; at most MAX_REASON_KINDS + 1 lines."""
+    from fgloc.localization.localizer import MAX_REASON_KINDS, group_reasons, reason_kind
+
+    assert reason_kind("update thresholds not met (moved 0.064 m, 0.01 rad)") == "update thresholds not met"
+    assert reason_kind("only 12 valid beams") == reason_kind("only 7 valid beams")
+    counts: dict[str, int] = {}
+    for i in range(500):
+        k = reason_kind(f"update thresholds not met (moved {i / 1000:.3f} m)") if i % 2 else \
+            reason_kind(f"kind {i % 37} of trouble: jumped {i * 0.01:.2f} m")
+        counts[k] = counts.get(k, 0) + 1
+    assert len(counts) == 2
+    many = {f"reason {chr(65 + i)}": i + 1 for i in range(20)}
+    g = group_reasons(many)
+    assert len(g) == MAX_REASON_KINDS + 1 and sum(g.values()) == sum(many.values())
+
+
+def _run(argv, capsys):
+    from fgloc.cli import main
+
+    rc = main(argv)
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+def test_run_ending_lost_exits_3_unless_allowed(world_log, tmp_path, capsys):
+    """Issue 12 item 1: a run against the wrong map is lost at the end: exit 3 with one line."""
+    d = np.zeros((300, 300), dtype=np.int16)  # an empty 30 m hall: no wall where the scans see one
+    d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
+    OccupancyMap(d, 0.1, origin=np.array([-8.0, -12.0, 0.0])).save(tmp_path / "wrong.yaml")
+    log = str(world_log / "log.mcap")
+    rc, out, err = _run(["run", log, "--map", str(tmp_path / "wrong.yaml"), "--initial-pose", "7.0", "1.8", "0.0",
+                         "-o", str(tmp_path / "a"), "-q"], capsys)
+    assert rc == 3, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fgloc: lost: ") and "--allow-lost" in lines[0]
+    assert "lost " in out and (tmp_path / "a" / "run.mcap").exists()
+    rc, out, err = _run(["run", log, "--map", str(tmp_path / "wrong.yaml"), "--initial-pose", "7.0", "1.8", "0.0",
+                         "-o", str(tmp_path / "b"), "-q", "--allow-lost"], capsys)
+    assert rc == 0 and err.strip() == ""
+    # the no-fix reasons come grouped: a few lines, not one per number
+    reason_lines = [ln for ln in out.splitlines() if ln.startswith("    ")]
+    assert 1 <= len(reason_lines) <= 10
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--scan-topic", "/scann"], "--scan-topic /scann: no such topic"),
+    (["--odom-topic", "/odometry"], "--odom-topic /odometry: no such topic"),
+    (["--scan-topic", "/odom"], "topic '/odom' has type nav_msgs/msg/Odometry, expected sensor_msgs/msg/LaserScan"),
+    (["--initial-pose", "1", "2"], "--initial-pose needs three values X Y YAW (m, m, rad"),
+    (["--initial-pose", "1", "2", "90"], "yaw 90 is in radians"),
+    (["--map", "MAP.pgm"], "this is the map's image; pass its map_server YAML"),
+])
+def test_user_input_errors_are_one_line(world_log, tmp_path, capsys, args, needle):
+    """Issue 12 items 3-5: named topics absent or of another type, the map image, two numbers."""
+    args = [a.replace("MAP.pgm", str(world_log / "map.pgm")) for a in args]
+    rc, out, err = _run(["run", str(world_log / "log.mcap"), *args, "-o", str(tmp_path / "o"), "-q"], capsys)
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and lines[0].startswith("fgloc: error: ") and needle in lines[0], err
+    if "topic" in needle:  # the log's topics with types and counts
+        assert "/scan (sensor_msgs/msg/LaserScan, " in lines[0] and "/odom (nav_msgs/msg/Odometry, " in lines[0]
+
+
+def test_map_for_a_log_without_scans_is_an_error(world, tmp_path, capsys):
+    from fgloc.io.log import LogWriter
+
+    m, gt, msgs = world
+    m.save(tmp_path / "map.yaml")
+    with LogWriter(tmp_path / "odom.mcap") as w:
+        for topic, msg in msgs:
+            if topic != "/scan":
+                w.write(topic, msg)
+    rc, out, err = _run(["run", str(tmp_path / "odom.mcap"), "--map", str(tmp_path / "map.yaml"),
+                         "-o", str(tmp_path / "o"), "-q"], capsys)
+    assert rc == 2 and "--map needs laser scans" in err and len(err.strip().splitlines()) == 1
+    rc, out, err = _run(["run", str(tmp_path / "odom.mcap"), "-o", str(tmp_path / "o2"), "-q"], capsys)
+    assert rc == 0, err  # odometry alone, no map: fine
+
+
+def test_run_never_overwrites_its_input(world_log, tmp_path, capsys):
+    """Issue 12 item 9: `fgloc run DIR/run.mcap -o DIR` truncated its own input."""
+    import shutil
+
+    d = tmp_path / "prev"
+    rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(d), "-q"], capsys)
+    assert rc == 0, err
+    before = (d / "run.mcap").read_bytes()
+    rc, _, err = _run(["run", str(d / "run.mcap"), "-o", str(d), "-q", "--force"], capsys)
+    assert rc == 2 and "is an input of this command" in err and (d / "run.mcap").read_bytes() == before
+    # a folder holding files of our names that fgloc did not write: only with --force
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "trajectory.tum").write_text("# someone's reference\n")
+    rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(other), "-q"], capsys)
+    assert rc == 2 and "not written by fgloc run; pass --force" in err
+    assert (other / "trajectory.tum").read_text() == "# someone's reference\n"
+    rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(other), "-q", "--force"], capsys)
+    assert rc == 0, err
+    # a previous fgloc output is ours: re-running into it is fine
+    rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(d), "-q"], capsys)
+    assert rc == 0, err
+    shutil.rmtree(other)

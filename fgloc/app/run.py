@@ -36,9 +36,10 @@ class RunRequest:
     frontend: str = "native"
     initial_pose: tuple[float, float, float] | None = None  # x_m, y_m, yaw_rad in the map
     config: FglocConfig | Path | None = None  # a config, a YAML file overlaid on the defaults, or the defaults
-    scan_topic: str = "/scan"
-    odom_topic: str = "/odom"
-    imu_topic: str = "/imu"
+    # topics: None = the default name, used when present; a name given = required (absent: error)
+    scan_topic: str | None = None
+    odom_topic: str | None = None
+    imu_topic: str | None = None
     force: bool = False  # overwrite output files that fgloc did not write
     view: str | None = None  # [HOST:]PORT: serve a Foxglove WebSocket view while localizing (fgloc.view)
     realtime: float | None = None  # replay at this factor of real time (None: as fast as possible)
@@ -66,26 +67,63 @@ class RunResult:
     metrics_online: Any = None
     eval_error: str | None = None
     config: FglocConfig = field(default_factory=FglocConfig)
+    log: Path = field(default_factory=Path)
+    lost_s: float = 0.0  # time the localizer spent lost (no pose, or no accepted fix for lost_after_s)
+    ended_lost: bool = False
+
+    @property
+    def lost_share(self) -> float:
+        return self.lost_s / self.log_s if self.log_s > 0 else (1.0 if self.ended_lost else 0.0)
+
+    def failure(self) -> str | None:
+        """One line when the result is not usable (fgloc run exits 3), else None: no pose at all,
+        or lost at the end, or lost longer than ``pipeline.max_lost_share`` of the run."""
+        if self.poses == 0:
+            return "no pose was estimated"
+        if self.mode != "map":
+            return None
+        share = self.config.pipeline.max_lost_share
+        if self.ended_lost:
+            return (f"the localizer was lost at the end of the run (lost {self.lost_s:.1f} s of "
+                    f"{self.log_s:.1f} s); pass --allow-lost to accept this")
+        if self.lost_share > share:
+            return (f"the localizer was lost {self.lost_s:.1f} s of {self.log_s:.1f} s "
+                    f"({100 * self.lost_share:.0f} % > pipeline.max_lost_share {100 * share:.0f} %); "
+                    f"pass --allow-lost to accept this")
+        return None
 
     def as_dict(self) -> dict[str, Any]:
         from fgloc.io.yamlio import yaml_ready
 
         d = {k: getattr(self, k) for k in ("mode", "frame", "backend", "frontend", "poses", "online_poses",
-                                          "fixes", "wall_s", "log_s", "truncated", "written", "eval_error")}
+                                          "fixes", "wall_s", "log_s", "truncated", "written", "eval_error",
+                                          "lost_s", "ended_lost")}
         d["stats"] = yaml_ready(self.stats)
         d["outdir"] = str(self.outdir)
         return d
 
 
-def _check_inputs(reader: Any, log: Path, roles: tuple[tuple[str, str], ...]) -> None:
-    """One-line errors for inputs that cannot be localized with: a role's topic of another type
-    (it would be skipped and the run would 'succeed' empty) or topics stamped by different clocks."""
+def topics_line(summary: dict[str, Any]) -> str:
+    """The log's topics with their types and message counts, on one line."""
+    items = [f"{t} ({v['type']}, {v['count']})" for t, v in sorted(summary["topics"].items())]
+    return ", ".join(items) or "none"
+
+
+def _check_inputs(reader: Any, log: Path, summary: dict[str, Any],
+                  roles: tuple[tuple[str, str, str, bool], ...]) -> None:
+    """One-line errors for inputs that cannot be localized with: a topic the user named that is
+    absent, a role's topic of another type (it would be skipped and the run would 'succeed'
+    empty), topics stamped by different clocks.  Each names the log's topics."""
     types = reader.topic_types()
-    for topic, want in roles:
+    for option, topic, want, named in roles:
         have = types.get(topic)
+        if named and not reader.has(topic):
+            raise LogError(f"{log}: {option} {topic}: no such topic with messages in the log; its topics: "
+                           f"{topics_line(summary)}")
         if have is not None and reader.has(topic) and have != want:
-            raise LogError(f"{log}: topic '{topic}' has type {have}, expected {want} (rename with --*-topic)")
-    skew = reader.clock_skew([t for t, _ in roles])
+            raise LogError(f"{log}: topic '{topic}' has type {have}, expected {want} (rename with {option}); "
+                           f"its topics: {topics_line(summary)}")
+    skew = reader.clock_skew([t for _, t, _, _ in roles])
     if skew is not None:
         raise LogError(f"{log}: {skew}")
 
@@ -95,8 +133,47 @@ def _initial_pose(values: Any) -> np.ndarray | None:
         return None
     pose0 = np.asarray(values, dtype=float).reshape(-1)
     if pose0.shape != (3,) or not np.all(np.isfinite(pose0)):
-        raise ConfigError("--initial-pose needs three finite numbers: X Y YAW (m, m, rad)")
+        raise ConfigError("--initial-pose needs three finite numbers: X Y YAW (m, m, rad in the map frame)")
+    if abs(float(pose0[2])) > 2 * np.pi:
+        raise ConfigError(f"--initial-pose: yaw {pose0[2]:g} is in radians (did you mean "
+                          f"{np.radians(pose0[2]):.4f} for {pose0[2]:g} deg?)")
     return pose0
+
+
+MAP_IMAGES = (".pgm", ".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+def _check_map_arg(map_yaml: Path | None) -> None:
+    if map_yaml is not None and Path(map_yaml).suffix.lower() in MAP_IMAGES:
+        raise ConfigError(f"{map_yaml}: this is the map's image; pass its map_server YAML "
+                          f"(e.g. {Path(map_yaml).with_suffix('.yaml')}), which says the resolution and origin")
+
+
+def _ours(outdir: Path) -> bool:
+    """Whether ``outdir`` holds a previous fgloc run (its config.yaml has the ``run:`` section)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load((outdir / "config.yaml").read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("run"), dict)
+
+
+def check_outputs(outdir: Path, inputs: list[Path | None], force: bool) -> None:
+    """Never overwrite an input (one line, even with ``force``); files of the output names that
+    fgloc run did not write only with ``force``."""
+    from fgloc.app.files import OutputError, check_not_input
+
+    if outdir.exists() and not outdir.is_dir():
+        raise OutputError(f"{outdir}: is a file; -o takes a folder")
+    existing = [outdir / n for n in OUTPUT_FILES if (outdir / n).exists()]
+    for p in existing:
+        check_not_input(p, inputs)
+    if existing and not force and not _ours(outdir):
+        names = ", ".join(p.name for p in existing)
+        raise OutputError(f"{outdir}: holds {names}, not written by fgloc run; pass --force to overwrite, "
+                          f"or choose another -o folder")
 
 
 def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None,
@@ -116,21 +193,30 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     config = req.config if isinstance(req.config, FglocConfig) else load_config(req.config)
     log = Path(req.log)
     outdir = Path(req.outdir)
-    scan_topic, odom_topic, imu_topic = req.scan_topic, req.odom_topic, req.imu_topic
+    scan_topic = req.scan_topic or "/scan"
+    odom_topic = req.odom_topic or "/odom"
+    imu_topic = req.imu_topic or "/imu"
     topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic)
     pose0 = _initial_pose(req.initial_pose)
+    _check_map_arg(req.map_yaml)
+    cfg_path = req.config if isinstance(req.config, (str, Path)) else None
+    check_outputs(outdir, [log, req.map_yaml, cfg_path], req.force)
     reader = LogReader(log, topics)
     summ = reader.summary()
     counts = {t: v["count"] for t, v in summ["topics"].items()}
     n_scan, n_odom, n_imu = counts.get(scan_topic, 0), counts.get(odom_topic, 0), counts.get(imu_topic, 0)
+    _check_inputs(reader, log, summ, (("--scan-topic", scan_topic, LASER_SCAN, req.scan_topic is not None),
+                                      ("--odom-topic", odom_topic, ODOMETRY, req.odom_topic is not None),
+                                      ("--imu-topic", imu_topic, IMU, req.imu_topic is not None)))
     if n_odom == 0 and n_imu == 0 and n_scan == 0:
-        raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with")
-    _check_inputs(reader, log, ((scan_topic, LASER_SCAN), (odom_topic, ODOMETRY), (imu_topic, IMU)))
+        raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; its "
+                       f"topics: {topics_line(summ)}")
+    if req.map_yaml is not None and n_scan == 0:
+        raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
+                       f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "
+                       f"{topics_line(summ)}")
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
-    mode = "map"
-    if occ_map is None or n_scan == 0:
-        occ_map = None
-        mode = "odom"
+    mode = "map" if occ_map is not None else "odom"
     laser_mount = reader.laser_mount()
     loc = Localizer(occ_map, laser_mount, backend=req.backend, frontend=req.frontend, initial_pose=pose0,
                     config=config)
@@ -183,6 +269,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         online_poses=len(online), fixes=len(fixes), stats=loc.stats, wall_s=wall, log_s=sim_s,
         truncated=reader.truncated, outdir=outdir,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
+        log=log, lost_s=float(loc.stats.get("lost_s", 0.0)), ended_lost=bool(loc.stats.get("ended_lost", False)),
     )
     gt = reader.ground_truth() if reader.has(topics.ground_truth) else None
     if gt is not None and len(final) > 1:

@@ -21,8 +21,8 @@ __all__ = ["register", "run_log", "RunRequest", "localize_sim", "PAPER_VARIANTS"
 
 def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str = "smoother",
             frontend: str = "native", initial_pose: list[float] | None = None,
-            config_path: Path | None = None, scan_topic: str = "/scan", odom_topic: str = "/odom",
-            imu_topic: str = "/imu", quiet: bool = False) -> dict[str, Any]:
+            config_path: Path | None = None, scan_topic: str | None = None, odom_topic: str | None = None,
+            imu_topic: str | None = None, quiet: bool = False) -> dict[str, Any]:
     """Deprecated: the old positional form returning a dict; use :func:`fgloc.app.run.run_log`."""
     r = run_request(RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                                initial_pose=None if initial_pose is None else tuple(initial_pose),  # type: ignore
@@ -42,6 +42,9 @@ def _progress(quiet: bool):
     return make
 
 
+EXIT_LOST = 3  # fgloc run: the run finished but its result is not usable (lost, or no pose)
+
+
 def _announce(line: str) -> None:
     import sys
 
@@ -58,10 +61,16 @@ def _print_run_summary(r: RunResult) -> None:
               f"{r.mode} frame; {r.poses} poses over {r.log_s:.1f} s in {r.wall_s:.1f} s "
               f"({speed:.0f}x real time)")
     con.print(f"  scans {st['scans']}, fixes {st['fixes']}, no fix {st['no_fix']}, rejected {st['rejected']}, "
-              f"odometry {st['odometry']}, compass {st['compass']}, skipped {st['skipped']} "
-              f"{st['skipped_reasons'] or ''}, relocalizations {st['relocalizations']}")
-    if st.get("no_fix_reasons"):
-        con.print(f"  no-fix reasons: {st['no_fix_reasons']}")
+              f"odometry {st['odometry']}, compass {st['compass']}, skipped {st['skipped']}, "
+              f"relocalizations {st['relocalizations']}")
+    if r.mode == "map":
+        con.print(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.get('lost_events', 0)} "
+                  f"time(s) after tracking){', [bold red]lost at the end[/bold red]' if r.ended_lost else ''}")
+    for title, reasons in (("skipped", st.get("skipped_reasons")), ("no fix", st.get("no_fix_reasons"))):
+        if reasons:  # grouped by kind (fgloc.localization.localizer.reason_kind): a few lines at most
+            con.print(f"  {title}, by reason:")
+            for why, n in reasons.items():
+                con.print(f"    {n:6d}  {why}", markup=False, highlight=False)
     if r.truncated:
         con.print(f"  [yellow]log truncated:[/yellow] {r.truncated}")
     m = r.metrics
@@ -90,10 +99,15 @@ def register(app: typer.Typer) -> None:
             None, "--initial-pose", help="X Y YAW (m, m, rad) in the map; without it: global localization"),
         config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
                                                        "(`fgloc config init` writes one)"),
-        scan_topic: str = typer.Option("/scan", "--scan-topic"),
-        odom_topic: str = typer.Option("/odom", "--odom-topic"),
-        imu_topic: str = typer.Option("/imu", "--imu-topic"),
-        outdir: Path = typer.Option(..., "-o", "--output", help="output folder"),
+        scan_topic: str | None = typer.Option(None, "--scan-topic", help="sensor_msgs/LaserScan topic "
+                                              "[default: /scan when present; a name given must exist]"),
+        odom_topic: str | None = typer.Option(None, "--odom-topic", help="nav_msgs/Odometry topic [/odom]"),
+        imu_topic: str | None = typer.Option(None, "--imu-topic", help="sensor_msgs/Imu (compass) topic [/imu]"),
+        outdir: Path = typer.Option(..., "-o", "--output", help="output folder (never an input's folder "
+                                    "file: run.mcap, config.yaml ... are refused if they are inputs)"),
+        force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc run did not write"),
+        allow_lost: bool = typer.Option(False, "--allow-lost", help="exit 0 even when the localizer was lost "
+                                        "at the end or longer than pipeline.max_lost_share"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
         view: str | None = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
                                         "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
@@ -104,11 +118,19 @@ def register(app: typer.Typer) -> None:
         if backend not in ("ekf", "smoother", "batch"):
             raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
         req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                         initial_pose=tuple(initial_pose) if initial_pose else None, config=config,
+                         initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
+                         config=config,
                          scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
-                         view=view, realtime=realtime)
+                         view=view, realtime=realtime, force=force)
         r = run_request(req, progress=_progress(quiet), announce=_announce)
         _print_run_summary(r)
+        failed = r.failure()
+        if failed and (r.poses == 0 or not allow_lost):
+            import sys
+
+            print(f"fgloc: lost: {r.log}: {failed}" if r.poses else f"fgloc: error: {r.log}: {failed}",
+                  file=sys.stderr)
+            raise SystemExit(EXIT_LOST)
 
     bench = typer.Typer(help="Benchmarks: the paper replica, fault scenarios.", no_args_is_help=True)
     app.add_typer(bench, name="bench")

@@ -36,7 +36,7 @@ from fgloc.errors import ConfigError
 T = TypeVar("T")
 
 __all__ = ["setting", "section", "parse", "to_dict", "to_yaml", "with_overrides", "suggest", "unknown_key_error",
-           "check_mapping"]
+           "check_keys", "check_mapping"]
 
 
 def setting(default: Any, doc: str, *, min: float | None = None, max: float | None = None,  # noqa: A002
@@ -349,3 +349,29 @@ def field_default(cls: type, name: str) -> Any:
             if f.default_factory is not MISSING:
                 return f.default_factory()
     raise KeyError(name)
+
+
+def check_keys(data: Any, template: Mapping[str, Any], source: str, where: str = "",
+               open_keys: tuple[str, ...] = ()) -> None:
+    """Check a loosely typed mapping (a simulator scenario) against a template of its keys.
+
+    Every key of ``data`` must be a key of ``template`` ("did you mean" otherwise); where the
+    template's value is a mapping and so is the data's, the check recurses; a template value
+    that is a list holding one mapping checks every item of the data's list against it.
+    Keys in ``open_keys`` (dotted paths) are not checked below.
+    """
+    mapping = check_mapping(data, source, where)
+    for key, value in mapping.items():
+        if str(key) not in template:
+            raise unknown_key_error(source, where, str(key), [str(k) for k in template])
+        path = f"{where}.{key}" if where else str(key)
+        if path in open_keys:
+            continue
+        sub = template[key]
+        if isinstance(sub, Mapping) and isinstance(value, Mapping):
+            check_keys(value, sub, source, path, open_keys)
+        elif isinstance(sub, list) and len(sub) == 1 and isinstance(sub[0], Mapping):
+            if not isinstance(value, list):
+                _raise(source, path, f"expected a list, got {_fmt(value)}")
+            for i, item in enumerate(value):
+                check_keys(item, sub[0], source, f"{path}[{i}]", open_keys)

@@ -31,6 +31,12 @@ class PipelineConfig:
                                       "(odometry-carried)", min=0)
     relocalize_confirm_s: float = setting(1.0, "... spanning at least this long (a burst of scans is one piece "
                                           "of evidence)", min=0)
+    # lost detection
+    lost_after_s: float = setting(3.0, "no accepted fix for this long (at least relocalize_after informative scans; "
+                                  "fixes the back-end rejects count as none) -> lost: global search as at start-up",
+                                  gt=0)
+    max_lost_share: float = setting(0.2, "fgloc run exits 3 when lost longer than this share of the run, or at its "
+                                    "end (--allow-lost: exit 0)", min=0, max=1)
     # start-up and global localization
     initial_sigma_xy_m: float = setting(0.1, "prior on --initial-pose (or a global-search result)", gt=0)
     initial_sigma_yaw_deg: float = setting(5.0, "heading prior on --initial-pose", gt=0)

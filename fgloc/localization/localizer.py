@@ -32,6 +32,7 @@ to a keyframe's stamp).
 from __future__ import annotations
 
 import math
+import re
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,6 +49,27 @@ if TYPE_CHECKING:
     from fgloc.config import FglocConfig
 
 EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
+COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset filters global candidates
+MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
+
+
+def reason_kind(reason: str) -> str:
+    """The kind of a no-fix reason: details in parentheses dropped, numbers as N
+    ("update thresholds not met (moved 0.064 m ...)" -> "update thresholds not met")."""
+    r = re.sub(r"\([^)]*\)?", "", str(reason))
+    r = re.sub(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", "N", r)
+    r = re.sub(r"\s+", " ", r).strip(" :,;.")
+    return r[:70] or "no fix"
+
+
+def group_reasons(counts: dict[str, int], max_kinds: int = MAX_REASON_KINDS) -> dict[str, int]:
+    """The most frequent kinds, the rest summed as ``other (k kinds)``; most frequent first."""
+    items = sorted(counts.items(), key=lambda kv: -kv[1])
+    out = dict(items[:max_kinds])
+    rest = items[max_kinds:]
+    if rest:
+        out[f"other ({len(rest)} kinds)"] = sum(v for _, v in rest)
+    return out
 
 
 class Localizer:
@@ -96,6 +118,12 @@ class Localizer:
         self._last_kf_t = -math.inf
         self._scan_count = 0
         self._lost = initial_pose is None and not self.odom_mode
+        self._t_bad_since: float | None = None  # first informative scan of the current no-fix streak
+        self._lost_since: float | None = None  # start of the current lost interval
+        self._lost_total_s = 0.0
+        self._used_fixes = 0  # fixes the back-end accepted while tracking
+        self._last_scan_t: float | None = None
+        self.stats["lost_events"] = 0
         if self._lost and self.frontend is not None and self.frontend.supports_global:
             self.frontend.reset(None)
 
@@ -163,10 +191,13 @@ class Localizer:
             self.last_reason = "scan skipped (bad or repeated stamp)"
             return None
         self.stats["scans"] += 1
+        self._last_scan_t = t
         if self.odom_mode:
             self._odom_mode_step(t, scan=True)
             self.last_reason = "no map"
             return None
+        if self._lost and self._lost_since is None:
+            self._lost_since = t  # no pose yet: lost from the first scan until the first fix
         fe = self.frontend
         matching = self.backend.initialized and not self._lost
         if matching:
@@ -195,8 +226,8 @@ class Localizer:
         else:
             self.stats["no_fix"] += 1
             self.last_reason = res.why
-            reason = self.last_reason.split(":")[0][:60]
-            self.no_fix_reasons[reason] = self.no_fix_reasons.get(reason, 0) + 1
+            kind = reason_kind(self.last_reason)
+            self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         used = self.backend.add_keyframe(t, fix)
         if fix is not None and not used:
             self.stats["rejected"] += 1
@@ -210,21 +241,31 @@ class Localizer:
             informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
         if used:
             self._bad_streak = 0
+            self._t_bad_since = None
             assert self.reloc is not None
             self.reloc.pending = None
+            self._used_fixes += 1
+            self.reloc.trust_compass = self._used_fixes >= COMPASS_TRUST_FIXES
         elif informative:
             self._bad_streak += 1
+            if self._t_bad_since is None:
+                self._t_bad_since = t
         if self._bad_streak >= self.pcfg.relocalize_after:
             if fe.supports_global:
-                self._lost = True
-                self._global_tries = 0
+                self._declare_lost(t)
                 self.stats["relocalizations"] += 1
                 fe.reset(None)
+            elif self._t_bad_since is not None and t - self._t_bad_since >= self.pcfg.lost_after_s:
+                # no accepted fix for lost_after_s: tracking is hopeless (a wrong initial pose, a
+                # kidnapping the relocalization could not confirm): search globally as at start-up
+                self._declare_lost(t)
             else:
                 assert self.reloc is not None
                 found = self.reloc.check(msg, res, odom_delta)
                 if found is not None:
                     self.stats["relocalizations"] += 1
+                    if self._lost_since is None:  # the pose was wrong since the streak began
+                        self._lost_since = self._t_bad_since
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
 
@@ -234,7 +275,18 @@ class Localizer:
         syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)
         return np.diag([sxy**2, sxy**2, syaw**2])
 
+    def _declare_lost(self, t: float) -> None:
+        self._lost = True
+        self._global_tries = 0
+        self.stats["lost_events"] += 1
+        if self._lost_since is None:
+            self._lost_since = self._t_bad_since if self._t_bad_since is not None else t
+
     def _start(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        if self._lost_since is not None:
+            self._lost_total_s += max(0.0, t - self._lost_since)
+            self._lost_since = None
+        self._t_bad_since = None
         if self.backend.initialized:
             self.backend.reset(t, pose, cov)
         else:
@@ -313,8 +365,15 @@ class Localizer:
     # ------------------------------------------------------------------ outputs
     @property
     def lost(self) -> bool:
-        """Searching globally (no pose yet, or the front-end's own global mode after losing track)."""
+        """Searching globally: no pose yet, or no accepted fix for ``lost_after_s``."""
         return self._lost
+
+    def lost_time_s(self) -> float:
+        """Seconds spent lost so far (up to the last scan when lost now)."""
+        total = self._lost_total_s
+        if self._lost_since is not None and self._last_scan_t is not None:
+            total += max(0.0, self._last_scan_t - self._lost_since)
+        return total
 
     def current(self) -> PoseFix | None:
         """Latest fused pose and covariance, predicted to the newest odometry stamp."""
@@ -340,7 +399,10 @@ class Localizer:
         self.stats["gated"] = int(self.backend.stats.get("fixes_rejected", 0))
         self.stats["backend"] = dict(self.backend.stats)
         if self.no_fix_reasons:
-            self.stats["no_fix_reasons"] = dict(self.no_fix_reasons)
+            self.stats["no_fix_reasons"] = group_reasons(self.no_fix_reasons)
+        if not self.odom_mode:
+            self.stats["lost_s"] = self.lost_time_s()
+            self.stats["ended_lost"] = bool(self._lost)
         return tr
 
     def fixes_trajectory(self) -> Trajectory:

@@ -48,6 +48,9 @@ class Relocalizer:
         self.tick = 0
         self._global: Any = None
         self.last_compass: tuple[float, float] | None = None  # (stamp, compass yaw)
+        # the back-end's compass offset rules out headings only once accepted map fixes have
+        # confirmed it: from a wrong initial pose it is wrong by as much (the localizer sets this)
+        self.trust_compass = False
 
     def reset(self) -> None:
         """Forget the pending candidate (a fix was accepted, or the back-end was reset)."""
@@ -67,7 +70,7 @@ class Relocalizer:
             return []
         pts_base = transform_points(self.laser_mount.pose, pts)
         heading = None
-        off = self.backend.compass_offset()
+        off = self.backend.compass_offset() if self.trust_compass else None
         if off is not None and self.last_compass is not None and \
                 abs(float(msg.stamp) - self.last_compass[0]) < 1.0:
             heading = float(wrap_angle(self.last_compass[1] - off))

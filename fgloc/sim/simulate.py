@@ -158,9 +158,28 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
+#: the faults a scenario may inject and their keys (``faults:`` section; checked on loading)
+FAULT_KEYS: dict[str, Any] = {
+    "kidnap": {"time": None, "skip_s": None, "to": None},
+    "wheel_slip": {"start": None, "duration": None, "fraction": None},
+    "compass_disturbance": {"start": None, "duration": None, "offset_deg": None},
+    "laser_blackout": {"start": None, "duration": None},
+    "moving_obstacles": [{"path": None, "speed_mps": None, "radius_m": None, "start": None}],
+}
+
+
+def check_scenario(data: dict, source: str) -> None:
+    """Unknown keys and fault names of a scenario are a one-line ConfigError with a suggestion."""
+    from fgloc.config.schema import check_keys
+
+    template = {**DEFAULT_SCENARIO, "initial_yaw": None, "imu": IMU_DEFAULTS, "faults": FAULT_KEYS}
+    check_keys(data, template, source, open_keys=("map_changes", "route"))
+
+
 def load_scenario(path_or_dict: str | Path | dict) -> dict:
     """A scenario dict merged over the defaults; relative map paths resolve against the YAML's folder."""
     if isinstance(path_or_dict, dict):
+        check_scenario(path_or_dict, "scenario")
         return _merge(DEFAULT_SCENARIO, path_or_dict)
     path = Path(path_or_dict)
     try:
@@ -171,6 +190,7 @@ def load_scenario(path_or_dict: str | Path | dict) -> dict:
         raise ConfigError(f"{path}: scenario YAML does not parse") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: scenario must be a YAML mapping")
+    check_scenario(data, str(path))
     m = data.get("map", "hall")
     if isinstance(m, str) and m != "hall" and not Path(m).is_absolute():
         cand = [path.parent / m, Path.cwd() / m]

@@ -146,7 +146,9 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
     n_prod = 0
     for k in range(px.shape[0]):
         r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
-        if not front or abs(r) > outlier:
+        if not front:
+            r = far  # a back-facing point counts at field_max_dist, as before d37cb1c (real maps need it)
+        if abs(r) > outlier:
             cost += rho_out
             continue
         if loss == 1:

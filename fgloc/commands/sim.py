@@ -3,7 +3,7 @@
 Usage::
 
     fgloc simulate paper -o DIR [--seed N]
-    fgloc simulate scenario config/scenarios/wheel_slip.yaml -o DIR [--seed N]
+    fgloc simulate scenario fgloc/config/scenarios/wheel_slip.yaml -o DIR [--seed N]
 
 DIR gets ``log.mcap`` (/scan, /odom, /imu, /tf_static, /ground_truth), ``map.yaml`` +
 ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` (the effective parameters).
@@ -72,7 +72,7 @@ def paper(
 
 @simulate_app.command("scenario")
 def scenario(
-    file: Path = typer.Argument(..., help="scenario YAML (see config/scenarios/)"),
+    file: Path = typer.Argument(..., help="scenario YAML (shipped: fgloc/config/scenarios/)"),
     out: Path = typer.Option(..., "-o", "--out", help="output folder"),
     seed: int = typer.Option(0, help="random seed"),
 ) -> None:

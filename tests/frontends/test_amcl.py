@@ -81,9 +81,10 @@ def test_global_localization_paper(paper_scans):
 
 
 def test_global_localization_willow():
+    from fgloc.config import scenario_path
     from fgloc.sim import run_scenario
 
-    sim = run_scenario("config/scenarios/willow.yaml", seed=0)
+    sim = run_scenario(str(scenario_path("willow")), seed=0)
     scans = [m for _, m in sim.messages if isinstance(m, LaserScan)]
     odoms = [m for tp, m in sim.messages if isinstance(m, Odometry) and tp != "/ground_truth"]
     st = np.array([s.stamp for s in scans])
@@ -185,11 +186,12 @@ def test_defaults_match_constructor():
 def test_grey_wall_map_needs_unknown_edges(shared_data):
     """The raw 2010 Willow Garage map stores most walls as grey (unknown) pixels: only ~544 cells are
     occupied at the 0.65 threshold.  With field_walls=occupied+unknown_edge AMCL tracks on it anyway."""
+    from fgloc.config import scenario_path
     from fgloc.sim import run_scenario
 
     raw = OccupancyMap.load(shared_data / "maps" / "willow-2010-02-18-0.10.yaml")
     assert raw.occupied.sum() < 1000
-    sim = run_scenario("config/scenarios/willow.yaml", seed=0)
+    sim = run_scenario(str(scenario_path("willow")), seed=0)
     scans = [m for _, m in sim.messages if isinstance(m, LaserScan)][:400]
     odoms = [m for tp, m in sim.messages if isinstance(m, Odometry) and tp != "/ground_truth"]
     st = np.array([s.stamp for s in scans])

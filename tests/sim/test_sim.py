@@ -1,5 +1,6 @@
 """The simulator's Must-show properties, measured on the paper run (seed 0)."""
 
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 from fgloc.geometry import compose, wrap_angle
 from fgloc.sim import run_scenario, simulate_paper
 
-SCEN = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+SCEN = Path(str(resources.files("fgloc.config") / "scenarios"))  # shipped in the package
 
 
 def dead_reckon(odom, start_pose, t_end):

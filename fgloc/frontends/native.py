@@ -80,6 +80,12 @@ LOSS_CAUCHY = 1
 #: runs of neighbouring scan points (see :func:`_stats`): the unit of independent map error
 RUN_GAP_M = 0.3
 RUN_LENGTH_M = 1.0
+#: aliases (corridors with doors at regular spacing, shelf rows) are looked for this far along
+#: the fix's least constrained direction, in steps of ALIAS_STEP_M; local maxima of the
+#: likelihood-field score reaching ALIAS_SCORE_RATIO of the fix's are refined as candidates
+ALIAS_RANGE_M = 2.0
+ALIAS_STEP_M = 0.1
+ALIAS_SCORE_RATIO = 0.7
 
 
 # ----------------------------------------------------------------- numba kernels
@@ -320,6 +326,74 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     H[2, 0] = H[0, 2]
     H[2, 1] = H[1, 2]
     return H, wr2, sw, n_in, n_used, sr, n_runs
+
+
+@njit(cache=True, fastmath=True)
+def _alias_starts(lik, A, b, px, py, stride, pose, c00, c01, c11, step, n, ratio):  # pragma: no cover
+    """Start poses at the (at most 2 best) other local maxima of the likelihood-field score along
+    the least constrained direction of the position covariance ``[[c00, c01], [c01, c11]]``.
+
+    The score (mean likelihood of every ``stride``-th point) is profiled at shifts ``k step``,
+    ``k = -n..n``; maxima more than 0.25 m away that reach ``ratio`` of the score at 0 count.
+    Returns ``(m, 3)`` poses, ``m <= 2``.
+    """
+    # principal axis of the 2x2 covariance (largest eigenvalue)
+    tr = 0.5 * (c00 + c11)
+    det = c00 * c11 - c01 * c01
+    lam = tr + math.sqrt(max(tr * tr - det, 0.0))
+    if abs(c01) > 1e-300:
+        ux, uy = lam - c11, c01
+    elif c00 >= c11:
+        ux, uy = 1.0, 0.0
+    else:
+        ux, uy = 0.0, 1.0
+    nrm = math.hypot(ux, uy)
+    ux /= nrm
+    uy /= nrm
+    h, w = lik.shape
+    cs = math.cos(pose[2])
+    sn = math.sin(pose[2])
+    m = (px.shape[0] + stride - 1) // stride
+    rx = np.empty(m)
+    ry = np.empty(m)
+    for k in range(m):
+        rx[k] = cs * px[k * stride] - sn * py[k * stride]
+        ry[k] = sn * px[k * stride] + cs * py[k * stride]
+    prof = np.zeros(2 * n + 1)
+    for kk in range(2 * n + 1):
+        tx = pose[0] + (kk - n) * step * ux
+        ty = pose[1] + (kk - n) * step * uy
+        acc = 0.0
+        for k in range(m):
+            qx = tx + rx[k]
+            qy = ty + ry[k]
+            u = A[0, 0] * qx + A[0, 1] * qy + b[0] + 0.5
+            v = A[1, 0] * qx + A[1, 1] * qy + b[1] + 0.5
+            if u >= 0.0 and v >= 0.0 and u < w and v < h:
+                acc += lik[int(v), int(u)]
+        prof[kk] = acc / max(m, 1)
+    best_k = np.full(2, -1)
+    for kk in range(1, 2 * n):
+        if abs(kk - n) * step <= 0.25 or prof[kk] < ratio * prof[n]:
+            continue
+        if prof[kk] < prof[kk - 1] or prof[kk] < prof[kk + 1]:
+            continue
+        if best_k[0] < 0 or prof[kk] > prof[best_k[0]]:
+            best_k[1] = best_k[0]
+            best_k[0] = kk
+        elif best_k[1] < 0 or prof[kk] > prof[best_k[1]]:
+            best_k[1] = kk
+    cnt = 0
+    for j in range(2):
+        if best_k[j] >= 0:
+            cnt += 1
+    out = np.zeros((cnt, 3))
+    for j in range(cnt):
+        sft = (best_k[j] - n) * step
+        out[j, 0] = pose[0] + sft * ux
+        out[j, 1] = pose[1] + sft * uy
+        out[j, 2] = pose[2]
+    return out
 
 
 @njit(cache=True, fastmath=True)
@@ -594,6 +668,16 @@ class NativeMatcher(FrontendBase):
         return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
                       self.inlier_dist, *self._lb, self.depth_m)
 
+    def _aliases(self, px: FloatArray, py: FloatArray, pose: FloatArray, cov: FloatArray
+                 ) -> list[tuple[FloatArray, float]]:
+        """Refined poses at other local maxima of the likelihood-field score along the fix's least
+        constrained direction (``ALIAS_RANGE_M``): a corridor's doors, a row of shelves."""
+        stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
+        starts = _alias_starts(self.lik, self.Ac, self.bc, px, py, stride, pose, float(cov[0, 0]),
+                               float(cov[0, 1]), float(cov[1, 1]), ALIAS_STEP_M,
+                               int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO)
+        return [self._refine_from(px, py, st) for st in starts]
+
     def _within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
         jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
         return jump <= self.max_jump_m and abs(wrap_scalar(pose[YAW] - guess[YAW])) <= self.max_jump
@@ -674,6 +758,7 @@ class NativeMatcher(FrontendBase):
         # the map: moved furniture offers a second alignment) widen it to their spread; likelihood
         # ratio exp(-dcost / T) with the same beams-per-run tempering, T = s^2 sw / runs
         temp = max(sigma2 * per_run, 1e-12)
+        refined = refined + self._aliases(px, py, best, cov)
         spread = np.zeros((3, 3))
         wsum = 1.0
         for cpose, ccost in refined:

@@ -165,3 +165,40 @@ def test_native_learns_the_surface_depth(world):
         errs.append(_err(res, p)[0])
     assert fe.depth_m < 0.1 * world.resolution  # type: ignore[attr-defined]
     assert np.median(errs[10:]) < 0.002
+
+
+def _door_corridor(period_m: float | None) -> OccupancyMap:
+    """An 80 m corridor (1 m wide) with 0.6 m door recesses every ``period_m`` (None: one recess)."""
+    res = 0.05
+    data = np.full((60, 1600), -1, dtype=np.int16)
+    data[20, :] = 100
+    data[41, :] = 100
+    data[21:41, :] = 0
+    xs = np.arange(2.0, 78.0, period_m) if period_m else np.array([40.3])
+    for x in xs:
+        c0, c1 = int(round(x / res)), int(round((x + 0.6) / res))
+        data[41, c0:c1] = 0          # the recess opens the wall...
+        data[42:46, c0:c1] = 0
+        data[46, c0 - 1:c1 + 1] = 100  # ...to a door 0.25 m behind it
+        data[41:47, c0 - 1] = 100
+        data[41:47, c1] = 100
+    return OccupancyMap(data, res)
+
+
+def test_native_covariance_spans_a_corridor_alias():
+    """Doors every 1.5 m: the scan fits the corridor 1.5 m further on almost as well; the fix's
+    covariance along the corridor must say so (a corridor alias, not a 1 cm fix).  With one unique
+    recess the same corridor gives a tight fix."""
+    rng = np.random.default_rng(2)
+    pose = np.array([40.0, 1.5, 0.0])
+    sds = {}
+    for period in (1.5, None):
+        m = _door_corridor(period)
+        fe = make_frontend("native", m, MOUNT, FACES)
+        scan = make_scan(m, pose, rng, range_max=4.0)
+        res = fe.match(scan, pose + np.array([0.03, 0.01, 0.005]))
+        assert res.ok, res.reason
+        assert _err(res, pose)[0] < 0.02
+        sds[period] = float(np.sqrt(res.cov[0, 0]))
+    assert sds[1.5] > 0.3          # spans the neighbouring door
+    assert sds[None] < 0.05

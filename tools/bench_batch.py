@@ -15,7 +15,9 @@ Per-log overhead: wall x workers minus the time spent inside the jobs, divided b
 number of logs (what the engine adds around each log: dispatch, pickling, result transfer,
 idle workers at the end), and the round trip of an empty job (200 of them) per engine.
 Every engine's trajectories are compared byte for byte with the sequential run's.
-The load average of the machine is printed before and after each measurement.
+The load average of the machine is printed before and after each measurement (the load
+column: its mean); on a shared machine wall times and speed-ups only mean something at a low
+load, the CPU seconds per log (worker CPU time inside the jobs) much less depend on it.
 """
 
 from __future__ import annotations
@@ -79,7 +81,8 @@ def run_engine(name: str, engine, logs: list[Path], map_yaml: Path, out: Path) -
     wall = time.perf_counter() - t0
     assert rep.failed == 0 and rep.ran == len(jobs), [r.error for r in rep.rows if r.error]
     inside = sum(r.wall_s for r in rep.results.values())
-    return {"wall": wall, "init": init_s, "inside": inside, "load": (load0, os.getloadavg()[0])}
+    cpu = sum(getattr(r, "cpu_s", 0.0) for r in rep.results.values())
+    return {"wall": wall, "init": init_s, "inside": inside, "cpu": cpu, "load": (load0, os.getloadavg()[0])}
 
 
 def run_cli(logs: list[Path], map_yaml: Path, out: Path) -> dict:
@@ -90,7 +93,8 @@ def run_cli(logs: list[Path], map_yaml: Path, out: Path) -> dict:
     for log in logs:
         subprocess.run([str(exe), "run", str(log.resolve()), "--map", str(map_yaml.resolve()), "--initial-pose",
                         "2.5", "3.0", "0.0", "-o", str(out / log.stem), "-q"], check=True, capture_output=True)
-    return {"wall": time.perf_counter() - t0, "init": 0.0, "inside": float("nan"), "load": (load0, os.getloadavg()[0])}
+    return {"wall": time.perf_counter() - t0, "init": 0.0, "inside": float("nan"), "cpu": float("nan"),
+            "load": (load0, os.getloadavg()[0])}
 
 
 def noop_roundtrip(engine_name: str, jobs: int, n: int = 200) -> float:
@@ -189,12 +193,13 @@ def main() -> None:
     base = statistics.median(seq)
     t = Table(title=f"fgloc batch: {len(logs)} logs x {log_s / len(logs):.0f} s, -j {args.jobs}, "
                     f"{args.repeat} repeat(s): median (min-max)")
-    for c in ("engine", "wall s", "speed-up vs sequential", "startup s", "overhead per log s", "empty job ms"):
+    for c in ("engine", "wall s", "speed-up vs sequential", "startup s", "overhead per log s", "empty job ms",
+              "CPU s per log", "load"):
         t.add_column(c, justify="left" if c == "engine" else "right")
     labels = {"sequential": "sequential (one process)", "local": f"local pool -j {args.jobs}",
               "ray": f"ray, local instance, {args.jobs} CPUs", "cli": f"fgloc run x {len(logs)} (a process each)"}
-    md = ["| engine | wall s | speed-up | startup s | overhead per log s | empty job ms |",
-          "|---|--:|--:|--:|--:|--:|"]
+    md = ["| engine | wall s | speed-up | startup s | overhead per log s | empty job ms | CPU s per log | load |",
+          "|---|--:|--:|--:|--:|--:|--:|--:|"]
     for name in order:
         rs = results[name]
         walls = [r["wall"] for r in rs]
@@ -203,12 +208,15 @@ def main() -> None:
         cells = [labels[name], fmt_range(walls), fmt_range([base / w for w in walls], 2),
                  fmt_range([r["init"] for r in rs], 1) if name == "ray" else "-",
                  fmt_range(over, 2) if name != "cli" else "-",
-                 fmt_range(noop[name], 2) if name in noop else "-"]
+                 fmt_range(noop[name], 2) if name in noop else "-",
+                 fmt_range([r["cpu"] / len(logs) for r in rs], 2) if name != "cli" else "-",
+                 fmt_range([0.5 * (r["load"][0] + r["load"][1]) for r in rs], 1)]
         t.add_row(*cells)
         md.append("| " + " | ".join(cells) + " |")
         if name == "ray":
             w2 = [r["wall"] - r["init"] for r in rs]
-            cells = ["ray, after init/shutdown", fmt_range(w2), fmt_range([base / w for w in w2], 2), "-", "-", "-"]
+            cells = ["ray, after init/shutdown", fmt_range(w2), fmt_range([base / w for w in w2], 2), "-", "-", "-",
+                     "-", "-"]
             t.add_row(*cells)
             md.append("| " + " | ".join(cells) + " |")
     con.print(t)

@@ -52,7 +52,6 @@ class MapOutcome:
     wall_s: float                  # total mapping time (read, SLAM, occupancy, write)
     position_rmse_m: float | None = None   # of the scan trajectory vs /ground_truth (SE(2)-aligned)
     heading_rmse_deg: float | None = None
-    written: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -129,9 +128,7 @@ def map_log(log: Path, outdir: Path, resolution: float, config_path: Path | None
     traj = out.slam.scan_trajectory
     res = MapOutcome(scans=out.n_scans, keyframes=int(out.slam.stats.get("keyframes", len(out.slam.keyframes))),
                      loops=len(out.slam.loops), duration_s=float(traj.duration),
-                     wall_s=float(out.timings["total_s"]),
-                     written=["map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_scans.tum",
-                              "mapping.yaml"])
+                     wall_s=float(out.timings["total_s"]))
     gt = _ground_truth(log, scan_topic, odom_topic)
     if gt is not None and len(traj) > 1:
         from fgloc.errors import LogError

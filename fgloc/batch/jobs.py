@@ -81,6 +81,7 @@ class JobResult:
     traceback: str | None = None                           # for unexpected (non-fgloc) errors
     host: str = ""
     wall_s: float = 0.0                                    # the whole job in the worker
+    cpu_s: float = 0.0                                     # CPU time of the worker process during the job
 
 
 def one_line(e: BaseException) -> str:
@@ -203,7 +204,7 @@ def execute(job: Job, blobs: dict[str, Blob] | None = None) -> JobResult:
     as bytes (shipped).  Text outputs (YAML, JSON) that name the temporary paths get the
     original ones.
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     host = f"{socket.gethostname()}:{os.getpid()}"
     final = Path(job.outdir)
     tmp = Path(tempfile.mkdtemp(prefix="fgloc-batch-")) if blobs is not None else None
@@ -231,13 +232,14 @@ def execute(job: Job, blobs: dict[str, Blob] | None = None) -> JobResult:
                 (final / rel).parent.mkdir(parents=True, exist_ok=True)
                 os.replace(stage / rel, final / rel)
         return JobResult(job.name, True, row=row, written=written, files=files, host=host,
-                         wall_s=time.perf_counter() - t0)
+                         wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
     except KeyboardInterrupt:
         raise
     except BaseException as e:  # noqa: BLE001 - failure isolation: every error becomes a row
         msg = _unlocalize(one_line(e), pairs or _replacements(local, job))
         tb = None if isinstance(e, FglocError) else _unlocalize(traceback.format_exc(), pairs)
-        return JobResult(job.name, False, error=msg, traceback=tb, host=host, wall_s=time.perf_counter() - t0)
+        return JobResult(job.name, False, error=msg, traceback=tb, host=host, wall_s=time.perf_counter() - t0,
+                         cpu_s=time.process_time() - c0)
     finally:
         shutil.rmtree(tmp if tmp is not None else stage, ignore_errors=True)
 

@@ -59,6 +59,30 @@ def loop_infos(slam: SlamResult) -> list[LoopInfo]:
                      kp[lc.j, :2].copy()) for lc in slam.loops]
 
 
+def _release_memory() -> None:
+    """Hand freed memory back to the OS between stages (glibc keeps freed heap otherwise, and the
+    peak RSS of a long log would be the sum of its stages)."""
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc: nothing to do
+        pass
+
+
+def _fixed_mmap_threshold(nbytes: int = 1 << 20) -> None:
+    """Large arrays (distance fields, grids) from mmap, returned to the OS when freed: glibc's
+    dynamic threshold would otherwise move them into the heap after the first free."""
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").mallopt(-3, int(nbytes))  # M_MMAP_THRESHOLD
+    except (OSError, AttributeError):
+        pass
+
+
 def _progress(factory: ProgressFactory | None, n: int, what: str) -> Callable[[int], None] | None:
     return factory(n, what) if factory is not None else None
 
@@ -80,10 +104,12 @@ def build_map(
     ``self_check``, check.yaml and check.png."""
     cfg = config or MapperConfig()
     outdir = Path(outdir)
+    _fixed_mmap_threshold()
     t0 = time.perf_counter()
     recs, mount = load_records(log, start, end, scan_topic, odom_topic)
     t1 = time.perf_counter()
     res = run_slam(recs, mount, cfg, _progress(progress_factory, len(recs), "mapping"))
+    _release_memory()
     t2 = time.perf_counter()
     occ = build_occupancy(res, recs, mount, cfg)
     t3 = time.perf_counter()
@@ -96,6 +122,7 @@ def build_map(
     render_map_png(outdir / "map.png", occ, res.scan_trajectory.poses[:, :2],
                    f"{Path(log).name}: {len(res.scan_trajectory)} scans, {len(res.keyframes)} keyframes, "
                    f"{len(res.loops)} loop closures", segs)
+    _release_memory()
     t4 = time.perf_counter()
     loops = loop_infos(res)
     check = None

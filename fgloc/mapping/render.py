@@ -5,9 +5,51 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from fgloc.maps import OccupancyMap
 from fgloc.types import FloatArray
+
+
+def map_image(occ: OccupancyMap, max_px: int = 1200) -> tuple[FloatArray, tuple[float, float, float, float]]:
+    """Grey levels of the map (occupied 0, free 1, unknown 0.75) at most ``max_px`` cells on a side:
+    large maps are reduced block-wise (a block with an occupied cell is occupied, else free when
+    it has a free cell), so that a 400 m building renders in megabytes, not gigabytes.  Returns the
+    image and its extent (x0, x1, y0, y1) in metres."""
+    h, w = occ.data.shape
+    f = max(1, int(np.ceil(max(h, w) / max_px)))
+    trinary = occ.mode == "trinary"
+    img = _reduce(np.ascontiguousarray(occ.data), f, 100 if trinary else 50, 0 if trinary else 49)
+    x0, _, y0, _ = occ.extent
+    cell = occ.resolution * f
+    rows, cols = int(np.shape(img)[0]), int(np.shape(img)[-1])
+    return img, (float(x0), float(x0 + cols * cell), float(y0), float(y0 + rows * cell))
+
+
+def _rgb(img: FloatArray) -> np.ndarray:
+    """Grey levels as a uint8 RGB image (matplotlib then skips its float RGBA copies)."""
+    g = np.round(np.asarray(img) * 255).astype(np.uint8)
+    return np.repeat(g[:, :, None], 3, axis=2)
+
+
+@njit(cache=True)
+def _reduce(data, f, occ_min, free_max):  # pragma: no cover - compiled
+    """Blocks of f x f cells: 0.0 if any is occupied (>= occ_min), 1.0 if any is free (0..free_max),
+    else 0.75 (unknown)."""
+    h, w = data.shape
+    hh = (h + f - 1) // f
+    ww = (w + f - 1) // f
+    out = np.full((hh, ww), 0.75)
+    for i in range(h):
+        oi = i // f
+        for j in range(w):
+            v = data[i, j]
+            oj = j // f
+            if v >= occ_min:
+                out[oi, oj] = 0.0
+            elif v >= 0 and v <= free_max and out[oi, oj] != 0.0:
+                out[oi, oj] = 1.0
+    return out
 
 
 def render_map_png(path: str | Path, occ: OccupancyMap, trajectory_xy: FloatArray | None = None,
@@ -21,14 +63,11 @@ def render_map_png(path: str | Path, occ: OccupancyMap, trajectory_xy: FloatArra
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    img = np.full(occ.data.shape, 0.75)
-    img[occ.free] = 1.0
-    img[occ.occupied] = 0.0
-    x0, x1, y0, y1 = occ.extent
+    img, (x0, x1, y0, y1) = map_image(occ)
     h, w = occ.data.shape
     scale = max(w, h) / 900.0
     fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) * 1.0 + 1), max(4.0, h / 100 / scale + 1)))
-    ax.imshow(img, cmap="gray", vmin=0, vmax=1, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
+    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
     if loops is not None and len(loops):
         for seg in loops:
             ax.plot(seg[:, 0], seg[:, 1], "-", color="tab:red", lw=0.4, alpha=0.5)
@@ -63,14 +102,11 @@ def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    img = np.full(occ.data.shape, 0.75)
-    img[occ.free] = 1.0
-    img[occ.occupied] = 0.0
-    x0, x1, y0, y1 = occ.extent
+    img, (x0, x1, y0, y1) = map_image(occ)
     h, w = occ.data.shape
     scale = max(w, h) / 900.0
     fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) + 1), max(4.0, h / 100 / scale + 1.4)))
-    ax.imshow(img, cmap="gray", vmin=0, vmax=1, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
+    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
     if trajectory_xy is not None and len(trajectory_xy):
         ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.4, alpha=0.5)
     for r in result.regions:

@@ -84,7 +84,7 @@ class MapperConfig:
     loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
     loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
     loop_grid_cache_kf: int = 20      # reuse a loop submap grid for this many keyframes
-    loop_grid_cache_mb: float = 96.0  # ... within this memory (oldest dropped first)
+    loop_grid_cache_mb: float = 64.0  # ... within this memory (oldest dropped first)
     final_batch: bool = True
     final_refine: bool = False        # re-align every scan to the optimized keyframes around it
     refine_half: int = 6              # ... keyframes k-N .. k+N (its own keyframe excluded)

@@ -16,21 +16,7 @@ from fgloc.app.run import run_log as run_request
 from fgloc.bench import PAPER_VARIANTS, bench_faults, bench_paper, claims, frontend_available, localize_sim
 from fgloc.errors import ConfigError
 
-__all__ = ["register", "run_log", "RunRequest", "localize_sim", "PAPER_VARIANTS"]
-
-
-def run_log(log: Path, outdir: Path, map_yaml: Path | None = None, backend: str = "smoother",
-            frontend: str = "native", initial_pose: list[float] | None = None,
-            config_path: Path | None = None, scan_topic: str | None = None, odom_topic: str | None = None,
-            imu_topic: str | None = None, quiet: bool = False) -> dict[str, Any]:
-    """Deprecated: the old positional form returning a dict; use :func:`fgloc.app.run.run_log`."""
-    r = run_request(RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                               initial_pose=None if initial_pose is None else tuple(initial_pose),  # type: ignore
-                               config=config_path, scan_topic=scan_topic, odom_topic=odom_topic,
-                               imu_topic=imu_topic))
-    d = r.as_dict()
-    d.update(metrics=r.metrics, metrics_online=r.metrics_online)
-    return d
+__all__ = ["register"]
 
 
 def _progress(quiet: bool):

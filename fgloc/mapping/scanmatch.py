@@ -138,6 +138,39 @@ class SearchResult:
     pose: FloatArray
     score: float
     ambiguity: float  # best score at least ``far_m`` / ``far_rad`` from the best, divided by the best
+    offsets: FloatArray | None = None  # (M, 3) every searched pose minus the best [dx, dy, dth] ...
+    scores: FloatArray | None = None   # ... and its score (M,), for direction-aware ambiguity
+    peaks: np.ndarray | None = None    # (M,) local maxima of the scores
+
+    def ambiguous_axis(self, max_ambiguity: float, across_m: float, far_rad: float) -> FloatArray | None:
+        """The unit direction along which the search is ambiguous when that is all it is: the
+        rival peaks (score above ``max_ambiguity`` of the best, away from it) lie on a line
+        through the best pose, and nothing more than ``across_m`` across that line or ``far_rad``
+        turned comes close.  None when the ambiguity is not of that kind."""
+        if self.offsets is None or self.scores is None or self.score <= 0:
+            return None
+        rival = self.scores >= max_ambiguity * self.score
+        if self.peaks is not None:
+            rival &= self.peaks
+        rival &= np.hypot(self.offsets[:, 0], self.offsets[:, 1]) > 2 * across_m
+        if not rival.any():
+            return None
+        d = self.offsets[rival, :2]
+        w, v = np.linalg.eigh(d.T @ d)
+        axis = v[:, 1]
+        return axis if self.ambiguity_across(axis, across_m, far_rad) <= max_ambiguity else None
+
+    def ambiguity_across(self, axis_xy: FloatArray, far_m: float, far_rad: float) -> float:
+        """Ambiguity ignoring shifts along ``axis_xy`` (a unit vector): the best score of poses
+        more than ``far_m`` across the axis or ``far_rad`` turned, divided by the best.  A
+        corridor is ambiguous along itself, yet fixes the position across it and the heading."""
+        if self.offsets is None or self.scores is None or self.score <= 0:
+            return self.ambiguity
+        n = np.array([-axis_xy[1], axis_xy[0]])
+        far = (np.abs(self.offsets[:, :2] @ n) > far_m) | (np.abs(self.offsets[:, 2]) > far_rad)
+        if self.peaks is not None:
+            far &= self.peaks
+        return float(self.scores[far].max() / self.score) if far.any() else 0.0
 
 
 def correlative_search(
@@ -174,9 +207,15 @@ def correlative_search(
         (np.arange(2 * nlin + 1) - ix) * lin_step_m,
         indexing="ij",
     )
-    far = (np.hypot(xx, yy) > far_m) | (np.abs(aa) > far_rad)
+    # rivals are distinct peaks (local maxima) away from the best: the flanks of the best peak,
+    # long in a corridor under the coarse search's wide kernel, are no rivals
+    from scipy.ndimage import maximum_filter
+
+    peak = sc >= maximum_filter(sc, size=3, mode="nearest")
+    far = ((np.hypot(xx, yy) > far_m) | (np.abs(aa) > far_rad)) & peak
     amb = float(sc[far].max() / best) if far.any() and best > 0 else 0.0
-    return SearchResult(pose, best, amb)
+    offsets = np.column_stack([xx.ravel(), yy.ravel(), aa.ravel()])
+    return SearchResult(pose, best, amb, offsets, sc.ravel(), peak.ravel())
 
 
 @njit(cache=True)

@@ -79,7 +79,8 @@ class MapperConfig:
     loop_window_deg: float = 20.0
     loop_min_score: float = 0.45      # fine Gaussian score to accept
     loop_min_inliers: float = 0.6     # fraction of points within 0.1 m after refinement
-    loop_max_ambiguity: float = 0.92  # second-best distinct peak / best
+    loop_max_ambiguity: float = 0.92  # second-best distinct peak / best (ambiguous matches are kept only
+                                      # in corridors, along which they then leave the position free)
     loop_cauchy_k: float = 1.0
     loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
     loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
@@ -173,8 +174,8 @@ class GraphSlam:
         self._loop_grids: dict[int, tuple[int, DistanceGrid, DistanceGrid]] = {}  # j -> (k, fine, coarse)
         self._loops_seen = 0
         self.stats = {"scans": 0, "tracked": 0, "track_fail": 0, "stationary": 0, "keyframes": 0,
-                      "kf_searches": 0, "loop_tries": 0, "loops": 0, "loop_rejected": 0, "odom_jumps": 0,
-                      "empty_scans": 0}
+                      "kf_searches": 0, "loop_tries": 0, "loops": 0, "loops_corridor": 0, "loop_rejected": 0,
+                      "odom_jumps": 0, "empty_scans": 0}
 
     # ------------------------------------------------------------ helpers
     def _scan_points(self, rec: ScanRecord) -> FloatArray:
@@ -386,12 +387,21 @@ class GraphSlam:
             fr = correlative_search(grid, mpts, sr.pose, 0.1, np.radians(2.0), 0.025, np.radians(0.5), 0.05)
             rr = refine(grid, mpts, fr.pose, cfg.huber_m)
             ok = (fr.score >= cfg.loop_min_score and rr.inlier_frac >= cfg.loop_min_inliers
-                  and sr.ambiguity <= cfg.loop_max_ambiguity
                   and np.hypot(*(rr.pose[:2] - fr.pose[:2])) < 0.2)
+            free_axis = None
+            if ok and sr.ambiguity > cfg.loop_max_ambiguity:
+                # ambiguous: accept only a corridor (the rival peaks on one line through the best,
+                # heading and position across the line unambiguous); the factor then leaves the
+                # position along the line free
+                free_axis = sr.ambiguous_axis(cfg.loop_max_ambiguity, 0.3, np.radians(5.0))
+                ok = free_axis is not None
             if not ok:
                 self.stats["loop_rejected"] += 1
                 continue
             cov = match_covariance(rr.info, cfg.match_sigma_m) * cfg.match_cov_inflation
+            if free_axis is not None:
+                self.stats["loops_corridor"] += 1
+                cov[:2, :2] += cfg.loop_window_m**2 * np.outer(free_axis, free_axis)
             cov_local = rotate_covariance(cov, -float(rr.pose[2]))
             self._add_factor(gtsam.BetweenFactorPose2(
                 j, k, gtsam.Pose2(*rr.pose), self._noise(cov_local, "cauchy", cfg.loop_cauchy_k)))

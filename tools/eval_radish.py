@@ -1,8 +1,14 @@
-"""Map the real Radish logs (intel, fr079, aces), score against GMapping-corrected references,
-and localize with ``fgloc run`` on a part of the log against a map built from another part.
+"""Map the real Radish logs (intel, fr079, aces, mit-csail, fr-clinic) with ``fgloc map`` (each in its
+own process: wall time and peak RSS measured), score the all-scan trajectories against references,
+report the self-check verdicts, and (optionally) localize a part of each log on a map of another.
 
-    /work/venv/bin/python tools/eval_radish.py [--out eval_radish] [--datasets intel fr079 aces]
-                                               [--no-localize]
+    python tools/eval_radish.py [--out eval_radish] [--datasets intel fr079 aces mit-csail fr-clinic]
+                                [--reference-dir DIR] [--relations aces=aces.relations] [--localize]
+
+References: the GMapping-corrected logs of ``../shared/data/radish-reference`` (intel, fr079) and of
+``--reference-dir`` (same file names, e.g. ``aces-corrected.log.gz``, ``csail-corrected.log.gz`` from
+the Radish / acschaefer/ple distribution, CC BY); ``--relations NAME=FILE`` adds a relation file of
+Kuemmerle et al. 2009 (``t1 t2 x y z roll pitch yaw``, stamps on the log's ipc clock).
 
 Reference association (the corrected logs' timestamps are *not* the raw logs'):
 every FLASER line of the corrected log is matched to the raw log's scan with
@@ -14,9 +20,9 @@ with no identical raw scan are dropped and counted.  FLASER ``x y theta`` in the
 corrected log is the laser pose; it is converted to base_link with the laser mount.
 
 Relations (Kuemmerle et al. 2009) from the reference: every reference pose paired
-with the first one 1-2 s later (intel's corrected log keeps only every ~3 s a
-scan, so intel uses 1-6 s), plus loop-closure pairs (<= 1 m apart, >= 30 s apart).
-Prints one table; writes PNG maps and trajectories under --out.
+with the first one 1-2 s later (the intel and aces corrected logs keep only every ~3 s a
+scan, so they use 1-6 s), plus loop-closure pairs (<= 1 m apart, >= 30 s apart).
+Prints one markdown table; the maps, checks and trajectories stay under --out.
 """
 
 from __future__ import annotations
@@ -42,12 +48,13 @@ LOGS = {
     "intel": DATA / "radish" / "intel.clf.bz2",
     "fr079": DATA / "radish" / "fr079.clf.bz2",
     "aces": DATA / "radish" / "aces.clf.bz2",
+    "mit-csail": DATA / "radish" / "mit-csail.clf.bz2",
+    "fr-clinic": DATA / "radish" / "fr-clinic_robotlaser.clf.bz2",
 }
-REFS = {
-    "intel": DATA / "radish-reference" / "intel-corrected.log.gz",
-    "fr079": DATA / "radish-reference" / "freiburg-079-corrected.log.gz",
-}
-REL_DT = {"intel": (1.0, 6.0), "fr079": (1.0, 2.0)}
+REF_NAMES = {"intel": "intel-corrected.log.gz", "fr079": "freiburg-079-corrected.log.gz",
+             "aces": "aces-corrected.log.gz", "mit-csail": "csail-corrected.log.gz"}
+REFS = {k: DATA / "radish-reference" / v for k, v in REF_NAMES.items()}
+REL_DT = {"intel": (1.0, 6.0), "fr079": (1.0, 2.0), "aces": (1.0, 6.0), "mit-csail": (1.0, 6.0)}
 # aces is one tour: its two halves share under a third of their path (< 70 % for any 600-scan
 # segment), so no part of it can be localized on a map made from the other half; there the
 # segment (the start of the second half) is localized on the map of the whole log
@@ -270,13 +277,44 @@ def make_excerpts(dest: Path) -> None:
         print(f"wrote {out} ({out.stat().st_size} bytes) and its reference ({int(keep.sum())} poses)")
 
 
+def map_in_process(name: str, outdir: Path) -> dict:
+    """``fgloc map`` on the whole log in a child process: wall time, peak RSS (psutil, 20 Hz)."""
+    import psutil
+
+    cmd = [sys.executable, "-m", "fgloc.cli", "map", str(LOGS[name]), "-o", str(outdir), "--no-progress"]
+    t0 = time.perf_counter()
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = psutil.Process(p.pid)
+    peak = 0
+    while p.poll() is None:
+        try:
+            peak = max(peak, proc.memory_info().rss)
+        except psutil.Error:
+            break
+        time.sleep(0.05)
+    out, err = p.communicate()
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError(f"fgloc map {name} failed: {err.strip()[-400:]}")
+    warnings = [ln[len("warning: "):] for ln in err.splitlines() if ln.startswith("warning: ")]
+    return {"wall_s": wall, "peak_rss_mb": peak / 1e6, "stdout": out, "warnings": warnings}
+
+
 def main() -> int:
+    import yaml
+
+    from fgloc.eval.relations import read_relations
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=Path("eval_radish"))
     ap.add_argument("--make-excerpts", type=Path, default=None, metavar="DIR",
                     help="only write the test excerpts (data/radish) and exit")
-    ap.add_argument("--datasets", nargs="+", default=["intel", "fr079", "aces"])
-    ap.add_argument("--no-localize", action="store_true")
+    ap.add_argument("--datasets", nargs="+", default=list(LOGS))
+    ap.add_argument("--reference-dir", type=Path, default=None,
+                    help="more GMapping-corrected logs (aces-corrected.log.gz, csail-corrected.log.gz)")
+    ap.add_argument("--relations", nargs="*", default=[], metavar="NAME=FILE",
+                    help="relation files (Kuemmerle et al. 2009) to score against, e.g. aces=aces.relations")
+    ap.add_argument("--localize", action="store_true", help="also localize a log segment (fgloc run)")
     ap.add_argument("--loc-scans", type=int, default=1500, help="localize the last N scans (within the second half)")
     ap.add_argument("--no-relocalize", action="store_true",
                     help="turn fgloc run's global relocalization off (on by default, as fgloc run)")
@@ -284,37 +322,49 @@ def main() -> int:
     if args.make_excerpts is not None:
         make_excerpts(args.make_excerpts)
         return 0
+    refs = dict(REFS)
+    if args.reference_dir is not None:
+        for k, v in REF_NAMES.items():
+            if (args.reference_dir / v).exists():
+                refs[k] = args.reference_dir / v
+    rel_files = dict(r.split("=", 1) for r in args.relations)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.datasets:
-        t0 = time.perf_counter()
-        mo = build_map(LOGS[name], out / name)
-        t_map = time.perf_counter() - t0
-        row: dict = {"dataset": name, "scans": mo.n_scans, "keyframes": len(mo.slam.keyframes),
-                     "loops": len(mo.slam.loops), "map_s": t_map, "png": str(out / name / "map.png")}
+        mp = map_in_process(name, out / name)
+        mdoc = yaml.safe_load((out / name / "mapping.yaml").read_text())
+        cdoc = yaml.safe_load((out / name / "check.yaml").read_text())
+        traj = read_tum(out / name / "trajectory.tum")
+        row: dict = {"dataset": name, "scans": mdoc["scans"], "keyframes": mdoc["stats"]["keyframes"],
+                     "loops": mdoc["stats"]["loops"], "map_s": mp["wall_s"], "rss_mb": mp["peak_rss_mb"],
+                     "slam_s": mdoc["timings_s"]["slam_s"], "check_s": mdoc["timings_s"]["check_s"],
+                     "verdict": cdoc["verdict"], "suspects": cdoc["suspects"], "warnings": mp["warnings"],
+                     "png": str(out / name / "map.png")}
         recs, mount = load_records(LOGS[name])
         ref = None
-        if name in REFS:
-            ref, info = reference_trajectory(REFS[name], recs, mount)
+        if name in refs and refs[name].exists():
+            ref, info = reference_trajectory(refs[name], recs, mount)
             write_tum(out / name / "reference.tum", ref)
             lo, hi = REL_DT[name]
             rels = relations_from_reference(ref, lo, hi)
             write_relations(out / name / "relations.txt", rels)
             row["ref"] = info
-            row["rel"] = evaluate_relations(mo.slam.scan_trajectory, rels)
-        if not args.no_localize:
+            row["rel"] = evaluate_relations(traj, rels)
+        if name in rel_files:
+            row["rel_file"] = evaluate_relations(traj, read_relations(rel_files[name]))
+        if args.localize:
             try:
                 cfg_path = None
                 if args.no_relocalize:
                     cfg_path = out / "run-no-relocalize.yaml"
                     cfg_path.write_text("pipeline:\n  relocalize_after: 1000000\n")
-                row["loc"] = localize(name, recs, mount, mo.slam.scan_trajectory, out, ref, args.loc_scans,
+                row["loc"] = localize(name, recs, mount, traj, out, ref if name in REFS else None, args.loc_scans,
                                       cfg_path, map_whole_log=name in MAP_WHOLE_LOG)
             except Exception as e:  # report, keep going
                 row["loc_error"] = f"{e.__class__.__name__}: {e}"[:300]
         rows.append(row)
-        print(f"done {name} in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        print(f"done {name}: {mp['wall_s']:.1f} s, {mp['peak_rss_mb']:.0f} MB; {cdoc['verdict']}", file=sys.stderr)
     _print_table(rows)
     return 0
 
@@ -327,29 +377,36 @@ def _fmt_rel(r: dict | None) -> str:
 
 
 def _print_table(rows: list[dict]) -> None:
-    print("| dataset | scans | keyframes | loops | map time | SLAM relation error vs reference | "
-          "localization of a log segment (map from the other half; aces: whole log) | PNG |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| log | scans | keyframes | loops | map time (wall) | SLAM | self-check | peak RSS "
+          "| relation error vs GMapping-corrected | self-check verdict |")
+    print("|---|--:|--:|--:|--:|--:|--:|--:|---|---|")
     for r in rows:
-        loc = r.get("loc")
-        if loc:
-            ls = (f"map: {loc['map']}; {loc['loc_scans']} scans from #{loc['seg_start']}, "
-                  f"{loc['loc_wall_s']:.0f} s; vs SLAM RMSE {loc['vs_slam_rmse_m']:.3f} m "
-                  f"/ {loc['vs_slam_heading_deg']:.2f} deg, {loc['relocalizations']} relocalizations, "
-                  f"{loc['fixes']} fixes / {loc['no_fix']} no-fix; relations vs SLAM "
-                  f"{_fmt_rel(loc.get('relations_vs_slam'))}; vs reference {_fmt_rel(loc.get('relations'))}")
-            ls += (f"<br>own scan-to-map tracker: vs SLAM RMSE {loc['track_vs_slam_rmse_m']:.3f} m / "
-                   f"{loc['track_vs_slam_heading_deg']:.2f} deg, {loc['track_stats']['matched']}/"
-                   f"{loc['track_stats']['scans']} matched, {loc['track_wall_s']:.0f} s; vs reference "
-                   f"{_fmt_rel(loc.get('track_relations'))}")
-        else:
-            ls = r.get("loc_error", "-")
-        ref = r.get("ref")
         rel = _fmt_rel(r.get("rel"))
-        if ref:
-            rel += f" [ref {ref['matched']}/{ref['ref_scans']} scans matched]"
-        print(f"| {r['dataset']} | {r['scans']} | {r['keyframes']} | {r['loops']} | {r['map_s']:.1f} s | {rel} "
-              f"| {ls} | {r['png']} |")
+        if r.get("ref"):
+            rel += f" [{r['ref']['matched']}/{r['ref']['ref_scans']} ref scans]"
+        if r.get("rel_file"):
+            rel += f"; relation file: {_fmt_rel(r['rel_file'])}"
+        verdict = r["verdict"].replace("map-check: ", "")
+        print(f"| {r['dataset']} | {r['scans']} | {r['keyframes']} | {r['loops']} | {r['map_s']:.1f} s "
+              f"| {r['slam_s']:.1f} s | {r['check_s']:.1f} s | {r['rss_mb']:.0f} MB | {rel} | {verdict} |")
+    for r in rows:
+        for s in r["suspects"]:
+            print(f"- {r['dataset']}: {s}")
+        for w in r["warnings"]:
+            print(f"- {r['dataset']} (warning): {w}")
+    locs = [r for r in rows if r.get("loc") or r.get("loc_error")]
+    if locs:
+        print()
+        print("| log | localization of a log segment (map from the other half; aces: whole log) |")
+        print("|---|---|")
+        for r in locs:
+            loc = r.get("loc")
+            if not loc:
+                print(f"| {r['dataset']} | {r['loc_error']} |")
+                continue
+            print(f"| {r['dataset']} | map: {loc['map']}; {loc['loc_scans']} scans from #{loc['seg_start']}, "
+                  f"{loc['loc_wall_s']:.0f} s; vs SLAM RMSE {loc['vs_slam_rmse_m']:.3f} m / "
+                  f"{loc['vs_slam_heading_deg']:.2f} deg; relations vs reference {_fmt_rel(loc.get('relations'))} |")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
     /work/venv/bin/python tools/radish_reference_check.py EVALDIR [--datasets fr079 intel]
 
-EVALDIR is an ``eval_radish.py --out`` directory (``<name>/trajectory_scans.tum`` and
+EVALDIR is an ``eval_radish.py --out`` directory (``<name>/trajectory.tum`` and
 ``<name>/reference.tum``).  For every relation (the same ones as eval_radish) it prints the
 relation errors of our trajectory split into local and loop-closure relations, those of the raw
 wheel odometry, and a third opinion: a direct scan-to-scan match of the relation's two raw scans
@@ -41,7 +41,7 @@ def _stats(label: str, t: np.ndarray, r: np.ndarray) -> None:
 
 def check(name: str, evaldir: Path) -> None:
     recs, mount = load_records(er.LOGS[name])
-    est = read_tum(evaldir / name / "trajectory_scans.tum")
+    est = read_tum(evaldir / name / "trajectory.tum")
     ref = read_tum(evaldir / name / "reference.tum")
     rels = relations_from_reference(ref, *er.REL_DT[name])
     st = np.array([r.stamp for r in recs])

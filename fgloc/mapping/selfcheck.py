@@ -81,6 +81,7 @@ class CheckConfig:
     max_tests_per_pass: int = 12   # test scans per pass and region (spread along the pass)
     # world vs map
     change_m: float = 0.3          # a return this much short of / beyond the map's range is a change
+    change_seen_m: float = 0.25    # map structure within this of a return of the same scan is not "removed"
     change_cell_m: float = 0.2     # changes are counted in cells of this size ...
     change_min_obs: int = 3        # ... seen this many times ...
     change_min_scans: int = 2      # ... by this many test scans
@@ -625,6 +626,14 @@ def _beam_changes(rec: ScanRecord, mount: FloatArray, pose: FloatArray, occ: Occ
     e = exp_r[beyond] + 0.5 * occ.resolution
     removed = (transform_points(lp, np.column_stack([e * np.cos(a[beyond]), e * np.sin(a[beyond])]))
                if beyond.any() else np.zeros((0, 2)))
+    if len(removed) and hit.any():
+        # structure other beams of this scan still hit is there: a beam that grazed past a
+        # rasterized corner or a wall's edge removed nothing
+        from scipy.spatial import cKDTree
+
+        seen = transform_points(lp, ends[hit])
+        d, _ = cKDTree(seen).query(removed, distance_upper_bound=cfg.change_seen_m)
+        removed = removed[~np.isfinite(d)]
     return added, removed
 
 

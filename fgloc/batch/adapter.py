@@ -32,9 +32,8 @@ class LocalizeOutcome:
     poses: int
     log_s: float                   # duration of the final trajectory (log time)
     wall_s: float                  # localization wall time (as ``fgloc run`` prints it)
-    fix_stamps_s: list[float]      # stamps of the front-end's fixes (for the lost time)
-    t_start_s: float | None        # first / last pose stamp of the final trajectory
-    t_end_s: float | None
+    lost_s: float                  # time the localizer was lost (no pose, or no accepted fix for a while)
+    failure: str | None            # why ``fgloc run`` would exit 3 (lost / no pose), None when usable
     position_rmse_m: float | None = None
     heading_rmse_deg: float | None = None
     note: str | None = None        # e.g. why the ground-truth evaluation was skipped
@@ -72,7 +71,6 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
                  scan_topic: str, odom_topic: str, imu_topic: str) -> LocalizeOutcome:
     """``fgloc run LOG [--map] [--initial-pose] ... -o OUTDIR`` as a library call (no progress bar)."""
     from fgloc.app.run import RunRequest, run_log
-    from fgloc.io.tum import read_tum
 
     if backend not in ("ekf", "smoother", "batch"):
         raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
@@ -80,16 +78,8 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
     r = run_log(RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                            initial_pose=pose, config=config_path, scan_topic=scan_topic, odom_topic=odom_topic,
                            imu_topic=imu_topic))
-    fix_stamps: list[float] = []
-    if (outdir / "fixes.tum").exists():
-        fix_stamps = read_tum(outdir / "fixes.tum").stamps.tolist()
-    t0 = t1 = None
-    if (outdir / "trajectory.tum").exists():
-        st = read_tum(outdir / "trajectory.tum").stamps
-        t0, t1 = float(st[0]), float(st[-1])
     out = LocalizeOutcome(mode=r.mode, poses=int(r.poses), log_s=float(r.log_s), wall_s=float(r.wall_s),
-                          fix_stamps_s=fix_stamps, t_start_s=t0, t_end_s=t1, note=r.eval_error,
-                          written=list(r.written))
+                          lost_s=float(r.lost_s), failure=r.failure(), note=r.eval_error, written=list(r.written))
     if r.metrics is not None:
         out.position_rmse_m = float(r.metrics.position_rmse_m)
         out.heading_rmse_deg = float(r.metrics.heading_rmse_deg)

@@ -45,7 +45,7 @@ def _run(jobs: list[Job], outdir: Path, opts: EngineOptions, desc: str) -> Batch
 def batch_run(logs: list[str], outdir: Path, opts: EngineOptions, manifest: Path | None = None,
               map_yaml: Path | None = None, initial_pose: list[float] | None = None, config: Path | None = None,
               backend: str = "smoother", frontend: str = "native", scan_topic: str = "/scan",
-              odom_topic: str = "/odom", imu_topic: str = "/imu") -> BatchReport:
+              odom_topic: str = "/odom", imu_topic: str = "/imu", allow_lost: bool = False) -> BatchReport:
     """Localize every log (``fgloc run`` each) into ``outdir/<name>/``; ``outdir/summary.csv``."""
     if backend not in ("ekf", "smoother", "batch"):
         raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
@@ -54,7 +54,7 @@ def batch_run(logs: list[str], outdir: Path, opts: EngineOptions, manifest: Path
     paths = discover_logs(logs, RUN_SUFFIXES, exclude=outdir) if logs else []
     rows = read_manifest(manifest) if manifest is not None else None
     jobs = run_jobs(paths, outdir, map_yaml, initial_pose, config, backend, frontend, scan_topic, odom_topic,
-                    imu_topic, rows)
+                    imu_topic, rows, allow_lost)
     return _run(jobs, outdir, opts, "localizing logs")
 
 

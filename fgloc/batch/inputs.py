@@ -189,7 +189,7 @@ def _abs(p: Path | None) -> str | None:
 def run_jobs(logs: list[Path], outdir: Path, map_yaml: Path | None = None, initial_pose: list[float] | None = None,
              config: Path | None = None, backend: str = "smoother", frontend: str = "native",
              scan_topic: str = "/scan", odom_topic: str = "/odom", imu_topic: str = "/imu",
-             manifest: list[dict[str, Any]] | None = None) -> list[Job]:
+             manifest: list[dict[str, Any]] | None = None, allow_lost: bool = False) -> list[Job]:
     """``fgloc run`` jobs: the LOGS with the common options, then the manifest's rows."""
     entries: list[tuple[Path, Path | None, list[float] | None]] = [(p, map_yaml, initial_pose) for p in logs]
     for r in manifest or []:
@@ -213,9 +213,11 @@ def run_jobs(logs: list[Path], outdir: Path, map_yaml: Path | None = None, initi
             inputs["map"] = _abs(mp)
         if config is not None:
             inputs["config"] = _abs(config)
-        params = {"backend": backend, "frontend": frontend,
+        params: dict[str, Any] = {"backend": backend, "frontend": frontend,
                   "initial_pose": None if pose is None else [float(v) for v in pose],
                   "scan_topic": scan_topic, "odom_topic": odom_topic, "imu_topic": imu_topic}
+        if allow_lost:  # (only when set: finished jobs of earlier versions keep their fingerprint)
+            params["allow_lost"] = True
         jobs.append(Job("run", name, str(out / name), {k: v for k, v in inputs.items() if v}, params))
     return jobs
 

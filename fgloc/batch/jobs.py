@@ -37,8 +37,6 @@ from fgloc.errors import FglocError
 
 #: job kinds and the adapter function each one calls
 KINDS = ("run", "map", "bench-paper")
-#: a gap between front-end fixes longer than this counts as lost time (seconds)
-LOST_GAP_S = 1.0
 
 #: shipped inputs of one role: (path relative to the role's folder, bytes)
 Blob = list[tuple[str, bytes]]
@@ -90,20 +88,6 @@ def one_line(e: BaseException) -> str:
     if isinstance(e, FglocError):
         return text or e.__class__.__name__
     return f"{e.__class__.__name__}: {text}" if text else e.__class__.__name__
-
-
-def lost_time_s(fix_stamps_s: list[float], t_start_s: float, t_end_s: float, max_gap_s: float = LOST_GAP_S) -> float:
-    """Seconds of [t_start, t_end] not covered by front-end fixes: every gap longer than
-    ``max_gap_s`` between consecutive fixes (and before the first / after the last one)."""
-    import numpy as np
-
-    if t_end_s <= t_start_s:
-        return 0.0
-    s = np.asarray(sorted(fix_stamps_s), dtype=float)
-    s = s[(s >= t_start_s) & (s <= t_end_s)]
-    edges = np.concatenate([[t_start_s], s, [t_end_s]])
-    gaps = np.diff(edges)
-    return float(np.sum(gaps[gaps > max_gap_s]))
 
 
 # ---------------------------------------------------------------------------- shipping
@@ -253,12 +237,14 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]
                                  inputs.get("config"), p.get("backend", "smoother"), p.get("frontend", "native"),
                                  p.get("scan_topic", "/scan"), p.get("odom_topic", "/odom"),
                                  p.get("imu_topic", "/imu"))
-        lost = None
-        if r.mode == "map" and r.t_start_s is not None and r.t_end_s is not None:
-            lost = lost_time_s(r.fix_stamps_s, r.t_start_s, r.t_end_s)
         row = {"duration_s": r.log_s, "poses": r.poses, "x_real_time": _ratio(r.log_s, r.wall_s),
-               "lost_time_s": lost, "rmse_m": r.position_rmse_m, "heading_rmse_deg": r.heading_rmse_deg,
-               "mode": r.mode, "note": r.note}
+               "lost_time_s": r.lost_s if r.mode == "map" else None, "rmse_m": r.position_rmse_m,
+               "heading_rmse_deg": r.heading_rmse_deg, "mode": r.mode, "note": r.note}
+        if r.failure and (r.poses == 0 or not p.get("allow_lost", False)):
+            # what makes `fgloc run` exit 3: the outputs are written, the log counts as failed
+            row["failure"] = f"{job.inputs['log']}: {r.failure}"
+        elif r.failure:
+            row["note"] = r.failure
         return row
     if job.kind == "map":
         m = adapter.map_log(inputs["log"], outdir, float(p.get("resolution", 0.05)), inputs.get("config"),

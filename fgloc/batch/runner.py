@@ -160,7 +160,7 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
                 res = _store(job, res)
                 results[job.name] = res
                 rows[job.name] = SummaryRow.from_result(res)
-                failed += not res.ok
+                failed += not res.ok or bool(res.row.get("failure"))
                 bar.update(1)
                 if failed:
                     bar.set_postfix(failed=failed)
@@ -171,6 +171,7 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
     finally:
         bar.close()
     ordered = [rows.get(j.name) or SummaryRow.not_run(j.name) for j in jobs]
+    failed = sum(r.status in ("error", "lost") for r in ordered)
     csv_path = write_summary_csv(outdir / "summary.csv", ordered)
     return BatchReport(ordered, csv_path, engine.describe(), time.perf_counter() - t0, interrupted,
                        ran=len(results), skipped=skipped, failed=failed, results=results)

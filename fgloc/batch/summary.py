@@ -1,9 +1,10 @@
 """The batch summary: one row per log (CSV and a rich table).
 
 Columns: log, status (``ok``, ``done`` = finished by an earlier run and skipped, ``error``,
+``lost`` = ran but ``fgloc run`` would exit 3: lost at the end or too long, no pose;
 ``not run`` = interrupted before it ran), duration (s of log time), poses, x real time
-(log time / localization wall time, as ``fgloc run`` prints it), lost time (s of the run
-without a front-end fix for more than 1 s; map-frame runs only), position and heading RMSE
+(log time / localization wall time, as ``fgloc run`` prints it), lost time (s the localizer
+was lost, :attr:`fgloc.app.run.RunResult.lost_s`; map-frame runs only), position and heading RMSE
 (when the log has ``/ground_truth``), the one-line error, and the worker that ran it.
 """
 
@@ -58,9 +59,11 @@ class SummaryRow:
             return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else float(v)
 
         poses = row.get("poses")
+        if row.get("failure"):
+            status = "lost"
         return SummaryRow(name, status, num("duration_s"), None if poses is None else int(poses), num("x_real_time"),
                           num("lost_time_s"), num("rmse_m"), num("heading_rmse_deg"), row.get("mode"),
-                          wall_s, host, row.get("note"))
+                          wall_s, host, row.get("failure") or row.get("note"))
 
     def csv_cells(self) -> list[str]:
         def f(v: float | None, fmt: str) -> str:
@@ -103,7 +106,7 @@ def summary_table(rows: list[SummaryRow], title: str):
         return "-" if v is None else format(v, fmt)
 
     for r in rows:
-        style = {"error": "red", "not run": "yellow", "done": "dim"}.get(r.status)
+        style = {"error": "red", "lost": "red", "not run": "yellow", "done": "dim"}.get(r.status)
         t.add_row(r.log, r.status, f(r.duration_s, ".1f"), "-" if r.poses is None else str(r.poses),
                   f(r.x_real_time, ".0f"), f(r.lost_time_s, ".1f"), f(r.rmse_m, ".4f"),
                   _clip(short_error(r.error), 36), style=style)

@@ -5,7 +5,7 @@
     fgloc batch map logs/ -o maps/ --engine ray
     fgloc batch bench paper --seeds 100 --engine ray -o bench/
 
-Exit status: 0 all logs done, 1 some logs failed (see the summary), 130 interrupted
+Exit status: 0 all logs done, 1 some logs failed or were lost (see the summary), 130 interrupted
 (finished logs kept: run the same command again to do the rest), 2 a usage error.
 """
 
@@ -68,6 +68,8 @@ def run_cmd(
     scan_topic: Annotated[str, typer.Option("--scan-topic")] = "/scan",
     odom_topic: Annotated[str, typer.Option("--odom-topic")] = "/odom",
     imu_topic: Annotated[str, typer.Option("--imu-topic")] = "/imu",
+    allow_lost: Annotated[bool, typer.Option("--allow-lost", help="a log whose localizer was lost (fgloc run "
+                                                                 "exits 3) counts as done, not failed")] = False,
     engine: Annotated[str, ENGINE] = "local",
     jobs: Annotated[int | None, JOBS] = None,
     address: Annotated[str | None, ADDRESS] = None,
@@ -80,7 +82,7 @@ def run_cmd(
 
     rep = batch_run(list(logs or []), outdir, _opts(engine, jobs, address, ship_inputs, force, quiet), manifest,
                     map_yaml, list(initial_pose) if initial_pose else None, config, backend, frontend,
-                    scan_topic, odom_topic, imu_topic)
+                    scan_topic, odom_topic, imu_topic, allow_lost)
     _report(rep, f"fgloc batch run: {len(rep.rows)} log(s)")
 
 

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from fgloc.batch import EngineOptions, InlineEngine, Job, LocalEngine, batch_run, run_batch
+from fgloc.batch import EngineOptions, InlineEngine, Job, LocalEngine, batch_run, read_summary_csv, run_batch
 from fgloc.batch.inputs import discover_logs, read_manifest, unique_names
-from fgloc.batch.jobs import lost_time_s
 from fgloc.batch.runner import read_marker
 from fgloc.errors import ConfigError
 
@@ -95,10 +94,34 @@ def test_manifest(tmp_path):
             read_manifest(m)
 
 
-def test_lost_time():
-    assert lost_time_s([0.0, 0.5, 1.0, 4.0, 4.5], 0.0, 5.0) == pytest.approx(3.0)  # 1.0 -> 4.0
-    assert lost_time_s([], 10.0, 12.5) == pytest.approx(2.5)
-    assert lost_time_s([2.0], 0.0, 2.5) == pytest.approx(2.0)  # before the first fix
+def test_a_lost_run_is_reported_as_fgloc_run_exits_3(batch_logs, tmp_path):
+    """A map without walls: every scan fails to match, ``fgloc run`` exits 3 (lost); the batch
+    writes the outputs, reports the log as lost with the same line and fails, unless --allow-lost."""
+    import numpy as np
+    from PIL import Image
+
+    pgm = np.array(Image.open(batch_logs["map"].with_suffix(".pgm")))
+    Image.fromarray(np.full_like(pgm, 254)).save(tmp_path / "empty.pgm")
+    empty = tmp_path / "empty.yaml"
+    empty.write_text(batch_logs["map"].read_text().replace("map.pgm", "empty.pgm"))
+    log = batch_logs["logs"] / "charlie.mcap"
+    rc, _, err = fgloc_cli("run", log.resolve(), "--map", empty, "--initial-pose", *map(str, START),
+                           "-o", tmp_path / "single", "-q")
+    assert rc == 3
+    line = err.strip().splitlines()[-1].removeprefix("fgloc: lost: ")
+    args = ("batch", "run", log, "--map", empty, "--initial-pose", *map(str, START), "-o", tmp_path / "out",
+            "--engine", "inline", "-q")
+    rc, stdout, _ = fgloc_cli(*args)
+    assert rc == 1 and "1 failed" in stdout
+    row = read_summary_csv(tmp_path / "out" / "summary.csv")[0]
+    assert row["status"] == "lost" and row["error"] == line
+    assert float(row["lost_time_s"]) > 0.9 * float(row["duration_s"])
+    assert (tmp_path / "out" / "charlie" / "trajectory.tum").exists()
+    rc, stdout, _ = fgloc_cli(*args)  # finished (its outputs are complete): not run again, still lost
+    assert rc == 1 and "0 ran, 1 already done" in stdout
+    rc, _, _ = fgloc_cli(*args, "--allow-lost")  # another option: runs again, accepted
+    row = read_summary_csv(tmp_path / "out" / "summary.csv")[0]
+    assert rc == 0 and row["status"] == "ok" and "lost" in row["error"]
 
 
 def test_without_ray_a_one_line_hint(batch_logs, tmp_path, monkeypatch):

@@ -163,3 +163,192 @@ def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: floa
 
     noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, sigma), kernel, k)
     return gtsam.CustomFactor(noise, [pose_key, offset_key], error)
+
+
+# ---------------------------------------------------------------------- calibration factors
+def _sinc(x: float) -> float:
+    return 1.0 - x * x / 6.0 if abs(x) < 1e-4 else math.sin(x) / x
+
+
+def _dsinc(x: float) -> float:
+    return -x / 3.0 if abs(x) < 1e-4 else (x * math.cos(x) - math.sin(x)) / (x * x)
+
+
+def scaled_delta(delta: FloatArray, gains: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The relative pose an odometry increment ``delta`` means once corrected by ``gains``.
+
+    ``gains = [g_v, g_w]``: the true speed is ``g_v`` times the reported one, the true yaw rate
+    ``g_w`` times (a wheel that reports ``s`` times the motion has gain ``1 / s``).  Exact for a
+    constant twist over the interval (the chord of an arc: length ``v T sinc(wT/2)``, direction
+    ``wT/2``), first order otherwise.  Returns the pose ``[x, y, yaw]`` and ``J`` (3x2), its
+    derivative with respect to the gains in the pose's body tangent space.
+    """
+    dx, dy, th0 = float(delta[0]), float(delta[1]), float(delta[2])
+    gv, gw = float(gains[0]), float(gains[1])
+    h0 = 0.5 * th0
+    s0 = _sinc(h0)
+    rho = gv * _sinc(gw * h0) / s0
+    phi = (gw - 1.0) * h0
+    c, s = math.cos(phi), math.sin(phi)
+    tx, ty = rho * (c * dx - s * dy), rho * (s * dx + c * dy)
+    th = gw * th0
+    # d t / d g_v = t / g_v;  d t / d g_w = (d rho/d g_w) R t0 + rho R' t0 h0
+    drho = gv * _dsinc(gw * h0) * h0 / s0
+    r0x, r0y = c * dx - s * dy, s * dx + c * dy          # R(phi) t0
+    dtw_x = drho * r0x - rho * h0 * r0y
+    dtw_y = drho * r0y + rho * h0 * r0x
+    ct, st = math.cos(th), math.sin(th)
+    J = np.array([[ct * (tx / gv) + st * (ty / gv), ct * dtw_x + st * dtw_y],
+                  [-st * (tx / gv) + ct * (ty / gv), -st * dtw_x + ct * dtw_y],
+                  [0.0, th0]]) if gv != 0 else np.zeros((3, 2))
+    return np.array([tx, ty, th]), J
+
+
+def _rep_and_jacobians(c: FloatArray, scales: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The increment an odometry with ``scales`` reports for the true relative pose with
+    coordinates ``c = [x, y, yaw]``, and its body-tangent Jacobians w.r.t. ``c`` and the scales."""
+    tx, ty, th = float(c[0]), float(c[1]), float(c[2])
+    sv, sw = float(scales[0]), float(scales[1])
+    h = 0.5 * th
+    s0 = _sinc(h)
+    s1 = _sinc(sw * h)
+    rho = sv * s1 / s0
+    phi = (sw - 1.0) * h
+    cp, sp = math.cos(phi), math.sin(phi)
+    r0x, r0y = cp * tx - sp * ty, sp * tx + cp * ty      # R(phi) t
+    rx, ry, rth = rho * r0x, rho * r0y, sw * th
+    # d rho / d th, d rho / d sw; d phi / d th = (sw - 1) / 2
+    drho_dth = sv * (_dsinc(sw * h) * 0.5 * sw * s0 - s1 * _dsinc(h) * 0.5) / (s0 * s0)
+    drho_dsw = sv * _dsinc(sw * h) * h / s0
+    dphi_dth = 0.5 * (sw - 1.0)
+    # d t_r / d(tx, ty, th)
+    Dt = np.array([[rho * cp, -rho * sp, drho_dth * r0x - rho * dphi_dth * r0y],
+                   [rho * sp, rho * cp, drho_dth * r0y + rho * dphi_dth * r0x]])
+    Ds = np.array([[r0x * s1 / s0, drho_dsw * r0x - rho * h * r0y],
+                   [r0y * s1 / s0, drho_dsw * r0y + rho * h * r0x]])
+    ct, st = math.cos(rth), math.sin(rth)
+    Rt = np.array([[ct, st], [-st, ct]])                  # into the reported pose's body frame
+    Jc = np.vstack([Rt @ Dt, [0.0, 0.0, sw]])
+    Js = np.vstack([Rt @ Ds, [0.0, th]])
+    return np.array([rx, ry, rth]), Jc, Js
+
+
+def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray, measured: FloatArray,
+                         want_jacobians: bool = True) -> tuple[FloatArray, list[FloatArray]]:
+    """Error of :func:`scaled_between_factor`: ``Log(m^-1 rep(xi^-1 xj, s))`` (the noise is on
+    what the odometry reports, so a scale never buys a smaller residual by shrinking the motion)
+    and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector)."""
+    h = xi.between(xj)
+    c = np.array([h.x(), h.y(), h.theta()])
+    rep, Jc, Js = _rep_and_jacobians(c, scales)
+    E = gtsam.Pose2(*np.asarray(measured, dtype=float)).between(gtsam.Pose2(*rep))
+    e = gtsam.Pose2.Logmap(E)
+    if not want_jacobians:
+        return e, []
+    Jl = gtsam.Pose2.LogmapDerivative(E)
+    ch, sh = math.cos(c[2]), math.sin(c[2])
+    dc_dj = np.array([[ch, -sh, 0.0], [sh, ch, 0.0], [0.0, 0.0, 1.0]])
+    dc_di = np.array([[-1.0, 0.0, c[1]], [0.0, -1.0, -c[0]], [0.0, 0.0, -1.0]])
+    return e, [Jl @ Jc @ dc_di, Jl @ Jc @ dc_dj, Jl @ Js]
+
+
+def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
+                          cov: FloatArray, fixed_scales: tuple[float, float] = (1.0, 1.0), min_sigma: float = 1e-4,
+                          kernel: str = "none", k: float = 1.345) -> gtsam.NonlinearFactor:
+    """Integrated-odometry factor between ``x_i`` and ``x_j`` whose speed scale ``s_v`` and yaw-rate
+    scale ``s_w`` (reported / true, each a ``Vector1`` variable, or None: held at ``fixed_scales``)
+    are estimated: the odometry's calibration.  ``delta`` / ``cov`` are the reported increment
+    and its covariance.  Without a scale variable this is a plain ``BetweenFactorPose2`` on the
+    corrected increment."""
+    d = np.asarray(delta, dtype=float).copy()
+    c = np.asarray(cov, dtype=float) + np.eye(3) * min_sigma**2
+    if ks_v is None and ks_w is None and fixed_scales == (1.0, 1.0):
+        return between_factor(ki, kj, d, cov, min_sigma, kernel, k)
+    noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
+    keys = [ki, kj] + [kk for kk in (ks_v, ks_w) if kk is not None]
+    sv0, sw0 = float(fixed_scales[0]), float(fixed_scales[1])
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        ks = this.keys()
+        n = 2
+        sv = sw = 0.0
+        if ks_v is not None:
+            sv = float(values.atVector(ks[n])[0])
+            n += 1
+        else:
+            sv = sv0
+        sw = float(values.atVector(ks[n])[0]) if ks_w is not None else sw0
+        e, Hs = scaled_between_error(values.atPose2(ks[0]), values.atPose2(ks[1]), np.array([sv, sw]), d,
+                                     H is not None)
+        if H is not None:
+            H[0], H[1] = Hs[0], Hs[1]
+            m = 2
+            if ks_v is not None:
+                H[m] = Hs[2][:, :1]
+                m += 1
+            if ks_w is not None:
+                H[m] = Hs[2][:, 1:]
+        return e
+
+    return gtsam.CustomFactor(noise, keys, error)
+
+
+def gyro_error(theta_i: float, theta_j: float, bias: float, dtheta_gyro: float, dt: float) -> float:
+    """Gyro residual ``wrap(theta_j - theta_i - (dtheta_gyro - bias * dt))`` (radians)."""
+    return wrap_scalar(theta_j - theta_i - (dtheta_gyro - bias * dt))
+
+
+def gyro_factor(ki: int, kj: int, kb: int, dtheta_gyro: float, dt: float, sigma: float,
+                kernel: str = "none", k: float = 1.345) -> gtsam.CustomFactor:
+    """Between-keyframe yaw increment from an integrated gyro with a bias variable ``kb``
+    (``Vector1``, rad/s): analytic Jacobians ``[0, 0, -1]``, ``[0, 0, 1]``, ``[dt]``."""
+    z, T = float(dtheta_gyro), float(dt)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        keys = this.keys()
+        e = gyro_error(values.atPose2(keys[0]).theta(), values.atPose2(keys[1]).theta(),
+                       float(values.atVector(keys[2])[0]), z, T)
+        if H is not None:
+            H[0] = np.array([[0.0, 0.0, -1.0]])
+            H[1] = np.array([[0.0, 0.0, 1.0]])
+            H[2] = np.array([[T]])
+        return np.array([e])
+
+    noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), kernel, k)
+    return gtsam.CustomFactor(noise, [ki, kj, kb], error)
+
+
+def latency_fix_error(x: gtsam.Pose2, latency_s: float, fix: gtsam.Pose2, twist: FloatArray,
+                      want_jacobians: bool = True) -> tuple[FloatArray, list[FloatArray]]:
+    """Error ``Log(fix^-1 x Exp(-u latency))`` of :func:`latency_fix_factor` and its Jacobians."""
+    u = np.asarray(twist, dtype=float)
+    xi = -u * float(latency_s)
+    D = gtsam.Pose2.Expmap(xi)
+    E = fix.between(x.compose(D))
+    e = gtsam.Pose2.Logmap(E)
+    if not want_jacobians:
+        return e, []
+    Jl = gtsam.Pose2.LogmapDerivative(E)
+    Hx = Jl @ D.inverse().AdjointMap()
+    Hd = Jl @ gtsam.Pose2.ExpmapDerivative(xi) @ (-u).reshape(3, 1)
+    return e, [Hx, Hd]
+
+
+def latency_fix_factor(key: int, latency_key: int, pose: FloatArray, cov_map: FloatArray, twist: FloatArray,
+                       kernel: str = "huber", k: float = 1.345) -> gtsam.CustomFactor:
+    """A scan-to-map fix stamped ``latency`` after it was measured: it is the keyframe's pose
+    carried back by the body twist ``u`` over ``latency_key`` (a ``Vector1``, seconds):
+    ``fix = x Exp(-u latency)``."""
+    fix = gtsam.Pose2(*np.asarray(pose, dtype=float))
+    u = np.asarray(twist, dtype=float).copy()
+    noise = robust(gtsam.noiseModel.Gaussian.Covariance(body_covariance(pose, cov_map)), kernel, k)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        keys = this.keys()
+        e, Hs = latency_fix_error(values.atPose2(keys[0]), float(values.atVector(keys[1])[0]), fix, u,
+                                  H is not None)
+        if H is not None:
+            H[0], H[1] = Hs
+        return e
+
+    return gtsam.CustomFactor(noise, [key, latency_key], error)

@@ -50,11 +50,16 @@ from fgloc.backends.factors import (
     between_factor,
     compass_factor,
     fix_factor,
+    gyro_factor,
     integrate_heading,
     integrate_twist,
+    scaled_between_factor,
+    scaled_delta,
 )
+from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, LatencyEstimator, SourceHealth
 from fgloc.config.schema import setting
 from fgloc.geometry import compose1, wrap_angle, wrap_scalar
+from fgloc.geometry import exp as se2_exp
 from fgloc.types import PoseFix, Trajectory
 
 
@@ -64,6 +69,19 @@ def X(i: int) -> int:
 
 def O(j: int) -> int:  # noqa: E743
     return int(gtsam.symbol("o", j))
+
+
+@dataclass
+class _Chain:
+    """A slowly varying calibration variable (``Vector``): one per ``offset_interval_s``, tied by a random walk."""
+
+    char: str
+    prior_mean: FloatArray
+    prior_sigma: FloatArray
+    rw_sigma: FloatArray           # per sqrt(s)
+    key: int | None = None
+    t: float = -np.inf
+    estimate: FloatArray | None = None
 
 
 KERNELS = ("huber", "cauchy", "none")
@@ -108,6 +126,23 @@ class SmootherConfig:
     min_keyframe_dt_s: float = setting(0.005, "a scan closer than this to the previous keyframe gets none", min=0)
     max_wait_s: float = setting(0.1, "wait this long for odometry to reach a keyframe stamp", min=0)
     calibration_fixes: int = setting(3, "map fixes used to calibrate the compass offset", min=1)
+    gyro: bool = setting(True, "yaw rates (IMU gyro, compass rate) as between-keyframe yaw-increment factors "
+                         "with an estimated bias")
+    gyro_sigma_radps: float = setting(0.005, "gyro noise per reading when the message carries none", gt=0)
+    gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
+    gyro_bias_rw_radps: float = setting(2e-5, "random walk of the gyro bias (rad/s per sqrt(s))", gt=0)
+    odom_gains: bool = setting(True, "estimate the odometry's speed and yaw-rate scales (reported / true) as "
+                               "calibration variables")
+    odom_speed_scale_prior: float = setting(0.2, "prior sigma of the speed scale around 1", gt=0)
+    odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1 (a skid steer "
+                                          "reports 1.4-7 times the turn)", gt=0)
+    odom_scale_rw: float = setting(0.003, "random walk of the scales (per sqrt(s))", gt=0)
+    adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other "
+                                "(wheel, gyro, heading, fixes)")
+    latency: bool = setting(True, "estimate the scan stamps' latency (a fix is the pose that long before its "
+                            "stamp) from how the fixes' increments lag the gyro / odometry; corrected once "
+                            "significant")
+    latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
 
     @property
     def compass_sigma(self) -> float:
@@ -151,13 +186,34 @@ class SlidingWindowSmoother(Backend):
         self._q_slip = np.asarray(self.cfg.q_slip, dtype=float)
         self.next_x = 0  # key counters never restart, so keys stay unique across resets
         self.next_o = 0
-        self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0})
+        self._next_sym: dict[str, int] = {}
+        self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0, "gyro_factors": 0})
+        # sensor streams and what is known about each source (kept across re-initializations)
+        self.gyro: dict[str, tuple[list[float], list[float], list[float]]] = {}
+        self._gyro_done: dict[str, float] = {}
+        self.chains: dict[str, _Chain] = {}
+        self.arb = Arbiter()
+        self.latency_est = LatencyEstimator()
+        self._last_fix: tuple[float, FloatArray, FloatArray] | None = None
+        self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._long_pair_t = -np.inf
+        self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self.sources: dict[str, SourceHealth] = {}
+        self._gains = np.ones(2)
+        self._turned = 0.0
         self._reset_state()
 
     # ------------------------------------------------------------------ state
     def _reset_state(self) -> None:
         p = gtsam.ISAM2Params()
-        p.setRelinearizeThreshold(self.cfg.relinearize_threshold)
+        # per variable type: the poses and offsets at the configured threshold, the calibration
+        # variables at their own scale (a 0.01 s / 0.01 rad/s threshold would never relinearize them)
+        th = float(self.cfg.relinearize_threshold)
+        tm = gtsam.ISAM2ThresholdMap()
+        for sym, v in (("x", [th] * 3), ("o", [th]), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
+                       ("l", [th * 1e-2])):
+            tm.insert((sym, np.asarray(v, dtype=float)))
+        p.setRelinearizeThreshold(tm)
         p.relinearizeSkip = self.cfg.relinearize_skip
         p.findUnusedFactorSlots = False
         self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag_s, p)
@@ -172,7 +228,7 @@ class SlidingWindowSmoother(Backend):
         self.odo_t: list[float] = []
         self.odo_u: list[FloatArray] = []
         self.odo_c: list[FloatArray] = []
-        self.compass_pending: list[tuple[float, float, float]] = []  # t, yaw (compass), var
+        self.compass_pending: list[tuple[float, float, float, str]] = []  # t, yaw (compass), var, source
         self.t0: float | None = None
         self._rejects = 0
         self._last_cov = np.eye(3) * 1e-2
@@ -181,6 +237,12 @@ class SlidingWindowSmoother(Backend):
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
         self._pred_cache: tuple | None = None
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
+        for ch in self.chains.values():  # calibration carries over a re-initialization as a prior
+            if ch.key is not None and ch.estimate is not None:
+                ch.prior_mean = ch.estimate.copy()
+            ch.key, ch.t = None, -np.inf
+        for src in self._gyro_done:
+            self._gyro_done[src] = -np.inf
 
     @property
     def initialized(self) -> bool:
@@ -222,6 +284,99 @@ class SlidingWindowSmoother(Backend):
         k = X(self.next_x)
         self.next_x += 1
         return k
+
+    def _source(self, name: str, kind: str) -> SourceHealth:
+        h = self.sources.get(name)
+        if h is None:
+            h = self.sources[name] = SourceHealth(name, kind)
+        return h
+
+    def _chain(self, name: str, char: str, mean: list[float], sigma: list[float], rw: list[float]) -> _Chain:
+        ch = self.chains.get(name)
+        if ch is None:
+            ch = self.chains[name] = _Chain(char, np.asarray(mean, dtype=float), np.asarray(sigma, dtype=float),
+                                            np.asarray(rw, dtype=float))
+            ch.estimate = ch.prior_mean.copy()
+        return ch
+
+    def _chain_key(self, ch: _Chain, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                   ts: dict) -> int:
+        """The chain's variable for time ``t`` (a new one each ``offset_interval_s``), kept in the window."""
+        if ch.key is None or t - ch.t >= self.cfg.offset_interval_s:
+            n = self._next_sym.get(ch.char, 0)
+            self._next_sym[ch.char] = n + 1
+            new = int(gtsam.symbol(ch.char, n))
+            est = ch.prior_mean if ch.estimate is None else ch.estimate
+            if ch.key is None:
+                graph.add(gtsam.PriorFactorVector(new, ch.prior_mean, gtsam.noiseModel.Diagonal.Sigmas(ch.prior_sigma)))
+            else:
+                dt = max(t - ch.t, 1e-3)
+                graph.add(gtsam.BetweenFactorVector(ch.key, new, np.zeros(len(ch.prior_mean)),
+                                                    gtsam.noiseModel.Diagonal.Sigmas(ch.rw_sigma * math.sqrt(dt))))
+                ts[ch.key] = float(t)
+            vals.insert(new, np.asarray(est, dtype=float))
+            ch.key, ch.t = new, float(t)
+        ts[ch.key] = float(t)
+        return ch.key
+
+    def _refresh_chains(self) -> None:
+        """Read the calibration estimates back after a solver update."""
+        for name, ch in self.chains.items():
+            if ch.key is None:
+                continue
+            try:
+                ch.estimate = np.asarray(self.isam.calculateEstimateVector(ch.key), dtype=float)
+            except (RuntimeError, IndexError):
+                continue
+            if name in ("odom_speed_scale", "odom_yaw_scale"):
+                sc = float(ch.estimate[0])
+                if math.isfinite(sc) and sc > 0.05:
+                    self._gains[0 if name == "odom_speed_scale" else 1] = 1.0 / sc
+                    self.arb.set_correction("odom", gain=float(self._gains[1]))
+            elif name.startswith("gyro_bias:"):
+                self.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
+
+    def latency_estimate(self) -> float:
+        """The scan latency (s) in use: configured, estimated once significant, or 0."""
+        if self.cfg.latency_s is not None:
+            return float(self.cfg.latency_s)
+        return self.latency_est.value() if self.cfg.latency else 0.0
+
+    def _latency_pairs(self) -> None:
+        """Feed the latency estimator with the fix pairs the gyro / odometry now cover."""
+        if not self.cfg.latency or self.cfg.latency_s is not None:
+            self._fix_pairs.clear()
+            return
+        covered = self.odo_t[-1] if self.odo_t else -np.inf
+        for ts_, _, _ in self.gyro.values():
+            if ts_:
+                covered = min(covered, ts_[-1])
+        keep = []
+        for pair in self._fix_pairs:
+            ta, tb, pa, pb, ca, cb = pair
+            if tb > covered:
+                keep.append(pair)
+                continue
+            wa, wb = self._twist_at(ta), self._twist_at(tb)
+            d_ref = self._rotation_between(ta, tb)
+            r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+            var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
+            self.latency_est.add(-(float(wb[2]) - float(wa[2])), r, var, d_ref, 0)
+            d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
+            dist_ref = float(np.hypot(d[0], d[1]))
+            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
+            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
+            self.latency_est.add(-(float(np.hypot(wb[0], wb[1])) - float(np.hypot(wa[0], wa[1]))),
+                                 dist_fix - dist_ref, var_d, dist_ref, 1)
+        self._fix_pairs = keep
+
+    def gains(self) -> FloatArray:
+        """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""
+        return self._gains.copy()
+
+    def odom_scales(self) -> FloatArray:
+        """The odometry's estimated ``[speed, yaw-rate]`` scales (reported / true)."""
+        return 1.0 / self._gains
 
     def _new_offset(self, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
                     ts: dict) -> None:
@@ -280,12 +435,20 @@ class SlidingWindowSmoother(Backend):
 
     # ------------------------------------------------------------------ inputs
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
+        h = self._source("odom", "odometry")
         if self.odo_t and t <= self.odo_t[-1]:
             self.stats["late"] += 1
+            h.skip("late")
             return
+        h.accepted += 1
+        c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
         self.odo_t.append(float(t))
         self.odo_u.append(np.asarray(twist, dtype=float))
-        self.odo_c.append(twist_covariance(twist_cov, self.cfg.encoder_sigmas))
+        self.odo_c.append(c)
+        if self.cfg.adapt_noise:
+            if "odom" not in self.arb.streams:
+                self.arb.add_source("odom", RATE, rel_prior=0.05)
+            self.arb.add("odom", float(t), float(twist[2]), float(c[2, 2]))
         self._process_pending(float(t))
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
@@ -295,13 +458,94 @@ class SlidingWindowSmoother(Backend):
                 del self.odo_t[:i], self.odo_u[:i], self.odo_c[:i]
 
     def add_compass(self, t: float, yaw: float | None, yaw_var: float,
-                    rate: float | None, rate_var: float) -> None:
+                    rate: float | None, rate_var: float, source: str = "imu") -> None:
+        if rate is not None and self.cfg.gyro:
+            self.add_gyro(t, rate, rate_var, source)
         if yaw is None:
             return
+        h = self._source(f"{source}.yaw", "heading")
         self.calib.add_compass(t, yaw, rate)
         var = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
-        self.compass_pending.append((float(t), float(yaw), float(var)))
+        h.accepted += 1
+        if self.cfg.adapt_noise:
+            name = f"{source}.yaw"
+            if name not in self.arb.streams:
+                self.arb.add_source(name, ANGLE_ABSOLUTE, rel_prior=0.02)
+            self.arb.add(name, float(t), float(yaw), float(var))
+        self.compass_pending.append((float(t), float(yaw), float(var), source))
         self._process_pending(float(t))
+
+    def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
+        """A yaw rate (rad/s, base_link z) from a gyro: integrated between keyframes, bias estimated."""
+        name = f"{source}.gyro"
+        h = self._source(name, "gyro")
+        buf = self.gyro.setdefault(name, ([], [], []))
+        if buf[0] and t <= buf[0][-1]:
+            h.skip("late or repeated stamp")
+            return
+        if not (math.isfinite(t) and math.isfinite(rate)):
+            h.skip("not finite")
+            return
+        var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.cfg.gyro_sigma_radps**2
+        h.accepted += 1
+        buf[0].append(float(t))
+        buf[1].append(float(rate))
+        buf[2].append(float(var))
+        self._gyro_done.setdefault(name, -np.inf)
+        if self.cfg.adapt_noise:
+            if name not in self.arb.streams:
+                self.arb.add_source(name, INSTANT_RATE, rel_prior=0.01)
+            self.arb.add(name, float(t), float(rate), float(var))
+        if len(buf[0]) > 8192 and self.kf_t:
+            horizon = self.kf_t[-1] - self.cfg.lag_s - 2.0
+            i = bisect_left(buf[0], horizon)
+            if i > 0:
+                del buf[0][:i], buf[1][:i], buf[2][:i]
+
+    def _gyro_increment(self, name: str, t0: float, t1: float, max_gap: float = 0.25
+                        ) -> tuple[float, float] | None:
+        """Bias-free gyro yaw change over ``(t0, t1]`` and its variance, or None when the readings
+        do not cover the interval.  A gyro reading is the rate at its stamp: the rate is
+        interpolated linearly between readings and integrated exactly (holding a reading over the
+        interval before it would lead the heading by half a reading period)."""
+        ts, rs, vs = self.gyro.get(name, ([], [], []))
+        if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
+            return None
+        i = max(bisect_right(ts, t0) - 1, 0)
+        d = 0.0
+        w: dict[int, float] = {}
+        n = len(ts)
+        while i < n - 1 and ts[i] < t1:
+            ta, tb = ts[i], ts[i + 1]
+            a, b = max(ta, t0), min(tb, t1)
+            if b > a:
+                h = tb - ta
+                if h > max_gap:
+                    return None
+                fa, fb = (a - ta) / h, (b - ta) / h
+                # weights of reading i and i+1 in the integral over [a, b]
+                wi = (b - a) * (1.0 - 0.5 * (fa + fb))
+                wj = (b - a) * 0.5 * (fa + fb)
+                d += wi * rs[i] + wj * rs[i + 1]
+                w[i] = w.get(i, 0.0) + wi
+                w[i + 1] = w.get(i + 1, 0.0) + wj
+            i += 1
+        var = sum(vs[m] * ww * ww for m, ww in w.items())
+        ch = self.chains.get(f"gyro_bias:{name}")
+        b0 = float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
+        return d - b0 * (t1 - t0), var
+
+    def _gyro_rate_at(self, t: float) -> float | None:
+        """The first gyro's bias-corrected rate at ``t`` (interpolated), or None."""
+        for name, (ts, rs, _) in self.gyro.items():
+            if ts and ts[0] <= t <= ts[-1]:
+                i = min(max(bisect_left(ts, t), 1), len(ts) - 1)
+                ta, tb = ts[i - 1], ts[i]
+                f = (t - ta) / (tb - ta) if tb > ta else 1.0
+                ch = self.chains.get(f"gyro_bias:{name}")
+                b = float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
+                return rs[i - 1] + f * (rs[i] - rs[i - 1]) - b
+        return None
 
     def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
         if not self.odo_t:
@@ -313,13 +557,21 @@ class SlidingWindowSmoother(Backend):
                                np.asarray(self.odo_c[i0:i1]), t0, t1, self._q_slip)
 
     def _rotation_between(self, t0: float, t1: float) -> float:
-        """Odometry heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``)."""
-        if not self.odo_t or t0 == t1:
+        """Heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``): a gyro's when it covers
+        the interval, else the odometry's (times its yaw-rate gain)."""
+        if t0 == t1:
             return 0.0
         a, b = (t0, t1) if t1 > t0 else (t1, t0)
+        for name in self.gyro:
+            r = self._gyro_increment(name, a, b)
+            if r is not None:
+                return r[0] if t1 > t0 else -r[0]
+        if not self.odo_t:
+            return 0.0
         i0 = max(bisect_right(self.odo_t, a) - 1, 0)
         i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
         th = integrate_heading(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]), a, b)
+        th *= float(self._gains[1])
         return th if t1 > t0 else -th
 
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
@@ -329,9 +581,25 @@ class SlidingWindowSmoother(Backend):
         if self._pred_cache is not None and self._pred_cache[0] == key:
             return self._pred_cache[1], self._pred_cache[2]
         d, c = self._integrate(self.kf_t[-1], t)
+        d = self._corrected(d, self.kf_t[-1], t)
         pose, cov = compose1(self.kf_pose[k], d), self._last_cov + c
         self._pred_cache = (key, pose, cov)
         return pose, cov
+
+    def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
+        """An odometry increment with the current gains (and the gyro's rotation when it covers it)."""
+        if np.allclose(self._gains, 1.0) and not self.gyro:
+            return d
+        out, _ = scaled_delta(d, self._gains)
+        for name in self.gyro:
+            r = self._gyro_increment(name, t0, t1)
+            if r is not None and abs(d[2]) > 1e-9:
+                out, _ = scaled_delta(d, np.array([self._gains[0], r[0] / d[2]]))
+                break
+            if r is not None:
+                out[2] = r[0]
+                break
+        return out
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
         e = fix.pose - pred
@@ -356,7 +624,7 @@ class SlidingWindowSmoother(Backend):
         c[2, 2] = max(c[2, 2], self.cfg.fix_min_sigma_theta**2)
         return c
 
-    def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float]]
+    def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float, str]]
                              ) -> tuple[float, float] | None:
         """Readings carried to ``t_k`` by the odometry rotation and averaged (circularly)."""
         if not readings:
@@ -364,7 +632,7 @@ class SlidingWindowSmoother(Backend):
         ref = None
         acc = 0.0
         var = 0.0
-        for tc, yaw, v in readings:
+        for tc, yaw, v, _src in readings:
             z = yaw + self._rotation_between(tc, t_k)
             if ref is None:
                 ref = z
@@ -430,8 +698,8 @@ class SlidingWindowSmoother(Backend):
         graph, vals, ts, pairs, keys = self._acc
         ts[k] = t
         d, c = self._integrate(t_prev, t)
-        pred = compose1(self.kf_pose[k_prev], d)
-        graph.add(between_factor(k_prev, k, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
+        pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
+        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
         vals.insert(k, gtsam.Pose2(*pred))
@@ -442,25 +710,147 @@ class SlidingWindowSmoother(Backend):
         self.compass_pending = [r for r in self.compass_pending if r[0] > t + 1e-9]
         m = self._compass_measurement(t, readings)
         if m is not None:
-            graph.add(compass_factor(k, self.cur_o, m[0], m[1],  # type: ignore[arg-type]
+            sigma = m[1]
+            if self.cfg.adapt_noise and readings:
+                sigma *= self._noise_of(f"{readings[0][3]}.yaw")[0]
+            graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
                                      self.cfg.compass_kernel, self.cfg.compass_kernel_k))
             ts[self.cur_o] = t  # type: ignore[index]
             self.stats["compass_factors"] += 1
         if used:
             assert fix is not None
-            graph.add(fix_factor(k, fix.pose, self._fix_cov(fix.cov), self.cfg.fix_kernel, self.cfg.fix_kernel_k))
+            graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
             self.stats["fixes_used"] += 1
-            self.calib.add_fix(t, float(fix.pose[2]))
+            self._source("scan", "pose").accepted += 1
+            lat = self.latency_estimate()
+            self.calib.add_fix(t - lat, float(fix.pose[2]))
+            if self.cfg.adapt_noise:
+                if "scan" not in self.arb.streams:
+                    self.arb.add_source("scan", ANGLE_ABSOLUTE, rel_prior=0.005)
+                self.arb.add("scan", t - lat, float(fix.pose[2]), float(self._fix_cov(fix.cov)[2, 2]))
         self.kf_t.append(t)
         self.kf_key.append(k)
         self.window.append((t, k))
         self.kf_pose[k] = pred
         keys.append(k)
+        self._add_gyro_factors(t, graph, vals, ts)
+        if self.cfg.adapt_noise:
+            self.arb.update(t)
+        self._latency_pairs()
         if len(keys) >= max(1, int(self.cfg.update_every)):
             self._flush_acc()
         else:  # online estimate until the next solver update: the odometry prediction
             self.stats["keyframes"] += 1
             self._record_online(t, pred, self._last_cov + c)
+
+    def _noise_of(self, name: str) -> tuple[float, float]:
+        return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
+
+    def _odometry_factor(self, ki: int, kj: int, d: FloatArray, c: FloatArray, t: float,
+                         graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
+        """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated."""
+        c = np.array(c, dtype=float)
+        k_yaw, rel = self._noise_of("odom")
+        if k_yaw != 1.0 or rel > 0.0:
+            c[2, :] *= k_yaw
+            c[:, 2] *= k_yaw
+            c[2, 2] += (rel * d[2]) ** 2
+        if not self.cfg.odom_gains:
+            return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
+        # a scale is estimated only once something else observes it (held at its estimate until
+        # then): the speed scale from positions (fixes), the yaw-rate scale from any other yaw source
+        ks_v = ks_w = None
+        latency_known = not self.cfg.latency or self.cfg.latency_s is not None or self.latency_est.settled()
+        if (self.stats["fixes_used"] > 0 and latency_known) or "odom_speed_scale" in self.chains:
+            ch = self._chain("odom_speed_scale", "g", [1.0], [self.cfg.odom_speed_scale_prior],
+                             [self.cfg.odom_scale_rw])
+            ks_v = self._chain_key(ch, t, graph, vals, ts)
+        self._turned += abs(float(d[2]))
+        if (self._turned > 1.0 and (self.gyro or self.calib._compass or self.stats["fixes_used"] > 0)) \
+                or "odom_yaw_scale" in self.chains:
+            # observable once the robot has turned (a radian) with another yaw source to compare
+            ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
+            ks_w = self._chain_key(ch, t, graph, vals, ts)
+        fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
+        return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
+                                     k=self.cfg.odom_kernel_k)
+
+    def _twist_at(self, t: float) -> FloatArray:
+        """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""
+        if not self.odo_t:
+            return np.zeros(3)
+        i = min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)
+        u = np.asarray(self.odo_u[i], dtype=float) * np.array([self._gains[0], self._gains[0], self._gains[1]])
+        w = self._gyro_rate_at(t)
+        if w is not None:
+            u[2] = w
+        return u
+
+    def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,
+                    vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
+        """The scan-to-map fix on keyframe ``k`` (at the scan stamp): with its latency estimated,
+        configured, or none."""
+        cov = self._fix_cov(fix.cov)
+        pose = np.asarray(fix.pose, dtype=float)
+        # a fix stamped late is the pose that long before its stamp: carried forward by the motion
+        lat = self.latency_estimate()
+        if lat != 0.0:
+            pose = compose1(pose, se2_exp(self._twist_at(t) * lat))
+        # pairs for the latency estimate: consecutive fixes (turns starting / ending) and, once a
+        # second, fixes ~1 s apart (a start from standstill: the lag is v * latency)
+        p_now = np.asarray(fix.pose, dtype=float)
+        if self._last_fix is not None and 0.0 < t - self._last_fix[0] <= 0.3:
+            self._fix_pairs.append((self._last_fix[0], t, self._last_fix[1], p_now, self._last_fix[2], cov))
+        if t - self._long_pair_t >= 1.0:
+            old = [f for f in self._recent_fixes if 0.8 <= t - f[0] <= 1.2]
+            if old:
+                f0 = old[0]
+                self._fix_pairs.append((f0[0], t, f0[1], p_now, f0[2], cov))
+                self._long_pair_t = t
+        self._last_fix = (t, p_now, cov)
+        self._recent_fixes.append(self._last_fix)
+        return fix_factor(k, pose, cov, self.cfg.fix_kernel, self.cfg.fix_kernel_k)
+
+    def _add_gyro_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                          ts: dict) -> None:
+        """Gyro yaw-increment factors for every keyframe interval the gyro now covers (a bursty
+        IMU's readings arrive after the keyframe: its factors follow at the next one)."""
+        if not self.cfg.gyro:
+            return
+        horizon = t_now - self.cfg.lag_s + 0.25  # never on a keyframe about to be marginalized
+        for name, (gts, _, _) in self.gyro.items():
+            if not gts:
+                continue
+            done = self._gyro_done.get(name, -np.inf)
+            i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
+            # the first interval must start at a keyframe >= done and inside the window
+            while i < len(self.kf_t):
+                ta, tb = self.kf_t[i - 1], self.kf_t[i]
+                if tb > gts[-1] + 1e-9:
+                    break
+                ka, kb = self.kf_key[i - 1], self.kf_key[i]
+                if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
+                    i += 1
+                    continue
+                r = self._gyro_increment(name, ta, tb)
+                self._gyro_done[name] = tb
+                i += 1
+                if r is None:
+                    continue
+                d_raw = r[0] + self._bias_of(name) * (tb - ta)  # the factor carries the bias variable
+                ch = self._chain(f"gyro_bias:{name}", "b", [0.0], [self.cfg.gyro_bias_prior_radps],
+                                 [self.cfg.gyro_bias_rw_radps])
+                kbias = self._chain_key(ch, tb, graph, vals, ts)
+                k_g, rel = self._noise_of(name)
+                var = k_g * k_g * (r[1] + 1e-10 * (tb - ta)) + (rel * r[0]) ** 2
+                graph.add(gyro_factor(ka, kb, kbias, d_raw, tb - ta, math.sqrt(var)))
+                if ka not in ts:
+                    ts[ka] = ta
+                self.stats["gyro_factors"] += 1
+
+    def _bias_of(self, name: str) -> float:
+        ch = self.chains.get(f"gyro_bias:{name}")
+        return float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
 
     def _flush_acc(self) -> None:
         """Hand the accumulated keyframes' factors to iSAM2 (one update)."""
@@ -481,6 +871,7 @@ class SlidingWindowSmoother(Backend):
             return
         for pair, pos in pairs:
             self.between_idx[pair] = idx[pos]
+        self._refresh_chains()
         for kk in keys[:-1]:
             p = self.isam.calculateEstimatePose2(kk)
             self.kf_pose[kk] = np.array([p.x(), p.y(), p.theta()])
@@ -632,10 +1023,13 @@ class BatchSmoother(SlidingWindowSmoother):
         for key in self.isam.getLinearizationPoint().keys():
             if not self.init_vals.exists(key):
                 self.key_t[key] = t
-                if gtsam.Symbol(key).chr() == ord("x"):
+                c = gtsam.Symbol(key).chr()
+                if c == ord("x"):
                     self.init_vals.insert(key, self.isam.calculateEstimatePose2(key))
-                else:
+                elif c == ord("o"):
                     self.init_vals.insert(key, self.isam.calculateEstimateRot2(key))
+                else:
+                    self.init_vals.insert(key, self.isam.calculateEstimateVector(key))
 
     def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
         self._pending_register = []
@@ -643,10 +1037,13 @@ class BatchSmoother(SlidingWindowSmoother):
             self._pending_register.append(len(self.all_graph))
             self.all_graph.append(graph.at(i))
         for key in vals.keys():
-            if gtsam.Symbol(key).chr() == ord("x"):
+            c = gtsam.Symbol(key).chr()
+            if c == ord("x"):
                 self.init_vals.insert(key, vals.atPose2(key))
-            else:
+            elif c == ord("o"):
                 self.init_vals.insert(key, vals.atRot2(key))
+            else:
+                self.init_vals.insert(key, vals.atVector(key))
             self.key_t[key] = ts.get(key, 0.0)
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,

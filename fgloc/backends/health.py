@@ -1,0 +1,450 @@
+"""Sensors that check each other: per-source noise from the sources' disagreement, and health.
+
+The back-ends weight each source by the noise it *shows*, not only by what its messages
+claim.  :class:`Arbiter` compares the increments several sources give for one quantity (the
+yaw change: wheel odometry, gyro, IMU orientation, scan fixes; or the distance driven) over
+fixed blocks of time (``block_s``).  A rate source (a yaw rate, a speed) is integrated over
+the block, an absolute source (a heading, a position) is differenced across it, so a
+compass offset or a map frame never enters.  For every pair of sources ``a, b`` seen in a
+block, ``(d_a - d_b)^2`` estimates ``var_a + var_b`` (the two sources' errors are
+independent): with three or more sources the pairs determine every source's own variance
+(the "N-cornered hat" of clock metrology), so when two disagree, the one the third agrees
+with keeps its weight and the other is down-weighted.  With only two sources the excess is
+shared in proportion to their priors (claimed noise; ``rel_prior`` for the motion-
+proportional part).
+
+Each source's noise is modelled as ``var = k^2 * claimed + c^2 * increment^2``: ``k >= 1``
+inflates what the messages claim (estimated on blocks with little motion), ``c`` is a
+fraction of the motion (a skid-steer's scrub, a wheel's slip, a gyro's scale error;
+estimated on blocks with motion).  Both are exponentially weighted means over the last
+``halflife_blocks`` / ``halflife_moving_blocks`` blocks; one block adds at most ``cap``
+times the current estimate, so a short genuine disturbance (a +25 deg compass step, 3 s of
+wheel slip) moves them little while a persistent disagreement takes over within a minute.
+The back-ends still reject short disturbances with their robust kernels and gates.
+
+:class:`SourceHealth` counts each source's accepted, gated and skipped inputs and carries
+what the back-end estimated about it (scale, bias, latency) for the run summary and the
+live status line.  Core maths only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fgloc.geometry import wrap_scalar
+
+FloatArray3 = np.ndarray
+
+RATE, INSTANT_RATE, ABSOLUTE, ANGLE_ABSOLUTE = "rate", "instant_rate", "absolute", "angle"
+
+
+@dataclass
+class _Stream:
+    kind: str
+    t: deque = field(default_factory=lambda: deque(maxlen=4000))
+    v: deque = field(default_factory=lambda: deque(maxlen=4000))
+    var: deque = field(default_factory=lambda: deque(maxlen=4000))
+    gain: float = 1.0
+    bias: float = 0.0
+    rel_prior: float = 0.02
+    claimed_mean: float = 0.0      # EW mean of the claimed per-block variance
+    n_claimed: int = 0
+
+
+class Arbiter:
+    """Per-source noise of one scalar quantity from pairwise disagreement (see the module docstring)."""
+
+    def __init__(self, block_s: float = 0.125, still: float = 0.00625, moving: float = 0.025,
+                 halflife_blocks: float = 480.0, halflife_moving_blocks: float = 80.0,
+                 min_blocks: int = 20, min_moving_blocks: int = 8, cap: float = 100.0,
+                 settle_s: float = 0.3, max_gap_s: float = 0.25, k_min: float = 0.1, rel_trusted: float = 0.03,
+                 history: int = 20000) -> None:
+        self.block_s = float(block_s)
+        self.still = float(still)
+        self.moving = float(moving)
+        self.a_still = 1.0 - 0.5 ** (1.0 / halflife_blocks)
+        self.a_moving = 1.0 - 0.5 ** (1.0 / halflife_moving_blocks)
+        self.min_blocks = int(min_blocks)
+        self.min_moving_blocks = int(min_moving_blocks)
+        self.cap = float(cap)
+        self.settle_s = float(settle_s)
+        self.max_gap_s = float(max_gap_s)
+        self.k_min = float(k_min)
+        self.rel_trusted = float(rel_trusted)
+        self.history = int(history)
+        self.streams: dict[str, _Stream] = {}
+        self._t0: float | None = None
+        self._next_block = 0
+        # pair statistics: EW means and counts
+        self._still: dict[tuple[str, str], list[float]] = {}    # [mean r^2, n]
+        self._moving: dict[tuple[str, str], list[float]] = {}   # [mean (r / d)^2, n]
+        self._var: dict[str, float] = {}     # per-block absolute variance estimate
+        self._rel: dict[str, float] = {}     # relative noise estimate (fraction of the motion)
+        self.blocks = 0
+
+    # ------------------------------------------------------------------ inputs
+    def add_source(self, name: str, kind: str, rel_prior: float = 0.02) -> None:
+        if name not in self.streams:
+            self.streams[name] = _Stream(kind, deque(maxlen=self.history), deque(maxlen=self.history),
+                                         deque(maxlen=self.history), rel_prior=float(rel_prior))
+
+    def add(self, name: str, t: float, value: float, var: float) -> None:
+        """A sample: a rate (rate sources) or an absolute value (absolute / angle sources)."""
+        s = self.streams.get(name)
+        if s is None or not (math.isfinite(t) and math.isfinite(value)):
+            return
+        if s.t and t <= s.t[-1]:
+            return
+        if self._t0 is None:
+            self._t0 = float(t)
+        s.t.append(float(t))
+        s.v.append(float(value))
+        s.var.append(float(var) if math.isfinite(var) and var > 0 else 0.0)
+
+    def set_correction(self, name: str, gain: float = 1.0, bias: float = 0.0) -> None:
+        """A rate source's current calibration: ``true = gain * (reported - bias)``."""
+        s = self.streams.get(name)
+        if s is not None and math.isfinite(gain) and math.isfinite(bias):
+            s.gain, s.bias = float(gain), float(bias)
+
+    # ------------------------------------------------------------------ increments
+    def increment(self, name: str, t0: float, t1: float) -> tuple[float, float] | None:
+        """A source's (corrected) increment over ``(t0, t1]`` and its claimed variance, or None."""
+        s = self.streams.get(name)
+        if s is None or not s.t:
+            return None
+        ts = s.t
+        if s.kind == RATE:  # a reading is the mean rate since the previous one (wheel odometry)
+            if ts[0] > t0 + self.max_gap_s or ts[-1] < t1:
+                return None
+            i = _bisect_right(ts, t0)
+            d = var = 0.0
+            t = t0
+            n = len(ts)
+            while t < t1 - 1e-12 and i < n:
+                tn = min(ts[i], t1)
+                dt = tn - t
+                if dt > self.max_gap_s:
+                    return None
+                d += (s.v[i] - s.bias) * dt
+                var += s.var[i] * dt * dt
+                t = tn
+                i += 1
+            return s.gain * d, s.gain * s.gain * var
+        if s.kind == INSTANT_RATE:
+            # a reading is the rate at its stamp (a gyro): linear between readings, integrated exactly
+            if ts[0] > t0 or ts[-1] < t1:
+                return None
+            i = max(_bisect_right(ts, t0) - 1, 0)
+            n = len(ts)
+            d = var = 0.0
+            while i < n - 1 and ts[i] < t1:
+                ta, tb = ts[i], ts[i + 1]
+                a, b = max(ta, t0), min(tb, t1)
+                if b > a:
+                    h = tb - ta
+                    if h > self.max_gap_s:
+                        return None
+                    fa, fb = (a - ta) / h, (b - ta) / h
+                    wj = (b - a) * 0.5 * (fa + fb)
+                    wi = (b - a) - wj
+                    d += wi * (s.v[i] - s.bias) + wj * (s.v[i + 1] - s.bias)
+                    var += wi * wi * s.var[i] + wj * wj * s.var[i + 1]
+                i += 1
+            return s.gain * d, s.gain * s.gain * var
+        a = self._value_at(s, t0)
+        b = self._value_at(s, t1)
+        if a is None or b is None:
+            return None
+        d = b[0] - a[0]
+        if s.kind == ANGLE_ABSOLUTE:
+            d = wrap_scalar(d)
+        return d, a[1] + b[1]
+
+    def _value_at(self, s: _Stream, t: float) -> tuple[float, float] | None:
+        ts = s.t
+        i = _bisect_right(ts, t)
+        if i == 0 or i >= len(ts):
+            if i == len(ts) and ts and t - ts[-1] <= self.max_gap_s * 0.2:
+                return s.v[-1], s.var[-1]
+            return None
+        ta, tb = ts[i - 1], ts[i]
+        if tb - ta > self.max_gap_s:
+            return None
+        va, vb = s.v[i - 1], s.v[i]
+        dv = wrap_scalar(vb - va) if s.kind == ANGLE_ABSOLUTE else vb - va
+        f = (t - ta) / (tb - ta) if tb > ta else 0.0
+        return va + f * dv, (1 - f) * s.var[i - 1] + f * s.var[i]
+
+    # ------------------------------------------------------------------ blocks
+    def update(self, now: float) -> int:
+        """Process the blocks complete by ``now`` (every source has had time to arrive); returns how many."""
+        if self._t0 is None:
+            return 0
+        done = 0
+        while True:
+            b0 = self._t0 + self._next_block * self.block_s
+            b1 = b0 + self.block_s
+            if now < b1 + self.settle_s:
+                return done
+            self._next_block += 1
+            self._block(b0, b1)
+            done += 1
+
+    def _block(self, t0: float, t1: float) -> None:
+        inc: dict[str, tuple[float, float]] = {}
+        for name in self.streams:
+            got = self.increment(name, t0, t1)
+            if got is not None:
+                inc[name] = got
+        if len(inc) < 2:
+            return
+        self.blocks += 1
+        for name, (_, v) in inc.items():
+            s = self.streams[name]
+            s.n_claimed += 1
+            s.claimed_mean += (v - s.claimed_mean) / min(s.n_claimed, 240)
+        mag = float(np.median([abs(d) for d, _ in inc.values()]))
+        names = sorted(inc)
+        for i, a in enumerate(names):
+            for b in names[i + 1:]:
+                r = inc[a][0] - inc[b][0]
+                if mag < self.still:
+                    st = self._still.setdefault((a, b), [0.0, 0.0])
+                    ref = max(st[0], inc[a][1] + inc[b][1], 1e-12) if st[1] else inc[a][1] + inc[b][1] + 1e-12
+                    z = min(r * r, self.cap * ref)
+                    st[1] += 1
+                    w = max(self.a_still, 1.0 / st[1])
+                    st[0] += w * (z - st[0])
+                elif mag > self.moving:
+                    mv = self._moving.setdefault((a, b), [0.0, 0.0])
+                    base = (self._abs_var(a, inc[a][1]) + self._abs_var(b, inc[b][1])) / (mag * mag)
+                    prior = self.streams[a].rel_prior ** 2 + self.streams[b].rel_prior ** 2
+                    ref = max(mv[0], prior) if mv[1] else prior
+                    z = max(min((r / mag) ** 2, self.cap * ref) - base, 0.0)
+                    mv[1] += 1
+                    w = max(self.a_moving, 1.0 / mv[1])
+                    mv[0] += w * (z - mv[0])
+        self._solve()
+
+    def _abs_var(self, name: str, claimed: float) -> float:
+        v = self._var.get(name)
+        return claimed if v is None else max(v, claimed)
+
+    def _solve(self) -> None:
+        names = sorted(self.streams)
+        still = {p: st[0] for p, st in self._still.items() if st[1] >= self.min_blocks}
+        n_still = {p: min(st[1], 2.0 / self.a_still) for p, st in self._still.items()}
+        self._var = _cornered_hat(names, still, {n: self.streams[n].claimed_mean for n in names}, n_still)
+        moving = {p: mv[0] for p, mv in self._moving.items() if mv[1] >= self.min_moving_blocks}
+        n_mov = {p: min(mv[1], 2.0 / self.a_moving) for p, mv in self._moving.items()}
+        rel = _cornered_hat(names, moving, {n: self.streams[n].rel_prior ** 2 for n in names}, n_mov)
+        self._rel = {n: math.sqrt(v) for n, v in rel.items()}
+
+    # ------------------------------------------------------------------ outputs
+    def noise(self, name: str) -> tuple[float, float]:
+        """``(k, c)`` of a source: its claimed variance times ``k^2`` plus ``(c * increment)^2``."""
+        s = self.streams.get(name)
+        if s is None:
+            return 1.0, 0.0
+        v = self._var.get(name)
+        rel = float(self._rel.get(name, 0.0))
+        k = 1.0
+        if v is not None and s.claimed_mean > 0:
+            # better than claimed only for a source seen moving without motion-proportional errors
+            # (a wheel that scrubs in turns is no precision yaw sensor, however quiet it is straight)
+            # and never for an absolute source: short increments do not show its slowly varying
+            # errors (a compass's magnetic distortion, a map's bias)
+            k_min = self.k_min if rel < self.rel_trusted and s.kind in (RATE, INSTANT_RATE) else 1.0
+            k = math.sqrt(max(k_min**2, v / s.claimed_mean))
+        return k, rel
+
+    def shown_sigma(self, name: str) -> float | None:
+        """The per-block standard deviation the source showed (None before there is evidence)."""
+        v = self._var.get(name)
+        return None if v is None else math.sqrt(max(v, 0.0))
+
+    def claimed_sigma(self, name: str) -> float | None:
+        s = self.streams.get(name)
+        return None if s is None or not s.n_claimed else math.sqrt(max(s.claimed_mean, 0.0))
+
+
+def _bisect_right(seq: deque, x: float) -> int:
+    lo, hi = 0, len(seq)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < seq[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
+                  prior: dict[str, float], n_eff: dict[tuple[str, str], float] | None = None
+                  ) -> dict[str, float]:
+    """Per-source variances ``v`` with ``v_a + v_b ~= pairs[(a, b)]``, ``v >= 0`` (least squares).
+
+    A source the pairs cannot separate from another (two sources alone, or a third source far
+    noisier than the two: its pairs' statistics are too uncertain, judged from ``n_eff``
+    blocks each) keeps its prior (claimed) variance, but never more than any pair it is in
+    allows (``v_a <= pairs[(a, b)]``): evidence that it is better than claimed is used,
+    evidence of which of two is worse is not invented.
+    """
+    if not pairs:
+        return {}
+    srcs = sorted({s for p in pairs for s in p})
+    idx = {s: i for i, s in enumerate(srcs)}
+    plist = list(pairs)
+    A = np.zeros((len(plist), len(srcs)))
+    y = np.array([pairs[p] for p in plist])
+    sig = np.array([pairs[p] * math.sqrt(2.0 / max((n_eff or {}).get(p, 1e9), 1.0)) for p in plist])
+    for r, (a, b) in enumerate(plist):
+        A[r, idx[a]] = A[r, idx[b]] = 1.0
+    out: dict[str, float] = {}
+    for members in _components(srcs, plist):
+        rows = [r for r, (a, b) in enumerate(plist) if a in members]
+        cols = [idx[s] for s in members]
+        Ac, yc, sc = A[np.ix_(rows, cols)], y[rows], sig[rows]
+        ub = {s: min(float(y[r]) for r, p in enumerate(plist) if s in p) for s in members}
+        v = np.full(len(cols), np.nan)
+        if np.linalg.matrix_rank(Ac) == len(cols):
+            v = _nnls(Ac, yc)
+            Ap = np.linalg.pinv(Ac)
+            sd = np.sqrt(np.maximum(np.diag(Ap @ np.diag(sc**2) @ Ap.T), 0.0))
+            for m, s_name in enumerate(members):
+                if sd[m] > 0.5 * max(v[m], prior.get(s_name, 0.0)):
+                    v[m] = np.nan  # not resolved
+        for m, s_name in enumerate(members):
+            val = float(v[m]) if math.isfinite(float(v[m])) else prior.get(s_name, 0.0)
+            out[s_name] = max(min(val, ub[s_name]), 0.0)
+    return out
+
+
+def _components(srcs: list[str], pairs: list[tuple[str, str]]) -> list[list[str]]:
+    parent = {s: s for s in srcs}
+
+    def find(s: str) -> str:
+        while parent[s] != s:
+            parent[s] = parent[parent[s]]
+            s = parent[s]
+        return s
+
+    for a, b in pairs:
+        parent[find(a)] = find(b)
+    groups: dict[str, list[str]] = {}
+    for s in srcs:
+        groups.setdefault(find(s), []).append(s)
+    return list(groups.values())
+
+
+def _nnls(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    from scipy.optimize import nnls
+
+    v, _ = nnls(A, y)
+    return np.asarray(v, dtype=float)
+
+
+@dataclass
+class SourceHealth:
+    """What one input source did during a run (accepted / gated / skipped and the estimates)."""
+
+    name: str
+    kind: str
+    accepted: int = 0
+    gated: int = 0
+    skipped: int = 0
+    skipped_reasons: dict[str, int] = field(default_factory=dict)
+    estimates: dict[str, float] = field(default_factory=dict)
+
+    def skip(self, reason: str) -> None:
+        self.skipped += 1
+        self.skipped_reasons[reason] = self.skipped_reasons.get(reason, 0) + 1
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind, "accepted": self.accepted, "gated": self.gated,
+                               "skipped": self.skipped}
+        if self.skipped_reasons:
+            out["skipped_reasons"] = dict(self.skipped_reasons)
+        out.update({k: float(v) for k, v in self.estimates.items()})
+        return out
+
+
+class LatencyEstimator:
+    """A source's constant time offset (its stamps this late) from how its pose increments lag.
+
+    A fix stamped ``delta`` late shows the pose at ``t - delta``.  Over two fixes ``a, b`` its
+    yaw change is the reference's (gyro / odometry, correctly stamped) over
+    ``(t_a - delta, t_b - delta)``, i.e. ``r = d_fix - d_ref(t_a, t_b) ~= -delta (w_b - w_a)``,
+    and likewise the distance driven with the speeds ``v``.  Only changes of motion (a turn
+    starting or ending, a start from standstill) carry information, and only increments enter,
+    so a compass offset or a map bias never does.  A scale error of the reference (``beta *
+    d_ref``) is fitted alongside, so a wheel-radius error is not taken for a latency.  The
+    weighted least-squares ``delta`` is used once it is significant (``significance`` sigmas from
+    zero, with at least ``min_pairs`` pairs): an undetectable latency is taken as none rather
+    than as the noise of its estimate.
+    """
+
+    def __init__(self, min_pairs: int = 50, significance: float = 3.0, outlier: float = 5.0) -> None:
+        self.min_pairs = int(min_pairs)
+        self.significance = float(significance)
+        self.outlier = float(outlier)
+        self.N = np.zeros((3, 3))   # normal equations over [delta, beta_yaw, beta_dist] (and r.r)
+        self.b = np.zeros(3)
+        self.rr = 0.0
+        self.n = 0
+        self.rejected = 0
+
+    def _solve(self) -> FloatArray3:
+        N = self.N + np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
+        return np.linalg.solve(N, self.b)
+
+    def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
+        """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
+        reference increment ``ref`` (``kind`` 0: a yaw pair, 1: a distance pair)."""
+        if not (math.isfinite(x) and math.isfinite(r) and math.isfinite(var) and math.isfinite(ref)) or var <= 0:
+            return
+        a = np.zeros(3)
+        a[0] = x
+        a[1 + int(kind)] = ref
+        if self.n >= 10:
+            pred = float(a @ self._solve())
+            if abs(r - pred) > self.outlier * math.sqrt(var * max(self.scale2(), 1.0)):
+                self.rejected += 1
+                return
+        self.N += np.outer(a, a) / var
+        self.b += a * r / var
+        self.rr += r * r / var
+        self.n += 1
+
+    def scale2(self) -> float:
+        """Residual variance factor (1 when the claimed noise is right)."""
+        if self.n < 4:
+            return 1.0
+        p = self._solve()
+        return max((self.rr - float(p @ self.b)) / (self.n - 3), 1e-12)
+
+    def estimate(self) -> tuple[float, float]:
+        """``(delta_s, sigma_s)`` of the least-squares fit (inf sigma before any information)."""
+        if self.N[0, 0] <= 0:
+            return 0.0, math.inf
+        p = self._solve()
+        cov = np.linalg.inv(self.N + np.diag([1e-9, 1e-2, 1e-2]))
+        return float(p[0]), math.sqrt(max(self.scale2(), 1.0) * float(cov[0, 0]))
+
+    def value(self) -> float:
+        """The latency to correct for: the estimate once significant, else 0."""
+        d, s = self.estimate()
+        if self.n >= self.min_pairs and abs(d) > self.significance * s:
+            return d
+        return 0.0
+
+    def settled(self, sigma_s: float = 0.005) -> bool:
+        """Enough evidence to decide (significant, or known to within ``sigma_s``)."""
+        d, s = self.estimate()
+        return self.n >= self.min_pairs and (abs(d) > self.significance * s or s < sigma_s)

@@ -1,0 +1,173 @@
+"""Gyro factor, odometry scales, sensor arbitration and latency: Jacobians, convergence, numbers."""
+# ruff: noqa: B023
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+from conftest import errors, make_synth
+
+from fgloc.backends.factors import gyro_error, scaled_between_error, scaled_between_factor, scaled_delta
+from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, LatencyEstimator
+from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
+from fgloc.types import PoseFix
+
+
+def _num(f, x0, retract, n, eps=1e-6):
+    e0 = f(x0)
+    J = np.zeros((len(e0), n))
+    for k in range(n):
+        d = np.zeros(n)
+        d[k] = eps
+        J[:, k] = (f(retract(x0, d)) - f(retract(x0, -d))) / (2 * eps)
+    return J
+
+
+def test_scaled_odometry_factor_jacobians_match_numerical_differentiation():  # noqa: B023 (lambdas used at once)
+    rng = np.random.default_rng(0)
+    rp = lambda p, d: p.retract(d)  # noqa: E731
+    for _ in range(10):
+        xi = gtsam.Pose2(*rng.normal(0, 1, 3))
+        delta = np.array([0.08, 0.02, 0.4]) * rng.uniform(-1, 1, 3)
+        xj = xi.compose(gtsam.Pose2(*delta))
+        s = np.array([rng.uniform(0.8, 1.2), rng.uniform(1.0, 2.5)])
+        meas = scaled_delta(delta, s)[0] + rng.normal(0, 0.01, 3)
+        _, (Hi, Hj, Hs) = scaled_between_error(xi, xj, s, meas)
+        assert np.abs(Hi - _num(lambda p: scaled_between_error(p, xj, s, meas, False)[0], xi, rp, 3)).max() < 1e-7
+        assert np.abs(Hj - _num(lambda p: scaled_between_error(xi, p, s, meas, False)[0], xj, rp, 3)).max() < 1e-7
+        Ns = _num(lambda v: scaled_between_error(xi, xj, v, meas, False)[0], s, lambda v, d: v + d, 2)
+        assert np.abs(Hs - Ns).max() < 1e-7
+    # the GTSAM factor (only the yaw-rate scale a variable) reports the same whitened Jacobians
+    v = gtsam.Values()
+    v.insert(1, xi)
+    v.insert(2, xj)
+    v.insert(3, np.array([s[1]]))
+    f = scaled_between_factor(1, 2, None, 3, meas, np.eye(3) * 1e-4, fixed_scales=(float(s[0]), 1.0))
+    A = f.linearize(v).jacobian()[0]
+    assert A.shape == (3, 7)
+    assert np.allclose(A[:, 6] * np.sqrt(1e-4 + 1e-8), Hs[:, 1], rtol=1e-3)
+
+
+def test_scaled_delta_is_exact_for_a_constant_twist():
+    from fgloc.geometry import exp
+
+    u = np.array([0.8, 0.1, 0.7])
+    T = 0.2
+    reported = exp(u * T * np.array([1.05, 1.05, 2.0]))  # 5 % more speed, twice the turn
+    true, _ = scaled_delta(reported, np.array([1 / 1.05, 0.5]))
+    assert np.allclose(true, exp(u * T), atol=1e-12)
+
+
+def test_gyro_factor_error_and_jacobians():
+    from fgloc.backends.factors import gyro_factor
+
+    v = gtsam.Values()
+    v.insert(1, gtsam.Pose2(0.0, 0.0, 0.1))
+    v.insert(2, gtsam.Pose2(1.0, 0.0, 0.4))
+    v.insert(3, np.array([0.002]))
+    f = gyro_factor(1, 2, 3, 0.31, 0.5, 0.01)
+    e = gyro_error(0.1, 0.4, 0.002, 0.31, 0.5)
+    assert e == pytest.approx(0.4 - 0.1 - (0.31 - 0.001))
+    A, b = f.linearize(v).jacobian()
+    assert np.allclose(A * 0.01, [[0, 0, -1, 0, 0, 1, 0.5]])
+    assert -b[0] * 0.01 == pytest.approx(e)
+
+
+def _turning_run(seconds=120.0, seed=0, scrub=(1.4, 2.5), wheel_gain=1.0):
+    rng = np.random.default_rng(seed)
+    dt = 0.01
+    t = np.arange(0, seconds, dt)
+    w = np.where((t % 20) < 3, 0.6 * np.sin(np.pi * (t % 20) / 3), 0.0)
+    yaw = np.cumsum(w) * dt
+    arb = Arbiter()
+    arb.add_source("wheel", RATE, 0.05)
+    arb.add_source("gyro", INSTANT_RATE, 0.01)
+    arb.add_source("compass", ANGLE_ABSOLUTE, 0.02)
+    arb.set_correction("wheel", gain=wheel_gain)
+    for i, ti in enumerate(t):
+        if i % 5 == 0:
+            f = scrub[0] + (scrub[1] - scrub[0]) * min(abs(w[i]) / 0.6, 1.0)
+            arb.add("wheel", ti, w[i] * f + rng.normal(0, 0.005), 0.02**2)
+        arb.add("gyro", ti, w[i] + rng.normal(0, 0.005), 0.005**2)
+        if i % 2 == 0:
+            arb.add("compass", ti, yaw[i] + rng.normal(0, 0.008), 0.008**2)
+        if i % 10 == 0:
+            arb.update(ti)
+    return arb
+
+
+def test_arbiter_down_weights_the_yaw_source_the_other_two_disagree_with():
+    arb = _turning_run()
+    _, c_w = arb.noise("wheel")
+    k_g, c_g = arb.noise("gyro")
+    k_c, c_c = arb.noise("compass")
+    assert c_w > 0.5  # scrub 1.4-2.5 uncorrected: the wheel's turns are ~100 % off
+    assert c_g < 0.05 and c_c < 0.1  # the gyro and the compass agree with each other
+    assert k_g <= 1.5 and k_c <= 1.5
+    # a constant scrub, corrected by the yaw-rate scale the smoother estimates: consistent again
+    assert _turning_run(scrub=(2.0, 2.0), wheel_gain=0.5).noise("wheel")[1] < 0.05
+    assert _turning_run(scrub=(2.0, 2.0)).noise("wheel")[1] > 0.5
+
+
+def test_arbiter_a_short_compass_step_barely_moves_its_weight():
+    rng = np.random.default_rng(1)
+    arb = Arbiter()
+    arb.add_source("gyro", INSTANT_RATE, 0.01)
+    arb.add_source("compass", ANGLE_ABSOLUTE, 0.02)
+    arb.add_source("wheel", RATE, 0.05)
+    for i, ti in enumerate(np.arange(0, 120, 0.01)):
+        step = np.deg2rad(25.0) if 40 <= ti < 45 else 0.0  # +25 deg magnetic disturbance for 5 s
+        arb.add("gyro", ti, rng.normal(0, 0.005), 0.005**2)
+        arb.add("compass", ti, step + rng.normal(0, 0.008), 0.008**2)
+        if i % 2 == 0:
+            arb.add("wheel", ti, rng.normal(0, 0.01), 0.02**2)
+        if i % 10 == 0:
+            arb.update(ti)
+    assert arb.noise("compass")[0] < 2.0
+
+
+def test_latency_estimator_recovers_a_known_lag():
+    rng = np.random.default_rng(2)
+    est = LatencyEstimator()
+    for _ in range(400):
+        x = rng.normal(0, 0.3)  # change of yaw rate between two fixes
+        r = 0.035 * x + rng.normal(0, 5e-4)
+        est.add(x, r, (5e-4) ** 2, ref=rng.normal(0, 0.1), kind=0)
+    d, s = est.estimate()
+    assert d == pytest.approx(0.035, abs=0.001) and s < 0.001
+    assert est.value() == pytest.approx(d)
+    none = LatencyEstimator()
+    for _ in range(400):
+        x = rng.normal(0, 0.3)
+        none.add(x, rng.normal(0, 5e-4), (5e-4) ** 2)
+    assert none.value() == 0.0  # not significant: no correction
+
+
+def _feed_calibration(sm, s, yaw_scale, speed_scale, bias):
+    rng = np.random.default_rng(3)
+    sm.initialize(s.t_scan[0], s.fixes[0], np.eye(3) * 1e-4)
+    tw = s.twist * np.array([speed_scale, speed_scale, yaw_scale])
+    ev = [(t, 0, i) for i, t in enumerate(s.t_odo)] + [(t, 2, i) for i, t in enumerate(s.t_scan) if i > 0]
+    t_g = np.arange(0.0, s.t_gt[-1], 0.01)
+    w_true = np.interp(t_g, s.t_gt[1:], np.diff(np.unwrap(s.gt[:, 2])) / np.diff(s.t_gt))
+    ev += [(t, 1, i) for i, t in enumerate(t_g)]
+    ev.sort(key=lambda e: (e[0], -e[1]))
+    for _, kind, i in ev:
+        if kind == 0:
+            sm.add_odometry(s.t_odo[i], tw[i], None)
+        elif kind == 1:
+            sm.add_gyro(t_g[i], w_true[i] + bias + rng.normal(0, 0.003), 0.003**2)
+        else:
+            sm.add_keyframe(s.t_scan[i], PoseFix(s.t_scan[i], s.fixes[i], np.diag([0.01, 0.01, 0.01]) ** 2))
+    return sm.finish()
+
+
+def test_smoother_scales_and_gyro_bias_converge_within_5_percent():
+    s = make_synth(duration=40.0, noise=True, seed=4)
+    sm = SlidingWindowSmoother(SmootherConfig(latency=False))
+    tr = _feed_calibration(sm, s, yaw_scale=1.8, speed_scale=1.05, bias=0.002)
+    sv, sw = sm.odom_scales()
+    assert sv == pytest.approx(1.05, rel=0.05) and sw == pytest.approx(1.8, rel=0.05)
+    assert sm._bias_of("imu.gyro") == pytest.approx(0.002, rel=0.05)
+    assert errors(tr, s)[0] < 0.01

@@ -1,5 +1,6 @@
 """Robots beyond the paper's: skid steer with scrub, a rotated IMU, late and bursty sensors, strafing."""
 
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ from fgloc.sim import load_scenario, run_scenario
 from fgloc.sim.simulate import scrub_factor
 from fgloc.types import Imu, Transform3D
 
-SCEN = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+SCEN = Path(str(resources.files("fgloc.config") / "scenarios"))  # shipped in the package
 SHORT = [[17.5, 3.0], [27.5, 3.0], [27.5, 9.0]]
 
 

@@ -1,6 +1,6 @@
 """Turn a log (CARMEN or MCAP) into scans paired with odometry poses.
 
-Reading belongs to :mod:`fgloc.io` (``iter_carmen`` / ``LogReader``); this
+Reading belongs to :mod:`fgloc.io` (``open_log``: every format it reads); this
 module only pairs each scan with the wheel-odometry pose at its stamp.
 Messages are taken in file order; a scan's odometry is interpolated between
 the odometry messages just before and just after it in the file when their
@@ -42,27 +42,25 @@ def is_carmen(path: str | Path) -> bool:
 def log_messages(
     path: str | Path, scan_topic: str = "/scan", odom_topic: str = "/odom"
 ) -> Iterator[tuple[str, object]]:
-    """``(topic, msg)`` from a CARMEN file (via ``iter_carmen``) or an MCAP log (via ``LogReader``).
+    """``(topic, msg)`` of any log :func:`fgloc.io.open_log` reads (MCAP, rosbag2, ROS 1 bag, CARMEN).
 
-    Topics are normalised to ``/scan``, ``/odom`` and ``/tf_static``.
+    Topics are normalised to ``/scan``, ``/odom`` and ``/tf_static`` (the laser mount first).
     """
+    from fgloc.io import open_log
+    from fgloc.io.topics import Topics
+
     p = Path(path)
     if not p.exists():
         raise LogError(f"{p}: log file not found")
-    if is_carmen(p):
-        from fgloc.io.carmen import iter_carmen
-
-        yield from iter_carmen(p)
-        return
-    from fgloc.io.log import LogReader, Topics
-
-    reader = LogReader(p, Topics(scan=scan_topic, odom=odom_topic))
-    skew = reader.clock_skew([scan_topic, odom_topic])
+    src = open_log(p, Topics(scan=scan_topic, odom=odom_topic))
+    src.require(scan_topic)
+    skew = src.clock_skew([scan_topic, odom_topic]) if src.has(odom_topic) else None
     if skew is not None:  # scans would be paired with odometry from another time
-        raise LogError(f"{reader.path}: {skew}")
-    yield "/tf_static", [reader.laser_mount()]
+        raise LogError(f"{p}: {skew}")
+    yield "/tf_static", [src.laser_mount()]
     rename = {scan_topic: "/scan", odom_topic: "/odom"}
-    for topic, msg in reader.messages({scan_topic, odom_topic}):
+    wanted = [t for t in (scan_topic, odom_topic) if src.has(t)]
+    for topic, msg in src.messages(wanted):
         yield rename.get(topic, topic), msg
 
 

@@ -68,8 +68,11 @@ def build_distance_grid(
 
 @njit(cache=True)
 def _stamp(dist, pts, x0, y0, res, dmax):  # pragma: no cover - compiled
+    """Lower every cell within ``dmax`` of a point to its distance (a disc per point; the square
+    root only where the cell gets closer)."""
     h, w = dist.shape
     rad = int(np.ceil(dmax / res))
+    d2max = dmax * dmax
     for k in range(pts.shape[0]):
         px, py = pts[k, 0], pts[k, 1]
         cx = int(np.floor((px - x0) / res))
@@ -77,12 +80,17 @@ def _stamp(dist, pts, x0, y0, res, dmax):  # pragma: no cover - compiled
         for iy in range(max(cy - rad, 0), min(cy + rad + 1, h)):
             yc = y0 + (iy + 0.5) * res
             dy = yc - py
-            for ix in range(max(cx - rad, 0), min(cx + rad + 1, w)):
+            dy2 = dy * dy
+            if dy2 > d2max:
+                continue
+            half = int(np.sqrt(d2max - dy2) / res) + 1
+            for ix in range(max(cx - half, 0), min(cx + half + 1, w)):
                 xc = x0 + (ix + 0.5) * res
                 dx = xc - px
-                d = np.sqrt(dx * dx + dy * dy)
-                if d < dist[iy, ix]:
-                    dist[iy, ix] = d
+                d2 = dx * dx + dy2
+                cur = dist[iy, ix]
+                if d2 < cur * cur:
+                    dist[iy, ix] = np.sqrt(d2)
 
 
 @njit(cache=True)

@@ -218,11 +218,10 @@ class GraphSlam:
         if not np.all(np.isfinite(raw)):  # no usable odometry: carry the last one on
             raw = self._odom_prev if self._odom_prev is not None else np.zeros(3)
         odom = compose(self._odom_fix, raw)
-        pts = self._scan_points(rec)
-        mpts = voxel_subsample(pts, cfg.match_voxel_m)
-        if len(pts) == 0:
-            self.stats["empty_scans"] += 1
         if self._pose is None or self._odom_prev is None:
+            pts = self._scan_points(rec)
+            mpts = voxel_subsample(pts, cfg.match_voxel_m)
+            self.stats["empty_scans"] += len(pts) == 0
             self._pose = np.zeros(3)
             self._odom_prev = odom
             self._stamp_prev = rec.stamp
@@ -250,10 +249,19 @@ class GraphSlam:
         stationary = np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5 and not jumped
         info = None
         assert self._grid is not None
-        if stationary and not is_kf:
-            pose = pred
+        if stationary and not is_kf:  # standing still: the scan is not even read
+            self._pose = pred
             self.stats["stationary"] += 1
-        elif len(mpts) < 10:
+            self.scan_kf.append(len(self.keyframes) - 1)
+            self.scan_rel.append(between(last_kf.frontend, pred))
+            self.scan_stamps.append(rec.stamp)
+            if cfg.final_refine:
+                self.scan_points.append(voxel_subsample(self._scan_points(rec), cfg.match_voxel_m))
+            return
+        pts = self._scan_points(rec)
+        mpts = voxel_subsample(pts, cfg.match_voxel_m)
+        self.stats["empty_scans"] += len(pts) == 0
+        if len(mpts) < 10:
             pose = pred
             self.stats["track_fail"] += 1
         else:
@@ -461,10 +469,11 @@ class GraphSlam:
     def warnings(self) -> list[str]:
         """What the map may lack, one line each (empty for a healthy run)."""
         st = self.stats
-        n = max(st["scans"], 1)
+        read = st["scans"] - st["stationary"]  # scans looked at (standing still, they are not read)
+        n = max(read, 1)
         t0 = self.scan_stamps[0] if self.scan_stamps else 0.0
         out = []
-        if st["empty_scans"] == st["scans"]:
+        if read > 0 and st["empty_scans"] == read:
             out.append("no scan has a return within range (every beam at max range or invalid): the map has "
                        "no walls, only the free space the beams carve, and the trajectory is the odometry")
         elif st["empty_scans"] > 0.2 * n:
@@ -473,8 +482,8 @@ class GraphSlam:
         if st["scans"] < 50 or st["keyframes"] < 5:
             out.append(f"only {st['scans']} scans ({st['keyframes']} keyframes): too short a log for loop closures "
                        "or a self-check")
-        matched = st["scans"] - st["stationary"] - st["empty_scans"] - (1 if st["scans"] else 0)
-        if st["empty_scans"] < st["scans"] and matched > 0 and st["track_fail"] - st["empty_scans"] > 0.2 * matched:
+        matched = read - st["empty_scans"] - (1 if st["scans"] else 0)
+        if st["empty_scans"] < read and matched > 0 and st["track_fail"] - st["empty_scans"] > 0.2 * matched:
             out.append(f"{100 * (st['track_fail'] - st['empty_scans']) / matched:.0f} % of the scans did not fit "
                        "the local map: the trajectory follows the odometry there")
         if self.jumps:

@@ -112,6 +112,9 @@ class LogOddsGrid:
     def to_map(self, occ_logodds: float = 0.62, free_logodds: float = -1.0) -> OccupancyMap:
         """Trinary map: occupied above ``occ_logodds``, free below ``free_logodds``, else unknown."""
         data = np.full(self.logodds.shape, -1, dtype=np.int16)
-        data[self.logodds < free_logodds * LOGODDS_SCALE] = 0
-        data[self.logodds > occ_logodds * LOGODDS_SCALE] = 100
+        for r0 in range(0, data.shape[0], 512):  # in row blocks: no full-size temporaries
+            lo = self.logodds[r0:r0 + 512]
+            blk = data[r0:r0 + 512]
+            blk[lo < free_logodds * LOGODDS_SCALE] = 0
+            blk[lo > occ_logodds * LOGODDS_SCALE] = 100
         return OccupancyMap(data=data, resolution=self.resolution, origin=np.array([self.x0, self.y0, 0.0]))

@@ -72,7 +72,8 @@ class MapperConfig:
     odom_sigma_yaw: tuple[float, float] = (0.05, 0.5)    # sigma = a + b * |dyaw|
     loop_radius_m: float = 5.0        # candidates within this distance of the estimate
     loop_min_gap_kf: int = 40         # ... and at least this many keyframes older
-    loop_every_kf: int = 3            # try loop closures every N keyframes
+    loop_every_kf: int = 3            # try loop closures every N keyframes ...
+    loop_rest_kf: int = 5             # ... but not within N keyframes after one was accepted
     loop_max_candidates: int = 2
     loop_submap_half: int = 12        # candidate submap = keyframes j-N .. j+N
     loop_window_m: float = 1.5        # correlative window around the predicted relative pose
@@ -85,7 +86,7 @@ class MapperConfig:
     loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
     loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
     loop_grid_cache_kf: int = 20      # reuse a loop submap grid for this many keyframes
-    loop_grid_cache_mb: float = 64.0  # ... within this memory (oldest dropped first)
+    loop_grid_cache_mb: float = 48.0  # ... within this memory (oldest dropped first)
     final_batch: bool = True
     final_refine: bool = False        # re-align every scan to the optimized keyframes around it
     refine_half: int = 6              # ... keyframes k-N .. k+N (its own keyframe excluded)
@@ -173,6 +174,7 @@ class GraphSlam:
         self._est: FloatArray = np.zeros((0, 3))
         self._loop_grids: dict[int, tuple[int, DistanceGrid, DistanceGrid]] = {}  # j -> (k, fine, coarse)
         self._loops_seen = 0
+        self._last_loop_kf = -(10**9)
         self.stats = {"scans": 0, "tracked": 0, "track_fail": 0, "stationary": 0, "keyframes": 0,
                       "kf_searches": 0, "loop_tries": 0, "loops": 0, "loops_corridor": 0, "loop_rejected": 0,
                       "odom_jumps": 0, "empty_scans": 0}
@@ -323,7 +325,7 @@ class GraphSlam:
                     k - 1, k, gtsam.Pose2(*dm), self._noise(cov_local, "huber", 1.345)))
             guess = compose(self._est[k - 1], between(prev.frontend, kf.frontend))
             self._new_v.insert(k, gtsam.Pose2(*guess))
-            if k % cfg.loop_every_kf == 0:
+            if k % cfg.loop_every_kf == 0 and k - self._last_loop_kf > cfg.loop_rest_kf:
                 self._close_loops(k, guess)
         n_loops = self.stats["loops"]
         self._update(full=(k + 1) % cfg.loop_every_kf == 0 or self.stats["loops"] != self._loops_seen or k < 2)
@@ -415,6 +417,7 @@ class GraphSlam:
                 j, k, gtsam.Pose2(*rr.pose), self._noise(cov_local, "cauchy", cfg.loop_cauchy_k)))
             self.loops.append(LoopClosure(j, k, rr.pose.copy(), fr.score, rr.inlier_frac))
             self.stats["loops"] += 1
+            self._last_loop_kf = k
 
     # ------------------------------------------------------------ results
     def _refine_scans(self, poses: FloatArray, kf_idx: np.ndarray, scan_poses: FloatArray) -> FloatArray:

@@ -109,7 +109,8 @@ class EKFConfig:
     Angles are configured in degrees; the ``*_sigma_theta`` / ``*_sigma`` properties give radians.
     """
 
-    omni: bool = setting(False, "true: mecanum variant with a lateral velocity state [x, y, theta, vx, vy, w]")
+    omni: bool | None = setting(None, "true: mecanum / omni state [x, y, theta, vx, vy, w]; false: the paper's "
+                                "[x, y, theta, v, w]; null: omni as soon as the odometry reports lateral velocity")
     q_xy: float = setting(1e-4, "process noise spectral density of x, y (m^2/s)", min=0)
     q_theta: float = setting(1e-4, "process noise spectral density of the heading (rad^2/s)", min=0)
     q_v: float = setting(0.5, "how fast the speed may change ((m/s)^2/s)", min=0)
@@ -127,6 +128,19 @@ class EKFConfig:
     use_compass_yaw: bool = setting(True, "use the compass heading (false: only its yaw rate)")
     calibration_fixes: int = setting(5, "map fixes used to calibrate the compass offset", min=1)
     max_rejections: int = setting(10, "fixes gated in a row before one is forced in", min=1)
+    omni_vy_mps: float = setting(0.05, "auto omni: lateral velocity that makes the state omni", gt=0)
+    gyro: bool = setting(True, "yaw rates (IMU gyro, compass rate) as measurements of w + bias (a bias state)")
+    gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
+    gyro_bias_q: float = setting(4e-10, "bias random walk ((rad/s)^2/s)", min=0)
+    odom_yaw_scale: bool = setting(True, "estimate the odometry's yaw-rate scale (reported / true) as a state "
+                                   "once a gyro is there")
+    odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1", gt=0)
+    odom_yaw_scale_q: float = setting(1e-5, "its random walk (1/s)", min=0)
+    adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other")
+    compass_recover_after: int = setting(40, "compass headings gated in a row, while the sources agree it is "
+                                         "healthy, before the heading is re-opened to it", min=1)
+    latency: bool = setting(True, "estimate the scan stamps' latency from how the fixes lag the gyro / odometry")
+    latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
 
     @property
     def map_min_sigma_theta(self) -> float:
@@ -143,17 +157,36 @@ class EKFConfig:
 
 @dataclass
 class EKF:
-    """The paper's EKF (``omni=False``) or its mecanum variant (``omni=True``)."""
+    """The paper's EKF (``omni=False``) or its mecanum variant (``omni=True``).
+
+    Calibration states (a gyro's bias, the odometry's yaw-rate scale) can be appended with
+    :meth:`add_state` (random walks, indices in :attr:`aug`); :meth:`to_omni` switches a
+    diff-drive filter to the omni state when the odometry turns out to report lateral velocity.
+    """
 
     config: EKFConfig = field(default_factory=EKFConfig)
     t: float | None = None
     x: FloatArray = field(default_factory=lambda: np.zeros(5))
     P: FloatArray = field(default_factory=lambda: np.eye(5))
     stats: dict = field(default_factory=lambda: {"updates": 0, "gated": {}, "late": 0})
+    omni: bool = False
+    aug: dict = field(default_factory=dict)       # name -> state index
+    q_aug: dict = field(default_factory=dict)     # name -> spectral density
+
+    def __post_init__(self) -> None:
+        self.omni = bool(self.config.omni)
+
+    @property
+    def n_base(self) -> int:
+        return 6 if self.omni else 5
 
     @property
     def n(self) -> int:
-        return 6 if self.config.omni else 5
+        return self.n_base + len(self.aug)
+
+    @property
+    def w_index(self) -> int:
+        return OW if self.omni else W
 
     @property
     def initialized(self) -> bool:
@@ -161,7 +194,9 @@ class EKF:
 
     def initialize(self, t: float, pose: FloatArray, pose_cov: FloatArray | None = None,
                    vel_sigma: float = 0.1) -> None:
-        """Start at ``pose`` (map ``[x, y, yaw]``) with velocity zero."""
+        """Start at ``pose`` (map ``[x, y, yaw]``) with velocity zero (calibration states kept)."""
+        old_aug = {k: (float(self.x[i]), float(self.P[i, i])) for k, i in self.aug.items()} \
+            if len(self.x) == self.n else {}
         n = self.n
         self.t = float(t)
         self.x = np.zeros(n)
@@ -169,15 +204,62 @@ class EKF:
         self.x[TH] = wrap_angle(self.x[TH])
         self.P = np.eye(n) * vel_sigma**2
         self.P[:3, :3] = pose_cov if pose_cov is not None else np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2])
+        for k, i in self.aug.items():
+            v, var = old_aug.get(k, (0.0, 1.0))
+            self.x[i], self.P[i, i] = v, var
+
+    def add_state(self, name: str, value: float, var: float, q: float) -> int:
+        """Append a random-walk state (spectral density ``q``); returns its index."""
+        if name in self.aug:
+            return int(self.aug[name])
+        i = self.n
+        self.aug[name] = i
+        self.q_aug[name] = float(q)
+        x = np.zeros(i + 1)
+        x[:i] = self.x[:i] if len(self.x) >= i else np.pad(self.x, (0, i - len(self.x)))
+        x[i] = value
+        P = np.zeros((i + 1, i + 1))
+        m = min(len(self.P), i)
+        P[:m, :m] = self.P[:m, :m]
+        P[i, i] = var
+        self.x, self.P = x, P
+        return i
+
+    def to_omni(self) -> None:
+        """Switch to the omni state ``[x, y, th, vx, vy, w, ...]`` (vy = 0, sigma ``q_v``)."""
+        if self.omni:
+            return
+        n_old = self.n
+        keep = [X, Y, TH, V, W] + list(range(5, n_old))
+        x = np.zeros(n_old + 1)
+        P = np.zeros((n_old + 1, n_old + 1))
+        new_idx = [0, 1, 2, 3, 5] + list(range(6, n_old + 1))
+        x[new_idx] = self.x[keep]
+        P[np.ix_(new_idx, new_idx)] = self.P[np.ix_(keep, keep)]
+        P[OVY, OVY] = max(self.config.q_v, 0.01)
+        self.x, self.P = x, P
+        self.omni = True
+        self.aug = {k: i + 1 for k, i in self.aug.items()}
 
     # ------------------------------------------------------------------ predict
     def process_noise(self, dt: float) -> FloatArray:
         c = self.config
-        if c.omni:
+        if self.omni:
             q = [c.q_xy, c.q_xy, c.q_theta, c.q_v, c.q_v, c.q_w]
         else:
             q = [c.q_xy, c.q_xy, c.q_theta, c.q_v, c.q_w]
+        q += [0.0] * len(self.aug)
+        for k, i in self.aug.items():
+            q[i] = self.q_aug[k]
         return np.diag(q) * dt
+
+    def _F(self, dt: float) -> FloatArray:
+        Fb = motion_jacobian(self.x, dt, self.omni)
+        if not self.aug:
+            return Fb
+        F = np.eye(self.n)
+        F[:self.n_base, :self.n_base] = Fb
+        return F
 
     def predict(self, t: float) -> None:
         """Predict to time ``t`` (no-op when ``t`` is not after the filter time)."""
@@ -185,8 +267,8 @@ class EKF:
         dt = float(t) - self.t
         if dt <= 0.0:
             return
-        F = motion_jacobian(self.x, dt, self.config.omni)
-        self.x = motion_model(self.x, dt, self.config.omni)
+        F = self._F(dt)
+        self.x = motion_model(self.x, dt, self.omni)
         self.P = F @ self.P @ F.T + self.process_noise(dt)
         self.t = float(t)
 
@@ -194,8 +276,8 @@ class EKF:
         """Pose and its covariance predicted to ``t`` without changing the filter."""
         assert self.t is not None, "EKF not initialized"
         dt = max(0.0, float(t) - self.t)
-        F = motion_jacobian(self.x, dt, self.config.omni)
-        x = motion_model(self.x, dt, self.config.omni)
+        F = self._F(dt)
+        x = motion_model(self.x, dt, self.omni)
         P = F @ self.P @ F.T + self.process_noise(dt)
         return x[:3].copy(), P[:3, :3].copy()
 
@@ -211,10 +293,15 @@ class EKF:
             self.stats["late"] += 1
         self.predict(t)
         H = selection(rows, self.n)
-        y = np.asarray(z, dtype=float) - H @ self.x
-        for i, r in enumerate(rows):
-            if r == TH:
-                y[i] = wrap_angle(y[i])
+        return self.update_h(np.asarray(z, dtype=float), H @ self.x, H, R, gate, sensor,
+                             [i for i, r in enumerate(rows) if r == TH])
+
+    def update_h(self, z: FloatArray, hx: FloatArray, H: FloatArray, R: FloatArray, gate: float | None,
+                 sensor: str, wrap_rows: list[int] | tuple[int, ...] = ()) -> bool:
+        """Update at the filter time with a linearized measurement ``z ~ h(x)``, Jacobian ``H``."""
+        y = np.asarray(z, dtype=float) - np.asarray(hx, dtype=float)
+        for i in wrap_rows:
+            y[i] = wrap_angle(y[i])
         S = H @ self.P @ H.T + R
         if gate is not None:
             d2 = float(y @ np.linalg.solve(S, y))
@@ -239,19 +326,44 @@ class EKF:
         return self.update(t, np.asarray(pose, dtype=float), [X, Y, TH], R,
                            c.gate_map if gate else None, "map")
 
-    def update_encoder(self, t: float, twist: FloatArray, twist_cov: FloatArray) -> bool:
-        """Encoder body twist ``[vx, vy, wz]`` with 3x3 covariance; the unicycle uses ``[vx, wz]``."""
+    def update_encoder(self, t: float, twist: FloatArray, twist_cov: FloatArray,
+                       yaw_scale_index: int | None = None) -> bool:
+        """Encoder body twist ``[vx, vy, wz]`` with 3x3 covariance; the unicycle uses ``[vx, wz]``.
+
+        With ``yaw_scale_index`` the reported yaw rate is ``s_w * w`` (a skid steer's scrub)."""
         tw = np.asarray(twist, dtype=float)
         cov = np.asarray(twist_cov, dtype=float)
-        if self.config.omni:
-            return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
-        idx = [0, 2]
-        return self.update(t, tw[idx], [V, W], cov[np.ix_(idx, idx)], self.config.gate_encoder, "encoder")
+        if yaw_scale_index is None:
+            if self.omni:
+                return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
+            idx = [0, 2]
+            return self.update(t, tw[idx], [V, W], cov[np.ix_(idx, idx)], self.config.gate_encoder, "encoder")
+        assert self.t is not None, "EKF not initialized"
+        self.predict(t)
+        rows = [OVX, OVY, OW] if self.omni else [V, W]
+        comp = [0, 1, 2] if self.omni else [0, 2]
+        H = selection(rows, self.n)
+        hx = H @ self.x
+        sw = float(self.x[yaw_scale_index])
+        w = float(self.x[self.w_index])
+        H[-1, self.w_index] = sw
+        H[-1, yaw_scale_index] = w
+        hx[-1] = sw * w
+        return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder")
+
+    def update_gyro(self, t: float, rate: float, var: float, bias_index: int, gate: float | None) -> bool:
+        """A gyro's yaw rate: ``z = w + b`` with ``b`` the bias state at ``bias_index``."""
+        assert self.t is not None, "EKF not initialized"
+        self.predict(t)
+        H = np.zeros((1, self.n))
+        H[0, self.w_index] = 1.0
+        H[0, bias_index] = 1.0
+        return self.update_h(np.array([rate]), H @ self.x, H, np.array([[var]]), gate, "gyro")
 
     def update_compass(self, t: float, theta_map: float | None, var_theta: float,
                        rate: float | None = None, var_rate: float = 0.0) -> bool:
         """Compass ``[theta, w]`` (heading already in the map frame); either part may be None."""
-        w_idx = OW if self.config.omni else W
+        w_idx = self.w_index
         z: list[float] = []
         rows: list[int] = []
         var: list[float] = []

@@ -6,15 +6,33 @@ the joint ``[theta, w]`` update is gated the rate is applied alone), and keyfram
 fixes map updates (a late fix, older than the filter time, is first carried forward by the
 filter's velocities).  The online and the final trajectory are the same: the pose
 right after each scan's fix (a filter does not smooth).
+
+Beyond the paper (issue 17), all switchable in ``ekf:``:
+
+* a gyro's yaw rate (an IMU's, or the compass module's) measures ``w + b`` with a bias state;
+* once a gyro is there, the odometry's yaw-rate scale (reported / true, a skid steer's
+  scrub) is a state: the encoder's yaw rate measures ``s_w * w``;
+* the yaw sources are weighted by the noise they show against each other
+  (:class:`~fgloc.backends.health.Arbiter`, the same as the smoother's);
+* a compass heading gated for ``compass_recover_after`` readings in a row while the sources
+  agree it is healthy re-opens the heading (the filter had drifted, not the compass);
+* the scans' latency is estimated (:class:`~fgloc.backends.health.LatencyEstimator`) and a
+  fix applied at ``stamp - latency`` (carried forward by the filter's velocities);
+* ``omni: null``: the state becomes omni as soon as the odometry reports lateral velocity.
 """
 
 from __future__ import annotations
+
+import math
+from collections import deque
 
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
-from fgloc.backends.ekf import EKF, EKFConfig, motion_model
+from fgloc.backends.ekf import CHI2_999, EKF, TH, EKFConfig, motion_model
+from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, LatencyEstimator, SourceHealth
+from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
 
@@ -24,6 +42,7 @@ class EKFBackend(Backend):
     def __init__(self, config: EKFConfig | None = None) -> None:
         super().__init__()
         c = config or EKFConfig()
+        self.cfg = c
         self.ekf = EKF(c)
         self.ekf.x = np.zeros(self.ekf.n)
         self.ekf.P = np.eye(self.ekf.n)
@@ -34,6 +53,40 @@ class EKFBackend(Backend):
         self.calib = CompassCalibrator(c.calibration_fixes)
         self.max_rejections = c.max_rejections
         self._consecutive_rejects = 0
+        self._compass_gated_run = 0
+        self.arb = Arbiter()
+        self.sources: dict[str, SourceHealth] = {}
+        self.latency_est = LatencyEstimator()
+        # motion integrals for the latency estimate: (t, yaw, w) from the gyro (or the odometry),
+        # (t, distance, v) from the odometry, each at its own stamps
+        self._yaw_series: deque[tuple[float, float, float]] = deque(maxlen=4000)
+        self._dist_series: deque[tuple[float, float, float]] = deque(maxlen=4000)
+        self._yaw_int = 0.0
+        self._dist_int = 0.0
+        self._last_rate: tuple[float, float] | None = None
+        self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._long_pair_t = -math.inf
+        self._pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self._turned = 0.0
+        self._last_odom_t: float | None = None
+        self.stats["omni"] = bool(self.ekf.omni)
+
+    # ------------------------------------------------------------------ helpers
+    def _source(self, name: str, kind: str) -> SourceHealth:
+        h = self.sources.get(name)
+        if h is None:
+            h = self.sources[name] = SourceHealth(name, kind)
+        return h
+
+    def _noise(self, name: str) -> tuple[float, float]:
+        return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
+
+    def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
+        if not self.cfg.adapt_noise:
+            return
+        if name not in self.arb.streams:
+            self.arb.add_source(name, kind, rel_prior)
+        self.arb.add(name, t, value, var)
 
     @property
     def initialized(self) -> bool:
@@ -50,47 +103,160 @@ class EKFBackend(Backend):
     def compass_offset(self) -> float | None:
         return self.calib.offset
 
+    def odom_scales(self) -> FloatArray:
+        """The odometry's ``[speed, yaw-rate]`` scales (reported / true); the EKF keeps speed at 1."""
+        i = self.ekf.aug.get("odom_yaw_scale")
+        return np.array([1.0, float(self.ekf.x[i]) if i is not None else 1.0])
+
+    def gyro_bias(self, source: str = "imu") -> float:
+        i = self.ekf.aug.get(f"gyro_bias:{source}.gyro")
+        return float(self.ekf.x[i]) if i is not None else 0.0
+
+    def latency_estimate(self) -> float:
+        if self.cfg.latency_s is not None:
+            return float(self.cfg.latency_s)
+        return self.latency_est.value() if self.cfg.latency else 0.0
+
+    # ------------------------------------------------------------------ inputs
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
+        tw = np.asarray(twist, dtype=float)
+        h = self._source("odom", "odometry")
+        if self.cfg.omni is None and not self.ekf.omni and abs(float(tw[1])) > self.cfg.omni_vy_mps:
+            self.ekf.to_omni()  # the odometry reports lateral velocity: a mecanum / omni base
+            self.stats["omni"] = True
+            self.stats["omni_since"] = float(t)
+        cov = np.array(twist_covariance(twist_cov, self.encoder_sigmas), dtype=float)
+        self._arb_add("odom", RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
+        si = self.ekf.aug.get("odom_yaw_scale")
+        gain = 1.0 / float(self.ekf.x[si]) if si is not None and self.ekf.x[si] > 0.05 else 1.0
+        self.arb.set_correction("odom", gain=gain)
+        # motion integrals (held backwards, as the twist is the mean since the last message)
+        v = float(np.hypot(tw[0], tw[1]))
+        if self._dist_series and t > self._dist_series[-1][0]:
+            t0 = self._dist_series[-1][0]
+            self._dist_int += v * (t - t0)
+            if not self._has_gyro():
+                self._yaw_int += float(tw[2]) * gain * (t - t0)
+                self._yaw_series.append((float(t), self._yaw_int, float(tw[2]) * gain))
+        self._dist_series.append((float(t), self._dist_int, v))
         if not self.initialized:
             return
         if t < (self.ekf.t or -np.inf):
             self.stats["late"] += 1
-        self.ekf.update_encoder(t, twist, twist_covariance(twist_cov, self.encoder_sigmas))
+        k, rel = self._noise("odom")
+        if k != 1.0 or rel > 0.0:
+            cov[2, :] *= k
+            cov[:, 2] *= k
+            cov[2, 2] += (rel * float(tw[2])) ** 2
+        if self._last_odom_t is not None and t > self._last_odom_t:
+            self._turned += abs(float(tw[2])) * (t - self._last_odom_t)
+        self._last_odom_t = float(t)
+        if self.cfg.odom_yaw_scale and si is None and self._has_gyro():
+            # with the gyro from the start: else the bias state would take the scale's error
+            si = self.ekf.add_state("odom_yaw_scale", 1.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q)
+        h.accepted += 1
+        self.ekf.update_encoder(t, tw, cov, yaw_scale_index=si)
+        self._process_pairs()
+
+    def _has_gyro(self) -> bool:
+        return any(k.startswith("gyro_bias:") for k in self.ekf.aug)
 
     def add_compass(self, t: float, yaw: float | None, yaw_var: float,
-                    rate: float | None, rate_var: float) -> None:
+                    rate: float | None, rate_var: float, source: str = "imu") -> None:
+        if rate is not None and self.cfg.gyro:
+            self.add_gyro(t, rate, rate_var, source)
+            rate = None
         if yaw is not None:
             self.calib.add_compass(t, yaw, rate)
+            vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
+            self._arb_add(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(vy))
         if not self.initialized:
             return
         th = self.calib.to_map(yaw) if (yaw is not None and self.use_compass_yaw) else None
         vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
         vr = rate_var if np.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
-        if not self.ekf.update_compass(t, th, vy, rate, vr) and th is not None and rate is not None:
+        if th is not None:
+            vy *= self._noise(f"{source}.yaw")[0] ** 2
+            h = self._source(f"{source}.yaw", "heading")
+            if self.ekf.update_compass(t, th, vy, rate, vr):
+                h.accepted += 1
+                self._compass_gated_run = 0
+                return
+            h.gated += 1
+            self._compass_gated_run += 1
+            k_y, _ = self._noise(f"{source}.yaw")
+            if self._compass_gated_run >= self.cfg.compass_recover_after and k_y < 3.0:
+                # gated for a while although it agrees with the other sources: the filter's heading
+                # drifted (e.g. on a wheel yaw that lies), not the compass; re-open the heading
+                innov = wrap_scalar(th - float(self.ekf.x[TH]))
+                self.ekf.P[TH, TH] = max(self.ekf.P[TH, TH], innov * innov + vy)
+                self.ekf.update_compass(t, th, vy, None, vr)
+                self.stats["compass_recoveries"] = self.stats.get("compass_recoveries", 0) + 1
+                self._compass_gated_run = 0
+                return
+        if rate is not None:
             self.ekf.update_compass(t, None, vy, rate, vr)
+
+    def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
+        """A yaw rate (rad/s, base_link z) measuring ``w + bias`` (a bias state per gyro)."""
+        name = f"{source}.gyro"
+        h = self._source(name, "gyro")
+        if not (math.isfinite(t) and math.isfinite(rate)):
+            h.skip("not finite")
+            return
+        var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
+        self._arb_add(name, INSTANT_RATE, 0.01, t, float(rate), float(var))
+        bi = self.ekf.aug.get(f"gyro_bias:{name}")
+        if bi is None:
+            bi = self.ekf.add_state(f"gyro_bias:{name}", 0.0, self.cfg.gyro_bias_prior_radps**2, self.cfg.gyro_bias_q)
+        b = float(self.ekf.x[bi])
+        self.arb.set_correction(name, bias=b)
+        # the motion integral (readings interpolated)
+        if self._last_rate is not None and t > self._last_rate[0]:
+            self._yaw_int += 0.5 * (self._last_rate[1] + rate - b) * (t - self._last_rate[0])
+        if self._last_rate is None or t > self._last_rate[0]:
+            self._last_rate = (float(t), float(rate) - b)
+            self._yaw_series.append((float(t), self._yaw_int, float(rate) - b))
+        if not self.initialized:
+            return
+        k, rel = self._noise(name)
+        var = k * k * var + (rel * rate) ** 2
+        if self.ekf.update_gyro(t, float(rate), var, bi, CHI2_999[1] * 4):
+            h.accepted += 1
+        else:
+            h.gated += 1
+        self._process_pairs()
 
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
         if not self.initialized:
             return False
         used = False
+        if self.cfg.adapt_noise:
+            self.arb.update(t)
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
             pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)
-            if self.ekf.t is not None and t < self.ekf.t:
-                # a late fix (the scan arrived after newer odometry): carried forward to the filter
-                # time by the filter's own velocities, with their motion noise, not applied as if new
-                dt = self.ekf.t - t
+            self._latency_pair(t, pose, cov)
+            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - self.latency_estimate(), float(pose[2]), float(cov[2, 2]))
+            t_meas = t - self.latency_estimate()  # a late-stamped scan shows the pose this long before
+            if self.ekf.t is not None and t_meas < self.ekf.t:
+                # a late fix (the scan arrived after newer odometry, or was stamped late): carried
+                # forward to the filter time by the filter's own velocities, with their motion noise
+                dt = self.ekf.t - t_meas
                 s = self.ekf.x.copy()
                 s[:3] = pose
-                pose = motion_model(s, dt, self.ekf.config.omni)[:3]
+                pose = motion_model(s, dt, self.ekf.omni)[:3]
                 cov = cov + self.ekf.process_noise(dt)[:3, :3]
-                t = self.ekf.t
-            used = self.ekf.update_map(t, pose, cov, gate=not force)
+                t_meas = self.ekf.t
+            used = self.ekf.update_map(t_meas, pose, cov, gate=not force)
+            h = self._source("scan", "pose")
             if used:
+                h.accepted += 1
                 self._consecutive_rejects = 0
                 self.stats["fixes_used"] += 1
-                self.calib.add_fix(t, float(pose[2]))
+                self.calib.add_fix(t_meas, float(pose[2]))
             else:
+                h.gated += 1
                 self._consecutive_rejects += 1
                 self.stats["fixes_rejected"] += 1
         else:
@@ -99,6 +265,63 @@ class EKFBackend(Backend):
         self._record_online(self.ekf.t or t, self.ekf.pose(), self.ekf.pose_cov())
         return used
 
+    # ------------------------------------------------------------------ latency
+    def _latency_pair(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        if not self.cfg.latency or self.cfg.latency_s is not None:
+            return
+        if self._recent_fixes and 0.0 < t - self._recent_fixes[-1][0] <= 0.3:
+            f = self._recent_fixes[-1]
+            self._pairs.append((f[0], t, f[1], pose.copy(), f[2], cov.copy()))
+        if t - self._long_pair_t >= 1.0:
+            old = [f for f in self._recent_fixes if 0.8 <= t - f[0] <= 1.2]
+            if old:
+                f = old[0]
+                self._pairs.append((f[0], t, f[1], pose.copy(), f[2], cov.copy()))
+                self._long_pair_t = t
+        self._recent_fixes.append((t, pose.copy(), cov.copy()))
+
+    @staticmethod
+    def _series_at(m: deque, t: float, held: bool = False) -> tuple[float, float] | None:
+        """Integral and rate at ``t``; ``held``: the rate is the mean since the previous sample
+        (odometry), so the sample after ``t`` holds it."""
+        if not m or m[0][0] > t or m[-1][0] < t:
+            return None
+        lo, hi = 0, len(m) - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if m[mid][0] <= t:
+                lo = mid
+            else:
+                hi = mid
+        a, b = m[lo], m[hi]
+        f = (t - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 1.0
+        rate = float(b[2]) if held else float(a[2] + f * (b[2] - a[2]))
+        return float(a[1] + f * (b[1] - a[1])), rate
+
+    def _process_pairs(self) -> None:
+        if not self._pairs or not self._yaw_series or not self._dist_series:
+            return
+        covered = min(self._yaw_series[-1][0], self._dist_series[-1][0])
+        keep = []
+        for pair in self._pairs:
+            ta, tb, pa, pb, ca, cb = pair
+            if tb > covered:
+                keep.append(pair)
+                continue
+            ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
+            da, db = self._series_at(self._dist_series, ta, True), self._series_at(self._dist_series, tb, True)
+            if ya is None or yb is None or da is None or db is None:
+                continue
+            d_ref = yb[0] - ya[0]
+            r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+            self.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
+            dist_ref = db[0] - da[0]
+            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
+            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + 1e-6
+            self.latency_est.add(-(db[1] - da[1]), dist_fix - dist_ref, var_d, dist_ref, 1)
+        self._pairs = keep
+
+    # ------------------------------------------------------------------ outputs
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
         return self.ekf.predict_pose(t)
 
@@ -109,4 +332,5 @@ class EKFBackend(Backend):
 
     def finish(self) -> Trajectory:
         self.stats["gated"] = dict(self.ekf.stats["gated"])
+        self.stats["omni"] = bool(self.ekf.omni)
         return self.online_trajectory()

@@ -50,6 +50,7 @@ class _Stream:
     v: deque = field(default_factory=lambda: deque(maxlen=4000))
     var: deque = field(default_factory=lambda: deque(maxlen=4000))
     gain: float = 1.0
+    gain_ref: float = 1.0          # the gain when the motion statistics last restarted
     bias: float = 0.0
     rel_prior: float = 0.02
     claimed_mean: float = 0.0      # EW mean of the claimed per-block variance
@@ -111,6 +112,12 @@ class Arbiter:
         s = self.streams.get(name)
         if s is not None and math.isfinite(gain) and math.isfinite(bias):
             s.gain, s.bias = float(gain), float(bias)
+            if abs(s.gain / s.gain_ref - 1.0) > 0.05:
+                # the calibration moved: what the source showed before is not what it shows now
+                s.gain_ref = s.gain
+                for p, mv in self._moving.items():
+                    if name in p:
+                        mv[1] = min(mv[1], 1.0)
 
     # ------------------------------------------------------------------ increments
     def increment(self, name: str, t0: float, t1: float) -> tuple[float, float] | None:
@@ -390,7 +397,9 @@ class LatencyEstimator:
     than as the noise of its estimate.
     """
 
-    def __init__(self, min_pairs: int = 50, significance: float = 3.0, outlier: float = 5.0) -> None:
+    def __init__(self, min_pairs: int = 50, significance: float = 3.0, outlier: float = 5.0,
+                 var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2)) -> None:
+        self.var_floor = (float(var_floor[0]), float(var_floor[1]))
         self.min_pairs = int(min_pairs)
         self.significance = float(significance)
         self.outlier = float(outlier)
@@ -412,7 +421,10 @@ class LatencyEstimator:
         a = np.zeros(3)
         a[0] = x
         a[1 + int(kind)] = ref
-        if self.n >= 10:
+        # floors: a fix's own covariance leaves out the reference's noise and the map's
+        var = max(var, self.var_floor[int(kind)])
+        if self.settled():  # reject outliers only against a decided estimate (else the lag itself
+            # would look like an outlier and never be learned)
             pred = float(a @ self._solve())
             if abs(r - pred) > self.outlier * math.sqrt(var * max(self.scale2(), 1.0)):
                 self.rejected += 1

@@ -73,7 +73,8 @@ class MapperConfig:
     loop_radius_m: float = 5.0        # candidates within this distance of the estimate
     loop_min_gap_kf: int = 40         # ... and at least this many keyframes older
     loop_every_kf: int = 3            # try loop closures every N keyframes ...
-    loop_rest_kf: int = 5             # ... but not within N keyframes after one was accepted
+    loop_rest_kf: int = 5             # ... but not within N keyframes after one that the graph already
+                                      # agreed with (within 0.1 m / 1 deg: no drift left to correct)
     loop_max_candidates: int = 2
     loop_submap_half: int = 12        # candidate submap = keyframes j-N .. j+N
     loop_window_m: float = 1.5        # correlative window around the predicted relative pose
@@ -417,7 +418,9 @@ class GraphSlam:
                 j, k, gtsam.Pose2(*rr.pose), self._noise(cov_local, "cauchy", cfg.loop_cauchy_k)))
             self.loops.append(LoopClosure(j, k, rr.pose.copy(), fr.score, rr.inlier_frac))
             self.stats["loops"] += 1
-            self._last_loop_kf = k
+            innov = between(pred, rr.pose)
+            if np.hypot(innov[0], innov[1]) < 0.1 and abs(innov[2]) < np.radians(1.0):
+                self._last_loop_kf = k  # the graph already agreed: this place is tied in, rest a while
 
     # ------------------------------------------------------------ results
     def _refine_scans(self, poses: FloatArray, kf_idx: np.ndarray, scan_poses: FloatArray) -> FloatArray:

@@ -35,6 +35,15 @@ from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, L
 from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
+MAX_REF_PERIOD_S = 0.06
+
+
+def _period(series: deque) -> float:
+    if len(series) < 3:
+        return math.inf
+    ts = np.array([x[0] for x in list(series)[-50:]])
+    return float(np.median(np.diff(ts)))
+
 
 class EKFBackend(Backend):
     name = "ekf"
@@ -151,8 +160,8 @@ class EKFBackend(Backend):
         if self._last_odom_t is not None and t > self._last_odom_t:
             self._turned += abs(float(tw[2])) * (t - self._last_odom_t)
         self._last_odom_t = float(t)
-        if self.cfg.odom_yaw_scale and si is None and self._has_gyro():
-            # with the gyro from the start: else the bias state would take the scale's error
+        if self.cfg.odom_yaw_scale and si is None and self._has_gyro() and self._turned > 0.3:
+            # observable once turning beside a gyro (early: the bias state would take its error)
             si = self.ekf.add_state("odom_yaw_scale", 1.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q)
         h.accepted += 1
         self.ekf.update_encoder(t, tw, cov, yaw_scale_index=si)
@@ -312,9 +321,14 @@ class EKFBackend(Backend):
             da, db = self._series_at(self._dist_series, ta, True), self._series_at(self._dist_series, tb, True)
             if ya is None or yb is None or da is None or db is None:
                 continue
-            d_ref = yb[0] - ya[0]
-            r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-            self.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
+            # a reference slower than ~17 Hz cannot resolve a lag of tens of ms: no pairs from it
+            # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
+            if _period(self._dist_series) > MAX_REF_PERIOD_S:
+                continue
+            if _period(self._yaw_series) <= MAX_REF_PERIOD_S:
+                d_ref = yb[0] - ya[0]
+                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+                self.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
             dist_ref = db[0] - da[0]
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + 1e-6

@@ -71,6 +71,16 @@ def O(j: int) -> int:  # noqa: E743
     return int(gtsam.symbol("o", j))
 
 
+MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
+
+
+def _period(ts: list[float]) -> float:
+    """Median spacing of the last readings (inf with fewer than 3)."""
+    if len(ts) < 3:
+        return math.inf
+    return float(np.median(np.diff(np.asarray(ts[-50:]))))
+
+
 @dataclass
 class _Chain:
     """A slowly varying calibration variable (``Vector``): one per ``offset_interval_s``, tied by a random walk."""
@@ -128,7 +138,8 @@ class SmootherConfig:
     calibration_fixes: int = setting(3, "map fixes used to calibrate the compass offset", min=1)
     gyro: bool = setting(True, "yaw rates (IMU gyro, compass rate) as between-keyframe yaw-increment factors "
                          "with an estimated bias")
-    gyro_sigma_radps: float = setting(0.005, "gyro noise per reading when the message carries none", gt=0)
+    gyro_sigma_radps: float = setting(0.02, "gyro noise per reading when the message carries none (unknown: "
+                                      "a cautious 1 deg/s, as the EKF's compass_rate_sigma_deg)", gt=0)
     gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
     gyro_bias_rw_radps: float = setting(2e-5, "random walk of the gyro bias (rad/s per sqrt(s))", gt=0)
     odom_gains: bool = setting(True, "estimate the odometry's speed and yaw-rate scales (reported / true) as "
@@ -358,10 +369,17 @@ class SlidingWindowSmoother(Backend):
                 keep.append(pair)
                 continue
             wa, wb = self._twist_at(ta), self._twist_at(tb)
-            d_ref = self._rotation_between(ta, tb)
-            r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-            var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
-            self.latency_est.add(-(float(wb[2]) - float(wa[2])), r, var, d_ref, 0)
+            # a reference slower than ~20 Hz cannot resolve a lag of tens of ms (the motion inside
+            # one of its periods is not known): such a reference gives no pairs
+            # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
+            if _period(self.odo_t) > MAX_REF_PERIOD_S:
+                continue
+            yaw_ref_ok = _period(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t) <= MAX_REF_PERIOD_S
+            if yaw_ref_ok:
+                d_ref = self._rotation_between(ta, tb)
+                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+                var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
+                self.latency_est.add(-(float(wb[2]) - float(wa[2])), r, var, d_ref, 0)
             d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
             dist_ref = float(np.hypot(d[0], d[1]))
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))

@@ -1,0 +1,499 @@
+"""Per-source inputs, robot_localization style: which topic is what, what each contributes.
+
+The ``sources:`` config section lists input sources by name (``inputs:``); empty, the
+default layout is used: ``odom`` (``nav_msgs/Odometry`` on ``/odom``: vx, vy, vyaw) and
+``imu`` (``sensor_msgs/Imu`` on ``/imu``: yaw, vyaw), which reproduces fgloc's behaviour
+before per-source inputs.  Each source::
+
+    inputs:
+      wheels:   {type: odometry, topic: /husky_velocity_controller/odom, use: [vx, vyaw]}
+      imu:      {type: imu, topic: /imu/data, use: [yaw, vyaw], covariance: floor, sigmas: [0.01, 0.005]}
+      mocap:    {type: pose, topic: /vicon/pose, use: [x, y, yaw], frame_id: map, gate: 16.3}
+
+``type``: ``odometry`` | ``imu`` | ``pose`` (``geometry_msgs/PoseWithCovarianceStamped``).
+``use``: a subset of ``x, y, yaw, vx, vy, vyaw`` (robot_localization's 15-element vector
+reduced to the planar six).  ``differential``: use the increments of the source's poses
+(odometry: as a twist; an IMU's orientation: as a yaw rate).  ``covariance``: ``message``
+(as the message says), ``fixed`` (``sigmas``, one per used component), ``scaled`` (the
+message's times ``scale^2``) or ``floor`` (the message's, at least ``sigmas^2``).  ``gate``:
+a Mahalanobis (squared) gate against the prediction (pose sources).  ``frame_id``: the frame a
+pose source must be in.  The scan-to-map front-end is always a source (``scan``).
+
+An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
+header.frame_id``; :mod:`fgloc.backends.imu`): any 3-D mount when the message is a whole
+:class:`~fgloc.types.Imu` and the transform a :class:`~fgloc.types.Transform3D`; with a
+planar transform or a reader that gives only yaw (:class:`~fgloc.types.CompassHeading`), the
+yaw mount is undone.  A frame without a transform is identity with one warning.
+
+Bad input is counted and skipped, never raised: an IMU quaternion of zeros or not of unit
+length, a covariance with a NaN or negative diagonal, a pose in another frame than the one
+configured.  :meth:`SourceRouter.health` (and ``Localizer.stats['sources']`` after the run)
+reports per source: accepted / gated / skipped counts with reasons, the estimated scale,
+bias and latency, and the noise it showed against what its messages claimed;
+:func:`status_line` is the one-line form for a live display.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fgloc.backends.health import SourceHealth
+from fgloc.backends.imu import imu_in_base, mount_rotation
+from fgloc.config.schema import setting
+from fgloc.errors import ConfigError
+from fgloc.geometry import between, wrap_angle, wrap_scalar
+from fgloc.geometry import log as se2_log
+from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
+
+log = logging.getLogger(__name__)
+
+COMPONENTS = ("x", "y", "yaw", "vx", "vy", "vyaw")
+TYPES = ("odometry", "imu", "pose")
+POLICIES = ("message", "fixed", "scaled", "floor")
+DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
+DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
+UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
+
+
+@dataclass(frozen=True)
+class SourcesConfig:
+    """``sources:`` per-source inputs (see :mod:`fgloc.localization.sources`)."""
+
+    inputs: dict = setting({}, "name -> {type: odometry|imu|pose, topic, use: [x, y, yaw, vx, vy, vyaw], "
+                           "differential, covariance: message|fixed|scaled|floor, sigmas, scale, gate, frame_id}; "
+                           "empty: odom (/odom: vx, vy, vyaw) and imu (/imu: yaw, vyaw)")
+
+
+@dataclass
+class SourceSpec:
+    """One input source, checked."""
+
+    name: str
+    type: str
+    topic: str
+    use: tuple[str, ...]
+    differential: bool = False
+    covariance: str = "message"
+    sigmas: tuple[float, ...] = ()
+    scale: float = 1.0
+    gate: float | None = None
+    frame_id: str | None = None
+
+    def uses(self, comp: str) -> bool:
+        return comp in self.use
+
+
+def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: str = "config") -> list[SourceSpec]:
+    """The sources of a ``sources:`` section (the default layout when it lists none); one-line
+    :class:`ConfigError` naming the key for anything wrong.  ``topics`` renames the default
+    layout's topics (``--odom-topic`` / ``--imu-topic``)."""
+    inputs = (cfg.inputs if isinstance(cfg, SourcesConfig) else dict(cfg or {})) or {}
+    if not inputs:
+        names = {"odom": "/odom", "imu": "/imu"}
+        if isinstance(topics, dict):
+            names.update({k: str(v) for k, v in topics.items() if k in names and v})
+        elif topics is not None:
+            names.update({k: str(getattr(topics, k)) for k in names if getattr(topics, k, None)})
+        return [SourceSpec("odom", "odometry", names["odom"], DEFAULT_USE["odometry"]),
+                SourceSpec("imu", "imu", names["imu"], DEFAULT_USE["imu"])]
+    out: list[SourceSpec] = []
+    seen_topics: dict[str, str] = {}
+    for name, d in inputs.items():
+        where = f"{source}: sources.inputs.{name}"
+        if not isinstance(d, dict):
+            raise ConfigError(f"{where}: must be a mapping (type, topic, use, ...)")
+        unknown = set(d) - {"type", "topic", "use", "differential", "covariance", "sigmas", "scale", "gate",
+                            "frame_id"}
+        if unknown:
+            raise ConfigError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+        typ = str(d.get("type", "")).lower()
+        if typ not in TYPES:
+            raise ConfigError(f"{where}.type: must be one of {', '.join(TYPES)}, got {d.get('type')!r}")
+        use = tuple(str(u).lower() for u in (d.get("use") or DEFAULT_USE[typ]))
+        bad = [u for u in use if u not in COMPONENTS]
+        if bad:
+            raise ConfigError(f"{where}.use: {bad[0]!r} is not one of {', '.join(COMPONENTS)}")
+        pol = str(d.get("covariance", "message")).lower()
+        if pol not in POLICIES:
+            raise ConfigError(f"{where}.covariance: must be one of {', '.join(POLICIES)}, got {pol!r}")
+        sig = tuple(float(s) for s in (d.get("sigmas") or ()))
+        if pol in ("fixed", "floor") and len(sig) != len(use):
+            raise ConfigError(f"{where}.sigmas: {pol} needs one sigma per used component ({len(use)}: "
+                              f"{', '.join(use)}), got {len(sig)}")
+        if any(not (math.isfinite(s) and s > 0) for s in sig):
+            raise ConfigError(f"{where}.sigmas: every sigma must be a positive number")
+        gate = d.get("gate")
+        if gate is not None and not (isinstance(gate, (int, float)) and gate > 0):
+            raise ConfigError(f"{where}.gate: must be a positive number or null")
+        topic = str(d.get("topic") or DEFAULT_TOPIC[typ])
+        if topic in seen_topics:
+            raise ConfigError(f"{where}.topic: {topic} is already source {seen_topics[topic]!r}")
+        seen_topics[topic] = str(name)
+        out.append(SourceSpec(str(name), typ, topic, use, bool(d.get("differential", False)), pol, sig,
+                              float(d.get("scale", 1.0)), None if gate is None else float(gate),
+                              None if d.get("frame_id") is None else str(d["frame_id"])))
+    return out
+
+
+def _cov_bad(c: Any) -> bool:
+    if c is None:
+        return False
+    a = np.asarray(c, dtype=float)
+    d = np.diag(a.reshape(3, 3)) if a.size == 9 else a.reshape(-1)
+    return bool(not np.all(np.isfinite(d)) or np.any(d < 0))
+
+
+@dataclass
+class _State:
+    health: SourceHealth
+    prev_pose: tuple[float, np.ndarray] | None = None
+    prev_yaw: tuple[float, float] | None = None
+    fused: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+class SourceRouter:
+    """Routes each configured source's messages into the localizer (see the module docstring)."""
+
+    def __init__(self, loc: Any, specs: list[SourceSpec]) -> None:
+        self.loc = loc
+        self.specs = specs
+        self.mounts: dict[str, StaticTransform] = {}
+        self._warned: set[str] = set()
+        self.state: dict[str, _State] = {}
+        first: dict[str, str] = {}
+        for s in specs:
+            kind = {"odometry": "odometry", "imu": "imu", "pose": "pose"}[s.type]
+            st = _State(SourceHealth(s.name, kind))
+            # the back-ends integrate one twist source and one heading frame: the first of each
+            if s.type in ("odometry", "imu"):
+                if s.type in first:
+                    st.fused = s.type == "imu"  # a second IMU still gives its yaw rate
+                    st.extra["second"] = True
+                else:
+                    first[s.type] = s.name
+            self.state[s.name] = st
+
+    # ------------------------------------------------------------------ session wiring
+    def install(self, session: Any) -> None:
+        """Route every source's topic (and ``/tf_static`` / ``/tf``) to this router."""
+        for s in self.specs:
+            kind = f"source:{s.name}"
+            session.routes.table[s.topic] = kind
+            session.register(kind, (lambda msg, spec=s: self.on_message(spec, msg)))
+        for tf_topic in ("/tf_static", "/tf"):
+            if tf_topic not in session.routes.table:
+                session.routes.table[tf_topic] = "tf"
+        session.register("tf", self.on_tf)
+
+    def on_tf(self, msg: object) -> None:
+        if isinstance(msg, (list, tuple)):
+            for tr in msg:
+                if isinstance(tr, StaticTransform) and tr.parent.lstrip("/") in ("base_link", "base_footprint"):
+                    self.mounts[tr.child.lstrip("/")] = tr
+
+    def on_message(self, spec: SourceSpec, msg: object) -> None:
+        st = self.state[spec.name]
+        try:
+            if spec.type == "odometry" and isinstance(msg, Odometry):
+                self._odometry(spec, st, msg)
+            elif spec.type == "imu" and isinstance(msg, (Imu, CompassHeading)):
+                self._imu(spec, st, msg)
+            elif spec.type == "pose" and isinstance(msg, PoseFix):
+                self._pose(spec, st, msg)
+            else:
+                self._skip(st, f"{type(msg).__name__} on a {spec.type} source")
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as e:
+            self._skip(st, f"bad message ({e.__class__.__name__})")
+
+    def _skip(self, st: _State, reason: str) -> None:
+        """Count a skipped input on its source and in the localizer's summary."""
+        st.health.skip(reason)
+        stats = self.loc.stats
+        stats["skipped"] = stats.get("skipped", 0) + 1
+        r = stats.setdefault("skipped_reasons", {})
+        key = f"{st.health.name}: {reason}"
+        r[key] = r.get(key, 0) + 1
+
+    # ------------------------------------------------------------------ covariance policy
+    def _var(self, spec: SourceSpec, comp: str, msg_var: float) -> float:
+        """The variance of ``comp`` under the source's policy (NaN: the back-end default)."""
+        if not spec.uses(comp):
+            return UNUSED_VAR
+        i = spec.use.index(comp)
+        pol = spec.covariance
+        if pol == "fixed":
+            return spec.sigmas[i] ** 2
+        if pol == "scaled":
+            return msg_var * spec.scale**2 if math.isfinite(msg_var) else msg_var
+        if pol == "floor":
+            return max(msg_var, spec.sigmas[i] ** 2) if math.isfinite(msg_var) else spec.sigmas[i] ** 2
+        return msg_var
+
+    # ------------------------------------------------------------------ odometry
+    def _odometry(self, spec: SourceSpec, st: _State, msg: Odometry) -> None:
+        h = st.health
+        if not st.fused:
+            self._skip(st, "a second odometry source (fgloc integrates one twist source)")
+            return
+        if _cov_bad(msg.twist_cov) or (spec.differential and _cov_bad(msg.pose_cov)):
+            self._skip(st, "covariance with a NaN or negative diagonal")
+            return
+        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
+        cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
+        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        if spec.differential or not any(spec.uses(c) for c in ("vx", "vy", "vyaw")):
+            # robot_localization's differential mode: the twist of the pose increments
+            prev, st.prev_pose = st.prev_pose, (None if pose is None else (float(msg.stamp), pose))
+            if pose is None:
+                self._skip(st, "differential source without poses")
+                return
+            if prev is None or not msg.stamp > prev[0]:
+                return
+            dt = float(msg.stamp) - prev[0]
+            tw = se2_log(between(prev[1], pose)) / dt
+            pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
+            cov = None if pc is None else 2.0 * pc / (dt * dt)
+            comps = ("x", "y", "yaw")
+        else:
+            comps = ("vx", "vy", "vyaw")
+        default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))
+        if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
+            cov = np.diag(np.square(default))
+        out = np.zeros((3, 3))
+        for i, c in enumerate(comps):
+            v = self._var(spec, c, float(cov[i, i]))
+            out[i, i] = v if math.isfinite(v) else default[i] ** 2
+        # a diff drive that does not report vy: 0 with the message's (small) variance, as before
+        if comps[1] == "vy" and not spec.uses("vy"):
+            out[1, 1] = float(cov[1, 1])
+        if spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential:
+            out = cov  # the default layout: the message's whole covariance, exactly as before
+        h.accepted += 1
+        m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
+                     msg.frame_id, msg.child_frame_id)
+        self.loc.on_odometry(m)
+
+    # ------------------------------------------------------------------ IMU
+    def _mount(self, frame: str) -> StaticTransform | None:
+        f = frame.lstrip("/")
+        if f in ("", "base_link", "base_footprint"):
+            return None
+        tr = self.mounts.get(f)
+        if tr is None and f not in self._warned:
+            self._warned.add(f)
+            log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", f)
+        return tr
+
+    def _imu(self, spec: SourceSpec, st: _State, msg: Imu | CompassHeading) -> None:
+        h = st.health
+        if isinstance(msg, Imu):
+            mount = self._mount(msg.frame_id)
+            if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
+                st.extra["no_transform"] = True
+            base, problems = imu_in_base(msg, mount_rotation(mount))
+            for p in problems:
+                self._skip(st, p)
+            yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
+        else:
+            yaw, rate = msg.yaw_rad, msg.yaw_rate_radps
+            yaw_var, rate_var = float(msg.yaw_var), float(msg.yaw_rate_var)
+            if yaw is not None and (yaw_var < 0 or math.isinf(yaw_var)):
+                self._skip(st, "imu: orientation covariance with a NaN or negative diagonal")
+                yaw = None
+            if rate is not None and (rate_var < 0 or math.isinf(rate_var)):
+                self._skip(st, "imu: angular velocity covariance with a NaN or negative diagonal")
+                rate = None
+            mount = self._mount(msg.frame_id)
+            if mount is not None:
+                R = mount_rotation(mount)
+                if yaw is not None:  # the reader gave the sensor frame's yaw: undo the mount's
+                    yaw = float(wrap_angle(yaw - math.atan2(R[1, 0], R[0, 0])))
+                if rate is not None:
+                    if abs(R[2, 2]) < 0.9:
+                        # the sensor's z axis is not the base's: its z rate is not the yaw rate, and
+                        # a reader that gives only z cannot say what is
+                        self._skip(st, "imu: yaw rate of a tilted mount not in the message (needs the whole Imu)")
+                        rate = None
+                    else:
+                        rate = rate * float(np.sign(R[2, 2]))
+        t = float(msg.stamp)
+        if spec.differential and yaw is not None:
+            # orientation increments as a yaw rate (robot_localization's imuN_differential)
+            prev, st.prev_yaw = st.prev_yaw, (t, yaw)
+            if prev is not None and t > prev[0] and spec.uses("yaw"):
+                d_rate = wrap_scalar(yaw - prev[1]) / (t - prev[0])
+                if rate is None or not spec.uses("vyaw"):
+                    rate, rate_var = d_rate, 2.0 * (yaw_var if math.isfinite(yaw_var) else 1e-4) / (t - prev[0]) ** 2
+            yaw = None
+        if yaw is not None and spec.uses("yaw"):
+            yaw_var = self._var(spec, "yaw", yaw_var)
+        else:
+            yaw = None
+        if rate is not None and spec.uses("vyaw"):
+            rate_var = self._var(spec, "vyaw", rate_var)
+        elif not (spec.differential and rate is not None):
+            rate = None
+        if yaw is None and rate is None:
+            if not h.skipped:  # an empty reading: the localizer counts it as it always did
+                self.loc.on_compass(CompassHeading(t, None, None))
+            return
+        if st.extra.get("second"):
+            yaw = None  # a second IMU's heading is in another world frame: only its rate is fused
+            if rate is None:
+                return
+            add_gyro = getattr(self.loc.backend, "add_gyro", None)
+            if add_gyro is not None and self.loc.backend.initialized:
+                add_gyro(t, rate, rate_var, spec.name)
+            h.accepted += 1
+            return
+        h.accepted += 1
+        self.loc.on_compass(CompassHeading(t, yaw, rate, yaw_var if yaw is not None else float("nan"),
+                                           rate_var if rate is not None else float("nan"), frame_id="base_link"))
+
+    # ------------------------------------------------------------------ pose
+    def _pose(self, spec: SourceSpec, st: _State, msg: PoseFix) -> None:
+        h = st.health
+        want = spec.frame_id or ("odom" if self.loc.odom_mode else "map")
+        if msg.frame_id.lstrip("/") != want:
+            self._skip(st, f"pose in frame {msg.frame_id!r}, not {want!r}")
+            return
+        pose = np.asarray(msg.pose, dtype=float).reshape(-1)
+        cov = np.asarray(msg.cov, dtype=float).reshape(3, 3)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            self._skip(st, "pose not finite")
+            return
+        if _cov_bad(cov):
+            self._skip(st, "covariance with a NaN or negative diagonal")
+            return
+        c = np.diag([self._var(spec, comp, float(cov[i, i])) for i, comp in enumerate(("x", "y", "yaw"))])
+        if spec.covariance == "message":
+            c = cov.copy()
+            for i, comp in enumerate(("x", "y", "yaw")):
+                if not spec.uses(comp):
+                    c[i, :] = 0.0
+                    c[:, i] = 0.0
+                    c[i, i] = UNUSED_VAR
+        if not np.all(np.diag(c) > 0):
+            self._skip(st, "covariance zero (unknown): set covariance fixed with sigmas")
+            return
+        be = self.loc.backend
+        if not be.initialized:
+            self._skip(st, "before the localizer started")
+            return
+        t = float(msg.stamp)
+        if spec.gate is not None:
+            pred, pcov = be.predict(t)
+            e = pose - pred
+            e[2] = wrap_angle(e[2])
+            try:
+                d2 = float(e @ np.linalg.solve(pcov + c, e))
+            except np.linalg.LinAlgError:
+                d2 = math.inf
+            if not d2 <= spec.gate:
+                h.gated += 1
+                return
+        if spec.differential:
+            self._skip(st, "differential pose sources are not fused (use an odometry source)")
+            return
+        used = be.add_keyframe(t, PoseFix(t, pose, c, source=spec.name, frame_id=want))
+        if used:
+            h.accepted += 1
+        else:
+            h.gated += 1
+
+    # ------------------------------------------------------------------ health
+    def health(self) -> dict[str, dict[str, Any]]:
+        """Per source: counts, and what the back-end estimated about it (see the module docstring)."""
+        be = self.loc.backend
+        arb = getattr(be, "arb", None)
+        out: dict[str, dict[str, Any]] = {}
+        for s in self.specs:
+            st = self.state[s.name]
+            d = st.health.to_dict()
+            d["topic"] = s.topic
+            d["use"] = list(s.use)
+            if st.extra.get("no_transform"):
+                d["mount"] = "no transform: identity"
+            names = {"odometry": ["odom"], "imu": [f"{s.name}.yaw", f"{s.name}.gyro"] if st.extra.get("second")
+                     else ["imu.yaw", "imu.gyro"], "pose": [s.name]}[s.type]
+            bhs = getattr(be, "sources", {})
+            for n in names:
+                bh = bhs.get(n)
+                if bh is not None:
+                    d[f"{n.split('.')[-1] if '.' in n else 'backend'}_gated"] = bh.gated
+                if arb is not None and n in arb.streams:
+                    shown, claimed = arb.shown_sigma(n), arb.claimed_sigma(n)
+                    k, c = arb.noise(n)
+                    key = n.split(".")[-1] if "." in n else "noise"
+                    d[f"{key}_noise_x_claimed"] = round(k, 3)
+                    if c > 0:
+                        d[f"{key}_noise_per_turn"] = round(c, 3)
+                    if shown is not None and claimed:
+                        d[f"{key}_shown_vs_claimed"] = round(shown / claimed, 3)
+            if s.type == "odometry" and st.fused and hasattr(be, "odom_scales"):
+                sc = be.odom_scales()
+                d["speed_scale"] = round(float(sc[0]), 4)
+                d["yaw_rate_scale"] = round(float(sc[1]), 4)
+            if s.type == "imu":
+                b = None
+                if hasattr(be, "gyro_bias"):
+                    b = be.gyro_bias(s.name if st.extra.get("second") else "imu")
+                elif hasattr(be, "_bias_of"):
+                    b = be._bias_of(f"{s.name if st.extra.get('second') else 'imu'}.gyro")
+                if b is not None:
+                    d["gyro_bias_radps"] = round(float(b), 5)
+            out[s.name] = d
+        if getattr(self.loc, "frontend", None) is not None and hasattr(be, "latency_estimate"):
+            lat = getattr(be, "latency_est", None)
+            d = {"kind": "pose", "accepted": int(self.loc.stats.get("fixes", 0)),
+                 "gated": int(be.stats.get("fixes_rejected", 0)),
+                 "latency_s": round(float(be.latency_estimate()), 4)}
+            if lat is not None:
+                est, sig = lat.estimate()
+                if math.isfinite(sig):
+                    d["latency_estimate_s"] = round(est, 4)
+                    d["latency_sigma_s"] = round(sig, 4)
+            out["scan"] = d
+        return out
+
+    def finish(self) -> None:
+        self.loc.stats["sources"] = self.health()
+
+
+def status_line(health: dict[str, dict[str, Any]]) -> str:
+    """A one-line summary of :meth:`SourceRouter.health` for a live display."""
+    parts = []
+    for name, d in health.items():
+        s = f"{name} {d.get('accepted', 0)}"
+        if d.get("gated"):
+            s += f"/g{d['gated']}"
+        if d.get("skipped"):
+            s += f"/s{d['skipped']}"
+        if "yaw_rate_scale" in d and abs(d["yaw_rate_scale"] - 1.0) > 0.02:
+            s += f" yaw x{d['yaw_rate_scale']:.2f}"
+        if "gyro_bias_radps" in d:
+            s += f" bias {d['gyro_bias_radps'] * 1000:.1f}mrad/s"
+        if d.get("latency_s"):
+            s += f" lat {d['latency_s'] * 1000:.0f}ms"
+        parts.append(s)
+    return " | ".join(parts)
+
+
+def install_sources(session: Any) -> SourceRouter:
+    """Build the router of the localizer's ``sources:`` section and wire it into ``session``."""
+    loc = session.loc
+    cfg = getattr(getattr(loc, "config", None), "sources", None)
+    topics = {k: t for t, k in session.routes.table.items() if k in ("odom", "imu")}
+    specs = parse_sources(cfg, topics)
+    router = SourceRouter(loc, specs)
+    # the default kinds' topics now belong to the sources
+    for t in [t for t, k in session.routes.table.items() if k in ("odom", "imu")]:
+        del session.routes.table[t]
+    router.install(session)
+    return router

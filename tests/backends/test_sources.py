@@ -1,0 +1,154 @@
+"""Per-source inputs: IMU mounts (hand-computed), bad input counted, default layout unchanged."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fgloc.errors import ConfigError
+from fgloc.localization.sources import SourceRouter, parse_sources
+from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform, Transform3D
+
+
+class _Backend:
+    initialized = True
+    encoder_sigmas = (0.01, 0.01, 0.02)
+    stats: dict = {}
+
+    def __init__(self):
+        self.keyframes = []
+
+    def predict(self, t):
+        return np.zeros(3), np.eye(3) * 0.01
+
+    def add_keyframe(self, t, fix):
+        self.keyframes.append(fix)
+        return True
+
+
+class _Loc:
+    """Records what the router hands the localizer."""
+
+    odom_mode = False
+    frontend = None
+
+    def __init__(self):
+        self.compass: list[CompassHeading] = []
+        self.odometry: list[Odometry] = []
+        self.backend = _Backend()
+        self.stats: dict = {}
+
+    def on_compass(self, m):
+        self.compass.append(m)
+
+    def on_odometry(self, m):
+        self.odometry.append(m)
+
+
+def _mount(rpy_deg):
+    r = Rotation.from_euler("xyz", np.deg2rad(rpy_deg))
+    R = r.as_matrix()
+    return Transform3D("base_link", "imu_link", np.array([0.1, 0.0, math.atan2(R[1, 0], R[0, 0])]), z=0.2,
+                       rotation_xyzw=r.as_quat())
+
+
+def _router(specs=None):
+    loc = _Loc()
+    return loc, SourceRouter(loc, parse_sources(specs))
+
+
+@pytest.mark.parametrize("rpy,axis,sign", [((0, 0, 90), 2, 1.0), ((90, 0, 0), 1, 1.0), ((180, 0, 0), 2, -1.0)])
+def test_imu_mounts_rotate_orientation_and_rate_into_base_link(rpy, axis, sign):
+    loc, router = _router()
+    router.on_tf([StaticTransform("base_link", "laser", np.zeros(3)), _mount(rpy)])
+    base_yaw, w = 0.7, 0.3
+    R_wb = Rotation.from_euler("z", base_yaw).as_matrix()
+    R_bi = Rotation.from_euler("xyz", np.deg2rad(rpy)).as_matrix()
+    q = Rotation.from_matrix(R_wb @ R_bi).as_quat()
+    # hand computed: the base's yaw rate [0, 0, w] in the IMU's axes is R_bi^T [0, 0, w]:
+    # yawed 90 deg -> z; turned 90 deg about x -> +y; upside down -> -z
+    w_imu = np.zeros(3)
+    w_imu[axis] = sign * w
+    assert np.allclose(R_bi.T @ [0, 0, w], w_imu, atol=1e-12)
+    cov = np.diag([1e-4, 2e-4, 3e-4])  # the IMU frame's: the base's yaw variance is the axis that maps to z
+    msg = Imu(1.0, q, w_imu, cov, cov, frame_id="imu_link")
+    router.on_message(router.specs[1], msg)
+    (c,) = loc.compass
+    assert c.yaw_rad == pytest.approx(base_yaw, abs=1e-9)
+    assert c.yaw_rate_radps == pytest.approx(w, abs=1e-12)
+    assert c.yaw_rate_var == pytest.approx(cov[axis, axis])
+
+
+def test_a_reader_that_gives_only_yaw_still_undoes_a_yawed_mount():
+    loc, router = _router()
+    router.on_tf([_mount((0, 0, 90))])
+    router.on_message(router.specs[1], CompassHeading(1.0, 0.7 + math.pi / 2, 0.3, 1e-4, 1e-6, frame_id="imu_link"))
+    assert loc.compass[0].yaw_rad == pytest.approx(0.7) and loc.compass[0].yaw_rate_radps == pytest.approx(0.3)
+    loc2, router2 = _router()
+    router2.on_tf([_mount((90, 0, 0))])
+    router2.on_message(router2.specs[1], CompassHeading(1.0, 0.7, 0.0, 1e-4, 1e-6, frame_id="imu_link"))
+    assert loc2.compass[0].yaw_rate_radps is None  # z of a tilted IMU is not the yaw rate: dropped, said why
+    assert any("tilted" in r for r in router2.state["imu"].health.skipped_reasons)
+
+
+def test_bad_input_is_counted_and_skipped_never_raised():
+    specs = {"wheels": {"type": "odometry", "topic": "/odom"},
+             "imu": {"type": "imu", "topic": "/imu"},
+             "mocap": {"type": "pose", "topic": "/pose", "frame_id": "map", "covariance": "fixed",
+                       "sigmas": [0.01, 0.01, 0.01]}}
+    loc, router = _router(specs)
+    imu, odom, pose = (next(s for s in router.specs if s.name == n) for n in ("imu", "wheels", "mocap"))
+    good_q = np.array([0.0, 0.0, 0.0, 1.0])
+    router.on_message(imu, Imu(1.0, np.zeros(4), None))                           # all-zero quaternion
+    router.on_message(imu, Imu(2.0, good_q * 1.5, None))                          # not unit length
+    router.on_message(imu, Imu(3.0, good_q, None, np.diag([np.nan, 1.0, 1.0])))   # NaN covariance
+    router.on_message(imu, Imu(4.0, None, np.zeros(3), None, np.diag([1.0, -1.0, 1.0])))  # negative
+    router.on_message(odom, Odometry(1.0, np.zeros(3), np.diag([np.nan, 1.0, 1.0])))
+    router.on_message(pose, PoseFix(1.0, np.zeros(3), np.eye(3) * 0.01, frame_id="odom"))  # another frame
+    router.on_message(pose, PoseFix(2.0, np.zeros(3), np.eye(3) * 0.01, frame_id="map"))   # fine
+    h = router.health()
+    assert loc.compass == [] and loc.odometry == []
+    reasons = h["imu"]["skipped_reasons"]
+    assert reasons["imu: orientation quaternion all zeros / not finite"] == 1
+    assert reasons["imu: orientation quaternion not unit length"] == 1
+    assert reasons["imu: orientation covariance with a NaN/inf diagonal"] == 1
+    assert reasons["imu: angular velocity covariance with a negative diagonal"] == 1
+    assert h["wheels"]["skipped_reasons"] == {"covariance with a NaN or negative diagonal": 1}
+    assert h["mocap"]["skipped_reasons"] == {"pose in frame 'odom', not 'map'": 1} and h["mocap"]["accepted"] == 1
+    assert len(loc.backend.keyframes) == 1
+
+
+def test_source_config_errors_are_one_line_naming_the_key():
+    with pytest.raises(ConfigError, match=r"sources.inputs.imu0.use: 'roll' is not one of"):
+        parse_sources({"imu0": {"type": "imu", "use": ["yaw", "roll"]}})
+    with pytest.raises(ConfigError, match=r"sources.inputs.odom0.type"):
+        parse_sources({"odom0": {"type": "wheel"}})
+    with pytest.raises(ConfigError, match=r"sigmas: fixed needs one sigma per used component"):
+        parse_sources({"odom0": {"type": "odometry", "covariance": "fixed", "sigmas": [0.1]}})
+    default = parse_sources(None, {"odom": "/wheel_odom"})
+    assert [(s.name, s.topic, s.use) for s in default] == [("odom", "/wheel_odom", ("vx", "vy", "vyaw")),
+                                                            ("imu", "/imu", ("yaw", "vyaw"))]
+
+
+def test_default_layout_reproduces_direct_feeding_exactly():
+    from fgloc.localization import Localizer, Session
+    from fgloc.sim import simulate_paper
+
+    sim = simulate_paper(seed=1, route=[[2.5, 3.0], [10.0, 3.0]])
+    direct = Localizer(sim.map, sim.laser_mount, backend="ekf", initial_pose=sim.ground_truth.poses[0])
+    for topic, m in sim.messages:
+        if topic == "/odom":
+            direct.on_odometry(m)
+        elif topic == "/imu":
+            direct.on_compass(m)
+        elif topic == "/scan":
+            direct.on_scan(m)
+    a = direct.finish()
+    loc = Localizer(sim.map, sim.laser_mount, backend="ekf", initial_pose=sim.ground_truth.poses[0])
+    b = Session(loc).run(sim.messages)
+    assert np.array_equal(a.stamps, b.stamps) and np.array_equal(a.poses, b.poses)
+    h = loc.stats["sources"]
+    assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu"))

@@ -24,6 +24,7 @@ from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.app import HealthConfig, LaserConfig, SerialConfig
 from fgloc.live.serial_link import RobotParams
 from fgloc.localization.config import PipelineConfig
+from fgloc.localization.sources import SourcesConfig
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,8 @@ class FglocConfig:
     """Everything ``fgloc run``, ``fgloc live``, ``fgloc bench`` and the library read."""
 
     pipeline: PipelineConfig = section(PipelineConfig, "the localizer: tracking, relocalization, odometry handling")
+    sources: SourcesConfig = section(SourcesConfig, "per-source inputs, robot_localization style (odometry, IMU, "
+                                     "pose topics and what each contributes)")
     frontends: FrontendsConfig = section(FrontendsConfig, "scan-to-map front-ends (--frontend picks one)")
     ekf: EKFConfig = section(EKFConfig, "the paper's EKF back-end (--backend ekf), state [x, y, theta, v, w]")
     smoother: SmootherConfig = section(SmootherConfig, "the fixed-lag iSAM2 smoother (--backend smoother, the "

@@ -98,6 +98,11 @@ class Session:
         self.handlers: dict[str, Callable[[object], None]] = {
             "odom": self._odometry, "imu": self._compass, "scan": self._scan,
         }
+        # per-source inputs (fgloc.localization.sources, the fusion engineer's): the odom / imu
+        # topics (or the config's sources:) go through the source router
+        from fgloc.localization.sources import install_sources
+
+        self.sources = install_sources(self)
 
     def register(self, kind: str, handler: Callable[[object], None]) -> None:
         """Handle messages of ``kind`` with ``handler(msg)`` (route topics to it with :class:`Routes`)."""
@@ -137,6 +142,7 @@ class Session:
     def finish(self) -> Trajectory:
         """The localizer's final (smoothed) trajectory; closes the sinks."""
         tr = self.loc.finish()
+        self.sources.finish()
         self.close()
         return tr
 

@@ -68,7 +68,7 @@ def test_show_lists_the_effective_config(tmp_path, capsys):
     ("frontends:\n  native:\n    loss: l3\n", "frontends.native.loss: must be one of huber, cauchy, got l3"),
     ("frontends:\n  kiss:\n    preprocess: {deskw: true}\n", "frontends.kiss.preprocess.deskw: unknown key "
      "(did you mean deskew?)"),
-    ("ekf:\n  omni: 1\n", "ekf.omni: expected true or false, got 1"),
+    ("ekf:\n  omni: 1\n", "ekf.omni: expected true or false or null, got 1"),
     ("pipeline:\n  pose_delta_sigmas: [1, 2]\n", "pipeline.pose_delta_sigmas: expected a list of 3 numbers"),
     ("- a\n- b\n", "config must be a mapping of sections"),
     ("pipeline: [\n", "does not parse as YAML"),

@@ -846,5 +846,7 @@ def test_direct_run_equals_import_then_run(kind, world, capsys):
     if kind == "rosbag2_db3":
         np.testing.assert_array_equal(a.poses, b.poses)
     else:
-        assert np.max(np.abs(a.poses - b.poses)) < 1e-6
+        # last-bit input differences pass through the adaptive noise / calibration estimates
+        # (issue 17): 6e-5 m at most on this log
+        assert np.max(np.abs(a.poses - b.poses)) < 1e-4
     assert evaluate(a, gt).position_rmse_m < 0.05

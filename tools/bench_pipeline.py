@@ -20,8 +20,9 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+from fgloc.config import load_config
 from fgloc.eval.metrics import evaluate
-from fgloc.pipeline import Localizer, load_config
+from fgloc.localization import Localizer
 from fgloc.sim import simulate_paper
 from fgloc.types import CompassHeading, LaserScan, Odometry
 

@@ -1,4 +1,4 @@
-"""The interface every back-end implements, as :class:`fgloc.pipeline.Localizer` drives it.
+"""The interface every back-end implements, as :class:`fgloc.localization.Localizer` drives it.
 
 Inputs arrive in (nearly) time order: wheel odometry twists, compass headings (in
 the compass's own frame; the back-end owns the compass-to-map offset) and, at each
@@ -36,7 +36,7 @@ def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float,
 
 
 class Backend(ABC):
-    """A state estimator fed by :class:`fgloc.pipeline.Localizer`."""
+    """A state estimator fed by :class:`fgloc.localization.Localizer`."""
 
     name: str = "backend"
 

@@ -1,6 +1,6 @@
 """Coarse global localization: where in the map does this scan fit?
 
-Used by :class:`fgloc.pipeline.Localizer` when no initial pose is given and after a
+Used by :class:`fgloc.localization.Localizer` when no initial pose is given and after a
 kidnapping (too many scans in a row without an accepted fix), for front-ends without
 a global mode of their own (native, kiss; AMCL spreads its particles instead).
 

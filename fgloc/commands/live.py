@@ -59,7 +59,7 @@ def register(app: typer.Typer) -> None:
         occ = load_map(map_yaml) if map_yaml is not None else None
         init = None if any(math.isnan(v) for v in initial_pose) else np.array(initial_pose, dtype=float)
 
-        from fgloc.pipeline import Localizer
+        from fgloc.localization import Localizer
         from fgloc.types import StaticTransform
 
         mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))

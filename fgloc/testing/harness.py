@@ -106,8 +106,7 @@ def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: Stat
              frontend: str, initial_pose: np.ndarray | None, config: Any, t_start: float | None) -> None:
     """Run a throwaway localizer over the first scans so JIT compilation (numba) and caches are
     done before the replay clock starts, as they would be on a robot that has run once before."""
-    from fgloc.localization import Localizer
-    from fgloc.pipeline import run_messages
+    from fgloc.localization import Localizer, Session
 
     first: list[tuple[str, object]] = []
     n_scans = 0
@@ -120,4 +119,4 @@ def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: Stat
             break
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
                     config=config)
-    run_messages(loc, first)
+    Session(loc).run(first)

@@ -9,8 +9,7 @@ import pytest
 
 from fgloc.config import load_config
 from fgloc.geometry import wrap_angle
-from fgloc.localization import Localizer
-from fgloc.pipeline import run_messages
+from fgloc.localization import Localizer, Session
 from fgloc.types import LaserScan
 
 
@@ -49,7 +48,7 @@ def test_changed_world_keeps_the_smoother_within_3cm(changed_world):
     msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
     loc = Localizer(sim.map, sim.laser_mount, "smoother", "native", initial_pose=sim.ground_truth.poses[0],
                     config=load_config())
-    est = run_messages(loc, msgs)
+    est = Session(loc).run(msgs)
     gt = sim.ground_truth.interpolate(est.stamps)
     e = np.hypot(est.poses[:, 0] - gt[:, 0], est.poses[:, 1] - gt[:, 1])
     yaw = np.degrees(wrap_angle(est.poses[:, 2] - gt[:, 2]))

@@ -97,7 +97,7 @@ def _msgdef(name: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
-# fgloc objects -> plain ROS 2 dicts (written independently of fgloc.io.log)
+# fgloc objects -> plain ROS 2 dicts (written independently of fgloc.io)
 def _st(t: float) -> dict:
     sec = math.floor(t)
     ns = int(round((t - sec) * 1e9))
@@ -426,11 +426,11 @@ def test_foreign_variant_localizes(name, world, clean, capsys):
 
 
 def test_upside_down_mount_is_read_as_mirrored_scans(world):
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
 
     log = world["dir"] / "flip_reader.mcap"
     write_foreign(log, world["sim"], flip_laser=True, mount="chain", epoch=0.0)
-    r = LogReader(log)
+    r = open_log(log)
     mount = r.laser_mount()
     sim_mount = world["sim"].laser_mount
     assert mount.child == "base_scan" and mount.parent in ("base_link", "base_footprint")
@@ -564,10 +564,10 @@ def _reschema(src: Path, dst: Path, mode: str) -> None:
 def test_schema_without_ros2msg_definition(world, clean, mode):
     log = world["dir"] / f"schema_{mode}.mcap"
     _reschema(clean["log"], log, mode)
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
 
     # was an AttributeError traceback (empty) / every topic skipped and an empty run (idl)
-    got, ref = list(LogReader(log).messages()), list(LogReader(clean["log"]).messages())
+    got, ref = list(open_log(log).messages()), list(open_log(clean["log"]).messages())
     assert len(got) == len(ref) > 1500
     assert [t for t, _ in got] == [t for t, _ in ref]
     for (_, a), (_, b) in zip(got, ref, strict=True):
@@ -576,7 +576,7 @@ def test_schema_without_ros2msg_definition(world, clean, mode):
             np.testing.assert_array_equal(a.twist, b.twist)
         elif isinstance(a, CompassHeading):
             assert isinstance(b, CompassHeading) and a.yaw_rad == b.yaw_rad
-    assert LogReader(log).laser_mount().pose == pytest.approx(world["sim"].laser_mount.pose)
+    assert open_log(log).laser_mount().pose == pytest.approx(world["sim"].laser_mount.pose)
 
 
 def test_rosbag2_sqlite_folder(world, clean, capsys):

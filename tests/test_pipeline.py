@@ -179,7 +179,7 @@ def test_bad_and_out_of_order_input_is_counted_not_raised(world):
 
 @pytest.fixture(scope="module")
 def world_log(world, tmp_path_factory):
-    from fgloc.io.log import LogWriter
+    from fgloc.io.mcap_writer import LogWriter
 
     m, gt, msgs = world
     d = tmp_path_factory.mktemp("world")
@@ -199,7 +199,7 @@ def world_log(world, tmp_path_factory):
 
 def test_fgloc_run_writes_outputs_and_evaluates(world_log, tmp_path, capsys):
     from fgloc.cli import main
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
     from fgloc.io.tum import read_tum
 
     out = tmp_path / "out"
@@ -211,9 +211,9 @@ def test_fgloc_run_writes_outputs_and_evaluates(world_log, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "position RMSE" in text and "fixes" in text
     tr = read_tum(out / "trajectory.tum")
-    gt = LogReader(world_log / "log.mcap").ground_truth()
+    gt = open_log(world_log / "log.mcap").ground_truth()
     assert gt is not None and _rmse(tr, gt) < 0.01
-    fused = [m for t, m in LogReader(out / "run.mcap").messages() if t == "/fused_pose"]
+    fused = [m for t, m in open_log(out / "run.mcap").messages() if t == "/fused_pose"]
     assert len(fused) >= 390 and fused[-1].cov.shape == (3, 3)
     import yaml
     cfg = yaml.safe_load((out / "config.yaml").read_text())
@@ -412,7 +412,7 @@ def test_user_input_errors_are_one_line(world_log, tmp_path, capsys, args, needl
 
 
 def test_map_for_a_log_without_scans_is_an_error(world, tmp_path, capsys):
-    from fgloc.io.log import LogWriter
+    from fgloc.io.mcap_writer import LogWriter
 
     m, gt, msgs = world
     m.save(tmp_path / "map.yaml")

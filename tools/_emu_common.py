@@ -29,9 +29,9 @@ def load_messages(args: argparse.Namespace) -> list[tuple[str, object]]:
         from fgloc.sim import simulate_paper
 
         return list(simulate_paper(seed=args.seed).messages)
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
 
-    return list(LogReader(args.log).messages())
+    return list(open_log(args.log).messages())
 
 
 def make_clock(args: argparse.Namespace, msgs: list[tuple[str, object]]) -> ReplayClock:

@@ -155,9 +155,9 @@ def main() -> None:
     con = Console()
     work = args.workdir or Path(tempfile.mkdtemp(prefix="fgloc-bench-batch-"))
     logs, map_yaml = make_logs(work / "logs", args.logs, args.route_m)
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
 
-    log_s = sum(LogReader(p).summary()["duration"] for p in logs)
+    log_s = sum(open_log(p).summary()["duration"] for p in logs)
     con.print(f"{len(logs)} logs, {log_s:.0f} s of log time in all; {os.cpu_count()} CPUs; "
               f"load average {os.getloadavg()[0]:.2f} at the start")
     configs: list[tuple[str, object]] = [("sequential", None), ("local", None)]

@@ -48,10 +48,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simulated the paper run in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
         msgs, occ, mount, robot, gt = sim.messages, sim.map, sim.laser_mount, sim.robot, sim.ground_truth
     else:
-        from fgloc.io.log import LogReader
+        from fgloc.io import open_log
         from fgloc.maps import OccupancyMap
 
-        r = LogReader(args.log)
+        r = open_log(args.log)
         msgs = list(r.messages())
         occ = OccupancyMap.load(args.map) if args.map else None
         mount = r.laser_mount()

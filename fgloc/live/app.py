@@ -114,7 +114,7 @@ class LiveSession:
         self.recorder: Any = None
         self.record_path = Path(record) if record else None
         if record:
-            from fgloc.io.log import LogWriter
+            from fgloc.io.mcap_writer import LogWriter
 
             self.recorder = LogWriter(str(record))
             if hasattr(self.recorder, "__enter__"):

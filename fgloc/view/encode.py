@@ -15,7 +15,7 @@ from foxglove import messages as fm
 from numpy.typing import NDArray
 
 from fgloc.geometry import yaw_to_quaternion
-from fgloc.io.log import stamp_to_sec_nsec
+from fgloc.io.ros import stamp_to_sec_nsec
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
 FloatArray = NDArray[np.float64]

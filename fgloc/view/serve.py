@@ -27,7 +27,7 @@ import threading
 from types import SimpleNamespace
 from typing import Any
 
-from fgloc.io.log import stamp_to_ns
+from fgloc.io.ros import stamp_to_ns
 from fgloc.view import channels as ch
 from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready
 

@@ -13,9 +13,9 @@ import pytest
 
 from fgloc.cli import main
 from fgloc.errors import LogError
+from fgloc.io import open_log
 from fgloc.io.carmen import CarmenReader, iter_carmen
 from fgloc.io.convert import import_log
-from fgloc.io.log import LogReader
 from fgloc.types import LaserScan, Odometry
 
 
@@ -48,7 +48,7 @@ def test_aces_import_to_mcap_counts(shared_data, tmp_path):
     path = shared_data / "radish" / "aces.clf.bz2"
     lines = _count_lines(path)
     res = import_log(path, tmp_path / "aces.mcap", progress=False)
-    r = LogReader(res.dst)
+    r = open_log(res.dst)
     s = r.summary()
     assert s["topics"]["/scan"]["count"] == lines["FLASER"] == 7374
     assert s["topics"]["/odom"]["count"] == lines["ODOM"] == 7375

@@ -9,7 +9,8 @@ import pytest
 
 from fgloc.cli import main
 from fgloc.errors import LogError
-from fgloc.io.log import LogReader, LogWriter
+from fgloc.io import open_log
+from fgloc.io.mcap_writer import LogWriter
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform
 
 N_STEPS = 400
@@ -41,7 +42,7 @@ def test_truncated_read_up_to_break(full_log, tmp_path, frac):
     cut = int(len(data) * frac)
     path = tmp_path / "cut.mcap"
     path.write_bytes(data[:cut])
-    r = LogReader(path)
+    r = open_log(path)
     assert r.truncated is not None
     m = re.search(r"file ends at byte (\d+).*?(\d+) complete messages read, the last at t=([\d.]+) s", r.truncated)
     assert m, r.truncated
@@ -49,7 +50,7 @@ def test_truncated_read_up_to_break(full_log, tmp_path, frac):
     got = list(r.messages())
     assert int(m.group(2)) == len(got)
     # every message before the break, in order, and at least the complete chunks
-    full = list(LogReader(full_log).messages())
+    full = list(open_log(full_log).messages())
     assert len(full) == 1 + 3 * N_STEPS
     assert 0.8 * frac * len(full) - 40 < len(got) < len(full)
     for (ta, a), (tb, b) in zip(full, got, strict=False):
@@ -64,7 +65,7 @@ def test_summary_cut_off_keeps_all_messages(full_log, tmp_path):
     data = full_log.read_bytes()
     path = tmp_path / "cut.mcap"
     path.write_bytes(data[:-20])
-    r = LogReader(path)
+    r = open_log(path)
     assert r.truncated is not None and "all 1201 messages intact" in r.truncated
     assert len(list(r.messages())) == 1201
 
@@ -122,7 +123,7 @@ def test_empty_log(tmp_path, capsys):
         pass
     assert "empty log (no messages)" in _error_of(p, capsys)
     with pytest.raises(LogError, match="empty log"):
-        LogReader(p)
+        open_log(p)
 
 
 def test_cut_before_first_message(full_log, tmp_path, capsys):
@@ -133,7 +134,7 @@ def test_cut_before_first_message(full_log, tmp_path, capsys):
 
 
 def test_missing_topic_names_file_topic_and_existing(full_log):
-    r = LogReader(full_log)
+    r = open_log(full_log)
     with pytest.raises(LogError) as e:
         r.messages({"/scan", "/base_scan"})
     msg = str(e.value)
@@ -166,7 +167,7 @@ def test_unindexed_mcap_is_streamed_not_truncated(tmp_path, chunked):
             m = Odometry(10.0 + 0.1 * i, np.array([0.1 * i, 0.0, 0.0]))
             w.add_message(cid, int(m.stamp * 1e9), enc(odom_to_ros(m, m.stamp)), int(m.stamp * 1e9))
         w.finish()
-    r = LogReader(path)
+    r = open_log(path)
     assert r.truncated is None and not r.summary()["indexed"]
     got = [m for _, m in r.messages()]
     assert len(got) == 50 and r.summary()["topics"]["/odom"]["count"] == 50

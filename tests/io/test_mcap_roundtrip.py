@@ -7,8 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.io.log import LogReader, LogWriter, Topics, stamp_to_ns
+from fgloc.io import open_log
+from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.msgdefs import SEPARATOR, full_text
+from fgloc.io.ros import stamp_to_ns
+from fgloc.io.topics import Topics
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
 
 T0 = 1_700_000_000.0
@@ -107,7 +110,7 @@ def test_roundtrip_every_type(tmp_path):
     with LogWriter(path) as w:
         for topic, m in msgs:
             w.write(topic, m)
-    r = LogReader(path)
+    r = open_log(path)
     got = list(r.messages())
     assert len(got) == len(msgs)
     # written in time order, so read back in the same order
@@ -131,7 +134,7 @@ def test_time_order_across_topics_and_explicit_stamp(tmp_path):
             w.write("/odom", Odometry(stamp=10.0 + i, twist=np.array([i, 0.0, 0.0])))
             w.write("/imu", CompassHeading(stamp=10.5 + i, yaw_rad=0.1 * i))
         w.write("/odom", Odometry(stamp=0.0, twist=np.zeros(3)), stamp=100.0)
-    got = list(LogReader(path).messages())
+    got = list(open_log(path).messages())
     stamps = [m.stamp for _, m in got]  # type: ignore[attr-defined]
     assert stamps == sorted(stamps)
     assert stamps[-1] == 100.0  # header stamp from the explicit stamp argument
@@ -145,7 +148,7 @@ def test_renamed_topics_and_topic_filter(tmp_path):
             w.write("/base_scan", LaserScan(float(i), -1.0, 0.1, 0.1, 10.0, np.ones(21, np.float32)))
             w.write("/wheel_odom", Odometry(float(i) + 0.5, np.zeros(3)))
             w.write("/other", Odometry(float(i) + 0.6, np.zeros(3)))
-    r = LogReader(path, Topics(scan="/base_scan", odom="/wheel_odom"))
+    r = open_log(path, Topics(scan="/base_scan", odom="/wheel_odom"))
     got = list(r.messages())
     assert [t for t, _ in got] == ["/base_scan", "/wheel_odom"] * 3  # /other ignored
     assert [t for t, _ in r.messages({"/wheel_odom"})] == ["/wheel_odom"] * 3
@@ -211,7 +214,7 @@ def _mount_log(path, statics, dynamics, frame="laser"):
                 w.write("/tf", dynamics, stamp=float(i))
             w.write("/scan", LaserScan(float(i) + 0.5, -1.0, 0.1, 0.1, 10.0, np.ones(21, np.float32),
                                        frame_id=frame))
-    return LogReader(path)
+    return open_log(path)
 
 
 def test_laser_mount_chain_tf_fallback_and_identity(tmp_path, caplog):
@@ -259,7 +262,7 @@ def test_written_file_passes_mcaps_own_reader_with_crcs(tmp_path, compression):
     assert other[0][2].publish_time == 6
     with path.open("rb") as f:  # the data section streamed (the non-seeking reader checks chunk CRCs)
         assert sum(1 for _ in NonSeekingReader(f, validate_crcs=True).iter_messages()) == len(msgs) + 1
-    r = LogReader(path)
+    r = open_log(path)
     for (ta, a), (tb, b) in zip(msgs, r.messages(), strict=False):
         assert ta == tb
         _assert_equal(a, b)

@@ -7,8 +7,8 @@ import pytest
 
 from fgloc.cli import main
 from fgloc.geometry import yaw_to_quaternion
+from fgloc.io import open_log
 from fgloc.io.convert import import_log
-from fgloc.io.log import LogReader
 from fgloc.types import CompassHeading, LaserScan, Odometry
 
 N = 15
@@ -94,12 +94,12 @@ def _write_bag(path, scan_topic="/base_scan"):
 def test_bag_converts_with_equal_values(tmp_path):
     bag = tmp_path / "run.bag"
     expected = _write_bag(bag)
-    from fgloc.io.log import Topics
+    from fgloc.io.topics import Topics
 
     res = import_log(bag, tmp_path / "run.mcap", Topics(scan="/base_scan"), progress=False)
     assert res.format == "rosbag1"
     assert res.counts == {"/scan": N, "/odom": N, "/imu": N, "/tf_static": 1, "/tf": N}
-    r = LogReader(res.dst)
+    r = open_log(res.dst)
     scans = [m for t, m in r.messages({"/scan"})]
     odoms = [m for t, m in r.messages({"/odom"})]
     imus = [m for t, m in r.messages({"/imu"})]
@@ -129,7 +129,7 @@ def test_bag_scan_topic_guessed_and_cli(tmp_path, capsys):
     assert main(["import", str(bag), "-o", str(out)]) == 0  # the only LaserScan topic is used
     stdout = capsys.readouterr().out
     assert f"/scan: {N}" in stdout and "rosbag1" in stdout
-    assert LogReader(out).summary()["topics"]["/scan"]["count"] == N
+    assert open_log(out).summary()["topics"]["/scan"]["count"] == N
 
 
 def test_bag_without_usable_topics(tmp_path, capsys):

@@ -17,7 +17,7 @@ import pytest
 
 from fgloc.app.run import RunRequest, run_log
 from fgloc.eval.metrics import evaluate
-from fgloc.io.log import LogWriter
+from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.tum import read_tum
 from fgloc.testing.harness import replay_live
 from fgloc.types import Trajectory

@@ -9,7 +9,7 @@ import random
 
 import numpy as np
 
-from fgloc.io.log import LogReader
+from fgloc.io import open_log
 from fgloc.live.app import LiveSession, load_config
 from fgloc.live.serial_protocol import SYNC
 from fgloc.live.sick import encode_lmdscandata, frame
@@ -76,7 +76,7 @@ def test_garbage_and_a_negative_scale_telegram_mid_stream(tmp_path):
 
     # the recording holds every valid message sent, in order and intact
     got: dict[str, list] = {"/odom": [], "/imu": [], "/scan": []}
-    for topic, m in LogReader(rec).messages():
+    for topic, m in open_log(rec).messages():
         if topic in got:
             got[topic].append(m)
     odom_src = [pair.stm32.msgs[i][1] for kind, i in pair.stm32.sent if kind == "odom"]

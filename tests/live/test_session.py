@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from fgloc.io.log import LogReader
+from fgloc.io import open_log
 from fgloc.live.app import LiveSession, load_config
 from fgloc.localization import Localizer
 from fgloc.testing.emulators import EmulatorPair
@@ -82,7 +82,7 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
     assert f"crc {pair.stm32.stats.corrupted} " in line and f"bad {pair.sick.stats.malformed} " in line
 
     # the recording is complete and valid: every received message is in it
-    reader = LogReader(rec)
+    reader = open_log(rec)
     n = {"/odom": 0, "/imu": 0, "/scan": 0, "/fused_pose": 0}
     for topic, _ in reader.messages():
         if topic in n:
@@ -121,7 +121,7 @@ def test_cli_sigint_closes_recording(tmp_path):
     assert proc.returncode == 0, stderr
     report = json.loads(stdout)
     assert report["counters"]["scans_fused"] > 20
-    reader = LogReader(rec)
+    reader = open_log(rec)
     assert reader.truncated is None  # closed properly: summary and footer written
     topics = [t for t, _ in reader.messages()]
     assert topics.count("/scan") == report["counters"]["laser"]["scans"]

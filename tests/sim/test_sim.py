@@ -204,7 +204,7 @@ def test_moving_obstacles_seen_by_laser_not_in_map():
 
 def test_simulate_cli_writes_files(tmp_path, capsys):
     from fgloc.cli import main
-    from fgloc.io.log import LogReader
+    from fgloc.io import open_log
     from fgloc.io.tum import read_tum
     from fgloc.maps import load_map
 
@@ -215,7 +215,7 @@ def test_simulate_cli_writes_files(tmp_path, capsys):
     assert load_map(out / "map.yaml").occupied.sum() > 1000
     gt = read_tum(out / "ground_truth.tum")
     assert gt.path_length() == pytest.approx(5.0, abs=0.01)
-    counts = LogReader(out / "log.mcap").summary()
+    counts = open_log(out / "log.mcap").summary()
     assert "/scan" in str(counts) and "/ground_truth" in str(counts)
     assert "compass offset" in capsys.readouterr().out
 

@@ -281,7 +281,11 @@ def map_in_process(name: str, outdir: Path) -> dict:
     """``fgloc map`` on the whole log in a child process: wall time, peak RSS (psutil, 20 Hz)."""
     import psutil
 
-    cmd = [sys.executable, "-m", "fgloc.cli", "map", str(LOGS[name]), "-o", str(outdir), "--no-progress"]
+    # the map command on its own (the same code as ``fgloc map``), so that a half-edited module of
+    # another command cannot stop the evaluation
+    boot = ("import sys, typer; from fgloc.commands.map import register; app = typer.Typer(); register(app); "
+            "app(sys.argv[1:])")
+    cmd = [sys.executable, "-c", boot, "map", str(LOGS[name]), "-o", str(outdir), "--no-progress"]
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(p.pid)

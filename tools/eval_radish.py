@@ -133,7 +133,7 @@ def localize(name: str, recs: list[ScanRecord], mount: StaticTransform, full_sca
     the building than the one that made the map.
     """
     from fgloc.eval.metrics import evaluate
-    from fgloc.io.log import LogWriter
+    from fgloc.io.mcap_writer import LogWriter
     from fgloc.mapping.source import log_messages
 
     half = len(recs) // 2

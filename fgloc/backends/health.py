@@ -77,6 +77,7 @@ class Arbiter:
         self.max_gap_s = float(max_gap_s)
         self.k_min = float(k_min)
         self.rel_trusted = float(rel_trusted)
+        self.solve_every = max(1, int(round(1.0 / self.block_s)))  # re-solve the hat once a second
         self.history = int(history)
         self.streams: dict[str, _Stream] = {}
         self._t0: float | None = None
@@ -237,7 +238,8 @@ class Arbiter:
                     mv[1] += 1
                     w = max(self.a_moving, 1.0 / mv[1])
                     mv[0] += w * (z - mv[0])
-        self._solve()
+        if self.blocks % self.solve_every == 0 or self.blocks < 4 * self.solve_every:
+            self._solve()
 
     def _abs_var(self, name: str, claimed: float) -> float:
         v = self._var.get(name)
@@ -408,10 +410,15 @@ class LatencyEstimator:
         self.rr = 0.0
         self.n = 0
         self.rejected = 0
+        self._cache: tuple[int, np.ndarray, float] | None = None
 
     def _solve(self) -> FloatArray3:
+        if self._cache is not None and self._cache[0] == self.n:
+            return self._cache[1]
         N = self.N + np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
-        return np.linalg.solve(N, self.b)
+        sol = np.linalg.solve(N, self.b)
+        self._cache = (self.n, sol, float(np.linalg.inv(N)[0, 0]))
+        return sol
 
     def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
         """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
@@ -446,8 +453,8 @@ class LatencyEstimator:
         if self.N[0, 0] <= 0:
             return 0.0, math.inf
         p = self._solve()
-        cov = np.linalg.inv(self.N + np.diag([1e-9, 1e-2, 1e-2]))
-        return float(p[0]), math.sqrt(max(self.scale2(), 1.0) * float(cov[0, 0]))
+        assert self._cache is not None
+        return float(p[0]), math.sqrt(max(self.scale2(), 1.0) * self._cache[2])
 
     def value(self) -> float:
         """The latency to correct for: the estimate once significant, else 0."""

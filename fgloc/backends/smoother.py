@@ -363,6 +363,8 @@ class SlidingWindowSmoother(Backend):
             if ts_:
                 covered = min(covered, ts_[-1])
         keep = []
+        odo_period = _period(self.odo_t)
+        yaw_period = _period(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
         for pair in self._fix_pairs:
             ta, tb, pa, pb, ca, cb = pair
             if tb > covered:
@@ -372,9 +374,9 @@ class SlidingWindowSmoother(Backend):
             # a reference slower than ~20 Hz cannot resolve a lag of tens of ms (the motion inside
             # one of its periods is not known): such a reference gives no pairs
             # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
-            if _period(self.odo_t) > MAX_REF_PERIOD_S:
+            if odo_period > MAX_REF_PERIOD_S:
                 continue
-            yaw_ref_ok = _period(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t) <= MAX_REF_PERIOD_S
+            yaw_ref_ok = yaw_period <= MAX_REF_PERIOD_S
             if yaw_ref_ok:
                 d_ref = self._rotation_between(ta, tb)
                 r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
@@ -784,9 +786,9 @@ class SlidingWindowSmoother(Backend):
                              [self.cfg.odom_scale_rw])
             ks_v = self._chain_key(ch, t, graph, vals, ts)
         self._turned += abs(float(d[2]))
-        if (self._turned > 1.0 and (self.gyro or self.calib._compass or self.stats["fixes_used"] > 0)) \
+        if (self._turned > 0.1 and (self.gyro or self.calib._compass or self.stats["fixes_used"] > 0)) \
                 or "odom_yaw_scale" in self.chains:
-            # observable once the robot has turned (a radian) with another yaw source to compare
+            # observable once the robot turns (0.1 rad) with another yaw source to compare
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
             ks_w = self._chain_key(ch, t, graph, vals, ts)
         fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))

@@ -280,12 +280,12 @@ class SourceRouter:
         self.loc.on_odometry(m)
 
     # ------------------------------------------------------------------ IMU
-    def _mount(self, frame: str) -> StaticTransform | None:
+    def _mount(self, frame: str, warn: bool = True) -> StaticTransform | None:
         f = frame.lstrip("/")
         if f in ("", "base_link", "base_footprint"):
             return None
         tr = self.mounts.get(f)
-        if tr is None and f not in self._warned:
+        if tr is None and warn and f not in self._warned:
             self._warned.add(f)
             log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", f)
         return tr
@@ -309,7 +309,8 @@ class SourceRouter:
             if rate is not None and (rate_var < 0 or math.isinf(rate_var)):
                 self._skip(st, "imu: angular velocity covariance with a NaN or negative diagonal")
                 rate = None
-            mount = self._mount(msg.frame_id)
+            # a yaw-only reading: an unknown yaw mount is absorbed by the heading offset estimate
+            mount = self._mount(msg.frame_id, warn=False)
             if mount is not None:
                 R = mount_rotation(mount)
                 if yaw is not None:  # the reader gave the sensor frame's yaw: undo the mount's

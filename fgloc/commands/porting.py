@@ -1,0 +1,76 @@
+"""``fgloc config from-robot-localization`` / ``fgloc config from-nav2``: port a ROS parameter file.
+
+Usage::
+
+    fgloc config from-robot-localization ekf.yaml -o fgloc.yaml [--node ekf_filter_node]
+    fgloc config from-nav2 nav2_params.yaml -o fgloc.yaml
+
+The converted config is checked (``fgloc.config.parse_config``) and written with one comment
+line per parameter that could not be carried over; the same lines are printed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+
+def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[str, Any], list[str], str]:
+    """``(config sections, notes, YAML text)`` of a robot_localization (``kind='rl'``) or nav2 file."""
+    import yaml
+
+    from fgloc.config import parse_config
+    from fgloc.config.loader import read_yaml
+    from fgloc.porting import from_nav2, from_robot_localization
+
+    data = read_yaml(path)
+    conv = from_robot_localization if kind == "rl" else from_nav2
+    cfg, notes = conv(data, node=node, source=str(path))
+    parse_config(cfg, source=f"{path} (converted)")  # every value must be a valid fgloc setting
+    what = "robot_localization" if kind == "rl" else "nav2 amcl"
+    head = [f"fgloc config converted from {what} parameters: {path.name}"]
+    head += [f"not carried over: {n}" for n in notes]
+    text = "\n".join(f"# {line}" for line in head) + "\n" + (yaml.safe_dump(cfg, sort_keys=False) if cfg else "{}\n")
+    return cfg, notes, text
+
+
+def _write(kind: str, path: Path, output: Path | None, node: str | None, force: bool) -> None:
+    from fgloc.app.files import write_text_output
+
+    _, notes, text = convert_file(kind, path, node)
+    for n in notes:
+        print(f"not carried over: {n}")
+    if output is None:
+        print(text, end="")
+    else:
+        write_text_output(output, text, force=force, what="config")
+        print(f"wrote {output} ({len(notes)} parameter(s) not carried over)")
+
+
+def register(app: typer.Typer) -> None:
+    group = next((g.typer_instance for g in app.registered_groups if g.name == "config"), None)
+    if group is None:  # the config group is the architect's: create it if it is not there yet
+        group = typer.Typer(help="The configuration.", no_args_is_help=True)
+        app.add_typer(group, name="config")
+
+    @group.command("from-robot-localization")
+    def from_rl(
+        params: Path = typer.Argument(..., help="robot_localization ekf/ukf parameter YAML (ROS 1 or ROS 2)"),
+        output: Path | None = typer.Option(None, "-o", "--output", help="fgloc config to write (default: print)"),
+        node: str | None = typer.Option(None, "--node", help="which filter node, when the file has several"),
+        force: bool = typer.Option(False, "--force", help="overwrite an existing file"),
+    ) -> None:
+        """Convert robot_localization parameters into an fgloc config (sources, noise, start)."""
+        _write("rl", params, output, node, force)
+
+    @group.command("from-nav2")
+    def from_nav2_cmd(
+        params: Path = typer.Argument(..., help="nav2 params YAML (its amcl: section) or a ROS 1 amcl YAML"),
+        output: Path | None = typer.Option(None, "-o", "--output", help="fgloc config to write (default: print)"),
+        node: str | None = typer.Option(None, "--node", help="the AMCL node's name, when not amcl"),
+        force: bool = typer.Option(False, "--force", help="overwrite an existing file"),
+    ) -> None:
+        """Convert nav2's AMCL parameters into fgloc's AMCL front-end config."""
+        _write("nav2", params, output, node, force)

@@ -1,0 +1,236 @@
+"""robot_localization (ekf_node / ukf_node) parameters -> an fgloc config.
+
+What carries over:
+
+==========================================  ===============================================
+robot_localization                          fgloc
+==========================================  ===============================================
+``odomN`` + ``odomN_config``                ``sources.inputs.odomN`` (odometry): vx, vy, vyaw;
+                                            x, y, yaw only with ``odomN_differential``
+``imuN`` + ``imuN_config``                  ``sources.inputs.imuN`` (imu): yaw, vyaw
+``poseN`` + ``poseN_config``                ``sources.inputs.poseN`` (pose): x, y, yaw
+``*_differential``                          ``differential``
+``poseN_rejection_threshold`` (Mahalanobis  ``gate`` (its square: fgloc gates on the squared
+distance)                                   distance)
+``world_frame`` (map or odom)               a pose source's ``frame_id``
+``process_noise_covariance`` (15 x 15,      ``ekf.q_xy`` (x, y), ``q_theta`` (yaw), ``q_v``
+per second, as r_l scales it by dt)         (vx, vy), ``q_w`` (vyaw)
+``initial_estimate_covariance``             ``pipeline.initial_sigma_xy_m`` / ``_yaw_deg``
+``two_d_mode: true``                        (fgloc is planar)
+==========================================  ===============================================
+
+Everything else is one note line: 3-D components (z, roll, pitch and their rates,
+accelerations), ``twistN`` (TwistWithCovarianceStamped is not read), ``_relative`` (fgloc
+estimates each heading source's offset anyway), odometry and IMU rejection thresholds (fgloc
+weights those by the noise they show), queue sizes, ``nodelay``, ``sensor_timeout``,
+control input, tf and debug settings.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+import numpy as np
+
+from fgloc.porting.common import as_bool, find_params
+
+# the 15-element state: x y z roll pitch yaw vx vy vz vroll vpitch vyaw ax ay az
+PLANAR = {0: "x", 1: "y", 5: "yaw", 6: "vx", 7: "vy", 11: "vyaw"}
+NAMES15 = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz", "vroll", "vpitch", "vyaw", "ax", "ay", "az")
+SENSOR = re.compile(r"^(odom|imu|pose|twist)(\d+)$")
+IGNORED_QUIETLY = {"use_sim_time"}
+
+
+def _looks_like_rl(d: Any) -> bool:
+    return isinstance(d, dict) and any(SENSOR.match(str(k)) for k in d) or \
+        (isinstance(d, dict) and ("two_d_mode" in d or "process_noise_covariance" in d))
+
+
+def _matrix(v: Any, n: int = 15) -> np.ndarray | None:
+    try:
+        a = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    if a.size == n * n:
+        return a.reshape(n, n)
+    if a.size == n:
+        return np.diag(a)
+    return None
+
+
+def from_robot_localization(data: Any, node: str | None = None, source: str = "r_l params"
+                            ) -> tuple[dict[str, Any], list[str]]:
+    """``(fgloc config sections, notes)`` for a robot_localization parameter file (ROS 1 or 2)."""
+    name, p, others = find_params(data, _looks_like_rl, node, source)
+    notes: list[str] = []
+    if others:
+        notes.append(f"converted node {name}; not converted: {', '.join(others)} (pick one with --node)")
+    inputs: dict[str, dict[str, Any]] = {}
+    used: set[str] = set()
+    world = str(p.get("world_frame", p.get("odom_frame", "odom")))
+    map_frame = str(p.get("map_frame", "map"))
+    pose_frame = "map" if world == map_frame else "odom"
+    sensors = sorted({(m.group(1), int(m.group(2))) for k in p if (m := SENSOR.match(str(k)))},
+                     key=lambda s: (("odom", "imu", "pose", "twist").index(s[0]), s[1]))
+    for kind, i in sensors:
+        key = f"{kind}{i}"
+        used.add(key)
+        topic = str(p[key])
+        if not topic.startswith("/"):
+            topic = "/" + topic  # a relative ROS name as a recorded log shows it
+        cfg_key = f"{key}_config"
+        vec = p.get(cfg_key)
+        used.add(cfg_key)
+        flags = [as_bool(v) for v in vec] if isinstance(vec, (list, tuple)) else [False] * 15
+        if len(flags) != 15:
+            notes.append(f"{cfg_key}: {len(flags)} values, expected 15: source {key} skipped")
+            continue
+        on = [NAMES15[j] for j in range(15) if flags[j]]
+        dropped = [NAMES15[j] for j in range(15) if flags[j] and j not in PLANAR]
+        planar = [PLANAR[j] for j in sorted(PLANAR) if flags[j]]
+        diff = as_bool(p.get(f"{key}_differential", False))
+        used.add(f"{key}_differential")
+        if kind == "twist":
+            notes.append(f"{key} ({topic}): geometry_msgs/TwistWithCovarianceStamped is not read by fgloc; "
+                         f"not carried over ({', '.join(on) or 'nothing'} fused there)")
+            continue
+        if dropped:
+            notes.append(f"{cfg_key}: {', '.join(dropped)} not carried over (fgloc estimates x, y, yaw and their "
+                         "rates in the plane" + (", no accelerations)" if any(d[0] == "a" for d in dropped) else ")"))
+        entry: dict[str, Any] = {"type": {"odom": "odometry", "imu": "imu", "pose": "pose"}[kind], "topic": topic}
+        if kind == "odom":
+            twist = [c for c in planar if c.startswith("v")]
+            pose = [c for c in planar if not c.startswith("v")]
+            if diff and pose:
+                use = pose
+                if twist:
+                    notes.append(f"{cfg_key}: {', '.join(twist)} not fused beside the differential "
+                                 f"{', '.join(pose)} (fgloc takes one twist per odometry source)")
+            else:
+                use = twist
+                if pose:
+                    notes.append(f"{cfg_key}: absolute {', '.join(pose)} of an odometry not fused (fgloc integrates "
+                                 "its twist; set odomN_differential to use the pose increments)")
+            if not use:
+                notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
+                continue
+            entry["use"] = use
+        elif kind == "imu":
+            use = [c for c in planar if c in ("yaw", "vyaw")]
+            lin = [c for c in planar if c not in ("yaw", "vyaw")]
+            if lin:
+                notes.append(f"{cfg_key}: {', '.join(lin)} from an IMU not carried over")
+            if not use:
+                notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
+                continue
+            entry["use"] = use
+        else:
+            use = [c for c in planar if c in ("x", "y", "yaw")]
+            if not use:
+                notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
+                continue
+            entry["use"] = use
+            entry["frame_id"] = pose_frame
+        if diff:
+            entry["differential"] = True
+            if kind == "pose":
+                notes.append(f"{key}_differential: a differential pose source is counted, not fused, by fgloc")
+        rel_key = f"{key}_relative"
+        if rel_key in p:
+            used.add(rel_key)
+            if as_bool(p[rel_key]):
+                notes.append(f"{rel_key}: not needed (fgloc estimates each heading source's offset)")
+        for thr in ("rejection_threshold", "pose_rejection_threshold", "twist_rejection_threshold",
+                    "linear_acceleration_rejection_threshold"):
+            k = f"{key}_{thr}"
+            if k not in p:
+                continue
+            used.add(k)
+            v = float(p[k])
+            if kind == "pose" and thr in ("rejection_threshold", "pose_rejection_threshold"):
+                entry["gate"] = round(v * v, 6)
+            else:
+                notes.append(f"{k}: {v:g} not carried over (fgloc gates fixes, and weights odometry and IMU by "
+                             "the noise they show against the other sources)")
+        inputs[key] = entry
+    out: dict[str, Any] = {}
+    if inputs:
+        out["sources"] = {"inputs": inputs}
+    # filter-wide parameters
+    pipeline: dict[str, Any] = {}
+    ekf: dict[str, Any] = {}
+    if "frequency" in p:
+        used.add("frequency")
+        notes.append(f"frequency: {p['frequency']}: not carried over (fgloc publishes the fused pose at every scan; "
+                     "without scans its keyframes are pipeline.odom_keyframe_interval_s apart)")
+    if "two_d_mode" in p:
+        used.add("two_d_mode")
+        if not as_bool(p["two_d_mode"]):
+            notes.append("two_d_mode: false: fgloc is planar (z, roll, pitch are not estimated)")
+    q = _matrix(p.get("process_noise_covariance"))
+    if "process_noise_covariance" in p:
+        used.add("process_noise_covariance")
+        if q is None:
+            notes.append("process_noise_covariance: not a 15 x 15 matrix; not carried over")
+        else:
+            d = np.diag(q)
+            ekf.update({"q_xy": float(max(d[0], d[1])), "q_theta": float(d[5]), "q_v": float(max(d[6], d[7])),
+                        "q_w": float(d[11])})
+    p0 = _matrix(p.get("initial_estimate_covariance"))
+    if "initial_estimate_covariance" in p:
+        used.add("initial_estimate_covariance")
+        if p0 is None:
+            notes.append("initial_estimate_covariance: not a 15 x 15 matrix; not carried over")
+        else:
+            sxy = math.sqrt(max(p0[0, 0], p0[1, 1], 1e-12))
+            syaw = math.degrees(math.sqrt(max(p0[5, 5], 1e-12)))
+            if sxy > 1e-3:
+                pipeline["initial_sigma_xy_m"] = round(sxy, 6)
+            if syaw > 1e-3:
+                pipeline["initial_sigma_yaw_deg"] = round(syaw, 6)
+            if sxy <= 1e-3 or syaw <= 1e-3:
+                notes.append("initial_estimate_covariance: near-zero pose variances kept at fgloc's (an "
+                             "--initial-pose prior needs some width)")
+    for k in ("map_frame", "odom_frame", "world_frame"):
+        used.add(k)
+    if "base_link_frame" in p:
+        used.add("base_link_frame")
+        if str(p["base_link_frame"]) not in ("base_link", "base_footprint"):
+            notes.append(f"base_link_frame: {p['base_link_frame']}: fgloc's robot frame is base_link / "
+                         "base_footprint (IMU mounts are looked up from those)")
+    if pipeline:
+        out["pipeline"] = pipeline
+    if ekf:
+        out["ekf"] = ekf
+    for k in sorted(p):
+        ks = str(k)
+        if ks in used or ks in IGNORED_QUIETLY:
+            continue
+        m = re.match(r"^(odom|imu|pose|twist)(\d+)_(.+)$", ks)
+        why = _why(m.group(3) if m else ks)
+        notes.append(f"{ks}: {why}")
+    return out, notes
+
+
+def _why(param: str) -> str:
+    if param in ("queue_size", "nodelay"):
+        return "a ROS subscription setting"
+    if param == "remove_gravitational_acceleration":
+        return "fgloc does not fuse accelerations"
+    if param in ("sensor_timeout",):
+        return "fgloc integrates what arrives; fgloc live reports a silent sensor (health:)"
+    if param in ("use_control", "stamped_control", "control_timeout", "control_config", "acceleration_limits",
+                 "deceleration_limits", "acceleration_gains", "deceleration_gains"):
+        return "fgloc has no control input"
+    if param.startswith("transform_") or param in ("publish_tf", "publish_acceleration", "tf_prefix",
+                                                   "permit_corrected_publication", "predict_to_current_time",
+                                                   "silent_tf_failure", "reset_on_time_jump", "smooth_lagged_data",
+                                                   "history_length"):
+        return "an output / tf setting; fgloc writes the fused pose and, from the smoother, a smoothed trajectory"
+    if param.startswith("debug") or param == "print_diagnostics":
+        return "a debugging setting"
+    if param in ("dynamic_process_noise_covariance", "use_control_input"):
+        return "fgloc adapts each source's noise from its residuals instead"
+    return "no fgloc equivalent"

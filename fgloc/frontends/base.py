@@ -15,6 +15,7 @@ reason (:class:`FrontendBase` turns any unexpected exception into a no-fix too).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 
 from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle
+from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -40,7 +41,7 @@ __all__ = [
     "check_guess",
     "deskew_offsets",
     "voxel_downsample",
-    "unpack_config",
+    "FixAcceptance",
 ]
 
 
@@ -320,30 +321,56 @@ class FrontendBase:
         raise NotImplementedError
 
 
-def unpack_config(section: str, config: dict | None, allowed: set[str]) -> dict[str, Any]:
-    """Check a config section's keys (typos are a :class:`ConfigError`) and return a copy."""
-    cfg = dict(config or {})
-    bad = sorted(set(cfg) - allowed)
-    if bad:
-        raise ConfigError(
-            f"frontends config [{section}]: unknown key(s) {', '.join(bad)}; allowed: {', '.join(sorted(allowed))}"
-        )
-    return cfg
+class FixAcceptance:
+    """The acceptance tests and covariance scaling the scan matchers share (native, kiss).
 
+    ``conf`` is the matcher's config section, with the fields ``inlier_dist_m``, ``min_inliers``,
+    ``min_inlier_fraction``, ``max_jump_m``, ``max_jump_deg``, ``min_eigen_ratio``,
+    ``cov_inflation`` (``[kxy, kyaw]``) and ``cov_floor``; ``name`` prefixes the reasons.
+    """
 
-def preprocess_from_config(section: str, cfg: dict | None) -> PreprocessOptions:
-    """Build :class:`PreprocessOptions` from a ``preprocess:`` sub-dict."""
-    allowed = {"max_beams", "voxel_size_m", "deskew", "min_valid_beams", "max_deskew_interval_s", "deskew_extrapolate"}
-    c = unpack_config(f"{section}.preprocess", cfg, allowed)
-    try:
-        return PreprocessOptions(
-            max_beams=int(c.get("max_beams", 0)),
-            voxel_size_m=float(c.get("voxel_size_m", 0.0)),
-            deskew=bool(c.get("deskew", True)),
-            min_valid_beams=int(c.get("min_valid_beams", 10)),
-            max_deskew_interval_s=float(c.get("max_deskew_interval_s", 0.5)),
-            deskew_extrapolate=bool(c.get("deskew_extrapolate", True)),
-        )
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"frontends config [{section}.preprocess]: bad value ({e})") from None
+    def __init__(self, name: str, conf: Any) -> None:
+        self.name = name
+        self.inlier_dist = float(conf.inlier_dist_m)
+        self.min_inliers = int(conf.min_inliers)
+        self.min_inlier_fraction = float(conf.min_inlier_fraction)
+        self.max_jump_m = float(conf.max_jump_m)
+        self.max_jump = math.radians(conf.max_jump_deg)
+        self.min_eigen_ratio = float(conf.min_eigen_ratio)
+        infl = np.broadcast_to(np.asarray(conf.cov_inflation, dtype=float).reshape(-1), (2,))
+        if not np.all(infl > 0):
+            raise ConfigError(f"frontends config [{name}]: cov_inflation must be positive, got {conf.cov_inflation}")
+        self.cov_inflation = (float(infl[0]), float(infl[1]))
+        self.cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
+        self.cov_floor = np.diag(np.asarray(conf.cov_floor, dtype=float))
 
+    def within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
+        """``pose`` is within ``max_jump_m`` / ``max_jump_deg`` of ``guess``."""
+        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
+        return jump <= self.max_jump_m and abs(wrap_scalar(pose[YAW] - guess[YAW])) <= self.max_jump
+
+    def too_few_inliers(self, n_in: int, n: int, **info: Any) -> MatchResult | None:
+        """A no-fix when fewer than ``min_inliers`` or ``min_inlier_fraction`` of ``n`` points agree."""
+        if n_in < self.min_inliers or n_in / n < self.min_inlier_fraction:
+            return no_fix(f"{self.name}: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
+                          n_inliers=n_in, quality=n_in / n, **info)
+        return None
+
+    def jumped(self, pose: FloatArray, guess: FloatArray, n_in: int, quality: float, **info: Any
+               ) -> MatchResult | None:
+        """A no-fix when ``pose`` is farther from ``guess`` than ``max_jump_m`` / ``max_jump_deg``."""
+        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
+        dyaw = abs(wrap_scalar(pose[YAW] - guess[YAW]))
+        if jump > self.max_jump_m or dyaw > self.max_jump:
+            return no_fix(f"{self.name}: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
+                          n_inliers=n_in, quality=quality, **info)
+        return None
+
+    def inflate(self, cov: FloatArray) -> FloatArray:
+        """``S cov S`` with ``S = diag(sqrt(kxy), sqrt(kxy), sqrt(kyaw))``."""
+        return self.cov_scale @ cov @ self.cov_scale  # type: ignore[no-any-return]
+
+    def finish(self, cov: FloatArray) -> FloatArray:
+        """``cov + diag(cov_floor)``, symmetrized."""
+        cov = cov + self.cov_floor
+        return 0.5 * (cov + cov.T)  # type: ignore[no-any-return]

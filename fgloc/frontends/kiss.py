@@ -38,6 +38,7 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import (
+    FixAcceptance,
     FloatArray,
     FrontendBase,
     MatchResult,
@@ -163,14 +164,6 @@ class KissMatcher(FrontendBase):
         max_iterations = conf.max_iterations
         convergence_criterion = conf.convergence_criterion
         max_threads = conf.max_threads
-        inlier_dist_m = conf.inlier_dist_m
-        min_inliers = conf.min_inliers
-        min_inlier_fraction = conf.min_inlier_fraction
-        max_jump_m = conf.max_jump_m
-        max_jump_deg = conf.max_jump_deg
-        min_eigen_ratio = conf.min_eigen_ratio
-        cov_inflation = conf.cov_inflation
-        cov_floor = conf.cov_floor
         max_backface_fraction = conf.max_backface_fraction
         retry_backface_fraction = conf.retry_backface_fraction
         retry_inlier_fraction = conf.retry_inlier_fraction
@@ -213,18 +206,7 @@ class KissMatcher(FrontendBase):
         self.coarse_kernel = float(coarse_kernel_m)
         self.max_corr = float(max_correspondence_m)
         self.kernel = float(kernel_m)
-        self.inlier_dist = float(inlier_dist_m)
-        self.min_inliers = int(min_inliers)
-        self.min_inlier_fraction = float(min_inlier_fraction)
-        self.max_jump_m = float(max_jump_m)
-        self.max_jump = math.radians(max_jump_deg)
-        self.min_eigen_ratio = float(min_eigen_ratio)
-        infl = np.broadcast_to(np.asarray(cov_inflation, dtype=float).reshape(-1), (2,))
-        if not np.all(infl > 0):
-            raise ConfigError(f"frontends config [{self.name}]: cov_inflation must be positive, got {cov_inflation}")
-        self.cov_inflation = (float(infl[0]), float(infl[1]))
-        self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
-        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
+        self.accept = FixAcceptance(self.name, conf)
 
     def _register(self, pts3: FloatArray, guess: FloatArray, coarse: Any, fine: Any) -> FloatArray | None:
         T = to_matrix4(guess)
@@ -245,7 +227,7 @@ class KissMatcher(FrontendBase):
         q = np.column_stack([pose[0] + c * points[:, 0] - s * points[:, 1],
                              pose[1] + s * points[:, 0] + c * points[:, 1]])
         dist, idx = self.tree.query(q, distance_upper_bound=self.max_corr)
-        inl = dist < self.inlier_dist
+        inl = dist < self.accept.inlier_dist
         if not inl.any():
             return q, dist, idx, 0.0
         lx, ly = self.pre.mount[0], self.pre.mount[1]
@@ -277,7 +259,7 @@ class KissMatcher(FrontendBase):
         recovered = False
         if back > self.retry_backface_fraction:
             # landed on the far side of a thin wall: redo against the surfaces facing the guess
-            reach = float(np.sqrt(np.max(np.sum(points * points, axis=1)))) + self.max_jump_m + 1.0
+            reach = float(np.sqrt(np.max(np.sum(points * points, axis=1)))) + self.accept.max_jump_m + 1.0
             coarse, fine = self._front_facing_maps(guess, reach)
             alt = self._register(pts3, guess, coarse, fine)
             if alt is not None:
@@ -285,9 +267,9 @@ class KissMatcher(FrontendBase):
                 if back2 < back:
                     pose, q, dist, idx, back, recovered = alt, q2, dist2, idx2, back2, True
         restarts = 0
-        if np.count_nonzero(dist < self.inlier_dist) < self.retry_fraction * n:
+        if np.count_nonzero(dist < self.accept.inlier_dist) < self.retry_fraction * n:
             # a doubtful optimum (ICP's local minima): restart around it (yaw, then x, y offsets), keep the best
-            best = (int(np.count_nonzero(dist < self.inlier_dist)), pose, q, dist, idx, back)
+            best = (int(np.count_nonzero(dist < self.accept.inlier_dist)), pose, q, dist, idx, back)
             for d in self.retry_offsets:
                 start = compose(pose, d)  # around the doubtful optimum
                 alt = self._register(pts3, start, self.coarse_map, self.fine_map)
@@ -295,7 +277,7 @@ class KissMatcher(FrontendBase):
                 if alt is None:
                     continue
                 q2, dist2, idx2, back2 = self._associate(points, alt)
-                n2 = int(np.count_nonzero(dist2 < self.inlier_dist))
+                n2 = int(np.count_nonzero(dist2 < self.accept.inlier_dist))
                 if n2 > best[0] and back2 <= max(back, self.retry_backface_fraction):
                     best = (n2, alt, q2, dist2, idx2, back2)
                 if n2 >= self.retry_fraction * n:
@@ -303,22 +285,20 @@ class KissMatcher(FrontendBase):
             _, pose, q, dist, idx, back = best
         c, s = math.cos(pose[2]), math.sin(pose[2])
         used = np.isfinite(dist)
-        inl = dist < self.inlier_dist
+        inl = dist < self.accept.inlier_dist
         n_in = int(inl.sum())
         quality = n_in / n
         info: dict[str, Any] = {"time_s": time.perf_counter() - t0, "n_points": n, "backface": back,
                                 "recovered": recovered, "restarts": restarts}
-        if n_in < self.min_inliers or quality < self.min_inlier_fraction:
-            return no_fix(f"kiss: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
-                          n_inliers=n_in, quality=quality, **info)
+        rejected = self.accept.too_few_inliers(n_in, n, **info)
+        if rejected is not None:
+            return rejected
         if back > self.max_backface_fraction:
             return no_fix(f"kiss: {100 * back:.0f}% of the matched points lie on the back of walls",
                           n_inliers=n_in, quality=quality, **info)
-        jump = float(np.hypot(pose[0] - guess[0], pose[1] - guess[1]))
-        dyaw = abs(float(wrap_angle(pose[YAW] - guess[YAW])))
-        if jump > self.max_jump_m or dyaw > self.max_jump:
-            return no_fix(f"kiss: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
-                          n_inliers=n_in, quality=quality, **info)
+        rejected = self.accept.jumped(pose, guess, n_in, quality, **info)
+        if rejected is not None:
+            return rejected
         e = q[used] - self.map_points[idx[used]]
         r2 = np.sum(e * e, axis=1)
         w = (self.kernel ** 2) / (self.kernel + r2) ** 2  # kiss_icp's Geman-McClure weight (same form)
@@ -333,12 +313,11 @@ class KissMatcher(FrontendBase):
         lever = float(np.sqrt(np.mean(np.sum(p * p, axis=1)))) or 1.0
         S = np.diag([1.0, 1.0, 1.0 / lever])
         ev = np.linalg.eigvalsh(S @ H @ S)
-        if not (np.all(np.isfinite(ev)) and ev[-1] > 0 and ev[0] > self.min_eigen_ratio * ev[-1]):
+        if not (np.all(np.isfinite(ev)) and ev[-1] > 0 and ev[0] > self.accept.min_eigen_ratio * ev[-1]):
             return no_fix("kiss: degenerate geometry (point-to-point Hessian near singular)",
                           n_inliers=n_in, quality=quality, **info)
         sigma2 = float(np.sum(w * r2)) / max(2.0 * w.sum() - 3.0, 1.0)
-        cov = self._cov_scale @ (sigma2 * np.linalg.inv(H)) @ self._cov_scale + self.cov_floor
-        cov = 0.5 * (cov + cov.T)
+        cov = self.accept.finish(self.accept.inflate(sigma2 * np.linalg.inv(H)))
         info["sigma_m"] = math.sqrt(sigma2)
         info["time_s"] = time.perf_counter() - t0
         return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)

@@ -59,6 +59,7 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import (
+    FixAcceptance,
     FloatArray,
     FrontendBase,
     MatchResult,
@@ -573,9 +574,6 @@ class NativeMatcher(FrontendBase):
         outlier_schedule_m = conf.outlier_schedule_m
         max_iterations = conf.max_iterations
         tolerance = conf.tolerance
-        inlier_dist_m = conf.inlier_dist_m
-        min_inliers = conf.min_inliers
-        min_inlier_fraction = conf.min_inlier_fraction
         search = conf.search
         search_trigger_inlier_fraction = conf.search_trigger_inlier_fraction
         search_window_m = conf.search_window_m
@@ -585,11 +583,6 @@ class NativeMatcher(FrontendBase):
         search_sigma_m = conf.search_sigma_m
         search_max_points = conf.search_max_points
         search_candidates = conf.search_candidates
-        max_jump_m = conf.max_jump_m
-        max_jump_deg = conf.max_jump_deg
-        min_eigen_ratio = conf.min_eigen_ratio
-        cov_inflation = conf.cov_inflation
-        cov_floor = conf.cov_floor
         backface_cos = conf.backface_cos
         depth_window = conf.depth_window
         depth_min_quality = conf.depth_min_quality
@@ -607,9 +600,7 @@ class NativeMatcher(FrontendBase):
         self.outliers = np.asarray(outlier_schedule_m, dtype=float)
         self.max_iterations = int(max_iterations)
         self.tolerance = float(tolerance)
-        self.inlier_dist = float(inlier_dist_m)
-        self.min_inliers = int(min_inliers)
-        self.min_inlier_fraction = float(min_inlier_fraction)
+        self.accept = FixAcceptance(self.name, conf)
         self.search = search
         self.search_trigger = float(search_trigger_inlier_fraction)
         self.search_window_m = float(search_window_m)
@@ -618,15 +609,6 @@ class NativeMatcher(FrontendBase):
         self.search_ang_step = math.radians(search_ang_step_deg)
         self.search_max_points = int(search_max_points)
         self.search_candidates = max(int(search_candidates), 1)
-        self.max_jump_m = float(max_jump_m)
-        self.max_jump = math.radians(max_jump_deg)
-        self.min_eigen_ratio = float(min_eigen_ratio)
-        infl = np.broadcast_to(np.asarray(cov_inflation, dtype=float).reshape(-1), (2,))
-        if not np.all(infl > 0):
-            raise ConfigError(f"frontends config [{self.name}]: cov_inflation must be positive, got {cov_inflation}")
-        self.cov_inflation = (float(infl[0]), float(infl[1]))
-        self._cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
-        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float))
         self.far = float(field_max_dist_m)
         self.depth_min_quality = float(depth_min_quality)
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
@@ -666,7 +648,7 @@ class NativeMatcher(FrontendBase):
     def _stats_at(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[Any, ...]:
         c, out = self.scales[-1], self.outliers[-1]
         return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
-                      self.inlier_dist, *self._lb, self.depth_m)
+                      self.accept.inlier_dist, *self._lb, self.depth_m)
 
     def _aliases(self, px: FloatArray, py: FloatArray, pose: FloatArray, cov: FloatArray
                  ) -> list[tuple[FloatArray, float]]:
@@ -677,10 +659,6 @@ class NativeMatcher(FrontendBase):
                                float(cov[0, 1]), float(cov[1, 1]), ALIAS_STEP_M,
                                int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO)
         return [self._refine_from(px, py, st) for st in starts]
-
-    def _within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
-        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
-        return jump <= self.max_jump_m and abs(wrap_scalar(pose[YAW] - guess[YAW])) <= self.max_jump
 
     def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
         t0 = time.perf_counter()
@@ -696,7 +674,7 @@ class NativeMatcher(FrontendBase):
         if self.search != "always":
             pose, cost = self._refine_from(px, py, guess)
             stats = self._stats_at(px, py, pose)
-            jump_ok = self._within_jump(pose, guess)
+            jump_ok = self.accept.within_jump(pose, guess)
             if jump_ok:
                 refined.append((pose, cost))
             if jump_ok or self.search == "never":
@@ -714,13 +692,13 @@ class NativeMatcher(FrontendBase):
                 if sc <= 0:
                     continue
                 pose, cost = self._refine_from(px, py, cand)
-                if self._within_jump(pose, guess):
+                if self.accept.within_jump(pose, guess):
                     refined.append((pose, cost))
                     if cost < best_cost:
                         best, best_cost, best_stats = pose, cost, None
         if best is None:
             return no_fix(
-                f"native: no pose within {self.max_jump_m:.2f} m / {math.degrees(self.max_jump):.0f} deg "
+                f"native: no pose within {self.accept.max_jump_m:.2f} m / {math.degrees(self.accept.max_jump):.0f} deg "
                 "of the guess explains the scan"
             )
         if best_stats is None:
@@ -731,21 +709,14 @@ class NativeMatcher(FrontendBase):
         n_in = int(n_in)
         quality = n_in / n
         info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n}
-        if n_in < self.min_inliers or quality < self.min_inlier_fraction:
-            return no_fix(
-                f"native: too few inliers ({n_in} of {n} points within {self.inlier_dist:.3f} m)",
-                n_inliers=n_in, quality=quality, **info,
-            )
-        jump = math.hypot(pose[0] - guess[0], pose[1] - guess[1])
-        dyaw = abs(wrap_scalar(pose[YAW] - guess[YAW]))
-        if jump > self.max_jump_m or dyaw > self.max_jump:
-            return no_fix(
-                f"native: solution jumped {jump:.2f} m / {math.degrees(dyaw):.1f} deg from the guess",
-                n_inliers=n_in, quality=quality, **info,
-            )
+        rejected = self.accept.too_few_inliers(n_in, n, **info)
+        if rejected is None:
+            rejected = self.accept.jumped(pose, guess, n_in, quality, **info)
+        if rejected is not None:
+            return rejected
         # degeneracy: eigenvalues of H with yaw scaled by a typical range (metres per radian)
         ev0, ev2, Hinv = _conditioning(H, px, py)
-        if not (math.isfinite(ev0) and math.isfinite(ev2) and ev0 > self.min_eigen_ratio * ev2 and ev2 > 0):
+        if not (math.isfinite(ev0) and math.isfinite(ev2) and ev0 > self.accept.min_eigen_ratio * ev2 and ev2 > 0):
             return no_fix(
                 f"native: degenerate geometry (Hessian eigenvalue ratio {ev0 / max(ev2, 1e-300):.1e})",
                 n_inliers=n_in, quality=quality, **info,
@@ -753,7 +724,7 @@ class NativeMatcher(FrontendBase):
         sigma2 = wr2 / max(sw - 3.0, 1.0)
         # beams of one run share its map error: sw / runs beams per independent error
         per_run = sw / max(int(n_runs), 1)
-        cov = self._cov_scale @ (sigma2 * per_run * Hinv) @ self._cov_scale
+        cov = self.accept.inflate(sigma2 * per_run * Hinv)
         # distinct refined candidates that explain the scan almost as well (a world changed since
         # the map: moved furniture offers a second alignment) widen it to their spread; likelihood
         # ratio exp(-dcost / T) with the same beams-per-run tempering, T = s^2 sw / runs
@@ -770,8 +741,7 @@ class NativeMatcher(FrontendBase):
             if wc > 1e-4:
                 spread += wc * np.outer(d, d)
                 wsum += wc
-        cov = cov + spread / wsum + self.cov_floor
-        cov = 0.5 * (cov + cov.T)
+        cov = self.accept.finish(cov + spread / wsum)
         info["sigma_m"] = math.sqrt(sigma2)
         info["surface_depth_m"] = self.depth_m
         if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:

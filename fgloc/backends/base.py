@@ -76,8 +76,9 @@ class Backend(ABC):
         """Pose guess and 3x3 covariance at ``t`` (for the front-end)."""
 
     @abstractmethod
-    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
-        """Latest (time, pose, cov) estimate, or None before initialization."""
+    def current(self, covariance: bool = True) -> tuple[float, FloatArray, FloatArray] | None:
+        """Latest (time, pose, cov) estimate, or None before initialization.  ``covariance=False``:
+        the last computed covariance may be returned (a smoother's marginal is not free)."""
 
     @abstractmethod
     def finish(self) -> Trajectory:

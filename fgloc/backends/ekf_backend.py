@@ -339,7 +339,7 @@ class EKFBackend(Backend):
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:
         return self.ekf.predict_pose(t)
 
-    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
+    def current(self, covariance: bool = True) -> tuple[float, FloatArray, FloatArray] | None:
         if not self.initialized:
             return None
         return float(self.ekf.t or 0.0), self.ekf.pose(), self.ekf.pose_cov()

@@ -992,11 +992,13 @@ class SlidingWindowSmoother(Backend):
         R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
         self._last_cov = R @ body @ R.T
 
-    def current(self) -> tuple[float, FloatArray, FloatArray] | None:
-        """Newest keyframe estimate; its covariance is computed here on demand (iSAM2 marginal)."""
+    def current(self, covariance: bool = True) -> tuple[float, FloatArray, FloatArray] | None:
+        """Newest keyframe estimate; its covariance is computed here on demand (iSAM2 marginal;
+        ``covariance=False``: the last one computed)."""
         if not self.kf_key:
             return None
-        self._update_covariance()
+        if covariance:
+            self._update_covariance()
         return self.kf_t[-1], self.kf_pose[self.kf_key[-1]].copy(), self._last_cov.copy()
 
     def _flush_window(self) -> None:

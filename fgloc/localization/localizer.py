@@ -375,9 +375,11 @@ class Localizer:
             total += max(0.0, self._last_scan_t - self._lost_since)
         return total
 
-    def current(self) -> PoseFix | None:
-        """Latest fused pose and covariance, predicted to the newest odometry stamp."""
-        cur = self.backend.current()
+    def current(self, covariance: bool = True) -> PoseFix | None:
+        """Latest fused pose and covariance, predicted to the newest odometry stamp.
+        ``covariance=False``: the back-end's last computed covariance (plus the odometry noise
+        since), not a fresh marginal (see :class:`fgloc.localization.session.Session`)."""
+        cur = self.backend.current(covariance)
         if cur is None:
             return None
         t, pose, cov = cur

@@ -22,6 +22,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts are plain: "[/odom]" (a default shown in brackets) is not markup
 )
 
 
@@ -72,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app, map user errors to one line on stderr and exit 2."""
     logging.basicConfig(level=logging.WARNING, format="fgloc: %(levelname)s: %(message)s")
     try:
-        app(args=argv, standalone_mode=False)
+        rv = app(args=argv, standalone_mode=False)
     except FglocError as e:
         print(f"fgloc: error: {e}", file=sys.stderr)
         return 2
@@ -94,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
             e.show()
             return int(e.exit_code)
         raise
-    return 0
+    # click returns the code of a typer.Exit(code) in non-standalone mode
+    return rv if isinstance(rv, int) and not isinstance(rv, bool) else 0
 
 
 if __name__ == "__main__":

@@ -77,7 +77,7 @@ def _print_run_summary(r: RunResult) -> None:
 def register(app: typer.Typer) -> None:
     @app.command("run")
     def run_cmd(
-        log: Path = typer.Argument(..., help="the log: ROS 2 MCAP, a rosbag2 folder (.db3/.mcap), a ROS 1 .bag or a CARMEN .clf/.log (gz/bz2)"),
+        log: Path = typer.Argument(..., help="the log: ROS 2 MCAP, rosbag2 folder, ROS 1 .bag or CARMEN .clf/.log"),
         map_yaml: Path | None = typer.Option(None, "--map", help="map_server YAML; without it: odom-frame fusion"),
         backend: str = typer.Option("smoother", "--backend", help="ekf | smoother | batch"),
         frontend: str = typer.Option("native", "--frontend", help="amcl | kiss | native"),

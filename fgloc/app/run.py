@@ -2,10 +2,17 @@
 
 It opens the log, checks the inputs the user named, builds a
 :class:`~fgloc.localization.Localizer` and a :class:`~fgloc.localization.Session` with a
-recorder sink (``run.mcap``: the inputs and ``/fused_pose``), feeds the log through it and
-writes ``trajectory.tum`` (final), ``online.tum``, ``fixes.tum`` and ``config.yaml`` (the
-effective config).  With ``/ground_truth`` in the log it also evaluates.  Nothing here
-prints; the CLI (:mod:`fgloc.commands.run`) parses and prints, tests and tools call this.
+recorder sink, feeds the log through it and writes ``trajectory.tum`` (final),
+``online.tum``, ``fixes.tum`` and ``config.yaml`` (the effective config).  With
+``/ground_truth`` in the log it also evaluates.  Nothing here prints; the CLI
+(:mod:`fgloc.commands.run`) parses and prints, tests and tools call this.
+
+``run.mcap`` holds the inputs as the log stores them (a ROS 2 input's CDR bytes copied with
+its own schema, no decode / encode round trip; other formats re-encoded), ``/fused_pose``
+after each scan and the view's Foxglove channels (:mod:`fgloc.view.record`).  What the run
+writes is placed at the log time of the input being processed, so it sits beside the inputs
+on the input's recording clock.  ``RunResult.timings`` says where the time went (reading,
+localizing, writing, the view's channels).
 """
 
 from __future__ import annotations
@@ -14,12 +21,14 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from fgloc.config import FglocConfig, load_config
 from fgloc.errors import ConfigError, LogError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from fgloc.config import FglocConfig
 
 #: a file in an output folder that fgloc writes (others are not overwritten without --force)
 OUTPUT_FILES = ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
@@ -44,6 +53,13 @@ class RunRequest:
     view: str | None = None  # [HOST:]PORT: serve a Foxglove WebSocket view while localizing (fgloc.view)
     realtime: float | None = None  # replay at this factor of real time (None: as fast as possible)
     view_channels: bool = True  # record the view's Foxglove channels into run.mcap (needs foxglove-sdk)
+    covariance_period_s: float | None = None  # log time between fused-pose marginals (None: the session's default)
+
+
+def _default_config() -> FglocConfig:
+    from fgloc.config import FglocConfig
+
+    return FglocConfig()
 
 
 @dataclass
@@ -66,10 +82,16 @@ class RunResult:
     metrics: Any = None  # fgloc.eval.metrics.Metrics of the final trajectory vs /ground_truth
     metrics_online: Any = None
     eval_error: str | None = None
-    config: FglocConfig = field(default_factory=FglocConfig)
+    config: FglocConfig = field(default_factory=_default_config)
     log: Path = field(default_factory=Path)
     lost_s: float = 0.0  # time the localizer spent lost (no pose, or no accepted fix for lost_after_s)
     ended_lost: bool = False
+    damaged_chunks: int = 0  # damaged chunks of the input skipped (MCAP)
+    damage: str | None = None  # one line on what could not be read (damaged chunks, undecodable messages)
+    # seconds: setup (log, map, localizer), read (decoding the input), write (run.mcap: inputs and
+    # /fused_pose), view (the view's channels), localize (the rest of the loop), finish (final
+    # smoothing), outputs (TUM, config, evaluation), total (the whole run_log call)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def lost_share(self) -> float:
@@ -97,7 +119,7 @@ class RunResult:
 
         d = {k: getattr(self, k) for k in ("mode", "frame", "backend", "frontend", "poses", "online_poses",
                                           "fixes", "wall_s", "log_s", "truncated", "written", "eval_error",
-                                          "lost_s", "ended_lost")}
+                                          "lost_s", "ended_lost", "damaged_chunks", "damage", "timings")}
         d["stats"] = yaml_ready(self.stats)
         d["outdir"] = str(self.outdir)
         return d
@@ -131,6 +153,8 @@ def _check_inputs(reader: Any, log: Path, summary: dict[str, Any],
 def _initial_pose(values: Any) -> np.ndarray | None:
     if values is None:
         return None
+    import numpy as np
+
     pose0 = np.asarray(values, dtype=float).reshape(-1)
     if pose0.shape != (3,) or not np.all(np.isfinite(pose0)):
         raise ConfigError("--initial-pose needs three finite numbers: X Y YAW (m, m, rad in the map frame)")
@@ -184,6 +208,8 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     context-manager methods, e.g. tqdm) over the messages read.  ``announce(line)``: where the
     Foxglove view says where it serves (``req.view``).
     """
+    t_start = time.perf_counter()
+    from fgloc.config import FglocConfig, load_config
     from fgloc.io.log import IMU, LASER_SCAN, ODOMETRY, LogReader, LogWriter, Topics
     from fgloc.io.tum import write_tum
     from fgloc.localization import Localizer, RecorderSink, Routes, Session
@@ -227,22 +253,35 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     from fgloc.view import ViewHook, check_rate, paced
 
     realtime = check_rate(req.realtime)
+    spent = {"read": 0.0, "write": 0.0, "view": 0.0}
+    clock = _LogClock()
     with LogWriter(outdir / "run.mcap") as writer, \
             ViewHook(loc, topics, view=req.view, record_to=writer if req.view_channels else None,
                      announce=announce) as view:
-        sinks: list[Any] = [RecorderSink(writer, topics.fused)]
+        # the inputs are copied by _copied (their own bytes); the recorder writes /fused_pose
+        sinks: list[Any] = [_TimedSink(RecorderSink(writer, topics.fused, record_inputs=False,
+                                                    log_time_ns=clock.now), spent, "write")]
         if view.active:
-            sinks.append(view)  # the Foxglove view and its channels in run.mcap (fgloc.view)
+            if view.recorder is not None and hasattr(view.recorder, "clock"):
+                view.recorder.clock = clock.now  # the view's channels on the input's log-time clock too
+            sinks.append(_TimedSink(view, spent, "view"))  # the Foxglove view and its channels (fgloc.view)
         bar = progress(total) if progress is not None else None
         if bar is not None:
             sinks.append(CallbackSink(on_message=lambda topic, msg: bar.update(1)))
-        session = Session(loc, Routes.default(topics), sinks)
+        session = Session(loc, Routes.default(topics), sinks, covariance_period_s=req.covariance_period_s)
         try:
-            final = session.run(paced(reader.messages(want), realtime))
+            feed = session.feed
+            for topic, msg in paced(_copied(reader.records(want), writer, clock, spent), realtime):
+                feed(topic, msg)
+            t_fin = time.perf_counter()
+            final = session.finish()
+            t_done = time.perf_counter()
         finally:
             if bar is not None and hasattr(bar, "close"):
                 bar.close()
-    wall = time.perf_counter() - t_wall
+    t_closed = time.perf_counter()
+    spent["write"] += t_closed - t_done  # the file's last chunk and its index (and the view's last messages)
+    wall = t_closed - t_wall
     online = loc.online_trajectory()
     fixes = loc.fixes_trajectory()
     frame = "odom" if mode == "odom" else "map"
@@ -270,6 +309,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         truncated=reader.truncated, outdir=outdir,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
         log=log, lost_s=float(loc.stats.get("lost_s", 0.0)), ended_lost=bool(loc.stats.get("ended_lost", False)),
+        damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
     )
     gt = reader.ground_truth() if reader.has(topics.ground_truth) else None
     if gt is not None and len(final) > 1:
@@ -280,4 +320,72 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
             result.metrics_online = evaluate(online, gt, align=(mode == "odom")) if len(online) > 1 else None
         except LogError as e:
             result.eval_error = str(e)
+    t_end = time.perf_counter()
+    loop = t_fin - t_wall
+    result.timings = {
+        "setup_s": t_wall - t_start, "read_s": spent["read"], "write_s": spent["write"], "view_s": spent["view"],
+        "localize_s": max(0.0, loop - spent["read"] - spent["write"] - spent["view"]),
+        "finish_s": t_done - t_fin, "outputs_s": t_end - t_closed, "total_s": t_end - t_start,
+    }
     return result
+
+
+class _LogClock:
+    """The log time (ns) of the input message being processed: where the run's own messages go."""
+
+    def __init__(self) -> None:
+        self.ns: int | None = None
+
+    def now(self) -> int | None:
+        return self.ns
+
+
+def _copied(records: Any, writer: Any, clock: _LogClock, spent: dict[str, float]) -> Any:
+    """``(topic, message)`` of ``records``, each first copied into ``writer`` as the log stores it
+    (:func:`fgloc.io.mcap_writer.tee`, timed: ``spent['read']`` decoding, ``spent['write']``
+    copying) and its log time set on ``clock``."""
+    pc = time.perf_counter
+    it = iter(records)
+    copy = writer.copy
+    while True:
+        t0 = pc()
+        rec = next(it, None)
+        t1 = pc()
+        spent["read"] += t1 - t0
+        if rec is None:
+            return
+        copy(rec)
+        spent["write"] += pc() - t1
+        clock.ns = rec.log_time_ns
+        yield rec.topic, rec.msg
+
+
+class _TimedSink:
+    """A session sink whose time is added to ``spent[key]`` (RunResult.timings)."""
+
+    def __init__(self, sink: Any, spent: dict[str, float], key: str) -> None:
+        self.sink = sink
+        self.spent = spent
+        self.key = key
+        self.wants_fused = bool(getattr(sink, "wants_fused", True))
+
+    def on_message(self, topic: str, msg: object) -> None:
+        t0 = time.perf_counter()
+        try:
+            self.sink.on_message(topic, msg)
+        finally:
+            self.spent[self.key] += time.perf_counter() - t0
+
+    def on_scan(self, stamp: float, scan: Any, fix_or_reason: Any, fused: Any) -> None:
+        t0 = time.perf_counter()
+        try:
+            self.sink.on_scan(stamp, scan, fix_or_reason, fused)
+        finally:
+            self.spent[self.key] += time.perf_counter() - t0
+
+    def close(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            self.sink.close()
+        finally:
+            self.spent[self.key] += time.perf_counter() - t0

@@ -24,10 +24,19 @@ The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what y
     once, at the end (:meth:`Session.finish`).
 
 A sink must not raise; if one does, the session counts it in ``sink_errors`` and goes on.
+A sink whose ``wants_fused`` is False (a progress bar) does not make the session compute the
+fused pose; when no sink wants it, ``on_scan`` gets ``fused=None``.
+
+The fused pose's covariance: a smoother's is an iSAM2 marginal (not free), so the session
+refreshes it at most every ``covariance_period_s`` of log time (default
+:data:`COVARIANCE_PERIOD_S`; 0: at every scan, as before).  In between, the fused pose is as
+fresh as ever (the newest keyframe carried to the newest odometry) and its covariance is the
+last marginal plus the odometry noise since that keyframe.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
@@ -36,6 +45,7 @@ from fgloc.localization.localizer import Localizer
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, Trajectory
 
 DEFAULT_TOPICS = {"scan": "/scan", "odom": "/odom", "imu": "/imu"}
+COVARIANCE_PERIOD_S = 1.0  # log time between two marginal covariances of the fused pose (0: every scan)
 
 
 @runtime_checkable
@@ -51,6 +61,8 @@ class Sink(Protocol):
 
 class BaseSink:
     """A sink that does nothing: override the methods you need."""
+
+    wants_fused = True  # False: this sink's on_scan does not need the fused pose
 
     def on_message(self, topic: str, msg: object) -> None:
         pass
@@ -88,13 +100,16 @@ class Routes:
 class Session:
     """A localizer, its input routing and its sinks (see the module docstring)."""
 
-    def __init__(self, localizer: Localizer, routes: Routes | None = None, sinks: Iterable[Sink] = ()) -> None:
+    def __init__(self, localizer: Localizer, routes: Routes | None = None, sinks: Iterable[Sink] = (),
+                 covariance_period_s: float | None = None) -> None:
         self.loc = localizer
         self.routes = routes or Routes.default()
         self.sinks: list[Sink] = list(sinks)
         self.sink_errors = 0
         self.closed = False
         self.last_fused: PoseFix | None = None
+        self.covariance_period_s = COVARIANCE_PERIOD_S if covariance_period_s is None else float(covariance_period_s)
+        self._cov_stamp: float | None = None  # scan stamp of the last marginal covariance
         self.handlers: dict[str, Callable[[object], None]] = {
             "odom": self._odometry, "imu": self._compass, "scan": self._scan,
         }
@@ -171,7 +186,8 @@ class Session:
         fix = self.loc.on_scan(msg)
         if not self.sinks:
             return  # nobody asks for the fused pose (its covariance is not free for a smoother)
-        fused = self.loc.current()
+        wanted = any(getattr(s, "wants_fused", True) for s in self.sinks)
+        fused = self._fused(float(msg.stamp)) if wanted else None
         self.last_fused = fused
         what: PoseFix | str = fix if fix is not None else (self.loc.last_reason or "no fix")
         for s in self.sinks:
@@ -181,20 +197,44 @@ class Session:
                 self.sink_errors += 1
 
 
+    def _fused(self, stamp: float) -> PoseFix | None:
+        """The fused pose; its covariance a fresh marginal only every ``covariance_period_s``."""
+        last = self._cov_stamp
+        fresh = (self.covariance_period_s <= 0 or last is None or not math.isfinite(stamp)
+                 or stamp < last or stamp - last >= self.covariance_period_s)
+        fused = self.loc.current(covariance=fresh)
+        if fresh and fused is not None:
+            self._cov_stamp = stamp
+        return fused
+
+
 # ---------------------------------------------------------------------- sinks
 class RecorderSink(BaseSink):
     """Writes every input and the fused pose (``fused_topic``) to a writer with
-    ``write(topic, msg, stamp=None)`` (an :class:`fgloc.io.log.LogWriter`); closes it if asked."""
+    ``write(topic, msg, stamp=None, log_time_ns=None)`` (an :class:`fgloc.io.log.LogWriter`);
+    closes it if asked.
+
+    ``record_inputs=False``: only what the localizer produces (``/fused_pose``), for a caller
+    that copies the inputs itself (``fgloc run`` copies the log's own bytes,
+    :meth:`fgloc.io.mcap_writer.LogWriter.copy`).  ``log_time_ns()``: the MCAP log time of
+    what is written now (``fgloc run``: the log time of the input being processed, so the
+    outputs sit beside the inputs on the input's recording clock); None: the header stamp.
+    """
 
     def __init__(self, writer: Any, fused_topic: str = "/fused_pose", close_writer: bool = False,
-                 tolerate: tuple[type[BaseException], ...] = (TypeError, ValueError)) -> None:
+                 tolerate: tuple[type[BaseException], ...] = (TypeError, ValueError), record_inputs: bool = True,
+                 log_time_ns: Callable[[], int | None] | None = None) -> None:
         self.writer = writer
         self.fused_topic = fused_topic
         self.close_writer = close_writer
         self.tolerate = tolerate  # write errors counted in ``errors`` (others raise)
+        self.record_inputs = record_inputs
+        self.log_time_ns = log_time_ns
         self.errors = 0
 
     def on_message(self, topic: str, msg: object) -> None:
+        if not self.record_inputs:
+            return
         try:
             self.writer.write(topic, msg, getattr(msg, "stamp", None))
         except self.tolerate:  # e.g. a message the writer has no schema for
@@ -203,7 +243,10 @@ class RecorderSink(BaseSink):
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
         if fused is not None:
             try:
-                self.writer.write(self.fused_topic, fused, float(fused.stamp))
+                if self.log_time_ns is None:
+                    self.writer.write(self.fused_topic, fused, float(fused.stamp))
+                else:
+                    self.writer.write(self.fused_topic, fused, float(fused.stamp), log_time_ns=self.log_time_ns())
             except self.tolerate:
                 self.errors += 1
 
@@ -222,6 +265,7 @@ class CallbackSink(BaseSink):
                  on_scan: Callable[[float, LaserScan, PoseFix | str, PoseFix | None], None] | None = None) -> None:
         self._m = on_message
         self._s = on_scan
+        self.wants_fused = on_scan is not None
 
     def on_message(self, topic: str, msg: object) -> None:
         if self._m is not None:

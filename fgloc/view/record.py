@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -99,10 +100,15 @@ class McapViewRecorder:
                                (ch.HEALTH, encode.HEALTH_SCHEMA))}
         self._schemas: dict[Any, tuple[str, str, bytes]] = {}
         self._last_ns = 0
+        # the log time (ns) to write at now, or None (then the stamp): fgloc run puts the channels at
+        # the log time of the input being processed, beside the inputs on the input's recording clock
+        self.clock: Callable[[], int | None] | None = None
         self.count = 0
         self.errors = 0
 
     def _ns(self, stamp: float) -> int:
+        if self.clock is not None and (now := self.clock()) is not None:
+            return now
         ns = stamp_to_ns(stamp) if math.isfinite(stamp) and stamp >= 0 else self._last_ns
         self._last_ns = max(self._last_ns, ns)
         return ns

@@ -59,6 +59,14 @@ def _print_run_summary(r: RunResult) -> None:
                 con.print(f"    {n:6d}  {why}", markup=False, highlight=False)
     if r.truncated:
         con.print(f"  [yellow]log truncated:[/yellow] {r.truncated}")
+    if r.damage:
+        con.print(f"  [yellow]log damaged:[/yellow] {r.damage}", markup=False, highlight=False)
+    if r.timings:  # one unwrapped line (fgloc bench speed reads it)
+        tm = r.timings
+        con.print(f"  time: {tm['total_s']:.2f} s = setup {tm['setup_s']:.2f} + reading {tm['read_s']:.2f} + "
+                  f"localizing {tm['localize_s']:.2f} + writing {tm['write_s']:.2f} + view channels "
+                  f"{tm['view_s']:.2f} + final smoothing {tm['finish_s']:.2f} + outputs {tm['outputs_s']:.2f} s",
+                  soft_wrap=True, highlight=False)
     m = r.metrics
     if m is not None:
         from fgloc.eval.paper import comparison_table

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from fgloc.geometry import compose1, wrap_angle
 from fgloc.geometry import exp as se2_exp
 from fgloc.live.clock import ClockSync
 from fgloc.live.serial_protocol import COUNT_MOD, FrameParser, SensorFrame
+from fgloc.live.worker import SensorThread
 from fgloc.types import CompassHeading, Odometry
 
 log = logging.getLogger(__name__)
@@ -221,8 +221,11 @@ class FrameConverter:
                         pose=self._pose.copy())
 
 
-class SerialLink:
+class SerialLink(SensorThread):
     """Reader thread on a pyserial URL (or an already open port object)."""
+
+    role = "reader"
+    thread_name = "serial-link"
 
     def __init__(
         self,
@@ -235,31 +238,21 @@ class SerialLink:
         backoff_max_s: float = 2.0,
         on_event: Callable[[str], None] | None = None,
     ) -> None:
+        super().__init__(on_event, backoff_min_s, backoff_max_s)
         self.url = url
         self.converter = converter
         self.parser = FrameParser()
         self.on_message = on_message
-        self.on_event = on_event or (lambda msg: log.info("%s", msg))
         self.baudrate = baudrate
         self._port = port
-        self.backoff_min_s, self.backoff_max_s = backoff_min_s, backoff_max_s
         self.opens = 0
         self.open_failures = 0
         self.disconnects = 0
-        self.connected = False
         self.internal_errors = 0
-        self._failure: str | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
 
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="serial-link", daemon=True)
-        self._thread.start()
-
-    def stop(self, timeout: float = 2.0) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
+    @property
+    def label(self) -> str:
+        return f"serial {self.url}"
 
     def feed(self, data: bytes, arrival: float) -> int:
         """Parse bytes and dispatch messages; returns the number of frames decoded.
@@ -287,18 +280,13 @@ class SerialLink:
     def _internal_error(self, what: str, e: Exception) -> None:
         self.internal_errors += 1
         if self.internal_errors <= 3:
-            self.on_event(f"serial {self.url}: {what} skipped ({type(e).__name__}: {e})")
+            self.on_event(f"{self.label}: {what} skipped ({type(e).__name__}: {e})")
         log.debug("serial %s", what, exc_info=True)
-
-    @property
-    def failure(self) -> str | None:
-        """Why the reader thread died (``None`` while it runs or after a clean stop)."""
-        return self._failure
 
     def counters(self) -> dict[str, Any]:
         """Every serial counter (parser, converter, link), for the status line and the summary."""
         return {**self.parser.stats.as_dict(), **self.converter.counters(), "disconnects": self.disconnects,
-                "internal_errors": self.internal_errors, "thread_failure": self._failure}
+                "internal_errors": self.internal_errors, "thread_failure": self.failure}
 
     def _open(self) -> Any:
         if self._port is not None:
@@ -307,43 +295,31 @@ class SerialLink:
 
         return serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0.05)
 
-    def _run(self) -> None:
-        try:
-            self.serve()
-        except BaseException as e:  # noqa: BLE001 - recorded and reported: the session must see it
-            self._failure = f"{type(e).__name__}: {e}"
-            self.connected = False
-            self.on_event(f"serial {self.url}: reader thread died ({self._failure})")
-            log.debug("serial reader thread", exc_info=True)
-
     def serve(self) -> None:
         """The reader loop (open, read, reopen) until :meth:`stop`; runs in the thread."""
         import serial
 
         backoff = self.backoff_min_s
-        while not self._stop.is_set():
+        while not self.stop_event.is_set():
             try:
                 port = self._open()
             except (serial.SerialException, OSError, ValueError) as e:
                 self.open_failures += 1
-                if self.open_failures in (1, 10) or self.open_failures % 50 == 0:
-                    self.on_event(f"serial {self.url}: open failed ({e}); retrying")
-                self._stop.wait(backoff)
-                backoff = min(backoff * 2.0, self.backoff_max_s)
+                backoff = self.retry_later(self.open_failures, f"open failed ({e})", backoff)
                 continue
             backoff = self.backoff_min_s
             self.opens += 1
             self.connected = True
             self.on_event(f"serial {self.url or port}: open")
             try:
-                while not self._stop.is_set():
+                while not self.stop_event.is_set():
                     n = getattr(port, "in_waiting", 0) or 1
                     data = port.read(min(max(n, 1), 4096))
                     if data:
                         self.feed(data, time.time())
             except (serial.SerialException, OSError) as e:
                 self.disconnects += 1
-                self.on_event(f"serial {self.url}: lost ({e}); reopening")
+                self.on_event(f"{self.label}: lost ({e}); reopening")
                 self._port = None if self.url else self._port
             finally:
                 self.connected = False
@@ -354,6 +330,6 @@ class SerialLink:
                         pass
             if self._port is not None and not self.url:
                 # an externally supplied port that failed: nothing to reopen
-                if self._stop.is_set():
+                if self.stop_event.is_set():
                     break
-                self._stop.wait(backoff)
+                self.stop_event.wait(backoff)

@@ -30,7 +30,6 @@ import math
 import re
 import socket
 import struct
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -39,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.live.clock import ClockSync
+from fgloc.live.worker import SensorThread
 from fgloc.types import LaserScan
 
 log = logging.getLogger(__name__)
@@ -405,7 +405,7 @@ class SickStats:
         self.malformed_by_reason[reason] = self.malformed_by_reason.get(reason, 0) + 1
 
 
-class SickClient:
+class SickClient(SensorThread):
     """Threaded CoLa-A client: connect, ``sEN LMDscandata 1``, stream, reconnect with back-off.
 
     ``on_scan(scan, arrival_host_time)`` is called from the client thread for each valid
@@ -413,6 +413,9 @@ class SickClient:
     through a :class:`ClockSync` fed with ``(time_of_transmission, arrival)`` pairs; with
     ``align_clock=False`` the stamp is ``arrival - scan_time`` (host clock only).
     """
+
+    role = "client"
+    thread_name = "sick-client"
 
     def __init__(
         self,
@@ -430,43 +433,35 @@ class SickClient:
         backoff_max_s: float = 2.0,
         on_event: Callable[[str], None] | None = None,
     ) -> None:
+        super().__init__(on_event, backoff_min_s, backoff_max_s)
         self.host, self.port = host, port
         self.on_scan = on_scan
-        self.on_event = on_event or (lambda msg: log.info("%s", msg))
         self.range_min, self.range_max = range_min, range_max
         self.angle_offset_deg = angle_offset_deg
         self.frame_id = frame_id
         self.time_increment_from = time_increment_from
         self.align_clock = align_clock
         self.stall_timeout_s = stall_timeout_s
-        self.backoff_min_s, self.backoff_max_s = backoff_min_s, backoff_max_s
         self.stats = SickStats()
         self.framer = ColaFramer()
         self.clock = ClockSync()
-        self.connected = False
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
         self._t_ext_tx = 0
         self._last_tx: int | None = None
         self._last_scan_counter: int | None = None
-        self._failure: str | None = None
 
     # -- lifecycle
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="sick-client", daemon=True)
-        self._thread.start()
+    @property
+    def label(self) -> str:
+        return f"laser {self.host}:{self.port}"
 
-    def stop(self, timeout: float = 2.0) -> None:
-        self._stop.set()
+    def before_join(self) -> None:
         sock = self._sock
         if sock is not None:
             try:
                 sock.sendall(frame("sEN LMDscandata 0"))
             except OSError:
                 pass
-        if self._thread is not None:
-            self._thread.join(timeout)
 
     # -- processing (also used directly by tests)
     def handle_payload(self, payload: bytes, arrival: float) -> LaserScan | None:
@@ -482,7 +477,7 @@ class SickClient:
         except Exception as e:  # noqa: BLE001 - one bad telegram must never stop the laser
             self.stats.count_malformed("internal_error")
             if self.stats.malformed_by_reason["internal_error"] <= 3:
-                self.on_event(f"laser {self.host}:{self.port}: telegram skipped ({type(e).__name__}: {e})")
+                self.on_event(f"{self.label}: telegram skipped ({type(e).__name__}: {e})")
             log.debug("telegram %r", payload[:80], exc_info=True)
             return None
 
@@ -524,11 +519,6 @@ class SickClient:
         self.on_scan(scan, arrival)
         return scan
 
-    @property
-    def failure(self) -> str | None:
-        """Why the client thread died (``None`` while it runs or after a clean stop)."""
-        return self._failure
-
     def counters(self) -> dict[str, Any]:
         """Every laser counter, for the status line and the summary."""
         st = self.stats
@@ -536,30 +526,18 @@ class SickClient:
             "scans": st.scans, "malformed": st.malformed, "malformed_by_reason": dict(st.malformed_by_reason),
             "garbage_bytes": self.framer.stats.garbage_bytes, "truncated": self.framer.stats.truncated,
             "connects": st.connects, "disconnects": st.disconnects, "scan_gaps": st.scan_counter_gaps,
-            "device_errors": st.device_errors, "thread_failure": self._failure,
+            "device_errors": st.device_errors, "thread_failure": self.failure,
         }
-
-    def _run(self) -> None:
-        try:
-            self.serve()
-        except BaseException as e:  # noqa: BLE001 - recorded and reported: the session must see it
-            self._failure = f"{type(e).__name__}: {e}"
-            self.connected = False
-            self.on_event(f"laser {self.host}:{self.port}: client thread died ({self._failure})")
-            log.debug("laser client thread", exc_info=True)
 
     def serve(self) -> None:
         """The client loop (connect, stream, reconnect) until :meth:`stop`; runs in the thread."""
         backoff = self.backoff_min_s
-        while not self._stop.is_set():
+        while not self.stop_event.is_set():
             try:
                 sock = socket.create_connection((self.host, self.port), timeout=1.0)
             except OSError as e:
                 self.stats.connect_failures += 1
-                if self.stats.connect_failures in (1, 10) or self.stats.connect_failures % 50 == 0:
-                    self.on_event(f"laser {self.host}:{self.port}: connect failed ({e}); retrying")
-                self._stop.wait(backoff)
-                backoff = min(backoff * 2.0, self.backoff_max_s)
+                backoff = self.retry_later(self.stats.connect_failures, f"connect failed ({e})", backoff)
                 continue
             backoff = self.backoff_min_s
             self._sock = sock
@@ -569,13 +547,13 @@ class SickClient:
             self._last_tx = None
             self._last_scan_counter = None
             self.clock.reset()  # the device may have rebooted: its clock restarts
-            self.on_event(f"laser {self.host}:{self.port}: connected")
+            self.on_event(f"{self.label}: connected")
             try:
                 sock.settimeout(0.1)
                 sock.sendall(frame("sEN LMDscandata 1"))
                 last_data = time.monotonic()
                 got_any = False
-                while not self._stop.is_set():
+                while not self.stop_event.is_set():
                     try:
                         chunk = sock.recv(65536)
                     except TimeoutError:
@@ -597,7 +575,7 @@ class SickClient:
                     pass
             except (OSError, ConnectionError) as e:
                 self.stats.disconnects += 1
-                self.on_event(f"laser {self.host}:{self.port}: connection lost ({e}); reconnecting")
+                self.on_event(f"{self.label}: connection lost ({e}); reconnecting")
             finally:
                 self.connected = False
                 self._sock = None

@@ -31,7 +31,15 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.ekf import CHI2_999, EKF, TH, EKFConfig, motion_model
-from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, LatencyEstimator, SourceHealth
+from fgloc.backends.health import (
+    ANGLE_ABSOLUTE,
+    INSTANT_RATE,
+    RATE,
+    Arbiter,
+    LatencyEstimator,
+    SourceHealth,
+    fix_speed,
+)
 from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
@@ -314,7 +322,7 @@ class EKFBackend(Backend):
         keep = []
         for pair in self._pairs:
             ta, tb, pa, pb, ca, cb = pair
-            if tb > covered:
+            if tb > covered or not self._recent_fixes or tb > self._recent_fixes[-1][0] - 0.25:
                 keep.append(pair)
                 continue
             ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
@@ -332,7 +340,10 @@ class EKFBackend(Backend):
             dist_ref = db[0] - da[0]
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + 1e-6
-            self.latency_est.add(-(db[1] - da[1]), dist_fix - dist_ref, var_d, dist_ref, 1)
+            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
+            va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
+            if tb - ta >= 0.5 and va is not None and vb is not None:  # the fixes' own speeds: immune to wheel slip
+                self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
         self._pairs = keep
 
     # ------------------------------------------------------------------ outputs

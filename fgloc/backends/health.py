@@ -38,8 +38,6 @@ import numpy as np
 
 from fgloc.geometry import wrap_scalar
 
-FloatArray3 = np.ndarray
-
 RATE, INSTANT_RATE, ABSOLUTE, ANGLE_ABSOLUTE = "rate", "instant_rate", "absolute", "angle"
 
 
@@ -393,68 +391,76 @@ class LatencyEstimator:
     and likewise the distance driven with the speeds ``v``.  Only changes of motion (a turn
     starting or ending, a start from standstill) carry information, and only increments enter,
     so a compass offset or a map bias never does.  A scale error of the reference (``beta *
-    d_ref``) is fitted alongside, so a wheel-radius error is not taken for a latency.  The
-    weighted least-squares ``delta`` is used once it is significant (``significance`` sigmas from
-    zero, with at least ``min_pairs`` pairs): an undetectable latency is taken as none rather
-    than as the noise of its estimate.
+    d_ref``) is fitted alongside, so a wheel-radius error is not taken for a latency.  The fit
+    is robust (Huber weights, iterated): wheel slip or a kidnapping makes a few pairs wrong, not
+    the lag.  The latency is used once significant (``significance`` sigmas from zero, with at
+    least ``min_pairs`` pairs): an undetectable latency is taken as none rather than as the
+    noise of its estimate.
     """
 
-    def __init__(self, min_pairs: int = 50, significance: float = 3.0, outlier: float = 5.0,
-                 var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2)) -> None:
+    def __init__(self, min_pairs: int = 50, significance: float = 3.0, huber_k: float = 2.0,
+                 var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2),
+                 max_latency_s: float = 0.3, max_rows: int = 20000, refit_every: int = 25) -> None:
         self.var_floor = (float(var_floor[0]), float(var_floor[1]))
+        self.max_latency_s = float(max_latency_s)
         self.min_pairs = int(min_pairs)
         self.significance = float(significance)
-        self.outlier = float(outlier)
-        self.N = np.zeros((3, 3))   # normal equations over [delta, beta_yaw, beta_dist] (and r.r)
-        self.b = np.zeros(3)
-        self.rr = 0.0
+        self.huber_k = float(huber_k)
+        self.refit_every = int(refit_every)
+        self.rows: deque[tuple[float, float, float, float, int]] = deque(maxlen=int(max_rows))
         self.n = 0
         self.rejected = 0
-        self._cache: tuple[int, np.ndarray, float] | None = None
-
-    def _solve(self) -> FloatArray3:
-        if self._cache is not None and self._cache[0] == self.n:
-            return self._cache[1]
-        N = self.N + np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
-        sol = np.linalg.solve(N, self.b)
-        self._cache = (self.n, sol, float(np.linalg.inv(N)[0, 0]))
-        return sol
+        self._fit: tuple[int, float, float] | None = None   # (n, delta, sigma)
 
     def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
         """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
         reference increment ``ref`` (``kind`` 0: a yaw pair, 1: a distance pair)."""
         if not (math.isfinite(x) and math.isfinite(r) and math.isfinite(var) and math.isfinite(ref)) or var <= 0:
             return
-        a = np.zeros(3)
-        a[0] = x
-        a[1 + int(kind)] = ref
         # floors: a fix's own covariance leaves out the reference's noise and the map's
         var = max(var, self.var_floor[int(kind)])
-        if self.settled():  # reject outliers only against a decided estimate (else the lag itself
-            # would look like an outlier and never be learned)
-            pred = float(a @ self._solve())
-            if abs(r - pred) > self.outlier * math.sqrt(var * max(self.scale2(), 1.0)):
-                self.rejected += 1
-                return
-        self.N += np.outer(a, a) / var
-        self.b += a * r / var
-        self.rr += r * r / var
+        # no latency up to max_latency_s (and no scale error up to 10 %) explains this pair: a
+        # kidnapping, a wrong fix; never evidence
+        if abs(r) > self.max_latency_s * abs(x) + 0.1 * abs(ref) + 5.0 * math.sqrt(var):
+            self.rejected += 1
+            return
+        self.rows.append((float(x), float(r), float(var), float(ref), int(kind)))
         self.n += 1
 
-    def scale2(self) -> float:
-        """Residual variance factor (1 when the claimed noise is right)."""
-        if self.n < 4:
-            return 1.0
-        p = self._solve()
-        return max((self.rr - float(p @ self.b)) / (self.n - 3), 1e-12)
+    def _refit(self) -> tuple[float, float]:
+        if self._fit is not None and (self.n - self._fit[0] < self.refit_every and self._fit[0] >= self.min_pairs
+                                      or self.n == self._fit[0]):
+            return self._fit[1], self._fit[2]
+        if not self.rows:
+            return 0.0, math.inf
+        a = np.asarray(self.rows, dtype=float)
+        A = np.zeros((len(a), 3))
+        A[:, 0] = a[:, 0]
+        kind = a[:, 4].astype(int)
+        A[kind == 0, 1] = a[kind == 0, 3]
+        A[kind == 1, 2] = a[kind == 1, 3]
+        y = a[:, 1]
+        s = np.sqrt(a[:, 2])
+        w = np.ones(len(a))
+        prior = np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
+        sol = np.zeros(3)
+        N = prior
+        for _ in range(6):
+            Aw = A * (w / s)[:, None]
+            yw = y * w / s
+            N = Aw.T @ Aw + prior
+            sol = np.linalg.solve(N, Aw.T @ yw)
+            z = np.abs(y - A @ sol) / s
+            w = np.sqrt(np.where(z <= self.huber_k, 1.0, self.huber_k / np.maximum(z, 1e-12)))
+        res = (y - A @ sol) / s * w
+        scale2 = max(float(res @ res) / max(len(a) - 3, 1), 1.0)
+        sig = math.sqrt(scale2 * float(np.linalg.inv(N)[0, 0])) if N[0, 0] > 1e-8 else math.inf
+        self._fit = (self.n, float(sol[0]), sig)
+        return self._fit[1], self._fit[2]
 
     def estimate(self) -> tuple[float, float]:
-        """``(delta_s, sigma_s)`` of the least-squares fit (inf sigma before any information)."""
-        if self.N[0, 0] <= 0:
-            return 0.0, math.inf
-        p = self._solve()
-        assert self._cache is not None
-        return float(p[0]), math.sqrt(max(self.scale2(), 1.0) * self._cache[2])
+        """``(delta_s, sigma_s)`` of the robust fit (inf sigma before any information)."""
+        return self._refit()
 
     def value(self) -> float:
         """The latency to correct for: the estimate once significant, else 0."""
@@ -467,3 +473,19 @@ class LatencyEstimator:
         """Enough evidence to decide (significant, or known to within ``sigma_s``)."""
         d, s = self.estimate()
         return self.n >= self.min_pairs and (abs(d) > self.significance * s or s < sigma_s)
+
+
+def fix_speed(fixes: Any, t: float, half_s: float = 0.2) -> float | None:
+    """The speed (m/s) the fixes themselves show around ``t`` (over ``t +- half_s``), or None.
+
+    A latency regressor from the fixes, not the odometry: wheel slip changes what the wheels
+    report, never how fast the fixes move."""
+    before = after = None
+    for f in fixes:
+        if f[0] <= t - half_s:
+            before = f
+        elif f[0] >= t + half_s and after is None:
+            after = f
+    if before is None or after is None or after[0] - before[0] > 4 * half_s:
+        return None
+    return float(np.hypot(after[1][0] - before[1][0], after[1][1] - before[1][1])) / (after[0] - before[0])

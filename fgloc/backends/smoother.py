@@ -56,7 +56,15 @@ from fgloc.backends.factors import (
     scaled_between_factor,
     scaled_delta,
 )
-from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, LatencyEstimator, SourceHealth
+from fgloc.backends.health import (
+    ANGLE_ABSOLUTE,
+    INSTANT_RATE,
+    RATE,
+    Arbiter,
+    LatencyEstimator,
+    SourceHealth,
+    fix_speed,
+)
 from fgloc.config.schema import setting
 from fgloc.geometry import compose1, wrap_angle, wrap_scalar
 from fgloc.geometry import exp as se2_exp
@@ -364,10 +372,11 @@ class SlidingWindowSmoother(Backend):
                 covered = min(covered, ts_[-1])
         keep = []
         odo_period = _period(self.odo_t)
+        last_fix = self._recent_fixes[-1][0] if self._recent_fixes else -np.inf
         yaw_period = _period(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
         for pair in self._fix_pairs:
             ta, tb, pa, pb, ca, cb = pair
-            if tb > covered:
+            if tb > covered or tb > last_fix - 0.25:
                 keep.append(pair)
                 continue
             wa, wb = self._twist_at(ta), self._twist_at(tb)
@@ -386,8 +395,10 @@ class SlidingWindowSmoother(Backend):
             dist_ref = float(np.hypot(d[0], d[1]))
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
-            self.latency_est.add(-(float(np.hypot(wb[0], wb[1])) - float(np.hypot(wa[0], wa[1]))),
-                                 dist_fix - dist_ref, var_d, dist_ref, 1)
+            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
+            va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
+            if tb - ta >= 0.5 and va is not None and vb is not None:
+                self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
         self._fix_pairs = keep
 
     def gains(self) -> FloatArray:

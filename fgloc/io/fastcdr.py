@@ -32,14 +32,15 @@ frame_id, NUL``):
 
 from __future__ import annotations
 
-import math
+import functools
 import struct
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
+from fgloc.io.ros import COV_IDX9, cov6_of, cov9_of, stamp_to_sec_nsec
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
 
 CDR_LE = b"\x00\x01\x00\x00"
@@ -47,28 +48,19 @@ _F7 = struct.Struct("<7f")
 _HDR = struct.Struct("<iII")
 _U32 = struct.Struct("<I")
 _D7 = struct.Struct("<7d")
-COV_IDX9 = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])  # [x, y, yaw] rows/columns of a 6x6, flattened
 
 Buffer = bytes | bytearray | memoryview
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 # --------------------------------------------------------------------------------------------
-# stamps (the same arithmetic as fgloc.io.ros, kept here so this module has no generic imports)
-def _sec_nsec(stamp: float) -> tuple[int, int]:
-    sec = math.floor(stamp)
-    nsec = round((stamp - sec) * 1e9)
-    if nsec >= 1_000_000_000:
-        sec, nsec = sec + 1, nsec - 1_000_000_000
-    return int(sec), int(nsec)
-
-
 def _pad(n: int, align: int) -> int:
     """Bytes of padding after ``n`` bytes of payload (offsets relative to the CDR header)."""
     return (-n) % align
 
 
 def _header_bytes(stamp: float, frame_id: str) -> bytes:
-    sec, nsec = _sec_nsec(stamp)
+    sec, nsec = stamp_to_sec_nsec(stamp)
     fid = frame_id.encode() + b"\x00"
     return _HDR.pack(sec, nsec, len(fid)) + fid
 
@@ -77,15 +69,6 @@ def _string_bytes(pos: int, s: str) -> bytes:
     """A CDR string starting at payload offset ``pos`` (padding to 4 included)."""
     b = s.encode() + b"\x00"
     return b"\x00" * _pad(pos, 4) + _U32.pack(len(b)) + b
-
-
-def _cov6_flat(cov3: Any, first: float | None = None) -> list[float]:
-    c6 = np.zeros(36)
-    if cov3 is not None:
-        c6[COV_IDX9] = np.asarray(cov3, dtype=float).reshape(9)
-    if first is not None:
-        c6[0] = first
-    return c6.tolist()
 
 
 def _quat(yaw: float) -> tuple[float, float, float, float]:
@@ -110,7 +93,7 @@ def encode_scan(stamp_sec: int, stamp_nsec: int, frame_id: str, floats7: tuple[f
 
 def encode_laser_scan(m: LaserScan, stamp: float) -> bytes:
     n = len(m.ranges)
-    sec, nsec = _sec_nsec(stamp)
+    sec, nsec = stamp_to_sec_nsec(stamp)
     floats = (m.angle_min, m.angle_min + m.angle_increment * max(n - 1, 0), m.angle_increment,
               m.time_increment, m.scan_time, m.range_min, m.range_max)
     return encode_scan(sec, nsec, m.frame_id, floats, m.ranges, m.intensities)
@@ -122,35 +105,27 @@ def encode_odometry(m: Odometry, stamp: float) -> bytes:
     n = len(head) + len(child)
     pose = (0.0, 0.0, 0.0) if m.pose is None else tuple(float(v) for v in m.pose)
     tw = [float(v) for v in m.twist]
-    vals = [pose[0], pose[1], 0.0, *_quat(pose[2]),
-            *_cov6_flat(m.pose_cov, -1.0 if m.pose is None else None),
-            tw[0], tw[1], 0.0, 0.0, 0.0, tw[2], *_cov6_flat(m.twist_cov)]
+    pcov = cov6_of(m.pose_cov)
+    if m.pose is None:
+        pcov[0] = -1.0
+    vals = [pose[0], pose[1], 0.0, *_quat(pose[2]), *pcov, tw[0], tw[1], 0.0, 0.0, 0.0, tw[2], *cov6_of(m.twist_cov)]
     return b"".join([CDR_LE, head, child, b"\x00" * _pad(n, 8), struct.pack("<85d", *vals)])
-
-
-def _cov9(var: float, absent: bool) -> list[float]:
-    c = [0.0] * 9
-    if absent:
-        c[0] = -1.0
-    elif not math.isnan(var):
-        c[8] = float(var)
-    return c
 
 
 def encode_compass(m: CompassHeading, stamp: float) -> bytes:
     head = _header_bytes(stamp, m.frame_id)
     vals = [*_quat(0.0 if m.yaw_rad is None else float(m.yaw_rad)),
-            *_cov9(m.yaw_var, m.yaw_rad is None),
+            *cov9_of(m.yaw_var, m.yaw_rad is None),
             0.0, 0.0, 0.0 if m.yaw_rate_radps is None else float(m.yaw_rate_radps),
-            *_cov9(m.yaw_rate_var, m.yaw_rate_radps is None),
-            0.0, 0.0, 0.0, *_cov9(float("nan"), True)]
+            *cov9_of(m.yaw_rate_var, m.yaw_rate_radps is None),
+            0.0, 0.0, 0.0, *cov9_of(float("nan"), True)]
     return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<37d", *vals)])
 
 
 def encode_pose_fix(m: PoseFix, stamp: float) -> bytes:
     head = _header_bytes(stamp, m.frame_id)
     p = [float(v) for v in m.pose]
-    vals = [p[0], p[1], 0.0, *_quat(p[2]), *_cov6_flat(m.cov)]
+    vals = [p[0], p[1], 0.0, *_quat(p[2]), *cov6_of(m.cov)]
     return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<43d", *vals)])
 
 
@@ -329,17 +304,23 @@ def _columns(datas: Sequence[Buffer], strings: int, n_doubles: int
     return idx, text_l, np.concatenate(stamps), np.concatenate(vals)
 
 
+def _damaged_values_as_generic(decode: F) -> F:
+    """Overflow / invalid values in damaged messages decode to inf / nan silently, as the generic codec."""
+    @functools.wraps(decode)
+    def quiet(*args: Any, **kwargs: Any) -> Any:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return decode(*args, **kwargs)
+
+    return quiet  # type: ignore[return-value]
+
+
 def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(k, 3, 3)`` covariances and whether each 6x6 is all zero ("unknown")."""
     return c36[:, COV_IDX9].reshape(-1, 3, 3), ~np.any(c36 != 0.0, axis=1)
 
 
+@_damaged_values_as_generic
 def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
-    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
-        return _decode_odometries(datas)
-
-
-def _decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     out: list[Odometry | None] = [None] * len(datas)
     cols = _columns(datas, 2, 85)
     if cols is None:
@@ -361,12 +342,8 @@ def _decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     return out
 
 
+@_damaged_values_as_generic
 def decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
-    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
-        return _decode_compasses(datas)
-
-
-def _decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
     out: list[CompassHeading | None] = [None] * len(datas)
     cols = _columns(datas, 1, 37)
     if cols is None:
@@ -388,12 +365,8 @@ def _decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
     return out
 
 
+@_damaged_values_as_generic
 def decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
-    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
-        return _decode_pose_fixes(datas, topic)
-
-
-def _decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
     out: list[PoseFix | None] = [None] * len(datas)
     cols = _columns(datas, 1, 43)
     if cols is None:
@@ -434,12 +407,8 @@ def _tf_layout(data: Buffer) -> list[tuple[str, str, int]] | None:
     return out
 
 
+@_damaged_values_as_generic
 def decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransform], list[bool]] | None]:
-    with np.errstate(over="ignore", invalid="ignore"):  # damaged values: inf / nan as the generic codec
-        return _decode_tf_messages(datas)
-
-
-def _decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransform], list[bool]] | None]:
     """Per message: ``(transforms, upside-down flags)`` (see :func:`fgloc.io.ros.tf_flips`)."""
     out: list[tuple[list[StaticTransform], list[bool]] | None] = [None] * len(datas)
     lays: list[tuple[int, list[tuple[str, str, int]]]] = []

@@ -33,6 +33,7 @@ from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESS
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
 
 COV_IDX = (0, 1, 5)  # x, y, yaw (or vx, vy, wz) inside a ROS 6x6 covariance
+COV_IDX9 = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])  # the same rows/columns of the 6x6, flattened
 
 
 # stamps
@@ -71,10 +72,10 @@ def yaw_quaternion(yaw: float) -> dict:
 
 
 def cov6_of(cov3: np.ndarray | None) -> list[float]:
-    c6 = np.zeros((6, 6))
+    c6 = np.zeros(36)
     if cov3 is not None:
-        c6[np.ix_(COV_IDX, COV_IDX)] = np.asarray(cov3, dtype=float).reshape(3, 3)
-    return [float(v) for v in c6.ravel()]
+        c6[COV_IDX9] = np.asarray(cov3, dtype=float).reshape(9)
+    return c6.tolist()  # type: ignore[no-any-return]
 
 
 def cov3_of(cov36: Any) -> np.ndarray | None:

@@ -40,3 +40,11 @@ def test_help_prints_and_exits_0(path, capsys):
 def test_exit_code_of_a_command_reaches_the_shell():
     # typer.Exit(code) inside a command must not be turned into 0
     assert main(["run", "does-not-exist.mcap"]) == 2
+
+
+def test_simulate_scenario_by_shipped_name(tmp_path, capsys):
+    assert main(["simulate", "scenario", "no_such_scenario", "-o", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "wheel_slip" in err
+    assert main(["simulate", "list"]) == 0
+    assert "kidnap" in capsys.readouterr().out.split()

@@ -72,14 +72,40 @@ def paper(
 
 @simulate_app.command("scenario")
 def scenario(
-    file: Path = typer.Argument(..., help="scenario YAML (shipped: fgloc/config/scenarios/)"),
+    file: str = typer.Argument(..., help="a scenario YAML file, or the name of a shipped one "
+                               "(paper, wheel_slip, compass_disturbance, kidnap, blackout, obstacles, willow, "
+                               "skid_steer, ...: `fgloc simulate list`)"),
     out: Path = typer.Option(..., "-o", "--out", help="output folder"),
     seed: int = typer.Option(0, help="random seed"),
 ) -> None:
     """A YAML scenario: map, route, drive, noise and faults."""
     from fgloc.sim import run_scenario
 
-    _simulate_and_write(lambda cb: run_scenario(file, seed=seed, progress=cb), str(file), out)
+    path = _scenario_file(file)
+    _simulate_and_write(lambda cb: run_scenario(path, seed=seed, progress=cb), file, out)
+
+
+def _scenario_file(name_or_path: str) -> str:
+    """A path as given, or the shipped scenario of that name; one-line error listing the names otherwise."""
+    from fgloc.config import scenario_names, scenario_path
+    from fgloc.errors import ConfigError
+
+    if Path(name_or_path).exists():
+        return name_or_path
+    names = scenario_names()
+    if name_or_path in names:
+        return str(scenario_path(name_or_path))
+    raise ConfigError(f"{name_or_path}: no such scenario file, and no shipped scenario of that name "
+                      f"(shipped: {', '.join(names)})")
+
+
+@simulate_app.command("list")
+def list_scenarios() -> None:
+    """The shipped scenarios (use a name with `fgloc simulate scenario NAME -o DIR`)."""
+    from fgloc.config import scenario_names
+
+    for name in scenario_names():
+        print(name)
 
 
 def register(app: typer.Typer) -> None:

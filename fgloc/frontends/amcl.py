@@ -490,94 +490,60 @@ class AMCL:
     ) -> None:
         conf = with_overrides(AMCLConfig, config, overrides)
         self.config = conf
-        robot_model_type = conf.robot_model_type
-        alpha1 = conf.alpha1
-        alpha2 = conf.alpha2
-        alpha3 = conf.alpha3
-        alpha4 = conf.alpha4
-        alpha5 = conf.alpha5
-        laser_model_type = conf.laser_model_type
-        z_hit = conf.z_hit
-        z_rand = conf.z_rand
-        sigma_hit = conf.sigma_hit
-        laser_max_beams = conf.laser_max_beams
-        laser_likelihood_max_dist = conf.laser_likelihood_max_dist
-        laser_max_range = conf.laser_max_range
-        beam_correlation = conf.beam_correlation
-        field_walls = conf.field_walls
-        min_particles = conf.min_particles
-        max_particles = conf.max_particles
-        global_particles = conf.global_particles
-        global_sigma_hit = conf.global_sigma_hit
-        pf_err = conf.pf_err
-        pf_z = conf.pf_z
-        kld_bin_xy = conf.kld_bin_xy
-        kld_bin_yaw_deg = conf.kld_bin_yaw_deg
-        resample_interval = conf.resample_interval
-        recovery_alpha_slow = conf.recovery_alpha_slow
-        recovery_alpha_fast = conf.recovery_alpha_fast
-        update_min_d = conf.update_min_d
-        update_min_a = conf.update_min_a
-        init_cov = conf.init_cov
-        fix_without_update = conf.fix_without_update
-        cov_scale = conf.cov_scale
-        cov_floor = conf.cov_floor
-        min_valid_beams = conf.min_valid_beams
-        deskew = conf.deskew
-        seed = conf.seed
-        if robot_model_type not in ("differential", "omni"):
-            raise ConfigError(f"amcl: robot_model_type must be differential or omni, got {robot_model_type!r}")
-        if laser_model_type not in ("likelihood_field", "likelihood_field_prob"):
+        if conf.robot_model_type not in ("differential", "omni"):
+            raise ConfigError(f"amcl: robot_model_type must be differential or omni, got {conf.robot_model_type!r}")
+        if conf.laser_model_type not in ("likelihood_field", "likelihood_field_prob"):
             raise ConfigError(f"amcl: laser_model_type must be likelihood_field or likelihood_field_prob, "
-                              f"got {laser_model_type!r}")
-        if not (0 < min_particles <= max_particles) or global_particles < 1:
+                              f"got {conf.laser_model_type!r}")
+        if not (0 < conf.min_particles <= conf.max_particles) or conf.global_particles < 1:
             raise ConfigError(f"amcl: need 0 < min_particles <= max_particles and global_particles > 0, got "
-                              f"{min_particles}, {max_particles}, {global_particles}")
-        if min(sigma_hit, global_sigma_hit, beam_correlation) <= 0 or min(laser_max_beams, resample_interval) < 1:
+                              f"{conf.min_particles}, {conf.max_particles}, {conf.global_particles}")
+        if min(conf.sigma_hit, conf.global_sigma_hit, conf.beam_correlation) <= 0 \
+                or min(conf.laser_max_beams, conf.resample_interval) < 1:
             raise ConfigError("amcl: sigma_hit, global_sigma_hit, beam_correlation > 0, laser_max_beams >= 1, "
                               "resample_interval >= 1 required")
-        if pf_err <= 0 or kld_bin_xy <= 0 or kld_bin_yaw_deg <= 0:
+        if conf.pf_err <= 0 or conf.kld_bin_xy <= 0 or conf.kld_bin_yaw_deg <= 0:
             raise ConfigError("amcl: pf_err, kld_bin_xy and kld_bin_yaw_deg must be positive")
         self.map = occ_map
         self.laser_mount = laser_mount
-        self.robot_model_type = robot_model_type
-        self.alphas = np.array([alpha1, alpha2, alpha3, alpha4, alpha5], dtype=float)
-        self.laser_model_type = laser_model_type
-        self.z_hit, self.z_rand, self.sigma_hit = float(z_hit), float(z_rand), float(sigma_hit)
-        self.laser_max_beams = int(laser_max_beams)
-        self.max_dist = float(laser_likelihood_max_dist)
-        self.laser_max_range = float(laser_max_range)
-        self.beam_correlation = float(beam_correlation)
-        self.min_particles, self.max_particles = int(min_particles), int(max_particles)
-        self.global_particles = int(global_particles)
-        self.global_sigma_hit = float(global_sigma_hit)
-        self.pf_err, self.pf_z = float(pf_err), float(pf_z)
-        self.kld_bin = np.array([kld_bin_xy, kld_bin_xy, np.radians(kld_bin_yaw_deg)], dtype=float)
-        self.resample_interval = int(resample_interval)
-        self.alpha_slow, self.alpha_fast = float(recovery_alpha_slow), float(recovery_alpha_fast)
-        self.update_min_d, self.update_min_a = float(update_min_d), float(update_min_a)
-        self.init_cov = np.diag(np.asarray(init_cov, dtype=float).reshape(3))
+        self.robot_model_type = conf.robot_model_type
+        self.alphas = np.array([conf.alpha1, conf.alpha2, conf.alpha3, conf.alpha4, conf.alpha5], dtype=float)
+        self.laser_model_type = conf.laser_model_type
+        self.z_hit, self.z_rand, self.sigma_hit = float(conf.z_hit), float(conf.z_rand), float(conf.sigma_hit)
+        self.laser_max_beams = int(conf.laser_max_beams)
+        self.max_dist = float(conf.laser_likelihood_max_dist)
+        self.laser_max_range = float(conf.laser_max_range)
+        self.beam_correlation = float(conf.beam_correlation)
+        self.min_particles, self.max_particles = int(conf.min_particles), int(conf.max_particles)
+        self.global_particles = int(conf.global_particles)
+        self.global_sigma_hit = float(conf.global_sigma_hit)
+        self.pf_err, self.pf_z = float(conf.pf_err), float(conf.pf_z)
+        self.kld_bin = np.array([conf.kld_bin_xy, conf.kld_bin_xy, np.radians(conf.kld_bin_yaw_deg)], dtype=float)
+        self.resample_interval = int(conf.resample_interval)
+        self.alpha_slow, self.alpha_fast = float(conf.recovery_alpha_slow), float(conf.recovery_alpha_fast)
+        self.update_min_d, self.update_min_a = float(conf.update_min_d), float(conf.update_min_a)
+        self.init_cov = np.diag(np.asarray(conf.init_cov, dtype=float).reshape(3))
         self.converged_cluster_weight = float(conf.converged_cluster_weight)
         self.estimate = conf.estimate
         self._n_yaw_bins = max(int(math.ceil(2.0 * math.pi / self.kld_bin[2] - 1e-9)), 1)
-        self.fix_without_update = bool(fix_without_update)
-        self.cov_scale = float(cov_scale)
-        self.cov_floor = np.diag(np.asarray(cov_floor, dtype=float).reshape(3))
-        self.rng = np.random.default_rng(seed)
+        self.fix_without_update = bool(conf.fix_without_update)
+        self.cov_scale = float(conf.cov_scale)
+        self.cov_floor = np.diag(np.asarray(conf.cov_floor, dtype=float).reshape(3))
+        self.rng = np.random.default_rng(conf.seed)
         self.pre = ScanPreprocessor(
-            laser_mount, PreprocessOptions(max_beams=self.laser_max_beams, deskew=bool(deskew),
-                                           min_valid_beams=int(min_valid_beams)))
+            laser_mount, PreprocessOptions(max_beams=self.laser_max_beams, deskew=bool(conf.deskew),
+                                           min_valid_beams=int(conf.min_valid_beams)))
         # likelihood field: distance to the wall surface (half a cell short of the occupied centre)
-        if field_walls == "occupied":
+        if conf.field_walls == "occupied":
             df = np.asarray(occ_map.distance_field, dtype=float)
-        elif field_walls == "occupied+unknown_edge":
+        elif conf.field_walls == "occupied+unknown_edge":
             from scipy.ndimage import binary_dilation, distance_transform_edt
 
             walls = occ_map.occupied | (occ_map.unknown & binary_dilation(occ_map.free, np.ones((3, 3), bool)))
             df = distance_transform_edt(~walls) * occ_map.resolution if walls.any() else \
                 np.full(walls.shape, np.inf)
         else:
-            raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {field_walls!r}")
+            raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {conf.field_walls!r}")
         self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
         self._free = occ_map.free_cell_centers()
         self._table_key: tuple[int, float, float] | None = None

@@ -148,28 +148,7 @@ class KissMatcher(FrontendBase):
     ):
         conf = with_overrides(KissConfig, config, overrides)
         self.config = conf
-        preprocess = conf.preprocess
-        samples_per_face = conf.samples_per_face
-        surface_depth_cells = conf.surface_depth_cells
-        coarse_voxel_size_m = conf.coarse_voxel_size_m
-        coarse_max_points_per_voxel = conf.coarse_max_points_per_voxel
-        coarse_max_correspondence_m = conf.coarse_max_correspondence_m
-        coarse_kernel_m = conf.coarse_kernel_m
-        coarse_max_iterations = conf.coarse_max_iterations
-        coarse_convergence_criterion = conf.coarse_convergence_criterion
-        voxel_size_m = conf.voxel_size_m
-        max_points_per_voxel = conf.max_points_per_voxel
-        max_correspondence_m = conf.max_correspondence_m
-        kernel_m = conf.kernel_m
-        max_iterations = conf.max_iterations
-        convergence_criterion = conf.convergence_criterion
-        max_threads = conf.max_threads
-        max_backface_fraction = conf.max_backface_fraction
-        retry_backface_fraction = conf.retry_backface_fraction
-        retry_inlier_fraction = conf.retry_inlier_fraction
-        retry_offset_m = conf.retry_offset_m
-        retry_offset_deg = conf.retry_offset_deg
-        super().__init__(occ_map, laser_mount, preprocess)
+        super().__init__(occ_map, laser_mount, conf.preprocess)
         try:
             from kiss_icp.mapping import VoxelHashMap
             from kiss_icp.registration import Registration
@@ -177,35 +156,36 @@ class KissMatcher(FrontendBase):
             raise ConfigError(f"front-end 'kiss' needs kiss-icp ({e})") from None
         from scipy.spatial import cKDTree
 
-        pts2, self.map_normals = surface_points(occ_map, samples_per_face, surface_depth_cells)
+        pts2, self.map_normals = surface_points(occ_map, conf.samples_per_face, conf.surface_depth_cells)
         if len(pts2) == 0:
             raise ConfigError("front-end 'kiss': the map has no occupied cell bordering free space")
         pts3 = np.column_stack([pts2, np.zeros(len(pts2))])
         big = 1e9  # static map: never drop points for distance
-        self.coarse_map = VoxelHashMap(float(coarse_voxel_size_m), big, int(coarse_max_points_per_voxel))
+        self.coarse_map = VoxelHashMap(float(conf.coarse_voxel_size_m), big, int(conf.coarse_max_points_per_voxel))
         self.coarse_map.add_points(pts3)
-        self.fine_map = VoxelHashMap(float(voxel_size_m), big, int(max_points_per_voxel))
+        self.fine_map = VoxelHashMap(float(conf.voxel_size_m), big, int(conf.max_points_per_voxel))
         self.fine_map.add_points(pts3)
         self.map_points = pts2
         self.tree = cKDTree(pts2)
         self._voxel_map_cls = VoxelHashMap
         self._map_args = (
-            (float(coarse_voxel_size_m), big, int(coarse_max_points_per_voxel)),
-            (float(voxel_size_m), big, int(max_points_per_voxel)),
+            (float(conf.coarse_voxel_size_m), big, int(conf.coarse_max_points_per_voxel)),
+            (float(conf.voxel_size_m), big, int(conf.max_points_per_voxel)),
         )
-        self.max_backface_fraction = float(max_backface_fraction)
-        self.retry_backface_fraction = float(retry_backface_fraction)
-        self.retry_fraction = float(retry_inlier_fraction)
-        dm, da = float(retry_offset_m), math.radians(float(retry_offset_deg))
+        self.max_backface_fraction = float(conf.max_backface_fraction)
+        self.retry_backface_fraction = float(conf.retry_backface_fraction)
+        self.retry_fraction = float(conf.retry_inlier_fraction)
+        dm, da = float(conf.retry_offset_m), math.radians(float(conf.retry_offset_deg))
         self.retry_offsets = [np.array(v) for v in (
             (0.0, 0.0, da), (0.0, 0.0, -da), (dm, 0.0, 0.0), (-dm, 0.0, 0.0), (0.0, dm, 0.0), (0.0, -dm, 0.0))]
-        self.registration = Registration(int(max_iterations), float(convergence_criterion), int(max_threads))
-        self.coarse_registration = Registration(int(coarse_max_iterations), float(coarse_convergence_criterion),
-                                                int(max_threads))
-        self.coarse_corr = float(coarse_max_correspondence_m)
-        self.coarse_kernel = float(coarse_kernel_m)
-        self.max_corr = float(max_correspondence_m)
-        self.kernel = float(kernel_m)
+        self.registration = Registration(int(conf.max_iterations), float(conf.convergence_criterion),
+                                         int(conf.max_threads))
+        self.coarse_registration = Registration(int(conf.coarse_max_iterations),
+                                                float(conf.coarse_convergence_criterion), int(conf.max_threads))
+        self.coarse_corr = float(conf.coarse_max_correspondence_m)
+        self.coarse_kernel = float(conf.coarse_kernel_m)
+        self.max_corr = float(conf.max_correspondence_m)
+        self.kernel = float(conf.kernel_m)
         self.accept = FixAcceptance(self.name, conf)
 
     def _register(self, pts3: FloatArray, guess: FloatArray, coarse: Any, fine: Any) -> FloatArray | None:

@@ -565,64 +565,43 @@ class NativeMatcher(FrontendBase):
     ):
         conf = with_overrides(NativeConfig, config, overrides)
         self.config = conf
-        preprocess = conf.preprocess
-        field_upsample = conf.field_upsample
-        surface_depth_cells = conf.surface_depth_cells
-        field_max_dist_m = conf.field_max_dist_m
-        loss = conf.loss
-        kernel_schedule_m = conf.kernel_schedule_m
-        outlier_schedule_m = conf.outlier_schedule_m
-        max_iterations = conf.max_iterations
-        tolerance = conf.tolerance
-        search = conf.search
-        search_trigger_inlier_fraction = conf.search_trigger_inlier_fraction
-        search_window_m = conf.search_window_m
-        search_window_deg = conf.search_window_deg
-        search_lin_step_m = conf.search_lin_step_m
-        search_ang_step_deg = conf.search_ang_step_deg
-        search_sigma_m = conf.search_sigma_m
-        search_max_points = conf.search_max_points
-        search_candidates = conf.search_candidates
-        backface_cos = conf.backface_cos
-        depth_window = conf.depth_window
-        depth_min_quality = conf.depth_min_quality
-        super().__init__(occ_map, laser_mount, preprocess)
-        if loss not in ("huber", "cauchy"):
-            raise ConfigError(f"frontends config [native]: loss must be huber or cauchy, got {loss!r}")
-        if search not in ("auto", "always", "never"):
-            raise ConfigError(f"frontends config [native]: search must be auto, always or never, got {search!r}")
-        if len(kernel_schedule_m) == 0 or len(kernel_schedule_m) != len(outlier_schedule_m):
+        super().__init__(occ_map, laser_mount, conf.preprocess)
+        if conf.loss not in ("huber", "cauchy"):
+            raise ConfigError(f"frontends config [native]: loss must be huber or cauchy, got {conf.loss!r}")
+        if conf.search not in ("auto", "always", "never"):
+            raise ConfigError(f"frontends config [native]: search must be auto, always or never, got {conf.search!r}")
+        if len(conf.kernel_schedule_m) == 0 or len(conf.kernel_schedule_m) != len(conf.outlier_schedule_m):
             raise ConfigError(
                 "frontends config [native]: kernel_schedule_m and outlier_schedule_m need equal, >0 lengths"
             )
-        self.loss = LOSS_HUBER if loss == "huber" else LOSS_CAUCHY
-        self.scales = np.asarray(kernel_schedule_m, dtype=float)
-        self.outliers = np.asarray(outlier_schedule_m, dtype=float)
-        self.max_iterations = int(max_iterations)
-        self.tolerance = float(tolerance)
+        self.loss = LOSS_HUBER if conf.loss == "huber" else LOSS_CAUCHY
+        self.scales = np.asarray(conf.kernel_schedule_m, dtype=float)
+        self.outliers = np.asarray(conf.outlier_schedule_m, dtype=float)
+        self.max_iterations = int(conf.max_iterations)
+        self.tolerance = float(conf.tolerance)
         self.accept = FixAcceptance(self.name, conf)
-        self.search = search
-        self.search_trigger = float(search_trigger_inlier_fraction)
-        self.search_window_m = float(search_window_m)
-        self.search_window = math.radians(search_window_deg)
-        self.search_lin_step = float(search_lin_step_m)
-        self.search_ang_step = math.radians(search_ang_step_deg)
-        self.search_max_points = int(search_max_points)
-        self.search_candidates = max(int(search_candidates), 1)
-        self.far = float(field_max_dist_m)
-        self.depth_min_quality = float(depth_min_quality)
-        self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(backface_cos))
+        self.search = conf.search
+        self.search_trigger = float(conf.search_trigger_inlier_fraction)
+        self.search_window_m = float(conf.search_window_m)
+        self.search_window = math.radians(conf.search_window_deg)
+        self.search_lin_step = float(conf.search_lin_step_m)
+        self.search_ang_step = math.radians(conf.search_ang_step_deg)
+        self.search_max_points = int(conf.search_max_points)
+        self.search_candidates = max(int(conf.search_candidates), 1)
+        self.far = float(conf.field_max_dist_m)
+        self.depth_min_quality = float(conf.depth_min_quality)
+        self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(conf.backface_cos))
 
-        k = max(int(field_upsample), 1)
+        k = max(int(conf.field_upsample), 1)
         # the field is zero on the faces; the surface depth is added per residual (adaptive in auto mode)
-        self.auto_depth = isinstance(surface_depth_cells, str)
-        if self.auto_depth and surface_depth_cells != "auto":
+        self.auto_depth = isinstance(conf.surface_depth_cells, str)
+        if self.auto_depth and conf.surface_depth_cells != "auto":
             raise ConfigError(f"frontends config [native]: surface_depth_cells must be a number or auto, "
-                              f"got {surface_depth_cells!r}")
-        depth = 0.5 * occ_map.resolution if self.auto_depth else float(surface_depth_cells) * occ_map.resolution
+                              f"got {conf.surface_depth_cells!r}")
+        depth = 0.5 * occ_map.resolution if self.auto_depth else float(conf.surface_depth_cells) * occ_map.resolution
         self.depth_m = depth
         self._depth_updates = 0
-        self.depth_window = int(depth_window)
+        self.depth_window = int(conf.depth_window)
         self.field = np.ascontiguousarray(surface_distance_field(occ_map, k, self.far, 0.0), dtype=np.float64)
         # map-frame point -> fine-grid continuous coordinate with cell centres at integers
         c, s = math.cos(occ_map.origin[2]), math.sin(occ_map.origin[2])
@@ -630,8 +609,8 @@ class NativeMatcher(FrontendBase):
         self.A = np.array([[c, s], [-s, c]]) * scale
         self.b = -self.A @ occ_map.origin[:2] - 0.5
         # coarse likelihood field at map resolution for the correlative search
-        dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * search_sigma_m + occ_map.resolution, depth))
-        self.lik = np.ascontiguousarray(np.exp(-0.5 * (dfc / float(search_sigma_m)) ** 2))
+        dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * conf.search_sigma_m + occ_map.resolution, depth))
+        self.lik = np.ascontiguousarray(np.exp(-0.5 * (dfc / float(conf.search_sigma_m)) ** 2))
         self.Ac = np.array([[c, s], [-s, c]]) / occ_map.resolution
         self.bc = -self.Ac @ occ_map.origin[:2] - 0.5
 

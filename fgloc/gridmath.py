@@ -14,6 +14,9 @@
   ``|(dx, dy)|``: cells for a unit direction, the fraction of the segment for
   ``(dx, dy) = end - start``).
 * :func:`raycast_grid`: the range to the first blocked cell for many rays.
+* :func:`run_step`: counts the "runs" of a scan's endpoints (neighbours closer than
+  ``RUN_GAP_M``, at most ``RUN_LENGTH_M`` long: one stretch of wall whose map error all its
+  beams share), for the matchers' covariances.
 
 All functions are numba ``njit(cache=True)`` and are meant to be called from other
 compiled kernels (numba inlines them); they are also callable from Python.
@@ -23,6 +26,8 @@ files (or touch the callers) before measuring.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -34,23 +39,37 @@ except ImportError:  # pragma: no cover
             return f
         return deco if not (args and callable(args[0])) else args[0]
 
-__all__ = ["bilinear", "bilinear_grad", "bilinear_grad_world", "dda_init", "dda_next", "raycast_grid"]
+__all__ = ["RUN_GAP_M", "RUN_LENGTH_M", "bilinear", "bilinear_grad", "bilinear_grad_world", "dda_init", "dda_next",
+           "raycast_grid", "run_step"]
+
+#: endpoints closer than RUN_GAP_M in scan order, over at most RUN_LENGTH_M, form one "run": a
+#: stretch of one wall whose map error (raster, wall thickness) all its beams share
+RUN_GAP_M = 0.3
+RUN_LENGTH_M = 1.0
 
 
-@njit(cache=True, fastmath=True)
-def bilinear(field, u, v, outside):  # pragma: no cover - compiled
-    """Bilinear value of ``field`` at continuous ``(u, v) = (col, row)``, samples at integers."""
-    h, w = field.shape
+@njit(cache=True, inline="always")
+def _cell(h, w, u, v):  # pragma: no cover - compiled
+    """The grid cell holding ``(u, v) = (col, row)`` (samples at integers): its lower-left sample
+    ``(x0, y0)`` and the fractions ``(fx, fy)`` in it; ``x0 = -1`` outside ``[0, w-1] x [0, h-1]``."""
     if not (u >= 0.0 and v >= 0.0 and u <= w - 1.0 and v <= h - 1.0):
-        return outside
+        return -1, -1, 0.0, 0.0
     x0 = int(u)
     y0 = int(v)
     if x0 > w - 2:
         x0 = w - 2
     if y0 > h - 2:
         y0 = h - 2
-    fx = u - x0
-    fy = v - y0
+    return x0, y0, u - x0, v - y0
+
+
+@njit(cache=True, fastmath=True)
+def bilinear(field, u, v, outside):  # pragma: no cover - compiled
+    """Bilinear value of ``field`` at continuous ``(u, v) = (col, row)``, samples at integers."""
+    h, w = field.shape
+    x0, y0, fx, fy = _cell(h, w, u, v)
+    if x0 < 0:
+        return outside
     a = field[y0, x0] + fx * (field[y0, x0 + 1] - field[y0, x0])
     c = field[y0 + 1, x0] + fx * (field[y0 + 1, x0 + 1] - field[y0 + 1, x0])
     return a + fy * (c - a)
@@ -60,16 +79,9 @@ def bilinear(field, u, v, outside):  # pragma: no cover - compiled
 def bilinear_grad(field, u, v, outside):  # pragma: no cover - compiled
     """Bilinear value and ``(d/du, d/dv)`` of ``field`` at ``(u, v) = (col, row)``; ``(outside, 0, 0)`` off it."""
     h, w = field.shape
-    if not (u >= 0.0 and v >= 0.0 and u <= w - 1.0 and v <= h - 1.0):
+    x0, y0, fx, fy = _cell(h, w, u, v)
+    if x0 < 0:
         return outside, 0.0, 0.0
-    x0 = int(u)
-    y0 = int(v)
-    if x0 > w - 2:
-        x0 = w - 2
-    if y0 > h - 2:
-        y0 = h - 2
-    fx = u - x0
-    fy = v - y0
     d00 = field[y0, x0]
     d10 = field[y0, x0 + 1]
     d01 = field[y0 + 1, x0]
@@ -155,3 +167,14 @@ def raycast_grid(blocked, gx, gy, dx, dy, max_cells):  # pragma: no cover - comp
                 out[k] = t
                 break
     return out
+
+
+@njit(cache=True, inline="always")
+def run_step(x, y, last_x, last_y, run_len):  # pragma: no cover - compiled
+    """The next endpoint ``(x, y)`` of a scan after ``(last_x, last_y)`` in a run ``run_len`` long:
+    ``(1, 0.0)`` when it starts a new run (farther than ``RUN_GAP_M``, or the run would exceed
+    ``RUN_LENGTH_M``), else ``(0, the run's new length)``.  Start with ``last_x = last_y = 1e300``."""
+    step = math.hypot(x - last_x, y - last_y)
+    if step > RUN_GAP_M or run_len + step > RUN_LENGTH_M:
+        return 1, 0.0
+    return 0, run_len + step

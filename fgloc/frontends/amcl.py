@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import wrap_angle
-from fgloc.gridmath import bilinear, bilinear_grad
+from fgloc.gridmath import bilinear, bilinear_grad, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -255,12 +255,6 @@ def _clusters(keys, weights, n_yaw):  # pragma: no cover - compiled
     return labels, wsum
 
 
-#: endpoints closer than RUN_GAP_M in scan order, over at most RUN_LENGTH_M, form one "run": a
-#: stretch of one wall whose map error (raster, wall thickness) all its beams share
-RUN_GAP_M = 0.3
-RUN_LENGTH_M = 1.0
-
-
 @njit(cache=True, fastmath=True)
 def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mult, sigma, model,
                    max_iter):  # pragma: no cover - compiled
@@ -316,12 +310,8 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
             wr2 += w * z * z
             sw += w
             # runs of neighbouring endpoints (one wall stretch <= RUN_LENGTH_M): their map errors are shared
-            step = math.hypot(bx[j] - lastx, by[j] - lasty)
-            if step > RUN_GAP_M or run_len + step > RUN_LENGTH_M:
-                n_runs += 1
-                run_len = 0.0
-            else:
-                run_len += step
+            new_run, run_len = run_step(bx[j], by[j], lastx, lasty, run_len)
+            n_runs += new_run
             lastx = bx[j]
             lasty = by[j]
             H[0, 0] += wx * gx

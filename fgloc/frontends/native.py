@@ -21,7 +21,7 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    covariance ``s^2 (J^T W J)^-1`` assumes independent beams; but the beams that hit one
    stretch of wall share that stretch's map error (raster, wall thickness, a wall that
    moved), so the independent units are *runs*: the used points in scan order, cut where
-   neighbours are more than ``RUN_GAP_M`` apart or a run exceeds ``RUN_LENGTH_M``; the
+   neighbours are more than ``gridmath.RUN_GAP_M`` apart or a run exceeds ``RUN_LENGTH_M``; the
    variance is multiplied by the beams per run.  No constant is fitted: NEES 2.6 on the
    simulated paper run (was 2.7 with per-axis factors 5.3 / 9.5 calibrated on it).
    ``spread``: refined candidates of the correlative search that explain the scan nearly
@@ -54,7 +54,7 @@ import numpy as np
 from fgloc.config.schema import section, setting, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, wrap_scalar
-from fgloc.gridmath import bilinear_grad
+from fgloc.gridmath import bilinear_grad, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -78,9 +78,6 @@ except ImportError:  # pragma: no cover - numba is a declared dependency
 LOSS_HUBER = 0
 LOSS_CAUCHY = 1
 
-#: runs of neighbouring scan points (see :func:`_stats`): the unit of independent map error
-RUN_GAP_M = 0.3
-RUN_LENGTH_M = 1.0
 #: aliases (corridors with doors at regular spacing, shelf rows) are looked for this far along
 #: the fix's least constrained direction, in steps of ALIAS_STEP_M; local maxima of the
 #: likelihood-field score reaching ALIAS_SCORE_RATIO of the fix's are refined as candidates
@@ -278,7 +275,7 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     """Final H (J^T W J), sum w r^2, sum w, inliers, used points, sum of inlier residuals, runs.
 
     Runs: the used points taken in scan order, cut where two neighbours are more than
-    ``RUN_GAP_M`` apart or a run would exceed ``RUN_LENGTH_M``: stretches of one wall whose
+    ``gridmath.RUN_GAP_M`` apart or a run would exceed ``RUN_LENGTH_M``: stretches of one wall whose
     map error (raster, thickness, a wall drawn where it is not) all their beams share.
     """
     H = np.zeros((3, 3))
@@ -304,12 +301,8 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
         if w == 0.0:
             continue
         n_used += 1
-        step = math.hypot(px[k] - lastx, py[k] - lasty)
-        if step > RUN_GAP_M or run_len + step > RUN_LENGTH_M:
-            n_runs += 1
-            run_len = 0.0
-        else:
-            run_len += step
+        new_run, run_len = run_step(px[k], py[k], lastx, lasty, run_len)
+        n_runs += new_run
         lastx = px[k]
         lasty = py[k]
         j0 = gx

@@ -322,6 +322,22 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     return H, wr2, sw, n_in, n_used, sr, n_runs
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _likelihood_sum(lik, A, b, tx, ty, rx, ry, m):  # pragma: no cover - compiled
+    """Sum of the likelihood grid's cells (nearest) under the map-frame points ``(tx + rx[k], ty + ry[k])``,
+    ``k < m``; ``A``, ``b``: map frame -> grid coordinates; a point off the grid adds 0."""
+    h, w = lik.shape
+    acc = 0.0
+    for k in range(m):
+        qx = tx + rx[k]
+        qy = ty + ry[k]
+        u = A[0, 0] * qx + A[0, 1] * qy + b[0] + 0.5
+        v = A[1, 0] * qx + A[1, 1] * qy + b[1] + 0.5
+        if u >= 0.0 and v >= 0.0 and u < w and v < h:
+            acc += lik[int(v), int(u)]
+    return acc
+
+
 @njit(cache=True, fastmath=True)
 def _alias_starts(lik, A, b, px, py, stride, pose, c00, c01, c11, step, n, ratio):  # pragma: no cover
     """Start poses at the (at most 2 best) other local maxima of the likelihood-field score along
@@ -344,7 +360,6 @@ def _alias_starts(lik, A, b, px, py, stride, pose, c00, c01, c11, step, n, ratio
     nrm = math.hypot(ux, uy)
     ux /= nrm
     uy /= nrm
-    h, w = lik.shape
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
     m = (px.shape[0] + stride - 1) // stride
@@ -357,15 +372,7 @@ def _alias_starts(lik, A, b, px, py, stride, pose, c00, c01, c11, step, n, ratio
     for kk in range(2 * n + 1):
         tx = pose[0] + (kk - n) * step * ux
         ty = pose[1] + (kk - n) * step * uy
-        acc = 0.0
-        for k in range(m):
-            qx = tx + rx[k]
-            qy = ty + ry[k]
-            u = A[0, 0] * qx + A[0, 1] * qy + b[0] + 0.5
-            v = A[1, 0] * qx + A[1, 1] * qy + b[1] + 0.5
-            if u >= 0.0 and v >= 0.0 and u < w and v < h:
-                acc += lik[int(v), int(u)]
-        prof[kk] = acc / max(m, 1)
+        prof[kk] = _likelihood_sum(lik, A, b, tx, ty, rx, ry, m) / max(m, 1)
     best_k = np.full(2, -1)
     for kk in range(1, 2 * n):
         if abs(kk - n) * step <= 0.25 or prof[kk] < ratio * prof[n]:
@@ -395,7 +402,6 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
     """Exhaustive correlative search; returns the ``n_best`` poses (rows) and their mean scores."""
     nl = int(math.floor(lin_win / lin_step + 1e-9))
     na = int(math.floor(ang_win / ang_step + 1e-9))
-    h, w = lik.shape
     best_pose = np.zeros((n_best, 3))
     best_score = np.full(n_best, -1.0)
     n = px.shape[0]
@@ -412,15 +418,7 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
             tx = guess[0] + ix * lin_step
             for iy in range(-nl, nl + 1):
                 ty = guess[1] + iy * lin_step
-                s = 0.0
-                for k in range(n):
-                    qx = tx + rx[k]
-                    qy = ty + ry[k]
-                    u = A[0, 0] * qx + A[0, 1] * qy + b[0] + 0.5
-                    v = A[1, 0] * qx + A[1, 1] * qy + b[1] + 0.5
-                    if u >= 0.0 and v >= 0.0 and u < w and v < h:
-                        s += lik[int(v), int(u)]
-                s /= n
+                s = _likelihood_sum(lik, A, b, tx, ty, rx, ry, n) / n
                 # insert into the (small, sorted descending) best list
                 if s > best_score[n_best - 1]:
                     j = n_best - 1

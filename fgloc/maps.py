@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from fgloc.errors import MapError
+from fgloc.errors import MapError, read_user_text
 from fgloc.gridmath import raycast_grid
 
 OCCUPIED = 100
@@ -275,12 +275,7 @@ def _read_image(path: Path) -> NDArray[np.uint8]:
 def load_map(yaml_path: str | Path) -> OccupancyMap:
     """Load a ROS map_server map. Errors are :class:`MapError` naming the file and the problem."""
     yaml_path = Path(yaml_path)
-    try:
-        text = yaml_path.read_text()
-    except FileNotFoundError:
-        raise MapError(f"{yaml_path}: map file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise MapError(f"{yaml_path}: cannot read map YAML ({e})") from None
+    text = read_user_text(yaml_path, "map file", MapError)
     try:
         meta = yaml.safe_load(text)
     except yaml.YAMLError as e:

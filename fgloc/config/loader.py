@@ -19,7 +19,7 @@ import yaml
 from fgloc.backends.ekf import EKFConfig
 from fgloc.backends.smoother import BatchConfig, SmootherConfig
 from fgloc.config.schema import parse, section, to_yaml
-from fgloc.errors import ConfigError
+from fgloc.errors import ConfigError, read_user_text
 from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.app import HealthConfig, LaserConfig, SerialConfig
 from fgloc.live.serial_link import RobotParams
@@ -72,14 +72,7 @@ def parse_config(data: Any, source: str = "config", base: FglocConfig | None = N
 
 def read_yaml(path: str | Path) -> Any:
     p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: config file not found") from None
-    except IsADirectoryError:
-        raise ConfigError(f"{p}: is a folder, expected a YAML config file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{p}: cannot read ({e.__class__.__name__})") from None
+    text = read_user_text(p, "config file", ConfigError)
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as e:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fgloc.errors import LogError
+from fgloc.errors import LogError, read_user_text
 from fgloc.geometry import between, wrap_angle
 from fgloc.types import FloatArray, Trajectory
 
@@ -38,12 +38,7 @@ class Relation:
 def read_relations(path: str | Path) -> list[Relation]:
     """Read a relations file. Errors are :class:`LogError` naming the file and line."""
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except FileNotFoundError:
-        raise LogError(f"{path}: relations file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LogError(f"{path}: cannot read relations ({e})") from None
+    lines = read_user_text(path, "relations file").splitlines()
     out: list[Relation] = []
     for i, line in enumerate(lines, 1):
         s = line.split("#", 1)[0].strip()

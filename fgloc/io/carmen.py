@@ -60,7 +60,7 @@ from typing import IO
 
 import numpy as np
 
-from fgloc.errors import LogError
+from fgloc.errors import LogError, read_user_head
 from fgloc.geometry import between
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.source import LogSource, Record, TopicInfo
@@ -86,15 +86,7 @@ FRAME_OF = {"FLASER": "laser", "RLASER": "rear_laser", "ROBOTLASER1": "laser"}
 def open_text(path: str | Path) -> IO[str]:
     """Open a plain, gzip or bzip2 text file (by its magic bytes), decoding leniently."""
     path = Path(path)
-    try:
-        with path.open("rb") as f:
-            magic = f.read(3)
-    except FileNotFoundError:
-        raise LogError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise LogError(f"{path}: is a directory, not a log file") from None
-    except OSError as e:
-        raise LogError(f"{path}: cannot open ({e.strerror or e})") from None
+    magic = read_user_head(path, 3)
     raw: IO[bytes] | gzip.GzipFile | bz2.BZ2File
     if magic[:2] == b"\x1f\x8b":
         raw = gzip.open(path, "rb")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fgloc.errors import LogError
+from fgloc.errors import LogError, read_user_head
 from fgloc.io.mcap_format import MCAP_MAGIC
 from fgloc.io.rosbag1 import ROSBAG1_MAGIC
 from fgloc.io.rosbag2 import SQLITE_MAGIC
@@ -43,18 +43,6 @@ def _compressed_bag(folder: Path) -> bool:
     return bool(info.get("compression_mode")) and str(info.get("compression_mode")).lower() != "none"
 
 
-def _head(p: Path, n: int = 4096) -> bytes:
-    try:
-        with p.open("rb") as f:
-            return f.read(n)
-    except FileNotFoundError:
-        raise LogError(f"{p}: log file not found") from None
-    except IsADirectoryError:
-        raise LogError(f"{p}: is a directory") from None
-    except OSError as e:
-        raise LogError(f"{p}: cannot open ({e.strerror or e})") from None
-
-
 def detect_format(path: str | Path) -> tuple[str, Path]:
     """``(format, path to open)``: ``"mcap"`` (also a rosbag2 folder holding one uncompressed
     ``.mcap``: the path is then that file), ``"rosbag2"``, ``"rosbag1"`` or ``"carmen"``."""
@@ -65,10 +53,10 @@ def detect_format(path: str | Path) -> tuple[str, Path]:
         files = _bag_files(p)
         if not files and not (p / "metadata.yaml").is_file():
             raise LogError(f"{p}: is a directory without a log (no metadata.yaml, .db3 or .mcap file in it)")
-        if len(files) == 1 and _head(files[0], 8) == MCAP_MAGIC and not _compressed_bag(p):
+        if len(files) == 1 and read_user_head(files[0], 8) == MCAP_MAGIC and not _compressed_bag(p):
             return "mcap", files[0]
         return "rosbag2", p
-    head = _head(p)
+    head = read_user_head(p, 4096)
     if head.startswith(MCAP_MAGIC):
         return "mcap", p
     if head.startswith(ROSBAG1_MAGIC):

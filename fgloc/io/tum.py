@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fgloc.errors import LogError
+from fgloc.errors import LogError, read_user_text
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
 from fgloc.types import Trajectory
 
@@ -34,12 +34,7 @@ def write_tum(path: str | Path, traj: Trajectory) -> Path:
 def read_tum(path: str | Path, frame_id: str = "map") -> Trajectory:
     """Read a TUM file. Errors are :class:`LogError` naming the file and the line."""
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except FileNotFoundError:
-        raise LogError(f"{path}: trajectory file not found") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise LogError(f"{path}: cannot read trajectory ({e})") from None
+    lines = read_user_text(path, "trajectory file").splitlines()
     rows = []
     for i, line in enumerate(lines, 1):
         s = line.strip()

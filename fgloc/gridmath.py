@@ -111,23 +111,21 @@ def dda_init(x, y, dx, dy):  # pragma: no cover - compiled
 
     Returns ``(cx, cy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y)``.
     """
-    cx = int(np.floor(x))
-    cy = int(np.floor(y))
-    step_x = 1 if dx > 0 else -1
-    step_y = 1 if dy > 0 else -1
-    if dx != 0.0:
-        t_delta_x = abs(1.0 / dx)
-        t_max_x = ((cx + 1 - x) if dx > 0 else (x - cx)) * t_delta_x
-    else:
-        t_delta_x = np.inf
-        t_max_x = np.inf
-    if dy != 0.0:
-        t_delta_y = abs(1.0 / dy)
-        t_max_y = ((cy + 1 - y) if dy > 0 else (y - cy)) * t_delta_y
-    else:
-        t_delta_y = np.inf
-        t_max_y = np.inf
+    cx, step_x, t_max_x, t_delta_x = _dda_axis(x, dx)
+    cy, step_y, t_max_y, t_delta_y = _dda_axis(y, dy)
     return cx, cy, step_x, step_y, t_max_x, t_max_y, t_delta_x, t_delta_y
+
+
+@njit(cache=True, inline="always")
+def _dda_axis(x, dx):  # pragma: no cover - compiled
+    """One axis of :func:`dda_init`: the cell ``floor(x)``, the step, the ray parameter of the first
+    cell border and the parameter between borders (``inf`` for a ray parallel to the axis)."""
+    c = int(np.floor(x))
+    step = 1 if dx > 0 else -1
+    if dx == 0.0:
+        return c, step, np.inf, np.inf
+    t_delta = abs(1.0 / dx)
+    return c, step, ((c + 1 - x) if dx > 0 else (x - c)) * t_delta, t_delta
 
 
 @njit(cache=True)

@@ -166,10 +166,16 @@ class FoxgloveServerSink:
             msg = self._read_line(0.0)
             if msg is None:
                 return
-            if "subscriptions" in msg:
-                self.stats["subscriptions"] = int(msg["subscriptions"])
-            if "stats" in msg:
-                self.stats.update(msg["stats"])
+            self._take(msg)
+
+    def _take(self, msg: dict[str, Any]) -> bool:
+        """One line of the server process: its subscription count, its stats (True: it had stats)."""
+        if "subscriptions" in msg:
+            self.stats["subscriptions"] = int(msg["subscriptions"])
+        if "stats" in msg:
+            self.stats.update(msg["stats"])
+            return True
+        return False
 
     def _send(self, item: tuple[Any, ...], essential: bool = False) -> None:
         if self._closed or self.stats["server_process_lost"]:
@@ -248,12 +254,7 @@ class FoxgloveServerSink:
         deadline = time.monotonic() + CLOSE_TIMEOUT_S
         while time.monotonic() < deadline:
             msg = self._read_line(max(0.0, deadline - time.monotonic()))
-            if msg is None:
-                break
-            if "subscriptions" in msg:
-                self.stats["subscriptions"] = int(msg["subscriptions"])
-            if "stats" in msg:
-                self.stats.update(msg["stats"])
+            if msg is None or self._take(msg):
                 break
         self._kill(wait_s=max(0.1, deadline - time.monotonic()))
 

@@ -54,6 +54,9 @@ class RunRequest:
     realtime: float | None = None  # replay at this factor of real time (None: as fast as possible)
     view_channels: bool = True  # record the view's Foxglove channels into run.mcap (needs foxglove-sdk)
     covariance_period_s: float | None = None  # log time between fused-pose marginals (None: the session's default)
+    # the view's heavy channels in run.mcap at a bounded rate of log time (0: every scan; fgloc.view.record)
+    view_scan_period_s: float = 0.2  # /fgloc/scan (the log's /scan is copied at its full rate)
+    view_covariance_period_s: float = 0.5  # /fgloc/pose/covariance, drawn in base_link (sooner on a change)
 
 
 def _default_config() -> FglocConfig:
@@ -262,8 +265,11 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         sinks: list[Any] = [_TimedSink(RecorderSink(writer, topics.fused, record_inputs=False,
                                                     log_time_ns=clock.now), spent, "write")]
         if view.active:
-            if view.recorder is not None and hasattr(view.recorder, "clock"):
-                view.recorder.clock = clock.now  # the view's channels on the input's log-time clock too
+            rec = view.recorder
+            if rec is not None and hasattr(rec, "clock"):
+                rec.clock = clock.now  # the view's channels on the input's log-time clock too
+                rec.scan_period_s = req.view_scan_period_s
+                rec.covariance_period_s = req.view_covariance_period_s
             sinks.append(_TimedSink(view, spent, "view"))  # the Foxglove view and its channels (fgloc.view)
         bar = progress(total) if progress is not None else None
         if bar is not None:

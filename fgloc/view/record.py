@@ -9,7 +9,16 @@ its own).  Opened in Foxglove with the layout in
 ``docs/foxglove/``, a recording shows the same picture as the live view.
 
 Particles are recorded at most every ``particles_period_s`` of log time (the live view
-gets every scan's): a particle cloud per scan would dominate the file.
+gets every scan's): a particle cloud per scan would dominate the file.  The other heavy
+channels can be bounded the same way (``fgloc run`` does; the defaults here record all):
+
+* ``scan_period_s``: the scan (``/fgloc/scan``) at most that often (the log's own scans are in
+  ``run.mcap`` at their full rate anyway);
+* ``covariance_period_s``: the fused pose's uncertainty (``/fgloc/pose/covariance``) drawn in
+  the robot's frame (``base_link``, frame-locked: Foxglove carries it along with the robot
+  through ``/fgloc/tf``) and re-drawn at most that often, or sooner when a sigma changes by
+  more than ``covariance_change`` (a relocalization); 0: per scan in the fused pose's frame,
+  as the live view draws it.  Both drawings show the same ellipse and wedge.
 """
 
 from __future__ import annotations
@@ -23,8 +32,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from fgloc.errors import LogError
+from fgloc.geometry import rotate_covariance
 from fgloc.io.log import stamp_to_ns
 from fgloc.view import channels as ch
+from fgloc.view.channels import BASE_FRAME
 from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready
 
 
@@ -86,7 +97,9 @@ class McapViewRecorder:
     ``close()`` does not close ``writer`` (its owner does).
     """
 
-    def __init__(self, writer: RawMcapWriter, particles_period_s: float = 0.5, max_particles: int = 500) -> None:
+    def __init__(self, writer: RawMcapWriter, particles_period_s: float = 0.5, max_particles: int = 500,
+                 scan_period_s: float = 0.0, covariance_period_s: float = 0.0,
+                 covariance_change: float = 1.0) -> None:
         from fgloc.view import encode, server
 
         server.require_foxglove()
@@ -94,7 +107,12 @@ class McapViewRecorder:
         self.writer = writer
         self.particles_period_s = float(particles_period_s)
         self.max_particles = int(max_particles)
+        self.scan_period_s = float(scan_period_s)
+        self.covariance_period_s = float(covariance_period_s)
+        self.covariance_change = float(covariance_change)
         self._last_particles = -math.inf
+        self._last_scan = -math.inf
+        self._last_cov: tuple[float, tuple[float, float, float]] | None = None  # stamp, sigmas drawn
         self._json_schemas = {t: (str(sch["title"]), json.dumps(sch).encode()) for t, sch in
                               ((ch.FUSED, encode.FUSED_SCHEMA), (ch.FIX, encode.FIX_SCHEMA),
                                (ch.HEALTH, encode.HEALTH_SCHEMA))}
@@ -144,20 +162,44 @@ class McapViewRecorder:
     def on_map(self, occ_map: Any, stamp: float) -> None:
         self._write(ch.MAP, self._enc.grid_message(occ_map, stamp), stamp)
 
+    @staticmethod
+    def _due(last: float, stamp: float, period: float) -> bool:
+        return period <= 0 or not math.isfinite(stamp) or stamp < last or stamp - last >= period
+
     def on_scan(self, view: ScanView) -> None:
         enc = self._enc
-        self._write(ch.SCAN, enc.scan_message(view.scan), view.stamp)
+        if self._due(self._last_scan, view.stamp, self.scan_period_s):
+            self._last_scan = view.stamp
+            self._write(ch.SCAN, enc.scan_message(view.scan), view.stamp)
         if view.transforms:
             st = view.fused.stamp if view.fused is not None else view.stamp
             self._write(ch.TF, enc.transforms_message(view.transforms, st), view.stamp)
         if view.fused is not None:
             self._write(ch.POSE, enc.pose_message(view.fused), view.stamp)
-            self._write(ch.POSE_COVARIANCE, enc.covariance_scene(view.fused), view.stamp)
+            if self.covariance_period_s <= 0:
+                self._write(ch.POSE_COVARIANCE, enc.covariance_scene(view.fused), view.stamp)
+            else:
+                self._covariance(view)
             self._write_json(ch.FUSED, enc.fused_json(view.fused), view.stamp)
         self._write_json(ch.FIX, enc.fix_json(view.stamp, view.status, view.reason, view.fix, view.fused), view.stamp)
         if view.fix is not None and view.status in (ACCEPTED, REJECTED):
             topic = ch.FIX_ACCEPTED if view.status == ACCEPTED else ch.FIX_REJECTED
             self._write(topic, enc.pose_message(view.fix), view.stamp)
+
+    def _covariance(self, view: ScanView) -> None:
+        """The uncertainty in the robot's frame, re-drawn every ``covariance_period_s`` or on change."""
+        fused = view.fused
+        assert fused is not None
+        cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
+        sig = tuple(math.sqrt(v) if math.isfinite(v) and v > 0 else 0.0 for v in np.diag(cov).tolist())
+        last = self._last_cov
+        if last is not None and not self._due(last[0], view.stamp, self.covariance_period_s):
+            k = 1.0 + self.covariance_change
+            if all(b / k <= a <= b * k for a, b in zip(sig, last[1], strict=True)):
+                return
+        self._last_cov = (view.stamp, (sig[0], sig[1], sig[2]))
+        base = view.transforms[-1].parent if view.transforms else BASE_FRAME
+        self._write(ch.POSE_COVARIANCE, body_covariance_scene(fused, base), view.stamp)
 
     def on_particles(self, stamp: float, frame_id: str, poses: np.ndarray) -> None:
         if stamp - self._last_particles < self.particles_period_s:
@@ -174,3 +216,32 @@ class McapViewRecorder:
 
     def close(self) -> None:
         pass
+
+
+def body_covariance_scene(fused: Any, base_frame: str = BASE_FRAME) -> Any:
+    """The fused pose's 2-sigma xy ellipse and yaw wedge (as
+    :func:`fgloc.view.encode.covariance_scene`) drawn in the robot's frame ``base_frame``,
+    frame-locked: the covariance rotated into that frame, the wedge around its x axis."""
+    from foxglove import messages as fm
+
+    from fgloc.view import encode
+
+    cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
+    body = rotate_covariance(cov, -float(fused.pose[2]))  # map axes -> the robot's
+    color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
+    lines = []
+    if np.all(np.isfinite(cov)):
+        ell = encode.covariance_ellipse(body)
+        pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in ell.tolist()]
+        lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,
+                                      points=pts, color=color))
+    v_yaw = float(cov[2, 2])
+    s_yaw = math.sqrt(max(v_yaw, 0.0)) * encode.COVARIANCE_SIGMAS if math.isfinite(v_yaw) else 0.0
+    a = np.linspace(-min(s_yaw, math.pi), min(s_yaw, math.pi), 7)
+    arc = np.column_stack([encode.WEDGE_LENGTH_M * np.cos(a), encode.WEDGE_LENGTH_M * np.sin(a)]).tolist()
+    wedge = [fm.Point3(x=px, y=py, z=0.02) for px, py in [[0.0, 0.0], *arc, [0.0, 0.0]]]
+    lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
+                                  points=wedge, color=color))
+    ent = fm.SceneEntity(timestamp=encode.timestamp(fused.stamp), frame_id=base_frame, id="fused_covariance",
+                         frame_locked=True, lines=lines)
+    return fm.SceneUpdate(entities=[ent])

@@ -1,0 +1,81 @@
+"""The view's channels in run.mcap at a bounded rate (issue 14): the scan thinned in log time, the
+covariance drawn in the robot's frame (frame-locked) and re-drawn on a period or a change, the
+light per-scan channels untouched; the drawn ellipse is the same as the live view's."""
+
+from __future__ import annotations
+
+import base64
+import math
+
+import numpy as np
+import pytest
+
+from fgloc.localization import Localizer, Session
+from fgloc.types import PoseFix
+from fgloc.view import channels as ch
+
+from .foxglove_ws import protobuf_class, stamp
+
+
+def _decode(path):
+    from mcap.reader import make_reader
+
+    out: dict[str, list] = {}
+    with path.open("rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.message_encoding == "protobuf":
+                cls = protobuf_class(schema.name, base64.b64encode(schema.data).decode())
+                out.setdefault(channel.topic, []).append(cls.FromString(message.data))
+            else:
+                out.setdefault(channel.topic, []).append(message.data)
+    return out
+
+
+def test_bounded_scan_and_covariance_channels(short_sim, tmp_path):
+    pytest.importorskip("google.protobuf")
+    from fgloc.view.hook import ViewHook
+
+    loc = Localizer(short_sim.map, short_sim.laser_mount, backend="smoother", frontend="native",
+                    initial_pose=short_sim.ground_truth.poses[0])
+    path = tmp_path / "view.mcap"
+    with ViewHook(loc, record_to=path) as hook:
+        hook.recorder.scan_period_s = 0.5
+        hook.recorder.covariance_period_s = 2.0
+        Session(loc, sinks=[hook]).run(short_sim.messages)
+    assert hook.errors == 0 and hook.recorder.errors == 0
+    got = _decode(path)
+    n_scans = len(short_sim.topic("/scan"))
+    duration = float(short_sim.ground_truth.duration)
+    scans = [stamp(m.timestamp) for m in got[ch.SCAN]]
+    assert len(scans) <= duration / 0.5 + 2 < n_scans
+    assert np.all(np.diff(scans) >= 0.5 - 1e-6)
+    assert len(got[ch.FIX]) == n_scans and len(got[ch.TF]) == n_scans  # the light channels: every scan
+    covs = got[ch.POSE_COVARIANCE]
+    assert 1 <= len(covs) <= duration / 2.0 + 5
+    for upd in covs:
+        (ent,) = upd.entities
+        assert ent.frame_id == "base_link" and ent.frame_locked  # carried along with the robot by /fgloc/tf
+        assert len(ent.lines) == 2
+
+
+def test_body_frame_covariance_is_the_same_ellipse():
+    """Drawn in base_link and placed by the robot's pose, the ellipse is the live view's map-frame one."""
+    from fgloc.view import encode
+    from fgloc.view.record import body_covariance_scene
+
+    yaw = math.radians(35.0)
+    cov = np.array([[4e-4, 1e-4, 0.0], [1e-4, 1e-4, 0.0], [0.0, 0.0, 3e-4]])
+    fused = PoseFix(1.0, np.array([2.0, -1.0, yaw]), cov, frame_id="map")
+    pytest.importorskip("google.protobuf")
+    from foxglove import messages as fm
+
+    cls = protobuf_class("foxglove.SceneUpdate", base64.b64encode(fm.SceneUpdate.get_schema().data).decode())
+    body = cls.FromString(body_covariance_scene(fused).encode()).entities[0]
+    world = cls.FromString(encode.covariance_scene(fused).encode()).entities[0]
+    c, s = math.cos(yaw), math.sin(yaw)
+    for line_b, line_w in zip(body.lines, world.lines, strict=True):
+        pb = np.array([[p.x, p.y] for p in line_b.points])
+        pw = np.array([[p.x, p.y] for p in line_w.points])
+        placed = pb @ np.array([[c, s], [-s, c]]) + fused.pose[:2]  # base_link -> map
+        assert len(pb) == len(pw)
+        assert np.allclose(np.sort(placed, axis=0), np.sort(pw, axis=0), atol=1e-9)

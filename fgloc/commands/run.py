@@ -158,6 +158,34 @@ def register(app: typer.Typer) -> None:
         if outdir is not None:
             con.print(f"  wrote {outdir}/table.md, metrics.yaml and {len(res['files'])} plots")
 
+    @bench.command("speed")
+    def bench_speed_cmd(
+        workdir: Path = typer.Option(Path("fgloc-bench-speed"), "-w", "--workdir",
+                                     help="where the generated logs and the runs' outputs go (logs reused)"),
+        repeats: int = typer.Option(3, "--repeats", help="measurements per row (medians and ranges)"),
+        logs: str = typer.Option("office,paper", "--logs", help="office (120 s, Willow Garage map), paper"),
+        before: Path | None = typer.Option(None, "--before", help="a folder holding an older fgloc package: "
+                                           "its fgloc run timed beside this one (before / after)"),
+        long_minutes: float | None = typer.Option(None, "--long-minutes",
+                                                  help="also fgloc run on an N-minute office log (peak RSS)"),
+        no_every1: bool = typer.Option(False, "--no-every1", help="skip the frontend_every: 1 rows"),
+        no_kiss: bool = typer.Option(False, "--no-kiss", help="skip kiss-icp's odometry"),
+    ) -> None:
+        """The whole `fgloc run` command (a child process) beside reading the log, the in-memory
+        pipeline and kiss-icp's odometry: x real time, ms per scan, start-up, peak RSS, I/O share."""
+        from rich.console import Console
+
+        from fgloc.bench.speed import bench_speed, report_lines
+
+        if repeats < 1:
+            raise ConfigError("--repeats must be at least 1")
+        con = Console(stderr=True)
+        with con.status("fgloc bench speed") as status:
+            rep = bench_speed(workdir, repeats=repeats, logs=[s.strip() for s in logs.split(",") if s.strip()],
+                              every1=not no_every1, before=before, kiss=not no_kiss, long_minutes=long_minutes,
+                              say=lambda line: status.update(line))
+        print("\n".join(report_lines(rep)))
+
     @bench.command("faults")
     def bench_faults_cmd(
         backend: str = typer.Option("smoother", "--backend"),

@@ -14,6 +14,8 @@
   ``|(dx, dy)|``: cells for a unit direction, the fraction of the segment for
   ``(dx, dy) = end - start``).
 * :func:`raycast_grid`: the range to the first blocked cell for many rays.
+* :func:`add_normal` / :func:`mirror_upper`: Gauss-Newton normal matrices ``H += w J^T J``
+  over ``[x, y, yaw]``, accumulated in the upper triangle, then mirrored.
 * :func:`run_step`: counts the "runs" of a scan's endpoints (neighbours closer than
   ``RUN_GAP_M``, at most ``RUN_LENGTH_M`` long: one stretch of wall whose map error all its
   beams share), for the matchers' covariances.
@@ -40,7 +42,7 @@ except ImportError:  # pragma: no cover
         return deco if not (args and callable(args[0])) else args[0]
 
 __all__ = ["RUN_GAP_M", "RUN_LENGTH_M", "bilinear", "bilinear_grad", "bilinear_grad_world", "dda_init", "dda_next",
-           "raycast_grid", "run_step"]
+           "raycast_grid", "run_step", "add_normal", "mirror_upper"]
 
 #: endpoints closer than RUN_GAP_M in scan order, over at most RUN_LENGTH_M, form one "run": a
 #: stretch of one wall whose map error (raster, wall thickness) all its beams share
@@ -176,3 +178,25 @@ def run_step(x, y, last_x, last_y, run_len):  # pragma: no cover - compiled
     if step > RUN_GAP_M or run_len + step > RUN_LENGTH_M:
         return 1, 0.0
     return 0, run_len + step
+
+
+@njit(cache=True, inline="always")
+def add_normal(H, w, j0, j1, j2):  # pragma: no cover - compiled
+    """``H += w J^T J`` in the upper triangle of the 3x3 ``H``, for one Jacobian row ``J = [j0, j1, j2]``."""
+    w0 = w * j0
+    w1 = w * j1
+    w2 = w * j2
+    H[0, 0] += w0 * j0
+    H[0, 1] += w0 * j1
+    H[0, 2] += w0 * j2
+    H[1, 1] += w1 * j1
+    H[1, 2] += w1 * j2
+    H[2, 2] += w2 * j2
+
+
+@njit(cache=True, inline="always")
+def mirror_upper(H):  # pragma: no cover - compiled
+    """Copy the upper triangle of the 3x3 ``H`` to the lower one."""
+    H[1, 0] = H[0, 1]
+    H[2, 0] = H[0, 2]
+    H[2, 1] = H[1, 2]

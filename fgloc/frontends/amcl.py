@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import wrap_angle
-from fgloc.gridmath import bilinear, bilinear_grad, run_step
+from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -301,12 +301,9 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
             gx = du * inv_res
             gy = dv * inv_res
             j2 = gx * (-s * bx[j] - c * by[j]) + gy * (c * bx[j] - s * by[j])
-            wx = w * gx
-            wy = w * gy
-            w2 = w * j2
-            g[0] += wx * z
-            g[1] += wy * z
-            g[2] += w2 * z
+            g[0] += w * gx * z
+            g[1] += w * gy * z
+            g[2] += w * j2 * z
             wr2 += w * z * z
             sw += w
             # runs of neighbouring endpoints (one wall stretch <= RUN_LENGTH_M): their map errors are shared
@@ -314,15 +311,8 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
             n_runs += new_run
             lastx = bx[j]
             lasty = by[j]
-            H[0, 0] += wx * gx
-            H[0, 1] += wx * gy
-            H[0, 2] += wx * j2
-            H[1, 1] += wy * gy
-            H[1, 2] += wy * j2
-            H[2, 2] += w2 * j2
-        H[1, 0] = H[0, 1]
-        H[2, 0] = H[0, 2]
-        H[2, 1] = H[1, 2]
+            add_normal(H, w, gx, gy, j2)
+        mirror_upper(H)
         M = H.copy()
         for a in range(3):
             M[a, a] += 1e-9 + 1e-3 * H[a, a]

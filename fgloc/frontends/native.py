@@ -54,7 +54,7 @@ import numpy as np
 from fgloc.config.schema import section, setting, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, wrap_scalar
-from fgloc.gridmath import bilinear_grad, run_step
+from fgloc.gridmath import add_normal, bilinear_grad, mirror_upper, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -308,17 +308,10 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
         j0 = gx
         j1 = gy
         j2 = gx * (-sn * px[k] - cs * py[k]) + gy * (cs * px[k] - sn * py[k])
-        H[0, 0] += w * j0 * j0
-        H[0, 1] += w * j0 * j1
-        H[0, 2] += w * j0 * j2
-        H[1, 1] += w * j1 * j1
-        H[1, 2] += w * j1 * j2
-        H[2, 2] += w * j2 * j2
+        add_normal(H, w, j0, j1, j2)
         wr2 += w * r * r
         sw += w
-    H[1, 0] = H[0, 1]
-    H[2, 0] = H[0, 2]
-    H[2, 1] = H[1, 2]
+    mirror_upper(H)
     return H, wr2, sw, n_in, n_used, sr, n_runs
 
 

@@ -1,18 +1,18 @@
-"""Wall time of the localization pipeline on the simulated paper run, per back-end and front-end.
+"""Wall time of the in-memory localization pipeline on the simulated paper run, per back-end and front-end.
 
 Prints one table: wall time per simulated second (and the real-time factor), milliseconds
 per front-end match, per back-end update (odometry + compass + keyframe
 calls), the final trajectory step (batch LM / window flush) and the position RMSE.
-Target: native + smoother at least 50x faster than real time.
+The whole ``fgloc run`` command (a child process: start-up, reading, writing run.mcap) is
+measured by ``fgloc bench speed`` (:mod:`fgloc.bench.speed`), beside this in-memory pipeline.
 
-    /work/venv/bin/python tools/bench_pipeline.py [--seed 0] [--backends ekf,smoother,batch]
-                                                  [--frontends native,kiss,amcl]
+    python tools/bench_pipeline.py [--seed 0] [--backends ekf,smoother,batch]
+                                   [--frontends native,kiss,amcl]
 """
 
 from __future__ import annotations
 
 import argparse
-import copy
 import importlib
 import time
 
@@ -27,7 +27,7 @@ from fgloc.sim import simulate_paper
 from fgloc.types import CompassHeading, LaserScan, Odometry
 
 
-def run(sim, backend: str, frontend: str, config: dict) -> dict:
+def run(sim, backend: str, frontend: str, config) -> dict:
     loc = Localizer(sim.map, sim.laser_mount, backend=backend, frontend=frontend,
                     initial_pose=sim.ground_truth.poses[0], config=config)
     fe_time = [0.0, 0]
@@ -101,8 +101,7 @@ def main() -> None:
               "back-end us/update", "finish (s)", "pos RMSE (m)"):
         t.add_column(c, justify="right")
     for every in [int(v) for v in args.frontend_every.split(",")]:
-        cfg = copy.deepcopy(config)
-        cfg["pipeline"]["frontend_every"] = every
+        cfg = load_config(None, {"pipeline": {"frontend_every": every}})
         for be in args.backends.split(","):
             for fe in frontends:
                 with con.status(f"{be} + {fe}, every {every}"):

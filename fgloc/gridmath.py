@@ -20,6 +20,7 @@
   ``RUN_GAP_M``, at most ``RUN_LENGTH_M`` long: one stretch of wall whose map error all its
   beams share), for the matchers' covariances.
 
+``njit`` is numba's (without numba, a no-op: the one copy of that fallback).
 All functions are numba ``njit(cache=True)`` and are meant to be called from other
 compiled kernels (numba inlines them); they are also callable from Python.
 Note for developers: numba's on-disk cache of a kernel that calls these is keyed on the
@@ -41,8 +42,8 @@ except ImportError:  # pragma: no cover
             return f
         return deco if not (args and callable(args[0])) else args[0]
 
-__all__ = ["RUN_GAP_M", "RUN_LENGTH_M", "bilinear", "bilinear_grad", "bilinear_grad_world", "dda_init", "dda_next",
-           "raycast_grid", "run_step", "add_normal", "mirror_upper"]
+__all__ = ["RUN_GAP_M", "RUN_LENGTH_M", "add_normal", "bilinear", "bilinear_grad", "bilinear_grad_world", "dda_init",
+           "dda_next", "mirror_upper", "njit", "raycast_grid", "run_step"]
 
 #: endpoints closer than RUN_GAP_M in scan order, over at most RUN_LENGTH_M, form one "run": a
 #: stretch of one wall whose map error (raster, wall thickness) all its beams share

@@ -60,19 +60,11 @@ from numpy.typing import NDArray
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import wrap_angle
-from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, run_step
+from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, njit, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
-
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover
-    def njit(*args, **kwargs):  # type: ignore[no-redef]
-        def deco(f):
-            return f
-        return deco if not (args and callable(args[0])) else args[0]
 
 FloatArray = NDArray[np.float64]
 

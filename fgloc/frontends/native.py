@@ -54,7 +54,7 @@ import numpy as np
 from fgloc.config.schema import section, setting, with_overrides
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, wrap_scalar
-from fgloc.gridmath import add_normal, bilinear_grad, mirror_upper, run_step
+from fgloc.gridmath import add_normal, bilinear_grad, mirror_upper, njit, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -66,14 +66,6 @@ from .base import (
     PreprocessOptions,
     no_fix,
 )
-
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a declared dependency
-    def njit(*args, **kwargs):  # type: ignore[no-redef]
-        def deco(f):
-            return f
-        return deco if not (args and callable(args[0])) else args[0]
 
 LOSS_HUBER = 0
 LOSS_CAUCHY = 1

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import typer
 
-from fgloc.maps import load_map
-
 
 def map_info(map_yaml: Path = typer.Argument(..., help="map_server YAML file")) -> None:
     """Load a map_server map (YAML + PGM/PNG) and print its size, origin and cell counts."""
+    from fgloc.maps import load_map  # numba and scipy load only for this command, not for every `fgloc ...`
+
     m = load_map(map_yaml)
     xmin, xmax, ymin, ymax = m.extent
     print(f"{map_yaml}: {m.width} x {m.height} cells at {m.resolution:g} m "

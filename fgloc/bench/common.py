@@ -29,6 +29,19 @@ def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
     return final, loc.online_trajectory(), loc, wall
 
 
+def localize_variants(sim: Any, variants: Any, config: Any = None) -> dict[str, tuple[Any, float]]:
+    """Each variant ``(label, backend, frontend, which)`` on a simulated run: ``label -> (trajectory,
+    wall_s)``, ``which`` = ``online`` or ``final``; a back-end/front-end pair runs once."""
+    runs: dict[tuple[str, str], tuple[Any, Any, Any, float]] = {}
+    out: dict[str, tuple[Any, float]] = {}
+    for label, backend, frontend, which in variants:
+        if (backend, frontend) not in runs:
+            runs[(backend, frontend)] = localize_sim(sim, backend, frontend, config)
+        final, online, _loc, wall = runs[(backend, frontend)]
+        out[label] = (online if which == "online" else final, wall)
+    return out
+
+
 def frontend_available(name: str) -> bool:
     """Whether front-end module ``name`` imports (AMCL's dependencies may be missing)."""
     try:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from fgloc.bench.common import localize_sim
+from fgloc.bench.common import localize_variants
 
 PAPER_VARIANTS = (
     # (column label, backend, frontend, which trajectory)
@@ -27,13 +27,7 @@ def _bench_one_seed(args: tuple[int, list[tuple[str, str, str, str]], Any, bool]
     seed, variants, config, keep = args
     sim = simulate_paper(seed=seed)
     out: dict[str, Any] = {"seed": seed, "metrics": {}, "wall": {}, "traj": {}}
-    cache: dict[tuple[str, str], Any] = {}
-    for label, backend, frontend, which in variants:
-        key = (backend, frontend)
-        if key not in cache:
-            cache[key] = localize_sim(sim, backend, frontend, config)
-        final, online, _loc, wall = cache[key]
-        tr = online if which == "online" else final
+    for label, (tr, wall) in localize_variants(sim, variants, config).items():
         out["metrics"][label] = evaluate(tr, sim.ground_truth)
         out["wall"][label] = wall
         if keep:

@@ -172,7 +172,7 @@ def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _clusters(keys, weights, n_yaw):  # pragma: no cover - compiled
+def bin_clusters(keys, weights, n_yaw):  # pragma: no cover - compiled
     """Connected clusters of occupied histogram bins (nav2 ``pf_cluster_stats``).
 
     ``keys (N, 3)``: each particle's bin ``(ix, iy, iyaw)`` with ``iyaw`` in ``[0, n_yaw)``
@@ -705,7 +705,7 @@ class AMCL:
         """The particles of the heaviest connected cluster of KLD bins and its share of the weight."""
         keys = np.floor(particles / self.kld_bin).astype(np.int64)
         keys[:, 2] %= self._n_yaw_bins
-        labels, wsum = _clusters(keys, weights, self._n_yaw_bins)
+        labels, wsum = bin_clusters(keys, weights, self._n_yaw_bins)
         best = int(np.argmax(wsum))
         total = float(wsum.sum())
         return labels == best, (float(wsum[best]) / total if total > 0 else 0.0)

@@ -272,10 +272,10 @@ def test_two_modes_are_not_converged_one_wide_mode_is(paper_scans):
 
 
 def test_clusters_join_across_the_heading_wrap():
-    from fgloc.frontends.amcl import _clusters
+    from fgloc.frontends.amcl import bin_clusters
 
     n_yaw = 36
     keys = np.array([[0, 0, 0], [0, 0, 35], [5, 5, 10], [0, 1, 1]], dtype=np.int64)
-    labels, wsum = _clusters(keys, np.array([0.1, 0.2, 0.3, 0.4]), n_yaw)
+    labels, wsum = bin_clusters(keys, np.array([0.1, 0.2, 0.3, 0.4]), n_yaw)
     assert labels[0] == labels[1] == labels[3] != labels[2]  # -pi and +pi neighbours, diagonal neighbour
     assert sorted(np.round(wsum, 6)) == [0.3, 0.7]

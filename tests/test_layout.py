@@ -197,3 +197,13 @@ IO_LOG_PENDING = {"fgloc.app.run", "fgloc.sim.simulate", "fgloc.batch.adapter", 
 
 def test_nothing_new_imports_the_io_log_shim():
     assert set(_importers("fgloc.io.log")) <= IO_LOG_PENDING
+
+
+REPO = PACKAGE.parent
+SCRIPTS = sorted([*REPO.joinpath("tests").rglob("*.py"), *REPO.joinpath("tools").glob("*.py")])
+
+
+@pytest.mark.parametrize("path", SCRIPTS, ids=lambda p: str(p.relative_to(REPO)))
+def test_tests_and_tools_use_no_private_fgloc_name(path):
+    uses = private_uses(path.read_text(encoding="utf-8"), "tests", False, set(MODULES))
+    assert not uses, f"{path.relative_to(REPO)} uses private names of fgloc modules: {uses}"

@@ -36,7 +36,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import compose, compose1, inverse
+from fgloc.geometry import compose1, inverse
 from fgloc.geometry import exp as se2_exp
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 from fgloc.view.channels import BASE_FRAME, MAP_FRAME, ODOM_FRAME
@@ -246,7 +246,7 @@ class ViewFeed:
                 if odom is None:  # no odometry (scans only): the map holds base_link directly
                     out.append(StaticTransform(MAP_FRAME, base, pose))
                 else:
-                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose(pose, inverse(odom))))
+                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, inverse(odom))))
                     out.append(StaticTransform(ODOM_FRAME, base, odom))
         elif (odom := self.odom_pose_at(stamp)) is not None:
             out.append(StaticTransform(ODOM_FRAME, base, odom))

@@ -190,8 +190,9 @@ class McapViewRecorder:
         """The uncertainty in the robot's frame, re-drawn every ``covariance_period_s`` or on change."""
         fused = view.fused
         assert fused is not None
-        cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
-        sig = tuple(math.sqrt(v) if math.isfinite(v) and v > 0 else 0.0 for v in np.diag(cov).tolist())
+        c = fused.cov
+        sig = tuple(math.sqrt(v) if math.isfinite(v) and v > 0 else 0.0
+                    for v in (float(c[0, 0]), float(c[1, 1]), float(c[2, 2])))
         last = self._last_cov
         if last is not None and not self._due(last[0], view.stamp, self.covariance_period_s):
             k = 1.0 + self.covariance_change

@@ -1,0 +1,135 @@
+"""Issue 17 acceptance: fgloc on robot_localization's own real-robot regression bags.
+
+r_l (BSD-3-Clause) checks its EKF on ``test1.bag`` (Clearpath Husky, 395 s, IMU mounted
+rotated: the mount is a static transform in the launch file, not in the bag) and ``test2.bag``
+(Jackal, 61 s) against a final position and tolerance written in each test's launch file.  Here
+each test's r_l parameters go through ``fgloc config from-robot-localization`` and fgloc runs
+the bag without a map, as ``tools/eval_rl_bags.py`` does (it prints the whole table).
+
+The bags are not in this repository: the tests look in ``$FGLOC_RL_BAGS``, ``data/robot_localization``
+and ``../shared/data/robot_localization`` for ``test1.bag``, ``test2.bag`` and r_l's ROS 1
+``test_ekf_localization_node_bag{1,2}.test`` (noetic-devel), and skip when they are absent.
+
+Where fgloc does not yet end within r_l's tolerance the test is ``xfail(strict=True)`` with the
+figure measured at the time, so it flips when the fusion work lands.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+NEEDED = ("test1.bag", "test2.bag", "test_ekf_localization_node_bag1.test", "test_ekf_localization_node_bag2.test")
+
+
+def _folders() -> list[Path]:
+    env = os.environ.get("FGLOC_RL_BAGS")
+    return ([Path(env)] if env else []) + [REPO / "data" / "robot_localization",
+                                            REPO.parent / "shared" / "data" / "robot_localization"]
+
+
+@pytest.fixture(scope="module")
+def tool() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("eval_rl_bags", REPO / "tools" / "eval_rl_bags.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("eval_rl_bags", mod)  # its dataclasses look their module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def cases(tool: ModuleType) -> dict[str, Any]:
+    pytest.importorskip("rosbags")
+    for d in _folders():
+        if all((d / n).is_file() for n in NEEDED):
+            return {c.bag.name: c for c in tool.find_cases([d])}
+    pytest.skip("robot_localization's test1.bag / test2.bag and their .test files not found "
+                "($FGLOC_RL_BAGS, data/robot_localization, ../shared/data/robot_localization)")
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("rl")
+
+
+@pytest.fixture(scope="module")
+def converted(tool: ModuleType, cases: dict[str, Any], work: Path) -> dict[str, tuple[Path, list[str]]]:
+    out = {}
+    for bag, case in cases.items():
+        cfg, notes, err = tool.convert(case, work)
+        assert err is None, err
+        out[bag] = (cfg, notes)
+    return out
+
+
+def test_rl_parameters_convert(converted: dict[str, tuple[Path, list[str]]]) -> None:
+    """The r_l test parameters convert; the planar part of each _config vector is carried over."""
+    import yaml
+
+    want = {"test1.bag": {"odom0": ("/husky_velocity_controller/odom", ["vx", "vy"]), "imu0": ("/imu/data", ["yaw"])},
+            "test2.bag": {"odom0": ("/jackal_velocity_controller/odom", ["vx", "vy", "vyaw"]),
+                          "imu0": ("/imu/data", ["yaw", "vyaw"])}}
+    for bag, sources in want.items():
+        cfg = yaml.safe_load(converted[bag][0].read_text())
+        got = {n: (s["topic"], s["use"]) for n, s in cfg["sources"]["inputs"].items()}
+        assert got == sources, bag
+
+
+RUNS = [
+    # bag, back-end, add the launch file's static transforms to a copy of the bag, xfail reason
+    ("test2.bag", "ekf", False,
+     "ee92bab: 0.221 m from r_l's final (1.021, 3.429), tolerance 0.138; dead reckoning with the IMU "
+     "yaw 0.142 m, with the IMU's whole attitude (the Jackal climbs 0.74 m) 0.084 m"),
+    ("test2.bag", "smoother", False,
+     "ee92bab: 0.366 m from r_l's final, tolerance 0.138 (wheel yaw-rate scale estimated 2.38; "
+     "the wheels report 47.9 rad of turning against the IMU's 10.2)"),
+    ("test1.bag", "ekf", True,
+     "ee92bab: 3.08 m from r_l's final (-40.045, -76.999), tolerance 1.045: 3429 of 3952 odometry "
+     "twists replaced by pose increments (pipeline.pose_deltas auto) that carry the wheel yaw odom0 does "
+     "not fuse; pose_deltas: never gives 0.43 m"),
+    ("test1.bag", "smoother", True, None),  # 1.037 m at ee92bab (margin 8 mm)
+]
+
+
+@pytest.mark.parametrize(("bag", "backend", "add_tf", "xfail"), RUNS,
+                         ids=[f"{b.split('.')[0]}-{be}{'-tf' if tf else ''}" for b, be, tf, _ in RUNS])
+def test_final_pose_within_rl_tolerance(tool: ModuleType, cases: dict[str, Any], converted: dict[str, Any],
+                                        work: Path, bag: str, backend: str, add_tf: bool, xfail: str | None,
+                                        request: pytest.FixtureRequest) -> None:
+    """fgloc without a map ends within r_l's own test tolerance of r_l's final position (x, y)."""
+    if xfail:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=xfail))
+    case = cases[bag]
+    log = case.bag
+    if add_tf:
+        assert case.static_tfs, "the launch file's static transform (the IMU mount) was not read"
+        log = tool.with_static_tfs(case.bag, case.static_tfs, work / f"{case.bag.stem}_tf.bag")
+    odom_topic, imu_topic = tool.topics(case.params)
+    res = tool.run_fgloc(log, converted[bag][0], backend, odom_topic, imu_topic, work / f"{bag}-{backend}")
+    assert "error" not in res, res.get("error")
+    x, y = float(res["final"][0]), float(res["final"][1])
+    ex, ey, _ = case.expected_xyz
+    err = math.hypot(x - ex, y - ey)
+    assert err < case.tolerance_m, f"final ({x:.3f}, {y:.3f}) is {err:.3f} m from r_l's, tolerance {case.tolerance_m}"
+
+
+@pytest.mark.xfail(strict=True, reason="ee92bab: fgloc run ignores the topics of a converted sources: "
+                   "config ('no /scan, /odom or /imu messages to localize with'); --odom-topic/--imu-topic needed")
+def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dict[str, Any], work: Path) -> None:
+    """A converted r_l config is enough to run: its sources name the topics (no --odom-topic)."""
+    from fgloc.app.run import RunRequest, run_log
+
+    case = cases["test2.bag"]
+    r = run_log(RunRequest(log=case.bag, outdir=work / "no-topics", backend="ekf", config=converted["test2.bag"][0],
+                           force=True, view_channels=False))
+    assert r.stats["sources"]["odom0"]["accepted"] == 3060
+    assert r.stats["sources"]["imu0"]["accepted"] == 3061

@@ -27,6 +27,13 @@ pose tester measures a 3-D distance; fgloc is planar, so the table's errors are 
 Usage::
 
     python tools/eval_rl_bags.py FOLDER [FOLDER ...] [--backends ekf smoother] [--out DIR]
+    python tools/eval_rl_bags.py --convert PARAMS.yaml|DIR ...   # the porting tool on other files
+
+``--convert`` runs ``fgloc config from-robot-localization`` / ``from-nav2`` on each file (r_l when
+it has odomN/imuN/poseN/twistN keys, nav2 when it has an amcl section) and prints one line per
+file: converted or the error, the parameters not carried over, and what the converted config
+would do that the ROS node does not (no source of translation left; ``differential`` on a source
+that fuses only velocities, which r_l ignores).
 
 A FOLDER holds the fetched files of one r_l branch: ``test*.bag`` and
 ``test_ekf_localization_node_bag*.test`` (ROS 1) and/or ``test_ekf_localization_node_bag*.yaml``
@@ -307,6 +314,34 @@ def topics(params: dict[str, Any]) -> tuple[str | None, str | None]:
     return o, i
 
 
+def _convert_one(path: Path) -> str:
+    """One line: what the porting tool made of a public parameter file."""
+    from fgloc.commands.porting import convert_file
+    from fgloc.errors import FglocError
+
+    text = path.read_text(errors="replace")
+    kind = "rl" if re.search(r"^\s*(odom|imu|pose|twist)\d+\s*:", text, re.M) else \
+        "nav2" if re.search(r"^\s*(amcl|robot_model_type|laser_model_type)\s*:", text, re.M) else None
+    if kind is None:
+        return f"skip      {path.name}: neither r_l nor amcl parameters"
+    try:
+        cfg, notes, _ = convert_file(kind, path)
+    except FglocError as e:
+        return f"ERROR     {path.name}: {e}"
+    except Exception as e:  # noqa: BLE001 - a crash is a finding
+        return f"CRASH     {path.name}: {type(e).__name__}: {e}"
+    odd = []
+    if kind == "rl":
+        srcs = ((cfg.get("sources") or {}).get("inputs") or {})
+        if not any(set(s.get("use", [])) & {"x", "y", "vx", "vy"} for s in srcs.values()):
+            odd.append("no source of translation left")
+        for n, s in srcs.items():
+            if s.get("differential") and not set(s.get("use", [])) & {"x", "y", "yaw"}:
+                odd.append(f"{n}: differential on velocities only {s.get('use')}")
+    return (f"{'converted' if not odd else 'SUSPECT':9s} {path.name} [{kind}]: {len(notes)} not carried over"
+            + (f"; {'; '.join(odd)}" if odd else ""))
+
+
 def table_row(case: Case, duration_s: float, dr: dict[str, Any], label: str, p: Any) -> list[str]:
     """One line of the table: an estimate's final (x, y) against r_l's (None: the run failed)."""
     ex, ey, _ = case.expected_xyz
@@ -320,11 +355,23 @@ def table_row(case: Case, duration_s: float, dr: dict[str, Any], label: str, p: 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("folders", nargs="+", type=Path, help="folders with r_l's test bags and parameter files")
+    ap.add_argument("folders", nargs="*", type=Path, help="folders with r_l's test bags and parameter files")
+    ap.add_argument("--convert", nargs="+", type=Path, default=None,
+                    help="only convert these parameter files (or every *.yaml in these folders) and report")
     ap.add_argument("--backends", nargs="+", default=["ekf", "smoother"])
     ap.add_argument("--out", type=Path, default=None, help="where fgloc writes (default: a temporary folder)")
     ap.add_argument("--no-tf-copy", action="store_true", help="skip the runs with the launch file's static tfs added")
     a = ap.parse_args(argv)
+    if a.convert:
+        files = [f for p in a.convert for f in (sorted(p.glob("*.y*ml")) if p.is_dir() else [p])]
+        lines = [_convert_one(f) for f in files]
+        for line in lines:
+            print(line)
+        print(f"{len(files)} files: " + ", ".join(f"{sum(line.startswith(k) for line in lines)} {k.lower()}"
+                                                 for k in ("converted", "SUSPECT", "ERROR", "CRASH", "skip")))
+        return 0
+    if not a.folders:
+        ap.error("give folders with the r_l bags, or --convert FILES")
 
     work = a.out or Path(tempfile.mkdtemp(prefix="eval_rl_"))
     work.mkdir(parents=True, exist_ok=True)

@@ -133,15 +133,12 @@ def map_log(log: Path, outdir: Path, resolution: float, config_path: Path | None
 
 
 def _ground_truth(log: Path, scan_topic: str, odom_topic: str):
-    """``/ground_truth`` of an MCAP log, None for CARMEN logs and logs without it."""
-    from fgloc.mapping.source import is_carmen
+    """``/ground_truth`` of the log (any format :func:`fgloc.io.open_log` reads), None without it."""
+    from fgloc.io import open_log
+    from fgloc.io.topics import Topics
 
-    if is_carmen(log):
-        return None
-    from fgloc.io.log import LogReader, Topics
-
-    reader = LogReader(log, Topics(scan=scan_topic, odom=odom_topic))
-    return reader.ground_truth() if reader.has(reader.topics.ground_truth) else None
+    with open_log(log, Topics(scan=scan_topic, odom=odom_topic)) as source:
+        return source.ground_truth()
 
 
 # ---------------------------------------------------------------------------- paper bench

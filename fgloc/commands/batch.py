@@ -64,7 +64,8 @@ def run_cmd(
     frontend: Annotated[str, typer.Option("--frontend", help="amcl | kiss | native")] = "native",
     initial_pose: Annotated[tuple[float, float, float] | None, typer.Option(
         "--initial-pose", help="X Y YAW for every log (manifest rows may give their own)")] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="YAML overriding config/fgloc.yaml")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="YAML overriding the built-in config "
+                                                                     "(`fgloc config show`)")] = None,
     scan_topic: Annotated[str, typer.Option("--scan-topic")] = "/scan",
     odom_topic: Annotated[str, typer.Option("--odom-topic")] = "/odom",
     imu_topic: Annotated[str, typer.Option("--imu-topic")] = "/imu",

@@ -39,27 +39,29 @@ def _free_ports(n: int) -> list[int]:
 
 
 def _end_process_tree(proc: subprocess.Popen) -> None:
-    """SIGTERM then SIGKILL to ``ray start`` and everything it started (by pid and by its own
-    process group), waiting for them to go."""
+    """End ``ray start --block`` and everything it started, by pid, waiting for them to go.
+
+    SIGTERM to ``ray start`` alone first: it stops its own processes in order (measured 2.5 s);
+    SIGTERM to every process at once leaves the GCS server and the monitor waiting on each other
+    (> 20 s).  Whatever is left after that gets SIGKILL (by pid and by the process group)."""
     import psutil
 
     try:
         tree = [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
     except psutil.NoSuchProcess:
         tree = []
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        for p in tree:
-            try:
-                p.send_signal(sig)
-            except psutil.NoSuchProcess:
-                pass
+    proc.send_signal(signal.SIGTERM)
+    _, alive = psutil.wait_procs(tree, timeout=20)
+    for p in alive:
         try:
-            os.killpg(proc.pid, sig)
-        except (ProcessLookupError, PermissionError):
+            p.kill()
+        except psutil.NoSuchProcess:
             pass
-        _, alive = psutil.wait_procs(tree, timeout=15)
-        if not alive:
-            break
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    psutil.wait_procs(alive, timeout=15)
     proc.wait(timeout=15)
 
 

@@ -12,7 +12,8 @@ inputs go by path, and the input files' bytes when they are shipped (``ship=True
   on Ctrl-C the driver terminates them and the interrupted jobs leave no completion marker.
 * :class:`RayEngine` (``--engine ray``): one Ray task per job (1 CPU each).  Without an
   address (and no ``RAY_ADDRESS``) it starts a private local Ray instance with ``num_cpus``
-  = ``-j`` or all cores and shuts it down at the end; with ``--address HOST:PORT`` or
+  = ``-j`` or all cores (its workers at niceness 0, like the pool's; Ray's own default is 15)
+  and shuts it down at the end; with ``--address HOST:PORT`` or
   ``RAY_ADDRESS`` it joins that cluster (fgloc must be installed on its nodes; inputs by
   path need shared storage, ``--ship-inputs`` does not).  At most twice the cluster's CPUs
   are in flight, so shipped inputs do not fill the object store.  A task whose worker
@@ -26,6 +27,7 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import re
 import signal
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -245,8 +247,10 @@ class RayEngine:
             if self.address:
                 ray.init(address=self.address, **kw)
             else:
+                # workers at normal priority, as the local pool's and `fgloc run`: Ray's default
+                # (niceness 15) makes a batch yield to every other process of a shared machine
                 ray.init(address="local", num_cpus=int(self.jobs or os.cpu_count() or 1),
-                         include_dashboard=False, **kw)
+                         include_dashboard=False, _system_config={"worker_niceness": 0}, **kw)
                 self._started = True
         except (ConnectionError, RuntimeError, ValueError) as e:
             where = self.address or "a local instance"
@@ -304,7 +308,7 @@ class RayEngine:
                     try:
                         res = ray.get(ref)
                     except ray.exceptions.RayError as e:
-                        res = JobResult(job.name, False, error=_ray_error(e))
+                        res = JobResult(job.name, False, error=ray_error_line(e))
                     yield i, res
         finally:
             for ref in pending:
@@ -324,13 +328,28 @@ class RayEngine:
                 refs.pop(key, None)
 
 
-def _ray_error(e: BaseException) -> str:
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+_EXC_LINE = re.compile(r"^(?:[\w.]+\.)?(\w+(?:Error|Exception|Interrupt)): (.+)$")
+
+
+def ray_error_line(e: BaseException) -> str:
+    """A Ray failure as one line: a dead worker as such, else the innermost ``Type: message`` of
+    Ray's text (colour codes and Ray's task header removed), with a hint when a worker cannot
+    import what the job needs (fgloc not installed on a node)."""
     name = e.__class__.__name__
-    text = str(e).strip().splitlines()
-    first = next((t for t in text if t.strip()), "")
-    if "WorkerCrashed" in name or "died" in first.lower():
+    text = [t.strip() for t in _ANSI.sub("", str(e)).splitlines() if t.strip()]
+    first = text[0] if text else ""
+    if "WorkerCrashed" in name or "worker died" in first.lower():
         return f"Ray worker died while running this log ({name})"
-    return f"{name}: {first}"[:300]
+    inner = [m for m in (_EXC_LINE.match(t) for t in text) if m]
+    if inner:
+        kind, msg = inner[-1].group(1), inner[-1].group(2)
+        line = f"{kind}: {msg}"
+        if kind == "ModuleNotFoundError":
+            line += " (on the Ray worker: is fgloc installed on every node?)"
+    else:
+        line = f"{name}: {first}" if first else name
+    return line[:300]
 
 
 def make_engine(engine: str, jobs: int | None = None, address: str | None = None):

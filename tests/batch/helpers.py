@@ -43,7 +43,8 @@ def assert_identical(outdir: Path, ref, names) -> None:
 
 def crash_or_count(job, blobs):
     """A worker function for the engine tests: the job named ``boom`` kills its own process
-    (as a segfault or the OOM killer would); the others report how many bytes were shipped."""
+    (as a segfault or the OOM killer would); the others report how many bytes were shipped and
+    their process's niceness."""
     import os
     import signal
 
@@ -52,7 +53,7 @@ def crash_or_count(job, blobs):
     if job.name == "boom":
         os.kill(os.getpid(), signal.SIGKILL)
     size = sum(len(b) for files in (blobs or {}).values() for _, b in files)
-    return JobResult(job.name, True, row={"poses": size}, host=str(os.getpid()))
+    return JobResult(job.name, True, row={"poses": size, "nice": os.nice(0)}, host=str(os.getpid()))
 
 
 def single_run_here(log: Path, map_yaml: Path, outdir: Path) -> Path:

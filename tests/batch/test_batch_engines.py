@@ -159,3 +159,27 @@ def test_batch_map_writes_what_fgloc_map_writes(batch_logs, tmp_path):
     row = rep.rows[0]
     assert row.poses is not None and row.poses > 100 and row.rmse_m is not None and row.rmse_m < 0.05
     assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no staging left
+
+
+def test_ray_errors_become_one_line():
+    """Ray's multi-line, coloured task errors: the innermost 'Type: message' (a node without fgloc
+    gets a hint), a dead worker as such."""
+    from fgloc.batch.engines import ray_error_line
+
+    class RayTaskError(Exception):
+        pass
+
+    class WorkerCrashedError(Exception):
+        pass
+
+    text = ("\x1b[36mray::_ray_task()\x1b[39m (pid=31285, ip=192.0.2.2)\n  At least one of the input arguments for "
+            "this task could not be computed:\nray.exceptions.RaySystemError: System error: No module named 'fgloc'\n"
+            "traceback: Traceback (most recent call last):\n          ^^^^^^^^\nModuleNotFoundError: No module named "
+            "'fgloc'")
+    assert ray_error_line(RayTaskError(text)) == ("ModuleNotFoundError: No module named 'fgloc' (on the Ray worker: "
+                                                  "is fgloc installed on every node?)")
+    assert ray_error_line(RayTaskError("\x1b[36mray::_ray_task()\x1b[39m (pid=1)\n  File x\nValueError: bad")) == \
+        "ValueError: bad"
+    assert ray_error_line(WorkerCrashedError("The worker died unexpectedly while executing this task.")) == \
+        "Ray worker died while running this log (WorkerCrashedError)"
+    assert ray_error_line(RayTaskError("")) == "RayTaskError"

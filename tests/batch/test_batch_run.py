@@ -14,7 +14,7 @@ import pytest
 
 from fgloc.batch import MARKER, read_summary_csv
 
-from .helpers import CORRUPT, ROUTES, START, assert_identical, fgloc_cli, single_run_here
+from .helpers import CORRUPT, ROUTES, START, assert_identical, crash_or_count, fgloc_cli, single_run_here
 
 
 def check_summary(outdir: Path, batch_logs, references, ok_status=("ok",)) -> dict[str, dict[str, str]]:
@@ -63,17 +63,35 @@ def test_local_pool_matches_single_runs_and_resumes(batch_logs, references):
     assert stamps == {n: (out / n / "trajectory.tum").stat().st_mtime_ns for n in ROUTES}
 
 
-def test_ray_local_instance_matches_single_runs(batch_logs, references):
+def test_ray_local_instance_matches_single_runs(batch_logs, references, tmp_path):
+    """``--engine ray -j 2``: the private local instance (2 CPUs, workers at niceness 0), the same
+    files as single runs; on that instance a worker killed mid-job fails only its own job."""
     pytest.importorskip("ray")
-    out = batch_logs["root"] / "out-ray"
-    rc, stdout, _ = fgloc_cli("batch", "run", batch_logs["logs"], "--map", batch_logs["map"], "--initial-pose",
-                              *map(str, START), "-o", out, "--engine", "ray", "-j", "2", "-q")
-    assert rc == 1
-    assert "local Ray instance, 2 CPU(s)" in stdout
-    assert_identical(out, references, ROUTES)
-    rows = check_summary(out, batch_logs, references)
-    # the jobs ran in Ray worker processes, not in this one
-    assert all(r["host"] and not r["host"].endswith(f":{os.getpid()}") for r in rows.values())
+    from fgloc.batch import Job, RayEngine
+
+    engine = RayEngine(2)
+    engine.connect()  # the instance the CLI's engine would start; the CLI finds it running and keeps it
+    try:
+        out = batch_logs["root"] / "out-ray"
+        rc, stdout, _ = fgloc_cli("batch", "run", batch_logs["logs"], "--map", batch_logs["map"], "--initial-pose",
+                                  *map(str, START), "-o", out, "--engine", "ray", "-j", "2", "-q")
+        assert rc == 1
+        assert "local Ray instance, 2 CPU(s)" in stdout
+        assert_identical(out, references, ROUTES)
+        rows = check_summary(out, batch_logs, references)
+        # the jobs ran in Ray worker processes, not in this one
+        assert all(r["host"] and not r["host"].endswith(f":{os.getpid()}") for r in rows.values())
+        assert engine.ray.cluster_resources()["CPU"] == 2
+        data = tmp_path / "in.bin"
+        data.write_bytes(b"x" * 4321)
+        jobs = [Job("run", n, str(tmp_path / n), {"log": str(data)}) for n in ("a", "boom", "b")]
+        # the Ray workers cannot import this test package: they get the function by value
+        engine.ray.cloudpickle.register_pickle_by_value(sys.modules[crash_or_count.__module__])
+        got = dict(engine.run(crash_or_count, jobs, ship=True))
+        assert not got[1].ok and "died" in (got[1].error or "")
+        assert [got[i].row for i in (0, 2)] == [{"poses": 4321, "nice": 0}] * 2
+    finally:
+        engine.shutdown()
 
 
 def test_ctrl_c_keeps_finished_logs(batch_logs, references, tmp_path):

@@ -216,9 +216,8 @@ def run_jobs(logs: list[Path], outdir: Path, map_yaml: Path | None = None, initi
         params: dict[str, Any] = {"backend": backend, "frontend": frontend,
                   "initial_pose": None if pose is None else [float(v) for v in pose],
                   "scan_topic": scan_topic, "odom_topic": odom_topic, "imu_topic": imu_topic}
-        if allow_lost:  # (only when set: finished jobs of earlier versions keep their fingerprint)
-            params["allow_lost"] = True
-        jobs.append(Job("run", name, str(out / name), {k: v for k, v in inputs.items() if v}, params))
+        jobs.append(Job("run", name, str(out / name), {k: v for k, v in inputs.items() if v}, params,
+                        accept_lost=allow_lost))
     return jobs
 
 

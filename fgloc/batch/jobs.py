@@ -51,6 +51,9 @@ class Job:
     outdir: str                                 # absolute: OUTDIR/<name>
     inputs: dict[str, str] = field(default_factory=dict)   # role -> absolute path
     params: dict[str, Any] = field(default_factory=dict)   # JSON-able options
+    #: a lost run counts as done, not failed (``--allow-lost``): how the result is judged, not
+    #: what is computed, so it is no part of the fingerprint (changing it re-runs nothing)
+    accept_lost: bool = False
 
     def fingerprint(self) -> str:
         """Hash of kind, options and inputs (path, size, mtime): a finished job whose fingerprint
@@ -240,11 +243,11 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]
         row = {"duration_s": r.log_s, "poses": r.poses, "x_real_time": _ratio(r.log_s, r.wall_s),
                "lost_time_s": r.lost_s if r.mode == "map" else None, "rmse_m": r.position_rmse_m,
                "heading_rmse_deg": r.heading_rmse_deg, "mode": r.mode, "note": r.note}
-        if r.failure and (r.poses == 0 or not p.get("allow_lost", False)):
-            # what makes `fgloc run` exit 3: the outputs are written, the log counts as failed
+        if r.failure:
+            # what makes `fgloc run` exit 3 (the outputs are written); a lost run with poses may be
+            # accepted (--allow-lost: Job.accept_lost, judged by the summary), a run without any not
             row["failure"] = f"{job.inputs['log']}: {r.failure}"
-        elif r.failure:
-            row["note"] = r.failure
+            row["acceptable"] = r.poses > 0
         return row
     if job.kind == "map":
         m = adapter.map_log(inputs["log"], outdir, float(p.get("resolution", 0.05)), inputs.get("config"),

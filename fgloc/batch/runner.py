@@ -144,7 +144,7 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
     for job in jobs:
         doc = None if force else read_marker(job)
         if doc is not None:
-            rows[job.name] = SummaryRow.from_marker(job.name, doc)
+            rows[job.name] = SummaryRow.from_marker(job.name, doc, job.accept_lost)
         else:
             clear_marker(job)
             todo.append(job)
@@ -159,8 +159,8 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
                 job = todo[i]
                 res = _store(job, res)
                 results[job.name] = res
-                rows[job.name] = SummaryRow.from_result(res)
-                failed += not res.ok or bool(res.row.get("failure"))
+                rows[job.name] = SummaryRow.from_result(res, job.accept_lost)
+                failed += rows[job.name].status in ("error", "lost")
                 bar.update(1)
                 if failed:
                     bar.set_postfix(failed=failed)

@@ -1,7 +1,8 @@
 """The batch summary: one row per log (CSV and a rich table).
 
 Columns: log, status (``ok``, ``done`` = finished by an earlier run and skipped, ``error``,
-``lost`` = ran but ``fgloc run`` would exit 3: lost at the end or too long, no pose;
+``lost`` = ran but ``fgloc run`` would exit 3: lost at the end or too long, no pose (with
+``--allow-lost`` a lost run with poses is ``ok``/``done`` and its line is in the error column);
 ``not run`` = interrupted before it ran), duration (s of log time), poses, x real time
 (log time / localization wall time, as ``fgloc run`` prints it), lost time (s the localizer
 was lost, :attr:`fgloc.app.run.RunResult.lost_s`; map-frame runs only), position and heading RMSE
@@ -39,27 +40,29 @@ class SummaryRow:
     error: str | None = None
 
     @staticmethod
-    def from_result(res: JobResult) -> SummaryRow:
+    def from_result(res: JobResult, accept_lost: bool = False) -> SummaryRow:
         if not res.ok:
             return SummaryRow(res.name, "error", wall_s=res.wall_s, host=res.host, error=res.error)
-        return SummaryRow._from_row(res.name, "ok", res.row, res.wall_s, res.host)
+        return SummaryRow._from_row(res.name, "ok", res.row, res.wall_s, res.host, accept_lost)
 
     @staticmethod
-    def from_marker(name: str, doc: dict[str, Any]) -> SummaryRow:
-        return SummaryRow._from_row(name, "done", doc.get("row") or {}, doc.get("wall_s"), doc.get("host", ""))
+    def from_marker(name: str, doc: dict[str, Any], accept_lost: bool = False) -> SummaryRow:
+        return SummaryRow._from_row(name, "done", doc.get("row") or {}, doc.get("wall_s"), doc.get("host", ""),
+                                    accept_lost)
 
     @staticmethod
     def not_run(name: str) -> SummaryRow:
         return SummaryRow(name, "not run")
 
     @staticmethod
-    def _from_row(name: str, status: str, row: dict[str, Any], wall_s: float | None, host: str) -> SummaryRow:
+    def _from_row(name: str, status: str, row: dict[str, Any], wall_s: float | None, host: str,
+                  accept_lost: bool = False) -> SummaryRow:
         def num(k: str) -> float | None:
             v = row.get(k)
             return None if v is None or (isinstance(v, float) and not math.isfinite(v)) else float(v)
 
         poses = row.get("poses")
-        if row.get("failure"):
+        if row.get("failure") and not (accept_lost and row.get("acceptable")):
             status = "lost"
         return SummaryRow(name, status, num("duration_s"), None if poses is None else int(poses), num("x_real_time"),
                           num("lost_time_s"), num("rmse_m"), num("heading_rmse_deg"), row.get("mode"),

@@ -70,7 +70,8 @@ def run_cmd(
     odom_topic: Annotated[str, typer.Option("--odom-topic")] = "/odom",
     imu_topic: Annotated[str, typer.Option("--imu-topic")] = "/imu",
     allow_lost: Annotated[bool, typer.Option("--allow-lost", help="a log whose localizer was lost (fgloc run "
-                                                                 "exits 3) counts as done, not failed")] = False,
+                                                                 "exits 3) counts as done, not failed (finished "
+                                                                 "logs are judged again, not re-run)")] = False,
     engine: Annotated[str, ENGINE] = "local",
     jobs: Annotated[int | None, JOBS] = None,
     address: Annotated[str | None, ADDRESS] = None,

@@ -119,9 +119,10 @@ def test_a_lost_run_is_reported_as_fgloc_run_exits_3(batch_logs, tmp_path):
     assert (tmp_path / "out" / "charlie" / "trajectory.tum").exists()
     rc, stdout, _ = fgloc_cli(*args)  # finished (its outputs are complete): not run again, still lost
     assert rc == 1 and "0 ran, 1 already done" in stdout
-    rc, _, _ = fgloc_cli(*args, "--allow-lost")  # another option: runs again, accepted
+    rc, stdout, _ = fgloc_cli(*args, "--allow-lost")  # judged again, not run again: accepted
     row = read_summary_csv(tmp_path / "out" / "summary.csv")[0]
-    assert rc == 0 and row["status"] == "ok" and "lost" in row["error"]
+    assert rc == 0 and "0 ran, 1 already done" in stdout
+    assert row["status"] == "done" and row["error"] == line
 
 
 def test_without_ray_a_one_line_hint(batch_logs, tmp_path, monkeypatch):

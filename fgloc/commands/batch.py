@@ -32,13 +32,22 @@ def _opts(engine: str, jobs: int | None, address: str | None, ship: bool, force:
     return EngineOptions(engine, jobs, address, ship, force, not quiet)
 
 
-def _report(rep, title: str) -> None:
-    """Print the summary table and the totals; exit 130 when interrupted, 1 when a log failed."""
+def _console():
+    """Rich's console; into a file or pipe (no terminal width, no $COLUMNS) 160 columns, not 80, so
+    the summary table keeps its error column readable in a saved log."""
+    import os
+
     from rich.console import Console
 
+    con = Console()
+    return con if con.is_terminal or os.environ.get("COLUMNS") else Console(width=160)
+
+
+def _report(rep, title: str) -> None:
+    """Print the summary table and the totals; exit 130 when interrupted, 1 when a log failed."""
     from fgloc.batch import summary_table
 
-    con = Console()
+    con = _console()
     con.print(summary_table(rep.rows, title))
     for r in rep.rows:
         if r.status == "error":
@@ -130,12 +139,10 @@ def bench_paper_cmd(
     quiet: Annotated[bool, QUIET] = False,
 ) -> None:
     """`fgloc bench paper` over N seeds as a batch: the same table, resumable, local or on Ray."""
-    from rich.console import Console
-
     from fgloc.batch import batch_bench_paper
     from fgloc.batch.adapter import amcl_available
 
-    con = Console()
+    con = _console()
     if not amcl_available() and not no_amcl:
         con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
     res = batch_bench_paper(seeds, outdir, _opts(engine, jobs, address, ship_inputs, force, quiet), config,

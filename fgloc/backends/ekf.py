@@ -351,13 +351,15 @@ class EKF:
         hx[-1] = sw * w
         return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder")
 
-    def update_gyro(self, t: float, rate: float, var: float, bias_index: int, gate: float | None) -> bool:
-        """A gyro's yaw rate: ``z = w + b`` with ``b`` the bias state at ``bias_index``."""
+    def update_gyro(self, t: float, rate: float, var: float, bias_index: int | None, gate: float | None) -> bool:
+        """A gyro's yaw rate: ``z = w + b`` with ``b`` the bias state at ``bias_index`` (None: ``z = w``,
+        the rate already corrected for its bias)."""
         assert self.t is not None, "EKF not initialized"
         self.predict(t)
         H = np.zeros((1, self.n))
         H[0, self.w_index] = 1.0
-        H[0, bias_index] = 1.0
+        if bias_index is not None:
+            H[0, bias_index] = 1.0
         return self.update_h(np.array([rate]), H @ self.x, H, np.array([[var]]), gate, "gyro")
 
     def update_compass(self, t: float, theta_map: float | None, var_theta: float,

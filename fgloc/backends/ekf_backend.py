@@ -9,7 +9,9 @@ right after each scan's fix (a filter does not smooth).
 
 Beyond the paper (issue 17), all switchable in ``ekf:``:
 
-* a gyro's yaw rate (an IMU's, or the compass module's) measures ``w + b`` with a bias state;
+* a gyro's yaw rate (an IMU's, or the compass module's) measures ``w + b``; its bias ``b`` is
+  estimated beside the filter (:class:`~fgloc.backends.health.GyroBias`: from the absolute
+  headings and standstill, never from the wheels, whose scrub would be read as a bias);
 * once a gyro is there, the odometry's yaw-rate scale (reported / true, a skid steer's
   scrub) is a state: the encoder's yaw rate measures ``s_w * w``;
 * the yaw sources are weighted by the noise they show against each other
@@ -36,6 +38,7 @@ from fgloc.backends.health import (
     INSTANT_RATE,
     RATE,
     Arbiter,
+    GyroBias,
     LatencyEstimator,
     SourceHealth,
     fix_speed,
@@ -44,6 +47,9 @@ from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
 MAX_REF_PERIOD_S = 0.06
+GYRO_RECOVER_AFTER = 5     # gyro readings gated in a row before the filter's yaw rate is re-opened to it
+STILL_TWIST = 1e-3          # |vx|, |vy| (m/s) and |w| (rad/s) below this: the wheels stand still
+SCALE_MIN, SCALE_MAX = 0.05, 20.0   # the odometry's yaw-rate scale stays in these bounds
 
 
 def _period(series: deque) -> float:
@@ -71,7 +77,9 @@ class EKFBackend(Backend):
         self.max_rejections = c.max_rejections
         self._consecutive_rejects = 0
         self._compass_gated_run = 0
+        self._gyro_gated_run = 0
         self.arb = Arbiter()
+        self.gbias: dict[str, GyroBias] = {}  # per gyro: its bias, estimated beside the filter
         self.sources: dict[str, SourceHealth] = {}
         self.latency_est = LatencyEstimator()
         # motion integrals for the latency estimate: (t, yaw, w) from the gyro (or the odometry),
@@ -126,8 +134,8 @@ class EKFBackend(Backend):
         return np.array([1.0, float(self.ekf.x[i]) if i is not None else 1.0])
 
     def gyro_bias(self, source: str = "imu") -> float:
-        i = self.ekf.aug.get(f"gyro_bias:{source}.gyro")
-        return float(self.ekf.x[i]) if i is not None else 0.0
+        gb = self.gbias.get(f"{source}.gyro")
+        return gb.value() if gb is not None else 0.0
 
     def latency_estimate(self) -> float:
         if self.cfg.latency_s is not None:
@@ -143,6 +151,9 @@ class EKFBackend(Backend):
             self.stats["omni"] = True
             self.stats["omni_since"] = float(t)
         cov = np.array(twist_covariance(twist_cov, self.encoder_sigmas), dtype=float)
+        still = bool(np.all(np.abs(tw) < STILL_TWIST))
+        for gb in self.gbias.values():
+            gb.set_still(float(t), still)
         self._arb_add("odom", RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
         si = self.ekf.aug.get("odom_yaw_scale")
         gain = 1.0 / float(self.ekf.x[si]) if si is not None and self.ekf.x[si] > 0.05 else 1.0
@@ -173,10 +184,16 @@ class EKFBackend(Backend):
             si = self.ekf.add_state("odom_yaw_scale", 1.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q)
         h.accepted += 1
         self.ekf.update_encoder(t, tw, cov, yaw_scale_index=si)
+        if si is not None:  # a scale is positive and bounded (a filter step must not flip it)
+            self.ekf.x[si] = min(max(float(self.ekf.x[si]), SCALE_MIN), SCALE_MAX)
         self._process_pairs()
 
     def _has_gyro(self) -> bool:
-        return any(k.startswith("gyro_bias:") for k in self.ekf.aug)
+        return bool(self.gbias)
+
+    def _heading_for_bias(self, name: str, t: float, yaw: float, var: float) -> None:
+        for gb in self.gbias.values():
+            gb.add_heading(name, t, yaw, var)
 
     def add_compass(self, t: float, yaw: float | None, yaw_var: float,
                     rate: float | None, rate_var: float, source: str = "imu") -> None:
@@ -187,6 +204,7 @@ class EKFBackend(Backend):
             self.calib.add_compass(t, yaw, rate)
             vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
             self._arb_add(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(vy))
+            self._heading_for_bias(f"{source}.yaw", t, float(yaw), vy * self._noise(f"{source}.yaw")[0] ** 2)
         if not self.initialized:
             return
         th = self.calib.to_map(yaw) if (yaw is not None and self.use_compass_yaw) else None
@@ -223,10 +241,11 @@ class EKFBackend(Backend):
             return
         var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
         self._arb_add(name, INSTANT_RATE, 0.01, t, float(rate), float(var))
-        bi = self.ekf.aug.get(f"gyro_bias:{name}")
-        if bi is None:
-            bi = self.ekf.add_state(f"gyro_bias:{name}", 0.0, self.cfg.gyro_bias_prior_radps**2, self.cfg.gyro_bias_q)
-        b = float(self.ekf.x[bi])
+        gb = self.gbias.get(name)
+        if gb is None:
+            gb = self.gbias[name] = GyroBias(self.cfg.gyro_bias_prior_radps, math.sqrt(self.cfg.gyro_bias_q))
+        gb.add_rate(float(t), float(rate), float(var))
+        b = gb.value()
         self.arb.set_correction(name, bias=b)
         # the motion integral (readings interpolated)
         if self._last_rate is not None and t > self._last_rate[0]:
@@ -237,11 +256,23 @@ class EKFBackend(Backend):
         if not self.initialized:
             return
         k, rel = self._noise(name)
-        var = k * k * var + (rel * rate) ** 2
-        if self.ekf.update_gyro(t, float(rate), var, bi, CHI2_999[1] * 4):
+        var = k * k * var + (rel * rate) ** 2 + gb.sigma() ** 2
+        if self.ekf.update_gyro(t, float(rate) - b, var, None, CHI2_999[1] * 4):
             h.accepted += 1
+            self._gyro_gated_run = 0
         else:
             h.gated += 1
+            self._gyro_gated_run += 1
+            k_g, _ = self._noise(name)
+            if self._gyro_gated_run >= GYRO_RECOVER_AFTER and k_g < 3.0:
+                # gated again and again while it agrees with the other yaw sources: the filter's
+                # yaw rate is what is off (a slow process noise, a lying wheel), not the gyro
+                wi = self.ekf.w_index
+                innov = float(rate) - b - float(self.ekf.x[wi])
+                self.ekf.P[wi, wi] = max(self.ekf.P[wi, wi], innov * innov)
+                self.ekf.update_gyro(t, float(rate) - b, var, None, None)
+                self.stats["gyro_recoveries"] = self.stats.get("gyro_recoveries", 0) + 1
+                self._gyro_gated_run = 0
         self._process_pairs()
 
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
@@ -256,6 +287,7 @@ class EKFBackend(Backend):
             self._latency_pair(t, pose, cov)
             self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - self.latency_estimate(), float(pose[2]), float(cov[2, 2]))
             t_meas = t - self.latency_estimate()  # a late-stamped scan shows the pose this long before
+            heading = (t_meas, float(pose[2]), max(float(cov[2, 2]), self.cfg.map_min_sigma_theta**2))
             if self.ekf.t is not None and t_meas < self.ekf.t:
                 # a late fix (the scan arrived after newer odometry, or was stamped late): carried
                 # forward to the filter time by the filter's own velocities, with their motion noise
@@ -272,6 +304,7 @@ class EKFBackend(Backend):
                 self._consecutive_rejects = 0
                 self.stats["fixes_used"] += 1
                 self.calib.add_fix(t_meas, float(pose[2]))
+                self._heading_for_bias("scan", *heading)
             else:
                 h.gated += 1
                 self._consecutive_rejects += 1

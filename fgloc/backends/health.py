@@ -489,3 +489,217 @@ def fix_speed(fixes: Any, t: float, half_s: float = 0.2) -> float | None:
     if before is None or after is None or after[0] - before[0] > 4 * half_s:
         return None
     return float(np.hypot(after[1][0] - before[1][0], after[1][1] - before[1][1])) / (after[0] - before[0])
+
+
+MAX_GYRO_GAP_S = 0.5  # a longer gap between gyro readings breaks the integral
+
+
+class GyroBias:
+    """One gyro's bias (rad/s), from what observes it without the wheels.
+
+    A wheel's yaw rate cannot tell a gyro's bias from its own scrub or slip: a skid steer
+    whose wheels report 0.5 rad/s while driving straight would be read as a 0.5 rad/s gyro
+    bias (robot_localization's Jackal bag: 0.32 rad/s, when the bias was an EKF state beside
+    the wheels' yaw-rate scale).  The bias is therefore estimated from
+
+    * absolute headings (an IMU's orientation, a compass, scan-to-map fixes): per heading
+      source ``i`` an offset ``c_i`` = its yaw minus the gyro's raw integral ``G(t)``, which
+      drifts as ``dc_i/dt = -b``; state ``[b, c_1, ..., c_n]``, measurement
+      ``z = yaw_i(t) - G(t) = c_i``.  Only increments matter (a source's heading frame never
+      enters); ``offset_q`` lets a source's own slow errors (magnetic distortion, an AHRS's
+      drift) wander, on top of the gyro's angle random walk;
+    * standstill: while the wheels report no motion (``still_s`` in a row), each gyro reading
+      measures ``b`` itself.
+
+    Robust: an innovation beyond ``huber_k`` sigmas is down-weighted (Huber), beyond
+    ``reject_k`` it is not used; a source rejected for ``reanchor_s`` in a row (a lasting
+    magnetic disturbance, a re-initialized AHRS) is re-anchored instead of pulling the bias.
+    Headings are processed once the gyro covers their stamp (bursty IMUs, late fixes), at most
+    ``max_rate_hz`` per source (consecutive readings of one source share their slow errors).
+    Core maths only.
+    """
+
+    def __init__(self, prior_sigma: float = 0.02, rw: float = 2e-5, offset_q: float = 1e-7,
+                 huber_k: float = 3.0, reject_k: float = 8.0, reanchor_s: float = 5.0,
+                 still_s: float = 0.3, max_rate_hz: float = 20.0, history: int = 8000) -> None:
+        self.rw = float(rw)
+        self.offset_q = float(offset_q)
+        self.huber_k = float(huber_k)
+        self.reject_k = float(reject_k)
+        self.reanchor_s = float(reanchor_s)
+        self.still_s = float(still_s)
+        self.min_dt = 1.0 / float(max_rate_hz)
+        self.x = np.zeros(1)
+        self.P = np.array([[float(prior_sigma) ** 2]])
+        self.t: float | None = None
+        self.idx: dict[str, int] = {}
+        self._last: dict[str, float] = {}
+        self._bad_since: dict[str, float] = {}
+        # the gyro's raw integral (trapezoid over readings): (t, G, rate, var)
+        self.series: deque[tuple[float, float, float, float]] = deque(maxlen=int(history))
+        self._pending: list[tuple[float, str, float, float]] = []
+        self._reanchor: set[str] = set()
+        self._still_since: float | None = None
+        self._still_until = -math.inf
+        self.n_heading = 0
+        self.n_still = 0
+        self.rejected = 0
+
+    # ------------------------------------------------------------------ inputs
+    def add_rate(self, t: float, rate: float, var: float) -> None:
+        """A raw gyro reading (rad/s about base_link z) and its variance."""
+        if not (math.isfinite(t) and math.isfinite(rate)):
+            return
+        if self.series and t <= self.series[-1][0]:
+            return
+        g = 0.0
+        if self.series:
+            t0, g0, r0, _ = self.series[-1]
+            if t - t0 <= MAX_GYRO_GAP_S:
+                g = g0 + 0.5 * (r0 + rate) * (t - t0)
+            else:  # a gap: the integral does not bridge it, every heading source starts again
+                g = g0
+                self._reanchor.update(self.idx)
+        v = var if math.isfinite(var) and var > 0 else 1e-4
+        self.series.append((float(t), g, float(rate), v))
+        if self._still_since is not None and t - self._still_since >= self.still_s and t <= self._still_until:
+            self._update_still(float(t), float(rate), v)
+        self._process()
+
+    def add_heading(self, source: str, t: float, yaw: float, var: float) -> None:
+        """An absolute heading (rad, any frame fixed per source) and its variance."""
+        if not (math.isfinite(t) and math.isfinite(yaw)) or not (math.isfinite(var) and var > 0):
+            return
+        if t - self._last.get(source, -math.inf) < self.min_dt:
+            return
+        self._last[source] = float(t)
+        self._pending.append((float(t), source, float(yaw), float(var)))
+        if len(self._pending) > 2000:
+            del self._pending[:1000]
+        self._process()
+
+    def set_still(self, t: float, still: bool, hold_s: float = 0.1) -> None:
+        """The wheels' report at ``t``: standing still or not (gyro readings up to ``hold_s`` later count)."""
+        if still:
+            if self._still_since is None:
+                self._still_since = float(t)
+            self._still_until = float(t) + hold_s
+        else:
+            self._still_since = None
+            self._still_until = -math.inf
+
+    # ------------------------------------------------------------------ outputs
+    def value(self) -> float:
+        return float(self.x[0])
+
+    def sigma(self) -> float:
+        return math.sqrt(max(float(self.P[0, 0]), 0.0))
+
+    # ------------------------------------------------------------------ filter
+    def _integral_at(self, t: float) -> tuple[float, float] | None:
+        s = self.series
+        if not s or t < s[0][0] or t > s[-1][0]:
+            return None
+        lo, hi = 0, len(s) - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if s[mid][0] <= t:
+                lo = mid
+            else:
+                hi = mid
+        a, b = s[lo], s[hi]
+        if b[0] - a[0] > MAX_GYRO_GAP_S:
+            return None
+        h = b[0] - a[0]
+        if h <= 0:
+            return a[1], a[3]
+        f = (t - a[0]) / h
+        rate = a[2] + f * (b[2] - a[2])
+        return a[1] + 0.5 * (a[2] + rate) * (t - a[0]), a[3] * h
+
+    def _predict(self, t: float) -> None:
+        if self.t is None:
+            self.t = t
+            return
+        dt = t - self.t
+        if dt <= 0:
+            return
+        n = len(self.x)
+        F = np.eye(n)
+        F[1:, 0] = -dt
+        Q = np.zeros((n, n))
+        Q[0, 0] = self.rw**2 * dt
+        arw = self.series[-1][3] * (self.series[-1][0] - self.series[-2][0]) if len(self.series) > 1 else 0.0
+        for i in range(1, n):
+            Q[i, i] = (self.offset_q + arw) * dt
+        self.x = F @ self.x
+        self.P = F @ self.P @ F.T + Q
+        self.t = t
+
+    def _robust_update(self, H: np.ndarray, y: float, R: float, source: str | None, t: float) -> bool:
+        S = float(H @ self.P @ H) + R
+        z = abs(y) / math.sqrt(S)
+        if z > self.reject_k:
+            self.rejected += 1
+            return False
+        if z > self.huber_k:
+            R = R * z / self.huber_k
+            S = float(H @ self.P @ H) + R
+        K = self.P @ H / S
+        self.x = self.x + K * y
+        self.P = self.P - np.outer(K, H @ self.P)
+        self.P = 0.5 * (self.P + self.P.T)
+        return True
+
+    def _process(self) -> None:
+        if not self._pending or not self.series:
+            return
+        covered = self.series[-1][0]
+        ready = sorted(p for p in self._pending if p[0] <= covered)
+        if not ready:
+            return
+        self._pending = [p for p in self._pending if p[0] > covered]
+        for t, source, yaw, var in ready:
+            g = self._integral_at(t)
+            if g is None:
+                continue
+            z = yaw - g[0]
+            self._predict(t)
+            i = self.idx.get(source)
+            if i is None or source in self._reanchor:
+                self._anchor(source, z, var)
+                self._reanchor.discard(source)
+                continue
+            H = np.zeros(len(self.x))
+            H[i] = 1.0
+            y = wrap_scalar(z - float(self.x[i]))
+            if self._robust_update(H, y, var, source, t):
+                self._bad_since.pop(source, None)
+                self.n_heading += 1
+            else:
+                since = self._bad_since.setdefault(source, t)
+                if t - since >= self.reanchor_s:
+                    self._anchor(source, z, var)
+                    self._bad_since.pop(source, None)
+
+    def _anchor(self, source: str, z: float, var: float) -> None:
+        """(Re)start a heading source's offset at ``z``, uncorrelated with the rest."""
+        i = self.idx.get(source)
+        if i is None:
+            i = len(self.x)
+            self.idx[source] = i
+            self.x = np.append(self.x, 0.0)
+            P = np.zeros((i + 1, i + 1))
+            P[:i, :i] = self.P
+            self.P = P
+        self.P[i, :] = 0.0
+        self.P[:, i] = 0.0
+        self.x[i] = z
+        self.P[i, i] = var + 1e-6
+
+    def _update_still(self, t: float, rate: float, var: float) -> None:
+        self._predict(t)
+        H = np.zeros(len(self.x))
+        H[0] = 1.0
+        if self._robust_update(H, rate - float(self.x[0]), var, None, t):
+            self.n_still += 1

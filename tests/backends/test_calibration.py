@@ -181,8 +181,9 @@ def test_ekf_yaw_scale_and_gyro_bias_converge_within_5_percent():
     ekf = EKFBackend(EKFConfig(omni=True, latency=False))
     tr = _feed_calibration(ekf, s, yaw_scale=1.8, speed_scale=1.0, bias=0.002)
     assert ekf.odom_scales()[1] == pytest.approx(1.8, rel=0.05)
-    # a filter converges slower than the smoother: 0.00243 after 40 s, 0.00216 after 80 s
-    assert ekf.gyro_bias() == pytest.approx(0.002, rel=0.25)
+    # the bias from the fixes' headings beside the filter (GyroBias): 0.00204 after 40 s (0.00243
+    # as an EKF state pulled by the wheels' yaw rate)
+    assert ekf.gyro_bias() == pytest.approx(0.002, rel=0.05)
     assert errors(tr, s)[0] < 0.02
 
 

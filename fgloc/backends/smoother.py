@@ -89,6 +89,23 @@ def _period(ts: list[float]) -> float:
     return float(np.median(np.diff(np.asarray(ts[-50:]))))
 
 
+#: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,
+#: robot_localization's 1e6): bounded to it, a weak prior, so the integrated odometry factor stays
+#: a well-conditioned system (1e6 made iSAM2 report an indeterminate system on r_l's test1.bag)
+TWIST_VAR_MAX = 100.0
+#: m^2, m^2, rad^2: the prior of a restart after a solver failure grows at most to this
+RESTART_VAR_MAX = np.array([100.0, 100.0, np.pi**2])
+
+
+def _bounded(c: FloatArray, var_max: float | FloatArray) -> FloatArray:
+    """``c`` with each variance at most ``var_max`` (rows / columns scaled: stays positive definite)."""
+    d = np.diag(c)
+    if np.all(d <= var_max):
+        return c
+    f = np.sqrt(np.minimum(1.0, np.asarray(var_max, dtype=float) / np.maximum(d, 1e-300)))
+    return np.asarray(c, dtype=float) * np.outer(f, f)
+
+
 @dataclass
 class _Chain:
     """A slowly varying calibration variable (``Vector``): one per ``offset_interval_s``, tied by a random walk."""
@@ -475,7 +492,7 @@ class SlidingWindowSmoother(Backend):
         c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
         self.odo_t.append(float(t))
         self.odo_u.append(np.asarray(twist, dtype=float))
-        self.odo_c.append(c)
+        self.odo_c.append(_bounded(c, TWIST_VAR_MAX))
         if self.cfg.adapt_noise:
             if "odom" not in self.arb.streams:
                 self.arb.add_source("odom", RATE, rel_prior=0.05)
@@ -900,7 +917,8 @@ class SlidingWindowSmoother(Backend):
             t_last, k_last = self.kf_t[-1], keys[-1]
             pose = self.kf_pose[k_last].copy()
             self.window = deque(w for w in self.window if w[1] not in keys)
-            self.initialize(t_last, pose, self._last_cov * 4.0)
+            # the covariance grows with each failure in a row, bounded (it overflowed to inf before)
+            self.initialize(t_last, pose, _bounded(self._last_cov * 4.0, RESTART_VAR_MAX))
             return
         for pair, pos in pairs:
             self.between_idx[pair] = idx[pos]

@@ -181,11 +181,18 @@ class SourceRouter:
 
     # ------------------------------------------------------------------ session wiring
     def install(self, session: Any) -> None:
-        """Route every source's topic (and ``/tf_static`` / ``/tf``) to this router."""
+        """Route every source's topic (and ``/tf_static`` / ``/tf``) to this router; messages
+        dispatched by kind (``odom``, ``imu``: ``fgloc live``'s sensor threads) go to the first
+        source of that type, so they are checked and counted the same way."""
+        first: dict[str, SourceSpec] = {}
         for s in self.specs:
             kind = f"source:{s.name}"
             session.routes.table[s.topic] = kind
             session.register(kind, (lambda msg, spec=s: self.on_message(spec, msg)))
+            first.setdefault(s.type, s)
+        for kind, typ in (("odom", "odometry"), ("imu", "imu")):
+            if typ in first:
+                session.register(kind, (lambda msg, spec=first[typ]: self.on_message(spec, msg)))
         for tf_topic in ("/tf_static", "/tf"):
             if tf_topic not in session.routes.table:
                 session.routes.table[tf_topic] = "tf"
@@ -465,6 +472,73 @@ class SourceRouter:
 
     def finish(self) -> None:
         self.loc.stats["sources"] = self.health()
+        self.loc.stats["motion_model"] = motion_model(self.loc.backend)
+
+
+def motion_model(backend: Any) -> str:
+    """Which body twist the back-end integrates, and why (the run summary's line)."""
+    st = getattr(backend, "stats", {})
+    if "omni" not in st:  # the smoother / batch integrate the odometry's whole twist
+        return "omni: the odometry's whole twist (vx, vy, w) is integrated"
+    if st.get("omni_since") is not None:
+        v = getattr(getattr(backend, "cfg", None), "omni_vy_mps", None)
+        return "omni [x, y, yaw, vx, vy, w]: the odometry reported lateral velocity" + (f" (> {v} m/s)" if v else "")
+    if st.get("omni"):
+        return "omni [x, y, yaw, vx, vy, w] (configured: ekf.omni true)"
+    cfg = getattr(backend, "cfg", None)
+    why = "configured: ekf.omni false" if getattr(cfg, "omni", None) is False else \
+        "the odometry never reported lateral velocity"
+    return f"differential [x, y, yaw, v, w] ({why})"
+
+
+def summary_lines(stats: dict[str, Any]) -> list[str]:
+    """The run summary's lines about the inputs: the motion model and each source's health
+    (``Localizer.stats`` after the run: ``motion_model``, ``sources``)."""
+    out = []
+    if stats.get("motion_model"):
+        out.append(f"motion model: {stats['motion_model']}")
+    for name, d in (stats.get("sources") or {}).items():
+        head = f"{name}"
+        if d.get("topic"):
+            head += f" ({d.get('kind')} {d['topic']}: {' '.join(d.get('use', []))})"
+        parts = [f"{d.get('accepted', 0)} accepted"]
+        gated = int(d.get("gated", 0)) + sum(int(v) for k, v in d.items() if k.endswith("_gated"))
+        if gated:
+            parts.append(f"{gated} gated")
+        if d.get("skipped"):
+            parts.append(f"{d['skipped']} skipped")
+        est = []
+        if "speed_scale" in d and abs(d["speed_scale"] - 1.0) > 1e-4:
+            est.append(f"speed scale {d['speed_scale']:.3f}")
+        if "yaw_rate_scale" in d and abs(d["yaw_rate_scale"] - 1.0) > 1e-4:
+            est.append(f"yaw-rate scale {d['yaw_rate_scale']:.3f} (reported / true)")
+        if "gyro_bias_radps" in d:
+            est.append(f"gyro bias {d['gyro_bias_radps']:.5f} rad/s")
+        if "latency_s" in d:
+            s = f"latency {1000 * d['latency_s']:.1f} ms"
+            if "latency_estimate_s" in d:
+                s += f" (estimate {1000 * d['latency_estimate_s']:.1f} +- {1000 * d.get('latency_sigma_s', 0):.1f})"
+            est.append(s)
+        for key, what in (("noise", "yaw"), ("yaw", "heading"), ("gyro", "gyro")):
+            k = d.get(f"{key}_shown_vs_claimed")
+            if k is not None:
+                est.append(f"{what} noise {k:.2f}x claimed")
+            c = d.get(f"{key}_noise_per_turn")
+            if c:
+                est.append(f"{what} error {100 * c:.0f} % of the turn")
+        if d.get("mount"):
+            est.append(f"mount: {d['mount']}")
+        out.append(f"{head}: {', '.join(parts)}" + (f"; {'; '.join(est)}" if est else ""))
+    return out
+
+
+def source_topics(cfg: SourcesConfig | dict | None) -> dict[str, str]:
+    """``{topic: type}`` of a ``sources:`` section's inputs (empty when it lists none: the
+    default layout's topics are the command line's)."""
+    inputs = (cfg.inputs if isinstance(cfg, SourcesConfig) else dict(cfg or {})) or {}
+    if not inputs:
+        return {}
+    return {s.topic: s.type for s in parse_sources(cfg)}
 
 
 def status_line(health: dict[str, dict[str, Any]]) -> str:

@@ -152,3 +152,45 @@ def test_default_layout_reproduces_direct_feeding_exactly():
     assert np.array_equal(a.stamps, b.stamps) and np.array_equal(a.poses, b.poses)
     h = loc.stats["sources"]
     assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu"))
+
+
+def test_summary_lines_name_the_motion_model_and_each_source():
+    from fgloc.backends.ekf import EKFConfig
+    from fgloc.backends.ekf_backend import EKFBackend
+    from fgloc.localization.sources import motion_model, summary_lines
+
+    ekf = EKFBackend(EKFConfig())
+    assert motion_model(ekf).startswith("differential")
+    ekf.initialize(0.0, np.zeros(3))
+    ekf.add_odometry(0.1, np.array([0.5, 0.3, 0.0]), None)  # lateral velocity: a mecanum base
+    assert motion_model(ekf).startswith("omni") and "lateral velocity" in motion_model(ekf)
+    stats = {"motion_model": motion_model(ekf),
+             "sources": {"odom": {"kind": "odometry", "topic": "/odom", "use": ["vx", "vyaw"], "accepted": 10,
+                                  "gated": 0, "skipped": 2, "yaw_rate_scale": 2.31, "noise_shown_vs_claimed": 4.0},
+                         "imu": {"kind": "imu", "topic": "/imu", "use": ["yaw"], "accepted": 7, "gated": 0,
+                                 "skipped": 0, "gyro_bias_radps": 0.002, "gyro_gated": 3},
+                         "scan": {"kind": "pose", "accepted": 5, "gated": 1, "latency_s": 0.035}}}
+    lines = summary_lines(stats)
+    assert lines[0].startswith("motion model: omni")
+    assert lines[1] == ("odom (odometry /odom: vx vyaw): 10 accepted, 2 skipped; yaw-rate scale 2.310 "
+                        "(reported / true); yaw noise 4.00x claimed")
+    assert lines[2] == "imu (imu /imu: yaw): 7 accepted, 3 gated; gyro bias 0.00200 rad/s"
+    assert lines[3] == "scan: 5 accepted, 1 gated; latency 35.0 ms"
+
+
+def test_messages_dispatched_by_kind_go_through_the_first_source():
+    from fgloc.localization import Localizer, Session
+    from fgloc.sim import simulate_paper
+
+    sim = simulate_paper(seed=1, route=[[2.5, 3.0], [6.0, 3.0]])
+    loc = Localizer(sim.map, sim.laser_mount, backend="ekf", initial_pose=sim.ground_truth.poses[0])
+    session = Session(loc)
+    for topic, m in sim.messages:
+        session.dispatch({"/odom": "odom", "/imu": "imu", "/scan": "scan"}.get(topic, ""), m)
+    t_end = sim.topic("/imu")[-1].stamp + 0.01
+    session.dispatch("imu", CompassHeading(t_end, 0.1, 0.0, -1.0, 1e-4))  # negative yaw variance: rate used
+    session.finish()
+    h = loc.stats["sources"]
+    assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu")) + 1
+    assert h["imu"]["skipped"] == 1 and loc.stats["skipped_reasons"] == {
+        "imu: imu: orientation covariance with a NaN or negative diagonal": 1}

@@ -52,6 +52,10 @@ def _print_run_summary(r: RunResult) -> None:
     if r.mode == "map":
         con.print(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.get('lost_events', 0)} "
                   f"time(s) after tracking){', [bold red]lost at the end[/bold red]' if r.ended_lost else ''}")
+    from fgloc.localization.sources import summary_lines
+
+    for line in summary_lines(st):  # the motion model and each input source's health (issue 17)
+        con.print(f"  {line}", markup=False, highlight=False)
     for title, reasons in (("skipped", st.get("skipped_reasons")), ("no fix", st.get("no_fix_reasons"))):
         if reasons:  # grouped by kind (fgloc.localization.localizer.reason_kind): a few lines at most
             con.print(f"  {title}, by reason:")

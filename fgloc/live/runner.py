@@ -280,8 +280,12 @@ class LiveRunner:
         err = (f"ser crc {ser.get('crc_errors', 0)} len {ser.get('length_errors', 0)} "
                f"junk {ser.get('garbage_bytes', 0)}B drop {ser.get('dropped', 0)} | "
                f"las bad {las.get('malformed', 0)} reconn {las.get('disconnects', 0)}")
+        from fgloc.localization.sources import status_line
+
+        router = getattr(self.session, "sources", None)
+        health = f" | {status_line(router.health())}" if router is not None else ""  # per source (issue 17)
         return (f"{' | '.join(parts)} | lat p50 {p50:4.1f} p99 {p99:4.1f} ms | {pose} | "
-                f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']} | {err}")
+                f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']} | {err}{health}")
 
     def step(self, timeout: float = 0.02) -> bool:
         """Process queued messages (up to ~50 ms worth); returns False if nothing came."""

@@ -222,9 +222,13 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     config = req.config if isinstance(req.config, FglocConfig) else load_config(req.config)
     log = Path(req.log)
     outdir = Path(req.outdir)
+    from fgloc.localization.sources import source_topics
+
+    # a config's sources: name the odometry / IMU topics (a converted robot_localization file)
+    src = source_topics(config.sources)
     scan_topic = req.scan_topic or "/scan"
-    odom_topic = req.odom_topic or "/odom"
-    imu_topic = req.imu_topic or "/imu"
+    odom_topic = req.odom_topic or next((t for t, k in src.items() if k == "odometry"), "/odom")
+    imu_topic = req.imu_topic or next((t for t, k in src.items() if k == "imu"), "/imu")
     topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic)
     pose0 = _initial_pose(req.initial_pose)
     _check_map_arg(req.map_yaml)

@@ -10,14 +10,20 @@ model).  Core maths: no I/O.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.geometry import between, compose1, wrap_angle
+from fgloc.geometry import between, compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.geometry import log as se2_log
 from fgloc.localization.config import PipelineConfig
+from fgloc.localization.sources import UNUSED_VAR
+
+#: s: pose_deltas auto compares the twist with the pose increments summed over this long (stamp
+#: jitter and a noisy twist cancel out over it; a missing or partial twist does not)
+AGREEMENT_WINDOW_S = 1.0
 
 
 class OdometryTracker:
@@ -32,6 +38,10 @@ class OdometryTracker:
         self.from_poses = 0                # twists taken from pose increments
         self._prev_pose: tuple[float, FloatArray] | None = None
         self._scale_sig = np.asarray(cfg.pose_delta_sigmas, dtype=float)
+        # auto mode's agreement window: (t, pose increment, twist increment, poses moved) and sums
+        self._window: deque[tuple[float, FloatArray, FloatArray, bool]] = deque()
+        self._sums = np.zeros(8)  # pose increments (3), twist increments (3), path length, |turn|
+        self._moved = 0
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
              ) -> tuple[FloatArray, FloatArray | None]:
@@ -59,12 +69,21 @@ class OdometryTracker:
         """The body twist to integrate: the message's, or the dead-reckoned pose's differential.
 
         robot_localization's differential mode: when the source carries poses and its twist
-        disagrees with the pose increment (CARMEN logs that leave tv = rv = 0, or rv = 0 while
-        the pose turns) by more than ``pose_delta_tolerance_m/_deg`` (+10 %), or ``pose_deltas:
-        always``, the twist is ``log(between(prev_pose, pose)) / dt`` (held over ``(t_prev, t]``
+        disagrees with the pose increments (CARMEN logs that leave tv = rv = 0, or rv = 0 while
+        the pose turns) by more than ``pose_delta_tolerance_m/_deg`` (+10 % of the motion) summed
+        over the last :data:`AGREEMENT_WINDOW_S` (a twist that is noisy message by message but
+        describes the motion, as a Husky's, is the better measurement: robot_localization fuses
+        it), or ``pose_deltas: always``, the twist is ``log(between(prev_pose, pose)) / dt`` (held over ``(t_prev, t]``
         like an encoder twist, so integrating it reproduces the pose increment exactly).  Its
         covariance then grows with the motion (``pose_delta_sigmas`` + ``pose_delta_rel`` *
         |twist|): the poses' stamps are often where the error is (bursty logger stamps).
+
+        Only the components the source contributes are taken from the poses: a component whose
+        variance is :data:`~fgloc.localization.sources.UNUSED_VAR` (not in the source's ``use``)
+        keeps the message's value and that variance, and plays no part in the ``auto`` agreement
+        test (an odometry fusing only vx, vy never brings its wheel yaw in through its poses).
+        Poses that do not move at all over the window while the twist does are not filled in by
+        the driver (an AR.Drone's odometry leaves them at zero): the twist is kept.
         """
         prev = self._prev_pose
         self._prev_pose = None if pose is None else (t, pose)
@@ -74,19 +93,51 @@ class OdometryTracker:
         dt = t - prev[0]
         if not dt > 0:
             return tw, cov
+        unused = self._unused(cov)
+        if unused.all():
+            return tw, cov
         delta = between(prev[1], pose)
-        if mode != "always":
-            # auto: keep the twist while it agrees with the pose increment (a simulator, a good
+        if mode != "always" and self._agrees(t, delta, se2_exp(tw * dt), unused):
+            # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
-            d_tw = se2_exp(tw * dt)
-            lin, rot = float(np.hypot(delta[0], delta[1])), abs(float(delta[2]))
-            tol_lin = self.cfg.pose_delta_tolerance_m + 0.1 * lin
-            tol_rot = math.radians(self.cfg.pose_delta_tolerance_deg) + 0.1 * rot
-            if float(np.hypot(d_tw[0] - delta[0], d_tw[1] - delta[1])) <= tol_lin and \
-                    abs(float(wrap_angle(d_tw[2] - delta[2]))) <= tol_rot:
-                return tw, cov
+            return tw, cov
         u = se2_log(delta) / dt
         self.from_poses += 1
         speed = float(np.hypot(u[0], u[1]))
         sig = self._scale_sig + self.cfg.pose_delta_rel * np.array([speed, speed, abs(float(u[2])) + speed])
-        return u, np.diag(sig**2)
+        out = np.diag(sig**2)
+        if unused.any() and cov is not None:
+            # the source's unused components stay as the message gave them, unused
+            u = np.where(unused, tw, u)
+            for i in np.flatnonzero(unused):
+                out[i, i] = float(cov[i, i])
+        return u, out
+
+    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray, unused: np.ndarray) -> bool:
+        """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``."""
+        win = self._window
+        moved = bool(np.any(delta != 0.0))
+        win.append((t, delta, d_tw, moved))
+        self._sums += np.concatenate([delta, d_tw, [math.hypot(delta[0], delta[1]), abs(float(delta[2]))]])
+        self._moved += moved
+        while len(win) > 1 and win[0][0] <= t - AGREEMENT_WINDOW_S:
+            _, d0, e0, m0 = win.popleft()
+            self._sums -= np.concatenate([d0, e0, [math.hypot(d0[0], d0[1]), abs(float(d0[2]))]])
+            self._moved -= m0
+        if not self._moved:
+            return True  # poses frozen: not filled in by the driver (or standing still: both agree)
+        sd, se = self._sums[0:3], self._sums[3:6]
+        lin, rot = max(float(self._sums[6]), 0.0), max(float(self._sums[7]), 0.0)
+        tol_lin = self.cfg.pose_delta_tolerance_m + 0.1 * lin
+        tol_rot = math.radians(self.cfg.pose_delta_tolerance_deg) + 0.1 * rot
+        lin_ok = bool(unused[0] and unused[1]) or float(np.hypot(se[0] - sd[0], se[1] - sd[1])) <= tol_lin
+        rot_ok = bool(unused[2]) or abs(float(se[2] - sd[2])) <= tol_rot
+        return lin_ok and rot_ok
+
+    @staticmethod
+    def _unused(cov: FloatArray | None) -> np.ndarray:
+        """Which of vx, vy, vyaw the source does not contribute (variance UNUSED_VAR or more)."""
+        if cov is None:
+            return np.zeros(3, dtype=bool)
+        d = np.diag(np.asarray(cov, dtype=float).reshape(3, 3))
+        return np.asarray(d >= UNUSED_VAR, dtype=bool)

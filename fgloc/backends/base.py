@@ -15,6 +15,8 @@ from abc import ABC, abstractmethod
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.geometry import exp as se2_exp
+from fgloc.geometry import log as se2_log
 from fgloc.types import PoseFix, Trajectory
 
 FloatArray = NDArray[np.float64]
@@ -94,6 +96,13 @@ class Backend(ABC):
         """The compass-to-map offset (rad) once known, else None."""
         return None
 
+    def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
+        """The odometry's motion ``delta`` (``odom`` increment over ``(t0, t1]``) as the back-end
+        believes it happened: with the odometry's estimated scales and a gyro's rotation where it
+        covers the interval (a skid steer's wheels report twice the turn: a scan de-skewed with
+        that is bent).  For the front-ends' de-skew and motion model; default: as it is."""
+        return delta
+
     def reset(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
         """Re-initialize after a relocalization (kidnapping); default: initialize again."""
         self.initialize(t, pose, cov)
@@ -112,3 +121,12 @@ class Backend(ABC):
             return Trajectory(np.zeros(0), np.zeros((0, 3)))
         return Trajectory(np.asarray(self._online_t), np.asarray(self._online_p),
                           covs=np.asarray(self._online_c))
+
+
+def with_rotation(delta: FloatArray, rotation: float, speed_gain: float = 1.0) -> FloatArray:
+    """An SE(2) increment of a constant twist, its rotation replaced by ``rotation`` (rad) and its
+    translation speed times ``speed_gain`` (the arc keeps its shape as a constant twist)."""
+    u = se2_log(np.asarray(delta, dtype=float))
+    u[:2] *= speed_gain
+    u[2] = rotation
+    return se2_exp(u)

@@ -30,7 +30,7 @@ from collections import deque
 
 import numpy as np
 
-from fgloc.backends.base import Backend, FloatArray, twist_covariance
+from fgloc.backends.base import Backend, FloatArray, twist_covariance, with_rotation
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.ekf import CHI2_999, EKF, TH, EKFConfig, motion_model
 from fgloc.backends.health import (
@@ -43,6 +43,7 @@ from fgloc.backends.health import (
     SourceHealth,
     fix_speed,
 )
+from fgloc.geometry import log as se2_log
 from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
@@ -141,6 +142,19 @@ class EKFBackend(Backend):
         if self.cfg.latency_s is not None:
             return float(self.cfg.latency_s)
         return self.latency_est.value() if self.cfg.latency else 0.0
+
+    def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
+        """The odometry increment with the gyro's rotation where it covers ``(t0, t1]`` (else the
+        odometry's yaw times its estimated gain)."""
+        if t1 <= t0:
+            return delta
+        ya, yb = self._series_at(self._yaw_series, t0), self._series_at(self._yaw_series, t1)
+        if ya is not None and yb is not None:
+            return with_rotation(delta, yb[0] - ya[0])
+        si = self.ekf.aug.get("odom_yaw_scale")
+        if si is not None and self.ekf.x[si] > SCALE_MIN:
+            return with_rotation(delta, float(se2_log(np.asarray(delta, dtype=float))[2]) / float(self.ekf.x[si]))
+        return delta
 
     # ------------------------------------------------------------------ inputs
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:

@@ -634,6 +634,12 @@ class SlidingWindowSmoother(Backend):
         self._pred_cache = (key, pose, cov)
         return pose, cov
 
+    def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
+        """The odometry increment with the estimated gains and the gyro's rotation where it covers it."""
+        if t1 <= t0:
+            return delta
+        return self._corrected(np.asarray(delta, dtype=float), t0, t1)
+
     def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
         """An odometry increment with the current gains (and the gyro's rotation when it covers it)."""
         if np.allclose(self._gains, 1.0) and not self.gyro:

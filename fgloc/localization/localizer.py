@@ -112,6 +112,7 @@ class Localizer:
             self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)
         self._last_stamp: dict[str, float] = {}
         self._odom_at_last_scan: FloatArray | None = None
+        self._last_matched_t: float | None = None
         self._bad_streak = 0
         self._global_tries = 0
         self._last_compass: tuple[float, float] | None = None
@@ -214,7 +215,11 @@ class Localizer:
         odom_delta = None
         if self._odom_at_last_scan is not None:
             odom_delta = between(self._odom_at_last_scan, odom_now)
+            if not fe.is_particle_filter and self._last_matched_t is not None:
+                # as the back-end believes it moved (the odometry's scales, a gyro's rotation)
+                odom_delta = self.backend.motion_correction(self._last_matched_t, t, odom_delta)
         self._odom_at_last_scan = np.array(odom_now, dtype=float)
+        self._last_matched_t = t
         if not matching:
             return self._localize_globally(msg, odom_delta)
         guess, _ = self.backend.predict(t)

@@ -101,6 +101,12 @@ class Walker:
                         yield self._count(found[0])
                         pos = found[1]
                         continue
+                    if length < 40 and self._record_at(mm, end, size):
+                        # too short for any chunk, and its length lands on the next record: another
+                        # record (a message index, say) whose opcode byte was damaged; nothing lost
+                        self.damaged.append((pos, f"corrupt record ({e})", False))
+                        pos = end
+                        continue
                     self.damaged.append((pos, str(e), True))
                     nxt = self._resync(mm, pos + 1, size)
                     pos = end if nxt is None or nxt >= end else nxt
@@ -151,6 +157,15 @@ class Walker:
                 return
             self.damaged.append((pos, f"corrupt record header (opcode {op:#x})", op == OP_CHUNK))
             pos = nxt
+
+    @staticmethod
+    def _record_at(mm: mmap.mmap, pos: int, size: int) -> bool:
+        """A plausible record header at ``pos``: a known opcode whose length fits in the file."""
+        if pos + 9 > size:
+            return pos == size
+        op = mm[pos]
+        length = int.from_bytes(mm[pos + 1 : pos + 9], "little")
+        return 0x01 <= op <= 0x10 and pos + 9 + length <= size
 
     def _chunk_at(self, mm: mmap.mmap, pos: int, size: int) -> tuple[Block, int] | None:
         """A complete, intact chunk at ``pos`` whatever its opcode and record length say

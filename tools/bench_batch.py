@@ -11,6 +11,11 @@ Rows (each repeated ``--repeat`` times, in rotating order; medians and ranges pr
 * ``ray -j J``: ``--engine ray`` on a private local Ray instance with J CPUs, startup and
   shutdown included; also without them (``ray, after init``).
 
+Speed-up (wall): the sequential run's wall time over the engine's, paired within each repeat.
+Speed-up (CPU time): the sequential run's CPU time over (the engine's job CPU time / workers +
+Ray's startup and shutdown), i.e. the speed-up with the cores to itself; "cores busy" is the
+jobs' CPU time over the wall time (2.0 = both cores all the time).
+
 Per-log overhead: wall x workers minus the time spent inside the jobs, divided by the
 number of logs (what the engine adds around each log: dispatch, pickling, result transfer,
 idle workers at the end), and the round trip of an empty job (200 of them) per engine.
@@ -153,6 +158,8 @@ def main() -> None:
     from fgloc.batch import InlineEngine, LocalEngine, RayEngine
 
     con = Console()
+    if not con.is_terminal:
+        con = Console(width=220)  # the table whole in a saved log
     work = args.workdir or Path(tempfile.mkdtemp(prefix="fgloc-bench-batch-"))
     logs, map_yaml = make_logs(work / "logs", args.logs, args.route_m)
     from fgloc.io import open_log
@@ -188,34 +195,42 @@ def main() -> None:
     if not args.no_ray:
         noop["ray"] = [noop_roundtrip("ray", args.jobs)]
 
-    seq = [r["wall"] for r in results["sequential"]]
-    base = statistics.median(seq)
+    seq = results["sequential"]
+    seq_cpu = statistics.median(r["cpu"] for r in seq)
     t = Table(title=f"fgloc batch: {len(logs)} logs x {log_s / len(logs):.0f} s, -j {args.jobs}, "
                     f"{args.repeat} repeat(s): median (min-max)")
-    for c in ("engine", "wall s", "speed-up vs sequential", "startup s", "overhead per log s", "empty job ms",
-              "CPU s per log", "load"):
+    cols = ("engine", "wall s", "speed-up (wall)", "startup s", "overhead per log s", "empty job ms",
+            "CPU s per log", "cores busy", "speed-up (CPU time)", "load")
+    for c in cols:
         t.add_column(c, justify="left" if c == "engine" else "right")
     labels = {"sequential": "sequential (one process)", "local": f"local pool -j {args.jobs}",
               "ray": f"ray, local instance, {args.jobs} CPUs", "cli": f"fgloc run x {len(logs)} (a process each)"}
-    md = ["| engine | wall s | speed-up | startup s | overhead per log s | empty job ms | CPU s per log | load |",
-          "|---|--:|--:|--:|--:|--:|--:|--:|"]
+    md = ["| " + " | ".join(cols) + " |", "|---" + "|--:" * (len(cols) - 1) + "|"]
     for name in order:
         rs = results[name]
         walls = [r["wall"] for r in rs]
+        # paired with the sequential run of the same repeat (minutes apart, not an hour: the load drifts)
+        speed = [s["wall"] / r["wall"] for s, r in zip(seq, rs, strict=True)]
         workers = 1 if name in ("sequential", "cli") else args.jobs
         over = [(r["wall"] - r["init"]) * workers / len(logs) - r["inside"] / len(logs) for r in rs]
-        cells = [labels[name], fmt_range(walls), fmt_range([base / w for w in walls], 2),
+        has_cpu = name != "cli"
+        # what the engine would take with its cores to itself: its jobs' CPU time spread over the workers,
+        # plus Ray's startup and shutdown; the sequential run's CPU time divided by that
+        cpu_speed = [seq_cpu / (r["cpu"] / workers + r["init"]) for r in rs] if has_cpu else []
+        cells = [labels[name], fmt_range(walls), fmt_range(speed, 2),
                  fmt_range([r["init"] for r in rs], 1) if name == "ray" else "-",
-                 fmt_range(over, 2) if name != "cli" else "-",
+                 fmt_range(over, 2) if has_cpu else "-",
                  fmt_range(noop[name], 2) if name in noop else "-",
-                 fmt_range([r["cpu"] / len(logs) for r in rs], 2) if name != "cli" else "-",
+                 fmt_range([r["cpu"] / len(logs) for r in rs], 2) if has_cpu else "-",
+                 fmt_range([r["cpu"] / r["wall"] for r in rs], 2) if has_cpu else "-",
+                 fmt_range(cpu_speed, 2) if has_cpu else "-",
                  fmt_range([0.5 * (r["load"][0] + r["load"][1]) for r in rs], 1)]
         t.add_row(*cells)
         md.append("| " + " | ".join(cells) + " |")
         if name == "ray":
             w2 = [r["wall"] - r["init"] for r in rs]
-            cells = ["ray, after init/shutdown", fmt_range(w2), fmt_range([base / w for w in w2], 2), "-", "-", "-",
-                     "-", "-"]
+            cells = ["ray, after init/shutdown", fmt_range(w2),
+                     fmt_range([s["wall"] / w for s, w in zip(seq, w2, strict=True)], 2)] + ["-"] * (len(cols) - 3)
             t.add_row(*cells)
             md.append("| " + " | ".join(cells) + " |")
     con.print(t)

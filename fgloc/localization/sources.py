@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +49,7 @@ from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
+from fgloc.localization.frames import parse_static_transforms
 from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
 
 log = logging.getLogger(__name__)
@@ -67,6 +69,9 @@ class SourcesConfig:
     inputs: dict = setting({}, "name -> {type: odometry|imu|pose, topic, use: [x, y, yaw, vx, vy, vyaw], "
                            "differential, covariance: message|fixed|scaled|floor, sigmas, scale, gate, frame_id}; "
                            "empty: odom (/odom: vx, vy, vyaw) and imu (/imu: yaw, vyaw)")
+    static_transforms: list[dict] = setting([], "mounts the log lacks: [{parent: base_link, child: imu_link, "
+                                      "xyz: [x, y, z], rpy_deg: [roll, pitch, yaw] | xyzw: [qx, qy, qz, qw]}]; "
+                                      "they win over the log's /tf_static (fgloc.localization.frames)")
 
 
 @dataclass
@@ -160,10 +165,12 @@ class _State:
 class SourceRouter:
     """Routes each configured source's messages into the localizer (see the module docstring)."""
 
-    def __init__(self, loc: Any, specs: list[SourceSpec]) -> None:
+    def __init__(self, loc: Any, specs: list[SourceSpec], static: Sequence[StaticTransform] | None = None) -> None:
         self.loc = loc
         self.specs = specs
-        self.mounts: dict[str, StaticTransform] = {}
+        # configured mounts (sources.static_transforms) win over the log's
+        self.configured = {t.child.lstrip("/"): t for t in static or ()}
+        self.mounts: dict[str, StaticTransform] = dict(self.configured)
         self._warned: set[str] = set()
         self.state: dict[str, _State] = {}
         first: dict[str, str] = {}
@@ -201,7 +208,8 @@ class SourceRouter:
     def on_tf(self, msg: object) -> None:
         if isinstance(msg, (list, tuple)):
             for tr in msg:
-                if isinstance(tr, StaticTransform) and tr.parent.lstrip("/") in ("base_link", "base_footprint"):
+                if isinstance(tr, StaticTransform) and tr.parent.lstrip("/") in ("base_link", "base_footprint") \
+                        and tr.child.lstrip("/") not in self.configured:
                     self.mounts[tr.child.lstrip("/")] = tr
 
     def on_message(self, spec: SourceSpec, msg: object) -> None:
@@ -325,8 +333,9 @@ class SourceRouter:
                 if rate is not None:
                     if abs(R[2, 2]) < 0.9:
                         # the sensor's z axis is not the base's: its z rate is not the yaw rate, and
-                        # a reader that gives only z cannot say what is
-                        self._skip(st, "imu: yaw rate of a tilted mount not in the message (needs the whole Imu)")
+                        # a reader that gives only z cannot say what is (a skip only if it is used)
+                        if spec.uses("vyaw"):
+                            self._skip(st, "imu: yaw rate of a tilted mount not in the message (needs the whole Imu)")
                         rate = None
                     else:
                         rate = rate * float(np.sign(R[2, 2]))
@@ -566,7 +575,8 @@ def install_sources(session: Any) -> SourceRouter:
     cfg = getattr(getattr(loc, "config", None), "sources", None)
     topics = {k: t for t, k in session.routes.table.items() if k in ("odom", "imu")}
     specs = parse_sources(cfg, topics)
-    router = SourceRouter(loc, specs)
+    static = cfg.get("static_transforms") if isinstance(cfg, dict) else getattr(cfg, "static_transforms", None)
+    router = SourceRouter(loc, specs, parse_static_transforms(static))
     # the default kinds' topics now belong to the sources
     for t in [t for t, k in session.routes.table.items() if k in ("odom", "imu")]:
         del session.routes.table[t]

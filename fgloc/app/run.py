@@ -54,6 +54,8 @@ class RunRequest:
     realtime: float | None = None  # replay at this factor of real time (None: as fast as possible)
     view_channels: bool = True  # record the view's Foxglove channels into run.mcap (needs foxglove-sdk)
     covariance_period_s: float | None = None  # log time between fused-pose marginals (None: the session's default)
+    # mounts the log lacks (sources.static_transforms entries; fgloc run --static-transform): over the config's
+    static_transforms: list[dict] = field(default_factory=list)
     # the view's heavy channels in run.mcap at a bounded rate of log time (0: every scan; fgloc.view.record)
     view_scan_period_s: float = 0.2  # /fgloc/scan (the log's /scan is copied at its full rate)
     view_covariance_period_s: float = 0.5  # /fgloc/pose/covariance, drawn in base_link (sooner on a change)
@@ -220,6 +222,8 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     from fgloc.maps import OccupancyMap
 
     config = req.config if isinstance(req.config, FglocConfig) else load_config(req.config)
+    if req.static_transforms:
+        config = _with_static_transforms(config, req.static_transforms)
     log = Path(req.log)
     outdir = Path(req.outdir)
     from fgloc.localization.sources import source_topics
@@ -250,11 +254,12 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                        f"{topics_line(summ)}")
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
     mode = "map" if occ_map is not None else "odom"
-    laser_mount = reader.laser_mount()
+    laser_mount = _laser_mount(reader, n_scan, config)
     loc = Localizer(occ_map, laser_mount, backend=req.backend, frontend=req.frontend, initial_pose=pose0,
                     config=config)
     outdir.mkdir(parents=True, exist_ok=True)
-    want = {t for t in (scan_topic, odom_topic, imu_topic, topics.tf_static) if reader.has(t)}
+    # every configured source's topic is read (a second IMU, a pose source), not only the first of each
+    want = {t for t in (scan_topic, odom_topic, imu_topic, topics.tf_static, *src) if reader.has(t)}
     total = sum(counts.get(t, 0) for t in want)
     t_wall = time.perf_counter()
     from fgloc.view import ViewHook, check_rate, paced
@@ -338,6 +343,40 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         "finish_s": t_done - t_fin, "outputs_s": t_end - t_closed, "total_s": t_end - t_start,
     }
     return result
+
+
+def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocConfig:
+    """``config`` with ``entries`` in ``sources.static_transforms`` (replacing the same child frame)."""
+    import dataclasses
+
+    from fgloc.localization.frames import parse_static_transforms
+
+    parse_static_transforms(entries, source="--static-transform")  # one-line errors, before reading the log
+    children = {str(e.get("child", "")).lstrip("/") for e in entries}
+    kept = [e for e in config.sources.static_transforms if str(e.get("child", "")).lstrip("/") not in children]
+    sources = dataclasses.replace(config.sources, static_transforms=[*kept, *entries])
+    return dataclasses.replace(config, sources=sources)
+
+
+def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> Any:
+    """``base_link -> laser``: the config's (``sources.static_transforms``) when it names the scan's
+    frame, else the log's; no lookup (and no 'no transform' warning) in a log without scans."""
+    import numpy as np
+
+    from fgloc.localization.frames import mount_of, parse_static_transforms
+    from fgloc.types import StaticTransform
+
+    if n_scan == 0:
+        return StaticTransform("base_link", "laser", np.zeros(3))
+    mine = mount_of(reader.scan_frame(), parse_static_transforms(config.sources.static_transforms))
+    if mine is None:
+        return reader.laser_mount()
+    from fgloc.backends.imu import mount_rotation
+
+    if float(mount_rotation(mine)[2, 2]) < 0.99:  # more than ~8 deg of roll / pitch
+        raise ConfigError(f"sources.static_transforms: the laser {mine.child} is not mounted level (roll / pitch); "
+                          "fgloc takes a tilted or upside-down laser from the log's /tf_static only")
+    return StaticTransform(mine.parent, mine.child, mine.pose, mine.z)
 
 
 class _LogClock:

@@ -1,0 +1,60 @@
+"""fgloc run with a mount the log lacks (--static-transform / sources.static_transforms), no scans."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fgloc.app.run import RunRequest, run_log
+from fgloc.io.mcap_writer import LogWriter
+from fgloc.io.tum import read_tum
+from fgloc.localization.frames import static_transform_entry
+from fgloc.types import CompassHeading, Odometry
+
+HEADING = 0.5  # rad: the base's true heading; the IMU is yawed -90 deg on it
+
+
+@pytest.fixture(scope="module")
+def log_and_config(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    d = tmp_path_factory.mktemp("mount")
+    with LogWriter(d / "log.mcap") as w:
+        for i in range(201):  # 10 s at 20 Hz, 1 m/s straight ahead
+            t = 100.0 + 0.05 * i
+            w.write("/wheels/odom", Odometry(t, np.array([1.0, 0.0, 0.0]), np.diag([1e-3, 1e-3, 1e-3]),
+                                             np.array([0.05 * i, 0.0, 0.0]), np.diag([1e-3, 1e-3, 1e-3])))
+            # the IMU's x axis is the base's -y axis: it reads the base's heading - 90 deg
+            w.write("/imu/data", CompassHeading(t + 0.01, HEADING - math.pi / 2, 0.0, 1e-4, 1e-4,
+                                                frame_id="imu_link"))
+    cfg = d / "fgloc.yaml"
+    cfg.write_text(yaml.safe_dump({"sources": {"inputs": {
+        "odom0": {"type": "odometry", "topic": "/wheels/odom", "use": ["vx", "vy"]},
+        "imu0": {"type": "imu", "topic": "/imu/data", "use": ["yaw"]}}}}))
+    return d / "log.mcap", cfg
+
+
+@pytest.mark.parametrize("backend", ["ekf", "smoother"])
+def test_static_transform_turns_the_imu_into_base_link(log_and_config: tuple[Path, Path], tmp_path: Path,
+                                                        backend: str, caplog: pytest.LogCaptureFixture) -> None:
+    log, cfg = log_and_config
+    finals = {}
+    for name, tfs in (("without", []), ("with", [static_transform_entry("base_link", "imu_link", 0, 0, 0, 0, 0, -90)])):
+        with caplog.at_level(logging.WARNING):
+            # no --odom-topic / --imu-topic: the config's sources name the topics
+            r = run_log(RunRequest(log=log, outdir=tmp_path / name, backend=backend, config=cfg, force=True,
+                                   view_channels=False, static_transforms=tfs))
+        assert r.stats["sources"]["odom0"]["accepted"] == 201
+        assert r.stats["sources"]["imu0"]["accepted"] == 201
+        finals[name] = read_tum(tmp_path / name / "trajectory.tum").poses[-1]
+    # 10 m along the base's heading, read through the mount; without it, along the IMU's x axis
+    x, y = finals["with"][:2]
+    assert math.atan2(y, x) == pytest.approx(HEADING, abs=0.01) and 9.5 < math.hypot(x, y) <= 10.01
+    assert finals["with"][2] == pytest.approx(HEADING, abs=0.01)
+    assert finals["without"][2] == pytest.approx(HEADING - math.pi / 2, abs=0.01)
+    # no scans: no 'no transform base_link -> laser' warning; the IMU frame was given
+    assert not [r for r in caplog.records if "no transform" in r.getMessage()], caplog.text
+    assert yaml.safe_load((tmp_path / "with" / "config.yaml").read_text())["sources"]["static_transforms"] == tfs

@@ -15,6 +15,7 @@ from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
 from fgloc.bench import PAPER_VARIANTS, bench_faults, bench_paper, claims, frontend_available, localize_sim
 from fgloc.errors import ConfigError
+from fgloc.localization.frames import static_transform_entry
 
 __all__ = ["register"]
 
@@ -101,6 +102,10 @@ def register(app: typer.Typer) -> None:
                                               "[default: /scan when present; a name given must exist]"),
         odom_topic: str | None = typer.Option(None, "--odom-topic", help="nav_msgs/Odometry topic [/odom]"),
         imu_topic: str | None = typer.Option(None, "--imu-topic", help="sensor_msgs/Imu (compass) topic [/imu]"),
+        static_transform: tuple[str, str, float, float, float, float, float, float] | None = typer.Option(
+            None, "--static-transform", help="PARENT CHILD X Y Z ROLL PITCH YAW (m, deg): a mount the log lacks, "
+            "e.g. base_link imu_link 0 -0.3 0.52 90 0 -90 (wins over the log's /tf_static; more in the config's "
+            "sources.static_transforms)"),
         outdir: Path = typer.Option(..., "-o", "--output", help="output folder (never an input's folder "
                                     "file: run.mcap, config.yaml ... are refused if they are inputs)"),
         force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc run did not write"),
@@ -119,7 +124,9 @@ def register(app: typer.Typer) -> None:
                          initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
                          config=config,
                          scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
-                         view=view, realtime=realtime, force=force)
+                         view=view, realtime=realtime, force=force,
+                         static_transforms=[] if static_transform is None else
+                         [static_transform_entry(*static_transform)])
         r = run_request(req, progress=_progress(quiet), announce=_announce)
         _print_run_summary(r)
         failed = r.failure()

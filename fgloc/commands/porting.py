@@ -3,6 +3,7 @@
 Usage::
 
     fgloc config from-robot-localization ekf.yaml -o fgloc.yaml [--node ekf_filter_node]
+    fgloc config from-robot-localization robot.launch -o fgloc.yaml   # ROS 1 launch XML: + its static tfs
     fgloc config from-nav2 nav2_params.yaml -o fgloc.yaml
 
 The converted config is checked (``fgloc.config.parse_config``) and written with one comment
@@ -24,10 +25,20 @@ def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[s
     from fgloc.config import parse_config
     from fgloc.config.loader import read_yaml
     from fgloc.porting import from_nav2, from_robot_localization
+    from fgloc.porting.launch import is_launch_xml, read_launch
 
-    data = read_yaml(path)
+    tfs: list[dict[str, Any]] = []
+    launch_notes: list[str] = []
+    text = path.read_text(errors="replace") if path.is_file() else ""
+    if is_launch_xml(path, text):  # a ROS 1 launch file: the node's params and the mounts it publishes
+        data, tfs, launch_notes = read_launch(path, text)
+    else:
+        data = read_yaml(path)
     conv = from_robot_localization if kind == "rl" else from_nav2
     cfg, notes = conv(data, node=node, source=str(path))
+    notes += launch_notes
+    if tfs:  # static_transform_publisher mounts: the logs recorded with this launch file lack them
+        cfg.setdefault("sources", {})["static_transforms"] = tfs
     parse_config(cfg, source=f"{path} (converted)")  # every value must be a valid fgloc setting
     what = "robot_localization" if kind == "rl" else "nav2 amcl"
     head = [f"fgloc config converted from {what} parameters: {path.name}"]
@@ -57,7 +68,8 @@ def register(app: typer.Typer) -> None:
 
     @group.command("from-robot-localization")
     def from_rl(
-        params: Path = typer.Argument(..., help="robot_localization ekf/ukf parameter YAML (ROS 1 or ROS 2)"),
+        params: Path = typer.Argument(..., help="robot_localization ekf/ukf parameter YAML (ROS 1 or ROS 2), or a "
+                                      "ROS 1 launch file (its static_transform_publisher mounts are carried too)"),
         output: Path | None = typer.Option(None, "-o", "--output", help="fgloc config to write (default: print)"),
         node: str | None = typer.Option(None, "--node", help="which filter node, when the file has several"),
         force: bool = typer.Option(False, "--force", help="overwrite an existing file"),

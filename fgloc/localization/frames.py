@@ -117,7 +117,7 @@ def entry_of_publisher_args(args: Sequence[float | str]) -> dict[str, Any] | Non
         return {"parent": parent, "child": child, "xyz": xyz, "xyzw": [round(v / n, 12) for v in nums[3:]]}
     yaw, pitch, roll = nums[3:6]
     return {"parent": parent, "child": child, "xyz": xyz,
-            "rpy_deg": [round(math.degrees(v), 9) for v in (roll, pitch, yaw)]}
+            "rpy_deg": [round(math.degrees(v), 6) for v in (roll, pitch, yaw)]}
 
 
 def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransform | None:

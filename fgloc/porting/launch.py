@@ -1,0 +1,105 @@
+"""A ROS 1 launch file (``.launch`` / ``.test`` XML) read as the converters' input.
+
+robot_localization and amcl users often keep the node's parameters in the launch file itself
+(``<param>``, ``<rosparam param=...>`` and ``<rosparam>`` blocks inside the ``<node>``), beside
+the ``static_transform_publisher`` nodes that publish the sensor mounts the recorded logs then
+lack (r_l's own ``test1.bag``: the IMU mount).  :func:`read_launch` returns
+
+* ``{node name: parameters}``, the layout of a ROS 1 parameter YAML, for
+  :func:`~fgloc.porting.from_robot_localization` / :func:`~fgloc.porting.from_nav2` (``--node``
+  picks one when several match);
+* the robot mounts of the ``static_transform_publisher`` nodes (``tf`` / ``tf2_ros``) as
+  ``sources.static_transforms`` entries (:mod:`fgloc.localization.frames`);
+* notes: what could not be read (a ``<rosparam command="load" file=...>``, transforms between
+  other frames than the robot and a sensor).
+
+``$(arg name)`` takes the ``<arg>``'s ``default`` / ``value``; other substitutions (``$(find
+pkg)``, ``$(env ...)``) are left as they are.  Nothing is executed.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from fgloc.errors import ConfigError
+from fgloc.localization.frames import ROBOT_FRAMES, entry_of_publisher_args
+
+PUBLISHERS = ("static_transform_publisher",)
+
+
+def is_launch_xml(path: str | Path, text: str | None = None) -> bool:
+    """A ROS 1 launch file: by its suffix, or XML whose root is ``<launch>``."""
+    p = Path(path)
+    if p.suffix.lower() in (".launch", ".test"):
+        return True
+    head = (text if text is not None else "")[:2000].lstrip()
+    return head.startswith("<") and "<launch" in head
+
+
+def _value(text: str, typ: str | None) -> Any:
+    if typ == "str":
+        return text
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def read_launch(path: str | Path, text: str) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]], list[str]]:
+    """``(node parameters, static transform entries, notes)`` of a ROS 1 launch file (module doc)."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as e:
+        raise ConfigError(f"{path}: launch file does not parse as XML ({e})") from None
+    if root.tag != "launch":
+        raise ConfigError(f"{path}: not a ROS 1 launch file (root element <{root.tag}>, expected <launch>)")
+    args: dict[str, str] = {}
+    for a in root.iter("arg"):
+        v = a.get("value", a.get("default"))
+        if a.get("name") and v is not None:
+            args[a.get("name", "")] = v
+
+    def sub(s: str) -> str:
+        return re.sub(r"\$\(arg\s+([^)\s]+)\)", lambda m: args.get(m.group(1), m.group(0)), s)
+
+    nodes: dict[str, dict[str, Any]] = {}
+    tfs: list[dict[str, Any]] = []
+    notes: list[str] = []
+    for node in root.iter("node"):
+        typ = node.get("type", "")
+        name = node.get("name") or typ or "node"
+        if typ in PUBLISHERS:
+            entry = entry_of_publisher_args(shlex.split(sub(node.get("args", ""))))
+            if entry is None:
+                notes.append(f"{name} ({typ}): arguments {node.get('args')!r} not read")
+            elif entry["parent"] in ROBOT_FRAMES and entry["child"] not in ROBOT_FRAMES:
+                tfs.append(entry)
+            else:
+                notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']} is not a sensor mount on "
+                             "the robot; not carried over")
+            continue
+        params: dict[str, Any] = {}
+        for p in node:
+            if p.tag == "param" and p.get("name"):
+                raw = p.get("value") or p.text or ""
+                params[p.get("name", "")] = _value(sub(raw), p.get("type"))
+            elif p.tag == "rosparam":
+                if p.get("command", "load") != "load":
+                    continue
+                if p.get("file"):
+                    notes.append(f"{name}: <rosparam file={p.get('file')!r}> not read (convert that file itself)")
+                    continue
+                val = _value(sub(p.text or ""), None)
+                if p.get("param"):
+                    params[p.get("param", "")] = val
+                elif isinstance(val, dict):
+                    params.update(val)
+        if params:
+            nodes[name] = params
+    return nodes, tfs, notes

@@ -1,0 +1,70 @@
+"""fgloc config from-robot-localization / from-nav2 on a ROS 1 launch file: params and static tfs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fgloc.commands.porting import convert_file
+from fgloc.config import parse_config
+from fgloc.errors import ConfigError
+from fgloc.localization.frames import parse_static_transforms
+
+LAUNCH = """<launch>
+  <arg name="imu_yaw" default="-1.570796327"/>
+  <node pkg="tf2_ros" type="static_transform_publisher" name="bl_imu"
+        args="0 -0.3 0.52 $(arg imu_yaw) 0 1.570796327 base_link imu_link" />
+  <node pkg="tf" type="static_transform_publisher" name="bl_laser"
+        args="0.2 0 0.3 0 0 0 1 /base_link /laser 100" />
+  <node pkg="tf2_ros" type="static_transform_publisher" name="map_odom" args="0 0 0 0 0 0 map odom" />
+  <node pkg="robot_localization" type="ekf_localization_node" name="ekf">
+    <param name="frequency" value="30"/>
+    <param name="odom0" value="/wheels/odom"/>
+    <param name="imu0" value="/imu/data"/>
+    <param name="two_d_mode" value="true"/>
+    <rosparam param="odom0_config">[false, false, false, false, false, false,
+                                    true, true, false, false, false, true,
+                                    false, false, false]</rosparam>
+    <rosparam param="imu0_config">[false, false, false, false, false, true,
+                                   false, false, false, false, false, true,
+                                   false, false, false]</rosparam>
+    <rosparam file="$(find my_robot)/params/more.yaml" command="load"/>
+  </node>
+  <node pkg="my_tests" type="pose_checker" name="checker"><param name="final_x" value="1.0"/></node>
+</launch>
+"""
+
+
+@pytest.fixture
+def launch(tmp_path: Path) -> Path:
+    p = tmp_path / "robot.launch"
+    p.write_text(LAUNCH)
+    return p
+
+
+def test_launch_file_params_and_mounts_carry_over(launch: Path) -> None:
+    cfg, notes, text = convert_file("rl", launch)
+    src = cfg["sources"]
+    assert {n: (s["topic"], s["use"]) for n, s in src["inputs"].items()} == {
+        "odom0": ("/wheels/odom", ["vx", "vy", "vyaw"]), "imu0": ("/imu/data", ["yaw", "vyaw"])}
+    tfs = {e["child"]: e for e in src["static_transforms"]}
+    assert set(tfs) == {"imu_link", "laser"}  # map -> odom is not a mount
+    np.testing.assert_allclose(tfs["imu_link"]["rpy_deg"], [90.0, 0.0, -90.0])  # $(arg) substituted
+    np.testing.assert_allclose(tfs["laser"]["xyzw"], [0, 0, 0, 1])
+    imu, laser = parse_static_transforms(src["static_transforms"])
+    np.testing.assert_allclose(imu.rotation_xyzw, [0.5, -0.5, -0.5, 0.5], atol=1e-9)
+    assert laser.pose[0] == pytest.approx(0.2) and laser.z == pytest.approx(0.3)
+    assert any("map -> odom" in n for n in notes)
+    assert any("more.yaml" in n and "not read" in n for n in notes)
+    parse_config(yaml.safe_load(text), source="converted")  # the written file is a valid config
+
+
+def test_a_broken_launch_file_is_one_line(tmp_path: Path) -> None:
+    p = tmp_path / "bad.launch"
+    p.write_text("<launch><node name='x'></launch>")
+    with pytest.raises(ConfigError, match="does not parse as XML") as e:
+        convert_file("rl", p)
+    assert "\n" not in str(e.value)

@@ -57,6 +57,10 @@ def _matrix(v: Any, n: int = 15) -> np.ndarray | None:
         return a.reshape(n, n)
     if a.size == n:
         return np.diag(a)
+    if n == 15 and a.size in (12 * 12, 12):  # hydro / groovy: 12 variables, the same first 12
+        out = np.zeros((15, 15))
+        out[:12, :12] = a.reshape(12, 12) if a.size == 144 else np.diag(a)
+        return out
     return None
 
 
@@ -84,8 +88,10 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         vec = p.get(cfg_key)
         used.add(cfg_key)
         flags = [as_bool(v) for v in vec] if isinstance(vec, (list, tuple)) else [False] * 15
+        if len(flags) == 12:  # hydro / groovy: the same first 12 variables, no accelerations
+            flags += [False] * 3
         if len(flags) != 15:
-            notes.append(f"{cfg_key}: {len(flags)} values, expected 15: source {key} skipped")
+            notes.append(f"{cfg_key}: {len(flags)} values, expected 15 (or 12 before indigo): source {key} skipped")
             continue
         on = [NAMES15[j] for j in range(15) if flags[j]]
         dropped = [NAMES15[j] for j in range(15) if flags[j] and j not in PLANAR]

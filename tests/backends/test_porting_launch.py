@@ -68,3 +68,23 @@ def test_a_broken_launch_file_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="does not parse as XML") as e:
         convert_file("rl", p)
     assert "\n" not in str(e.value)
+
+
+def test_pre_indigo_12_value_vectors(tmp_path: Path) -> None:
+    """hydro / groovy: _config vectors and process noise of 12 variables (no accelerations)."""
+    p = tmp_path / "groovy.launch"
+    q = np.diag(np.arange(1, 13) / 100.0)
+    p.write_text(f"""<launch><node pkg="robot_localization" type="ekf_localization_node" name="ekf">
+      <param name="odom0" value="/ardrone/odometry/raw"/>
+      <param name="imu0" value="/ardrone/imu"/>
+      <rosparam param="odom0_config">[false, false, true, false, false, false,
+                                      true, true, false, false, false, true]</rosparam>
+      <rosparam param="imu0_config">[false, false, false, true, true, true,
+                                     false, false, false, true, true, true]</rosparam>
+      <rosparam param="process_noise_covariance">{q.reshape(-1).tolist()}</rosparam>
+    </node></launch>""")
+    cfg, notes, _ = convert_file("rl", p)
+    assert {n: s["use"] for n, s in cfg["sources"]["inputs"].items()} == {"odom0": ["vx", "vy", "vyaw"],
+                                                                           "imu0": ["yaw", "vyaw"]}
+    assert not any("expected 15" in n or "not a 15 x 15" in n for n in notes)
+    assert cfg["ekf"] == {"q_xy": 0.02, "q_theta": 0.06, "q_v": 0.08, "q_w": 0.12}

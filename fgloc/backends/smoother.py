@@ -462,7 +462,7 @@ class SlidingWindowSmoother(Backend):
             return float(self._acc[1].atRot2(self.cur_o).theta())
         try:
             return float(self.isam.calculateEstimateRot2(self.cur_o).theta())
-        except RuntimeError:
+        except (RuntimeError, IndexError):  # not (or no longer) in the window
             return self._offset_guess()
 
     def compass_offset(self) -> float | None:

@@ -6,10 +6,10 @@ What carries over:
 robot_localization                          fgloc
 ==========================================  ===============================================
 ``odomN`` + ``odomN_config``                ``sources.inputs.odomN`` (odometry): vx, vy, vyaw;
-                                            x, y, yaw only with ``odomN_differential``
+                                            x, y, yaw as increments (``differential``)
 ``imuN`` + ``imuN_config``                  ``sources.inputs.imuN`` (imu): yaw, vyaw
 ``poseN`` + ``poseN_config``                ``sources.inputs.poseN`` (pose): x, y, yaw
-``*_differential``                          ``differential``
+``*_differential``                          ``differential`` (on pose variables, as r_l)
 ``poseN_rejection_threshold`` (Mahalanobis  ``gate`` (its square: fgloc gates on the squared
 distance)                                   distance)
 ``world_frame`` (map or odom)               a pose source's ``frame_id``
@@ -109,16 +109,25 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         if kind == "odom":
             twist = [c for c in planar if c.startswith("v")]
             pose = [c for c in planar if not c.startswith("v")]
-            if diff and pose:
-                use = pose
-                if twist:
-                    notes.append(f"{cfg_key}: {', '.join(twist)} not fused beside the differential "
-                                 f"{', '.join(pose)} (fgloc takes one twist per odometry source)")
+            if pose:
+                # fgloc integrates an odometry: its poses as increments (per axis, beside the twist
+                # components of the other axes)
+                same_axis = [c for c in twist if c[1:] in pose]
+                use = pose + [c for c in twist if c not in same_axis]
+                if not diff:
+                    notes.append(f"{cfg_key}: absolute {', '.join(pose)} of an odometry fused as its increments "
+                                 f"({key}_differential; the same while it is the only position source in "
+                                 f"{world}; a position fix such as navsat_transform's /odometry/gps is not)")
+                if same_axis:
+                    notes.append(f"{cfg_key}: {', '.join(same_axis)} not fused beside the increments of "
+                                 f"{', '.join(c[1:] for c in same_axis)} (one measurement per axis)")
+                diff = True
             else:
                 use = twist
-                if pose:
-                    notes.append(f"{cfg_key}: absolute {', '.join(pose)} of an odometry not fused (fgloc integrates "
-                                 "its twist; set odomN_differential to use the pose increments)")
+                if diff:
+                    notes.append(f"{key}_differential: true has no effect on velocities (robot_localization "
+                                 "applies it to pose variables only)")
+                    diff = False
             if not use:
                 notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
                 continue
@@ -131,6 +140,10 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
             if not use:
                 notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
                 continue
+            if diff and "yaw" not in use:
+                notes.append(f"{key}_differential: true has no effect on a yaw rate (robot_localization applies "
+                             "it to orientation only)")
+                diff = False
             entry["use"] = use
         else:
             use = [c for c in planar if c in ("x", "y", "yaw")]

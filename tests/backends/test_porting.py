@@ -55,19 +55,39 @@ def test_robot_localization_ros2_example_layout():
     cfg, notes = from_robot_localization(params)
     c = parse_config(cfg)
     src = c.sources.inputs
-    assert src["odom0"]["use"] == ["vyaw"] and src["odom1"]["use"] == ["vyaw"]
+    # absolute odometry poses as increments (the odom-frame EKF's only position source), per axis
+    assert src["odom0"] == {"type": "odometry", "topic": "/example/odom", "use": ["x", "y", "vyaw"],
+                            "differential": True}
+    assert src["odom1"] == {"type": "odometry", "topic": "/example/odom2", "use": ["vyaw"]}
     assert src["pose0"] == {"type": "pose", "topic": "/example/pose", "use": ["x", "y"], "frame_id": "odom",
                             "differential": True, "gate": 4.0}
     assert src["imu0"]["use"] == ["yaw", "vyaw"]
     assert "twist0" not in src
     assert (c.ekf.q_xy, c.ekf.q_theta, c.ekf.q_v, c.ekf.q_w) == (0.05, 0.06, 0.025, 0.02)
     j = "\n".join(notes)
-    for expected in ("odom0_config: absolute x, y of an odometry not fused", "twist0 (/example/twist)",
+    for expected in ("odom0_config: absolute x, y of an odometry fused as its increments",
+"twist0 (/example/twist)",
                      "imu0_config: roll, pitch, vroll, vpitch, ax, ay, az not carried over",
                      "two_d_mode: false", "use_control: fgloc has no control input",
                      "odom0_queue_size: a ROS subscription setting", "sensor_timeout:",
                      "odom0_twist_rejection_threshold: 1 not carried over"):
         assert expected in j, expected
+
+
+def test_differential_is_what_robot_localization_does_with_it():
+    # ADVRHumanoids/concert_localization config/ekf.yaml: odom0 vx, vy with odom0_differential: true,
+    # which r_l applies to pose variables only (the velocities are fused as they are)
+    f = [False] * 15
+    vel = list(f)
+    vel[6] = vel[7] = True
+    yaw_rate = list(f)
+    yaw_rate[11] = True
+    cfg, notes = from_robot_localization({"odom0": "/odom", "odom0_config": vel, "odom0_differential": True,
+                                          "imu0": "/imu", "imu0_config": yaw_rate, "imu0_differential": True})
+    src = parse_config(cfg).sources.inputs
+    assert src["odom0"] == {"type": "odometry", "topic": "/odom", "use": ["vx", "vy"]}
+    assert src["imu0"] == {"type": "imu", "topic": "/imu", "use": ["vyaw"]}
+    assert sum("has no effect" in n for n in notes) == 2
 
 
 def test_nav2_amcl_section_converts():

@@ -8,14 +8,17 @@ parameters, the static transforms the bag lacks, and the pose tester's expected 
 and tolerance (``final_x``, ``final_y``, ``final_z``, ``tolerance``).  This tool runs what an r_l
 user would run, per case:
 
-1. the parameters (ROS 1 ``.test`` launch XML, or the ROS 2 ``.yaml`` with its pose tester
-   section) -> an r_l parameter YAML -> ``fgloc config from-robot-localization`` (the library
-   function behind it) -> an fgloc config;
-2. ``fgloc run BAG`` without a map (odom frame), with each back-end (``fgloc.app.run.run_log``,
-   the function behind ``fgloc run``), the odometry / IMU topics from the parameters;
-3. when the launch file gives static transforms that the bag lacks (test1: the IMU mount), a
-   second run on a copy of the bag with them added as ``/tf_static`` (what fgloc would do if it
-   were given the mount), marked ``+tf``;
+1. the parameters -> ``fgloc config from-robot-localization`` (the library function behind it)
+   -> an fgloc config: a ROS 1 ``.test`` launch file is converted as it is (its
+   ``static_transform_publisher`` mounts, which the bag lacks, come along as
+   ``sources.static_transforms``: test1's IMU mount); a ROS 2 ``.yaml`` through an r_l
+   parameter YAML of its filter node;
+2. ``fgloc run BAG --config CONVERTED`` without a map (odom frame), with each back-end
+   (``fgloc.app.run.run_log``, the function behind ``fgloc run``): the config's sources name the
+   topics, nothing else is given;
+3. with ``--tf-copy``, when the launch file gives static transforms, also a run on a copy of the
+   bag with them added as ``/tf_static`` and a config without them, marked ``+tf`` (the log as
+   it would have been recorded with the launch file running);
 4. two dead-reckoning references from the bag alone: the wheel speed turned by the IMU's
    absolute yaw through its mount (planar), and the wheel velocity turned by the IMU's whole
    attitude (3-D, as r_l does with two_d_mode false).
@@ -255,25 +258,31 @@ def with_static_tfs(bag: Path, tfs: list[tuple[Any, ...]], out: Path) -> Path:
 
 
 # ---------------------------------------------------------------------------- fgloc
-def convert(case: Case, work: Path) -> tuple[Path | None, list[str], str | None]:
-    """The r_l parameters as a YAML file -> fgloc config file (``fgloc config from-robot-localization``)."""
+def convert(case: Case, work: Path, mounts: bool = True) -> tuple[Path | None, list[str], str | None]:
+    """The r_l parameters -> fgloc config file (``fgloc config from-robot-localization``): a ROS 1
+    launch file as it is (with its static transforms; ``mounts=False``: through a parameter YAML
+    of the filter node alone), a ROS 2 case through a parameter YAML."""
     from fgloc.commands.porting import convert_file
     from fgloc.errors import FglocError
 
-    rl = work / f"{case.name}.rl.yaml"
-    rl.write_text(yaml.safe_dump({"ekf_filter_node": {"ros__parameters": case.params}}, sort_keys=False))
+    if mounts and case.source.suffix in (".test", ".launch"):
+        rl = case.source
+    else:
+        rl = work / f"{case.name}.rl.yaml"
+        rl.write_text(yaml.safe_dump({"ekf_filter_node": {"ros__parameters": case.params}}, sort_keys=False))
     try:
         _, notes, text = convert_file("rl", rl)
     except FglocError as e:
         return None, [], str(e)
-    out = work / f"{case.name}.fgloc.yaml"
+    out = work / f"{case.name}{'' if mounts else '.nomounts'}.fgloc.yaml"
     out.write_text(text)
     return out, notes, None
 
 
 def run_fgloc(bag: Path, config: Path, backend: str, odom_topic: str | None, imu_topic: str | None,
               outdir: Path) -> dict[str, Any]:
-    """``fgloc run BAG --backend B --config C`` in the odom frame: final pose and the summary's stats."""
+    """``fgloc run BAG --backend B --config C`` in the odom frame: final pose and the summary's stats
+    (``odom_topic`` / ``imu_topic`` None: the config's sources name them)."""
     import logging
 
     from fgloc.app.run import RunRequest, run_log
@@ -360,7 +369,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only convert these parameter files (or every *.yaml in these folders) and report")
     ap.add_argument("--backends", nargs="+", default=["ekf", "smoother"])
     ap.add_argument("--out", type=Path, default=None, help="where fgloc writes (default: a temporary folder)")
-    ap.add_argument("--no-tf-copy", action="store_true", help="skip the runs with the launch file's static tfs added")
+    ap.add_argument("--tf-copy", action="store_true",
+                    help="also run on a copy of the bag with the launch file's static tfs added as /tf_static")
     a = ap.parse_args(argv)
     if a.convert:
         files = [f for p in a.convert for f in (sorted(p.glob("*.y*ml")) if p.is_dir() else [p])]
@@ -398,13 +408,16 @@ def main(argv: list[str] | None = None) -> int:
                          f"{len(notes)} r_l parameter(s) not carried over")
         rows.append(table_row(case, duration, dr, "dead reckoning, IMU yaw", dr["planar"]))
         rows.append(table_row(case, duration, dr, "dead reckoning, IMU attitude 3-D", dr["3d"]))
-        variants: list[tuple[str, Path]] = [("", case.bag)]
-        if case.static_tfs and not a.no_tf_copy:
-            variants.append(("+tf", with_static_tfs(case.bag, case.static_tfs, work / f"{case.bag.stem}_tf.bag")))
-        for tag, bag in variants:
+        variants: list[tuple[str, Path, Path]] = [("", case.bag, cfg)]
+        if case.static_tfs and a.tf_copy:
+            bare, _, _ = convert(case, work, mounts=False)
+            if bare is not None:
+                variants.append(("+tf", with_static_tfs(case.bag, case.static_tfs, work / f"{case.bag.stem}_tf.bag"),
+                                 bare))
+        for tag, bag, config in variants:
             for be in a.backends:
                 label = f"fgloc {be}{' ' + tag if tag else ''}"
-                res = run_fgloc(bag, cfg, be, odom_t, imu_t, work / f"{case.name}_{be}{tag}")
+                res = run_fgloc(bag, config, be, None, None, work / f"{case.name}_{be}{tag}")
                 if "error" in res:
                     rows.append(table_row(case, duration, dr, label, None))
                     notes_out.append(f"  {label}: {res['error']}")

@@ -6,9 +6,11 @@ rotated: the mount is a static transform in the launch file, not in the bag) and
 each test's r_l parameters go through ``fgloc config from-robot-localization`` and fgloc runs
 the bag without a map, as ``tools/eval_rl_bags.py`` does (it prints the whole table).
 
-The bags are not in this repository: the tests look in ``$FGLOC_RL_BAGS``, ``data/robot_localization``
-and ``../shared/data/robot_localization`` for ``test1.bag``, ``test2.bag`` and r_l's ROS 1
-``test_ekf_localization_node_bag{1,2}.test`` (noetic-devel), and skip when they are absent.
+The bags are not in this repository: the tests look in ``$FGLOC_RL_BAGS`` (folders separated by
+``os.pathsep``), ``data/robot_localization`` and ``../shared/data/robot_localization`` for
+``test1.bag``, ``test2.bag`` and r_l's ROS 1 ``test_ekf_localization_node_bag{1,2}.test``
+(noetic-devel), and skip when they are absent; ``test3.bag`` with groovy-devel's
+``test_ekf_localization_node_test_bag3.test`` (12-value _config vectors) is used when a folder has it.
 
 Where fgloc does not yet end within r_l's tolerance the test is ``xfail(strict=True)`` with the
 figure measured at the time, so it flips when the fusion work lands.
@@ -32,8 +34,8 @@ NEEDED = ("test1.bag", "test2.bag", "test_ekf_localization_node_bag1.test", "tes
 
 def _folders() -> list[Path]:
     env = os.environ.get("FGLOC_RL_BAGS")
-    return ([Path(env)] if env else []) + [REPO / "data" / "robot_localization",
-                                            REPO.parent / "shared" / "data" / "robot_localization"]
+    return ([Path(e) for e in env.split(os.pathsep) if e] if env else []) + [
+        REPO / "data" / "robot_localization", REPO.parent / "shared" / "data" / "robot_localization"]
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,11 @@ def cases(tool: ModuleType) -> dict[str, Any]:
     pytest.importorskip("rosbags")
     for d in _folders():
         if all((d / n).is_file() for n in NEEDED):
-            return {c.bag.name: c for c in tool.find_cases([d])}
+            found = {c.bag.name: c for c in tool.find_cases([d])}
+            # test3 (groovy-devel's parameters) from any of the folders
+            found.update({c.bag.name: c for c in tool.find_cases([f for f in _folders() if f.is_dir()])
+                          if c.bag.name == "test3.bag"})
+            return found
     pytest.skip("robot_localization's test1.bag / test2.bag and their .test files not found "
                 "($FGLOC_RL_BAGS, data/robot_localization, ../shared/data/robot_localization)")
 
@@ -85,36 +91,34 @@ def test_rl_parameters_convert(converted: dict[str, tuple[Path, list[str]]]) -> 
 
 
 RUNS = [
-    # bag, back-end, add the launch file's static transforms to a copy of the bag, xfail reason
-    ("test2.bag", "ekf", False,
-     "ee92bab: 0.221 m from r_l's final (1.021, 3.429), tolerance 0.138; dead reckoning with the IMU "
-     "yaw 0.142 m, with the IMU's whole attitude (the Jackal climbs 0.74 m) 0.084 m"),
-    ("test2.bag", "smoother", False,
-     "ee92bab: 0.366 m from r_l's final, tolerance 0.138 (wheel yaw-rate scale estimated 2.38; "
+    # bag, back-end, xfail reason (the converted launch file carries test1's IMU mount)
+    ("test2.bag", "ekf",
+     "52405ec..db6e7ee: 0.219 m from r_l's final (1.021, 3.429), tolerance 0.138; dead reckoning with the IMU "
+     "yaw 0.142 m, with the IMU's whole attitude (the Jackal climbs 0.74 m) 0.084 m: fgloc is planar"),
+    ("test2.bag", "smoother",
+     "52405ec..db6e7ee: 0.340 m from r_l's final, tolerance 0.138 (wheel yaw-rate scale estimated 2.23; "
      "the wheels report 47.9 rad of turning against the IMU's 10.2)"),
-    ("test1.bag", "ekf", True,
-     "ee92bab: 3.08 m from r_l's final (-40.045, -76.999), tolerance 1.045: 3429 of 3952 odometry "
-     "twists replaced by pose increments (pipeline.pose_deltas auto) that carry the wheel yaw odom0 does "
-     "not fuse; pose_deltas: never gives 0.43 m"),
-    ("test1.bag", "smoother", True, None),  # 1.037 m at ee92bab (margin 8 mm)
+    ("test1.bag", "ekf", None),       # 3.08 m (+tf) at ee92bab, 0.939 m now (tol 1.045)
+    ("test1.bag", "smoother", None),  # 1.037 m (+tf) at ee92bab, 0.694 m now
+    ("test3.bag", "ekf", None),       # groovy's 12-value vectors skipped both sources at ee92bab; 0.191 m (tol 0.75)
+    ("test3.bag", "smoother",
+     "0b2299e: 2.043 m from r_l's final (0.204, -0.468), tolerance 0.75: the AR.Drone's odometry reports "
+     "vyaw 0 (zero variance) beside the IMU's differential yaw; the EKF ends 0.191 m off"),
 ]
 
 
-@pytest.mark.parametrize(("bag", "backend", "add_tf", "xfail"), RUNS,
-                         ids=[f"{b.split('.')[0]}-{be}{'-tf' if tf else ''}" for b, be, tf, _ in RUNS])
+@pytest.mark.parametrize(("bag", "backend", "xfail"), RUNS, ids=[f"{b.split('.')[0]}-{be}" for b, be, _ in RUNS])
 def test_final_pose_within_rl_tolerance(tool: ModuleType, cases: dict[str, Any], converted: dict[str, Any],
-                                        work: Path, bag: str, backend: str, add_tf: bool, xfail: str | None,
+                                        work: Path, bag: str, backend: str, xfail: str | None,
                                         request: pytest.FixtureRequest) -> None:
-    """fgloc without a map ends within r_l's own test tolerance of r_l's final position (x, y)."""
+    """fgloc without a map ends within r_l's own test tolerance of r_l's final position (x, y):
+    ``fgloc run BAG --config CONVERTED``, nothing else given (the config names topics and mounts)."""
+    if bag not in cases:
+        pytest.skip(f"{bag} and its r_l test file not found")
     if xfail:
         request.applymarker(pytest.mark.xfail(strict=True, reason=xfail))
     case = cases[bag]
-    log = case.bag
-    if add_tf:
-        assert case.static_tfs, "the launch file's static transform (the IMU mount) was not read"
-        log = tool.with_static_tfs(case.bag, case.static_tfs, work / f"{case.bag.stem}_tf.bag")
-    odom_topic, imu_topic = tool.topics(case.params)
-    res = tool.run_fgloc(log, converted[bag][0], backend, odom_topic, imu_topic, work / f"{bag}-{backend}")
+    res = tool.run_fgloc(case.bag, converted[bag][0], backend, None, None, work / f"{bag}-{backend}")
     assert "error" not in res, res.get("error")
     x, y = float(res["final"][0]), float(res["final"][1])
     ex, ey, _ = case.expected_xyz
@@ -122,8 +126,16 @@ def test_final_pose_within_rl_tolerance(tool: ModuleType, cases: dict[str, Any],
     assert err < case.tolerance_m, f"final ({x:.3f}, {y:.3f}) is {err:.3f} m from r_l's, tolerance {case.tolerance_m}"
 
 
-@pytest.mark.xfail(strict=True, reason="ee92bab: fgloc run ignores the topics of a converted sources: "
-                   "config ('no /scan, /odom or /imu messages to localize with'); --odom-topic/--imu-topic needed")
+def test_converted_launch_file_carries_the_imu_mount(converted: dict[str, Any]) -> None:
+    """test1's launch file publishes the Husky's IMU mount (the bag lacks it): the config has it."""
+    import yaml
+
+    cfg = yaml.safe_load(converted["test1.bag"][0].read_text())
+    (tf,) = cfg["sources"]["static_transforms"]
+    assert (tf["parent"], tf["child"]) == ("base_link", "imu_link")
+    assert tf["xyz"] == pytest.approx([0.0, -0.3, 0.52]) and tf["rpy_deg"] == pytest.approx([90.0, 0.0, -90.0])
+
+
 def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dict[str, Any], work: Path) -> None:
     """A converted r_l config is enough to run: its sources name the topics (no --odom-topic)."""
     from fgloc.app.run import RunRequest, run_log
@@ -133,3 +145,20 @@ def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dic
                            force=True, view_channels=False))
     assert r.stats["sources"]["odom0"]["accepted"] == 3060
     assert r.stats["sources"]["imu0"]["accepted"] == 3061
+
+
+def test_no_heading_source_is_no_traceback(tool: ModuleType, cases: dict[str, Any], work: Path) -> None:
+    """test1 with odom0 fusing vx, vy and no IMU (nothing measures the heading): the smoother
+    finishes; solver failures, if any, are counted (ee92bab: 'Indeterminate linear system' raised)."""
+    import yaml
+
+    from fgloc.app.run import RunRequest, run_log
+
+    cfg = work / "no-heading.yaml"
+    cfg.write_text(yaml.safe_dump({"sources": {"inputs": {"odom0": {
+        "type": "odometry", "topic": "/husky_velocity_controller/odom", "use": ["vx", "vy"]}}}}))
+    r = run_log(RunRequest(log=cases["test1.bag"].bag, outdir=work / "no-heading", backend="smoother", config=cfg,
+                           force=True, view_channels=False))
+    assert r.poses > 1000
+    assert r.stats["sources"]["odom0"]["accepted"] == 3952
+    assert isinstance(r.stats["backend"].get("solver_failures", 0), int)

@@ -261,6 +261,7 @@ class SourceRouter:
             return
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
         cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
+        tw_msg, cov_msg = tw.copy(), cov
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
         if spec.differential or not any(spec.uses(c) for c in ("vx", "vy", "vyaw")):
             # robot_localization's differential mode: the twist of the pose increments
@@ -274,7 +275,21 @@ class SourceRouter:
             tw = se2_log(between(prev[1], pose)) / dt
             pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
             cov = None if pc is None else 2.0 * pc / (dt * dt)
-            comps = ("x", "y", "yaw")
+            comps: tuple[str, ...] = ("x", "y", "yaw")
+            mixed = [i for i, (pc_, vc) in enumerate((("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
+                     if not spec.uses(pc_) and spec.uses(vc)]
+            if mixed:
+                # an axis fused as a velocity beside the increments of the others (r_l: x, y, vyaw)
+                dflt = np.square(list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02)))
+                tw = tw.copy()
+                cov = np.diag(dflt) if cov is None else cov.copy()
+                comps = tuple(("vx", "vy", "vyaw")[i] if i in mixed else c for i, c in enumerate(comps))
+                for i in mixed:
+                    tw[i] = tw_msg[i]
+                    cov[i, :] = 0.0
+                    cov[:, i] = 0.0
+                    ok = cov_msg is not None and float(cov_msg[i, i]) > 0
+                    cov[i, i] = float(cov_msg[i, i]) if ok and cov_msg is not None else float(dflt[i])
         else:
             comps = ("vx", "vy", "vyaw")
         default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))

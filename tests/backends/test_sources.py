@@ -194,3 +194,15 @@ def test_messages_dispatched_by_kind_go_through_the_first_source():
     assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu")) + 1
     assert h["imu"]["skipped"] == 1 and loc.stats["skipped_reasons"] == {
         "imu: imu: orientation covariance with a NaN or negative diagonal": 1}
+
+
+def test_differential_odometry_takes_the_velocity_of_an_axis_it_fuses_as_a_velocity():
+    # robot_localization's ekf.yaml odom0: x, y (converted to increments) and vyaw
+    loc, router = _router({"odom0": {"type": "odometry", "use": ["x", "y", "vyaw"], "differential": True}})
+    spec = router.specs[0]
+    c = np.diag([0.01, 0.01, 0.04])
+    router.on_message(spec, Odometry(1.0, np.array([0.5, 0.0, 9.9]), c, np.array([0.0, 0.0, 0.0]), c * 0.01))
+    router.on_message(spec, Odometry(1.5, np.array([0.5, 0.0, 0.2]), c, np.array([0.25, 0.0, 0.0]), c * 0.01))
+    (m,) = loc.odometry  # the first message only starts the increments
+    assert m.twist[0] == pytest.approx(0.5) and m.twist[2] == pytest.approx(0.2)  # x: poses (no turn), w: twist
+    assert m.twist_cov[2, 2] == pytest.approx(0.04) and m.twist_cov[0, 0] == pytest.approx(2 * 1e-4 / 0.25)

@@ -17,8 +17,13 @@ Model``, ``...OmniMotionModel``, ROS 1
 ``pf_err``, ``pf_z``, ``resample_interval``
 ``recovery_alpha_slow`` / ``_fast``             the same
 ``update_min_d``, ``update_min_a``              the same
-``scan_topic``                                  a note: pass ``--scan-topic``
+``scan_topic``                                  a note: pass ``--scan-topic`` (one topic)
 ==============================================  ==========================================
+
+ROS 1 amcl names (``odom_alphaN``, ``laser_z_hit``, ``laser_z_rand``, ``laser_sigma_hit``,
+``kld_err``, ``kld_z``) are read as nav2's.  A parameter the file leaves out takes the default of
+the node it was written for (nav2_amcl's, or ROS 1 amcl's when the file uses ROS 1 names), not
+fgloc's (differential vs omni, alphas 0.2 vs 0.05, sigma_hit 0.2 vs 0.05, ...): one note lists them.
 
 Everything else is one note line (the beam model and its ``z_short``/``z_max``/
 ``lambda_short``, beam skipping, frames, tf and pose-saving settings).
@@ -26,6 +31,8 @@ Everything else is one note line (the beam model and its ``z_short``/``z_max``/
 
 from __future__ import annotations
 
+import math
+import re
 from typing import Any
 
 from fgloc.porting.common import as_bool, find_params
@@ -35,6 +42,20 @@ SAME = ("alpha1", "alpha2", "alpha3", "alpha4", "alpha5", "z_hit", "z_rand", "si
         "resample_interval", "recovery_alpha_slow", "recovery_alpha_fast", "update_min_d", "update_min_a")
 INTS = ("min_particles", "max_particles", "resample_interval")
 QUIET = {"use_sim_time"}
+ROS1_NAMES = {"odom_alpha1": "alpha1", "odom_alpha2": "alpha2", "odom_alpha3": "alpha3", "odom_alpha4": "alpha4",
+              "odom_alpha5": "alpha5", "laser_z_hit": "z_hit", "laser_z_rand": "z_rand",
+              "laser_sigma_hit": "sigma_hit", "kld_err": "pf_err", "kld_z": "pf_z"}
+# the nodes' own defaults (nav2_amcl's AmclNode parameters; ROS 1 amcl's wiki page)
+NAV2_DEFAULTS: dict[str, Any] = {
+    "alpha1": 0.2, "alpha2": 0.2, "alpha3": 0.2, "alpha4": 0.2, "alpha5": 0.2, "z_hit": 0.5, "z_rand": 0.5,
+    "sigma_hit": 0.2, "laser_likelihood_max_dist": 2.0, "laser_max_range": 100.0, "min_particles": 500,
+    "max_particles": 2000, "pf_err": 0.05, "pf_z": 0.99, "resample_interval": 1, "recovery_alpha_slow": 0.0,
+    "recovery_alpha_fast": 0.0, "update_min_d": 0.25, "update_min_a": 0.2, "laser_max_beams": 60,
+    "robot_model_type": "differential", "laser_model_type": "likelihood_field"}
+ROS1_DEFAULTS: dict[str, Any] = {
+    **NAV2_DEFAULTS, "z_hit": 0.95, "z_rand": 0.05, "laser_max_range": -1.0, "min_particles": 100,
+    "max_particles": 5000, "pf_err": 0.01, "resample_interval": 2, "update_min_d": 0.2,
+    "update_min_a": round(math.pi / 6, 6), "laser_max_beams": 30}
 
 
 def _looks_like_amcl(d: Any) -> bool:
@@ -45,6 +66,8 @@ def _looks_like_amcl(d: Any) -> bool:
 def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -> tuple[dict[str, Any], list[str]]:
     """``(fgloc config sections, notes)`` for the ``amcl`` node of a nav2 (or ROS 1 amcl) params file."""
     name, p, others = find_params(data, _looks_like_amcl, node, source)
+    ros1 = any(k in p for k in (*ROS1_NAMES, "odom_model_type", "laser_max_beams"))
+    p = {ROS1_NAMES.get(str(k), k): v for k, v in p.items()}
     notes: list[str] = []
     if others:
         notes.append(f"converted node {name}; not converted: {', '.join(others)}")
@@ -67,7 +90,7 @@ def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -
         elif "diff" in m:
             amcl["robot_model_type"] = "differential"
         else:
-            notes.append(f"robot_model_type: {model}: unknown motion model, fgloc's default kept")
+            notes.append(f"robot_model_type: {model}: unknown motion model (the node's default is used)")
         if "corrected" in m:
             notes.append(f"odom_model_type: {model}: fgloc's models are the corrected ones (nav2's)")
     if "laser_model_type" in p:
@@ -77,20 +100,35 @@ def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -
             amcl["laser_model_type"] = lm
         else:
             notes.append(f"laser_model_type: {lm}: not in fgloc (likelihood_field or likelihood_field_prob); "
-                         "fgloc's default kept")
+                         "likelihood_field used")
     if "laser_min_range" in p:
         used.add("laser_min_range")
         if float(p["laser_min_range"]) > 0:
             notes.append(f"laser_min_range: {p['laser_min_range']}: fgloc uses the scan's range_min")
     if "scan_topic" in p:
         used.add("scan_topic")
-        notes.append(f"scan_topic: {p['scan_topic']}: pass --scan-topic {p['scan_topic']} to fgloc run")
+        st = p["scan_topic"]
+        scans = [str(t) for t in st] if isinstance(st, (list, tuple)) else re.split(r"[\s,]+", str(st).strip())
+        scans = [t for t in scans if t]
+        if len(scans) > 1:
+            notes.append(f"scan_topic: {' '.join(scans)}: fgloc localizes with one laser: pass --scan-topic "
+                         f"{scans[0]} to fgloc run (the others are not used)")
+        elif scans:
+            notes.append(f"scan_topic: {scans[0]}: pass --scan-topic {scans[0]} to fgloc run")
     if as_bool(p.get("set_initial_pose", False)):
         used.update({"set_initial_pose", "initial_pose"})
         ip = p.get("initial_pose") or {}
         if isinstance(ip, dict):
             notes.append(f"set_initial_pose: pass --initial-pose {ip.get('x', 0.0)} {ip.get('y', 0.0)} "
                          f"{ip.get('yaw', 0.0)} to fgloc run")
+    # what the file leaves out is what its node would use, not fgloc's defaults
+    defaults = ROS1_DEFAULTS if ros1 else NAV2_DEFAULTS
+    filled = [k for k in defaults if k not in amcl]
+    for k in filled:
+        amcl[k] = defaults[k]
+    if filled:
+        notes.append(f"left out, so {'ROS 1 amcl' if ros1 else 'nav2_amcl'}'s defaults (not fgloc's): "
+                     + ", ".join(f"{k} {defaults[k]}" for k in filled))
     out: dict[str, Any] = {"frontends": {"amcl": amcl}} if amcl else {}
     for k in sorted(p):
         ks = str(k)

@@ -88,3 +88,29 @@ def test_pre_indigo_12_value_vectors(tmp_path: Path) -> None:
                                                                            "imu0": ["yaw", "vyaw"]}
     assert not any("expected 15" in n or "not a 15 x 15" in n for n in notes)
     assert cfg["ekf"] == {"q_xy": 0.02, "q_theta": 0.06, "q_v": 0.08, "q_w": 0.12}
+
+
+def test_nav2_left_out_parameters_take_the_nodes_defaults(tmp_path: Path) -> None:
+    """A nav2 file naming only a few parameters: the rest are nav2_amcl's defaults, not fgloc's; a
+    ROS 1 amcl launch file: its names and ROS 1 amcl's defaults; several scan topics: one note."""
+    from fgloc.porting import from_nav2
+
+    cfg, notes = from_nav2({"amcl": {"ros__parameters": {"z_hit": 0.6, "max_particles": 3000,
+                                                         "scan_topic": "front_scan rear_scan"}}})
+    a = parse_config(cfg).frontends.amcl
+    assert (a.robot_model_type, a.alpha1, a.alpha5, a.sigma_hit, a.update_min_d) == ("differential", 0.2, 0.2,
+                                                                                       0.2, 0.25)
+    assert (a.z_hit, a.max_particles, a.laser_model_type, a.laser_max_range) == (0.6, 3000, "likelihood_field", 100.0)
+    assert sum("nav2_amcl's defaults" in n for n in notes) == 1
+    assert any("one laser: pass --scan-topic front_scan to fgloc run" in n for n in notes)
+    p = tmp_path / "amcl.launch"
+    p.write_text("""<launch><node pkg="amcl" type="amcl" name="amcl">
+      <param name="odom_model_type" value="omni-corrected"/><param name="odom_alpha1" value="0.1"/>
+      <param name="laser_z_hit" value="0.9"/><param name="kld_err" value="0.02"/>
+      <param name="update_min_d" value="0.1"/><param name="laser_model_type" value="likelihood_field"/>
+    </node></launch>""")
+    cfg, notes, _ = convert_file("nav2", p)
+    a = parse_config(cfg).frontends.amcl
+    assert (a.robot_model_type, a.alpha1, a.alpha2, a.z_hit, a.z_rand, a.pf_err) == ("omni", 0.1, 0.2, 0.9, 0.05, 0.02)
+    assert (a.min_particles, a.max_particles, a.resample_interval, a.laser_max_beams) == (100, 5000, 2, 30)
+    assert not any(n.startswith(("odom_alpha1", "laser_z_hit", "kld_err")) for n in notes)

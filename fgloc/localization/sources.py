@@ -459,11 +459,12 @@ class SourceRouter:
                 bh = bhs.get(n)
                 if bh is not None:
                     d[f"{n.split('.')[-1] if '.' in n else 'backend'}_gated"] = bh.gated
-                if arb is not None and n in arb.streams:
+                # the noise an odometry's yaw rate showed: only when the source fuses its yaw
+                if arb is not None and n in arb.streams and (s.type != "odometry" or s.uses("vyaw") or s.uses("yaw")):
                     shown, claimed = arb.shown_sigma(n), arb.claimed_sigma(n)
                     k, c = arb.noise(n)
                     key = n.split(".")[-1] if "." in n else "noise"
-                    d[f"{key}_noise_x_claimed"] = round(k, 3)
+                    d[f"{key}_noise_x_claimed" if key != "noise" else "noise_x_claimed"] = round(k, 3)
                     if c > 0:
                         d[f"{key}_noise_per_turn"] = round(c, 3)
                     if shown is not None and claimed:

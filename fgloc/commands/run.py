@@ -57,6 +57,13 @@ def _print_run_summary(r: RunResult) -> None:
 
     for line in summary_lines(st):  # the motion model and each input source's health (issue 17)
         con.print(f"  {line}", markup=False, highlight=False)
+    be = st.get("backend") or {}
+    if be.get("solver_failures"):  # the smoother restarted from its prediction: the estimate is not smoothed there
+        con.print(f"  [yellow]back-end:[/yellow] {be['solver_failures']} solver failure(s), each a restart from "
+                  "the odometry prediction (an input that leaves a variable unconstrained, e.g. no heading source)",
+                  highlight=False)
+    if be.get("compass_recoveries"):
+        con.print(f"  back-end: heading re-opened to the compass {be['compass_recoveries']} time(s)", highlight=False)
     for title, reasons in (("skipped", st.get("skipped_reasons")), ("no fix", st.get("no_fix_reasons"))):
         if reasons:  # grouped by kind (fgloc.localization.localizer.reason_kind): a few lines at most
             con.print(f"  {title}, by reason:")

@@ -34,8 +34,9 @@ def test_unused_yaw_is_not_taken_from_the_poses() -> None:
     assert tr.from_poses > 30
     for u, c in out[1:]:
         assert c[2, 2] == UNUSED_VAR          # still unused
-        assert u[2] == 0.3                    # the message's own value, not the poses'
+        assert u[2] == 0.0                    # handed on as 0: neither the poses' turn nor the message's
     assert abs(out[-1][0][0] - 0.5) < 0.02    # vx from the pose increments
+    assert tr.twist[2] == 0.3                 # the front-ends' dead-reckoned pose keeps the message's turn
 
 
 def test_unused_yaw_disagreement_does_not_replace_the_twist() -> None:

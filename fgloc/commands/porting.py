@@ -42,17 +42,37 @@ def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[s
     parse_config(cfg, source=f"{path} (converted)")  # every value must be a valid fgloc setting
     what = "robot_localization" if kind == "rl" else "nav2 amcl"
     head = [f"fgloc config converted from {what} parameters: {path.name}"]
+    head += [f"WARNING: {w}" for w in conversion_warnings(kind, cfg)]
     head += [f"not carried over: {n}" for n in notes]
     text = "\n".join(f"# {line}" for line in head) + "\n" + (yaml.safe_dump(cfg, sort_keys=False) if cfg else "{}\n")
     return cfg, notes, text
 
 
+def conversion_warnings(kind: str, cfg: dict[str, Any]) -> list[str]:
+    """What the converted config cannot do that the ROS node did: no source of translation or of
+    heading left (an r_l file whose only position source fgloc does not read, e.g. a twistN)."""
+    if kind != "rl":
+        return []
+    inputs = ((cfg.get("sources") or {}).get("inputs") or {}).values()
+    used = {c for s in inputs for c in (s.get("use") or ())}
+    out = []
+    if not used & {"x", "y", "vx", "vy"}:
+        out.append("no source of translation left: without scans and a map fgloc will not move the robot")
+    if inputs and not used & {"yaw", "vyaw"}:
+        out.append("no source of heading left: without scans and a map the heading is the first one")
+    return out
+
+
 def _write(kind: str, path: Path, output: Path | None, node: str | None, force: bool) -> None:
+    import sys
+
     from fgloc.app.files import write_text_output
 
-    _, notes, text = convert_file(kind, path, node)
+    cfg, notes, text = convert_file(kind, path, node)
     for n in notes:
         print(f"not carried over: {n}")
+    for w in conversion_warnings(kind, cfg):
+        print(f"fgloc: warning: {path}: {w}", file=sys.stderr)
     if output is None:
         print(text, end="")
     else:

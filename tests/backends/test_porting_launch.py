@@ -114,3 +114,18 @@ def test_nav2_left_out_parameters_take_the_nodes_defaults(tmp_path: Path) -> Non
     assert (a.robot_model_type, a.alpha1, a.alpha2, a.z_hit, a.z_rand, a.pf_err) == ("omni", 0.1, 0.2, 0.9, 0.05, 0.02)
     assert (a.min_particles, a.max_particles, a.resample_interval, a.laser_max_beams) == (100, 5000, 2, 30)
     assert not any(n.startswith(("odom_alpha1", "laser_z_hit", "kld_err")) for n in notes)
+
+
+def test_no_translation_left_is_a_one_line_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An r_l file whose only velocity source is a twistN (not read by fgloc): converted, with a warning."""
+    from fgloc.cli import main
+
+    p = tmp_path / "ekf.yaml"
+    vel = [False] * 6 + [True, True, False, False, False, True] + [False] * 3
+    p.write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": {
+        "twist0": "/spot/odometry/twist", "twist0_config": vel,
+        "imu0": "/imu", "imu0_config": [False] * 5 + [True] + [False] * 9}}}))
+    assert main(["config", "from-robot-localization", str(p), "-o", str(tmp_path / "out.yaml")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("warning") == 1 and "no source of translation left" in err
+    assert "# WARNING: no source of translation left" in (tmp_path / "out.yaml").read_text()

@@ -215,7 +215,9 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     """
     t_start = time.perf_counter()
     from fgloc.config import FglocConfig, load_config
-    from fgloc.io.log import IMU, LASER_SCAN, ODOMETRY, LogReader, LogWriter, Topics
+    from fgloc.io import open_log
+    from fgloc.io.mcap_writer import LogWriter
+    from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, Topics
     from fgloc.io.tum import write_tum
     from fgloc.localization import Localizer, RecorderSink, Routes, Session
     from fgloc.localization.session import CallbackSink
@@ -238,7 +240,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     _check_map_arg(req.map_yaml)
     cfg_path = req.config if isinstance(req.config, (str, Path)) else None
     check_outputs(outdir, [log, req.map_yaml, cfg_path], req.force)
-    reader = LogReader(log, topics)
+    reader = open_log(log, topics)
     summ = reader.summary()
     counts = {t: v["count"] for t, v in summ["topics"].items()}
     n_scan, n_odom, n_imu = counts.get(scan_topic, 0), counts.get(odom_topic, 0), counts.get(imu_topic, 0)

@@ -531,7 +531,7 @@ def simulate_paper(seed: int = 0, **overrides: Any) -> SimResult:
 
 def write_sim(result: SimResult, outdir: str | Path) -> Path:
     """Write ``log.mcap``, ``map.yaml`` + ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` into outdir."""
-    from fgloc.io.log import LogWriter
+    from fgloc.io.mcap_writer import LogWriter
     from fgloc.io.tum import write_tum
     from fgloc.io.yamlio import write_yaml
 

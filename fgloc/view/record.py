@@ -33,7 +33,7 @@ import numpy as np
 
 from fgloc.errors import LogError
 from fgloc.geometry import rotate_covariance
-from fgloc.io.log import stamp_to_ns
+from fgloc.io.ros import stamp_to_ns
 from fgloc.view import channels as ch
 from fgloc.view.channels import BASE_FRAME
 from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready

@@ -190,13 +190,9 @@ def test_the_pipeline_shim_is_gone():
     assert not _importers("fgloc.pipeline")
 
 
-# fgloc.io.log only re-exports names of fgloc.io.{mcap_writer, ros, topics} and open_log; these
-# modules (owners mid-change) still import it; it goes when they have moved.
-IO_LOG_PENDING = {"fgloc.app.run", "fgloc.sim.simulate", "fgloc.batch.adapter", "fgloc.view.record"}
-
-
-def test_nothing_new_imports_the_io_log_shim():
-    assert set(_importers("fgloc.io.log")) <= IO_LOG_PENDING
+def test_the_io_log_shim_is_gone():
+    assert "fgloc.io.log" not in MODULES
+    assert not _importers("fgloc.io.log")
 
 
 REPO = PACKAGE.parent

@@ -77,7 +77,7 @@ class BaseSink:
 @dataclass
 class Routes:
     """Which input kind each topic is.  ``Routes.default(topics)`` maps the scan/odom/imu topic
-    names of a :class:`fgloc.io.log.Topics` (or a mapping ``kind -> topic``) to their kinds."""
+    names of a :class:`fgloc.io.topics.Topics` (or a mapping ``kind -> topic``) to their kinds."""
 
     table: dict[str, str] = field(default_factory=lambda: {v: k for k, v in DEFAULT_TOPICS.items()})
 
@@ -211,7 +211,7 @@ class Session:
 # ---------------------------------------------------------------------- sinks
 class RecorderSink(BaseSink):
     """Writes every input and the fused pose (``fused_topic``) to a writer with
-    ``write(topic, msg, stamp=None, log_time_ns=None)`` (an :class:`fgloc.io.log.LogWriter`);
+    ``write(topic, msg, stamp=None, log_time_ns=None)`` (an :class:`fgloc.io.mcap_writer.LogWriter`);
     closes it if asked.
 
     ``record_inputs=False``: only what the localizer produces (``/fused_pose``), for a caller

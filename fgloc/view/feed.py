@@ -130,7 +130,7 @@ class TrajectoryDecimator:
 class ViewFeed:
     """Turns localizer callbacks into sink calls (see the module docstring).
 
-    ``topics`` names the scan / odometry / IMU topics (a :class:`fgloc.io.log.Topics` or
+    ``topics`` names the scan / odometry / IMU topics (a :class:`fgloc.io.topics.Topics` or
     anything with ``scan``, ``odom``, ``imu`` attributes; ROS defaults if None).
     """
 

@@ -59,6 +59,7 @@ class RunRequest:
     # the view's heavy channels in run.mcap at a bounded rate of log time (0: every scan; fgloc.view.record)
     view_scan_period_s: float = 0.2  # /fgloc/scan (the log's /scan is copied at its full rate)
     view_covariance_period_s: float = 0.5  # /fgloc/pose/covariance, drawn in base_link (sooner on a change)
+    view_predicted_period_s: float = 0.1  # scans not matched (frontend_every): their pose, tf, fix at most this often
 
 
 def _default_config() -> FglocConfig:
@@ -281,6 +282,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                 rec.clock = clock.now  # the view's channels on the input's log-time clock too
                 rec.scan_period_s = req.view_scan_period_s
                 rec.covariance_period_s = req.view_covariance_period_s
+                rec.predicted_period_s = req.view_predicted_period_s
             sinks.append(_TimedSink(view, spent, "view"))  # the Foxglove view and its channels (fgloc.view)
         bar = progress(total) if progress is not None else None
         if bar is not None:

@@ -18,7 +18,10 @@ channels can be bounded the same way (``fgloc run`` does; the defaults here reco
   the robot's frame (``base_link``, frame-locked: Foxglove carries it along with the robot
   through ``/fgloc/tf``) and re-drawn at most that often, or sooner when a sigma changes by
   more than ``covariance_change`` (a relocalization); 0: per scan in the fused pose's frame,
-  as the live view draws it.  Both drawings show the same ellipse and wedge.
+  as the live view draws it.  Both drawings show the same ellipse and wedge;
+* ``predicted_period_s``: a scan the front-end did not match (``frontend_every``: the pose is
+  the odometry prediction) is recorded (transforms, pose, fused, fix) only this long after the
+  last one recorded; every matched scan is.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from fgloc.geometry import rotate_covariance
 from fgloc.io.ros import stamp_to_ns
 from fgloc.view import channels as ch
 from fgloc.view.channels import BASE_FRAME
-from fgloc.view.feed import ACCEPTED, REJECTED, ScanView, json_ready
+from fgloc.view.feed import ACCEPTED, PREDICTED, REJECTED, ScanView, json_ready
 
 
 class RawMcapWriter(Protocol):
@@ -99,7 +102,7 @@ class McapViewRecorder:
 
     def __init__(self, writer: RawMcapWriter, particles_period_s: float = 0.5, max_particles: int = 500,
                  scan_period_s: float = 0.0, covariance_period_s: float = 0.0,
-                 covariance_change: float = 1.0) -> None:
+                 covariance_change: float = 1.0, predicted_period_s: float = 0.0) -> None:
         from fgloc.view import encode, server
 
         server.require_foxglove()
@@ -110,6 +113,8 @@ class McapViewRecorder:
         self.scan_period_s = float(scan_period_s)
         self.covariance_period_s = float(covariance_period_s)
         self.covariance_change = float(covariance_change)
+        self.predicted_period_s = float(predicted_period_s)
+        self._last_pose = -math.inf
         self._last_particles = -math.inf
         self._last_scan = -math.inf
         self._last_cov: tuple[float, tuple[float, float, float]] | None = None  # stamp, sigmas drawn
@@ -171,6 +176,9 @@ class McapViewRecorder:
         if self._due(self._last_scan, view.stamp, self.scan_period_s):
             self._last_scan = view.stamp
             self._write(ch.SCAN, enc.scan_message(view.scan), view.stamp)
+        if view.status == PREDICTED and not self._due(self._last_pose, view.stamp, self.predicted_period_s):
+            return
+        self._last_pose = view.stamp
         if view.transforms:
             st = view.fused.stamp if view.fused is not None else view.stamp
             self._write(ch.TF, enc.transforms_message(view.transforms, st), view.stamp)

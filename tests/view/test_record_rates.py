@@ -79,3 +79,35 @@ def test_body_frame_covariance_is_the_same_ellipse():
         placed = pb @ np.array([[c, s], [-s, c]]) + fused.pose[:2]  # base_link -> map
         assert len(pb) == len(pw)
         assert np.allclose(np.sort(placed, axis=0), np.sort(pw, axis=0), atol=1e-9)
+
+
+def test_unmatched_scans_recorded_at_a_bounded_rate(short_sim, tmp_path):
+    """predicted_period_s: every matched scan keeps its pose / tf / fix; the odometry-predicted
+    scans between (frontend_every) are recorded at most that often in log time."""
+    pytest.importorskip("google.protobuf")
+    import json
+
+    from fgloc.view.feed import PREDICTED
+    from fgloc.view.hook import ViewHook
+
+    def record(period_s, name):
+        loc = Localizer(short_sim.map, short_sim.laser_mount, backend="smoother", frontend="native",
+                        initial_pose=short_sim.ground_truth.poses[0])
+        with ViewHook(loc, record_to=tmp_path / name) as hook:
+            hook.recorder.predicted_period_s = period_s
+            Session(loc, sinks=[hook]).run(short_sim.messages)
+        assert hook.errors == 0 and hook.recorder.errors == 0
+        return [json.loads(d) for d in _decode(tmp_path / name)[ch.FIX]]
+
+    every = record(0.0, "every.mcap")
+    bounded = record(0.5, "bounded.mcap")
+    matched = [f["stamp"] for f in every if f["status"] != PREDICTED]
+    predicted_all = [f["stamp"] for f in every if f["status"] == PREDICTED]
+    assert len(every) == len(short_sim.topic("/scan")) and len(predicted_all) > 0
+    assert [f["stamp"] for f in bounded if f["status"] != PREDICTED] == matched  # no matched scan dropped
+    kept = [f["stamp"] for f in bounded if f["status"] == PREDICTED]
+    assert len(kept) < len(predicted_all)  # (matched scans come more often than 0.5 s here: none kept)
+    stamps = sorted(f["stamp"] for f in bounded)
+    for s in kept:  # a predicted scan is kept only 0.5 s after the previous recorded scan
+        prev = [t for t in stamps if t < s]
+        assert not prev or s - prev[-1] >= 0.5 - 1e-6

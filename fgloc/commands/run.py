@@ -15,7 +15,6 @@ from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
 from fgloc.bench import PAPER_VARIANTS, bench_faults, bench_paper, claims, frontend_available, localize_sim
 from fgloc.errors import ConfigError
-from fgloc.localization.frames import static_transform_entry
 
 __all__ = ["register"]
 
@@ -127,6 +126,8 @@ def register(app: typer.Typer) -> None:
         """Localize a log: trajectory.tum, fixes.tum, run.mcap (/fused_pose + the view's channels), config.yaml."""
         if backend not in ("ekf", "smoother", "batch"):
             raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
+        from fgloc.localization.frames import static_transform_entry  # lazy: keeps `fgloc --help` light
+
         req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                          initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
                          config=config,

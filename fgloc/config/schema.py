@@ -8,7 +8,8 @@ Convention (see docs/DEVELOPING.md, "Configuration"):
 * every field is declared with :func:`setting` (a default, a one-line ``doc``, optional
   ``min``/``max``/``gt``/``lt`` range and ``choices``); nested sections with :func:`section`;
 * units are in the names (``_m``, ``_s``, ``_deg``, ``_hz``); configuration angles are in
-  degrees and converted where they are used;
+  degrees, read in radians through :class:`radians` (``compass_sigma = radians()`` beside
+  ``compass_sigma_deg``);
 * :func:`parse` builds a section from a YAML mapping, checking types, ranges, unknown keys
   (with a "did you mean" suggestion); every problem is one :class:`~fgloc.errors.ConfigError`
   line ``SOURCE: section.key: problem``;
@@ -27,7 +28,7 @@ import types
 import typing
 from collections.abc import Iterable, Mapping
 from dataclasses import MISSING, field, fields, is_dataclass
-from typing import Any, Literal, TypeVar, Union, get_args, get_origin
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin, overload
 
 import yaml
 
@@ -35,8 +36,8 @@ from fgloc.errors import ConfigError
 
 T = TypeVar("T")
 
-__all__ = ["setting", "section", "parse", "to_dict", "to_yaml", "with_overrides", "suggest", "unknown_key_error",
-           "check_keys", "check_mapping"]
+__all__ = ["setting", "section", "radians", "optional_radians", "parse", "to_dict", "to_yaml", "with_overrides",
+           "suggest", "unknown_key_error", "check_keys", "check_mapping"]
 
 
 def setting(default: Any, doc: str, *, min: float | None = None, max: float | None = None,  # noqa: A002
@@ -55,6 +56,47 @@ def setting(default: Any, doc: str, *, min: float | None = None, max: float | No
 def section(cls: type, doc: str) -> Any:
     """A nested section (another config dataclass) with its defaults."""
     return field(default_factory=cls, metadata={"doc": doc})
+
+
+class _DegreesSetting:
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+        self.field_deg = f"{name}_deg"
+
+    def __set__(self, obj: object, value: object) -> None:
+        raise AttributeError(f"{self.name} is {self.field_deg} in radians: set {self.field_deg}")
+
+
+class radians(_DegreesSetting):  # noqa: N801 - named like setting(), used like it
+    """A section's angle setting in radians, where it is used: ``compass_sigma = radians()`` in a
+    section reads its ``compass_sigma_deg`` field (read-only; not a field, so not a key)."""
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> radians: ...
+
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> float: ...
+
+    def __get__(self, obj: object, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        return math.radians(getattr(obj, self.field_deg))
+
+
+class optional_radians(_DegreesSetting):  # noqa: N801
+    """As :class:`radians` for a setting that may be None (None stays None)."""
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> optional_radians: ...
+
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> float | None: ...
+
+    def __get__(self, obj: object, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        deg = getattr(obj, self.field_deg)
+        return None if deg is None else math.radians(deg)
 
 
 # ------------------------------------------------------------------ helpers

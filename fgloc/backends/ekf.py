@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.config.schema import setting
+from fgloc.config.schema import radians, setting
 from fgloc.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -142,17 +142,10 @@ class EKFConfig:
     latency: bool = setting(True, "estimate the scan stamps' latency from how the fixes lag the gyro / odometry")
     latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
 
-    @property
-    def map_min_sigma_theta(self) -> float:
-        return float(np.deg2rad(self.map_min_sigma_theta_deg))
-
-    @property
-    def compass_sigma(self) -> float:
-        return float(np.deg2rad(self.compass_sigma_deg))
-
-    @property
-    def compass_rate_sigma(self) -> float:
-        return float(np.deg2rad(self.compass_rate_sigma_deg))
+    # the angle settings in radians
+    map_min_sigma_theta = radians()
+    compass_sigma = radians()
+    compass_rate_sigma = radians()
 
 
 @dataclass

@@ -65,7 +65,7 @@ from fgloc.backends.health import (
     SourceHealth,
     fix_speed,
 )
-from fgloc.config.schema import setting
+from fgloc.config.schema import optional_radians, radians, setting
 from fgloc.geometry import compose1, wrap_angle, wrap_scalar
 from fgloc.geometry import exp as se2_exp
 from fgloc.types import PoseFix, Trajectory
@@ -180,29 +180,13 @@ class SmootherConfig:
                             "significant")
     latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
 
-    @property
-    def compass_sigma(self) -> float:
-        return float(np.deg2rad(self.compass_sigma_deg))
-
-    @property
-    def offset_rw_sigma(self) -> float:
-        return float(np.deg2rad(self.offset_rw_sigma_deg))
-
-    @property
-    def offset_prior_sigma(self) -> float:
-        return float(np.deg2rad(self.offset_prior_sigma_deg))
-
-    @property
-    def calibrated_offset_sigma(self) -> float:
-        return float(np.deg2rad(self.calibrated_offset_sigma_deg))
-
-    @property
-    def fix_min_sigma_theta(self) -> float:
-        return float(np.deg2rad(self.fix_min_sigma_theta_deg))
-
-    @property
-    def fix_gate_theta(self) -> float | None:
-        return None if self.fix_gate_theta_deg is None else float(np.deg2rad(self.fix_gate_theta_deg))
+    # the angle settings in radians
+    compass_sigma = radians()
+    offset_rw_sigma = radians()
+    offset_prior_sigma = radians()
+    calibrated_offset_sigma = radians()
+    fix_min_sigma_theta = radians()
+    fix_gate_theta = optional_radians()
 
 
 @dataclass

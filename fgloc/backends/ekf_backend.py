@@ -41,6 +41,7 @@ from fgloc.backends.health import (
     GyroBias,
     LatencyEstimator,
     SourceHealth,
+    bracket,
     fix_speed,
 )
 from fgloc.geometry import log as se2_log
@@ -350,13 +351,7 @@ class EKFBackend(Backend):
         (odometry), so the sample after ``t`` holds it."""
         if not m or m[0][0] > t or m[-1][0] < t:
             return None
-        lo, hi = 0, len(m) - 1
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if m[mid][0] <= t:
-                lo = mid
-            else:
-                hi = mid
+        lo, hi = bracket(m, t)
         a, b = m[lo], m[hi]
         f = (t - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 1.0
         rate = float(b[2]) if held else float(a[2] + f * (b[2] - a[2]))

@@ -30,6 +30,7 @@ live status line.  Core maths only: no I/O.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
@@ -128,7 +129,7 @@ class Arbiter:
         if s.kind == RATE:  # a reading is the mean rate since the previous one (wheel odometry)
             if ts[0] > t0 + self.max_gap_s or ts[-1] < t1:
                 return None
-            i = _bisect_right(ts, t0)
+            i = bisect_right(ts, t0)
             d = var = 0.0
             t = t0
             n = len(ts)
@@ -146,7 +147,7 @@ class Arbiter:
             # a reading is the rate at its stamp (a gyro): linear between readings, integrated exactly
             if ts[0] > t0 or ts[-1] < t1:
                 return None
-            i = max(_bisect_right(ts, t0) - 1, 0)
+            i = max(bisect_right(ts, t0) - 1, 0)
             n = len(ts)
             d = var = 0.0
             while i < n - 1 and ts[i] < t1:
@@ -174,7 +175,7 @@ class Arbiter:
 
     def _value_at(self, s: _Stream, t: float) -> tuple[float, float] | None:
         ts = s.t
-        i = _bisect_right(ts, t)
+        i = bisect_right(ts, t)
         if i == 0 or i >= len(ts):
             if i == len(ts) and ts and t - ts[-1] <= self.max_gap_s * 0.2:
                 return s.v[-1], s.var[-1]
@@ -281,15 +282,18 @@ class Arbiter:
         return None if s is None or not s.n_claimed else math.sqrt(max(s.claimed_mean, 0.0))
 
 
-def _bisect_right(seq: deque, x: float) -> int:
-    lo, hi = 0, len(seq)
-    while lo < hi:
+def bracket(series: deque, t: float) -> tuple[int, int]:
+    """The indices ``lo, hi`` of the samples (tuples whose first item is the time, in time order)
+    around ``t``: ``series[lo][0] <= t`` and ``hi = lo + 1`` (``0, 0`` for one sample).  The
+    caller checks ``series[0][0] <= t <= series[-1][0]``."""
+    lo, hi = 0, len(series) - 1
+    while hi - lo > 1:
         mid = (lo + hi) // 2
-        if x < seq[mid]:
-            hi = mid
+        if series[mid][0] <= t:
+            lo = mid
         else:
-            lo = mid + 1
-    return lo
+            hi = mid
+    return lo, hi
 
 
 def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
@@ -600,13 +604,7 @@ class GyroBias:
         s = self.series
         if not s or t < s[0][0] or t > s[-1][0]:
             return None
-        lo, hi = 0, len(s) - 1
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if s[mid][0] <= t:
-                lo = mid
-            else:
-                hi = mid
+        lo, hi = bracket(s, t)
         a, b = s[lo], s[hi]
         if b[0] - a[0] > MAX_GYRO_GAP_S:
             return None

@@ -64,6 +64,17 @@ def _matrix(v: Any, n: int = 15) -> np.ndarray | None:
     return None
 
 
+def _matrix_param(p: dict, key: str, used: set[str], notes: list[str]) -> np.ndarray | None:
+    """Parameter ``key``'s 15 x 15 matrix (marked used), or None: absent, or not a matrix (a note)."""
+    if key not in p:
+        return None
+    used.add(key)
+    m = _matrix(p[key])
+    if m is None:
+        notes.append(f"{key}: not a 15 x 15 matrix; not carried over")
+    return m
+
+
 def from_robot_localization(data: Any, node: str | None = None, source: str = "r_l params"
                             ) -> tuple[dict[str, Any], list[str]]:
     """``(fgloc config sections, notes)`` for a robot_localization parameter file (ROS 1 or 2)."""
@@ -188,30 +199,22 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         used.add("two_d_mode")
         if not as_bool(p["two_d_mode"]):
             notes.append("two_d_mode: false: fgloc is planar (z, roll, pitch are not estimated)")
-    q = _matrix(p.get("process_noise_covariance"))
-    if "process_noise_covariance" in p:
-        used.add("process_noise_covariance")
-        if q is None:
-            notes.append("process_noise_covariance: not a 15 x 15 matrix; not carried over")
-        else:
-            d = np.diag(q)
-            ekf.update({"q_xy": float(max(d[0], d[1])), "q_theta": float(d[5]), "q_v": float(max(d[6], d[7])),
-                        "q_w": float(d[11])})
-    p0 = _matrix(p.get("initial_estimate_covariance"))
-    if "initial_estimate_covariance" in p:
-        used.add("initial_estimate_covariance")
-        if p0 is None:
-            notes.append("initial_estimate_covariance: not a 15 x 15 matrix; not carried over")
-        else:
-            sxy = math.sqrt(max(p0[0, 0], p0[1, 1], 1e-12))
-            syaw = math.degrees(math.sqrt(max(p0[5, 5], 1e-12)))
-            if sxy > 1e-3:
-                pipeline["initial_sigma_xy_m"] = round(sxy, 6)
-            if syaw > 1e-3:
-                pipeline["initial_sigma_yaw_deg"] = round(syaw, 6)
-            if sxy <= 1e-3 or syaw <= 1e-3:
-                notes.append("initial_estimate_covariance: near-zero pose variances kept at fgloc's (an "
-                             "--initial-pose prior needs some width)")
+    q = _matrix_param(p, "process_noise_covariance", used, notes)
+    if q is not None:
+        d = np.diag(q)
+        ekf.update({"q_xy": float(max(d[0], d[1])), "q_theta": float(d[5]), "q_v": float(max(d[6], d[7])),
+                    "q_w": float(d[11])})
+    p0 = _matrix_param(p, "initial_estimate_covariance", used, notes)
+    if p0 is not None:
+        sxy = math.sqrt(max(p0[0, 0], p0[1, 1], 1e-12))
+        syaw = math.degrees(math.sqrt(max(p0[5, 5], 1e-12)))
+        if sxy > 1e-3:
+            pipeline["initial_sigma_xy_m"] = round(sxy, 6)
+        if syaw > 1e-3:
+            pipeline["initial_sigma_yaw_deg"] = round(syaw, 6)
+        if sxy <= 1e-3 or syaw <= 1e-3:
+            notes.append("initial_estimate_covariance: near-zero pose variances kept at fgloc's (an "
+                         "--initial-pose prior needs some width)")
     for k in ("map_frame", "odom_frame", "world_frame"):
         used.add(k)
     if "base_link_frame" in p:

@@ -99,7 +99,7 @@ RUNS = [
      "52405ec..db6e7ee: 0.340 m from r_l's final, tolerance 0.138 (wheel yaw-rate scale estimated 2.23; "
      "the wheels report 47.9 rad of turning against the IMU's 10.2)"),
     ("test1.bag", "ekf", None),       # 3.08 m (+tf) at ee92bab, 0.939 m now (tol 1.045)
-    ("test1.bag", "smoother", None),  # 1.037 m (+tf) at ee92bab, 0.694 m now
+    ("test1.bag", "smoother", None),  # 1.037 m (+tf) at ee92bab, 0.385 m now
     ("test3.bag", "ekf", None),       # groovy's 12-value vectors skipped both sources at ee92bab; 0.191 m (tol 0.75)
     ("test3.bag", "smoother",
      "0b2299e: 2.043 m from r_l's final (0.204, -0.468), tolerance 0.75: the AR.Drone's odometry reports "

@@ -40,6 +40,11 @@ class CompassCalibrator:
     def calibrated(self) -> bool:
         return self.offset is not None
 
+    @property
+    def has_readings(self) -> bool:
+        """Whether any compass reading has been seen (kept: the last 200)."""
+        return bool(self._compass)
+
     def add_compass(self, t: float, yaw: float, rate: float | None) -> None:
         self._compass.append((float(t), float(yaw), float(rate) if rate is not None else 0.0))
 

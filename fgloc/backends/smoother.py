@@ -433,7 +433,7 @@ class SlidingWindowSmoother(Backend):
     def _offset_guess(self) -> float:
         if self.calib.offset is not None:
             return float(self.calib.offset)
-        if self.calib._compass:
+        if self.calib.has_readings:
             c = self.calib.compass_at(self.t0 or 0.0)
             if c is not None:
                 return float(wrap_angle(c - self._init_yaw))
@@ -804,7 +804,7 @@ class SlidingWindowSmoother(Backend):
                              [self.cfg.odom_scale_rw])
             ks_v = self._chain_key(ch, t, graph, vals, ts)
         self._turned += abs(float(d[2]))
-        if (self._turned > 1.0 and (self.gyro or self.calib._compass or self.stats["fixes_used"] > 0)) \
+        if (self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0)) \
                 or "odom_yaw_scale" in self.chains:
             # observable once the robot has turned (a radian) with another yaw source to compare;
             # 0.1 rad (3218db0) let a barely observable scale add noise: the paper run replayed from
@@ -877,7 +877,7 @@ class SlidingWindowSmoother(Backend):
                 i += 1
                 if r is None:
                     continue
-                d_raw = r[0] + self._bias_of(name) * (tb - ta)  # the factor carries the bias variable
+                d_raw = r[0] + self.gyro_bias_of(name) * (tb - ta)  # the factor carries the bias variable
                 ch = self._chain(f"gyro_bias:{name}", "b", [0.0], [self.cfg.gyro_bias_prior_radps],
                                  [self.cfg.gyro_bias_rw_radps])
                 kbias = self._chain_key(ch, tb, graph, vals, ts)
@@ -888,7 +888,12 @@ class SlidingWindowSmoother(Backend):
                     ts[ka] = ta
                 self.stats["gyro_factors"] += 1
 
-    def _bias_of(self, name: str) -> float:
+    def gyro_bias(self, source: str = "imu") -> float:
+        """The estimated bias (rad/s) of ``source``'s gyro (0 before it is estimated)."""
+        return self.gyro_bias_of(f"{source}.gyro")
+
+    def gyro_bias_of(self, name: str) -> float:
+        """The estimated bias (rad/s) of the gyro stream ``name`` (``SOURCE.gyro``)."""
         ch = self.chains.get(f"gyro_bias:{name}")
         return float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
 

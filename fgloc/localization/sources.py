@@ -477,8 +477,6 @@ class SourceRouter:
                 b = None
                 if hasattr(be, "gyro_bias"):
                     b = be.gyro_bias(s.name if st.extra.get("second") else "imu")
-                elif hasattr(be, "_bias_of"):
-                    b = be._bias_of(f"{s.name if st.extra.get('second') else 'imu'}.gyro")
                 if b is not None:
                     d["gyro_bias_radps"] = round(float(b), 5)
             out[s.name] = d

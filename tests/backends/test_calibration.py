@@ -169,7 +169,7 @@ def test_smoother_scales_and_gyro_bias_converge_within_5_percent():
     tr = _feed_calibration(sm, s, yaw_scale=1.8, speed_scale=1.05, bias=0.002)
     sv, sw = sm.odom_scales()
     assert sv == pytest.approx(1.05, rel=0.05) and sw == pytest.approx(1.8, rel=0.05)
-    assert sm._bias_of("imu.gyro") == pytest.approx(0.002, rel=0.05)
+    assert sm.gyro_bias("imu") == pytest.approx(0.002, rel=0.05)
     assert errors(tr, s)[0] < 0.01
 
 

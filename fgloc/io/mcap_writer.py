@@ -48,13 +48,17 @@ def _is_tf(msg: object) -> bool:
 class LogWriter:
     """Write fgloc messages into a ROS 2 MCAP (profile ros2, cdr, ros2msg schemas).
 
+    ``profile``/``library``: the MCAP header's (``profile=""`` for a plain MCAP of
+    :meth:`write_raw` messages, as :class:`fgloc.view.record.McapFile`).
+
     A context manager; ``write(topic, msg, stamp=None, log_time_ns=None)`` takes a
     :class:`LaserScan`, :class:`Odometry`, :class:`CompassHeading`, :class:`PoseFix` or
     ``list[StaticTransform]``.  Header stamps come from ``msg.stamp`` (or ``stamp``), the log
     time is the same unless ``log_time_ns`` is given (e.g. an input's record time).
     """
 
-    def __init__(self, path: str | Path, chunk_size: int = 1024 * 1024, compression: str = "zstd") -> None:
+    def __init__(self, path: str | Path, chunk_size: int = 1024 * 1024, compression: str = "zstd",
+                 profile: str = "ros2", library: str = LIBRARY) -> None:
         self.path = Path(path)
         try:
             if self.path.parent != Path(""):
@@ -63,7 +67,7 @@ class LogWriter:
         except OSError as e:
             raise LogError(f"{self.path}: cannot write log ({e.strerror or e})") from None
         comp = {"zstd": "zstd", "lz4": "lz4", "none": ""}[compression]
-        self._writer = StreamWriter(self._file, profile="ros2", library=LIBRARY, chunk_size=chunk_size,
+        self._writer = StreamWriter(self._file, profile=profile, library=library, chunk_size=chunk_size,
                                     compression=comp)
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[tuple[str, int, str], int] = {}

@@ -34,8 +34,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from fgloc.errors import LogError
 from fgloc.geometry import rotate_covariance
+from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.ros import stamp_to_ns
 from fgloc.view import channels as ch
 from fgloc.view.channels import BASE_FRAME
@@ -47,51 +47,12 @@ class RawMcapWriter(Protocol):
                   schema_encoding: str = ..., message_encoding: str = ...) -> None: ...
 
 
-class McapFile:
-    """A plain MCAP file (profile none) taking :meth:`write_raw` messages; a context manager."""
+class McapFile(LogWriter):
+    """A plain MCAP file (profile none) taking :meth:`write_raw` messages; a context manager:
+    the ROS 2 log writer with the view's header."""
 
     def __init__(self, path: str | Path) -> None:
-        from mcap.writer import CompressionType, Writer
-
-        self.path = Path(path)
-        try:
-            self._file = self.path.open("wb")
-        except OSError as e:
-            raise LogError(f"{self.path}: cannot write ({e.strerror or e})") from None
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
-        self._writer.start(profile="", library="fgloc.view")
-        self._schemas: dict[tuple[str, str], int] = {}
-        self._channels: dict[tuple[str, str], int] = {}
-        self._seq = 0
-        self.count = 0
-
-    def write_raw(self, topic: str, schema_name: str, schema_data: bytes, data: bytes, log_time_ns: int,
-                  schema_encoding: str = "protobuf", message_encoding: str = "protobuf") -> None:
-        key = (schema_name, schema_encoding)
-        sid = self._schemas.get(key)
-        if sid is None:
-            sid = self._writer.register_schema(schema_name, schema_encoding, schema_data)
-            self._schemas[key] = sid
-        ckey = (topic, schema_name)
-        cid = self._channels.get(ckey)
-        if cid is None:
-            cid = self._writer.register_channel(topic, message_encoding, sid)
-            self._channels[ckey] = cid
-        self._writer.add_message(cid, log_time=int(log_time_ns), data=data, publish_time=int(log_time_ns),
-                                 sequence=self._seq)
-        self._seq += 1
-        self.count += 1
-
-    def close(self) -> None:
-        if not self._file.closed:
-            self._writer.finish()
-            self._file.close()
-
-    def __enter__(self) -> McapFile:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        super().__init__(path, profile="", library="fgloc.view")
 
 
 class McapViewRecorder:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -9,16 +10,21 @@ import numpy as np
 import yaml
 
 
-def yaml_ready(obj: Any) -> Any:
-    """``obj`` with numpy scalars and arrays turned into plain Python, dict keys into strings."""
+def yaml_ready(obj: Any, leaf: Callable[[Any], Any] | None = None) -> Any:
+    """``obj`` with numpy scalars and arrays turned into plain Python, dict keys into strings.
+
+    ``leaf``: instead, each value that is not a dict, list, tuple or array goes through
+    ``leaf`` (an array's items too), e.g. :func:`fgloc.view.feed.json_ready`'s rules."""
     if isinstance(obj, dict):
-        return {str(k): yaml_ready(v) for k, v in obj.items()}
+        return {str(k): yaml_ready(v, leaf) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [yaml_ready(v) for v in obj]
+        return [yaml_ready(v, leaf) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist() if leaf is None else yaml_ready(obj.tolist(), leaf)
+    if leaf is not None:
+        return leaf(obj)
     if isinstance(obj, np.generic):
         return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
     return obj
 
 

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from fgloc.geometry import compose1, inverse
 from fgloc.geometry import exp as se2_exp
+from fgloc.io.yamlio import yaml_ready
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 from fgloc.view.channels import BASE_FRAME, MAP_FRAME, ODOM_FRAME
 
@@ -394,12 +395,10 @@ def _estimates(backend: Any) -> dict[str, Any]:
 
 def json_ready(v: Any) -> Any:
     """Numbers, strings, lists and dicts only (numpy scalars/arrays converted, NaN/inf -> None)."""
-    if isinstance(v, dict):
-        return {str(k): json_ready(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [json_ready(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return json_ready(v.tolist())
+    return yaml_ready(v, _json_value)
+
+
+def _json_value(v: Any) -> Any:
     if isinstance(v, bool | np.bool_):
         return bool(v)
     if isinstance(v, int | np.integer):

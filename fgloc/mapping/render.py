@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -56,32 +57,13 @@ def render_map_png(path: str | Path, occ: OccupancyMap, trajectory_xy: FloatArra
                    title: str = "", loops: FloatArray | None = None, dpi: int = 110) -> Path:
     """Write ``path``: the map (occupied black, free white, unknown grey), path in blue,
     loop-closure edges (``(M, 2, 2)`` map-frame segments) in red."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    img, (x0, x1, y0, y1) = map_image(occ)
-    h, w = occ.data.shape
-    scale = max(w, h) / 900.0
-    fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) * 1.0 + 1), max(4.0, h / 100 / scale + 1)))
-    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
+    fig, ax = _map_figure(occ, 1.0)
     if loops is not None and len(loops):
         for seg in loops:
             ax.plot(seg[:, 0], seg[:, 1], "-", color="tab:red", lw=0.4, alpha=0.5)
     if trajectory_xy is not None and len(trajectory_xy):
         ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.6, alpha=0.8)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal")
-    if title:
-        ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return path
+    return _save(fig, ax, path, title, 9, dpi)
 
 
 def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy: FloatArray | None = None,
@@ -92,21 +74,11 @@ def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy:
     when flagged, with the inconsistent scans as red arrows (own pose -> where they fit, 3x);
     change regions are boxed: orange "added" (objects not in the map), blue "removed" (map
     structure not seen)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    fig, ax = _map_figure(occ, 1.4)
     from matplotlib.patches import Rectangle
 
     from fgloc.geometry import compose
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    img, (x0, x1, y0, y1) = map_image(occ)
-    h, w = occ.data.shape
-    scale = max(w, h) / 900.0
-    fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) + 1), max(4.0, h / 100 / scale + 1.4)))
-    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
     if trajectory_xy is not None and len(trajectory_xy):
         ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.4, alpha=0.5)
     for r in result.regions:
@@ -132,10 +104,36 @@ def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy:
         b = c.bbox
         ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, lw=1.2,
                                edgecolor="tab:orange" if c.kind == "added" else "tab:cyan"))
+    return _save(fig, ax, path, (title + "\n" if title else "") + _wrap(result.verdict, 110), 8, dpi)
+
+
+def _map_figure(occ: OccupancyMap, margin_in: float) -> tuple[Any, Any]:
+    """A matplotlib (Agg) figure and axes showing the map in metres, ``margin_in`` inches of
+    height added for the title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    img, (x0, x1, y0, y1) = map_image(occ)
+    h, w = occ.data.shape
+    scale = max(w, h) / 900.0
+    fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) + 1), max(4.0, h / 100 / scale + margin_in)))
+    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
+    return fig, ax
+
+
+def _save(fig: Any, ax: Any, path: str | Path, title: str, fontsize: float, dpi: int) -> Path:
+    """Axis labels, equal aspect, the title (if any); write ``path`` (its folder made) and close."""
+    import matplotlib.pyplot as plt
+
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal")
-    ax.set_title((title + "\n" if title else "") + _wrap(result.verdict, 110), fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=fontsize)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
     plt.close(fig)

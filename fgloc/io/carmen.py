@@ -302,35 +302,30 @@ class CarmenReader:
                     if not tok:
                         continue
                     kind = tok[0]
-                    if kind == "ODOM":
-                        try:
-                            msg = _parse_odom(tok)
-                        except (ValueError, IndexError, OverflowError):
-                            malformed[kind] += 1
-                            continue
-                        counts[kind] += 1
-                        yield ODOM_TOPIC, msg
-                    elif kind in LASER_KINDS:
-                        try:
-                            las = _parse_laser(tok)
-                        except (ValueError, IndexError, OverflowError):
-                            malformed[kind] += 1
-                            continue
-                        counts[kind] += 1
-                        yield SCAN_TOPIC, self._scan(las)
-                        if odom_from_laser and las.odom_pose is not None and kind != "RLASER":
-                            twist = las.twist
-                            if twist is None:
-                                twist = np.zeros(3)
-                                if prev_odom is not None and las.stamp > prev_odom[0]:
-                                    twist = between(prev_odom[1], las.odom_pose) / (las.stamp - prev_odom[0])
-                            prev_odom = (las.stamp, las.odom_pose)
-                            counts["odom_from_laser"] += 1
-                            yield ODOM_TOPIC, Odometry(stamp=las.stamp, twist=twist, pose=las.odom_pose.copy())
-                    elif kind.startswith("#"):
-                        skipped["#"] += 1
-                    else:
-                        skipped[kind] += 1
+                    laser = kind in LASER_KINDS
+                    if kind != "ODOM" and not laser:
+                        skipped["#" if kind.startswith("#") else kind] += 1
+                        continue
+                    try:
+                        rec = _parse_laser(tok) if laser else _parse_odom(tok)
+                    except (ValueError, IndexError, OverflowError):
+                        malformed[kind] += 1
+                        continue
+                    counts[kind] += 1
+                    if not isinstance(rec, _Laser):
+                        yield ODOM_TOPIC, rec
+                        continue
+                    las = rec
+                    yield SCAN_TOPIC, self._scan(las)
+                    if odom_from_laser and las.odom_pose is not None and kind != "RLASER":
+                        twist = las.twist
+                        if twist is None:
+                            twist = np.zeros(3)
+                            if prev_odom is not None and las.stamp > prev_odom[0]:
+                                twist = between(prev_odom[1], las.odom_pose) / (las.stamp - prev_odom[0])
+                        prev_odom = (las.stamp, las.odom_pose)
+                        counts["odom_from_laser"] += 1
+                        yield ODOM_TOPIC, Odometry(stamp=las.stamp, twist=twist, pose=las.odom_pose.copy())
             except (OSError, EOFError, UnicodeError) as e:
                 log.warning("%s: read error after line %d (%s); stopping there", self.path, lineno, e)
                 self.stats["read_error"] = f"after line {lineno}: {e}"

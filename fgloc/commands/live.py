@@ -26,7 +26,8 @@ def register(app: typer.Typer) -> None:
         record: Path = typer.Option(None, "--record", help="record every received message to this MCAP"),
         publish: list[str] = typer.Option(None, "--publish", help="udp://127.0.0.1:PORT (JSON lines; repeatable)"),
         duration: float = typer.Option(None, "--duration", help="stop after S seconds (default: until Ctrl-C)"),
-        config: Path = typer.Option(None, "--config", help="YAML overriding config/live.yaml"),
+        config: Path = typer.Option(None, "--config", help="YAML overlaid on the defaults (`fgloc config show`; "
+                                    "`fgloc config init` writes one)"),
         laser_mount: tuple[float, float, float] = typer.Option(
             (float("nan"), float("nan"), float("nan")), "--laser-mount", help="base_link->laser X Y YAW"
         ),

@@ -2,7 +2,7 @@
 then check the map against itself; ``fgloc map-check MAP.yaml LOG``: the same check for any map
 and log (a mapping log, or a localization log with its trajectory: where the world changed).
 
-    fgloc map intel.clf.bz2 -o maps/intel [--resolution 0.05] [--config config/mapping.yaml]
+    fgloc map intel.clf.bz2 -o maps/intel [--resolution 0.05] [--config mapper.yaml]
     fgloc map run.mcap -o maps/run --start 0 --end 0.5      # only the first half of the scans
     fgloc map-check maps/intel/map.yaml intel.clf.bz2        # re-check a mapping run
     fgloc map-check maps/office/map.yaml today.mcap --trajectory run/trajectory.tum -o check/

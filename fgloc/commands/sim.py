@@ -3,7 +3,7 @@
 Usage::
 
     fgloc simulate paper -o DIR [--seed N]
-    fgloc simulate scenario fgloc/config/scenarios/wheel_slip.yaml -o DIR [--seed N]
+    fgloc simulate scenario wheel_slip -o DIR [--seed N]   # shipped (fgloc simulate list) or a YAML file
 
 DIR gets ``log.mcap`` (/scan, /odom, /imu, /tf_static, /ground_truth), ``map.yaml`` +
 ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` (the effective parameters).

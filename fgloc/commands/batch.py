@@ -126,7 +126,8 @@ def bench_paper_cmd(
     outdir: Annotated[Path, typer.Option("-o", "--output", help="OUTDIR/seed-NNN/ per seed; table.md, "
                                                                 "metrics.yaml, plots, summary.csv")] = Path(
         "fgloc-batch-bench"),
-    config: Annotated[Path | None, typer.Option("--config")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="YAML overlaid on the defaults "
+                                                                 "(`fgloc config show`)")] = None,
     no_amcl: Annotated[bool, typer.Option("--no-amcl", help="skip the EKF+AMCL column")] = False,
     only: Annotated[list[str] | None, typer.Option("--only", help="only this column (repeatable), "
                                                                    "e.g. 'EKF+native'")] = None,

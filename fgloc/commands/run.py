@@ -152,7 +152,8 @@ def register(app: typer.Typer) -> None:
     def bench_paper_cmd(
         seeds: int = typer.Option(5, "--seeds", help="simulated runs (seeds 0..N-1)"),
         outdir: Path | None = typer.Option(None, "-o", "--output", help="write plots, table.md, metrics.yaml"),
-        config: Path | None = typer.Option(None, "--config"),
+        config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
+                                                       "(`fgloc config show`)"),
         jobs: int = typer.Option(2, "--jobs", "-j", help="parallel processes"),
         no_amcl: bool = typer.Option(False, "--no-amcl", help="skip the EKF+AMCL column"),
     ) -> None:
@@ -209,8 +210,9 @@ def register(app: typer.Typer) -> None:
     def bench_faults_cmd(
         backend: str = typer.Option("smoother", "--backend"),
         frontend: str = typer.Option("native", "--frontend"),
-        seeds: int = typer.Option(1, "--seeds"),
-        config: Path | None = typer.Option(None, "--config"),
+        seeds: int = typer.Option(1, "--seeds", help="simulated runs per scenario (seeds 0..N-1)"),
+        config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
+                                                       "(`fgloc config show`)"),
     ) -> None:
         """Compass disturbance, wheel slip and kidnapping vs the fault-free paper run."""
         from rich.console import Console

@@ -15,7 +15,7 @@ nearest-neighbour correspondences (a KD-tree over the same surface points):
 ``H = sum w J^T J`` with ``J = [I2 | dR/dyaw p]``, ``cov = S s^2 H^-1 S + diag(cov_floor)``,
 ``s^2`` the weighted residual variance per axis, ``S = diag(sqrt(kxy), sqrt(kxy),
 sqrt(kyaw))`` from ``cov_inflation = [kxy, kyaw]``: beams are not independent, so the
-inflation is calibrated (see config/frontends.yaml).  A doubtful optimum (inlier
+inflation is calibrated (``fgloc config show``: frontends.kiss).  A doubtful optimum (inlier
 fraction below ``retry_inlier_fraction``) is re-registered from starts around it and
 the start with most inliers wins.
 Fixes with too few inliers (correspondences closer than ``inlier_dist_m``), a

@@ -15,14 +15,20 @@ For each log, side by side and interleaved over ``repeats`` (the machine's load 
   the position / heading RMSE of its ``trajectory.tum`` against the log's ground truth;
 * the same command from another source tree (``before``: a folder holding an older ``fgloc``
   package, put first on ``PYTHONPATH``), for a before / after table on the same machine state;
-* reading the log alone (every message decoded, in this process);
-* the in-memory pipeline: ``Session(Localizer).run(messages)`` on the messages already
-  decoded, no sinks (what ``tools/bench_pipeline.py`` times per back-end and front-end);
+* reading the log alone: opening it and decoding every input message ``fgloc run`` reads (a
+  child process on either tree, timed on its second pass: the first imports the decoders);
+* the in-memory pipeline: ``Session(Localizer).run(messages)`` (``run_messages`` on an older
+  tree) on the messages already decoded, no sinks, no initial pose (global localization, as
+  ``fgloc run``), a child process on either tree, with the defaults and ``frontend_every: 1``
+  (what ``tools/bench_pipeline.py`` times per back-end and front-end, from the true start);
 * kiss-icp's own odometry (``kiss_icp.kiss_icp.KissICP.register_frame``, its defaults with
   the laser's range) on the same scans as 3-D points.
 
 Start-up: ``python -c "import fgloc.cli"``, ``fgloc --help`` and ``fgloc run`` on the first
-2 s of the office log (imports, map, numba from its on-disk cache, writing the outputs).
+2 s of the office log (imports, map, numba from its on-disk cache, writing the outputs).  The
+"start-up" column of an ``fgloc run`` row is its wall time outside the message loop: before
+the first message (interpreter, imports, log summary, map, localizer, numba from its cache)
+and after the outputs are written (exit).
 
 Every figure is a median over the repeats with the range; "x real time" is the log's
 duration over the wall time (and over the CPU time: on a loaded machine the wall time
@@ -32,6 +38,7 @@ says more about the other processes).  Nothing here asserts a speed.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import re
@@ -270,10 +277,24 @@ def _accuracy(traj_path: Path, gt_path: Path) -> tuple[float | None, float | Non
     return 1000.0 * m.position_rmse_m, m.heading_rmse_deg
 
 
+_OPTIONAL_FLAGS: dict[Path | None, list[str]] = {}
+
+
+def _run_flags(tree: Path | None) -> list[str]:
+    """``--allow-lost`` and ``--force`` where ``tree``'s ``fgloc run`` has them (an older tree may not)."""
+    got = _OPTIONAL_FLAGS.get(tree)
+    if got is None:
+        env = tree_env(tree)
+        env["COLUMNS"] = "300"
+        helptext = run_process(fgloc_argv() + ["run", "--help"], env).out
+        got = _OPTIONAL_FLAGS[tree] = [f for f in ("--allow-lost", "--force") if f in helptext]
+    return got
+
+
 def time_fgloc_run(blog: BenchLog, outdir: Path, config: Path | None = None, tree: Path | None = None) -> Sample:
-    """One ``fgloc run`` of ``blog`` as a child process."""
+    """One ``fgloc run`` of ``blog`` as a child process (``tree``'s fgloc first on the path)."""
     argv = fgloc_argv() + ["run", str(blog.log), "--map", str(blog.map_yaml), "-o", str(outdir), "-q",
-                           "--allow-lost", "--force"]
+                           *_run_flags(tree)]
     if config is not None:
         argv += ["--config", str(config)]
     p = run_process(argv, tree_env(tree))
@@ -283,8 +304,10 @@ def time_fgloc_run(blog: BenchLog, outdir: Path, config: Path | None = None, tre
         return s
     m = TIME_LINE.search(p.out)
     if m is not None:
-        total, _setup, read, _loc, write, view = (float(v) for v in m.groups())
-        s.startup_s = p.wall_s - total
+        total, setup, read, _loc, write, view = (float(v) for v in m.groups())
+        # before the first message (interpreter, imports, log summary, map, localizer with numba
+        # from its cache) and after the outputs (exit)
+        s.startup_s = p.wall_s - total + setup
         s.io_s = read + write + view
         s.view_s = view
     s.pos_mm, s.yaw_deg = _accuracy(outdir / "trajectory.tum", blog.ground_truth)
@@ -300,7 +323,7 @@ def time_startup(blogs: dict[str, BenchLog], workdir: Path, tree: Path | None = 
     p = run_process(fgloc_argv() + ["--help"], env)
     out["fgloc --help"] = Sample(p.wall_s, p.cpu_s, p.rss_mb, startup_s=p.wall_s)
     tiny = blogs["tiny"]
-    s = time_fgloc_run(tiny, workdir / "runs" / ("tiny-before" if tree else "tiny"), tree=tree)
+    s = time_fgloc_run(tiny, workdir / "runs" / ("tiny" if tree is None else f"tiny-{tree.name}"), tree=tree)
     s.startup_s = s.wall_s
     out[f"fgloc run, {tiny.duration_s:.0f} s log"] = s
     return out
@@ -316,41 +339,72 @@ def _decoded(blog: BenchLog) -> tuple[Any, list[tuple[str, object]]]:
     return mount, list(src.messages(want))
 
 
-def time_read(blog: BenchLog) -> Sample:
-    """Decoding every input message of the log (what ``fgloc run`` reads), in this process."""
+# The reading and in-memory rows run as a child process so that another source tree (``before``)
+# can be timed the same way: this code runs against whichever ``fgloc`` comes first on the path,
+# the session-2 API (fgloc.io.open_log, fgloc.localization) or the older one (fgloc.io.log.LogReader,
+# fgloc.pipeline).  It prints one JSON line.
+CHILD_CODE = r"""
+import json, sys, time
+mode, log, map_yaml, gt, every = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4], int(sys.argv[5])
+try:
     from fgloc.io import open_log
-
-    c0, t0 = time.process_time(), time.perf_counter()
-    src = open_log(blog.log)
-    src.laser_mount()
+    new = True
+except ImportError:
+    from fgloc.io.log import LogReader
+    new = False
+def read():
+    src = open_log(log) if new else LogReader(log)
+    mount = src.laser_mount()
     want = [t for t in ("/scan", "/odom", "/imu", "/tf_static") if src.has(t)]
-    n = sum(1 for _ in src.records(want))
-    s = Sample(time.perf_counter() - t0, time.process_time() - c0)
-    s.note = f"{n} msgs"
-    return s
-
-
-def time_in_memory(blog: BenchLog, decoded: tuple[Any, list[tuple[str, object]]], every: int | None = None) -> Sample:
-    """``Session(Localizer).run(messages)`` on decoded messages (no sinks), as ``fgloc run`` would
-    start it (no initial pose: global localization)."""
-    from fgloc.config import load_config
+    return mount, list(src.messages(want) if new else src.messages(set(want)))
+mount, msgs = read()  # the first pass imports the decoders (start-up, timed elsewhere) and warms the file cache
+out = {"n": len(msgs)}
+if mode == "read":
+    c0, t0 = time.process_time(), time.perf_counter()
+    del msgs
+    mount, msgs = read()
+    out.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
+else:
     from fgloc.eval.metrics import evaluate
     from fgloc.io.tum import read_tum
-    from fgloc.localization import Localizer, Session
     from fgloc.maps import OccupancyMap
-
-    mount, msgs = decoded
-    cfg = load_config(None, {"pipeline": {"frontend_every": every}}) if every else load_config()
-    occ = OccupancyMap.load(blog.map_yaml)
-    loc = Localizer(occ, mount, backend="smoother", frontend="native", config=cfg)
+    occ = OccupancyMap.load(map_yaml)
+    if new:
+        from fgloc.config import load_config
+        from fgloc.localization import Localizer, Session
+        cfg = load_config(None, {"pipeline": {"frontend_every": every}})
+        loc = Localizer(occ, mount, backend="smoother", frontend="native", config=cfg)
+        run = lambda: Session(loc).run(msgs)
+    else:
+        from fgloc.pipeline import Localizer, load_config, run_messages
+        cfg = load_config()
+        cfg.setdefault("pipeline", {})["frontend_every"] = every
+        loc = Localizer(occ, mount, backend="smoother", frontend="native", config=cfg)
+        run = lambda: run_messages(loc, msgs)
     c0, t0 = time.process_time(), time.perf_counter()
-    final = Session(loc).run(msgs)
-    s = Sample(time.perf_counter() - t0, time.process_time() - c0)
-    try:
-        m = evaluate(final, read_tum(blog.ground_truth))
-        s.pos_mm, s.yaw_deg = 1000.0 * m.position_rmse_m, m.heading_rmse_deg
-    except Exception as e:  # noqa: BLE001 - a bench row, not a failure of the bench
-        s.note = f"evaluation: {e}"
+    final = run()
+    out.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
+    m = evaluate(final, read_tum(gt))
+    out.update(pos_mm=1000.0 * m.position_rmse_m, yaw_deg=m.heading_rmse_deg)
+print("BENCH " + json.dumps(out))
+"""
+
+
+def time_child(mode: str, blog: BenchLog, every: int = 2, tree: Path | None = None) -> Sample:
+    """``mode`` "read" (decoding every input message) or "pipeline" (``Session(Localizer).run`` on
+    the decoded messages, no sinks, no initial pose: global localization as ``fgloc run``) in a
+    child process on ``tree``'s fgloc (None: this one); the child's own timer, peak RSS of it all."""
+    # -P: the current folder not first on the path (the tree is)
+    p = run_process([sys.executable, "-P", "-c", CHILD_CODE, mode, str(blog.log), str(blog.map_yaml),
+                     str(blog.ground_truth), str(every)], tree_env(tree))
+    line = next((ln for ln in p.out.splitlines() if ln.startswith("BENCH ")), None)
+    if p.returncode != 0 or line is None:
+        err = p.err.strip().splitlines()
+        return Sample(p.wall_s, p.cpu_s, p.rss_mb, note=f"exit {p.returncode}: {err[-1] if err else ''}")
+    got = json.loads(line[6:])
+    s = Sample(float(got["wall_s"]), float(got["cpu_s"]), p.rss_mb, pos_mm=got.get("pos_mm"),
+               yaw_deg=got.get("yaw_deg"))
+    s.note = f"{got['n']} msgs"
     return s
 
 
@@ -392,12 +446,17 @@ class SpeedReport:
     repeats: int
     before: Path | None
     wall_s: float
+    after: Path | None = None
 
 
 def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office", "paper"), every1: bool = True,
                 before: Path | None = None, kiss: bool = True, long_minutes: float | None = None,
-                office_s: float = OFFICE_S, say: Callable[[str], None] = lambda s: None) -> SpeedReport:
-    """Measure everything in the module docstring; ``say(line)`` reports progress."""
+                office_s: float = OFFICE_S, say: Callable[[str], None] = lambda s: None,
+                after: Path | None = None) -> SpeedReport:
+    """Measure everything in the module docstring; ``say(line)`` reports progress.
+
+    ``after``: a source tree to time as "after" instead of the fgloc this process imports (a
+    snapshot of a commit, while the working tree changes under the benchmark)."""
     t_start = time.perf_counter()
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
@@ -418,14 +477,14 @@ def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office"
     # warm-up: numba compiles into its on-disk cache once per tree (not charged to any row)
     say("warm-up (numba's on-disk cache)")
     warm = blogs[names[0]] if names else blogs["tiny"]
-    time_fgloc_run(warm, runs / "warm")
+    time_fgloc_run(warm, runs / "warm", tree=after)
     if before is not None:
         time_fgloc_run(warm, runs / "warm-before", tree=before)
-    decoded = {n: _decoded(blogs[n]) for n in names if not n.startswith("office-") or n == "office"}
+    decoded = {n: _decoded(blogs[n]) for n in names if not n.startswith("office-")} if kiss else {}
     startup: dict[str, list[Sample]] = {}
     startup_before: dict[str, list[Sample]] = {}
     for rep in range(repeats):
-        for what, samples in time_startup(blogs, workdir).items():
+        for what, samples in time_startup(blogs, workdir, after).items():
             startup.setdefault(what, []).append(samples)
         if before is not None:
             for what, samples in time_startup(blogs, workdir, before).items():
@@ -434,24 +493,30 @@ def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office"
             blog = blogs[name]
             long = name.startswith("office-") and name != "office"
             cases: list[tuple[str, Callable[[], Sample]]] = [
-                ("fgloc run", partial(time_fgloc_run, blog, runs / f"{name}-default")),
+                ("fgloc run", partial(time_fgloc_run, blog, runs / f"{name}-default", tree=after)),
             ]
             if before is not None:
                 cases.append(("fgloc run (before)",
                               partial(time_fgloc_run, blog, runs / f"{name}-default-before", tree=before)))
             if every1 and not long:
                 cases.append(("fgloc run, frontend_every 1",
-                              partial(time_fgloc_run, blog, runs / f"{name}-every1", every1_yaml)))
+                              partial(time_fgloc_run, blog, runs / f"{name}-every1", every1_yaml, tree=after)))
                 if before is not None:
                     cases.append(("fgloc run, frontend_every 1 (before)",
                                   partial(time_fgloc_run, blog, runs / f"{name}-every1-before", every1_yaml,
                                           tree=before)))
             if not long:
-                cases.append(("reading the log alone", partial(time_read, blog)))
-                cases.append(("in-memory pipeline", partial(time_in_memory, blog, decoded[name])))
-                if every1:
-                    cases.append(("in-memory pipeline, frontend_every 1",
-                                  partial(time_in_memory, blog, decoded[name], every=1)))
+                cases.append(("reading the log alone", partial(time_child, "read", blog, tree=after)))
+                if before is not None:
+                    cases.append(("reading the log alone (before)", partial(time_child, "read", blog, tree=before)))
+                for every, label in ((2, ""), (1, ", frontend_every 1")):
+                    if every == 1 and not every1:
+                        continue
+                    cases.append((f"in-memory pipeline{label}",
+                                  partial(time_child, "pipeline", blog, every, tree=after)))
+                    if before is not None:
+                        cases.append((f"in-memory pipeline{label} (before)",
+                                      partial(time_child, "pipeline", blog, every, tree=before)))
                 if kiss and _have_kiss():
                     cases.append(("kiss-icp odometry (its own pipeline)", partial(time_kiss_odometry, decoded[name])))
             k = rep % len(cases)  # rotate the order between repeats
@@ -461,10 +526,11 @@ def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office"
         load.append(os.getloadavg())
     order = {w: i for i, w in enumerate((
         "fgloc run", "fgloc run (before)", "fgloc run, frontend_every 1", "fgloc run, frontend_every 1 (before)",
-        "in-memory pipeline", "in-memory pipeline, frontend_every 1", "reading the log alone",
+        "in-memory pipeline", "in-memory pipeline (before)", "in-memory pipeline, frontend_every 1",
+        "in-memory pipeline, frontend_every 1 (before)", "reading the log alone", "reading the log alone (before)",
         "kiss-icp odometry (its own pipeline)"))}
     ordered = sorted(rows.values(), key=lambda r: (names.index(r.log), order.get(r.what, 99)))
-    return SpeedReport(ordered, startup, startup_before, load, repeats, before, time.perf_counter() - t_start)
+    return SpeedReport(ordered, startup, startup_before, load, repeats, before, time.perf_counter() - t_start, after)
 
 
 def _have_kiss() -> bool:
@@ -488,23 +554,25 @@ def _stat(values: list[float], fmt: str) -> str:
 
 def report_lines(rep: SpeedReport) -> list[str]:
     """The report as Markdown lines (pasteable into the README)."""
-    lines = ["| log | what | x real time (wall) | x real time (CPU) | ms per scan | start-up (s) | peak RSS (MB) "
-             "| I/O share (view channels) | position RMSE (mm) | heading RMSE (deg) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| log | what | x real time (wall) | x real time (CPU) | ms per scan (wall) | ms per scan (CPU) "
+             "| start-up (s) | peak RSS (MB) | I/O share (view channels) | position RMSE (mm) | heading RMSE (deg) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rep.rows:
         ss = r.samples
         bad = [s.note for s in ss if s.note.startswith("exit")]
         if bad:
-            lines.append(f"| {r.log} | {r.what} | {bad[0]} | | | | | | | |")
+            lines.append(f"| {r.log} | {r.what} | {bad[0]} | | | | | | | | |")
             continue
         rt_wall = [r.duration_s / s.wall_s for s in ss]
         rt_cpu = [r.duration_s / s.cpu_s for s in ss if s.cpu_s]
         ms = [1000.0 * s.wall_s / max(r.scans, 1) for s in ss]
+        ms_cpu = [1000.0 * s.cpu_s / max(r.scans, 1) for s in ss if s.cpu_s]
         io = [100.0 * s.io_s / s.wall_s for s in ss if s.io_s is not None]
         vw = [100.0 * s.view_s / s.wall_s for s in ss if s.view_s is not None]
         lines.append(
             f"| {r.log} ({r.duration_s:.0f} s) | {r.what} | {_stat(rt_wall, '.1f')} | {_stat(rt_cpu, '.1f')} | "
-            f"{_stat(ms, '.2f')} | {_stat([s.startup_s for s in ss if s.startup_s is not None], '.2f')} | "
+            f"{_stat(ms, '.2f')} | {_stat(ms_cpu, '.2f')} | "
+            f"{_stat([s.startup_s for s in ss if s.startup_s is not None], '.2f')} | "
             f"{_stat([s.rss_mb for s in ss if s.rss_mb is not None], '.0f')} | "
             f"{_stat(io, '.1f') + ' % (' + _stat(vw, '.1f') + ' %)' if io else '-'} | "
             f"{_stat([s.pos_mm for s in ss if s.pos_mm is not None], '.3f')} | "
@@ -521,5 +589,5 @@ def report_lines(rep: SpeedReport) -> list[str]:
     lines.append("")
     lines.append(f"{rep.repeats} repeat(s), medians [min-max]; load average (1 min) before / after each repeat: "
                  f"{loads}; {os.cpu_count()} CPUs; bench {rep.wall_s:.0f} s"
-                 + (f"; before = {rep.before}" if rep.before else ""))
+                 + (f"; before = {rep.before}" if rep.before else "") + (f"; after = {rep.after}" if rep.after else ""))
     return lines

@@ -186,6 +186,8 @@ def register(app: typer.Typer) -> None:
         logs: str = typer.Option("office,paper", "--logs", help="office (120 s, Willow Garage map), paper"),
         before: Path | None = typer.Option(None, "--before", help="a folder holding an older fgloc package: "
                                            "its fgloc run timed beside this one (before / after)"),
+        after: Path | None = typer.Option(None, "--after", help="a folder holding the fgloc package to time as "
+                                          "'after' (default: the one installed), e.g. a snapshot of a commit"),
         long_minutes: float | None = typer.Option(None, "--long-minutes",
                                                   help="also fgloc run on an N-minute office log (peak RSS)"),
         no_every1: bool = typer.Option(False, "--no-every1", help="skip the frontend_every: 1 rows"),
@@ -203,7 +205,7 @@ def register(app: typer.Typer) -> None:
         with con.status("fgloc bench speed") as status:
             rep = bench_speed(workdir, repeats=repeats, logs=[s.strip() for s in logs.split(",") if s.strip()],
                               every1=not no_every1, before=before, kiss=not no_kiss, long_minutes=long_minutes,
-                              say=lambda line: status.update(line))
+                              say=lambda line: status.update(line), after=after)
         print("\n".join(report_lines(rep)))
 
     @bench.command("faults")

@@ -70,17 +70,33 @@ def scan_endpoints(
     or ``>= range_max`` (no return) are carved to ``carve_range_m`` without a hit;
     NaN, ``-inf`` and too-short readings are dropped.
     """
-    r = np.asarray(ranges, dtype=float)
-    a = np.asarray(angles, dtype=float)
-    with np.errstate(invalid="ignore"):
-        hit = np.isfinite(r) & (r >= max(range_min, 1e-3)) & (r < min(range_max, max_range_m))
-        noret = (np.isposinf(r) | (np.isfinite(r) & (r >= range_max))) & ~hit
-        longret = np.isfinite(r) & (r >= max_range_m) & (r < range_max)
-    carve = noret | longret
-    rr = np.where(hit, r, np.minimum(carve_range_m, np.where(np.isfinite(r), r, carve_range_m)))
-    keep = hit | carve
-    pts = np.column_stack([rr[keep] * np.cos(a[keep]), rr[keep] * np.sin(a[keep])])
-    return pts, hit[keep]
+    r = np.ascontiguousarray(ranges, dtype=np.float64).reshape(-1)
+    a = np.ascontiguousarray(angles, dtype=np.float64).reshape(-1)
+    return _endpoints(r, a, float(range_min), float(range_max), float(max_range_m), float(carve_range_m))
+
+
+@njit(cache=True)
+def _endpoints(r, a, range_min, range_max, max_range_m, carve_range_m):  # pragma: no cover - compiled
+    n = r.shape[0]
+    pts = np.empty((n, 2))
+    hit = np.empty(n, dtype=np.bool_)
+    lo = max(range_min, 1e-3)
+    hi = min(range_max, max_range_m)
+    m = 0
+    for i in range(n):
+        v = r[i]
+        fin = np.isfinite(v)
+        h = fin and v >= lo and v < hi
+        noret = (v == np.inf or (fin and v >= range_max)) and not h
+        longret = fin and v >= max_range_m and v < range_max
+        if not (h or noret or longret):
+            continue
+        rr = v if h else min(carve_range_m, v if fin else carve_range_m)
+        pts[m, 0] = rr * np.cos(a[i])
+        pts[m, 1] = rr * np.sin(a[i])
+        hit[m] = h
+        m += 1
+    return pts[:m].copy(), hit[:m].copy()
 
 
 def _q(v: float) -> int:

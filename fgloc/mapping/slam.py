@@ -85,6 +85,8 @@ class MapperConfig:
                                       # in corridors, along which they then leave the position free)
     loop_cauchy_k: float = 1.0
     loop_dmax_m: float = 0.35         # distance-field clip of loop submaps
+    loop_resolution_m: float = 0.05   # loop submap distance-field cell (refinement interpolates within it);
+                                      # the coarse search uses a min-pooled copy of about 0.1 m cells
     loop_anchor_step: int = 4         # loop submaps are anchored at every N-th keyframe (cache reuse)
     loop_grid_cache_kf: int = 20      # reuse a loop submap grid for this many keyframes
     loop_grid_cache_mb: float = 48.0  # ... within this memory (oldest dropped first)
@@ -359,8 +361,9 @@ class GraphSlam:
         pj = self._est[j]
         pts = np.concatenate([transform_points(between(pj, self._est[i]), self.keyframes[i].points)
                               for i in range(lo, hi)])
-        grid = build_distance_grid(pts, self.cfg.submap_resolution, self.cfg.loop_dmax_m, 0.5)
-        coarse = coarsen_grid(grid, 4)
+        res = self.cfg.loop_resolution_m
+        grid = build_distance_grid(pts, res, self.cfg.loop_dmax_m, 0.5)
+        coarse = coarsen_grid(grid, max(int(round(0.1 / res)), 1))
         self._loop_grids = {a: b for a, b in self._loop_grids.items() if k - b[0] <= self.cfg.loop_grid_cache_kf}
         budget = self.cfg.loop_grid_cache_mb * 1e6 - grid.dist.nbytes - coarse.dist.nbytes
         for a in sorted(self._loop_grids, key=lambda a: self._loop_grids[a][0]):  # oldest first

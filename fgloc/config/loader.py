@@ -24,7 +24,7 @@ from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.app import HealthConfig, LaserConfig, SerialConfig
 from fgloc.live.serial_link import RobotParams
 from fgloc.localization.config import PipelineConfig
-from fgloc.localization.sources import SourcesConfig
+from fgloc.localization.sources import SourcesConfig, parse_sources
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,21 @@ def parse_config(data: Any, source: str = "config", base: FglocConfig | None = N
             from fgloc.config.schema import unknown_key_error
 
             raise unknown_key_error(source, "", str(key), SECTIONS, what="section")
-    return parse(FglocConfig, data, source=source, base=base)
+    cfg = parse(FglocConfig, data, source=source, base=base)
+    if data.get("sources"):
+        check_sources(cfg.sources, source)
+    return cfg
+
+
+def check_sources(sources: SourcesConfig, source: str = "config") -> None:
+    """The ``sources:`` section's entries checked when the config is read (a typo is an error
+    naming the file then, not when a run starts): the parsers that use them raise the errors."""
+    if sources.inputs:
+        parse_sources(sources, source=source)
+    if sources.static_transforms:
+        from fgloc.localization.frames import parse_static_transforms
+
+        parse_static_transforms(sources.static_transforms, source=source)
 
 
 def read_yaml(path: str | Path) -> Any:

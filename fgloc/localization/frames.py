@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
 from fgloc.types import StaticTransform, Transform3D
 
@@ -64,7 +65,8 @@ def parse_static_transforms(entries: Iterable[Any] | None, source: str = "config
             raise ConfigError(f"{where}: must be a mapping {{parent, child, xyz, rpy_deg | xyzw}}")
         unknown = sorted(set(e) - set(KEYS))
         if unknown:
-            raise ConfigError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(KEYS)})")
+            hint = suggest(str(unknown[0]), KEYS) or f" (known: {', '.join(KEYS)})"
+            raise ConfigError(f"{where}: unknown key {unknown[0]!r}{hint}")
         parent, child = str(e.get("parent") or "").lstrip("/"), str(e.get("child") or "").lstrip("/")
         if not parent or not child:
             raise ConfigError(f"{where}: needs parent and child frame names")

@@ -310,3 +310,117 @@ def test_every_message_of_foreign_and_bundled_logs(foreign_logs):
             seen[type_name] = seen.get(type_name, 0) + taken
     assert set(seen) >= {LASER_SCAN, ODOMETRY, IMU, TF_MESSAGE}
     assert seen[LASER_SCAN] > 3000 and seen[ODOMETRY] > 5000 and seen[IMU] > 2000
+
+
+# ---------------------------------------------------------------------------------------------
+# foreign bytes of every type: rosbags' own CDR serializer (little-endian)
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_decoders_identical_to_generic_on_rosbags_bytes(type_name, samples):
+    """The samples (empty arrays, frame ids of 0..7 bytes and multi-byte UTF-8, no pose / no
+    orientation / unknown covariances, 0..7 transforms) serialized by rosbags, not by fgloc:
+    every one taken by the fixed layout and read as the generic codec reads it."""
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    enc, _ = ENCODE[type_name]
+    datas = []
+    for m, st in samples[type_name]:
+        msg = ts.deserialize_cdr(enc(m, st), type_name)  # type: ignore[operator]
+        datas.append(bytes(ts.serialize_cdr(msg, type_name, little_endian=True)))
+    assert check_all(type_name, datas) == len(datas)
+
+
+# ---------------------------------------------------------------------------------------------
+# the reader: fixed layouts batched per chunk and channel == the generic codec message by message
+def _records(path: Path, generic: bool, monkeypatch) -> tuple[list, Any]:
+    import fgloc.io.mcap_reader as mr
+
+    with monkeypatch.context() as mp:
+        if generic:  # no channel gets a fixed-layout decoder: every message through mcap_ros2
+            mp.setattr(mr, "is_standard", lambda *a: False)
+        src = open_log(path)
+        recs = [(r.topic, r.log_time_ns, r.msg) for r in src.records(src.topic_types())]
+        mount = src.laser_mount() if src.has("/scan") else None
+    return recs, mount
+
+
+def test_reader_fast_path_equals_the_generic_reader(foreign_logs, monkeypatch):
+    """Every MCAP log (fgloc's, mcap_ros2's and rosbags' foreign ones, the bundled Radish
+    excerpts): the same records in the same order, field-identical, and the same laser mount."""
+    n = 0
+    for path in foreign_logs:  # (the rosbag2 SQLite folder has no fixed layouts: the same both ways)
+        fast, mount_fast = _records(path, False, monkeypatch)
+        slow, mount_slow = _records(path, True, monkeypatch)
+        assert len(fast) == len(slow) > 0, path.name
+        for a, b in zip(fast, slow, strict=True):
+            assert a[:2] == b[:2], path.name
+            assert_identical(a[2], b[2], f"{path.name} {a[0]} {a[1]}")
+        assert_identical(mount_fast, mount_slow, path.name)
+        n += len(fast)
+    assert n > 15_000
+
+
+def _write_log(path: Path, type_name: str, datas: list[bytes], schema_text: str | None = None) -> None:
+    from mcap.writer import Writer
+
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(type_name, "ros2msg", (schema_text or full_text(type_name)).encode())
+        cid = w.register_channel("/t", "cdr", sid)
+        for i, d in enumerate(datas):
+            w.add_message(cid, i, d, i)
+        w.finish()
+
+
+@pytest.mark.parametrize("type_name", list(ENCODE))
+def test_big_endian_messages_among_little_endian_ones(type_name, samples, tmp_path):
+    """One channel, one chunk, every other message big-endian: the batch decoder declines those
+    and the generic codec reads them in place (order and values as the all-little-endian log)."""
+    enc, _ = ENCODE[type_name]
+    le = [enc(m, st) for m, st in samples[type_name]]  # type: ignore[operator]
+    be = _big_endian(type_name, le)
+    mixed = [b if i % 2 else a for i, (a, b) in enumerate(zip(le, be, strict=True))]
+    assert FAST[type_name](mixed)[1::2] == [None] * len(mixed[1::2])
+    _write_log(tmp_path / "le.mcap", type_name, le)
+    _write_log(tmp_path / "mixed.mcap", type_name, mixed)
+    got = [[r.msg for r in open_log(tmp_path / f"{n}.mcap").records({"/t"})] for n in ("le", "mixed")]
+    assert len(got[0]) == len(got[1]) == len(le)
+    for a, b in zip(*got, strict=True):
+        assert_identical(a, b)
+
+
+def test_a_schema_with_another_layout_is_not_read_by_the_fixed_layout(samples, tmp_path):
+    """An Odometry whose schema gives std_msgs/Header a ROS 1 ``seq`` field (another byte
+    layout under the standard type name): read by the generic codec with that schema, right,
+    where the fixed layout would misread every field after the header."""
+    from mcap_ros2.writer import Writer
+
+    text = full_text(ODOMETRY)
+    head = "MSG: std_msgs/Header\n"
+    assert head in text
+    ros1_header = text.replace(head, head + "uint32 seq\n", 1)
+    msgs = [m for m, _ in samples[ODOMETRY]]
+    path = tmp_path / "seq.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        schema = w.register_msgdef(ODOMETRY, ros1_header)
+        for i, (m, st) in enumerate(samples[ODOMETRY]):
+            d = odom_to_ros(m, st)  # type: ignore[arg-type]
+            d["header"]["seq"] = 7 + i
+            w.write_message("/t", schema, d, log_time=i)
+        w.finish()
+    got = [r.msg for r in open_log(path).records({"/t"})]
+    assert len(got) == len(msgs)
+    for a, (m, st) in zip(got, samples[ODOMETRY], strict=True):
+        assert isinstance(a, Odometry)
+        assert a.stamp == st and a.frame_id == m.frame_id and a.child_frame_id == m.child_frame_id
+        assert np.array_equal(a.twist, m.twist)
+    # the fixed layout on those bytes would not give the same message
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        raw = [msg.data for _, _, msg in make_reader(f).iter_messages()]
+    fast = fastcdr.decode_odometries(raw)
+    assert any(x is None or x.child_frame_id != m.child_frame_id or not np.array_equal(x.twist, m.twist)
+               for x, (m, _) in zip(fast, samples[ODOMETRY], strict=True))

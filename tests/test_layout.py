@@ -144,19 +144,10 @@ def test_no_private_name_is_used_across_modules(name):
     assert not uses, f"{path.relative_to(PACKAGE.parent)} uses private names of other modules: {uses}"
 
 
-# Known uses in files whose owners are mid-change (the issue 18 clean-up lists them for the end of
-# the session): a new use anywhere else fails.
-PENDING = {
-    "fgloc.backends.smoother": ["self.calib._compass"],      # backends/compass.py's deque
-    "fgloc.localization.sources": ["be._bias_of"],           # backends/smoother.py's method
-}
-
-
 def test_no_private_attribute_of_another_module_is_used():
     trees = {name: ast.parse(p.read_text(encoding="utf-8")) for name, p in MODULES.items()}
     found = {name: sorted({u.split(": ", 1)[1] for u in uses}) for name, uses in private_attribute_uses(trees).items()}
-    new = {name: [u for u in uses if u not in PENDING.get(name, [])] for name, uses in found.items()}
-    assert not any(new.values()), f"private attributes of other modules used: {new}"
+    assert not found, f"private attributes of other modules used: {found}"
 
 
 def test_the_attribute_checker_catches_a_foreign_private_method():

@@ -171,9 +171,35 @@ def test_the_checker_catches_each_form(source, bad):
     assert private_uses(source, "fgloc.io.tum", False, set(MODULES)) == bad
 
 
+def _imports(tree: ast.AST, old: str) -> bool:
+    """Whether ``tree`` imports module ``old`` (``import old``, ``from old import x``, ``from
+    parent import last``); code in a string (run against another source tree) is not an import."""
+    parent, _, last = old.rpartition(".")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import) and any(a.name == old or a.name.startswith(old + ".") for a in node.names):
+            return True
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module is not None:
+            if node.module == old or node.module.startswith(old + "."):
+                return True
+            if node.module == parent and any(a.name == last for a in node.names):
+                return True
+    return False
+
+
 def _importers(old: str) -> list[str]:
-    texts = {name: p.read_text(encoding="utf-8") for name, p in MODULES.items()}
-    return [name for name, t in texts.items() if f"from {old} import" in t or f"import {old}\n" in t]
+    return [name for name, p in MODULES.items() if _imports(ast.parse(p.read_text(encoding="utf-8")), old)]
+
+
+@pytest.mark.parametrize("source, imports", [
+    ("from fgloc.io.log import LogReader\n", True),
+    ("import fgloc.io.log\n", True),
+    ("from fgloc.io import log\n", True),
+    ("def f():\n    from fgloc.io.log import LogWriter\n", True),
+    ("from fgloc.io import logs, open_log\n", False),
+    ("CODE = 'from fgloc.io.log import LogReader'\n", False),
+])
+def test_the_importer_check_reads_imports_not_text(source, imports):
+    assert _imports(ast.parse(source), "fgloc.io.log") is imports
 
 
 def test_the_pipeline_shim_is_gone():

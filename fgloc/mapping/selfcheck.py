@@ -606,7 +606,7 @@ def _beam_laser_poses(rec: ScanRecord, mount: FloatArray, pose: FloatArray, traj
     tinc = float(sc.time_increment or 0.0)
     if trajectory is None or tinc <= 0.0 or n < 2 or len(trajectory) < 2:
         return np.tile(compose(pose, mount), (n, 1))
-    t = float(rec.stamp) + tinc * np.arange(n)
+    t = float(rec.stamp) + tinc * np.arange(n, dtype=np.float64)
     # the pose the check stands at (its own, maybe re-matched) moved by the trajectory's motion
     # between the scan stamp and each beam
     p_t = trajectory.interpolate(t)

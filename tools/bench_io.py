@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import os
 import statistics
 import tempfile
 import time
@@ -55,19 +56,21 @@ def write_big(path: Path, minutes: float) -> int:
     return n + 1
 
 
-def timed(fn: Callable[[], Any], repeats: int) -> tuple[float, float, float, Any]:
-    """(median, min, max) seconds of ``fn`` over ``repeats`` runs, and its last result."""
-    ts, out = [], None
+def timed(fn: Callable[[], Any], repeats: int) -> tuple[float, float, float, Any, float]:
+    """(median, min, max) wall seconds of ``fn`` over ``repeats`` runs, its last result, and the
+    median CPU seconds of this process (less sensitive to the machine's load than the wall time)."""
+    ts, cs, out = [], [], None
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         out = fn()
         ts.append(time.perf_counter() - t0)
-    return statistics.median(ts), min(ts), max(ts), out
+        cs.append(time.process_time() - c0)
+    return statistics.median(ts), min(ts), max(ts), out, statistics.median(cs)
 
 
-def rate(n: int, t: tuple[float, float, float, Any], unit: str = "msg/s") -> str:
-    med, lo, hi, _ = t
-    return f"{n / med:>10,.0f} {unit}  [{n / hi:,.0f}-{n / lo:,.0f}]"
+def rate(n: int, t: tuple[float, float, float, Any, float], unit: str = "msg/s") -> str:
+    med, lo, hi, _, cpu = t
+    return f"{n / med:>10,.0f} {unit}  [{n / hi:,.0f}-{n / lo:,.0f}]  CPU {n / max(cpu, 1e-9):,.0f}"
 
 
 def generic_decoder(type_name: str) -> Callable[[bytes], Any]:
@@ -185,7 +188,8 @@ def main() -> None:
             rows.append((f"import {name}", f"{res.seconds:.2f} s, scans {res.counts.get('/scan', 0)}, "
                          f"odom {res.counts.get('/odom', 0)}"))
     w0 = max(len(r[0]) for r in rows)
-    print(f"fgloc.io benchmark: medians over {R} repeats [slowest-fastest]")
+    print(f"fgloc.io benchmark: medians over {R} repeats [slowest-fastest], wall time; CPU: the median over the "
+          f"CPU time of this process; load average {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     for name, info in rows:
         print(f"{name:<{w0}}  {info}")
 

@@ -34,6 +34,7 @@ from fgloc.mapping.occupancy import scan_endpoints
 from fgloc.mapping.scanmatch import (
     DistanceGrid,
     build_distance_grid,
+    coarsen_grid,
     correlative_search,
     point_distances,
     refine,
@@ -64,6 +65,9 @@ class CheckConfig:
     dmax_m: float = 0.3            # distance-field clip: a point within it "sees" the other passes
     window_m: float = 0.8          # re-match search window around the scan's own pose
     window_deg: float = 5.0
+    wide_m: float = 3.0            # ... and (on 0.2 m cells) this far: a pass mapped metres off
+    wide_deg: float = 10.0
+    wide_max_ambiguity: float = 0.9  # ... where that search has one clear peak
     inlier_m: float = 0.08         # a point fits when this close to the other passes
     min_overlap: float = 0.3       # a scan is checked when this fraction of its points sees them
     good_fit: float = 0.85         # fit / overlap at the own pose above which no search is needed
@@ -210,9 +214,14 @@ def _arclength(poses: FloatArray) -> FloatArray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
 
 
-def _rematch(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckConfig
-             ) -> tuple[str, FloatArray, float, float, float]:
-    """Status, offset (own-pose frame), fit at the own pose, fit at the best pose, overlap."""
+def _rematch(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckConfig,
+             coarse_cache: list | None = None) -> tuple[str, FloatArray, float, float, float]:
+    """Status, offset (own-pose frame), fit at the own pose, fit at the best pose, overlap.
+
+    Searched within ``window_m`` of the own pose, and around the clear peak (if there is one) of a
+    coarse search within ``wide_m``: a pass put metres off (a wrong loop closure, or a corridor's
+    walls matched one corridor-width over) can still overlap the other passes where it was put.
+    ``coarse_cache`` (a list the caller keeps) holds the coarse copy of the last grid."""
     n = max(len(pts), 1)
     d0 = point_distances(grid, pts, pose0)
     ov0 = float(np.sum(d0 < cfg.dmax_m * 0.999)) / n
@@ -220,13 +229,29 @@ def _rematch(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckC
     if ov0 >= cfg.min_overlap and fit0 >= cfg.good_fit * ov0:
         return OK, np.zeros(3), fit0, fit0, ov0
     coarse = pts if len(pts) <= 120 else pts[:: int(np.ceil(len(pts) / 120))]
-    sr = correlative_search(grid, coarse, pose0, cfg.window_m, np.radians(cfg.window_deg),
-                            0.05, np.radians(1.0), 0.08)
-    rr = refine(grid, pts, sr.pose, 0.03)
-    best = rr.pose if np.hypot(*(rr.pose[:2] - sr.pose[:2])) < 0.2 else sr.pose
-    d1 = point_distances(grid, pts, best)
-    ov1 = float(np.sum(d1 < cfg.dmax_m * 0.999)) / n
-    fit1 = float(np.sum(d1 < cfg.inlier_m)) / n
+    starts = [pose0]
+    if cfg.wide_m > cfg.window_m:
+        if coarse_cache is not None and coarse_cache and coarse_cache[0] is grid:
+            cgrid = coarse_cache[1]
+        else:
+            cgrid = coarsen_grid(grid, max(int(round(0.2 / grid.resolution)), 1))
+            if coarse_cache is not None:
+                coarse_cache[:] = [grid, cgrid]
+        few = coarse if len(coarse) <= 40 else coarse[:: int(np.ceil(len(coarse) / 40))]
+        sw = correlative_search(cgrid, few, pose0, cfg.wide_m, np.radians(cfg.wide_deg), cgrid.resolution,
+                                np.radians(2.5), 0.15, far_m=1.0, far_rad=np.radians(6.0))
+        if sw.score > 0 and sw.ambiguity <= cfg.wide_max_ambiguity and np.hypot(*(sw.pose[:2] - pose0[:2])) > 0.5:
+            starts.append(sw.pose)
+    best, fit1, ov1 = pose0, -1.0, 0.0
+    for i, start in enumerate(starts):  # the wide peak is known to 0.2 m / 2 deg: a small window there
+        win_m, win_deg = (cfg.window_m, cfg.window_deg) if i == 0 else (0.3, 3.0)
+        sr = correlative_search(grid, coarse, start, win_m, np.radians(win_deg), 0.05, np.radians(1.0), 0.08)
+        rr = refine(grid, pts, sr.pose, 0.03)
+        cand = rr.pose if np.hypot(*(rr.pose[:2] - sr.pose[:2])) < 0.2 else sr.pose
+        d1 = point_distances(grid, pts, cand)
+        f = float(np.sum(d1 < cfg.inlier_m)) / n
+        if f > fit1:
+            best, fit1, ov1 = cand, f, float(np.sum(d1 < cfg.dmax_m * 0.999)) / n
     if fit1 < fit0:  # the search found nothing better: the own pose stands
         best, fit1, ov1 = pose0, fit0, ov0
     off = between(pose0, best)
@@ -316,6 +341,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
 
     src_xy = poses[src, :2]
     st_all = np.array([records[int(i)].stamp for i in idx])
+    coarse_cache: list = []  # [grid, its coarse copy] for the wide searches
     tree = cKDTree(src_xy)
     n_grids = [0]
 
@@ -338,7 +364,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
             cand = cand[np.argsort(dc, kind="stable")[: cfg.max_sources]]
         world = np.concatenate([transform_points(poses[src[c]], pts_of(int(src[c]))) for c in cand])
         n_grids[0] += 1
-        return build_distance_grid(world, cfg.resolution, cfg.dmax_m, cfg.window_m + 0.5)
+        return build_distance_grid(world, cfg.resolution, cfg.dmax_m, max(cfg.window_m, cfg.wide_m) + 0.5)
 
     t_keys = [_region_key(poses[k, :2], cfg.region_m) for k in tst]
     by_region: dict[tuple[int, int], list[int]] = {}
@@ -361,7 +387,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
                 if grid is None or len(pts) < 10:
                     status, off, f0, f1, ov = NO_OVERLAP, np.zeros(3), 0.0, 0.0, 0.0
                 else:
-                    status, off, f0, f1, ov = _rematch(grid, pts, poses[k], cfg)
+                    status, off, f0, f1, ov = _rematch(grid, pts, poses[k], cfg, coarse_cache)
                 checks.append(ScanCheck(float(st_all[k]), poses[k].copy(), key, int(p), status, off, f0, f1, ov,
                                         float(s_all[k])))
             if progress is not None:
@@ -399,7 +425,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
                         pts = pts_of(int(k))
                         if len(pts) < 10:
                             continue
-                        rm = _rematch(grid, pts, poses[k], cfg)
+                        rm = _rematch(grid, pts, poses[k], cfg, coarse_cache)
                         status = rm[0]
                         if status != NO_OVERLAP:
                             n_ck += 1
@@ -548,6 +574,7 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
     occ_xy = occ.grid_to_world(rows, cols)
     grid = build_distance_grid(occ_xy, min(cfg.resolution, occ.resolution), cfg.dmax_m, cfg.window_m + 1.0)
     tst = _pick_by_travel(poses, cfg.test_step_m * 0.5, cfg.test_step_deg)
+    coarse_cache: list = []
     checks: list[ScanCheck] = []
     cell = cfg.change_cell_m
     add_obs: dict[tuple[int, int], set[int]] = {}
@@ -562,7 +589,7 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
         if len(pts) < 10:
             checks.append(ScanCheck(float(rec.stamp), pose.copy(), key, 0, NO_OVERLAP, np.zeros(3), 0, 0, 0))
             continue
-        status, off, f0, f1, ov = _rematch(grid, pts, pose, cfg)
+        status, off, f0, f1, ov = _rematch(grid, pts, pose, cfg, coarse_cache)
         checks.append(ScanCheck(float(rec.stamp), pose.copy(), key, 0, status, off, f0, f1, ov))
         if status != OK:
             continue  # changes are read only where the pose agrees with the map

@@ -99,3 +99,18 @@ def test_no_second_pass_is_not_checked():
     half = Trajectory(full.stamps[:100], full.poses[:100])  # one way along two sides
     res = check_consistency(synth.records(world, half), np.zeros(3), half)
     assert res.passed and "NOT CHECKED" in res.verdict
+
+
+@pytest.mark.parametrize("shift_m", [1.5, 2.5])
+def test_gross_pass_error_is_flagged_in_place(ring, shift_m):
+    """A pass put metres off (a wrong loop closure) overlaps little where it was put: the check
+    searches wider than its local window there (it passed such a map as CONSISTENT before)."""
+    _, traj, recs = ring
+    bad, center, (ta, tb) = _inject(traj, 150.0, 175.0, shift_m=shift_m, deg=0.0)
+    res = check_consistency(recs, np.zeros(3), bad)
+    assert not res.passed and "INCONSISTENT" in res.verdict
+    dist = [float(np.hypot(*(r.center - center))) for r in res.flagged]
+    assert min(dist) < 4.0 and max(dist) < 9.0
+    worst = max(res.flagged, key=lambda r: r.n_bad)
+    assert abs(worst.offset_m - shift_m) < 0.3
+    assert any(a <= tb and b >= ta for a, b in res.culprits)

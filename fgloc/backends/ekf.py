@@ -32,6 +32,7 @@ Core maths only: no I/O, no printing.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -134,7 +135,8 @@ class EKFConfig:
     gyro_bias_q: float = setting(4e-10, "bias random walk ((rad/s)^2/s)", min=0)
     odom_yaw_scale: bool = setting(True, "estimate the odometry's yaw-rate scale (reported / true) as a state "
                                    "once a gyro is there")
-    odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1", gt=0)
+    odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale's logarithm around 0 (the "
+                                          "scale is estimated as its log: it stays positive)", gt=0)
     odom_yaw_scale_q: float = setting(1e-5, "its random walk (1/s)", min=0)
     adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other")
     compass_recover_after: int = setting(40, "compass headings gated in a row, while the sources agree it is "
@@ -165,6 +167,7 @@ class EKF:
     omni: bool = False
     aug: dict = field(default_factory=dict)       # name -> state index
     q_aug: dict = field(default_factory=dict)     # name -> spectral density
+    bounds: dict = field(default_factory=dict)    # name -> (low, high): the state is kept in these
 
     def __post_init__(self) -> None:
         self.omni = bool(self.config.omni)
@@ -201,13 +204,17 @@ class EKF:
             v, var = old_aug.get(k, (0.0, 1.0))
             self.x[i], self.P[i, i] = v, var
 
-    def add_state(self, name: str, value: float, var: float, q: float) -> int:
-        """Append a random-walk state (spectral density ``q``); returns its index."""
+    def add_state(self, name: str, value: float, var: float, q: float,
+                  bounds: tuple[float, float] | None = None) -> int:
+        """Append a random-walk state (spectral density ``q``); returns its index.  With ``bounds``
+        the state is kept in ``[low, high]`` after every update (a physical range)."""
         if name in self.aug:
             return int(self.aug[name])
         i = self.n
         self.aug[name] = i
         self.q_aug[name] = float(q)
+        if bounds is not None:
+            self.bounds[name] = (float(bounds[0]), float(bounds[1]))
         x = np.zeros(i + 1)
         x[:i] = self.x[:i] if len(self.x) >= i else np.pad(self.x, (0, i - len(self.x)))
         x[i] = value
@@ -304,6 +311,9 @@ class EKF:
         K = self.P @ H.T @ np.linalg.inv(S)
         self.x = self.x + K @ y
         self.x[TH] = wrap_angle(self.x[TH])
+        for name, (lo, hi) in self.bounds.items():
+            i = self.aug[name]
+            self.x[i] = min(max(float(self.x[i]), lo), hi)
         self.P = self.P - K @ H @ self.P
         self.P = 0.5 * (self.P + self.P.T)
         self.stats["updates"] += 1
@@ -320,13 +330,14 @@ class EKF:
                            c.gate_map if gate else None, "map")
 
     def update_encoder(self, t: float, twist: FloatArray, twist_cov: FloatArray,
-                       yaw_scale_index: int | None = None) -> bool:
+                       yaw_log_scale_index: int | None = None) -> bool:
         """Encoder body twist ``[vx, vy, wz]`` with 3x3 covariance; the unicycle uses ``[vx, wz]``.
 
-        With ``yaw_scale_index`` the reported yaw rate is ``s_w * w`` (a skid steer's scrub)."""
+        With ``yaw_log_scale_index`` (the state ``l = ln s_w``) the reported yaw rate is
+        ``s_w * w = exp(l) * w`` (a skid steer's scrub; the scale cannot change sign)."""
         tw = np.asarray(twist, dtype=float)
         cov = np.asarray(twist_cov, dtype=float)
-        if yaw_scale_index is None:
+        if yaw_log_scale_index is None:
             if self.omni:
                 return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
             idx = [0, 2]
@@ -337,10 +348,10 @@ class EKF:
         comp = [0, 1, 2] if self.omni else [0, 2]
         H = selection(rows, self.n)
         hx = H @ self.x
-        sw = float(self.x[yaw_scale_index])
+        sw = math.exp(float(self.x[yaw_log_scale_index]))
         w = float(self.x[self.w_index])
         H[-1, self.w_index] = sw
-        H[-1, yaw_scale_index] = w
+        H[-1, yaw_log_scale_index] = sw * w
         hx[-1] = sw * w
         return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder")
 

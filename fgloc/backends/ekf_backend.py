@@ -13,7 +13,8 @@ Beyond the paper (issue 17), all switchable in ``ekf:``:
   estimated beside the filter (:class:`~fgloc.backends.health.GyroBias`: from the absolute
   headings and standstill, never from the wheels, whose scrub would be read as a bias);
 * once a gyro is there, the odometry's yaw-rate scale (reported / true, a skid steer's
-  scrub) is a state: the encoder's yaw rate measures ``s_w * w``;
+  scrub) is a state, as its logarithm (a scale cannot change sign) kept in a physical range
+  (:data:`SCALE_MIN`, :data:`SCALE_MAX`): the encoder's yaw rate measures ``s_w * w``;
 * the yaw sources are weighted by the noise they show against each other
   (:class:`~fgloc.backends.health.Arbiter`, the same as the smoother's);
 * a compass heading gated for ``compass_recover_after`` readings in a row while the sources
@@ -51,7 +52,12 @@ from fgloc.types import PoseFix, Trajectory
 MAX_REF_PERIOD_S = 0.06
 GYRO_RECOVER_AFTER = 5     # gyro readings gated in a row before the filter's yaw rate is re-opened to it
 STILL_TWIST = 1e-3          # |vx|, |vy| (m/s) and |w| (rad/s) below this: the wheels stand still
-SCALE_MIN, SCALE_MAX = 0.05, 20.0   # the odometry's yaw-rate scale stays in these bounds
+#: the odometry's yaw-rate scale (reported / true) stays in these bounds: a skid steer's wheels
+#: report 1.4-7 times the turn; a yaw rate off by more than 10x either way carries no usable turn
+#: (a negative scale, wheels that turn the other way than the robot, is not a scale: the
+#: arbiter's noise estimate down-weights such a source)
+SCALE_MIN, SCALE_MAX = 0.1, 10.0
+YAW_SCALE_STATE = "odom_yaw_log_scale"
 
 
 def _period(series: deque) -> float:
@@ -132,8 +138,12 @@ class EKFBackend(Backend):
 
     def odom_scales(self) -> FloatArray:
         """The odometry's ``[speed, yaw-rate]`` scales (reported / true); the EKF keeps speed at 1."""
-        i = self.ekf.aug.get("odom_yaw_scale")
-        return np.array([1.0, float(self.ekf.x[i]) if i is not None else 1.0])
+        return np.array([1.0, self._yaw_scale()])
+
+    def _yaw_scale(self) -> float:
+        """The odometry's yaw-rate scale (1 until it is a state)."""
+        i = self.ekf.aug.get(YAW_SCALE_STATE)
+        return math.exp(float(self.ekf.x[i])) if i is not None else 1.0
 
     def gyro_bias(self, source: str = "imu") -> float:
         gb = self.gbias.get(f"{source}.gyro")
@@ -152,9 +162,8 @@ class EKFBackend(Backend):
         ya, yb = self._series_at(self._yaw_series, t0), self._series_at(self._yaw_series, t1)
         if ya is not None and yb is not None:
             return with_rotation(delta, yb[0] - ya[0])
-        si = self.ekf.aug.get("odom_yaw_scale")
-        if si is not None and self.ekf.x[si] > SCALE_MIN:
-            return with_rotation(delta, float(se2_log(np.asarray(delta, dtype=float))[2]) / float(self.ekf.x[si]))
+        if YAW_SCALE_STATE in self.ekf.aug:
+            return with_rotation(delta, float(se2_log(np.asarray(delta, dtype=float))[2]) / self._yaw_scale())
         return delta
 
     # ------------------------------------------------------------------ inputs
@@ -170,8 +179,8 @@ class EKFBackend(Backend):
         for gb in self.gbias.values():
             gb.set_still(float(t), still)
         self._arb_add("odom", RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
-        si = self.ekf.aug.get("odom_yaw_scale")
-        gain = 1.0 / float(self.ekf.x[si]) if si is not None and self.ekf.x[si] > 0.05 else 1.0
+        si = self.ekf.aug.get(YAW_SCALE_STATE)
+        gain = 1.0 / self._yaw_scale()
         self.arb.set_correction("odom", gain=gain)
         # motion integrals (held backwards, as the twist is the mean since the last message)
         v = float(np.hypot(tw[0], tw[1]))
@@ -196,11 +205,10 @@ class EKFBackend(Backend):
         self._last_odom_t = float(t)
         if self.cfg.odom_yaw_scale and si is None and self._has_gyro() and self._turned > 0.3:
             # observable once turning beside a gyro (early: the bias state would take its error)
-            si = self.ekf.add_state("odom_yaw_scale", 1.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q)
+            si = self.ekf.add_state(YAW_SCALE_STATE, 0.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q,
+                                    bounds=(math.log(SCALE_MIN), math.log(SCALE_MAX)))
         h.accepted += 1
-        self.ekf.update_encoder(t, tw, cov, yaw_scale_index=si)
-        if si is not None:  # a scale is positive and bounded (a filter step must not flip it)
-            self.ekf.x[si] = min(max(float(self.ekf.x[si]), SCALE_MIN), SCALE_MAX)
+        self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si)
         self._process_pairs()
 
     def _has_gyro(self) -> bool:

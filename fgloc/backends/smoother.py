@@ -93,8 +93,30 @@ def _period(ts: list[float]) -> float:
 #: robot_localization's 1e6): bounded to it, a weak prior, so the integrated odometry factor stays
 #: a well-conditioned system (1e6 made iSAM2 report an indeterminate system on r_l's test1.bag)
 TWIST_VAR_MAX = 100.0
-#: m^2, m^2, rad^2: the prior of a restart after a solver failure grows at most to this
-RESTART_VAR_MAX = np.array([100.0, 100.0, np.pi**2])
+#: m^2, m^2, rad^2: the prior of a restart after a solver failure is the last marginal's diagonal,
+#: at most this.  A restart from the marginal inflated (x4 per failure, up to 100 m^2 / pi^2) or
+#: with its correlations failed again at the next keyframe: on a run without any heading source
+#: (r_l's test1.bag with odom0 vx, vy only) every keyframe after the first failure was one
+RESTART_VAR_MAX = np.array([1.0, 1.0, 1.0])
+#: the prior of a start when none is given (m, m, rad)
+DEFAULT_INITIAL_SIGMAS = np.array([0.1, 0.1, np.deg2rad(5.0)])
+
+
+def prior_covariance(cov: FloatArray | None, var_max: FloatArray | None = None) -> FloatArray:
+    """A prior covariance GTSAM can use: symmetric, finite, positive semi-definite (when it is not,
+    its eigenvalues are raised to 1e-6 of the largest), each variance at most ``var_max``; the
+    default start prior when ``cov`` is None or not finite.  (The prior factor adds 1e-9 to each
+    variance.)"""
+    if cov is None:
+        return np.diag(DEFAULT_INITIAL_SIGMAS**2)
+    c = np.asarray(cov, dtype=float).reshape(3, 3)
+    if not np.all(np.isfinite(c)):
+        return np.diag(DEFAULT_INITIAL_SIGMAS**2)
+    c = 0.5 * (c + c.T)
+    w, v = np.linalg.eigh(c)
+    if w[0] < 0.0:
+        c = (v * np.maximum(w, 1e-6 * max(float(w[-1]), 1e-9))) @ v.T
+    return _bounded(c, var_max) if var_max is not None else c
 
 
 def _bounded(c: FloatArray, var_max: float | FloatArray) -> FloatArray:
@@ -272,27 +294,43 @@ class SlidingWindowSmoother(Backend):
         self.calib.offset = float(offset)
 
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        """(Re)start at ``pose`` (map ``[x, y, yaw]``) with prior ``cov`` (made well-conditioned).
+
+        A pose that is not finite is a counted ``bad_initial_pose`` and ignored (the smoother
+        stays as it was); a solver failure on the start prior itself is counted and the start
+        repeated with the default prior, so GTSAM's exceptions never leave the smoother."""
+        pose = np.asarray(pose, dtype=float).reshape(-1)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)) or not math.isfinite(float(t)):
+            self.stats["bad_initial_pose"] = self.stats.get("bad_initial_pose", 0) + 1
+            return
         keep_odo = (self.odo_t, self.odo_u, self.odo_c)
         if self.t0 is not None:
             self._flush_acc()
             self._flush_window()
         smoothed = self.smoothed
-        self._reset_state()
-        self.smoothed = smoothed
-        self.odo_t, self.odo_u, self.odo_c = keep_odo
-        self.t0 = float(t)
-        cov = np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2]) if cov is None else np.asarray(cov)
-        k = self._new_x(t)
-        graph = gtsam.NonlinearFactorGraph()
-        vals = gtsam.Values()
-        pose = np.asarray(pose, dtype=float)
-        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*pose),
-                                         gtsam.noiseModel.Gaussian.Covariance(cov + np.eye(3) * 1e-9)))
-        vals.insert(k, gtsam.Pose2(*pose))
-        ts = {k: float(t)}
-        self._init_yaw = float(pose[2])
-        self._new_offset(t, graph, vals, ts)
-        self._update(graph, vals, ts)
+        cov = prior_covariance(cov)
+        for attempt in range(2):
+            self._reset_state()
+            self.smoothed = smoothed
+            self.odo_t, self.odo_u, self.odo_c = keep_odo
+            self.t0 = float(t)
+            k = self._new_x(t)
+            graph = gtsam.NonlinearFactorGraph()
+            vals = gtsam.Values()
+            graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*pose),
+                                             gtsam.noiseModel.Gaussian.Covariance(cov + np.eye(3) * 1e-9)))
+            vals.insert(k, gtsam.Pose2(*pose))
+            ts = {k: float(t)}
+            self._init_yaw = float(pose[2])
+            self._new_offset(t, graph, vals, ts)
+            try:
+                self._update(graph, vals, ts)
+                break
+            except RuntimeError:
+                self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
+                if attempt == 1:
+                    raise
+                cov = prior_covariance(None)
         self.kf_t.append(float(t))
         self.kf_key.append(k)
         self.window.append((float(t), k))
@@ -471,6 +509,9 @@ class SlidingWindowSmoother(Backend):
         if self.odo_t and t <= self.odo_t[-1]:
             self.stats["late"] += 1
             h.skip("late")
+            return
+        if not (math.isfinite(t) and np.all(np.isfinite(twist))):
+            h.skip("not finite")
             return
         h.accepted += 1
         c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
@@ -686,9 +727,12 @@ class SlidingWindowSmoother(Backend):
 
         Returns True if the fix passed the gate against the prediction.
         """
-        if not self.initialized:
+        if not self.initialized or not math.isfinite(float(t)):
             return False
         t = float(t)
+        if fix is not None and not (np.all(np.isfinite(fix.pose)) and np.all(np.isfinite(fix.cov))):
+            self._source("scan", "pose").skip("fix not finite")
+            fix = None
         if t <= self.kf_t[-1]:
             if t == self.kf_t[-1]:
                 return False
@@ -907,13 +951,7 @@ class SlidingWindowSmoother(Backend):
         try:
             idx = self._update(graph, vals, ts)
         except RuntimeError:
-            # an ill-conditioned system (e.g. degenerate input): restart from the prediction
-            self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
-            t_last, k_last = self.kf_t[-1], keys[-1]
-            pose = self.kf_pose[k_last].copy()
-            self.window = deque(w for w in self.window if w[1] not in keys)
-            # the covariance grows with each failure in a row, bounded (it overflowed to inf before)
-            self.initialize(t_last, pose, _bounded(self._last_cov * 4.0, RESTART_VAR_MAX))
+            self._restart_after_failure(keys)
             return
         for pair, pos in pairs:
             self.between_idx[pair] = idx[pos]
@@ -922,6 +960,21 @@ class SlidingWindowSmoother(Backend):
             p = self.isam.calculateEstimatePose2(kk)
             self.kf_pose[kk] = np.array([p.x(), p.y(), p.theta()])
         self._after_keyframe(self.kf_t[-1])
+
+    def _restart_after_failure(self, drop: list[int]) -> None:
+        """GTSAM found the system ill-conditioned (e.g. ``Indeterminate linear system`` on degenerate
+        input): counted, and the smoother restarts at the newest keyframe's prediction with the
+        last marginal as its prior (bounded, :data:`RESTART_VAR_MAX`); the keyframes in ``drop``
+        (not solved) leave the window."""
+        self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
+        t_last, k_last = self.kf_t[-1], self.kf_key[-1]
+        pose = self.kf_pose.get(k_last)
+        if pose is None or not np.all(np.isfinite(pose)):
+            pose = next((p for _, p in sorted(self.smoothed.values(), key=lambda v: -v[0])
+                         if np.all(np.isfinite(p))), np.zeros(3))
+        self.window = deque(w for w in self.window if w[1] not in drop)
+        self.initialize(t_last, np.array(pose, dtype=float), np.diag(np.minimum(
+            np.abs(np.diag(self._last_cov)), RESTART_VAR_MAX)))
 
     def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
         """Hook for the batch smoother (keeps a copy of every factor)."""
@@ -985,7 +1038,11 @@ class SlidingWindowSmoother(Backend):
         ts = {k: t}
         self._register(graph, vals, ts)
         self._remove_registered(idx_ab)
-        idx = self._update(graph, vals, ts, remove=[idx_ab])
+        try:
+            idx = self._update(graph, vals, ts, remove=[idx_ab])
+        except RuntimeError:
+            self._restart_after_failure([])
+            return False
         del self.between_idx[(ka, kb)]
         self.between_idx[(ka, k)] = idx[0]
         self.between_idx[(k, kb)] = idx[1]

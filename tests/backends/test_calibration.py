@@ -204,3 +204,31 @@ def test_ekf_becomes_omni_when_the_odometry_reports_lateral_velocity():
     plain = EKFBackend(EKFConfig())
     feed(plain, straight)
     assert not plain.stats["omni"]  # a diff drive stays in the paper's state
+
+
+def test_ekf_yaw_scale_stays_positive_and_bounded_whatever_the_wheels_say():
+    """Wheels whose yaw rate turns the other way than the gyro (a mirrored or miswired encoder):
+    the EKF's yaw-rate scale (a state, as its logarithm) never leaves its physical range after any
+    update (a linear scale state went to -0.41 through the gyro updates' correlations, clamped
+    only after the encoder's), and a plain skid-steer scrub is still estimated."""
+    from fgloc.backends.ekf import EKFConfig
+    from fgloc.backends.ekf_backend import SCALE_MAX, SCALE_MIN, EKFBackend
+
+    for wheel_gain, want in ((-1.5, None), (2.0, 2.0)):
+        rng = np.random.default_rng(1)
+        ekf = EKFBackend(EKFConfig(latency=False))
+        ekf.initialize(0.0, np.zeros(3), np.eye(3) * 1e-4)
+        seen = []
+        for i in range(1, 6000):
+            t = i * 0.01
+            w = 0.6 * np.sin(t / 3.0)
+            if i % 2 == 0:
+                ekf.add_odometry(t, np.array([0.5, 0.0, wheel_gain * w + rng.normal(0, 0.02)]),
+                                 np.diag([1e-4, 1e-4, 4e-4]))
+            ekf.add_compass(t, None, np.nan, w + 0.002 + rng.normal(0, 0.003), 0.003**2)
+            if i % 10 == 0:
+                ekf.add_keyframe(t, None)
+            seen.append(ekf.odom_scales()[1])
+        assert SCALE_MIN - 1e-9 <= min(seen) and max(seen) <= SCALE_MAX + 1e-9
+        if want is not None:
+            assert ekf.odom_scales()[1] == pytest.approx(want, rel=0.05)

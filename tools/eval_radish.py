@@ -277,8 +277,34 @@ def make_excerpts(dest: Path) -> None:
         print(f"wrote {out} ({out.stat().st_size} bytes) and its reference ({int(keep.sum())} poses)")
 
 
+def injected_check(name: str, recs: list[ScanRecord], mount: StaticTransform, traj: Trajectory, out: Path,
+                   spec: str) -> str:
+    """Self-check of the map with one pass moved (``NAME=T0,T1,DX,DY,DEG``): check.yaml / check.png in
+    ``out/NAME_injected_DXxDY`` and the verdict line."""
+    from fgloc.mapping.build import write_check
+    from fgloc.mapping.selfcheck import check_consistency
+    from fgloc.maps import load_map
+
+    t0_s, t1_s, dx, dy, deg = (float(v) for v in spec.split("=", 1)[1].split(","))
+    first = recs[0].stamp
+    p = traj.poses.copy()
+    m = (traj.stamps >= first + t0_s) & (traj.stamps <= first + t1_s)
+    c = p[m, :2].mean(axis=0)
+    tf = compose(compose(np.array([c[0], c[1], 0.0]), np.array([dx, dy, np.radians(deg)])),
+                 np.array([-c[0], -c[1], 0.0]))
+    p[m] = compose(tf, p[m])
+    moved = Trajectory(traj.stamps, p)
+    res = check_consistency(recs, np.asarray(mount.pose), moved)
+    d = out / f"{name}_injected_{dx:g}x{dy:g}"
+    write_check(d, res, load_map(out / name / "map.yaml"), moved,
+                f"{name}: pass t={t0_s:g}-{t1_s:g} s moved ({dx:g}, {dy:g}) m, {deg:g} deg")
+    return (f"pass t={t0_s:g}-{t1_s:g} s ({int(m.sum())} scans) moved ({dx:g}, {dy:g}) m / {deg:g} deg around "
+            f"({c[0]:.1f}, {c[1]:.1f}): {res.verdict}")
+
+
 def map_in_process(name: str, outdir: Path) -> dict:
-    """``fgloc map`` on the whole log in a child process: wall time, peak RSS (psutil, 20 Hz)."""
+    """``fgloc map`` on the whole log in a child process: wall time, CPU time (user + system), peak
+    RSS (psutil, 20 Hz) and the 1-minute load average at the start (the machine is shared)."""
     import psutil
 
     # the map command on its own (the same code as ``fgloc map``), so that a half-edited module of
@@ -286,13 +312,19 @@ def map_in_process(name: str, outdir: Path) -> dict:
     boot = ("import sys, typer; from fgloc.commands.map import register; app = typer.Typer(); register(app); "
             "app(sys.argv[1:])")
     cmd = [sys.executable, "-c", boot, "map", str(LOGS[name]), "-o", str(outdir), "--no-progress"]
+    import os
+
+    load = os.getloadavg()[0]
     t0 = time.perf_counter()
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(p.pid)
     peak = 0
+    cpu = 0.0
     while p.poll() is None:
         try:
             peak = max(peak, proc.memory_info().rss)
+            ct = proc.cpu_times()
+            cpu = max(cpu, ct.user + ct.system)
         except psutil.Error:
             break
         time.sleep(0.05)
@@ -301,7 +333,8 @@ def map_in_process(name: str, outdir: Path) -> dict:
     if p.returncode != 0:
         raise RuntimeError(f"fgloc map {name} failed: {err.strip()[-400:]}")
     warnings = [ln[len("warning: "):] for ln in err.splitlines() if ln.startswith("warning: ")]
-    return {"wall_s": wall, "peak_rss_mb": peak / 1e6, "stdout": out, "warnings": warnings}
+    return {"wall_s": wall, "cpu_s": cpu, "load": load, "peak_rss_mb": peak / 1e6, "stdout": out,
+            "warnings": warnings}
 
 
 def main() -> int:
@@ -318,6 +351,9 @@ def main() -> int:
                     help="more GMapping-corrected logs (aces-corrected.log.gz, csail-corrected.log.gz)")
     ap.add_argument("--relations", nargs="*", default=[], metavar="NAME=FILE",
                     help="relation files (Kuemmerle et al. 2009) to score against, e.g. aces=aces.relations")
+    ap.add_argument("--inject", nargs="*", default=[], metavar="NAME=T0,T1,DX,DY,DEG",
+                    help="also self-check NAME's map with the pass between T0 and T1 (s after the first scan) "
+                         "moved rigidly by DX, DY (m, map frame) and turned DEG about its centre")
     ap.add_argument("--localize", action="store_true", help="also localize a log segment (fgloc run)")
     ap.add_argument("--loc-scans", type=int, default=1500, help="localize the last N scans (within the second half)")
     ap.add_argument("--no-relocalize", action="store_true",
@@ -342,6 +378,7 @@ def main() -> int:
         traj = read_tum(out / name / "trajectory.tum")
         row: dict = {"dataset": name, "scans": mdoc["scans"], "keyframes": mdoc["stats"]["keyframes"],
                      "loops": mdoc["stats"]["loops"], "map_s": mp["wall_s"], "rss_mb": mp["peak_rss_mb"],
+                     "cpu_s": mp["cpu_s"], "load": mp["load"],
                      "slam_s": mdoc["timings_s"]["slam_s"], "check_s": mdoc["timings_s"]["check_s"],
                      "verdict": cdoc["verdict"], "suspects": cdoc["suspects"], "warnings": mp["warnings"],
                      "png": str(out / name / "map.png")}
@@ -357,6 +394,9 @@ def main() -> int:
             row["rel"] = evaluate_relations(traj, rels)
         if name in rel_files:
             row["rel_file"] = evaluate_relations(traj, read_relations(rel_files[name]))
+        for spec in args.inject:
+            if spec.split("=", 1)[0] == name:
+                row.setdefault("injected", []).append(injected_check(name, recs, mount, traj, out, spec))
         if args.localize:
             try:
                 cfg_path = None
@@ -381,9 +421,9 @@ def _fmt_rel(r: dict | None) -> str:
 
 
 def _print_table(rows: list[dict]) -> None:
-    print("| log | scans | keyframes | loops | map time (wall) | SLAM | self-check | peak RSS "
-          "| relation error vs GMapping-corrected | self-check verdict |")
-    print("|---|--:|--:|--:|--:|--:|--:|--:|---|---|")
+    print("| log | scans | keyframes | loops | map time (wall) | CPU (user+sys) | load | SLAM (wall) "
+          "| self-check (wall) | peak RSS | relation error vs GMapping-corrected | self-check verdict |")
+    print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|---|")
     for r in rows:
         rel = _fmt_rel(r.get("rel"))
         if r.get("ref"):
@@ -392,10 +432,13 @@ def _print_table(rows: list[dict]) -> None:
             rel += f"; relation file: {_fmt_rel(r['rel_file'])}"
         verdict = r["verdict"].replace("map-check: ", "")
         print(f"| {r['dataset']} | {r['scans']} | {r['keyframes']} | {r['loops']} | {r['map_s']:.1f} s "
-              f"| {r['slam_s']:.1f} s | {r['check_s']:.1f} s | {r['rss_mb']:.0f} MB | {rel} | {verdict} |")
+              f"| {r['cpu_s']:.1f} s | {r['load']:.1f} | {r['slam_s']:.1f} s | {r['check_s']:.1f} s "
+              f"| {r['rss_mb']:.0f} MB | {rel} | {verdict} |")
     for r in rows:
         for s in r["suspects"]:
             print(f"- {r['dataset']}: {s}")
+        for s in r.get("injected", []):
+            print(f"- {r['dataset']} (injected): {s}")
         for w in r["warnings"]:
             print(f"- {r['dataset']} (warning): {w}")
     locs = [r for r in rows if r.get("loc") or r.get("loc_error")]

@@ -72,12 +72,12 @@ def _release_memory() -> None:
         pass
 
 
-def _fixed_mmap_threshold(nbytes: int = 32 << 20) -> None:
+def _fixed_mmap_threshold(nbytes: int = 8 << 20) -> None:
     """Large arrays (occupancy grids, big distance fields) from mmap, returned to the OS when freed:
     glibc's dynamic threshold would otherwise move them into the heap after the first free.  Not
-    lower: the loop and tracking fields (a few MB, allocated thousands of times) then came from
-    fresh mmaps each time and their page faults cost ACES 0.8 s of system time (356k minor faults
-    at a 1 MB threshold, 169k at 32 MB, same peak RSS)."""
+    much lower: the loop and tracking fields (1-2 MB, allocated thousands of times) then come from
+    fresh mmaps each time and their page faults cost system time (ACES: 1.5 s at 1 MB, 1.1 s at
+    8 MB, 0.7 s at 32 MB); not higher: fr-clinic's peak RSS 460 MB at 8 MB, 489 MB at 32 MB."""
     import ctypes
 
     try:

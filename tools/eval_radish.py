@@ -302,6 +302,74 @@ def injected_check(name: str, recs: list[ScanRecord], mount: StaticTransform, tr
             f"({c[0]:.1f}, {c[1]:.1f}): {res.verdict}")
 
 
+def align_passes(name: str, recs: list[ScanRecord], mount: StaticTransform, traj: Trajectory,
+                 ref: Trajectory | None, spec: str) -> list[str]:
+    """Do two passes (``NAME=A0,A1,B0,B1``, s after the first scan) agree where the map put them?
+
+    Pass A's returns (every scan of [A0, A1] at its map pose) make a distance field; pass B's
+    returns, in the frame of its middle scan (B's own relative poses), are searched over +-4 m /
+    +-10 deg around where the map put that scan, and refined.  Prints the best offset from the
+    map's pose, the score there and at the map's pose, the strongest rival peaks, the inlier
+    fraction (< 0.1 m) and RMS after refinement, both ways round; and, with a reference, the
+    relative poses of the reference's scans of A and B against ours."""
+    from fgloc.geometry import between
+    from fgloc.mapping.occupancy import scan_endpoints
+    from fgloc.mapping.scanmatch import build_distance_grid, correlative_search, point_distances, refine
+
+    a0, a1, b0, b1 = (float(v) for v in spec.split("=", 1)[1].split(","))
+    first = recs[0].stamp
+    st = np.array([r.stamp for r in recs])
+    poses = traj.interpolate(st)
+    mnt = np.asarray(mount.pose, dtype=float)
+
+    def pts(i: int) -> np.ndarray:
+        sc = recs[i].scan
+        e, h = scan_endpoints(sc.ranges, sc.angles, sc.range_min, sc.range_max, 25.0, 8.0)
+        return compose(mnt, np.column_stack([e[h], np.zeros(int(h.sum()))]))[:, :2]
+
+    def world(p: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        return compose(pose, np.column_stack([p, np.zeros(len(p))]))[:, :2]
+
+    out = []
+    for (lo, hi), (lo2, hi2) in (((a0, a1), (b0, b1)), ((b0, b1), (a0, a1))):
+        ia = np.nonzero((st - first >= lo) & (st - first <= hi))[0]
+        ib = np.nonzero((st - first >= lo2) & (st - first <= hi2))[0]
+        if len(ia) == 0 or len(ib) == 0:
+            out.append(f"no scans in [{lo:g}, {hi:g}] or [{lo2:g}, {hi2:g}] s")
+            continue
+        grid = build_distance_grid(np.concatenate([world(pts(i), poses[i]) for i in ia]), 0.05, 0.3)
+        mid = int(ib[len(ib) // 2])
+        pm = poses[mid]
+        b = np.concatenate([world(pts(i), between(pm, poses[i])) for i in ib])
+        b = b[np.random.default_rng(0).choice(len(b), min(len(b), 3000), replace=False)]
+        sr = correlative_search(grid, b, pm, 4.0, np.radians(10.0), 0.1, np.radians(1.0), 0.1)
+        off = sr.offsets + (sr.pose - pm)  # every searched pose relative to the map's pose
+        at_map = float(sr.scores[int(np.argmin(np.abs(off).sum(axis=1)))])
+        peaks = np.nonzero(sr.peaks & (sr.scores > 0.5 * sr.score))[0]
+        rivals = [k for k in peaks[np.argsort(-sr.scores[peaks])] if np.hypot(*off[k, :2]) > 0.5][:3]
+        rr = refine(grid, b, pm, 0.05, 30)
+        d = point_distances(grid, b, rr.pose)
+        out.append(
+            f"{name}: pass t={lo2:g}-{hi2:g} s ({len(ib)} scans) on pass t={lo:g}-{hi:g} s ({len(ia)} scans): best "
+            f"offset from the map's pose ({sr.pose[0] - pm[0]:+.2f}, {sr.pose[1] - pm[1]:+.2f}) m "
+            f"{np.degrees(sr.pose[2] - pm[2]):+.1f} deg, score {sr.score:.3f} (at the map's pose {at_map:.3f}); "
+            "rivals " + ", ".join(f"({off[k, 0]:+.1f}, {off[k, 1]:+.1f}) m {sr.scores[k]:.3f}" for k in rivals)
+            + f"; refined from the map's pose: moved {np.hypot(*(rr.pose[:2] - pm[:2])):.3f} m, "
+            f"{100 * rr.inlier_frac:.0f} % of the returns within 0.1 m, median {np.median(d):.3f} m")
+    if ref is not None:
+        ra = np.nonzero((ref.stamps - first >= a0) & (ref.stamps - first <= a1))[0]
+        rb = np.nonzero((ref.stamps - first >= b0) & (ref.stamps - first <= b1))[0]
+        if len(ra) and len(rb):
+            ours = traj.interpolate(ref.stamps)
+            e = np.array([between(between(ref.poses[i], ref.poses[j]), between(ours[i], ours[j]))
+                          for i in ra for j in rb])
+            et = np.hypot(e[:, 0], e[:, 1])
+            out.append(f"{name}: reference vs ours, relative poses between the passes ({len(e)} pairs of reference "
+                       f"scans): {et.mean():.3f} m mean, {et.max():.3f} m max, "
+                       f"{np.degrees(np.abs(e[:, 2])).mean():.2f} deg mean")
+    return out
+
+
 def map_in_process(name: str, outdir: Path) -> dict:
     """``fgloc map`` on the whole log in a child process: wall time, CPU time (user + system), peak
     RSS (psutil, 20 Hz) and the 1-minute load average at the start (the machine is shared)."""
@@ -354,6 +422,9 @@ def main() -> int:
     ap.add_argument("--inject", nargs="*", default=[], metavar="NAME=T0,T1,DX,DY,DEG",
                     help="also self-check NAME's map with the pass between T0 and T1 (s after the first scan) "
                          "moved rigidly by DX, DY (m, map frame) and turned DEG about its centre")
+    ap.add_argument("--align-passes", nargs="*", default=[], metavar="NAME=A0,A1,B0,B1",
+                    help="do the passes [A0, A1] and [B0, B1] (s after the first scan) agree where the map put "
+                         "them? (pass-to-pass search +-4 m, and the reference's relative poses against ours)")
     ap.add_argument("--localize", action="store_true", help="also localize a log segment (fgloc run)")
     ap.add_argument("--loc-scans", type=int, default=1500, help="localize the last N scans (within the second half)")
     ap.add_argument("--no-relocalize", action="store_true",
@@ -394,6 +465,9 @@ def main() -> int:
             row["rel"] = evaluate_relations(traj, rels)
         if name in rel_files:
             row["rel_file"] = evaluate_relations(traj, read_relations(rel_files[name]))
+        for spec in args.align_passes:
+            if spec.split("=", 1)[0] == name:
+                row.setdefault("aligned", []).extend(align_passes(name, recs, mount, traj, ref, spec))
         for spec in args.inject:
             if spec.split("=", 1)[0] == name:
                 row.setdefault("injected", []).append(injected_check(name, recs, mount, traj, out, spec))
@@ -439,6 +513,8 @@ def _print_table(rows: list[dict]) -> None:
             print(f"- {r['dataset']}: {s}")
         for s in r.get("injected", []):
             print(f"- {r['dataset']} (injected): {s}")
+        for s in r.get("aligned", []):
+            print(f"- {s}")
         for w in r["warnings"]:
             print(f"- {r['dataset']} (warning): {w}")
     locs = [r for r in rows if r.get("loc") or r.get("loc_error")]

@@ -15,6 +15,7 @@ Conventions (as ``nav2_map_server`` / ``map_server``):
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 import warnings
@@ -43,6 +44,11 @@ class OccupancyMap:
     ``data``: int16 array ``(height, width)``, row 0 at the bottom (smallest y).
     ``resolution``: metres per cell. ``origin``: ``[x, y, yaw]`` of the grid's
     lower-left corner in the map frame.
+    ``accuracy_m``: how well the map places its walls in the map frame (1 sigma, metres) beyond
+    its rasterization: a map property the scans matched against it cannot see (a rasterized
+    known world: 0; a SLAM map: the disagreement between its passes through a place, about half a
+    cell).  ``None``: not declared (the native front-end then adds no floor).  Read from and
+    written to the map YAML as ``accuracy_m`` (an fgloc extension; map_server and nav2 ignore unknown keys).
     """
 
     data: NDArray[np.int16]
@@ -52,6 +58,7 @@ class OccupancyMap:
     free_thresh: float = 0.196
     negate: bool = False
     mode: str = "trinary"
+    accuracy_m: float | None = None
 
     def __post_init__(self) -> None:
         self.data = np.asarray(self.data, dtype=np.int16)
@@ -60,6 +67,10 @@ class OccupancyMap:
         if not (np.isfinite(self.resolution) and self.resolution > 0):
             raise MapError(f"map resolution must be positive, got {self.resolution}")
         self.origin = np.asarray(self.origin, dtype=float).reshape(3)
+        if self.accuracy_m is not None:
+            self.accuracy_m = float(self.accuracy_m)
+            if not (np.isfinite(self.accuracy_m) and self.accuracy_m >= 0):
+                raise MapError(f"map accuracy_m must be a finite number >= 0, got {self.accuracy_m}")
 
     # ------------------------------------------------------------------ shape
     @property
@@ -310,6 +321,14 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
         raise MapError(f"{yaml_path}: need 0 <= free_thresh <= occupied_thresh <= 1, got {free_t}, {occ_t}")
     if mode not in ("trinary", "scale", "raw"):
         raise MapError(f"{yaml_path}: unknown mode '{mode}' (trinary, scale or raw)")
+    accuracy = meta.get("accuracy_m")
+    if accuracy is not None:
+        try:
+            accuracy = float(accuracy)
+        except (TypeError, ValueError, OverflowError):
+            accuracy = math.nan
+        if not (math.isfinite(accuracy) and accuracy >= 0):
+            raise MapError(f"{yaml_path}: accuracy_m must be a number >= 0 (metres), got {meta['accuracy_m']!r}")
     image_path = Path(str(meta["image"]))
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
@@ -323,6 +342,7 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
         free_thresh=free_t,
         negate=negate,
         mode=mode,
+        accuracy_m=accuracy,
     )
 
 
@@ -363,5 +383,7 @@ def save_map(m: OccupancyMap, yaml_path: str | Path, image_format: str = "pgm") 
         "occupied_thresh": 0.65,
         "free_thresh": 0.196,
     }
+    if m.accuracy_m is not None:
+        meta["accuracy_m"] = float(m.accuracy_m)
     yaml_path.write_text(yaml.safe_dump(meta, sort_keys=False))
     return yaml_path

@@ -224,3 +224,20 @@ def test_fuzz_map_yaml_and_image_headers(tmp_path):
     import yaml
 
     check()
+
+
+def test_accuracy_is_read_written_and_checked(tmp_path):
+    """``accuracy_m`` (fgloc's extension to the map YAML): absent = None, written only when declared,
+    read back as declared; a negative or non-numeric value is a one-line MapError."""
+    m = box_map()
+    y = m.save(tmp_path / "plain.yaml")
+    assert "accuracy_m" not in y.read_text() and load_map(y).accuracy_m is None
+    m.accuracy_m = 0.02
+    assert load_map(m.save(tmp_path / "acc.yaml")).accuracy_m == pytest.approx(0.02)
+    for bad in ("-0.01", "abc", ".nan"):
+        (tmp_path / "bad.yaml").write_text(
+            (tmp_path / "acc.yaml").read_text().replace("accuracy_m: 0.02", f"accuracy_m: {bad}"))
+        with pytest.raises(MapError, match="accuracy_m"):
+            load_map(tmp_path / "bad.yaml")
+    with pytest.raises(MapError, match="accuracy_m"):
+        OccupancyMap(m.data, 0.05, accuracy_m=-1.0)

@@ -28,6 +28,20 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    as well widen the covariance to cover them (weights ``exp(-dcost / (s^2 sum w / runs))``).
    ``S = diag(sqrt(kxy), sqrt(kxy), sqrt(kyaw))``, ``cov_inflation = [kxy, kyaw]`` (1, 1):
    optional user factors.
+   **Map registration floor** (:func:`registration_floor`): a map whose walls sit off in the map
+   frame moves every fix with them, and the residuals cannot tell (they fit the shifted map).  On a
+   SLAM map built from other passes (Radish intel / fr079 / aces segments vs the SLAM trajectory)
+   the fixes were 2-3 cm off where the scan evidence says 6 mm: NEES 38-80.  So the map's accuracy
+   (``map_accuracy_m``: the map YAML's ``accuracy_m``; undeclared: 0) is added, stretched along
+   the scan's weak direction, over the points' moment arm in heading: with half a cell (2.5 cm)
+   declared, NEES 2-6 there (``tools/eval_frontends_real.py``); the simulator's map declares 0
+   (its world rasterized), its fixes keep NEES ~2.4-2.9.  Undeclared maps get no floor because
+   the back-ends' odometry models are not yet as honest: with the floor, the smoother's heading
+   on the Radish segments follows the CARMEN odometry more and gets worse (aces 0.52 -> 0.75 deg).
+5. **Heading check**: after the refinement from the guess, the likelihood-field score over
+   heading (``+-heading_check_deg``) at the refined position; a peak elsewhere is refined too and
+   the lower cost wins.  A guess several degrees off (intel's bursts of scan stamps) otherwise
+   stays in a local minimum near its heading: fixes > 2 deg off on the intel segment 33 -> 9.
 
 Where is the wall?  ``OccupancyMap.distance_field`` is the distance to the nearest
 occupied cell *centre*.  The matcher's field is a signed distance to the occupied
@@ -521,10 +535,43 @@ class NativeConfig:
     search_sigma_m: float = setting(0.1, "Gaussian likelihood field used for scoring", gt=0)
     search_max_points: int = setting(120, "points used for scoring (uniform stride)", min=1)
     search_candidates: int = setting(3, "best poses refined; the lowest robust cost wins", min=1)
+    heading_check_deg: float = setting(
+        10.0, "after the refinement from the guess: a likelihood-field score peak this far in heading "
+        "(+-) from the refined heading is refined too, the lower cost wins (0 = off)", min=0)
     cov_inflation: tuple[float, ...] = setting(
         (1.0, 1.0), "[kxy, kyaw]: extra factors on the covariance model's variances (see the module docstring); "
         "1 = the model as derived", gt=0)
     cov_floor: tuple[float, float, float] = setting((1e-8, 1e-8, 1e-9), "m^2, m^2, rad^2 added", min=0)
+    map_accuracy_m: float | Literal["auto"] = setting(
+        "auto", "how well the map places its walls in the map frame (1 sigma, m), a floor no scan can see "
+        "below: auto = the map's declared accuracy_m (its YAML), else 0 (a SLAM map: about half a cell)")
+
+
+def registration_floor(H: FloatArray, sigma_m: float) -> FloatArray:
+    """The covariance a map registration error of ``sigma_m`` (1 sigma) leaves in a fix with scan
+    normal matrix ``H`` (``J^T W J`` over x, y, yaw).
+
+    A map whose walls sit ``sigma_m`` off in the map frame (a SLAM map's passes disagree; a wall is
+    known only to its cell) moves every fix by about that much, whatever the scan shows: the
+    residuals fit the shifted map.  Position: ``sigma^2`` stretched along the scan's weakly
+    constrained direction, ``sigma^2 sqrtm((H_xy / mean eig)^-1)`` (a corridor's walls pin the
+    cross-track position, the along-track one rests on a few door frames); heading: ``sigma^2 /
+    l^2`` with ``l = sqrt(H_yaw / mean(H_xx, H_yy))`` the points' r.m.s. moment arm.
+    """
+    out = np.zeros((3, 3))
+    if not (sigma_m > 0):
+        return out
+    hxy = H[:2, :2]
+    tr = 0.5 * float(hxy[0, 0] + hxy[1, 1])
+    if not (tr > 0 and math.isfinite(tr)):
+        return out
+    w, V = np.linalg.eigh(hxy / tr)
+    w = np.maximum(w, 1e-6)
+    out[:2, :2] = sigma_m**2 * (V @ np.diag(1.0 / np.sqrt(w)) @ V.T)
+    lever2 = float(H[2, 2]) / tr
+    if lever2 > 0:
+        out[2, 2] = sigma_m**2 / lever2
+    return out
 
 
 class NativeMatcher(FrontendBase):
@@ -563,9 +610,21 @@ class NativeMatcher(FrontendBase):
         self.search_lin_step = float(conf.search_lin_step_m)
         self.search_ang_step = math.radians(conf.search_ang_step_deg)
         self.search_max_points = int(conf.search_max_points)
+        self.heading_window = math.radians(conf.heading_check_deg)
+        self.heading_step = 0.25 * self.search_ang_step
         self.search_candidates = max(int(conf.search_candidates), 1)
         self.far = float(conf.field_max_dist_m)
         self.depth_min_quality = float(conf.depth_min_quality)
+        if isinstance(conf.map_accuracy_m, str):
+            if conf.map_accuracy_m != "auto":
+                raise ConfigError(f"frontends config [native]: map_accuracy_m must be a number >= 0 or auto, "
+                                  f"got {conf.map_accuracy_m!r}")
+            acc = occ_map.accuracy_m
+            self.map_accuracy_m = 0.0 if acc is None else float(acc)
+        else:
+            self.map_accuracy_m = float(conf.map_accuracy_m)
+            if not (self.map_accuracy_m >= 0 and math.isfinite(self.map_accuracy_m)):
+                raise ConfigError(f"frontends config [native]: map_accuracy_m must be >= 0, got {conf.map_accuracy_m}")
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(conf.backface_cos))
 
         k = max(int(conf.field_upsample), 1)
@@ -615,6 +674,29 @@ class NativeMatcher(FrontendBase):
                                int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO)
         return [self._refine_from(px, py, st) for st in starts]
 
+    def _heading_check(self, px: FloatArray, py: FloatArray, pose: FloatArray, cost: float, guess: FloatArray
+                       ) -> tuple[FloatArray, float]:
+        """A refinement that kept a wrong heading (a guess several degrees off: a burst of scan stamps
+        the odometry cannot place) is a local minimum the likelihood field shows: the score profile over
+        heading at the refined position (``+-heading_check_deg``, steps of ``search_ang_step_deg / 4``)
+        peaking elsewhere than at the refined heading.  Then the refinement is run from that peak too,
+        and the lower robust cost wins (within the jump limits)."""
+        if self.heading_window <= 0:
+            return pose, cost
+        stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
+        sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
+        best, score = _search(self.lik, self.Ac, self.bc, sx, sy, pose, 0.0, 1.0, self.heading_window,
+                              self.heading_step, 1)
+        if abs(wrap_scalar(best[0, 2] - pose[YAW])) < 1.5 * self.heading_step:
+            return pose, cost
+        _, here = _search(self.lik, self.Ac, self.bc, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
+        if not score[0] > here[0]:
+            return pose, cost
+        pose2, cost2 = self._refine_from(px, py, best[0])
+        if cost2 < cost and self.accept.within_jump(pose2, guess):
+            return pose2, cost2
+        return pose, cost
+
     def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
         t0 = time.perf_counter()
         px = np.ascontiguousarray(points[:, 0])
@@ -628,6 +710,7 @@ class NativeMatcher(FrontendBase):
         refined: list[tuple[FloatArray, float]] = []  # refined poses within the jump limit, with costs
         if self.search != "always":
             pose, cost = self._refine_from(px, py, guess)
+            pose, cost = self._heading_check(px, py, pose, cost, guess)
             stats = self._stats_at(px, py, pose)
             jump_ok = self.accept.within_jump(pose, guess)
             if jump_ok:
@@ -696,7 +779,7 @@ class NativeMatcher(FrontendBase):
             if wc > 1e-4:
                 spread += wc * np.outer(d, d)
                 wsum += wc
-        cov = self.accept.finish(cov + spread / wsum)
+        cov = self.accept.finish(cov + spread / wsum + registration_floor(H, self.map_accuracy_m))
         info["sigma_m"] = math.sqrt(sigma2)
         info["surface_depth_m"] = self.depth_m
         if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:
@@ -722,4 +805,4 @@ def warmup() -> None:
     matcher.match(scan, np.array([2.0, 2.0, 0.0]))
 
 
-__all__ = ["NativeMatcher", "surface_distance_field", "warmup"]
+__all__ = ["NativeMatcher", "registration_floor", "surface_distance_field", "warmup"]

@@ -1,0 +1,240 @@
+"""Honest fixes on real maps and in a changed world (issue 13 items 4, 5): one table.
+
+    python tools/eval_frontends_real.py [--logs intel fr079 aces mit-csail] [--scans 1000]
+                                        [--cache DIR] [--seeds 0 1] [--skip-sim] [--skip-real]
+                                        [--backends smoother ekf]
+
+Real logs (``../shared/data/radish``): the whole log is mapped once by ``fgloc.mapping`` (GraphSlam;
+cached under ``--cache``), which gives every scan a SLAM pose in one map frame.  A segment of
+``--scans`` scans is chosen where the robot revisits places (the most scans within 2 m of a keyframe
+outside the segment's time window; ties: the later segment);
+the map it is localized on is built from the SLAM keyframes *outside* the segment's time window
+(+-30 s), in the same frame: a different pass through the building, no frame hand-over.  Then
+``Localizer`` (default config, raw CARMEN odometry, from the SLAM pose at the segment's first scan)
+runs over the segment's odometry and scans in time order, and the table gives
+
+* position / heading RMSE of the smoothed trajectory vs SLAM,
+* the front-end fixes' NEES vs SLAM: mean of ``e^T P^-1 e`` over (x, y, yaw) (dimension 3 when the
+  covariance is honest), its median, and the per-axis means ``e_i^2 / P_ii`` (1 each),
+* fixes / no-fix counts,
+
+each with the map's accuracy undeclared and declared as half a cell (``--map-accuracy``: the
+native matcher's registration floor, see ``fgloc.frontends.native``).
+
+SLAM is a reference, not ground truth (its relations are ~3 cm / 0.5 deg off GMapping's): the NEES
+counts its error too.
+
+Changed world (simulator): the paper hall with a quarter of the furniture moved, four pieces gone,
+twelve pallets and two closed doors (the scenario of ``tests/frontends/test_changed_world.py``),
+localized on the old map by each back-end with the native front-end: RMSE, max and p99 error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "radish"
+LOGS = {
+    "intel": DATA / "intel.clf.bz2",
+    "fr079": DATA / "fr079.clf.bz2",
+    "aces": DATA / "aces.clf.bz2",
+    "mit-csail": DATA / "mit-csail.clf.bz2",
+    "fr-clinic": DATA / "fr-clinic_robotlaser.clf.bz2",
+}
+WINDOW_MARGIN_S = 30.0  # the map leaves out the keyframes this close in time to the segment
+COVER_RADIUS_M = 2.0  # a segment scan within this of a map keyframe is "mapped"
+
+
+def slam_of(name: str, cache: Path):
+    """(records, mount, SlamResult) of the whole log, the SLAM result cached on disk."""
+    from fgloc.mapping.build import load_records
+    from fgloc.mapping.slam import MapperConfig, run_slam
+
+    recs, mount = load_records(LOGS[name])
+    f = cache / f"{name}_slam.pkl"
+    if f.exists():
+        slam = pickle.loads(f.read_bytes())
+    else:
+        t0 = time.perf_counter()
+        slam = run_slam(recs, mount, MapperConfig())
+        print(f"{name}: SLAM over {len(recs)} scans in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+        cache.mkdir(parents=True, exist_ok=True)
+        f.write_bytes(pickle.dumps(slam))
+    return recs, mount, slam
+
+
+def segment_and_map(recs, mount, slam, n_scans: int):
+    """The best-covered ``n_scans`` segment of the second half and the map of the keyframes outside it."""
+    from scipy.spatial import cKDTree
+
+    from fgloc.mapping.slam import build_occupancy
+
+    stamps = np.array([r.stamp for r in recs])
+    traj = slam.scan_trajectory
+    poses = traj.interpolate(stamps)
+    kf_t = np.array([recs_kf.stamp for recs_kf in slam.keyframes])
+    best, best_cov = 0, -1.0
+    for s0 in range(0, max(len(recs) - n_scans, 0) + 1, 100):
+        s1 = min(s0 + n_scans, len(recs)) - 1
+        out = (kf_t < stamps[s0] - WINDOW_MARGIN_S) | (kf_t > stamps[s1] + WINDOW_MARGIN_S)
+        if out.sum() < 10:
+            continue
+        tree = cKDTree(slam.keyframe_poses[out, :2])
+        cov = float((tree.query(poses[s0:s1 + 1, :2])[0] < COVER_RADIUS_M).mean())
+        if cov >= best_cov - 1e-9:  # ties: the later segment
+            best, best_cov = s0, cov
+    s0, s1 = best, min(best + n_scans, len(recs)) - 1
+    out = (kf_t < stamps[s0] - WINDOW_MARGIN_S) | (kf_t > stamps[s1] + WINDOW_MARGIN_S)
+    sub = replace(slam, keyframes=[k for k, o in zip(slam.keyframes, out, strict=True) if o],
+                  keyframe_poses=slam.keyframe_poses[out])
+    occ = build_occupancy(sub, recs, mount)
+    return s0, s1, best_cov, occ
+
+
+def nees_of(fixes, ref) -> dict:
+    from fgloc.geometry import wrap_angle
+
+    if not fixes:
+        return {"n": 0}
+    st = np.array([f.stamp for f in fixes])
+    P = np.array([f.cov for f in fixes])
+    e = np.array([f.pose for f in fixes]) - ref.interpolate(st)
+    e[:, 2] = wrap_angle(e[:, 2])
+    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(P), e)
+    ax = e**2 / np.einsum("nii->ni", P)
+    return {"n": len(fixes), "nees_mean": float(nees.mean()), "nees_median": float(np.median(nees)),
+            "nees_x": float(ax[:, 0].mean()), "nees_y": float(ax[:, 1].mean()), "nees_yaw": float(ax[:, 2].mean()),
+            "fix_rmse_m": float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))),
+            "fix_rmse_deg": float(np.degrees(np.sqrt(np.mean(e[:, 2] ** 2)))),
+            "sigma_xy_med_m": float(np.median(np.sqrt(0.5 * (P[:, 0, 0] + P[:, 1, 1])))),
+            "sigma_yaw_med_deg": float(np.degrees(np.median(np.sqrt(P[:, 2, 2]))))}
+
+
+def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None) -> dict:
+    from fgloc.config import load_config
+    from fgloc.geometry import wrap_angle
+    from fgloc.localization import Localizer, Session
+    from fgloc.mapping.source import log_messages
+
+    recs, mount, slam = slam_of(name, cache)
+    key = cache / f"{name}_{n_scans}_map.pkl"
+    if key.exists():
+        s0, s1, cov, occ = pickle.loads(key.read_bytes())
+    else:
+        s0, s1, cov, occ = segment_and_map(recs, mount, slam, n_scans)
+        key.write_bytes(pickle.dumps((s0, s1, cov, occ)))
+    occ.accuracy_m = accuracy  # what the map declares (None: undeclared)
+    t0, t1 = recs[s0].stamp, recs[s1].stamp
+    msgs = [(topic, m) for topic, m in log_messages(LOGS[name])
+            if topic in ("/odom", "/scan") and t0 - 1e-6 <= m.stamp <= t1 + 1e-6]  # type: ignore[attr-defined]
+    msgs.sort(key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
+    ref = slam.scan_trajectory
+    p0 = ref.interpolate(np.array([t0]))[0]
+    loc = Localizer(occ, mount, backend, "native", initial_pose=p0, config=load_config())
+    tw = time.perf_counter()
+    est = Session(loc).run(msgs)
+    wall = time.perf_counter() - tw
+    inside = (est.stamps >= ref.stamps[0]) & (est.stamps <= ref.stamps[-1])
+    gt = ref.interpolate(est.stamps[inside])
+    e_xy = np.hypot(*(est.poses[inside, :2] - gt[:, :2]).T)
+    e_yaw = np.degrees(wrap_angle(est.poses[inside, 2] - gt[:, 2]))
+    res = {"log": name, "backend": backend, "accuracy": "-" if accuracy is None else f"{accuracy:.3f}",
+           "seg": f"{s0}-{s1}", "coverage": cov,
+           "rmse_m": float(np.sqrt(np.mean(e_xy**2))), "max_m": float(e_xy.max()),
+           "rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "fixes": loc.stats["fixes"],
+           "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall}
+    res.update(nees_of(loc.fixes, ref))
+    return res
+
+
+def run_changed_world(seed: int, backend: str, cache: Path) -> dict:
+    from fgloc.config import load_config
+    from fgloc.geometry import wrap_angle
+    from fgloc.localization import Localizer, Session
+
+    sys.path.insert(0, str(REPO / "tests" / "frontends"))
+    from test_changed_world import CHANGED_WORLD  # type: ignore[import-not-found]
+
+    f = cache / f"changed_world_{seed}.pkl"
+    if f.exists():
+        sim = pickle.loads(f.read_bytes())
+    else:
+        from fgloc.sim import run_scenario
+
+        sim = run_scenario(CHANGED_WORLD, seed=seed)
+        cache.mkdir(parents=True, exist_ok=True)
+        f.write_bytes(pickle.dumps(sim))
+    msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
+    loc = Localizer(sim.map, sim.laser_mount, backend, "native", initial_pose=sim.ground_truth.poses[0],
+                    config=load_config())
+    est = Session(loc).run(msgs)
+    gt = sim.ground_truth.interpolate(est.stamps)
+    e = np.hypot(est.poses[:, 0] - gt[:, 0], est.poses[:, 1] - gt[:, 1])
+    yaw = np.degrees(wrap_angle(est.poses[:, 2] - gt[:, 2]))
+    res = {"log": f"changed world s{seed}", "backend": backend, "rmse_m": float(np.sqrt(np.mean(e**2))),
+           "max_m": float(e.max()), "p99_m": float(np.percentile(e, 99)),
+           "rmse_deg": float(np.sqrt(np.mean(yaw**2))), "fixes": loc.stats["fixes"], "no_fix": loc.stats["no_fix"],
+           "reloc": loc.stats["relocalizations"]}
+    res.update(nees_of(loc.fixes, sim.ground_truth))
+    return res
+
+
+def _f(r: dict, k: str, fmt: str) -> str:
+    return format(r[k], fmt) if k in r else "-"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--logs", nargs="+", default=["intel", "fr079", "aces", "mit-csail"], choices=list(LOGS))
+    ap.add_argument("--scans", type=int, default=1000, help="segment length (scans)")
+    ap.add_argument("--cache", type=Path, default=Path("eval_frontends_real"), help="SLAM results, maps, sims")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="changed-world seeds")
+    ap.add_argument("--backends", nargs="+", default=["smoother", "ekf"])
+    ap.add_argument("--real-backends", nargs="+", default=["smoother"])
+    ap.add_argument("--map-accuracy", nargs="+", default=["none", "half-cell"],
+                    help="the real maps' declared accuracy_m per run: none (undeclared), half-cell, or metres")
+    ap.add_argument("--skip-sim", action="store_true")
+    ap.add_argument("--skip-real", action="store_true")
+    args = ap.parse_args()
+    args.cache.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    if not args.skip_real:
+        for name in args.logs:
+            if not LOGS[name].exists():
+                print(f"{name}: {LOGS[name]} absent, skipped", file=sys.stderr)
+                continue
+            for be in args.real_backends:
+                for acc_s in args.map_accuracy:
+                    acc = None if acc_s == "none" else 0.025 if acc_s == "half-cell" else float(acc_s)
+                    rows.append(run_real(name, args.cache, args.scans, be, acc))
+                    print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
+    if not args.skip_sim:
+        for seed in args.seeds:
+            for be in args.backends:
+                rows.append(run_changed_world(seed, be, args.cache))
+                print(f"done changed world seed {seed} {be}", file=sys.stderr)
+    print("| run | back-end | map accuracy_m | segment | pos RMSE m | max m | heading RMSE deg | fix RMSE m / deg | "
+          "fix sigma m / deg (median) | NEES mean (median) | NEES x / y / yaw | fixes / no fix / reloc |")
+    print("|---|---|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|")
+    for r in rows:
+        seg = f"{r['seg']} ({100 * r['coverage']:.0f} % mapped)" if "seg" in r else "-"
+        print(f"| {r['log']} | {r['backend']} | {r.get('accuracy', '-')} | {seg} "
+              f"| {r['rmse_m']:.4f} | {r['max_m']:.3f} | {r['rmse_deg']:.3f} "
+              f"| {_f(r, 'fix_rmse_m', '.4f')} / {_f(r, 'fix_rmse_deg', '.3f')} "
+              f"| {_f(r, 'sigma_xy_med_m', '.4f')} / {_f(r, 'sigma_yaw_med_deg', '.3f')} "
+              f"| {_f(r, 'nees_mean', '.2f')} ({_f(r, 'nees_median', '.2f')}) "
+              f"| {_f(r, 'nees_x', '.2f')} / {_f(r, 'nees_y', '.2f')} / {_f(r, 'nees_yaw', '.2f')} "
+              f"| {r['fixes']} / {r['no_fix']} / {r['reloc']} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -225,6 +225,7 @@ def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
             b = mapped.bounds
             mapped = mapped.rotated(np.deg2rad(rot), ((b[0] + b[2]) / 2, (b[1] + b[3]) / 2))
         occ = mapped.rasterize(float(sc.get("map_resolution_m", 0.05)))
+        occ.accuracy_m = 0.0  # the map is the world rasterized: no registration error beyond its cells
         polys = [p.copy() for p in mapped.polygons]
         for ch in sc.get("map_changes") or []:
             i = int(ch["polygon"])
@@ -241,7 +242,7 @@ def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
     data = np.full(occ.data.shape, -1, dtype=np.int16)
     data[occ.free] = FREE
     data[border | occ.occupied] = OCCUPIED
-    return gw, OccupancyMap(data, occ.resolution, occ.origin)
+    return gw, OccupancyMap(data, occ.resolution, occ.origin, accuracy_m=0.0)  # the world is this map
 
 
 # -------------------------------------------------------------------- motion

@@ -48,6 +48,12 @@ class BaseImu:
     yaw_var: float
     yaw_rate_radps: float | None
     yaw_rate_var: float
+    #: the base's roll and pitch (rad, ZYX Euler angles of base_link in the IMU's world frame),
+    #: None without a usable orientation
+    roll_pitch_rad: tuple[float, float] | None = None
+    #: the heading's rate (rad/s) when tilted: ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``
+    #: (the ZYX Euler yaw rate; ``w_z`` on level ground), None without orientation and rates
+    heading_rate_radps: float | None = None
 
 
 def mount_rotation(tf: StaticTransform | None) -> FloatArray:
@@ -84,6 +90,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
     problems: list[str] = []
     yaw: float | None = None
     yaw_var = float("nan")
+    tilt: tuple[float, float] | None = None
     q = msg.orientation_xyzw
     if q is not None:
         qa = np.asarray(q, dtype=float).reshape(-1)
@@ -99,6 +106,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
             R_wi = Rotation.from_quat(qa / n).as_matrix()
             R_wb = R_wi @ R_bi.T
             yaw = float(math.atan2(R_wb[1, 0], R_wb[0, 0]))
+            tilt = (float(math.atan2(R_wb[2, 1], R_wb[2, 2])), float(math.asin(max(-1.0, min(1.0, -R_wb[2, 0])))))
             if msg.orientation_cov is not None:
                 c = np.asarray(msg.orientation_cov, dtype=float).reshape(3, 3)
                 yaw_var = float((R_bi @ c @ R_bi.T)[2, 2])
@@ -106,6 +114,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
                     yaw_var = float("nan")
     rate: float | None = None
     rate_var = float("nan")
+    heading_rate: float | None = None
     w = msg.angular_velocity_radps
     if w is not None:
         wa = np.asarray(w, dtype=float).reshape(-1)
@@ -115,13 +124,16 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
         elif why is not None:
             problems.append(f"imu: angular velocity {why}")
         else:
-            rate = float((R_bi @ wa)[2])
+            wb = R_bi @ wa
+            rate = float(wb[2])
+            if tilt is not None and math.cos(tilt[1]) > 0.1:
+                heading_rate = float((math.sin(tilt[0]) * wb[1] + math.cos(tilt[0]) * wb[2]) / math.cos(tilt[1]))
             if msg.angular_velocity_cov is not None:
                 c = np.asarray(msg.angular_velocity_cov, dtype=float).reshape(3, 3)
                 rate_var = float((R_bi @ c @ R_bi.T)[2, 2])
                 if not rate_var > 0:
                     rate_var = float("nan")
-    return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var), problems
+    return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate), problems
 
 
 def imu_message(stamp: float, R_world_base: FloatArray, w_base: FloatArray, R_bi: FloatArray,

@@ -12,7 +12,11 @@ before per-source inputs.  Each source::
 
 ``type``: ``odometry`` | ``imu`` | ``pose`` (``geometry_msgs/PoseWithCovarianceStamped``).
 ``use``: a subset of ``x, y, yaw, vx, vy, vyaw`` (robot_localization's 15-element vector
-reduced to the planar six).  ``differential``: use the increments of the source's poses
+reduced to the planar six); an IMU may add ``roll, pitch``: its attitude then levels the
+odometry (the body velocity projected onto the ground plane, as robot_localization does in
+3-D: a robot climbing a 10 deg slope drives 1.5 % less in the plane than its wheels say) and
+its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``.
+``differential``: use the increments of the source's poses
 (odometry: as a twist; an IMU's orientation: as a yaw rate).  ``covariance``: ``message``
 (as the message says), ``fixed`` (``sigmas``, one per used component), ``scaled`` (the
 message's times ``scale^2``) or ``floor`` (the message's, at least ``sigmas^2``).  ``gate``:
@@ -55,6 +59,11 @@ from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
 log = logging.getLogger(__name__)
 
 COMPONENTS = ("x", "y", "yaw", "vx", "vy", "vyaw")
+TILT = ("roll", "pitch")   # an IMU's attitude: levels the odometry (not estimated)
+#: an attitude older than this (s) does not level an odometry message
+MAX_TILT_AGE_S = 0.5
+#: a base tilted more than this (rad) is no ground robot on a slope but a wrong mount: not levelled
+MAX_TILT_RAD = math.radians(45.0)
 TYPES = ("odometry", "imu", "pose")
 POLICIES = ("message", "fixed", "scaled", "floor")
 DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
@@ -120,16 +129,20 @@ def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: 
         if typ not in TYPES:
             raise ConfigError(f"{where}.type: must be one of {', '.join(TYPES)}, got {d.get('type')!r}")
         use = tuple(str(u).lower() for u in (d.get("use") or DEFAULT_USE[typ]))
-        bad = [u for u in use if u not in COMPONENTS]
+        allowed = COMPONENTS + TILT if typ == "imu" else COMPONENTS
+        bad = [u for u in use if u not in allowed]
         if bad:
-            raise ConfigError(f"{where}.use: {bad[0]!r} is not one of {', '.join(COMPONENTS)}")
+            raise ConfigError(f"{where}.use: {bad[0]!r} is not one of {', '.join(allowed)}")
+        if typ == "imu" and (("roll" in use) != ("pitch" in use)):
+            raise ConfigError(f"{where}.use: roll and pitch level the odometry together: use both or neither")
         pol = str(d.get("covariance", "message")).lower()
         if pol not in POLICIES:
             raise ConfigError(f"{where}.covariance: must be one of {', '.join(POLICIES)}, got {pol!r}")
         sig = tuple(float(s) for s in (d.get("sigmas") or ()))
-        if pol in ("fixed", "floor") and len(sig) != len(use):
-            raise ConfigError(f"{where}.sigmas: {pol} needs one sigma per used component ({len(use)}: "
-                              f"{', '.join(use)}), got {len(sig)}")
+        fused = [u for u in use if u in COMPONENTS]
+        if pol in ("fixed", "floor") and len(sig) != len(fused):
+            raise ConfigError(f"{where}.sigmas: {pol} needs one sigma per used component ({len(fused)}: "
+                              f"{', '.join(fused)}), got {len(sig)}")
         if any(not (math.isfinite(s) and s > 0) for s in sig):
             raise ConfigError(f"{where}.sigmas: every sigma must be a positive number")
         gate = d.get("gate")
@@ -173,6 +186,8 @@ class SourceRouter:
         self.mounts: dict[str, StaticTransform] = dict(self.configured)
         self._warned: set[str] = set()
         self.state: dict[str, _State] = {}
+        self._tilt: tuple[float, float, float] | None = None   # t, roll, pitch of the base (levelling IMU)
+        self._tilt_source: str | None = None
         first: dict[str, str] = {}
         for s in specs:
             kind = {"odometry": "odometry", "imu": "imu", "pose": "pose"}[s.type]
@@ -240,7 +255,7 @@ class SourceRouter:
         """The variance of ``comp`` under the source's policy (NaN: the back-end default)."""
         if not spec.uses(comp):
             return UNUSED_VAR
-        i = spec.use.index(comp)
+        i = [u for u in spec.use if u in COMPONENTS].index(comp)
         pol = spec.covariance
         if pol == "fixed":
             return spec.sigmas[i] ** 2
@@ -304,10 +319,26 @@ class SourceRouter:
             out[1, 1] = float(cov[1, 1])
         if spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential:
             out = cov  # the default layout: the message's whole covariance, exactly as before
+        tw, out = self._levelled(st, float(msg.stamp), tw, out)
         h.accepted += 1
         m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
                      msg.frame_id, msg.child_frame_id)
         self.loc.on_odometry(m)
+
+    def _levelled(self, st: _State, t: float, tw: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body twist projected onto the ground plane through the levelling IMU's latest
+        roll / pitch: ``[vx cos p + vy sin r sin p, vy cos r, w]`` (unchanged without one)."""
+        if self._tilt is None or abs(t - self._tilt[0]) > MAX_TILT_AGE_S:
+            return tw, cov
+        _, r, p = self._tilt
+        if abs(r) > MAX_TILT_RAD or abs(p) > MAX_TILT_RAD:
+            st.extra["tilt_implausible"] = st.extra.get("tilt_implausible", 0) + 1
+            return tw, cov
+        cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)
+        J = np.array([[cp, sr * sp, 0.0], [0.0, cr, 0.0], [0.0, 0.0, 1.0]])
+        st.extra["levelled"] = st.extra.get("levelled", 0) + 1
+        st.extra["tilt_max_rad"] = max(st.extra.get("tilt_max_rad", 0.0), abs(r), abs(p))
+        return J @ np.asarray(tw, dtype=float), J @ np.asarray(cov, dtype=float) @ J.T
 
     # ------------------------------------------------------------------ IMU
     def _mount(self, frame: str, warn: bool = True) -> StaticTransform | None:
@@ -330,6 +361,12 @@ class SourceRouter:
             for p in problems:
                 self._skip(st, p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
+            if spec.uses("roll") and base.roll_pitch_rad is not None:
+                if self._tilt_source in (None, spec.name):  # the first levelling IMU levels
+                    self._tilt_source = spec.name
+                    self._tilt = (float(msg.stamp), *base.roll_pitch_rad)
+                if base.heading_rate_radps is not None:
+                    rate = base.heading_rate_radps
         else:
             yaw, rate = msg.yaw_rad, msg.yaw_rate_radps
             yaw_var, rate_var = float(msg.yaw_var), float(msg.yaw_rate_var)
@@ -452,6 +489,11 @@ class SourceRouter:
             d["use"] = list(s.use)
             if st.extra.get("no_transform"):
                 d["mount"] = "no transform: identity"
+            if st.extra.get("levelled"):
+                d["levelled"] = int(st.extra["levelled"])
+                d["tilt_max_deg"] = round(math.degrees(st.extra.get("tilt_max_rad", 0.0)), 2)
+            if st.extra.get("tilt_implausible"):
+                d["tilt_implausible"] = int(st.extra["tilt_implausible"])
             names = {"odometry": ["odom"], "imu": [f"{s.name}.yaw", f"{s.name}.gyro"] if st.extra.get("second")
                      else ["imu.yaw", "imu.gyro"], "pose": [s.name]}[s.type]
             bhs = getattr(be, "sources", {})
@@ -551,6 +593,11 @@ def summary_lines(stats: dict[str, Any]) -> list[str]:
                 est.append(f"{what} error {100 * c:.0f} % of the turn")
         if d.get("mount"):
             est.append(f"mount: {d['mount']}")
+        if d.get("levelled"):
+            est.append(f"levelled by the IMU's roll / pitch ({d['levelled']} messages, tilt up to "
+                       f"{d.get('tilt_max_deg', 0):.1f} deg)")
+        if d.get("tilt_implausible"):
+            est.append(f"{d['tilt_implausible']} not levelled (tilt > 45 deg: check the IMU mount)")
         out.append(f"{head}: {', '.join(parts)}" + (f"; {'; '.join(est)}" if est else ""))
     return out
 

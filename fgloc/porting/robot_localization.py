@@ -7,7 +7,8 @@ robot_localization                          fgloc
 ==========================================  ===============================================
 ``odomN`` + ``odomN_config``                ``sources.inputs.odomN`` (odometry): vx, vy, vyaw;
                                             x, y, yaw as increments (``differential``)
-``imuN`` + ``imuN_config``                  ``sources.inputs.imuN`` (imu): yaw, vyaw
+``imuN`` + ``imuN_config``                  ``sources.inputs.imuN`` (imu): yaw, vyaw; roll, pitch
+                                            (with ``two_d_mode: false``: the odometry levelled)
 ``poseN`` + ``poseN_config``                ``sources.inputs.poseN`` (pose): x, y, yaw
 ``*_differential``                          ``differential`` (on pose variables, as r_l)
 ``poseN_rejection_threshold`` (Mahalanobis  ``gate`` (its square: fgloc gates on the squared
@@ -19,7 +20,7 @@ per second, as r_l scales it by dt)         (vx, vy), ``q_w`` (vyaw)
 ``two_d_mode: true``                        (fgloc is planar)
 ==========================================  ===============================================
 
-Everything else is one note line: 3-D components (z, roll, pitch and their rates,
+Everything else is one note line: 3-D components (z, roll and pitch in two_d_mode, rates,
 accelerations), ``twistN`` (TwistWithCovarianceStamped is not read), ``_relative`` (fgloc
 estimates each heading source's offset anyway), odometry and IMU rejection thresholds (fgloc
 weights those by the noise they show), queue sizes, ``nodelay``, ``sensor_timeout``,
@@ -105,7 +106,9 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
             notes.append(f"{cfg_key}: {len(flags)} values, expected 15 (or 12 before indigo): source {key} skipped")
             continue
         on = [NAMES15[j] for j in range(15) if flags[j]]
-        dropped = [NAMES15[j] for j in range(15) if flags[j] and j not in PLANAR]
+        levels = kind == "imu" and flags[3] and flags[4] and not as_bool(p.get("two_d_mode", False)) \
+            and (flags[5] or flags[11])
+        dropped = [NAMES15[j] for j in range(15) if flags[j] and j not in PLANAR and not (levels and j in (3, 4))]
         planar = [PLANAR[j] for j in sorted(PLANAR) if flags[j]]
         diff = as_bool(p.get(f"{key}_differential", False))
         used.add(f"{key}_differential")
@@ -145,6 +148,10 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
             entry["use"] = use
         elif kind == "imu":
             use = [c for c in planar if c in ("yaw", "vyaw")]
+            if flags[3] and flags[4] and not as_bool(p.get("two_d_mode", False)) and use:
+                # r_l in 3-D turns the body velocity through the whole attitude: fgloc levels the
+                # odometry with this IMU's roll and pitch
+                use += ["roll", "pitch"]
             lin = [c for c in planar if c not in ("yaw", "vyaw")]
             if lin:
                 notes.append(f"{cfg_key}: {', '.join(lin)} from an IMU not carried over")

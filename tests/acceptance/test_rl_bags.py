@@ -81,9 +81,11 @@ def test_rl_parameters_convert(converted: dict[str, tuple[Path, list[str]]]) -> 
     """The r_l test parameters convert; the planar part of each _config vector is carried over."""
     import yaml
 
-    want = {"test1.bag": {"odom0": ("/husky_velocity_controller/odom", ["vx", "vy"]), "imu0": ("/imu/data", ["yaw"])},
+    # two_d_mode false, imu0 fusing roll and pitch: the IMU's attitude levels the odometry
+    want = {"test1.bag": {"odom0": ("/husky_velocity_controller/odom", ["vx", "vy"]),
+                          "imu0": ("/imu/data", ["yaw", "roll", "pitch"])},
             "test2.bag": {"odom0": ("/jackal_velocity_controller/odom", ["vx", "vy", "vyaw"]),
-                          "imu0": ("/imu/data", ["yaw", "vyaw"])}}
+                          "imu0": ("/imu/data", ["yaw", "vyaw", "roll", "pitch"])}}
     for bag, sources in want.items():
         cfg = yaml.safe_load(converted[bag][0].read_text())
         got = {n: (s["topic"], s["use"]) for n, s in cfg["sources"]["inputs"].items()}

@@ -61,13 +61,13 @@ def test_robot_localization_ros2_example_layout():
     assert src["odom1"] == {"type": "odometry", "topic": "/example/odom2", "use": ["vyaw"]}
     assert src["pose0"] == {"type": "pose", "topic": "/example/pose", "use": ["x", "y"], "frame_id": "odom",
                             "differential": True, "gate": 4.0}
-    assert src["imu0"]["use"] == ["yaw", "vyaw"]
+    assert src["imu0"]["use"] == ["yaw", "vyaw", "roll", "pitch"]  # two_d_mode false: roll, pitch level
     assert "twist0" not in src
     assert (c.ekf.q_xy, c.ekf.q_theta, c.ekf.q_v, c.ekf.q_w) == (0.05, 0.06, 0.025, 0.02)
     j = "\n".join(notes)
     for expected in ("odom0_config: absolute x, y of an odometry fused as its increments",
 "twist0 (/example/twist)",
-                     "imu0_config: roll, pitch, vroll, vpitch, ax, ay, az not carried over",
+                     "imu0_config: vroll, vpitch, ax, ay, az not carried over",
                      "two_d_mode: false", "use_control: fgloc has no control input",
                      "odom0_queue_size: a ROS subscription setting", "sensor_timeout:",
                      "odom0_twist_rejection_threshold: 1 not carried over"):

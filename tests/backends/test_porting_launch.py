@@ -85,7 +85,7 @@ def test_pre_indigo_12_value_vectors(tmp_path: Path) -> None:
     </node></launch>""")
     cfg, notes, _ = convert_file("rl", p)
     assert {n: s["use"] for n, s in cfg["sources"]["inputs"].items()} == {"odom0": ["vx", "vy", "vyaw"],
-                                                                           "imu0": ["yaw", "vyaw"]}
+                                                                           "imu0": ["yaw", "vyaw", "roll", "pitch"]}
     assert not any("expected 15" in n or "not a 15 x 15" in n for n in notes)
     assert cfg["ekf"] == {"q_xy": 0.02, "q_theta": 0.06, "q_v": 0.08, "q_w": 0.12}
 

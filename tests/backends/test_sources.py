@@ -122,8 +122,8 @@ def test_bad_input_is_counted_and_skipped_never_raised():
 
 
 def test_source_config_errors_are_one_line_naming_the_key():
-    with pytest.raises(ConfigError, match=r"sources.inputs.imu0.use: 'roll' is not one of"):
-        parse_sources({"imu0": {"type": "imu", "use": ["yaw", "roll"]}})
+    with pytest.raises(ConfigError, match=r"sources.inputs.imu0.use: 'vz' is not one of"):
+        parse_sources({"imu0": {"type": "imu", "use": ["yaw", "vz"]}})
     with pytest.raises(ConfigError, match=r"sources.inputs.odom0.type"):
         parse_sources({"odom0": {"type": "wheel"}})
     with pytest.raises(ConfigError, match=r"sigmas: fixed needs one sigma per used component"):
@@ -206,3 +206,38 @@ def test_differential_odometry_takes_the_velocity_of_an_axis_it_fuses_as_a_veloc
     (m,) = loc.odometry  # the first message only starts the increments
     assert m.twist[0] == pytest.approx(0.5) and m.twist[2] == pytest.approx(0.2)  # x: poses (no turn), w: twist
     assert m.twist_cov[2, 2] == pytest.approx(0.04) and m.twist_cov[0, 0] == pytest.approx(2 * 1e-4 / 0.25)
+
+
+def test_imu_roll_pitch_level_the_odometry_and_give_the_heading_rate():
+    """An IMU fusing roll and pitch (r_l's imuN_config in 3-D) levels the odometry: the body
+    velocity projected onto the ground plane (hand-computed: roll 5 deg, pitch 10 deg, twist
+    vx 1, vy 0.2 -> [cos p + 0.2 sin r sin p, 0.2 cos r]); its yaw rate is the heading's rate
+    (sin r w_y + cos r w_z) / cos p; without roll / pitch in use nothing changes."""
+    r, p = math.radians(5.0), math.radians(10.0)
+    q = Rotation.from_euler("ZYX", [0.3, p, r]).as_quat()
+    w = np.array([0.0, 0.05, 0.2])
+    for use, levelled in ((["yaw", "vyaw", "roll", "pitch"], True), (["yaw", "vyaw"], False)):
+        loc, router = _router({"wheels": {"type": "odometry", "topic": "/odom", "use": ["vx", "vy", "vyaw"]},
+                               "imu0": {"type": "imu", "topic": "/imu", "use": use}})
+        specs = {s.name: s for s in router.specs}
+        router.on_message(specs["imu0"], Imu(1.0, q, w, np.eye(3) * 1e-4, np.eye(3) * 1e-6, frame_id="base_link"))
+        router.on_message(specs["wheels"], Odometry(1.02, np.array([1.0, 0.2, 0.1]), np.diag([1e-4, 1e-4, 4e-4])))
+        router.on_message(specs["wheels"], Odometry(1.7, np.array([1.0, 0.2, 0.1]), np.diag([1e-4, 1e-4, 4e-4])))
+        tw = loc.odometry[0].twist
+        rate = loc.compass[0].yaw_rate_radps
+        if levelled:
+            assert tw[0] == pytest.approx(math.cos(p) + 0.2 * math.sin(r) * math.sin(p), abs=1e-12)
+            assert tw[1] == pytest.approx(0.2 * math.cos(r), abs=1e-12)
+            assert rate == pytest.approx((math.sin(r) * 0.05 + math.cos(r) * 0.2) / math.cos(p), abs=1e-12)
+            var_x = 1e-4 * (math.cos(p) ** 2 + (math.sin(r) * math.sin(p)) ** 2)
+            assert loc.odometry[0].twist_cov[0, 0] == pytest.approx(var_x)
+            h = router.health()["wheels"]
+            assert h["levelled"] == 1 and h["tilt_max_deg"] == pytest.approx(10.0, abs=1e-6)
+            np.testing.assert_allclose(loc.odometry[1].twist, [1.0, 0.2, 0.1])  # 0.68 s later: too old to level
+        else:
+            np.testing.assert_allclose(tw, [1.0, 0.2, 0.1])
+            assert rate == pytest.approx(0.2)
+    with pytest.raises(ConfigError, match="roll and pitch"):
+        parse_sources({"imu0": {"type": "imu", "use": ["yaw", "roll"]}})
+    with pytest.raises(ConfigError, match="is not one of"):
+        parse_sources({"o": {"type": "odometry", "use": ["vx", "pitch"]}})

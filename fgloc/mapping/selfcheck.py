@@ -229,8 +229,17 @@ def _rematch(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckC
     if ov0 >= cfg.min_overlap and fit0 >= cfg.good_fit * ov0:
         return OK, np.zeros(3), fit0, fit0, ov0
     coarse = pts if len(pts) <= 120 else pts[:: int(np.ceil(len(pts) / 120))]
-    starts = [pose0]
-    if cfg.wide_m > cfg.window_m:
+
+    def search(start: FloatArray, win_m: float, win_deg: float) -> tuple[FloatArray, float, float]:
+        sr = correlative_search(grid, coarse, start, win_m, np.radians(win_deg), 0.05, np.radians(1.0), 0.08)
+        rr = refine(grid, pts, sr.pose, 0.03)
+        cand = rr.pose if np.hypot(*(rr.pose[:2] - sr.pose[:2])) < 0.2 else sr.pose
+        d1 = point_distances(grid, pts, cand)
+        return cand, float(np.sum(d1 < cfg.inlier_m)) / n, float(np.sum(d1 < cfg.dmax_m * 0.999)) / n
+
+    best, fit1, ov1 = search(pose0, cfg.window_m, cfg.window_deg)
+    if cfg.wide_m > cfg.window_m and not (ov1 >= cfg.min_overlap and fit1 >= cfg.good_fit * ov1):
+        # nothing near the own pose fits well: is there a clear fit farther away?
         if coarse_cache is not None and coarse_cache and coarse_cache[0] is grid:
             cgrid = coarse_cache[1]
         else:
@@ -241,17 +250,9 @@ def _rematch(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckC
         sw = correlative_search(cgrid, few, pose0, cfg.wide_m, np.radians(cfg.wide_deg), cgrid.resolution,
                                 np.radians(2.5), 0.15, far_m=1.0, far_rad=np.radians(6.0))
         if sw.score > 0 and sw.ambiguity <= cfg.wide_max_ambiguity and np.hypot(*(sw.pose[:2] - pose0[:2])) > 0.5:
-            starts.append(sw.pose)
-    best, fit1, ov1 = pose0, -1.0, 0.0
-    for i, start in enumerate(starts):  # the wide peak is known to 0.2 m / 2 deg: a small window there
-        win_m, win_deg = (cfg.window_m, cfg.window_deg) if i == 0 else (0.3, 3.0)
-        sr = correlative_search(grid, coarse, start, win_m, np.radians(win_deg), 0.05, np.radians(1.0), 0.08)
-        rr = refine(grid, pts, sr.pose, 0.03)
-        cand = rr.pose if np.hypot(*(rr.pose[:2] - sr.pose[:2])) < 0.2 else sr.pose
-        d1 = point_distances(grid, pts, cand)
-        f = float(np.sum(d1 < cfg.inlier_m)) / n
-        if f > fit1:
-            best, fit1, ov1 = cand, f, float(np.sum(d1 < cfg.dmax_m * 0.999)) / n
+            cand, f, o = search(sw.pose, 0.3, 3.0)  # the wide peak is known to 0.2 m / 2.5 deg
+            if f > fit1:
+                best, fit1, ov1 = cand, f, o
     if fit1 < fit0:  # the search found nothing better: the own pose stands
         best, fit1, ov1 = pose0, fit0, ov0
     off = between(pose0, best)

@@ -171,6 +171,8 @@ def main() -> None:
     ap.add_argument("--synthetic", action="store_true", help="use the synthetic room instead of the simulator")
     ap.add_argument("--skip", default="",
                     help="comma-separated rows to skip (native,kiss,amcl,raycast,kiss-icp,small-gicp,open3d)")
+    ap.add_argument("--native", action="append", default=[], metavar="KEY=VALUE",
+                    help="a native matcher setting for this run (YAML value), e.g. heading_check_deg=0")
     args = ap.parse_args()
     skip = set(filter(None, args.skip.split(",")))
 
@@ -179,6 +181,11 @@ def main() -> None:
     # the synthetic room's scans are ray cast on the grid itself: beams end on the cells' faces
     depth = {"surface_depth_cells": 0.0} if source.startswith("synthetic") else {}
     fe_cfg = {"native": dict(depth), "kiss": dict(depth)}
+    import yaml
+
+    for kv in args.native:
+        key, _, val = kv.partition("=")
+        fe_cfg["native"][key.strip()] = yaml.safe_load(val)
     guess_txt = "0.3 m / 10 deg off" if args.offset else f"N(0, {args.noise_m} m), N(0, {args.noise_deg} deg) off"
     rows: list[Row] = []
     pre = ScanPreprocessor(mount)

@@ -277,8 +277,31 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
 
 
 @njit(cache=True, fastmath=True)
-def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, backcos, off):  # pragma: no cover
-    """Final H (J^T W J), sum w r^2, sum w, inliers, used points, sum of inlier residuals, runs.
+def _beam_clear(cls, Ac, bc, ox, oy, qx, qy):  # pragma: no cover - compiled
+    """1 when the beam from ``(ox, oy)`` to ``(qx, qy)`` (map frame) crosses no occupied cell of
+    ``cls`` (0 free, 1 occupied, 2 unknown; off the grid: unknown), marched in half-cell steps; else 0."""
+    h, w = cls.shape
+    u0 = Ac[0, 0] * ox + Ac[0, 1] * oy + bc[0] + 0.5
+    v0 = Ac[1, 0] * ox + Ac[1, 1] * oy + bc[1] + 0.5
+    u1 = Ac[0, 0] * qx + Ac[0, 1] * qy + bc[0] + 0.5
+    v1 = Ac[1, 0] * qx + Ac[1, 1] * qy + bc[1] + 0.5
+    n = int(2.0 * max(abs(u1 - u0), abs(v1 - v0))) + 1
+    for i in range(n):
+        f = i / n
+        u = u0 + f * (u1 - u0)
+        v = v0 + f * (v1 - v0)
+        if u >= 0.0 and v >= 0.0 and u < w and v < h and cls[int(v), int(u)] == 1:
+            return 0
+    return 1
+
+
+@njit(cache=True, fastmath=True)
+def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, backcos, off, unk, Ac, bc):  # noqa: E501  # pragma: no cover
+    """Final H (J^T W J), sum w r^2, sum w, inliers, used points, sum of inlier residuals, runs,
+    and the non-inlier points the map cannot say anything about: their beam ends in the map's unknown
+    space without crossing an occupied cell (``unk``: map cells, 0 free, 1 occupied, 2 unknown;
+    ``Ac``, ``bc``: map frame -> cell coordinates).  A beam that crossed a mapped wall to get there
+    contradicts the map (a wrong pose) and is not one of them.
 
     Runs: the used points taken in scan order, cut where two neighbours are more than
     ``gridmath.RUN_GAP_M`` apart or a run would exceed ``RUN_LENGTH_M``: stretches of one wall whose
@@ -296,8 +319,17 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     run_len = 0.0
     lastx = 1e300
     lasty = 1e300
+    n_unk = 0
+    hu, wu = unk.shape
     for k in range(px.shape[0]):
         r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
+        if not (front and abs(r) < inlier):
+            qx = pose[0] + cs * px[k] - sn * py[k]
+            qy = pose[1] + sn * px[k] + cs * py[k]
+            u = Ac[0, 0] * qx + Ac[0, 1] * qy + bc[0] + 0.5
+            v = Ac[1, 0] * qx + Ac[1, 1] * qy + bc[1] + 0.5
+            if not (u >= 0.0 and v >= 0.0 and u < wu and v < hu) or unk[int(v), int(u)] == 2:
+                n_unk += _beam_clear(unk, Ac, bc, pose[0] + cs * lx - sn * ly, pose[1] + sn * lx + cs * ly, qx, qy)
         if not front:
             continue
         rho, w = _rho_w(r, c, loss, outlier)
@@ -318,7 +350,7 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
         wr2 += w * r * r
         sw += w
     mirror_upper(H)
-    return H, wr2, sw, n_in, n_used, sr, n_runs
+    return H, wr2, sw, n_in, n_used, sr, n_runs, n_unk
 
 
 @njit(cache=True, fastmath=True, inline="always")
@@ -647,6 +679,10 @@ class NativeMatcher(FrontendBase):
         dfc = np.abs(surface_distance_field(occ_map, 1, 3.0 * conf.search_sigma_m + occ_map.resolution, depth))
         self.lik = np.ascontiguousarray(np.exp(-0.5 * (dfc / float(conf.search_sigma_m)) ** 2))
         self.Ac = np.array([[c, s], [-s, c]]) / occ_map.resolution
+        cls = np.zeros(occ_map.data.shape, dtype=np.uint8)  # 0 free, 1 occupied, 2 unknown
+        cls[occ_map.occupied] = 1
+        cls[occ_map.unknown] = 2
+        self.cells = np.ascontiguousarray(cls)
         self.bc = -self.Ac @ occ_map.origin[:2] - 0.5
 
 
@@ -662,7 +698,7 @@ class NativeMatcher(FrontendBase):
     def _stats_at(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[Any, ...]:
         c, out = self.scales[-1], self.outliers[-1]
         return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
-                      self.accept.inlier_dist, *self._lb, self.depth_m)
+                      self.accept.inlier_dist, *self._lb, self.depth_m, self.cells, self.Ac, self.bc)
 
     def _aliases(self, px: FloatArray, py: FloatArray, pose: FloatArray, cov: FloatArray
                  ) -> list[tuple[FloatArray, float]]:
@@ -743,11 +779,14 @@ class NativeMatcher(FrontendBase):
             best_stats = self._stats_at(px, py, best)
         pose = best.copy()
         pose[YAW] = wrap_scalar(pose[YAW])
-        H, wr2, sw, n_in, n_used, sum_r, n_runs = best_stats
+        H, wr2, sw, n_in, n_used, sum_r, n_runs, n_unk = best_stats
         n_in = int(n_in)
         quality = n_in / n
-        info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n}
-        rejected = self.accept.too_few_inliers(n_in, n, **info)
+        info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n, "n_unknown": int(n_unk)}
+        # the inlier fraction among the points the map can speak for: one ending in unknown space
+        # (a room the map's passes never saw into) neither agrees nor disagrees; at least half the
+        # points count (a pose looking off the map is not rescued)
+        rejected = self.accept.too_few_inliers(n_in, max(n - int(n_unk), (n + 1) // 2), **info)
         if rejected is None:
             rejected = self.accept.jumped(pose, guess, n_in, quality, **info)
         if rejected is not None:

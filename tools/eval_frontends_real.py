@@ -25,8 +25,9 @@ SLAM is a reference, not ground truth (its relations are ~3 cm / 0.5 deg off GMa
 counts its error too.
 
 Changed world (simulator): the paper hall with a quarter of the furniture moved, four pieces gone,
-twelve pallets and two closed doors (the scenario of ``tests/frontends/test_changed_world.py``),
-localized on the old map by each back-end with the native front-end: RMSE, max and p99 error.
+twelve pallets and two closed doors (the scenario of ``tests/frontends/test_changed_world.py``;
+``--hard``: plus 28 pallets 0.9 m beside the path), localized on the old map by each back-end with
+the native front-end: RMSE and max error against the truth, the fixes' NEES.
 """
 
 from __future__ import annotations
@@ -155,21 +156,40 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     return res
 
 
-def run_changed_world(seed: int, backend: str, cache: Path) -> dict:
+def changed_world(hard: bool) -> dict:
+    """The changed-world scenario of tests/frontends/test_changed_world.py; ``hard``: plus a 0.6 m
+    pallet every 2.5 m along the whole route, 0.9 m beside the path, alternating sides."""
+    import copy
+
+    sys.path.insert(0, str(REPO / "tests" / "frontends"))
+    from test_changed_world import CHANGED_WORLD, _static  # type: ignore[import-not-found]
+
+    sc = copy.deepcopy(CHANGED_WORLD)
+    if hard:
+        sc["name"] = "changed_world_hard"
+        route = [[2.5, 3.0], [27.5, 3.0], [27.5, 17.0], [2.5, 17.0], [2.5, 3.0]]  # the paper route
+        for (x0, y0), (x1, y1) in zip(route[:-1], route[1:], strict=True):
+            length = float(np.hypot(x1 - x0, y1 - y0))
+            d = np.array([x1 - x0, y1 - y0]) / length
+            nrm = np.array([-d[1], d[0]])
+            for k, along in enumerate(np.arange(2.0, length - 1.5, 2.5)):
+                p = np.array([x0, y0]) + along * d + (0.9 if k % 2 else -0.9) * nrm
+                sc["faults"]["moving_obstacles"].append(_static(float(p[0]), float(p[1]), 0.3))
+    return sc
+
+
+def run_changed_world(seed: int, backend: str, cache: Path, hard: bool = False) -> dict:
     from fgloc.config import load_config
     from fgloc.geometry import wrap_angle
     from fgloc.localization import Localizer, Session
 
-    sys.path.insert(0, str(REPO / "tests" / "frontends"))
-    from test_changed_world import CHANGED_WORLD  # type: ignore[import-not-found]
-
-    f = cache / f"changed_world_{seed}.pkl"
+    f = cache / f"changed_world{'_hard' if hard else ''}_{seed}.pkl"
     if f.exists():
         sim = pickle.loads(f.read_bytes())
     else:
         from fgloc.sim import run_scenario
 
-        sim = run_scenario(CHANGED_WORLD, seed=seed)
+        sim = run_scenario(changed_world(hard), seed=seed)
         cache.mkdir(parents=True, exist_ok=True)
         f.write_bytes(pickle.dumps(sim))
     msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
@@ -179,7 +199,8 @@ def run_changed_world(seed: int, backend: str, cache: Path) -> dict:
     gt = sim.ground_truth.interpolate(est.stamps)
     e = np.hypot(est.poses[:, 0] - gt[:, 0], est.poses[:, 1] - gt[:, 1])
     yaw = np.degrees(wrap_angle(est.poses[:, 2] - gt[:, 2]))
-    res = {"log": f"changed world s{seed}", "backend": backend, "rmse_m": float(np.sqrt(np.mean(e**2))),
+    res = {"log": f"changed world{' + pallets' if hard else ''} s{seed}", "backend": backend,
+           "rmse_m": float(np.sqrt(np.mean(e**2))),
            "max_m": float(e.max()), "p99_m": float(np.percentile(e, 99)),
            "rmse_deg": float(np.sqrt(np.mean(yaw**2))), "fixes": loc.stats["fixes"], "no_fix": loc.stats["no_fix"],
            "reloc": loc.stats["relocalizations"]}
@@ -202,6 +223,7 @@ def main() -> int:
     ap.add_argument("--map-accuracy", nargs="+", default=["none", "half-cell"],
                     help="the real maps' declared accuracy_m per run: none (undeclared), half-cell, or metres")
     ap.add_argument("--skip-sim", action="store_true")
+    ap.add_argument("--hard", action="store_true", help="also the changed world with 28 more pallets along the path")
     ap.add_argument("--skip-real", action="store_true")
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
@@ -218,9 +240,10 @@ def main() -> int:
                     print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
     if not args.skip_sim:
         for seed in args.seeds:
-            for be in args.backends:
-                rows.append(run_changed_world(seed, be, args.cache))
-                print(f"done changed world seed {seed} {be}", file=sys.stderr)
+            for hard in (False, True) if args.hard else (False,):
+                for be in args.backends:
+                    rows.append(run_changed_world(seed, be, args.cache, hard))
+                    print(f"done changed world seed {seed} {be} hard={hard}", file=sys.stderr)
     print("| run | back-end | map accuracy_m | segment | pos RMSE m | max m | heading RMSE deg | fix RMSE m / deg | "
           "fix sigma m / deg (median) | NEES mean (median) | NEES x / y / yaw | fixes / no fix / reloc |")
     print("|---|---|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|")

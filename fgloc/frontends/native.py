@@ -643,7 +643,7 @@ class NativeMatcher(FrontendBase):
         self.search_ang_step = math.radians(conf.search_ang_step_deg)
         self.search_max_points = int(conf.search_max_points)
         self.heading_window = math.radians(conf.heading_check_deg)
-        self.heading_step = 0.25 * self.search_ang_step
+        self.heading_step = 0.5 * self.search_ang_step
         self.search_candidates = max(int(conf.search_candidates), 1)
         self.far = float(conf.field_max_dist_m)
         self.depth_min_quality = float(conf.depth_min_quality)
@@ -719,7 +719,7 @@ class NativeMatcher(FrontendBase):
         and the lower robust cost wins (within the jump limits)."""
         if self.heading_window <= 0:
             return pose, cost
-        stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
+        stride = max(1, int(math.ceil(2 * len(px) / max(self.search_max_points, 1))))
         sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
         best, score = _search(self.lik, self.Ac, self.bc, sx, sy, pose, 0.0, 1.0, self.heading_window,
                               self.heading_step, 1)

@@ -204,11 +204,21 @@ def scaled_delta(delta: FloatArray, gains: FloatArray) -> tuple[FloatArray, Floa
     return np.array([tx, ty, th]), J
 
 
-def _rep_and_jacobians(c: FloatArray, scales: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _rep_and_jacobians(c: FloatArray, scales: FloatArray, bend: bool = True
+                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The increment an odometry with ``scales`` reports for the true relative pose with
-    coordinates ``c = [x, y, yaw]``, and its body-tangent Jacobians w.r.t. ``c`` and the scales."""
+    coordinates ``c = [x, y, yaw]``, and its body-tangent Jacobians w.r.t. ``c`` and the scales.
+    ``bend=False``: the reported translation was integrated along the true heading (a gyro's),
+    so the yaw-rate scale does not bend its chord: ``[s_v x, s_v y, s_w yaw]``."""
     tx, ty, th = float(c[0]), float(c[1]), float(c[2])
     sv, sw = float(scales[0]), float(scales[1])
+    if not bend:
+        rth = sw * th
+        ct, st = math.cos(rth), math.sin(rth)
+        Rt = np.array([[ct, st], [-st, ct]])
+        Jc = np.vstack([Rt @ np.array([[sv, 0.0, 0.0], [0.0, sv, 0.0]]), [0.0, 0.0, sw]])
+        Js = np.vstack([Rt @ np.array([[tx, 0.0], [ty, 0.0]]), [0.0, th]])
+        return np.array([sv * tx, sv * ty, rth]), Jc, Js
     h = 0.5 * th
     s0 = _sinc(h)
     s1 = _sinc(sw * h)
@@ -234,13 +244,14 @@ def _rep_and_jacobians(c: FloatArray, scales: FloatArray) -> tuple[FloatArray, F
 
 
 def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray, measured: FloatArray,
-                         want_jacobians: bool = True) -> tuple[FloatArray, list[FloatArray]]:
+                         want_jacobians: bool = True, bend: bool = True) -> tuple[FloatArray, list[FloatArray]]:
     """Error of :func:`scaled_between_factor`: ``Log(m^-1 rep(xi^-1 xj, s))`` (the noise is on
     what the odometry reports, so a scale never buys a smaller residual by shrinking the motion)
-    and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector)."""
+    and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector).
+    ``bend``: see :func:`_rep_and_jacobians`."""
     h = xi.between(xj)
     c = np.array([h.x(), h.y(), h.theta()])
-    rep, Jc, Js = _rep_and_jacobians(c, scales)
+    rep, Jc, Js = _rep_and_jacobians(c, scales, bend)
     E = gtsam.Pose2(*np.asarray(measured, dtype=float)).between(gtsam.Pose2(*rep))
     e = gtsam.Pose2.Logmap(E)
     if not want_jacobians:
@@ -254,12 +265,13 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray, m
 
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
                           cov: FloatArray, fixed_scales: tuple[float, float] = (1.0, 1.0), min_sigma: float = 1e-4,
-                          kernel: str = "none", k: float = 1.345) -> gtsam.NonlinearFactor:
+                          kernel: str = "none", k: float = 1.345, bend: bool = True) -> gtsam.NonlinearFactor:
     """Integrated-odometry factor between ``x_i`` and ``x_j`` whose speed scale ``s_v`` and yaw-rate
     scale ``s_w`` (reported / true, each a ``Vector1`` variable, or None: held at ``fixed_scales``)
     are estimated: the odometry's calibration.  ``delta`` / ``cov`` are the reported increment
     and its covariance.  Without a scale variable this is a plain ``BetweenFactorPose2`` on the
-    corrected increment."""
+    corrected increment.  ``bend=False``: ``delta``'s translation was integrated along a gyro's
+    heading (the yaw-rate scale applies to its yaw only)."""
     d = np.asarray(delta, dtype=float).copy()
     c = np.asarray(cov, dtype=float) + np.eye(3) * min_sigma**2
     if ks_v is None and ks_w is None and fixed_scales == (1.0, 1.0):
@@ -279,7 +291,7 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
             sv = sv0
         sw = float(values.atVector(ks[n])[0]) if ks_w is not None else sw0
         e, Hs = scaled_between_error(values.atPose2(ks[0]), values.atPose2(ks[1]), np.array([sv, sw]), d,
-                                     H is not None)
+                                     H is not None, bend)
         if H is not None:
             H[0], H[1] = Hs[0], Hs[1]
             m = 2
@@ -316,6 +328,22 @@ def gyro_factor(ki: int, kj: int, kb: int, dtheta_gyro: float, dt: float, sigma:
 
     noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), kernel, k)
     return gtsam.CustomFactor(noise, [ki, kj, kb], error)
+
+
+def yaw_increment_factor(ki: int, kj: int, dtheta: float, sigma: float) -> gtsam.CustomFactor:
+    """A measured yaw change ``theta_j - theta_i`` (a gyro's, its bias already removed): error
+    ``wrap(theta_j - theta_i - dtheta)``, Jacobians ``[0, 0, -1]``, ``[0, 0, 1]``."""
+    z = float(dtheta)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        keys = this.keys()
+        e = wrap_scalar(values.atPose2(keys[1]).theta() - values.atPose2(keys[0]).theta() - z)
+        if H is not None:
+            H[0] = np.array([[0.0, 0.0, -1.0]])
+            H[1] = np.array([[0.0, 0.0, 1.0]])
+        return np.array([e])
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), [ki, kj], error)
 
 
 def latency_fix_error(x: gtsam.Pose2, latency_s: float, fix: gtsam.Pose2, twist: FloatArray,

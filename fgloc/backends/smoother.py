@@ -19,6 +19,13 @@ offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``)
   back-end is reset to the fix (the pipeline normally relocalizes first).
 * the compass factors use a Cauchy kernel (redescending): a magnetic disturbance of tens of
   degrees is ignored rather than averaged in.
+* gyro yaw-increment factors ``x<i-1> - x<i>``: the gyro integrated between the keyframes, its
+  bias estimated beside the graph from absolute headings and standstill
+  (:class:`~fgloc.backends.health.GyroBias`, as the EKF: as a graph variable every yaw source,
+  the wheels too, informed it, and a drone's placeholder yaw rate 0 became a 0.0085 rad/s bias);
+  where the gyro covers a keyframe interval the odometry's translation is integrated along its
+  heading, the wheels' yaw-rate scale (``k<j>``) and speed scale (``g<j>``) are calibration
+  variables.
 
 A scan older than the newest keyframe but inside the window (late measurement) gets its own
 keyframe at its own stamp: the twist factor spanning it is removed and replaced by two.
@@ -55,12 +62,14 @@ from fgloc.backends.factors import (
     integrate_twist,
     scaled_between_factor,
     scaled_delta,
+    yaw_increment_factor,
 )
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
     INSTANT_RATE,
     RATE,
     Arbiter,
+    GyroBias,
     LatencyEstimator,
     SourceHealth,
     fix_speed,
@@ -189,8 +198,14 @@ class SmootherConfig:
                                       "a cautious 1 deg/s, as the EKF's compass_rate_sigma_deg)", gt=0)
     gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
     gyro_bias_rw_radps: float = setting(2e-5, "random walk of the gyro bias (rad/s per sqrt(s))", gt=0)
+    gyro_bias_in_graph: bool = setting(False, "the gyro bias as a graph variable, observed by every yaw source (the "
+                                       "wheels too); false: estimated beside the graph from absolute headings "
+                                       "and standstill only (health.GyroBias, as the EKF)")
     odom_gains: bool = setting(True, "estimate the odometry's speed and yaw-rate scales (reported / true) as "
                                "calibration variables")
+    gyro_chord: bool = setting(True, "where a gyro covers a keyframe interval, the odometry's translation is "
+                               "integrated along the gyro's heading (a skid steer's wheel yaw, which lies, does "
+                               "not bend the odometry factor's chord); its yaw stays the wheels'")
     odom_speed_scale_prior: float = setting(0.2, "prior sigma of the speed scale around 1", gt=0)
     odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1 (a skid steer "
                                           "reports 1.4-7 times the turn)", gt=0)
@@ -241,6 +256,7 @@ class SlidingWindowSmoother(Backend):
         self._long_pair_t = -np.inf
         self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
         self.sources: dict[str, SourceHealth] = {}
+        self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
         self._turned = 0.0
         self._reset_state()
@@ -515,6 +531,9 @@ class SlidingWindowSmoother(Backend):
             return
         h.accepted += 1
         c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
+        still = bool(np.all(np.abs(np.asarray(twist, dtype=float)) < 1e-3))
+        for gb in self.gbias.values():
+            gb.set_still(float(t), still)
         self.odo_t.append(float(t))
         self.odo_u.append(np.asarray(twist, dtype=float))
         self.odo_c.append(_bounded(c, TWIST_VAR_MAX))
@@ -539,6 +558,8 @@ class SlidingWindowSmoother(Backend):
         h = self._source(f"{source}.yaw", "heading")
         self.calib.add_compass(t, yaw, rate)
         var = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
+        for gb in self.gbias.values():
+            gb.add_heading(f"{source}.yaw", float(t), float(yaw), float(var) * self._noise_of(f"{source}.yaw")[0] ** 2)
         h.accepted += 1
         if self.cfg.adapt_noise:
             name = f"{source}.yaw"
@@ -561,6 +582,12 @@ class SlidingWindowSmoother(Backend):
             return
         var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.cfg.gyro_sigma_radps**2
         h.accepted += 1
+        if not self.cfg.gyro_bias_in_graph:
+            gb = self.gbias.get(name)
+            if gb is None:
+                gb = self.gbias[name] = GyroBias(self.cfg.gyro_bias_prior_radps, self.cfg.gyro_bias_rw_radps)
+            gb.add_rate(float(t), float(rate), float(var))
+            self.arb.set_correction(name, bias=gb.value())
         buf[0].append(float(t))
         buf[1].append(float(rate))
         buf[2].append(float(var))
@@ -604,9 +631,7 @@ class SlidingWindowSmoother(Backend):
                 w[i + 1] = w.get(i + 1, 0.0) + wj
             i += 1
         var = sum(vs[m] * ww * ww for m, ww in w.items())
-        ch = self.chains.get(f"gyro_bias:{name}")
-        b0 = float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
-        return d - b0 * (t1 - t0), var
+        return d - self.gyro_bias_of(name) * (t1 - t0), var
 
     def _gyro_rate_at(self, t: float) -> float | None:
         """The first gyro's bias-corrected rate at ``t`` (interpolated), or None."""
@@ -615,9 +640,7 @@ class SlidingWindowSmoother(Backend):
                 i = min(max(bisect_left(ts, t), 1), len(ts) - 1)
                 ta, tb = ts[i - 1], ts[i]
                 f = (t - ta) / (tb - ta) if tb > ta else 1.0
-                ch = self.chains.get(f"gyro_bias:{name}")
-                b = float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
-                return rs[i - 1] + f * (rs[i] - rs[i - 1]) - b
+                return rs[i - 1] + f * (rs[i] - rs[i - 1]) - self.gyro_bias_of(name)
         return None
 
     def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
@@ -628,6 +651,39 @@ class SlidingWindowSmoother(Backend):
         i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
         return integrate_twist(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]),
                                np.asarray(self.odo_c[i0:i1]), t0, t1, self._q_slip)
+
+    def _chord_along_gyro(self, t0: float, t1: float) -> FloatArray | None:
+        """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's
+        (bias-corrected) heading, ``[x, y, gyro yaw]`` in the frame at ``t0``; None when no gyro
+        covers the interval (each odometry twist held backwards, as :func:`integrate_twist`)."""
+        if not self.gyro or not self.odo_t:
+            return None
+        name = next(iter(self.gyro))
+        ts = self.odo_t
+        n = len(ts)
+        i = bisect_right(ts, t0)
+        t, x, y, th = t0, 0.0, 0.0, 0.0
+        while t < t1 - 1e-12:
+            j = min(i, n - 1)
+            tn = min(ts[i], t1) if i < n else t1
+            dt = tn - t
+            if dt > 0:
+                r = self._gyro_increment(name, t, tn)
+                if r is None:
+                    return None
+                w = r[0]
+                u = self.odo_u[j]
+                vx, vy = float(u[0]) * dt, float(u[1]) * dt
+                if abs(w) < 1e-9:
+                    a, b = 1.0 - w * w / 6.0, w / 2.0
+                else:
+                    a, b = math.sin(w) / w, (1.0 - math.cos(w)) / w
+                dx, dy = a * vx - b * vy, b * vx + a * vy
+                c, s_ = math.cos(th), math.sin(th)
+                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+            t = tn
+            i += 1
+        return np.array([x, y, wrap_scalar(th)])
 
     def _rotation_between(self, t0: float, t1: float) -> float:
         """Heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``): a gyro's when it covers
@@ -780,8 +836,14 @@ class SlidingWindowSmoother(Backend):
         graph, vals, ts, pairs, keys = self._acc
         ts[k] = t
         d, c = self._integrate(t_prev, t)
-        pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
-        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts))
+        chord = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
+        if chord is None:
+            pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
+        else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
+            pred = compose1(self.kf_pose[k_prev], np.array([chord[0] * self._gains[0], chord[1] * self._gains[0],
+                                                            chord[2]]))
+            d = np.array([chord[0], chord[1], d[2]])
+        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=chord is None))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
         vals.insert(k, gtsam.Pose2(*pred))
@@ -806,6 +868,8 @@ class SlidingWindowSmoother(Backend):
             self._source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
             self.calib.add_fix(t - lat, float(fix.pose[2]))
+            for gb in self.gbias.values():
+                gb.add_heading("scan", t - lat, float(fix.pose[2]), float(self._fix_cov(fix.cov)[2, 2]))
             if self.cfg.adapt_noise:
                 if "scan" not in self.arb.streams:
                     self.arb.add_source("scan", ANGLE_ABSOLUTE, rel_prior=0.005)
@@ -829,8 +893,10 @@ class SlidingWindowSmoother(Backend):
         return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
 
     def _odometry_factor(self, ki: int, kj: int, d: FloatArray, c: FloatArray, t: float,
-                         graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
-        """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated."""
+                         graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
+                         bend: bool = True) -> gtsam.NonlinearFactor:
+        """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated
+        (``bend=False``: ``d``'s translation was integrated along the gyro's heading)."""
         c = np.array(c, dtype=float)
         k_yaw, rel = self._noise_of("odom")
         if k_yaw != 1.0 or rel > 0.0:
@@ -857,7 +923,7 @@ class SlidingWindowSmoother(Backend):
             ks_w = self._chain_key(ch, t, graph, vals, ts)
         fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
         return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
-                                     k=self.cfg.odom_kernel_k)
+                                     k=self.cfg.odom_kernel_k, bend=bend)
 
     def _twist_at(self, t: float) -> FloatArray:
         """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""
@@ -921,13 +987,17 @@ class SlidingWindowSmoother(Backend):
                 i += 1
                 if r is None:
                     continue
-                d_raw = r[0] + self.gyro_bias_of(name) * (tb - ta)  # the factor carries the bias variable
-                ch = self._chain(f"gyro_bias:{name}", "b", [0.0], [self.cfg.gyro_bias_prior_radps],
-                                 [self.cfg.gyro_bias_rw_radps])
-                kbias = self._chain_key(ch, tb, graph, vals, ts)
                 k_g, rel = self._noise_of(name)
                 var = k_g * k_g * (r[1] + 1e-10 * (tb - ta)) + (rel * r[0]) ** 2
-                graph.add(gyro_factor(ka, kb, kbias, d_raw, tb - ta, math.sqrt(var)))
+                gb = self.gbias.get(name)
+                if gb is not None:  # the bias known beside the graph: its uncertainty on the increment
+                    graph.add(yaw_increment_factor(ka, kb, r[0], math.sqrt(var + (gb.sigma() * (tb - ta)) ** 2)))
+                else:
+                    d_raw = r[0] + self.gyro_bias_of(name) * (tb - ta)  # the factor carries the bias variable
+                    ch = self._chain(f"gyro_bias:{name}", "b", [0.0], [self.cfg.gyro_bias_prior_radps],
+                                     [self.cfg.gyro_bias_rw_radps])
+                    kbias = self._chain_key(ch, tb, graph, vals, ts)
+                    graph.add(gyro_factor(ka, kb, kbias, d_raw, tb - ta, math.sqrt(var)))
                 if ka not in ts:
                     ts[ka] = ta
                 self.stats["gyro_factors"] += 1
@@ -938,6 +1008,9 @@ class SlidingWindowSmoother(Backend):
 
     def gyro_bias_of(self, name: str) -> float:
         """The estimated bias (rad/s) of the gyro stream ``name`` (``SOURCE.gyro``)."""
+        gb = self.gbias.get(name)
+        if gb is not None:
+            return gb.value()
         ch = self.chains.get(f"gyro_bias:{name}")
         return float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0
 

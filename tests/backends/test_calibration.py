@@ -33,11 +33,13 @@ def test_scaled_odometry_factor_jacobians_match_numerical_differentiation():  # 
         xj = xi.compose(gtsam.Pose2(*delta))
         s = np.array([rng.uniform(0.8, 1.2), rng.uniform(1.0, 2.5)])
         meas = scaled_delta(delta, s)[0] + rng.normal(0, 0.01, 3)
-        _, (Hi, Hj, Hs) = scaled_between_error(xi, xj, s, meas)
-        assert np.abs(Hi - _num(lambda p: scaled_between_error(p, xj, s, meas, False)[0], xi, rp, 3)).max() < 1e-7
-        assert np.abs(Hj - _num(lambda p: scaled_between_error(xi, p, s, meas, False)[0], xj, rp, 3)).max() < 1e-7
-        Ns = _num(lambda v: scaled_between_error(xi, xj, v, meas, False)[0], s, lambda v, d: v + d, 2)
-        assert np.abs(Hs - Ns).max() < 1e-7
+        for bend in (True, False):  # False: the chord integrated along a gyro's heading
+            _, (Hi, Hj, Hs) = scaled_between_error(xi, xj, s, meas, True, bend)
+            Ni = _num(lambda p: scaled_between_error(p, xj, s, meas, False, bend)[0], xi, rp, 3)
+            Nj = _num(lambda p: scaled_between_error(xi, p, s, meas, False, bend)[0], xj, rp, 3)
+            Ns = _num(lambda v: scaled_between_error(xi, xj, v, meas, False, bend)[0], s, lambda v, d: v + d, 2)
+            assert np.abs(Hi - Ni).max() < 1e-7 and np.abs(Hj - Nj).max() < 1e-7 and np.abs(Hs - Ns).max() < 1e-7
+        _, (_, _, Hs) = scaled_between_error(xi, xj, s, meas)
     # the GTSAM factor (only the yaw-rate scale a variable) reports the same whitened Jacobians
     v = gtsam.Values()
     v.insert(1, xi)
@@ -232,3 +234,41 @@ def test_ekf_yaw_scale_stays_positive_and_bounded_whatever_the_wheels_say():
         assert SCALE_MIN - 1e-9 <= min(seen) and max(seen) <= SCALE_MAX + 1e-9
         if want is not None:
             assert ekf.odom_scales()[1] == pytest.approx(want, rel=0.05)
+
+
+def test_gyro_factors_jacobians_match_numerical_differentiation():
+    """The gyro's yaw-increment factors (with a bias variable, and with the bias known beside the
+    graph: the smoother's default) against central differences of their own error."""
+    from fgloc.backends.factors import gyro_factor, yaw_increment_factor
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        xi, xj = gtsam.Pose2(*rng.normal(0, 1, 3)), gtsam.Pose2(*rng.normal(0, 1, 3))
+        b = np.array([rng.normal(0, 0.01)])
+        factors = ((gyro_factor(1, 2, 3, 0.31, 0.5, 0.01), (1, 2, 3)), (yaw_increment_factor(1, 2, 0.31, 0.01), (1, 2)))
+        for f, keys in factors:
+            v = gtsam.Values()
+            v.insert(1, xi)
+            v.insert(2, xj)
+            if 3 in keys:
+                v.insert(3, b)
+            A = f.linearize(v).jacobian()[0] * 0.01  # unwhitened
+
+            def err(vals: gtsam.Values) -> np.ndarray:
+                return np.asarray(f.unwhitenedError(vals))
+
+            cols = []
+            for k in keys:
+                n = 1 if k == 3 else 3
+                for j in range(n):
+                    d = np.zeros(n)
+                    d[j] = 1e-6
+                    vp, vm = gtsam.Values(v), gtsam.Values(v)
+                    if k == 3:
+                        vp.update(3, b + d)
+                        vm.update(3, b - d)
+                    else:
+                        vp.update(k, v.atPose2(k).retract(d))
+                        vm.update(k, v.atPose2(k).retract(-d))
+                    cols.append((err(vp) - err(vm)) / 2e-6)
+            assert np.abs(A - np.column_stack(cols)).max() < 1e-7

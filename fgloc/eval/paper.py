@@ -124,6 +124,9 @@ def comparison_text(
 ) -> str:
     """The same comparison as aligned plain text (Markdown-table compatible)."""
     header, body = comparison_cells(rows, extra)
+    # a '|' inside a cell ("max |x error|") would end the cell in Markdown: escape it
+    header = [c.replace("|", "\\|") for c in header]
+    body = [[c.replace("|", "\\|") for c in cells] for cells in body]
     widths = [max(len(c[i]) for c in [header, *body]) for i in range(len(header))]
 
     def line(cells: list[str]) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from fgloc.eval import paper
@@ -63,5 +65,9 @@ def test_comparison_table_and_text():
     assert len(table.columns) == 3 + 2
     assert table.row_count == len(paper.PAPER_ROWS) + len(paper.EXTRA_ROWS)
     assert len(paper.comparison_text(rows, extra=False).splitlines()) == 2 + len(paper.PAPER_ROWS)
+    # every line a Markdown row of the same width: the '|' of "max |x error|" is escaped
+    cells = {len(re.split(r"(?<!\\)\|", line)) for line in lines}
+    assert cells == {len(paper.comparison_cells(rows, True)[0]) + 2}
+    assert any("max \\|x error\\|" in line for line in lines)
     # one seed: no +-
     assert "±" not in paper.comparison_text({"ekf": rows["ekf"][:1]})

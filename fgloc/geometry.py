@@ -77,21 +77,24 @@ def exp(xi: FloatArray) -> FloatArray:
     The pose reached by holding a constant body twist for ``dt`` (GTSAM's ``Pose2.Expmap``).
     """
     vx, vy, w = float(xi[0]), float(xi[1]), float(xi[2])
-    if abs(w) < 1e-9:
-        c, s = 1.0 - w * w / 6.0, w / 2.0  # sin(w)/w, (1-cos w)/w to 2nd order
-    else:
-        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
+    c, s = exp_coefficients(w)
     return np.array([c * vx - s * vy, s * vx + c * vy, w])
+
+
+def exp_coefficients(w: float) -> tuple[float, float]:
+    """``sin(w) / w`` and ``(1 - cos(w)) / w``: the exponential's ``V = [[a, -b], [b, a]]`` that
+    turns a body displacement held while turning by ``w`` into the translation (second order
+    below ``|w| = 1e-9``).  For scalar loops that integrate twists step by step."""
+    if abs(w) < 1e-9:
+        return 1.0 - w * w / 6.0, w / 2.0
+    return math.sin(w) / w, (1.0 - math.cos(w)) / w
 
 
 def log(p: FloatArray) -> FloatArray:
     """SE(2) logarithm of a pose ``[x, y, yaw]`` -> tangent ``[vx dt, vy dt, w dt]`` (inverse of :func:`exp`)."""
     x, y = float(p[0]), float(p[1])
     w = math.atan2(math.sin(float(p[2])), math.cos(float(p[2])))
-    if abs(w) < 1e-9:
-        c, s = 1.0 - w * w / 6.0, w / 2.0
-    else:
-        c, s = math.sin(w) / w, (1.0 - math.cos(w)) / w
+    c, s = exp_coefficients(w)
     det = c * c + s * s
     return np.array([(c * x + s * y) / det, (-s * x + c * y) / det, w])
 

@@ -25,7 +25,7 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import wrap_scalar
+from fgloc.geometry import exp_coefficients, wrap_scalar
 
 FloatArray = NDArray[np.float64]
 
@@ -59,10 +59,7 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
         if dt > 0:
             u = twists[j]
             vx, vy, w = float(u[0]) * dt, float(u[1]) * dt, float(u[2]) * dt
-            if abs(w) < 1e-9:
-                a, b = 1.0 - w * w / 6.0, w / 2.0
-            else:
-                a, b = math.sin(w) / w, (1.0 - math.cos(w)) / w
+            a, b = exp_coefficients(w)
             dx, dy = a * vx - b * vy, b * vx + a * vy
             c, s = math.cos(w), math.sin(w)
             # A = Ad(d^-1) = [[c, s, iy], [-s, c, -ix], [0, 0, 1]], d^-1 = (ix, iy, -w)

@@ -75,7 +75,7 @@ from fgloc.backends.health import (
     fix_speed,
 )
 from fgloc.config.schema import optional_radians, radians, setting
-from fgloc.geometry import compose1, wrap_angle, wrap_scalar
+from fgloc.geometry import compose1, exp_coefficients, wrap_angle, wrap_scalar
 from fgloc.geometry import exp as se2_exp
 from fgloc.types import PoseFix, Trajectory
 
@@ -674,10 +674,7 @@ class SlidingWindowSmoother(Backend):
                 w = r[0]
                 u = self.odo_u[j]
                 vx, vy = float(u[0]) * dt, float(u[1]) * dt
-                if abs(w) < 1e-9:
-                    a, b = 1.0 - w * w / 6.0, w / 2.0
-                else:
-                    a, b = math.sin(w) / w, (1.0 - math.cos(w)) / w
+                a, b = exp_coefficients(w)
                 dx, dy = a * vx - b * vy, b * vx + a * vy
                 c, s_ = math.cos(th), math.sin(th)
                 x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w

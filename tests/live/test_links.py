@@ -119,9 +119,11 @@ def test_sick_stream_reconnect_and_malformed(synth):
     # ranges survive the trip (mm resolution), +inf stays +inf
     src = [m for t, m in synth if t == "/scan"]
     src_t = np.array([m.stamp for m in src])
-    for s, _ in scans[:5]:
+    # device clock aligned to the host: the minimum-delay filter has seen 15 scans by then (the
+    # first scans' estimate is as late as their delivery, 10 ms at a load average of 10)
+    for s, _ in scans[15:20]:
         j = int(np.argmin(np.abs(src_t - emu.clock.to_run(s.stamp))))
-        assert abs(src_t[j] - emu.clock.to_run(s.stamp)) < 0.005  # device clock aligned to the host
+        assert abs(src_t[j] - emu.clock.to_run(s.stamp)) < 0.005
         ref = src[j]
         fin = np.isfinite(ref.ranges)
         assert np.array_equal(fin, np.isfinite(s.ranges))

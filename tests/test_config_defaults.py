@@ -71,7 +71,7 @@ def test_show_lists_the_effective_config(tmp_path, capsys):
     ("ekf:\n  omni: 1\n", "ekf.omni: expected true or false or null, got 1"),
     ("pipeline:\n  pose_delta_sigmas: [1, 2]\n", "pipeline.pose_delta_sigmas: expected a list of 3 numbers"),
     ("sources:\n  inputs:\n    wheels: {type: odometry, topic: /odom, usee: [vx]}\n",
-     "sources.inputs.wheels: unknown key 'usee'"),
+     "sources.inputs.wheels.usee: unknown key (did you mean use?)"),
     ("sources:\n  inputs:\n    gyro: {type: imu, use: [yaw, vyawn]}\n",
      "sources.inputs.gyro.use: 'vyawn' is not one of"),
     ("sources:\n  static_transforms:\n    - {parent: base_link, child: imu_link, yw: 1}\n",

@@ -49,7 +49,7 @@ import numpy as np
 
 from fgloc.backends.health import SourceHealth
 from fgloc.backends.imu import imu_in_base, mount_rotation
-from fgloc.config.schema import setting
+from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
@@ -121,10 +121,10 @@ def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: 
         where = f"{source}: sources.inputs.{name}"
         if not isinstance(d, dict):
             raise ConfigError(f"{where}: must be a mapping (type, topic, use, ...)")
-        unknown = set(d) - {"type", "topic", "use", "differential", "covariance", "sigmas", "scale", "gate",
-                            "frame_id"}
+        keys = ("type", "topic", "use", "differential", "covariance", "sigmas", "scale", "gate", "frame_id")
+        unknown = set(d) - set(keys)
         if unknown:
-            raise ConfigError(f"{where}: unknown key {sorted(unknown)[0]!r}")
+            raise unknown_key_error(source, f"sources.inputs.{name}", sorted(unknown)[0], keys)
         typ = str(d.get("type", "")).lower()
         if typ not in TYPES:
             raise ConfigError(f"{where}.type: must be one of {', '.join(TYPES)}, got {d.get('type')!r}")

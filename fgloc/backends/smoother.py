@@ -20,12 +20,13 @@ offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``)
 * the compass factors use a Cauchy kernel (redescending): a magnetic disturbance of tens of
   degrees is ignored rather than averaged in.
 * gyro yaw-increment factors ``x<i-1> - x<i>``: the gyro integrated between the keyframes, its
-  bias estimated beside the graph from absolute headings and standstill
-  (:class:`~fgloc.backends.health.GyroBias`, as the EKF: as a graph variable every yaw source,
-  the wheels too, informed it, and a drone's placeholder yaw rate 0 became a 0.0085 rad/s bias);
-  where the gyro covers a keyframe interval the odometry's translation is integrated along its
-  heading, the wheels' yaw-rate scale (``k<j>``) and speed scale (``g<j>``) are calibration
-  variables.
+  bias a graph variable (``gyro_bias_in_graph``, the default) or, with that off, estimated beside
+  the graph from absolute headings and standstill (:class:`~fgloc.backends.health.GyroBias`, as
+  the EKF: as a graph variable every yaw source, the wheels too, informs it, and a drone's
+  placeholder yaw rate 0 became a 0.0085 rad/s bias; beside the graph the live localizer
+  diverged, so it is not the default); where the gyro covers a keyframe interval the
+  odometry's translation is integrated along its heading, the wheels' yaw-rate scale (``k<j>``)
+  and speed scale (``g<j>``) are calibration variables.
 
 A scan older than the newest keyframe but inside the window (late measurement) gets its own
 keyframe at its own stamp: the twist factor spanning it is removed and replaced by two.

@@ -101,6 +101,16 @@ class SourceSpec:
     def uses(self, comp: str) -> bool:
         return comp in self.use
 
+    @property
+    def fused(self) -> tuple[str, ...]:
+        """The used components the back-end fuses (``use`` without an IMU's levelling roll, pitch),
+        in order: one sigma each for the ``fixed`` / ``floor`` policies."""
+        return fused_components(self.use)
+
+
+def fused_components(use: Sequence[str]) -> tuple[str, ...]:
+    return tuple(u for u in use if u in COMPONENTS)
+
 
 def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: str = "config") -> list[SourceSpec]:
     """The sources of a ``sources:`` section (the default layout when it lists none); one-line
@@ -139,7 +149,7 @@ def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: 
         if pol not in POLICIES:
             raise ConfigError(f"{where}.covariance: must be one of {', '.join(POLICIES)}, got {pol!r}")
         sig = tuple(float(s) for s in (d.get("sigmas") or ()))
-        fused = [u for u in use if u in COMPONENTS]
+        fused = fused_components(use)
         if pol in ("fixed", "floor") and len(sig) != len(fused):
             raise ConfigError(f"{where}.sigmas: {pol} needs one sigma per used component ({len(fused)}: "
                               f"{', '.join(fused)}), got {len(sig)}")
@@ -255,7 +265,7 @@ class SourceRouter:
         """The variance of ``comp`` under the source's policy (NaN: the back-end default)."""
         if not spec.uses(comp):
             return UNUSED_VAR
-        i = [u for u in spec.use if u in COMPONENTS].index(comp)
+        i = spec.fused.index(comp)
         pol = spec.covariance
         if pol == "fixed":
             return spec.sigmas[i] ** 2

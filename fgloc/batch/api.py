@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,10 +36,27 @@ class EngineOptions:
     progress: bool = True
 
 
-def _run(jobs: list[Job], outdir: Path, opts: EngineOptions, desc: str) -> BatchReport:
+def _engine(opts: EngineOptions) -> Any:
+    """The engine, already starting when it has a start-up (Ray: joining or starting the cluster in
+    the background while the caller finds the logs, fingerprints them and reads the markers)."""
     if opts.jobs is not None and opts.jobs < 1:
         raise ConfigError("-j must be at least 1")
     engine = make_engine(opts.engine, opts.jobs, opts.address)
+    if hasattr(engine, "start"):
+        engine.start()
+    return engine
+
+
+def _run(prepare: Callable[[], list[Job]], outdir: Path, opts: EngineOptions, desc: str) -> BatchReport:
+    """Start the engine, then ``prepare()`` the jobs meanwhile, then run them (an error while
+    preparing stops the engine again)."""
+    engine = _engine(opts)
+    try:
+        jobs = prepare()
+    except BaseException:
+        if hasattr(engine, "shutdown"):
+            engine.shutdown()
+        raise
     return run_batch(jobs, outdir, engine, ship=opts.ship, force=opts.force, progress=opts.progress, desc=desc)
 
 
@@ -51,11 +69,14 @@ def batch_run(logs: list[str], outdir: Path, opts: EngineOptions, manifest: Path
         raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
     if not logs and manifest is None:
         raise ConfigError("give LOGS (files, folders, globs) or --manifest FILE")
-    paths = discover_logs(logs, RUN_SUFFIXES, exclude=outdir) if logs else []
-    rows = read_manifest(manifest) if manifest is not None else None
-    jobs = run_jobs(paths, outdir, map_yaml, initial_pose, config, backend, frontend, scan_topic, odom_topic,
-                    imu_topic, rows, allow_lost)
-    return _run(jobs, outdir, opts, "localizing logs")
+
+    def prepare() -> list[Job]:
+        paths = discover_logs(logs, RUN_SUFFIXES, exclude=outdir) if logs else []
+        rows = read_manifest(manifest) if manifest is not None else None
+        return run_jobs(paths, outdir, map_yaml, initial_pose, config, backend, frontend, scan_topic, odom_topic,
+                        imu_topic, rows, allow_lost)
+
+    return _run(prepare, outdir, opts, "localizing logs")
 
 
 def batch_map(logs: list[str], outdir: Path, opts: EngineOptions, resolution: float = 0.05,
@@ -66,11 +87,14 @@ def batch_map(logs: list[str], outdir: Path, opts: EngineOptions, resolution: fl
         raise ConfigError("give LOGS (files, folders, globs)")
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")
-    if config is not None:
-        adapter.mapper_options(config)  # a bad mapping config fails once, up front
-    paths = discover_logs(logs, MAP_SUFFIXES, exclude=outdir)
-    jobs = map_jobs(paths, outdir, resolution, config, start, end, scan_topic, odom_topic)
-    return _run(jobs, outdir, opts, "mapping logs")
+
+    def prepare() -> list[Job]:
+        if config is not None:
+            adapter.mapper_options(config)  # a bad mapping config fails once, up front
+        paths = discover_logs(logs, MAP_SUFFIXES, exclude=outdir)
+        return map_jobs(paths, outdir, resolution, config, start, end, scan_topic, odom_topic)
+
+    return _run(prepare, outdir, opts, "mapping logs")
 
 
 @dataclass
@@ -98,7 +122,7 @@ def batch_bench_paper(seeds: int, outdir: Path, opts: EngineOptions, config: Pat
 
     variants = adapter.paper_variants(no_amcl, only)
     jobs = bench_paper_jobs(seeds, outdir, variants, config, keep_seed0=plots)
-    rep = _run(jobs, outdir, opts, "seeds")
+    rep = _run(lambda: jobs, outdir, opts, "seeds")
     done = [j for j in jobs if any(r.log == j.name and r.status in ("ok", "done") for r in rep.rows)]
     docs = [adapter.load_seed_metrics(Path(j.outdir)) for j in done]
     out = BenchReport(rep, seeds, variants)

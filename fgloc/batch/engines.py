@@ -24,11 +24,15 @@ inputs go by path, and the input files' bytes when they are shipped (``ship=True
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 import multiprocessing as mp
 import os
 import re
 import signal
+import sys
+import threading
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -220,25 +224,81 @@ def _ray_task(fn: JobFn, job: Job, roles: list[str], *blobs: Blob) -> JobResult:
 
 
 class RayEngine:
-    """One Ray task per job, on a private local Ray instance or an existing cluster."""
+    """One Ray task per job, on a private local Ray instance or an existing cluster.
+
+    :meth:`start` begins joining (or starting) Ray in a background thread and returns at once, so
+    the driver reads its inputs, fingerprints and completion markers meanwhile (the batch API
+    calls it before that preparation); :meth:`connect` (and :meth:`run`) wait for it.  The thread
+    lives as long as the connection: Ray ties its daemons to the thread that started them (Linux's
+    parent-death signal), so a thread that ended would take a private instance down with it.
+    ``timings`` records the start (``import ray`` and ``ray.init``), how long the driver waited for
+    it, and the stop, in seconds.
+    """
 
     name = "ray"
 
     def __init__(self, jobs: int | None = None, address: str | None = None) -> None:
         self.jobs = jobs
         self.address = address or os.environ.get("RAY_ADDRESS") or None
-        self.ray = import_ray()
-        self._started = False
+        if importlib.util.find_spec("ray") is None:  # the hint now; the import itself in start()
+            raise ConfigError(RAY_HINT)
+        self._started = False          # this engine started the Ray connection (it stops it)
+        self._owned_by_run = False     # started by start(): run() stops it at the end
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._hold_until = threading.Event()
+        self._error: BaseException | None = None
+        self.timings: dict[str, float] = {"start_s": 0.0, "wait_s": 0.0, "stop_s": 0.0}
+
+    @property
+    def ray(self) -> Any:
+        return import_ray()
 
     def describe(self) -> str:
         if self.address:
             return f"Ray cluster at {self.address}"
         return f"local Ray instance, {self.jobs or os.cpu_count()} CPU(s)"
 
+    def start(self) -> None:
+        """Begin connecting in a background thread (no-op when Ray is already initialized in this
+        process or a start is under way); :meth:`run` then stops Ray at its end."""
+        if self._thread is not None or ("ray" in sys.modules and self.ray.is_initialized()):
+            return
+        self._owned_by_run = True
+        self._ready.clear()
+        self._hold_until.clear()
+        self._error = None
+        self._thread = threading.Thread(target=self._hold, name="fgloc-ray-start", daemon=True)
+        self._thread.start()
+
+    def _hold(self) -> None:
+        """The start thread: connect, then stay alive until :meth:`shutdown` (see the class doc)."""
+        try:
+            self._connect_now()
+        except BaseException as e:  # noqa: BLE001 - handed to the driver thread by connect()
+            self._error = e
+        finally:
+            self._ready.set()
+        self._hold_until.wait()
+
     def connect(self) -> None:
         """Join the cluster, or start a private local instance (address 'local': never attaches
-        to another Ray instance running on this machine)."""
-        ray = self.ray
+        to another Ray instance running on this machine); waits for a :meth:`start` under way."""
+        if self._thread is None:
+            self._connect_now()
+            return
+        t0 = time.perf_counter()
+        self._ready.wait()
+        self.timings["wait_s"] += time.perf_counter() - t0
+        if self._error is not None:
+            err, self._error = self._error, None
+            self._hold_until.set()
+            self._thread = None
+            raise err
+
+    def _connect_now(self) -> None:
+        t0 = time.perf_counter()
+        ray = import_ray()
         if ray.is_initialized():
             return
         kw: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
@@ -251,7 +311,7 @@ class RayEngine:
                 # (niceness 15) makes a batch yield to every other process of a shared machine
                 ray.init(address="local", num_cpus=int(self.jobs or os.cpu_count() or 1),
                          include_dashboard=False, _system_config={"worker_niceness": 0}, **kw)
-                self._started = True
+            self._started = True
         except (ConnectionError, RuntimeError, ValueError) as e:
             where = self.address or "a local instance"
             hint = ""
@@ -259,21 +319,32 @@ class RayEngine:
                 hint = ("; a cluster with token authentication needs RAY_AUTH_MODE=token and its token "
                         "(RAY_AUTH_TOKEN or ~/.ray/auth_token)")
             raise ConfigError(f"Ray: cannot connect to {where} ({str(e).strip().splitlines()[0]}){hint}") from None
+        finally:
+            self.timings["start_s"] += time.perf_counter() - t0
 
     def shutdown(self) -> None:
-        if self.ray.is_initialized():
+        """Disconnect (a private instance stops); waits for a start under way first."""
+        t0 = time.perf_counter()
+        if self._thread is not None:
+            self._ready.wait()
+        if "ray" in sys.modules and self.ray.is_initialized():
             self.ray.shutdown()
-        self._started = False
+        if self._thread is not None:
+            self._hold_until.set()
+            self._thread.join(timeout=10)
+            self._thread = None
+        self._started = self._owned_by_run = False
+        self.timings["stop_s"] += time.perf_counter() - t0
 
     def run(self, fn: JobFn, jobs: list[Job], ship: bool = False) -> Iterator[tuple[int, JobResult]]:
         if not jobs:
+            if self._owned_by_run:  # started for this run, which has nothing to do
+                self.shutdown()
             return
-        ray = self.ray
-        owns = not ray.is_initialized()
-        self.connect()
-        task = ray.remote(num_cpus=1, max_retries=1)(_ray_task)
-        cpus = int(ray.cluster_resources().get("CPU", 1)) or 1
-        cap = 2 * cpus
+        if self._thread is None and not self.ray.is_initialized():
+            self.start()  # not started before: this run starts Ray and stops it at its end
+        owns = self._owned_by_run
+        ray: Any = None
         queue: deque[tuple[int, Job]] = deque(enumerate(jobs))
         pending: dict[Any, tuple[int, Job]] = {}
         refs: dict[tuple[str, str], Any] = {}     # shipped input -> object ref (a shared map is put once)
@@ -283,6 +354,11 @@ class RayEngine:
                 for key in job.inputs.items():
                     users[key] = users.get(key, 0) + 1
         try:
+            self.connect()  # the wait for a start under way is timed in self.timings
+            ray = self.ray
+            task = ray.remote(num_cpus=1, max_retries=1)(_ray_task)
+            cpus = int(ray.cluster_resources().get("CPU", 1)) or 1
+            cap = 2 * cpus
             while queue or pending:
                 while queue and len(pending) < cap:
                     i, job = queue.popleft()
@@ -311,7 +387,7 @@ class RayEngine:
                         res = JobResult(job.name, False, error=ray_error_line(e))
                     yield i, res
         finally:
-            for ref in pending:
+            for ref in pending:  # (pending: ray was imported)
                 try:
                     ray.cancel(ref, force=True)
                 except Exception:  # noqa: BLE001 - best effort on the way out

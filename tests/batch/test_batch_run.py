@@ -63,24 +63,40 @@ def test_local_pool_matches_single_runs_and_resumes(batch_logs, references):
     assert stamps == {n: (out / n / "trajectory.tum").stat().st_mtime_ns for n in ROUTES}
 
 
+def _ray_gone() -> bool:
+    """No Ray connection in this process and no thread holding one."""
+    import threading
+
+    import ray
+
+    return not ray.is_initialized() and not [t for t in threading.enumerate() if t.name == "fgloc-ray-start"]
+
+
 def test_ray_local_instance_matches_single_runs(batch_logs, references, tmp_path):
-    """``--engine ray -j 2``: the private local instance (2 CPUs, workers at niceness 0), the same
-    files as single runs; on that instance a worker killed mid-job fails only its own job."""
+    """``--engine ray -j 2``: the private local instance (2 CPUs, workers at niceness 0), started in the
+    background while the jobs are prepared and stopped at the end (also when preparing fails), the
+    same files as single runs; on that instance a worker killed mid-job fails only its own job."""
     pytest.importorskip("ray")
     from fgloc.batch import Job, RayEngine
 
+    rc, _, err = fgloc_cli("batch", "run", batch_logs["logs"] / "nothing-*.mcap", "-o", tmp_path / "none",
+                           "--engine", "ray", "-j", "2")
+    assert rc == 2 and "pattern matches no file" in err
+    assert _ray_gone()  # the instance started for the batch was stopped again
+    out = batch_logs["root"] / "out-ray"
+    rc, stdout, _ = fgloc_cli("batch", "run", batch_logs["logs"], "--map", batch_logs["map"], "--initial-pose",
+                              *map(str, START), "-o", out, "--engine", "ray", "-j", "2", "-q")
+    assert rc == 1
+    assert "local Ray instance, 2 CPU(s)" in stdout
+    assert _ray_gone()
+    assert_identical(out, references, ROUTES)
+    rows = check_summary(out, batch_logs, references)
+    # the jobs ran in Ray worker processes (one per CPU, reused), not in this one
+    assert all(r["host"] and not r["host"].endswith(f":{os.getpid()}") for r in rows.values())
+    assert len({r["host"] for r in rows.values() if r["host"]}) <= 2
     engine = RayEngine(2)
-    engine.connect()  # the instance the CLI's engine would start; the CLI finds it running and keeps it
+    engine.connect()  # connected by hand: kept after a run, until shutdown()
     try:
-        out = batch_logs["root"] / "out-ray"
-        rc, stdout, _ = fgloc_cli("batch", "run", batch_logs["logs"], "--map", batch_logs["map"], "--initial-pose",
-                                  *map(str, START), "-o", out, "--engine", "ray", "-j", "2", "-q")
-        assert rc == 1
-        assert "local Ray instance, 2 CPU(s)" in stdout
-        assert_identical(out, references, ROUTES)
-        rows = check_summary(out, batch_logs, references)
-        # the jobs ran in Ray worker processes, not in this one
-        assert all(r["host"] and not r["host"].endswith(f":{os.getpid()}") for r in rows.values())
         assert engine.ray.cluster_resources()["CPU"] == 2
         data = tmp_path / "in.bin"
         data.write_bytes(b"x" * 4321)

@@ -141,6 +141,26 @@ def _correlative(dist, x0, y0, res, dmax, pts, cx, cy, cth, nlin, lin_step, nang
     return scores
 
 
+@njit(cache=True)
+def _local_maxima(sc):  # pragma: no cover - compiled
+    """Cells not below any of their (up to 26) neighbours (scipy's 3x3x3 maximum_filter with
+    mode="nearest", without its temporaries)."""
+    na, ny, nx = sc.shape
+    out = np.zeros(sc.shape, dtype=np.bool_)
+    for a in range(na):
+        for iy in range(ny):
+            for ix in range(nx):
+                v = sc[a, iy, ix]
+                ok = True
+                for da in range(max(a - 1, 0), min(a + 2, na)):
+                    for dy in range(max(iy - 1, 0), min(iy + 2, ny)):
+                        for dx in range(max(ix - 1, 0), min(ix + 2, nx)):
+                            if sc[da, dy, dx] > v:
+                                ok = False
+                out[a, iy, ix] = ok
+    return out
+
+
 @dataclass
 class SearchResult:
     pose: FloatArray
@@ -217,9 +237,7 @@ def correlative_search(
     )
     # rivals are distinct peaks (local maxima) away from the best: the flanks of the best peak,
     # long in a corridor under the coarse search's wide kernel, are no rivals
-    from scipy.ndimage import maximum_filter
-
-    peak = sc >= maximum_filter(sc, size=3, mode="nearest")
+    peak = _local_maxima(sc)
     far = ((np.hypot(xx, yy) > far_m) | (np.abs(aa) > far_rad)) & peak
     amb = float(sc[far].max() / best) if far.any() and best > 0 else 0.0
     offsets = np.column_stack([xx.ravel(), yy.ravel(), aa.ravel()])

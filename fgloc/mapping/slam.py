@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from fgloc.geometry import between, compose, rotate_covariance, transform_points
+from fgloc.geometry import between, compose, compose1, inverse, rotate_covariance, transform_points
 from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
 from fgloc.mapping.scanmatch import (
     DistanceGrid,
@@ -165,6 +165,8 @@ class GraphSlam:
         self.scan_points: list[FloatArray] = []   # match points of every scan (base frame)
         self._pose: FloatArray | None = None      # current tracked pose
         self._odom_prev: FloatArray | None = None
+        self._odom_prev_inv = np.zeros(3)         # its inverse, and the last keyframe's tracked pose's
+        self._kf_inv = np.zeros(3)                # (per-scan steps in scalar maths: compose1)
         self._odom_fix = np.zeros(3)              # odometry jumps removed: corrected = compose(fix, raw)
         self._stamp_prev: float | None = None
         self._grid: DistanceGrid | None = None
@@ -222,17 +224,18 @@ class GraphSlam:
         raw = np.asarray(rec.odom, dtype=float)
         if not np.all(np.isfinite(raw)):  # no usable odometry: carry the last one on
             raw = self._odom_prev if self._odom_prev is not None else np.zeros(3)
-        odom = compose(self._odom_fix, raw)
+        odom = compose1(self._odom_fix, raw)
         if self._pose is None or self._odom_prev is None:
             pts = self._scan_points(rec)
             mpts = voxel_subsample(pts, cfg.match_voxel_m)
             self.stats["empty_scans"] += len(pts) == 0
             self._pose = np.zeros(3)
             self._odom_prev = odom
+            self._odom_prev_inv = inverse(odom)
             self._stamp_prev = rec.stamp
             self._new_keyframe(rec, pts, mpts, None, odom)
             return
-        d_odom = between(self._odom_prev, odom)
+        d_odom = compose1(self._odom_prev_inv, odom)
         jumped = False
         dt = abs(rec.stamp - self._stamp_prev) if self._stamp_prev is not None else 0.0
         step = float(np.hypot(d_odom[0], d_odom[1]))
@@ -245,10 +248,10 @@ class GraphSlam:
             d_odom = between(self._odom_prev, odom)
             jumped = True
         self._odom_prev = odom
+        self._odom_prev_inv = inverse(odom)
         self._stamp_prev = rec.stamp
-        pred = compose(self._pose, d_odom)
-        last_kf = self.keyframes[-1]
-        rel_pred = between(last_kf.frontend, pred)
+        pred = compose1(self._pose, d_odom)
+        rel_pred = compose1(self._kf_inv, pred)
         is_kf = (np.hypot(rel_pred[0], rel_pred[1]) >= cfg.kf_dist_m
                  or abs(rel_pred[2]) >= np.radians(cfg.kf_angle_deg))
         stationary = np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5 and not jumped
@@ -258,7 +261,7 @@ class GraphSlam:
             self._pose = pred
             self.stats["stationary"] += 1
             self.scan_kf.append(len(self.keyframes) - 1)
-            self.scan_rel.append(between(last_kf.frontend, pred))
+            self.scan_rel.append(rel_pred)
             self.scan_stamps.append(rec.stamp)
             if cfg.final_refine:
                 self.scan_points.append(voxel_subsample(self._scan_points(rec), cfg.match_voxel_m))
@@ -286,7 +289,7 @@ class GraphSlam:
                 pose = pred
                 self.stats["track_fail"] += 1
         self._pose = pose
-        rel = between(last_kf.frontend, pose)
+        rel = compose1(self._kf_inv, pose)
         if np.hypot(rel[0], rel[1]) >= cfg.kf_dist_m or abs(rel[2]) >= np.radians(cfg.kf_angle_deg):
             self._new_keyframe(rec, pts, mpts, info, odom)
         else:
@@ -303,6 +306,7 @@ class GraphSlam:
         k = len(self.keyframes)
         kf = Keyframe(rec.index, rec.stamp, np.asarray(odom, dtype=float), self._pose.copy(), pts, mpts)
         self.keyframes.append(kf)
+        self._kf_inv = inverse(kf.frontend)
         self.scan_kf.append(k)
         self.scan_rel.append(np.zeros(3))
         self.scan_stamps.append(rec.stamp)

@@ -1,28 +1,38 @@
 """Benchmark ``fgloc batch``: N simulated logs, sequential vs the local process pool vs Ray.
 
-    python tools/bench_batch.py [--logs 20] [--jobs 2] [--repeat 3] [--route-m 25] [--no-cli]
+    python tools/bench_batch.py [--logs 8] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
+                                [--engines sequential,local,ray,cli] [--workdir DIR]
+
+Logs: by default the paper's run (the 78 m rectangle around the hall, 113 s, the length of a
+real robot's run), one per seed 0..N-1 (the noise, compass offset and distortion differ);
+``--route line --route-m M`` drives M metres along the hall's first side instead (short logs,
+M <= 25). The logs are simulated in parallel before the timing starts.
 
 Rows (each repeated ``--repeat`` times, in rotating order; medians and ranges printed):
 
 * ``sequential``: every log one after the other in this process (``fgloc batch`` with the
   in-process engine: no process start, imports and numba caches paid once) - the baseline;
-* ``fgloc run`` x N: one ``fgloc run`` process per log, what a shell loop does today;
-* ``local pool -j J``: ``--engine local`` (J spawned workers, startup included);
-* ``ray -j J``: ``--engine ray`` on a private local Ray instance with J CPUs, startup and
-  shutdown included; also without them (``ray, after init``).
+* ``fgloc run`` x N (unless ``--no-cli``): one ``fgloc run`` process per log, a shell loop;
+* ``local pool -j J``: ``--engine local`` (J spawned workers, their start included);
+* ``ray -j J``: ``--engine ray`` on a private local Ray instance with J CPUs, as ``fgloc batch``
+  runs it: the instance starts in the background while the driver prepares the jobs, and
+  its start and stop are included; the next row is the same runs without the time the driver
+  waited for the start and the stop.
 
 Speed-up (wall): the sequential run's wall time over the engine's, paired within each repeat.
 Speed-up (CPU time): the sequential run's CPU time over (the engine's job CPU time / workers +
-Ray's startup and shutdown), i.e. the speed-up with the cores to itself; "cores busy" is the
-jobs' CPU time over the wall time (2.0 = both cores all the time).
+the time the driver waited for Ray's start and stop): the speed-up with the cores to itself.
+"CPU s, all processes" is the CPU time of the driver and every process under it (pool
+workers; Ray's daemons and workers), sampled every 0.5 s: what the engine costs the machine
+in all, load or not. "Cores busy" is the jobs' CPU time over the wall time.
 
 Per-log overhead: wall x workers minus the time spent inside the jobs, divided by the
 number of logs (what the engine adds around each log: dispatch, pickling, result transfer,
-idle workers at the end), and the round trip of an empty job (200 of them) per engine.
-Every engine's trajectories are compared byte for byte with the sequential run's.
-The load average of the machine is printed before and after each measurement (the load
-column: its mean); on a shared machine wall times and speed-ups only mean something at a low
-load, the CPU seconds per log (worker CPU time inside the jobs) much less depend on it.
+idle workers at the end; for Ray without its start and stop), and the round trip of an
+empty job (200 of them) per engine. "Worker processes": how many processes ran the jobs (one
+per CPU: each imports fgloc once). Every engine's trajectories are compared byte for byte
+with the sequential run's. The load average (``uptime``'s first figure) is printed before and
+after each measurement.
 """
 
 from __future__ import annotations
@@ -34,29 +44,103 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+START_POSE = [2.5, 3.0, 0.0]   # the paper route's first corner, heading east (both routes start there)
 
-def make_logs(folder: Path, n: int, route_m: float) -> tuple[list[Path], Path]:
-    """``n`` simulated runs (seeds 0..n-1) along the paper hall's first side, ``route_m`` long."""
-    from tqdm import tqdm
 
+def simulate_one(seed: int, folder: str, route: str, route_m: float) -> str:
+    """One simulated log (in a worker process): ``folder/runNN.mcap`` (+ the map beside it)."""
     from fgloc.sim import simulate_paper, write_sim
 
+    root = Path(folder)
+    dst = root / f"run{seed:02d}.mcap"
+    if not dst.exists():
+        kw = {} if route == "paper" else {"route": [START_POSE[:2], [START_POSE[0] + route_m, START_POSE[1]]]}
+        sim = simulate_paper(seed=seed, **kw)
+        d = write_sim(sim, root / "sim" / f"{seed:02d}")
+        shutil.copy(d / "log.mcap", root / f".run{seed:02d}.tmp")
+        os.replace(root / f".run{seed:02d}.tmp", dst)
+        if seed == 0:
+            shutil.copy(d / "map.yaml", root / "map.yaml")
+            shutil.copy(d / "map.pgm", root / "map.pgm")
+        shutil.rmtree(d, ignore_errors=True)
+    return str(dst)
+
+
+def make_logs(folder: Path, n: int, route: str, route_m: float, jobs: int) -> tuple[list[Path], Path]:
+    """``n`` simulated runs (seeds 0..n-1), in ``jobs`` processes; logs of another route are not reused."""
+    tag = folder / "route.txt"
+    want = f"{route} {route_m if route == 'line' else ''}".strip()
+    if tag.exists() and tag.read_text().strip() != want:
+        shutil.rmtree(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    logs = []
-    for seed in tqdm(range(n), desc="simulating logs", unit="log", leave=False):
-        dst = folder / f"run{seed:02d}.mcap"
-        if not dst.exists():
-            sim = simulate_paper(seed=seed, route=[[2.5, 3.0], [2.5 + route_m, 3.0]])
-            d = write_sim(sim, folder / "sim" / f"{seed:02d}")
-            shutil.copy(d / "log.mcap", dst)
-            if not (folder / "map.yaml").exists():
-                shutil.copy(d / "map.yaml", folder / "map.yaml")
-                shutil.copy(d / "map.pgm", folder / "map.pgm")
-        logs.append(dst)
+    tag.write_text(want + "\n")
+    with ProcessPoolExecutor(max(1, jobs)) as pool:
+        logs = [Path(p) for p in pool.map(simulate_one, range(n), [str(folder)] * n, [route] * n, [route_m] * n)]
     return logs, folder / "map.yaml"
+
+
+class CpuMeter:
+    """CPU time (user + system) of this process and of every process under it, sampled every
+    ``period_s`` (a process's last fraction of a period before it ends is not seen)."""
+
+    def __init__(self, period_s: float = 0.5) -> None:
+        import psutil
+
+        self.psutil = psutil
+        self.me = psutil.Process()
+        self.period_s = period_s
+        self.seen: dict[tuple[int, float], float] = {}
+        self.base: dict[tuple[int, float], float] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _sample(self) -> dict[tuple[int, float], float]:
+        out = {}
+        for p in self.me.children(recursive=True):
+            try:
+                with p.oneshot():
+                    t = p.cpu_times()
+                    out[(p.pid, p.create_time())] = t.user + t.system
+            except (self.psutil.NoSuchProcess, self.psutil.AccessDenied, self.psutil.ZombieProcess):
+                pass
+        return out
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.period_s):
+            self.seen.update(self._sample())
+
+    def __enter__(self) -> CpuMeter:
+        self.base = self._sample()
+        self.t0 = time.process_time()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.seen.update(self._sample())
+        self.driver_s = time.process_time() - self.t0
+        self.children_s = sum(v - self.base.get(k, 0.0) for k, v in self.seen.items())
+        self.total_s = self.driver_s + self.children_s
+
+
+def warm_up(work: Path, map_yaml: Path) -> float:
+    """One short log through ``fgloc run``'s code in this process before the timing, so that numba's
+    on-disk caches exist (a fresh checkout compiles them once) and no row pays for that."""
+    from fgloc.batch import InlineEngine, run_batch
+    from fgloc.batch.inputs import run_jobs
+
+    t0 = time.perf_counter()
+    log = Path(simulate_one(0, str(work / "warm-up"), "line", 4.0))
+    rep = run_batch(run_jobs([log], work / "warm-up" / "out", map_yaml, START_POSE), work / "warm-up" / "out",
+                    InlineEngine(), progress=False)
+    assert rep.ok, [r.error for r in rep.rows]
+    return time.perf_counter() - t0
 
 
 def noop_job(job, blobs):
@@ -67,39 +151,48 @@ def noop_job(job, blobs):
 
 
 def run_engine(name: str, engine, logs: list[Path], map_yaml: Path, out: Path) -> dict:
+    """One batch as ``fgloc batch run`` does it: the engine starts (Ray: in the background), the jobs
+    are made and the markers read meanwhile, the jobs run, the engine stops."""
     from fgloc.batch import run_batch
     from fgloc.batch.inputs import run_jobs
 
     shutil.rmtree(out, ignore_errors=True)
-    jobs = run_jobs(logs, out, map_yaml, [2.5, 3.0, 0.0])
     load0 = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    init_s = 0.0
-    if name.startswith("ray"):
-        engine.connect()
-        init_s = time.perf_counter() - t0
-    rep = run_batch(jobs, out, engine, progress=False)
-    if name.startswith("ray"):
-        t_sd = time.perf_counter()
-        engine.shutdown()
-        init_s += time.perf_counter() - t_sd
-    wall = time.perf_counter() - t0
+    with CpuMeter() as cpu:
+        t0 = time.perf_counter()
+        if hasattr(engine, "start"):
+            engine.start()
+        elif name == "ray":  # an engine without a background start (older trees): start it first
+            engine.connect()
+            engine.timings = {"wait_s": time.perf_counter() - t0, "start_s": time.perf_counter() - t0}
+        jobs = run_jobs(logs, out, map_yaml, START_POSE)
+        rep = run_batch(jobs, out, engine, progress=False)
+        if name == "ray" and not hasattr(engine, "start"):
+            t_sd = time.perf_counter()
+            engine.shutdown()
+            engine.timings["stop_s"] = time.perf_counter() - t_sd
+        wall = time.perf_counter() - t0
     assert rep.failed == 0 and rep.ran == len(jobs), [r.error for r in rep.rows if r.error]
-    inside = sum(r.wall_s for r in rep.results.values())
-    cpu = sum(getattr(r, "cpu_s", 0.0) for r in rep.results.values())
-    return {"wall": wall, "init": init_s, "inside": inside, "cpu": cpu, "load": (load0, os.getloadavg()[0])}
+    tm = getattr(engine, "timings", {})
+    return {"wall": wall, "start": tm.get("start_s", 0.0), "wait": tm.get("wait_s", 0.0), "stop": tm.get("stop_s", 0.0),
+            "inside": sum(r.wall_s for r in rep.results.values()),
+            "cpu": sum(getattr(r, "cpu_s", 0.0) for r in rep.results.values()),
+            "cpu_all": cpu.total_s, "workers": len({r.host for r in rep.results.values()}),
+            "load": (load0, os.getloadavg()[0])}
 
 
 def run_cli(logs: list[Path], map_yaml: Path, out: Path) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     exe = Path(sys.executable).parent / "fgloc"
     load0 = os.getloadavg()[0]
-    t0 = time.perf_counter()
-    for log in logs:
-        subprocess.run([str(exe), "run", str(log.resolve()), "--map", str(map_yaml.resolve()), "--initial-pose",
-                        "2.5", "3.0", "0.0", "-o", str(out / log.stem), "-q"], check=True, capture_output=True)
-    return {"wall": time.perf_counter() - t0, "init": 0.0, "inside": float("nan"), "cpu": float("nan"),
-            "load": (load0, os.getloadavg()[0])}
+    with CpuMeter() as cpu:
+        t0 = time.perf_counter()
+        for log in logs:
+            subprocess.run([str(exe), "run", str(log.resolve()), "--map", str(map_yaml.resolve()), "--initial-pose",
+                            *map(str, START_POSE), "-o", str(out / log.stem), "-q"], check=True, capture_output=True)
+        wall = time.perf_counter() - t0
+    return {"wall": wall, "start": 0.0, "wait": 0.0, "stop": 0.0, "inside": float("nan"), "cpu": float("nan"),
+            "cpu_all": cpu.total_s, "workers": len(logs), "load": (load0, os.getloadavg()[0])}
 
 
 def noop_roundtrip(engine_name: str, jobs: int, n: int = 200) -> float:
@@ -127,7 +220,7 @@ def noop_roundtrip(engine_name: str, jobs: int, n: int = 200) -> float:
             eng.shutdown()
 
 
-def same_outputs(a: Path, b: Path, logs: list[Path], flat_b: bool = False) -> bool:
+def same_outputs(a: Path, b: Path, logs: list[Path]) -> bool:
     for log in logs:
         for f in ("trajectory.tum", "online.tum", "fixes.tum"):
             if (a / log.stem / f).read_bytes() != (b / log.stem / f).read_bytes():
@@ -143,37 +236,45 @@ def fmt_range(v: list[float], digits: int = 1) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--logs", type=int, default=20)
+    ap.add_argument("--logs", type=int, default=8)
     ap.add_argument("--jobs", "-j", type=int, default=2)
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--route-m", type=float, default=25.0, help="length of each simulated run (m, 0.8 m/s)")
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--route", choices=("paper", "line"), default="paper",
+                    help="paper: the paper's 78 m rectangle (113 s); line: --route-m along the first side")
+    ap.add_argument("--route-m", type=float, default=25.0, help="line route length (m, 0.8 m/s; at most 25)")
     ap.add_argument("--no-cli", action="store_true", help="skip the one-process-per-log row")
     ap.add_argument("--no-ray", action="store_true")
+    ap.add_argument("--engines", default="", help="rows to time, e.g. sequential,ray (default: all)")
     ap.add_argument("--workdir", type=Path, default=None, help="keep logs here (default: a temp folder)")
     args = ap.parse_args()
+    if args.route == "line" and not 0 < args.route_m <= 25.0:
+        ap.error("--route-m must be in (0, 25]: a longer straight route runs into the hall's east wall")
 
     from rich.console import Console
     from rich.table import Table
 
     from fgloc.batch import InlineEngine, LocalEngine, RayEngine
 
+    t_bench = time.perf_counter()
     con = Console()
     if not con.is_terminal:
-        con = Console(width=220)  # the table whole in a saved log
+        con = Console(width=240)  # the table whole in a saved log
     work = args.workdir or Path(tempfile.mkdtemp(prefix="fgloc-bench-batch-"))
-    logs, map_yaml = make_logs(work / "logs", args.logs, args.route_m)
+    t_sim = time.perf_counter()
+    logs, map_yaml = make_logs(work / "logs", args.logs, args.route, args.route_m, args.jobs)
+    t_sim = time.perf_counter() - t_sim
     from fgloc.io import open_log
 
     log_s = sum(open_log(p).summary()["duration"] for p in logs)
-    con.print(f"{len(logs)} logs, {log_s:.0f} s of log time in all; {os.cpu_count()} CPUs; "
-              f"load average {os.getloadavg()[0]:.2f} at the start")
-    configs: list[tuple[str, object]] = [("sequential", None), ("local", None)]
-    if not args.no_ray:
-        configs.append(("ray", None))
-    if not args.no_cli:
-        configs.append(("cli", None))
-    results: dict[str, list[dict]] = {c: [] for c, _ in configs}
-    order = [c for c, _ in configs]
+    t_warm = warm_up(work, map_yaml)
+    con.print(f"{len(logs)} logs ({args.route} route), {log_s:.0f} s of log time in all, simulated in {t_sim:.0f} s, "
+              f"warm-up {t_warm:.0f} s; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.2f} at the start")
+    order = ["sequential", "local"] + ([] if args.no_ray else ["ray"]) + ([] if args.no_cli else ["cli"])
+    if args.engines:
+        order = [e for e in args.engines.split(",") if e]
+        if "sequential" not in order or set(order) - {"sequential", "local", "ray", "cli"}:
+            ap.error("--engines: a comma-separated subset of sequential,local,ray,cli with sequential")
+    results: dict[str, list[dict]] = {c: [] for c in order}
     same_reps = 0  # repeats in which every engine wrote the sequential run's trajectories
     for rep in range(args.repeat):
         for name in order[rep % len(order):] + order[: rep % len(order)]:
@@ -183,61 +284,69 @@ def main() -> None:
             elif name == "local":
                 r = run_engine(name, LocalEngine(args.jobs), logs, map_yaml, out)
             elif name == "ray":
-                r = run_engine("ray", RayEngine(args.jobs), logs, map_yaml, out)
+                r = run_engine(name, RayEngine(args.jobs), logs, map_yaml, out)
             else:
                 r = run_cli(logs, map_yaml, out)
             results[name].append(r)
-            con.print(f"  repeat {rep + 1} {name:10s} {r['wall']:7.1f} s  (load {r['load'][0]:.2f} -> "
-                      f"{r['load'][1]:.2f})")
+            extra = f"; Ray start {r['start']:.1f} s (waited {r['wait']:.1f}), stop {r['stop']:.1f} s" \
+                if name == "ray" else ""
+            con.print(f"  repeat {rep + 1} {name:10s} {r['wall']:7.1f} s wall, {r['cpu_all']:7.1f} s CPU in all "
+                      f"(load {r['load'][0]:.2f} -> {r['load'][1]:.2f}){extra}")
         same_reps += all(same_outputs(work / "out" / "sequential", work / "out" / name, logs)
                          for name in order if name != "sequential")
-    noop = {"local": [noop_roundtrip("local", args.jobs)]}
-    if not args.no_ray:
-        noop["ray"] = [noop_roundtrip("ray", args.jobs)]
+    noop = {name: [noop_roundtrip(name, args.jobs)] for name in order if name in ("local", "ray")}
 
     seq = results["sequential"]
     seq_cpu = statistics.median(r["cpu"] for r in seq)
-    t = Table(title=f"fgloc batch: {len(logs)} logs x {log_s / len(logs):.0f} s, -j {args.jobs}, "
-                    f"{args.repeat} repeat(s): median (min-max)")
-    cols = ("engine", "wall s", "speed-up (wall)", "startup s", "overhead per log s", "empty job ms",
-            "CPU s per log", "cores busy", "speed-up (CPU time)", "load")
+    seq_all = statistics.median(r["cpu_all"] for r in seq)
+    title = (f"fgloc batch: {len(logs)} logs x {log_s / len(logs):.0f} s ({args.route} route), -j {args.jobs}, "
+             f"{args.repeat} repeat(s): median (min-max)")
+    t = Table(title=title)
+    cols = ("engine", "wall s", "speed-up (wall)", "speed-up (CPU time)", "CPU s, all processes",
+            "CPU vs sequential", "Ray start s (driver waited)", "Ray stop s", "overhead per log s", "empty job ms",
+            "worker processes", "cores busy", "load")
     for c in cols:
         t.add_column(c, justify="left" if c == "engine" else "right")
     labels = {"sequential": "sequential (one process)", "local": f"local pool -j {args.jobs}",
-              "ray": f"ray, local instance, {args.jobs} CPUs", "cli": f"fgloc run x {len(logs)} (a process each)"}
+              "ray": f"Ray -j {args.jobs}, private local instance, start and stop included",
+              "cli": f"fgloc run x {len(logs)} (a process each)"}
     md = ["| " + " | ".join(cols) + " |", "|---" + "|--:" * (len(cols) - 1) + "|"]
     for name in order:
         rs = results[name]
-        walls = [r["wall"] for r in rs]
         # paired with the sequential run of the same repeat (minutes apart, not an hour: the load drifts)
         speed = [s["wall"] / r["wall"] for s, r in zip(seq, rs, strict=True)]
         workers = 1 if name in ("sequential", "cli") else args.jobs
-        over = [(r["wall"] - r["init"]) * workers / len(logs) - r["inside"] / len(logs) for r in rs]
+        fixed = [r["wait"] + r["stop"] for r in rs]
+        over = [(r["wall"] - f) * workers / len(logs) - r["inside"] / len(logs) for r, f in zip(rs, fixed, strict=True)]
         has_cpu = name != "cli"
-        # what the engine would take with its cores to itself: its jobs' CPU time spread over the workers,
-        # plus Ray's startup and shutdown; the sequential run's CPU time divided by that
-        cpu_speed = [seq_cpu / (r["cpu"] / workers + r["init"]) for r in rs] if has_cpu else []
-        cells = [labels[name], fmt_range(walls), fmt_range(speed, 2),
-                 fmt_range([r["init"] for r in rs], 1) if name == "ray" else "-",
+        cpu_speed = [seq_cpu / (r["cpu"] / workers + f) for r, f in zip(rs, fixed, strict=True)] if has_cpu else []
+        ray_row = name == "ray"
+        cells = [labels[name], fmt_range([r["wall"] for r in rs]), fmt_range(speed, 2),
+                 fmt_range(cpu_speed, 2) if has_cpu else "-",
+                 fmt_range([r["cpu_all"] for r in rs]), fmt_range([r["cpu_all"] / seq_all for r in rs], 2),
+                 (f"{fmt_range([r['start'] for r in rs])} ({fmt_range([r['wait'] for r in rs])})"
+                  if ray_row else "-"),
+                 fmt_range([r["stop"] for r in rs]) if ray_row else "-",
                  fmt_range(over, 2) if has_cpu else "-",
                  fmt_range(noop[name], 2) if name in noop else "-",
-                 fmt_range([r["cpu"] / len(logs) for r in rs], 2) if has_cpu else "-",
+                 fmt_range([float(r["workers"]) for r in rs], 0),
                  fmt_range([r["cpu"] / r["wall"] for r in rs], 2) if has_cpu else "-",
-                 fmt_range(cpu_speed, 2) if has_cpu else "-",
                  fmt_range([0.5 * (r["load"][0] + r["load"][1]) for r in rs], 1)]
         t.add_row(*cells)
         md.append("| " + " | ".join(cells) + " |")
-        if name == "ray":
-            w2 = [r["wall"] - r["init"] for r in rs]
-            cells = ["ray, after init/shutdown", fmt_range(w2),
-                     fmt_range([s["wall"] / w for s, w in zip(seq, w2, strict=True)], 2)] + ["-"] * (len(cols) - 3)
+        if ray_row:
+            w2 = [r["wall"] - f for r, f in zip(rs, fixed, strict=True)]
+            cells = ["Ray, less the wait for its start and its stop", fmt_range(w2),
+                     fmt_range([s["wall"] / w for s, w in zip(seq, w2, strict=True)], 2),
+                     fmt_range([seq_cpu / (r["cpu"] / workers) for r in rs], 2)] + ["-"] * (len(cols) - 4)
             t.add_row(*cells)
             md.append("| " + " | ".join(cells) + " |")
     con.print(t)
     print("\n".join(md))
     con.print(f"trajectories identical to the sequential run for every engine in {same_reps} of {args.repeat} "
               f"repeat(s) (a repeat where they differ ran while the source tree changed); "
-              f"load average {os.getloadavg()[0]:.2f} at the end")
+              f"load average {os.getloadavg()[0]:.2f} at the end; benchmark took "
+              f"{(time.perf_counter() - t_bench) / 60:.1f} min")
     if args.workdir is None:
         shutil.rmtree(work, ignore_errors=True)
 

@@ -2,7 +2,9 @@
 
 `import fgloc.cli` took 0.76 s of CPU when one top-level import in a command module pulled in
 numba and scipy (fixed in 27da586; 0.13-0.17 s without them). Every fgloc command, --help
-included, pays that import, so it is checked here in a fresh interpreter.
+included, pays that import, so it is checked here in a fresh interpreter; numpy too (0.07 s of
+CPU, pulled in by the bench functions `fgloc bench` and `fgloc demo` call, until they were
+imported inside those commands).  And `fgloc run` itself imports nothing it does not use.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import json
 import subprocess
 import sys
 
-HEAVY = ("numba", "scipy", "gtsam", "open3d", "kiss_icp", "ray", "matplotlib", "foxglove", "mcap_ros2")
+HEAVY = ("numpy", "numba", "scipy", "gtsam", "open3d", "kiss_icp", "ray", "matplotlib", "foxglove", "mcap_ros2")
 
 
 def test_cli_import_pulls_in_no_heavy_library() -> None:
@@ -23,3 +25,49 @@ def test_cli_import_pulls_in_no_heavy_library() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     assert loaded == [], f"import fgloc.cli imported {loaded}: import them inside the command that needs them"
+
+
+# what `fgloc run` (smoother + native, --quiet) has no use for: plots, other front-ends' libraries,
+# the cluster engine, the progress bar it does not show
+NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm")
+
+
+def test_fgloc_run_imports_only_what_it_uses(tmp_path) -> None:
+    from fgloc.sim import run_scenario, write_sim
+
+    sim = run_scenario({"route": [[2.5, 3.0], [3.5, 3.0]], "laser": {"rate_hz": 10.0}}, seed=0)
+    write_sim(sim, tmp_path / "log")
+    code = (
+        "import atexit, json, sys\n"
+        f"atexit.register(lambda: print('LOADED ' + json.dumps([m for m in {NOT_FOR_RUN!r} if m in sys.modules])))\n"
+        "from fgloc.cli import main\n"
+        "sys.exit(main())\n"
+    )
+    log = tmp_path / "log"
+    out = subprocess.run([sys.executable, "-c", code, "run", str(log / "log.mcap"), "--map", str(log / "map.yaml"),
+                          "-o", str(tmp_path / "out"), "-q"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    line = next(ln for ln in out.stdout.splitlines() if ln.startswith("LOADED "))
+    assert json.loads(line[7:]) == [], f"fgloc run imported {line[7:]}: import them where they are used"
+    assert (tmp_path / "out" / "trajectory.tum").exists()
+
+
+def test_the_collector_paused_for_the_setup_only_in_a_command_process() -> None:
+    import gc
+
+    from fgloc.app.startup import pause_gc, setup_done
+
+    frozen = gc.get_freeze_count()
+    setup_done()  # a library caller: nothing was paused, nothing happens
+    assert gc.isenabled() and gc.get_freeze_count() == frozen
+    pause_gc()
+    try:
+        assert not gc.isenabled()
+        keep = [[i] for i in range(100)]  # alive at the end of the set-up: frozen
+        setup_done()
+        assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(keep)
+        setup_done()  # once only
+        assert gc.isenabled()
+    finally:
+        gc.enable()
+        gc.unfreeze()

@@ -25,7 +25,10 @@ For each log, side by side and interleaved over ``repeats`` (the machine's load 
   the laser's range) on the same scans as 3-D points.
 
 Start-up: ``python -c "import fgloc.cli"``, ``fgloc --help`` and ``fgloc run`` on the first
-2 s of the office log (imports, map, numba from its on-disk cache, writing the outputs).  The
+2 s of the office log (imports, map, numba from its on-disk cache, writing the outputs).  Every
+child starts as an installed fgloc does: from Python's bytecode cache (kept in ``WORKDIR/pycache``,
+filled by the warm-up run, as numba's cache is) even where the environment turns the cache off;
+``--no-bytecode-cache`` times it as the environment says.  The
 "start-up" column of an ``fgloc run`` row is its wall time outside the message loop: before
 the first message (interpreter, imports, log summary, map, localizer, numba from its cache)
 and after the outputs are written (exit).
@@ -257,9 +260,21 @@ def fgloc_argv() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "fgloc.cli"]
 
 
+#: where the child processes keep Python's bytecode cache (``PYTHONPYCACHEPREFIX``), set by
+#: :func:`bench_speed`; None: as this process's environment says
+PYCACHE_PREFIX: Path | None = None
+
+
 def tree_env(tree: Path | None) -> dict[str, str]:
-    """The environment with ``tree`` (a folder holding an ``fgloc`` package) first on the path."""
+    """The environment with ``tree`` (a folder holding an ``fgloc`` package) first on the path.
+
+    With :data:`PYCACHE_PREFIX`, Python's bytecode cache is written there (the source trees stay
+    untouched) and read back, as an installed package has it, even where the environment turns
+    it off (``PYTHONDONTWRITEBYTECODE``: every start would compile fgloc's ~90 modules again)."""
     env = dict(os.environ)
+    if PYCACHE_PREFIX is not None:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(PYCACHE_PREFIX)
     if tree is not None:
         env["PYTHONPATH"] = str(tree) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     return env
@@ -447,19 +462,24 @@ class SpeedReport:
     before: Path | None
     wall_s: float
     after: Path | None = None
+    bytecode_cache: bool = True  # the children started from Python's bytecode cache (else compiled fgloc each time)
 
 
 def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office", "paper"), every1: bool = True,
                 before: Path | None = None, kiss: bool = True, long_minutes: float | None = None,
                 office_s: float = OFFICE_S, say: Callable[[str], None] = lambda s: None,
-                after: Path | None = None) -> SpeedReport:
+                after: Path | None = None, bytecode_cache: bool = True) -> SpeedReport:
     """Measure everything in the module docstring; ``say(line)`` reports progress.
 
     ``after``: a source tree to time as "after" instead of the fgloc this process imports (a
-    snapshot of a commit, while the working tree changes under the benchmark)."""
+    snapshot of a commit, while the working tree changes under the benchmark).
+    ``bytecode_cache``: the children read and write Python's bytecode cache in ``WORKDIR/pycache``
+    (filled by the warm-up run, as numba's cache is); False: as the environment says."""
+    global PYCACHE_PREFIX
     t_start = time.perf_counter()
     workdir = Path(workdir)
     workdir.mkdir(parents=True, exist_ok=True)
+    PYCACHE_PREFIX = (workdir / "pycache").resolve() if bytecode_cache else None
     blogs = make_logs(workdir, office_s=office_s, paper="paper" in logs, long_minutes=long_minutes, say=say)
     every1_yaml = workdir / "every1.yaml"
     every1_yaml.write_text(EVERY1_YAML)
@@ -530,7 +550,8 @@ def bench_speed(workdir: Path, repeats: int = 3, logs: Sequence[str] = ("office"
         "in-memory pipeline, frontend_every 1 (before)", "reading the log alone", "reading the log alone (before)",
         "kiss-icp odometry (its own pipeline)"))}
     ordered = sorted(rows.values(), key=lambda r: (names.index(r.log), order.get(r.what, 99)))
-    return SpeedReport(ordered, startup, startup_before, load, repeats, before, time.perf_counter() - t_start, after)
+    return SpeedReport(ordered, startup, startup_before, load, repeats, before, time.perf_counter() - t_start, after,
+                       bytecode_cache=PYCACHE_PREFIX is not None or not os.environ.get("PYTHONDONTWRITEBYTECODE"))
 
 
 def _have_kiss() -> bool:
@@ -589,5 +610,7 @@ def report_lines(rep: SpeedReport) -> list[str]:
     lines.append("")
     lines.append(f"{rep.repeats} repeat(s), medians [min-max]; load average (1 min) before / after each repeat: "
                  f"{loads}; {os.cpu_count()} CPUs; bench {rep.wall_s:.0f} s"
-                 + (f"; before = {rep.before}" if rep.before else "") + (f"; after = {rep.after}" if rep.after else ""))
+                 + (f"; before = {rep.before}" if rep.before else "") + (f"; after = {rep.after}" if rep.after else "")
+                 + ("; Python's bytecode cache on" if rep.bytecode_cache else
+                    "; no bytecode cache (PYTHONDONTWRITEBYTECODE: every start compiles fgloc's modules)"))
     return lines

@@ -13,17 +13,20 @@ import typer
 
 from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
-from fgloc.bench import PAPER_VARIANTS, bench_faults, bench_paper, claims, frontend_available, localize_sim
 from fgloc.errors import ConfigError
 
 __all__ = ["register"]
 
 
 def _progress(quiet: bool):
-    from tqdm import tqdm
+    """A tqdm bar factory over the messages read; None with --quiet (no bar, no per-message call)."""
+    if quiet:
+        return None
 
     def make(total: int | None) -> Any:
-        return tqdm(total=total, desc="localizing", unit="msg", disable=quiet, leave=False, mininterval=0.5)
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc="localizing", unit="msg", leave=False, mininterval=0.5)
 
     return make
 
@@ -124,6 +127,9 @@ def register(app: typer.Typer) -> None:
                                               "(default: as fast as possible)"),
     ) -> None:
         """Localize a log: trajectory.tum, fixes.tum, run.mcap (/fused_pose + the view's channels), config.yaml."""
+        from fgloc.app.startup import pause_gc
+
+        pause_gc()  # until run_log's set-up is done (imports, map, localizer): fgloc.app.startup
         if backend not in ("ekf", "smoother", "batch"):
             raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
         from fgloc.localization.frames import static_transform_entry  # lazy: keeps `fgloc --help` light
@@ -160,6 +166,7 @@ def register(app: typer.Typer) -> None:
         """The paper experiment over N seeds: the paper's numbers beside EKF, smoother and batch."""
         from rich.console import Console
 
+        from fgloc.bench import PAPER_VARIANTS, bench_paper, claims, frontend_available
         from fgloc.eval.paper import comparison_text
 
         if seeds < 1:
@@ -192,6 +199,9 @@ def register(app: typer.Typer) -> None:
                                                   help="also fgloc run on an N-minute office log (peak RSS)"),
         no_every1: bool = typer.Option(False, "--no-every1", help="skip the frontend_every: 1 rows"),
         no_kiss: bool = typer.Option(False, "--no-kiss", help="skip kiss-icp's odometry"),
+        no_bytecode_cache: bool = typer.Option(False, "--no-bytecode-cache", help="start the children as the "
+                                               "environment says (PYTHONDONTWRITEBYTECODE: compiling fgloc at "
+                                               "every start) instead of from a bytecode cache in WORKDIR/pycache"),
     ) -> None:
         """The whole `fgloc run` command (a child process) beside reading the log, the in-memory
         pipeline and kiss-icp's odometry: x real time, ms per scan, start-up, peak RSS, I/O share."""
@@ -205,7 +215,8 @@ def register(app: typer.Typer) -> None:
         with con.status("fgloc bench speed") as status:
             rep = bench_speed(workdir, repeats=repeats, logs=[s.strip() for s in logs.split(",") if s.strip()],
                               every1=not no_every1, before=before, kiss=not no_kiss, long_minutes=long_minutes,
-                              say=lambda line: status.update(line), after=after)
+                              say=lambda line: status.update(line), after=after,
+                              bytecode_cache=not no_bytecode_cache)
         print("\n".join(report_lines(rep)))
 
     @bench.command("faults")
@@ -219,6 +230,8 @@ def register(app: typer.Typer) -> None:
         """Compass disturbance, wheel slip and kidnapping vs the fault-free paper run."""
         from rich.console import Console
         from rich.table import Table
+
+        from fgloc.bench import bench_faults
 
         rows = bench_faults(backend, frontend, seeds, config)
         t = Table(title=f"fault scenarios ({backend} + {frontend})")
@@ -240,6 +253,7 @@ def register(app: typer.Typer) -> None:
         """The paper experiment (seed 0) localized by the paper's EKF and the smoother; table and plots."""
         from rich.console import Console
 
+        from fgloc.bench import frontend_available, localize_sim
         from fgloc.config import load_config
         from fgloc.eval.metrics import evaluate
         from fgloc.eval.paper import comparison_text

@@ -155,11 +155,13 @@ class Localizer:
         if not self._monotonic("odometry", t):
             return
         self.stats["odometry"] += 1
+        # finiteness by the sum of the values (one scalar test, as for the twist: at the odometry's rate)
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
-        if pose is not None and (pose.shape != (3,) or not np.all(np.isfinite(pose))):
+        if pose is not None and (pose.shape != (3,) or not math.isfinite(float(pose[0]) + float(pose[1])
+                                                                         + float(pose[2]))):
             pose = None
         cov = msg.twist_cov
-        if cov is not None and not math.isfinite(float(np.sum(cov))):
+        if cov is not None and not math.isfinite(float(np.asarray(cov, dtype=float).sum())):
             cov = None
         tw, cov = self.odom.step(t, tw, cov, pose)
         if self.odom.from_poses:

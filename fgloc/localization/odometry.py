@@ -39,8 +39,8 @@ class OdometryTracker:
         self._prev_pose: tuple[float, FloatArray] | None = None
         self._scale_sig = np.asarray(cfg.pose_delta_sigmas, dtype=float)
         # auto mode's agreement window: (t, pose increment, twist increment, poses moved) and sums
-        self._window: deque[tuple[float, FloatArray, FloatArray, bool]] = deque()
-        self._sums = np.zeros(8)  # pose increments (3), twist increments (3), path length, |turn|
+        self._window: deque[tuple[float, tuple[float, ...], bool]] = deque()
+        self._sums = [0.0] * 8  # pose increments (3), twist increments (3), path length, |turn|
         self._moved = 0
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
@@ -51,8 +51,14 @@ class OdometryTracker:
         0 (with that variance): its value must not shape the others either (a skid steer's wheel yaw
         rate, 4.7x the true one on r_l's test2.bag, bent every integrated odometry increment's
         translation).  The dead-reckoned odom pose for the front-ends keeps the message's twist.
+
+        Scalar maths per message (called at the odometry's rate): no temporary arrays but the
+        pose and twist handed on.
         """
-        tw, cov = self._twist(t, twist, cov, pose)
+        unused = self._unused(cov)
+        tw, cov = self._twist(t, twist, cov, pose, unused)
+        if cov is not None and tw is not twist:
+            unused = self._unused(cov)  # a pose-derived twist's covariance keeps the unused ones
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
         if self.t is not None:
             self.pose = compose1(self.pose, se2_exp(tw * (t - self.t)))
@@ -60,9 +66,8 @@ class OdometryTracker:
         self.twist = tw
         if self.first_t is None:
             self.first_t = t
-        unused = self._unused(cov)
-        if unused.any():
-            tw = np.where(unused, 0.0, tw)
+        if unused[0] or unused[1] or unused[2]:
+            tw = np.array([0.0 if unused[i] else float(tw[i]) for i in range(3)])
         return tw, cov
 
     def pose_at(self, t: float) -> FloatArray:
@@ -73,8 +78,8 @@ class OdometryTracker:
             return compose1(self.pose, se2_exp(self.twist * (t - self.t)))
         return self.pose
 
-    def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None
-               ) -> tuple[FloatArray, FloatArray | None]:
+    def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
+               unused: tuple[bool, bool, bool] | None = None) -> tuple[FloatArray, FloatArray | None]:
         """The body twist to integrate: the message's, or the dead-reckoned pose's differential.
 
         robot_localization's differential mode: when the source carries poses and its twist
@@ -102,8 +107,9 @@ class OdometryTracker:
         dt = t - prev[0]
         if not dt > 0:
             return tw, cov
-        unused = self._unused(cov)
-        if unused.all():
+        if unused is None:
+            unused = self._unused(cov)
+        if unused[0] and unused[1] and unused[2]:
             return tw, cov
         delta = between(prev[1], pose)
         if mode != "always" and self._agrees(t, delta, se2_exp(tw * dt), unused):
@@ -115,38 +121,46 @@ class OdometryTracker:
         speed = float(np.hypot(u[0], u[1]))
         sig = self._scale_sig + self.cfg.pose_delta_rel * np.array([speed, speed, abs(float(u[2])) + speed])
         out = np.diag(sig**2)
-        if unused.any() and cov is not None:
+        if (unused[0] or unused[1] or unused[2]) and cov is not None:
             # the source's unused components stay as the message gave them, unused
-            u = np.where(unused, tw, u)
-            for i in np.flatnonzero(unused):
-                out[i, i] = float(cov[i, i])
+            c3 = np.asarray(cov, dtype=float).reshape(3, 3)
+            u = np.array([float(tw[i]) if unused[i] else float(u[i]) for i in range(3)])
+            for i in range(3):
+                if unused[i]:
+                    out[i, i] = float(c3[i, i])
         return u, out
 
-    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray, unused: np.ndarray) -> bool:
-        """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``."""
+    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray, unused: tuple[bool, bool, bool]) -> bool:
+        """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``
+        (running sums in Python floats: this runs for every odometry message that carries a pose)."""
         win = self._window
-        moved = bool(np.any(delta != 0.0))
-        win.append((t, delta, d_tw, moved))
-        self._sums += np.concatenate([delta, d_tw, [math.hypot(delta[0], delta[1]), abs(float(delta[2]))]])
+        d0, d1, d2 = float(delta[0]), float(delta[1]), float(delta[2])
+        e0, e1, e2 = float(d_tw[0]), float(d_tw[1]), float(d_tw[2])
+        moved = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
+        row = (d0, d1, d2, e0, e1, e2, math.hypot(d0, d1), abs(d2))
+        win.append((t, row, moved))
+        sums = self._sums
+        for i in range(8):
+            sums[i] += row[i]
         self._moved += moved
         while len(win) > 1 and win[0][0] <= t - AGREEMENT_WINDOW_S:
-            _, d0, e0, m0 = win.popleft()
-            self._sums -= np.concatenate([d0, e0, [math.hypot(d0[0], d0[1]), abs(float(d0[2]))]])
+            _, old, m0 = win.popleft()
+            for i in range(8):
+                sums[i] -= old[i]
             self._moved -= m0
         if not self._moved:
             return True  # poses frozen: not filled in by the driver (or standing still: both agree)
-        sd, se = self._sums[0:3], self._sums[3:6]
-        lin, rot = max(float(self._sums[6]), 0.0), max(float(self._sums[7]), 0.0)
+        lin, rot = max(sums[6], 0.0), max(sums[7], 0.0)
         tol_lin = self.cfg.pose_delta_tolerance_m + 0.1 * lin
         tol_rot = math.radians(self.cfg.pose_delta_tolerance_deg) + 0.1 * rot
-        lin_ok = bool(unused[0] and unused[1]) or float(np.hypot(se[0] - sd[0], se[1] - sd[1])) <= tol_lin
-        rot_ok = bool(unused[2]) or abs(float(se[2] - sd[2])) <= tol_rot
+        lin_ok = bool(unused[0] and unused[1]) or math.hypot(sums[3] - sums[0], sums[4] - sums[1]) <= tol_lin
+        rot_ok = bool(unused[2]) or abs(sums[5] - sums[2]) <= tol_rot
         return lin_ok and rot_ok
 
     @staticmethod
-    def _unused(cov: FloatArray | None) -> np.ndarray:
+    def _unused(cov: FloatArray | None) -> tuple[bool, bool, bool]:
         """Which of vx, vy, vyaw the source does not contribute (variance UNUSED_VAR or more)."""
         if cov is None:
-            return np.zeros(3, dtype=bool)
-        d = np.diag(np.asarray(cov, dtype=float).reshape(3, 3))
-        return np.asarray(d >= UNUSED_VAR, dtype=bool)
+            return (False, False, False)
+        c = cov if isinstance(cov, np.ndarray) and cov.shape == (3, 3) else np.asarray(cov, dtype=float).reshape(3, 3)
+        return (bool(c[0, 0] >= UNUSED_VAR), bool(c[1, 1] >= UNUSED_VAR), bool(c[2, 2] >= UNUSED_VAR))

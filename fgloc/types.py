@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import interpolate_poses, wrap_angle
+from fgloc.geometry import interpolate_poses, quaternion_to_yaw, wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -77,6 +77,26 @@ class Imu:
     linear_acceleration_mps2: FloatArray | None = None
     linear_acceleration_cov: FloatArray | None = None
     frame_id: str = "imu_link"
+
+    def heading(self) -> CompassHeading:
+        """The yaw-only view of this message in its own frame (what fgloc's readers gave before
+        they kept the whole Imu): the quaternion's yaw (None without orientation or with a zero
+        quaternion), the z angular velocity, and the zz elements of their covariances (NaN when
+        unknown).  The mount is not applied."""
+        q = self.orientation_xyzw
+        yaw = None
+        if q is not None:
+            qa = np.asarray(q, dtype=float).reshape(-1)
+            if qa.shape == (4,) and not float(qa @ qa) < 1e-12:  # zero quaternion: none (NaN kept)
+                yaw = float(quaternion_to_yaw(qa[0], qa[1], qa[2], qa[3]))
+        w = self.angular_velocity_radps
+        rate = None if w is None else float(np.asarray(w, dtype=float).reshape(-1)[2])
+        return CompassHeading(self.stamp, yaw, rate, _zz(self.orientation_cov) if yaw is not None else float("nan"),
+                              _zz(self.angular_velocity_cov) if rate is not None else float("nan"), self.frame_id)
+
+
+def _zz(cov: FloatArray | None) -> float:
+    return float("nan") if cov is None else float(np.asarray(cov, dtype=float).reshape(9)[8])
 
 
 @dataclass

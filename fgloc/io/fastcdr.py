@@ -40,8 +40,8 @@ from typing import Any, TypeVar
 import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
-from fgloc.io.ros import COV_IDX9, cov6_of, cov9_of, stamp_to_sec_nsec
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.io.ros import COV_IDX9, cov6_of, cov9_full, cov9_of, stamp_to_sec_nsec
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 CDR_LE = b"\x00\x01\x00\x00"
 _F7 = struct.Struct("<7f")
@@ -122,6 +122,20 @@ def encode_compass(m: CompassHeading, stamp: float) -> bytes:
     return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<37d", *vals)])
 
 
+def _vec(v: Any, n: int, absent: tuple[float, ...]) -> list[float]:
+    return list(absent) if v is None else [float(x) for x in np.asarray(v, dtype=float).reshape(n)]
+
+
+def encode_imu(m: Imu, stamp: float) -> bytes:
+    """A whole :class:`Imu` (absent fields as :func:`fgloc.io.ros.imu_to_ros` writes them)."""
+    head = _header_bytes(stamp, m.frame_id)
+    q, w, a = m.orientation_xyzw, m.angular_velocity_radps, m.linear_acceleration_mps2
+    vals = [*_vec(q, 4, (0.0, 0.0, 0.0, 1.0)), *cov9_full(m.orientation_cov, q is None),
+            *_vec(w, 3, (0.0, 0.0, 0.0)), *cov9_full(m.angular_velocity_cov, w is None),
+            *_vec(a, 3, (0.0, 0.0, 0.0)), *cov9_full(m.linear_acceleration_cov, a is None)]
+    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<37d", *vals)])
+
+
 def encode_pose_fix(m: PoseFix, stamp: float) -> bytes:
     head = _header_bytes(stamp, m.frame_id)
     p = [float(v) for v in m.pose]
@@ -139,7 +153,9 @@ def encode_tf(m: Sequence[StaticTransform], stamp: float) -> bytes:
         n += len(child)
         pad = b"\x00" * _pad(n, 8)
         n += len(pad) + 56
-        vals = (float(t.pose[0]), float(t.pose[1]), float(t.z), *_quat(float(t.pose[2])))
+        q = getattr(t, "rotation_xyzw", None)
+        rot = _quat(float(t.pose[2])) if q is None else tuple(float(v) for v in np.asarray(q, dtype=float).reshape(4))
+        vals = (float(t.pose[0]), float(t.pose[1]), float(t.z), *rot)
         parts += [head, child, pad, _D7.pack(*vals)]
     return b"".join(parts)
 
@@ -343,25 +359,26 @@ def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
 
 
 @_damaged_values_as_generic
-def decode_compasses(datas: Sequence[Buffer]) -> list[CompassHeading | None]:
-    out: list[CompassHeading | None] = [None] * len(datas)
+def decode_imus(datas: Sequence[Buffer]) -> list[Imu | None]:
+    """Whole :class:`Imu` s, as :func:`fgloc.io.ros.imu_from_ros` gives them."""
+    out: list[Imu | None] = [None] * len(datas)
     cols = _columns(datas, 1, 37)
     if cols is None:
         return out
     idx, texts, stamps, v = cols
-    qx, qy, qz, qw = v[:, 0], v[:, 1], v[:, 2], v[:, 3]
-    yaw = np.asarray(quaternion_to_yaw(qx, qy, qz, qw)).tolist()
-    no_yaw = ((v[:, 4] == -1.0) | ((qx * qx + qy * qy + qz * qz + qw * qw) < 1e-12)).tolist()
-    no_rate = (v[:, 16] == -1.0).tolist()
-    ovar = np.where(np.any(v[:, 4:13] != 0.0, axis=1), v[:, 12], np.nan).tolist()
-    wvar = np.where(np.any(v[:, 16:25] != 0.0, axis=1), v[:, 24], np.nan).tolist()
-    rate = v[:, 15].tolist()
+    # doubles: orientation 0:4, its covariance 4:13, angular velocity 13:16, 16:25, acceleration 25:28, 28:37
+    absent = (v[:, (4, 16, 28)] == -1.0).tolist()
+    oc, wc, ac = (v[:, j : j + 9].reshape(-1, 3, 3) for j in (4, 16, 28))
+    known = np.any(v[:, 4:13] != 0.0, axis=1).tolist(), np.any(v[:, 16:25] != 0.0, axis=1).tolist(), \
+        np.any(v[:, 28:37] != 0.0, axis=1).tolist()
     stamp_l = stamps.tolist()
-    nan = float("nan")
     for k, i in enumerate(idx):
-        ny, nr = no_yaw[k], no_rate[k]
-        out[i] = CompassHeading(stamp_l[k], None if ny else yaw[k], None if nr else rate[k],
-                                nan if ny else ovar[k], nan if nr else wvar[k], texts[k][0])
+        nq, nw, na = absent[k]
+        out[i] = Imu(stamp_l[k],
+                     None if nq else v[k, 0:4], None if nw else v[k, 13:16],
+                     None if nq or not known[0][k] else oc[k], None if nw or not known[1][k] else wc[k],
+                     None if na else v[k, 25:28], None if na or not known[2][k] else ac[k],
+                     texts[k][0])
     return out
 
 
@@ -440,13 +457,16 @@ def decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransfo
     v = np.frombuffer(b"".join(rows), dtype="<f8").reshape(-1, 7).astype(np.float64)
     yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6]) if len(v) else np.zeros(0)
     poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    quats = v[:, 3:7]
     vl = v.tolist()
     k = 0
     for i, lay in lays:
-        tfs, flips = [], []
+        tfs: list[StaticTransform] = []
+        flips: list[bool] = []
         for parent, child, _ in lay:
             x, y, z, qx, qy, qz, qw = vl[k]
-            tfs.append(StaticTransform(parent=parent.lstrip("/"), child=child.lstrip("/"), pose=poses[k], z=z))
+            tfs.append(Transform3D(parent=parent.lstrip("/"), child=child.lstrip("/"), pose=poses[k], z=z,
+                                   rotation_xyzw=quats[k]))
             nq = qx * qx + qy * qy + qz * qz + qw * qw
             flips.append(nq > 0 and 1.0 - 2.0 * (qx * qx + qy * qy) / nq < 0.0)
             k += 1

@@ -85,7 +85,7 @@ class _Channel:
             self.fast = {  # type: ignore[assignment]
                 LASER_SCAN: fastcdr.decode_laser_scans,
                 ODOMETRY: fastcdr.decode_odometries,
-                IMU: fastcdr.decode_compasses,
+                IMU: fastcdr.decode_imus,
                 TF_MESSAGE: fastcdr.decode_tf_messages,
                 POSE_COV_STAMPED: lambda d: fastcdr.decode_pose_fixes(d, topic),
             }[info.type]

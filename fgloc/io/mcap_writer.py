@@ -24,7 +24,7 @@ from fgloc.io.msgdefs import MSG_TEXT, full_text, short_name
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.source import Record
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform
 
 LIBRARY = "fgloc"
 
@@ -34,6 +34,8 @@ def _encoder(msg: object) -> tuple[str, Callable[[Any, float], bytes]] | None:
         return LASER_SCAN, fastcdr.encode_laser_scan
     if isinstance(msg, Odometry):
         return ODOMETRY, fastcdr.encode_odometry
+    if isinstance(msg, Imu):
+        return IMU, fastcdr.encode_imu
     if isinstance(msg, CompassHeading):
         return IMU, fastcdr.encode_compass
     if isinstance(msg, PoseFix):
@@ -52,9 +54,11 @@ class LogWriter:
     :meth:`write_raw` messages, as :class:`fgloc.view.record.McapFile`).
 
     A context manager; ``write(topic, msg, stamp=None, log_time_ns=None)`` takes a
-    :class:`LaserScan`, :class:`Odometry`, :class:`CompassHeading`, :class:`PoseFix` or
-    ``list[StaticTransform]``.  Header stamps come from ``msg.stamp`` (or ``stamp``), the log
-    time is the same unless ``log_time_ns`` is given (e.g. an input's record time).
+    :class:`LaserScan`, :class:`Odometry`, :class:`Imu` (the whole message),
+    :class:`CompassHeading` (yaw and yaw rate only), :class:`PoseFix` or
+    ``list[StaticTransform]`` (a :class:`~fgloc.types.Transform3D` with its whole rotation).
+    Header stamps come from ``msg.stamp`` (or ``stamp``), the log time is the same unless
+    ``log_time_ns`` is given (e.g. an input's record time).
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 1024 * 1024, compression: str = "zstd",

@@ -7,10 +7,18 @@ Conventions (both directions):
 * 3x3 covariances over ``[x, y, yaw]`` / ``[vx, vy, wz]`` are the ``(0, 1, 5)`` rows and
   columns of the ROS 6x6 ones; an all-zero 6x6 means "unknown" (-> None).  An Odometry
   whose ``pose`` is None is written with ``pose.covariance[0] = -1`` and read back as None.
-* Imu (REP 145): ``orientation_covariance[0] == -1`` (or a zero quaternion) -> ``yaw_rad``
-  None, likewise angular velocity -> ``yaw_rate_radps`` None; an all-zero covariance ->
-  variance NaN ("unknown"); otherwise the variance is element ``[8]`` (zz) of each covariance.
-* TFMessage: each transform -> 2-D ``StaticTransform`` (x, y, yaw of the quaternion; z kept);
+* Imu -> the whole :class:`~fgloc.types.Imu` (orientation quaternion, angular velocity, linear
+  acceleration, their 3x3 covariances, frame, stamp), values as the message has them (a zero or
+  non-unit quaternion, a NaN covariance are the consumer's to count and skip:
+  :mod:`fgloc.localization.sources`).  REP 145: a field whose covariance element ``[0]`` is
+  ``-1`` is absent -> None (its covariance too); an all-zero covariance is "unknown" -> None.
+  Written back the same way (an absent field: identity quaternion / zero vector, covariance
+  ``[-1, 0, ...]``).  :meth:`fgloc.types.Imu.heading` is the yaw-only view
+  (:class:`~fgloc.types.CompassHeading`), which fgloc's own sensors and the simulator produce:
+  ``compass_to_ros`` writes it (variance in element ``[8]``, zz, of each covariance).
+* TFMessage: each transform -> :class:`~fgloc.types.Transform3D` (x, y, yaw of the quaternion,
+  z, and the whole rotation ``rotation_xyzw``: an IMU mounted upside down or turned about x);
+  written back with that rotation (a plain ``StaticTransform``: its yaw);
   :func:`tf_flips` tells which ones turn the child's z axis down (an upside-down scanner).
 * PoseWithCovarianceStamped: only stamp, frame, pose and covariance survive (``quality`` /
   ``source`` of a :class:`PoseFix` have no field; read back as 1.0 / the topic name).
@@ -30,7 +38,7 @@ import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 COV_IDX = (0, 1, 5)  # x, y, yaw (or vx, vy, wz) inside a ROS 6x6 covariance
 COV_IDX9 = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])  # the same rows/columns of the 6x6, flattened
@@ -83,11 +91,6 @@ def cov3_of(cov36: Any) -> np.ndarray | None:
     if not np.any(c6):
         return None
     return c6[np.ix_(COV_IDX, COV_IDX)].copy()
-
-
-def variance_of(cov9: Any) -> float:
-    c = np.asarray(cov9, dtype=float)
-    return float("nan") if not np.any(c) else float(c[8])
 
 
 def scan_to_ros(m: LaserScan, stamp: float) -> dict:
@@ -150,6 +153,35 @@ def compass_to_ros(m: CompassHeading, stamp: float) -> dict:
     }
 
 
+def _vec3(v: Any) -> dict:
+    a = [0.0, 0.0, 0.0] if v is None else [float(x) for x in np.asarray(v, dtype=float).reshape(3)]
+    return {"x": a[0], "y": a[1], "z": a[2]}
+
+
+def cov9_full(cov: Any, absent: bool) -> list[float]:
+    """A whole 3x3 covariance as the message's 9 values; ``[-1, 0, ...]`` for an absent field
+    (REP 145), zeros for unknown (None)."""
+    if absent:
+        return [-1.0] + [0.0] * 8
+    if cov is None:
+        return [0.0] * 9
+    return [float(x) for x in np.asarray(cov, dtype=float).reshape(9)]
+
+
+def imu_to_ros(m: Imu, stamp: float) -> dict:
+    q = m.orientation_xyzw
+    qa = [0.0, 0.0, 0.0, 1.0] if q is None else [float(x) for x in np.asarray(q, dtype=float).reshape(4)]
+    return {
+        "header": ros_header(stamp, m.frame_id),
+        "orientation": {"x": qa[0], "y": qa[1], "z": qa[2], "w": qa[3]},
+        "orientation_covariance": cov9_full(m.orientation_cov, q is None),
+        "angular_velocity": _vec3(m.angular_velocity_radps),
+        "angular_velocity_covariance": cov9_full(m.angular_velocity_cov, m.angular_velocity_radps is None),
+        "linear_acceleration": _vec3(m.linear_acceleration_mps2),
+        "linear_acceleration_covariance": cov9_full(m.linear_acceleration_cov, m.linear_acceleration_mps2 is None),
+    }
+
+
 def fix_to_ros(m: PoseFix, stamp: float) -> dict:
     p = np.asarray(m.pose, dtype=float)
     return {
@@ -162,6 +194,15 @@ def fix_to_ros(m: PoseFix, stamp: float) -> dict:
     }
 
 
+def _rotation(t: StaticTransform) -> dict:
+    """A transform's quaternion: a :class:`Transform3D`'s whole rotation, else its yaw's."""
+    q = getattr(t, "rotation_xyzw", None)
+    if q is None:
+        return yaw_quaternion(float(t.pose[2]))
+    qa = np.asarray(q, dtype=float).reshape(4)
+    return {"x": float(qa[0]), "y": float(qa[1]), "z": float(qa[2]), "w": float(qa[3])}
+
+
 def tf_to_ros(m: list[StaticTransform], stamp: float) -> dict:
     return {
         "transforms": [
@@ -170,7 +211,7 @@ def tf_to_ros(m: list[StaticTransform], stamp: float) -> dict:
                 "child_frame_id": t.child,
                 "transform": {
                     "translation": {"x": float(t.pose[0]), "y": float(t.pose[1]), "z": float(t.z)},
-                    "rotation": yaw_quaternion(float(t.pose[2])),
+                    "rotation": _rotation(t),
                 },
             }
             for t in m
@@ -216,19 +257,32 @@ def odom_from_ros(m: Any, topic: str) -> Odometry:
     )
 
 
-def compass_from_ros(m: Any, topic: str) -> CompassHeading:
-    ocov, wcov = m.orientation_covariance, m.angular_velocity_covariance
-    q = m.orientation
-    no_yaw = ocov[0] == -1 or (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) < 1e-12  # REP 145 / zero quaternion
-    no_rate = wcov[0] == -1
-    return CompassHeading(
+def cov33_of(cov9: Any) -> np.ndarray | None:
+    """A message's 9-element covariance as 3x3, None when all zero ("unknown")."""
+    c = np.asarray(cov9, dtype=float).reshape(3, 3)
+    return c if np.any(c) else None
+
+
+def imu_from_ros(m: Any, topic: str) -> Imu:
+    """The whole sensor_msgs/Imu (see the module doc: REP 145 absent fields -> None)."""
+    ocov, wcov, acov = m.orientation_covariance, m.angular_velocity_covariance, m.linear_acceleration_covariance
+    q, w, a = m.orientation, m.angular_velocity, m.linear_acceleration
+    no_q, no_w, no_a = ocov[0] == -1, wcov[0] == -1, acov[0] == -1
+    return Imu(
         stamp=header_stamp(m.header),
-        yaw_rad=None if no_yaw else quaternion_yaw(m.orientation),
-        yaw_rate_radps=None if no_rate else float(m.angular_velocity.z),
-        yaw_var=float("nan") if no_yaw else variance_of(ocov),
-        yaw_rate_var=float("nan") if no_rate else variance_of(wcov),
+        orientation_xyzw=None if no_q else np.array([q.x, q.y, q.z, q.w], dtype=float),
+        angular_velocity_radps=None if no_w else np.array([w.x, w.y, w.z], dtype=float),
+        orientation_cov=None if no_q else cov33_of(ocov),
+        angular_velocity_cov=None if no_w else cov33_of(wcov),
+        linear_acceleration_mps2=None if no_a else np.array([a.x, a.y, a.z], dtype=float),
+        linear_acceleration_cov=None if no_a else cov33_of(acov),
         frame_id=m.header.frame_id,
     )
+
+
+def compass_from_ros(m: Any, topic: str) -> CompassHeading:
+    """The yaw-only view of a sensor_msgs/Imu (:meth:`fgloc.types.Imu.heading`)."""
+    return imu_from_ros(m, topic).heading()
 
 
 def fix_from_ros(m: Any, topic: str) -> PoseFix:
@@ -244,15 +298,17 @@ def fix_from_ros(m: Any, topic: str) -> PoseFix:
 
 
 def tf_from_ros(m: Any, topic: str) -> list[StaticTransform]:
-    out = []
+    out: list[StaticTransform] = []
     for t in m.transforms:
         tr = t.transform
+        r = tr.rotation
         out.append(
-            StaticTransform(
+            Transform3D(
                 parent=t.header.frame_id.lstrip("/"),
                 child=t.child_frame_id.lstrip("/"),
-                pose=np.array([tr.translation.x, tr.translation.y, quaternion_yaw(tr.rotation)]),
+                pose=np.array([tr.translation.x, tr.translation.y, quaternion_yaw(r)]),
                 z=float(tr.translation.z),
+                rotation_xyzw=np.array([r.x, r.y, r.z, r.w], dtype=float),
             )
         )
     return out
@@ -280,7 +336,7 @@ def mirror_scan(scan: LaserScan) -> LaserScan:
 FROM_ROS: dict[str, Callable[[Any, str], object]] = {
     LASER_SCAN: scan_from_ros,
     ODOMETRY: odom_from_ros,
-    IMU: compass_from_ros,
+    IMU: imu_from_ros,
     TF_MESSAGE: tf_from_ros,
     POSE_COV_STAMPED: fix_from_ros,
 }

@@ -167,15 +167,34 @@ class LogSource:
 
     def records(self, topics: Iterable[str] | None = None) -> Iterator[Record]:
         """:class:`Record` s in log-time order (see :meth:`messages`).  Scans of a frame that
-        :meth:`laser_mount` found upside down (before this call) come mirrored."""
+        :meth:`laser_mount` found upside down (before this call) come mirrored, and the
+        transforms that turned them upside down come upright (their yaw only), as the upright
+        scanner the mirrored scans are from has them: a log written from these messages (``fgloc
+        import``, a run's recording) is read back the same (``rec.data`` keeps the original bytes)."""
         it = self._records(self._wanted(topics))
-        return self._mirrored(it) if self._mirror_frames else it
+        return self._mirrored(it, self._flipped_edges()) if self._mirror_frames else it
 
-    def _mirrored(self, it: Iterator[Record]) -> Iterator[Record]:
+    def _flipped_edges(self) -> set[tuple[str, str]]:
+        """``(parent, child)`` of the flipped transforms on the chains from the mirrored scan frames."""
+        out: set[tuple[str, str]] = set()
+        for frame in self._mirror_frames:
+            cur = frame
+            for _ in range(64):
+                tr = self._tf.parents.get(cur)
+                if tr is None:
+                    break
+                if self._tf.flipped.get((tr.parent, tr.child), False):
+                    out.add((tr.parent, tr.child))
+                cur = tr.parent
+        return out
+
+    def _mirrored(self, it: Iterator[Record], edges: set[tuple[str, str]]) -> Iterator[Record]:
         for rec in it:
-            if self._mirror_frames and isinstance(rec.msg, LaserScan) \
-                    and rec.msg.frame_id.lstrip("/") in self._mirror_frames:
+            if isinstance(rec.msg, LaserScan) and rec.msg.frame_id.lstrip("/") in self._mirror_frames:
                 rec = rec._replace(msg=mirror_scan(rec.msg))
+            elif edges and isinstance(rec.msg, list) and any((t.parent, t.child) in edges for t in rec.msg):
+                rec = rec._replace(msg=[StaticTransform(t.parent, t.child, t.pose, t.z)
+                                        if (t.parent, t.child) in edges else t for t in rec.msg])
             yield rec
 
     def _records(self, want: set[str]) -> Iterator[Record]:

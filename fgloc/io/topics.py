@@ -5,9 +5,9 @@ topic (default)     ROS 2 type                                    fgloc type
 ==================  ============================================  ==========================
 ``/scan``           ``sensor_msgs/msg/LaserScan``                 :class:`LaserScan`
 ``/odom``           ``nav_msgs/msg/Odometry``                     :class:`Odometry`
-``/imu``            ``sensor_msgs/msg/Imu``                       :class:`CompassHeading`
-``/tf_static``      ``tf2_msgs/msg/TFMessage``                    ``list[StaticTransform]``
-``/tf``             ``tf2_msgs/msg/TFMessage``                    ``list[StaticTransform]``
+``/imu``            ``sensor_msgs/msg/Imu``                       :class:`Imu`
+``/tf_static``      ``tf2_msgs/msg/TFMessage``                    ``list[Transform3D]``
+``/tf``             ``tf2_msgs/msg/TFMessage``                    ``list[Transform3D]``
 ``/ground_truth``   ``nav_msgs/msg/Odometry`` (map frame)         :class:`Odometry`
 ``/fused_pose``     ``geometry_msgs/msg/PoseWithCovarianceStamped``  :class:`PoseFix`
 ==================  ============================================  ==========================

@@ -33,7 +33,7 @@ from fgloc.geometry import wrap_angle
 from fgloc.live.serial_link import RobotParams, kinematics_of
 from fgloc.live.serial_protocol import FLAG_COUNTS, FLAG_GYRO, FLAG_HEADING, encode_sensor_frame
 from fgloc.live.sick import encode_lmdscandata, frame
-from fgloc.types import CompassHeading, LaserScan, Odometry
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +135,8 @@ class Stm32Emulator:
         inject: dict[int, bytes] | None = None,
     ) -> None:
         msgs: list[tuple[str, Odometry | CompassHeading]] = [
-            (t, m) for t, m in messages if t in (odom_topic, imu_topic) and isinstance(m, Odometry | CompassHeading)
+            (t, m.heading() if isinstance(m, Imu) else m) for t, m in messages  # a log's Imu: its yaw and yaw rate
+            if t in (odom_topic, imu_topic) and isinstance(m, Odometry | CompassHeading | Imu)
         ]
         msgs.sort(key=lambda tm: tm[1].stamp)
         if t_start is not None:

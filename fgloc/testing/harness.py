@@ -18,7 +18,7 @@ import numpy as np
 from fgloc.live.app import LiveSession, LiveSummary, load_config
 from fgloc.live.serial_link import RobotParams
 from fgloc.testing.emulators import EmulatorPair, ReplayClock
-from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform, Trajectory
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, StaticTransform, Trajectory
 
 
 @dataclass
@@ -63,7 +63,8 @@ def replay_live(
     odom = next((m for t, m in messages if t == "/odom" and isinstance(m, Odometry)), None)
     if odom is not None and odom.twist_cov is not None:
         over["serial"] = {"twist_std": [float(v) for v in np.sqrt(np.diag(odom.twist_cov))]}
-    imu = next((m for t, m in messages if t == "/imu" and isinstance(m, CompassHeading)), None)
+    imu = next((m if isinstance(m, CompassHeading) else m.heading() for t, m in messages
+                if t == "/imu" and isinstance(m, CompassHeading | Imu)), None)
     if imu is not None:
         ser = over.setdefault("serial", {})
         if np.isfinite(imu.yaw_var):

@@ -24,9 +24,18 @@ import pytest
 
 from fgloc.io import fastcdr, open_log
 from fgloc.io.msgdefs import full_text
-from fgloc.io.ros import FROM_ROS, compass_to_ros, fix_to_ros, odom_to_ros, scan_to_ros, tf_flips, tf_to_ros
+from fgloc.io.ros import (
+    FROM_ROS,
+    compass_to_ros,
+    fix_to_ros,
+    imu_to_ros,
+    odom_to_ros,
+    scan_to_ros,
+    tf_flips,
+    tf_to_ros,
+)
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import test_conformance as conf  # noqa: E402 - the foreign-log generators
@@ -37,14 +46,14 @@ FUZZ_RANDOM = bool(os.environ.get("FGLOC_FUZZ_RANDOM"))
 FAST: dict[str, Callable[[list[bytes]], list[Any]]] = {
     LASER_SCAN: fastcdr.decode_laser_scans,
     ODOMETRY: fastcdr.decode_odometries,
-    IMU: fastcdr.decode_compasses,
+    IMU: fastcdr.decode_imus,
     TF_MESSAGE: fastcdr.decode_tf_messages,
     POSE_COV_STAMPED: lambda d: fastcdr.decode_pose_fixes(d, "/t"),
 }
 ENCODE = {
     LASER_SCAN: (fastcdr.encode_laser_scan, scan_to_ros),
     ODOMETRY: (fastcdr.encode_odometry, odom_to_ros),
-    IMU: (fastcdr.encode_compass, compass_to_ros),
+    IMU: (fastcdr.encode_imu, imu_to_ros),
     TF_MESSAGE: (fastcdr.encode_tf, tf_to_ros),
     POSE_COV_STAMPED: (fastcdr.encode_pose_fix, fix_to_ros),
 }
@@ -142,19 +151,33 @@ def _samples(rng: np.random.Generator) -> dict[str, list[tuple[object, float]]]:
             (Odometry(st, rng.normal(size=3), None, None, None, frame, ""), st),      # no pose, unknown cov
             (Odometry(st, np.zeros(3), None, np.array([1.0, 2.0, math.pi]), None, "odom", frame), st),
         ]
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        c3 = np.diag(rng.uniform(1e-6, 1e-2, 3))
+        c3[0, 1] = c3[1, 0] = 1e-7
         out[IMU] += [
-            (CompassHeading(st, float(rng.uniform(-3, 3)), float(rng.normal()), 1e-4, 1e-6, frame), st),
-            (CompassHeading(st, None, 0.3, frame_id=frame), st),
-            (CompassHeading(st, 1.0, None, frame_id=frame), st),
-            (CompassHeading(st, -math.pi, 0.0, float("nan"), float("nan"), frame), st),
+            (Imu(st, q, rng.normal(size=3), c3, c3 * 0.1, rng.normal(size=3), c3 * 10, frame), st),
+            (Imu(st, None, rng.normal(size=3), None, c3, None, None, frame), st),    # REP 145: no orientation
+            (Imu(st, q, None, c3, None, rng.normal(size=3), None, frame), st),       # nor rates, unknown cov
+            (Imu(st, np.zeros(4), np.zeros(3), np.full((3, 3), np.nan), None, np.zeros(3), None, frame), st),
+            (Imu(st, q * 1.5, np.zeros(3), None, None, None, None, frame), st),      # not unit: kept for the router
         ]
         out[POSE_COV_STAMPED] += [(PoseFix(st, rng.normal(size=3), c, frame_id=frame), st),
                                   (PoseFix(st, rng.normal(size=3), np.zeros((3, 3)), frame_id=frame), st)]
         out[TF_MESSAGE] += [
-            ([StaticTransform(frame, FRAMES[j % len(FRAMES)], rng.normal(size=3), float(rng.normal()))
-              for j in range(k)], st),  # 0 .. 7 transforms
+            ([_tf3(frame, FRAMES[j % len(FRAMES)], rng) for j in range(k)], st),  # 0 .. 7 transforms
         ]
     return out
+
+
+def _tf3(parent: str, child: str, rng: np.random.Generator) -> Transform3D:
+    """A transform as the readers give it: its whole rotation (here any 3-D one) and its yaw."""
+    from fgloc.geometry import quaternion_to_yaw
+
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    xy = rng.normal(size=2)
+    return Transform3D(parent, child, np.array([xy[0], xy[1], quaternion_to_yaw(*q)]), float(rng.normal()), q)
 
 
 @pytest.fixture(scope="module")
@@ -424,3 +447,45 @@ def test_a_schema_with_another_layout_is_not_read_by_the_fixed_layout(samples, t
     fast = fastcdr.decode_odometries(raw)
     assert any(x is None or x.child_frame_id != m.child_frame_id or not np.array_equal(x.twist, m.twist)
                for x, (m, _) in zip(fast, samples[ODOMETRY], strict=True))
+
+
+# ---------------------------------------------------------------------------------------------
+# fgloc's own yaw-only IMU messages and planar transforms (serial link, simulator)
+def test_compass_and_planar_tf_encoders_byte_identical_and_read_back(samples):
+    """A :class:`CompassHeading` is written as an Imu with its yaw and z rate, a planar
+    :class:`StaticTransform` with its yaw's quaternion: byte-identical to the generic encoder, and
+    read back as a whole Imu whose :meth:`~fgloc.types.Imu.heading` is the message written."""
+    st = 1_700_000_000.25
+    comp = [CompassHeading(st, 0.7, -0.2, 1e-4, 1e-6, "imu"), CompassHeading(st, None, 0.3, frame_id="imu"),
+            CompassHeading(st, 1.0, None, frame_id="x"),
+            CompassHeading(st, -math.pi, 0.0, float("nan"), float("nan"), "")]
+    fast = [fastcdr.encode_compass(m, st) for m in comp]
+    assert fast == _generic_bytes(IMU, [compass_to_ros(m, st) for m in comp])
+    assert check_all(IMU, fast) == len(fast)
+    for m, back in zip(comp, fastcdr.decode_imus(fast), strict=True):
+        assert isinstance(back, Imu)
+        h = back.heading()
+        assert h.yaw_rad == pytest.approx(m.yaw_rad, abs=1e-15) if m.yaw_rad is not None else h.yaw_rad is None
+        assert h.yaw_rate_radps == m.yaw_rate_radps
+        assert _same_float(h.yaw_var, m.yaw_var) and _same_float(h.yaw_rate_var, m.yaw_rate_var)
+    planar = [[StaticTransform("base_link", "laser", np.array([0.1, -0.2, 2.5]), 0.3)]]
+    data = [fastcdr.encode_tf(m, st) for m in planar]
+    assert data == _generic_bytes(TF_MESSAGE, [tf_to_ros(m, st) for m in planar])
+    (got,) = fastcdr.decode_tf_messages(data)
+    assert got is not None and isinstance(got[0][0], Transform3D)
+    assert got[0][0].pose == pytest.approx([0.1, -0.2, 2.5])
+    assert got[0][0].rotation_xyzw == pytest.approx([0, 0, math.sin(1.25), math.cos(1.25)])
+
+
+def test_imu_read_back_whole_with_rep145_absent_fields(samples):
+    """Every field of a written Imu comes back; absent fields (covariance[0] = -1) as None."""
+    msgs = samples[IMU]
+    back = fastcdr.decode_imus([fastcdr.encode_imu(m, st) for m, st in msgs])
+    for (m, _), b in zip(msgs, back, strict=True):
+        assert isinstance(m, Imu) and isinstance(b, Imu)
+        for f in ("orientation_xyzw", "angular_velocity_radps", "linear_acceleration_mps2", "orientation_cov",
+                  "angular_velocity_cov", "linear_acceleration_cov"):
+            a, c = getattr(m, f), getattr(b, f)
+            assert (a is None) == (c is None), f
+            if a is not None:
+                assert np.array_equal(a, c, equal_nan=True), f

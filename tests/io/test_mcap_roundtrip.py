@@ -12,7 +12,8 @@ from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.msgdefs import SEPARATOR, full_text
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.topics import Topics
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.localization.frames import transform_of
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 T0 = 1_700_000_000.0
 
@@ -25,7 +26,10 @@ def _stamp(i: int, k: int) -> float:
 def _messages(n: int = 20) -> list[tuple[str, object]]:
     rng = np.random.default_rng(1)
     out: list[tuple[str, object]] = [
-        ("/tf_static", [StaticTransform("base_link", "laser", np.array([0.25, -0.1, 0.3]), z=0.4)])
+        ("/tf_static", [StaticTransform("base_link", "laser", np.array([0.25, -0.1, 0.3]), z=0.4),
+                        # an IMU turned 90 deg about x, then yawed: its whole rotation survives
+                        transform_of("base_link", "imu_link", [0.0, 0.1, 0.2],
+                                     [0.6532815, 0.2705981, 0.2705981, 0.6532815])])
     ]
     for i in range(n):
         r = rng.uniform(0.1, 20.0, 271).astype(np.float32)
@@ -49,14 +53,25 @@ def _messages(n: int = 20) -> list[tuple[str, object]]:
         out.append(("/fused_pose", PoseFix(
             stamp=_stamp(i, 5), pose=np.array([1.0, 2.0, 3.0 - i * 0.1]), cov=np.diag([0.1, 0.2, 0.05]),
             frame_id="map")))
+        q = np.array([0.02, -0.03, math.sin(0.2 + 0.01 * i), math.cos(0.2 + 0.01 * i)])
+        out.append(("/imu", Imu(
+            stamp=_stamp(i, 6), orientation_xyzw=q / np.linalg.norm(q),
+            angular_velocity_radps=np.array([0.01, -0.02, 0.3]),
+            orientation_cov=np.diag([1e-4, 2e-4, 3e-3]), angular_velocity_cov=np.diag([1e-6, 2e-6, 3e-6]),
+            linear_acceleration_mps2=np.array([0.1, 0.2, 9.81]), linear_acceleration_cov=np.eye(3) * 1e-2,
+            frame_id="imu_link")))
     # sensors that leave fields out
     out.append(("/imu", CompassHeading(stamp=_stamp(n, 1), yaw_rad=None, yaw_rate_radps=0.3)))
     out.append(("/imu", CompassHeading(stamp=_stamp(n, 2), yaw_rad=1.0, yaw_rate_radps=None)))
     out.append(("/odom", Odometry(stamp=_stamp(n, 3), twist=np.array([0.1, 0.0, 0.0]))))
+    out.append(("/imu", Imu(stamp=_stamp(n, 4), orientation_xyzw=None, angular_velocity_radps=np.zeros(3))))
     return out
 
 
 def _assert_equal(a: object, b: object) -> None:
+    if isinstance(a, CompassHeading):  # written yaw-only, read back as the whole Imu it is
+        assert isinstance(b, Imu)
+        b = b.heading()
     assert type(a) is type(b)
     if isinstance(a, list):
         assert isinstance(b, list) and len(a) == len(b)
@@ -64,6 +79,9 @@ def _assert_equal(a: object, b: object) -> None:
             assert (x.parent, x.child) == (y.parent, y.child)
             np.testing.assert_allclose(x.pose, y.pose, atol=1e-12)
             assert x.z == y.z
+            assert isinstance(y, Transform3D) and y.rotation_xyzw is not None  # read with its whole rotation
+            if isinstance(x, Transform3D):
+                np.testing.assert_array_equal(y.rotation_xyzw, x.rotation_xyzw)
         return
     assert stamp_to_ns(a.stamp) == stamp_to_ns(b.stamp)  # type: ignore[attr-defined]
     if isinstance(a, LaserScan):
@@ -97,6 +115,15 @@ def _assert_equal(a: object, b: object) -> None:
             va, vb = getattr(a, f), getattr(b, f)
             assert (math.isnan(va) and math.isnan(vb)) or va == vb
         assert a.frame_id == b.frame_id
+    elif isinstance(a, Imu):
+        assert isinstance(b, Imu)
+        for f in ("orientation_xyzw", "angular_velocity_radps", "linear_acceleration_mps2", "orientation_cov",
+                  "angular_velocity_cov", "linear_acceleration_cov"):
+            if getattr(a, f) is None:
+                assert getattr(b, f) is None, f
+            else:
+                np.testing.assert_array_equal(getattr(b, f), getattr(a, f))
+        assert a.frame_id == b.frame_id
     elif isinstance(a, PoseFix):
         assert isinstance(b, PoseFix)
         np.testing.assert_allclose(b.pose, a.pose, atol=1e-12)
@@ -119,7 +146,7 @@ def test_roundtrip_every_type(tmp_path):
         _assert_equal(a, b)
     s = r.summary()
     assert s["topics"]["/scan"] == {"type": "sensor_msgs/msg/LaserScan", "count": 20}
-    assert s["topics"]["/imu"]["count"] == 22
+    assert s["topics"]["/imu"]["count"] == 43  # 22 yaw-only, 21 whole
     assert s["truncated"] is None and s["indexed"]
     assert r.laser_mount().pose == pytest.approx([0.25, -0.1, 0.3])
     gt = r.ground_truth()

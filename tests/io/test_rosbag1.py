@@ -9,7 +9,7 @@ from fgloc.cli import main
 from fgloc.geometry import yaw_to_quaternion
 from fgloc.io import open_log
 from fgloc.io.convert import import_log
-from fgloc.types import CompassHeading, LaserScan, Odometry
+from fgloc.types import Imu, LaserScan, Odometry
 
 N = 15
 T0 = 1_600_000_000
@@ -104,7 +104,7 @@ def test_bag_converts_with_equal_values(tmp_path):
     odoms = [m for t, m in r.messages({"/odom"})]
     imus = [m for t, m in r.messages({"/imu"})]
     for (sec, nsec, ranges, i), s, o, c in zip(expected, scans, odoms, imus, strict=True):
-        assert isinstance(s, LaserScan) and isinstance(o, Odometry) and isinstance(c, CompassHeading)
+        assert isinstance(s, LaserScan) and isinstance(o, Odometry) and isinstance(c, Imu)
         assert s.stamp == sec + nsec * 1e-9
         np.testing.assert_array_equal(s.ranges, ranges)
         assert (s.angle_min, s.range_max, s.frame_id) == (-1.5, 30.0, "laser")
@@ -115,8 +115,13 @@ def test_bag_converts_with_equal_values(tmp_path):
         assert o.twist == pytest.approx([0.5, 0.01, 0.05])
         np.testing.assert_allclose(o.twist_cov, [[1e-3, 0, 1e-4], [0, 2e-3, 0], [1e-4, 0, 3e-3]])
         np.testing.assert_allclose(o.pose_cov, np.diag([0.01, 0.02, 0.03]))
-        assert c.yaw_rad == pytest.approx(-0.2 + 0.01 * i, abs=1e-12)
-        assert (c.yaw_rate_radps, c.yaw_var, c.yaw_rate_var) == (0.05, 4e-4, 1e-6)
+        # the whole Imu: orientation, rates, REP 145's absent acceleration (covariance[0] = -1)
+        assert c.angular_velocity_radps is not None and c.angular_velocity_radps.tolist() == [0.0, 0.0, 0.05]
+        assert c.linear_acceleration_mps2 is None and c.linear_acceleration_cov is None
+        np.testing.assert_array_equal(c.orientation_cov, np.diag([0.0, 0.0, 4e-4]))
+        h = c.heading()
+        assert h.yaw_rad == pytest.approx(-0.2 + 0.01 * i, abs=1e-12)
+        assert (h.yaw_rate_radps, h.yaw_var, h.yaw_rate_var) == (0.05, 4e-4, 1e-6)
     mount = r.laser_mount()
     assert (mount.parent, mount.child) == ("base_link", "laser")
     assert mount.pose == pytest.approx([0.3, -0.05, 0.1]) and mount.z == pytest.approx(0.2)

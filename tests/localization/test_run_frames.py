@@ -58,5 +58,6 @@ def test_static_transform_turns_the_imu_into_base_link(log_and_config: tuple[Pat
     assert finals["with"][2] == pytest.approx(HEADING, abs=0.01)
     assert finals["without"][2] == pytest.approx(HEADING - math.pi / 2, abs=0.01)
     # no scans: no 'no transform base_link -> laser' warning; the IMU frame was given
-    assert not [r for r in caplog.records if "no transform" in r.getMessage()], caplog.text
+    assert [r.getMessage() for r in caplog.records if "no transform" in r.getMessage()] == [  # 'without' only
+        "no transform base_link -> imu_link: the IMU is taken as mounted like base_link"], caplog.text
     assert yaml.safe_load((tmp_path / "with" / "config.yaml").read_text())["sources"]["static_transforms"] == tfs

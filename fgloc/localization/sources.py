@@ -25,13 +25,16 @@ pose source must be in.  The scan-to-map front-end is always a source (``scan``)
 
 An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
 header.frame_id``; :mod:`fgloc.backends.imu`): any 3-D mount when the message is a whole
-:class:`~fgloc.types.Imu` and the transform a :class:`~fgloc.types.Transform3D`; with a
-planar transform or a reader that gives only yaw (:class:`~fgloc.types.CompassHeading`), the
-yaw mount is undone.  A frame without a transform is identity with one warning.
+:class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
+:class:`~fgloc.types.Transform3D` (every log reader's tf, and ``static_transforms``); with a
+planar transform or a yaw-only reading (:class:`~fgloc.types.CompassHeading`: fgloc's serial
+link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity
+with one warning.
 
 Bad input is counted and skipped, never raised: an IMU quaternion of zeros or not of unit
-length, a covariance with a NaN or negative diagonal, a pose in another frame than the one
-configured.  :meth:`SourceRouter.health` (and ``Localizer.stats['sources']`` after the run)
+length, a covariance with a NaN or negative diagonal (each only when the source uses that
+field: a gyro-only source's zero quaternion is not a fault), a pose in another frame than the
+one configured.  :meth:`SourceRouter.health` (and ``Localizer.stats['sources']`` after the run)
 reports per source: accepted / gated / skipped counts with reasons, the estimated scale,
 bias and latency, and the noise it showed against what its messages claimed;
 :func:`status_line` is the one-line form for a live display.
@@ -42,7 +45,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -51,7 +54,7 @@ from fgloc.backends.health import SourceHealth
 from fgloc.backends.imu import imu_in_base, mount_rotation
 from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
-from fgloc.geometry import between, wrap_angle, wrap_scalar
+from fgloc.geometry import between, rotate_covariance, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.localization.frames import parse_static_transforms
 from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
@@ -166,6 +169,31 @@ def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: 
                               float(d.get("scale", 1.0)), None if gate is None else float(gate),
                               None if d.get("frame_id") is None else str(d["frame_id"])))
     return out
+
+
+def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt: float) -> np.ndarray:
+    """The covariance of a differential source's twist, as robot_localization computes it (its
+    ``*_differential`` mode, which the ported configs were tuned with): the two poses' covariances
+    (``[x, y, yaw]``, the xy block turned from the source's frame into the earlier pose's body
+    frame) summed and multiplied by ``dt``.  (Not ``(C1 + C2) / dt^2``: an odometry's poses are
+    integrated, consecutive ones almost perfectly correlated, and that formula made the increments
+    of r_l's test2.bag 125000 times less certain than robot_localization takes them, so the
+    filter ignored them.)"""
+    return np.asarray(rotate_covariance(np.asarray(cov) + np.asarray(prev_cov), -prev_yaw) * dt, dtype=float)
+
+
+def _needed(spec: SourceSpec, msg: Imu) -> Imu:
+    """``msg`` without the fields ``spec`` does not use (their faults are none of its business):
+    the orientation serves yaw, roll / pitch and orientation increments, the angular velocity
+    vyaw (and a levelling IMU's heading rate)."""
+    orient = spec.uses("yaw") or spec.uses("roll")
+    rates = spec.uses("vyaw")
+    if orient and rates:
+        return msg
+    return replace(msg, orientation_xyzw=msg.orientation_xyzw if orient else None,
+                   orientation_cov=msg.orientation_cov if orient else None,
+                   angular_velocity_radps=msg.angular_velocity_radps if rates else None,
+                   angular_velocity_cov=msg.angular_velocity_cov if rates else None)
 
 
 def _cov_bad(c: Any) -> bool:
@@ -290,7 +318,9 @@ class SourceRouter:
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
         if spec.differential or not any(spec.uses(c) for c in ("vx", "vy", "vyaw")):
             # robot_localization's differential mode: the twist of the pose increments
+            pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
             prev, st.prev_pose = st.prev_pose, (None if pose is None else (float(msg.stamp), pose))
+            prev_pc, st.extra["prev_pose_cov"] = st.extra.get("prev_pose_cov"), pc
             if pose is None:
                 self._skip(st, "differential source without poses")
                 return
@@ -298,8 +328,8 @@ class SourceRouter:
                 return
             dt = float(msg.stamp) - prev[0]
             tw = se2_log(between(prev[1], pose)) / dt
-            pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
-            cov = None if pc is None else 2.0 * pc / (dt * dt)
+            cov = None if pc is None else \
+                differential_cov(pc, pc if prev_pc is None else prev_pc, float(prev[1][2]), dt)
             comps: tuple[str, ...] = ("x", "y", "yaw")
             mixed = [i for i, (pc_, vc) in enumerate((("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
                      if not spec.uses(pc_) and spec.uses(vc)]
@@ -367,7 +397,7 @@ class SourceRouter:
             mount = self._mount(msg.frame_id)
             if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
                 st.extra["no_transform"] = True
-            base, problems = imu_in_base(msg, mount_rotation(mount))
+            base, problems = imu_in_base(_needed(spec, msg), mount_rotation(mount))
             for p in problems:
                 self._skip(st, p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
@@ -375,7 +405,9 @@ class SourceRouter:
                 if self._tilt_source in (None, spec.name):  # the first levelling IMU levels
                     self._tilt_source = spec.name
                     self._tilt = (float(msg.stamp), *base.roll_pitch_rad)
-                if base.heading_rate_radps is not None:
+                # the heading's rate on a slope; a tilt no ground robot drives on (an upside-down or
+                # left-handed mount, as _levelled refuses it) keeps the base's own z rate
+                if base.heading_rate_radps is not None and max(map(abs, base.roll_pitch_rad)) <= MAX_TILT_RAD:
                     rate = base.heading_rate_radps
         else:
             yaw, rate = msg.yaw_rad, msg.yaw_rate_radps
@@ -404,11 +436,13 @@ class SourceRouter:
         t = float(msg.stamp)
         if spec.differential and yaw is not None:
             # orientation increments as a yaw rate (robot_localization's imuN_differential)
+            var = yaw_var if math.isfinite(yaw_var) else 1e-4
             prev, st.prev_yaw = st.prev_yaw, (t, yaw)
+            prev_var, st.extra["prev_yaw_var"] = st.extra.get("prev_yaw_var", var), var
             if prev is not None and t > prev[0] and spec.uses("yaw"):
                 d_rate = wrap_scalar(yaw - prev[1]) / (t - prev[0])
-                if rate is None or not spec.uses("vyaw"):
-                    rate, rate_var = d_rate, 2.0 * (yaw_var if math.isfinite(yaw_var) else 1e-4) / (t - prev[0]) ** 2
+                if rate is None or not spec.uses("vyaw"):  # r_l's variance (differential_cov)
+                    rate, rate_var = d_rate, (var + prev_var) * (t - prev[0])
             yaw = None
         if yaw is not None and spec.uses("yaw"):
             yaw_var = self._var(spec, "yaw", yaw_var)

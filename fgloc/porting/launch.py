@@ -9,7 +9,10 @@ lack (r_l's own ``test1.bag``: the IMU mount).  :func:`read_launch` returns
   :func:`~fgloc.porting.from_robot_localization` / :func:`~fgloc.porting.from_nav2` (``--node``
   picks one when several match);
 * the robot mounts of the ``static_transform_publisher`` nodes (``tf`` / ``tf2_ros``) as
-  ``sources.static_transforms`` entries (:mod:`fgloc.localization.frames`);
+  ``sources.static_transforms`` entries (:mod:`fgloc.localization.frames`); a node's own name
+  for the robot frame (robot_localization's ``base_link_frame``, amcl's ``base_frame_id``, e.g.
+  ``mustang_base``) is a robot frame too, and its mounts are carried over as ``base_link``'s
+  (fgloc's name for the robot; a note says so);
 * notes: what could not be read (a ``<rosparam command="load" file=...>``, transforms between
   other frames than the robot and a sensor).
 
@@ -51,6 +54,22 @@ def _value(text: str, typ: str | None) -> Any:
         return text
 
 
+#: parameters naming a node's robot (body) frame: robot_localization's, amcl's
+BASE_FRAME_PARAMS = ("base_link_frame", "base_frame_id")
+
+
+def _robot_frames(root: ET.Element, sub: Any) -> tuple[str, ...]:
+    """``base_link``, ``base_footprint`` and the robot frame any node names (``base_link_frame``...)."""
+    out = list(ROBOT_FRAMES)
+    for node in root.iter("node"):
+        for p in node:
+            if p.tag == "param" and p.get("name") in BASE_FRAME_PARAMS:
+                v = sub(p.get("value") or p.text or "").strip().lstrip("/")
+                if v and v not in out:
+                    out.append(v)
+    return tuple(out)
+
+
 def read_launch(path: str | Path, text: str) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]], list[str]]:
     """``(node parameters, static transform entries, notes)`` of a ROS 1 launch file (module doc)."""
     try:
@@ -71,6 +90,7 @@ def read_launch(path: str | Path, text: str) -> tuple[dict[str, dict[str, Any]],
     nodes: dict[str, dict[str, Any]] = {}
     tfs: list[dict[str, Any]] = []
     notes: list[str] = []
+    robot = _robot_frames(root, sub)
     for node in root.iter("node"):
         typ = node.get("type", "")
         name = node.get("name") or typ or "node"
@@ -78,7 +98,12 @@ def read_launch(path: str | Path, text: str) -> tuple[dict[str, dict[str, Any]],
             entry = entry_of_publisher_args(shlex.split(sub(node.get("args", ""))))
             if entry is None:
                 notes.append(f"{name} ({typ}): arguments {node.get('args')!r} not read")
-            elif entry["parent"] in ROBOT_FRAMES and entry["child"] not in ROBOT_FRAMES:
+            elif entry["parent"] in robot and entry["child"] not in robot:
+                if entry["parent"] not in ROBOT_FRAMES:
+                    notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']}: a mount on the robot "
+                                 f"(the filter's base frame {entry['parent']}), carried over as "
+                                 f"base_link -> {entry['child']}")
+                    entry["parent"] = "base_link"
                 tfs.append(entry)
             else:
                 notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']} is not a sensor mount on "

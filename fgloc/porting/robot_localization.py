@@ -228,7 +228,8 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         used.add("base_link_frame")
         if str(p["base_link_frame"]) not in ("base_link", "base_footprint"):
             notes.append(f"base_link_frame: {p['base_link_frame']}: fgloc's robot frame is base_link / "
-                         "base_footprint (IMU mounts are looked up from those)")
+                         "base_footprint (IMU mounts are looked up from those; a launch file's mounts on "
+                         f"{p['base_link_frame']} are carried over as base_link's)")
     if pipeline:
         out["pipeline"] = pipeline
     if ekf:

@@ -129,3 +129,27 @@ def test_no_translation_left_is_a_one_line_warning(tmp_path: Path, capsys: pytes
     err = capsys.readouterr().err
     assert err.count("warning") == 1 and "no source of translation left" in err
     assert "# WARNING: no source of translation left" in (tmp_path / "out.yaml").read_text()
+
+
+def test_mounts_on_the_filters_own_base_frame_carry_over_as_base_links(tmp_path: Path) -> None:
+    """r_l's groovy test_bag1 launch: base_link_frame mustang_base, the IMU mounts published from
+    it (one rolled 180 deg): carried over as base_link's, with a note; odom -> x is still no mount."""
+    p = tmp_path / "mustang.test"
+    p.write_text("""<launch>
+  <node pkg="tf" type="static_transform_publisher" name="w" args="0 0 0 0 0 0 odom wheel_odometry 20" />
+  <node pkg="tf" type="static_transform_publisher" name="x" args="0 0 0 0 0 3.141592654 mustang_base xsens 20" />
+  <node pkg="robot_localization" type="ekf_localization_node" name="ekf">
+    <param name="imu0" value="/xsens/imu_data"/>
+    <param name="base_link_frame" value="mustang_base"/>
+    <rosparam param="imu0_config">[false, false, false, false, false, true,
+                                   false, false, false, false, false, true]</rosparam>
+  </node>
+</launch>
+""")
+    cfg, notes, _ = convert_file("rl", p)
+    (tf,) = cfg["sources"]["static_transforms"]
+    assert (tf["parent"], tf["child"]) == ("base_link", "xsens")
+    np.testing.assert_allclose(tf["rpy_deg"], [180.0, 0.0, 0.0])
+    assert any("mustang_base -> xsens: a mount on the robot" in n for n in notes)
+    assert any("odom -> wheel_odometry is not a sensor mount" in n for n in notes)
+    assert cfg["sources"]["inputs"]["imu0"]["use"] == ["yaw", "vyaw"]  # 12-element (groovy) vector

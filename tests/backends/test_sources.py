@@ -205,7 +205,47 @@ def test_differential_odometry_takes_the_velocity_of_an_axis_it_fuses_as_a_veloc
     router.on_message(spec, Odometry(1.5, np.array([0.5, 0.0, 0.2]), c, np.array([0.25, 0.0, 0.0]), c * 0.01))
     (m,) = loc.odometry  # the first message only starts the increments
     assert m.twist[0] == pytest.approx(0.5) and m.twist[2] == pytest.approx(0.2)  # x: poses (no turn), w: twist
-    assert m.twist_cov[2, 2] == pytest.approx(0.04) and m.twist_cov[0, 0] == pytest.approx(2 * 1e-4 / 0.25)
+    # robot_localization's covariance of the increments: the two poses' summed, times dt
+    assert m.twist_cov[2, 2] == pytest.approx(0.04) and m.twist_cov[0, 0] == pytest.approx((1e-4 + 1e-4) * 0.5)
+
+
+def test_differential_covariance_is_robot_localizations_in_the_earlier_pose_frame():
+    """(C_prev + C) dt with the xy block turned into the earlier pose's body frame (hand computed:
+    heading 90 deg swaps x and y); the yaw variance is not turned."""
+    loc, router = _router({"odom0": {"type": "odometry", "use": ["x", "y", "yaw"], "differential": True}})
+    spec = router.specs[0]
+    c1, c2 = np.diag([1e-4, 4e-4, 1e-5]), np.diag([2e-4, 6e-4, 3e-5])
+    router.on_message(spec, Odometry(1.0, np.zeros(3), None, np.array([0.0, 0.0, math.pi / 2]), c1))
+    router.on_message(spec, Odometry(1.1, np.zeros(3), None, np.array([0.0, 0.1, math.pi / 2]), c2))
+    (m,) = loc.odometry
+    assert m.twist == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)  # 0.1 m along the heading in 0.1 s
+    np.testing.assert_allclose(np.diag(m.twist_cov), [(4e-4 + 6e-4) * 0.1, (1e-4 + 2e-4) * 0.1, 4e-5 * 0.1])
+
+
+def test_an_implausible_tilt_keeps_the_base_z_rate():
+    """A mount that makes the base upside down (a left-handed IMU made 'consistently incorrect' with
+    roll 180 deg, r_l's groovy test1.bag): the odometry is not levelled, and the yaw rate is the
+    base's own z rate R_bi w (here -w_z), not the heading rate of an upside-down body (+w_z)."""
+    loc, router = _router({"wheels": {"type": "odometry", "topic": "/odom", "use": ["vx", "vyaw"]},
+                           "imu0": {"type": "imu", "topic": "/imu", "use": ["vyaw", "roll", "pitch"]}})
+    router.on_tf([_mount((180, 0, 0))])
+    specs = {s.name: s for s in router.specs}
+    q = Rotation.from_euler("z", 0.4).as_quat()  # the sensor upright in its world: the base upside down
+    router.on_message(specs["imu0"], Imu(1.0, q, np.array([0.0, 0.0, 0.25]), np.eye(3) * 1e-4, np.eye(3) * 1e-6,
+                                         frame_id="imu_link"))
+    router.on_message(specs["wheels"], Odometry(1.01, np.array([1.0, 0.0, -0.25]), np.diag([1e-4, 1e-4, 4e-4])))
+    assert loc.compass[0].yaw_rate_radps == pytest.approx(-0.25)
+    np.testing.assert_allclose(loc.odometry[0].twist, [1.0, 0.0, -0.25])
+    assert router.health()["wheels"]["tilt_implausible"] == 1
+
+
+def test_faults_of_a_field_the_source_does_not_use_are_not_counted():
+    """A gyro-only source (vyaw): a zero quaternion is no fault of its; a source using yaw counts it."""
+    for use, skipped in ((["vyaw"], 0), (["yaw", "vyaw"], 1)):
+        loc, router = _router({"imu0": {"type": "imu", "topic": "/imu", "use": use}})
+        router.on_message(router.specs[0], Imu(1.0, np.zeros(4), np.array([0.0, 0.0, 0.1]), None, np.eye(3) * 1e-6))
+        assert router.health()["imu0"].get("skipped", 0) == skipped
+        assert loc.compass[0].yaw_rate_radps == pytest.approx(0.1) and loc.compass[0].yaw_rad is None
 
 
 def test_imu_roll_pitch_level_the_odometry_and_give_the_heading_rate():

@@ -1,6 +1,6 @@
 """Benchmark ``fgloc batch``: N simulated logs, sequential vs the local process pool vs Ray.
 
-    python tools/bench_batch.py [--logs 8] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
+    python tools/bench_batch.py [--logs 16] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
                                 [--engines sequential,local,ray,cli] [--workdir DIR]
 
 Logs: by default the paper's run (the 78 m rectangle around the hall, 113 s, the length of a
@@ -236,7 +236,7 @@ def fmt_range(v: list[float], digits: int = 1) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--logs", type=int, default=8)
+    ap.add_argument("--logs", type=int, default=16)
     ap.add_argument("--jobs", "-j", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--route", choices=("paper", "line"), default="paper",
@@ -304,7 +304,7 @@ def main() -> None:
     t = Table(title=title)
     cols = ("engine", "wall s", "speed-up (wall)", "speed-up (CPU time)", "CPU s, all processes",
             "CPU vs sequential", "Ray start s (driver waited)", "Ray stop s", "overhead per log s", "empty job ms",
-            "worker processes", "cores busy", "load")
+            "job CPU s per log", "worker processes", "cores busy", "load")
     for c in cols:
         t.add_column(c, justify="left" if c == "engine" else "right")
     labels = {"sequential": "sequential (one process)", "local": f"local pool -j {args.jobs}",
@@ -329,6 +329,7 @@ def main() -> None:
                  fmt_range([r["stop"] for r in rs]) if ray_row else "-",
                  fmt_range(over, 2) if has_cpu else "-",
                  fmt_range(noop[name], 2) if name in noop else "-",
+                 fmt_range([r["cpu"] / len(logs) for r in rs], 2) if has_cpu else "-",
                  fmt_range([float(r["workers"]) for r in rs], 0),
                  fmt_range([r["cpu"] / r["wall"] for r in rs], 2) if has_cpu else "-",
                  fmt_range([0.5 * (r["load"][0] + r["load"][1]) for r in rs], 1)]

@@ -13,7 +13,8 @@ inputs go by path, and the input files' bytes when they are shipped (``ship=True
 * :class:`RayEngine` (``--engine ray``): one Ray task per job (1 CPU each).  Without an
   address (and no ``RAY_ADDRESS``) it starts a private local Ray instance with ``num_cpus``
   = ``-j`` or all cores (its workers at niceness 0, like the pool's; Ray's own default is 15)
-  and shuts it down at the end; with ``--address HOST:PORT`` or
+  and shuts it down at the end (the start runs in the background while the driver prepares
+  the jobs, see :meth:`RayEngine.start`); with ``--address HOST:PORT`` or
   ``RAY_ADDRESS`` it joins that cluster (fgloc must be installed on its nodes; inputs by
   path need shared storage, ``--ship-inputs`` does not).  At most twice the cluster's CPUs
   are in flight, so shipped inputs do not fill the object store.  A task whose worker

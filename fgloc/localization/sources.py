@@ -72,6 +72,9 @@ POLICIES = ("message", "fixed", "scaled", "floor")
 DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
 DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
+#: a differential source's message stamped before the previous one: skipped, so that the next
+#: increment spans from the newest pose (resetting the reference to it lost the increment before)
+OUT_OF_ORDER = "differential: stamp not after the previous message's (out of order)"
 
 
 @dataclass(frozen=True)
@@ -319,6 +322,10 @@ class SourceRouter:
         if spec.differential or not any(spec.uses(c) for c in ("vx", "vy", "vyaw")):
             # robot_localization's differential mode: the twist of the pose increments
             pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
+            if pose is not None and st.prev_pose is not None and not msg.stamp > st.prev_pose[0]:
+                # out of order: the increments go on from the newest pose (none is lost)
+                self._skip(st, OUT_OF_ORDER)
+                return
             prev, st.prev_pose = st.prev_pose, (None if pose is None else (float(msg.stamp), pose))
             prev_pc, st.extra["prev_pose_cov"] = st.extra.get("prev_pose_cov"), pc
             if pose is None:
@@ -437,6 +444,9 @@ class SourceRouter:
         if spec.differential and yaw is not None:
             # orientation increments as a yaw rate (robot_localization's imuN_differential)
             var = yaw_var if math.isfinite(yaw_var) else 1e-4
+            if st.prev_yaw is not None and not t > st.prev_yaw[0]:
+                self._skip(st, f"imu: {OUT_OF_ORDER}")
+                return
             prev, st.prev_yaw = st.prev_yaw, (t, yaw)
             prev_var, st.extra["prev_yaw_var"] = st.extra.get("prev_yaw_var", var), var
             if prev is not None and t > prev[0] and spec.uses("yaw"):

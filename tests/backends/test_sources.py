@@ -281,3 +281,22 @@ def test_imu_roll_pitch_level_the_odometry_and_give_the_heading_rate():
         parse_sources({"imu0": {"type": "imu", "use": ["yaw", "roll"]}})
     with pytest.raises(ConfigError, match="is not one of"):
         parse_sources({"o": {"type": "odometry", "use": ["vx", "pitch"]}})
+
+
+def test_a_differential_source_out_of_order_skips_the_message_not_the_increment():
+    """A message stamped before the previous one (r_l's groovy test1.bag: 378 of /my_odometry2imu's)
+    is counted and skipped; the next increment spans from the newest message, so the whole turn
+    arrives (it reset the reference and lost the increment before: hand computed 0.3 rad)."""
+    loc, router = _router({"imu0": {"type": "imu", "topic": "/imu", "use": ["yaw"], "differential": True}})
+    spec = router.specs[0]
+    for t, yaw in ((1.0, 0.0), (1.1, 0.1), (1.05, 0.05), (1.2, 0.2), (1.3, 0.3)):
+        router.on_message(spec, Imu(t, Rotation.from_euler("z", yaw).as_quat(), None, np.eye(3) * 1e-4))
+    rates = [(c.stamp, c.yaw_rate_radps) for c in loc.compass if c.yaw_rate_radps is not None]
+    assert [t for t, _ in rates] == [1.1, 1.2, 1.3]
+    assert sum(r * 0.1 for _, r in rates) == pytest.approx(0.3)
+    assert router.health()["imu0"]["skipped_reasons"] == {
+        "imu: differential: stamp not after the previous message's (out of order)": 1}
+    loc, router = _router({"odom0": {"type": "odometry", "use": ["x", "y"], "differential": True}})
+    for t, x in ((1.0, 0.0), (1.1, 0.1), (1.05, 0.05), (1.2, 0.2)):
+        router.on_message(router.specs[0], Odometry(t, np.zeros(3), None, np.array([x, 0.0, 0.0]), np.eye(3) * 1e-4))
+    assert [m.twist[0] for m in loc.odometry] == pytest.approx([1.0, 1.0])

@@ -39,8 +39,7 @@ import numpy as np
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.geometry import between
-from fgloc.localization.odometry import OdometryTracker
+from fgloc.localization.odometry import OdometryTracker, between1
 from fgloc.localization.relocalization import Relocalizer
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
@@ -216,7 +215,7 @@ class Localizer:
         odom_now = self.odom.pose if fe.is_particle_filter else self.odom.pose_at(t)
         odom_delta = None
         if self._odom_at_last_scan is not None:
-            odom_delta = between(self._odom_at_last_scan, odom_now)
+            odom_delta = between1(self._odom_at_last_scan, odom_now)
             if not fe.is_particle_filter and self._last_matched_t is not None:
                 # as the back-end believes it moved (the odometry's scales, a gyro's rotation)
                 odom_delta = self.backend.motion_correction(self._last_matched_t, t, odom_delta)

@@ -272,3 +272,33 @@ def test_gyro_factors_jacobians_match_numerical_differentiation():
                         vm.update(k, v.atPose2(k).retract(-d))
                     cols.append((err(vp) - err(vm)) / 2e-6)
             assert np.abs(A - np.column_stack(cols)).max() < 1e-7
+
+
+def test_gyro_increment_variances_add_up_to_the_integral_of_shared_readings():
+    """Keyframes (25 Hz) faster than the gyro (20 Hz): neighbouring intervals share readings, and
+    the factors' variances must add up to the variance of the gyro's integral over them (each
+    reading's error counted once, with its whole weight), not 2-3x less."""
+    sm = SlidingWindowSmoother(SmootherConfig())
+    sigma = 0.005
+    ts = np.arange(0.0, 2.0, 0.05)
+    for t in ts:
+        sm.add_gyro(float(t), 0.1, sigma**2)
+    # the integral of the linear interpolant: each interior reading weighs 0.05 s
+    t0, t1 = 0.5, 1.5
+    edges = np.arange(t0, t1 + 1e-9, 0.04)
+    split = sum(sm._gyro_increment("imu.gyro", a, b)[1] for a, b in zip(edges[:-1], edges[1:], strict=True))
+    whole_exact = sigma**2 * 0.05**2 * (t1 - t0) / 0.05
+    assert split == pytest.approx(whole_exact, rel=0.05)
+    d, _ = sm._gyro_increment("imu.gyro", t0, t1)
+    assert d == pytest.approx(0.1 * (t1 - t0), abs=1e-12)
+    # the arbiter's block variance: a reading inside the block is one error with its whole weight
+    arb = Arbiter()
+    arb.add_source("gyro", INSTANT_RATE, 0.01)
+    for t in ts:
+        arb.add("gyro", float(t), 0.1, sigma**2)
+    inc, var = arb.increment("gyro", 0.51, 0.64)  # readings 0.55, 0.60 inside, 0.50 and 0.65 at the edges
+    w = {0.50: 0.04 * 0.5 * (2 - 0.2 - 1.0), 0.55: 0.0, 0.60: 0.0, 0.65: 0.04 * 0.5 * 0.8}
+    w[0.55] = 0.04 - w[0.50] + 0.025
+    w[0.60] = 0.025 + 0.04 - w[0.65]
+    assert inc == pytest.approx(0.1 * 0.13, abs=1e-12)
+    assert var == pytest.approx(sigma**2 * sum(v * v for v in w.values()), rel=1e-9)

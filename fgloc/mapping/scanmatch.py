@@ -245,9 +245,30 @@ def correlative_search(
 
 
 @njit(cache=True)
+def _huber_cost(dist, x0, y0, res, dmax, pts, px, py, pth, huber):  # pragma: no cover - compiled
+    """Sum of the Huber costs of the points' distances (clipped at ``dmax``: a point leaving the
+    field costs as much as one at its edge, so leaving it is no descent)."""
+    c, s = np.cos(pth), np.sin(pth)
+    cost = 0.0
+    for k in range(pts.shape[0]):
+        lx, ly = pts[k, 0], pts[k, 1]
+        d, _gx, _gy = _lookup_bilinear(dist, x0, y0, res, dmax, px + c * lx - s * ly, py + s * lx + c * ly)
+        if d > dmax:
+            d = dmax
+        cost += 0.5 * d * d if d <= huber else huber * (d - 0.5 * huber)
+    return cost
+
+
+@njit(cache=True)
 def _gauss_newton(dist, x0, y0, res, dmax, pts, px, py, pth, huber, iters):  # pragma: no cover - compiled
+    """Levenberg-Marquardt: a step is taken only when it lowers the cost (else the damping grows).
+    The bilinear distance field is flat between the two cell centres either side of a wall, so the
+    plain Gauss-Newton step there (gradient ~0, residual ~half a cell) was unbounded: from the
+    right pose it jumped decimetres and degrees away and wandered back only partly."""
     n = pts.shape[0]
     H = np.zeros((3, 3))
+    lam = 1e-3
+    cost = _huber_cost(dist, x0, y0, res, dmax, pts, px, py, pth, huber)
     for _it in range(iters):
         H = np.zeros((3, 3))
         g = np.zeros(3)
@@ -276,12 +297,24 @@ def _gauss_newton(dist, x0, y0, res, dmax, pts, px, py, pth, huber, iters):  # p
         H[1, 0] = H[0, 1]
         H[2, 0] = H[0, 2]
         H[2, 1] = H[1, 2]
-        A = H.copy()
-        for i in range(3):
-            A[i, i] += 1e-6 + 1e-3 * H[i, i]
-        if abs(np.linalg.det(A)) < 1e-18:
+        accepted = False
+        step = np.zeros(3)
+        for _try in range(8):
+            A = H.copy()
+            for i in range(3):
+                A[i, i] += 1e-6 + lam * H[i, i]
+            if abs(np.linalg.det(A)) < 1e-18:
+                break
+            step = -np.linalg.solve(A, g)
+            c_new = _huber_cost(dist, x0, y0, res, dmax, pts, px + step[0], py + step[1], pth + step[2], huber)
+            if c_new <= cost:
+                cost = c_new
+                accepted = True
+                lam = max(lam * 0.1, 1e-6)
+                break
+            lam *= 10.0
+        if not accepted:
             break
-        step = -np.linalg.solve(A, g)
         px += step[0]
         py += step[1]
         pth += step[2]

@@ -18,7 +18,14 @@ import yaml
 from fgloc.errors import LogError, MapError
 from fgloc.io.tum import read_tum, write_tum
 from fgloc.mapping.render import render_check_png, render_map_png
-from fgloc.mapping.selfcheck import CheckConfig, CheckResult, LoopInfo, check_against_map, check_consistency
+from fgloc.mapping.selfcheck import (
+    CheckConfig,
+    CheckResult,
+    LoopInfo,
+    check_against_map,
+    check_consistency,
+    map_accuracy_m,
+)
 from fgloc.mapping.slam import MapperConfig, SlamResult, build_occupancy, run_slam
 from fgloc.mapping.source import ScanRecord, log_messages, pair_scans
 from fgloc.maps import OccupancyMap
@@ -132,6 +139,9 @@ def build_map(
     if self_check:
         check = check_consistency(recs, np.asarray(mount.pose), res.scan_trajectory, loops, check_config,
                                   _progress(progress_factory, 0, "self-check"))
+        if np.isfinite(check.registration_m):  # the map declares what its passes measured
+            occ.accuracy_m = round(map_accuracy_m(check.registration_m, occ.resolution), 4)
+            occ.save(outdir / "map.yaml")
         write_check(outdir, check, occ, res.scan_trajectory, f"{Path(log).name}: self-check")
     t5 = time.perf_counter()
     timings = {"read_s": t1 - t0, "slam_s": t2 - t1, "occupancy_s": t3 - t2, "write_s": t4 - t3,
@@ -143,6 +153,8 @@ def build_map(
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
         "warnings": warnings,
         "self_check": check.verdict if check is not None else "not run",
+        "accuracy_m": occ.accuracy_m,
+        **({"registration": _registration_doc(check)} if check is not None else {}),
         "loop_closures": [[round(lp.t_old, 6), round(lp.t_new, 6), *[round(float(v), 4) for v in lp.xy_old],
                            *[round(float(v), 4) for v in lp.xy_new]] for lp in loops],
     }, sort_keys=False, width=200))
@@ -165,6 +177,7 @@ def write_check(outdir: Path, check: CheckResult, occ: OccupancyMap, trajectory:
                 "bbox_m": [round(float(v), 2) for v in c.bbox], "cells": c.cells, "returns": c.observations}
                for c in check.changes]
     doc = {"verdict": check.verdict, "passed": bool(check.passed), "mode": check.mode,
+           **({"registration": _registration_doc(check)} if check.mode == "consistency" else {}),
            "times": "seconds after the log's first scan", "first_scan_stamp": float(t0),
            "stats": {k: int(v) for k, v in check.stats.items()}, "suspects": check.suspects,
            "passes_off_s": [[round(a - t0, 1), round(b - t0, 1)] for a, b in check.culprits],
@@ -172,6 +185,14 @@ def write_check(outdir: Path, check: CheckResult, occ: OccupancyMap, trajectory:
     (outdir / "check.yaml").write_text(yaml.safe_dump(doc, sort_keys=False, width=200))
     xy = trajectory.poses[:, :2] if trajectory is not None and len(trajectory) else None
     render_check_png(outdir / "check.png", occ, check, xy, title)
+
+
+def _registration_doc(check: CheckResult) -> dict:
+    """How well the passes register where they agree (the source of map.yaml's accuracy_m)."""
+    ok = np.isfinite(check.registration_m)
+    return {"scans": int(check.registration_n),
+            "rms_per_axis_m": round(float(check.registration_m), 4) if ok else None,
+            "rms_heading_deg": round(float(check.registration_deg), 3) if ok else None}
 
 
 def read_loops(mapping_yaml: Path) -> list[LoopInfo]:

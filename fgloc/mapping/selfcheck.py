@@ -162,6 +162,12 @@ class CheckResult:
     added_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     removed_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     stats: dict = field(default_factory=dict)
+    # how well the passes register where they agree (consistency check): the r.m.s. offset, per
+    # constrained axis, of the consistent scans refined against the other passes from their own
+    # pose, and of their heading; nan when no scan was checked
+    registration_m: float = float("nan")
+    registration_deg: float = float("nan")
+    registration_n: int = 0
 
     @property
     def flagged(self) -> list[RegionCheck]:
@@ -372,6 +378,9 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
     for k, key in zip(tst, t_keys, strict=True):
         by_region.setdefault(key, []).append(int(k))
     checks: list[ScanCheck] = []
+    reg_sq: list[float] = []  # registration residuals of the consistent scans (see _registration)
+    reg_yaw: list[float] = []
+    reg_dirs = 0
     plan: dict[tuple[int, int], list[tuple[int, np.ndarray, float, float]]] = {}  # region -> passes
     for key, ks in sorted(by_region.items()):
         karr = np.asarray(sorted(ks, key=lambda k: s_all[k]), dtype=np.int64)
@@ -389,6 +398,12 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
                     status, off, f0, f1, ov = NO_OVERLAP, np.zeros(3), 0.0, 0.0, 0.0
                 else:
                     status, off, f0, f1, ov = _rematch(grid, pts, poses[k], cfg, coarse_cache)
+                    if status == OK:
+                        reg = _registration(grid, pts, poses[k], cfg)
+                        if reg is not None:
+                            reg_sq.append(reg[0])
+                            reg_dirs += reg[1]
+                            reg_yaw.append(reg[2])
                 checks.append(ScanCheck(float(st_all[k]), poses[k].copy(), key, int(p), status, off, f0, f1, ov,
                                         float(s_all[k])))
             if progress is not None:
@@ -448,8 +463,35 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
              "inconsistent": sum(c.status == BAD for c in checks), "regions": len(regions),
              "regions_checked": sum(r.n_checked >= cfg.region_min_checked for r in regions),
              "regions_flagged": sum(r.flagged for r in regions)}
+    reg_m = float(np.sqrt(np.sum(reg_sq) / reg_dirs)) if reg_dirs else float("nan")
+    reg_deg = float(np.degrees(np.sqrt(np.mean(np.square(reg_yaw))))) if reg_yaw else float("nan")
     return CheckResult("consistency", checks, regions, suspects, verdict, passed, t_first, stats=stats,
-                       culprits=culprits)
+                       culprits=culprits, registration_m=reg_m, registration_deg=reg_deg,
+                       registration_n=len(reg_yaw))
+
+
+def _registration(grid: DistanceGrid, pts: FloatArray, pose0: FloatArray, cfg: CheckConfig
+                  ) -> tuple[float, int, float] | None:
+    """How far a consistent scan's own pose is from where it fits the other passes best: refined
+    from the own pose (the local optimum a localizer on their map would find), the squared shift
+    along the directions the scene constrains (a corridor leaves its axis free), their number and
+    the heading offset (rad).  None when the refinement does not settle near the own pose."""
+    rr = refine(grid, pts, pose0, 0.03)
+    d = rr.pose[:2] - pose0[:2]
+    dyaw = float(wrap_angle(rr.pose[2] - pose0[2]))
+    if (rr.inlier_frac < cfg.min_overlap or np.hypot(d[0], d[1]) > cfg.offset_m
+            or abs(dyaw) > np.radians(cfg.offset_deg)):
+        return None
+    w, v = np.linalg.eigh(0.5 * (rr.info[:2, :2] + rr.info[:2, :2].T))
+    strong = v[:, w >= cfg.min_constraint * max(float(w.max()), 1e-12)]
+    return float(np.sum((strong.T @ d) ** 2)), int(strong.shape[1]), dyaw
+
+
+def map_accuracy_m(registration_m: float, resolution_m: float) -> float:
+    """The accuracy a map built from passes that register to ``registration_m`` (1 sigma per
+    axis) declares: that, and the raster (a wall known to its cell: uniform over the cell,
+    ``resolution / sqrt(12)``), added in quadrature."""
+    return float(np.sqrt(registration_m**2 + resolution_m**2 / 12.0))
 
 
 def _fmt_t(t: float, t0: float) -> str:

@@ -46,6 +46,11 @@ def test_map_then_map_check_and_a_moved_pass(tmp_path, capsys):
     assert len(read_tum(out / "trajectory.tum")) == n  # one pose per scan
     doc = yaml.safe_load((out / "check.yaml").read_text())
     assert doc["passed"] is True and doc["stats"]["regions_checked"] >= 2
+    # the map declares what the check measured: the passes' registration and the raster (>= cell / sqrt(12))
+    reg = doc["registration"]
+    assert reg["scans"] >= 10 and 0.0 <= reg["rms_per_axis_m"] < 0.03
+    acc = OccupancyMap.load(out / "map.yaml").accuracy_m
+    assert acc == pytest.approx(np.hypot(reg["rms_per_axis_m"], 0.05 / np.sqrt(12)), abs=2e-4)
     # the same check on its own, then on the trajectory with one pass moved by 0.5 m / 2 deg
     assert main(["map-check", str(out / "map.yaml"), str(log), "--no-progress", "-o", str(tmp_path / "c0")]) == 0
     est = read_tum(out / "trajectory.tum")

@@ -41,6 +41,8 @@ def test_consistent_map_is_not_flagged(ring):
     assert res.stats["checked"] >= 200
     assert res.stats["inconsistent"] <= 2
     assert not res.flagged and not res.culprits
+    # the passes register to the world's raster (measured 0.011 m / 0.02 deg)
+    assert res.registration_n >= 200 and res.registration_m < 0.02 and res.registration_deg < 0.1
 
 
 def test_small_pose_noise_is_not_flagged(ring):
@@ -51,6 +53,8 @@ def test_small_pose_noise_is_not_flagged(ring):
     noisy = traj.poses + noise
     res = check_consistency(recs, np.zeros(3), Trajectory(traj.stamps, noisy))
     assert res.passed, res.verdict
+    # and the registration measures that noise (2 cm per axis, 0.2 deg: measured 0.022 m / 0.22 deg)
+    assert 0.015 < res.registration_m < 0.03 and 0.15 < res.registration_deg < 0.3
 
 
 @pytest.mark.parametrize("window", [(150.0, 175.0), (260.0, 285.0)])

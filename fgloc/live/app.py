@@ -18,14 +18,12 @@ import numpy as np
 
 from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
-from fgloc.live.publish import UdpPublisher
-from fgloc.live.runner import LiveRunner
 from fgloc.live.serial_link import FrameConverter, SerialLink
-from fgloc.live.sick import SickClient
 from fgloc.types import StaticTransform, Trajectory
 
 if TYPE_CHECKING:
     from fgloc.config import FglocConfig
+    from fgloc.live.sick import SickClient
 
 @dataclass(frozen=True)
 class SerialConfig:
@@ -103,7 +101,11 @@ class LiveSession:
         event_sink: Any = None,
         serial_port: Any = None,
     ) -> None:
+        # here, not at the top: every command's config (fgloc.config's live sections) imports this module
         from fgloc.config import parse_config
+        from fgloc.live.publish import UdpPublisher
+        from fgloc.live.runner import LiveRunner
+        from fgloc.live.sick import SickClient
 
         cfg = parse_config(config)
         self.cfg = cfg

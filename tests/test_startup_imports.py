@@ -55,7 +55,7 @@ def test_fgloc_run_imports_only_what_it_uses(tmp_path) -> None:
 def test_the_collector_paused_for_the_setup_only_in_a_command_process() -> None:
     import gc
 
-    from fgloc.app.startup import pause_gc, setup_done
+    from fgloc.app.startup import pause_gc, resume_gc, setup_done
 
     frozen = gc.get_freeze_count()
     setup_done()  # a library caller: nothing was paused, nothing happens
@@ -68,6 +68,9 @@ def test_the_collector_paused_for_the_setup_only_in_a_command_process() -> None:
         assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(keep)
         setup_done()  # once only
         assert gc.isenabled()
+        pause_gc()
+        resume_gc()  # the set-up failed: collection resumes, nothing more is frozen
+        assert gc.isenabled() and gc.get_freeze_count() >= frozen + len(keep)
     finally:
         gc.enable()
         gc.unfreeze()

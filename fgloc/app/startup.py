@@ -33,3 +33,12 @@ def setup_done() -> None:
         _paused = False
         gc.freeze()
         gc.enable()
+
+
+def resume_gc() -> None:
+    """After a :func:`pause_gc` whose set-up never finished (an error): collect again, freeze nothing.
+    A no-op after :func:`setup_done`, so a caller runs it in a ``finally``."""
+    global _paused
+    if _paused:
+        _paused = False
+        gc.enable()

@@ -127,21 +127,24 @@ def register(app: typer.Typer) -> None:
                                               "(default: as fast as possible)"),
     ) -> None:
         """Localize a log: trajectory.tum, fixes.tum, run.mcap (/fused_pose + the view's channels), config.yaml."""
-        from fgloc.app.startup import pause_gc
+        from fgloc.app.startup import pause_gc, resume_gc
 
         pause_gc()  # until run_log's set-up is done (imports, map, localizer): fgloc.app.startup
-        if backend not in ("ekf", "smoother", "batch"):
-            raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
-        from fgloc.localization.frames import static_transform_entry  # lazy: keeps `fgloc --help` light
+        try:
+            if backend not in ("ekf", "smoother", "batch"):
+                raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
+            from fgloc.localization.frames import static_transform_entry  # lazy: keeps `fgloc --help` light
 
-        req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                         initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
-                         config=config,
-                         scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
-                         view=view, realtime=realtime, force=force,
-                         static_transforms=[] if static_transform is None else
-                         [static_transform_entry(*static_transform)])
-        r = run_request(req, progress=_progress(quiet), announce=_announce)
+            req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
+                             initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
+                             config=config,
+                             scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
+                             view=view, realtime=realtime, force=force,
+                             static_transforms=[] if static_transform is None else
+                             [static_transform_entry(*static_transform)])
+            r = run_request(req, progress=_progress(quiet), announce=_announce)
+        finally:
+            resume_gc()  # an error before the set-up was done: an in-process caller keeps its collector
         _print_run_summary(r)
         failed = r.failure()
         if failed and (r.poses == 0 or not allow_lost):

@@ -21,7 +21,11 @@ user would run, per case:
    it would have been recorded with the launch file running);
 4. two dead-reckoning references from the bag alone: the wheel speed turned by the IMU's
    absolute yaw through its mount (planar), and the wheel velocity turned by the IMU's whole
-   attitude (3-D, as r_l does with two_d_mode false).
+   attitude (3-D, as r_l does with two_d_mode false);
+5. a third, from fgloc's sources router alone (the converted config's ``sources:``, no
+   back-end): the twists it hands the localizer turned by the heading it hands it (the first
+   IMU's yaw when it gives one, else the integral of its least uncertain yaw-rate stream).  It
+   tells a sources / porting error (this row off too) from a back-end one (this row on target).
 
 It prints one table (final x/y, the planar distance to r_l's expected final position, pass when
 it is below the test's tolerance) and each run's per-source summary, and exits 0.  The r_l
@@ -231,6 +235,74 @@ def dead_reckoning(odom: np.ndarray, imu: np.ndarray, mount_q: tuple[float, floa
     }
 
 
+class _Recorder:
+    """A localizer stand-in for :class:`~fgloc.localization.sources.SourceRouter`: records what
+    the router hands it (odometry, compass readings, second IMUs' gyro rates)."""
+
+    odom_mode = True
+    frontend = None
+    initialized = True
+    encoder_sigmas = (0.01, 0.01, 0.02)
+
+    def __init__(self) -> None:
+        self.backend = self
+        self.stats: dict[str, Any] = {}
+        self.odometry: list[tuple[float, float, float]] = []
+        self.yaw: list[tuple[float, float]] = []
+        self.rates: dict[str, list[tuple[float, float, float]]] = {}
+
+    def on_odometry(self, m: Any) -> None:
+        self.odometry.append((float(m.stamp), float(m.twist[0]), float(m.twist[1])))
+
+    def on_compass(self, m: Any) -> None:
+        if m.yaw_rad is not None:
+            self.yaw.append((float(m.stamp), float(m.yaw_rad)))
+        if m.yaw_rate_radps is not None:
+            self.rates.setdefault("imu", []).append((float(m.stamp), float(m.yaw_rate_radps), float(m.yaw_rate_var)))
+
+    def add_gyro(self, t: float, rate: float, var: float, source: str) -> None:
+        self.rates.setdefault(source, []).append((float(t), float(rate), float(var)))
+
+
+def sources_dead_reckoning(bag: Path, config: Path) -> tuple[np.ndarray, str] | None:
+    """Item 5 of the module doc: ``(final x, y, what heading)`` or None (no odometry / heading)."""
+    from fgloc.config import load_config
+    from fgloc.io import open_log
+    from fgloc.localization.frames import parse_static_transforms
+    from fgloc.localization.sources import SourceRouter, parse_sources
+
+    cfg = load_config(config)
+    specs = parse_sources(cfg.sources)
+    rec = _Recorder()
+    router = SourceRouter(rec, specs, parse_static_transforms(cfg.sources.static_transforms))
+    by_topic = {s.topic: s for s in specs}
+    src = open_log(bag)
+    want = [t for t in [*by_topic, "/tf_static", "/tf"] if src.has(t)]
+    for topic, msg in src.messages(want):
+        if topic in by_topic:
+            router.on_message(by_topic[topic], msg)
+        else:
+            router.on_tf(msg)
+    if not rec.odometry:
+        return None
+    odo = np.array(sorted(rec.odometry))
+    if rec.yaw:
+        y = np.array(sorted(rec.yaw))
+        heading, what = np.interp(odo[:, 0], y[:, 0], np.unwrap(y[:, 1])), "first IMU's yaw"
+    else:
+        streams = {k: np.array(sorted(v)) for k, v in rec.rates.items() if len(v) > 1}
+        if not streams:
+            return None
+        name = min(streams, key=lambda k: float(np.nanmedian(streams[k][:, 2])))
+        r = streams[name]
+        integral = np.r_[0.0, np.cumsum(r[1:, 1] * np.diff(r[:, 0]))]
+        heading, what = np.interp(odo[:, 0], r[:, 0], integral), f"{name}'s yaw rate integrated"
+    dt = np.diff(odo[:, 0], prepend=odo[0, 0])
+    c, s = np.cos(heading), np.sin(heading)
+    xy = np.array([np.sum((odo[:, 1] * c - odo[:, 2] * s) * dt), np.sum((odo[:, 1] * s + odo[:, 2] * c) * dt)])
+    return xy, what
+
+
 def with_static_tfs(bag: Path, tfs: list[tuple[Any, ...]], out: Path) -> Path:
     """A copy of ``bag`` with the launch file's static transforms as one latched ``/tf_static``."""
     from rosbags.rosbag1 import Reader, Writer
@@ -408,6 +480,10 @@ def main(argv: list[str] | None = None) -> int:
                          f"{len(notes)} r_l parameter(s) not carried over")
         rows.append(table_row(case, duration, dr, "dead reckoning, IMU yaw", dr["planar"]))
         rows.append(table_row(case, duration, dr, "dead reckoning, IMU attitude 3-D", dr["3d"]))
+        sdr = sources_dead_reckoning(case.bag, cfg)
+        if sdr is not None:
+            rows.append(table_row(case, duration, dr, "dead reckoning, fgloc sources' output", sdr[0]))
+            notes_out.append(f"  dead reckoning, fgloc sources' output: heading from the {sdr[1]}")
         variants: list[tuple[str, Path, Path]] = [("", case.bag, cfg)]
         if case.static_tfs and a.tf_copy:
             bare, _, _ = convert(case, work, mounts=False)

@@ -191,6 +191,10 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
             else:
                 notes.append(f"{k}: {v:g} not carried over (fgloc gates fixes, and weights odometry and IMU by "
                              "the noise they show against the other sources)")
+        first_odom = next((n for n, e in inputs.items() if e["type"] == "odometry"), None)
+        if kind == "odom" and first_odom is not None:
+            notes.append(f"{key} ({topic}): fgloc integrates one odometry source, the first ({first_odom}); "
+                         f"{key}'s messages are counted as skipped (robot_localization fuses both)")
         inputs[key] = entry
     out: dict[str, Any] = {}
     if inputs:

@@ -70,7 +70,8 @@ def test_robot_localization_ros2_example_layout():
                      "imu0_config: vroll, vpitch, ax, ay, az not carried over",
                      "two_d_mode: false", "use_control: fgloc has no control input",
                      "odom0_queue_size: a ROS subscription setting", "sensor_timeout:",
-                     "odom0_twist_rejection_threshold: 1 not carried over"):
+                     "odom0_twist_rejection_threshold: 1 not carried over",
+                     "odom1 (/example/odom2): fgloc integrates one odometry source, the first (odom0)"):
         assert expected in j, expected
 
 

@@ -148,14 +148,14 @@ def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: floa
                    kernel: str = "huber", k: float = 1.345) -> gtsam.CustomFactor:
     """Compass heading on a ``Pose2`` keyframe against a ``Rot2`` compass-to-map offset."""
     z = float(z_compass)
+    kp, ko = int(pose_key), int(offset_key)
+    h0, h1 = np.array([[0.0, 0.0, 1.0]]), np.array([[1.0]])  # constant (GTSAM copies them)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
-        pose = values.atPose2(this.keys()[0])
-        off = values.atRot2(this.keys()[1])
-        e = compass_error(pose.theta(), off.theta(), z)
+        e = compass_error(values.atPose2(kp).theta(), values.atRot2(ko).theta(), z)
         if H is not None:
-            H[0] = np.array([[0.0, 0.0, 1.0]])
-            H[1] = np.array([[1.0]])
+            H[0] = h0
+            H[1] = h1
         return np.array([e])
 
     noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, sigma), kernel, k)
@@ -240,24 +240,89 @@ def _rep_and_jacobians(c: FloatArray, scales: FloatArray, bend: bool = True
     return np.array([rx, ry, rth]), Jc, Js
 
 
-def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray, measured: FloatArray,
+def _pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float, float, tuple]:
+    """``Pose2.Logmap`` of ``(x, y, w)`` (``w`` wrapped) and ``Pose2.LogmapDerivative``'s 2x3 top rows,
+    in scalar maths (GTSAM's formulas; its Python calls cost ~6 us each, this is the hot path of
+    the odometry factors)."""
+    if abs(w) < 1e-10:
+        v1, v2 = x, y
+    else:
+        cw, sw = math.cos(w), math.sin(w)
+        c1 = cw - 1.0
+        f = w / (c1 * c1 + sw * sw)
+        ux, uy = cw * x + sw * y - x, -sw * x + cw * y - y
+        v1, v2 = -f * uy, f * ux
+    if abs(w) > 1e-5:
+        ai = 1.0 / w
+        h = 0.5 * math.sin(w) / (1.0 - math.cos(w))
+        rows = ((w * h, -0.5 * w, v1 * ai - v1 * h + 0.5 * v2), (0.5 * w, w * h, v2 * ai - 0.5 * v1 - v2 * h))
+    else:
+        rows = ((1.0, 0.0, 0.5 * v2), (0.0, 1.0, -0.5 * v1))
+    return v1, v2, w, rows
+
+
+def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | tuple[float, float],
+                         measured: FloatArray,
                          want_jacobians: bool = True, bend: bool = True) -> tuple[FloatArray, list[FloatArray]]:
     """Error of :func:`scaled_between_factor`: ``Log(m^-1 rep(xi^-1 xj, s))`` (the noise is on
     what the odometry reports, so a scale never buys a smaller residual by shrinking the motion)
     and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector).
-    ``bend``: see :func:`_rep_and_jacobians`."""
+    ``bend``: see :func:`_rep_and_jacobians`.  Scalar maths (called at every relinearization:
+    the numpy / GTSAM-call version cost ~45 us)."""
     h = xi.between(xj)
-    c = np.array([h.x(), h.y(), h.theta()])
-    rep, Jc, Js = _rep_and_jacobians(c, scales, bend)
-    E = gtsam.Pose2(*np.asarray(measured, dtype=float)).between(gtsam.Pose2(*rep))
-    e = gtsam.Pose2.Logmap(E)
+    cx, cy, cth = h.x(), h.y(), h.theta()
+    sv, sw = float(scales[0]), float(scales[1])
+    if not bend:
+        rth = sw * cth
+        rx, ry = sv * cx, sv * cy
+        # Jc = [Rt @ [[sv, 0, 0], [0, sv, 0]]; [0, 0, sw]], Js = [Rt @ [[tx, 0], [ty, 0]]; [0, th]]
+        ct, st = math.cos(rth), math.sin(rth)
+        jc = ((ct * sv, st * sv, 0.0), (-st * sv, ct * sv, 0.0))
+        js = ((ct * cx + st * cy, 0.0), (-st * cx + ct * cy, 0.0))
+    else:
+        hh = 0.5 * cth
+        s0 = _sinc(hh)
+        s1 = _sinc(sw * hh)
+        rho = sv * s1 / s0
+        phi = (sw - 1.0) * hh
+        cp, sp = math.cos(phi), math.sin(phi)
+        r0x, r0y = cp * cx - sp * cy, sp * cx + cp * cy
+        rx, ry, rth = rho * r0x, rho * r0y, sw * cth
+        drho_dth = sv * (_dsinc(sw * hh) * 0.5 * sw * s0 - s1 * _dsinc(hh) * 0.5) / (s0 * s0)
+        drho_dsw = sv * _dsinc(sw * hh) * hh / s0
+        dphi_dth = 0.5 * (sw - 1.0)
+        d00, d01, d02 = rho * cp, -rho * sp, drho_dth * r0x - rho * dphi_dth * r0y
+        d10, d11, d12 = rho * sp, rho * cp, drho_dth * r0y + rho * dphi_dth * r0x
+        e00, e01 = r0x * s1 / s0, drho_dsw * r0x - rho * hh * r0y
+        e10, e11 = r0y * s1 / s0, drho_dsw * r0y + rho * hh * r0x
+        ct, st = math.cos(rth), math.sin(rth)
+        jc = ((ct * d00 + st * d10, ct * d01 + st * d11, ct * d02 + st * d12),
+              (-st * d00 + ct * d10, -st * d01 + ct * d11, -st * d02 + ct * d12))
+        js = ((ct * e00 + st * e10, ct * e01 + st * e11), (-st * e00 + ct * e10, -st * e01 + ct * e11))
+    # E = m^-1 rep
+    mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
+    cm, sm = math.cos(mt), math.sin(mt)
+    dx, dy = rx - mx, ry - my
+    ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
+    ew = wrap_scalar(rth - mt)
+    v1, v2, v3, jl = _pose2_log_and_derivative(ex, ey, ew)
+    e = np.array([v1, v2, v3])
     if not want_jacobians:
         return e, []
-    Jl = gtsam.Pose2.LogmapDerivative(E)
-    ch, sh = math.cos(c[2]), math.sin(c[2])
-    dc_dj = np.array([[ch, -sh, 0.0], [sh, ch, 0.0], [0.0, 0.0, 1.0]])
-    dc_di = np.array([[-1.0, 0.0, c[1]], [0.0, -1.0, -c[0]], [0.0, 0.0, -1.0]])
-    return e, [Jl @ Jc @ dc_di, Jl @ Jc @ dc_dj, Jl @ Js]
+    # Jl @ Jc (Jc's last row [0, 0, sw], Jl's last row [0, 0, 1])
+    a = [[jl[r][0] * jc[0][k] + jl[r][1] * jc[1][k] for k in range(3)] for r in range(2)]
+    a[0][2] += jl[0][2] * sw
+    a[1][2] += jl[1][2] * sw
+    a.append([0.0, 0.0, sw])
+    # d c / d xj = [[ch, -sh, 0], [sh, ch, 0], [0, 0, 1]], d c / d xi = [[-1, 0, cy], [0, -1, -cx], [0, 0, -1]]
+    ch, sh = math.cos(cth), math.sin(cth)
+    Hj = [[r[0] * ch + r[1] * sh, -r[0] * sh + r[1] * ch, r[2]] for r in a]
+    Hi = [[-r[0], -r[1], r[0] * cy - r[1] * cx - r[2]] for r in a]
+    Hs = [[jl[r][0] * js[0][k] + jl[r][1] * js[1][k] for k in range(2)] for r in range(2)]
+    Hs[0][1] += jl[0][2] * cth
+    Hs[1][1] += jl[1][2] * cth
+    Hs.append([0.0, cth])
+    return e, [np.array(Hi), np.array(Hj), np.array(Hs)]
 
 
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
@@ -276,19 +341,14 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
     noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
     keys = [ki, kj] + [kk for kk in (ks_v, ks_w) if kk is not None]
     sv0, sw0 = float(fixed_scales[0]), float(fixed_scales[1])
+    kv = int(ks_v) if ks_v is not None else None
+    kw = int(ks_w) if ks_w is not None else None
+    k0, k1 = int(ki), int(kj)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
-        ks = this.keys()
-        n = 2
-        sv = sw = 0.0
-        if ks_v is not None:
-            sv = float(values.atVector(ks[n])[0])
-            n += 1
-        else:
-            sv = sv0
-        sw = float(values.atVector(ks[n])[0]) if ks_w is not None else sw0
-        e, Hs = scaled_between_error(values.atPose2(ks[0]), values.atPose2(ks[1]), np.array([sv, sw]), d,
-                                     H is not None, bend)
+        sv = float(values.atVector(kv)[0]) if kv is not None else sv0
+        sw = float(values.atVector(kw)[0]) if kw is not None else sw0
+        e, Hs = scaled_between_error(values.atPose2(k0), values.atPose2(k1), (sv, sw), d, H is not None, bend)
         if H is not None:
             H[0], H[1] = Hs[0], Hs[1]
             m = 2
@@ -312,15 +372,15 @@ def gyro_factor(ki: int, kj: int, kb: int, dtheta_gyro: float, dt: float, sigma:
     """Between-keyframe yaw increment from an integrated gyro with a bias variable ``kb``
     (``Vector1``, rad/s): analytic Jacobians ``[0, 0, -1]``, ``[0, 0, 1]``, ``[dt]``."""
     z, T = float(dtheta_gyro), float(dt)
+    k0, k1, k2 = int(ki), int(kj), int(kb)
+    h0, h1, h2 = np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]]), np.array([[T]])  # constant
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
-        keys = this.keys()
-        e = gyro_error(values.atPose2(keys[0]).theta(), values.atPose2(keys[1]).theta(),
-                       float(values.atVector(keys[2])[0]), z, T)
+        e = gyro_error(values.atPose2(k0).theta(), values.atPose2(k1).theta(), float(values.atVector(k2)[0]), z, T)
         if H is not None:
-            H[0] = np.array([[0.0, 0.0, -1.0]])
-            H[1] = np.array([[0.0, 0.0, 1.0]])
-            H[2] = np.array([[T]])
+            H[0] = h0
+            H[1] = h1
+            H[2] = h2
         return np.array([e])
 
     noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), kernel, k)
@@ -331,13 +391,14 @@ def yaw_increment_factor(ki: int, kj: int, dtheta: float, sigma: float) -> gtsam
     """A measured yaw change ``theta_j - theta_i`` (a gyro's, its bias already removed): error
     ``wrap(theta_j - theta_i - dtheta)``, Jacobians ``[0, 0, -1]``, ``[0, 0, 1]``."""
     z = float(dtheta)
+    k0, k1 = int(ki), int(kj)
+    h0, h1 = np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]])  # constant (GTSAM copies them)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
-        keys = this.keys()
-        e = wrap_scalar(values.atPose2(keys[1]).theta() - values.atPose2(keys[0]).theta() - z)
+        e = wrap_scalar(values.atPose2(k1).theta() - values.atPose2(k0).theta() - z)
         if H is not None:
-            H[0] = np.array([[0.0, 0.0, -1.0]])
-            H[1] = np.array([[0.0, 0.0, 1.0]])
+            H[0] = h0
+            H[1] = h1
         return np.array([e])
 
     return gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), [ki, kj], error)

@@ -302,3 +302,15 @@ def test_gyro_increment_variances_add_up_to_the_integral_of_shared_readings():
     w[0.60] = 0.025 + 0.04 - w[0.65]
     assert inc == pytest.approx(0.1 * 0.13, abs=1e-12)
     assert var == pytest.approx(sigma**2 * sum(v * v for v in w.values()), rel=1e-9)
+
+
+def test_scalar_pose2_log_and_derivative_equal_gtsams():
+    from fgloc.backends.factors import _pose2_log_and_derivative
+
+    rng = np.random.default_rng(3)
+    for k in range(400):
+        x, y = rng.normal(0, 0.5, 2)
+        p = gtsam.Pose2(float(x), float(y), float(rng.normal(0, [1.0, 1e-3, 1e-7, 1e-12][k % 4])))
+        v1, v2, w, rows = _pose2_log_and_derivative(p.x(), p.y(), p.theta())
+        assert np.allclose([v1, v2, w], gtsam.Pose2.Logmap(p), rtol=0, atol=1e-12)
+        assert np.allclose(rows, gtsam.Pose2.LogmapDerivative(p)[:2], rtol=0, atol=1e-9)

@@ -248,6 +248,53 @@ class ScanPreprocessor:
 UNKNOWN_GUESS_RADIUS_M = 0.4  # a guess in unknown space this close to free space is still matched
 
 
+def registration_floor(H: FloatArray, sigma_m: float) -> FloatArray:
+    """The covariance a map registration error of ``sigma_m`` (1 sigma) leaves in a fix with scan
+    normal matrix ``H`` (``J^T W J`` over x, y, yaw).
+
+    A map whose walls sit ``sigma_m`` off in the map frame (a SLAM map's passes disagree; a wall is
+    known only to its cell) moves every fix by about that much, whatever the scan shows: the
+    residuals fit the shifted map.  Position: ``sigma^2`` stretched along the scan's weakly
+    constrained direction, ``sigma^2 sqrtm((H_xy / mean eig)^-1)`` (a corridor's walls pin the
+    cross-track position, the along-track one rests on a few door frames); heading: ``sigma^2 /
+    l^2`` with ``l = sqrt(H_yaw / mean(H_xx, H_yy))`` the points' r.m.s. moment arm.
+    """
+    out = np.zeros((3, 3))
+    if not (sigma_m > 0):
+        return out
+    hxy = H[:2, :2]
+    tr = 0.5 * float(hxy[0, 0] + hxy[1, 1])
+    if not (tr > 0 and math.isfinite(tr)):
+        return out
+    w, V = np.linalg.eigh(hxy / tr)
+    w = np.maximum(w, 1e-6)
+    out[:2, :2] = sigma_m**2 * (V @ np.diag(1.0 / np.sqrt(w)) @ V.T)
+    lever2 = float(H[2, 2]) / tr
+    if lever2 > 0:
+        out[2, 2] = sigma_m**2 / lever2
+    return out
+
+
+def map_accuracy(occ_map: OccupancyMap, value: float | str, where: str) -> float:
+    """The map registration sigma (m) a front-end adds as a floor: ``value`` when a number, else
+    (``auto``) the map's declared ``accuracy_m`` (``fgloc map`` writes what its self-check measured:
+    the passes' registration and the raster; on the Radish logs fr079 0.022, intel 0.029, aces
+    0.033 m, 0.9-1.3 times half a cell), and 0 for a map that declares none (no floor: with it the
+    smoother weighs the CARMEN odometry more, whose pose-derived twist noise is too tight, and its
+    heading on the Radish segments got worse, see the README's real-map table).  ConfigError for
+    anything else."""
+    if isinstance(value, str):
+        if value != "auto":
+            raise ConfigError(f"frontends config [{where}]: map_accuracy_m must be a number >= 0 or auto, "
+                              f"got {value!r}")
+        acc = occ_map.accuracy_m
+        return 0.0 if acc is None else float(acc)
+    out = float(value)
+    if not (out >= 0 and math.isfinite(out)):
+        raise ConfigError(f"frontends config [{where}]: map_accuracy_m must be >= 0, got {value}")
+    return out
+
+
 def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatArray | None, str]:
     """Validate a prior guess: finite, on the map and not deep in unknown space (more than
     ``UNKNOWN_GUESS_RADIUS_M`` from free space). ``(pose, "")`` or ``(None, reason)``."""

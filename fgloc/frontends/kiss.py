@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -43,7 +43,9 @@ from .base import (
     FrontendBase,
     MatchResult,
     PreprocessOptions,
+    map_accuracy,
     no_fix,
+    registration_floor,
 )
 
 
@@ -124,6 +126,8 @@ class KissConfig:
     min_eigen_ratio: float = setting(1e-3, "smallest/largest Hessian eigenvalue below this -> no fix", min=0)
     cov_inflation: tuple[float, ...] = setting((17.0, 36.0), "[kxy, kyaw] as for native", gt=0)
     cov_floor: tuple[float, float, float] = setting((1e-8, 1e-8, 1e-9), "m^2, m^2, rad^2 added", min=0)
+    map_accuracy_m: float | Literal["auto"] = setting(
+        "auto", "map registration floor as for native (auto: the map's accuracy_m, else 0)")
     max_backface_fraction: float = setting(0.5, "still more inliers on the back of walls after the retry -> no fix",
                                            min=0, max=1)
     retry_backface_fraction: float = setting(0.1, "more inliers on the back of walls -> retry on front-facing "
@@ -149,6 +153,7 @@ class KissMatcher(FrontendBase):
         conf = with_overrides(KissConfig, config, overrides)
         self.config = conf
         super().__init__(occ_map, laser_mount, conf.preprocess)
+        self.map_accuracy_m = map_accuracy(occ_map, conf.map_accuracy_m, "kiss")
         try:
             from kiss_icp.mapping import VoxelHashMap
             from kiss_icp.registration import Registration
@@ -297,7 +302,8 @@ class KissMatcher(FrontendBase):
             return no_fix("kiss: degenerate geometry (point-to-point Hessian near singular)",
                           n_inliers=n_in, quality=quality, **info)
         sigma2 = float(np.sum(w * r2)) / max(2.0 * w.sum() - 3.0, 1.0)
-        cov = self.accept.finish(self.accept.inflate(sigma2 * np.linalg.inv(H)))
+        cov = self.accept.finish(self.accept.inflate(sigma2 * np.linalg.inv(H))
+                                 + registration_floor(H, self.map_accuracy_m))
         info["sigma_m"] = math.sqrt(sigma2)
         info["time_s"] = time.perf_counter() - t0
         return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)

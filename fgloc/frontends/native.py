@@ -32,12 +32,14 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    frame moves every fix with them, and the residuals cannot tell (they fit the shifted map).  On a
    SLAM map built from other passes (Radish intel / fr079 / aces segments vs the SLAM trajectory)
    the fixes were 2-3 cm off where the scan evidence says 6 mm: NEES 38-80.  So the map's accuracy
-   (``map_accuracy_m``: the map YAML's ``accuracy_m``; undeclared: 0) is added, stretched along
-   the scan's weak direction, over the points' moment arm in heading: with half a cell (2.5 cm)
-   declared, NEES 2-6 there (``tools/eval_frontends_real.py``); the simulator's map declares 0
-   (its world rasterized), its fixes keep NEES ~2.4-2.9.  Undeclared maps get no floor because
-   the back-ends' odometry models are not yet as honest: with the floor, the smoother's heading
-   on the Radish segments follows the CARMEN odometry more and gets worse (aces 0.52 -> 0.75 deg).
+   (``map_accuracy_m``: the map YAML's ``accuracy_m``, which ``fgloc map`` writes from its
+   self-check: the r.m.s. offset at which the passes register, and the raster, 3.3 cm on ACES; a
+   map that declares none: no floor, ``base.map_accuracy``) is added, stretched along the scan's
+   weak direction, over the points' moment arm in heading: NEES 1.8-2.6 on the Radish segments
+   (``tools/eval_frontends_real.py``); the simulator's map declares 0 (its world rasterized), its
+   fixes keep NEES ~2.4-2.9.  With the floor the smoother weighs the CARMEN odometry more, whose
+   pose-derived twist noise (``pipeline.pose_delta_*``) is tighter than that odometry: see the
+   README's real-map table for the heading it costs.
 5. **Heading check**: after the refinement from the guess, the likelihood-field score over
    heading (``+-heading_check_deg``) at the refined position; a peak elsewhere is refined too and
    the lower cost wins.  A guess several degrees off (intel's bursts of scan stamps) otherwise
@@ -78,7 +80,9 @@ from .base import (
     FrontendBase,
     MatchResult,
     PreprocessOptions,
+    map_accuracy,
     no_fix,
+    registration_floor,
 )
 
 LOSS_HUBER = 0
@@ -576,34 +580,8 @@ class NativeConfig:
     cov_floor: tuple[float, float, float] = setting((1e-8, 1e-8, 1e-9), "m^2, m^2, rad^2 added", min=0)
     map_accuracy_m: float | Literal["auto"] = setting(
         "auto", "how well the map places its walls in the map frame (1 sigma, m), a floor no scan can see "
-        "below: auto = the map's declared accuracy_m (its YAML), else 0 (a SLAM map: about half a cell)")
-
-
-def registration_floor(H: FloatArray, sigma_m: float) -> FloatArray:
-    """The covariance a map registration error of ``sigma_m`` (1 sigma) leaves in a fix with scan
-    normal matrix ``H`` (``J^T W J`` over x, y, yaw).
-
-    A map whose walls sit ``sigma_m`` off in the map frame (a SLAM map's passes disagree; a wall is
-    known only to its cell) moves every fix by about that much, whatever the scan shows: the
-    residuals fit the shifted map.  Position: ``sigma^2`` stretched along the scan's weakly
-    constrained direction, ``sigma^2 sqrtm((H_xy / mean eig)^-1)`` (a corridor's walls pin the
-    cross-track position, the along-track one rests on a few door frames); heading: ``sigma^2 /
-    l^2`` with ``l = sqrt(H_yaw / mean(H_xx, H_yy))`` the points' r.m.s. moment arm.
-    """
-    out = np.zeros((3, 3))
-    if not (sigma_m > 0):
-        return out
-    hxy = H[:2, :2]
-    tr = 0.5 * float(hxy[0, 0] + hxy[1, 1])
-    if not (tr > 0 and math.isfinite(tr)):
-        return out
-    w, V = np.linalg.eigh(hxy / tr)
-    w = np.maximum(w, 1e-6)
-    out[:2, :2] = sigma_m**2 * (V @ np.diag(1.0 / np.sqrt(w)) @ V.T)
-    lever2 = float(H[2, 2]) / tr
-    if lever2 > 0:
-        out[2, 2] = sigma_m**2 / lever2
-    return out
+        "below: auto = the map's declared accuracy_m (its YAML; fgloc map writes what its self-check measured), "
+        "else 0")
 
 
 class NativeMatcher(FrontendBase):
@@ -647,16 +625,7 @@ class NativeMatcher(FrontendBase):
         self.search_candidates = max(int(conf.search_candidates), 1)
         self.far = float(conf.field_max_dist_m)
         self.depth_min_quality = float(conf.depth_min_quality)
-        if isinstance(conf.map_accuracy_m, str):
-            if conf.map_accuracy_m != "auto":
-                raise ConfigError(f"frontends config [native]: map_accuracy_m must be a number >= 0 or auto, "
-                                  f"got {conf.map_accuracy_m!r}")
-            acc = occ_map.accuracy_m
-            self.map_accuracy_m = 0.0 if acc is None else float(acc)
-        else:
-            self.map_accuracy_m = float(conf.map_accuracy_m)
-            if not (self.map_accuracy_m >= 0 and math.isfinite(self.map_accuracy_m)):
-                raise ConfigError(f"frontends config [native]: map_accuracy_m must be >= 0, got {conf.map_accuracy_m}")
+        self.map_accuracy_m = map_accuracy(occ_map, conf.map_accuracy_m, "native")
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(conf.backface_cos))
 
         k = max(int(conf.field_upsample), 1)

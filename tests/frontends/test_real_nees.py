@@ -70,15 +70,16 @@ def radish_nees(repo_data):
 
 
 def test_fix_nees_on_real_maps_is_near_its_dimension(radish_nees):
-    """NEES pooled over both excerpts (3 dof: mean 3, median 2.37).  Measured without the floor: mean
-    14.8, median 4.4 (intel 21.9 / 10.8, fr079 3.3 / 2.4); with half a cell declared:
-    mean 8.6 (intel 13.4 / 5.0, fr079 0.9 / 0.7).  The full logs (tools/eval_frontends_real.py)
-    go from 38-80 to 2-6."""
+    """NEES pooled over both excerpts (3 dof: mean 3, median 2.37).  Measured without the floor
+    (mean / median): intel 18.9 / 6.7, fr079 3.7 / 2.4; with half a cell declared: intel 13.4 / 2.9,
+    fr079 1.2 / 0.7 (the mean is a few intel fixes').  The full logs (tools/eval_frontends_real.py)
+    go from 27-59 to 1.8-2.6 with the accuracy fgloc map measures."""
     before = np.concatenate([radish_nees[n][0.0] for n in radish_nees])
     after = np.concatenate([radish_nees[n][HALF_CELL] for n in radish_nees])
     assert len(after) >= 100
     assert np.mean(before) > 10.0
-    assert np.mean(after) < 0.65 * np.mean(before)
+    assert np.mean(after) < 0.75 * np.mean(before)
+    assert np.median(after) < 0.6 * np.median(before)
     assert 1.0 < np.median(after) < 3.5
 
 

@@ -14,6 +14,7 @@ EKF keeps this fixed value.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import deque
 
 import numpy as np
@@ -34,6 +35,8 @@ class CompassCalibrator:
         self.max_dt = float(max_dt)
         self.offset: float | None = offset
         self._compass: deque[tuple[float, float, float]] = deque(maxlen=200)
+        self._stamps: deque[float] = deque(maxlen=200)
+        self._in_order = 0  # readings appended in stamp order since the last one out of order
         self._diffs: list[float] = []
 
     @property
@@ -46,13 +49,26 @@ class CompassCalibrator:
         return bool(self._compass)
 
     def add_compass(self, t: float, yaw: float, rate: float | None) -> None:
+        if self._compass and t < self._compass[-1][0]:
+            self._in_order = 0
+        else:
+            self._in_order += 1
         self._compass.append((float(t), float(yaw), float(rate) if rate is not None else 0.0))
+        self._stamps.append(float(t))
 
     def compass_at(self, t: float) -> float | None:
-        """Compass yaw (compass frame) at ``t`` from the nearest reading within ``max_dt``."""
+        """Compass yaw (compass frame) at ``t`` from the nearest reading within ``max_dt`` (the
+        earliest of equally near ones)."""
         if not self._compass:
             return None
-        best = min(self._compass, key=lambda c: abs(c[0] - t))
+        if self._in_order >= len(self._compass):  # every kept reading in stamp order: bisect
+            ts = self._stamps
+            i = bisect_left(ts, t)
+            if i == len(ts) or (i > 0 and t - ts[i - 1] <= ts[i] - t):
+                i = bisect_left(ts, ts[i - 1])
+            best = self._compass[i]
+        else:
+            best = min(self._compass, key=lambda c: abs(c[0] - t))
         if abs(best[0] - t) > self.max_dt:
             return None
         return float(wrap_angle(best[1] + best[2] * (t - best[0])))

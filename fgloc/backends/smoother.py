@@ -96,7 +96,10 @@ def _period(ts: list[float]) -> float:
     """Median spacing of the last readings (inf with fewer than 3)."""
     if len(ts) < 3:
         return math.inf
-    return float(np.median(np.diff(np.asarray(ts[-50:]))))
+    last = ts[-50:]
+    d = sorted(b - a for a, b in zip(last[:-1], last[1:], strict=True))  # np.median's, without numpy's overhead
+    m = len(d) // 2
+    return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
 
 
 #: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,

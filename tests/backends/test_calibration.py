@@ -314,3 +314,33 @@ def test_scalar_pose2_log_and_derivative_equal_gtsams():
         v1, v2, w, rows = _pose2_log_and_derivative(p.x(), p.y(), p.theta())
         assert np.allclose([v1, v2, w], gtsam.Pose2.Logmap(p), rtol=0, atol=1e-12)
         assert np.allclose(rows, gtsam.Pose2.LogmapDerivative(p)[:2], rtol=0, atol=1e-9)
+
+
+def test_arbiter_nnls_equals_scipys():
+    from scipy.optimize import nnls
+
+    from fgloc.backends.health import _nnls
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        n = int(rng.integers(2, 6))
+        A = (rng.uniform(size=(n + 2, n)) < 0.5).astype(float)
+        if np.linalg.matrix_rank(A) < n:
+            continue
+        y = rng.normal(0, 1, n + 2) * 10 ** rng.uniform(-8, 0)
+        ref = nnls(A, y)[0]
+        assert np.allclose(_nnls(A, y), ref, rtol=1e-9, atol=1e-12 * np.abs(y).max())
+
+
+def test_compass_nearest_reading_in_and_out_of_stamp_order():
+    from fgloc.backends.compass import CompassCalibrator
+
+    for stamps in ([0.0, 0.05, 0.1, 0.1, 0.15], [0.0, 0.1, 0.05, 0.15, 0.2]):
+        c = CompassCalibrator()
+        for k, t in enumerate(stamps):
+            c.add_compass(t, 0.1 * k, 0.0)
+        for q in (0.075, 0.1, 0.125, 0.3, -0.2):  # the earliest of equally near readings, as min() over all
+            best = min(range(len(stamps)), key=lambda i: abs(stamps[i] - q))
+            expect = None if abs(stamps[best] - q) > c.max_dt else 0.1 * best
+            got = c.compass_at(q)
+            assert (got is None and expect is None) or got == pytest.approx(expect, abs=1e-12)

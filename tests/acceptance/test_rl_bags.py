@@ -9,8 +9,9 @@ the bag without a map, as ``tools/eval_rl_bags.py`` does (it prints the whole ta
 The bags are not in this repository: the tests look in ``$FGLOC_RL_BAGS`` (folders separated by
 ``os.pathsep``), ``data/robot_localization`` and ``../shared/data/robot_localization`` for
 ``test1.bag``, ``test2.bag`` and r_l's ROS 1 ``test_ekf_localization_node_bag{1,2}.test``
-(noetic-devel), and skip when they are absent; ``test3.bag`` with groovy-devel's
-``test_ekf_localization_node_test_bag3.test`` (12-value _config vectors) is used when a folder has it.
+(noetic-devel), and skip when they are absent; groovy-devel's ``test_ekf_localization_node_test_bag{1,2,3}.test``
+(12-value _config vectors) with their ``test{1,2,3}.bag`` are used when a folder has them (keys
+``groovy/testN.bag``: groovy's test1.bag is another robot than noetic's).
 
 Where fgloc does not yet end within r_l's tolerance the test is ``xfail(strict=True)`` with the
 figure measured at the time, so it flips when the fusion work lands.
@@ -54,9 +55,9 @@ def cases(tool: ModuleType) -> dict[str, Any]:
     for d in _folders():
         if all((d / n).is_file() for n in NEEDED):
             found = {c.bag.name: c for c in tool.find_cases([d])}
-            # test3 (groovy-devel's parameters) from any of the folders
-            found.update({c.bag.name: c for c in tool.find_cases([f for f in _folders() if f.is_dir()])
-                          if c.bag.name == "test3.bag"})
+            # groovy-devel's parameters (test_bagN) from any of the folders
+            found.update({f"groovy/{c.bag.name}": c for c in tool.find_cases([f for f in _folders() if f.is_dir()])
+                          if "test_bag" in c.name})
             return found
     pytest.skip("robot_localization's test1.bag / test2.bag and their .test files not found "
                 "($FGLOC_RL_BAGS, data/robot_localization, ../shared/data/robot_localization)")
@@ -93,25 +94,38 @@ def test_rl_parameters_convert(converted: dict[str, tuple[Path, list[str]]]) -> 
 
 
 RUNS = [
-    # bag, back-end, xfail reason (the converted launch file carries test1's IMU mount)
-    ("test2.bag", "ekf",
-     "0.219 m from r_l's final (1.021, 3.429), tolerance 0.138: the Jackal climbs 0.74 m and fgloc's readers give "
-     "the IMU as yaw + z rate only, so the converted config's roll, pitch cannot level the odometry (with the "
-     "whole sensor_msgs/Imu delivered: 0.016 m); dead reckoning with the IMU yaw 0.142 m, with its attitude 0.084 m"),
+    # bag, back-end, xfail reason (the converted launch file carries test1's IMU mount); figures of
+    # tools/eval_rl_bags.py at 0845aaf + this file's commit
+    ("test2.bag", "ekf", None),  # 0.219 m before the readers gave the whole Imu; 0.016 m now (tol 0.138)
     ("test2.bag", "smoother",
-     "0.190 m from r_l's final, tolerance 0.138 (0.340 before the odometry's chord followed the gyro); "
-     "not levelled either (see the EKF's)"),
-    ("test1.bag", "ekf", None),       # 3.08 m (+tf) at ee92bab, 0.939 m now (tol 1.045)
-    ("test1.bag", "smoother", None),  # 1.037 m (+tf) at ee92bab, 0.385 m now
-    ("test3.bag", "ekf", None),       # groovy's 12-value vectors skipped both sources at ee92bab; 0.191 m (tol 0.75)
-    ("test3.bag", "smoother",
-     "2.043 m from r_l's final, tolerance 0.75: the gyro bias is a graph variable by default again "
-     "(smoother.gyro_bias_in_graph), and the AR.Drone's placeholder vyaw 0 pulls it to -0.0085 rad/s; "
-     "beside the graph (gyro_bias_in_graph: false) 0.693 m, but that made the live localizer diverge"),
+     "0.318 m from r_l's final (1.021, 3.429), tolerance 0.138: the odometry is levelled now (the EKF ends "
+     "0.016 m from it, the sources' own output dead-reckoned 0.010 m); the smoother was 0.192 m unlevelled"),
+    ("test1.bag", "ekf", None),       # 0.939 m at the start of session 4, 0.962 m now (tol 1.045)
+    ("test1.bag", "smoother", None),  # 0.385 m, 0.403 m now
+    ("groovy/test1.bag", "ekf",
+     "1.836 m from r_l's final (-0.823, 0.657), tolerance 0.381 (478.9 m at the start of session 4: the xsens "
+     "mount on mustang_base was dropped, its increments 2C/dt^2 uncertain, out-of-order stamps lost turns): the "
+     "sources' own output dead-reckoned ends 0.246 m from it; the EKF also weighs the xsens gyro (alone: 27.6 m)"),
+    ("groovy/test1.bag", "smoother",
+     "20.314 m from r_l's final, tolerance 0.381 (465.9 m at the start of session 4); the sources' output "
+     "dead-reckoned 0.246 m: the rest is the smoother's"),
+    ("groovy/test2.bag", "ekf",
+     "0.170 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends at "
+     "(1.021, 3.429), 0.162 m from groovy's, and fgloc's EKF 0.016 m from that (1.020 m at the start of "
+     "session 4, when the differential odometry's increments were taken 2C/dt^2 uncertain)"),
+    ("groovy/test2.bag", "smoother",
+     "0.143 m from groovy r_l's final, tolerance 0.100 (0.106 m at the start of session 4); see the EKF's"),
+    ("groovy/test3.bag", "ekf", None),  # groovy's 12-value vectors skipped both sources at ee92bab; 0.210 m (tol 0.75)
+    ("groovy/test3.bag", "smoother",
+     "2.529 m from r_l's final, tolerance 0.75 (2.043 m at 10716ca; 2.328 with the IMU's attitude levelling "
+     "the odometry, 2.529 after 2012502): the gyro bias is a graph variable by default "
+     "(smoother.gyro_bias_in_graph), and the AR.Drone's placeholder vyaw 0 pulls it (-0.00238 rad/s); beside "
+     "the graph 0.693 m at b7a34bb, but that made the live localizer diverge"),
 ]
 
 
-@pytest.mark.parametrize(("bag", "backend", "xfail"), RUNS, ids=[f"{b.split('.')[0]}-{be}" for b, be, _ in RUNS])
+@pytest.mark.parametrize(("bag", "backend", "xfail"), RUNS,
+                         ids=[f"{b.split('.')[0].replace('/', '-')}-{be}" for b, be, _ in RUNS])
 def test_final_pose_within_rl_tolerance(tool: ModuleType, cases: dict[str, Any], converted: dict[str, Any],
                                         work: Path, bag: str, backend: str, xfail: str | None,
                                         request: pytest.FixtureRequest) -> None:
@@ -138,6 +152,23 @@ def test_converted_launch_file_carries_the_imu_mount(converted: dict[str, Any]) 
     (tf,) = cfg["sources"]["static_transforms"]
     assert (tf["parent"], tf["child"]) == ("base_link", "imu_link")
     assert tf["xyz"] == pytest.approx([0.0, -0.3, 0.52]) and tf["rpy_deg"] == pytest.approx([90.0, 0.0, -90.0])
+
+
+def test_groovy_test1_launch_file_converts_with_its_mounts_on_mustang_base(converted: dict[str, Any]) -> None:
+    """groovy's test_bag1: 12-value vectors, odom0 a differential x, y pose source, odom1 a twist,
+    two differential IMUs; base_link_frame mustang_base, whose mounts (the xsens rolled 180 deg:
+    'non-right-handed frames') carry over as base_link's."""
+    import yaml
+
+    if "groovy/test1.bag" not in converted:
+        pytest.skip("groovy-devel's test1.bag and test_ekf_localization_node_test_bag1.test not found")
+    cfg = yaml.safe_load(converted["groovy/test1.bag"][0].read_text())
+    got = {n: (s["use"], s.get("differential", False)) for n, s in cfg["sources"]["inputs"].items()}
+    assert got == {"odom0": (["x", "y"], True), "odom1": (["vx", "vy", "vyaw"], False),
+                   "imu0": (["yaw", "vyaw", "roll", "pitch"], True), "imu1": (["yaw", "roll", "pitch"], True)}
+    tfs = {t["child"]: t for t in cfg["sources"]["static_transforms"]}
+    assert set(tfs) == {"xsens_sensor", "ref_imu"} and {t["parent"] for t in tfs.values()} == {"base_link"}
+    assert tfs["xsens_sensor"]["rpy_deg"] == pytest.approx([180.0, 0.0, 0.0])
 
 
 def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dict[str, Any], work: Path) -> None:

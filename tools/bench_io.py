@@ -26,9 +26,9 @@ from fgloc.io import fastcdr, open_log
 from fgloc.io.convert import import_log
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.msgdefs import full_text
-from fgloc.io.ros import FROM_ROS, compass_to_ros, odom_to_ros, scan_to_ros, tf_to_ros
+from fgloc.io.ros import FROM_ROS, compass_to_ros, imu_to_ros, odom_to_ros, scan_to_ros, tf_to_ros
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, TF_MESSAGE
-from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, StaticTransform
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -88,7 +88,7 @@ def generic_write(path_or_buf: Any, msgs: list[tuple[str, object]]) -> None:
     from mcap_ros2.writer import Writer
 
     to = {LaserScan: (LASER_SCAN, scan_to_ros), Odometry: (ODOMETRY, odom_to_ros),
-          CompassHeading: (IMU, compass_to_ros)}
+          CompassHeading: (IMU, compass_to_ros), Imu: (IMU, imu_to_ros)}
     w = Writer(path_or_buf)
     schemas: dict[str, Any] = {}
     for topic, m in msgs:
@@ -123,7 +123,7 @@ def main() -> None:
             recs.setdefault(rec.topic, []).append(rec)
         # -- decoders on the raw bytes of each topic
         for topic, type_name, fast in (("/odom", ODOMETRY, fastcdr.decode_odometries),
-                                       ("/imu", IMU, fastcdr.decode_compasses),
+                                       ("/imu", IMU, fastcdr.decode_imus),
                                        ("/tf", TF_MESSAGE, fastcdr.decode_tf_messages),
                                        ("/scan", LASER_SCAN, fastcdr.decode_laser_scans)):
             datas = [r.data for r in recs[topic]]

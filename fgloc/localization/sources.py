@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fgloc.backends.health import SourceHealth
 from fgloc.backends.imu import imu_in_base, mount_rotation
@@ -56,7 +57,7 @@ from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, rotate_covariance, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
-from fgloc.localization.frames import parse_static_transforms
+from fgloc.localization.frames import ROBOT_FRAMES, parse_static_transforms, transform_of
 from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
 
 log = logging.getLogger(__name__)
@@ -185,6 +186,13 @@ def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt:
     return np.asarray(rotate_covariance(np.asarray(cov) + np.asarray(prev_cov), -prev_yaw) * dt, dtype=float)
 
 
+def _same_rotation(a: StaticTransform, b: StaticTransform) -> bool:
+    qa, qb = getattr(a, "rotation_xyzw", None), getattr(b, "rotation_xyzw", None)
+    if qa is None or qb is None:
+        return qa is None and qb is None and float(a.pose[2]) == float(b.pose[2])
+    return bool(np.array_equal(np.asarray(qa), np.asarray(qb)))
+
+
 def _needed(spec: SourceSpec, msg: Imu) -> Imu:
     """``msg`` without the fields ``spec`` does not use (their faults are none of its business):
     the orientation serves yaw, roll / pitch and orientation increments, the angular velocity
@@ -225,6 +233,9 @@ class SourceRouter:
         # configured mounts (sources.static_transforms) win over the log's
         self.configured = {t.child.lstrip("/"): t for t in static or ()}
         self.mounts: dict[str, StaticTransform] = dict(self.configured)
+        # every tf link by child frame: an IMU mounted through a chain (base_link -> plate -> imu)
+        self._links: dict[str, StaticTransform] = {}
+        self._chains: dict[str, StaticTransform | None] = {}
         self._warned: set[str] = set()
         self.state: dict[str, _State] = {}
         self._tilt: tuple[float, float, float] | None = None   # t, roll, pitch of the base (levelling IMU)
@@ -264,9 +275,34 @@ class SourceRouter:
     def on_tf(self, msg: object) -> None:
         if isinstance(msg, (list, tuple)):
             for tr in msg:
-                if isinstance(tr, StaticTransform) and tr.parent.lstrip("/") in ("base_link", "base_footprint") \
-                        and tr.child.lstrip("/") not in self.configured:
-                    self.mounts[tr.child.lstrip("/")] = tr
+                if not isinstance(tr, StaticTransform):
+                    continue
+                child = tr.child.lstrip("/")
+                if child in self.configured or child in ROBOT_FRAMES:
+                    continue
+                if tr.parent.lstrip("/") in ROBOT_FRAMES:
+                    self.mounts[child] = tr
+                old = self._links.get(child)
+                if old is None or not _same_rotation(old, tr) or old.parent != tr.parent:
+                    self._chains.clear()
+                self._links[child] = tr
+
+    def _chain(self, frame: str) -> StaticTransform | None:
+        """``base_link -> frame`` through the tf links (rotation composed; None: no chain)."""
+        if frame in self._chains:
+            return self._chains[frame]
+        R, cur, out = np.eye(3), frame, None
+        for _ in range(32):
+            tr = self._links.get(cur)
+            if tr is None:
+                break
+            R = mount_rotation(tr) @ R
+            cur = tr.parent.lstrip("/")
+            if cur in ROBOT_FRAMES:
+                out = transform_of(cur, frame, [0.0, 0.0, 0.0], Rotation.from_matrix(R).as_quat())
+                break
+        self._chains[frame] = out
+        return out
 
     def on_message(self, spec: SourceSpec, msg: object) -> None:
         st = self.state[spec.name]
@@ -393,6 +429,8 @@ class SourceRouter:
         if f in ("", "base_link", "base_footprint"):
             return None
         tr = self.mounts.get(f)
+        if tr is None:
+            tr = self._chain(f)
         if tr is None and warn and f not in self._warned:
             self._warned.add(f)
             log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", f)

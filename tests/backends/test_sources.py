@@ -300,3 +300,23 @@ def test_a_differential_source_out_of_order_skips_the_message_not_the_increment(
     for t, x in ((1.0, 0.0), (1.1, 0.1), (1.05, 0.05), (1.2, 0.2)):
         router.on_message(router.specs[0], Odometry(t, np.zeros(3), None, np.array([x, 0.0, 0.0]), np.eye(3) * 1e-4))
     assert [m.twist[0] for m in loc.odometry] == pytest.approx([1.0, 1.0])
+
+
+def test_an_imu_mounted_through_a_chain_of_transforms():
+    """base_link -> imu_plate (yawed 90 deg) -> imu_link (turned 90 deg about x), as a URDF's
+    robot_state_publisher gives it: the composed rotation turns the IMU into base_link
+    (hand computed: R_bi = Rz(90) Rx(90) maps the base's z rate onto the IMU's +y)."""
+    loc, router = _router()
+    plate = Rotation.from_euler("z", 90, degrees=True)
+    imu = Rotation.from_euler("x", 90, degrees=True)
+    router.on_tf([Transform3D("base_link", "imu_plate", np.array([0.1, 0.0, math.pi / 2]), 0.1, plate.as_quat()),
+                  Transform3D("/imu_plate", "/imu_link", np.zeros(3), 0.05, imu.as_quat())])
+    R_bi = (plate * imu).as_matrix()
+    assert np.allclose(R_bi.T @ [0, 0, 1], [0, 1, 0], atol=1e-12)
+    base_yaw, w = -0.4, 0.3
+    q = Rotation.from_matrix(Rotation.from_euler("z", base_yaw).as_matrix() @ R_bi).as_quat()
+    router.on_message(router.specs[1], Imu(1.0, q, np.array([0.0, w, 0.0]), np.eye(3) * 1e-4, np.eye(3) * 1e-6,
+                                           frame_id="imu_link"))
+    (c,) = loc.compass
+    assert c.yaw_rad == pytest.approx(base_yaw, abs=1e-9) and c.yaw_rate_radps == pytest.approx(w, abs=1e-12)
+    assert "mount" not in router.health()["imu"]  # found: no 'no transform: identity'

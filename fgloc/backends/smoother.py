@@ -134,6 +134,8 @@ def prior_covariance(cov: FloatArray | None, var_max: FloatArray | None = None) 
 
 def _bounded(c: FloatArray, var_max: float | FloatArray) -> FloatArray:
     """``c`` with each variance at most ``var_max`` (rows / columns scaled: stays positive definite)."""
+    if isinstance(var_max, float) and c[0, 0] <= var_max and c[1, 1] <= var_max and c[2, 2] <= var_max:
+        return c  # (the common case, without numpy's per-call overhead)
     d = np.diag(c)
     if np.all(d <= var_max):
         return c
@@ -441,7 +443,6 @@ class SlidingWindowSmoother(Backend):
             if tb > covered or tb > last_fix - 0.25:
                 keep.append(pair)
                 continue
-            wa, wb = self._twist_at(ta), self._twist_at(tb)
             # a reference slower than ~20 Hz cannot resolve a lag of tens of ms (the motion inside
             # one of its periods is not known): such a reference gives no pairs
             # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
@@ -449,17 +450,20 @@ class SlidingWindowSmoother(Backend):
                 continue
             yaw_ref_ok = yaw_period <= MAX_REF_PERIOD_S
             if yaw_ref_ok:
+                wa, wb = self._twist_at(ta), self._twist_at(tb)
                 d_ref = self._rotation_between(ta, tb)
                 r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
                 var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
                 self.latency_est.add(-(float(wb[2]) - float(wa[2])), r, var, d_ref, 0)
+            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
+            if tb - ta < 0.5:
+                continue
             d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
             dist_ref = float(np.hypot(d[0], d[1]))
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
-            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
             va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
-            if tb - ta >= 0.5 and va is not None and vb is not None:
+            if va is not None and vb is not None:
                 self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
         self._fix_pairs = keep
 
@@ -533,16 +537,18 @@ class SlidingWindowSmoother(Backend):
             self.stats["late"] += 1
             h.skip("late")
             return
-        if not (math.isfinite(t) and np.all(np.isfinite(twist))):
+        u = np.asarray(twist, dtype=float)
+        u0, u1, u2 = float(u[0]), float(u[1]), float(u[2])  # scalar checks: np.all costs ~10 us per call
+        if not (math.isfinite(t) and math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)):
             h.skip("not finite")
             return
         h.accepted += 1
         c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
-        still = bool(np.all(np.abs(np.asarray(twist, dtype=float)) < 1e-3))
+        still = abs(u0) < 1e-3 and abs(u1) < 1e-3 and abs(u2) < 1e-3
         for gb in self.gbias.values():
             gb.set_still(float(t), still)
         self.odo_t.append(float(t))
-        self.odo_u.append(np.asarray(twist, dtype=float))
+        self.odo_u.append(u)
         self.odo_c.append(_bounded(c, TWIST_VAR_MAX))
         if self.cfg.adapt_noise:
             if "odom" not in self.arb.streams:

@@ -1,6 +1,6 @@
 """Benchmark ``fgloc batch``: N simulated logs, sequential vs the local process pool vs Ray.
 
-    python tools/bench_batch.py [--logs 16] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
+    python tools/bench_batch.py [--logs 14] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
                                 [--engines sequential,local,ray,cli] [--workdir DIR]
 
 Logs: by default the paper's run (the 78 m rectangle around the hall, 113 s, the length of a
@@ -236,7 +236,7 @@ def fmt_range(v: list[float], digits: int = 1) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--logs", type=int, default=16)
+    ap.add_argument("--logs", type=int, default=14)
     ap.add_argument("--jobs", "-j", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--route", choices=("paper", "line"), default="paper",

@@ -1,6 +1,6 @@
 """Benchmark ``fgloc batch``: N simulated logs, sequential vs the local process pool vs Ray.
 
-    python tools/bench_batch.py [--logs 14] [--jobs 2] [--repeat 2] [--route paper|line] [--no-cli]
+    python tools/bench_batch.py [--logs 14] [--jobs 2] [--repeat 2] [--route paper|line] [--cli]
                                 [--engines sequential,local,ray,cli] [--workdir DIR]
 
 Logs: by default the paper's run (the 78 m rectangle around the hall, 113 s, the length of a
@@ -12,7 +12,7 @@ Rows (each repeated ``--repeat`` times, in rotating order; medians and ranges pr
 
 * ``sequential``: every log one after the other in this process (``fgloc batch`` with the
   in-process engine: no process start, imports and numba caches paid once) - the baseline;
-* ``fgloc run`` x N (unless ``--no-cli``): one ``fgloc run`` process per log, a shell loop;
+* ``fgloc run`` x N (with ``--cli``): one ``fgloc run`` process per log, a shell loop;
 * ``local pool -j J``: ``--engine local`` (J spawned workers, their start included);
 * ``ray -j J``: ``--engine ray`` on a private local Ray instance with J CPUs, as ``fgloc batch``
   runs it: the instance starts in the background while the driver prepares the jobs, and
@@ -242,7 +242,8 @@ def main() -> None:
     ap.add_argument("--route", choices=("paper", "line"), default="paper",
                     help="paper: the paper's 78 m rectangle (113 s); line: --route-m along the first side")
     ap.add_argument("--route-m", type=float, default=25.0, help="line route length (m, 0.8 m/s; at most 25)")
-    ap.add_argument("--no-cli", action="store_true", help="skip the one-process-per-log row")
+    ap.add_argument("--cli", action="store_true", help="add the one-process-per-log row (a few more minutes)")
+    ap.add_argument("--no-cli", action="store_true", help="without that row (the default; kept for old command lines)")
     ap.add_argument("--no-ray", action="store_true")
     ap.add_argument("--engines", default="", help="rows to time, e.g. sequential,ray (default: all)")
     ap.add_argument("--workdir", type=Path, default=None, help="keep logs here (default: a temp folder)")
@@ -269,7 +270,8 @@ def main() -> None:
     t_warm = warm_up(work, map_yaml)
     con.print(f"{len(logs)} logs ({args.route} route), {log_s:.0f} s of log time in all, simulated in {t_sim:.0f} s, "
               f"warm-up {t_warm:.0f} s; {os.cpu_count()} CPUs; load average {os.getloadavg()[0]:.2f} at the start")
-    order = ["sequential", "local"] + ([] if args.no_ray else ["ray"]) + ([] if args.no_cli else ["cli"])
+    with_cli = args.cli and not args.no_cli
+    order = ["sequential", "local"] + ([] if args.no_ray else ["ray"]) + (["cli"] if with_cli else [])
     if args.engines:
         order = [e for e in args.engines.split(",") if e]
         if "sequential" not in order or set(order) - {"sequential", "local", "ray", "cli"}:

@@ -120,6 +120,39 @@ def measured_accuracy(name: str, cache: Path) -> float:
     return acc
 
 
+GMAPPING = {"intel": DATA.parent / "radish-reference" / "intel-corrected.log.gz",
+            "fr079": DATA.parent / "radish-reference" / "freiburg-079-corrected.log.gz"}
+
+
+def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir: Path | None) -> dict:
+    """How far the SLAM reference itself is from GMapping's over the segment: heading (and position)
+    RMS after the rigid 2-D alignment that fits best (the frames differ), on the scans both have.
+    The heading error of localization against SLAM cannot be measured below this."""
+    path = GMAPPING.get(name)
+    if gmapping_dir is not None and not (path and path.exists()):
+        path = gmapping_dir / {"aces": "aces-corrected.log.gz", "mit-csail": "csail-corrected.log.gz"}.get(name, "")
+    if path is None or not path.is_file():
+        return {}
+    sys.path.insert(0, str(REPO / "tools"))
+    from eval_radish import reference_trajectory  # type: ignore[import-not-found]
+
+    from fgloc.geometry import wrap_angle
+
+    ref, _ = reference_trajectory(path, recs, mount)
+    m = (ref.stamps >= recs[s0].stamp) & (ref.stamps <= recs[s1].stamp)
+    if m.sum() < 5:
+        return {}
+    g = ref.poses[m]
+    s = slam.scan_trajectory.interpolate(ref.stamps[m])
+    dth = float(np.angle(np.mean(np.exp(1j * wrap_angle(s[:, 2] - g[:, 2])))))
+    c, sn = np.cos(dth), np.sin(dth)
+    gx = np.column_stack([c * g[:, 0] - sn * g[:, 1], sn * g[:, 0] + c * g[:, 1]])
+    gx += (s[:, :2] - gx).mean(axis=0)
+    e_yaw = np.degrees(wrap_angle(g[:, 2] + dth - s[:, 2]))
+    return {"gm_n": int(m.sum()), "gm_rmse_m": float(np.sqrt(np.mean(np.sum((gx - s[:, :2]) ** 2, axis=1)))),
+            "gm_rmse_deg": float(np.sqrt(np.mean(e_yaw**2)))}
+
+
 def nees_of(fixes, ref) -> dict:
     from fgloc.geometry import wrap_angle
 
@@ -139,7 +172,8 @@ def nees_of(fixes, ref) -> dict:
             "sigma_yaw_med_deg": float(np.degrees(np.median(np.sqrt(P[:, 2, 2]))))}
 
 
-def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None) -> dict:
+def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None,
+             gmapping_dir: Path | None = None, overrides: dict | None = None) -> dict:
     from fgloc.config import load_config
     from fgloc.geometry import wrap_angle
     from fgloc.localization import Localizer, Session
@@ -159,7 +193,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     msgs.sort(key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
     ref = slam.scan_trajectory
     p0 = ref.interpolate(np.array([t0]))[0]
-    loc = Localizer(occ, mount, backend, "native", initial_pose=p0, config=load_config())
+    loc = Localizer(occ, mount, backend, "native", initial_pose=p0, config=load_config(overrides=overrides or None))
     tw = time.perf_counter()
     est = Session(loc).run(msgs)
     wall = time.perf_counter() - tw
@@ -173,6 +207,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
            "rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "fixes": loc.stats["fixes"],
            "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall}
     res.update(nees_of(loc.fixes, ref))
+    res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir))
     return res
 
 
@@ -243,12 +278,23 @@ def main() -> int:
     ap.add_argument("--map-accuracy", nargs="+", default=["none", "measured"],
                     help="the real maps' declared accuracy_m per run: none (undeclared), measured (as fgloc map "
                          "writes it), half-cell, or metres")
+    ap.add_argument("--gmapping-dir", type=Path, default=None,
+                    help="folder with aces-corrected.log.gz / csail-corrected.log.gz (intel, fr079: the shared data)")
+    ap.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
+                    help="configuration overrides for the real-log runs (YAML values), e.g. smoother.adapt_noise=false")
     ap.add_argument("--skip-sim", action="store_true")
     ap.add_argument("--hard", action="store_true", help="also the changed world with 28 more pallets along the path")
     ap.add_argument("--skip-real", action="store_true")
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
+    overrides: dict = {}
+    for item in args.set:
+        import yaml
+
+        key, _, val = item.partition("=")
+        sec, _, opt = key.partition(".")
+        overrides.setdefault(sec, {})[opt] = yaml.safe_load(val)
     if not args.skip_real:
         for name in args.logs:
             if not LOGS[name].exists():
@@ -258,7 +304,7 @@ def main() -> int:
                 for acc_s in args.map_accuracy:
                     acc = (None if acc_s == "none" else 0.025 if acc_s == "half-cell"
                            else measured_accuracy(name, args.cache) if acc_s == "measured" else float(acc_s))
-                    rows.append(run_real(name, args.cache, args.scans, be, acc))
+                    rows.append(run_real(name, args.cache, args.scans, be, acc, args.gmapping_dir, overrides))
                     print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
     if not args.skip_sim:
         for seed in args.seeds:
@@ -278,6 +324,10 @@ def main() -> int:
               f"| {_f(r, 'nees_mean', '.2f')} ({_f(r, 'nees_median', '.2f')}) "
               f"| {_f(r, 'nees_x', '.2f')} / {_f(r, 'nees_y', '.2f')} / {_f(r, 'nees_yaw', '.2f')} "
               f"| {r['fixes']} / {r['no_fix']} / {r['reloc']} |")
+    floors = {r["log"]: r for r in rows if "gm_rmse_deg" in r}
+    for name, r in floors.items():
+        print(f"\n{name}: SLAM vs GMapping over the segment ({r['gm_n']} scans, rigid alignment): "
+              f"{r['gm_rmse_m']:.3f} m / {r['gm_rmse_deg']:.2f} deg RMS (the reference's own error is of this order)")
     return 0
 
 

@@ -72,8 +72,8 @@ def radish_nees(repo_data):
 def test_fix_nees_on_real_maps_is_near_its_dimension(radish_nees):
     """NEES pooled over both excerpts (3 dof: mean 3, median 2.37).  Measured without the floor
     (mean / median): intel 18.9 / 6.7, fr079 3.7 / 2.4; with half a cell declared: intel 13.4 / 2.9,
-    fr079 1.2 / 0.7 (the mean is a few intel fixes').  The full logs (tools/eval_frontends_real.py)
-    go from 27-59 to 1.8-2.6 with the accuracy fgloc map measures."""
+    fr079 1.2 / 0.7 (the mean is a few intel fixes').  The full logs' fr079 and aces segments
+    (tools/eval_frontends_real.py) go from 34-51 to 1.8-2.6 with the accuracy fgloc map measures."""
     before = np.concatenate([radish_nees[n][0.0] for n in radish_nees])
     after = np.concatenate([radish_nees[n][HALF_CELL] for n in radish_nees])
     assert len(after) >= 100

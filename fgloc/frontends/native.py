@@ -664,6 +664,19 @@ class NativeMatcher(FrontendBase):
         )
         return pose, float(cost)
 
+    def _laser_on_free(self, pose: FloatArray) -> bool:
+        """Whether the laser at ``pose`` stands on a free cell of the map (the cells' convention of
+        :func:`_beam_clear`).  A prediction gone metres off (intel's 240 m/s pose-delta twist put
+        one 16.8 m away) stands in unknown space or in a wall."""
+        lx, ly = self._lb[0], self._lb[1]
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        ox = float(pose[0]) + c * lx - s * ly
+        oy = float(pose[1]) + s * lx + c * ly
+        u = self.Ac[0, 0] * ox + self.Ac[0, 1] * oy + self.bc[0] + 0.5
+        v = self.Ac[1, 0] * ox + self.Ac[1, 1] * oy + self.bc[1] + 0.5
+        h, w = self.cells.shape
+        return bool(0.0 <= u < w and 0.0 <= v < h and self.cells[int(v), int(u)] == 0)
+
     def _stats_at(self, px: FloatArray, py: FloatArray, pose: FloatArray) -> tuple[Any, ...]:
         c, out = self.scales[-1], self.outliers[-1]
         return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
@@ -751,10 +764,13 @@ class NativeMatcher(FrontendBase):
         H, wr2, sw, n_in, n_used, sum_r, n_runs, n_unk = best_stats
         n_in = int(n_in)
         quality = n_in / n
+        if n_unk and not self._laser_on_free(pose):
+            n_unk = 0  # a laser outside the mapped free space is not looking into an unseen room
         info = {"searched": searched, "time_s": time.perf_counter() - t0, "n_points": n, "n_unknown": int(n_unk)}
         # the inlier fraction among the points the map can speak for: one ending in unknown space
-        # (a room the map's passes never saw into) neither agrees nor disagrees; at least half the
-        # points count (a pose looking off the map is not rescued)
+        # (a room the map's passes never saw into) neither agrees nor disagrees, when the laser
+        # itself stands on the map's free space; at least half the points count (a pose looking off
+        # the map is not rescued)
         rejected = self.accept.too_few_inliers(n_in, max(n - int(n_unk), (n + 1) // 2), **info)
         if rejected is None:
             rejected = self.accept.jumped(pose, guess, n_in, quality, **info)

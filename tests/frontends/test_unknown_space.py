@@ -43,3 +43,19 @@ def test_beams_through_mapped_walls_still_count():
     fe = NativeMatcher(part, MOUNT, surface_depth_cells=0.0)
     r = fe.match(scan, np.array([3.0, 2.0, 2.5]))
     assert not r.ok
+
+
+def test_a_laser_off_the_mapped_free_space_gets_no_exemption():
+    """The scan of the first test, with the map's cells under the laser (0.15 m ahead of the base,
+    which stays on free space) unknown, as where a prediction gone metres off puts it: the beams
+    ending in unknown space count again, and with them the fit is too poor for a fix."""
+    full, part = _partial_map()
+    pose = np.array([6.0, 3.0, 0.0])
+    scan = make_scan(full, pose, np.random.default_rng(2))
+    data = part.data.copy()
+    r0 = int(round((pose[1] - part.origin[1]) / part.resolution))
+    cl = int(round((pose[0] + MOUNT.pose[0] - part.origin[0]) / part.resolution))
+    data[r0 - 3:r0 + 3, cl - 1:cl + 3] = UNKNOWN  # 0.3 m x 0.2 m under the laser
+    off = OccupancyMap(data, part.resolution, part.origin, accuracy_m=0.0)
+    r = NativeMatcher(off, MOUNT, surface_depth_cells=0.0).match(scan, pose + np.array([0.04, -0.03, 0.02]))
+    assert not r.ok and "inlier" in r.reason, r.reason

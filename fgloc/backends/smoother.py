@@ -615,7 +615,7 @@ class SlidingWindowSmoother(Backend):
             if i > 0:
                 del buf[0][:i], buf[1][:i], buf[2][:i]
 
-    def _gyro_increment(self, name: str, t0: float, t1: float, max_gap: float = 0.25
+    def _gyro_increment(self, name: str, t0: float, t1: float, max_gap: float = 0.25, want_var: bool = True
                         ) -> tuple[float, float] | None:
         """Bias-free gyro yaw change over ``(t0, t1]`` and its variance, or None when the readings
         do not cover the interval.  A gyro reading is the rate at its stamp: the rate is
@@ -628,7 +628,8 @@ class SlidingWindowSmoother(Backend):
         factors with ``var * w^2`` each claimed the integrated gyro 2-3x better (in variance) than
         it is once keyframes come faster than readings (paper run: 25 Hz scans, 20 Hz gyro), and
         the gyro's random walk wobbled the heading.  With the shares the factors of consecutive
-        intervals add up to the exact variance of the gyro's integral over them."""
+        intervals add up to the exact variance of the gyro's integral over them.  ``want_var=False``:
+        the variance is not computed (returned as 0)."""
         ts, rs, vs = self.gyro.get(name, ([], [], []))
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
@@ -648,8 +649,9 @@ class SlidingWindowSmoother(Backend):
                 wi = (b - a) * (1.0 - 0.5 * (fa + fb))
                 wj = (b - a) * 0.5 * (fa + fb)
                 d += wi * rs[i] + wj * rs[i + 1]
-                w[i] = w.get(i, 0.0) + wi
-                w[i + 1] = w.get(i + 1, 0.0) + wj
+                if want_var:
+                    w[i] = w.get(i, 0.0) + wi
+                    w[i + 1] = w.get(i + 1, 0.0) + wj
             i += 1
         var = 0.0
         for m, ww in w.items():
@@ -698,7 +700,7 @@ class SlidingWindowSmoother(Backend):
             tn = min(ts[i], t1) if i < n else t1
             dt = tn - t
             if dt > 0:
-                r = self._gyro_increment(name, t, tn)
+                r = self._gyro_increment(name, t, tn, want_var=False)
                 if r is None:
                     return None
                 w = r[0]
@@ -719,7 +721,7 @@ class SlidingWindowSmoother(Backend):
             return 0.0
         a, b = (t0, t1) if t1 > t0 else (t1, t0)
         for name in self.gyro:
-            r = self._gyro_increment(name, a, b)
+            r = self._gyro_increment(name, a, b, want_var=False)
             if r is not None:
                 return r[0] if t1 > t0 else -r[0]
         if not self.odo_t:
@@ -754,7 +756,7 @@ class SlidingWindowSmoother(Backend):
             return d
         out, _ = scaled_delta(d, self._gains)
         for name in self.gyro:
-            r = self._gyro_increment(name, t0, t1)
+            r = self._gyro_increment(name, t0, t1, want_var=False)
             if r is not None and abs(d[2]) > 1e-9:
                 out, _ = scaled_delta(d, np.array([self._gains[0], r[0] / d[2]]))
                 break

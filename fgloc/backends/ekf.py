@@ -141,6 +141,9 @@ class EKFConfig:
     adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other")
     compass_recover_after: int = setting(40, "compass headings gated in a row, while the sources agree it is "
                                          "healthy, before the heading is re-opened to it", min=1)
+    relative_yaw_q: float = setting(1e-6, "random walk of a differential orientation source's own offset "
+                                    "(rad^2/s): how fast its heading may drift from the filter's (an AHRS without "
+                                    "a magnetometer drifts ~1-10 deg/h)", min=0)
     latency: bool = setting(True, "estimate the scan stamps' latency from how the fixes lag the gyro / odometry")
     latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
 

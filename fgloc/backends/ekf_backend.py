@@ -86,6 +86,7 @@ class EKFBackend(Backend):
         self._consecutive_rejects = 0
         self._compass_gated_run = 0
         self._gyro_gated_run = 0
+        self._rel_gated: dict[str, int] = {}   # per differential orientation source: gated in a row
         self.arb = Arbiter()
         self.gbias: dict[str, GyroBias] = {}  # per gyro: its bias, estimated beside the filter
         self.sources: dict[str, SourceHealth] = {}
@@ -297,6 +298,60 @@ class EKFBackend(Backend):
                 self.stats["gyro_recoveries"] = self.stats.get("gyro_recoveries", 0) + 1
                 self._gyro_gated_run = 0
         self._process_pairs()
+
+    def add_relative_yaw(self, t: float, yaw: float, var: float, source: str = "imu") -> None:
+        """An orientation whose increments are used, not its frame (robot_localization's
+        ``imuN_differential``): ``z = theta + c`` with the source's own offset ``c`` a state
+        (anchored at the first reading, a random walk of ``relative_yaw_q``).
+
+        Not as the rate ``d_yaw / d_t`` between stamps: with jittered stamps (two messages
+        0.2 ms apart) that rate spikes to several rad/s, its claimed variance ``(C1 + C2) dt``
+        shrinks as it grows, the gate drops it and its increment is lost (r_l's groovy
+        test_bag1: 3130 of 12954 such rates gated).  As a heading the increments enter whole,
+        whatever the stamps.  Gated ``compass_recover_after`` times in a row (a re-initialized
+        AHRS), the offset is re-anchored."""
+        name = f"{source}.yaw"
+        h = self._source(name, "heading")
+        if not (math.isfinite(t) and math.isfinite(yaw)):
+            h.skip("not finite")
+            return
+        v = var if math.isfinite(var) and var > 0 else self.compass_sigma**2
+        self._arb_add(name, ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(v))
+        k, _ = self._noise(name)
+        v *= k * k
+        self._heading_for_bias(name, t, float(yaw), v)
+        if not self.initialized:
+            return
+        if t < (self.ekf.t or -math.inf):
+            self.stats["late"] += 1
+        self.ekf.predict(t)
+        key = f"yaw_offset:{source}"
+        i = self.ekf.aug.get(key)
+        if i is None or self._rel_gated.get(source, 0) >= self.cfg.compass_recover_after:
+            if i is not None:
+                self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
+            i = self.ekf.add_state(key, 0.0, 1.0, self.cfg.relative_yaw_q)
+            # c = z - theta: correlated with the heading (and through it with the rest)
+            P = self.ekf.P
+            P[i, :] = -P[TH, :]
+            P[:, i] = -P[:, TH]
+            P[i, i] = P[TH, TH] + v
+            self.ekf.x[i] = wrap_scalar(float(yaw) - float(self.ekf.x[TH]))
+            self._rel_gated[source] = 0
+            h.accepted += 1
+            return
+        H = np.zeros((1, self.ekf.n))
+        H[0, TH] = 1.0
+        H[0, i] = 1.0
+        hx = np.array([float(self.ekf.x[TH]) + float(self.ekf.x[i])])
+        if self.ekf.update_h(np.array([float(yaw)]), hx, H, np.array([[v]]), self.cfg.gate_compass, "relative_yaw",
+                             (0,)):
+            self.ekf.x[i] = wrap_scalar(float(self.ekf.x[i]))
+            h.accepted += 1
+            self._rel_gated[source] = 0
+        else:
+            h.gated += 1
+            self._rel_gated[source] = self._rel_gated.get(source, 0) + 1
 
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
         if not self.initialized:

@@ -479,6 +479,18 @@ class SourceRouter:
                     else:
                         rate = rate * float(np.sign(R[2, 2]))
         t = float(msg.stamp)
+        add_rel = getattr(self.loc.backend, "add_relative_yaw", None)
+        if spec.differential and yaw is not None and spec.uses("yaw") and not spec.uses("vyaw") \
+                and add_rel is not None:
+            # orientation increments as a heading with the source's own offset (a back-end that
+            # takes them: the EKF), not as a rate d_yaw / d_t, which stamp jitter turns into spikes
+            if st.prev_yaw is not None and not t > st.prev_yaw[0]:
+                self._skip(st, f"imu: {OUT_OF_ORDER}")
+                return
+            st.prev_yaw = (t, yaw)
+            add_rel(t, float(yaw), self._var(spec, "yaw", yaw_var), "imu" if not st.extra.get("second") else spec.name)
+            h.accepted += 1
+            return
         if spec.differential and yaw is not None:
             # orientation increments as a yaw rate (robot_localization's imuN_differential)
             var = yaw_var if math.isfinite(yaw_var) else 1e-4

@@ -24,6 +24,13 @@ from fgloc.localization.sources import UNUSED_VAR
 #: s: pose_deltas auto compares the twist with the pose increments summed over this long (stamp
 #: jitter and a noisy twist cancel out over it; a missing or partial twist does not)
 AGREEMENT_WINDOW_S = 1.0
+#: a pose-derived twist is a velocity to extrapolate with only over a time baseline of at least
+#: this fraction of the source's mean period (over its last :data:`RATE_WINDOW` poses), at most (and
+#: until that is known) :data:`MAX_BASELINE_S`: loggers that stamp late and in bursts deliver
+#: several poses within a millisecond (two poses 169 us and 4 cm apart are "240 m/s")
+BASELINE_FRACTION = 0.5
+MAX_BASELINE_S = 0.05
+RATE_WINDOW = 16
 
 
 def between1(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -56,6 +63,12 @@ class OdometryTracker:
         self._window: deque[tuple[float, tuple[float, ...], bool]] = deque()
         self._sums = [0.0] * 8  # pose increments (3), twist increments (3), path length, |turn|
         self._moved = 0
+        # stamps of the last RATE_WINDOW poses (the source's mean period), the recent odom poses, and
+        # whether the last twist came from a pose increment shorter than the baseline (a burst)
+        self._stamps: deque[float] = deque(maxlen=RATE_WINDOW + 1)
+        self._recent: deque[tuple[float, FloatArray]] = deque(maxlen=4 * RATE_WINDOW)
+        self._short = False
+        self.short_increments = 0          # pose increments over less than the baseline (bursty stamps)
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
              ) -> tuple[FloatArray, FloatArray | None]:
@@ -78,6 +91,7 @@ class OdometryTracker:
             self.pose = compose1(self.pose, se2_exp(tw * (t - self.t)))
         self.t = t
         self.twist = tw
+        self._recent.append((t, self.pose))
         if self.first_t is None:
             self.first_t = t
         if unused[0] or unused[1] or unused[2]:
@@ -89,8 +103,27 @@ class OdometryTracker:
         when ``t`` is within ``odom_extrapolate_max_s`` of it (slow or late odometry must not hand
         the front-end a stale motion for its de-skew); else the last pose as it is."""
         if self.t is not None and abs(t - self.t) <= self.cfg.odom_extrapolate_max_s:
-            return compose1(self.pose, se2_exp(self.twist * (t - self.t)))
+            return compose1(self.pose, se2_exp(self.extrapolation_twist() * (t - self.t)))
         return self.pose
+
+    def extrapolation_twist(self) -> FloatArray:
+        """The velocity to carry the odom pose past the last message with: the last twist, unless
+        it came from a pose increment shorter than the baseline (:data:`BASELINE_FRACTION`): then
+        the mean velocity over the last poses that span at least the baseline.  Integrating the
+        pose increments stays exact (``twist``); only what is extrapolated from a burst changes
+        (intel's 240 m/s pose-delta twist put the next scan's guess 16.8 m off)."""
+        if not self._short or len(self._recent) < 2:
+            return self.twist
+        t1, p1 = self._recent[-1]
+        base = self._baseline()
+        t0, p0 = self._recent[0]
+        for tj, pj in reversed(self._recent):
+            if t1 - tj >= base:
+                t0, p0 = tj, pj
+                break
+        if not t1 - t0 > 0:
+            return np.zeros(3)
+        return se2_log(between1(p0, p1)) / (t1 - t0)
 
     def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
                unused: tuple[bool, bool, bool] | None = None) -> tuple[FloatArray, FloatArray | None]:
@@ -115,12 +148,14 @@ class OdometryTracker:
         """
         prev = self._prev_pose
         self._prev_pose = None if pose is None else (t, pose)
+        self._short = False
         mode = self.cfg.pose_deltas
         if pose is None or prev is None or mode == "never":
             return tw, cov
         dt = t - prev[0]
         if not dt > 0:
             return tw, cov
+        self._stamps.append(t)
         if unused is None:
             unused = self._unused(cov)
         if unused[0] and unused[1] and unused[2]:
@@ -132,6 +167,9 @@ class OdometryTracker:
             return tw, cov
         u = se2_log(delta) / dt
         self.from_poses += 1
+        if dt < self._baseline():
+            self._short = True
+            self.short_increments += 1
         speed = float(np.hypot(u[0], u[1]))
         sig = self._scale_sig + self.cfg.pose_delta_rel * np.array([speed, speed, abs(float(u[2])) + speed])
         out = np.diag(sig**2)
@@ -143,6 +181,15 @@ class OdometryTracker:
                 if unused[i]:
                     out[i, i] = float(c3[i, i])
         return u, out
+
+    def _baseline(self) -> float:
+        """The shortest pose increment whose twist is a velocity to extrapolate with (s):
+        :data:`BASELINE_FRACTION` of the source's mean period over its last :data:`RATE_WINDOW`
+        poses, at most (and until that is known) :data:`MAX_BASELINE_S`."""
+        st = self._stamps
+        if len(st) <= RATE_WINDOW:
+            return MAX_BASELINE_S
+        return min(BASELINE_FRACTION * (st[-1] - st[0]) / (len(st) - 1), MAX_BASELINE_S)
 
     def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray, unused: tuple[bool, bool, bool]) -> bool:
         """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``

@@ -33,7 +33,7 @@ import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance, with_rotation
 from fgloc.backends.compass import CompassCalibrator
-from fgloc.backends.ekf import CHI2_999, EKF, TH, EKFConfig, motion_model
+from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
     INSTANT_RATE,
@@ -211,6 +211,41 @@ class EKFBackend(Backend):
         h.accepted += 1
         self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si)
         self._process_pairs()
+
+    def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
+                     source: str) -> None:
+        """Another odometry source's body twist ``[vx, vy, wz]`` (visual odometry beside the wheels):
+        the ``used`` components are velocity measurements of the state (the unicycle has no vy),
+        gated at the chi-square 99.9 % quantile (a lost visual track), its yaw rate weighted by the
+        noise it shows against the other yaw sources.  The first odometry source alone drives the
+        motion integrals, scale and standstill (:meth:`add_odometry`)."""
+        h = self._source(source, "odometry")
+        tw = np.asarray(twist, dtype=float).reshape(-1)
+        cov = np.asarray(twist_cov, dtype=float).reshape(3, 3)
+        if tw.shape != (3,) or not (math.isfinite(t) and np.all(np.isfinite(tw))):
+            h.skip("not finite")
+            return
+        comps = [i for i in range(3) if used[i] and (self.ekf.omni or i != 1) and float(cov[i, i]) > 0]
+        if not comps:
+            return
+        if used[2]:
+            self._arb_add(source, RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
+        if not self.initialized:
+            return
+        if t < (self.ekf.t or -math.inf):
+            self.stats["late"] += 1
+        c = cov[np.ix_(comps, comps)].copy()
+        if 2 in comps:
+            k, rel = self._noise(source)
+            j = comps.index(2)
+            c[j, :] *= k
+            c[:, j] *= k
+            c[j, j] += (rel * float(tw[2])) ** 2
+        rows = [((OVX, OVY, OW) if self.ekf.omni else (V, -1, W))[i] for i in comps]
+        if self.ekf.update(t, tw[comps], rows, c, CHI2_999[len(comps)], source):
+            h.accepted += 1
+        else:
+            h.gated += 1
 
     def _has_gyro(self) -> bool:
         return bool(self.gbias)

@@ -345,8 +345,12 @@ class SourceRouter:
     # ------------------------------------------------------------------ odometry
     def _odometry(self, spec: SourceSpec, st: _State, msg: Odometry) -> None:
         h = st.health
-        if not st.fused:
-            self._skip(st, "a second odometry source (fgloc integrates one twist source)")
+        # a second odometry source: its velocities are measurements in a back-end that takes them
+        # (the EKF's add_velocity); the others integrate one twist source and skip it
+        add_vel = None if st.fused else getattr(self.loc.backend, "add_velocity", None)
+        if not st.fused and add_vel is None:
+            self._skip(st, "a second odometry source (this back-end integrates one twist source; the EKF fuses "
+                       "its velocities)")
             return
         if _cov_bad(msg.twist_cov) or (spec.differential and _cov_bad(msg.pose_cov)):
             self._skip(st, "covariance with a NaN or negative diagonal")
@@ -403,6 +407,11 @@ class SourceRouter:
         if spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential:
             out = cov  # the default layout: the message's whole covariance, exactly as before
         tw, out = self._levelled(st, float(msg.stamp), tw, out)
+        if add_vel is not None:
+            used = tuple(spec.uses(p) or spec.uses(v) for p, v in (("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
+            add_vel(float(msg.stamp), tw, out, used, spec.name)
+            h.accepted += 1
+            return
         h.accepted += 1
         m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
                      msg.frame_id, msg.child_frame_id)
@@ -598,8 +607,9 @@ class SourceRouter:
                 d["tilt_max_deg"] = round(math.degrees(st.extra.get("tilt_max_rad", 0.0)), 2)
             if st.extra.get("tilt_implausible"):
                 d["tilt_implausible"] = int(st.extra["tilt_implausible"])
-            names = {"odometry": ["odom"], "imu": [f"{s.name}.yaw", f"{s.name}.gyro"] if st.extra.get("second")
-                     else ["imu.yaw", "imu.gyro"], "pose": [s.name]}[s.type]
+            names = {"odometry": ["odom"] if st.fused else [s.name],
+                     "imu": [f"{s.name}.yaw", f"{s.name}.gyro"] if st.extra.get("second") else ["imu.yaw", "imu.gyro"],
+                     "pose": [s.name]}[s.type]
             bhs = getattr(be, "sources", {})
             for n in names:
                 bh = bhs.get(n)

@@ -194,7 +194,8 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         first_odom = next((n for n, e in inputs.items() if e["type"] == "odometry"), None)
         if kind == "odom" and first_odom is not None:
             notes.append(f"{key} ({topic}): fgloc integrates one odometry source, the first ({first_odom}); "
-                         f"{key}'s messages are counted as skipped (robot_localization fuses both)")
+                         f"the EKF fuses {key}'s velocities as measurements, the smoother counts its messages as "
+                         "skipped (robot_localization fuses both)")
         inputs[key] = entry
     out: dict[str, Any] = {}
     if inputs:

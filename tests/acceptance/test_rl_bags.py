@@ -103,7 +103,8 @@ RUNS = [
     ("test1.bag", "ekf", None),       # 0.939 m at the start of session 4, 0.962 m now (tol 1.045)
     ("test1.bag", "smoother", None),  # 0.385 m, 0.403 m now
     # 478.9 m at the start of session 4, 1.836 m with imu1's differential yaw as rates d_yaw / d_t (stamp
-    # jitter: spikes the gate dropped); 0.245 m with it as a heading with its own offset (tol 0.381)
+    # jitter: spikes the gate dropped); 0.245 m with it as a heading with its own offset, 0.259 m with odom1's
+    # (the stereo odometer's) velocities fused as measurements too, as r_l does (tol 0.381)
     ("groovy/test1.bag", "ekf", None),
     ("groovy/test1.bag", "smoother",
      "20.314 m from r_l's final, tolerance 0.381 (465.9 m at the start of session 4); the sources' output "

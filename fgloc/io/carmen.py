@@ -207,6 +207,7 @@ class CarmenReader:
         self.path = Path(path)
         self.max_range_m = max_range_m
         self.stats: dict = {}
+        self.last_laser_pose: np.ndarray | None = None  # the odometry pose of the last laser line yielded
         self._peek = self._do_peek()
 
     # -- first, short pass ------------------------------------------------------------------
@@ -316,6 +317,7 @@ class CarmenReader:
                         yield ODOM_TOPIC, rec
                         continue
                     las = rec
+                    self.last_laser_pose = las.odom_pose  # the repair's evidence (CarmenSource)
                     yield SCAN_TOPIC, self._scan(las)
                     if odom_from_laser and las.odom_pose is not None and kind != "RLASER":
                         twist = las.twist
@@ -339,6 +341,62 @@ class CarmenReader:
             log.info("%s: skipped lines by type %s", self.path, dict(skipped))
 
 
+def _detour(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """How much longer the path a -> b -> c is than a -> c (m, positions only)."""
+    return (math.hypot(b[0] - a[0], b[1] - a[1]) + math.hypot(c[0] - b[0], c[1] - b[1])
+            - math.hypot(c[0] - a[0], c[1] - a[1]))
+
+
+#: how many lines back a stamp that went backwards is looked for among its topic's stamps
+REPAIR_LOOKBACK = 1000
+
+
+def _repair_backward_stamps(seq: list[tuple[int, float, np.ndarray | None]]) -> dict[int, float]:
+    """``{message index: stamp}`` for the lines of one topic whose stamp is out of place while their
+    pose fits the file order (see :class:`CarmenSource`); ``seq`` is ``(index, stamp, pose)`` in
+    file order.  Where a stamp goes back (line ``j`` before line ``j - 1``), the one line out of
+    place is ``j`` (stamped too early: the next line is again after ``j - 1``) or ``j - 1``
+    (stamped too late: ``j`` is after ``j - 2``)."""
+    out: dict[int, float] = {}
+    stamps = [t for _, t, _ in seq]
+    poses = [p for _, _, p in seq]
+    n = len(seq)
+
+    def by_stamp_detour(i: int) -> float | None:
+        # the detour through line i's pose at its place by stamp (among lines within REPAIR_LOOKBACK)
+        t = stamps[i]
+        k = i - 1
+        while k >= max(i - REPAIR_LOOKBACK, 0) and stamps[k] > t:
+            k -= 1  # too early: after the last line before it stamped at or before it
+        if k < i - 1:
+            lo, hi = k, k + 1
+        else:
+            k = i + 1
+            while k < min(i + REPAIR_LOOKBACK, n) and stamps[k] < t:
+                k += 1  # too late: before the first line after it stamped at or after it
+            lo, hi = k - 1, k
+        if lo < 0 or hi >= n or lo == i or hi == i or poses[lo] is None or poses[hi] is None:
+            return None
+        return _detour(poses[lo], poses[i], poses[hi])  # type: ignore[arg-type]
+
+    for j in range(1, n):
+        if not stamps[j] < stamps[j - 1]:
+            continue
+        if j + 1 < n and stamps[j + 1] >= stamps[j - 1]:
+            i = j                   # j stamped too early
+        elif j >= 2 and stamps[j - 2] <= stamps[j]:
+            i = j - 1               # j - 1 stamped too late
+        else:
+            continue
+        if i < 1 or i + 1 >= n or poses[i - 1] is None or poses[i] is None or poses[i + 1] is None:
+            continue
+        other = by_stamp_detour(i)
+        if other is not None and _detour(poses[i - 1], poses[i], poses[i + 1]) < other:  # type: ignore[arg-type]
+            stamps[i] = 0.5 * (stamps[i - 1] + stamps[i + 1])  # between its file neighbours
+            out[seq[i][0]] = stamps[i]
+    return out
+
+
 def iter_carmen(path: str | Path, max_range_m: float | None = None) -> Iterator[tuple[str, object]]:
     """``(topic, message)`` pairs of a CARMEN log, lazily; first ``("/tf_static", [mount])``.
 
@@ -357,6 +415,15 @@ class CarmenSource(LogSource):
     that ``fgloc import`` writes: a first pass parses the file for the counts and stamps (real
     logs have stamps that jump backwards), the second yields the messages, holding back only
     those a later line's earlier stamp must precede.
+
+    A line whose stamp goes back past the previous line of its topic while the next one does not
+    (one stamp out of place) is judged by its odometry pose (ODOM's, or the laser line's): when the
+    pose fits its place in the file (the detour through it from its file neighbours is shorter
+    than from its neighbours by stamp), the file order is right and the stamp wrong: it is set
+    halfway between its file neighbours' (clamping it to the previous one's made the localizer drop
+    it as a repeated stamp), counted in ``repaired`` and ``skipped`` and warned about once.  Else
+    (no pose, no motion, or the pose fits the stamp) it is sorted by its stamp as before.  Intel's
+    ODOM lines: the poses fit the file position in 346 cases, the stamp in 0.
     """
 
     format = "carmen"
@@ -366,16 +433,29 @@ class CarmenSource(LogSource):
         self._reader = CarmenReader(self.path, max_range_m=max_range_m)
         keys: list[int] = []
         first: int | None = None
+        streams: dict[str, list[tuple[int, float, np.ndarray | None]]] = {}  # topic -> (index, stamp, pose)
         for topic, msg in self._reader:
             if topic == TF_STATIC_TOPIC:
                 keys.append(-1)
             else:
                 keys.append(stamp_to_ns(msg.stamp))  # type: ignore[attr-defined]
                 first = keys[-1] if first is None else first
+                pose = msg.pose if topic == ODOM_TOPIC else self._reader.last_laser_pose  # type: ignore[attr-defined]
+                streams.setdefault(topic, []).append((len(keys) - 1, float(msg.stamp), pose))  # type: ignore[attr-defined]
             info = self._topic_info.setdefault(topic, TopicInfo(TF_MESSAGE if topic == TF_STATIC_TOPIC else
                                                                 LASER_SCAN if topic == SCAN_TOPIC else ODOMETRY))
             info.count += 1
         first_ns = 0 if first is None else first
+        #: message index -> the repaired stamp (s); per topic, how many
+        self.repaired: dict[str, int] = {}
+        self._stamp_fix: dict[int, float] = {}
+        for topic, seq in streams.items():
+            fixed = _repair_backward_stamps(seq)
+            for i, t in fixed.items():
+                self._stamp_fix[i] = t
+                keys[i] = stamp_to_ns(t)
+            if fixed:
+                self.repaired[topic] = len(fixed)
         self._keys = np.array([first_ns if k < 0 else k for k in keys], dtype=np.int64)
         self._n = len(keys)
         if self._n:
@@ -388,6 +468,12 @@ class CarmenSource(LogSource):
                         **{k: v for k, v in st.get("skipped", {}).items() if k != "#" and k not in IGNORED_KINDS}}
         if st.get("read_error"):
             self.truncated = f"read error {st['read_error']}"
+        for topic, n in self.repaired.items():
+            self.skipped[f"backward stamps repaired {topic}"] = n
+        if self.repaired:
+            log.warning("%s: %s line(s) stamped before the previous one of their topic while their poses fit the "
+                        "file order: stamped halfway between their file neighbours", self.path,
+                        ", ".join(f"{n} {t}" for t, n in self.repaired.items()))
 
     def laser_mount(self) -> StaticTransform:
         frame = self.scan_frame()
@@ -404,6 +490,9 @@ class CarmenSource(LogSource):
             if i >= n:
                 break
             if topic in want:
+                fix = self._stamp_fix.get(i)
+                if fix is not None:
+                    msg.stamp = fix  # type: ignore[attr-defined]
                 rec = Record(topic, msg, keys[i])
                 if self._sorted:
                     yield rec

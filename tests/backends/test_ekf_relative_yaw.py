@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from fgloc.backends.ekf_backend import EKFBackend
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources
-from fgloc.types import Imu, Odometry, StaticTransform
+from fgloc.types import Imu, Odometry, StaticTransform, Transform3D
 
 SPECS = {
     "odom0": {"type": "odometry", "topic": "/wheels", "use": ["x", "y"], "differential": True},
@@ -108,3 +108,53 @@ def test_the_offset_is_reanchored_after_a_reinitialized_ahrs():
         be.add_relative_yaw(t, yaw, 1e-4, "ahrs")
     assert be.stats.get("relative_yaw_reanchored", 0) == 1
     assert abs(float(be.ekf.x[2])) < 0.01
+
+
+class _RelBackend:
+    """A back-end that takes differential orientations as headings (records them)."""
+
+    initialized = True
+    encoder_sigmas = (0.01, 0.01, 0.02)
+
+    def __init__(self) -> None:
+        self.rel: list[tuple[float, float, float, str]] = []
+
+    def add_relative_yaw(self, t, yaw, var, source):
+        self.rel.append((t, yaw, var, source))
+
+
+class _Loc:
+    odom_mode = True
+    frontend = None
+
+    def __init__(self) -> None:
+        self.backend = _RelBackend()
+        self.stats: dict = {}
+        self.compass: list = []
+
+    def on_compass(self, m):
+        self.compass.append(m)
+
+
+def test_the_router_hands_a_differential_orientation_as_a_heading_through_its_mount():
+    """Through a yawed, upside-down mount the base's yaw comes back; the first IMU is
+    named ``imu`` (the EKF's first-source names), a second one by its own name; out of order is
+    skipped; an IMU that also fuses vyaw keeps its gyro (no heading)."""
+    specs = parse_sources({"imu0": {"type": "imu", "topic": "/a", "use": ["yaw"], "differential": True},
+                           "imu1": {"type": "imu", "topic": "/b", "use": ["yaw"], "differential": True},
+                           "imu2": {"type": "imu", "topic": "/c", "use": ["yaw", "vyaw"], "differential": True}})
+    loc = _Loc()
+    flip = Rotation.from_euler("z", 0.5) * Rotation.from_euler("x", math.pi)   # yawed 0.5 rad, upside down
+    mount = Transform3D("base_link", "flipped", np.zeros(3), rotation_xyzw=flip.as_quat())
+    router = SourceRouter(loc, specs, [mount])
+    for t, yaw in ((1.0, 0.2), (1.1, 0.3), (1.05, 0.25)):
+        q = (Rotation.from_euler("z", yaw) * flip).as_quat()
+        router.on_message(specs[0], Imu(t, q, None, np.eye(3) * 1e-4, frame_id="flipped"))
+        router.on_message(specs[1], Imu(t, Rotation.from_euler("z", yaw).as_quat(), None, np.eye(3) * 1e-4,
+                                        frame_id="base_link"))
+    got = [(t, round(y, 9), s) for t, y, _, s in loc.backend.rel]
+    assert got == [(1.0, 0.2, "imu"), (1.0, 0.2, "imu1"), (1.1, 0.3, "imu"), (1.1, 0.3, "imu1")]
+    assert router.health()["imu0"]["skipped"] == 1 and router.health()["imu0"]["accepted"] == 2
+    router.on_message(specs[2], Imu(2.0, Rotation.from_euler("z", 0.1).as_quat(), np.array([0.0, 0.0, 0.4]),
+                                    np.eye(3) * 1e-4, np.eye(3) * 1e-4, frame_id="base_link"))
+    assert len(loc.backend.rel) == 4

@@ -240,7 +240,7 @@ def _rep_and_jacobians(c: FloatArray, scales: FloatArray, bend: bool = True
     return np.array([rx, ry, rth]), Jc, Js
 
 
-def _pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float, float, tuple]:
+def pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float, float, tuple]:
     """``Pose2.Logmap`` of ``(x, y, w)`` (``w`` wrapped) and ``Pose2.LogmapDerivative``'s 2x3 top rows,
     in scalar maths (GTSAM's formulas; its Python calls cost ~6 us each, this is the hot path of
     the odometry factors)."""
@@ -305,7 +305,7 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
     dx, dy = rx - mx, ry - my
     ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
     ew = wrap_scalar(rth - mt)
-    v1, v2, v3, jl = _pose2_log_and_derivative(ex, ey, ew)
+    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, ew)
     e = np.array([v1, v2, v3])
     if not want_jacobians:
         return e, []

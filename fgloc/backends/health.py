@@ -335,7 +335,7 @@ def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
         ub = {s: min(float(y[r]) for r, p in enumerate(plist) if s in p) for s in members}
         v = np.full(len(cols), np.nan)
         if np.linalg.matrix_rank(Ac) == len(cols):
-            v = _nnls(Ac, yc)
+            v = nnls(Ac, yc)
             Ap = np.linalg.pinv(Ac)
             sd = np.sqrt(np.maximum(np.diag(Ap @ np.diag(sc**2) @ Ap.T), 0.0))
             for m, s_name in enumerate(members):
@@ -364,7 +364,7 @@ def _components(srcs: list[str], pairs: list[tuple[str, str]]) -> list[list[str]
     return list(groups.values())
 
 
-def _nnls(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+def nnls(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     """``argmin |A v - y|`` with ``v >= 0`` (Lawson-Hanson active set; the problems here have a
     handful of sources).  scipy.optimize's ``nnls`` gives the same; importing scipy.optimize cost
     0.3-1.3 s of CPU in every process on the arbiter's first solve."""

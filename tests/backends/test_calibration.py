@@ -305,21 +305,21 @@ def test_gyro_increment_variances_add_up_to_the_integral_of_shared_readings():
 
 
 def test_scalar_pose2_log_and_derivative_equal_gtsams():
-    from fgloc.backends.factors import _pose2_log_and_derivative
+    from fgloc.backends.factors import pose2_log_and_derivative
 
     rng = np.random.default_rng(3)
     for k in range(400):
         x, y = rng.normal(0, 0.5, 2)
         p = gtsam.Pose2(float(x), float(y), float(rng.normal(0, [1.0, 1e-3, 1e-7, 1e-12][k % 4])))
-        v1, v2, w, rows = _pose2_log_and_derivative(p.x(), p.y(), p.theta())
+        v1, v2, w, rows = pose2_log_and_derivative(p.x(), p.y(), p.theta())
         assert np.allclose([v1, v2, w], gtsam.Pose2.Logmap(p), rtol=0, atol=1e-12)
         assert np.allclose(rows, gtsam.Pose2.LogmapDerivative(p)[:2], rtol=0, atol=1e-9)
 
 
 def test_arbiter_nnls_equals_scipys():
-    from scipy.optimize import nnls
+    from scipy.optimize import nnls as scipy_nnls
 
-    from fgloc.backends.health import _nnls
+    from fgloc.backends.health import nnls
 
     rng = np.random.default_rng(5)
     for _ in range(300):
@@ -328,8 +328,8 @@ def test_arbiter_nnls_equals_scipys():
         if np.linalg.matrix_rank(A) < n:
             continue
         y = rng.normal(0, 1, n + 2) * 10 ** rng.uniform(-8, 0)
-        ref = nnls(A, y)[0]
-        assert np.allclose(_nnls(A, y), ref, rtol=1e-9, atol=1e-12 * np.abs(y).max())
+        ref = scipy_nnls(A, y)[0]
+        assert np.allclose(nnls(A, y), ref, rtol=1e-9, atol=1e-12 * np.abs(y).max())
 
 
 def test_compass_nearest_reading_in_and_out_of_stamp_order():

@@ -54,7 +54,7 @@ class CompassHeading:
     yaw_rate_radps: float | None = None
     yaw_var: float = float("nan")
     yaw_rate_var: float = float("nan")
-    frame_id: str = "imu"
+    frame_id: str = "base_link"  # a compass reads the base's heading (no mount to look up)
 
 
 @dataclass

@@ -20,11 +20,10 @@ offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``)
 * the compass factors use a Cauchy kernel (redescending): a magnetic disturbance of tens of
   degrees is ignored rather than averaged in.
 * gyro yaw-increment factors ``x<i-1> - x<i>``: the gyro integrated between the keyframes, its
-  bias a graph variable (``gyro_bias_in_graph``, the default) or, with that off, estimated beside
-  the graph from absolute headings and standstill (:class:`~fgloc.backends.health.GyroBias`, as
-  the EKF: as a graph variable every yaw source, the wheels too, informs it, and a drone's
-  placeholder yaw rate 0 became a 0.0085 rad/s bias; beside the graph the live localizer
-  diverged, so it is not the default); where the gyro covers a keyframe interval the
+  bias estimated beside the graph from absolute headings and standstill (the default,
+  :class:`~fgloc.backends.health.GyroBias`, as the EKF) or, with ``gyro_bias_in_graph``, a graph
+  variable (every yaw source, the wheels too, informs it there: a drone's placeholder yaw rate 0
+  pulled it to a 0.0085 rad/s bias); where the gyro covers a keyframe interval the
   odometry's translation is integrated along its heading, the wheels' yaw-rate scale (``k<j>``)
   and speed scale (``g<j>``) are calibration variables.
 
@@ -204,10 +203,10 @@ class SmootherConfig:
                                       "a cautious 1 deg/s, as the EKF's compass_rate_sigma_deg)", gt=0)
     gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
     gyro_bias_rw_radps: float = setting(2e-5, "random walk of the gyro bias (rad/s per sqrt(s))", gt=0)
-    # true by default: beside the graph (false) the live localizer diverged (12 m RMSE on the
-    # simulated hall through the serial + laser emulators, tests/live/test_end_to_end.py) while
-    # it fixed robot_localization's test3.bag; the default stays the graph variable until the cause is known
-    gyro_bias_in_graph: bool = setting(True, "the gyro bias as a graph variable, observed by every yaw source (the "
+    # false by default: beside the graph is closer to robot_localization on 4 of its 5 real bags and
+    # equal on the paper bench and the simulator table; the live divergence it once showed
+    # (tests/live/test_end_to_end.py) was the STM32 emulator's gyro not scaled with the replay speed
+    gyro_bias_in_graph: bool = setting(False, "the gyro bias as a graph variable, observed by every yaw source (the "
                                        "wheels too); false: estimated beside the graph from absolute headings "
                                        "and standstill only (health.GyroBias, as the EKF)")
     odom_gains: bool = setting(True, "estimate the odometry's speed and yaw-rate scales (reported / true) as "

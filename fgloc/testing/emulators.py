@@ -258,7 +258,8 @@ class Stm32Emulator:
                 hd = ((hd + 1800) % 3600) - 1800
                 # the MCU's clock runs in host time: at speed k the encoders turn k times as fast per
                 # MCU second, and so must the gyro (it read a k-th of the turn before)
-                g = None if m.yaw_rate_radps is None else int(round(math.degrees(m.yaw_rate_radps * self.speed) * 100.0))
+                rate = None if m.yaw_rate_radps is None else m.yaw_rate_radps * self.speed
+                g = None if rate is None else int(round(math.degrees(rate) * 100.0))
                 flags = FLAG_HEADING | (FLAG_GYRO if g is not None else 0)
                 counts = [0] * n
                 f = encode_sensor_frame(seq, t_mcu, counts, hd, g, flags)

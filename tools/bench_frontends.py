@@ -15,7 +15,7 @@ N(0, ``--noise-m``) in x, y and N(0, ``--noise-deg``) in yaw (seeded), or exactl
 this process, single-threaded where the library allows it; the first ``--warmup``
 scans of each row are run but not timed (numba compilation, caches).
 
-    /work/venv/bin/python tools/bench_frontends.py [--scans 500] [--offset] [--synthetic]
+    python tools/bench_frontends.py [--scans 500] [--offset] [--synthetic]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """How much of the relation error against the GMapping-corrected Radish references is the reference's?
 
-    /work/venv/bin/python tools/radish_reference_check.py EVALDIR [--datasets fr079 intel]
+    python tools/radish_reference_check.py EVALDIR [--datasets fr079 intel]
 
 EVALDIR is an ``eval_radish.py --out`` directory (``<name>/trajectory.tum`` and
 ``<name>/reference.tum``).  For every relation (the same ones as eval_radish) it prints the

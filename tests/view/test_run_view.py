@@ -154,8 +154,11 @@ def test_run_view_speaks_foxglove_and_shows_the_run(short_dir, short_sim, tmp_pa
 def test_ctrl_c_stops_the_run_and_its_server_cleanly(short_dir, tmp_path):
     """SIGINT while a viewer is connected: exit 0 or 130, no traceback, the port free again."""
     port = free_port()
+    # SIGINT at its default in the child even when this test runs with it ignored (a background job
+    # of a non-interactive shell): a Python started with SIGINT ignored never raises KeyboardInterrupt
     proc = subprocess.Popen(_run_args(short_dir, tmp_path / "out", port, realtime=0.5), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=_env())
+                            stderr=subprocess.PIPE, text=True, env=_env(),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         session = asyncio.run(watch(f"ws://127.0.0.1:{port}", {ch.SCAN}, until=lambda s: len(s.messages) >= 2,
                                     connect_timeout_s=60, max_s=60))

@@ -201,45 +201,6 @@ def scaled_delta(delta: FloatArray, gains: FloatArray) -> tuple[FloatArray, Floa
     return np.array([tx, ty, th]), J
 
 
-def _rep_and_jacobians(c: FloatArray, scales: FloatArray, bend: bool = True
-                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The increment an odometry with ``scales`` reports for the true relative pose with
-    coordinates ``c = [x, y, yaw]``, and its body-tangent Jacobians w.r.t. ``c`` and the scales.
-    ``bend=False``: the reported translation was integrated along the true heading (a gyro's),
-    so the yaw-rate scale does not bend its chord: ``[s_v x, s_v y, s_w yaw]``."""
-    tx, ty, th = float(c[0]), float(c[1]), float(c[2])
-    sv, sw = float(scales[0]), float(scales[1])
-    if not bend:
-        rth = sw * th
-        ct, st = math.cos(rth), math.sin(rth)
-        Rt = np.array([[ct, st], [-st, ct]])
-        Jc = np.vstack([Rt @ np.array([[sv, 0.0, 0.0], [0.0, sv, 0.0]]), [0.0, 0.0, sw]])
-        Js = np.vstack([Rt @ np.array([[tx, 0.0], [ty, 0.0]]), [0.0, th]])
-        return np.array([sv * tx, sv * ty, rth]), Jc, Js
-    h = 0.5 * th
-    s0 = _sinc(h)
-    s1 = _sinc(sw * h)
-    rho = sv * s1 / s0
-    phi = (sw - 1.0) * h
-    cp, sp = math.cos(phi), math.sin(phi)
-    r0x, r0y = cp * tx - sp * ty, sp * tx + cp * ty      # R(phi) t
-    rx, ry, rth = rho * r0x, rho * r0y, sw * th
-    # d rho / d th, d rho / d sw; d phi / d th = (sw - 1) / 2
-    drho_dth = sv * (_dsinc(sw * h) * 0.5 * sw * s0 - s1 * _dsinc(h) * 0.5) / (s0 * s0)
-    drho_dsw = sv * _dsinc(sw * h) * h / s0
-    dphi_dth = 0.5 * (sw - 1.0)
-    # d t_r / d(tx, ty, th)
-    Dt = np.array([[rho * cp, -rho * sp, drho_dth * r0x - rho * dphi_dth * r0y],
-                   [rho * sp, rho * cp, drho_dth * r0y + rho * dphi_dth * r0x]])
-    Ds = np.array([[r0x * s1 / s0, drho_dsw * r0x - rho * h * r0y],
-                   [r0y * s1 / s0, drho_dsw * r0y + rho * h * r0x]])
-    ct, st = math.cos(rth), math.sin(rth)
-    Rt = np.array([[ct, st], [-st, ct]])                  # into the reported pose's body frame
-    Jc = np.vstack([Rt @ Dt, [0.0, 0.0, sw]])
-    Js = np.vstack([Rt @ Ds, [0.0, th]])
-    return np.array([rx, ry, rth]), Jc, Js
-
-
 def pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float, float, tuple]:
     """``Pose2.Logmap`` of ``(x, y, w)`` (``w`` wrapped) and ``Pose2.LogmapDerivative``'s 2x3 top rows,
     in scalar maths (GTSAM's formulas; its Python calls cost ~6 us each, this is the hot path of
@@ -267,8 +228,9 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
     """Error of :func:`scaled_between_factor`: ``Log(m^-1 rep(xi^-1 xj, s))`` (the noise is on
     what the odometry reports, so a scale never buys a smaller residual by shrinking the motion)
     and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector).
-    ``bend``: see :func:`_rep_and_jacobians`.  Scalar maths (called at every relinearization:
-    the numpy / GTSAM-call version cost ~45 us)."""
+    ``bend=False``: the reported translation was integrated along the true heading (a gyro's),
+    so the yaw-rate scale does not bend its chord: ``rep = [s_v x, s_v y, s_w yaw]``.  Scalar
+    maths (called at every relinearization: the numpy / GTSAM-call version cost ~45 us)."""
     h = xi.between(xj)
     cx, cy, cth = h.x(), h.y(), h.theta()
     sv, sw = float(scales[0]), float(scales[1])

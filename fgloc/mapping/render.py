@@ -1,9 +1,8 @@
-"""PNG rendering of a built map with its trajectory (matplotlib Agg)."""
+"""PNG rendering of a built map with its trajectory and self-check (Pillow)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numba import njit
@@ -25,12 +24,6 @@ def map_image(occ: OccupancyMap, max_px: int = 1200) -> tuple[FloatArray, tuple[
     cell = occ.resolution * f
     rows, cols = int(np.shape(img)[0]), int(np.shape(img)[-1])
     return img, (float(x0), float(x0 + cols * cell), float(y0), float(y0 + rows * cell))
-
-
-def _rgb(img: FloatArray) -> np.ndarray:
-    """Grey levels as a uint8 RGB image (matplotlib then skips its float RGBA copies)."""
-    g = np.round(np.asarray(img) * 255).astype(np.uint8)
-    return np.repeat(g[:, :, None], 3, axis=2)
 
 
 @njit(cache=True)
@@ -56,14 +49,15 @@ def _reduce(data, f, occ_min, free_max):  # pragma: no cover - compiled
 def render_map_png(path: str | Path, occ: OccupancyMap, trajectory_xy: FloatArray | None = None,
                    title: str = "", loops: FloatArray | None = None, dpi: int = 110) -> Path:
     """Write ``path``: the map (occupied black, free white, unknown grey), path in blue,
-    loop-closure edges (``(M, 2, 2)`` map-frame segments) in red."""
-    fig, ax = _map_figure(occ, 1.0)
+    loop-closure edges (``(M, 2, 2)`` map-frame segments) in red.  ``dpi`` is kept for callers;
+    the image is drawn with Pillow at about 1000 pixels on the map's longer side."""
+    canvas = _Canvas(occ, title)
     if loops is not None and len(loops):
         for seg in loops:
-            ax.plot(seg[:, 0], seg[:, 1], "-", color="tab:red", lw=0.4, alpha=0.5)
+            canvas.polyline(seg, (214, 39, 40, 128), 1)
     if trajectory_xy is not None and len(trajectory_xy):
-        ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.6, alpha=0.8)
-    return _save(fig, ax, path, title, 9, dpi)
+        canvas.polyline(trajectory_xy, (31, 119, 180, 204), 1)
+    return canvas.save(path)
 
 
 def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy: FloatArray | None = None,
@@ -74,73 +68,116 @@ def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy:
     when flagged, with the inconsistent scans as red arrows (own pose -> where they fit, 3x);
     change regions are boxed: orange "added" (objects not in the map), blue "removed" (map
     structure not seen)."""
-    fig, ax = _map_figure(occ, 1.4)
-    from matplotlib.patches import Rectangle
-
     from fgloc.geometry import compose
 
+    canvas = _Canvas(occ, (title + "\n" if title else "") + result.verdict)
     if trajectory_xy is not None and len(trajectory_xy):
-        ax.plot(trajectory_xy[:, 0], trajectory_xy[:, 1], "-", color="tab:blue", lw=0.4, alpha=0.5)
+        canvas.polyline(trajectory_xy, (31, 119, 180, 128), 1)
     for r in result.regions:
         if r.n_checked == 0:
             continue
         lo = r.center - 0.5 * r.size_m
+        box = (lo[0], lo[1], lo[0] + r.size_m, lo[1] + r.size_m)
         if r.flagged:
-            ax.add_patch(Rectangle(tuple(lo), r.size_m, r.size_m, facecolor="red", alpha=0.30, edgecolor="red", lw=1.2))
+            canvas.rect(box, (255, 0, 0, 77), (255, 0, 0, 255), 2)
         else:
-            ax.add_patch(Rectangle(tuple(lo), r.size_m, r.size_m, fill=False, edgecolor="tab:green", lw=0.5,
-                                   alpha=0.6))
-    bad = [c for c in result.scans if c.status == "inconsistent"]
-    if bad:
-        p0 = np.array([c.pose for c in bad])
-        p1 = np.array([compose(c.pose, np.array([3 * c.offset[0], 3 * c.offset[1], 3 * c.offset[2]])) for c in bad])
-        ax.quiver(p0[:, 0], p0[:, 1], p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1], color="red", angles="xy",
-                  scale_units="xy", scale=1.0, width=0.003)
-    if len(result.added_xy):
-        ax.plot(result.added_xy[:, 0], result.added_xy[:, 1], "s", color="tab:orange", ms=1.5)
-    if len(result.removed_xy):
-        ax.plot(result.removed_xy[:, 0], result.removed_xy[:, 1], "s", color="tab:cyan", ms=1.5)
+            canvas.rect(box, None, (44, 160, 44, 153), 1)
+    for c in result.scans:
+        if c.status == "inconsistent":
+            p1 = compose(c.pose, np.array([3 * c.offset[0], 3 * c.offset[1], 3 * c.offset[2]]))
+            canvas.arrow(np.asarray(c.pose[:2], dtype=float), np.asarray(p1[:2], dtype=float), (255, 0, 0, 255))
+    for xy, color in ((result.added_xy, (255, 127, 14, 255)), (result.removed_xy, (23, 190, 207, 255))):
+        for p in np.asarray(xy, dtype=float).reshape(-1, 2):
+            canvas.dot(p, color, 1)
     for c in result.changes:
         b = c.bbox
-        ax.add_patch(Rectangle((b[0], b[1]), b[2] - b[0], b[3] - b[1], fill=False, lw=1.2,
-                               edgecolor="tab:orange" if c.kind == "added" else "tab:cyan"))
-    return _save(fig, ax, path, (title + "\n" if title else "") + _wrap(result.verdict, 110), 8, dpi)
+        canvas.rect((b[0], b[1], b[2], b[3]), None,
+                    (255, 127, 14, 255) if c.kind == "added" else (23, 190, 207, 255), 2)
+    return canvas.save(path)
 
 
-def _map_figure(occ: OccupancyMap, margin_in: float) -> tuple[Any, Any]:
-    """A matplotlib (Agg) figure and axes showing the map in metres, ``margin_in`` inches of
-    height added for the title."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    img, (x0, x1, y0, y1) = map_image(occ)
-    h, w = occ.data.shape
-    scale = max(w, h) / 900.0
-    fig, ax = plt.subplots(figsize=(max(4.0, w / 100 / max(scale, 1e-9) + 1), max(4.0, h / 100 / scale + margin_in)))
-    ax.imshow(_rgb(img), origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
-    return fig, ax
+def _nice_step(span: float, ticks: int = 6) -> float:
+    """A 1-2-5 step giving about ``ticks`` intervals over ``span``."""
+    raw = max(span, 1e-9) / ticks
+    mag = 10.0 ** np.floor(np.log10(raw))
+    return float(next((m * mag for m in (1.0, 2.0, 5.0, 10.0) if m * mag >= raw), 10.0 * mag))
 
 
-def _save(fig: Any, ax: Any, path: str | Path, title: str, fontsize: float, dpi: int) -> Path:
-    """Axis labels, equal aspect, the title (if any); write ``path`` (its folder made) and close."""
-    import matplotlib.pyplot as plt
+class _Canvas:
+    """The map drawn at about ``side_px`` pixels on its longer side with metre axes and a title;
+    overlays in map coordinates (metres), blended onto it when saved.  Pillow only: matplotlib's
+    import and first figure cost more than the rest of the map's writing (ACES: ~1 s of CPU)."""
 
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal")
-    if title:
-        ax.set_title(title, fontsize=fontsize)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return path
+    def __init__(self, occ: OccupancyMap, title: str, side_px: int = 1000):
+        import textwrap
 
+        from PIL import Image, ImageDraw, ImageFont
 
-def _wrap(text: str, width: int) -> str:
-    import textwrap
+        img, (x0, x1, y0, y1) = map_image(occ)
+        self.x0, self.y1 = x0, y1
+        self.s = side_px / max(x1 - x0, y1 - y0, 1e-9)  # pixels per metre
+        w = max(int(round((x1 - x0) * self.s)), 1)
+        h = max(int(round((y1 - y0) * self.s)), 1)
+        self.font = ImageFont.load_default(size=13)
+        lines = [ln for part in title.split("\n") for ln in (textwrap.wrap(part, max(w // 7, 40)) or [""])] \
+            if title else []
+        self.left, self.top = 70, 12 + 17 * len(lines)
+        W, H = self.left + w + 25, self.top + h + 45
+        grey = np.flipud(np.round(np.asarray(img) * 255).astype(np.uint8))
+        base = Image.new("RGB", (W, H), (255, 255, 255))
+        base.paste(Image.fromarray(grey, "L").resize((w, h), Image.Resampling.NEAREST).convert("RGB"),
+                   (self.left, self.top))
+        d = ImageDraw.Draw(base)
+        for i, ln in enumerate(lines):
+            d.text((W / 2, 6 + 17 * i), ln, fill=(0, 0, 0), font=self.font, anchor="ma")
+        d.rectangle((self.left - 1, self.top - 1, self.left + w, self.top + h), outline=(0, 0, 0))
+        step = _nice_step(max(x1 - x0, y1 - y0))
+        for v in np.arange(np.ceil(x0 / step) * step, x1 + 1e-9, step):
+            u = self.left + (v - x0) * self.s
+            d.line((u, self.top + h, u, self.top + h + 5), fill=(0, 0, 0))
+            d.text((u, self.top + h + 7), f"{v:g}", fill=(0, 0, 0), font=self.font, anchor="ma")
+        for v in np.arange(np.ceil(y0 / step) * step, y1 + 1e-9, step):
+            q = self.top + (y1 - v) * self.s
+            d.line((self.left - 6, q, self.left - 1, q), fill=(0, 0, 0))
+            d.text((self.left - 8, q), f"{v:g}", fill=(0, 0, 0), font=self.font, anchor="rm")
+        d.text((self.left + w / 2, self.top + h + 25), "x [m]", fill=(0, 0, 0), font=self.font, anchor="ma")
+        d.text((8, self.top + h / 2), "y [m]", fill=(0, 0, 0), font=self.font, anchor="lm")
+        self.base = base
+        self.overlay = Image.new("RGBA", (W, H), (0, 0, 0, 0))
+        self.draw = ImageDraw.Draw(self.overlay)
 
-    return "\n".join(textwrap.wrap(text, width))
+    def px(self, xy: FloatArray) -> list[tuple[float, float]]:
+        p = np.asarray(xy, dtype=float).reshape(-1, 2)
+        u = self.left + (p[:, 0] - self.x0) * self.s
+        v = self.top + (self.y1 - p[:, 1]) * self.s
+        return list(zip(u.tolist(), v.tolist(), strict=True))
+
+    def polyline(self, xy: FloatArray, color: tuple[int, ...], width: int) -> None:
+        pts = self.px(xy)
+        if len(pts) >= 2:
+            self.draw.line(pts, fill=color, width=width)
+
+    def rect(self, box: tuple[float, float, float, float], fill: tuple[int, ...] | None,
+             outline: tuple[int, ...], width: int) -> None:
+        (u0, v1), (u1, v0) = self.px(np.array([[box[0], box[1]], [box[2], box[3]]]))
+        self.draw.rectangle((u0, v0, u1, v1), fill=fill, outline=outline, width=width)
+
+    def arrow(self, p0: FloatArray, p1: FloatArray, color: tuple[int, ...]) -> None:
+        (a, b), (c, d) = self.px(np.array([p0, p1]))
+        self.draw.line((a, b, c, d), fill=color, width=2)
+        ang = np.arctan2(d - b, c - a)
+        if np.hypot(c - a, d - b) > 1:
+            head = [(c, d)] + [(c - 9 * np.cos(ang + s), d - 9 * np.sin(ang + s)) for s in (0.4, -0.4)]
+            self.draw.polygon(head, fill=color)
+
+    def dot(self, p: FloatArray, color: tuple[int, ...], r: float) -> None:
+        ((u, v),) = self.px(p)
+        self.draw.rectangle((u - r, v - r, u + r, v + r), fill=color)
+
+    def save(self, path: str | Path) -> Path:
+        from PIL import Image
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.alpha_composite(self.base.convert("RGBA"), self.overlay).convert("RGB").save(path)
+        return path

@@ -145,21 +145,71 @@ def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pr
 def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off, H, g):  # pragma: no cover
     """Fill H = J^T W J, g = J^T W r at ``pose``; return the robust cost (as :func:`_rho_w` sums it).
 
-    The Cauchy cost ``c^2/2 sum log(1 + q)`` is summed as the log of running products over
-    blocks of 64 points (each factor <= 1 + (outlier/c)^2, no overflow): one log per block
-    instead of one per point.
+    The residuals of :func:`_residual`, with the pose and the map-to-grid transform composed into
+    one affine map per call (base_link point -> fine-grid coordinates) and the bilinear lookup
+    inline: the LM's inner loop, 2x faster than calling :func:`_residual` per point (same maths;
+    results differ in the last bits).  The Cauchy cost ``c^2/2 sum log(1 + q)`` is summed as the
+    log of running products over blocks of 64 points (each factor <= 1 + (outlier/c)^2, no
+    overflow): one log per block instead of one per point.
     """
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
+    # base_link point (x, y) -> fine-grid (u, v) = A (R(yaw) p + t) + b
+    a00 = A[0, 0] * cs + A[0, 1] * sn
+    a01 = A[0, 1] * cs - A[0, 0] * sn
+    a02 = A[0, 0] * pose[0] + A[0, 1] * pose[1] + b[0]
+    a10 = A[1, 0] * cs + A[1, 1] * sn
+    a11 = A[1, 1] * cs - A[1, 0] * sn
+    a12 = A[1, 0] * pose[0] + A[1, 1] * pose[1] + b[1]
+    h, w = field.shape
+    umax = w - 1.0
+    vmax = h - 1.0
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     g0 = g1 = g2 = 0.0
     cost = 0.0
     rho_out, _w = _rho_w(2.0 * outlier + 1.0, c, loss, outlier)
     inv_c2 = 1.0 / (c * c)
+    bc2 = backcos * backcos
     prod = 1.0
     n_prod = 0
     for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
+        x = px[k]
+        y = py[k]
+        u = a00 * x + a01 * y + a02
+        v = a10 * x + a11 * y + a12
+        if u >= 0.0 and v >= 0.0 and u <= umax and v <= vmax:  # gridmath.bilinear_grad, inline
+            x0 = int(u)
+            y0 = int(v)
+            if x0 > w - 2:
+                x0 = w - 2
+            if y0 > h - 2:
+                y0 = h - 2
+            fx = u - x0
+            fy = v - y0
+            d00 = field[y0, x0]
+            d10 = field[y0, x0 + 1]
+            d01 = field[y0 + 1, x0]
+            d11 = field[y0 + 1, x0 + 1]
+            ea = d10 - d00
+            ec = d11 - d01
+            r = d00 + fx * ea + fy * (d01 - d00 + fx * (ec - ea)) + off
+            du = ea + fy * (ec - ea)
+            dv = (d01 - d00) + fx * (d11 - d10 - d01 + d00)
+        else:
+            r = far + off
+            du = 0.0
+            dv = 0.0
+        gx = du * A[0, 0] + dv * A[1, 0]
+        gy = du * A[0, 1] + dv * A[1, 1]
+        # back face (as _residual): the gradient pointing away from the laser
+        bx = cs * (x - lx) - sn * (y - ly)
+        by = sn * (x - lx) + cs * (y - ly)
+        dot = gx * bx + gy * by
+        if backcos >= 0.0:
+            front = dot <= 0.0 or not (dot * dot > bc2 * (gx * gx + gy * gy) * (bx * bx + by * by))
+        else:
+            nrm = math.sqrt((gx * gx + gy * gy) * (bx * bx + by * by))
+            front = not (nrm > 0.0 and dot > backcos * nrm)
         if not front:
             r = far  # a back-facing point counts at field_max_dist, as before d37cb1c (real maps need it)
         if abs(r) > outlier:
@@ -173,14 +223,14 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
                 cost += 0.5 * c * c * math.log(prod)
                 prod = 1.0
                 n_prod = 0
-            w = 1.0 / q1
+            wt = 1.0 / q1
         else:
-            rho, w = _rho_w(r, c, loss, outlier)
+            rho, wt = _rho_w(r, c, loss, outlier)
             cost += rho
-        j2 = gx * (-sn * px[k] - cs * py[k]) + gy * (cs * px[k] - sn * py[k])
-        wx = w * gx
-        wy = w * gy
-        w2 = w * j2
+        j2 = gx * (-sn * x - cs * y) + gy * (cs * x - sn * y)
+        wx = wt * gx
+        wy = wt * gy
+        w2 = wt * j2
         g0 += wx * r
         g1 += wy * r
         g2 += w2 * r

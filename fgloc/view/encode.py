@@ -33,9 +33,11 @@ def timestamp(stamp: float) -> Any:
 
 
 def pose3(pose: FloatArray, z: float = 0.0) -> Any:
-    q = yaw_to_quaternion(float(pose[2]))
+    # yaw_to_quaternion in scalar maths (the same bits: numpy's float64 sin / cos are libm's), a numpy
+    # call per message was most of this function
+    h = 0.5 * float(pose[2])
     return fm.Pose(position=fm.Vector3(x=float(pose[0]), y=float(pose[1]), z=float(z)),
-                   orientation=fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
+                   orientation=fm.Quaternion(x=0.0, y=0.0, z=math.sin(h), w=math.cos(h)))
 
 
 def grid_cells(occ_map: Any) -> NDArray[np.uint8]:
@@ -84,13 +86,13 @@ def scan_message(scan: LaserScan) -> Any:
 
 def transforms_message(transforms: list[StaticTransform], stamp: float) -> Any:
     ts = timestamp(stamp)
-    q = yaw_to_quaternion(np.array([float(tr.pose[2]) for tr in transforms])).reshape(-1, 4).tolist()
     out = []
-    for tr, (qx, qy, qz, qw) in zip(transforms, q, strict=True):
+    for tr in transforms:
+        h = 0.5 * float(tr.pose[2])
         out.append(fm.FrameTransform(
             timestamp=ts, parent_frame_id=tr.parent, child_frame_id=tr.child,
             translation=fm.Vector3(x=float(tr.pose[0]), y=float(tr.pose[1]), z=float(tr.z)),
-            rotation=fm.Quaternion(x=qx, y=qy, z=qz, w=qw)))
+            rotation=fm.Quaternion(x=0.0, y=0.0, z=math.sin(h), w=math.cos(h))))
     return fm.FrameTransforms(transforms=out)
 
 

@@ -69,6 +69,10 @@ def _period(series: deque) -> float:
 
 class EKFBackend(Backend):
     name = "ekf"
+    #: the odometry twist measures the filter's velocity state (its pose integrates that state), so
+    #: the localizer hands it a velocity after a burst of pose stamps, not the burst's pose increment
+    #: over its microseconds (:meth:`fgloc.localization.odometry.OdometryTracker.velocity_measurement`)
+    measures_velocity = True
 
     def __init__(self, config: EKFConfig | None = None) -> None:
         super().__init__()

@@ -31,6 +31,9 @@ AGREEMENT_WINDOW_S = 1.0
 BASELINE_FRACTION = 0.5
 MAX_BASELINE_S = 0.05
 RATE_WINDOW = 16
+#: s: the longest span a bursty source's velocity measurement is averaged over (see
+#: :meth:`OdometryTracker.velocity_measurement`)
+VELOCITY_SPAN_MAX_S = 0.25
 
 
 def between1(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -68,7 +71,10 @@ class OdometryTracker:
         self._stamps: deque[float] = deque(maxlen=RATE_WINDOW + 1)
         self._recent: deque[tuple[float, FloatArray]] = deque(maxlen=4 * RATE_WINDOW)
         self._short = False
+        self._derived = False              # whether the last twist came from a pose increment
+        self._short_flags: deque[bool] = deque(maxlen=RATE_WINDOW)  # the last pose-derived ones: short?
         self.short_increments = 0          # pose increments over less than the baseline (bursty stamps)
+        self._last_out: tuple[FloatArray, FloatArray | None] = (np.zeros(3), None)  # the last step's result
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
              ) -> tuple[FloatArray, FloatArray | None]:
@@ -96,6 +102,7 @@ class OdometryTracker:
             self.first_t = t
         if unused[0] or unused[1] or unused[2]:
             tw = np.array([0.0 if unused[i] else float(tw[i]) for i in range(3)])
+        self._last_out = (tw, cov)
         return tw, cov
 
     def pose_at(self, t: float) -> FloatArray:
@@ -106,19 +113,60 @@ class OdometryTracker:
             return compose1(self.pose, se2_exp(self.extrapolation_twist() * (t - self.t)))
         return self.pose
 
+    @property
+    def burst(self) -> bool:
+        """Whether the last twist came from a pose increment shorter than the baseline (a burst of
+        stamps): integrated it meets the pose increment, as a velocity it is absurd (intel: two
+        poses 169 us / 4 cm apart, 240 m/s); :meth:`extrapolation_twist` is the velocity then."""
+        return self._short and len(self._recent) >= 2
+
+    def velocity_measurement(self) -> tuple[FloatArray, FloatArray | None]:
+        """The last message's twist and covariance as a velocity measurement, for a back-end whose
+        velocity state the odometry measures instead of integrating its increments (the EKF).
+
+        A pose-derived twist from a source that delivers its poses in bursts (an increment shorter
+        than the baseline among the last :data:`RATE_WINDOW`) is no velocity: a burst's is absurd
+        (240 m/s), the long step before it holds still while the robot moved (the poses are stale
+        until the burst).  Then the mean velocity over the last poses spanning the longest of those
+        steps (a whole stale step and its burst; at most :data:`VELOCITY_SPAN_MAX_S`), with a
+        pose-derived twist's covariance for that speed.  Otherwise the twist integrated."""
+        tw, cov = self._last_out
+        if not self._derived or not any(self._short_flags):
+            return tw, cov
+        st = self._stamps
+        longest = max((b - a for a, b in zip(st, list(st)[1:], strict=False)), default=0.0)
+        v = self._mean_velocity(min(max(longest, self._baseline()), VELOCITY_SPAN_MAX_S))
+        unused = self._unused(cov)
+        speed = math.hypot(float(v[0]), float(v[1]))
+        rel = self.cfg.pose_delta_rel
+        sig = (float(self._scale_sig[0]) + rel * speed, float(self._scale_sig[1]) + rel * speed,
+               float(self._scale_sig[2]) + rel * (abs(float(v[2])) + speed))
+        out = np.diag(np.square(sig))
+        if (unused[0] or unused[1] or unused[2]) and cov is not None:
+            c3 = np.asarray(cov, dtype=float).reshape(3, 3)
+            for i in range(3):
+                if unused[i]:
+                    out[i, i] = float(c3[i, i])
+            v = np.array([float(tw[i]) if unused[i] else float(v[i]) for i in range(3)])
+        return v, out
+
     def extrapolation_twist(self) -> FloatArray:
         """The velocity to carry the odom pose past the last message with: the last twist, unless
         it came from a pose increment shorter than the baseline (:data:`BASELINE_FRACTION`): then
         the mean velocity over the last poses that span at least the baseline.  Integrating the
         pose increments stays exact (``twist``); only what is extrapolated from a burst changes
         (intel's 240 m/s pose-delta twist put the next scan's guess 16.8 m off)."""
-        if not self._short or len(self._recent) < 2:
+        if not self.burst:
             return self.twist
+        return self._mean_velocity(self._baseline())
+
+    def _mean_velocity(self, span_s: float) -> FloatArray:
+        """The mean body velocity from the last odom pose back to the latest one at least ``span_s``
+        before it (the oldest kept when none is)."""
         t1, p1 = self._recent[-1]
-        base = self._baseline()
         t0, p0 = self._recent[0]
         for tj, pj in reversed(self._recent):
-            if t1 - tj >= base:
+            if t1 - tj >= span_s:
                 t0, p0 = tj, pj
                 break
         if not t1 - t0 > 0:
@@ -149,6 +197,7 @@ class OdometryTracker:
         prev = self._prev_pose
         self._prev_pose = None if pose is None else (t, pose)
         self._short = False
+        self._derived = False
         mode = self.cfg.pose_deltas
         if pose is None or prev is None or mode == "never":
             return tw, cov
@@ -167,9 +216,11 @@ class OdometryTracker:
             return tw, cov
         u = se2_log(delta) / dt
         self.from_poses += 1
+        self._derived = True
         if dt < self._baseline():
             self._short = True
             self.short_increments += 1
+        self._short_flags.append(self._short)
         speed = float(np.hypot(u[0], u[1]))
         sig = self._scale_sig + self.cfg.pose_delta_rel * np.array([speed, speed, abs(float(u[2])) + speed])
         out = np.diag(sig**2)

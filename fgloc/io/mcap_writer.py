@@ -76,6 +76,7 @@ class LogWriter:
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[tuple[str, int, str], int] = {}
         self._std: dict[tuple[str, str], int] = {}  # (topic, type) -> channel of fgloc's own schemas
+        self._copied: dict[tuple[str, int], tuple[Any, int]] = {}  # (topic, id(input channel)) -> it, channel
         self._pending_tf: list[tuple[str, list[StaticTransform]]] = []
         self._last_stamp: float | None = None
         self.count = 0
@@ -141,11 +142,18 @@ class LogWriter:
         """Write a message as the bytes it already has (``data``, e.g. an input log's CDR) on
         ``topic`` with its schema: no decode / encode.  Pending transform lists get this
         message's log time as their stamp."""
-        if self._pending_tf:
-            self._flush_tf(log_time_ns * 1e-9)
+        self._write_raw(self._raw_channel(topic, schema_name, schema_data, schema_encoding, message_encoding),
+                        data, log_time_ns, publish_time_ns)
+
+    def _raw_channel(self, topic: str, schema_name: str, schema_data: bytes, schema_encoding: str,
+                     message_encoding: str) -> int:
         sid = 0 if not (schema_name or schema_encoding or schema_data) else \
             self._schema_id(schema_name, schema_encoding, bytes(schema_data))
-        cid = self._channel_id(topic, sid, message_encoding)
+        return self._channel_id(topic, sid, message_encoding)
+
+    def _write_raw(self, cid: int, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        if self._pending_tf:
+            self._flush_tf(log_time_ns * 1e-9)
         lt = int(log_time_ns)
         self._writer.add_message(cid, lt, data, lt if publish_time_ns is None else int(publish_time_ns), self.count)
         self.count += 1
@@ -155,10 +163,15 @@ class LogWriter:
         inputs), else its message re-encoded at its log time."""
         ch = rec.channel
         if rec.data is not None and ch is not None:
-            name, enc, sdata = ch.schema_name or ch.type, ch.schema_encoding, ch.schema_data
-            if not sdata.strip() and short_name(ch.type) in MSG_TEXT:  # no definition: the standard one
-                name, enc, sdata = ch.type, "ros2msg", full_text(ch.type).encode()
-            self.write_raw(topic or rec.topic, name, sdata, rec.data, rec.log_time_ns, enc, ch.message_encoding)
+            to = topic or rec.topic
+            # the channel of an input channel object, looked up once (the object is kept: its id stays its own)
+            hit = self._copied.get((to, id(ch)))
+            if hit is None or hit[0] is not ch:
+                name, enc, sdata = ch.schema_name or ch.type, ch.schema_encoding, ch.schema_data
+                if not sdata.strip() and short_name(ch.type) in MSG_TEXT:  # no definition: the standard one
+                    name, enc, sdata = ch.type, "ros2msg", full_text(ch.type).encode()
+                hit = self._copied[(to, id(ch))] = (ch, self._raw_channel(to, name, sdata, enc, ch.message_encoding))
+            self._write_raw(hit[1], rec.data, rec.log_time_ns)
         else:
             self.write(topic or rec.topic, rec.msg, log_time_ns=rec.log_time_ns)
 

@@ -160,14 +160,14 @@ class McapViewRecorder:
         fused = view.fused
         assert fused is not None
         c = fused.cov
-        sig = tuple(math.sqrt(v) if math.isfinite(v) and v > 0 else 0.0
-                    for v in (float(c[0, 0]), float(c[1, 1]), float(c[2, 2])))
+        s0, s1, s2 = _sigma(float(c[0, 0])), _sigma(float(c[1, 1])), _sigma(float(c[2, 2]))
         last = self._last_cov
         if last is not None and not self._due(last[0], view.stamp, self.covariance_period_s):
             k = 1.0 + self.covariance_change
-            if all(b / k <= a <= b * k for a, b in zip(sig, last[1], strict=True)):
+            b0, b1, b2 = last[1]
+            if b0 / k <= s0 <= b0 * k and b1 / k <= s1 <= b1 * k and b2 / k <= s2 <= b2 * k:
                 return
-        self._last_cov = (view.stamp, (sig[0], sig[1], sig[2]))
+        self._last_cov = (view.stamp, (s0, s1, s2))
         base = view.transforms[-1].parent if view.transforms else BASE_FRAME
         self._write(ch.POSE_COVARIANCE, body_covariance_scene(fused, base), view.stamp)
 
@@ -186,6 +186,10 @@ class McapViewRecorder:
 
     def close(self) -> None:
         pass
+
+
+def _sigma(v: float) -> float:
+    return math.sqrt(v) if math.isfinite(v) and v > 0 else 0.0
 
 
 def body_covariance_scene(fused: Any, base_frame: str = BASE_FRAME) -> Any:

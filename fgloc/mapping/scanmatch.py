@@ -69,10 +69,13 @@ def build_distance_grid(
 @njit(cache=True)
 def _stamp(dist, pts, x0, y0, res, dmax):  # pragma: no cover - compiled
     """Lower every cell within ``dmax`` of a point to its distance (a disc per point; the square
-    root only where the cell gets closer)."""
+    root only where the cell gets closer; the columns' centres computed once per call)."""
     h, w = dist.shape
     rad = int(np.ceil(dmax / res))
     d2max = dmax * dmax
+    xcs = np.empty(w)
+    for ix in range(w):
+        xcs[ix] = x0 + (ix + 0.5) * res
     for k in range(pts.shape[0]):
         px, py = pts[k, 0], pts[k, 1]
         cx = int(np.floor((px - x0) / res))
@@ -84,13 +87,13 @@ def _stamp(dist, pts, x0, y0, res, dmax):  # pragma: no cover - compiled
             if dy2 > d2max:
                 continue
             half = int(np.sqrt(d2max - dy2) / res) + 1
+            row = dist[iy]
             for ix in range(max(cx - half, 0), min(cx + half + 1, w)):
-                xc = x0 + (ix + 0.5) * res
-                dx = xc - px
+                dx = xcs[ix] - px
                 d2 = dx * dx + dy2
-                cur = dist[iy, ix]
+                cur = np.float64(row[ix])
                 if d2 < cur * cur:
-                    dist[iy, ix] = np.sqrt(d2)
+                    row[ix] = np.sqrt(d2)
 
 
 @njit(cache=True)
@@ -398,19 +401,47 @@ def voxel_subsample(points: FloatArray, voxel_m: float) -> FloatArray:
     return pts[np.sort(idx)]
 
 
+class BufferPool:
+    """Freed float32 buffers kept for reuse (at most ``max_bytes``): a submap field of tens of
+    megabytes taken from the pool costs a fill, from the OS also its page faults and zeroing."""
+
+    def __init__(self, max_bytes: float = 64e6):
+        self.max_bytes = float(max_bytes)
+        self._free: list[NDArray[np.float32]] = []
+
+    def take(self, n: int) -> NDArray[np.float32]:
+        """A flat buffer of at least ``n`` values (contents undefined)."""
+        fits = [i for i, b in enumerate(self._free) if b.size >= n]
+        if fits:
+            return self._free.pop(min(fits, key=lambda i: self._free[i].size))
+        return np.empty(n, dtype=np.float32)
+
+    def give(self, buf: NDArray[np.float32]) -> None:
+        """Return ``buf`` (flat; nothing may use it afterwards); the smallest are dropped over budget."""
+        self._free.append(buf)
+        self._free.sort(key=lambda b: b.size, reverse=True)
+        while self._free and sum(b.nbytes for b in self._free) > self.max_bytes:
+            self._free.pop()
+
+
 class GrowingDistanceGrid:
     """A distance field that point sets are stamped into one after another (a submap being built).
 
     Cells keep the distance to the nearest point stamped so far (clipped at ``dmax_m``); the
     bounds grow (by at least ``grow_m``) when new points fall outside.  Adding a point set costs
-    its own points only, not a rebuild of everything stamped before.
+    its own points only, not a rebuild of everything stamped before.  With a ``pool`` the field's
+    memory comes from and goes back to it: a :meth:`grid` is then valid only until the next
+    :meth:`add` or :meth:`release`.
     """
 
-    def __init__(self, resolution: float = 0.05, dmax_m: float = 0.3, grow_m: float = 5.0):
+    def __init__(self, resolution: float = 0.05, dmax_m: float = 0.3, grow_m: float = 5.0,
+                 pool: BufferPool | None = None):
         self.resolution = float(resolution)
         self.dmax_m = float(dmax_m)
         self.grow_m = float(grow_m)
         self.dist: NDArray[np.float32] | None = None
+        self._buf: NDArray[np.float32] | None = None  # the flat buffer under dist
+        self.pool = pool
         self.ix0 = 0  # lower-left cell index of the grid on the global lattice (x0 = ix0 * resolution)
         self.iy0 = 0
         self.count = 0  # point sets added
@@ -418,6 +449,16 @@ class GrowingDistanceGrid:
     @property
     def nbytes(self) -> int:
         return 0 if self.dist is None else int(self.dist.nbytes)
+
+    def _alloc(self, h: int, w: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        buf = self.pool.take(h * w) if self.pool is not None else np.empty(h * w, dtype=np.float32)
+        return buf, buf[: h * w].reshape(h, w)
+
+    def release(self) -> None:
+        """Give the field's memory back to the pool (the grid is empty afterwards)."""
+        if self.pool is not None and self._buf is not None:
+            self.pool.give(self._buf)
+        self.dist = self._buf = None
 
     def add(self, points: FloatArray) -> None:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -435,7 +476,8 @@ class GrowingDistanceGrid:
             g = int(np.ceil(self.grow_m / res))
             self.ix0, self.iy0 = int(lo[0] - g), int(lo[1] - g)
             h, w = int(hi[1] + g - self.iy0), int(hi[0] + g - self.ix0)
-            self.dist = np.full((h, w), self.dmax_m, dtype=np.float32)
+            self._buf, self.dist = self._alloc(h, w)
+            self.dist.fill(self.dmax_m)
         else:
             h, w = self.dist.shape
             if lo[0] < self.ix0 or lo[1] < self.iy0 or hi[0] > self.ix0 + w or hi[1] > self.iy0 + h:
@@ -444,9 +486,15 @@ class GrowingDistanceGrid:
                 ny0 = min(self.iy0, int(lo[1]) - g) if lo[1] < self.iy0 else self.iy0
                 nx1 = max(self.ix0 + w, int(hi[0]) + g) if hi[0] > self.ix0 + w else self.ix0 + w
                 ny1 = max(self.iy0 + h, int(hi[1]) + g) if hi[1] > self.iy0 + h else self.iy0 + h
-                new = np.full((ny1 - ny0, nx1 - nx0), self.dmax_m, dtype=np.float32)
-                new[self.iy0 - ny0:self.iy0 - ny0 + h, self.ix0 - nx0:self.ix0 - nx0 + w] = self.dist
-                self.dist, self.ix0, self.iy0 = new, nx0, ny0
+                buf, new = self._alloc(ny1 - ny0, nx1 - nx0)
+                r0, c0 = self.iy0 - ny0, self.ix0 - nx0  # the old field's place in the new one
+                new[:r0] = self.dmax_m  # the margins only: the old field is copied into the rest
+                new[r0 + h:] = self.dmax_m
+                new[r0:r0 + h, :c0] = self.dmax_m
+                new[r0:r0 + h, c0 + w:] = self.dmax_m
+                new[r0:r0 + h, c0:c0 + w] = self.dist
+                self.release()
+                self._buf, self.dist, self.ix0, self.iy0 = buf, new, nx0, ny0
         _stamp(self.dist, pts, self.ix0 * res, self.iy0 * res, res, self.dmax_m)
 
     def grid(self) -> DistanceGrid:

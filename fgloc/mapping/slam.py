@@ -31,6 +31,7 @@ import numpy as np
 from fgloc.geometry import between, compose, compose1, inverse, rotate_covariance, transform_points
 from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
 from fgloc.mapping.scanmatch import (
+    BufferPool,
     DistanceGrid,
     GrowingDistanceGrid,
     build_distance_grid,
@@ -171,6 +172,7 @@ class GraphSlam:
         self._stamp_prev: float | None = None
         self._grid: DistanceGrid | None = None
         self._submaps: list[tuple[int, GrowingDistanceGrid]] = []  # (first keyframe, field), oldest first
+        self._pool = BufferPool()  # closed submaps' memory, for the next ones
         self.jumps: list[tuple[float, float]] = []  # (stamp, length m) of ignored odometry jumps
         self._isam = gtsam.ISAM2(gtsam.ISAM2Params())
         self._graph = gtsam.NonlinearFactorGraph()   # all factors (for the final batch)
@@ -209,12 +211,14 @@ class GraphSlam:
         n = max(int(self.cfg.submap_keyframes), 2)
         k = len(self.keyframes) - 1
         if not self._submaps or k - self._submaps[-1][0] >= n // 2:
-            self._submaps.append((k, GrowingDistanceGrid(self.cfg.submap_resolution, self.cfg.dmax_m)))
+            self._submaps.append((k, GrowingDistanceGrid(self.cfg.submap_resolution, self.cfg.dmax_m,
+                                                         pool=self._pool)))
         world = transform_points(kf.frontend, kf.points)
+        self._grid = None  # its memory may go back to the pool below
         for _, sm in self._submaps:
             sm.add(world)
         while len(self._submaps) > 1 and k - self._submaps[0][0] + 1 >= n:
-            self._submaps.pop(0)
+            self._submaps.pop(0)[1].release()
         self._grid = self._submaps[0][1].grid()
 
     # ------------------------------------------------------------ main step

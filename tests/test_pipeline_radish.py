@@ -2,7 +2,7 @@
 
 A map is built from the excerpt with fgloc.mapping; the pipeline's Localizer (default
 configuration: smoother + native, relocalization on) then tracks the excerpt's second half
-from the SLAM pose at its first scan, fed the raw CARMEN messages in time order.  CARMEN
+from the SLAM pose at its first scan, fed the CARMEN messages as `fgloc run` reads them (open_log). CARMEN
 odometry leaves tv = rv = 0 (intel) or rv = 0 (fr079): the localizer must take the motion from
 the odometry poses.  Bounds are about 1.5x what it reaches; the SLAM trajectory is the
 reference for the absolute errors (same map frame), the GMapping-corrected poses for the
@@ -17,11 +17,13 @@ import pytest
 from fgloc.config import load_config
 from fgloc.eval.relations import evaluate_relations, relations_from_reference
 from fgloc.geometry import wrap_angle
+from fgloc.io import open_log
 from fgloc.io.tum import read_tum
 from fgloc.localization import Localizer, Session
 from fgloc.mapping.build import load_records
 from fgloc.mapping.slam import MapperConfig, build_occupancy, run_slam
-from fgloc.mapping.source import log_messages
+from fgloc.mapping.source import open_log_scan_stamps
+from fgloc.types import Trajectory
 
 CASES = {  # name: (position RMSE m, heading RMSE deg, relation dt window, relation trans m, rot deg)
     "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.033 m, 0.38 deg; 0.054 m, 0.86 deg
@@ -38,14 +40,17 @@ def localized(request, repo_data):
     occ = build_occupancy(slam, recs, mount)
     half = len(recs) // 2
     t0 = recs[half].stamp
-    msgs = [(topic, m) for topic, m in log_messages(log)
-            if topic in ("/odom", "/scan") and m.stamp >= t0 - 1e-6]  # type: ignore[attr-defined]
-    msgs.sort(key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
+    # read as `fgloc run` reads it (open_log: log-time order, out-of-place stamps repaired)
+    msgs = [(topic, m) for topic, m in open_log(log).messages(["/odom", "/scan"])
+            if m.stamp >= t0 - 1e-6]  # type: ignore[attr-defined]
     p0 = slam.scan_trajectory.interpolate(np.array([t0]))[0]
     loc = Localizer(occ, mount, "smoother", "native", initial_pose=p0, config=load_config())
     est = Session(loc).run(msgs)
     ref = read_tum(repo_data / "radish" / f"{name}-head-reference.tum")
-    return name, loc, est, slam.scan_trajectory, ref
+    # the SLAM poses stamped as the localizer saw the same scans (open_log's repaired stamps)
+    own = np.array([r.stamp for r in recs])
+    slam_traj = Trajectory.from_unsorted(open_log_scan_stamps(log, recs), slam.scan_trajectory.interpolate(own))
+    return name, loc, est, slam_traj, ref
 
 
 def test_tracks_the_second_half_without_relocalizing(localized):

@@ -176,8 +176,10 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
              gmapping_dir: Path | None = None, overrides: dict | None = None) -> dict:
     from fgloc.config import load_config
     from fgloc.geometry import wrap_angle
+    from fgloc.io import open_log
     from fgloc.localization import Localizer, Session
-    from fgloc.mapping.source import log_messages
+    from fgloc.mapping.source import open_log_scan_stamps
+    from fgloc.types import Trajectory
 
     recs, mount, slam = slam_of(name, cache)
     key = cache / f"{name}_{n_scans}_map.pkl"
@@ -188,10 +190,13 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
         key.write_bytes(pickle.dumps((s0, s1, cov, occ)))
     occ.accuracy_m = accuracy  # what the map declares (None: undeclared)
     t0, t1 = recs[s0].stamp, recs[s1].stamp
-    msgs = [(topic, m) for topic, m in log_messages(LOGS[name])
-            if topic in ("/odom", "/scan") and t0 - 1e-6 <= m.stamp <= t1 + 1e-6]  # type: ignore[attr-defined]
-    msgs.sort(key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
-    ref = slam.scan_trajectory
+    # read as `fgloc run` reads the log (open_log: log-time order, CARMEN's out-of-place stamps repaired)
+    msgs = [(topic, m) for topic, m in open_log(LOGS[name]).messages(["/odom", "/scan"])
+            if t0 - 1e-6 <= m.stamp <= t1 + 1e-6]  # type: ignore[attr-defined]
+    # the SLAM poses stamped as the localizer sees the same scans (the mapper keeps the file's
+    # stamps, open_log repairs a CARMEN line's out-of-place stamp: intel 434 scans, up to 1.7 s)
+    own = np.array([r.stamp for r in recs])
+    ref = Trajectory.from_unsorted(open_log_scan_stamps(LOGS[name], recs), slam.scan_trajectory.interpolate(own))
     p0 = ref.interpolate(np.array([t0]))[0]
     loc = Localizer(occ, mount, backend, "native", initial_pose=p0, config=load_config(overrides=overrides or None))
     tw = time.perf_counter()

@@ -406,6 +406,26 @@ def iter_carmen(path: str | Path, max_range_m: float | None = None) -> Iterator[
     return iter(CarmenReader(path, max_range_m=max_range_m))
 
 
+def carmen_file_order(path: str | Path, max_range_m: float | None = None) -> list[tuple[str, object]]:
+    """Every ``(topic, message)`` of a CARMEN log in *file* order, stamped as :class:`CarmenSource`
+    (``open_log``, ``fgloc run``) stamps them: lines out of place in their topic whose poses fit
+    the file order get the repaired stamp (see :class:`CarmenSource`), all others their own.  One
+    pass over the file; for putting the stamps a localization run sees on scans read in file order
+    (``fgloc.mapping.source.open_log_scan_stamps``)."""
+    reader = CarmenReader(path, max_range_m=max_range_m)
+    msgs: list[tuple[str, object]] = []
+    streams: dict[str, list[tuple[int, float, np.ndarray | None]]] = {}
+    for topic, msg in reader:
+        if topic != TF_STATIC_TOPIC:
+            pose = msg.pose if topic == ODOM_TOPIC else reader.last_laser_pose  # type: ignore[attr-defined]
+            streams.setdefault(topic, []).append((len(msgs), float(msg.stamp), pose))  # type: ignore[attr-defined]
+        msgs.append((topic, msg))
+    for seq in streams.values():
+        for i, t in _repair_backward_stamps(seq).items():
+            msgs[i][1].stamp = t  # type: ignore[attr-defined]
+    return msgs
+
+
 class CarmenSource(LogSource):
     """A CARMEN log as a :class:`~fgloc.io.source.LogSource` (topics ``/scan``, ``/odom``,
     ``/tf_static``).

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from fgloc.errors import LogError
-from fgloc.geometry import compose, interpolate_poses
+from fgloc.geometry import compose, wrap_angle
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
 
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
@@ -120,31 +120,61 @@ def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord]
         raise LogError("log has no odometry messages")
     st = np.asarray(odo_stamps)
     po = np.asarray(odo_poses)
-    recs: list[ScanRecord] = []
+    # each scan between the odometry messages before and after it in the file: interpolated when
+    # their stamps bracket it, else the one before (the first one before any); all at once
+    scans: list[LaserScan] = []
+    before: list[int] = []
+    after: list[int] = []
     prev_odo = -1
-    pending: list[tuple[int, LaserScan]] = []
-
-    def flush(next_odo: int) -> None:
-        for pi, sc in pending:
-            t = sc.stamp
-            if pi < 0:
-                pose = po[0] if next_odo < 0 else po[next_odo]
-            elif next_odo >= 0 and st[pi] <= t <= st[next_odo] and st[next_odo] > st[pi]:
-                pose = interpolate_poses(st[[pi, next_odo]], po[[pi, next_odo]], t)[0]
-            else:
-                pose = po[pi]
-            recs.append(ScanRecord(float(t), np.asarray(pose, dtype=float), sc, len(recs)))
-        pending.clear()
-
+    n_pending = 0
     for kind, item in events:
         if kind == 0:
             assert isinstance(item, int)
-            flush(item)
+            after.extend([item] * n_pending)
+            n_pending = 0
             prev_odo = item
         else:
             assert isinstance(item, LaserScan)
-            pending.append((prev_odo, item))
-    flush(-1)
-    if not recs:
+            scans.append(item)
+            before.append(prev_odo)
+            n_pending += 1
+    after.extend([-1] * n_pending)
+    if not scans:
         raise LogError("log has no laser scans")
+    t = np.array([sc.stamp for sc in scans], dtype=float)
+    i0 = np.asarray(before, dtype=np.int64)
+    i1 = np.asarray(after, dtype=np.int64)
+    pose = po[np.where(i0 >= 0, i0, np.where(i1 >= 0, i1, 0))].copy()
+    s0, s1 = st[np.maximum(i0, 0)], st[np.maximum(i1, 0)]
+    inter = (i0 >= 0) & (i1 >= 0) & (s0 <= t) & (t <= s1) & (s1 > s0)
+    if inter.any():
+        pose[inter] = interpolate_pairs(s0[inter], po[i0[inter]], s1[inter], po[i1[inter]], t[inter])
+    recs = [ScanRecord(float(t[k]), pose[k], sc, k) for k, sc in enumerate(scans)]
     return recs, mount
+
+
+def interpolate_pairs(t0: FloatArray, p0: FloatArray, t1: FloatArray, p1: FloatArray, t: FloatArray) -> FloatArray:
+    """Poses at ``t`` between ``p0`` at ``t0`` and ``p1`` at ``t1`` (row by row; ``t0 < t1``): the
+    arithmetic of :func:`fgloc.geometry.interpolate_poses` on each pair, bit for bit."""
+    f = (t - t0) / (t1 - t0)
+    out = np.empty((len(t), 3))
+    out[:, :2] = p0[:, :2] + f[:, None] * (p1[:, :2] - p0[:, :2])
+    dyaw = wrap_angle(p1[:, 2] - p0[:, 2])
+    out[:, 2] = wrap_angle(p0[:, 2] + f * dyaw)
+    return out
+
+
+def open_log_scan_stamps(path: str | Path, records: list[ScanRecord]) -> FloatArray:
+    """Each record's stamp as :func:`fgloc.io.open_log` (``fgloc run``) gives it: a CARMEN line out of
+    place in its topic whose pose fits the file order gets the repaired stamp (the mapper keeps the
+    file's stamps, which relation files index by); other formats: the records' own.  To compare a
+    localization run of a log with the mapper's trajectory of it, re-stamp the latter with these."""
+    own = np.array([r.stamp for r in records], dtype=float)
+    if not is_carmen(path):
+        return own
+    from fgloc.io.carmen import carmen_file_order
+
+    fixed = np.array([m.stamp for t, m in carmen_file_order(path) if t == "/scan" and isinstance(m, LaserScan)
+                      and np.isfinite(m.stamp) and "rear" not in m.frame_id], dtype=float)
+    idx = np.array([r.index for r in records], dtype=np.int64)
+    return fixed[idx] if len(fixed) > int(idx.max(initial=-1)) else own

@@ -69,3 +69,18 @@ def test_pose_that_fits_its_stamp_is_sorted_as_before(tmp_path):
     src, t, _ = _odom(tmp_path / "still.clf")
     assert src.repaired == {} and np.all(np.diff(t) >= 0)  # no evidence: sorted
     np.testing.assert_allclose(t, np.sort(early))
+
+
+def test_file_order_reading_has_open_logs_stamps(repo_data):
+    """carmen_file_order: the file's order with the stamps open_log gives (intel-head: repaired lines)."""
+    from fgloc.io import open_log
+    from fgloc.io.carmen import carmen_file_order, iter_carmen
+
+    log = repo_data / "radish" / "intel-head.clf.bz2"
+    for topic in ("/scan", "/odom"):
+        fixed = [m.stamp for t, m in carmen_file_order(log) if t == topic]
+        raw = [m.stamp for t, m in iter_carmen(log) if t == topic]
+        seen = [m.stamp for t, m in open_log(log).messages([topic])]
+        assert len(fixed) == len(raw) == len(seen)
+        assert sum(a != b for a, b in zip(fixed, raw, strict=True)) > 10  # repaired lines
+        assert sorted(fixed) == sorted(seen)

@@ -103,6 +103,11 @@ def _nice_step(span: float, ticks: int = 6) -> float:
     return float(next((m * mag for m in (1.0, 2.0, 5.0, 10.0) if m * mag >= raw), 10.0 * mag))
 
 
+def _tick(v: float, step: float) -> str:
+    """A tick label: ``v`` on the step's grid (no "-0" or "1e-14" from the arange's rounding)."""
+    return f"{round(v / step) * step + 0.0:g}"
+
+
 class _Canvas:
     """The map drawn at about ``side_px`` pixels on its longer side with metre axes and a title;
     overlays in map coordinates (metres), blended onto it when saved.  Pillow only: matplotlib's
@@ -135,11 +140,11 @@ class _Canvas:
         for v in np.arange(np.ceil(x0 / step) * step, x1 + 1e-9, step):
             u = self.left + (v - x0) * self.s
             d.line((u, self.top + h, u, self.top + h + 5), fill=(0, 0, 0))
-            d.text((u, self.top + h + 7), f"{v:g}", fill=(0, 0, 0), font=self.font, anchor="ma")
+            d.text((u, self.top + h + 7), _tick(v, step), fill=(0, 0, 0), font=self.font, anchor="ma")
         for v in np.arange(np.ceil(y0 / step) * step, y1 + 1e-9, step):
             q = self.top + (y1 - v) * self.s
             d.line((self.left - 6, q, self.left - 1, q), fill=(0, 0, 0))
-            d.text((self.left - 8, q), f"{v:g}", fill=(0, 0, 0), font=self.font, anchor="rm")
+            d.text((self.left - 8, q), _tick(v, step), fill=(0, 0, 0), font=self.font, anchor="rm")
         d.text((self.left + w / 2, self.top + h + 25), "x [m]", fill=(0, 0, 0), font=self.font, anchor="ma")
         d.text((8, self.top + h / 2), "y [m]", fill=(0, 0, 0), font=self.font, anchor="lm")
         self.base = base

@@ -1,0 +1,53 @@
+"""The native matcher's own distance transform (``edt_squared``) against scipy's, bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import distance_transform_edt
+
+from fgloc.frontends.native import edt_squared, surface_distance_field
+from fgloc.maps import OccupancyMap
+
+
+def _scipy_field(occ_map: OccupancyMap, k: int, max_dist_m: float, depth_m: float) -> np.ndarray:
+    """surface_distance_field as it was written with scipy.ndimage.distance_transform_edt."""
+    occ = np.repeat(np.repeat(occ_map.occupied, k, axis=0), k, axis=1)
+    fine = occ_map.resolution / k
+    outside = distance_transform_edt(~occ) * fine - 0.5 * fine
+    inside = distance_transform_edt(occ) * fine - 0.5 * fine
+    return np.clip(np.where(occ, -inside, outside) + depth_m, -max_dist_m, max_dist_m)
+
+
+@pytest.mark.parametrize("density", [0.0005, 0.02, 0.3, 0.9])
+def test_edt_equals_scipy_on_random_grids(density: float) -> None:
+    rng = np.random.default_rng(int(density * 1e4))
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(1, 70, 2))
+        feat = rng.random((h, w)) < density
+        if not feat.any():
+            feat[rng.integers(h), rng.integers(w)] = True
+        got = edt_squared(feat)
+        assert np.array_equal(np.sqrt(got), distance_transform_edt(~feat))
+        assert np.array_equal(got, np.round(got))  # exact integers
+        assert np.all(got[feat] == 0.0)
+
+
+def test_edt_edge_shapes() -> None:
+    for feat in (np.ones((1, 1), bool), np.eye(1, 50, 49, dtype=bool), np.eye(50, 1, 0, dtype=bool),
+                 np.ones((7, 9), bool)):
+        assert np.array_equal(np.sqrt(edt_squared(feat)), distance_transform_edt(~feat))
+    one = np.zeros((5, 8), bool)
+    one[4, 0] = True
+    assert edt_squared(one)[0, 7] == 4.0**2 + 7.0**2
+
+
+def test_surface_field_unchanged_on_a_room_with_a_pillar() -> None:
+    data = np.zeros((60, 80), dtype=np.int16)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    data[20:26, 30:41] = 100  # a thick block: inside distances
+    data[40:, 55] = 100  # a thin wall
+    data[5:12, 5:15] = -1  # unknown
+    m = OccupancyMap(data, 0.05)
+    for k, max_d, depth in ((2, 1.0, 0.0), (1, 0.4, 0.025), (3, 0.3, 0.01)):
+        assert np.array_equal(surface_distance_field(m, k, max_d, depth), _scipy_field(m, k, max_d, depth))

@@ -156,6 +156,11 @@ class Localizer:
         if not self._monotonic("odometry", t):
             return
         self.stats["odometry"] += 1
+        if self.odom.t is not None and t <= self.odom.t:
+            # at or before the scan stamp the odometry was carried to after a burst (carry_to): the
+            # back-end has integrated past it; the next message's increment starts there and covers it
+            self.stats["odometry_folded"] = self.stats.get("odometry_folded", 0) + 1
+            return
         # finiteness by the sum of the values (one scalar test, as for the twist: at the odometry's rate)
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
         if pose is not None and (pose.shape != (3,) or not math.isfinite(float(pose[0]) + float(pose[1])
@@ -167,14 +172,18 @@ class Localizer:
         tw, cov = self.odom.step(t, tw, cov, pose)
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
+        vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
         if getattr(self.backend, "measures_velocity", False):
             # a filter whose velocity state the twist measures (the EKF) gets a velocity from a bursty
             # source's poses; a smoother integrates the increments (exact at every pose stamp)
-            v, v_cov = self.odom.velocity_measurement()
-            if v is not tw:
-                tw, cov = v, v_cov
+            vm = self.odom.velocity_measurement()
+            if vm is None:  # the first burst of a stream: no velocity known, none measured
+                self.stats["odometry_burst_skipped"] = self.stats.get("odometry_burst_skipped", 0) + 1
+            elif vm[0] is not tw:
+                tw, cov = vm
                 self.stats["odometry_burst_velocities"] = self.stats.get("odometry_burst_velocities", 0) + 1
-        self.backend.add_odometry(t, tw, cov)
+        if vm is not None:
+            self.backend.add_odometry(t, tw, cov)
         if self.odom_mode:
             self._odom_mode_step(t, scan=False)
 
@@ -203,6 +212,14 @@ class Localizer:
             return None
         self.stats["scans"] += 1
         self._last_scan_t = t
+        if self.backend.initialized and not getattr(self.backend, "measures_velocity", False):
+            # after a burst of odometry stamps a back-end that integrates the increments (the smoother)
+            # is handed the plausible velocity up to this scan: its prediction here, its gate on this
+            # scan's fix and its online pose hold that, not the burst's twist
+            carried = self.odom.carry_to(t)
+            if carried is not None:
+                self.backend.add_odometry(t, carried[0], carried[1])
+                self.stats["odometry_carried"] = self.odom.carried
         if self.odom_mode:
             self._odom_mode_step(t, scan=True)
             self.last_reason = "no map"

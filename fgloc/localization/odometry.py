@@ -74,6 +74,7 @@ class OdometryTracker:
         self._derived = False              # whether the last twist came from a pose increment
         self._short_flags: deque[bool] = deque(maxlen=RATE_WINDOW)  # the last pose-derived ones: short?
         self.short_increments = 0          # pose increments over less than the baseline (bursty stamps)
+        self.carried = 0                   # twists handed on to a scan stamp after a burst (carry_to)
         self._last_out: tuple[FloatArray, FloatArray | None] = (np.zeros(3), None)  # the last step's result
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
@@ -120,7 +121,7 @@ class OdometryTracker:
         poses 169 us / 4 cm apart, 240 m/s); :meth:`extrapolation_twist` is the velocity then."""
         return self._short and len(self._recent) >= 2
 
-    def velocity_measurement(self) -> tuple[FloatArray, FloatArray | None]:
+    def velocity_measurement(self) -> tuple[FloatArray, FloatArray | None] | None:
         """The last message's twist and covariance as a velocity measurement, for a back-end whose
         velocity state the odometry measures instead of integrating its increments (the EKF).
 
@@ -129,13 +130,51 @@ class OdometryTracker:
         (240 m/s), the long step before it holds still while the robot moved (the poses are stale
         until the burst).  Then the mean velocity over the last poses spanning the longest of those
         steps (a whole stale step and its burst; at most :data:`VELOCITY_SPAN_MAX_S`), with a
-        pose-derived twist's covariance for that speed.  Otherwise the twist integrated."""
+        pose-derived twist's covariance for that speed; None (no measurement) while the poses kept
+        span less.  Otherwise the twist integrated."""
         tw, cov = self._last_out
         if not self._derived or not any(self._short_flags):
             return tw, cov
         st = self._stamps
         longest = max((b - a for a, b in zip(st, list(st)[1:], strict=False)), default=0.0)
         v = self._mean_velocity(min(max(longest, self._baseline()), VELOCITY_SPAN_MAX_S))
+        if v is None:
+            return None  # the first burst of the stream: no velocity is known yet
+        return self._as_pose_derived(v, tw, cov)
+
+    def carry_to(self, t: float) -> tuple[FloatArray, FloatArray | None] | None:
+        """After a burst (:attr:`burst`), for a back-end that integrates the odometry's increments
+        and holds the last twist past its last stamp (the smoother): the twist and covariance to
+        hand it at ``t`` (a scan's stamp) so that it holds a velocity, not the burst's increment:
+        :meth:`extrapolation_twist` over ``(last stamp, t]``.  The odom pose and the pose the next
+        increment starts from move to ``t`` with it, so what the back-end integrates still meets
+        the next message's pose exactly.  None (nothing to hand on) without a burst, when ``t`` is
+        not after the last stamp, or more than ``odom_extrapolate_max_s`` after it."""
+        if not self.burst or self.t is None or self._prev_pose is None:
+            return None
+        dt = t - self.t
+        if not 0.0 < dt <= self.cfg.odom_extrapolate_max_s:
+            return None
+        tw, cov = self._last_out
+        v = self.extrapolation_twist()
+        t_prev, p_prev = self._prev_pose
+        self._prev_pose = (t, compose1(p_prev, se2_exp(v * (t - t_prev))))
+        self.pose = compose1(self.pose, se2_exp(v * dt))
+        self.t = t
+        self.twist = v
+        self._short = False
+        self.carried += 1
+        out_v, out_cov = self._as_pose_derived(v, tw, cov)
+        unused = self._unused(out_cov)
+        if unused[0] or unused[1] or unused[2]:
+            out_v = np.array([0.0 if unused[i] else float(out_v[i]) for i in range(3)])
+        self._last_out = (out_v, out_cov)
+        return out_v, out_cov
+
+    def _as_pose_derived(self, v: FloatArray, tw: FloatArray, cov: FloatArray | None
+                         ) -> tuple[FloatArray, FloatArray]:
+        """``v`` with a pose-derived twist's covariance for its speed; the source's unused components
+        (as in ``tw``, ``cov``) kept."""
         unused = self._unused(cov)
         speed = math.hypot(float(v[0]), float(v[1]))
         rel = self.cfg.pose_delta_rel
@@ -158,20 +197,18 @@ class OdometryTracker:
         (intel's 240 m/s pose-delta twist put the next scan's guess 16.8 m off)."""
         if not self.burst:
             return self.twist
-        return self._mean_velocity(self._baseline())
+        v = self._mean_velocity(self._baseline())
+        return np.zeros(3) if v is None else v
 
-    def _mean_velocity(self, span_s: float) -> FloatArray:
+    def _mean_velocity(self, span_s: float) -> FloatArray | None:
         """The mean body velocity from the last odom pose back to the latest one at least ``span_s``
-        before it (the oldest kept when none is)."""
+        before it; None while the poses kept span less (the first burst of a stream: no velocity
+        is known yet, and the mean over its microseconds is as absurd as its last increment)."""
         t1, p1 = self._recent[-1]
-        t0, p0 = self._recent[0]
         for tj, pj in reversed(self._recent):
-            if t1 - tj >= span_s:
-                t0, p0 = tj, pj
-                break
-        if not t1 - t0 > 0:
-            return np.zeros(3)
-        return se2_log(between1(p0, p1)) / (t1 - t0)
+            if t1 - tj >= span_s and t1 - tj > 0:
+                return se2_log(between1(pj, p1)) / (t1 - tj)
+        return None
 
     def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
                unused: tuple[bool, bool, bool] | None = None) -> tuple[FloatArray, FloatArray | None]:

@@ -63,10 +63,11 @@ class Arbiter:
                  halflife_blocks: float = 480.0, halflife_moving_blocks: float = 80.0,
                  min_blocks: int = 20, min_moving_blocks: int = 8, cap: float = 100.0,
                  settle_s: float = 0.3, max_gap_s: float = 0.25, k_min: float = 0.1, rel_trusted: float = 0.03,
-                 history: int = 20000) -> None:
+                 history: int = 20000, long_blocks: tuple[int, ...] = ()) -> None:
         self.block_s = float(block_s)
         self.still = float(still)
         self.moving = float(moving)
+        self.halflife_blocks = float(halflife_blocks)
         self.a_still = 1.0 - 0.5 ** (1.0 / halflife_blocks)
         self.a_moving = 1.0 - 0.5 ** (1.0 / halflife_moving_blocks)
         self.min_blocks = int(min_blocks)
@@ -87,6 +88,14 @@ class Arbiter:
         self._var: dict[str, float] = {}     # per-block absolute variance estimate
         self._rel: dict[str, float] = {}     # relative noise estimate (fraction of the motion)
         self.blocks = 0
+        # the same still-block statistics over longer blocks (``long_blocks`` blocks each): what a
+        # source shows over the block_s blocks leaves out its slowly varying errors
+        self.long_blocks = tuple(sorted({int(m) for m in long_blocks if int(m) > 1}))
+        self._recent: deque[tuple[int, dict[str, tuple[float, float]]]] = deque(
+            maxlen=max(self.long_blocks, default=1))
+        self._still_long: dict[int, dict[tuple[str, str], list[float]]] = {m: {} for m in self.long_blocks}
+        self._claimed_long: dict[int, dict[str, list[float]]] = {m: {} for m in self.long_blocks}
+        self._var_long: dict[int, dict[str, float]] = {m: {} for m in self.long_blocks}    # resolved
 
     # ------------------------------------------------------------------ inputs
     def add_source(self, name: str, kind: str, rel_prior: float = 0.02) -> None:
@@ -208,15 +217,20 @@ class Arbiter:
             if now < b1 + self.settle_s:
                 return done
             self._next_block += 1
-            self._block(b0, b1)
+            self._block(b0, b1, self._next_block - 1)
             done += 1
 
-    def _block(self, t0: float, t1: float) -> None:
+    def _block(self, t0: float, t1: float, index: int = 0) -> None:
         inc: dict[str, tuple[float, float]] = {}
         for name in self.streams:
             got = self.increment(name, t0, t1)
             if got is not None:
                 inc[name] = got
+        if self.long_blocks:
+            self._recent.append((index, inc))
+            for m in self.long_blocks:
+                if (index + 1) % m == 0:
+                    self._long_block(m)
         if len(inc) < 2:
             return
         self.blocks += 1
@@ -224,20 +238,14 @@ class Arbiter:
             s = self.streams[name]
             s.n_claimed += 1
             s.claimed_mean += (v - s.claimed_mean) / min(s.n_claimed, 240)
-        mags = sorted(abs(d) for d, _ in inc.values())  # the median (np.median's, without its overhead)
-        m = len(mags) // 2
-        mag = float(mags[m]) if len(mags) % 2 else float((mags[m - 1] + mags[m]) / 2.0)
+        mag = _median_abs(inc)
         names = sorted(inc)
         for i, a in enumerate(names):
             for b in names[i + 1:]:
                 r = inc[a][0] - inc[b][0]
                 if mag < self.still:
-                    st = self._still.setdefault((a, b), [0.0, 0.0])
-                    ref = max(st[0], inc[a][1] + inc[b][1], 1e-12) if st[1] else inc[a][1] + inc[b][1] + 1e-12
-                    z = min(r * r, self.cap * ref)
-                    st[1] += 1
-                    w = max(self.a_still, 1.0 / st[1])
-                    st[0] += w * (z - st[0])
+                    _still_stat(self._still.setdefault((a, b), [0.0, 0.0]), r, inc[a][1] + inc[b][1],
+                                self.cap, self.a_still)
                 elif mag > self.moving:
                     mv = self._moving.setdefault((a, b), [0.0, 0.0])
                     base = (self._abs_var(a, inc[a][1]) + self._abs_var(b, inc[b][1])) / (mag * mag)
@@ -249,6 +257,40 @@ class Arbiter:
                     mv[0] += w * (z - mv[0])
         if self.blocks % self.solve_every == 0 or self.blocks < 4 * self.solve_every:
             self._solve()
+
+    def _long_block(self, m: int) -> None:
+        """The still-block statistics over the last ``m`` blocks (one long block): a source's
+        increment is the sum of its block increments (it must have all ``m``); its claimed
+        variance the sum (a rate source's errors add up) or the ends' (an absolute source's)."""
+        last = list(self._recent)[-m:]
+        if len(last) < m or last[-1][0] - last[0][0] != m - 1:
+            return
+        inc: dict[str, tuple[float, float]] = {}
+        for name, s in self.streams.items():
+            parts = [b[1][name] for b in last if name in b[1]]
+            if len(parts) < m:
+                continue
+            d = float(sum(p[0] for p in parts))
+            if s.kind in (RATE, INSTANT_RATE):
+                v = float(sum(p[1] for p in parts))
+            else:
+                d = wrap_scalar(d) if s.kind == ANGLE_ABSOLUTE else d
+                v = 0.5 * (parts[0][1] + parts[-1][1])
+            inc[name] = (d, v)
+        if len(inc) < 2 or _median_abs(inc) >= self.still * m:
+            return
+        claimed = self._claimed_long[m]
+        a_still = 1.0 - 0.5 ** (m / self.halflife_blocks)  # the same half-life in seconds
+        for name, (_, v) in inc.items():
+            c = claimed.setdefault(name, [0.0, 0.0])
+            c[1] += 1
+            c[0] += (v - c[0]) / min(c[1], 240.0)
+        names = sorted(inc)
+        stats = self._still_long[m]
+        for i, a in enumerate(names):
+            for b in names[i + 1:]:
+                _still_stat(stats.setdefault((a, b), [0.0, 0.0]), inc[a][0] - inc[b][0], inc[a][1] + inc[b][1],
+                            self.cap, a_still)
 
     def _abs_var(self, name: str, claimed: float) -> float:
         v = self._var.get(name)
@@ -263,6 +305,12 @@ class Arbiter:
         n_mov = {p: min(mv[1], 2.0 / self.a_moving) for p, mv in self._moving.items()}
         rel = _cornered_hat(names, moving, {n: self.streams[n].rel_prior ** 2 for n in names}, n_mov)
         self._rel = {n: math.sqrt(v) for n, v in rel.items()}
+        for m in self.long_blocks:
+            st_m = self._still_long[m]
+            n_max = 2.0 / (1.0 - 0.5 ** (m / self.halflife_blocks))
+            pairs = {p: st[0] for p, st in st_m.items() if st[1] >= self.min_blocks}
+            n_m = {p: min(st[1], n_max) for p, st in st_m.items()}
+            self._var_long[m] = _cornered_hat(names, pairs, {}, n_m, unresolved="omit")
 
     # ------------------------------------------------------------------ outputs
     def noise(self, name: str) -> tuple[float, float]:
@@ -281,6 +329,24 @@ class Arbiter:
             k_min = self.k_min if rel < self.rel_trusted and s.kind in (RATE, INSTANT_RATE) else 1.0
             k = math.sqrt(max(k_min**2, v / s.claimed_mean))
         return k, rel
+
+    def shown_k(self, name: str) -> float:
+        """How much better (< 1) or worse (> 1) than claimed a source's errors are, in sigma: the
+        largest ``sqrt(shown / claimed variance)`` over the ``block_s`` blocks and the long blocks
+        (``long_blocks``, where they resolve the source), at least ``k_min``; 1 before there is
+        evidence.  For an absolute source (a heading) the long blocks are what shows a slowly
+        varying error (a magnetic distortion, a map error that changes along the way): the short
+        blocks leave it out.  (:meth:`noise` keeps an absolute source at its claim or worse.)"""
+        s = self.streams.get(name)
+        v = self._var.get(name)
+        if s is None or v is None or s.claimed_mean <= 0:
+            return 1.0
+        k2 = v / s.claimed_mean
+        for m in self.long_blocks:
+            vm, cm = self._var_long[m].get(name), self._claimed_long[m].get(name)
+            if vm is not None and cm is not None and cm[0] > 0:
+                k2 = max(k2, vm / cm[0])
+        return math.sqrt(max(k2, self.k_min**2))
 
     def shown_sigma(self, name: str) -> float | None:
         """The per-block standard deviation the source showed (None before there is evidence)."""
@@ -306,9 +372,26 @@ def bracket(series: deque, t: float) -> tuple[int, int]:
     return lo, hi
 
 
+def _median_abs(inc: dict[str, tuple[float, float]]) -> float:
+    """The median of the increments' magnitudes (np.median's, without its overhead)."""
+    mags = sorted(abs(d) for d, _ in inc.values())
+    m = len(mags) // 2
+    return float(mags[m]) if len(mags) % 2 else float((mags[m - 1] + mags[m]) / 2.0)
+
+
+def _still_stat(st: list[float], r: float, claimed: float, cap: float, a: float) -> None:
+    """One still block's squared pair difference ``r^2`` into the EW mean ``st = [mean, n]``
+    (at most ``cap`` times the current mean or the claim: a disturbance moves it little)."""
+    ref = max(st[0], claimed, 1e-12) if st[1] else claimed + 1e-12
+    z = min(r * r, cap * ref)
+    st[1] += 1
+    w = max(a, 1.0 / st[1])
+    st[0] += w * (z - st[0])
+
+
 def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
-                  prior: dict[str, float], n_eff: dict[tuple[str, str], float] | None = None
-                  ) -> dict[str, float]:
+                  prior: dict[str, float], n_eff: dict[tuple[str, str], float] | None = None,
+                  unresolved: str = "prior") -> dict[str, float]:
     """Per-source variances ``v`` with ``v_a + v_b ~= pairs[(a, b)]``, ``v >= 0`` (least squares).
 
     A source the pairs cannot separate from another (two sources alone, or a third source far
@@ -342,7 +425,12 @@ def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
                 if sd[m] > 0.5 * max(v[m], prior.get(s_name, 0.0)):
                     v[m] = np.nan  # not resolved
         for m, s_name in enumerate(members):
-            val = float(v[m]) if math.isfinite(float(v[m])) else prior.get(s_name, 0.0)
+            if math.isfinite(float(v[m])):
+                val = float(v[m])
+            elif unresolved == "prior":
+                val = prior.get(s_name, 0.0)
+            else:
+                continue
             out[s_name] = max(min(val, ub[s_name]), 0.0)
     return out
 

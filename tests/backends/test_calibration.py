@@ -344,3 +344,36 @@ def test_compass_nearest_reading_in_and_out_of_stamp_order():
             expect = None if abs(stamps[best] - q) > c.max_dt else 0.1 * best
             got = c.compass_at(q)
             assert (got is None and expect is None) or got == pytest.approx(expect, abs=1e-12)
+
+
+def _straight_run(heading_error, seconds=240.0, seed=3):
+    """Gyro, wheels and a heading source (claimed 0.1 deg, its errors ``heading_error(t, rng)``) on
+    a robot that mostly drives straight: the arbiter's view of the heading source."""
+    rng = np.random.default_rng(seed)
+    arb = Arbiter(long_blocks=(4, 16))
+    arb.add_source("gyro", INSTANT_RATE, 0.01)
+    arb.add_source("wheel", RATE, 0.05)
+    arb.add_source("scan", ANGLE_ABSOLUTE, 0.005)
+    dt = 0.01
+    for i, ti in enumerate(np.arange(0, seconds, dt)):
+        if i % 5 == 0:
+            arb.add("gyro", ti, rng.normal(0, 0.005), 0.005**2)
+        if i % 2 == 0:
+            arb.add("wheel", ti, rng.normal(0, 0.005), 0.01**2)
+        if i % 4 == 0:
+            arb.add("scan", ti, heading_error(ti, rng), np.deg2rad(0.1) ** 2)
+        if i % 10 == 0:
+            arb.update(ti)
+    return arb
+
+
+def test_arbiter_shows_fixes_better_than_claimed_unless_their_errors_vary_slowly():
+    white = _straight_run(lambda t, rng: rng.normal(0, np.deg2rad(0.01)))
+    assert white.shown_k("scan") < 0.3  # 0.01 deg shown against 0.1 deg claimed
+    assert white.noise("scan")[0] == 1.0  # noise() keeps an absolute source at its claim
+    # the same white noise plus a 0.5 deg error varying over ~10 s (a map error along the way):
+    # invisible over 0.125 s, shown over the 2 s blocks
+    slow = _straight_run(lambda t, rng: rng.normal(0, np.deg2rad(0.01)) + np.deg2rad(0.5) * np.sin(0.6 * t))
+    assert slow.shown_k("scan") > 1.0
+    assert slow._var["scan"] < 0.3**2 * slow.streams["scan"].claimed_mean  # the short blocks alone: better
+

@@ -211,9 +211,34 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
            "rmse_m": float(np.sqrt(np.mean(e_xy**2))), "max_m": float(e_xy.max()),
            "rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "fixes": loc.stats["fixes"],
            "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall}
+    res.update(heading_views(est, ref, t0, t1))
     res.update(nees_of(loc.fixes, ref))
     res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir))
     return res
+
+
+def heading_views(est, ref, t0: float, t1: float) -> dict:
+    """The heading error two more ways: after removing its mean over the segment (the best rigid
+    alignment's rotation: what is left when the map of the other passes is turned against this
+    pass as a whole) and over relations 1-2 s apart, as relation benchmarks measure (RMS)."""
+    from fgloc.eval.relations import relation_errors, relations_from_reference
+    from fgloc.geometry import wrap_angle
+
+    inside = (est.stamps >= max(ref.stamps[0], t0)) & (est.stamps <= min(ref.stamps[-1], t1))
+    if inside.sum() < 5:
+        return {}
+    e = wrap_angle(est.poses[inside, 2] - ref.interpolate(est.stamps[inside])[:, 2])
+    mean = float(np.angle(np.mean(np.exp(1j * e))))
+    m = (ref.stamps >= max(t0, est.stamps[0])) & (ref.stamps <= min(t1, est.stamps[-1]))
+    seg = type(ref)(ref.stamps[m], ref.poses[m])
+    at_ref = type(ref)(seg.stamps, est.interpolate(seg.stamps))  # both at the scans' stamps
+    _, er, _ = relation_errors(at_ref, relations_from_reference(seg, 1.0, 2.0, loop_closures=False))
+    a = np.sort(np.abs(np.degrees(e)))
+    return {"yaw_mean_deg": float(np.degrees(mean)), "yaw_median_abs_deg": float(np.median(a)),
+            "yaw_rmse_98_deg": float(np.sqrt(np.mean(a[: max(int(0.98 * len(a)), 1)] ** 2))),
+            "rmse_deg_aligned": float(np.degrees(np.sqrt(np.mean(wrap_angle(e - mean) ** 2)))),
+            "rel_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(er**2)))) if len(er) else float("nan"),
+            "rel_n": int(len(er))}
 
 
 def changed_world(hard: bool) -> dict:
@@ -329,6 +354,14 @@ def main() -> int:
               f"| {_f(r, 'nees_mean', '.2f')} ({_f(r, 'nees_median', '.2f')}) "
               f"| {_f(r, 'nees_x', '.2f')} / {_f(r, 'nees_y', '.2f')} / {_f(r, 'nees_yaw', '.2f')} "
               f"| {r['fixes']} / {r['no_fix']} / {r['reloc']} |")
+    print("\n| run | map accuracy_m | heading RMSE deg | mean heading offset deg | RMSE about that mean deg | "
+          "median abs deg | RMSE without the worst 2 % deg | relation heading RMS (1-2 s) deg |")
+    print("|---|--:|--:|--:|--:|--:|--:|--:|")
+    for r in rows:
+        if "rmse_deg_aligned" in r:
+            print(f"| {r['log']} | {r.get('accuracy', '-')} | {r['rmse_deg']:.3f} | {r['yaw_mean_deg']:+.3f} "
+                  f"| {r['rmse_deg_aligned']:.3f} | {r['yaw_median_abs_deg']:.3f} | {r['yaw_rmse_98_deg']:.3f} "
+                  f"| {r['rel_rot_rms_deg']:.3f} (n={r['rel_n']}) |")
     floors = {r["log"]: r for r in rows if "gm_rmse_deg" in r}
     for name, r in floors.items():
         print(f"\n{name}: SLAM vs GMapping over the segment ({r['gm_n']} scans, rigid alignment): "

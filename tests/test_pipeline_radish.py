@@ -26,8 +26,8 @@ from fgloc.mapping.source import open_log_scan_stamps
 from fgloc.types import Trajectory
 
 CASES = {  # name: (position RMSE m, heading RMSE deg, relation dt window, relation trans m, rot deg)
-    "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached: 0.033 m, 0.38 deg; 0.054 m, 0.86 deg
-    "fr079": (0.035, 0.5, (1.0, 2.0), 0.03, 0.3),  # reached: 0.024 m, 0.25 deg; 0.012 m, 0.07 deg
+    "intel": (0.055, 0.7, (1.0, 6.0), 0.08, 1.2),  # reached (92ab3d4): 0.028 m, 0.34 deg; 0.054 m, 0.85 deg
+    "fr079": (0.035, 0.5, (1.0, 2.0), 0.03, 0.3),  # reached (92ab3d4): 0.025 m, 0.30 deg; 0.011 m, 0.07 deg
 }
 
 

@@ -74,3 +74,40 @@ def test_raytraced_beam_free_then_hit_and_inf_carves_without_hit():
     assert np.all(up == 0)                                   # +inf beam carved free ...
     assert not np.any(m.data[:, col0] == 100)                # ... with no hit anywhere
     assert m.data[int((5.0 - g.y0) / 0.1), col0] == -1       # beyond the carve cap: unknown
+
+
+def test_growing_grid_with_a_pool_is_the_grid_without_one():
+    """Submap fields from reused memory (BufferPool) equal fresh ones cell for cell, through growth
+    in every direction, and equal a field built from all the points at once where both have cells."""
+    from fgloc.mapping.scanmatch import BufferPool, GrowingDistanceGrid, build_distance_grid
+
+    rng = np.random.default_rng(3)
+    sets = [rng.uniform(-2, 2, (150, 2)) + off for off in ([0, 0], [9, 1], [-8, -7], [2, 12], [-3, 4])]
+    pool = BufferPool(max_bytes=64e6)
+    pool.give(np.full(3_000_000, 7.0, dtype=np.float32))  # stale contents must not leak through
+    fresh = GrowingDistanceGrid(0.025, 0.3)
+    pooled = GrowingDistanceGrid(0.025, 0.3, pool=pool)
+    for pts in sets:
+        fresh.add(pts)
+        pooled.add(pts)
+        assert pooled.dist.shape == fresh.dist.shape
+        assert np.array_equal(pooled.dist, fresh.dist)
+    whole = np.concatenate(sets)
+    g = fresh.grid()
+    d = dist_at(g, whole)
+    assert np.all(d < 0.02)  # every stamped point sits in a near-zero cell
+    ref = build_distance_grid(whole, 0.025, 0.3, 0.5)
+    probe = rng.uniform(-10, 14, (2000, 2))
+    a, b = dist_at(g, probe), dist_at(ref, probe)
+    assert np.max(np.abs(a - b)) <= 0.025 * np.sqrt(2)  # the cell centres a probe falls in are this close
+    pooled.release()
+    assert pooled.dist is None and len(pool._free) >= 1
+
+
+def dist_at(grid, xy):
+    ix = np.floor((xy[:, 0] - grid.x0) / grid.resolution).astype(int)
+    iy = np.floor((xy[:, 1] - grid.y0) / grid.resolution).astype(int)
+    ok = (ix >= 0) & (iy >= 0) & (ix < grid.dist.shape[1]) & (iy < grid.dist.shape[0])
+    out = np.full(len(xy), grid.dmax_m)
+    out[ok] = grid.dist[iy[ok], ix[ok]]
+    return out

@@ -634,6 +634,9 @@ class GyroBias:
     * standstill: while the wheels report no motion (``still_s`` in a row), each gyro reading
       measures ``b`` itself.
 
+    A heading source's readings share its slowly varying errors: each counts for its variance
+    times the inflation its innovations show over ``window_s`` windows (:meth:`_shared`).
+
     Robust: an innovation beyond ``huber_k`` sigmas is down-weighted (Huber), beyond
     ``reject_k`` it is not used; a source rejected for ``reanchor_s`` in a row (a lasting
     magnetic disturbance, a re-initialized AHRS) is re-anchored instead of pulling the bias.
@@ -644,7 +647,8 @@ class GyroBias:
 
     def __init__(self, prior_sigma: float = 0.02, rw: float = 2e-5, offset_q: float = 1e-7,
                  huber_k: float = 3.0, reject_k: float = 8.0, reanchor_s: float = 5.0,
-                 still_s: float = 0.3, max_rate_hz: float = 20.0, history: int = 8000) -> None:
+                 still_s: float = 0.3, max_rate_hz: float = 20.0, history: int = 8000,
+                 window_s: float = 2.0) -> None:
         self.rw = float(rw)
         self.offset_q = float(offset_q)
         self.huber_k = float(huber_k)
@@ -652,6 +656,7 @@ class GyroBias:
         self.reanchor_s = float(reanchor_s)
         self.still_s = float(still_s)
         self.min_dt = 1.0 / float(max_rate_hz)
+        self.window_s = float(window_s)
         self.x = np.zeros(1)
         self.P = np.array([[float(prior_sigma) ** 2]])
         self.t: float | None = None
@@ -662,6 +667,9 @@ class GyroBias:
         self.series: deque[tuple[float, float, float, float]] = deque(maxlen=int(history))
         self._pending: list[tuple[float, str, float, float]] = []
         self._reanchor: set[str] = set()
+        # per heading source: [EW mean of yn^2, EW mean of n * mean(yn)^2 over a window, the window's sum
+        # of yn, its n, its start, windows, the inflation factor, readings] (see _shared)
+        self._vif: dict[str, list[float]] = {}
         self._still_since: float | None = None
         self._still_until = -math.inf
         self.n_heading = 0
@@ -790,6 +798,7 @@ class GyroBias:
             H = np.zeros(len(self.x))
             H[i] = 1.0
             y = wrap_scalar(z - float(self.x[i]))
+            var = var * self._shared(source, t, y / math.sqrt(float(self.P[i, i]) + var))
             if self._robust_update(H, y, var, source, t):
                 self._bad_since.pop(source, None)
                 self.n_heading += 1
@@ -798,6 +807,30 @@ class GyroBias:
                 if t - since >= self.reanchor_s:
                     self._anchor(source, z, var)
                     self._bad_since.pop(source, None)
+
+    def _shared(self, source: str, t: float, yn: float) -> float:
+        """How many times its variance a heading reading counts for (>= 1): the variance inflation
+        of the source's normalized innovations ``yn`` over ``window_s`` windows,
+        ``n * var(mean of n) / var(one)``.  A heading's slowly varying errors (a magnetic
+        distortion along the path, an AHRS's drift) are shared by the readings of a stretch; taken
+        as independent, 20 readings a second fitted the distortion's slope as gyro bias (the
+        skid-steer run: 1.82 mrad/s for 2.00).  White readings: 1."""
+        st = self._vif.get(source)
+        if st is None:
+            st = self._vif[source] = [0.0, 0.0, 0.0, 0.0, t, 0.0, 1.0, 0.0]
+        yn = min(max(yn, -self.huber_k), self.huber_k)  # an outlier does not make the source correlated
+        st[7] += 1.0
+        st[0] += max(0.01, 1.0 / st[7]) * (yn * yn - st[0])
+        st[2] += yn
+        st[3] += 1.0
+        if t - st[4] >= self.window_s:
+            n = st[3]
+            st[5] += 1.0
+            st[1] += max(0.05, 1.0 / st[5]) * (st[2] * st[2] / n - st[1])
+            st[2], st[3], st[4] = 0.0, 0.0, t
+            if st[5] >= 5 and st[0] > 0:
+                st[6] = min(max(st[1] / st[0], 1.0), max(n, 1.0))
+        return st[6]
 
     def _anchor(self, source: str, z: float, var: float) -> None:
         """(Re)start a heading source's offset at ``z``, uncorrelated with the rest."""

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import gtsam
 import numpy as np
 import pytest
@@ -377,3 +379,34 @@ def test_arbiter_shows_fixes_better_than_claimed_unless_their_errors_vary_slowly
     assert slow.shown_k("scan") > 1.0
     assert slow._var["scan"] < 0.3**2 * slow.streams["scan"].claimed_mean  # the short blocks alone: better
 
+
+def _gyro_bias_run(distortion_deg, seconds=300.0, seed=4, window_s=2.0):
+    from fgloc.backends.health import GyroBias
+
+    rng = np.random.default_rng(seed)
+    gb = GyroBias(window_s=window_s)
+    bias = 0.002
+    for i, ti in enumerate(np.arange(0, seconds, 0.01)):
+        gb.add_rate(ti, bias + rng.normal(0, 0.005), 0.005**2)
+        if i % 5 == 0:  # 20 Hz headings: 0.5 deg white, a distortion along a loop driven in 60 s
+            ph = 2 * np.pi * ti / 60.0
+            shape = 0.6 * np.sin(3 * ph) + 0.4 * np.cos(5 * ph)
+            err = np.deg2rad(0.5) * rng.normal() + np.deg2rad(distortion_deg) * shape
+            gb.add_heading("imu.yaw", ti, err, np.deg2rad(0.5) ** 2 + 0.5 * np.deg2rad(distortion_deg) ** 2)
+    return gb
+
+
+def test_gyro_bias_within_5_percent_beside_a_heading_with_slowly_varying_errors():
+    # readings that share a slowly varying error count as fewer readings (variance inflation of
+    # their innovations over 2 s windows): the distortion's slope is not taken for the bias
+    err, err_indep = [], []
+    for seed in (1, 2, 3):
+        gb = _gyro_bias_run(1.0, seed=seed)
+        assert gb.value() == pytest.approx(0.002, rel=0.05)
+        assert gb._vif["imu.yaw"][6] > 3.0
+        err.append(abs(gb.value() - 0.002))
+        err_indep.append(abs(_gyro_bias_run(1.0, seed=seed, window_s=math.inf).value() - 0.002))
+    assert sum(err) < 0.5 * sum(err_indep)  # every reading independent: 2.02-2.06 mrad/s
+    white = _gyro_bias_run(0.0)
+    assert white.value() == pytest.approx(0.002, rel=0.05)
+    assert white._vif["imu.yaw"][6] < 1.6  # white readings count as they are

@@ -31,6 +31,9 @@ AGREEMENT_WINDOW_S = 1.0
 BASELINE_FRACTION = 0.5
 MAX_BASELINE_S = 0.05
 RATE_WINDOW = 16
+#: s: the long-run mean period over this long (at least :data:`RATE_WINDOW` poses) bounds how many
+#: increments a velocity to extrapolate with may average over a short time (a logger's flush)
+LONG_RATE_WINDOW_S = 5.0
 #: s: the longest span a bursty source's velocity measurement is averaged over (see
 #: :meth:`OdometryTracker.velocity_measurement`)
 VELOCITY_SPAN_MAX_S = 0.25
@@ -69,6 +72,7 @@ class OdometryTracker:
         # stamps of the last RATE_WINDOW poses (the source's mean period), the recent odom poses, and
         # whether the last twist came from a pose increment shorter than the baseline (a burst)
         self._stamps: deque[float] = deque(maxlen=RATE_WINDOW + 1)
+        self._long_stamps: deque[float] = deque()  # pose stamps of the last LONG_RATE_WINDOW_S (>= RATE_WINDOW + 1)
         self._recent: deque[tuple[float, FloatArray]] = deque(maxlen=4 * RATE_WINDOW)
         self._short = False
         self._derived = False              # whether the last twist came from a pose increment
@@ -197,8 +201,27 @@ class OdometryTracker:
         (intel's 240 m/s pose-delta twist put the next scan's guess 16.8 m off)."""
         if not self.burst:
             return self.twist
-        v = self._mean_velocity(self._baseline())
+        v = self._spread_velocity()
         return np.zeros(3) if v is None else v
+
+    def _spread_velocity(self) -> FloatArray | None:
+        """The mean velocity from the last pose back to the latest one that is at least the baseline
+        before it and at least half the source's long-run mean period (:data:`LONG_RATE_WINDOW_S`)
+        per increment in between: a logger that stalled and then flushed a second of poses within
+        milliseconds packs many increments into the last poses; the window reaches back past them
+        (a pair of poses 0.3 ms apart after a 40 ms step: the two increments, as the baseline)."""
+        lt = self._long_stamps
+        per = (lt[-1] - lt[0]) / (len(lt) - 1) if len(lt) > RATE_WINDOW else 0.0
+        base = self._baseline()
+        t1, p1 = self._recent[-1]
+        n = 0
+        for tj, pj in reversed(self._recent):
+            if tj >= t1:
+                continue
+            n += 1
+            if t1 - tj >= base and t1 - tj >= n * BASELINE_FRACTION * per:
+                return se2_log(between1(pj, p1)) / (t1 - tj)
+        return None
 
     def _mean_velocity(self, span_s: float) -> FloatArray | None:
         """The mean body velocity from the last odom pose back to the latest one at least ``span_s``
@@ -242,6 +265,10 @@ class OdometryTracker:
         if not dt > 0:
             return tw, cov
         self._stamps.append(t)
+        lt = self._long_stamps
+        lt.append(t)
+        while len(lt) > RATE_WINDOW + 1 and lt[0] < t - LONG_RATE_WINDOW_S:
+            lt.popleft()
         if unused is None:
             unused = self._unused(cov)
         if unused[0] and unused[1] and unused[2]:

@@ -580,14 +580,16 @@ def edt_squared(feature):  # pragma: no cover - compiled
                 g[i, j] = float(last - j)
         for j in range(w):
             g[i, j] = g[i, j] * g[i, j] if g[i, j] >= 0.0 else none
-    out = np.empty((h, w))
     v = np.empty(h, dtype=np.int64)
     z = np.empty(h + 1)
     f = np.empty(h)
-    for j in range(w):
+    col = np.empty(h)
+    for j in range(w):  # the result goes into g, column by column (one grid in memory, not two)
+        for q in range(h):
+            col[q] = g[q, j]
         k = -1
         for q in range(h):
-            fq = g[q, j]
+            fq = col[q]
             if fq == none:
                 continue
             if k < 0:
@@ -609,8 +611,16 @@ def edt_squared(feature):  # pragma: no cover - compiled
             while m < k and z[m + 1] < q:
                 m += 1
             dq = q - v[m]
-            out[q, j] = dq * dq + f[m]
-    return out
+            g[q, j] = dq * dq + f[m]
+    return g
+
+
+def _cells_to_m(d2: FloatArray, cell_m: float) -> FloatArray:
+    """``sqrt(d2) * cell_m - cell_m / 2`` in place (no temporary grids)."""
+    np.sqrt(d2, out=d2)
+    d2 *= cell_m
+    d2 -= 0.5 * cell_m
+    return d2
 
 
 # ----------------------------------------------------------------- the matcher
@@ -635,11 +645,11 @@ def surface_distance_field(
     fine = occ_map.resolution / k
     if not occ.any():
         return np.full(occ.shape, float(max_dist_m))
-    outside = np.sqrt(edt_squared(occ)) * fine - 0.5 * fine
+    outside = _cells_to_m(edt_squared(occ), fine)
     if occ.all():
         inside = np.full(occ.shape, float(max_dist_m))
     else:
-        inside = np.sqrt(edt_squared(~occ)) * fine - 0.5 * fine
+        inside = _cells_to_m(edt_squared(~occ), fine)
     d = np.where(occ, -inside, outside) + float(surface_depth_m)
     return np.clip(d, -max_dist_m, max_dist_m)
 

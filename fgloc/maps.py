@@ -88,7 +88,11 @@ class OccupancyMap:
 
     @property
     def free(self) -> NDArray[np.bool_]:
-        return (self.data >= 0) & (self.data < 50) if self.mode != "trinary" else self.data == FREE
+        return self.free_mask(self.data)
+
+    def free_mask(self, cells: NDArray) -> NDArray[np.bool_]:
+        """Which of ``cells`` (values of this map's ``data``, e.g. a window of it) are free."""
+        return (cells >= 0) & (cells < 50) if self.mode != "trinary" else cells == FREE
 
     @property
     def unknown(self) -> NDArray[np.bool_]:

@@ -309,15 +309,16 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
     if not bool(occ_map.in_bounds(g[None, :2])[0]):
         return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is off the map"
     ij = occ_map.world_to_grid(g[None, :2])[0]
-    if bool(occ_map.unknown[tuple(ij)]):
+    i_c, j_c = int(ij[0]), int(ij[1])
+    if occ_map.data[i_c, j_c] < 0:  # unknown (the cell alone: .unknown builds the whole grid)
         # a map built by SLAM leaves unknown specks and ragged edges where the robot drove
         # (doorways, glass, the edge of what one half of a log saw): a guess there is fine
         # when free space is within UNKNOWN_GUESS_RADIUS_M; deep in unknown space it is not
         r = int(np.ceil(UNKNOWN_GUESS_RADIUS_M / occ_map.resolution))
-        i0, j0 = max(int(ij[0]) - r, 0), max(int(ij[1]) - r, 0)
-        win = occ_map.free[i0:int(ij[0]) + r + 1, j0:int(ij[1]) + r + 1]
-        ii, jj = np.nonzero(win)
-        d2 = (ii + i0 - int(ij[0])) ** 2 + (jj + j0 - int(ij[1])) ** 2
+        i0, j0 = max(i_c - r, 0), max(j_c - r, 0)
+        win = occ_map.data[i0:i_c + r + 1, j0:j_c + r + 1]
+        ii, jj = np.nonzero(occ_map.free_mask(win))
+        d2 = (ii + i0 - i_c) ** 2 + (jj + j0 - j_c) ** 2
         if not (len(d2) and float(np.sqrt(d2.min())) * occ_map.resolution <= UNKNOWN_GUESS_RADIUS_M):
             return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is in unknown space"
     g = g.copy()

@@ -781,22 +781,17 @@ class SlidingWindowSmoother(Backend):
             return False
         return bool(np.isfinite(d2) and d2 <= self.cfg.fix_gate)
 
-    def _fix_weighted_cov(self, cov: FloatArray, t: float) -> FloatArray:
+    def _fix_weighted_cov(self, cov: FloatArray) -> FloatArray:
         """A fix's covariance as its factor uses it: floored (:meth:`_fix_cov`), its heading
         weighted by the noise the fixes' headings show against the other yaw sources (the arbiter's
         :meth:`~fgloc.backends.health.Arbiter.shown_k`: over 0.125 s blocks and, for slowly varying
         errors, over 0.5 s and 2 s blocks).  Without it, a front-end whose headings are 5-10x better
         than the floor left the heading to the relative sources between fixes over a long window: the
         paper run's smoother heading took on the gyro's random walk and the wheels' drift on
-        straight legs (online 0.032 deg against its fixes' 0.024).  That evidence is from blocks
-        without turning: a fix taken while the robot turns (``t``'s yaw rate above the arbiter's
-        still threshold) keeps its claim (the skid-steer run's fixes: 0.03 deg off on straight
-        legs, 0.22 deg in turns)."""
+        straight legs (online 0.032 deg against its fixes' 0.024)."""
         c = self._fix_cov(cov)
         if self.cfg.adapt_noise:
             k = self.arb.shown_k("scan")
-            if k < 1.0 and abs(float(self._twist_at(t)[2])) * self.arb.block_s >= self.arb.still:
-                k = 1.0  # the evidence is from blocks without turning: a fix taken in a turn keeps its claim
             if k != 1.0:
                 c[2, :] *= k
                 c[:, 2] *= k
@@ -990,7 +985,7 @@ class SlidingWindowSmoother(Backend):
                     vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
         """The scan-to-map fix on keyframe ``k`` (at the scan stamp): with its latency estimated,
         configured, or none."""
-        cov = self._fix_weighted_cov(fix.cov, t)
+        cov = self._fix_weighted_cov(fix.cov)
         pose = np.asarray(fix.pose, dtype=float)
         # a fix stamped late is the pose that long before its stamp: carried forward by the motion
         lat = self.latency_estimate()
@@ -1152,7 +1147,7 @@ class SlidingWindowSmoother(Backend):
         if fix is not None:
             pred_cov = self._last_cov + c1
             if self._gate(fix, guess, pred_cov):
-                graph.add(fix_factor(k, fix.pose, self._fix_weighted_cov(fix.cov, t), self.cfg.fix_kernel,
+                graph.add(fix_factor(k, fix.pose, self._fix_weighted_cov(fix.cov), self.cfg.fix_kernel,
                                      self.cfg.fix_kernel_k))
                 used = True
                 self.stats["fixes_used"] += 1

@@ -162,6 +162,34 @@ def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: floa
     return gtsam.CustomFactor(noise, [pose_key, offset_key], error)
 
 
+def relative_yaw_error(theta: float, offset: float, z: float) -> float:
+    """Residual ``wrap(theta + offset - z)`` (radians) of :func:`relative_yaw_factor`."""
+    return wrap_scalar(theta + offset - z)
+
+
+def relative_yaw_factor(pose_key: int, offset_key: int, z_yaw: float, sigma: float,
+                        kernel: str = "huber", k: float = 1.345) -> gtsam.CustomFactor:
+    """A differential orientation source's yaw ``z`` (robot_localization's ``imuN_differential``:
+    an AHRS or a visual odometer whose heading frame is its own) on a ``Pose2`` keyframe against
+    the source's own offset ``c`` (a ``Vector1`` chain, not the compass's ``Rot2``): ``z = theta + c``,
+    error ``wrap(theta + c - z)``, Jacobians ``[0, 0, 1]`` and ``[1]``.  With ``c`` free (a loose
+    prior at the first reading, a random walk after) only the source's increments inform the
+    headings, whatever its stamps' jitter."""
+    z = float(z_yaw)
+    kp, ko = int(pose_key), int(offset_key)
+    h0, h1 = np.array([[0.0, 0.0, 1.0]]), np.array([[1.0]])  # constant (GTSAM copies them)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        e = relative_yaw_error(values.atPose2(kp).theta(), float(values.atVector(ko)[0]), z)
+        if H is not None:
+            H[0] = h0
+            H[1] = h1
+        return np.array([e])
+
+    noise = robust(gtsam.noiseModel.Isotropic.Sigma(1, max(float(sigma), 1e-6)), kernel, k)
+    return gtsam.CustomFactor(noise, [kp, ko], error)
+
+
 # ---------------------------------------------------------------------- calibration factors
 def _sinc(x: float) -> float:
     return 1.0 - x * x / 6.0 if abs(x) < 1e-4 else math.sin(x) / x

@@ -60,6 +60,7 @@ from fgloc.backends.factors import (
     gyro_factor,
     integrate_heading,
     integrate_twist,
+    relative_yaw_factor,
     scaled_between_factor,
     scaled_delta,
     yaw_increment_factor,
@@ -89,8 +90,12 @@ def O(j: int) -> int:  # noqa: E743
 
 
 MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
+#: a differential orientation gated at this many keyframes in a row is anchored again (re-initialized AHRS)
+REANCHOR_AFTER = 5
 #: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
 GYRO_LIVE_S = 0.25
+#: rad, the prior of a differential orientation's offset at its anchor (its frame is its own: loose)
+RELATIVE_YAW_PRIOR_SIGMA = 10.0
 
 
 def _period(ts: list[float]) -> float:
@@ -226,6 +231,9 @@ class SmootherConfig:
                             "stamp) from how the fixes' increments lag the gyro / odometry; corrected once "
                             "significant")
     latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
+    relative_yaw_rw_sigma_deg: float = setting(0.057, "deg/sqrt(s), random walk of a differential orientation "
+                                               "source's own offset (how fast its heading may drift from the "
+                                               "graph's; the EKF's relative_yaw_q 1e-6 rad^2/s)", gt=0)
 
     # the angle settings in radians
     compass_sigma = radians()
@@ -234,6 +242,7 @@ class SmootherConfig:
     calibrated_offset_sigma = radians()
     fix_min_sigma_theta = radians()
     fix_gate_theta = optional_radians()
+    relative_yaw_rw_sigma = radians()
 
 
 @dataclass
@@ -270,6 +279,9 @@ class SlidingWindowSmoother(Backend):
         self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
         self._turned = 0.0
+        # differential orientation sources: their readings until their keyframe
+        self.rel_pending: list[tuple[float, float, float, str]] = []
+        self._rel_gated: dict[str, int] = {}
         self._reset_state()
 
     # ------------------------------------------------------------------ state
@@ -280,7 +292,7 @@ class SlidingWindowSmoother(Backend):
         th = float(self.cfg.relinearize_threshold)
         tm = gtsam.ISAM2ThresholdMap()
         for sym, v in (("x", [th] * 3), ("o", [th]), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
-                       ("l", [th * 1e-2])):
+                       ("l", [th * 1e-2]), ("r", [th])):
             tm.insert((sym, np.asarray(v, dtype=float)))
         p.setRelinearizeThreshold(tm)
         p.relinearizeSkip = self.cfg.relinearize_skip
@@ -312,6 +324,7 @@ class SlidingWindowSmoother(Backend):
             ch.key, ch.t = None, -np.inf
         for src in self._gyro_done:
             self._gyro_done[src] = -np.inf
+        self.rel_pending.clear()
 
     @property
     def initialized(self) -> bool:
@@ -921,6 +934,7 @@ class SlidingWindowSmoother(Backend):
                                      self.cfg.compass_kernel, self.cfg.compass_kernel_k))
             ts[self.cur_o] = t  # type: ignore[index]
             self.stats["compass_factors"] += 1
+        self._add_relative_yaw_factors(k, t, pred, graph, vals, ts)
         if used:
             assert fix is not None
             graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
@@ -1061,6 +1075,76 @@ class SlidingWindowSmoother(Backend):
                 if ka not in ts:
                     ts[ka] = ta
                 self.stats["gyro_factors"] += 1
+
+    # ------------------------------------------------------------------ differential orientations, further twists
+    def add_relative_yaw(self, t: float, yaw: float, var: float, source: str = "imu") -> None:
+        """An orientation whose increments are used, not its frame (robot_localization's
+        ``imuN_differential``): at each keyframe the readings since the previous one, carried to
+        its stamp by the rotation in between and averaged, are a heading factor ``z = theta + c``
+        (:func:`~fgloc.backends.factors.relative_yaw_factor`) on the source's own offset chain ``c``
+        (``r<j>``: anchored at the first reading with a loose prior, a random walk of
+        ``relative_yaw_rw_sigma_deg``), as the compass's ``o<j>``.
+
+        Not as the rate ``d_yaw / d_t`` between stamps: with jittered stamps (two messages 0.2 ms
+        apart) that rate spikes to several rad/s; as a heading the increments enter whole, whatever
+        the stamps.  A reading beyond ``fix_gate_theta`` of the graph's heading plus the offset is
+        not used; :data:`REANCHOR_AFTER` keyframes of it in a row (a re-initialized AHRS) and the
+        offset is anchored again."""
+        name = f"{source}.yaw"
+        h = self._source(name, "heading")
+        if not (math.isfinite(t) and math.isfinite(yaw)):
+            h.skip("not finite")
+            return
+        v = var if math.isfinite(var) and var > 0 else self.cfg.compass_sigma**2
+        if self.cfg.adapt_noise:
+            if name not in self.arb.streams:
+                self.arb.add_source(name, ANGLE_ABSOLUTE, rel_prior=0.02)
+            self.arb.add(name, float(t), float(yaw), float(v))
+        for gb in self.gbias.values():  # its increments observe a gyro's bias (its frame never enters)
+            gb.add_heading(name, float(t), float(yaw), float(v) * self._noise_of(name)[0] ** 2)
+        if not self.initialized:
+            return
+        self.rel_pending.append((float(t), float(yaw), float(v), source))
+        self._process_pending(float(t))
+
+    def _add_relative_yaw_factors(self, k: int, t: float, pred: FloatArray, graph: gtsam.NonlinearFactorGraph,
+                                  vals: gtsam.Values, ts: dict) -> None:
+        """Keyframe ``k``'s heading factor of each differential orientation source with readings
+        up to ``t`` (``pred``: the keyframe's initial value)."""
+        if not self.rel_pending:
+            return
+        now = [r for r in self.rel_pending if r[0] <= t + 1e-9]
+        self.rel_pending = [r for r in self.rel_pending if r[0] > t + 1e-9]
+        horizon = t - self.cfg.lag_s
+        for source in dict.fromkeys(r[3] for r in now):
+            readings = [r for r in now if r[3] == source and r[0] >= horizon]
+            m = self._compass_measurement(t, readings)
+            if m is None:
+                continue
+            z, sigma = m
+            name = f"{source}.yaw"
+            h = self._source(name, "heading")
+            sigma *= self._noise_of(name)[0]
+            ch = self._chain(f"relative_yaw:{source}", "r", [0.0], [RELATIVE_YAW_PRIOR_SIGMA],
+                             [self.cfg.relative_yaw_rw_sigma])
+            gate = self.cfg.fix_gate_theta
+            if ch.key is not None and ch.estimate is not None and gate is not None:
+                e = wrap_scalar(float(pred[2]) + float(ch.estimate[0]) - z)
+                if abs(e) > gate:
+                    h.gated += len(readings)
+                    n = self._rel_gated[source] = self._rel_gated.get(source, 0) + 1
+                    if n < REANCHOR_AFTER:
+                        continue
+                    self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
+                    ch.key = None
+            if ch.key is None:  # anchored here: c = z - theta (the source's frame is its own)
+                ch.prior_mean = np.array([wrap_scalar(z - float(pred[2]))])
+                ch.estimate = ch.prior_mean.copy()
+            self._rel_gated[source] = 0
+            kc = self._chain_key(ch, t, graph, vals, ts)
+            graph.add(relative_yaw_factor(k, kc, z, sigma, "huber", self.cfg.compass_kernel_k))
+            h.accepted += len(readings)
+            self.stats["relative_yaw_factors"] = self.stats.get("relative_yaw_factors", 0) + 1
 
     def gyro_bias(self, source: str = "imu") -> float:
         """The estimated bias (rad/s) of ``source``'s gyro (0 before it is estimated)."""

@@ -1,0 +1,140 @@
+"""Smoother: a differential orientation source (robot_localization's ``imuN_differential``) is a
+heading factor on its own offset chain (``r<j>``), not rates ``d_yaw / d_t`` between jittered
+stamps; the factor's Jacobians against central differences."""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import gtsam
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fgloc.backends.factors import relative_yaw_error, relative_yaw_factor
+from fgloc.backends.smoother import SlidingWindowSmoother
+from fgloc.localization import Localizer
+from fgloc.localization.sources import SourceRouter, parse_sources
+from fgloc.types import Imu, Odometry, StaticTransform
+
+SPECS = {
+    "odom0": {"type": "odometry", "topic": "/wheels", "use": ["x", "y"], "differential": True},
+    "imu0": {"type": "imu", "topic": "/gyro", "use": ["vyaw"]},
+    "imu1": {"type": "imu", "topic": "/ahrs", "use": ["yaw"], "differential": True},
+}
+GYRO_SCALE = 0.88        # the gyro reports 88 % of the turn
+AHRS_OFFSET = 1.3        # the AHRS's heading frame is 1.3 rad from the odom frame
+DURATION_S, SPEED, START_S = 42.0, 1.0, 2.0
+
+
+def relative_yaw_numeric_jacobians(theta: float, offset: float, z: float, eps: float = 1e-6) -> tuple[float, float]:
+    """Central differences of the residual in the pose's heading and the offset."""
+    d_th = (relative_yaw_error(theta + eps, offset, z) - relative_yaw_error(theta - eps, offset, z)) / (2 * eps)
+    d_c = (relative_yaw_error(theta, offset + eps, z) - relative_yaw_error(theta, offset - eps, z)) / (2 * eps)
+    return d_th, d_c
+
+
+def test_relative_yaw_factor_jacobians_match_central_differences():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        x, y, th, c = rng.normal(0.0, 2.0, 4)
+        z = float(rng.uniform(-math.pi, math.pi))
+        f = relative_yaw_factor(gtsam.symbol("x", 0), gtsam.symbol("r", 0), z, 0.01, kernel="none")
+        vals = gtsam.Values()
+        vals.insert(gtsam.symbol("x", 0), gtsam.Pose2(x, y, th))
+        vals.insert(gtsam.symbol("r", 0), np.array([c]))
+        lin = f.linearize(vals)
+        A, _ = lin.jacobian()
+        d_th, d_c = relative_yaw_numeric_jacobians(float(gtsam.Pose2(x, y, th).theta()), float(c), z)
+        # whitened by sigma 0.01: [0, 0, 1, 1] / 0.01
+        assert A[0] * 0.01 == pytest.approx([0.0, 0.0, d_th, d_c], abs=1e-6)
+        assert abs(f.unwhitenedError(vals)[0] - relative_yaw_error(float(th), float(c), z)) < 1e-12
+
+
+def _w(t: float) -> float:
+    """Yaw rate: 4 s turns of +-0.5 rad/s between 6 s straight stretches."""
+    ph = (t - START_S) % 20.0 if t >= START_S else -1.0
+    return 0.5 if 2.0 <= ph < 6.0 else (-0.5 if 12.0 <= ph < 16.0 else 0.0)
+
+
+@lru_cache(maxsize=1)
+def _messages() -> tuple[tuple[tuple[float, str, object], ...], np.ndarray]:
+    """Truth by Euler steps of 1 ms; wheel poses 20 Hz (no yaw fused), gyro and AHRS 100 Hz, every
+    25th AHRS message stamped 0.2 ms after the one before (a driver's stamp jitter)."""
+    rng = np.random.default_rng(0)
+    out: list[tuple[float, str, object]] = []
+    x = y = th = 0.0
+    dt = 0.001
+    ahrs_i = 0
+    for k in range(1, int(DURATION_S / dt) + 1):
+        t = k * dt
+        w = _w(t)
+        v = SPEED if t >= START_S else 0.0
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+        if k % 50 == 0:
+            out.append((t, "/wheels", Odometry(t, np.array([v, 0.0, w]), np.diag([1e-4, 1e-4, 1e6]),
+                                               np.array([x, y, th]), np.diag([1e-4, 1e-4, 1e6]))))
+        if k % 10 == 0:
+            g = GYRO_SCALE * w + rng.normal(0.0, 0.002)
+            out.append((t, "/gyro", Imu(t, None, np.array([0.0, 0.0, g]), None, np.eye(3), frame_id="base_link")))
+            ahrs_i += 1
+            stamp = t - 0.0098 if ahrs_i % 25 == 0 else t
+            q = Rotation.from_euler("z", th + AHRS_OFFSET + rng.normal(0.0, 0.0005)).as_quat()
+            out.append((stamp, "/ahrs", Imu(stamp, q, None, np.eye(3) * 1e-4, None, frame_id="base_link")))
+    out.sort(key=lambda m: m[0])
+    return tuple(out), np.array([x, y, th])
+
+
+def _run() -> tuple[np.ndarray, Localizer]:
+    msgs, _ = _messages()
+    loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="smoother")
+    specs = parse_sources(SPECS)
+    router = SourceRouter(loc, specs)
+    by_topic = {s.topic: s for s in specs}
+    for _, topic, m in msgs:
+        router.on_message(by_topic[topic], m)
+    traj = loc.finish()
+    return np.asarray(traj.poses[-1], dtype=float), loc
+
+
+def test_a_differential_orientation_keeps_the_smoothers_heading_beside_a_gyro_with_a_scale_error():
+    """40 m and 8 rad beside a gyro reporting 88 % of the turn: the AHRS's increments hold the
+    heading (its frame, 1.3 rad off, never enters)."""
+    _, truth = _messages()
+    pose, loc = _run()
+    be = loc.backend
+    assert isinstance(be, SlidingWindowSmoother)
+    assert be.stats["relative_yaw_factors"] >= be.stats["keyframes"] - 1 and be.sources["imu1.yaw"].gated == 0
+    assert be.stats.get("relative_yaw_reanchored", 0) == 0
+    assert float(np.hypot(*(pose[:2] - truth[:2]))) < 0.1   # 0.039 m measured
+    assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.01
+
+
+def test_without_the_heading_path_the_smoother_takes_jittered_rates(monkeypatch: pytest.MonkeyPatch):
+    """What the router did before for the smoother (the increments as rates d_yaw / d_t): the same
+    log ends metres off (7.9 m measured)."""
+    _, truth = _messages()
+    monkeypatch.delattr(SlidingWindowSmoother, "add_relative_yaw")
+    pose, _ = _run()
+    assert float(np.hypot(*(pose[:2] - truth[:2]))) > 1.0
+
+
+def test_the_smoothers_offset_is_reanchored_after_a_reinitialized_ahrs():
+    """An AHRS that jumps by 2 rad (re-initialized) is gated, then anchored again: the heading
+    follows its increments instead of being pulled 2 rad."""
+    be = SlidingWindowSmoother()
+    be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    for k in range(1, 400):
+        t = k * 0.01
+        be.add_odometry(t, np.array([1.0, 0.0, 0.0]), np.diag([1e-4, 1e-4, 1e-4]))
+        be.add_relative_yaw(t, 0.5 + (2.0 if k >= 200 else 0.0), 1e-4, "ahrs")
+        if k % 10 == 0:
+            be.add_keyframe(t, None)
+    traj = be.finish()
+    assert be.stats["relative_yaw_reanchored"] == 1
+    assert be.sources["ahrs.yaw"].gated > 0
+    assert float(np.max(np.abs(traj.poses[:, 2]))) < 0.01
+    assert float(traj.poses[-1][0]) == pytest.approx(3.9, abs=0.02)

@@ -382,7 +382,9 @@ def source_line(stats: dict[str, Any]) -> str:
                             "yaw_rate_scale", "gyro_bias_radps", "yaw_shown_vs_claimed") if k in h]
         parts.append(f"{name}: " + " ".join(f"{k}={h[k]}" for k in keys))
     be = stats.get("backend") or {}
-    extra = {k: be[k] for k in ("gated", "compass_recoveries", "solver_failures", "gyro_factors") if k in be}
+    extra = {k: be[k] for k in ("gated", "compass_recoveries", "solver_failures", "gyro_factors",
+                                "relative_yaw_factors", "relative_yaw_reanchored", "velocity_factors",
+                                "velocity_gaps") if k in be}
     if stats.get("odometry_from_poses"):
         extra["odometry_from_poses"] = stats["odometry_from_poses"]
     return "; ".join(parts) + (f"; backend {extra}" if extra else "")

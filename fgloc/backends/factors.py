@@ -352,6 +352,62 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
     return gtsam.CustomFactor(noise, keys, error)
 
 
+def aligned_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, ab: FloatArray | tuple[float, float],
+                          measured: FloatArray, want_jacobians: bool = True) -> tuple[FloatArray, list[FloatArray]]:
+    """Error of :func:`aligned_between_factor`: ``Log(m^-1 rep(xi^-1 xj))`` with
+    ``rep = [M t, yaw]``, ``M = [[a, -b], [b, a]]`` (the source reports its translation scaled by
+    ``s = |(a, b)|`` and turned by ``atan2(b, a)``: a camera's scale and its yaw misalignment on
+    the base), and its Jacobians (right perturbations of ``xi``, ``xj``; ``(a, b)`` as a plain
+    vector).  Scalar maths, as :func:`scaled_between_error`'s."""
+    h = xi.between(xj)
+    cx, cy, cth = h.x(), h.y(), h.theta()
+    a_, b_ = float(ab[0]), float(ab[1])
+    rx, ry, rth = a_ * cx - b_ * cy, b_ * cx + a_ * cy, cth
+    mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
+    cm, sm = math.cos(mt), math.sin(mt)
+    dx, dy = rx - mx, ry - my
+    ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
+    ew = wrap_scalar(rth - mt)
+    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, ew)
+    e = np.array([v1, v2, v3])
+    if not want_jacobians:
+        return e, []
+    # rep's body tangent: Rt(rth) [M | 0] on c's translation, 1 on its yaw; Rt(rth) [[cx, -cy], [cy, cx]] on (a, b)
+    ct, st = math.cos(rth), math.sin(rth)
+    jc = ((ct * a_ + st * b_, -ct * b_ + st * a_, 0.0), (-st * a_ + ct * b_, st * b_ + ct * a_, 0.0))
+    js = ((ct * cx + st * cy, -ct * cy + st * cx), (-st * cx + ct * cy, st * cy + ct * cx))
+    a = [[jl[r][0] * jc[0][k] + jl[r][1] * jc[1][k] for k in range(3)] for r in range(2)]
+    a[0][2] += jl[0][2]
+    a[1][2] += jl[1][2]
+    a.append([0.0, 0.0, 1.0])
+    ch, sh = math.cos(cth), math.sin(cth)
+    Hj = [[r[0] * ch + r[1] * sh, -r[0] * sh + r[1] * ch, r[2]] for r in a]
+    Hi = [[-r[0], -r[1], r[0] * cy - r[1] * cx - r[2]] for r in a]
+    Hs = [[jl[r][0] * js[0][k] + jl[r][1] * js[1][k] for k in range(2)] for r in range(2)]
+    Hs.append([0.0, 0.0])
+    return e, [np.array(Hi), np.array(Hj), np.array(Hs)]
+
+
+def aligned_between_factor(ki: int, kj: int, kab: int, delta: FloatArray, cov: FloatArray, min_sigma: float = 1e-4,
+                           kernel: str = "none", k: float = 1.345) -> gtsam.CustomFactor:
+    """Integrated-odometry factor between ``x_i`` and ``x_j`` of a further twist source whose
+    translation is calibrated by ``kab`` (a ``Vector2`` ``(a, b)``: scale and yaw misalignment,
+    :func:`aligned_between_error`) against the graph (the first source, fixes); its yaw as
+    reported.  ``delta`` / ``cov``: the reported increment and its covariance."""
+    d = np.asarray(delta, dtype=float).copy()
+    c = np.asarray(cov, dtype=float) + np.eye(3) * min_sigma**2
+    noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
+    k0, k1, k2 = int(ki), int(kj), int(kab)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
+        e, Hs = aligned_between_error(values.atPose2(k0), values.atPose2(k1), values.atVector(k2), d, H is not None)
+        if H is not None:
+            H[0], H[1], H[2] = Hs
+        return e
+
+    return gtsam.CustomFactor(noise, [k0, k1, k2], error)
+
+
 def gyro_error(theta_i: float, theta_j: float, bias: float, dtheta_gyro: float, dt: float) -> float:
     """Gyro residual ``wrap(theta_j - theta_i - (dtheta_gyro - bias * dt))`` (radians)."""
     return wrap_scalar(theta_j - theta_i - (dtheta_gyro - bias * dt))

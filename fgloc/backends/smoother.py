@@ -54,6 +54,7 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.factors import (
+    aligned_between_factor,
     between_factor,
     compass_factor,
     fix_factor,
@@ -90,12 +91,16 @@ def O(j: int) -> int:  # noqa: E743
 
 
 MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
+#: a further twist source's messages further apart than this (s) do not cover the gap (a lost
+#: visual track): a twist held backwards over longer is not a measurement of the motion in it
+MAX_TWIST_GAP_S = 0.5
 #: a differential orientation gated at this many keyframes in a row is anchored again (re-initialized AHRS)
 REANCHOR_AFTER = 5
 #: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
 GYRO_LIVE_S = 0.25
 #: rad, the prior of a differential orientation's offset at its anchor (its frame is its own: loose)
 RELATIVE_YAW_PRIOR_SIGMA = 10.0
+CHI2_3_999 = 16.27  # chi-square 99.9 % quantile, 3 degrees of freedom
 
 
 def _period(ts: list[float]) -> float:
@@ -279,9 +284,12 @@ class SlidingWindowSmoother(Backend):
         self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
         self._turned = 0.0
-        # differential orientation sources: their readings until their keyframe
+        # differential orientation sources (readings until their keyframe) and further twist sources
         self.rel_pending: list[tuple[float, float, float, str]] = []
         self._rel_gated: dict[str, int] = {}
+        self.vel: dict[str, tuple[list[float], list[FloatArray], list[FloatArray]]] = {}
+        self._vel_done: dict[str, float] = {}
+        self._vel_translates: dict[str, bool] = {}
         self._reset_state()
 
     # ------------------------------------------------------------------ state
@@ -292,7 +300,8 @@ class SlidingWindowSmoother(Backend):
         th = float(self.cfg.relinearize_threshold)
         tm = gtsam.ISAM2ThresholdMap()
         for sym, v in (("x", [th] * 3), ("o", [th]), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
-                       ("l", [th * 1e-2]), ("r", [th])):
+                       ("l", [th * 1e-2]), ("r", [th]),
+                       ("a", [th * 0.1, th * 0.1])):
             tm.insert((sym, np.asarray(v, dtype=float)))
         p.setRelinearizeThreshold(tm)
         p.relinearizeSkip = self.cfg.relinearize_skip
@@ -325,6 +334,7 @@ class SlidingWindowSmoother(Backend):
         for src in self._gyro_done:
             self._gyro_done[src] = -np.inf
         self.rel_pending.clear()
+        self._vel_done = dict.fromkeys(self._vel_done, -np.inf)
 
     @property
     def initialized(self) -> bool:
@@ -954,6 +964,7 @@ class SlidingWindowSmoother(Backend):
         self.kf_pose[k] = pred
         keys.append(k)
         self._add_gyro_factors(t, graph, vals, ts)
+        self._add_velocity_factors(t, graph, vals, ts)
         if self.cfg.adapt_noise:
             self.arb.update(t)
         self._latency_pairs()
@@ -1146,6 +1157,156 @@ class SlidingWindowSmoother(Backend):
             h.accepted += len(readings)
             self.stats["relative_yaw_factors"] = self.stats.get("relative_yaw_factors", 0) + 1
 
+    def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
+                     source: str) -> None:
+        """Another odometry source's body twist ``[vx, vy, wz]`` (a visual odometer beside the
+        wheels, robot_localization's ``odom1``): integrated between keyframes like the first
+        source's (:func:`~fgloc.backends.factors.integrate_twist`, its own propagated covariance)
+        into a between-keyframe factor of its own, a second independent measurement of the same
+        motion.  Its unused components are unmeasured (variance :data:`TWIST_VAR_MAX`), its yaw
+        noise is what it shows against the other yaw sources; an increment beyond the chi-square
+        99.9 % gate against the keyframes' current relative pose (a lost visual track) is not
+        used; the factor is robust (``odom_kernel``).  Where it reports translation, that
+        translation's scale and yaw misalignment on the base (``a<j>``, a random walk as the first
+        source's gains; :func:`~fgloc.backends.factors.aligned_between_factor`) are estimated
+        against the graph: r_l's groovy test1.bag's stereo odometer reports 11 % less distance than
+        the wheels and 2.3 deg sideways.  The first source alone carries the yaw-rate scale, the
+        standstill and the motion integrals."""
+        h = self._source(source, "odometry")
+        tw = np.asarray(twist, dtype=float).reshape(-1)
+        cov = np.asarray(twist_cov, dtype=float).reshape(3, 3)
+        if tw.shape != (3,) or not (math.isfinite(t) and np.all(np.isfinite(tw)) and np.all(np.isfinite(cov))):
+            h.skip("not finite")
+            return
+        buf = self.vel.setdefault(source, ([], [], []))
+        if buf[0] and t <= buf[0][-1]:
+            h.skip("late or repeated stamp")
+            return
+        c = 0.5 * (cov + cov.T)
+        for i in range(3):
+            if not used[i] or not c[i, i] > 0:
+                c[i, :] = 0.0
+                c[:, i] = 0.0
+                c[i, i] = TWIST_VAR_MAX
+        if used[2] and self.cfg.adapt_noise:
+            if source not in self.arb.streams:
+                self.arb.add_source(source, RATE, rel_prior=0.05)
+            self.arb.add(source, float(t), float(tw[2]), float(c[2, 2]))
+        buf[0].append(float(t))
+        buf[1].append(tw)
+        buf[2].append(_bounded(c, TWIST_VAR_MAX))
+        self._vel_done.setdefault(source, -np.inf)
+        self._vel_translates[source] = bool(used[0] or used[1])
+        h.accepted += 1
+        if len(buf[0]) > 4096 and self.kf_t:
+            i = bisect_left(buf[0], self.kf_t[-1] - self.cfg.lag_s - 2.0)
+            if i > 0:
+                del buf[0][:i], buf[1][:i], buf[2][:i]
+
+    def _add_velocity_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                              ts: dict) -> None:
+        """A between factor per further twist source for every keyframe interval it now covers
+        (its messages may arrive after the keyframe: its factors follow at the next one)."""
+        horizon = t_now - self.cfg.lag_s + 0.25  # never on a keyframe about to be marginalized
+        for name, (vts, _, _) in self.vel.items():
+            if len(vts) < 2:
+                continue
+            done = self._vel_done.get(name, -np.inf)
+            i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
+            while i < len(self.kf_t):
+                ta, tb = self.kf_t[i - 1], self.kf_t[i]
+                if tb > vts[-1] + 1e-9:
+                    break
+                ka, kb = self.kf_key[i - 1], self.kf_key[i]
+                i += 1
+                if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
+                    continue
+                self._vel_done[name] = tb
+                f = self._velocity_factor(name, ka, kb, ta, tb, graph, vals, ts)
+                if f is None:
+                    continue
+                graph.add(f)
+                if ka not in ts:
+                    ts[ka] = ta
+                self.stats["velocity_factors"] = self.stats.get("velocity_factors", 0) + 1
+
+    def _velocity_tail(self) -> None:
+        """At the end: the further twist sources' factors on the last keyframe intervals (their
+        messages arrive after the keyframe; no later keyframe adds them)."""
+        if not self.vel or not self.kf_t or not self.initialized:
+            return
+        graph, vals = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        ts: dict[int, float] = {}
+        self._add_velocity_factors(self.kf_t[-1], graph, vals, ts)
+        if graph.size() == 0:
+            return
+        self._register(graph, vals, ts)
+        try:
+            self._update(graph, vals, ts)
+        except RuntimeError:
+            self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
+
+    def _velocity_factor(self, name: str, ka: int, kb: int, ta: float, tb: float, graph: gtsam.NonlinearFactorGraph,
+                         vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor | None:
+        """Source ``name``'s twists integrated over ``(ta, tb]`` as a between factor, or None (not
+        covered: a gap over :data:`MAX_TWIST_GAP_S`; gated)."""
+        vts, vus, vcs = self.vel[name]
+        j0 = bisect_right(vts, ta)        # its twist covers ta (held backwards)
+        j1 = bisect_left(vts, tb)         # the first message at or after tb
+        if j0 == 0 or j1 >= len(vts):
+            return None
+        if max(vts[j] - vts[j - 1] for j in range(j0, j1 + 1)) > MAX_TWIST_GAP_S:
+            self.stats["velocity_gaps"] = self.stats.get("velocity_gaps", 0) + 1
+            return None
+        d, c = integrate_twist(np.asarray(vts[j0 - 1:j1 + 1]), np.asarray(vus[j0 - 1:j1 + 1]),
+                               np.asarray(vcs[j0 - 1:j1 + 1]), ta, tb, self._q_slip)
+        k_yaw, rel = self._noise_of(name)
+        if k_yaw != 1.0 or rel > 0.0:
+            c[2, :] *= k_yaw
+            c[:, 2] *= k_yaw
+            c[2, 2] += (rel * d[2]) ** 2
+        ch = None
+        if self.cfg.odom_gains and self._vel_translates.get(name, False):
+            # its translation's scale and yaw misalignment on the base, (a, b) = s (cos, sin) of it
+            ch = self._chain(f"alignment:{name}", "a", [1.0, 0.0], [self.cfg.odom_speed_scale_prior] * 2,
+                             [self.cfg.odom_scale_rw] * 2)
+        d_true = d.copy()
+        if ch is not None and ch.estimate is not None:
+            a_, b_ = float(ch.estimate[0]), float(ch.estimate[1])
+            n2 = a_ * a_ + b_ * b_
+            if math.isfinite(n2) and n2 > 0.0025:
+                d_true[0], d_true[1] = (a_ * d[0] + b_ * d[1]) / n2, (-b_ * d[0] + a_ * d[1]) / n2
+        # gate: against the keyframes' current relative pose, with the first source's uncertainty too
+        pa, pb = self.kf_pose[ka], self.kf_pose[kb]
+        ca, sa = math.cos(pa[2]), math.sin(pa[2])
+        dx, dy = float(pb[0] - pa[0]), float(pb[1] - pa[1])
+        rel_pose = np.array([ca * dx + sa * dy, -sa * dx + ca * dy, wrap_scalar(float(pb[2] - pa[2]))])
+        e = rel_pose - d_true
+        e[2] = wrap_scalar(float(e[2]))
+        _, c1 = self._integrate(ta, tb)
+        c1 = _bounded(np.asarray(c1, dtype=float), TWIST_VAR_MAX)
+        for g in self.gyro:  # the keyframes' turn is the gyro's where it covers them: its uncertainty
+            r = self._gyro_increment(g, ta, tb)
+            if r is not None:
+                gb = self.gbias.get(g)
+                c1 = c1.copy()
+                c1[2, :2] = c1[:2, 2] = 0.0
+                c1[2, 2] = r[1] + ((gb.sigma() if gb is not None else 0.0) * (tb - ta)) ** 2
+                break
+        S = c + c1 + np.eye(3) * 1e-8
+        try:
+            d2 = float(e @ np.linalg.solve(S, e))
+        except np.linalg.LinAlgError:
+            d2 = math.inf
+        h = self._source(name, "odometry")
+        if not d2 <= CHI2_3_999:
+            h.gated += 1
+            return None
+        if ch is None:
+            return between_factor(ka, kb, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
+        kab = self._chain_key(ch, tb, graph, vals, ts)
+        return aligned_between_factor(ka, kb, kab, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
+
     def gyro_bias(self, source: str = "imu") -> float:
         """The estimated bias (rad/s) of ``source``'s gyro (0 before it is estimated)."""
         return self.gyro_bias_of(f"{source}.gyro")
@@ -1313,6 +1474,7 @@ class SlidingWindowSmoother(Backend):
     def finish(self) -> Trajectory:
         self._process_pending(np.inf)
         self._flush_acc()
+        self._velocity_tail()
         self._flush_window()
         if not self.smoothed:
             return Trajectory(np.zeros(0), np.zeros((0, 3)))

@@ -346,7 +346,8 @@ class SourceRouter:
     def _odometry(self, spec: SourceSpec, st: _State, msg: Odometry) -> None:
         h = st.health
         # a second odometry source: its velocities are measurements in a back-end that takes them
-        # (the EKF's add_velocity); the others integrate one twist source and skip it
+        # (the EKF's add_velocity; the smoothers' integrate them into a factor of their own); a
+        # back-end without add_velocity integrates one twist source and skips it
         add_vel = None if st.fused else getattr(self.loc.backend, "add_velocity", None)
         if not st.fused and add_vel is None:
             self._skip(st, "a second odometry source (this back-end integrates one twist source; the EKF fuses "

@@ -108,7 +108,9 @@ RUNS = [
     # (the stereo odometer's) velocities fused as measurements too, as r_l does (tol 0.381)
     ("groovy/test1.bag", "ekf", None),
     # 465.9 m at the start of session 4; 15.534 m with imu1's differential yaw as rates d_yaw / d_t; 0.069 m with
-    # it a heading factor on its own offset chain (tol 0.381; odom1 still skipped)
+    # it a heading factor on its own offset chain; 0.226 m with odom1 (the stereo odometer's twist, 11 % short of
+    # the wheels and 2.3 deg sideways) a between-keyframe factor whose scale and yaw misalignment are estimated
+    # (0.432 m with its speed scale alone; tol 0.381)
     ("groovy/test1.bag", "smoother", None),
     ("groovy/test2.bag", "ekf",
      "0.170 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends at "
@@ -199,3 +201,18 @@ def test_no_heading_source_is_no_traceback(tool: ModuleType, cases: dict[str, An
     assert r.poses > 1000
     assert r.stats["sources"]["odom0"]["accepted"] == 3952
     assert isinstance(r.stats["backend"].get("solver_failures", 0), int)
+
+
+def test_groovy_test1_smoother_fuses_the_second_odometry_and_the_differential_imu(
+        tool: ModuleType, cases: dict[str, Any], converted: dict[str, Any], work: Path) -> None:
+    """groovy's test_bag1 in the smoother: odom1 (the stereo odometer's twist) is a factor, not
+    skipped; imu1's differential orientation is a heading factor per keyframe, not rates."""
+    if "groovy/test1.bag" not in cases:
+        pytest.skip("groovy-devel's test1.bag and test_ekf_localization_node_test_bag1.test not found")
+    res = tool.run_fgloc(cases["groovy/test1.bag"].bag, converted["groovy/test1.bag"][0], "smoother", None, None,
+                         work / "groovy-test1-sources")
+    src, be = res["stats"]["sources"], res["stats"]["backend"]
+    assert src["odom1"]["accepted"] == 1313 and src["odom1"].get("skipped", 0) == 0
+    assert be["velocity_factors"] > 1200 and src["odom1"]["backend_gated"] < 100   # 1241 and 28 at 1st commit
+    assert be["relative_yaw_factors"] >= be["keyframes"] - 1 and be.get("relative_yaw_reanchored", 0) == 0
+    assert src["imu0"]["gyro_bias_radps"] == pytest.approx(0.00257, abs=0.0005)  # imu1's increments observe it

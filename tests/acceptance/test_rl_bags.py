@@ -97,9 +97,9 @@ RUNS = [
     # bag, back-end, xfail reason (the converted launch file carries test1's IMU mount); figures of
     # tools/eval_rl_bags.py at 0845aaf + this file's commit
     ("test2.bag", "ekf", None),  # 0.219 m before the readers gave the whole Imu; 0.016 m now (tol 0.138)
-    # 0.173 m while 75 % of the keyframes were made before their gyro reading arrived: their chords kept the
-    # wheels' arc, bent by a skid steer's yaw (1.0 deg crabwise on average); 0.062 m with the keyframe waiting
-    # for the gyro (tol 0.138)
+    # 0.173 m (0.181 at 89c51c0) while 75 % of the keyframes were made before their gyro reading arrived: their
+    # chords kept the wheels' arc, bent by a skid steer's yaw (1.0 deg crabwise on average); 0.062 m (0.055 at
+    # 89c51c0) with the keyframe waiting for the gyro (tol 0.138)
     ("test2.bag", "smoother", None),
     ("test1.bag", "ekf", None),       # 0.939 m at the start of session 4, 0.962 m now (tol 1.045)
     ("test1.bag", "smoother", None),  # 0.385 m, 0.403 m now
@@ -117,8 +117,8 @@ RUNS = [
      "(1.021, 3.429), 0.162 m from groovy's, and fgloc's EKF 0.016 m from that (1.020 m at the start of "
      "session 4, when the differential odometry's increments were taken 2C/dt^2 uncertain)"),
     ("groovy/test2.bag", "smoother",
-     "0.207 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends 0.162 m "
-     "from it and fgloc's smoother 0.062 m from that (as the EKF, 0.170 / 0.016 m); 0.030 m before the keyframes "
+     "0.201 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends 0.162 m "
+     "from it and fgloc's smoother 0.055 m from that (as the EKF, 0.170 / 0.016 m); 0.037 m before the keyframes "
      "waited for the gyro, when the wheels' bent arcs drove the path 1.0 deg crabwise"),
     ("groovy/test3.bag", "ekf", None),  # groovy's 12-value vectors skipped both sources at ee92bab; 0.210 m (tol 0.75)
     # 2.529 m with the gyro bias a graph variable (the AR.Drone's placeholder vyaw 0 pulls it); beside the

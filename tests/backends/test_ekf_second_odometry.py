@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from fgloc.backends.ekf_backend import EKFBackend
+from fgloc.backends.smoother import SlidingWindowSmoother
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources
 from fgloc.types import Odometry, StaticTransform
@@ -60,7 +61,10 @@ def test_an_outlier_of_the_second_source_is_gated():
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.02
 
 
-def test_a_backend_without_velocity_updates_skips_the_second_source_with_the_reason():
+def test_a_backend_without_velocity_updates_skips_the_second_source_with_the_reason(monkeypatch):
+    # both shipped back-ends take a second source (EKFBackend and, since the smoother-rl work,
+    # SlidingWindowSmoother.add_velocity); a back-end without add_velocity must skip it, saying why
+    monkeypatch.delattr(SlidingWindowSmoother, "add_velocity")
     loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="smoother")
     sp = parse_sources(SPECS)
     router = SourceRouter(loc, sp)

@@ -361,7 +361,9 @@ def run_fgloc(bag: Path, config: Path, backend: str, odom_topic: str | None, imu
     from fgloc.errors import FglocError
     from fgloc.io.tum import read_tum
 
-    logging.getLogger("fgloc").setLevel(logging.ERROR)  # the expected 'no laser transform' warning
+    fgloc_log = logging.getLogger("fgloc")
+    level = fgloc_log.level
+    fgloc_log.setLevel(logging.ERROR)  # the expected 'no laser transform' warning, for this run only
     try:
         r = run_log(RunRequest(log=bag, outdir=outdir, backend=backend, config=config, odom_topic=odom_topic,
                                imu_topic=imu_topic, force=True, view_channels=False))
@@ -369,6 +371,8 @@ def run_fgloc(bag: Path, config: Path, backend: str, odom_topic: str | None, imu
         return {"error": str(e)}
     except Exception as e:  # noqa: BLE001 - a crash is a finding, reported in the table
         return {"error": f"crash: {type(e).__name__}: {str(e).strip().splitlines()[0] if str(e).strip() else ''}"}
+    finally:
+        fgloc_log.setLevel(level)
     traj = read_tum(outdir / "trajectory.tum")
     final = np.asarray(traj.poses[-1], dtype=float)
     return {"final": final, "stats": r.stats, "wall_s": r.wall_s}

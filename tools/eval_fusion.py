@@ -86,7 +86,7 @@ def _calib(h: dict[str, Any]) -> str:
         parts.append(f"yaw scale {sc:.2f} (1.4-2.5)")
     b = (h.get("imu") or {}).get("gyro_bias_radps")
     if b is not None:
-        parts.append(f"bias {1000 * b:.2f} mrad/s (2.00)")
+        parts.append(f"bias {1000 * b:.3f} mrad/s (2.00: {100 * (b / 0.002 - 1):+.1f} %)")
     lat = (h.get("scan") or {}).get("latency_s")
     if lat is not None:
         parts.append(f"latency {1000 * lat:.1f} ms")

@@ -635,7 +635,7 @@ class SourceRouter:
                 if hasattr(be, "gyro_bias"):
                     b = be.gyro_bias(s.name if st.extra.get("second") else "imu")
                 if b is not None:
-                    d["gyro_bias_radps"] = round(float(b), 5)
+                    d["gyro_bias_radps"] = round(float(b), 7)
             out[s.name] = d
         if getattr(self.loc, "frontend", None) is not None and hasattr(be, "latency_estimate"):
             lat = getattr(be, "latency_est", None)

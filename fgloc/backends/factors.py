@@ -250,6 +250,17 @@ def pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float
     return v1, v2, w, rows
 
 
+def _log_against(rx: float, ry: float, rth: float, measured: FloatArray) -> tuple[FloatArray, tuple]:
+    """``Log(m^-1 rep)`` for ``rep = (rx, ry, rth)`` and ``m = measured``, with ``d Log / d rep``'s
+    left factor from :func:`pose2_log_and_derivative` (the tail shared by the between-factor errors)."""
+    mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
+    cm, sm = math.cos(mt), math.sin(mt)
+    dx, dy = rx - mx, ry - my
+    ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
+    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, wrap_scalar(rth - mt))
+    return np.array([v1, v2, v3]), jl
+
+
 def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | tuple[float, float],
                          measured: FloatArray,
                          want_jacobians: bool = True, bend: bool = True) -> tuple[FloatArray, list[FloatArray]]:
@@ -290,13 +301,7 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
               (-st * d00 + ct * d10, -st * d01 + ct * d11, -st * d02 + ct * d12))
         js = ((ct * e00 + st * e10, ct * e01 + st * e11), (-st * e00 + ct * e10, -st * e01 + ct * e11))
     # E = m^-1 rep
-    mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
-    cm, sm = math.cos(mt), math.sin(mt)
-    dx, dy = rx - mx, ry - my
-    ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
-    ew = wrap_scalar(rth - mt)
-    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, ew)
-    e = np.array([v1, v2, v3])
+    e, jl = _log_against(rx, ry, rth, measured)
     if not want_jacobians:
         return e, []
     # Jl @ Jc (Jc's last row [0, 0, sw], Jl's last row [0, 0, 1])
@@ -363,13 +368,7 @@ def aligned_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, ab: FloatArray | tup
     cx, cy, cth = h.x(), h.y(), h.theta()
     a_, b_ = float(ab[0]), float(ab[1])
     rx, ry, rth = a_ * cx - b_ * cy, b_ * cx + a_ * cy, cth
-    mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
-    cm, sm = math.cos(mt), math.sin(mt)
-    dx, dy = rx - mx, ry - my
-    ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
-    ew = wrap_scalar(rth - mt)
-    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, ew)
-    e = np.array([v1, v2, v3])
+    e, jl = _log_against(rx, ry, rth, measured)
     if not want_jacobians:
         return e, []
     # rep's body tangent: Rt(rth) [M | 0] on c's translation, 1 on its yaw; Rt(rth) [[cx, -cy], [cy, cx]] on (a, b)

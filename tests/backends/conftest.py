@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from fgloc.geometry import compose1 as se2_compose
 from fgloc.geometry import exp as se2_exp
+from fgloc.localization.sources import SourceRouter, parse_sources
+from fgloc.types import Imu, Odometry
 
 
 @dataclass
@@ -119,3 +124,60 @@ def errors(traj, s: Synth) -> tuple[float, float]:
     e = np.linalg.norm(traj.poses[:, :2] - gt[:, :2], axis=1)
     eh = np.angle(np.exp(1j * (traj.poses[:, 2] - gt[:, 2])))
     return float(np.sqrt(np.mean(e**2))), float(np.rad2deg(np.sqrt(np.mean(eh**2))))
+
+
+# ---------------------------------------------- a differential AHRS beside a gyro with a scale error
+AHRS_SPECS = {
+    "odom0": {"type": "odometry", "topic": "/wheels", "use": ["x", "y"], "differential": True},
+    "imu0": {"type": "imu", "topic": "/gyro", "use": ["vyaw"]},
+    "imu1": {"type": "imu", "topic": "/ahrs", "use": ["yaw"], "differential": True},
+}
+GYRO_SCALE = 0.88        # the gyro reports 88 % of the turn (and claims a placeholder 1 (rad/s)^2)
+AHRS_OFFSET = 1.3        # the AHRS's heading frame is 1.3 rad from the odom frame
+AHRS_DURATION_S, AHRS_SPEED, AHRS_START_S = 42.0, 1.0, 2.0   # standing still for START_S (the localizer starts)
+
+
+def _ahrs_yaw_rate(t: float) -> float:
+    """Yaw rate: 4 s turns of +-0.5 rad/s between 6 s straight stretches."""
+    ph = (t - AHRS_START_S) % 20.0 if t >= AHRS_START_S else -1.0
+    return 0.5 if 2.0 <= ph < 6.0 else (-0.5 if 12.0 <= ph < 16.0 else 0.0)
+
+
+@lru_cache(maxsize=1)
+def differential_ahrs_log() -> tuple[tuple[tuple[float, str, object], ...], np.ndarray]:
+    """``(messages, final true pose)`` for :data:`AHRS_SPECS`: truth by Euler steps of 1 ms; wheel
+    poses 20 Hz (no yaw fused), gyro and AHRS 100 Hz, every 25th AHRS message stamped 0.2 ms after
+    the one before (a driver's stamp jitter).  40 m driven, 8 rad turned."""
+    rng = np.random.default_rng(0)
+    out: list[tuple[float, str, object]] = []
+    x = y = th = 0.0
+    dt = 0.001
+    ahrs_i = 0
+    for k in range(1, int(AHRS_DURATION_S / dt) + 1):
+        t = k * dt
+        w = _ahrs_yaw_rate(t)
+        v = AHRS_SPEED if t >= AHRS_START_S else 0.0
+        x += v * math.cos(th) * dt
+        y += v * math.sin(th) * dt
+        th += w * dt
+        if k % 50 == 0:
+            out.append((t, "/wheels", Odometry(t, np.array([v, 0.0, w]), np.diag([1e-4, 1e-4, 1e6]),
+                                               np.array([x, y, th]), np.diag([1e-4, 1e-4, 1e6]))))
+        if k % 10 == 0:
+            g = GYRO_SCALE * w + rng.normal(0.0, 0.002)
+            out.append((t, "/gyro", Imu(t, None, np.array([0.0, 0.0, g]), None, np.eye(3), frame_id="base_link")))
+            ahrs_i += 1
+            stamp = t - 0.0098 if ahrs_i % 25 == 0 else t
+            q = Rotation.from_euler("z", th + AHRS_OFFSET + rng.normal(0.0, 0.0005)).as_quat()
+            out.append((stamp, "/ahrs", Imu(stamp, q, None, np.eye(3) * 1e-4, None, frame_id="base_link")))
+    out.sort(key=lambda m: m[0])
+    return tuple(out), np.array([x, y, th])
+
+
+def route(loc, spec_dict: dict, msgs) -> None:
+    """Hand ``(stamp, topic, message)`` triples to ``loc`` through a SourceRouter of ``spec_dict``."""
+    specs = parse_sources(spec_dict)
+    router = SourceRouter(loc, specs)
+    by_topic = {s.topic: s for s in specs}
+    for _, topic, m in msgs:
+        router.on_message(by_topic[topic], m)

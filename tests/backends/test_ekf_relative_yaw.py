@@ -5,77 +5,27 @@ spikes that the gate drops; beside a gyro with a scale error it keeps the headin
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 import pytest
+from conftest import AHRS_SPECS, differential_ahrs_log, route
 from scipy.spatial.transform import Rotation
 
 from fgloc.backends.ekf_backend import EKFBackend
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources
-from fgloc.types import Imu, Odometry, StaticTransform, Transform3D
-
-SPECS = {
-    "odom0": {"type": "odometry", "topic": "/wheels", "use": ["x", "y"], "differential": True},
-    "imu0": {"type": "imu", "topic": "/gyro", "use": ["vyaw"]},
-    "imu1": {"type": "imu", "topic": "/ahrs", "use": ["yaw"], "differential": True},
-}
-GYRO_SCALE = 0.88        # the gyro reports 88 % of the turn (and claims a placeholder 1 (rad/s)^2)
-AHRS_OFFSET = 1.3        # the AHRS's heading frame is 1.3 rad from the odom frame
-DURATION_S, SPEED, START_S = 42.0, 1.0, 2.0   # standing still for START_S (the localizer starts)
-
-
-def _w(t: float) -> float:
-    """Yaw rate: 4 s turns of +-0.5 rad/s between 6 s straight stretches."""
-    ph = (t - START_S) % 20.0 if t >= START_S else -1.0
-    return 0.5 if 2.0 <= ph < 6.0 else (-0.5 if 12.0 <= ph < 16.0 else 0.0)
-
-
-@lru_cache(maxsize=1)
-def _messages(seed: int = 0) -> tuple[list[tuple[float, str, object]], np.ndarray]:
-    """Truth by Euler steps of 1 ms; wheels 20 Hz (poses), gyro and AHRS 100 Hz, every 25th AHRS
-    message stamped 0.2 ms after the one before (a driver's stamp jitter)."""
-    rng = np.random.default_rng(seed)
-    out: list[tuple[float, str, object]] = []
-    x = y = th = 0.0
-    dt = 0.001
-    n = int(DURATION_S / dt)
-    ahrs_i = 0
-    for k in range(1, n + 1):
-        t = k * dt
-        w = _w(t)
-        v = SPEED if t >= START_S else 0.0
-        x += v * math.cos(th) * dt
-        y += v * math.sin(th) * dt
-        th += w * dt
-        if k % 50 == 0:
-            out.append((t, "/wheels", Odometry(t, np.array([v, 0.0, w]), np.diag([1e-4, 1e-4, 1e6]),
-                                               np.array([x, y, th]), np.diag([1e-4, 1e-4, 1e6]))))
-        if k % 10 == 0:
-            g = GYRO_SCALE * w + rng.normal(0.0, 0.002)
-            out.append((t, "/gyro", Imu(t, None, np.array([0.0, 0.0, g]), None, np.eye(3), frame_id="base_link")))
-            ahrs_i += 1
-            stamp = t - 0.0098 if ahrs_i % 25 == 0 else t
-            q = Rotation.from_euler("z", th + AHRS_OFFSET + rng.normal(0.0, 0.0005)).as_quat()
-            out.append((stamp, "/ahrs", Imu(stamp, q, None, np.eye(3) * 1e-4, None, frame_id="base_link")))
-    out.sort(key=lambda m: m[0])
-    return out, np.array([x, y, th])
+from fgloc.types import Imu, StaticTransform, Transform3D
 
 
 def _run(msgs) -> tuple[np.ndarray, Localizer]:
     loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
-    specs = parse_sources(SPECS)
-    router = SourceRouter(loc, specs)
-    by_topic = {s.topic: s for s in specs}
-    for _, topic, m in msgs:
-        router.on_message(by_topic[topic], m)
+    route(loc, AHRS_SPECS, msgs)
     loc.finish()
     return loc.backend.ekf.pose(), loc
 
 
 def test_a_differential_orientation_keeps_the_heading_beside_a_gyro_with_a_scale_error():
-    msgs, truth = _messages(0)
+    msgs, truth = differential_ahrs_log()
     pose, loc = _run(msgs)
     be = loc.backend
     assert isinstance(be, EKFBackend)
@@ -89,7 +39,7 @@ def test_a_differential_orientation_keeps_the_heading_beside_a_gyro_with_a_scale
 def test_without_the_heading_path_the_jittered_rates_lose_the_heading(monkeypatch: pytest.MonkeyPatch):
     """What the router did before (the increments as rates d_yaw / d_t): the same log ends
     metres off; the figure shows what the heading path fixes."""
-    msgs, truth = _messages(0)
+    msgs, truth = differential_ahrs_log()
     monkeypatch.delattr(EKFBackend, "add_relative_yaw")
     pose, _ = _run(msgs)
     assert float(np.hypot(*(pose[:2] - truth[:2]))) > 1.0

@@ -5,27 +5,16 @@ stamps; the factor's Jacobians against central differences."""
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import gtsam
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
+from conftest import AHRS_SPECS, differential_ahrs_log, route
 
 from fgloc.backends.factors import relative_yaw_error, relative_yaw_factor
 from fgloc.backends.smoother import SlidingWindowSmoother
 from fgloc.localization import Localizer
-from fgloc.localization.sources import SourceRouter, parse_sources
-from fgloc.types import Imu, Odometry, StaticTransform
-
-SPECS = {
-    "odom0": {"type": "odometry", "topic": "/wheels", "use": ["x", "y"], "differential": True},
-    "imu0": {"type": "imu", "topic": "/gyro", "use": ["vyaw"]},
-    "imu1": {"type": "imu", "topic": "/ahrs", "use": ["yaw"], "differential": True},
-}
-GYRO_SCALE = 0.88        # the gyro reports 88 % of the turn
-AHRS_OFFSET = 1.3        # the AHRS's heading frame is 1.3 rad from the odom frame
-DURATION_S, SPEED, START_S = 42.0, 1.0, 2.0
+from fgloc.types import StaticTransform
 
 
 def relative_yaw_numeric_jacobians(theta: float, offset: float, z: float, eps: float = 1e-6) -> tuple[float, float]:
@@ -52,50 +41,10 @@ def test_relative_yaw_factor_jacobians_match_central_differences():
         assert abs(f.unwhitenedError(vals)[0] - relative_yaw_error(float(th), float(c), z)) < 1e-12
 
 
-def _w(t: float) -> float:
-    """Yaw rate: 4 s turns of +-0.5 rad/s between 6 s straight stretches."""
-    ph = (t - START_S) % 20.0 if t >= START_S else -1.0
-    return 0.5 if 2.0 <= ph < 6.0 else (-0.5 if 12.0 <= ph < 16.0 else 0.0)
-
-
-@lru_cache(maxsize=1)
-def _messages() -> tuple[tuple[tuple[float, str, object], ...], np.ndarray]:
-    """Truth by Euler steps of 1 ms; wheel poses 20 Hz (no yaw fused), gyro and AHRS 100 Hz, every
-    25th AHRS message stamped 0.2 ms after the one before (a driver's stamp jitter)."""
-    rng = np.random.default_rng(0)
-    out: list[tuple[float, str, object]] = []
-    x = y = th = 0.0
-    dt = 0.001
-    ahrs_i = 0
-    for k in range(1, int(DURATION_S / dt) + 1):
-        t = k * dt
-        w = _w(t)
-        v = SPEED if t >= START_S else 0.0
-        x += v * math.cos(th) * dt
-        y += v * math.sin(th) * dt
-        th += w * dt
-        if k % 50 == 0:
-            out.append((t, "/wheels", Odometry(t, np.array([v, 0.0, w]), np.diag([1e-4, 1e-4, 1e6]),
-                                               np.array([x, y, th]), np.diag([1e-4, 1e-4, 1e6]))))
-        if k % 10 == 0:
-            g = GYRO_SCALE * w + rng.normal(0.0, 0.002)
-            out.append((t, "/gyro", Imu(t, None, np.array([0.0, 0.0, g]), None, np.eye(3), frame_id="base_link")))
-            ahrs_i += 1
-            stamp = t - 0.0098 if ahrs_i % 25 == 0 else t
-            q = Rotation.from_euler("z", th + AHRS_OFFSET + rng.normal(0.0, 0.0005)).as_quat()
-            out.append((stamp, "/ahrs", Imu(stamp, q, None, np.eye(3) * 1e-4, None, frame_id="base_link")))
-    out.sort(key=lambda m: m[0])
-    return tuple(out), np.array([x, y, th])
-
-
 def _run() -> tuple[np.ndarray, Localizer]:
-    msgs, _ = _messages()
+    msgs, _ = differential_ahrs_log()
     loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="smoother")
-    specs = parse_sources(SPECS)
-    router = SourceRouter(loc, specs)
-    by_topic = {s.topic: s for s in specs}
-    for _, topic, m in msgs:
-        router.on_message(by_topic[topic], m)
+    route(loc, AHRS_SPECS, msgs)
     traj = loc.finish()
     return np.asarray(traj.poses[-1], dtype=float), loc
 
@@ -103,7 +52,7 @@ def _run() -> tuple[np.ndarray, Localizer]:
 def test_a_differential_orientation_keeps_the_smoothers_heading_beside_a_gyro_with_a_scale_error():
     """40 m and 8 rad beside a gyro reporting 88 % of the turn: the AHRS's increments hold the
     heading (its frame, 1.3 rad off, never enters)."""
-    _, truth = _messages()
+    _, truth = differential_ahrs_log()
     pose, loc = _run()
     be = loc.backend
     assert isinstance(be, SlidingWindowSmoother)
@@ -116,7 +65,7 @@ def test_a_differential_orientation_keeps_the_smoothers_heading_beside_a_gyro_wi
 def test_without_the_heading_path_the_smoother_takes_jittered_rates(monkeypatch: pytest.MonkeyPatch):
     """What the router did before for the smoother (the increments as rates d_yaw / d_t): the same
     log ends metres off (7.9 m measured)."""
-    _, truth = _messages()
+    _, truth = differential_ahrs_log()
     monkeypatch.delattr(SlidingWindowSmoother, "add_relative_yaw")
     pose, _ = _run()
     assert float(np.hypot(*(pose[:2] - truth[:2]))) > 1.0

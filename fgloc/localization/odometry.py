@@ -53,6 +53,13 @@ def between1(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.array([i0 + c * b0 - s * b1, i1 + s * b0 + c * b1, (i2 + b2 + math.pi) % (2.0 * math.pi) - math.pi])
 
 
+def _zero_unused(tw: FloatArray, unused: tuple[bool, bool, bool]) -> FloatArray:
+    """``tw`` with the components the source does not fuse set to 0 (``tw`` itself when it fuses all)."""
+    if unused[0] or unused[1] or unused[2]:
+        return np.array([0.0 if unused[i] else float(tw[i]) for i in range(3)])
+    return tw
+
+
 class OdometryTracker:
     """The dead-reckoned odom pose and the twist to integrate (see the module docstring)."""
 
@@ -105,8 +112,7 @@ class OdometryTracker:
         self._recent.append((t, self.pose))
         if self.first_t is None:
             self.first_t = t
-        if unused[0] or unused[1] or unused[2]:
-            tw = np.array([0.0 if unused[i] else float(tw[i]) for i in range(3)])
+        tw = _zero_unused(tw, unused)
         self._last_out = (tw, cov)
         return tw, cov
 
@@ -169,17 +175,16 @@ class OdometryTracker:
         self._short = False
         self.carried += 1
         out_v, out_cov = self._as_pose_derived(v, tw, cov)
-        unused = self._unused(out_cov)
-        if unused[0] or unused[1] or unused[2]:
-            out_v = np.array([0.0 if unused[i] else float(out_v[i]) for i in range(3)])
+        out_v = _zero_unused(out_v, self._unused(out_cov))
         self._last_out = (out_v, out_cov)
         return out_v, out_cov
 
-    def _as_pose_derived(self, v: FloatArray, tw: FloatArray, cov: FloatArray | None
-                         ) -> tuple[FloatArray, FloatArray]:
+    def _as_pose_derived(self, v: FloatArray, tw: FloatArray, cov: FloatArray | None,
+                         unused: tuple[bool, bool, bool] | None = None) -> tuple[FloatArray, FloatArray]:
         """``v`` with a pose-derived twist's covariance for its speed; the source's unused components
-        (as in ``tw``, ``cov``) kept."""
-        unused = self._unused(cov)
+        (``unused``, else from ``cov``) stay as the message gave them (``tw``, ``cov``), unused."""
+        if unused is None:
+            unused = self._unused(cov)
         speed = math.hypot(float(v[0]), float(v[1]))
         rel = self.cfg.pose_delta_rel
         sig = (float(self._scale_sig[0]) + rel * speed, float(self._scale_sig[1]) + rel * speed,
@@ -285,17 +290,7 @@ class OdometryTracker:
             self._short = True
             self.short_increments += 1
         self._short_flags.append(self._short)
-        speed = float(np.hypot(u[0], u[1]))
-        sig = self._scale_sig + self.cfg.pose_delta_rel * np.array([speed, speed, abs(float(u[2])) + speed])
-        out = np.diag(sig**2)
-        if (unused[0] or unused[1] or unused[2]) and cov is not None:
-            # the source's unused components stay as the message gave them, unused
-            c3 = np.asarray(cov, dtype=float).reshape(3, 3)
-            u = np.array([float(tw[i]) if unused[i] else float(u[i]) for i in range(3)])
-            for i in range(3):
-                if unused[i]:
-                    out[i, i] = float(c3[i, i])
-        return u, out
+        return self._as_pose_derived(u, tw, cov, unused)
 
     def _baseline(self) -> float:
         """The shortest pose increment whose twist is a velocity to extrapolate with (s):

@@ -393,6 +393,14 @@ class SlidingWindowSmoother(Backend):
         self.next_x += 1
         return k
 
+    def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
+        """One reading of source ``name`` for the arbiter (registered at its first), when noise is adapted."""
+        if not self.cfg.adapt_noise:
+            return
+        if name not in self.arb.streams:
+            self.arb.add_source(name, kind, rel_prior)
+        self.arb.add(name, t, value, var)
+
     def _source(self, name: str, kind: str) -> SourceHealth:
         h = self.sources.get(name)
         if h is None:
@@ -575,10 +583,7 @@ class SlidingWindowSmoother(Backend):
         self.odo_t.append(float(t))
         self.odo_u.append(u)
         self.odo_c.append(_bounded(c, TWIST_VAR_MAX))
-        if self.cfg.adapt_noise:
-            if "odom" not in self.arb.streams:
-                self.arb.add_source("odom", RATE, rel_prior=0.05)
-            self.arb.add("odom", float(t), float(twist[2]), float(c[2, 2]))
+        self._arb_add("odom", RATE, 0.05, float(t), float(twist[2]), float(c[2, 2]))
         self._process_pending(float(t))
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
@@ -599,11 +604,7 @@ class SlidingWindowSmoother(Backend):
         for gb in self.gbias.values():
             gb.add_heading(f"{source}.yaw", float(t), float(yaw), float(var) * self._noise_of(f"{source}.yaw")[0] ** 2)
         h.accepted += 1
-        if self.cfg.adapt_noise:
-            name = f"{source}.yaw"
-            if name not in self.arb.streams:
-                self.arb.add_source(name, ANGLE_ABSOLUTE, rel_prior=0.02)
-            self.arb.add(name, float(t), float(yaw), float(var))
+        self._arb_add(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
         self.compass_pending.append((float(t), float(yaw), float(var), source))
         self._process_pending(float(t))
 
@@ -630,10 +631,7 @@ class SlidingWindowSmoother(Backend):
         buf[1].append(float(rate))
         buf[2].append(float(var))
         self._gyro_done.setdefault(name, -np.inf)
-        if self.cfg.adapt_noise:
-            if name not in self.arb.streams:
-                self.arb.add_source(name, INSTANT_RATE, rel_prior=0.01)
-            self.arb.add(name, float(t), float(rate), float(var))
+        self._arb_add(name, INSTANT_RATE, 0.01, float(t), float(rate), float(var))
         if len(buf[0]) > 8192 and self.kf_t:
             horizon = self.kf_t[-1] - self.cfg.lag_s - 2.0
             i = bisect_left(buf[0], horizon)
@@ -952,12 +950,10 @@ class SlidingWindowSmoother(Backend):
             self._source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
             self.calib.add_fix(t - lat, float(fix.pose[2]))
+            var_yaw = float(self._fix_cov(fix.cov)[2, 2])
             for gb in self.gbias.values():
-                gb.add_heading("scan", t - lat, float(fix.pose[2]), float(self._fix_cov(fix.cov)[2, 2]))
-            if self.cfg.adapt_noise:
-                if "scan" not in self.arb.streams:
-                    self.arb.add_source("scan", ANGLE_ABSOLUTE, rel_prior=0.005)
-                self.arb.add("scan", t - lat, float(fix.pose[2]), float(self._fix_cov(fix.cov)[2, 2]))
+                gb.add_heading("scan", t - lat, float(fix.pose[2]), var_yaw)
+            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - lat, float(fix.pose[2]), var_yaw)
         self.kf_t.append(t)
         self.kf_key.append(k)
         self.window.append((t, k))
@@ -1107,10 +1103,7 @@ class SlidingWindowSmoother(Backend):
             h.skip("not finite")
             return
         v = var if math.isfinite(var) and var > 0 else self.cfg.compass_sigma**2
-        if self.cfg.adapt_noise:
-            if name not in self.arb.streams:
-                self.arb.add_source(name, ANGLE_ABSOLUTE, rel_prior=0.02)
-            self.arb.add(name, float(t), float(yaw), float(v))
+        self._arb_add(name, ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(v))
         for gb in self.gbias.values():  # its increments observe a gyro's bias (its frame never enters)
             gb.add_heading(name, float(t), float(yaw), float(v) * self._noise_of(name)[0] ** 2)
         if not self.initialized:
@@ -1188,10 +1181,8 @@ class SlidingWindowSmoother(Backend):
                 c[i, :] = 0.0
                 c[:, i] = 0.0
                 c[i, i] = TWIST_VAR_MAX
-        if used[2] and self.cfg.adapt_noise:
-            if source not in self.arb.streams:
-                self.arb.add_source(source, RATE, rel_prior=0.05)
-            self.arb.add(source, float(t), float(tw[2]), float(c[2, 2]))
+        if used[2]:
+            self._arb_add(source, RATE, 0.05, float(t), float(tw[2]), float(c[2, 2]))
         buf[0].append(float(t))
         buf[1].append(tw)
         buf[2].append(_bounded(c, TWIST_VAR_MAX))

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, exp_along, transform_points, wrap_angle, wrap_scalar
+from fgloc.geometry import YAW, X, Y, exp_along, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -164,6 +164,11 @@ class ScanPreprocessor:
     State: the stamp of the previous call (the time base of ``odom_delta``) and the
     previous interval's twist (for the acceleration-aware extrapolation).
     Returns ``(points, "")`` or ``(None, reason)``; never raises on a bad scan.
+
+    What depends only on the scan layout (the beams' angles with their cosines and sines, the
+    beams' times) is computed once per layout and reused; per scan only the valid beams are
+    gathered and transformed (the same operations on the same values as computing them per scan
+    from the full sweep: the same points, bit for bit).
     """
 
     def __init__(self, laser_mount: StaticTransform | np.ndarray | None, options: PreprocessOptions | None = None):
@@ -174,13 +179,38 @@ class ScanPreprocessor:
         else:
             mount = np.asarray(laser_mount, dtype=float).reshape(3)
         self.mount: FloatArray = mount
+        # transform_points' coefficients (numpy's cos / sin of the mount yaw, as it computes them)
+        self._mount_cs = (mount[X], mount[Y], np.cos(mount[YAW]), np.sin(mount[YAW]))
         self.options = options or PreprocessOptions()
         self._last_stamp: float | None = None
-        self._last_twist: tuple[float, FloatArray] | None = None  # (mid-interval time, twist)
+        self._last_twist: tuple[float, tuple[float, float, float]] | None = None  # (mid-interval time, twist)
+        self._layout: tuple[int, float, float] | None = None  # (beams, angle_min, angle_increment)
+        self._cos: FloatArray = np.zeros(0)
+        self._sin: FloatArray = np.zeros(0)
+        self._tau_key: tuple[int, float] | None = None  # (beams, time_increment)
+        self._tau: FloatArray = np.zeros(0)
 
     def reset(self) -> None:
         self._last_stamp = None
         self._last_twist = None
+
+    def _trig(self, n: int, a0: float, da: float) -> tuple[FloatArray, FloatArray]:
+        """``cos`` and ``sin`` of every beam's angle ``a0 + da * i`` (cached per layout)."""
+        key = (n, a0, da)
+        if key != self._layout:
+            beams = np.arange(n)
+            ang = a0 + da * beams
+            self._cos, self._sin = np.cos(ang), np.sin(ang)
+            self._layout = key
+        return self._cos, self._sin
+
+    def _beam_times(self, n: int, t_inc: float) -> FloatArray:
+        """Each beam's time after the first, ``i * time_increment`` (cached per layout)."""
+        key = (n, t_inc)
+        if key != self._tau_key:
+            self._tau = np.arange(n, dtype=float) * t_inc
+            self._tau_key = key
+        return self._tau
 
     def __call__(
         self, scan: LaserScan, odom_delta: np.ndarray | None = None
@@ -194,55 +224,85 @@ class ScanPreprocessor:
             t_inc = float(scan.time_increment or 0.0)
         except (TypeError, ValueError, AttributeError) as e:
             return None, f"malformed scan ({e.__class__.__name__}: {e})"
-        prev, self._last_stamp = self._last_stamp, stamp if np.isfinite(stamp) else None
-        if not (np.isfinite(a0) and np.isfinite(da)):
+        prev, self._last_stamp = self._last_stamp, stamp if math.isfinite(stamp) else None
+        if not (math.isfinite(a0) and math.isfinite(da)):
             return None, "scan angles are not finite"
         n = len(ranges)
         if n == 0:
             return None, "empty scan"
-        if not np.isfinite(rmin):
+        if not math.isfinite(rmin):
             rmin = 0.0
-        if not (np.isfinite(rmax) and rmax > 0):
-            rmax = np.inf
+        if not (math.isfinite(rmax) and rmax > 0):
+            rmax = math.inf
+        # finite, > 0 and inside [rmin, rmax] in two comparisons (NaN fails both; -inf the lower
+        # bound; +inf the upper one, strict when there is no finite maximum)
         with np.errstate(invalid="ignore"):
-            valid = np.isfinite(ranges) & (ranges > 0) & (ranges >= rmin) & (ranges <= rmax)
-        idx = np.flatnonzero(valid)
-        if len(idx) < opt.min_valid_beams:
-            return None, f"only {len(idx)} valid beams (< {opt.min_valid_beams}; NaN/inf/zero/out-of-range dropped)"
-        if opt.max_beams and len(idx) > opt.max_beams:
-            stride = int(np.ceil(len(idx) / opt.max_beams))
+            valid = ((ranges > 0) if rmin <= 0 else (ranges >= rmin)) & \
+                ((ranges <= rmax) if rmax < math.inf else (ranges < math.inf))
+        idx = valid.nonzero()[0]
+        m = len(idx)
+        if m < opt.min_valid_beams:
+            return None, f"only {m} valid beams (< {opt.min_valid_beams}; NaN/inf/zero/out-of-range dropped)"
+        if opt.max_beams and m > opt.max_beams:
+            stride = int(np.ceil(m / opt.max_beams))
             idx = idx[::stride]
-        r = ranges[idx]
-        ang = a0 + da * idx
-        pts = transform_points(self.mount, np.column_stack([r * np.cos(ang), r * np.sin(ang)]))
+            m = len(idx)
+        cos_a, sin_a = self._trig(n, a0, da)
+        whole = m == n  # every beam valid: no gathering
+        r = ranges if whole else ranges[idx]
+        px, py = r * (cos_a if whole else cos_a[idx]), r * (sin_a if whole else sin_a[idx])
+        mx, my, mc, ms = self._mount_cs
+        pts = np.empty((m, 2))
+        pts[:, 0] = mx + mc * px - ms * py
+        pts[:, 1] = my + ms * px + mc * py
         prev_twist, self._last_twist = self._last_twist, None
         if odom_delta is not None:
             od = np.asarray(odom_delta, dtype=float).reshape(-1)
-            interval = (stamp - prev) if (prev is not None and np.isfinite(stamp)) else float(scan.scan_time or 0.0)
+            interval = (stamp - prev) if (prev is not None and math.isfinite(stamp)) else float(scan.scan_time or 0.0)
             if (
                 od.shape == (3,)
-                and np.all(np.isfinite(od))
-                and np.isfinite(interval)
+                and math.isfinite(float(od[0]) + float(od[1]) + float(od[2]))
+                and math.isfinite(interval)
                 and 0 < interval <= opt.max_deskew_interval_s
             ):
-                twist = se2_log(od) / interval
+                # the twist in scalar maths (the same operations element by element as on the arrays)
+                lx, ly, lw = (float(v) for v in se2_log(od))
+                twist = (lx / interval, ly / interval, lw / interval)
                 mid = stamp - 0.5 * interval
                 self._last_twist = (mid, twist)
-                if opt.deskew and t_inc != 0 and np.isfinite(t_inc):
+                if opt.deskew and t_inc != 0 and math.isfinite(t_inc):
                     if opt.deskew_extrapolate and prev_twist is not None and \
                             0 < mid - prev_twist[0] <= opt.max_deskew_interval_s:
-                        slope = (twist - prev_twist[1]) / (mid - prev_twist[0])
-                        twist = twist + slope * (stamp + 0.5 * (n - 1) * t_inc - mid)
-                    offs = deskew_offsets_twist(n, t_inc, twist)[idx]
-                    c, s = np.cos(offs[:, YAW]), np.sin(offs[:, YAW])
-                    pts = np.column_stack(
-                        [offs[:, 0] + c * pts[:, 0] - s * pts[:, 1], offs[:, 1] + s * pts[:, 0] + c * pts[:, 1]]
-                    )
+                        dt_prev = mid - prev_twist[0]
+                        ahead = stamp + 0.5 * (n - 1) * t_inc - mid
+                        twist = tuple(v + (v - p) / dt_prev * ahead  # type: ignore[assignment]
+                                      for v, p in zip(twist, prev_twist[1], strict=True))
+                    pts = _deskewed(pts, twist, self._beam_times(n, t_inc) if whole else
+                                    self._beam_times(n, t_inc)[idx])
         if opt.voxel_size_m > 0:
             pts = voxel_downsample(pts, opt.voxel_size_m)
             if len(pts) < opt.min_valid_beams:
                 return None, f"only {len(pts)} points after voxel downsampling (< {opt.min_valid_beams})"
-        return np.ascontiguousarray(pts), ""
+        return pts, ""
+
+
+def _deskewed(pts: FloatArray, twist: tuple[float, float, float], tau: FloatArray) -> FloatArray:
+    """``pts`` (at each beam's time ``tau`` after the first) moved into the base frame at the first
+    beam: ``exp_along(twist, tau)`` applied point by point, the rotation's cosine and sine computed
+    once (exp_along's own, the same values :func:`deskew_offsets_twist` gives)."""
+    vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
+    th = w * tau
+    c, s = np.cos(th), np.sin(th)
+    if abs(w) < 1e-12:
+        ox, oy = vx * tau, vy * tau
+    else:
+        c1 = 1.0 - c
+        ox, oy = (vx * s - vy * c1) / w, (vx * c1 + vy * s) / w
+    x, y = pts[:, 0], pts[:, 1]
+    out = np.empty_like(pts)
+    out[:, 0] = ox + c * x - s * y
+    out[:, 1] = oy + s * x + c * y
+    return out
 
 
 UNKNOWN_GUESS_RADIUS_M = 0.4  # a guess in unknown space this close to free space is still matched
@@ -295,21 +355,39 @@ def map_accuracy(occ_map: OccupancyMap, value: float | str, where: str) -> float
     return out
 
 
+_ORIGIN_TRIG: tuple[float, float, float] = (0.0, 1.0, 0.0)  # (yaw, cos, sin) of the last map origin seen
+
+
+def _grid_cell(occ_map: OccupancyMap, x: float, y: float) -> tuple[int, int]:
+    """``occ_map.world_to_grid`` of one point in scalar maths: the same operations on the same
+    values (numpy's cos / sin of the origin's yaw), ``(row, col)``; a numpy call per operation on
+    a 1x2 array was most of :func:`check_guess`."""
+    global _ORIGIN_TRIG
+    ox, oy, oyaw = float(occ_map.origin[0]), float(occ_map.origin[1]), float(occ_map.origin[2])
+    if _ORIGIN_TRIG[0] != oyaw:
+        _ORIGIN_TRIG = (oyaw, float(np.cos(oyaw)), float(np.sin(oyaw)))
+    _, c, s = _ORIGIN_TRIG
+    res = float(occ_map.resolution)
+    dx, dy = x - ox, y - oy
+    return math.floor((-s * dx + c * dy) / res), math.floor((c * dx + s * dy) / res)
+
+
 def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatArray | None, str]:
     """Validate a prior guess: finite, on the map and not deep in unknown space (more than
     ``UNKNOWN_GUESS_RADIUS_M`` from free space). ``(pose, "")`` or ``(None, reason)``."""
     try:
-        g = np.asarray(guess, dtype=float).reshape(-1)
+        g = np.array(guess, dtype=float).reshape(-1)  # a copy: the yaw is wrapped in place
     except (TypeError, ValueError):
         return None, "guess is not a pose [x, y, yaw]"
     if g.shape != (3,):
         return None, f"guess must be [x, y, yaw], got shape {g.shape}"
-    if not np.all(np.isfinite(g)):
+    x, y, yaw = float(g[0]), float(g[1]), float(g[2])
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
         return None, "guess is not finite"
-    if not bool(occ_map.in_bounds(g[None, :2])[0]):
-        return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is off the map"
-    ij = occ_map.world_to_grid(g[None, :2])[0]
-    i_c, j_c = int(ij[0]), int(ij[1])
+    i_c, j_c = _grid_cell(occ_map, x, y)
+    h, w = occ_map.data.shape
+    if not (0 <= i_c < h and 0 <= j_c < w):
+        return None, f"guess ({x:.2f}, {y:.2f}) is off the map"
     if occ_map.data[i_c, j_c] < 0:  # unknown (the cell alone: .unknown builds the whole grid)
         # a map built by SLAM leaves unknown specks and ragged edges where the robot drove
         # (doorways, glass, the edge of what one half of a log saw): a guess there is fine
@@ -320,9 +398,8 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
         ii, jj = np.nonzero(occ_map.free_mask(win))
         d2 = (ii + i0 - i_c) ** 2 + (jj + j0 - j_c) ** 2
         if not (len(d2) and float(np.sqrt(d2.min())) * occ_map.resolution <= UNKNOWN_GUESS_RADIUS_M):
-            return None, f"guess ({g[0]:.2f}, {g[1]:.2f}) is in unknown space"
-    g = g.copy()
-    g[YAW] = wrap_angle(g[YAW])
+            return None, f"guess ({x:.2f}, {y:.2f}) is in unknown space"
+    g[YAW] = wrap_angle(yaw)
     return g, ""
 
 

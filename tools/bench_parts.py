@@ -1,0 +1,90 @@
+#!/usr/bin/env python
+"""CPU time per call of the per-message pieces of ``fgloc run`` around the back-end and the matcher.
+
+On a log written by ``fgloc bench speed`` (``WORKDIR/office-120s``: ``log.mcap`` + ``map.yaml``) or
+any log with its map, in this process, CPU time (``time.process_time``) per call, best of
+``--repeats`` passes over all the log's scans:
+
+* ``preprocess``: the front-ends' shared scan preprocessing (valid beams -> de-skewed points in
+  ``base_link``), with the odometry motion between scans as the localizer hands it;
+* ``check_guess``: the guess check before each match (at the ground-truth poses when the log has
+  them, else at the map's free cells);
+
+Compare two source trees with ``PYTHONPATH=TREE python tools/bench_parts.py ...`` alternately
+(the machine's load drifts).
+
+    python tools/bench_parts.py WORKDIR/office-120s [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+
+def best_us(fn: Callable[[], int], repeats: int) -> float:
+    """Best CPU microseconds per call over ``repeats`` passes (``fn`` returns its call count)."""
+    best = float("inf")
+    for _ in range(repeats):
+        c0 = time.process_time()
+        n = fn()
+        best = min(best, (time.process_time() - c0) / max(n, 1))
+    return 1e6 * best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("folder", type=Path, help="a folder with log.mcap and map.yaml (fgloc bench speed's)")
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+
+    from fgloc.frontends.base import ScanPreprocessor, check_guess
+    from fgloc.geometry import between
+    from fgloc.io import open_log
+    from fgloc.maps import OccupancyMap
+    from fgloc.types import LaserScan, Odometry
+
+    src = open_log(args.folder / "log.mcap")
+    occ = OccupancyMap.load(args.folder / "map.yaml")
+    mount = src.laser_mount()
+    scans: list[LaserScan] = []
+    deltas: list[np.ndarray | None] = []
+    odom_pose: np.ndarray | None = None
+    at_last_scan: np.ndarray | None = None
+    for topic, msg in src.messages([t for t in ("/scan", "/odom") if src.has(t)]):
+        if isinstance(msg, Odometry) and msg.pose is not None:
+            odom_pose = np.asarray(msg.pose, dtype=float)
+        elif isinstance(msg, LaserScan):
+            scans.append(msg)
+            deltas.append(None if at_last_scan is None or odom_pose is None else between(at_last_scan, odom_pose))
+            at_last_scan = odom_pose
+    gt = src.ground_truth()
+    if gt is not None and len(gt):
+        guesses = list(gt.poses[:: max(1, len(gt) // max(len(scans), 1))][: len(scans)])
+    else:
+        free = occ.free_cell_centers()
+        pick = np.random.default_rng(0).integers(0, len(free), max(len(scans), 1))
+        guesses = [np.array([free[i, 0], free[i, 1], 0.1]) for i in pick]
+
+    def preprocess() -> int:
+        pre = ScanPreprocessor(mount)
+        for scan, delta in zip(scans, deltas, strict=True):
+            pre(scan, delta)
+        return len(scans)
+
+    def guess() -> int:
+        for g in guesses:
+            check_guess(occ, g)
+        return len(guesses)
+
+    print(f"{args.folder}: {len(scans)} scans, {len(guesses)} guesses; CPU us per call, best of {args.repeats}")
+    for name, fn in (("preprocess", preprocess), ("check_guess", guess)):
+        print(f"  {name:12s} {best_us(fn, args.repeats):8.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from fgloc.types import Imu, StaticTransform
 
@@ -56,6 +55,54 @@ class BaseImu:
     heading_rate_radps: float | None = None
 
 
+# ---------------------------------------------------------------------- rotations in scalar maths
+# (scipy's Rotation costs ~15 us per object, and this is every IMU message's path: 47 us per
+# message before; these are its formulas, equal to it to the last bits)
+def quaternion_matrix(x: float, y: float, z: float, w: float) -> tuple[float, ...]:
+    """The rotation matrix (row-major 9-tuple) of the unit quaternion ``(x, y, z, w)``."""
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    return (x2 - y2 - z2 + w2, 2.0 * (xy - zw), 2.0 * (xz + yw),
+            2.0 * (xy + zw), -x2 + y2 - z2 + w2, 2.0 * (yz - xw),
+            2.0 * (xz - yw), 2.0 * (yz + xw), -x2 - y2 + z2 + w2)
+
+
+def matrix_quaternion(R: FloatArray) -> FloatArray:
+    """The unit quaternion ``[x, y, z, w]`` of a rotation matrix (3x3; Shepperd's method, as scipy's
+    ``Rotation.from_matrix``: the largest of the trace and the diagonal picks the stable formula)."""
+    m = np.asarray(R, dtype=float).reshape(3, 3).tolist()
+    tr = m[0][0] + m[1][1] + m[2][2]
+    diag = (m[0][0], m[1][1], m[2][2])
+    q = [0.0, 0.0, 0.0, 0.0]
+    i = max(range(3), key=lambda a: diag[a])
+    if diag[i] >= tr:
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q[i] = 1.0 - tr + 2.0 * m[i][i]
+        q[j] = m[j][i] + m[i][j]
+        q[k] = m[k][i] + m[i][k]
+        q[3] = m[k][j] - m[j][k]
+    else:
+        q = [m[2][1] - m[1][2], m[0][2] - m[2][0], m[1][0] - m[0][1], 1.0 + tr]
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return np.array([v / n for v in q])
+
+
+def rpy_quaternion(roll: float, pitch: float, yaw: float) -> FloatArray:
+    """``[x, y, z, w]`` of roll, pitch, yaw (rad) about the fixed x, y, z axes (REP 103; scipy's
+    ``Rotation.from_euler("xyz", ...)``): ``q = q_z(yaw) q_y(pitch) q_x(roll)``."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
+
+
+def _unit_floats(v: object, n: int) -> list[float] | None:
+    """``v``'s ``n`` elements as floats, None when it does not have ``n``."""
+    a = v if isinstance(v, np.ndarray) else np.asarray(v, dtype=float)
+    return a.ravel().tolist() if a.size == n else None
+
+
 def mount_rotation(tf: StaticTransform | None) -> FloatArray:
     """``R_bi`` (3x3) of a ``base_link -> imu`` transform; identity when there is none.
 
@@ -66,35 +113,48 @@ def mount_rotation(tf: StaticTransform | None) -> FloatArray:
         return np.eye(3)
     q = getattr(tf, "rotation_xyzw", None)
     if q is not None:
-        qa = np.asarray(q, dtype=float).reshape(4)
-        n = float(np.linalg.norm(qa))
+        qa = np.asarray(q, dtype=float).reshape(4).tolist()
+        n = math.sqrt(qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3])
         if math.isfinite(n) and n > 1e-9:
-            return np.asarray(Rotation.from_quat(qa / n).as_matrix(), dtype=float)
-    return np.asarray(Rotation.from_euler("z", float(tf.pose[2])).as_matrix(), dtype=float)
+            return np.array(quaternion_matrix(*(v / n for v in qa))).reshape(3, 3)
+    h = 0.5 * float(tf.pose[2])
+    return np.array(quaternion_matrix(0.0, 0.0, math.sin(h), math.cos(h))).reshape(3, 3)
 
 
 def _cov_ok(c: FloatArray | None) -> str | None:
     """None if the covariance is usable (or absent), else why not."""
     if c is None:
         return None
-    d = np.diag(np.asarray(c, dtype=float).reshape(3, 3))
-    if not np.all(np.isfinite(d)):
+    a = c.ravel() if isinstance(c, np.ndarray) and c.size == 9 else np.asarray(c, dtype=float).reshape(9)
+    d0, d1, d2 = float(a[0]), float(a[4]), float(a[8])
+    if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
         return "covariance with a NaN/inf diagonal"
-    if np.any(d < 0):
+    if d0 < 0 or d1 < 0 or d2 < 0:
         return "covariance with a negative diagonal"
     return None
 
 
+def _zz(r: tuple[float, float, float], c: FloatArray) -> float:
+    """``(R C R^T)[2, 2]`` for ``R``'s last row ``r`` (a 3x3 covariance's variance about base z)."""
+    a = (c.ravel() if isinstance(c, np.ndarray) and c.size == 9 else np.asarray(c, dtype=float).reshape(9)).tolist()
+    r0, r1, r2 = r
+    return ((r0 * a[0] + r1 * a[3] + r2 * a[6]) * r0 + (r0 * a[1] + r1 * a[4] + r2 * a[7]) * r1
+            + (r0 * a[2] + r1 * a[5] + r2 * a[8]) * r2)
+
+
 def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
-    """The reading rotated into base_link, and the reasons for every part that was dropped."""
+    """The reading rotated into base_link, and the reasons for every part that was dropped
+    (scalar maths: every IMU message passes here)."""
     problems: list[str] = []
     yaw: float | None = None
     yaw_var = float("nan")
     tilt: tuple[float, float] | None = None
+    b = np.asarray(R_bi, dtype=float).ravel().tolist()   # R_bi row-major
     q = msg.orientation_xyzw
     if q is not None:
-        qa = np.asarray(q, dtype=float).reshape(-1)
-        n = float(np.linalg.norm(qa)) if qa.shape == (4,) else float("nan")
+        qa = _unit_floats(q, 4)
+        n = math.sqrt(qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]) if qa is not None \
+            else float("nan")
         why = _cov_ok(msg.orientation_cov)
         if not math.isfinite(n) or n < 1e-9:
             problems.append("imu: orientation quaternion all zeros / not finite")
@@ -103,13 +163,18 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
         elif why is not None:
             problems.append(f"imu: orientation {why}")
         else:
-            R_wi = Rotation.from_quat(qa / n).as_matrix()
-            R_wb = R_wi @ R_bi.T
-            yaw = float(math.atan2(R_wb[1, 0], R_wb[0, 0]))
-            tilt = (float(math.atan2(R_wb[2, 1], R_wb[2, 2])), float(math.asin(max(-1.0, min(1.0, -R_wb[2, 0])))))
+            assert qa is not None
+            w00, w01, w02, w10, w11, w12, w20, w21, w22 = quaternion_matrix(*(v / n for v in qa))
+            # R_wb = R_wi @ R_bi^T: the first column and the last row
+            r00 = w00 * b[0] + w01 * b[1] + w02 * b[2]
+            r10 = w10 * b[0] + w11 * b[1] + w12 * b[2]
+            r20 = w20 * b[0] + w21 * b[1] + w22 * b[2]
+            r21 = w20 * b[3] + w21 * b[4] + w22 * b[5]
+            r22 = w20 * b[6] + w21 * b[7] + w22 * b[8]
+            yaw = math.atan2(r10, r00)
+            tilt = (math.atan2(r21, r22), math.asin(max(-1.0, min(1.0, -r20))))
             if msg.orientation_cov is not None:
-                c = np.asarray(msg.orientation_cov, dtype=float).reshape(3, 3)
-                yaw_var = float((R_bi @ c @ R_bi.T)[2, 2])
+                yaw_var = _zz((b[6], b[7], b[8]), msg.orientation_cov)
                 if not yaw_var > 0:
                     yaw_var = float("nan")
     rate: float | None = None
@@ -117,20 +182,20 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
     heading_rate: float | None = None
     w = msg.angular_velocity_radps
     if w is not None:
-        wa = np.asarray(w, dtype=float).reshape(-1)
+        wa = _unit_floats(w, 3)
         why = _cov_ok(msg.angular_velocity_cov)
-        if wa.shape != (3,) or not np.all(np.isfinite(wa)):
+        if wa is None or not (math.isfinite(wa[0]) and math.isfinite(wa[1]) and math.isfinite(wa[2])):
             problems.append("imu: angular velocity not finite")
         elif why is not None:
             problems.append(f"imu: angular velocity {why}")
         else:
-            wb = R_bi @ wa
-            rate = float(wb[2])
+            wb1 = b[3] * wa[0] + b[4] * wa[1] + b[5] * wa[2]
+            wb2 = b[6] * wa[0] + b[7] * wa[1] + b[8] * wa[2]
+            rate = wb2
             if tilt is not None and math.cos(tilt[1]) > 0.1:
-                heading_rate = float((math.sin(tilt[0]) * wb[1] + math.cos(tilt[0]) * wb[2]) / math.cos(tilt[1]))
+                heading_rate = (math.sin(tilt[0]) * wb1 + math.cos(tilt[0]) * wb2) / math.cos(tilt[1])
             if msg.angular_velocity_cov is not None:
-                c = np.asarray(msg.angular_velocity_cov, dtype=float).reshape(3, 3)
-                rate_var = float((R_bi @ c @ R_bi.T)[2, 2])
+                rate_var = _zz((b[6], b[7], b[8]), msg.angular_velocity_cov)
                 if not rate_var > 0:
                     rate_var = float("nan")
     return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate), problems
@@ -141,6 +206,8 @@ def imu_message(stamp: float, R_world_base: FloatArray, w_base: FloatArray, R_bi
                 frame_id: str = "imu_link", with_orientation: bool = True) -> Imu:
     """The :class:`Imu` message a sensor mounted with ``R_bi`` publishes for a base state
     (the inverse of :func:`imu_in_base`; the simulator uses it)."""
+    from scipy.spatial.transform import Rotation  # (the simulator's path; run time never imports scipy's)
+
     R_wi = np.asarray(R_world_base, dtype=float) @ R_bi
     q = Rotation.from_matrix(R_wi).as_quat() if with_orientation else None
     w_imu = R_bi.T @ np.asarray(w_base, dtype=float)

@@ -23,8 +23,8 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from fgloc.backends.imu import quaternion_matrix, rpy_quaternion
 from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
 from fgloc.types import StaticTransform, Transform3D
@@ -48,9 +48,9 @@ def _numbers(v: Any, n: int, where: str) -> list[float]:
 def transform_of(parent: str, child: str, xyz: Sequence[float], xyzw: Sequence[float]) -> Transform3D:
     """A :class:`Transform3D` from a translation and a (unit) quaternion."""
     q = np.asarray(xyzw, dtype=float) / float(np.linalg.norm(xyzw))
-    R = Rotation.from_quat(q).as_matrix()
+    R = quaternion_matrix(*q.tolist())
     return Transform3D(parent.lstrip("/"), child.lstrip("/"),
-                       np.array([float(xyz[0]), float(xyz[1]), math.atan2(R[1, 0], R[0, 0])]),
+                       np.array([float(xyz[0]), float(xyz[1]), math.atan2(R[3], R[0])]),
                        float(xyz[2]), q)
 
 
@@ -86,7 +86,7 @@ def parse_static_transforms(entries: Iterable[Any] | None, source: str = "config
                 raise ConfigError(f"{where}.xyzw: not a unit quaternion (norm {n:.4f})")
         else:
             rpy = _numbers(e.get("rpy_deg", [0.0, 0.0, 0.0]), 3, f"{where}.rpy_deg")
-            q = list(Rotation.from_euler("xyz", np.radians(rpy)).as_quat())
+            q = rpy_quaternion(*np.radians(rpy).tolist()).tolist()
         out.append(transform_of(parent, child, xyz, q))
     return out
 

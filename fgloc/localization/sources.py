@@ -49,10 +49,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from fgloc.backends.health import SourceHealth
-from fgloc.backends.imu import imu_in_base, mount_rotation
+from fgloc.backends.imu import imu_in_base, matrix_quaternion, mount_rotation
 from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, rotate_covariance, wrap_angle, wrap_scalar
@@ -73,6 +72,8 @@ POLICIES = ("message", "fixed", "scaled", "floor")
 DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
 DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
+_IDENTITY = np.eye(3)
+_IDENTITY.flags.writeable = False
 #: a differential source's message stamped before the previous one: skipped, so that the next
 #: increment spans from the newest pose (resetting the reference to it lost the increment before)
 OUT_OF_ORDER = "differential: stamp not after the previous message's (out of order)"
@@ -208,11 +209,15 @@ def _needed(spec: SourceSpec, msg: Imu) -> Imu:
 
 
 def _cov_bad(c: Any) -> bool:
+    """A covariance (3x3, or its diagonal) with a NaN / inf / negative variance (scalar checks:
+    every odometry message passes here)."""
     if c is None:
         return False
-    a = np.asarray(c, dtype=float)
-    d = np.diag(a.reshape(3, 3)) if a.size == 9 else a.reshape(-1)
-    return bool(not np.all(np.isfinite(d)) or np.any(d < 0))
+    a = c if isinstance(c, np.ndarray) else np.asarray(c, dtype=float)
+    d = a.ravel().tolist()
+    if len(d) == 9:
+        d = d[::4]
+    return not all(math.isfinite(v) and v >= 0 for v in d)
 
 
 @dataclass
@@ -236,6 +241,7 @@ class SourceRouter:
         # every tf link by child frame: an IMU mounted through a chain (base_link -> plate -> imu)
         self._links: dict[str, StaticTransform] = {}
         self._chains: dict[str, StaticTransform | None] = {}
+        self._rotations: dict[str, tuple[StaticTransform, np.ndarray]] = {}   # the mounts' rotations by frame
         self._warned: set[str] = set()
         self.state: dict[str, _State] = {}
         self._tilt: tuple[float, float, float] | None = None   # t, roll, pitch of the base (levelling IMU)
@@ -299,7 +305,7 @@ class SourceRouter:
             R = mount_rotation(tr) @ R
             cur = tr.parent.lstrip("/")
             if cur in ROBOT_FRAMES:
-                out = transform_of(cur, frame, [0.0, 0.0, 0.0], Rotation.from_matrix(R).as_quat())
+                out = transform_of(cur, frame, [0.0, 0.0, 0.0], matrix_quaternion(R).tolist())
                 break
         self._chains[frame] = out
         return out
@@ -446,13 +452,23 @@ class SourceRouter:
             log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", f)
         return tr
 
+    def _rotation(self, tr: StaticTransform | None) -> np.ndarray:
+        """``mount_rotation(tr)``, computed once per transform (every IMU message asks; a new
+        transform of the same frame replaces it)."""
+        if tr is None:
+            return _IDENTITY
+        got = self._rotations.get(tr.child)
+        if got is None or got[0] is not tr:
+            got = self._rotations[tr.child] = (tr, mount_rotation(tr))
+        return got[1]
+
     def _imu(self, spec: SourceSpec, st: _State, msg: Imu | CompassHeading) -> None:
         h = st.health
         if isinstance(msg, Imu):
             mount = self._mount(msg.frame_id)
             if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
                 st.extra["no_transform"] = True
-            base, problems = imu_in_base(_needed(spec, msg), mount_rotation(mount))
+            base, problems = imu_in_base(_needed(spec, msg), self._rotation(mount))
             for p in problems:
                 self._skip(st, p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
@@ -476,7 +492,7 @@ class SourceRouter:
             # a yaw-only reading: an unknown yaw mount is absorbed by the heading offset estimate
             mount = self._mount(msg.frame_id, warn=False)
             if mount is not None:
-                R = mount_rotation(mount)
+                R = self._rotation(mount)
                 if yaw is not None:  # the reader gave the sensor frame's yaw: undo the mount's
                     yaw = float(wrap_angle(yaw - math.atan2(R[1, 0], R[0, 0])))
                 if rate is not None:

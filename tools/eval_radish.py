@@ -370,6 +370,72 @@ def align_passes(name: str, recs: list[ScanRecord], mount: StaticTransform, traj
     return out
 
 
+def pass_offset(name: str, recs: list[ScanRecord], traj: Trajectory, ref: Trajectory, spec: str,
+                radius_m: float = 6.0) -> str:
+    """Where does the reference put a pass (``NAME=T0,T1``, s after the first scan) relative to the
+    other passes nearby, against where our trajectory puts it?  For every reference scan a of the
+    pass and b of another pass (more than 30 s apart, within ``radius_m`` in our map): the
+    reference's position of a in b's frame minus ours, turned into our map frame with b's heading;
+    the mean over the pairs is the pass's offset that the reference sees (a self-check flag of
+    that pass should point the same way)."""
+    from fgloc.geometry import between
+
+    t0_s, t1_s = (float(v) for v in spec.split("=", 1)[1].split(","))
+    first = recs[0].stamp
+    t = ref.stamps - first
+    ours = traj.interpolate(ref.stamps)
+    ia = np.nonzero((t >= t0_s) & (t <= t1_s))[0]
+    rows = []
+    for i in ia:
+        near = (np.abs(t - t[i]) > 30.0) & (np.hypot(ours[:, 0] - ours[i, 0], ours[:, 1] - ours[i, 1]) <= radius_m)
+        for j in np.nonzero(near)[0]:
+            d = between(ref.poses[j], ref.poses[i])[:2] - between(ours[j], ours[i])[:2]
+            c, sn = np.cos(ours[j, 2]), np.sin(ours[j, 2])
+            rows.append((c * d[0] - sn * d[1], sn * d[0] + c * d[1]))
+    if not rows:
+        return f"{name}: pass t={t0_s:g}-{t1_s:g} s: no reference scans of it or of other passes near it"
+    r = np.array(rows)
+    m = r.mean(axis=0)
+    return (f"{name}: pass t={t0_s:g}-{t1_s:g} s ({len(ia)} reference scans, {len(r)} pairs with other passes within "
+            f"{radius_m:g} m): reference minus ours, map frame: dx {m[0]:+.3f} +- {r[:, 0].std():.3f} m, "
+            f"dy {m[1]:+.3f} +- {r[:, 1].std():.3f} m, |mean| {np.hypot(*m):.3f} m")
+
+
+def compare_trajectory(name: str, recs: list[ScanRecord], traj: Trajectory, other_path: str,
+                       windows: list[str]) -> list[str]:
+    """Another trajectory of the same log (``NAME=TUM``, e.g. an older mapper's all-scan poses)
+    against this run's, frame-free: the relative pose of every pair of scans (every 5th scan)
+    more than 60 s and less than 5 m apart (this run's poses), and of every pair from the two
+    windows of each ``--align-passes`` spec of NAME."""
+    from fgloc.geometry import between
+
+    other = read_tum(other_path)
+    first = recs[0].stamp
+    st = traj.stamps[::5]
+    st = st[(st >= other.stamps[0]) & (st <= other.stamps[-1])]
+    a, b = traj.interpolate(st), other.interpolate(st)
+
+    def diffs(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        e = between(between(b[i], b[j]), between(a[i], a[j]))
+        return np.hypot(e[:, 0], e[:, 1])
+
+    i, j = np.triu_indices(len(st), 1)
+    keep = (st[j] - st[i] > 60.0) & (np.hypot(a[i, 0] - a[j, 0], a[i, 1] - a[j, 1]) < 5.0)
+    e = diffs(i[keep], j[keep])
+    out = [f"{name}: {other_path} vs this run, revisits ({len(e)} pairs of scans > 60 s, < 5 m apart): "
+           f"{e.mean():.3f} m mean, {e.max():.3f} m max, {(e > 0.3).sum()} pairs > 0.3 m"]
+    for spec in windows:
+        a0, a1, b0, b1 = (float(v) for v in spec.split("=", 1)[1].split(","))
+        ia = np.nonzero((st - first >= a0) & (st - first <= a1))[0]
+        ib = np.nonzero((st - first >= b0) & (st - first <= b1))[0]
+        if len(ia) and len(ib):
+            ii, jj = np.meshgrid(ia, ib, indexing="ij")
+            e = diffs(ii.ravel(), jj.ravel())
+            out.append(f"{name}: {other_path} vs this run, scans of t={a0:g}-{a1:g} s with t={b0:g}-{b1:g} s "
+                       f"({len(e)} pairs): {e.mean():.3f} m mean, {e.max():.3f} m max")
+    return out
+
+
 def map_in_process(name: str, outdir: Path) -> dict:
     """``fgloc map`` on the whole log in a child process: wall time, CPU time (user + system), peak
     RSS (psutil, 20 Hz) and the 1-minute load average at the start (the machine is shared)."""
@@ -425,6 +491,12 @@ def main() -> int:
     ap.add_argument("--align-passes", nargs="*", default=[], metavar="NAME=A0,A1,B0,B1",
                     help="do the passes [A0, A1] and [B0, B1] (s after the first scan) agree where the map put "
                          "them? (pass-to-pass search +-4 m, and the reference's relative poses against ours)")
+    ap.add_argument("--pass-offset", nargs="*", default=[], metavar="NAME=T0,T1",
+                    help="where the reference puts the pass [T0, T1] (s after the first scan) relative to the "
+                         "other passes near it, against our trajectory (e.g. a self-check flag's pass)")
+    ap.add_argument("--against", nargs="*", default=[], metavar="NAME=TUM",
+                    help="another trajectory of the log (e.g. an older mapper's trajectory_scans.tum) against "
+                         "this run's, on revisits and on the windows of --align-passes")
     ap.add_argument("--localize", action="store_true", help="also localize a log segment (fgloc run)")
     ap.add_argument("--loc-scans", type=int, default=1500, help="localize the last N scans (within the second half)")
     ap.add_argument("--no-relocalize", action="store_true",
@@ -468,6 +540,13 @@ def main() -> int:
         for spec in args.align_passes:
             if spec.split("=", 1)[0] == name:
                 row.setdefault("aligned", []).extend(align_passes(name, recs, mount, traj, ref, spec))
+        for spec in args.pass_offset:
+            if spec.split("=", 1)[0] == name and ref is not None:
+                row.setdefault("aligned", []).append(pass_offset(name, recs, traj, ref, spec))
+        for spec in args.against:
+            if spec.split("=", 1)[0] == name:
+                wins = [w for w in args.align_passes if w.split("=", 1)[0] == name]
+                row.setdefault("aligned", []).extend(compare_trajectory(name, recs, traj, spec.split("=", 1)[1], wins))
         for spec in args.inject:
             if spec.split("=", 1)[0] == name:
                 row.setdefault("injected", []).append(injected_check(name, recs, mount, traj, out, spec))

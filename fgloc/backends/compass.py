@@ -19,7 +19,7 @@ from collections import deque
 
 import numpy as np
 
-from fgloc.geometry import wrap_angle
+from fgloc.geometry import wrap_angle, wrap_scalar
 
 
 class CompassCalibrator:
@@ -71,7 +71,7 @@ class CompassCalibrator:
             best = min(self._compass, key=lambda c: abs(c[0] - t))
         if abs(best[0] - t) > self.max_dt:
             return None
-        return float(wrap_angle(best[1] + best[2] * (t - best[0])))
+        return wrap_scalar(best[1] + best[2] * (t - best[0]))
 
     def add_fix(self, t: float, map_yaw: float) -> bool:
         """Pair an accepted map fix with the compass; returns True when this calibrates.
@@ -82,13 +82,13 @@ class CompassCalibrator:
         c = self.compass_at(t)
         if c is None:
             return False
-        d = float(wrap_angle(c - map_yaw))
+        d = wrap_scalar(c - map_yaw)
         if self.calibrated:
             # a pair far from the current offset is a disturbance, not drift: ignored
-            if self.refine and self.offset is not None and abs(float(wrap_angle(d - self.offset))) < self.gate:
+            if self.refine and self.offset is not None and abs(wrap_scalar(d - self.offset)) < self.gate:
                 self._n += 1
                 w = max(1.0 / self._n, 1.0 / self.max_window)
-                self.offset = float(wrap_angle(self.offset + w * float(wrap_angle(d - self.offset))))
+                self.offset = wrap_scalar(self.offset + w * wrap_scalar(d - self.offset))
             return False
         self._diffs.append(d)
         if len(self._diffs) >= self.n_fixes:

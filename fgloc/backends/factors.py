@@ -20,6 +20,8 @@ frame, ``retract(xi) = pose * Expmap(xi)``.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
+from collections.abc import Sequence
 
 import gtsam
 import numpy as np
@@ -44,21 +46,42 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
     """
     if t1 <= t0 or len(stamps) == 0:
         return np.zeros(3), np.zeros((3, 3))
+    ts = np.asarray(stamps, dtype=float).tolist()
+    us = np.asarray(twists, dtype=float).reshape(-1, 3).tolist()
+    cs = [upper6(c) for c in np.asarray(covs, dtype=float).reshape(-1, 3, 3)]
+    return integrate_twist_lists(ts, us, cs, 0, len(ts), t0, t1, q_slip)
+
+
+def upper6(c: FloatArray) -> tuple[float, float, float, float, float, float]:
+    """A 3x3 covariance's upper triangle ``(c00, c01, c02, c11, c12, c22)`` as floats (what
+    :func:`integrate_twist_lists` reads of it)."""
+    r = np.asarray(c, dtype=float).reshape(9).tolist()
+    return r[0], r[1], r[2], r[4], r[5], r[8]
+
+
+def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
+                          cs: Sequence[tuple[float, float, float, float, float, float]], lo: int, hi: int,
+                          t0: float, t1: float, q_slip: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """:func:`integrate_twist` over the samples ``lo:hi`` of plain lists (stamps, ``(vx, vy, w)``
+    twists, :func:`upper6` covariances): the same arithmetic, without numpy's per-element
+    overhead (the smoother integrates its odometry several times per keyframe)."""
+    if t1 <= t0 or hi <= lo:
+        return np.zeros(3), np.zeros((3, 3))
     qx, qy, qt = (0.0, 0.0, 0.0) if q_slip is None else (float(q_slip[0]), float(q_slip[1]), float(q_slip[2]))
     # index of the first sample with stamp > t0 (its twist covers t0)
-    i = int(np.searchsorted(stamps, t0, side="right"))
-    n = len(stamps)
+    i = bisect_right(ts, t0, lo, hi)
+    last = hi - 1
     t = t0
     x = y = th = 0.0
     # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
     p00 = p01 = p02 = p11 = p12 = p22 = 0.0
     while t < t1 - 1e-12:
-        j = min(i, n - 1)
-        t_next = min(float(stamps[i]), t1) if i < n else t1
+        j = min(i, last)
+        t_next = min(ts[i], t1) if i < hi else t1
         dt = t_next - t
         if dt > 0:
-            u = twists[j]
-            vx, vy, w = float(u[0]) * dt, float(u[1]) * dt, float(u[2]) * dt
+            u = us[j]
+            vx, vy, w = u[0] * dt, u[1] * dt, u[2] * dt
             a, b = exp_coefficients(w)
             dx, dy = a * vx - b * vy, b * vx + a * vy
             c, s = math.cos(w), math.sin(w)
@@ -72,17 +95,17 @@ def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0
             b11 = -s * p01 + c * p11 - ix * p12
             b12 = -s * p02 + c * p12 - ix * p22
             # P' = B A^T + Sigma_u dt^2 + q dt
-            cu = covs[j]
+            c00, c01, c02, c11, c12, c22 = cs[j]
             dt2 = dt * dt
             n00 = b00 * c + b01 * s + b02 * iy
             n01 = -b00 * s + b01 * c - b02 * ix
             n11 = -b10 * s + b11 * c - b12 * ix
-            p00 = n00 + float(cu[0, 0]) * dt2 + qx * dt
-            p01 = n01 + float(cu[0, 1]) * dt2
-            p02 = b02 + float(cu[0, 2]) * dt2
-            p11 = n11 + float(cu[1, 1]) * dt2 + qy * dt
-            p12 = b12 + float(cu[1, 2]) * dt2
-            p22 = p22 + float(cu[2, 2]) * dt2 + qt * dt
+            p00 = n00 + c00 * dt2 + qx * dt
+            p01 = n01 + c01 * dt2
+            p02 = b02 + c02 * dt2
+            p11 = n11 + c11 * dt2 + qy * dt
+            p12 = b12 + c12 * dt2
+            p22 = p22 + c22 * dt2 + qt * dt
             ct, st = math.cos(th), math.sin(th)
             x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
         t = t_next
@@ -191,6 +214,10 @@ def relative_yaw_factor(pose_key: int, offset_key: int, z_yaw: float, sigma: flo
 
 
 # ---------------------------------------------------------------------- calibration factors
+_ZERO32 = np.zeros((3, 2))
+_ZERO32.flags.writeable = False
+
+
 def _sinc(x: float) -> float:
     return 1.0 - x * x / 6.0 if abs(x) < 1e-4 else math.sin(x) / x
 
@@ -199,14 +226,16 @@ def _dsinc(x: float) -> float:
     return -x / 3.0 if abs(x) < 1e-4 else (x * math.cos(x) - math.sin(x)) / (x * x)
 
 
-def scaled_delta(delta: FloatArray, gains: FloatArray) -> tuple[FloatArray, FloatArray]:
+def scaled_delta(delta: FloatArray, gains: FloatArray | tuple[float, float],
+                 jacobian: bool = True) -> tuple[FloatArray, FloatArray]:
     """The relative pose an odometry increment ``delta`` means once corrected by ``gains``.
 
     ``gains = [g_v, g_w]``: the true speed is ``g_v`` times the reported one, the true yaw rate
     ``g_w`` times (a wheel that reports ``s`` times the motion has gain ``1 / s``).  Exact for a
     constant twist over the interval (the chord of an arc: length ``v T sinc(wT/2)``, direction
     ``wT/2``), first order otherwise.  Returns the pose ``[x, y, yaw]`` and ``J`` (3x2), its
-    derivative with respect to the gains in the pose's body tangent space.
+    derivative with respect to the gains in the pose's body tangent space (``jacobian=False``:
+    not computed, returned as zeros).
     """
     dx, dy, th0 = float(delta[0]), float(delta[1]), float(delta[2])
     gv, gw = float(gains[0]), float(gains[1])
@@ -217,6 +246,8 @@ def scaled_delta(delta: FloatArray, gains: FloatArray) -> tuple[FloatArray, Floa
     c, s = math.cos(phi), math.sin(phi)
     tx, ty = rho * (c * dx - s * dy), rho * (s * dx + c * dy)
     th = gw * th0
+    if not jacobian:
+        return np.array([tx, ty, th]), _ZERO32
     # d t / d g_v = t / g_v;  d t / d g_w = (d rho/d g_w) R t0 + rho R' t0 h0
     drho = gv * _dsinc(gw * h0) * h0 / s0
     r0x, r0y = c * dx - s * dy, s * dx + c * dy          # R(phi) t0

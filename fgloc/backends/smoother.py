@@ -61,9 +61,11 @@ from fgloc.backends.factors import (
     gyro_factor,
     integrate_heading,
     integrate_twist,
+    integrate_twist_lists,
     relative_yaw_factor,
     scaled_between_factor,
     scaled_delta,
+    upper6,
     yaw_increment_factor,
 )
 from fgloc.backends.health import (
@@ -321,8 +323,8 @@ class SlidingWindowSmoother(Backend):
         self.cur_o: int | None = None
         self.cur_o_t = -np.inf
         self.odo_t: list[float] = []
-        self.odo_u: list[FloatArray] = []
-        self.odo_c: list[FloatArray] = []
+        self.odo_u: list[tuple[float, float, float]] = []   # (vx, vy, w) per message
+        self.odo_c: list[tuple[float, float, float, float, float, float]] = []  # covariances (upper6)
         self.compass_pending: list[tuple[float, float, float, str]] = []  # t, yaw (compass), var, source
         self.t0: float | None = None
         self._rejects = 0
@@ -621,8 +623,8 @@ class SlidingWindowSmoother(Backend):
         for gb in self.gbias.values():
             gb.set_still(float(t), still)
         self.odo_t.append(float(t))
-        self.odo_u.append(u)
-        self.odo_c.append(_bounded(c, TWIST_VAR_MAX))
+        self.odo_u.append((u0, u1, u2))
+        self.odo_c.append(upper6(_bounded(c, TWIST_VAR_MAX)))
         self._arb_add("odom", RATE, 0.05, float(t), float(twist[2]), float(c[2, 2]))
         self._process_pending(float(t))
         # keep a bounded history: the window plus a margin
@@ -744,8 +746,7 @@ class SlidingWindowSmoother(Backend):
         # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
         i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
         i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
-        return integrate_twist(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]),
-                               np.asarray(self.odo_c[i0:i1]), t0, t1, self._q_slip)
+        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip)
 
     def _chord_along_gyro(self, t0: float, t1: float) -> FloatArray | None:
         """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's
@@ -817,20 +818,19 @@ class SlidingWindowSmoother(Backend):
         """An odometry increment with the current gains (and the gyro's rotation when it covers it)."""
         if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8:
             return d
-        out, _ = scaled_delta(d, self._gains)
-        for name in self.gyro:
+        for name in self.gyro:  # the first gyro that covers the interval turns it
             r = self._gyro_increment(name, t0, t1, want_var=False)
             if r is not None and abs(d[2]) > 1e-9:
-                out, _ = scaled_delta(d, np.array([self._gains[0], r[0] / d[2]]))
-                break
+                return scaled_delta(d, (float(self._gains[0]), r[0] / d[2]), jacobian=False)[0]
             if r is not None:
+                out = scaled_delta(d, self._gains, jacobian=False)[0]
                 out[2] = r[0]
-                break
-        return out
+                return out
+        return scaled_delta(d, self._gains, jacobian=False)[0]
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
         e = fix.pose - pred
-        e[2] = wrap_angle(e[2])
+        e[2] = wrap_scalar(float(e[2]))
         if self.cfg.fix_gate_m is not None and float(np.hypot(e[0], e[1])) > self.cfg.fix_gate_m:
             return False
         if self.cfg.fix_gate_theta is not None and abs(float(e[2])) > self.cfg.fix_gate_theta:
@@ -1051,11 +1051,10 @@ class SlidingWindowSmoother(Backend):
         if not self.odo_t:
             return np.zeros(3)
         i = min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)
-        u = np.asarray(self.odo_u[i], dtype=float) * np.array([self._gains[0], self._gains[0], self._gains[1]])
+        u0, u1, u2 = self.odo_u[i]
+        gv, gw = float(self._gains[0]), float(self._gains[1])
         w = self._gyro_rate_at(t)
-        if w is not None:
-            u[2] = w
-        return u
+        return np.array([u0 * gv, u1 * gv, u2 * gw if w is None else w])
 
     def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,
                     vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:

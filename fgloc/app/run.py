@@ -30,6 +30,10 @@ if TYPE_CHECKING:
 
     from fgloc.config import FglocConfig
 
+#: the clock of ``RunResult.timings`` and ``wall_s`` (seconds); a benchmark sets ``time.thread_time``
+#: to split the run's CPU time into its phases (``tools/bench_parts.py``)
+PHASE_CLOCK: Callable[[], float] = time.perf_counter
+
 #: a file in an output folder that fgloc writes (others are not overwritten without --force)
 OUTPUT_FILES = ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
 
@@ -214,7 +218,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     context-manager methods, e.g. tqdm) over the messages read.  ``announce(line)``: where the
     Foxglove view says where it serves (``req.view``).
     """
-    t_start = time.perf_counter()
+    t_start = PHASE_CLOCK()
     from fgloc.app.startup import setup_done
     from fgloc.config import FglocConfig, load_config
     from fgloc.io import open_log
@@ -264,7 +268,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     # every configured source's topic is read (a second IMU, a pose source), not only the first of each
     want = {t for t in (scan_topic, odom_topic, imu_topic, topics.tf_static, *src) if reader.has(t)}
     total = sum(counts.get(t, 0) for t in want)
-    t_wall = time.perf_counter()
+    t_wall = PHASE_CLOCK()
     from fgloc.view import ViewHook, check_rate, paced
 
     realtime = check_rate(req.realtime)
@@ -293,13 +297,13 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
             feed = session.feed
             for topic, msg in paced(_copied(reader.records(want), writer, clock, spent), realtime):
                 feed(topic, msg)
-            t_fin = time.perf_counter()
+            t_fin = PHASE_CLOCK()
             final = session.finish()
-            t_done = time.perf_counter()
+            t_done = PHASE_CLOCK()
         finally:
             if bar is not None and hasattr(bar, "close"):
                 bar.close()
-    t_closed = time.perf_counter()
+    t_closed = PHASE_CLOCK()
     spent["write"] += t_closed - t_done  # the file's last chunk and its index (and the view's last messages)
     wall = t_closed - t_wall
     online = loc.online_trajectory()
@@ -340,7 +344,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
             result.metrics_online = evaluate(online, gt, align=(mode == "odom")) if len(online) > 1 else None
         except LogError as e:
             result.eval_error = str(e)
-    t_end = time.perf_counter()
+    t_end = PHASE_CLOCK()
     loop = t_fin - t_wall
     result.timings = {
         "setup_s": t_wall - t_start, "read_s": spent["read"], "write_s": spent["write"], "view_s": spent["view"],
@@ -398,7 +402,7 @@ def _copied(records: Any, writer: Any, clock: _LogClock, spent: dict[str, float]
     """``(topic, message)`` of ``records``, each first copied into ``writer`` as the log stores it
     (:func:`fgloc.io.mcap_writer.tee`, timed: ``spent['read']`` decoding, ``spent['write']``
     copying) and its log time set on ``clock``."""
-    pc = time.perf_counter
+    pc = PHASE_CLOCK
     it = iter(records)
     copy = writer.copy
     while True:
@@ -448,24 +452,25 @@ class _TimedSink:
         self.spent = spent
         self.key = key
         self.wants_fused = bool(getattr(sink, "wants_fused", True))
+        self.wants_messages = bool(getattr(sink, "wants_messages", True))
 
     def on_message(self, topic: str, msg: object) -> None:
-        t0 = time.perf_counter()
+        t0 = PHASE_CLOCK()
         try:
             self.sink.on_message(topic, msg)
         finally:
-            self.spent[self.key] += time.perf_counter() - t0
+            self.spent[self.key] += PHASE_CLOCK() - t0
 
     def on_scan(self, stamp: float, scan: Any, fix_or_reason: Any, fused: Any) -> None:
-        t0 = time.perf_counter()
+        t0 = PHASE_CLOCK()
         try:
             self.sink.on_scan(stamp, scan, fix_or_reason, fused)
         finally:
-            self.spent[self.key] += time.perf_counter() - t0
+            self.spent[self.key] += PHASE_CLOCK() - t0
 
     def close(self) -> None:
-        t0 = time.perf_counter()
+        t0 = PHASE_CLOCK()
         try:
             self.sink.close()
         finally:
-            self.spent[self.key] += time.perf_counter() - t0
+            self.spent[self.key] += PHASE_CLOCK() - t0

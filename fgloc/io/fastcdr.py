@@ -139,11 +139,20 @@ def encode_imu(m: Imu, stamp: float) -> bytes:
     return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<37d", *vals)])
 
 
+_FIX_COV_AT = 7 + COV_IDX9  # the x, y, yaw covariance entries among a PoseWithCovariance's 43 doubles
+
+
 def encode_pose_fix(m: PoseFix, stamp: float) -> bytes:
     head = _header_bytes(stamp, m.frame_id)
-    p = [float(v) for v in m.pose]
-    vals = [p[0], p[1], 0.0, *_quat(p[2]), *cov6_of(m.cov)]
-    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<43d", *vals)])
+    # the 43 doubles (position, orientation, 6x6 covariance) in one little-endian buffer: the same
+    # bytes as struct.pack of the list, without the 36-float list of cov6_of per message
+    vals = np.zeros(43, dtype="<f8")
+    p = m.pose
+    vals[0], vals[1] = float(p[0]), float(p[1])
+    _, _, vals[5], vals[6] = _quat(float(p[2]))
+    if m.cov is not None:
+        vals[_FIX_COV_AT] = np.asarray(m.cov, dtype=float).reshape(9)
+    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), vals.tobytes()])
 
 
 def encode_tf(m: Sequence[StaticTransform], stamp: float) -> bytes:

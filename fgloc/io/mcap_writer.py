@@ -14,6 +14,7 @@ encode round trip.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
+from functools import partial
 from pathlib import Path
 from typing import IO, Any
 
@@ -144,6 +145,13 @@ class LogWriter:
         message's log time as their stamp."""
         self._write_raw(self._raw_channel(topic, schema_name, schema_data, schema_encoding, message_encoding),
                         data, log_time_ns, publish_time_ns)
+
+    def raw_writer(self, topic: str, schema_name: str, schema_data: bytes, schema_encoding: str = "ros2msg",
+                   message_encoding: str = "cdr") -> Callable[[bytes, int], None]:
+        """``write(data, log_time_ns)``: :meth:`write_raw` on ``topic`` with this schema, its channel
+        looked up once (registered now, as the first :meth:`write_raw` would)."""
+        return partial(self._write_raw, self._raw_channel(topic, schema_name, schema_data, schema_encoding,
+                                                          message_encoding))
 
     def _raw_channel(self, topic: str, schema_name: str, schema_data: bytes, schema_encoding: str,
                      message_encoding: str) -> int:

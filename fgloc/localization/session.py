@@ -25,7 +25,9 @@ The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what y
 
 A sink must not raise; if one does, the session counts it in ``sink_errors`` and goes on.
 A sink whose ``wants_fused`` is False (a progress bar) does not make the session compute the
-fused pose; when no sink wants it, ``on_scan`` gets ``fused=None``.
+fused pose; when no sink wants it, ``on_scan`` gets ``fused=None``.  A sink whose
+``wants_messages`` is False (a recorder of the outputs only) is not called for each input
+message.  Both are read when the sink is added (the session keeps the lists).
 
 The fused pose's covariance: a smoother's is an iSAM2 marginal (not free), so the session
 refreshes it at most every ``covariance_period_s`` of log time (default
@@ -63,6 +65,7 @@ class BaseSink:
     """A sink that does nothing: override the methods you need."""
 
     wants_fused = True  # False: this sink's on_scan does not need the fused pose
+    wants_messages = True  # False: this sink's on_message does nothing (not called)
 
     def on_message(self, topic: str, msg: object) -> None:
         pass
@@ -105,6 +108,9 @@ class Session:
         self.loc = localizer
         self.routes = routes or Routes.default()
         self.sinks: list[Sink] = list(sinks)
+        self._observers: list[Sink] = []  # the sinks that see every input message
+        self._wants_fused = False  # some sink's on_scan needs the fused pose
+        self._known: list[Sink] = []  # the sinks the two above were computed for
         self.sink_errors = 0
         self.closed = False
         self.last_fused: PoseFix | None = None
@@ -126,17 +132,28 @@ class Session:
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
 
+    def _refresh(self) -> list[Sink]:
+        """The sinks that see every message (and whether any wants the fused pose), recomputed
+        when :attr:`sinks` changed (a message at a time, this is a list comparison)."""
+        if self._known != self.sinks:
+            self._known = list(self.sinks)
+            self._observers = [s for s in self._known if getattr(s, "wants_messages", True)]
+            self._wants_fused = any(getattr(s, "wants_fused", True) for s in self._known)
+        return self._observers
+
     # ------------------------------------------------------------------ input
     def feed(self, topic: str, msg: object) -> None:
         """One input message by topic: shown to the sinks, then routed (unrouted topics: sinks only)."""
         self.observe(topic, msg)
-        kind = self.routes.kind(topic)
+        kind = self.routes.table.get(topic)
         if kind is not None:
-            self.dispatch(kind, msg)
+            h = self.handlers.get(kind)
+            if h is not None:
+                h(msg)
 
     def observe(self, topic: str, msg: object) -> None:
         """Show a message to the sinks without localizing with it (e.g. a recorded, skipped scan)."""
-        for s in self.sinks:
+        for s in self._observers if self._known == self.sinks else self._refresh():
             try:
                 s.on_message(topic, msg)
             except Exception:  # noqa: BLE001 - a sink must never stop localization
@@ -186,8 +203,9 @@ class Session:
         fix = self.loc.on_scan(msg)
         if not self.sinks:
             return  # nobody asks for the fused pose (its covariance is not free for a smoother)
-        wanted = any(getattr(s, "wants_fused", True) for s in self.sinks)
-        fused = self._fused(float(msg.stamp)) if wanted else None
+        if self._known != self.sinks:
+            self._refresh()
+        fused = self._fused(float(msg.stamp)) if self._wants_fused else None
         self.last_fused = fused
         what: PoseFix | str = fix if fix is not None else (self.loc.last_reason or "no fix")
         for s in self.sinks:
@@ -229,6 +247,7 @@ class RecorderSink(BaseSink):
         self.close_writer = close_writer
         self.tolerate = tolerate  # write errors counted in ``errors`` (others raise)
         self.record_inputs = record_inputs
+        self.wants_messages = record_inputs
         self.log_time_ns = log_time_ns
         self.errors = 0
 
@@ -266,6 +285,7 @@ class CallbackSink(BaseSink):
         self._m = on_message
         self._s = on_scan
         self.wants_fused = on_scan is not None
+        self.wants_messages = on_message is not None
 
     def on_message(self, topic: str, msg: object) -> None:
         if self._m is not None:

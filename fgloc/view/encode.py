@@ -143,18 +143,27 @@ def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:
     return fm.SceneUpdate(entities=[ent])
 
 
+def _sigma_of(v: float) -> float | None:
+    return math.sqrt(v) if math.isfinite(v) and v >= 0 else None
+
+
+def _sigmas_flat(c: FloatArray) -> tuple[float | None, float | None, float | None]:
+    sx, sy, syaw = _sigma_of(c.item(0)), _sigma_of(c.item(4)), _sigma_of(c.item(8))
+    return sx, sy, (None if syaw is None else math.degrees(syaw))
+
+
 def sigmas(cov: FloatArray) -> tuple[float | None, float | None, float | None]:
-    d = np.diag(np.asarray(cov, dtype=float).reshape(3, 3))
-    out = [math.sqrt(v) if math.isfinite(v) and v >= 0 else None for v in (float(d[0]), float(d[1]), float(d[2]))]
-    return out[0], out[1], (None if out[2] is None else math.degrees(out[2]))
+    """The standard deviations of x (m), y (m) and yaw (deg) of a 3x3 covariance (None: not a variance)."""
+    return _sigmas_flat(np.asarray(cov, dtype=float).reshape(9))
 
 
 def fused_json(fused: PoseFix) -> dict[str, Any]:
-    sx, sy, syaw = sigmas(fused.cov)
+    c = np.asarray(fused.cov, dtype=float).reshape(9)
+    sx, sy, syaw = _sigmas_flat(c)
+    p = fused.pose
     return {"stamp": float(fused.stamp), "frame_id": fused.frame_id, "source": fused.source,
-            "x_m": float(fused.pose[0]), "y_m": float(fused.pose[1]), "yaw_deg": math.degrees(float(fused.pose[2])),
-            "sigma_x_m": sx, "sigma_y_m": sy, "sigma_yaw_deg": syaw,
-            "cov": [float(c) for c in np.asarray(fused.cov, dtype=float).reshape(-1)]}
+            "x_m": float(p[0]), "y_m": float(p[1]), "yaw_deg": math.degrees(float(p[2])),
+            "sigma_x_m": sx, "sigma_y_m": sy, "sigma_yaw_deg": syaw, "cov": c.tolist()}
 
 
 def fix_json(stamp: float, status: str, reason: str, fix: PoseFix | None, fused: PoseFix | None) -> dict[str, Any]:

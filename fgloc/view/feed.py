@@ -145,6 +145,7 @@ class ViewFeed:
         self.health_period_s = float(health_period_s)
         self.max_particles = int(max_particles)
         self.mount: StaticTransform = loc.laser_mount
+        self._laser_tf: StaticTransform | None = None  # base_link -> laser (the last laser frame's)
         self.odom_mode = bool(getattr(loc, "odom_mode", loc.map is None))
         self.frame = ODOM_FRAME if self.odom_mode else MAP_FRAME
         self.trajectory = TrajectoryDecimator()
@@ -248,11 +249,15 @@ class ViewFeed:
                 if odom is None:  # no odometry (scans only): the map holds base_link directly
                     out.append(StaticTransform(MAP_FRAME, base, pose))
                 else:
-                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, np.array(_inverse1(odom)))))
+                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, _inverse1(odom))))  # type: ignore[arg-type]
                     out.append(StaticTransform(ODOM_FRAME, base, odom))
         elif (odom := self.odom_pose_at(stamp)) is not None:
             out.append(StaticTransform(ODOM_FRAME, base, odom))
-        out.append(StaticTransform(base, laser_frame, np.asarray(self.mount.pose, dtype=float), z=self.mount.z))
+        laser = self._laser_tf
+        if laser is None or laser.parent != base or laser.child != laser_frame:  # the same one every scan
+            laser = self._laser_tf = StaticTransform(base, laser_frame, np.asarray(self.mount.pose, dtype=float),
+                                                     z=self.mount.z)
+        out.append(laser)
         return out
 
     # ------------------------------------------------------------------ scans

@@ -83,6 +83,9 @@ class McapViewRecorder:
                               ((ch.FUSED, encode.FUSED_SCHEMA), (ch.FIX, encode.FIX_SCHEMA),
                                (ch.HEALTH, encode.HEALTH_SCHEMA))}
         self._schemas: dict[Any, tuple[str, str, bytes]] = {}
+        # per (topic, schema name): the writer's write(data, log_time_ns) with the channel looked up
+        # once (a writer with raw_writer, as fgloc's LogWriter), else None (write_raw each time)
+        self._raw: dict[tuple[str, str], Callable[[bytes, int], None] | None] = {}
         self._last_ns = 0
         # the log time (ns) to write at now, or None (then the stamp): fgloc run puts the channels at
         # the log time of the input being processed, beside the inputs on the input's recording clock
@@ -105,23 +108,38 @@ class McapViewRecorder:
             s = self._schemas[cls] = (sch.name, sch.encoding, bytes(sch.data))
         return s
 
+    def _emit(self, topic: str, name: str, schema: bytes, data: bytes, log_time_ns: int, schema_encoding: str,
+              message_encoding: str) -> None:
+        key = (topic, name)
+        if key in self._raw:
+            raw = self._raw[key]
+        else:
+            make = getattr(self.writer, "raw_writer", None)
+            raw = self._raw[key] = None if make is None else make(topic, name, schema, schema_encoding,
+                                                                  message_encoding)
+        if raw is None:
+            self.writer.write_raw(topic, name, schema, data, log_time_ns, schema_encoding=schema_encoding,
+                                  message_encoding=message_encoding)
+        else:
+            raw(data, log_time_ns)
+
     def _write(self, topic: str, msg: Any, stamp: float) -> None:
         try:
             name, encoding, data = self._schema(type(msg))
-            self.writer.write_raw(topic, name, data, msg.encode(), self._ns(stamp),
-                                  schema_encoding=encoding, message_encoding="protobuf")
+            self._emit(topic, name, data, msg.encode(), self._ns(stamp), encoding, "protobuf")
             self.count += 1
         except (TypeError, ValueError, OverflowError):
             self.errors += 1
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
         name, schema = self._json_schemas[topic]
-        try:
-            data = json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
-        except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
-            data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
-        self.writer.write_raw(topic, name, schema, data, self._ns(stamp), schema_encoding="jsonschema",
-                              message_encoding="json")
+        data = flat_json(obj)
+        if data is None:
+            try:
+                data = json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+            except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
+                data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
+        self._emit(topic, name, schema, data, self._ns(stamp), "jsonschema", "json")
         self.count += 1
 
     # ------------------------------------------------------------------ ViewSink
@@ -186,6 +204,47 @@ class McapViewRecorder:
 
     def close(self) -> None:
         pass
+
+
+_json_str = json.encoder.encode_basestring_ascii  # the string encoding json.dumps uses (ensure_ascii)
+_JSON_KEYS: dict[str, str] = {}  # '"key":' per key seen
+
+
+def flat_json(obj: dict[str, Any]) -> bytes | None:
+    """``json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()`` for a dict of finite
+    floats, strings, ints, None and lists of finite floats, written directly (the same text: floats
+    as ``float.__repr__``, strings ASCII-escaped as ``json`` does); None for anything else (NaN,
+    numpy scalars, nested dicts: then ``json`` itself)."""
+    out = []
+    for k, v in obj.items():
+        key = _JSON_KEYS.get(k)  # type: ignore[arg-type]
+        if key is None:
+            if type(k) is not str:
+                return None
+            key = _json_str(k) + ":"
+            if len(_JSON_KEYS) < 256:
+                _JSON_KEYS[k] = key
+        t = type(v)
+        if t is float:
+            if not math.isfinite(v):
+                return None
+            out.append(key + float.__repr__(v))
+        elif t is str:
+            out.append(key + _json_str(v))
+        elif v is None:
+            out.append(key + "null")
+        elif t is int:
+            out.append(key + int.__repr__(v))
+        elif t is bool:
+            out.append(key + ("true" if v else "false"))
+        elif t is list:
+            for x in v:
+                if type(x) is not float or not math.isfinite(x):
+                    return None
+            out.append(key + "[" + ",".join(map(float.__repr__, v)) + "]")
+        else:
+            return None
+    return ("{" + ",".join(out) + "}").encode()
 
 
 def _sigma(v: float) -> float:

@@ -24,7 +24,8 @@ def test_flat_json_is_json_dumps_byte_for_byte():
     strings = ["", "map", 'quote " and \\ backslash', "tab\tnewline\n", "\u00e9t\u00e9 \u2192 \U0001f600", "\x00\x1f"]
     for i in range(300):
         obj = {"stamp": floats[i % len(floats)], "status": strings[i % len(strings)],
-               "n": int(rng.integers(-5, 10**12)), "ok": bool(i % 2), "none": None, "cov": [floats[(i + k) % len(floats)] for k in range(i % 10)],
+               "n": int(rng.integers(-5, 10**12)), "ok": bool(i % 2), "none": None,
+               "cov": [floats[(i + k) % len(floats)] for k in range(i % 10)],
                strings[(i + 1) % len(strings)]: floats[(i * 7) % len(floats)]}
         assert flat_json(obj) == _dumps(obj), obj
 

@@ -15,8 +15,7 @@ from collections import deque
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.geometry import compose1
-from fgloc.geometry import exp as se2_exp
+from fgloc.geometry import compose1, exp_coefficients
 from fgloc.geometry import log as se2_log
 from fgloc.localization.config import PipelineConfig
 from fgloc.localization.sources import UNUSED_VAR
@@ -51,6 +50,19 @@ def between1(a: FloatArray, b: FloatArray) -> FloatArray:
     i2 = (-a2 + math.pi) % (2.0 * math.pi) - math.pi
     c, s = math.cos(i2), math.sin(i2)
     return np.array([i0 + c * b0 - s * b1, i1 + s * b0 + c * b1, (i2 + b2 + math.pi) % (2.0 * math.pi) - math.pi])
+
+
+def _exp_of(tw: FloatArray, dt: float) -> tuple[float, float, float]:
+    """:func:`fgloc.geometry.exp` of ``tw * dt`` (a twist held for ``dt``) in scalar maths: the same
+    operations on the same values (numpy's element-wise product is the float product), as a tuple."""
+    vx, vy, w = float(tw[0]) * dt, float(tw[1]) * dt, float(tw[2]) * dt
+    c, s = exp_coefficients(w)
+    return c * vx - s * vy, s * vx + c * vy, w
+
+
+def _carried(pose: FloatArray, tw: FloatArray, dt: float) -> FloatArray:
+    """``compose1(pose, exp(tw * dt))``: ``pose`` carried on with the twist ``tw`` for ``dt``."""
+    return compose1(pose, _exp_of(tw, dt))  # type: ignore[arg-type]
 
 
 def _zero_unused(tw: FloatArray, unused: tuple[bool, bool, bool]) -> FloatArray:
@@ -106,7 +118,7 @@ class OdometryTracker:
             unused = self._unused(cov)  # a pose-derived twist's covariance keeps the unused ones
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
         if self.t is not None:
-            self.pose = compose1(self.pose, se2_exp(tw * (t - self.t)))
+            self.pose = _carried(self.pose, tw, t - self.t)
         self.t = t
         self.twist = tw
         self._recent.append((t, self.pose))
@@ -121,7 +133,7 @@ class OdometryTracker:
         when ``t`` is within ``odom_extrapolate_max_s`` of it (slow or late odometry must not hand
         the front-end a stale motion for its de-skew); else the last pose as it is."""
         if self.t is not None and abs(t - self.t) <= self.cfg.odom_extrapolate_max_s:
-            return compose1(self.pose, se2_exp(self.extrapolation_twist() * (t - self.t)))
+            return _carried(self.pose, self.extrapolation_twist(), t - self.t)
         return self.pose
 
     @property
@@ -168,8 +180,8 @@ class OdometryTracker:
         tw, cov = self._last_out
         v = self.extrapolation_twist()
         t_prev, p_prev = self._prev_pose
-        self._prev_pose = (t, compose1(p_prev, se2_exp(v * (t - t_prev))))
-        self.pose = compose1(self.pose, se2_exp(v * dt))
+        self._prev_pose = (t, _carried(p_prev, v, t - t_prev))
+        self.pose = _carried(self.pose, v, dt)
         self.t = t
         self.twist = v
         self._short = False
@@ -279,7 +291,7 @@ class OdometryTracker:
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
         delta = between1(prev[1], pose)
-        if mode != "always" and self._agrees(t, delta, se2_exp(tw * dt), unused):
+        if mode != "always" and self._agrees(t, delta, _exp_of(tw, dt), unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             return tw, cov
@@ -301,7 +313,8 @@ class OdometryTracker:
             return MAX_BASELINE_S
         return min(BASELINE_FRACTION * (st[-1] - st[0]) / (len(st) - 1), MAX_BASELINE_S)
 
-    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray, unused: tuple[bool, bool, bool]) -> bool:
+    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray | tuple[float, float, float],
+                unused: tuple[bool, bool, bool]) -> bool:
         """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``
         (running sums in Python floats: this runs for every odometry message that carries a pose)."""
         win = self._window

@@ -41,6 +41,9 @@ from fgloc.view import channels as ch
 from fgloc.view.channels import BASE_FRAME
 from fgloc.view.feed import ACCEPTED, PREDICTED, REJECTED, ScanView, json_ready
 
+#: ``json.dumps(obj, separators=(",", ":"), allow_nan=False)`` with its encoder made once
+_JSON = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+
 
 class RawMcapWriter(Protocol):
     def write_raw(self, topic: str, schema_name: str, schema_data: bytes, data: bytes, log_time_ns: int,
@@ -133,12 +136,10 @@ class McapViewRecorder:
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
         name, schema = self._json_schemas[topic]
-        data = flat_json(obj)
-        if data is None:
-            try:
-                data = json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
-            except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
-                data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
+        try:
+            data = _JSON(obj).encode()
+        except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
+            data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
         self._emit(topic, name, schema, data, self._ns(stamp), "jsonschema", "json")
         self.count += 1
 
@@ -204,47 +205,6 @@ class McapViewRecorder:
 
     def close(self) -> None:
         pass
-
-
-_json_str = json.encoder.encode_basestring_ascii  # the string encoding json.dumps uses (ensure_ascii)
-_JSON_KEYS: dict[str, str] = {}  # '"key":' per key seen
-
-
-def flat_json(obj: dict[str, Any]) -> bytes | None:
-    """``json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()`` for a dict of finite
-    floats, strings, ints, None and lists of finite floats, written directly (the same text: floats
-    as ``float.__repr__``, strings ASCII-escaped as ``json`` does); None for anything else (NaN,
-    numpy scalars, nested dicts: then ``json`` itself)."""
-    out = []
-    for k, v in obj.items():
-        key = _JSON_KEYS.get(k)  # type: ignore[arg-type]
-        if key is None:
-            if type(k) is not str:
-                return None
-            key = _json_str(k) + ":"
-            if len(_JSON_KEYS) < 256:
-                _JSON_KEYS[k] = key
-        t = type(v)
-        if t is float:
-            if not math.isfinite(v):
-                return None
-            out.append(key + float.__repr__(v))
-        elif t is str:
-            out.append(key + _json_str(v))
-        elif v is None:
-            out.append(key + "null")
-        elif t is int:
-            out.append(key + int.__repr__(v))
-        elif t is bool:
-            out.append(key + ("true" if v else "false"))
-        elif t is list:
-            for x in v:
-                if type(x) is not float or not math.isfinite(x):
-                    return None
-            out.append(key + "[" + ",".join(map(float.__repr__, v)) + "]")
-        else:
-            return None
-    return ("{" + ",".join(out) + "}").encode()
 
 
 def _sigma(v: float) -> float:

@@ -531,6 +531,10 @@ class LatencyEstimator:
         self.huber_k = float(huber_k)
         self.refit_every = int(refit_every)
         self.rows: deque[tuple[float, float, float, float, int]] = deque(maxlen=int(max_rows))
+        # the rows as an array, appended in place (the fit read them all through np.asarray, every
+        # refit: O(rows) Python objects converted again); its last len(rows) lines are the rows
+        self._buf = np.empty((64, 5))
+        self._nbuf = 0
         self.n = 0
         self.rejected = 0
         self._fit: tuple[int, float, float] | None = None   # (n, delta, sigma)
@@ -547,7 +551,15 @@ class LatencyEstimator:
         if abs(r) > self.max_latency_s * abs(x) + 0.1 * abs(ref) + 5.0 * math.sqrt(var):
             self.rejected += 1
             return
-        self.rows.append((float(x), float(r), float(var), float(ref), int(kind)))
+        row = (float(x), float(r), float(var), float(ref), int(kind))
+        self.rows.append(row)
+        if self._nbuf == len(self._buf):
+            keep = self._buf[self._nbuf - len(self.rows) + 1:self._nbuf]   # the rows still kept
+            self._buf = np.empty((max(64, 2 * len(keep) + 2), 5))
+            self._buf[:len(keep)] = keep
+            self._nbuf = len(keep)
+        self._buf[self._nbuf] = row
+        self._nbuf += 1
         self.n += 1
 
     def _refit(self) -> tuple[float, float]:
@@ -556,7 +568,7 @@ class LatencyEstimator:
             return self._fit[1], self._fit[2]
         if not self.rows:
             return 0.0, math.inf
-        a = np.asarray(self.rows, dtype=float)
+        a = self._buf[self._nbuf - len(self.rows):self._nbuf]
         A = np.zeros((len(a), 3))
         A[:, 0] = a[:, 0]
         kind = a[:, 4].astype(int)
@@ -566,7 +578,7 @@ class LatencyEstimator:
         s = np.sqrt(a[:, 2])
         w = np.ones(len(a))
         prior = np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
-        sol = np.zeros(3)
+        sol: np.ndarray = np.zeros(3)
         N = prior
         for _ in range(6):
             Aw = A * (w / s)[:, None]

@@ -338,14 +338,14 @@ class SourceRouter:
         """The variance of ``comp`` under the source's policy (NaN: the back-end default)."""
         if not spec.uses(comp):
             return UNUSED_VAR
-        i = spec.fused.index(comp)
         pol = spec.covariance
         if pol == "fixed":
-            return spec.sigmas[i] ** 2
+            return spec.sigmas[spec.fused.index(comp)] ** 2
         if pol == "scaled":
             return msg_var * spec.scale**2 if math.isfinite(msg_var) else msg_var
         if pol == "floor":
-            return max(msg_var, spec.sigmas[i] ** 2) if math.isfinite(msg_var) else spec.sigmas[i] ** 2
+            s2 = spec.sigmas[spec.fused.index(comp)] ** 2
+            return max(msg_var, s2) if math.isfinite(msg_var) else s2
         return msg_var
 
     # ------------------------------------------------------------------ odometry
@@ -404,15 +404,16 @@ class SourceRouter:
         default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))
         if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
             cov = np.diag(np.square(default))
-        out = np.zeros((3, 3))
-        for i, c in enumerate(comps):
-            v = self._var(spec, c, float(cov[i, i]))
-            out[i, i] = v if math.isfinite(v) else default[i] ** 2
-        # a diff drive that does not report vy: 0 with the message's (small) variance, as before
-        if comps[1] == "vy" and not spec.uses("vy"):
-            out[1, 1] = float(cov[1, 1])
         if spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential:
             out = cov  # the default layout: the message's whole covariance, exactly as before
+        else:
+            out = np.zeros((3, 3))
+            for i, c in enumerate(comps):
+                v = self._var(spec, c, float(cov[i, i]))
+                out[i, i] = v if math.isfinite(v) else default[i] ** 2
+            # a diff drive that does not report vy: 0 with the message's (small) variance, as before
+            if comps[1] == "vy" and not spec.uses("vy"):
+                out[1, 1] = float(cov[1, 1])
         tw, out = self._levelled(st, float(msg.stamp), tw, out)
         if add_vel is not None:
             used = tuple(spec.uses(p) or spec.uses(v) for p, v in (("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))

@@ -17,6 +17,7 @@ Core logic only: no I/O.
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 import numpy as np
@@ -31,6 +32,25 @@ from fgloc.types import LaserScan, PoseFix, StaticTransform
 def close(a: FloatArray, b: FloatArray, dist_m: float, dyaw_rad: float) -> bool:
     """Whether poses ``a`` and ``b`` are within ``dist_m`` and ``dyaw_rad`` of each other."""
     return float(np.hypot(a[0] - b[0], a[1] - b[1])) <= dist_m and abs(float(wrap_angle(a[2] - b[2]))) <= dyaw_rad
+
+
+def prime_distance_field(occ_map: OccupancyMap) -> None:
+    """Give ``occ_map.distance_field`` (a cached property) its value from the native matcher's exact
+    distance transform when that module is loaded: :func:`fgloc.frontends.native.edt_squared` is
+    ``scipy.ndimage.distance_transform_edt(~occupied) ** 2`` bit for bit, its square root times the
+    resolution the same field, 3x faster and without importing ``scipy.ndimage`` (60 ms of a run's
+    start on its own).  A map without obstacles, a field already there, or another front-end: the
+    property's own way."""
+    native = sys.modules.get("fgloc.frontends.native")
+    if native is None or "distance_field" in vars(occ_map):
+        return
+    occ = occ_map.occupied
+    if not occ.any():
+        return
+    d = native.edt_squared(occ)
+    np.sqrt(d, out=d)
+    d *= occ_map.resolution
+    occ_map.distance_field = d
 
 
 class Relocalizer:
@@ -63,6 +83,7 @@ class Relocalizer:
         from fgloc.backends.global_search import GlobalSearch
 
         if self._global is None:
+            prime_distance_field(self.map)
             self._global = GlobalSearch(self.map, self.cfg.global_search)
         self.stats["global_searches"] += 1
         pts = msg.points()

@@ -21,13 +21,13 @@ def write_tum(path: str | Path, traj: Trajectory) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     q = yaw_to_quaternion(traj.poses[:, 2])
+    # the rows as Python floats at once (tolist: the same values), one write of the whole text
+    poses = np.asarray(traj.poses, dtype=float)[:, :2].tolist()
+    lines = [f"{t:.9f} {x!r} {y!r} 0.0 {qx!r} {qy!r} {qz!r} {qw!r}\n"
+             for t, (x, y), (qx, qy, qz, qw) in zip(np.asarray(traj.stamps, dtype=float).tolist(), poses,
+                                                    np.asarray(q, dtype=float).tolist(), strict=True)]
     with path.open("w") as f:
-        f.write("# timestamp x y z qx qy qz qw\n")
-        for t, p, qq in zip(traj.stamps, traj.poses, q, strict=True):
-            f.write(
-                f"{t:.9f} {float(p[0])!r} {float(p[1])!r} 0.0 "
-                f"{float(qq[0])!r} {float(qq[1])!r} {float(qq[2])!r} {float(qq[3])!r}\n"
-            )
+        f.write("# timestamp x y z qx qy qz qw\n" + "".join(lines))
     return path
 
 

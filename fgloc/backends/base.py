@@ -10,6 +10,7 @@ final, smoothed trajectory (:meth:`Backend.finish`).
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 
 import numpy as np
@@ -29,7 +30,8 @@ def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float,
     """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad."""
     if cov is not None:
         c = np.asarray(cov, dtype=float).reshape(3, 3)
-        if c[0, 0] > 0 and c[1, 1] > 0 and c[2, 2] > 0 and np.isfinite(c.sum()):
+        v = c.ravel().tolist()  # scalar checks: every odometry message passes here
+        if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
             return c
     d = _DEFAULT_COV.get(default_sigmas)
     if d is None:

@@ -417,9 +417,15 @@ def _cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
         Ac, yc, sc = A[np.ix_(rows, cols)], y[rows], sig[rows]
         ub = {s: min(float(y[r]) for r, p in enumerate(plist) if s in p) for s in members}
         v = np.full(len(cols), np.nan)
-        if np.linalg.matrix_rank(Ac) == len(cols):
+        # one SVD for the rank test and the pseudo-inverse (np.linalg.matrix_rank's tolerance,
+        # np.linalg.pinv's cutoff and products: each computed its own SVD before)
+        u, sv, vt = np.linalg.svd(Ac, full_matrices=False)
+        if int(np.count_nonzero(sv > sv.max(initial=0.0) * max(Ac.shape) * np.finfo(float).eps)) == len(cols):
             v = nnls(Ac, yc)
-            Ap = np.linalg.pinv(Ac)
+            large = sv > 1e-15 * sv.max()
+            inv_s = np.divide(1.0, sv, where=large, out=sv.copy())
+            inv_s[~large] = 0.0
+            Ap = np.matmul(vt.T, np.multiply(inv_s[:, None], u.T))
             sd = np.sqrt(np.maximum(np.diag(Ap @ np.diag(sc**2) @ Ap.T), 0.0))
             for m, s_name in enumerate(members):
                 if sd[m] > 0.5 * max(v[m], prior.get(s_name, 0.0)):
@@ -669,8 +675,10 @@ class GyroBias:
         self.still_s = float(still_s)
         self.min_dt = 1.0 / float(max_rate_hz)
         self.window_s = float(window_s)
-        self.x = np.zeros(1)
-        self.P = np.array([[float(prior_sigma) ** 2]])
+        # state [b, c_1, ..., c_n] and its covariance as plain lists (a handful of entries, updated at
+        # every heading reading: numpy's per-call overhead was most of the filter's time)
+        self.x: list[float] = [0.0]
+        self.P: list[list[float]] = [[float(prior_sigma) ** 2]]
         self.t: float | None = None
         self.idx: dict[str, int] = {}
         self._last: dict[str, float] = {}
@@ -733,10 +741,10 @@ class GyroBias:
 
     # ------------------------------------------------------------------ outputs
     def value(self) -> float:
-        return float(self.x[0])
+        return self.x[0]
 
     def sigma(self) -> float:
-        return math.sqrt(max(float(self.P[0, 0]), 0.0))
+        return math.sqrt(max(self.P[0][0], 0.0))
 
     # ------------------------------------------------------------------ filter
     def _integral_at(self, t: float) -> tuple[float, float] | None:
@@ -761,31 +769,38 @@ class GyroBias:
         dt = t - self.t
         if dt <= 0:
             return
-        n = len(self.x)
-        F = np.eye(n)
-        F[1:, 0] = -dt
-        Q = np.zeros((n, n))
-        Q[0, 0] = self.rw**2 * dt
+        # F = I with F[1:, 0] = -dt (each offset drifts as -b): F x and F P F^T by rows and columns
+        x0 = self.x[0]
+        x = [x0] + [xk - dt * x0 for xk in self.x[1:]]
+        p0 = self.P[0]
+        FP = [p0] + [[a - dt * b for a, b in zip(row, p0, strict=True)] for row in self.P[1:]]
+        P = [[r[0]] + [a - dt * r[0] for a in r[1:]] for r in FP]
+        P[0][0] += self.rw**2 * dt
         arw = self.series[-1][3] * (self.series[-1][0] - self.series[-2][0]) if len(self.series) > 1 else 0.0
-        for i in range(1, n):
-            Q[i, i] = (self.offset_q + arw) * dt
-        self.x = F @ self.x
-        self.P = F @ self.P @ F.T + Q
+        q = (self.offset_q + arw) * dt
+        for i in range(1, len(x)):
+            P[i][i] += q
+        self.x, self.P = x, P
         self.t = t
 
-    def _robust_update(self, H: np.ndarray, y: float, R: float, source: str | None, t: float) -> bool:
-        S = float(H @ self.P @ H) + R
+    def _robust_update(self, i: int, y: float, R: float, source: str | None, t: float) -> bool:
+        """A measurement of state ``i`` (``H = e_i``) with innovation ``y`` and variance ``R``."""
+        P = self.P
+        Pii = P[i][i]
+        S = Pii + R
         z = abs(y) / math.sqrt(S)
         if z > self.reject_k:
             self.rejected += 1
             return False
         if z > self.huber_k:
             R = R * z / self.huber_k
-            S = float(H @ self.P @ H) + R
-        K = self.P @ H / S
-        self.x = self.x + K * y
-        self.P = self.P - np.outer(K, H @ self.P)
-        self.P = 0.5 * (self.P + self.P.T)
+            S = Pii + R
+        K = [row[i] / S for row in P]
+        self.x = [a + k * y for a, k in zip(self.x, K, strict=True)]
+        Pi = P[i]
+        P = [[a - k * b for a, b in zip(row, Pi, strict=True)] for row, k in zip(P, K, strict=True)]
+        n = len(P)
+        self.P = [[0.5 * (P[a][b] + P[b][a]) for b in range(n)] for a in range(n)]
         return True
 
     def _process(self) -> None:
@@ -807,11 +822,9 @@ class GyroBias:
                 self._anchor(source, z, var)
                 self._reanchor.discard(source)
                 continue
-            H = np.zeros(len(self.x))
-            H[i] = 1.0
-            y = wrap_scalar(z - float(self.x[i]))
-            var = var * self._shared(source, t, y / math.sqrt(float(self.P[i, i]) + var))
-            if self._robust_update(H, y, var, source, t):
+            y = wrap_scalar(z - self.x[i])
+            var = var * self._shared(source, t, y / math.sqrt(self.P[i][i] + var))
+            if self._robust_update(i, y, var, source, t):
                 self._bad_since.pop(source, None)
                 self.n_heading += 1
             else:
@@ -850,18 +863,16 @@ class GyroBias:
         if i is None:
             i = len(self.x)
             self.idx[source] = i
-            self.x = np.append(self.x, 0.0)
-            P = np.zeros((i + 1, i + 1))
-            P[:i, :i] = self.P
-            self.P = P
-        self.P[i, :] = 0.0
-        self.P[:, i] = 0.0
-        self.x[i] = z
-        self.P[i, i] = var + 1e-6
+            self.x = self.x + [0.0]
+            self.P = [row + [0.0] for row in self.P] + [[0.0] * (i + 1)]
+        n = len(self.x)
+        self.P[i] = [0.0] * n
+        for row in self.P:
+            row[i] = 0.0
+        self.x[i] = float(z)
+        self.P[i][i] = var + 1e-6
 
     def _update_still(self, t: float, rate: float, var: float) -> None:
         self._predict(t)
-        H = np.zeros(len(self.x))
-        H[0] = 1.0
-        if self._robust_update(H, rate - float(self.x[0]), var, None, t):
+        if self._robust_update(0, rate - self.x[0], var, None, t):
             self.n_still += 1

@@ -273,7 +273,11 @@ def test_gyro_factors_jacobians_match_numerical_differentiation():
                         vp.update(k, v.atPose2(k).retract(d))
                         vm.update(k, v.atPose2(k).retract(-d))
                     cols.append((err(vp) - err(vm)) / 2e-6)
-            assert np.abs(A - np.column_stack(cols)).max() < 1e-7
+            # the yaw row (yaw_increment_factor is a BetweenFactorPose2 whose translation rows
+            # have infinite sigmas: they weigh nothing, their whitened Jacobians are zero)
+            assert A.shape[0] in (1, 3)
+            assert np.abs(A[-1] - np.column_stack(cols)[-1]).max() < 1e-7
+            assert not A[:-1].any()
 
 
 def test_gyro_increment_variances_add_up_to_the_integral_of_shared_readings():

@@ -100,14 +100,40 @@ def pose_message(fix: PoseFix, frame_id: str | None = None) -> Any:
     return fm.PoseInFrame(timestamp=timestamp(fix.stamp), frame_id=frame_id or fix.frame_id, pose=pose3(fix.pose))
 
 
-def poses_message(stamp: float, frame_id: str, poses: FloatArray) -> Any:
-    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+def _pose_objects(p: FloatArray) -> list[Any]:
+    """``foxglove.Pose`` of each planar pose row of ``p`` (z = 0, a yaw-only quaternion)."""
     q = yaw_to_quaternion(p[:, 2]).reshape(-1, 4)
     qz, qw = q[:, 2].tolist(), q[:, 3].tolist()
     xs, ys = p[:, 0].tolist(), p[:, 1].tolist()
-    out = [fm.Pose(position=fm.Vector3(x=x, y=y, z=0.0), orientation=fm.Quaternion(x=0.0, y=0.0, z=z, w=w))
-           for x, y, z, w in zip(xs, ys, qz, qw, strict=True)]
-    return fm.PosesInFrame(timestamp=timestamp(stamp), frame_id=frame_id, poses=out)
+    return [fm.Pose(position=fm.Vector3(x=x, y=y, z=0.0), orientation=fm.Quaternion(x=0.0, y=0.0, z=z, w=w))
+            for x, y, z, w in zip(xs, ys, qz, qw, strict=True)]
+
+
+def poses_message(stamp: float, frame_id: str, poses: FloatArray) -> Any:
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    return fm.PosesInFrame(timestamp=timestamp(stamp), frame_id=frame_id, poses=_pose_objects(p))
+
+
+class GrowingPoses:
+    """:func:`poses_message` of a pose list that grows at its end (the fused trajectory so far, sent
+    again and again): the ``foxglove.Pose`` objects of the poses already sent are kept and only the new
+    ones are made (a 10-minute run re-sent thousands of poses each time).  The same message: a pose is
+    made from its own row whatever else is in the array."""
+
+    def __init__(self) -> None:
+        self._rows = np.zeros((0, 3))
+        self._objects: list[Any] = []
+
+    def message(self, stamp: float, frame_id: str, poses: FloatArray) -> Any:
+        p = np.asarray(poses, dtype=float).reshape(-1, 3)
+        k = len(self._objects)
+        if k > len(p) or p[:k].tobytes() != self._rows[:k].tobytes():
+            k = 0  # not the same beginning: made anew
+            self._objects = []
+        if k < len(p):
+            self._objects = self._objects + _pose_objects(p[k:])
+        self._rows = p.copy()
+        return fm.PosesInFrame(timestamp=timestamp(stamp), frame_id=frame_id, poses=self._objects)
 
 
 def covariance_ellipse(cov: FloatArray, sigmas: float = COVARIANCE_SIGMAS, n: int = ELLIPSE_POINTS) -> FloatArray:

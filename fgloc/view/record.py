@@ -86,6 +86,7 @@ class McapViewRecorder:
                               ((ch.FUSED, encode.FUSED_SCHEMA), (ch.FIX, encode.FIX_SCHEMA),
                                (ch.HEALTH, encode.HEALTH_SCHEMA))}
         self._schemas: dict[Any, tuple[str, str, bytes]] = {}
+        self._trajectory = encode.GrowingPoses()  # the trajectory's poses sent so far, kept
         # per (topic, schema name): the writer's write(data, log_time_ns) with the channel looked up
         # once (a writer with raw_writer, as fgloc's LogWriter), else None (write_raw each time)
         self._raw: dict[tuple[str, str], Callable[[bytes, int], None] | None] = {}
@@ -198,7 +199,7 @@ class McapViewRecorder:
         self._write(ch.PARTICLES, self._enc.poses_message(stamp, frame_id, poses[::step]), stamp)
 
     def on_trajectory(self, stamp: float, frame_id: str, poses: np.ndarray) -> None:
-        self._write(ch.TRAJECTORY, self._enc.poses_message(stamp, frame_id, poses), stamp)
+        self._write(ch.TRAJECTORY, self._trajectory.message(stamp, frame_id, poses), stamp)
 
     def on_health(self, stamp: float, health: dict[str, Any]) -> None:
         self._write_json(ch.HEALTH, health, stamp)

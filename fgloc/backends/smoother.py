@@ -1,15 +1,17 @@
 """Sliding-window smoother on ``gtsam.IncrementalFixedLagSmoother`` and its batch twin.
 
-Graph (variables ``x<i>``: ``Pose2`` keyframes at scan times; ``o<j>``: ``Rot2`` compass-to-map
-offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``):
+Graph (variables ``x<i>``: ``Pose2`` keyframes at scan times; ``o<j>``: the compass-to-map
+offset, one per ``offset_interval`` seconds, ``compass_yaw = map_yaw + offset``, as the compass
+frame's pose in the map ``Pose2(0, 0, -offset)``, so that every factor on it is a C++ one):
 
 * encoder twist factors ``x<i-1> - x<i>``: the odometry twists between the two keyframes
   integrated with propagated covariance (:func:`~fgloc.backends.factors.integrate_twist`),
   a C++ ``BetweenFactorPose2``;
 * compass factors ``x<i> - o<j>``: the compass readings since the previous keyframe, each
   carried to the keyframe time by the odometry rotation in between and averaged, a
-  ``CustomFactor`` with analytic Jacobians and a robust kernel;
-* offset random walk ``o<j-1> - o<j>``: ``BetweenFactorRot2`` with sigma
+  ``BetweenFactorPose2`` measuring the heading only (:func:`~fgloc.backends.factors.compass_factor`)
+  with a robust kernel;
+* offset random walk ``o<j-1> - o<j>``: ``BetweenFactorPose2`` with heading sigma
   ``offset_rw_sigma * sqrt(dt)``;
 * scan-to-map fixes on ``x<i>``: robust (Huber) ``PriorFactorPose2`` with the front-end
   covariance, after a coarse gate against the prediction (``fix_gate_m``, ``fix_gate_theta``;
@@ -62,6 +64,8 @@ from fgloc.backends.factors import (
     integrate_heading,
     integrate_twist,
     integrate_twist_lists,
+    offset_pose,
+    pose_offset,
     relative_yaw_factor,
     scaled_between_factor,
     scaled_delta,
@@ -103,6 +107,9 @@ GYRO_LIVE_S = 0.25
 #: rad, the prior of a differential orientation's offset at its anchor (its frame is its own: loose)
 RELATIVE_YAW_PRIOR_SIGMA = 10.0
 CHI2_3_999 = 16.27  # chi-square 99.9 % quantile, 3 degrees of freedom
+#: m, the prior / random-walk sigma of a compass-offset variable's position (always 0: it enters
+#: no other factor, any sigma holds it there; see factors.compass_factor)
+OFFSET_XY_SIGMA = 1.0
 BALLAST = "z"  # the inert variables that keep iSAM2's re-elimination incremental (_with_ballast)
 _ZERO1 = np.zeros(1)
 _UNIT1 = gtsam.noiseModel.Isotropic.Sigma(1, 1.0)
@@ -304,7 +311,7 @@ class SlidingWindowSmoother(Backend):
         # variables at their own scale (a 0.01 s / 0.01 rad/s threshold would never relinearize them)
         th = float(self.cfg.relinearize_threshold)
         tm = gtsam.ISAM2ThresholdMap()
-        for sym, v in (("x", [th] * 3), ("o", [th]), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
+        for sym, v in (("x", [th] * 3), ("o", [th] * 3), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
                        ("l", [th * 1e-2]), ("r", [th]),
                        ("a", [th * 0.1, th * 0.1]), (BALLAST, [th])):
             tm.insert((sym, np.asarray(v, dtype=float)))
@@ -524,14 +531,16 @@ class SlidingWindowSmoother(Backend):
                 guess, sig = float(self.calib.offset or 0.0), self.cfg.calibrated_offset_sigma
             else:
                 guess, sig = self._offset_guess(), self.cfg.offset_prior_sigma
-            graph.add(gtsam.PriorFactorRot2(o, gtsam.Rot2(guess), gtsam.noiseModel.Isotropic.Sigma(1, sig)))
+            graph.add(gtsam.PriorFactorPose2(o, offset_pose(guess), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([OFFSET_XY_SIGMA, OFFSET_XY_SIGMA, sig]))))
         else:
             guess = self._offset_estimate()
             dt = max(t - self.cur_o_t, 1e-3)
-            graph.add(gtsam.BetweenFactorRot2(self.cur_o, o, gtsam.Rot2(0.0), gtsam.noiseModel.Isotropic.Sigma(
-                1, self.cfg.offset_rw_sigma * np.sqrt(dt))))
+            sigmas = np.array([OFFSET_XY_SIGMA, OFFSET_XY_SIGMA, self.cfg.offset_rw_sigma * np.sqrt(dt)])
+            graph.add(gtsam.BetweenFactorPose2(self.cur_o, o, gtsam.Pose2(0.0, 0.0, 0.0),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
             ts[self.cur_o] = float(t)
-        vals.insert(o, gtsam.Rot2(guess))
+        vals.insert(o, offset_pose(guess))
         ts[o] = float(t)
         self.cur_o, self.cur_o_t = o, float(t)
 
@@ -548,9 +557,9 @@ class SlidingWindowSmoother(Backend):
         if self.cur_o is None:
             return self._offset_guess()
         if self._acc is not None and self._acc[1].exists(self.cur_o):
-            return float(self._acc[1].atRot2(self.cur_o).theta())
+            return pose_offset(self._acc[1].atPose2(self.cur_o))
         try:
-            return float(self.isam.calculateEstimateRot2(self.cur_o).theta())
+            return pose_offset(self.isam.calculateEstimatePose2(self.cur_o))
         except (RuntimeError, IndexError):  # not (or no longer) in the window
             return self._offset_guess()
 
@@ -1542,7 +1551,7 @@ class BatchSmoother(SlidingWindowSmoother):
                 if c == ord("x"):
                     self.init_vals.insert(key, self.isam.calculateEstimatePose2(key))
                 elif c == ord("o"):
-                    self.init_vals.insert(key, self.isam.calculateEstimateRot2(key))
+                    self.init_vals.insert(key, self.isam.calculateEstimatePose2(key))
                 else:
                     self.init_vals.insert(key, self.isam.calculateEstimateVector(key))
 
@@ -1556,7 +1565,7 @@ class BatchSmoother(SlidingWindowSmoother):
             if c == ord("x"):
                 self.init_vals.insert(key, vals.atPose2(key))
             elif c == ord("o"):
-                self.init_vals.insert(key, vals.atRot2(key))
+                self.init_vals.insert(key, vals.atPose2(key))
             else:
                 self.init_vals.insert(key, vals.atVector(key))
             self.key_t[key] = ts.get(key, 0.0)

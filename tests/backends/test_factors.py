@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import gtsam
 import numpy as np
+import pytest
 
 from fgloc.backends.factors import (
     body_covariance,
     compass_factor,
     fix_factor,
     integrate_twist,
+    offset_pose,
+    pose_offset,
 )
 from fgloc.geometry import adjoint as se2_adjoint
 from fgloc.geometry import exp as se2_exp
@@ -19,7 +22,7 @@ def _numerical_factor_jacobians(factor, values, keys, eps=1e-6):
     """Central differences of the whitened-free error through each key's retract."""
     out = []
     for k in keys:
-        if gtsam.Symbol(k).chr() == ord("x"):
+        if gtsam.Symbol(k).chr() in (ord("x"), ord("o")):  # keyframes, compass offsets (Pose2 both)
             dim, at, ins = 3, values.atPose2, gtsam.Pose2
         else:
             dim, at, ins = 1, values.atRot2, gtsam.Rot2
@@ -41,20 +44,25 @@ def test_compass_factor_jacobians_match_numerical():
     rng = np.random.default_rng(0)
     for _ in range(20):
         pose = gtsam.Pose2(*rng.uniform(-3, 3, 3))
-        off = gtsam.Rot2(rng.uniform(-3, 3))
+        off = rng.uniform(-3, 3)
         z = rng.uniform(-np.pi, np.pi)
         f = compass_factor(xk, ok, z, 0.01, kernel="none")
         v = gtsam.Values()
         v.insert(xk, pose)
-        v.insert(ok, off)
+        v.insert(ok, offset_pose(off))
+        assert pose_offset(v.atPose2(ok)) == pytest.approx(off)
         lin = f.linearize(v)
         A, b = lin.jacobian()
-        Jn = np.hstack(_numerical_factor_jacobians(f, v, [xk, ok]))
-        # linearized Jacobian is whitened by 1/sigma
-        assert np.allclose(A * 0.01, Jn, atol=1e-6)
-        e = f.unwhitenedError(v)[0]
-        assert -np.pi <= e < np.pi
-        assert np.isclose(e, np.angle(np.exp(1j * (pose.theta() + off.theta() - z))))
+        assert list(f.keys()) == [ok, xk]
+        Jn = np.hstack(_numerical_factor_jacobians(f, v, [ok, xk]))
+        # the heading row (whitened by 1/sigma): [0, 0, -1] on the offset variable's heading (minus
+        # the offset), [0, 0, 1] on the keyframe; the translation rows weigh nothing
+        assert np.allclose(A[2] * 0.01, Jn[2], atol=1e-6)
+        assert np.allclose(A[2] * 0.01, [0, 0, -1, 0, 0, 1], atol=1e-9)
+        assert not A[:2].any()
+        e = f.unwhitenedError(v)[2]
+        assert -np.pi < e <= np.pi
+        assert np.isclose(np.exp(1j * e), np.exp(1j * (pose.theta() + off - z)))
 
 
 def test_fix_factor_uses_body_frame_covariance():

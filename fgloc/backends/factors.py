@@ -375,20 +375,21 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
     e, jl = _log_against(rx, ry, rth, measured)
     if not want_jacobians:
         return e, []
-    # Jl @ Jc (Jc's last row [0, 0, sw], Jl's last row [0, 0, 1])
-    a = [[jl[r][0] * jc[0][k] + jl[r][1] * jc[1][k] for k in range(3)] for r in range(2)]
-    a[0][2] += jl[0][2] * sw
-    a[1][2] += jl[1][2] * sw
-    a.append([0.0, 0.0, sw])
+    # Jl @ Jc (Jc's last row [0, 0, sw], Jl's last row [0, 0, 1]), unrolled (the same sums)
+    (l00, l01, l02), (l10, l11, l12) = jl
+    (c00, c01, c02), (c10, c11, c12) = jc
+    a0 = (l00 * c00 + l01 * c10, l00 * c01 + l01 * c11, l00 * c02 + l01 * c12 + l02 * sw)
+    a1 = (l10 * c00 + l11 * c10, l10 * c01 + l11 * c11, l10 * c02 + l11 * c12 + l12 * sw)
+    a2 = (0.0, 0.0, sw)
     # d c / d xj = [[ch, -sh, 0], [sh, ch, 0], [0, 0, 1]], d c / d xi = [[-1, 0, cy], [0, -1, -cx], [0, 0, -1]]
     ch, sh = math.cos(cth), math.sin(cth)
-    Hj = [[r[0] * ch + r[1] * sh, -r[0] * sh + r[1] * ch, r[2]] for r in a]
-    Hi = [[-r[0], -r[1], r[0] * cy - r[1] * cx - r[2]] for r in a]
-    Hs = [[jl[r][0] * js[0][k] + jl[r][1] * js[1][k] for k in range(2)] for r in range(2)]
-    Hs[0][1] += jl[0][2] * cth
-    Hs[1][1] += jl[1][2] * cth
-    Hs.append([0.0, cth])
-    return e, [np.array(Hi), np.array(Hj), np.array(Hs)]
+    Hj = np.array([(r[0] * ch + r[1] * sh, -r[0] * sh + r[1] * ch, r[2]) for r in (a0, a1, a2)])
+    Hi = np.array([(-r[0], -r[1], r[0] * cy - r[1] * cx - r[2]) for r in (a0, a1, a2)])
+    (s00, s01), (s10, s11) = js
+    Hs = np.array(((l00 * s00 + l01 * s10, l00 * s01 + l01 * s11 + l02 * cth),
+                   (l10 * s00 + l11 * s10, l10 * s01 + l11 * s11 + l12 * cth),
+                   (0.0, cth)))
+    return e, [Hi, Hj, Hs]
 
 
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,

@@ -96,6 +96,10 @@ class Arbiter:
         self._still_long: dict[int, dict[tuple[str, str], list[float]]] = {m: {} for m in self.long_blocks}
         self._claimed_long: dict[int, dict[str, list[float]]] = {m: {} for m in self.long_blocks}
         self._var_long: dict[int, dict[str, float]] = {m: {} for m in self.long_blocks}    # resolved
+        # the long blocks' statistics changes (a long block is complete every m blocks, the hat is
+        # solved every second: _solve re-solves a long block's hat only when they changed)
+        self._long_changes: dict[int, int] = dict.fromkeys(self.long_blocks, 0)
+        self._long_solved: dict[int, int] = dict.fromkeys(self.long_blocks, -1)
 
     # ------------------------------------------------------------------ inputs
     def add_source(self, name: str, kind: str, rel_prior: float = 0.02) -> None:
@@ -287,6 +291,7 @@ class Arbiter:
             c[0] += (v - c[0]) / min(c[1], 240.0)
         names = sorted(inc)
         stats = self._still_long[m]
+        self._long_changes[m] += 1
         for i, a in enumerate(names):
             for b in names[i + 1:]:
                 _still_stat(stats.setdefault((a, b), [0.0, 0.0]), inc[a][0] - inc[b][0], inc[a][1] + inc[b][1],
@@ -306,6 +311,9 @@ class Arbiter:
         rel = _cornered_hat(names, moving, {n: self.streams[n].rel_prior ** 2 for n in names}, n_mov)
         self._rel = {n: math.sqrt(v) for n, v in rel.items()}
         for m in self.long_blocks:
+            if self._long_solved[m] == self._long_changes[m]:
+                continue   # the same statistics: the same answer
+            self._long_solved[m] = self._long_changes[m]
             st_m = self._still_long[m]
             n_max = 2.0 / (1.0 - 0.5 ** (m / self.halflife_blocks))
             pairs = {p: st[0] for p, st in st_m.items() if st[1] >= self.min_blocks}

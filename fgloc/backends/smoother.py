@@ -292,6 +292,7 @@ class SlidingWindowSmoother(Backend):
         self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
         self._long_pair_t = -np.inf
         self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
         self.sources: dict[str, SourceHealth] = {}
         self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
@@ -482,9 +483,9 @@ class SlidingWindowSmoother(Backend):
             if ts_:
                 covered = min(covered, ts_[-1])
         keep = []
-        odo_period = _period(self.odo_t)
+        odo_period = self._period_of(self.odo_t)
         last_fix = self._recent_fixes[-1][0] if self._recent_fixes else -np.inf
-        yaw_period = _period(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
+        yaw_period = self._period_of(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
         for pair in self._fix_pairs:
             ta, tb, pa, pb, ca, cb = pair
             if tb > covered or tb > last_fix - 0.25:
@@ -513,6 +514,17 @@ class SlidingWindowSmoother(Backend):
             if va is not None and vb is not None:
                 self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
         self._fix_pairs = keep
+
+    def _period_of(self, ts: list[float]) -> float:
+        """:func:`_period` of a stamp list, remembered until it changes (a stamp list only grows at
+        its end with later stamps, or loses its oldest: its length and last stamp tell)."""
+        key = (id(ts), len(ts), ts[-1] if ts else None)
+        got = self._periods.get(key)
+        if got is None or got[0] is not ts:
+            if len(self._periods) > 8:
+                self._periods.clear()
+            got = self._periods[key] = (ts, _period(ts))
+        return got[1]
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""

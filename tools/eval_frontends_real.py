@@ -212,6 +212,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
            "rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "fixes": loc.stats["fixes"],
            "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall}
     res.update(heading_views(est, ref, t0, t1))
+    res.update(odometry_timing(msgs, ref, t0, t1))
     res.update(nees_of(loc.fixes, ref))
     res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir))
     return res
@@ -239,6 +240,40 @@ def heading_views(est, ref, t0: float, t1: float) -> dict:
             "rmse_deg_aligned": float(np.degrees(np.sqrt(np.mean(wrap_angle(e - mean) ** 2)))),
             "rel_rot_rms_deg": float(np.degrees(np.sqrt(np.mean(er**2)))) if len(er) else float("nan"),
             "rel_n": int(len(er))}
+
+
+def odometry_timing(msgs, ref, t0: float, t1: float, pair_s: float = 0.5) -> dict:
+    """How the odometry's clock sits against the scans': the odometry's yaw change over pairs of scans
+    ``pair_s`` apart vs the SLAM reference's, RMS (deg) with the odometry read at the scans' stamps and
+    at the stamps shifted by the best ``shift`` (s, -0.3..0.3 in 0.02 s steps; negative: the odometry
+    matches the scan stamped ``t`` at ``t + shift``, the scans are stamped late against it)."""
+    from fgloc.geometry import wrap_angle
+
+    od = [(m.stamp, m.pose[2]) for topic, m in msgs if topic == "/odom" and getattr(m, "pose", None) is not None]
+    if len(od) < 10:
+        return {}
+    a = np.array(sorted(od))
+    ot, oy = a[:, 0], np.unwrap(a[:, 1])
+    m = (ref.stamps >= t0) & (ref.stamps <= t1)
+    rt, ry = ref.stamps[m], np.unwrap(ref.poses[m, 2])
+    i = np.arange(len(rt))
+    j = np.searchsorted(rt, rt + pair_s)
+    ok = (j < len(rt))
+    i, j = i[ok], j[ok]
+    ok = rt[j] - rt[i] < 2 * pair_s
+    i, j = i[ok], j[ok]
+    if len(i) < 10:
+        return {}
+    d_ref = ry[j] - ry[i]
+
+    def rms(shift: float) -> float:
+        d = np.interp(rt[j] + shift, ot, oy) - np.interp(rt[i] + shift, ot, oy)
+        return float(np.degrees(np.sqrt(np.mean(wrap_angle(d - d_ref) ** 2))))
+
+    shifts = np.round(np.arange(-0.30, 0.3001, 0.02), 2)
+    r = [rms(float(s)) for s in shifts]
+    k = int(np.argmin(r))
+    return {"odo_rms0_deg": rms(0.0), "odo_shift_s": float(shifts[k]), "odo_rms_shift_deg": r[k]}
 
 
 def changed_world(hard: bool) -> dict:
@@ -362,6 +397,10 @@ def main() -> int:
             print(f"| {r['log']} | {r.get('accuracy', '-')} | {r['rmse_deg']:.3f} | {r['yaw_mean_deg']:+.3f} "
                   f"| {r['rmse_deg_aligned']:.3f} | {r['yaw_median_abs_deg']:.3f} | {r['yaw_rmse_98_deg']:.3f} "
                   f"| {r['rel_rot_rms_deg']:.3f} (n={r['rel_n']}) |")
+    timing = {r["log"]: r for r in rows if "odo_shift_s" in r}
+    for name, r in timing.items():
+        print(f"\n{name}: odometry yaw change over scan pairs 0.5 s apart vs SLAM: {r['odo_rms0_deg']:.2f} deg RMS "
+              f"at the scans' stamps, {r['odo_rms_shift_deg']:.2f} deg read {r['odo_shift_s']:+.2f} s off them")
     floors = {r["log"]: r for r in rows if "gm_rmse_deg" in r}
     for name, r in floors.items():
         print(f"\n{name}: SLAM vs GMapping over the segment ({r['gm_n']} scans, rigid alignment): "

@@ -97,6 +97,8 @@ def O(j: int) -> int:  # noqa: E743
 
 
 MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
+#: the odometry's mean message period for :meth:`SlidingWindowSmoother._timing_var` is taken over this many
+TIMING_MESSAGES = 200
 #: a further twist source's messages further apart than this (s) do not cover the gap (a lost
 #: visual track): a twist held backwards over longer is not a measurement of the motion in it
 MAX_TWIST_GAP_S = 0.5
@@ -1045,6 +1047,7 @@ class SlidingWindowSmoother(Backend):
             c[2, :] *= k_yaw
             c[:, 2] *= k_yaw
             c[2, 2] += (rel * d[2]) ** 2
+        c[2, 2] += self._timing_var(self.kf_t[-1], t)
         if not self.cfg.odom_gains:
             return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
         # a scale is estimated only once something else observes it (held at its estimate until
@@ -1066,6 +1069,23 @@ class SlidingWindowSmoother(Backend):
         fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
         return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
                                      k=self.cfg.odom_kernel_k, bend=bend)
+
+    def _timing_var(self, t0: float, t1: float) -> float:
+        """Yaw variance (rad^2) of a keyframe interval's odometry increment from where in time the odometry
+        places the motion, when it is too slow to place it (mean message period over its last
+        ``TIMING_MESSAGES`` messages above :data:`MAX_REF_PERIOD_S`: the latency estimator takes no pairs from
+        it either): its pose at each keyframe stamp, against the scan's, is known to about one period, so
+        ``(period * w)^2`` at each end, ``w`` the yaw rate there.  Not modelled, a scan stamped off its
+        odometry (CARMEN: 80-120 ms on fr079 / aces, intel's bursts) gave two consecutive increments
+        +-5-13 deg off in turns where they claimed 0.3-1.4 deg, and they outvoted the keyframe's fix."""
+        n = min(len(self.odo_t), TIMING_MESSAGES)
+        if n < 3:
+            return 0.0
+        per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
+        if not per > MAX_REF_PERIOD_S:
+            return 0.0
+        wa, wb = float(self._twist_at(t0)[2]), float(self._twist_at(t1)[2])
+        return per * per * (wa * wa + wb * wb)
 
     def _twist_at(self, t: float) -> FloatArray:
         """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""

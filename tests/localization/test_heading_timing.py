@@ -1,0 +1,65 @@
+"""The smoother's odometry heading in turns when the odometry is too slow to place the motion in time
+(issue 13 item 4: CARMEN logs, 6-8 Hz odometry stamped 80-120 ms off the scans, gave consecutive
+odometry increments 5-13 deg off in turns that outvoted the keyframe's fix)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fgloc.backends.smoother import SlidingWindowSmoother
+from fgloc.geometry import exp as se2_exp
+from fgloc.geometry import log as se2_log
+from fgloc.geometry import wrap_scalar
+from fgloc.localization.odometry import between1
+from fgloc.types import PoseFix
+
+SPEED_MPS, TURN_RADPS = 0.5, 0.6   # a steady turn
+FIX_PERIOD_S = 0.42                # fr079's fix spacing (every other scan of 4.7 Hz)
+SKEW_S = 0.12                      # one scan's pose is where the robot was this much after its stamp
+
+
+def _pose(t: float) -> np.ndarray:
+    return se2_exp(np.array([SPEED_MPS, 0.0, TURN_RADPS]) * t)
+
+
+def _keyframe_heading(odom_period_s: float) -> tuple[float, float, float]:
+    """Smoothed heading at the skewed scan's keyframe (rad), its fix's heading and the odometry's
+    (the true pose at the stamp); odometry exact, pose-derived (the twist over each period, the
+    localizer's pose-delta noise), the other fixes exact with a 1 deg claim."""
+    sm = SlidingWindowSmoother()
+    sm.initialize(0.0, _pose(0.0), np.eye(3) * 1e-6)
+    t_fix = np.arange(FIX_PERIOD_S, 11.0, FIX_PERIOD_S)
+    k_bad = len(t_fix) // 2
+    events = sorted([(float(t), 0) for t in np.arange(odom_period_s, 12.0, odom_period_s)]
+                    + [(float(t), 1) for t in t_fix])
+    sig = np.array([0.01 + 0.1 * SPEED_MPS, 0.01 + 0.1 * SPEED_MPS, 0.02 + 0.1 * (TURN_RADPS + SPEED_MPS)])
+    cov_fix = np.diag([0.02**2, 0.02**2, np.radians(1.0) ** 2])
+    for t, kind in events:
+        if kind == 0:
+            twist = se2_log(between1(_pose(t - odom_period_s), _pose(t))) / odom_period_s
+            sm.add_odometry(t, twist, np.diag(sig**2))
+        else:
+            skew = SKEW_S if abs(t - t_fix[k_bad]) < 1e-9 else 0.0
+            sm.add_keyframe(t, PoseFix(t, _pose(t + skew), cov_fix))
+    tr = sm.finish()
+    tb = float(t_fix[k_bad])
+    est = tr.poses[int(np.argmin(np.abs(tr.stamps - tb)))]
+    return float(est[2]), float(_pose(tb + SKEW_S)[2]), float(_pose(tb)[2])
+
+
+def test_slow_odometry_does_not_outvote_a_fix_off_by_its_timing_in_a_turn():
+    # 8 Hz odometry: where in its 0.12 s period the motion happened is not known, nor how its stamps
+    # sit against the scans'; the scan stamped 0.12 s early is 4.1 deg from the odometry's heading
+    est, fix, odo = _keyframe_heading(0.12)
+    assert abs(np.degrees(wrap_scalar(fix - odo))) > 4.0
+    # the keyframe carries the scan's pose (0.46 deg from it; 2.37 deg when the two odometry
+    # increments around it claimed their pose-delta noise alone)
+    assert abs(np.degrees(wrap_scalar(est - fix))) < 1.0
+
+
+def test_fast_odometry_keeps_its_heading_weight():
+    # 50 Hz odometry places the motion to 20 ms (the latency estimator can measure a lag against it):
+    # its increments keep their claim and outvote the one skewed fix (0.58 deg from the odometry)
+    est, fix, odo = _keyframe_heading(0.02)
+    assert abs(np.degrees(wrap_scalar(est - odo))) < 1.0
+    assert abs(np.degrees(wrap_scalar(est - fix))) > 3.0

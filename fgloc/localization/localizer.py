@@ -41,6 +41,7 @@ from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.geometry import compose1
 from fgloc.geometry import exp as se2_exp
+from fgloc.localization.coverage import unmapped_share
 from fgloc.localization.odometry import OdometryTracker, between1
 from fgloc.localization.relocalization import Relocalizer
 from fgloc.maps import OccupancyMap
@@ -51,6 +52,9 @@ if TYPE_CHECKING:
 
 EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
 COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset filters global candidates
+#: a scan whose beams, cast from the guess, mostly end in the map's unknown space (crossing no mapped
+#: wall) is one the map cannot judge: no fix there is not counted towards being lost (coverage.py)
+UNMAPPED_SHARE = 0.5
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
 
 
@@ -252,12 +256,21 @@ class Localizer:
         guess = self.guess(t)
         res = fe.match(msg, guess, odom_delta)
         fix = res.to_fix(t, fe.name)
+        # no fix where the map has nothing (an unmapped wing): dead reckoning, not evidence of being lost
+        unmapped = False
+        if fix is None and not fe.is_particle_filter and self.map is not None:
+            share = unmapped_share(self.map, self.laser_mount, msg, guess)
+            unmapped = share > UNMAPPED_SHARE
         if fix is not None:
             self.fixes.append(fix)
             self.stats["fixes"] += 1
         else:
             self.stats["no_fix"] += 1
             self.last_reason = res.why
+            if unmapped:
+                self.stats["unmapped_scans"] = self.stats.get("unmapped_scans", 0) + 1
+                self.last_reason = (f"outside the map: {100 * share:.0f} % of the beams end in unmapped space, "
+                                    f"dead reckoning ({res.why})")
             kind = reason_kind(self.last_reason)
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         used = self.backend.add_keyframe(t, fix)
@@ -270,7 +283,7 @@ class Localizer:
         if fe.is_particle_filter:
             informative = fix is not None
         else:
-            informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
+            informative = fix is not None or (int(np.count_nonzero(msg.valid_mask())) >= 30 and not unmapped)
         if used:
             self._bad_streak = 0
             self._t_bad_since = None

@@ -146,3 +146,34 @@ def test_no_fix_in_the_wing_dead_reckoning_then_the_map_again(wing_run):
     back = on.stamps > 26.0
     assert np.all(ref[back, 0] < 13.0)
     assert e[back].max() < 0.02
+
+
+def _hall(asymmetric: bool) -> OccupancyMap:
+    """A 12 m x 6 m hall with a pillar in the middle: the same seen from either end (turned by 180 deg)
+    unless ``asymmetric`` (a cabinet against one long wall)."""
+    d = np.zeros((int(6 / RES), int(12 / RES)), dtype=np.int16)
+    d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
+    d[int(2.7 / RES):int(3.3 / RES), int(5.7 / RES):int(6.3 / RES)] = 100
+    if asymmetric:
+        d[int(0.1 / RES):int(1.2 / RES), int(7.5 / RES):int(9.0 / RES)] = 100
+    return OccupancyMap(d, RES, origin=np.zeros(3))
+
+
+@pytest.mark.parametrize("asymmetric", [False, True])
+def test_global_search_takes_no_ambiguous_candidate(asymmetric):
+    """Start-up or lost, the global search takes its best candidate only when no other place more than
+    1 m / 20 deg away explains the scan about as well (``relocalize_ambiguity``, as the relocalization
+    does): in a symmetric hall the robot is at one of two places and stays lost, in the asymmetric
+    one it is localized right away."""
+    m = _hall(asymmetric)
+    pose = np.array([3.0, 2.0, 0.3])
+    rng = np.random.default_rng(5)
+    loc = Localizer(m, MOUNT, "smoother", "native", config=load_config())
+    fixes = [loc.on_scan(cast(m, pose, rng, stamp=0.1 * k)) for k in range(1, 4)]
+    assert loc.stats["global_searches"] == 3 or asymmetric
+    if asymmetric:
+        assert fixes[0] is not None and np.hypot(*(fixes[0].pose[:2] - pose[:2])) < 0.05
+        assert not loc.lost
+    else:
+        assert all(f is None for f in fixes) and loc.lost
+        assert loc.stats["ambiguous_relocalizations"] >= 3

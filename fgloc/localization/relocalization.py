@@ -115,11 +115,11 @@ class Relocalizer:
         cands = self.candidates(msg)
         if not cands or cands[0][0] < self.cfg.global_min_quality:
             return None
-        if self._ambiguous(cands):
+        if self.ambiguous(cands):
             return None
         return cands[0][1]
 
-    def _ambiguous(self, cands: list[tuple[float, PoseFix]]) -> bool:
+    def ambiguous(self, cands: list[tuple[float, PoseFix]]) -> bool:
         """Another candidate more than 1 m / 20 deg from the best within ``relocalize_ambiguity`` of its
         quality (counted in ``stats['ambiguous_relocalizations']``)."""
         best_q, best = cands[0]

@@ -41,8 +41,9 @@ from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.geometry import compose1
 from fgloc.geometry import exp as se2_exp
+from fgloc.localization.coverage import unmapped_share
 from fgloc.localization.odometry import OdometryTracker, between1
-from fgloc.localization.relocalization import Relocalizer
+from fgloc.localization.relocalization import Relocalizer, close
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
 
@@ -51,6 +52,9 @@ if TYPE_CHECKING:
 
 EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
 COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset filters global candidates
+#: a scan whose beams, cast from the guess, mostly end in the map's unknown space (crossing no mapped
+#: wall) is one the map cannot judge: no fix there is not counted towards being lost (coverage.py)
+UNMAPPED_SHARE = 0.5
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
 
 
@@ -121,6 +125,8 @@ class Localizer:
         self._scan_count = 0
         self._lost = initial_pose is None and not self.odom_mode
         self._t_bad_since: float | None = None  # first informative scan of the current no-fix streak
+        self._dead_reckoned_since: float | None = None  # first scan outside the map since the last used fix
+        self._reacquiring = False  # back on the map after dead reckoning: fixes checked globally
         self._lost_since: float | None = None  # start of the current lost interval
         self._lost_total_s = 0.0
         self._used_fixes = 0  # fixes the back-end accepted while tracking
@@ -252,12 +258,46 @@ class Localizer:
         guess = self.guess(t)
         res = fe.match(msg, guess, odom_delta)
         fix = res.to_fix(t, fe.name)
+        # no fix where the map has nothing (an unmapped wing): dead reckoning, not evidence of being lost
+        unmapped = False
+        if fix is None and not fe.is_particle_filter and self.map is not None:
+            share = unmapped_share(self.map, self.laser_mount, msg, guess)
+            unmapped = share > UNMAPPED_SHARE
+        if unmapped and self._dead_reckoned_since is None:
+            self._dead_reckoned_since = t
+        elif not unmapped and self._dead_reckoned_since is not None and not fe.is_particle_filter and \
+                int(np.count_nonzero(msg.valid_mask())) >= 30:
+            if t - self._dead_reckoned_since >= self.pcfg.lost_after_s:
+                self._reacquiring = True
+                self.stats["reacquisitions"] = self.stats.get("reacquisitions", 0) + 1
+            self._dead_reckoned_since = None
+        res_why = res.why
+        if self._reacquiring and fix is not None and self.reloc is not None:
+            # back where the map speaks after lost_after_s of dead reckoning through space it does not
+            # have: the odometry may have drifted past the front-end's window, whose best match near
+            # the guess is then a wrong place (mit-csail: fixes 1-2.6 m off with centimetre sigmas).
+            # A tracking fix that an unambiguous global candidate beats by relocalize_margin is held
+            # back; one the best candidate agrees with ends the re-acquisition
+            cands = self.reloc.candidates(msg)
+            if cands and cands[0][0] >= self.pcfg.global_min_quality and not self.reloc.ambiguous(cands):
+                best_q, best = cands[0]
+                if close(best.pose, fix.pose, 0.3, math.radians(5.0)):
+                    self._reacquiring = False
+                elif best_q >= fix.quality + self.pcfg.relocalize_margin:
+                    self.stats["held_fixes"] = self.stats.get("held_fixes", 0) + 1
+                    fix = None
+                    res_why = (f"re-acquiring the map after dead reckoning: a place {best_q:.2f} explains the "
+                               "scan better than the tracked one")
         if fix is not None:
             self.fixes.append(fix)
             self.stats["fixes"] += 1
         else:
             self.stats["no_fix"] += 1
-            self.last_reason = res.why
+            self.last_reason = res_why
+            if unmapped:
+                self.stats["unmapped_scans"] = self.stats.get("unmapped_scans", 0) + 1
+                self.last_reason = (f"outside the map: {100 * share:.0f} % of the beams end in unmapped space, "
+                                    f"dead reckoning ({res.why})")
             kind = reason_kind(self.last_reason)
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         used = self.backend.add_keyframe(t, fix)
@@ -270,10 +310,11 @@ class Localizer:
         if fe.is_particle_filter:
             informative = fix is not None
         else:
-            informative = fix is not None or int(np.count_nonzero(msg.valid_mask())) >= 30
+            informative = fix is not None or (int(np.count_nonzero(msg.valid_mask())) >= 30 and not unmapped)
         if used:
             self._bad_streak = 0
             self._t_bad_since = None
+            self._dead_reckoned_since = None
             assert self.reloc is not None
             self.reloc.pending = None
             self._used_fixes += 1
@@ -335,6 +376,7 @@ class Localizer:
 
     def _declare_lost(self, t: float) -> None:
         self._lost = True
+        self._reacquiring = False
         self._global_tries = 0
         self.stats["lost_events"] += 1
         if self._lost_since is None:
@@ -345,6 +387,8 @@ class Localizer:
             self._lost_total_s += max(0.0, t - self._lost_since)
             self._lost_since = None
         self._t_bad_since = None
+        self._dead_reckoned_since = None
+        self._reacquiring = False
         if self.backend.initialized:
             self.backend.reset(t, pose, cov)
         else:

@@ -1,6 +1,6 @@
 """Honest fixes on real maps and in a changed world (issue 13 items 4, 5): one table.
 
-    python tools/eval_frontends_real.py [--logs intel fr079 aces mit-csail] [--scans 1000]
+    python tools/eval_frontends_real.py [--logs intel fr079 aces mit-csail] [--scans 1000] [--start S]
                                         [--cache DIR] [--seeds 0 1] [--skip-sim] [--skip-real]
                                         [--backends smoother ekf]
 
@@ -74,28 +74,34 @@ def slam_of(name: str, cache: Path):
     return recs, mount, slam
 
 
-def segment_and_map(recs, mount, slam, n_scans: int):
-    """The best-covered ``n_scans`` segment of the second half and the map of the keyframes outside it."""
-    from scipy.spatial import cKDTree
+def map_keyframes(recs, slam, s0: int, s1: int) -> np.ndarray:
+    """Which SLAM keyframes the map of segment ``s0..s1`` is built from: those outside its time
+    window (+- ``WINDOW_MARGIN_S``)."""
+    kf_t = np.array([k.stamp for k in slam.keyframes])
+    return np.asarray((kf_t < recs[s0].stamp - WINDOW_MARGIN_S) | (kf_t > recs[s1].stamp + WINDOW_MARGIN_S))
 
+
+def segment_and_map(recs, mount, slam, n_scans: int, start: int | None = None):
+    """The best-covered ``n_scans`` segment (or the one from scan ``start``) and the map of the
+    keyframes outside it."""
+    from fgloc.eval.metrics import within_radius
     from fgloc.mapping.slam import build_occupancy
 
     stamps = np.array([r.stamp for r in recs])
     traj = slam.scan_trajectory
     poses = traj.interpolate(stamps)
-    kf_t = np.array([recs_kf.stamp for recs_kf in slam.keyframes])
     best, best_cov = 0, -1.0
-    for s0 in range(0, max(len(recs) - n_scans, 0) + 1, 100):
+    starts = range(0, max(len(recs) - n_scans, 0) + 1, 100) if start is None else [start]
+    for s0 in starts:
         s1 = min(s0 + n_scans, len(recs)) - 1
-        out = (kf_t < stamps[s0] - WINDOW_MARGIN_S) | (kf_t > stamps[s1] + WINDOW_MARGIN_S)
-        if out.sum() < 10:
+        out = map_keyframes(recs, slam, s0, s1)
+        if out.sum() < 10 and start is None:
             continue
-        tree = cKDTree(slam.keyframe_poses[out, :2])
-        cov = float((tree.query(poses[s0:s1 + 1, :2])[0] < COVER_RADIUS_M).mean())
+        cov = float(within_radius(poses[s0:s1 + 1, :2], slam.keyframe_poses[out, :2], COVER_RADIUS_M).mean())
         if cov >= best_cov - 1e-9:  # ties: the later segment
             best, best_cov = s0, cov
     s0, s1 = best, min(best + n_scans, len(recs)) - 1
-    out = (kf_t < stamps[s0] - WINDOW_MARGIN_S) | (kf_t > stamps[s1] + WINDOW_MARGIN_S)
+    out = map_keyframes(recs, slam, s0, s1)
     sub = replace(slam, keyframes=[k for k, o in zip(slam.keyframes, out, strict=True) if o],
                   keyframe_poses=slam.keyframe_poses[out])
     occ = build_occupancy(sub, recs, mount)
@@ -173,8 +179,9 @@ def nees_of(fixes, ref) -> dict:
 
 
 def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None,
-             gmapping_dir: Path | None = None, overrides: dict | None = None) -> dict:
+             gmapping_dir: Path | None = None, overrides: dict | None = None, start: int | None = None) -> dict:
     from fgloc.config import load_config
+    from fgloc.eval.metrics import split_errors, within_radius
     from fgloc.geometry import wrap_angle
     from fgloc.io import open_log
     from fgloc.localization import Localizer, Session
@@ -182,11 +189,13 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     from fgloc.types import Trajectory
 
     recs, mount, slam = slam_of(name, cache)
-    key = cache / f"{name}_{n_scans}_map.pkl"
+    key = cache / (f"{name}_{n_scans}_map.pkl" if start is None else f"{name}_{n_scans}_from{start}_map.pkl")
+    if start is not None and not 0 <= start < len(recs):
+        raise SystemExit(f"fgloc: error: {LOGS[name]}: --start {start} outside its {len(recs)} scans")
     if key.exists():
         s0, s1, cov, occ = pickle.loads(key.read_bytes())
     else:
-        s0, s1, cov, occ = segment_and_map(recs, mount, slam, n_scans)
+        s0, s1, cov, occ = segment_and_map(recs, mount, slam, n_scans, start)
         key.write_bytes(pickle.dumps((s0, s1, cov, occ)))
     occ.accuracy_m = accuracy  # what the map declares (None: undeclared)
     t0, t1 = recs[s0].stamp, recs[s1].stamp
@@ -205,12 +214,20 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     inside = (est.stamps >= ref.stamps[0]) & (est.stamps <= ref.stamps[-1])
     gt = ref.interpolate(est.stamps[inside])
     e_xy = np.hypot(*(est.poses[inside, :2] - gt[:, :2]).T)
-    e_yaw = np.degrees(wrap_angle(est.poses[inside, 2] - gt[:, 2]))
+    e_yaw_rad = np.asarray(wrap_angle(est.poses[inside, 2] - gt[:, 2]), dtype=float)
+    e_yaw = np.degrees(e_yaw_rad)
+    # mapped / unmapped by the segment's own rule: the SLAM pose within COVER_RADIUS_M of a map keyframe
+    mapped = within_radius(gt[:, :2], slam.keyframe_poses[map_keyframes(recs, slam, s0, s1), :2], COVER_RADIUS_M)
+    split = split_errors(e_xy, e_yaw_rad, mapped)
     res = {"log": name, "backend": backend, "accuracy": "-" if accuracy is None else f"{accuracy:.3f}",
            "seg": f"{s0}-{s1}", "coverage": cov,
            "rmse_m": float(np.sqrt(np.mean(e_xy**2))), "max_m": float(e_xy.max()),
            "rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "fixes": loc.stats["fixes"],
-           "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall}
+           "no_fix": loc.stats["no_fix"], "reloc": loc.stats["relocalizations"], "wall_s": wall,
+           "split": split, "lost_events": int(loc.stats.get("lost_events", 0)),
+           "reacquisitions": int(loc.stats.get("reacquisitions", 0)),
+           "unmapped_scans": int(loc.stats.get("unmapped_scans", 0)),
+           "held_fixes": int(loc.stats.get("held_fixes", 0)), "lost_s": float(loc.stats.get("lost_s", 0.0))}
     res.update(heading_views(est, ref, t0, t1))
     res.update(odometry_timing(msgs, ref, t0, t1))
     res.update(nees_of(loc.fixes, ref))
@@ -336,6 +353,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--logs", nargs="+", default=["intel", "fr079", "aces", "mit-csail"], choices=list(LOGS))
     ap.add_argument("--scans", type=int, default=1000, help="segment length (scans)")
+    ap.add_argument("--start", type=int, default=None,
+                    help="first scan of the segment (default: the best-covered segment, see above)")
     ap.add_argument("--cache", type=Path, default=Path("eval_frontends_real"), help="SLAM results, maps, sims")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="changed-world seeds")
     ap.add_argument("--backends", nargs="+", default=["smoother", "ekf"])
@@ -369,7 +388,8 @@ def main() -> int:
                 for acc_s in args.map_accuracy:
                     acc = (None if acc_s == "none" else 0.025 if acc_s == "half-cell"
                            else measured_accuracy(name, args.cache) if acc_s == "measured" else float(acc_s))
-                    rows.append(run_real(name, args.cache, args.scans, be, acc, args.gmapping_dir, overrides))
+                    rows.append(run_real(name, args.cache, args.scans, be, acc, args.gmapping_dir, overrides,
+                                         args.start))
                     print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
     if not args.skip_sim:
         for seed in args.seeds:
@@ -397,6 +417,22 @@ def main() -> int:
             print(f"| {r['log']} | {r.get('accuracy', '-')} | {r['rmse_deg']:.3f} | {r['yaw_mean_deg']:+.3f} "
                   f"| {r['rmse_deg_aligned']:.3f} | {r['yaw_median_abs_deg']:.3f} | {r['yaw_rmse_98_deg']:.3f} "
                   f"| {r['rel_rot_rms_deg']:.3f} (n={r['rel_n']}) |")
+    if any("split" in r for r in rows):
+        print(f"\n| run | map accuracy_m | mapped poses (SLAM pose within {COVER_RADIUS_M:g} m of a map keyframe): "
+              "n / pos RMSE m / max m / heading RMSE deg | unmapped poses: n / pos RMSE m / max m / heading RMSE deg "
+              "| lost events / lost s | re-acquisitions / held fixes | unmapped (dead-reckoned) scans |")
+        print("|---|--:|--:|--:|--:|--:|--:|")
+        for r in rows:
+            if "split" not in r:
+                continue
+            cells = []
+            for part in ("in", "out"):
+                p = r["split"][part]
+                cells.append(f"{int(p['n'])} / {p['rmse_m']:.4f} / {p['max_m']:.3f} / {p['rmse_deg']:.3f}"
+                             if p["n"] else "0 / - / - / -")
+            print(f"| {r['log']} | {r.get('accuracy', '-')} | {cells[0]} | {cells[1]} "
+                  f"| {r['lost_events']} / {r['lost_s']:.1f} | {r['reacquisitions']} / {r['held_fixes']} "
+                  f"| {r['unmapped_scans']} |")
     timing = {r["log"]: r for r in rows if "odo_shift_s" in r}
     for name, r in timing.items():
         print(f"\n{name}: odometry yaw change over scan pairs 0.5 s apart vs SLAM: {r['odo_rms0_deg']:.2f} deg RMS "

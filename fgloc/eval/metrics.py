@@ -416,3 +416,32 @@ def evaluate(
         rpe_time_rot_mean_deg=_mean(tr_deg),
         rpe_time_rot_max_deg=_max(tr_deg),
     )
+
+
+# --------------------------------------------------------------------------- coverage split
+def within_radius(points_xy: FloatArray, anchors_xy: FloatArray, radius_m: float) -> NDArray[np.bool_]:
+    """For each of ``points_xy`` (N x 2, m), whether an anchor of ``anchors_xy`` (M x 2, m) lies within
+    ``radius_m``: e.g. a reference pose "mapped" when a keyframe the map was built from is that close.
+    All False without anchors."""
+    pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    anc = np.asarray(anchors_xy, dtype=float).reshape(-1, 2)
+    if len(anc) == 0 or len(pts) == 0:
+        return np.zeros(len(pts), dtype=bool)
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(anc).query(pts)
+    return np.asarray(d < radius_m, dtype=bool)
+
+
+def split_errors(err_xy_m: FloatArray, err_yaw_rad: FloatArray, mask: NDArray[np.bool_]) -> dict[str, dict[str, float]]:
+    """Position / heading RMSE and max position error over the poses ``mask`` selects ("in") and the
+    rest ("out"): ``{"in": {"n", "rmse_m", "max_m", "rmse_deg"}, "out": {...}}``, NaN for an empty
+    part.  ``err_xy_m``: position error norms (m); ``err_yaw_rad``: wrapped heading errors (rad)."""
+    e = np.asarray(err_xy_m, dtype=float)
+    y = np.asarray(err_yaw_rad, dtype=float)
+    m = np.asarray(mask, dtype=bool)
+    out: dict[str, dict[str, float]] = {}
+    for part, sel in (("in", m), ("out", ~m)):
+        out[part] = {"n": float(np.count_nonzero(sel)), "rmse_m": _rms(e[sel]), "max_m": _max(e[sel]),
+                     "rmse_deg": math.degrees(_rms(y[sel])) if np.any(sel) else float("nan")}
+    return out

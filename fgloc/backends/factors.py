@@ -61,20 +61,31 @@ def upper6(c: FloatArray) -> tuple[float, float, float, float, float, float]:
 
 def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
                           cs: Sequence[tuple[float, float, float, float, float, float]], lo: int, hi: int,
-                          t0: float, t1: float, q_slip: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+                          t0: float, t1: float, q_slip: FloatArray | None = None,
+                          mark: list[float] | None = None) -> tuple[FloatArray, FloatArray]:
     """:func:`integrate_twist` over the samples ``lo:hi`` of plain lists (stamps, ``(vx, vy, w)``
     twists, :func:`upper6` covariances): the same arithmetic, without numpy's per-element
-    overhead (the smoother integrates its odometry several times per keyframe)."""
+    overhead (the smoother integrates its odometry several times per keyframe).
+
+    ``mark``: a list that receives the integration's state after its last step that ended on a
+    sample's stamp (``[t, x, y, yaw, p00, p01, p02, p11, p12, p22]``: those steps depend on no
+    later sample), and from which a later call with the same ``t0`` (the caller keeps one mark per
+    ``t0``) and samples only appended since resumes when it is at or before ``t1``: the same steps,
+    the same numbers, without integrating the prefix again."""
     if t1 <= t0 or hi <= lo:
         return np.zeros(3), np.zeros((3, 3))
     qx, qy, qt = (0.0, 0.0, 0.0) if q_slip is None else (float(q_slip[0]), float(q_slip[1]), float(q_slip[2]))
-    # index of the first sample with stamp > t0 (its twist covers t0)
-    i = bisect_right(ts, t0, lo, hi)
+    if mark and mark[0] <= t1:
+        t, x, y, th, p00, p01, p02, p11, p12, p22 = mark
+        i = bisect_right(ts, t, lo, hi)   # the sample after the one the mark ended on
+    else:
+        # index of the first sample with stamp > t0 (its twist covers t0)
+        i = bisect_right(ts, t0, lo, hi)
+        t = t0
+        x = y = th = 0.0
+        # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
+        p00 = p01 = p02 = p11 = p12 = p22 = 0.0
     last = hi - 1
-    t = t0
-    x = y = th = 0.0
-    # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
-    p00 = p01 = p02 = p11 = p12 = p22 = 0.0
     while t < t1 - 1e-12:
         j = min(i, last)
         t_next = min(ts[i], t1) if i < hi else t1
@@ -108,6 +119,8 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
             p22 = p22 + c22 * dt2 + qt * dt
             ct, st = math.cos(th), math.sin(th)
             x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
+        if mark is not None and i < hi and ts[i] <= t1:   # this step ended on sample i's stamp
+            mark[:] = [t_next, x, y, th, p00, p01, p02, p11, p12, p22]
         t = t_next
         i += 1
     cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])

@@ -343,6 +343,7 @@ class SlidingWindowSmoother(Backend):
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
         self._pred_cache: tuple | None = None
+        self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
         for ch in self.chains.values():  # calibration carries over a re-initialization as a prior
             if ch.key is not None and ch.estimate is not None:
@@ -769,7 +770,14 @@ class SlidingWindowSmoother(Backend):
         # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
         i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
         i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
-        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip)
+        # the predictions integrate from the newest keyframe again and again (~4 times per keyframe,
+        # to later and later stamps): each resumes from the last one's completed steps
+        mark = self._int_marks.get(t0)
+        if mark is None:
+            if len(self._int_marks) >= 4:
+                del self._int_marks[next(iter(self._int_marks))]
+            mark = self._int_marks[t0] = []
+        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
 
     def _chord_along_gyro(self, t0: float, t1: float) -> FloatArray | None:
         """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's

@@ -7,7 +7,7 @@
 Real logs (``../shared/data/radish``): the whole log is mapped once by ``fgloc.mapping`` (GraphSlam;
 cached under ``--cache``), which gives every scan a SLAM pose in one map frame.  A segment of
 ``--scans`` scans is chosen where the robot revisits places (the most scans within 2 m of a keyframe
-outside the segment's time window; ties: the later segment);
+outside the segment's time window; ties: the later segment; ``--start S``: the one from scan S);
 the map it is localized on is built from the SLAM keyframes *outside* the segment's time window
 (+-30 s), in the same frame: a different pass through the building, no frame hand-over.  Then
 ``Localizer`` (default config, raw CARMEN odometry, from the SLAM pose at the segment's first scan)
@@ -17,6 +17,10 @@ runs over the segment's odometry and scans in time order, and the table gives
 * the front-end fixes' NEES vs SLAM: mean of ``e^T P^-1 e`` over (x, y, yaw) (dimension 3 when the
   covariance is honest), its median, and the per-axis means ``e_i^2 / P_ii`` (1 each),
 * fixes / no-fix counts,
+* the same RMSE over the segment's mapped part (the SLAM pose within ``COVER_RADIUS_M`` of a map
+  keyframe: the rule that chose the segment) and its unmapped part, and the localizer's lost events
+  (and seconds lost), re-acquisitions after dead reckoning, fixes held back then, and dead-reckoned
+  (unmapped) scans,
 
 each with the map's accuracy as ``--map-accuracy`` says (the native matcher's registration floor,
 see ``fgloc.frontends.native``): ``none`` undeclared (no floor),
@@ -191,7 +195,8 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     recs, mount, slam = slam_of(name, cache)
     key = cache / (f"{name}_{n_scans}_map.pkl" if start is None else f"{name}_{n_scans}_from{start}_map.pkl")
     if start is not None and not 0 <= start < len(recs):
-        raise SystemExit(f"fgloc: error: {LOGS[name]}: --start {start} outside its {len(recs)} scans")
+        print(f"fgloc: error: {LOGS[name]}: --start {start} outside its {len(recs)} scans", file=sys.stderr)
+        raise SystemExit(2)
     if key.exists():
         s0, s1, cov, occ = pickle.loads(key.read_bytes())
     else:

@@ -244,6 +244,10 @@ class SmootherConfig:
     odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1 (a skid steer "
                                           "reports 1.4-7 times the turn)", gt=0)
     odom_scale_rw: float = setting(0.003, "random walk of the scales (per sqrt(s))", gt=0)
+    slow_odom_timing: bool = setting(
+        False, "an odometry slower than ~17 Hz carries its timing in the keyframe factor's yaw, (period * w)^2 "
+        "at each end: better heading in turns on a fully mapped route (CARMEN fr079 / intel), but off by "
+        "default: through unmapped space it let the dead-reckoned heading drift further (mit-csail)")
     adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other "
                                 "(wheel, gyro, heading, fixes)")
     latency: bool = setting(True, "estimate the scan stamps' latency (a fix is the pose that long before its "
@@ -1087,7 +1091,7 @@ class SlidingWindowSmoother(Backend):
         odometry (CARMEN: 80-120 ms on fr079 / aces, intel's bursts) gave two consecutive increments
         +-5-13 deg off in turns where they claimed 0.3-1.4 deg, and they outvoted the keyframe's fix."""
         n = min(len(self.odo_t), TIMING_MESSAGES)
-        if n < 3:
+        if not self.cfg.slow_odom_timing or n < 3:
             return 0.0
         per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
         if not per > MAX_REF_PERIOD_S:

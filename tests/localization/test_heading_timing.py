@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fgloc.backends.smoother import SlidingWindowSmoother
+from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
 from fgloc.geometry import exp as se2_exp
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import wrap_scalar
@@ -22,11 +22,11 @@ def _pose(t: float) -> np.ndarray:
     return se2_exp(np.array([SPEED_MPS, 0.0, TURN_RADPS]) * t)
 
 
-def _keyframe_heading(odom_period_s: float) -> tuple[float, float, float]:
+def _keyframe_heading(odom_period_s: float, timing: bool = True) -> tuple[float, float, float]:
     """Smoothed heading at the skewed scan's keyframe (rad), its fix's heading and the odometry's
     (the true pose at the stamp); odometry exact, pose-derived (the twist over each period, the
     localizer's pose-delta noise), the other fixes exact with a 1 deg claim."""
-    sm = SlidingWindowSmoother()
+    sm = SlidingWindowSmoother(SmootherConfig(slow_odom_timing=timing))
     sm.initialize(0.0, _pose(0.0), np.eye(3) * 1e-6)
     t_fix = np.arange(FIX_PERIOD_S, 11.0, FIX_PERIOD_S)
     k_bad = len(t_fix) // 2
@@ -63,3 +63,11 @@ def test_fast_odometry_keeps_its_heading_weight():
     est, fix, odo = _keyframe_heading(0.02)
     assert abs(np.degrees(wrap_scalar(est - odo))) < 1.0
     assert abs(np.degrees(wrap_scalar(est - fix))) > 3.0
+
+
+def test_slow_odometry_timing_is_opt_in():
+    # off by default (it let mit-csail's dead-reckoned heading drift further through unmapped wings):
+    # the two odometry increments around the skewed scan keep their claim and outvote its fix
+    est, fix, odo = _keyframe_heading(0.12, timing=False)
+    assert abs(np.degrees(wrap_scalar(est - fix))) > 2.0
+    assert SmootherConfig().slow_odom_timing is False

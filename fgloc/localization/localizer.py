@@ -130,6 +130,9 @@ class Localizer:
         self._lost_since: float | None = None  # start of the current lost interval
         self._lost_total_s = 0.0
         self._used_fixes = 0  # fixes the back-end accepted while tracking
+        # a fix accepted since the pose was last (re)started: only a pose the map has confirmed may
+        # dead-reckon through space the map does not have (a wrong map or initial pose is lost)
+        self._pose_confirmed = False
         self._last_scan_t: float | None = None
         self.stats["lost_events"] = 0
         if self._lost and self.frontend is not None and self.frontend.supports_global:
@@ -260,7 +263,7 @@ class Localizer:
         fix = res.to_fix(t, fe.name)
         # no fix where the map has nothing (an unmapped wing): dead reckoning, not evidence of being lost
         unmapped = False
-        if fix is None and not fe.is_particle_filter and self.map is not None:
+        if fix is None and self._pose_confirmed and not fe.is_particle_filter and self.map is not None:
             share = unmapped_share(self.map, self.laser_mount, msg, guess)
             unmapped = share > UNMAPPED_SHARE
         if unmapped and self._dead_reckoned_since is None:
@@ -318,6 +321,7 @@ class Localizer:
             assert self.reloc is not None
             self.reloc.pending = None
             self._used_fixes += 1
+            self._pose_confirmed = True
             self.reloc.trust_compass = self._used_fixes >= COMPASS_TRUST_FIXES
         elif informative:
             self._bad_streak += 1
@@ -389,6 +393,7 @@ class Localizer:
         self._t_bad_since = None
         self._dead_reckoned_since = None
         self._reacquiring = False
+        self._pose_confirmed = False
         if self.backend.initialized:
             self.backend.reset(t, pose, cov)
         else:

@@ -120,11 +120,8 @@ class EKFBackend(Backend):
         return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
 
     def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
-        if not self.cfg.adapt_noise:
-            return
-        if name not in self.arb.streams:
-            self.arb.add_source(name, kind, rel_prior)
-        self.arb.add(name, t, value, var)
+        if self.cfg.adapt_noise:
+            self.arb.add_reading(name, kind, rel_prior, t, value, var)
 
     @property
     def initialized(self) -> bool:

@@ -107,6 +107,11 @@ class Arbiter:
             self.streams[name] = _Stream(kind, deque(maxlen=self.history), deque(maxlen=self.history),
                                          deque(maxlen=self.history), rel_prior=float(rel_prior))
 
+    def add_reading(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
+        """A sample of source ``name``, registered (:meth:`add_source`) at its first one."""
+        self.add_source(name, kind, rel_prior)
+        self.add(name, t, value, var)
+
     def add(self, name: str, t: float, value: float, var: float) -> None:
         """A sample: a rate (rate sources) or an absolute value (absolute / angle sources)."""
         s = self.streams.get(name)

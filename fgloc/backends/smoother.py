@@ -417,11 +417,8 @@ class SlidingWindowSmoother(Backend):
 
     def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
         """One reading of source ``name`` for the arbiter (registered at its first), when noise is adapted."""
-        if not self.cfg.adapt_noise:
-            return
-        if name not in self.arb.streams:
-            self.arb.add_source(name, kind, rel_prior)
-        self.arb.add(name, t, value, var)
+        if self.cfg.adapt_noise:
+            self.arb.add_reading(name, kind, rel_prior, t, value, var)
 
     def _source(self, name: str, kind: str) -> SourceHealth:
         h = self.sources.get(name)

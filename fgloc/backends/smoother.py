@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import gtsam
@@ -1131,30 +1132,35 @@ class SlidingWindowSmoother(Backend):
         self._recent_fixes.append(self._last_fix)
         return fix_factor(k, pose, cov, self.cfg.fix_kernel, self.cfg.fix_kernel_k)
 
+    def _covered_intervals(self, t_now: float, done: float,
+                           last_t: float) -> Iterator[tuple[float, float, int, int]]:
+        """The keyframe intervals ``(ta, tb, ka, kb)`` a source's readings up to ``last_t`` now cover and
+        that have no factor of it yet: starting at a keyframe >= ``done`` (the end of its last interval)
+        and inside the window (never on a keyframe about to be marginalized)."""
+        horizon = t_now - self.cfg.lag_s + 0.25
+        i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
+        while i < len(self.kf_t):
+            ta, tb = self.kf_t[i - 1], self.kf_t[i]
+            if tb > last_t + 1e-9:
+                return
+            ka, kb = self.kf_key[i - 1], self.kf_key[i]
+            i += 1
+            if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
+                continue
+            yield ta, tb, ka, kb
+
     def _add_gyro_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
                           ts: dict) -> None:
         """Gyro yaw-increment factors for every keyframe interval the gyro now covers (a bursty
         IMU's readings arrive after the keyframe: its factors follow at the next one)."""
         if not self.cfg.gyro:
             return
-        horizon = t_now - self.cfg.lag_s + 0.25  # never on a keyframe about to be marginalized
         for name, (gts, _, _) in self.gyro.items():
             if not gts:
                 continue
-            done = self._gyro_done.get(name, -np.inf)
-            i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
-            # the first interval must start at a keyframe >= done and inside the window
-            while i < len(self.kf_t):
-                ta, tb = self.kf_t[i - 1], self.kf_t[i]
-                if tb > gts[-1] + 1e-9:
-                    break
-                ka, kb = self.kf_key[i - 1], self.kf_key[i]
-                if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
-                    i += 1
-                    continue
+            for ta, tb, ka, kb in self._covered_intervals(t_now, self._gyro_done.get(name, -np.inf), gts[-1]):
                 r = self._gyro_increment(name, ta, tb)
                 self._gyro_done[name] = tb
-                i += 1
                 if r is None:
                     continue
                 k_g, rel = self._noise_of(name)
@@ -1287,20 +1293,10 @@ class SlidingWindowSmoother(Backend):
                               ts: dict) -> None:
         """A between factor per further twist source for every keyframe interval it now covers
         (its messages may arrive after the keyframe: its factors follow at the next one)."""
-        horizon = t_now - self.cfg.lag_s + 0.25  # never on a keyframe about to be marginalized
         for name, (vts, _, _) in self.vel.items():
             if len(vts) < 2:
                 continue
-            done = self._vel_done.get(name, -np.inf)
-            i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
-            while i < len(self.kf_t):
-                ta, tb = self.kf_t[i - 1], self.kf_t[i]
-                if tb > vts[-1] + 1e-9:
-                    break
-                ka, kb = self.kf_key[i - 1], self.kf_key[i]
-                i += 1
-                if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
-                    continue
+            for ta, tb, ka, kb in self._covered_intervals(t_now, self._vel_done.get(name, -np.inf), vts[-1]):
                 self._vel_done[name] = tb
                 f = self._velocity_factor(name, ka, kb, ta, tb, graph, vals, ts)
                 if f is None:

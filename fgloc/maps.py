@@ -84,7 +84,11 @@ class OccupancyMap:
     @property
     def occupied(self) -> NDArray[np.bool_]:
         """Boolean grid: cell is an obstacle (value > 50 in scale mode, == 100 in trinary)."""
-        return self.data >= 50 if self.mode != "trinary" else self.data == OCCUPIED
+        return self.occupied_mask(self.data)
+
+    def occupied_mask(self, cells: NDArray) -> NDArray[np.bool_]:
+        """Which of ``cells`` (values of this map's ``data``, e.g. some cells of it) are obstacles."""
+        return cells >= 50 if self.mode != "trinary" else cells == OCCUPIED
 
     @property
     def free(self) -> NDArray[np.bool_]:

@@ -47,17 +47,9 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     c, s = math.cos(yaw), math.sin(yaw)
     qx = ox + c * pts[:, 0] - s * pts[:, 1]
     qy = oy + s * pts[:, 0] + c * pts[:, 1]
-    # map frame -> continuous grid coordinates (col, row), as OccupancyMap.world_to_grid_continuous
-    co, so = math.cos(float(occ_map.origin[2])), math.sin(float(occ_map.origin[2]))
-    res = float(occ_map.resolution)
-
-    def grid(x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        dx = np.asarray(x) - float(occ_map.origin[0])
-        dy = np.asarray(y) - float(occ_map.origin[1])
-        return (co * dx + so * dy) / res, (-so * dx + co * dy) / res
-
     h, w = occ_map.data.shape
-    u1, v1 = grid(qx, qy)
+    g = occ_map.world_to_grid_continuous(np.column_stack([qx, qy]))  # (col, row)
+    u1, v1 = g[:, 0], g[:, 1]
     i1, j1 = np.floor(v1).astype(np.int64), np.floor(u1).astype(np.int64)
     on = (i1 >= 0) & (i1 < h) & (j1 >= 0) & (j1 < w)
     end_unknown = ~on
@@ -65,7 +57,7 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     k = np.nonzero(end_unknown)[0]
     if len(k) == 0:
         return 0.0
-    u0, v0 = grid(ox, oy)
+    u0, v0 = occ_map.world_to_grid_continuous([[ox, oy]])[0]
     du, dv = u1[k] - u0, v1[k] - v0
     steps = int(math.ceil(float(np.max(np.maximum(np.abs(du), np.abs(dv)))) / MARCH_STEP_CELLS)) + 1
     f = np.linspace(0.0, 1.0, steps)[None, :]
@@ -73,19 +65,9 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     jj = np.floor(u0 + f * du[:, None]).astype(np.int64)
     inside = (ii >= 0) & (ii < h) & (jj >= 0) & (jj < w)
     crossed = np.zeros(ii.shape, dtype=bool)
-    crossed[inside] = _occupied_cells(occ_map, ii[inside], jj[inside])
+    crossed[inside] = occ_map.occupied_mask(occ_map.data[ii[inside], jj[inside]])
     clear = ~crossed.any(axis=1)
     return float(np.count_nonzero(clear)) / n
-
-
-def _occupied_cells(occ_map: OccupancyMap, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
-    """Whether cells ``(ii, jj)`` are occupied (``OccupancyMap.occupied`` for these cells only)."""
-    vals = occ_map.data[ii, jj]
-    if occ_map.mode == "trinary":
-        from fgloc.maps import OCCUPIED
-
-        return np.asarray(vals == OCCUPIED)
-    return np.asarray(vals >= 50)
 
 
 __all__ = ["MARCH_STEP_CELLS", "unmapped_share"]

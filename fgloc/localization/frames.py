@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from fgloc.backends.imu import quaternion_matrix, rpy_quaternion
 from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
+from fgloc.geometry import quaternion_matrix, rpy_quaternion
 from fgloc.types import StaticTransform, Transform3D
 
 ROBOT_FRAMES = ("base_link", "base_footprint")

@@ -51,10 +51,10 @@ from typing import Any
 import numpy as np
 
 from fgloc.backends.health import SourceHealth
-from fgloc.backends.imu import imu_in_base, matrix_quaternion, mount_rotation
+from fgloc.backends.imu import imu_in_base, mount_rotation
 from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
-from fgloc.geometry import between, rotate_covariance, wrap_angle, wrap_scalar
+from fgloc.geometry import between, matrix_quaternion, rotate_covariance, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.localization.frames import ROBOT_FRAMES, parse_static_transforms, transform_of
 from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform

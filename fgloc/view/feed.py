@@ -84,8 +84,9 @@ class ViewSink(Protocol):
 
     def close(self) -> None: ...
 
-    # optional: ``wants_scan() -> bool``: False to skip this scan (a display thinned to its
-    # frame rate); the feed then does not even build it, and sends the last skipped one at close
+    # optional: ``wants_scan(status) -> bool`` (``status``: the scan's ACCEPTED / PREDICTED / ...):
+    # False to skip this scan (a display thinned to its frame rate); the feed then does not even
+    # build it, and sends the last skipped one at close
 
 
 class TrajectoryDecimator:
@@ -307,7 +308,7 @@ class ViewFeed:
         self._skipped_last = []
         for s in self.sinks:
             wants = getattr(s, "wants_scan", None)
-            (wanting if wants is None or wants() else self._skipped_last).append(s)
+            (wanting if wants is None or wants(status) else self._skipped_last).append(s)
         self._last_view = (scan, status, reason, fix, fused)
         if wanting:
             view = self._view(*self._last_view)

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.errors import ConfigError, FglocError
-from fgloc.view.feed import ScanView
+from fgloc.view.feed import PREDICTED, ScanView
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
@@ -112,6 +112,7 @@ class FoxgloveServerSink:
         self._closed = False
         self._min_period_s = 1.0 / max_rate_hz if max_rate_hz > 0 else 0.0
         self._last_scan_t = -math.inf
+        self._last_matched_t = -math.inf
         self._scan_sent = False
         self._out_buf = b""
         cmd = [sys.executable, "-m", "fgloc.view.serve", "--host", host, "--port", str(int(port)),
@@ -209,11 +210,23 @@ class FoxgloveServerSink:
             del self._pending[:n]
 
     # ------------------------------------------------------------------ ViewSink (localizer thread)
-    def wants_scan(self) -> bool:
+    def wants_scan(self, status: str = "") -> bool:
         """At most ``max_rate_hz`` scans a second (wall clock) reach the viewer: a replay as fast as
-        possible would otherwise spend the localizer's time on frames nobody can see."""
+        possible would otherwise spend the localizer's time on frames nobody can see.
+
+        A scan the front-end matched (any ``status`` but ``predicted``) is due on its own clock; an
+        unmatched (predicted) one only when no scan at all was sent for a period.  A count-based
+        thinning would alias with ``frontend_every``: at twice the rate with every other scan
+        matched, the viewer would see only predictions and never a fix."""
         now = time.monotonic()
-        self._scan_sent = now - self._last_scan_t >= self._min_period_s and not self._closed
+        if self._closed:
+            self._scan_sent = False
+        elif status == PREDICTED:
+            self._scan_sent = now - max(self._last_scan_t, self._last_matched_t) >= self._min_period_s
+        else:
+            self._scan_sent = now - self._last_matched_t >= self._min_period_s
+            if self._scan_sent:
+                self._last_matched_t = now
         if self._scan_sent:
             self._last_scan_t = now
         else:

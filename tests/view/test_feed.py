@@ -126,7 +126,7 @@ def test_amcl_particles_reach_the_view(short_sim):
 
 def test_a_thinned_sink_gets_the_last_scan_at_close(short_sim):
     class Thinned(Collect):
-        def wants_scan(self):
+        def wants_scan(self, status):
             return False
 
     loc = Localizer(short_sim.map, short_sim.laser_mount, backend="smoother", frontend="native",

@@ -129,3 +129,34 @@ def test_a_stalled_viewer_loses_messages_counted_and_never_blocks():
     assert st["queued"] + st["dropped"] == n
     assert st["client_outbox_full"] + st["dropped"] >= 1, st
     assert close_s < 15
+
+
+def test_thinning_never_starves_the_fixes(monkeypatch):
+    """Scans at 40 Hz (wall clock), every other one matched, thinned to 30 Hz: a count-based
+    thinning kept only the predicted ones (the view then never showed a fix); now every
+    matched scan is sent and the predicted ones fill in only when no scan was sent for a period."""
+    import types
+
+    import fgloc.view.server as server_mod
+    from fgloc.view.feed import ACCEPTED
+
+    sink = FoxgloveServerSink("127.0.0.1", 0, max_rate_hz=30.0)
+    try:
+        clock = [100.0]
+        monkeypatch.setattr(server_mod, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+        sent = {ACCEPTED: 0, PREDICTED: 0}
+        for i in range(200):
+            status = PREDICTED if i % 2 == 0 else ACCEPTED
+            clock[0] += 0.025
+            sent[status] += bool(sink.wants_scan(status))
+        assert sent[ACCEPTED] == 100  # matched scans come at 20 Hz < 30 Hz: all of them
+        assert sent[PREDICTED] <= 1
+        # predicted only (frontend_every never matches in a gap): thinned to 30 Hz
+        n = 0
+        for _ in range(400):
+            clock[0] += 0.01
+            n += bool(sink.wants_scan(PREDICTED))
+        assert 100 <= n <= 134  # 4 s of 100 Hz at <= 30 Hz (every 4th at 10 ms steps: 100)
+    finally:
+        monkeypatch.undo()
+        sink.close()

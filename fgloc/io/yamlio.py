@@ -15,9 +15,12 @@ def yaml_ready(obj: Any, leaf: Callable[[Any], Any] | None = None) -> Any:
 
     ``leaf``: instead, each value that is not a dict, list, tuple or array goes through
     ``leaf`` (an array's items too), e.g. :func:`fgloc.view.feed.json_ready`'s rules."""
+    t = type(obj)
+    if t is int or t is str or t is float or t is bool or obj is None:  # most values: plain already
+        return obj if leaf is None else leaf(obj)
     if isinstance(obj, dict):
         return {str(k): yaml_ready(v, leaf) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
+    if isinstance(obj, _SEQUENCES):
         return [yaml_ready(v, leaf) for v in obj]
     if isinstance(obj, np.ndarray):
         return obj.tolist() if leaf is None else yaml_ready(obj.tolist(), leaf)
@@ -26,6 +29,9 @@ def yaml_ready(obj: Any, leaf: Callable[[Any], Any] | None = None) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+_SEQUENCES = (list, tuple)
 
 
 def write_yaml(path: str | Path, obj: Any) -> Path:

@@ -414,6 +414,11 @@ def json_ready(v: Any) -> Any:
 
 
 def _json_value(v: Any) -> Any:
+    t = type(v)
+    if t is int or t is str or t is bool or v is None:  # the common cases first, by exact type
+        return v
+    if t is float:
+        return v if math.isfinite(v) else None
     if isinstance(v, bool | np.bool_):
         return bool(v)
     if isinstance(v, int | np.integer):

@@ -53,51 +53,70 @@ def stalled_server():
     client.close()
 
 
+class _TimedFeed:
+    """The view's whole share of the localizer's thread: every call the session makes into the
+    ViewFeed (building snapshots, the server sink's pickling and non-blocking writes), timed in
+    that thread's CPU clock."""
+
+    def __init__(self, feed: ViewFeed) -> None:
+        self.feed = feed
+        self.cpu_s = 0.0
+        self.wants_fused = getattr(feed, "wants_fused", True)
+        self.wants_messages = getattr(feed, "wants_messages", True)
+
+    def _timed(self, name: str, *args):
+        t0 = time.thread_time()
+        try:
+            return getattr(self.feed, name)(*args)
+        finally:
+            self.cpu_s += time.thread_time() - t0
+
+    def on_message(self, *args):
+        return self._timed("on_message", *args)
+
+    def on_scan(self, *args):
+        return self._timed("on_scan", *args)
+
+    def close(self):
+        return self._timed("close")
+
+
 def _localize(sim, server: FoxgloveServerSink | None):
+    """(thread CPU of the whole run, thread CPU inside the view's calls, final, online)."""
     loc = Localizer(sim.map, sim.laser_mount, backend="smoother", frontend="native",
                     initial_pose=sim.ground_truth.poses[0])
     # a sink in both runs, so the fused pose is computed in both
-    sink = BaseSink() if server is None else ViewFeed(loc, [_Shared(server)])
+    sink = BaseSink() if server is None else _TimedFeed(ViewFeed(loc, [_Shared(server)]))
     session = Session(loc, sinks=[sink])
     t0 = time.thread_time()
     final = session.run(sim.messages)
-    return time.thread_time() - t0, final, loc.online_trajectory()
+    return time.thread_time() - t0, getattr(sink, "cpu_s", 0.0), final, loc.online_trajectory()
 
 
 def test_a_stalled_viewer_changes_neither_the_poses_nor_the_time(timing_sim, stalled_server):
-    """Interleaved runs without a view and with one whose viewer subscribed to every channel
-    and never reads; identical trajectories; the localizer's own CPU time (its thread's) within
-    10 % (the issue's bound; medians of interleaved repeats, once extended if noisy).
+    """Runs without a view and with one whose viewer subscribed to every channel and never reads:
+    identical trajectories, and the view's share of the localizer thread's CPU time under 10 %
+    (the issue's bound on the slow-down).
 
-    CPU time of the localizer's thread, not wall time: the server runs in its own process, and
-    on a 2-core machine shared with other jobs its encoding competes for the cores, so wall-time
-    ratios of these 0.4 s runs swung 1.02-1.22x between identical repeats while the view's work in
-    the localizer's thread measured ~3 % (cProfile). What the view must not do is make the
-    localizer itself work or wait longer, and a blocked publish would show up here too."""
-    walls: dict[bool, list[float]] = {False: [], True: []}
-
-    def pairs(n: int) -> None:
-        for _ in range(n):
-            for view in (False, True):
-                wall, final, online = _localize(timing_sim, stalled_server if view else None)
-                walls[view].append(wall)
-                if view:
-                    assert np.array_equal(final.stamps, ref[0].stamps) and np.array_equal(final.poses, ref[0].poses)
-                    assert np.array_equal(online.poses, ref[1].poses)
-
-    _, f0, o0 = _localize(timing_sim, None)  # warm-up (JIT, caches) and the reference
-    ref = (f0, o0)
-    pairs(PAIRS)
-    ratio = statistics.median(walls[True]) / statistics.median(walls[False])
-    if ratio > 1.10:  # a busy machine: measure as much again before judging
-        pairs(PAIRS)
-        ratio = statistics.median(walls[True]) / statistics.median(walls[False])
-    print(f"view / no view localizer CPU: {ratio:.3f} (no view {sorted(walls[False])}, view {sorted(walls[True])})")
+    The share is measured inside each run (the CPU spent in the session's calls into the view,
+    over the run's), not as a ratio of two runs' times: on a 2-core machine shared with other
+    jobs, whole-run times of these 0.4 s runs swung 1.02-1.22x between identical repeats, and
+    that comparison failed under load with nothing wrong.  A blocked or busy publish would be
+    inside the timed calls; the server and its encoding run in their own process."""
+    _, _, f0, o0 = _localize(timing_sim, None)  # warm-up (JIT, caches) and the reference
+    shares = []
+    for _ in range(PAIRS):
+        total, view_cpu, final, online = _localize(timing_sim, stalled_server)
+        assert np.array_equal(final.stamps, f0.stamps) and np.array_equal(final.poses, f0.poses)
+        assert np.array_equal(online.poses, o0.poses)
+        shares.append(view_cpu / total)
+    share = statistics.median(shares)
+    print(f"view share of the localizer thread's CPU: {share:.3f} (runs {sorted(round(x, 3) for x in shares)})")
     stalled_server.poll()
     st = stalled_server.stats
     assert st["subscriptions"] == len(CHANNELS)  # the viewer asked for everything ...
     assert st["queued"] > 0  # ... and was sent it, it just never read
-    assert ratio <= 1.10, f"view slowed the localizer: median CPU {ratio:.3f}x ({walls})"
+    assert 0.0 < share <= 0.10, f"the view took {share:.1%} of the localizer's CPU ({shares})"
 
 
 def _fat_scan(t: float, n: int = 20000) -> LaserScan:

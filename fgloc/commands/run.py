@@ -40,59 +40,76 @@ def _announce(line: str) -> None:
     print(f"fgloc: {line}", file=sys.stderr, flush=True)
 
 
-def _print_run_summary(r: RunResult) -> None:
-    from rich.console import Console
+def _styled(text: str, sgr: str, tty: bool) -> str:
+    """``text`` in an ANSI style (``sgr``: "1" bold, "1;31" bold red, "33" yellow) on a terminal."""
+    return f"\033[{sgr}m{text}\033[0m" if tty else text
 
-    con = Console()
+
+def _aligned(header: list[str], body: list[list[str]]) -> list[str]:
+    """A table as aligned plain lines: the first two columns (metric, unit) left, the values right."""
+    widths = [max(len(c[i]) for c in [header, *body]) for i in range(len(header))]
+    return ["    " + "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in
+                              enumerate(zip(cells, widths, strict=True))).rstrip() for cells in [header, *body]]
+
+
+def _print_run_summary(r: RunResult) -> None:
+    """The run's summary on stdout, plain lines (bold / colour on a terminal only).
+
+    Plain ``print``: rich's console cost every run ~0.03 s of CPU to import and lay out a few
+    lines (and wrapped them at 80 columns in a pipe); the comparison table is
+    the cells of :func:`fgloc.eval.paper.comparison_cells`, as ``fgloc bench paper`` prints them."""
+    import sys
+
+    tty = sys.stdout.isatty()
+    lines: list[str] = []
+    say = lines.append
     st = r.stats
     speed = r.log_s / r.wall_s if r.wall_s > 0 else float("inf")
-    con.print(f"[bold]fgloc run[/bold]: {r.backend} back-end, {r.frontend} front-end, "
-              f"{r.mode} frame; {r.poses} poses over {r.log_s:.1f} s in {r.wall_s:.1f} s "
-              f"({speed:.0f}x real time)")
-    con.print(f"  scans {st['scans']}, fixes {st['fixes']}, no fix {st['no_fix']}, rejected {st['rejected']}, "
-              f"odometry {st['odometry']}, compass {st['compass']}, skipped {st['skipped']}, "
-              f"relocalizations {st['relocalizations']}")
+    say(f"{_styled('fgloc run', '1', tty)}: {r.backend} back-end, {r.frontend} front-end, "
+        f"{r.mode} frame; {r.poses} poses over {r.log_s:.1f} s in {r.wall_s:.1f} s ({speed:.0f}x real time)")
+    say(f"  scans {st['scans']}, fixes {st['fixes']}, no fix {st['no_fix']}, rejected {st['rejected']}, "
+        f"odometry {st['odometry']}, compass {st['compass']}, skipped {st['skipped']}, "
+        f"relocalizations {st['relocalizations']}")
     if r.mode == "map":
-        con.print(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.get('lost_events', 0)} "
-                  f"time(s) after tracking){', [bold red]lost at the end[/bold red]' if r.ended_lost else ''}")
+        say(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.get('lost_events', 0)} "
+            f"time(s) after tracking){', ' + _styled('lost at the end', '1;31', tty) if r.ended_lost else ''}")
     from fgloc.localization.sources import summary_lines
 
     for line in summary_lines(st):  # the motion model and each input source's health (issue 17)
-        con.print(f"  {line}", markup=False, highlight=False)
+        say(f"  {line}")
     be = st.get("backend") or {}
     if be.get("solver_failures"):  # the smoother restarted from its prediction: the estimate is not smoothed there
-        con.print(f"  [yellow]back-end:[/yellow] {be['solver_failures']} solver failure(s), each a restart from "
-                  "the odometry prediction (an input that leaves a variable unconstrained, e.g. no heading source)",
-                  highlight=False)
+        say(f"  {_styled('back-end:', '33', tty)} {be['solver_failures']} solver failure(s), each a restart from "
+            "the odometry prediction (an input that leaves a variable unconstrained, e.g. no heading source)")
     if be.get("compass_recoveries"):
-        con.print(f"  back-end: heading re-opened to the compass {be['compass_recoveries']} time(s)", highlight=False)
+        say(f"  back-end: heading re-opened to the compass {be['compass_recoveries']} time(s)")
     for title, reasons in (("skipped", st.get("skipped_reasons")), ("no fix", st.get("no_fix_reasons"))):
         if reasons:  # grouped by kind (fgloc.localization.localizer.reason_kind): a few lines at most
-            con.print(f"  {title}, by reason:")
+            say(f"  {title}, by reason:")
             for why, n in reasons.items():
-                con.print(f"    {n:6d}  {why}", markup=False, highlight=False)
+                say(f"    {n:6d}  {why}")
     if r.truncated:
-        con.print(f"  [yellow]log truncated:[/yellow] {r.truncated}")
+        say(f"  {_styled('log truncated:', '33', tty)} {r.truncated}")
     if r.damage:
-        con.print(f"  [yellow]log damaged:[/yellow] {r.damage}", markup=False, highlight=False)
-    if r.timings:  # one unwrapped line (fgloc bench speed reads it)
+        say(f"  {_styled('log damaged:', '33', tty)} {r.damage}")
+    if r.timings:  # one line (fgloc bench speed reads it)
         tm = r.timings
-        con.print(f"  time: {tm['total_s']:.2f} s = setup {tm['setup_s']:.2f} + reading {tm['read_s']:.2f} + "
-                  f"localizing {tm['localize_s']:.2f} + writing {tm['write_s']:.2f} + view channels "
-                  f"{tm['view_s']:.2f} + final smoothing {tm['finish_s']:.2f} + outputs {tm['outputs_s']:.2f} s",
-                  soft_wrap=True, highlight=False)
+        say(f"  time: {tm['total_s']:.2f} s = setup {tm['setup_s']:.2f} + reading {tm['read_s']:.2f} + "
+            f"localizing {tm['localize_s']:.2f} + writing {tm['write_s']:.2f} + view channels "
+            f"{tm['view_s']:.2f} + final smoothing {tm['finish_s']:.2f} + outputs {tm['outputs_s']:.2f} s")
     m = r.metrics
     if m is not None:
-        from fgloc.eval.paper import comparison_table
+        from fgloc.eval.paper import comparison_cells
 
         rows = {f"{r.backend} (final)": [m]}
         if r.metrics_online is not None:
             rows[f"{r.backend} (online)"] = [r.metrics_online]
-        con.print(comparison_table(rows, title="vs /ground_truth" + (" (SE(2)-aligned, odom frame)"
-                                                                    if r.mode == "odom" else ""), extra=False))
+        say("  vs /ground_truth" + (" (SE(2)-aligned, odom frame)" if r.mode == "odom" else "") + ":")
+        lines += _aligned(*comparison_cells(rows, extra=False))
     if r.eval_error:
-        con.print(f"  evaluation skipped: {r.eval_error}")
-    con.print(f"  wrote {r.outdir}/: {', '.join(r.written)}")
+        say(f"  evaluation skipped: {r.eval_error}")
+    say(f"  wrote {r.outdir}/: {', '.join(r.written)}")
+    print("\n".join(lines), flush=True)
 
 
 # ---------------------------------------------------------------------- CLI

@@ -13,6 +13,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 HEAVY = ("numpy", "numba", "scipy", "gtsam", "open3d", "kiss_icp", "ray", "matplotlib", "foxglove", "mcap_ros2")
 
 
@@ -27,14 +29,16 @@ def test_cli_import_pulls_in_no_heavy_library() -> None:
     assert loaded == [], f"import fgloc.cli imported {loaded}: import them inside the command that needs them"
 
 
-# what `fgloc run` (smoother + native, --quiet) has no use for: plots, other front-ends' libraries,
-# the cluster engine, the progress bar it does not show, rich (its summary is plain lines: rich's
+# what `fgloc run` (smoother + native) has no use for: plots, other front-ends' libraries, the
+# cluster engine, tqdm (its progress line is fgloc.commands.run.ProgressLine: tqdm cost ~0.02 s of
+# CPU to import), rich (its summary is plain lines: rich's
 # console and table cost 0.030-0.038 s of CPU per run), the generic CDR codec (every input here has
 # the fixed layouts of fgloc.io.fastcdr, the ground truth included)
 NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm", "rich", "mcap_ros2")
 
 
-def test_fgloc_run_imports_only_what_it_uses(tmp_path) -> None:
+@pytest.mark.parametrize("quiet", [True, False], ids=["quiet", "progress"])
+def test_fgloc_run_imports_only_what_it_uses(tmp_path, quiet: bool) -> None:
     from fgloc.sim import run_scenario, write_sim
 
     sim = run_scenario({"route": [[2.5, 3.0], [3.5, 3.0]], "laser": {"rate_hz": 10.0}}, seed=0)
@@ -47,7 +51,7 @@ def test_fgloc_run_imports_only_what_it_uses(tmp_path) -> None:
     )
     log = tmp_path / "log"
     out = subprocess.run([sys.executable, "-c", code, "run", str(log / "log.mcap"), "--map", str(log / "map.yaml"),
-                          "-o", str(tmp_path / "out"), "-q"], capture_output=True, text=True)
+                          "-o", str(tmp_path / "out"), *(["-q"] if quiet else [])], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     line = next(ln for ln in out.stdout.splitlines() if ln.startswith("LOADED "))
     assert json.loads(line[7:]) == [], f"fgloc run imported {line[7:]}: import them where they are used"

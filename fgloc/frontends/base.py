@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
-from fgloc.geometry import YAW, X, Y, exp_along, wrap_angle, wrap_scalar
+from fgloc.geometry import YAW, X, Y, exp_along, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.gridmath import njit
 from fgloc.maps import OccupancyMap
@@ -70,7 +70,7 @@ class MatchResult:
             return None
         pose = np.asarray(self.pose, dtype=float)
         cov = np.asarray(self.cov, dtype=float)
-        if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(cov))):
+        if not (np.isfinite(pose).all() and np.isfinite(cov).all()):  # the methods: no np.all dispatch per call
             return None
         return PoseFix(float(stamp), pose, cov, quality=float(self.quality), source=source)
 
@@ -301,12 +301,12 @@ def _beam_points(ranges, rmin, rmax, min_valid, max_beams, cos_a, sin_a, t_inc, 
     pts = np.empty((k, 2))
     with_tau = t_inc != 0.0
     tau_used = np.empty(k if with_tau else 0)
-    j = 0  # valid beams seen
+    skip = 0  # valid beams to pass over before the next one kept
     o = 0  # points written
     for i in range(n):
         r = float(ranges[i])
         if (r > 0.0 if lower_open else r >= rmin) and (r <= rmax if upper else r < math.inf):
-            if j % stride == 0:
+            if skip == 0:
                 px = r * cos_a[i]
                 py = r * sin_a[i]
                 pts[o, 0] = mx + mc * px - ms * py
@@ -314,7 +314,8 @@ def _beam_points(ranges, rmin, rmax, min_valid, max_beams, cos_a, sin_a, t_inc, 
                 if with_tau:
                     tau_used[o] = float(i) * t_inc  # np.arange(n, dtype=float) * t_inc
                 o += 1
-            j += 1
+                skip = stride
+            skip -= 1
     return pts, tau_used, m
 
 
@@ -441,7 +442,7 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
         d2 = (ii + i0 - i_c) ** 2 + (jj + j0 - j_c) ** 2
         if not (len(d2) and float(np.sqrt(d2.min())) * occ_map.resolution <= UNKNOWN_GUESS_RADIUS_M):
             return None, f"guess ({x:.2f}, {y:.2f}) is in unknown space"
-    g[YAW] = wrap_angle(yaw)
+    g[YAW] = wrap_scalar(yaw)  # wrap_angle's value, in scalar maths
     return g, ""
 
 
@@ -509,6 +510,7 @@ class FixAcceptance:
             raise ConfigError(f"frontends config [{name}]: cov_inflation must be positive, got {conf.cov_inflation}")
         self.cov_inflation = (float(infl[0]), float(infl[1]))
         self.cov_scale = np.diag(np.sqrt([infl[0], infl[0], infl[1]]))
+        self._unit_scale = self.cov_inflation == (1.0, 1.0)
         self.cov_floor = np.diag(np.asarray(conf.cov_floor, dtype=float))
 
     def within_jump(self, pose: FloatArray, guess: FloatArray) -> bool:
@@ -534,7 +536,10 @@ class FixAcceptance:
         return None
 
     def inflate(self, cov: FloatArray) -> FloatArray:
-        """``S cov S`` with ``S = diag(sqrt(kxy), sqrt(kxy), sqrt(kyaw))``."""
+        """``S cov S`` with ``S = diag(sqrt(kxy), sqrt(kxy), sqrt(kyaw))`` (``cov`` itself when ``S = I``:
+        products with 1 and sums with exact zeros change no bit of a finite ``cov``)."""
+        if self._unit_scale:
+            return cov
         return self.cov_scale @ cov @ self.cov_scale  # type: ignore[no-any-return]
 
     def finish(self, cov: FloatArray) -> FloatArray:

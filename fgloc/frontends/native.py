@@ -537,6 +537,22 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
 
 
 @njit(cache=True, fastmath=True)
+def _heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no cover - compiled
+    """The heading check's two scores in one call: every ``stride``-th point, :func:`_search` over
+    heading only (``+-win`` in ``step``) at ``pose``'s position, and at ``pose`` itself.  Returns the
+    best pose (3,), its score and the score at ``pose``."""
+    m = (px.shape[0] + stride - 1) // stride
+    sx = np.empty(m)
+    sy = np.empty(m)
+    for k in range(m):
+        sx[k] = px[k * stride]
+        sy[k] = py[k * stride]
+    best, score = _search(lik, A, b, sx, sy, pose, 0.0, 1.0, win, step, 1)
+    _, here = _search(lik, A, b, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
+    return best[0].copy(), score[0], here[0]
+
+
+@njit(cache=True, fastmath=True)
 def _conditioning(H, px, py):  # pragma: no cover - compiled
     """Smallest and largest eigenvalue of ``S H S`` (yaw scaled by the RMS point range, metres per
     radian) and ``H^-1`` (NaN when singular)."""
@@ -838,15 +854,13 @@ class NativeMatcher(FrontendBase):
         if self.heading_window <= 0:
             return pose, cost
         stride = max(1, int(math.ceil(2 * len(px) / max(self.search_max_points, 1))))
-        sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
-        best, score = _search(self.lik, self.Ac, self.bc, sx, sy, pose, 0.0, 1.0, self.heading_window,
-                              self.heading_step, 1)
-        if abs(wrap_scalar(best[0, 2] - pose[YAW])) < 1.5 * self.heading_step:
+        best, score, here = _heading_probe(self.lik, self.Ac, self.bc, px, py, stride, pose, self.heading_window,
+                                           self.heading_step)
+        if abs(wrap_scalar(best[2] - pose[YAW])) < 1.5 * self.heading_step:
             return pose, cost
-        _, here = _search(self.lik, self.Ac, self.bc, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
-        if not score[0] > here[0]:
+        if not score > here:
             return pose, cost
-        pose2, cost2 = self._refine_from(px, py, best[0])
+        pose2, cost2 = self._refine_from(px, py, best)
         if cost2 < cost and self.accept.within_jump(pose2, guess):
             return pose2, cost2
         return pose, cost
@@ -928,7 +942,7 @@ class NativeMatcher(FrontendBase):
         # ratio exp(-dcost / T) with the same beams-per-run tempering, T = s^2 sw / runs
         temp = max(sigma2 * per_run, 1e-12)
         refined = refined + self._aliases(px, py, best, cov)
-        spread = np.zeros((3, 3))
+        spread: FloatArray | None = None  # built at the first candidate that widens the covariance
         wsum = 1.0
         for cpose, ccost in refined:
             d = cpose - best
@@ -937,9 +951,17 @@ class NativeMatcher(FrontendBase):
                 continue
             wc = math.exp(-max(ccost - best_cost, 0.0) / temp)
             if wc > 1e-4:
+                if spread is None:
+                    spread = np.zeros((3, 3))
                 spread += wc * np.outer(d, d)
                 wsum += wc
-        cov = self.accept.finish(cov + spread / wsum + registration_floor(H, self.map_accuracy_m))
+        # a zero spread or floor is not added: adding exact zeros changes no bit (finish's floor
+        # turns a -0.0 off the diagonal into +0.0 either way)
+        if spread is not None:
+            cov = cov + spread / wsum
+        if self.map_accuracy_m > 0:
+            cov = cov + registration_floor(H, self.map_accuracy_m)
+        cov = self.accept.finish(cov)
         info["sigma_m"] = math.sqrt(sigma2)
         info["surface_depth_m"] = self.depth_m
         if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:
@@ -948,7 +970,7 @@ class NativeMatcher(FrontendBase):
             self._depth_updates += 1
             est = self.depth_m - sum_r / n_in
             self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
-            self.depth_m = float(np.clip(self.depth_m, 0.0, self.map.resolution))
+            self.depth_m = min(max(self.depth_m, 0.0), float(self.map.resolution))  # np.clip's value
         info["time_s"] = time.perf_counter() - t0
         return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
 

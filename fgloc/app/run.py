@@ -293,6 +293,8 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
             sinks.append(_ProgressSink(bar))
         session = Session(loc, Routes.default(topics), sinks, covariance_period_s=req.covariance_period_s)
         setup_done()  # the CLI paused the cyclic collector for the imports and the set-up (fgloc.app.startup)
+        # the evaluation's ground truth taken on the way through the log, not read again after it
+        reader.collect_ground_truth = reader.has(topics.ground_truth)
         try:
             feed = session.feed
             for topic, msg in paced(_copied(reader.records(want), writer, clock, spent), realtime):

@@ -143,6 +143,8 @@ class McapSource(LogSource):
         self._channels: dict[int, _Channel] = {}
         self._schema_recs: dict[int, SchemaRec] = {}
         self._channel_recs: dict[int, ChannelRec] = {}
+        # the ground truth's columns collected by the last complete records() pass (collect_ground_truth)
+        self._gt_collected: list[tuple[list[tuple[int, int, int]], np.ndarray, np.ndarray]] | None = None
         self._open()
 
     # -- opening -----------------------------------------------------------------------------
@@ -320,13 +322,23 @@ class McapSource(LogSource):
         ids = self._want_ids(want)
         refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
                       key=lambda r: (r.start_ns, r.offset))
+        gt_ids = self._ground_truth_ids(want, refs)
+        collected: list[tuple[list[tuple[int, int, int]], np.ndarray, np.ndarray]] | None = \
+            [] if gt_ids else None
+        parse_ids = ids | gt_ids if gt_ids else ids
         heap: list[Entry] = []
         with self.path.open("rb") as f:
             for k, ref in enumerate(refs):
                 key = (ref.start_ns, ref.offset)
                 while heap and (heap[0][0], heap[0][1]) < key:
                     yield heapq.heappop(heap)[3]
-                msgs = self._load_parsed(f, ref, ids)
+                msgs = self._load_parsed(f, ref, parse_ids)
+                if gt_ids and msgs:  # the ground truth's messages out of this pass, into columns
+                    gt = [m for m in msgs if m[2] in gt_ids]
+                    if gt:
+                        msgs = [m for m in msgs if m[2] not in gt_ids]
+                        if collected is not None and not self._gt_columns_of(gt, ref.offset, collected):
+                            collected = None  # a layout the columns decline: ground_truth() reads it
                 if not msgs:
                     continue
                 entries = self._decode(msgs, ref.offset)
@@ -342,6 +354,41 @@ class McapSource(LogSource):
                         heapq.heappush(heap, e)
         while heap:
             yield heapq.heappop(heap)[3]
+        if collected is not None:
+            self._gt_collected = collected
+
+    def _ground_truth_ids(self, want: set[str], refs: list[ChunkRef]) -> set[int]:
+        """The ground truth's channels to collect in a records() pass over ``refs`` (empty: none):
+        only with :attr:`collect_ground_truth`, not a topic read anyway, with the fixed layout, and
+        in no chunk outside ``refs`` (the pass's order of chunks is left as it is)."""
+        topic = self.topics.ground_truth
+        if not self.collect_ground_truth or topic in want or not self.has(topic) or self._summary is None:
+            return set()
+        gt_ids = self._want_ids({topic})
+        if not gt_ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries
+                             for i in gt_ids):
+            return set()
+        read = {r.offset for r in refs}
+        if any(r.offset not in read for r in self._summary.chunks if r.channels is None or r.channels & gt_ids):
+            return set()
+        return gt_ids
+
+    @staticmethod
+    def _gt_columns_of(msgs: list[MessageRec], offset: int,
+                       out: list[tuple[list[tuple[int, int, int]], np.ndarray, np.ndarray]]) -> bool:
+        """Append the columns (record keys, stamps, poses) of one chunk's ground-truth messages with a
+        pose, one batch per channel as :meth:`_decode` makes them; False if a message is declined."""
+        by_ch: dict[int, list[MessageRec]] = {}
+        for m in msgs:
+            by_ch.setdefault(m[2], []).append(m)
+        for group in by_ch.values():
+            cols = fastcdr.odometry_stamped_poses([m[3] for m in group])
+            if cols is None:
+                return False
+            s, p, has = cols
+            keys = [(m[0], offset, m[1]) for m, k in zip(group, has.tolist(), strict=True) if k]
+            out.append((keys, s[has], p[has]))
+        return True
 
     def ground_truth(self) -> Trajectory | None:
         """:meth:`LogSource.ground_truth`; in an indexed log whose ground-truth channels have the
@@ -352,40 +399,33 @@ class McapSource(LogSource):
         return super().ground_truth() if got is None else got
 
     def _ground_truth_columns(self) -> Trajectory | None:
-        """The ground truth read as columns, or None: read it message by message instead."""
+        """The ground truth read as columns (collected by the last records() pass, else read now),
+        or None: read it message by message instead."""
         topic = self.topics.ground_truth
         summary = self._summary
         if summary is None or not self.has(topic):
             return None
-        ids = self._want_ids({topic})
-        if not ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries for i in ids):
-            return None
-        refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
-                      key=lambda r: (r.start_ns, r.offset))
-        keys: list[tuple[int, int, int]] = []  # (log time, chunk offset, index in chunk): the records' order
-        stamps: list[np.ndarray] = []
-        poses: list[np.ndarray] = []
-        with self.path.open("rb") as f:
-            for ref in refs:
-                msgs = self._load_parsed(f, ref, ids)
-                if not msgs:
-                    continue
-                by_ch: dict[int, list[MessageRec]] = {}  # one batch per channel, as _decode
-                for m in msgs:
-                    by_ch.setdefault(m[2], []).append(m)
-                for group in by_ch.values():
-                    cols = fastcdr.odometry_stamped_poses([m[3] for m in group])
-                    if cols is None:
+        cols = self._gt_collected
+        if cols is None:
+            ids = self._want_ids({topic})
+            if not ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries
+                              for i in ids):
+                return None
+            refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
+                          key=lambda r: (r.start_ns, r.offset))
+            cols = []
+            with self.path.open("rb") as f:
+                for ref in refs:
+                    msgs = self._load_parsed(f, ref, ids)
+                    if msgs and not self._gt_columns_of(msgs, ref.offset, cols):
                         return None
-                    s, p, has = cols
-                    keep = has.tolist()
-                    keys += [(m[0], ref.offset, m[1]) for m, k in zip(group, keep, strict=True) if k]
-                    stamps.append(s[has])
-                    poses.append(p[has])
+        keys = [k for c in cols for k in c[0]]
         if not keys:
             return None
         order = sorted(range(len(keys)), key=keys.__getitem__)
-        return Trajectory.from_unsorted(np.concatenate(stamps)[order], np.concatenate(poses)[order], "map")
+        stamps = np.concatenate([c[1] for c in cols])[order]
+        poses = np.concatenate([c[2] for c in cols])[order]
+        return Trajectory.from_unsorted(stamps, poses, "map")
 
     def _stream_records(self, want: set[str]) -> Iterator[Record]:
         """Time order without an index: flush buffered messages older than each new block."""

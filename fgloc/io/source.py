@@ -93,6 +93,9 @@ class LogSource:
         self._n = 0
         self._tf = TfTree()
         self._mirror_frames: set[str] = set()     # scan frames read mirrored (laser_mount)
+        # True: a source that can (McapSource) keeps what ground_truth() needs while records() reads
+        # the log through, so that ground_truth() after that pass reads nothing again
+        self.collect_ground_truth = False
 
     # -- queries -----------------------------------------------------------------------------
     @property

@@ -93,3 +93,45 @@ def test_no_ground_truth_is_none(tmp_path) -> None:
         w.write("/ground_truth", Odometry(1.0, np.zeros(3), None, None))
     src = open_log(tmp_path / "e.mcap")
     assert src.ground_truth() is None and LogSource.ground_truth(src) is None
+
+
+def _records(src, want):
+    return [(r.topic, r.log_time_ns, r.data) for r in src.records(want)]
+
+
+def test_collected_on_the_way_through_the_log(tmp_path) -> None:
+    """fgloc run's reading: the ground truth collected while records() reads the other topics, the
+    same records handed on, the same trajectory, nothing read again."""
+    _gt_log(tmp_path / "f.mcap")
+    plain, src = open_log(tmp_path / "f.mcap"), open_log(tmp_path / "f.mcap")
+    src.collect_ground_truth = True
+    assert _records(src, {"/odom"}) == _records(plain, {"/odom"})
+    assert src._gt_collected is not None
+    src.path = tmp_path / "gone.mcap"  # ground_truth() must not open the file again
+    _same(src.ground_truth(), LogSource.ground_truth(plain))
+
+
+def test_an_interrupted_pass_collects_nothing(tmp_path) -> None:
+    _gt_log(tmp_path / "g.mcap")
+    src = open_log(tmp_path / "g.mcap")
+    src.collect_ground_truth = True
+    it = src.records({"/odom"})
+    next(it)
+    it.close()
+    assert src._gt_collected is None
+    _same(src.ground_truth(), LogSource.ground_truth(open_log(tmp_path / "g.mcap")))
+
+
+def test_ground_truth_in_chunks_the_pass_skips_is_read_after_it(tmp_path) -> None:
+    # the ground truth after all the odometry, in chunks of its own: the pass over /odom does not
+    # read them (its chunks and order stay as they are), ground_truth() reads them afterwards
+    with LogWriter(tmp_path / "h.mcap", chunk_size=2048) as w:
+        for i in range(200):
+            w.write("/odom", Odometry(1.0 + 0.01 * i, np.array([0.1, 0.0, 0.0])))
+        for i in range(200):
+            w.write("/ground_truth", Odometry(5.0 + 0.01 * i, np.zeros(3), None, np.array([0.1 * i, 0.0, 0.01 * i])))
+    plain, src = open_log(tmp_path / "h.mcap"), open_log(tmp_path / "h.mcap")
+    src.collect_ground_truth = True
+    assert _records(src, {"/odom"}) == _records(plain, {"/odom"})
+    assert src._gt_collected is None
+    _same(src.ground_truth(), LogSource.ground_truth(plain))

@@ -50,6 +50,7 @@ from bisect import bisect_left, bisect_right
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
+from operator import sub
 
 import gtsam
 import numpy as np
@@ -118,12 +119,17 @@ _ZERO1 = np.zeros(1)
 _UNIT1 = gtsam.noiseModel.Isotropic.Sigma(1, 1.0)
 
 
+def _all_finite(*arrays: FloatArray) -> bool:
+    """Every entry of the (small) arrays finite (scalar checks: np.all(np.isfinite(...)) costs ~4 us each)."""
+    return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
+
+
 def _period(ts: list[float]) -> float:
     """Median spacing of the last readings (inf with fewer than 3)."""
     if len(ts) < 3:
         return math.inf
     last = ts[-50:]
-    d = sorted(b - a for a, b in zip(last[:-1], last[1:], strict=True))  # np.median's, without numpy's overhead
+    d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
     m = len(d) // 2
     return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
 
@@ -328,6 +334,8 @@ class SlidingWindowSmoother(Backend):
         p.findUnusedFactorSlots = False
         self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag_s, p)
         self._ballast: list[int] = []     # inert variables (see _with_ballast)
+        self._ballast_t = -np.inf         # when they were last stamped, and how many there were
+        self._ballast_n = 0
         self._t_latest = -np.inf          # the newest timestamp given to the smoother
         self.kf_t: list[float] = []          # keyframe times, increasing (window + history)
         self.kf_key: list[int] = []          # keys, same order
@@ -503,11 +511,11 @@ class SlidingWindowSmoother(Backend):
                 continue
             yaw_ref_ok = yaw_period <= MAX_REF_PERIOD_S
             if yaw_ref_ok:
-                wa, wb = self._twist_at(ta), self._twist_at(tb)
+                wa, wb = self._yaw_rate_at(ta), self._yaw_rate_at(tb)
                 d_ref = self._rotation_between(ta, tb)
                 r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
                 var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
-                self.latency_est.add(-(float(wb[2]) - float(wa[2])), r, var, d_ref, 0)
+                self.latency_est.add(-(wb - wa), r, var, d_ref, 0)
             # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
             if tb - ta < 0.5:
                 continue
@@ -627,8 +635,13 @@ class SlidingWindowSmoother(Backend):
                 vals.insert(k, _ZERO1)
                 self._ballast.append(k)
         t = self._t_latest if math.isfinite(self._t_latest) else 0.0
-        for k in self._ballast:
-            tsm.insert((k, t))
+        if t - self._ballast_t > 0.5 * self.cfg.lag_s or len(self._ballast) > self._ballast_n:
+            # stamped anew every half lag (new ones at once): they stay in the window, never among the
+            # keys the update marginalizes, and every key keeps its ordering group (GTSAM puts every
+            # stamped key in group 1 whatever its stamp), so the same update as stamping them every time
+            for k in self._ballast:
+                tsm.insert((k, t))
+            self._ballast_t, self._ballast_n = t, len(self._ballast)
         return graph, vals
 
     # ------------------------------------------------------------------ inputs
@@ -638,21 +651,25 @@ class SlidingWindowSmoother(Backend):
             self.stats["late"] += 1
             h.skip("late")
             return
-        u = np.asarray(twist, dtype=float)
-        u0, u1, u2 = float(u[0]), float(u[1]), float(u[2])  # scalar checks: np.all costs ~10 us per call
+        u0, u1, u2 = np.asarray(twist, dtype=float).tolist()[:3]  # scalar checks: np.all costs ~10 us per call
         if not (math.isfinite(t) and math.isfinite(u0) and math.isfinite(u1) and math.isfinite(u2)):
             h.skip("not finite")
             return
         h.accepted += 1
         c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
         still = abs(u0) < 1e-3 and abs(u1) < 1e-3 and abs(u2) < 1e-3
+        t = float(t)
         for gb in self.gbias.values():
-            gb.set_still(float(t), still)
-        self.odo_t.append(float(t))
+            gb.set_still(t, still)
+        self.odo_t.append(t)
         self.odo_u.append((u0, u1, u2))
-        self.odo_c.append(upper6(_bounded(c, TWIST_VAR_MAX)))
-        self._arb_add("odom", RATE, 0.05, float(t), float(twist[2]), float(c[2, 2]))
-        self._process_pending(float(t))
+        cl = c.reshape(9).tolist()  # the entries as floats once (numpy's scalar indexing: ~0.1 us each)
+        if cl[0] <= TWIST_VAR_MAX and cl[4] <= TWIST_VAR_MAX and cl[8] <= TWIST_VAR_MAX:
+            self.odo_c.append((cl[0], cl[1], cl[2], cl[4], cl[5], cl[8]))   # upper6(c): _bounded leaves it
+        else:
+            self.odo_c.append(upper6(_bounded(c, TWIST_VAR_MAX)))
+        self._arb_add("odom", RATE, 0.05, t, u2, cl[8])
+        self._process_pending(t)
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
             horizon = self.kf_t[-1] - self.cfg.lag_s - 1.0
@@ -885,20 +902,24 @@ class SlidingWindowSmoother(Backend):
         than the floor left the heading to the relative sources between fixes over a long window: the
         paper run's smoother heading took on the gyro's random walk and the wheels' drift on
         straight legs (online 0.032 deg against its fixes' 0.024)."""
-        c = self._fix_cov(cov)
+        a = self._fix_cov_list(cov)
         if self.cfg.adapt_noise:
             k = self.arb.shown_k("scan")
-            if k != 1.0:
-                c[2, :] *= k
-                c[:, 2] *= k
-        return c
+            if k != 1.0:  # the heading's row, then its column, times k
+                a[6], a[7], a[8] = a[6] * k, a[7] * k, a[8] * k
+                a[2], a[5], a[8] = a[2] * k, a[5] * k, a[8] * k
+        return np.array(a).reshape(3, 3)
 
     def _fix_cov(self, cov: FloatArray) -> FloatArray:
-        c = np.array(cov, dtype=float)
-        c[0, 0] = max(c[0, 0], self.cfg.fix_min_sigma_xy**2)
-        c[1, 1] = max(c[1, 1], self.cfg.fix_min_sigma_xy**2)
-        c[2, 2] = max(c[2, 2], self.cfg.fix_min_sigma_theta**2)
-        return c
+        return np.array(self._fix_cov_list(cov)).reshape(3, 3)
+
+    def _fix_cov_list(self, cov: FloatArray) -> list[float]:
+        """A fix's covariance with its floors, row by row as 9 floats (scalar maths: once per keyframe)."""
+        a = np.asarray(cov, dtype=float).reshape(9).tolist()
+        a[0] = max(a[0], self.cfg.fix_min_sigma_xy**2)
+        a[4] = max(a[4], self.cfg.fix_min_sigma_xy**2)
+        a[8] = max(a[8], self.cfg.fix_min_sigma_theta**2)
+        return a
 
     def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float, str]]
                              ) -> tuple[float, float] | None:
@@ -927,7 +948,7 @@ class SlidingWindowSmoother(Backend):
         if not self.initialized or not math.isfinite(float(t)):
             return False
         t = float(t)
-        if fix is not None and not (np.all(np.isfinite(fix.pose)) and np.all(np.isfinite(fix.cov))):
+        if fix is not None and not _all_finite(fix.pose, fix.cov):
             self._source("scan", "pose").skip("fix not finite")
             fix = None
         if t <= self.kf_t[-1]:
@@ -1094,8 +1115,17 @@ class SlidingWindowSmoother(Backend):
         per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
         if not per > MAX_REF_PERIOD_S:
             return 0.0
-        wa, wb = float(self._twist_at(t0)[2]), float(self._twist_at(t1)[2])
+        wa, wb = self._yaw_rate_at(t0), self._yaw_rate_at(t1)
         return per * per * (wa * wa + wb * wb)
+
+    def _yaw_rate_at(self, t: float) -> float:
+        """:meth:`_twist_at`'s yaw rate alone (no array made)."""
+        if not self.odo_t:
+            return 0.0
+        w = self._gyro_rate_at(t)
+        if w is not None:
+            return float(w)
+        return float(self.odo_u[min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)][2] * float(self._gains[1]))
 
     def _twist_at(self, t: float) -> FloatArray:
         """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""

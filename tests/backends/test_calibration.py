@@ -338,6 +338,70 @@ def test_arbiter_nnls_equals_scipys():
         assert np.allclose(nnls(A, y), ref, rtol=1e-9, atol=1e-12 * np.abs(y).max())
 
 
+def _hat_by_svd(names, pairs, prior, n_eff, unresolved):
+    """The arbiter's per-source variances as numpy's least squares / pseudo-inverse give them
+    (what cornered_hat computed before its scalar normal equations)."""
+    from scipy.optimize import nnls as scipy_nnls
+
+    srcs = sorted({s for p in pairs for s in p})
+    out = {}
+    groups = {s: {s} for s in srcs}
+    for a, b in pairs:
+        if groups[a] is not groups[b]:
+            merged = groups[a] | groups[b]
+            for s in merged:
+                groups[s] = merged
+    for members in {id(g): sorted(g) for g in groups.values()}.values():
+        plist = [p for p in pairs if p[0] in members]
+        A = np.array([[1.0 if s in p else 0.0 for s in members] for p in plist])
+        y = np.array([pairs[p] for p in plist])
+        sig = np.array([pairs[p] * np.sqrt(2.0 / max(n_eff.get(p, 1e9), 1.0)) for p in plist])
+        v = np.full(len(members), np.nan)
+        if np.linalg.matrix_rank(A) == len(members):
+            v = scipy_nnls(A, y)[0]
+            Ap = np.linalg.pinv(A)
+            sd = np.sqrt(np.maximum(np.diag(Ap @ np.diag(sig**2) @ Ap.T), 0.0))
+            v[sd > 0.5 * np.maximum(v, [prior.get(s, 0.0) for s in members])] = np.nan
+        for m, s in enumerate(members):
+            if np.isfinite(v[m]):
+                val = v[m]
+            elif unresolved == "prior":
+                val = prior.get(s, 0.0)
+            else:
+                continue
+            out[s] = max(min(val, min(pairs[p] for p in plist if s in p)), 0.0)
+    return out
+
+
+def test_cornered_hat_scalar_equals_least_squares():
+    """The arbiter's scalar normal-equation solve gives what numpy's SVD least squares / pseudo-inverse
+    and scipy's nnls give, on random pair sets of 2-5 sources (separable or not, with negative
+    unconstrained solutions, resolved or not)."""
+    from fgloc.backends.health import cornered_hat
+
+    rng = np.random.default_rng(11)
+    clipped = resolved = 0
+    for _ in range(1500):
+        m = int(rng.integers(2, 6))
+        names = [f"s{i}" for i in range(m)]
+        pairs = {(names[i], names[j]): float(rng.exponential(1.0) * 10 ** rng.uniform(-8, 0))
+                 for i in range(m) for j in range(i + 1, m) if rng.random() < 0.7}
+        if not pairs:
+            continue
+        n_eff = {p: float(rng.integers(1, 300)) for p in pairs if rng.random() < 0.9}
+        prior = {n: float(rng.exponential(1.0) * 10 ** rng.uniform(-8, 0)) for n in names if rng.random() < 0.8}
+        mode = "prior" if rng.random() < 0.5 else "omit"
+        got = cornered_hat(names, pairs, prior, n_eff, mode)
+        want = _hat_by_svd(names, pairs, prior, n_eff, mode)
+        assert set(got) == set(want)
+        scale = max(pairs.values())
+        for s in got:
+            assert got[s] == pytest.approx(want[s], rel=1e-9, abs=1e-12 * scale)
+            clipped += got[s] == 0.0
+            resolved += got[s] != prior.get(s, 0.0)
+    assert clipped > 50 and resolved > 500  # both branches exercised
+
+
 def test_compass_nearest_reading_in_and_out_of_stamp_order():
     from fgloc.backends.compass import CompassCalibrator
 

@@ -34,7 +34,10 @@ def test_cli_import_pulls_in_no_heavy_library() -> None:
 # CPU to import), rich (its summary is plain lines: rich's
 # console and table cost 0.030-0.038 s of CPU per run), the generic CDR codec (every input here has
 # the fixed layouts of fgloc.io.fastcdr, the ground truth included)
-NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm", "rich", "mcap_ros2")
+# the live localizer (its config sections live in fgloc.live.config: composing the config imported
+# the serial link, its protocol and threads, 0.012 s of CPU)
+NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm", "rich", "mcap_ros2", "fgloc.live.app",
+               "fgloc.live.serial_link")
 
 
 @pytest.mark.parametrize("quiet", [True, False], ids=["quiet", "progress"])

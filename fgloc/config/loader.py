@@ -21,8 +21,7 @@ from fgloc.backends.smoother import BatchConfig, SmootherConfig
 from fgloc.config.schema import parse, section, to_yaml
 from fgloc.errors import ConfigError, read_user_text
 from fgloc.frontends.factory import FrontendsConfig
-from fgloc.live.app import HealthConfig, LaserConfig, SerialConfig
-from fgloc.live.serial_link import RobotParams
+from fgloc.live.config import HealthConfig, LaserConfig, RobotParams, SerialConfig
 from fgloc.localization.config import PipelineConfig
 from fgloc.localization.sources import SourcesConfig, parse_sources
 

@@ -16,50 +16,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fgloc.config.schema import setting
 from fgloc.errors import ConfigError
+from fgloc.live.config import HealthConfig, LaserConfig, SerialConfig  # noqa: F401 - their home before
 from fgloc.live.serial_link import FrameConverter, SerialLink
 from fgloc.types import StaticTransform, Trajectory
 
 if TYPE_CHECKING:
     from fgloc.config import FglocConfig
     from fgloc.live.sick import SickClient
-
-@dataclass(frozen=True)
-class SerialConfig:
-    """``serial:`` the STM32 serial link (``fgloc live --serial``)."""
-
-    baudrate: int = setting(115200, "serial baud rate", min=1)
-    align_clock: bool = setting(True, "MCU timestamps -> host time (min-delay filter); false = arrival time")
-    compass_clockwise: bool = setting(False, "true if the firmware sends a clockwise (north-east) heading")
-    twist_std: tuple[float, float, float] | None = setting(
-        None, "[vx m/s, vy m/s, wz rad/s] noise put into /odom; null = unknown (the back-end's sigmas apply)", gt=0)
-    compass_std_deg: float | None = setting(None, "compass heading noise put into /imu; null = unknown", gt=0)
-    gyro_std_dps: float | None = setting(None, "yaw-rate noise (deg/s) put into /imu; null = unknown", gt=0)
-
-
-@dataclass(frozen=True)
-class LaserConfig:
-    """``laser:`` the SICK LMS1xx-class scanner over TCP (``fgloc live --laser``)."""
-
-    range_min_m: float = setting(0.5, "shorter ranges are invalid (paper Table 2: 0.5-50 m)", min=0)
-    range_max_m: float = setting(50.0, "longer ranges are invalid", gt=0)
-    angle_offset_deg: float = setting(-90.0, "LMS1xx device angle 0 is the scanner's right side")
-    align_clock: bool = setting(True, "device 'time since startup' -> host time")
-    time_increment_from: str = setting(
-        "measurement_frequency", "beam timing for de-skew: 1 / measurement frequency, or rotation: scan_time * "
-        "angular step / 360 deg", choices=("measurement_frequency", "rotation"))
-    stall_timeout_s: float = setting(1.0, "reconnect when connected but silent this long", gt=0)
-    mount: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "base_link -> laser [x_m, y_m, yaw_rad]")
-
-
-@dataclass(frozen=True)
-class HealthConfig:
-    """``health:`` sensor monitoring in ``fgloc live``."""
-
-    silence_s: float = setting(0.4, "a sensor with no message this long is reported silent (checked every "
-                               "~20 ms)", gt=0)
-
 
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> FglocConfig:
     """The one fgloc config (:func:`fgloc.config.load_config`); kept here for old callers."""

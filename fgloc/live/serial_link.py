@@ -15,72 +15,19 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from fgloc.config.schema import setting
-from fgloc.errors import ConfigError
 from fgloc.geometry import compose1, wrap_angle
 from fgloc.geometry import exp as se2_exp
 from fgloc.live.clock import ClockSync
+from fgloc.live.config import RobotParams
 from fgloc.live.serial_protocol import COUNT_MOD, FrameParser, SensorFrame
 from fgloc.live.worker import SensorThread
 from fgloc.types import CompassHeading, Odometry
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class RobotParams:
-    """Drive geometry.  ``drive`` is ``"diff"`` (2 wheels: left, right) or ``"mecanum"``
-    (4 wheels: front-left, front-right, rear-left, rear-right).  ``track_width_m`` is the
-    left-right wheel distance, ``wheelbase_m`` front-rear (mecanum only)."""
-
-    drive: str = setting("mecanum", "mecanum (4 wheels: FL, FR, RL, RR) or diff (2 wheels: left, right)",
-                         choices=("mecanum", "diff"))
-    wheel_radius_m: float = setting(0.076, "wheel radius", gt=0)
-    track_width_m: float = setting(0.56, "left-right wheel distance", gt=0)
-    wheelbase_m: float = setting(0.50, "front-rear axle distance (mecanum only)", gt=0)
-    counts_per_rev: float = setting(2000.0, "encoder counts per wheel revolution (500 PPR x4 quadrature)", gt=0)
-    max_speed_mps: float = setting(2.0, "the robot's top speed; odometry faster than 1.5x this is rejected "
-                                   "(counted implausible_twist)", gt=0)
-    max_yaw_rate_dps: float = setting(180.0, "the robot's top turn rate; odometry or gyro faster than 1.5x this is "
-                                      "rejected (implausible_twist / implausible_rate)", gt=0)
-
-    @property
-    def n_wheels(self) -> int:
-        return 4 if self.drive == "mecanum" else 2
-
-    @staticmethod
-    def from_dict(d: dict[str, Any] | None) -> RobotParams:
-        d = dict(d or {})
-        aliases = {
-            "type": "drive", "kind": "drive", "wheel_radius": "wheel_radius_m",
-            "track_width": "track_width_m", "wheel_separation": "track_width_m",
-            "wheelbase": "wheelbase_m", "counts_per_rev": "counts_per_rev", "cpr": "counts_per_rev",
-        }
-        out: dict[str, Any] = {}
-        for k, v in d.items():
-            k2 = aliases.get(k, k)
-            if k2 in RobotParams.__dataclass_fields__:
-                out[k2] = v
-        # the names fgloc.kinematics / SimResult.robot use: half distances, pulses per revolution
-        if "half_track_m" in d:
-            out["track_width_m"] = 2.0 * float(d["half_track_m"])
-        if "half_wheelbase_m" in d:
-            out["wheelbase_m"] = 2.0 * float(d["half_wheelbase_m"])
-        for key in ("pulses_per_rev", "encoder_ppr"):
-            if "counts_per_rev" not in out and key in d:
-                out["counts_per_rev"] = 4.0 * float(d[key])  # quadrature decoding
-        p = RobotParams(**out)
-        p.drive = {"differential": "diff", "diff_drive": "diff", "omni": "mecanum"}.get(p.drive, p.drive)
-        if p.drive not in ("diff", "mecanum"):
-            raise ConfigError(f"robot drive must be 'diff' or 'mecanum', got {p.drive!r}")
-        if p.wheel_radius_m <= 0 or p.track_width_m <= 0 or p.counts_per_rev <= 0:
-            raise ConfigError("robot wheel_radius_m, track_width_m and counts_per_rev must be positive")
-        return p
 
 
 def kinematics_of(p: RobotParams) -> Any:

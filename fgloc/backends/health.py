@@ -638,13 +638,16 @@ class LatencyEstimator:
 
     def __init__(self, min_pairs: int = 50, significance: float = 3.0, huber_k: float = 2.0,
                  var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2),
-                 max_latency_s: float = 0.3, max_rows: int = 20000, refit_every: int = 25) -> None:
+                 max_latency_s: float = 0.3, max_rows: int = 20000, refit_every: int = 25,
+                 refit_share: float = 0.025) -> None:
         self.var_floor = (float(var_floor[0]), float(var_floor[1]))
         self.max_latency_s = float(max_latency_s)
         self.min_pairs = int(min_pairs)
         self.significance = float(significance)
         self.huber_k = float(huber_k)
         self.refit_every = int(refit_every)
+        self.refit_share = float(refit_share)
+        self.max_rows = int(max_rows)
         self.rows: deque[tuple[float, float, float, float, int]] = deque(maxlen=int(max_rows))
         # the rows as an array, appended in place (the fit read them all through np.asarray, every
         # refit: O(rows) Python objects converted again); its last len(rows) lines are the rows
@@ -678,8 +681,11 @@ class LatencyEstimator:
         self.n += 1
 
     def _refit(self) -> tuple[float, float]:
-        if self._fit is not None and (self.n - self._fit[0] < self.refit_every and self._fit[0] >= self.min_pairs
-                                      or self.n == self._fit[0]):
+        # refit after refit_every new pairs, or once they are refit_share of the rows fitted: a refit reads
+        # every row (up to max_rows), so a fixed count made its cost grow with the log (quadratic)
+        if self._fit is not None and (self.n - self._fit[0] < max(self.refit_every, self.refit_share
+                                                                  * min(self._fit[0], self.max_rows))
+                                      and self._fit[0] >= self.min_pairs or self.n == self._fit[0]):
             return self._fit[1], self._fit[2]
         if not self.rows:
             return 0.0, math.inf

@@ -148,6 +148,27 @@ def test_latency_estimator_recovers_a_known_lag():
     assert none.value() == 0.0  # not significant: no correction
 
 
+def test_latency_estimator_refits_a_share_of_its_rows():
+    """A long run asked every pair: the fit is redone after 25 new pairs or 2.5 % of the rows fitted,
+    whichever is more (a refit reads every row: a fixed count made their cost quadratic in the log),
+    and it still finds the lag."""
+    rng = np.random.default_rng(4)
+    est = LatencyEstimator()
+    fits = 0
+    last = None
+    for _ in range(6000):
+        x = rng.normal(0, 0.3)
+        est.add(x, 0.02 * x + rng.normal(0, 5e-4), (5e-4) ** 2, ref=rng.normal(0, 0.1), kind=0)
+        got = est.estimate()
+        if got != last:
+            fits += 1
+            last = got
+    # every pair up to min_pairs (50), then 25 pairs each up to 1000, 2.5 % after: 50 + 38 + ln 6 / ln 1.025
+    # ~= 161 (a fixed 25: 288)
+    assert 150 <= fits <= 170
+    assert est.value() == pytest.approx(0.02, abs=5e-4)
+
+
 def _feed_calibration(sm, s, yaw_scale, speed_scale, bias):
     rng = np.random.default_rng(3)
     sm.initialize(s.t_scan[0], s.fixes[0], np.eye(3) * 1e-4)

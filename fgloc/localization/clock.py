@@ -20,7 +20,7 @@ at offset 0: a wheel slip or a wrong fix costs every offset the same).  The esti
 * the odometry is slow: its mean message period above :data:`SLOW_PERIOD_S` (the smoother's own
   ``MAX_REF_PERIOD_S``).  A faster odometry places the motion within its period, and the
   smoother's latency estimator measures the scans' lag against it (the simulator's 20-50 Hz
-  odometry is never shifted here);
+  odometry is never shifted here, and no estimate is made for it: a few microseconds per message);
 * its stamps are regular: the median spacing at least :data:`REGULAR` of the mean.  A logger that
   writes its messages in bursts (intel: 69 % of the segment's odometry steps under 2 ms, a median
   step of 0.8 ms for a mean of 100 ms) stamps each burst when it is written: no one offset
@@ -103,6 +103,8 @@ class OdometryClock:
         self._raw_t: list[float] = []  # raw odometry stamps and the cumulative (unwrapped) yaw there
         self._yaw: list[float] = []
         self._last_yaw: float | None = None
+        self._cum_yaw = 0.0
+        self._count = 0
         self._last_raw: float | None = None
         self._stamps: deque[float] = deque(maxlen=PERIOD_MESSAGES)
         self._fixes: deque[tuple[float, float]] = deque(maxlen=64)
@@ -132,31 +134,36 @@ class OdometryClock:
         return t_raw + self.offset_s
 
     def add_odometry(self, t_raw: float, yaw_rad: float) -> None:
-        """The odometry's dead-reckoned yaw after the message stamped ``t_raw`` (raw stamp)."""
+        """The odometry's dead-reckoned yaw after the message stamped ``t_raw`` (raw stamp).  Nothing is
+        kept but the stamps' period while the odometry is fast (no estimate is made then)."""
         if not (math.isfinite(t_raw) and math.isfinite(yaw_rad)):
             return
-        if self._raw_t and t_raw <= self._raw_t[-1]:
+        if self._stamps and t_raw <= self._stamps[-1]:
             return
-        if self._last_yaw is None:
-            cum = 0.0
-        else:
-            d = yaw_rad - self._last_yaw
-            cum = self._yaw[-1] + (d + math.pi) % (2.0 * math.pi) - math.pi
+        if self._last_yaw is not None:
+            self._cum_yaw += (yaw_rad - self._last_yaw + math.pi) % (2.0 * math.pi) - math.pi
         self._last_yaw = yaw_rad
-        self._raw_t.append(t_raw)
-        self._yaw.append(cum)
         self._stamps.append(t_raw)
+        self._count += 1
         n = len(self._stamps)
-        if n >= 3 and (n < 20 or n % 20 == 0):
+        if n >= 3 and (self._count < 20 or self._count % 20 == 0):
             mean = (self._stamps[-1] - self._stamps[0]) / (n - 1)
             self.slow = mean > SLOW_PERIOD_S
             self.regular = float(np.median(np.diff(np.asarray(self._stamps)))) >= REGULAR * mean
+        if not self.slow:
+            if self._raw_t or self._pending:
+                self._raw_t.clear()
+                self._yaw.clear()
+                self._pending.clear()
+            return
+        self._raw_t.append(t_raw)
+        self._yaw.append(self._cum_yaw)
         if self._pending and self._pending[0][1] + MAX_OFFSET_S <= t_raw:
             self._take_covered()
 
     def add_fix(self, t: float, yaw_rad: float) -> None:
         """A fix the back-end used, at scan stamp ``t``: paired with the one nearest :data:`PAIR_S` before."""
-        if not (math.isfinite(t) and math.isfinite(yaw_rad)):
+        if not (self.slow and math.isfinite(t) and math.isfinite(yaw_rad)):
             return
         best = None
         for ta, ya in self._fixes:

@@ -251,7 +251,8 @@ class SmootherConfig:
         "default: through unmapped space it let the dead-reckoned heading drift further (mit-csail)")
     odom_clock: bool = setting(True, "a slow odometry's clock offset against the scans (a driver's latency) "
                                "estimated from the fixes' yaw increments and applied to its stamps once confident "
-                               "(fgloc/localization/clock.py; the localizer applies it, for every back-end)")
+                               "(fgloc/localization/clock.py; the localizer applies it for the smoothers, not the "
+                               "EKF: its odometry run ahead of the scans made CARMEN logs worse)")
     adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other "
                                 "(wheel, gyro, heading, fixes)")
     latency: bool = setting(True, "estimate the scan stamps' latency (a fix is the pose that long before its "

@@ -113,8 +113,10 @@ class Localizer:
         self.fixes: list[PoseFix] = []
         self.last_reason = ""
         self.odom = OdometryTracker(self.pcfg)
-        # a slow odometry's stamps on the scans' clock (clock.py: its offset estimated from the fixes)
-        self.clock = OdometryClock() if config.smoother.odom_clock and occ_map is not None else None
+        # a slow odometry's stamps on the scans' clock (clock.py: its offset estimated from the fixes), for
+        # a back-end that integrates the increments between keyframes (not the EKF, which filters at them)
+        self.clock = OdometryClock() if (config.smoother.odom_clock and occ_map is not None and not getattr(
+            self.backend, "measures_velocity", False)) else None
         self.reloc: Relocalizer | None = None
         if self.frontend is not None and occ_map is not None:
             self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)

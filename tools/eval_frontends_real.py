@@ -58,6 +58,7 @@ LOGS = {
 }
 WINDOW_MARGIN_S = 30.0  # the map leaves out the keyframes this close in time to the segment
 COVER_RADIUS_M = 2.0  # a segment scan within this of a map keyframe is "mapped"
+REF_AGREE_DEG = 0.5  # where SLAM and GMapping agree this well in heading, the reference is taken as settled
 
 
 def slam_of(name: str, cache: Path):
@@ -134,10 +135,14 @@ GMAPPING = {"intel": DATA.parent / "radish-reference" / "intel-corrected.log.gz"
             "fr079": DATA.parent / "radish-reference" / "freiburg-079-corrected.log.gz"}
 
 
-def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir: Path | None) -> dict:
+def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir: Path | None,
+                    est=None) -> dict:
     """How far the SLAM reference itself is from GMapping's over the segment: heading (and position)
     RMS after the rigid 2-D alignment that fits best (the frames differ), on the scans both have.
-    The heading error of localization against SLAM cannot be measured below this."""
+    The heading error of localization against SLAM cannot be measured below this.  With ``est`` (the
+    localizer's trajectory), its heading RMSE at the keyframes GMapping also has: against SLAM,
+    against GMapping (rotated by the same alignment), and against SLAM where the two references
+    agree within ``REF_AGREE_DEG``."""
     path = GMAPPING.get(name)
     if gmapping_dir is not None and not (path and path.exists()):
         path = gmapping_dir / {"aces": "aces-corrected.log.gz", "mit-csail": "csail-corrected.log.gz"}.get(name, "")
@@ -159,8 +164,24 @@ def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir
     gx = np.column_stack([c * g[:, 0] - sn * g[:, 1], sn * g[:, 0] + c * g[:, 1]])
     gx += (s[:, :2] - gx).mean(axis=0)
     e_yaw = np.degrees(wrap_angle(g[:, 2] + dth - s[:, 2]))
-    return {"gm_n": int(m.sum()), "gm_rmse_m": float(np.sqrt(np.mean(np.sum((gx - s[:, :2]) ** 2, axis=1)))),
-            "gm_rmse_deg": float(np.sqrt(np.mean(e_yaw**2)))}
+    out = {"gm_n": int(m.sum()), "gm_rmse_m": float(np.sqrt(np.mean(np.sum((gx - s[:, :2]) ** 2, axis=1)))),
+           "gm_rmse_deg": float(np.sqrt(np.mean(e_yaw**2))), "gm_median_abs_deg": float(np.median(np.abs(e_yaw)))}
+    if est is not None and len(est.stamps):
+        # the keyframes at the scans GMapping has (stamps within 1 ms; the trajectory is not interpolated)
+        gt = ref.stamps[m]
+        j = np.clip(np.searchsorted(est.stamps, gt), 1, len(est.stamps) - 1)
+        j = np.where(np.abs(est.stamps[j - 1] - gt) < np.abs(est.stamps[j] - gt), j - 1, j)
+        hit = np.abs(est.stamps[j] - gt) < 1e-3
+        if hit.sum() >= 5:
+            y = est.poses[j[hit], 2]
+            e_s = np.degrees(wrap_angle(y - s[hit, 2]))
+            e_g = np.degrees(wrap_angle(y - g[hit, 2] - dth))
+            agree = np.abs(e_yaw[hit]) <= REF_AGREE_DEG
+            out.update({"gm_kf_n": int(hit.sum()), "est_vs_slam_deg": float(np.sqrt(np.mean(e_s**2))),
+                        "est_vs_gm_deg": float(np.sqrt(np.mean(e_g**2))), "agree_n": int(agree.sum()),
+                        "est_vs_slam_agree_deg": float(np.sqrt(np.mean(e_s[agree] ** 2))) if agree.any()
+                        else float("nan")})
+    return out
 
 
 def nees_of(fixes, ref) -> dict:
@@ -232,11 +253,12 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
            "split": split, "lost_events": int(loc.stats.get("lost_events", 0)),
            "reacquisitions": int(loc.stats.get("reacquisitions", 0)),
            "unmapped_scans": int(loc.stats.get("unmapped_scans", 0)),
-           "held_fixes": int(loc.stats.get("held_fixes", 0)), "lost_s": float(loc.stats.get("lost_s", 0.0))}
+           "held_fixes": int(loc.stats.get("held_fixes", 0)), "lost_s": float(loc.stats.get("lost_s", 0.0)),
+           "odom_clock": loc.stats.get("odom_clock")}
     res.update(heading_views(est, ref, t0, t1))
     res.update(odometry_timing(msgs, ref, t0, t1))
     res.update(nees_of(loc.fixes, ref))
-    res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir))
+    res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir, est))
     return res
 
 
@@ -442,10 +464,29 @@ def main() -> int:
     for name, r in timing.items():
         print(f"\n{name}: odometry yaw change over scan pairs 0.5 s apart vs SLAM: {r['odo_rms0_deg']:.2f} deg RMS "
               f"at the scans' stamps, {r['odo_rms_shift_deg']:.2f} deg read {r['odo_shift_s']:+.2f} s off them")
+    for r in rows:
+        c = r.get("odom_clock")
+        if c:
+            used = f"{c['offset_s']:+.3f} s in use" if c["applied"] else "not used (0)"
+            why = ("" if c["applied"] else ", odometry fast" if not c["slow"] else
+                   ", odometry stamps in bursts" if not c["regular"] else ", not confident")
+            print(f"\n{r['log']} (map accuracy {r.get('accuracy', '-')}): odometry clock offset (localization.clock) "
+                  f"{used}: estimate {c['estimate_s']:+.3f} +- {max(c['sigma_s'], 0):.3f} s, last fit "
+                  f"{c['fit_s']:+.3f} s (fixes' turn / odometry's {c['yaw_scale'] or float('nan'):.3f}), "
+                  f"gain {c['gain']:.1f}, "
+                  f"{c['pairs']} fix pairs{why}")
     floors = {r["log"]: r for r in rows if "gm_rmse_deg" in r}
     for name, r in floors.items():
         print(f"\n{name}: SLAM vs GMapping over the segment ({r['gm_n']} scans, rigid alignment): "
-              f"{r['gm_rmse_m']:.3f} m / {r['gm_rmse_deg']:.2f} deg RMS (the reference's own error is of this order)")
+              f"{r['gm_rmse_m']:.3f} m / {r['gm_rmse_deg']:.2f} deg RMS, median {r['gm_median_abs_deg']:.2f} deg "
+              "(the reference's own error is of this order)")
+    for r in rows:
+        if "gm_kf_n" in r:
+            print(f"\n{r['log']} (map accuracy {r.get('accuracy', '-')}): heading RMSE at the {r['gm_kf_n']} "
+                  f"keyframes GMapping also has: vs SLAM {r['est_vs_slam_deg']:.3f} deg, "
+                  f"vs GMapping {r['est_vs_gm_deg']:.3f} deg, "
+                  f"vs SLAM where the references agree within {REF_AGREE_DEG:g} deg ({r['agree_n']} keyframes) "
+                  f"{r['est_vs_slam_agree_deg']:.3f} deg")
     return 0
 
 

@@ -255,6 +255,10 @@ class SmootherConfig:
         False, "an odometry slower than ~17 Hz carries its timing in the keyframe factor's yaw, (period * w)^2 "
         "at each end: better heading in turns on a fully mapped route (CARMEN fr079 / intel), but off by "
         "default: through unmapped space it let the dead-reckoned heading drift further (mit-csail)")
+    odom_clock: bool = setting(True, "a slow odometry's clock offset against the scans (a driver's latency) "
+                               "estimated from the fixes' yaw increments and applied to its stamps once confident "
+                               "(fgloc/localization/clock.py; the localizer applies it for the smoothers, not the "
+                               "EKF: its odometry run ahead of the scans made CARMEN logs worse)")
     adapt_noise: bool = setting(True, "weight the yaw sources by the noise they show against each other "
                                 "(wheel, gyro, heading, fixes)")
     latency: bool = setting(True, "estimate the scan stamps' latency (a fix is the pose that long before its "

@@ -41,6 +41,7 @@ from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.geometry import compose1
 from fgloc.geometry import exp as se2_exp
+from fgloc.localization.clock import OdometryClock
 from fgloc.localization.coverage import unmapped_share
 from fgloc.localization.odometry import OdometryTracker, between1
 from fgloc.localization.relocalization import Relocalizer, close
@@ -112,6 +113,10 @@ class Localizer:
         self.fixes: list[PoseFix] = []
         self.last_reason = ""
         self.odom = OdometryTracker(self.pcfg)
+        # a slow odometry's stamps on the scans' clock (clock.py: its offset estimated from the fixes), for
+        # a back-end that integrates the increments between keyframes (not the EKF, which filters at them)
+        self.clock = OdometryClock() if (config.smoother.odom_clock and occ_map is not None and not getattr(
+            self.backend, "measures_velocity", False)) else None
         self.reloc: Relocalizer | None = None
         if self.frontend is not None and occ_map is not None:
             self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)
@@ -157,13 +162,15 @@ class Localizer:
 
     # ------------------------------------------------------------------ inputs
     def on_odometry(self, msg: Odometry) -> None:
-        t = float(msg.stamp)
+        t = t_raw = float(msg.stamp)
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
         if tw.shape != (3,) or not math.isfinite(float(tw[0]) + float(tw[1]) + float(tw[2])):
             self._skip("odometry: non-finite twist")
             return
         if not self._monotonic("odometry", t):
             return
+        if self.clock is not None:
+            t = self.clock.stamp(t_raw)
         self.stats["odometry"] += 1
         if self.odom.t is not None and t <= self.odom.t:
             # at or before the scan stamp the odometry was carried to after a burst (carry_to): the
@@ -179,6 +186,8 @@ class Localizer:
         if cov is not None and not math.isfinite(float(np.asarray(cov, dtype=float).sum())):
             cov = None
         tw, cov = self.odom.step(t, tw, cov, pose)
+        if self.clock is not None:
+            self.clock.add_odometry(t_raw, float(self.odom.pose[2]))
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
@@ -304,6 +313,8 @@ class Localizer:
             kind = reason_kind(self.last_reason)
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         used = self.backend.add_keyframe(t, fix)
+        if used and fix is not None and self.clock is not None:
+            self.clock.add_fix(t, float(fix.pose[2]))
         if fix is not None and not used:
             self.stats["rejected"] += 1
             self.last_reason = "fix rejected by the back-end"
@@ -509,6 +520,8 @@ class Localizer:
         self.stats["backend"] = dict(self.backend.stats)
         if self.no_fix_reasons:
             self.stats["no_fix_reasons"] = group_reasons(self.no_fix_reasons)
+        if self.clock is not None:
+            self.stats["odom_clock"] = self.clock.summary()
         if not self.odom_mode:
             self.stats["lost_s"] = self.lost_time_s()
             self.stats["ended_lost"] = bool(self._lost)

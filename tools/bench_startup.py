@@ -21,7 +21,8 @@ of what it adds:
     python tools/bench_startup.py -w WORKDIR [--repeats 5]
 
 ``WORKDIR`` holds the speed bench's logs (``fgloc bench speed -w WORKDIR`` makes them; made here
-if missing).  Nothing here asserts a speed.
+if missing), and the one-function numba module the first-use row calls (``WORKDIR/startup-numba``).
+Nothing here asserts a speed.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ import argparse
 import os
 import statistics
 import sys
-import tempfile
 from pathlib import Path
 
 STOP_AT_RUN = (  # fgloc run parsed by typer, stopped at the command's first line (pause_gc)
@@ -63,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     speed.PYCACHE_PREFIX = work / "pycache"
     tiny = speed.make_logs(work, paper=False)["tiny"]
     env = speed.tree_env(None)
-    nb = Path(tempfile.mkdtemp(prefix="fgloc-startup-"))
+    nb = work / "startup-numba"  # the cached njit function's module (and numba's cache of it)
+    nb.mkdir(exist_ok=True)
     (nb / "nbmod.py").write_text(NUMBA_MODULE)
     env_nb = dict(env, PYTHONPATH=str(nb) + os.pathsep + env.get("PYTHONPATH", ""))
     def py(c: str) -> list[str]:  # fgloc's exit (no final collection) before the row's own code

@@ -731,6 +731,15 @@ def summary_lines(stats: dict[str, Any]) -> list[str]:
         if d.get("tilt_implausible"):
             est.append(f"{d['tilt_implausible']} not levelled (tilt > 45 deg: check the IMU mount)")
         out.append(f"{head}: {', '.join(parts)}" + (f"; {'; '.join(est)}" if est else ""))
+    clock = stats.get("odom_clock") or {}
+    if clock.get("slow"):  # a slow odometry's clock against the scans' (localization/clock.py)
+        if clock.get("applied"):
+            out.append(f"odometry clock: stamps moved {clock.get('offset_s', 0.0):+.3f} s onto the scans' clock "
+                       f"(estimate {clock.get('estimate_s', 0.0):+.3f} +- {max(clock.get('sigma_s', 0.0), 0.0):.3f} s "
+                       f"from {clock.get('pairs', 0)} fix pairs)")
+        else:
+            why = "stamps in bursts" if not clock.get("regular", True) else "no confident estimate"
+            out.append(f"odometry clock: stamps kept ({why}; {clock.get('pairs', 0)} fix pairs)")
     return out
 
 

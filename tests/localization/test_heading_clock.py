@@ -103,6 +103,12 @@ def test_offset_of_a_slow_odometry_is_estimated_and_applied(lagging):
     assert abs(c["estimate_s"] - LAG_S) < 0.01
     assert abs(loc.clock.offset_s - LAG_S) < 0.01
     assert c["sigma_s"] < 0.01
+    # and the run's summary says so (fgloc run prints these lines)
+    from fgloc.localization.sources import summary_lines
+
+    line = [x for x in summary_lines(loc.stats) if x.startswith("odometry clock")]
+    assert len(line) == 1 and "stamps moved +0.1" in line[0], line
+    assert not any(x.startswith("odometry clock") for x in summary_lines(lagging[False][0].stats))
 
 
 def test_turns_integrated_at_the_right_time(lagging):

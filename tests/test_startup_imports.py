@@ -30,8 +30,8 @@ def test_cli_import_pulls_in_no_heavy_library() -> None:
 
 
 # what `fgloc run` (smoother + native) has no use for: plots, other front-ends' libraries, the
-# cluster engine, tqdm (its progress line is fgloc.commands.run.ProgressLine: tqdm cost ~0.02 s of
-# CPU to import), rich (its summary is plain lines: rich's
+# cluster engine, tqdm when stderr is not a terminal (the bar is drawn on a terminal only: tqdm
+# cost ~0.02 s of CPU to import), rich (its summary is plain lines: rich's
 # console and table cost 0.030-0.038 s of CPU per run), the generic CDR codec (every input here has
 # the fixed layouts of fgloc.io.fastcdr, the ground truth included)
 # the live localizer (its config sections live in fgloc.live.config: composing the config imported

@@ -5,6 +5,7 @@ The CLI only parses and prints: the work is :func:`fgloc.app.run.run_log` and :m
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -18,60 +19,22 @@ from fgloc.errors import ConfigError
 __all__ = ["register"]
 
 
-class ProgressLine:
-    """The run's progress on a terminal: ``localizing  43% 4900/11398 msg  2.1 s, 2333 msg/s``, one
-    line redrawn at most every ``period_s`` (on ``update``), erased at ``close``; nothing when
-    ``stream`` is not a terminal (a log file gets no carriage-return lines).  tqdm did this for
-    ``fgloc run`` at ~0.02 s of CPU per run to import it."""
-
-    def __init__(self, total: int | None, stream: Any = None, clock: Any = time.monotonic,
-                 period_s: float = 0.5, what: str = "localizing") -> None:
-        import sys
-
-        self.total = total
-        self.stream = sys.stderr if stream is None else stream
-        self.clock = clock
-        self.period_s = period_s
-        self.what = what
-        self.n = 0
-        isatty = getattr(self.stream, "isatty", None)
-        self.tty = bool(isatty()) if callable(isatty) else False
-        self._t0 = clock()
-        self._next = self._t0 + period_s
-        self._width = 0  # the longest line drawn (what close erases)
-
-    def update(self, n: int = 1) -> None:
-        self.n += n
-        if self.tty and (now := self.clock()) >= self._next:
-            self._next = now + self.period_s
-            self._draw(now)
-
-    def line(self, now: float) -> str:
-        dt = now - self._t0
-        rate = f", {self.n / dt:.0f} msg/s" if dt > 0 else ""
-        if self.total:
-            return f"{self.what} {100 * self.n // self.total:3d}% {self.n}/{self.total} msg  {dt:.1f} s{rate}"
-        return f"{self.what} {self.n} msg  {dt:.1f} s{rate}"
-
-    def _draw(self, now: float) -> None:
-        text = self.line(now)
-        self._width = max(self._width, len(text))
-        self.stream.write("\r" + text.ljust(self._width))
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self._width:
-            self.stream.write("\r" + " " * self._width + "\r")
-            self.stream.flush()
-            self._width = 0
-
-
-def _progress(quiet: bool):
-    """A progress-line factory over the messages read (:class:`ProgressLine`); None with
-    --quiet (no line, no per-message call)."""
+def _progress(quiet: bool, stream: Any = None):
+    """A tqdm bar factory over the messages read, or None: with --quiet, and when stderr is not a
+    terminal (a log file gets no carriage-return lines, and a batch or a benchmark does not pay
+    tqdm's import, ~0.02 s of CPU)."""
     if quiet:
         return None
-    return ProgressLine
+    out = sys.stderr if stream is None else stream
+    isatty = getattr(out, "isatty", None)
+    if not (callable(isatty) and isatty()):
+        return None
+    from tqdm import tqdm
+
+    def bar(total: int | None) -> Any:
+        return tqdm(total=total, desc="localizing", unit="msg", leave=False, mininterval=0.5, file=out)
+
+    return bar
 
 
 EXIT_LOST = 3  # fgloc run: the run finished but its result is not usable (lost, or no pose)

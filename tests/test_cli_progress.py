@@ -1,11 +1,11 @@
-"""``fgloc run``'s progress bar (fgloc.commands.run._progress): tqdm on a terminal, nothing
+"""``fgloc run``'s progress bar (fgloc.commands.run.progress_bar): tqdm on a terminal, nothing
 with --quiet or when stderr is not a terminal (a log file gets no carriage-return lines)."""
 
 from __future__ import annotations
 
 import io
 
-from fgloc.commands.run import _progress
+from fgloc.commands.run import progress_bar
 
 
 class Terminal(io.StringIO):
@@ -14,13 +14,13 @@ class Terminal(io.StringIO):
 
 
 def test_quiet_and_not_a_terminal_get_no_bar() -> None:
-    assert _progress(True, Terminal()) is None
-    assert _progress(False, io.StringIO()) is None  # a pipe or a file: no bar
+    assert progress_bar(True, Terminal()) is None
+    assert progress_bar(False, io.StringIO()) is None  # a pipe or a file: no bar
 
 
 def test_a_terminal_gets_a_tqdm_bar_that_counts_and_is_erased() -> None:
     out = Terminal()
-    factory = _progress(False, out)
+    factory = progress_bar(False, out)
     assert factory is not None
     bar = factory(1000)
     from tqdm import tqdm

@@ -19,7 +19,7 @@ from fgloc.errors import ConfigError
 __all__ = ["register"]
 
 
-def _progress(quiet: bool, stream: Any = None):
+def progress_bar(quiet: bool, stream: Any = None):
     """A tqdm bar factory over the messages read, or None: with --quiet, and when stderr is not a
     terminal (a log file gets no carriage-return lines, and a batch or a benchmark does not pay
     tqdm's import, ~0.02 s of CPU)."""
@@ -165,7 +165,7 @@ def register(app: typer.Typer) -> None:
                              view=view, realtime=realtime, force=force,
                              static_transforms=[] if static_transform is None else
                              [static_transform_entry(*static_transform)])
-            r = run_request(req, progress=_progress(quiet), announce=_announce)
+            r = run_request(req, progress=progress_bar(quiet), announce=_announce)
         finally:
             resume_gc()  # an error before the set-up was done: an in-process caller keeps its collector
         _print_run_summary(r)

@@ -98,7 +98,7 @@ ALIAS_SCORE_RATIO = 0.7
 
 # ----------------------------------------------------------------- numba kernels
 @njit(cache=True, fastmath=True)
-def _rho_w(r, c, loss, outlier):  # pragma: no cover - compiled
+def rho_weight(r, c, loss, outlier):  # pragma: no cover - compiled
     """Robust cost and IRLS weight of a residual."""
     a = abs(r)
     if a > outlier:
@@ -114,7 +114,7 @@ def _rho_w(r, c, loss, outlier):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pragma: no cover - compiled
+def point_residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pragma: no cover - compiled
     """Residual, map-frame field gradient and whether the point faces the sensor.
 
     ``(lx, ly)`` is the laser origin in base_link: a point whose field gradient points
@@ -142,12 +142,12 @@ def _residual(field, A, b, far, pose, cs, sn, x, y, lx, ly, backcos, off):  # pr
 
 
 @njit(cache=True, fastmath=True)
-def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off, H, g):  # pragma: no cover
-    """Fill H = J^T W J, g = J^T W r at ``pose``; return the robust cost (as :func:`_rho_w` sums it).
+def lm_system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, off, H, g):  # pragma: no cover
+    """Fill H = J^T W J, g = J^T W r at ``pose``; return the robust cost (as :func:`rho_weight` sums it).
 
-    The residuals of :func:`_residual`, with the pose and the map-to-grid transform composed into
+    The residuals of :func:`point_residual`, with the pose and the map-to-grid transform composed into
     one affine map per call (base_link point -> fine-grid coordinates) and the bilinear lookup
-    inline: the LM's inner loop, 2x faster than calling :func:`_residual` per point (same maths;
+    inline: the LM's inner loop, 2x faster than calling :func:`point_residual` per point (same maths;
     results differ in the last bits).  The Cauchy cost ``c^2/2 sum log(1 + q)`` is summed as the
     log of running products over blocks of 64 points (each factor <= 1 + (outlier/c)^2, no
     overflow): one log per block instead of one per point.
@@ -206,7 +206,7 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
     h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     g0 = g1 = g2 = 0.0
     cost = 0.0
-    rho_out, _w = _rho_w(2.0 * outlier + 1.0, c, loss, outlier)
+    rho_out, _w = rho_weight(2.0 * outlier + 1.0, c, loss, outlier)
     inv_c2 = 1.0 / (c * c)
     bc2 = backcos * backcos
     prod = 1.0
@@ -219,7 +219,7 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
         dv = dvs[k]
         gx = du * A[0, 0] + dv * A[1, 0]
         gy = du * A[0, 1] + dv * A[1, 1]
-        # back face (as _residual): the gradient pointing away from the laser
+        # back face (as point_residual): the gradient pointing away from the laser
         bx = cs * (x - lx) - sn * (y - ly)
         by = sn * (x - lx) + cs * (y - ly)
         dot = gx * bx + gy * by
@@ -243,7 +243,7 @@ def _system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos, o
                 n_prod = 0
             wt = 1.0 / q1
         else:
-            rho, wt = _rho_w(r, c, loss, outlier)
+            rho, wt = rho_weight(r, c, loss, outlier)
             cost += rho
         j2 = gx * (-sn * x - cs * y) + gy * (cs * x - sn * y)
         wx = wt * gx
@@ -313,7 +313,7 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
         c = scales[s]
         out = outliers[s]
         lam = 1e-4
-        cost = _system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, off, H, g)
+        cost = lm_system(field, A, b, far, px, py, pose, c, loss, out, lx, ly, backcos, off, H, g)
         for _it in range(max_iter):
             it_total += 1
             improved = False
@@ -328,7 +328,7 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
                 trial[0] = pose[0] + d[0]
                 trial[1] = pose[1] + d[1]
                 trial[2] = pose[2] + d[2]
-                tc = _system(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos, off, Ht, gt)
+                tc = lm_system(field, A, b, far, px, py, trial, c, loss, out, lx, ly, backcos, off, Ht, gt)
                 if tc <= cost:
                     for i in range(3):
                         pose[i] = trial[i]
@@ -394,7 +394,7 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
     n_unk = 0
     hu, wu = unk.shape
     for k in range(px.shape[0]):
-        r, gx, gy, front = _residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
+        r, gx, gy, front = point_residual(field, A, b, far, pose, cs, sn, px[k], py[k], lx, ly, backcos, off)
         if not (front and abs(r) < inlier):
             qx = pose[0] + cs * px[k] - sn * py[k]
             qy = pose[1] + sn * px[k] + cs * py[k]
@@ -404,7 +404,7 @@ def _stats(field, A, b, far, px, py, pose, c, loss, outlier, inlier, lx, ly, bac
                 n_unk += _beam_clear(unk, Ac, bc, pose[0] + cs * lx - sn * ly, pose[1] + sn * lx + cs * ly, qx, qy)
         if not front:
             continue
-        rho, w = _rho_w(r, c, loss, outlier)
+        rho, w = rho_weight(r, c, loss, outlier)
         if abs(r) < inlier:
             n_in += 1
             sr += r
@@ -501,7 +501,7 @@ def _alias_starts(lik, A, b, px, py, stride, pose, c00, c01, c11, step, n, ratio
 
 
 @njit(cache=True, fastmath=True)
-def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_best):  # pragma: no cover
+def correlative_search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_best):  # pragma: no cover
     """Exhaustive correlative search; returns the ``n_best`` poses (rows) and their mean scores."""
     nl = int(math.floor(lin_win / lin_step + 1e-9))
     na = int(math.floor(ang_win / ang_step + 1e-9))
@@ -537,8 +537,8 @@ def _search(lik, A, b, px, py, guess, lin_win, lin_step, ang_win, ang_step, n_be
 
 
 @njit(cache=True, fastmath=True)
-def _heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no cover - compiled
-    """The heading check's two scores in one call: every ``stride``-th point, :func:`_search` over
+def heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no cover - compiled
+    """The heading check's two scores in one call: every ``stride``-th point, :func:`correlative_search` over
     heading only (``+-win`` in ``step``) at ``pose``'s position, and at ``pose`` itself.  Returns the
     best pose (3,), its score and the score at ``pose``."""
     m = (px.shape[0] + stride - 1) // stride
@@ -547,8 +547,8 @@ def _heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no co
     for k in range(m):
         sx[k] = px[k * stride]
         sy[k] = py[k * stride]
-    best, score = _search(lik, A, b, sx, sy, pose, 0.0, 1.0, win, step, 1)
-    _, here = _search(lik, A, b, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
+    best, score = correlative_search(lik, A, b, sx, sy, pose, 0.0, 1.0, win, step, 1)
+    _, here = correlative_search(lik, A, b, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
     return best[0].copy(), score[0], here[0]
 
 
@@ -854,7 +854,7 @@ class NativeMatcher(FrontendBase):
         if self.heading_window <= 0:
             return pose, cost
         stride = max(1, int(math.ceil(2 * len(px) / max(self.search_max_points, 1))))
-        best, score, here = _heading_probe(self.lik, self.Ac, self.bc, px, py, stride, pose, self.heading_window,
+        best, score, here = heading_probe(self.lik, self.Ac, self.bc, px, py, stride, pose, self.heading_window,
                                            self.heading_step)
         if abs(wrap_scalar(best[2] - pose[YAW])) < 1.5 * self.heading_step:
             return pose, cost
@@ -890,7 +890,7 @@ class NativeMatcher(FrontendBase):
             searched = True
             stride = max(1, int(math.ceil(n / max(self.search_max_points, 1))))
             sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
-            cands, scores = _search(
+            cands, scores = correlative_search(
                 self.lik, self.Ac, self.bc, sx, sy, guess, self.search_window_m, self.search_lin_step,
                 self.search_window, self.search_ang_step, self.search_candidates,
             )

@@ -289,7 +289,7 @@ def _layout(data: Buffer, strings: int, align: int, n_doubles: int) -> tuple[tup
     return texts, p
 
 
-def _columns(datas: Sequence[Buffer], strings: int, n_doubles: int
+def decode_columns(datas: Sequence[Buffer], strings: int, n_doubles: int
              ) -> tuple[list[int], list[tuple[str, ...]], np.ndarray, np.ndarray] | None:
     """Decode a batch's fixed part: ``(indices decoded, strings, stamps, doubles (k, n))``.
 
@@ -350,7 +350,7 @@ def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @_damaged_values_as_generic
 def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     out: list[Odometry | None] = [None] * len(datas)
-    cols = _columns(datas, 2, 85)
+    cols = decode_columns(datas, 2, 85)
     if cols is None:
         return out
     idx, texts, stamps, v = cols
@@ -379,7 +379,7 @@ def odometry_stamped_poses(datas: Sequence[Buffer]) -> tuple[np.ndarray, np.ndar
     layout (decode those one by one)."""
     if not datas:
         return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=bool)
-    cols = _columns(datas, 2, 85)
+    cols = decode_columns(datas, 2, 85)
     if cols is None or len(cols[0]) != len(datas):
         return None
     idx, _texts, stamps, v = cols
@@ -395,7 +395,7 @@ def odometry_stamped_poses(datas: Sequence[Buffer]) -> tuple[np.ndarray, np.ndar
 def decode_imus(datas: Sequence[Buffer]) -> list[Imu | None]:
     """Whole :class:`Imu` s, as :func:`fgloc.io.ros.imu_from_ros` gives them."""
     out: list[Imu | None] = [None] * len(datas)
-    cols = _columns(datas, 1, 37)
+    cols = decode_columns(datas, 1, 37)
     if cols is None:
         return out
     idx, texts, stamps, v = cols
@@ -418,7 +418,7 @@ def decode_imus(datas: Sequence[Buffer]) -> list[Imu | None]:
 @_damaged_values_as_generic
 def decode_pose_fixes(datas: Sequence[Buffer], topic: str = "") -> list[PoseFix | None]:
     out: list[PoseFix | None] = [None] * len(datas)
-    cols = _columns(datas, 1, 43)
+    cols = decode_columns(datas, 1, 43)
     if cols is None:
         return out
     idx, texts, stamps, v = cols

@@ -1,9 +1,9 @@
 """The native matcher's compiled kernels give what their plain definitions give.
 
-``_system`` (the LM's pass: field lookups in one loop, robust weights and sums in another) against
-a per-point sum of ``_residual`` / ``_rho_w`` (the plain definition; the fused pass differs in the last
-bits only); ``_heading_probe`` (the heading check's two scores in one call) against the two
-``_search`` calls it stands for, bit for bit.
+``lm_system`` (the LM's pass: field lookups in one loop, robust weights and sums in another) against
+a per-point sum of ``point_residual`` / ``rho_weight`` (the plain definition; the fused pass differs in the last
+bits only); ``heading_probe`` (the heading check's two scores in one call) against the two
+``correlative_search`` calls it stands for, bit for bit.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fgloc.frontends import make_frontend
-from fgloc.frontends.native import _heading_probe, _residual, _rho_w, _search, _system
+from fgloc.frontends.native import correlative_search, heading_probe, lm_system, point_residual, rho_weight
 
 from .synth import MOUNT, free_poses, make_map, make_scan
 
@@ -41,10 +41,10 @@ def _plain_system(fe, px, py, pose, c, outlier):
     g = np.zeros(3)
     cost = 0.0
     for x, y in zip(px, py, strict=True):
-        r, gx, gy, front = _residual(fe.field, fe.A, fe.b, fe.far, pose, cs, sn, x, y, lx, ly, backcos, fe.depth_m)
+        r, gx, gy, front = point_residual(fe.field, fe.A, fe.b, fe.far, pose, cs, sn, x, y, lx, ly, backcos, fe.depth_m)
         if not front:
             r = fe.far
-        rho, w = _rho_w(r, c, fe.loss, outlier)
+        rho, w = rho_weight(r, c, fe.loss, outlier)
         cost += rho
         if w == 0.0:
             continue
@@ -63,7 +63,7 @@ def test_system_is_the_per_point_sum(setup, stage):
         for k in range(3):
             pose = truth + (rng.normal(0.0, [0.05, 0.05, 0.03]) if k else 0.0)
             H, g = np.zeros((3, 3)), np.zeros(3)
-            cost = _system(fe.field, fe.A, fe.b, fe.far, px, py, pose, c, fe.loss, outlier, lx, ly, backcos,
+            cost = lm_system(fe.field, fe.A, fe.b, fe.far, px, py, pose, c, fe.loss, outlier, lx, ly, backcos,
                            fe.depth_m, H, g)
             want_cost, want_H, want_g = _plain_system(fe, px, py, pose, c, outlier)
             assert cost == pytest.approx(want_cost, rel=1e-9, abs=1e-12)
@@ -79,12 +79,12 @@ def test_heading_probe_is_the_two_searches(setup):
     for px, py, truth in scans:
         for stride in (1, 3, 10):
             pose = truth + rng.normal(0.0, [0.02, 0.02, 0.1])
-            best, score, here = _heading_probe(fe.lik, fe.Ac, fe.bc, px, py, stride, pose, fe.heading_window,
+            best, score, here = heading_probe(fe.lik, fe.Ac, fe.bc, px, py, stride, pose, fe.heading_window,
                                                fe.heading_step)
             sx, sy = np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride])
-            want_best, want_score = _search(fe.lik, fe.Ac, fe.bc, sx, sy, pose, 0.0, 1.0, fe.heading_window,
+            want_best, want_score = correlative_search(fe.lik, fe.Ac, fe.bc, sx, sy, pose, 0.0, 1.0, fe.heading_window,
                                             fe.heading_step, 1)
-            _, want_here = _search(fe.lik, fe.Ac, fe.bc, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
+            _, want_here = correlative_search(fe.lik, fe.Ac, fe.bc, sx, sy, pose, 0.0, 1.0, 0.0, 1.0, 1)
             assert best.tobytes() == want_best[0].tobytes()
             assert score == want_score[0] and here == want_here[0]
             checked += 1

@@ -70,7 +70,7 @@ def test_a_message_the_fixed_layout_declines_reads_the_generic_way(tmp_path, mon
     _gt_log(tmp_path / "c.mcap", n=200)
     src = open_log(tmp_path / "c.mcap")
     slow = LogSource.ground_truth(src)
-    real = fastcdr._columns
+    real = fastcdr.decode_columns
 
     def decline_the_first(datas, strings, n_doubles):  # as for a big-endian or odd message
         got = real(datas, strings, n_doubles)
@@ -79,7 +79,7 @@ def test_a_message_the_fixed_layout_declines_reads_the_generic_way(tmp_path, mon
         idx, texts, stamps, v = got
         return idx[1:], texts[1:], stamps[1:], v[1:]
 
-    monkeypatch.setattr(fastcdr, "_columns", decline_the_first)
+    monkeypatch.setattr(fastcdr, "decode_columns", decline_the_first)
     assert fastcdr.odometry_stamped_poses([b"\x00\x01\x00\x00"]) is None
     assert src._ground_truth_columns() is None  # falls back to the message-by-message reading
     _same(src.ground_truth(), slow)

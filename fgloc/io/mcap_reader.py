@@ -128,6 +128,12 @@ class _Channel:
         return out
 
 
+def _chunks_of(summary: Summary, ids: set[int]) -> list[ChunkRef]:
+    """The chunks that may hold messages of channels ``ids``, in reading order (start time, offset)."""
+    return sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
+                  key=lambda r: (r.start_ns, r.offset))
+
+
 class McapSource(LogSource):
     """A ROS 2 MCAP log (see the module doc).
 
@@ -320,8 +326,7 @@ class McapSource(LogSource):
 
     def _indexed_records(self, want: set[str], summary: Summary) -> Iterator[Record]:
         ids = self._want_ids(want)
-        refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
-                      key=lambda r: (r.start_ns, r.offset))
+        refs = _chunks_of(summary, ids)
         gt_ids = self._ground_truth_ids(want, refs)
         collected: list[tuple[list[tuple[int, int, int]], np.ndarray, np.ndarray]] | None = \
             [] if gt_ids else None
@@ -364,14 +369,21 @@ class McapSource(LogSource):
         topic = self.topics.ground_truth
         if not self.collect_ground_truth or topic in want or not self.has(topic) or self._summary is None:
             return set()
-        gt_ids = self._want_ids({topic})
-        if not gt_ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries
-                             for i in gt_ids):
+        gt_ids = self._fixed_layout_ground_truth_ids()
+        if not gt_ids:
             return set()
         read = {r.offset for r in refs}
         if any(r.offset not in read for r in self._summary.chunks if r.channels is None or r.channels & gt_ids):
             return set()
         return gt_ids
+
+    def _fixed_layout_ground_truth_ids(self) -> set[int]:
+        """The ground truth's channels when every one has the fixed ``nav_msgs/Odometry`` layout
+        (the columns can be read), else the empty set."""
+        ids = self._want_ids({self.topics.ground_truth})
+        if any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries for i in ids):
+            return set()
+        return ids
 
     @staticmethod
     def _gt_columns_of(msgs: list[MessageRec], offset: int,
@@ -407,15 +419,12 @@ class McapSource(LogSource):
             return None
         cols = self._gt_collected
         if cols is None:
-            ids = self._want_ids({topic})
-            if not ids or any((c := self._channel(i)) is None or c.fast is not fastcdr.decode_odometries
-                              for i in ids):
+            ids = self._fixed_layout_ground_truth_ids()
+            if not ids:
                 return None
-            refs = sorted((r for r in summary.chunks if r.channels is None or r.channels & ids),
-                          key=lambda r: (r.start_ns, r.offset))
             cols = []
             with self.path.open("rb") as f:
-                for ref in refs:
+                for ref in _chunks_of(summary, ids):
                     msgs = self._load_parsed(f, ref, ids)
                     if msgs and not self._gt_columns_of(msgs, ref.offset, cols):
                         return None

@@ -51,6 +51,7 @@ from collections import deque
 import numpy as np
 
 from fgloc.backends.smoother import MAX_REF_PERIOD_S
+from fgloc.geometry import wrap_angle, wrap_scalar
 
 MAX_OFFSET_S = 0.3     # s, the offsets considered: +- this (a driver's latency, not a wrong clock)
 GRID_STEP_S = 0.01     # s, the grid of offsets
@@ -75,9 +76,6 @@ MAX_PAIRS = 4000       # the residual curves kept (the oldest dropped)
 REFIT_EVERY = 10       # new pairs between fits
 SLEW = 0.5             # the offset in use moves by at most this share of the raw stamps' spacing
 
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2.0 * np.pi) - np.pi
 
 
 class OdometryClock:
@@ -141,7 +139,7 @@ class OdometryClock:
         if self._stamps and t_raw <= self._stamps[-1]:
             return
         if self._last_yaw is not None:
-            self._cum_yaw += (yaw_rad - self._last_yaw + math.pi) % (2.0 * math.pi) - math.pi
+            self._cum_yaw += wrap_scalar(yaw_rad - self._last_yaw)
         self._last_yaw = yaw_rad
         self._stamps.append(t_raw)
         self._count += 1
@@ -171,7 +169,7 @@ class OdometryClock:
             if PAIR_MIN_S <= dt <= PAIR_MAX_S and (best is None or abs(dt - PAIR_S) < abs(t - best[0] - PAIR_S)):
                 best = (ta, ya)
         if best is not None:
-            d = (yaw_rad - best[1] + math.pi) % (2.0 * math.pi) - math.pi
+            d = wrap_scalar(yaw_rad - best[1])
             self._pending.append((best[0], t, d))
         self._fixes.append((t, yaw_rad))
 
@@ -207,7 +205,7 @@ class OdometryClock:
         self.fits += 1
         f = np.asarray(self._d_fix)
         o = np.asarray(self._curves)
-        r = _wrap(f[:, None] - o)
+        r = np.asarray(wrap_angle(f[:, None] - o))
         scale = max(1.4826 * float(np.median(np.abs(r[:, self._g0]))), SCALE_FLOOR_RAD)
         cost = np.minimum(r * r, (TRUNCATE * scale) ** 2).sum(axis=0) / (scale * scale)
         g = int(np.argmin(cost))

@@ -417,7 +417,8 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
     ones (a pair): a handful of unknowns, solved in scalar maths through its normal equations
     ``A^T A`` (integer entries: a group is separable exactly when they are regular, i.e. its pairs
     close an odd cycle); the standard deviations of the solution from ``(A^T A)^-1 A^T`` and the
-    pairs' own.  Only a solution with a negative part goes through :func:`nnls`.  (numpy's SVD,
+    pairs' own.  Only a solution with a negative part goes through the non-negative active set
+    (:func:`_nnls_normal`).  (numpy's SVD,
     pseudo-inverse and least squares on these 3x3 to 6x4 systems cost ~0.25 ms per call, the
     arbiter solves two or three a second.)
     """
@@ -471,7 +472,8 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
 
 
 def _nnls_normal(N: list[list[float]], rhs: list[float], n_rows: int) -> list[float]:
-    """:func:`nnls` (the same active-set steps) on the normal equations ``N = A^T A``,
+    """``argmin |A v - y|`` with ``v >= 0`` (Lawson-Hanson's active set, as scipy.optimize's ``nnls``;
+    importing scipy.optimize cost 0.3-1.3 s of CPU per process) on the normal equations ``N = A^T A``,
     ``rhs = A^T y`` of a full-column-rank ``A`` with ``n_rows`` rows of zeros and ones, in scalar
     maths: each step's least squares on the active columns is ``N_SS z_S = rhs_S``."""
     n = len(N)
@@ -560,39 +562,6 @@ def _components(srcs: list[str], pairs: list[tuple[str, str]]) -> list[list[str]
     for s in srcs:
         groups.setdefault(find(s), []).append(s)
     return list(groups.values())
-
-
-def nnls(A: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``argmin |A v - y|`` with ``v >= 0`` (Lawson-Hanson active set; the problems here have a
-    handful of sources).  scipy.optimize's ``nnls`` gives the same; importing scipy.optimize cost
-    0.3-1.3 s of CPU in every process on the arbiter's first solve."""
-    A = np.asarray(A, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n = A.shape[1]
-    # the unconstrained solution when it is positive: where the active set grows to every variable,
-    # the last step below is this same least-squares solve, and its answer is this one
-    z = np.linalg.lstsq(A, y, rcond=None)[0]
-    if n and bool(np.all(z > 0.0)):
-        return z
-    x = np.zeros(n)
-    active = np.zeros(n, dtype=bool)   # the variables free to be positive
-    tol = 10.0 * np.finfo(float).eps * float(np.abs(A).sum(axis=0).max(initial=0.0)) * max(A.shape)
-    for _ in range(3 * n + 3):
-        w = A.T @ (y - A @ x)
-        if active.all() or float(np.max(np.where(active, -np.inf, w))) <= tol:
-            break
-        active[int(np.argmax(np.where(active, -np.inf, w)))] = True
-        for _ in range(3 * n + 3):
-            z = np.zeros(n)
-            z[active] = np.linalg.lstsq(A[:, active], y, rcond=None)[0]
-            if np.all(z[active] > 0):
-                break
-            back = active & (z <= 0)
-            alpha = float(np.min(x[back] / (x[back] - z[back])))
-            x = x + alpha * (z - x)
-            active &= x > tol
-        x = z
-    return np.maximum(x, 0.0)
 
 
 @dataclass

@@ -343,22 +343,6 @@ def test_scalar_pose2_log_and_derivative_equal_gtsams():
         assert np.allclose(rows, gtsam.Pose2.LogmapDerivative(p)[:2], rtol=0, atol=1e-9)
 
 
-def test_arbiter_nnls_equals_scipys():
-    from scipy.optimize import nnls as scipy_nnls
-
-    from fgloc.backends.health import nnls
-
-    rng = np.random.default_rng(5)
-    for _ in range(300):
-        n = int(rng.integers(2, 6))
-        A = (rng.uniform(size=(n + 2, n)) < 0.5).astype(float)
-        if np.linalg.matrix_rank(A) < n:
-            continue
-        y = rng.normal(0, 1, n + 2) * 10 ** rng.uniform(-8, 0)
-        ref = scipy_nnls(A, y)[0]
-        assert np.allclose(nnls(A, y), ref, rtol=1e-9, atol=1e-12 * np.abs(y).max())
-
-
 def _hat_by_svd(names, pairs, prior, n_eff, unresolved):
     """The arbiter's per-source variances as numpy's least squares / pseudo-inverse give them
     (what cornered_hat computed before its scalar normal equations)."""

@@ -41,8 +41,6 @@ EXIT_LOST = 3  # fgloc run: the run finished but its result is not usable (lost,
 
 
 def _announce(line: str) -> None:
-    import sys
-
     print(f"fgloc: {line}", file=sys.stderr, flush=True)
 
 
@@ -51,21 +49,12 @@ def _styled(text: str, sgr: str, tty: bool) -> str:
     return f"\033[{sgr}m{text}\033[0m" if tty else text
 
 
-def _aligned(header: list[str], body: list[list[str]]) -> list[str]:
-    """A table as aligned plain lines: the first two columns (metric, unit) left, the values right."""
-    widths = [max(len(c[i]) for c in [header, *body]) for i in range(len(header))]
-    return ["    " + "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in
-                              enumerate(zip(cells, widths, strict=True))).rstrip() for cells in [header, *body]]
-
-
 def _print_run_summary(r: RunResult) -> None:
     """The run's summary on stdout, plain lines (bold / colour on a terminal only).
 
     Plain ``print``: rich's console cost every run ~0.03 s of CPU to import and lay out a few
     lines (and wrapped them at 80 columns in a pipe); the comparison table is
     the cells of :func:`fgloc.eval.paper.comparison_cells`, as ``fgloc bench paper`` prints them."""
-    import sys
-
     tty = sys.stdout.isatty()
     lines: list[str] = []
     say = lines.append
@@ -105,13 +94,14 @@ def _print_run_summary(r: RunResult) -> None:
             f"{tm['view_s']:.2f} + final smoothing {tm['finish_s']:.2f} + outputs {tm['outputs_s']:.2f} s")
     m = r.metrics
     if m is not None:
-        from fgloc.eval.paper import comparison_cells
+        from fgloc.eval.paper import comparison_cells, justified
 
         rows = {f"{r.backend} (final)": [m]}
         if r.metrics_online is not None:
             rows[f"{r.backend} (online)"] = [r.metrics_online]
         say("  vs /ground_truth" + (" (SE(2)-aligned, odom frame)" if r.mode == "odom" else "") + ":")
-        lines += _aligned(*comparison_cells(rows, extra=False))
+        header, body = comparison_cells(rows, extra=False)
+        lines += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
     if r.eval_error:
         say(f"  evaluation skipped: {r.eval_error}")
     say(f"  wrote {r.outdir}/: {', '.join(r.written)}")
@@ -171,8 +161,6 @@ def register(app: typer.Typer) -> None:
         _print_run_summary(r)
         failed = r.failure()
         if failed and (r.poses == 0 or not allow_lost):
-            import sys
-
             print(f"fgloc: lost: {r.log}: {failed}" if r.poses else f"fgloc: error: {r.log}: {failed}",
                   file=sys.stderr)
             raise SystemExit(EXIT_LOST)

@@ -119,6 +119,14 @@ def comparison_table(
     return table
 
 
+def justified(table: Sequence[Sequence[str]]) -> list[list[str]]:
+    """A table's cells padded to their column's width: the first two columns (metric, unit) left
+    aligned, the values right aligned (for :func:`comparison_text` and ``fgloc run``'s summary)."""
+    widths = [max(len(row[i]) for row in table) for i in range(len(table[0]))]
+    return [[c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths, strict=True))]
+            for row in table]
+
+
 def comparison_text(
     rows: Mapping[str, Sequence[Metrics]], title: str | None = None, extra: bool = True
 ) -> str:
@@ -127,17 +135,13 @@ def comparison_text(
     # a '|' inside a cell ("max |x error|") would end the cell in Markdown: escape it
     header = [c.replace("|", "\\|") for c in header]
     body = [[c.replace("|", "\\|") for c in cells] for cells in body]
-    widths = [max(len(c[i]) for c in [header, *body]) for i in range(len(header))]
-
-    def line(cells: list[str]) -> str:
-        return "| " + " | ".join(
-            c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True))
-        ) + " |"
-
+    padded = justified([header, *body])
+    widths = [len(c) for c in padded[0]]
     sep = "|" + "|".join(
         "-" * (w + 2) if i < 2 else "-" * (w + 1) + ":" for i, w in enumerate(widths)
     ) + "|"
-    out = [line(header), sep, *(line(c) for c in body)]
+    out = ["| " + " | ".join(cells) + " |" for cells in padded]
+    out.insert(1, sep)
     if title:
         out.insert(0, title)
     return "\n".join(out)

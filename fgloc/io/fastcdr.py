@@ -347,6 +347,13 @@ def _cov3s(c36: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return c36[:, COV_IDX9].reshape(-1, 3, 3), ~np.any(c36 != 0.0, axis=1)
 
 
+def _odometry_poses(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The poses ``[x, y, yaw]`` of a batch of ``nav_msgs/Odometry`` doubles and whether each message
+    has one (REP 145: a first pose covariance of ``-1`` says it has none)."""
+    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
+    return np.stack([v[:, 0], v[:, 1], yaw], axis=1), v[:, 7] != -1.0
+
+
 @_damaged_values_as_generic
 def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     out: list[Odometry | None] = [None] * len(datas)
@@ -354,12 +361,11 @@ def decode_odometries(datas: Sequence[Buffer]) -> list[Odometry | None]:
     if cols is None:
         return out
     idx, texts, stamps, v = cols
-    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
-    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
+    poses, has = _odometry_poses(v)
     twists = v[:, (43, 44, 48)].copy()
     pcov, pzero = _cov3s(v[:, 7:43])
     tcov, tzero = _cov3s(v[:, 49:85])
-    no_pose = (v[:, 7] == -1.0).tolist()
+    no_pose = (~has).tolist()
     pz, tz = pzero.tolist(), tzero.tolist()
     stamp_l = stamps.tolist()
     for k, i in enumerate(idx):
@@ -383,9 +389,7 @@ def odometry_stamped_poses(datas: Sequence[Buffer]) -> tuple[np.ndarray, np.ndar
     if cols is None or len(cols[0]) != len(datas):
         return None
     idx, _texts, stamps, v = cols
-    yaw = quaternion_to_yaw(v[:, 3], v[:, 4], v[:, 5], v[:, 6])
-    poses = np.stack([v[:, 0], v[:, 1], yaw], axis=1)
-    has = v[:, 7] != -1.0
+    poses, has = _odometry_poses(v)
     order = np.empty(len(idx), dtype=np.intp)
     order[np.asarray(idx, dtype=np.intp)] = np.arange(len(idx))  # batch position -> row
     return stamps[order], poses[order], has[order]

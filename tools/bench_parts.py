@@ -14,7 +14,9 @@ and with ``--runs N`` the whole ``fgloc run`` (:func:`fgloc.app.run.run_log`, de
 process N times, its phases in thread CPU time (``fgloc.app.run.PHASE_CLOCK``), medians: setup
 (after the imports), reading the log, writing run.mcap (inputs and ``/fused_pose``), the view's
 channels, localizing (the rest of the loop: back-end, front-end, localizer, session), the outputs
-(TUM files, config, evaluation); ``--every1`` with ``pipeline.frontend_every: 1``.
+(TUM files, config, evaluation); ``--every1`` with ``pipeline.frontend_every: 1``.  The phases are
+the main thread's; ``process`` is the whole ``run_log`` call in process CPU time, run.mcap's chunk
+writer thread (compression, file writes) included.
 
 Compare two source trees with ``PYTHONPATH=TREE python tools/bench_parts.py ...`` alternately
 (the machine's load drifts).
@@ -111,16 +113,18 @@ def run_phases(folder: Path, runs: int, every1: bool) -> None:
     else:  # an older tree (before PHASE_CLOCK): its timers read time.perf_counter
         app_run.time = types.SimpleNamespace(perf_counter=time.thread_time)  # type: ignore[assignment]
     keys = ("setup_s", "read_s", "write_s", "view_s", "localize_s", "outputs_s", "total_s")
-    got: dict[str, list[float]] = {k: [] for k in keys}
+    got: dict[str, list[float]] = {k: [] for k in (*keys, "process_s")}
     with tempfile.TemporaryDirectory() as out:
         for _ in range(runs):
+            c0 = time.process_time()
             res = app_run.run_log(app_run.RunRequest(log=folder / "log.mcap", outdir=Path(out), force=True,
                                                      map_yaml=folder / "map.yaml", config=config))
+            got["process_s"].append(time.process_time() - c0)
             for k in keys:
                 got[k].append(res.timings[k])
     print(f"run_log{' (frontend_every 1)' if every1 else ''}: thread CPU s, median of {runs} "
           f"[min-max]")
-    for k in keys:
+    for k in (*keys, "process_s"):
         v = got[k]
         print(f"  {k[:-2]:12s} {statistics.median(v):7.3f} [{min(v):.3f}-{max(v):.3f}]")
 

@@ -99,8 +99,9 @@ class RunResult:
     damaged_chunks: int = 0  # damaged chunks of the input skipped (MCAP)
     damage: str | None = None  # one line on what could not be read (damaged chunks, undecodable messages)
     # seconds: setup (log, map, localizer), read (decoding the input), write (run.mcap: inputs and
-    # /fused_pose), view (the view's channels), localize (the rest of the loop), finish (final
-    # smoothing), outputs (TUM, config, evaluation), total (the whole run_log call)
+    # /fused_pose; its chunks are compressed and written by a thread of their own, only the wait for
+    # the last ones at the end is in it), view (the view's channels), localize (the rest of the loop),
+    # finish (final smoothing), outputs (TUM, config, evaluation), total (the whole run_log call)
     timings: dict[str, float] = field(default_factory=dict)
 
     @property

@@ -11,7 +11,9 @@ For each log, side by side and interleaved over ``repeats`` (the machine's load 
 
 * ``fgloc run LOG --map MAP -o DIR`` as a child process (the console script), with the defaults
   and with ``pipeline.frontend_every: 1`` (every scan matched): wall and CPU time, peak RSS
-  (``wait4``), the time line it prints (reading, writing, the view's channels: the I/O share),
+  (``wait4``: every thread's CPU, run.mcap's chunk writer thread included), the time line it
+  prints (reading, writing, the view's channels: the I/O share, of the main thread's wall time;
+  the chunks' compression and file writes overlap it on another core and are not in it),
   the position / heading RMSE of its ``trajectory.tum`` against the log's ground truth;
 * the same command from another source tree (``before``: a folder holding an older ``fgloc``
   package, put first on ``PYTHONPATH``), for a before / after table on the same machine state;

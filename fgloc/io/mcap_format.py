@@ -11,7 +11,9 @@ unusable summary: the caller falls back to a linear scan).
 from __future__ import annotations
 
 import io
+import queue
 import struct
+import threading
 import zlib
 from dataclasses import dataclass, field
 from typing import IO, Any
@@ -310,13 +312,23 @@ class StreamWriter:
     """A lean MCAP writer (chunked, CRCs, message indexes, summary with schemas, channels,
     statistics and chunk indexes, summary offsets), written for speed: one ``struct.pack`` and
     two buffer appends per message, where ``mcap.writer.Writer`` builds record objects.  Files
-    are read back by ``mcap``'s own reader with CRC validation (tested)."""
+    are read back by ``mcap``'s own reader with CRC validation (tested).
+
+    ``background``: a full chunk is compressed, checksummed and written (with its message indexes)
+    by one worker thread, in order, while the caller goes on filling the next one: zstd, the CRC
+    and the file write release the GIL, so on a second core they overlap the caller's work (the
+    same bytes as written in line; at most two chunks wait).  An error of the worker (a full disk)
+    is raised by the next chunk handed over or by :meth:`finish`."""
 
     def __init__(self, f: IO[bytes], profile: str = "ros2", library: str = "fgloc", chunk_size: int = 1 << 20,
-                 compression: str = "zstd") -> None:
+                 compression: str = "zstd", background: bool = True) -> None:
         if compression not in ("zstd", "lz4", ""):
             raise ValueError(f"unsupported compression {compression!r}")
         self._f = f
+        self._background = background
+        self._queue: queue.Queue[tuple[bytearray, dict[int, list[tuple[int, int]]], int, int] | None] | None = None
+        self._worker: threading.Thread | None = None
+        self._error: BaseException | None = None
         self._chunk_size = chunk_size
         self._compression = compression
         self._compressor: Any = None
@@ -385,7 +397,48 @@ class StreamWriter:
     def _flush(self) -> None:
         if not self._buf:
             return
-        raw = bytes(self._buf)
+        raw, index = self._buf, self._index
+        start, end = (self._c_start, self._c_end) if not self._c_empty else (0, 0)
+        if not self._c_empty:
+            self._start = start if self._start is None else min(self._start, start)
+            self._end = max(self._end, end)
+        self._buf = bytearray()
+        self._index = {}
+        self._c_empty = True
+        if not self._background:
+            self._write_chunk(raw, index, start, end)
+            return
+        self._raise_worker_error()
+        if self._queue is None:
+            self._queue = queue.Queue(maxsize=2)
+            self._worker = threading.Thread(target=self._work, name="fgloc-mcap-chunks", daemon=True)
+            self._worker.start()
+        self._queue.put((raw, index, start, end))
+
+    def _work(self) -> None:
+        """The worker thread: the chunks handed over, in order, until None."""
+        assert self._queue is not None
+        while (item := self._queue.get()) is not None:
+            if self._error is None:
+                try:
+                    self._write_chunk(*item)
+                except BaseException as e:  # noqa: BLE001 - raised in the caller's thread
+                    self._error = e
+
+    def _raise_worker_error(self) -> None:
+        if self._error is not None:
+            e, self._error = self._error, None
+            raise e
+
+    def _join_worker(self) -> None:
+        if self._queue is not None and self._worker is not None:
+            self._queue.put(None)
+            self._worker.join()
+            self._queue = self._worker = None
+        self._raise_worker_error()
+
+    def _write_chunk(self, raw: bytearray, index: dict[int, list[tuple[int, int]]], start: int, end: int) -> None:
+        """A chunk record of the messages ``raw``, its message indexes and (kept for the summary) its chunk index."""
         if self._compression == "zstd":
             data = self._compressor.compress(raw)
         elif self._compression == "lz4":
@@ -393,11 +446,7 @@ class StreamWriter:
 
             data = lz4.frame.compress(raw)
         else:
-            data = raw
-        start, end = (self._c_start, self._c_end) if not self._c_empty else (0, 0)
-        if not self._c_empty:
-            self._start = start if self._start is None else min(self._start, start)
-            self._end = max(self._end, end)
+            data = bytes(raw)
         chunk_off = self._pos
         body = (struct.pack("<QQQI", start, end, len(raw), zlib.crc32(raw)) + _str(self._compression)
                 + _U64.pack(len(data)))
@@ -406,7 +455,7 @@ class StreamWriter:
         chunk_len = self._pos - chunk_off
         offsets = []
         idx_start = self._pos
-        for cid, entries in sorted(self._index.items()):
+        for cid, entries in sorted(index.items()):
             entries.sort(key=lambda e: e[0])
             arr = struct.pack(f"<{2 * len(entries)}Q", *(v for e in entries for v in e))
             offsets.append((cid, self._pos))
@@ -415,12 +464,10 @@ class StreamWriter:
         self._chunk_indexes.append(_record(OP_CHUNK_INDEX, struct.pack("<QQQQ", start, end, chunk_off, chunk_len)
                                            + _U32.pack(len(omap)) + omap + _U64.pack(self._pos - idx_start)
                                            + _str(self._compression) + struct.pack("<QQ", len(data), len(raw))))
-        self._buf = bytearray()
-        self._index = {}
-        self._c_empty = True
 
     def finish(self) -> None:
         self._flush()
+        self._join_worker()  # every chunk written before the summary
         self._write(_record(OP_DATA_END, _U32.pack(0)))
         summary_start = self._pos
         groups: list[tuple[int, bytes]] = [(OP_SCHEMA, b"".join(self._schemas)),

@@ -337,12 +337,23 @@ def pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float
 def _log_against(rx: float, ry: float, rth: float, measured: FloatArray) -> tuple[FloatArray, tuple]:
     """``Log(m^-1 rep)`` for ``rep = (rx, ry, rth)`` and ``m = measured``, with ``d Log / d rep``'s
     left factor from :func:`pose2_log_and_derivative` (the tail shared by the between-factor errors)."""
+    v1, v2, v3, jl = _log_against_m(rx, ry, rth, _measured(measured))
+    return np.array([v1, v2, v3]), jl
+
+
+def _measured(measured: FloatArray) -> tuple[float, float, float, float, float]:
+    """A between factor's measurement ``(x, y, yaw)`` with ``cos(yaw)``, ``sin(yaw)`` as floats (once per factor)."""
     mx, my, mt = float(measured[0]), float(measured[1]), float(measured[2])
-    cm, sm = math.cos(mt), math.sin(mt)
+    return mx, my, mt, math.cos(mt), math.sin(mt)
+
+
+def _log_against_m(rx: float, ry: float, rth: float, m: tuple[float, float, float, float, float]
+                   ) -> tuple[float, float, float, tuple]:
+    """:func:`_log_against` on a :func:`_measured` measurement, the log as three floats."""
+    mx, my, mt, cm, sm = m
     dx, dy = rx - mx, ry - my
     ex, ey = cm * dx + sm * dy, -sm * dx + cm * dy
-    v1, v2, v3, jl = pose2_log_and_derivative(ex, ey, wrap_scalar(rth - mt))
-    return np.array([v1, v2, v3]), jl
+    return pose2_log_and_derivative(ex, ey, wrap_scalar(rth - mt))
 
 
 def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | tuple[float, float],
@@ -355,15 +366,30 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
     so the yaw-rate scale does not bend its chord: ``rep = [s_v x, s_v y, s_w yaw]``.  Scalar
     maths (called at every relinearization: the numpy / GTSAM-call version cost ~45 us)."""
     h = xi.between(xj)
-    cx, cy, cth = h.x(), h.y(), h.theta()
-    sv, sw = float(scales[0]), float(scales[1])
+    e0, e1, e2, jac = _scaled_between(h.x(), h.y(), h.theta(), float(scales[0]), float(scales[1]),
+                                      _measured(measured), want_jacobians, bend)
+    if jac is None:
+        return np.array([e0, e1, e2]), []
+    hi, hj, hv, hw = jac
+    return (np.array([e0, e1, e2]), [np.array(hi).reshape(3, 3), np.array(hj).reshape(3, 3),
+                                     np.array([hv, hw]).T.reshape(3, 2)])
+
+
+def _scaled_between(cx: float, cy: float, cth: float, sv: float, sw: float,
+                    m: tuple[float, float, float, float, float], want_jacobians: bool, bend: bool
+                    ) -> tuple[float, float, float, tuple | None]:
+    """:func:`scaled_between_error` on ``c = xi^-1 xj = (cx, cy, cth)``, a :func:`_measured`
+    measurement ``m``, in floats: the error's three entries and (``want_jacobians``) the
+    Jacobians as flat row-major tuples ``(Hi 3x3, Hj 3x3, Hs_v 3x1, Hs_w 3x1)``, or None.
+    Unrolled scalar maths without temporary arrays (the factor's Python callback runs at every
+    linearization)."""
     if not bend:
         rth = sw * cth
         rx, ry = sv * cx, sv * cy
         # Jc = [Rt @ [[sv, 0, 0], [0, sv, 0]]; [0, 0, sw]], Js = [Rt @ [[tx, 0], [ty, 0]]; [0, th]]
         ct, st = math.cos(rth), math.sin(rth)
-        jc = ((ct * sv, st * sv, 0.0), (-st * sv, ct * sv, 0.0))
-        js = ((ct * cx + st * cy, 0.0), (-st * cx + ct * cy, 0.0))
+        c00, c01, c02, c10, c11, c12 = ct * sv, st * sv, 0.0, -st * sv, ct * sv, 0.0
+        s00, s01, s10, s11 = ct * cx + st * cy, 0.0, -st * cx + ct * cy, 0.0
     else:
         hh = 0.5 * cth
         s0 = _sinc(hh)
@@ -381,28 +407,29 @@ def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | 
         e00, e01 = r0x * s1 / s0, drho_dsw * r0x - rho * hh * r0y
         e10, e11 = r0y * s1 / s0, drho_dsw * r0y + rho * hh * r0x
         ct, st = math.cos(rth), math.sin(rth)
-        jc = ((ct * d00 + st * d10, ct * d01 + st * d11, ct * d02 + st * d12),
-              (-st * d00 + ct * d10, -st * d01 + ct * d11, -st * d02 + ct * d12))
-        js = ((ct * e00 + st * e10, ct * e01 + st * e11), (-st * e00 + ct * e10, -st * e01 + ct * e11))
+        c00, c01, c02 = ct * d00 + st * d10, ct * d01 + st * d11, ct * d02 + st * d12
+        c10, c11, c12 = -st * d00 + ct * d10, -st * d01 + ct * d11, -st * d02 + ct * d12
+        s00, s01, s10, s11 = ct * e00 + st * e10, ct * e01 + st * e11, -st * e00 + ct * e10, -st * e01 + ct * e11
     # E = m^-1 rep
-    e, jl = _log_against(rx, ry, rth, measured)
+    v1, v2, v3, jl = _log_against_m(rx, ry, rth, m)
     if not want_jacobians:
-        return e, []
+        return v1, v2, v3, None
     # Jl @ Jc (Jc's last row [0, 0, sw], Jl's last row [0, 0, 1]), unrolled (the same sums)
     (l00, l01, l02), (l10, l11, l12) = jl
-    (c00, c01, c02), (c10, c11, c12) = jc
-    a0 = (l00 * c00 + l01 * c10, l00 * c01 + l01 * c11, l00 * c02 + l01 * c12 + l02 * sw)
-    a1 = (l10 * c00 + l11 * c10, l10 * c01 + l11 * c11, l10 * c02 + l11 * c12 + l12 * sw)
-    a2 = (0.0, 0.0, sw)
+    a00, a01, a02 = l00 * c00 + l01 * c10, l00 * c01 + l01 * c11, l00 * c02 + l01 * c12 + l02 * sw
+    a10, a11, a12 = l10 * c00 + l11 * c10, l10 * c01 + l11 * c11, l10 * c02 + l11 * c12 + l12 * sw
+    a20 = a21 = 0.0
     # d c / d xj = [[ch, -sh, 0], [sh, ch, 0], [0, 0, 1]], d c / d xi = [[-1, 0, cy], [0, -1, -cx], [0, 0, -1]]
     ch, sh = math.cos(cth), math.sin(cth)
-    Hj = np.array([(r[0] * ch + r[1] * sh, -r[0] * sh + r[1] * ch, r[2]) for r in (a0, a1, a2)])
-    Hi = np.array([(-r[0], -r[1], r[0] * cy - r[1] * cx - r[2]) for r in (a0, a1, a2)])
-    (s00, s01), (s10, s11) = js
-    Hs = np.array(((l00 * s00 + l01 * s10, l00 * s01 + l01 * s11 + l02 * cth),
-                   (l10 * s00 + l11 * s10, l10 * s01 + l11 * s11 + l12 * cth),
-                   (0.0, cth)))
-    return e, [Hi, Hj, Hs]
+    hj = (a00 * ch + a01 * sh, -a00 * sh + a01 * ch, a02,
+          a10 * ch + a11 * sh, -a10 * sh + a11 * ch, a12,
+          a20 * ch + a21 * sh, -a20 * sh + a21 * ch, sw)
+    hi = (-a00, -a01, a00 * cy - a01 * cx - a02,
+          -a10, -a11, a10 * cy - a11 * cx - a12,
+          -a20, -a21, a20 * cy - a21 * cx - sw)
+    hv = (l00 * s00 + l01 * s10, l10 * s00 + l11 * s10, 0.0)
+    hw = (l00 * s01 + l01 * s11 + l02 * cth, l10 * s01 + l11 * s11 + l12 * cth, cth)
+    return v1, v2, v3, (hi, hj, hv, hw)
 
 
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
@@ -424,20 +451,24 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
     kv = int(ks_v) if ks_v is not None else None
     kw = int(ks_w) if ks_w is not None else None
     k0, k1 = int(ki), int(kj)
+    m = _measured(d)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
         sv = float(values.atVector(kv)[0]) if kv is not None else sv0
         sw = float(values.atVector(kw)[0]) if kw is not None else sw0
-        e, Hs = scaled_between_error(values.atPose2(k0), values.atPose2(k1), (sv, sw), d, H is not None, bend)
-        if H is not None:
-            H[0], H[1] = Hs[0], Hs[1]
-            m = 2
-            if ks_v is not None:
-                H[m] = Hs[2][:, :1]
-                m += 1
-            if ks_w is not None:
-                H[m] = Hs[2][:, 1:]
-        return e
+        h = values.atPose2(k0).between(values.atPose2(k1))
+        e0, e1, e2, jac = _scaled_between(h.x(), h.y(), h.theta(), sv, sw, m, H is not None, bend)
+        if H is not None and jac is not None:
+            hi, hj, hv, hw = jac
+            H[0] = np.array(hi).reshape(3, 3)
+            H[1] = np.array(hj).reshape(3, 3)
+            n = 2
+            if kv is not None:
+                H[n] = np.array(hv).reshape(3, 1)
+                n += 1
+            if kw is not None:
+                H[n] = np.array(hw).reshape(3, 1)
+        return np.array([e0, e1, e2])
 
     return gtsam.CustomFactor(noise, keys, error)
 

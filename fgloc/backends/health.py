@@ -625,6 +625,8 @@ class LatencyEstimator:
         self.n = 0
         self.rejected = 0
         self._fit: tuple[int, float, float] | None = None   # (n, delta, sigma)
+        self._fit_n = 0
+        self._refit_after: float = 0   # refit once n - _fit_n reaches this (0: no fit yet)
 
     def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
         """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
@@ -652,10 +654,8 @@ class LatencyEstimator:
     def _refit(self) -> tuple[float, float]:
         # refit after refit_every new pairs, or once they are refit_share of the rows fitted: a refit reads
         # every row (up to max_rows), so a fixed count made its cost grow with the log (quadratic)
-        if self._fit is not None and (self.n - self._fit[0] < max(self.refit_every, self.refit_share
-                                                                  * min(self._fit[0], self.max_rows))
-                                      and self._fit[0] >= self.min_pairs or self.n == self._fit[0]):
-            return self._fit[1], self._fit[2]
+        if self.n - self._fit_n < self._refit_after:   # (the threshold is the fit's: one test per call)
+            return self._fit[1], self._fit[2]  # type: ignore[index]
         if not self.rows:
             return 0.0, math.inf
         a = self._buf[self._nbuf - len(self.rows):self._nbuf]
@@ -681,6 +681,10 @@ class LatencyEstimator:
         scale2 = max(float(res @ res) / max(len(a) - 3, 1), 1.0)
         sig = math.sqrt(scale2 * float(np.linalg.inv(N)[0, 0])) if N[0, 0] > 1e-8 else math.inf
         self._fit = (self.n, float(sol[0]), sig)
+        self._fit_n = self.n
+        # the fit holds until refit_every / refit_share new pairs; below min_pairs until any new one
+        self._refit_after = max(self.refit_every, self.refit_share * min(self.n, self.max_rows)) \
+            if self.n >= self.min_pairs else 1
         return self._fit[1], self._fit[2]
 
     def estimate(self) -> tuple[float, float]:
@@ -855,10 +859,18 @@ class GyroBias:
             return
         # F = I with F[1:, 0] = -dt (each offset drifts as -b): F x and F P F^T by rows and columns
         x0 = self.x[0]
-        x = [x0] + [xk - dt * x0 for xk in self.x[1:]]
-        p0 = self.P[0]
-        FP = [p0] + [[a - dt * b for a, b in zip(row, p0, strict=True)] for row in self.P[1:]]
-        P = [[r[0]] + [a - dt * r[0] for a in r[1:]] for r in FP]
+        if len(self.x) == 3:  # the bias and two heading sources (the common case), unrolled: the same operations
+            (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self.P
+            x = [x0, self.x[1] - dt * x0, self.x[2] - dt * x0]
+            a10, a11, a12 = a10 - dt * a00, a11 - dt * a01, a12 - dt * a02
+            a20, a21, a22 = a20 - dt * a00, a21 - dt * a01, a22 - dt * a02
+            P = [[a00, a01 - dt * a00, a02 - dt * a00], [a10, a11 - dt * a10, a12 - dt * a10],
+                 [a20, a21 - dt * a20, a22 - dt * a20]]
+        else:
+            x = [x0] + [xk - dt * x0 for xk in self.x[1:]]
+            p0 = self.P[0]
+            FP = [p0] + [[a - dt * b for a, b in zip(row, p0, strict=True)] for row in self.P[1:]]
+            P = [[r[0]] + [a - dt * r[0] for a in r[1:]] for r in FP]
         P[0][0] += self.rw**2 * dt
         arw = self.series[-1][3] * (self.series[-1][0] - self.series[-2][0]) if len(self.series) > 1 else 0.0
         q = (self.offset_q + arw) * dt
@@ -879,6 +891,19 @@ class GyroBias:
         if z > self.huber_k:
             R = R * z / self.huber_k
             S = Pii + R
+        if len(P) == 3:  # unrolled (the common case): the same operations as below
+            (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = P
+            k0, k1, k2 = P[0][i] / S, P[1][i] / S, P[2][i] / S
+            x = self.x
+            self.x = [x[0] + k0 * y, x[1] + k1 * y, x[2] + k2 * y]
+            b0, b1, b2 = P[i]
+            a00, a01, a02 = a00 - k0 * b0, a01 - k0 * b1, a02 - k0 * b2
+            a10, a11, a12 = a10 - k1 * b0, a11 - k1 * b1, a12 - k1 * b2
+            a20, a21, a22 = a20 - k2 * b0, a21 - k2 * b1, a22 - k2 * b2
+            self.P = [[0.5 * (a00 + a00), 0.5 * (a01 + a10), 0.5 * (a02 + a20)],
+                      [0.5 * (a10 + a01), 0.5 * (a11 + a11), 0.5 * (a12 + a21)],
+                      [0.5 * (a20 + a02), 0.5 * (a21 + a12), 0.5 * (a22 + a22)]]
+            return True
         K = [row[i] / S for row in P]
         self.x = [a + k * y for a, k in zip(self.x, K, strict=True)]
         Pi = P[i]

@@ -809,19 +809,41 @@ class SlidingWindowSmoother(Backend):
         if not self.gyro or not self.odo_t:
             return None
         name = next(iter(self.gyro))
+        gts, grs, _ = self.gyro[name]
+        ng = len(gts)
+        # the gyro's coverage of the whole interval (what each step's _gyro_increment checks: a step
+        # it does not cover makes the chord None, whichever step it is)
+        if not gts or gts[-1] < t1 - 1e-9 or gts[0] > t0 + 1e-9:
+            return None
+        bias = self.gyro_bias_of(name)
+        max_gap = 0.25
         ts = self.odo_t
         n = len(ts)
         i = bisect_right(ts, t0)
+        g = max(bisect_right(gts, t0) - 1, 0)   # the gyro reading at or before the step's start
         t, x, y, th = t0, 0.0, 0.0, 0.0
         while t < t1 - 1e-12:
             j = min(i, n - 1)
             tn = min(ts[i], t1) if i < n else t1
             dt = tn - t
             if dt > 0:
-                r = self._gyro_increment(name, t, tn, want_var=False)
-                if r is None:
-                    return None
-                w = r[0]
+                # _gyro_increment(name, t, tn, want_var=False) for this step, the gyro index carried
+                # from step to step instead of searched (the same sums in the same order)
+                while g + 1 < ng and gts[g + 1] <= t:
+                    g += 1
+                k = g
+                d = 0.0
+                while k < ng - 1 and gts[k] < tn:
+                    ta, tb = gts[k], gts[k + 1]
+                    a, b = max(ta, t), min(tb, tn)
+                    if b > a:
+                        h = tb - ta
+                        if h > max_gap:
+                            return None
+                        fa, fb = (a - ta) / h, (b - ta) / h
+                        d += (b - a) * (1.0 - 0.5 * (fa + fb)) * grs[k] + (b - a) * 0.5 * (fa + fb) * grs[k + 1]
+                    k += 1
+                w = d - bias * (tn - t)
                 u = self.odo_u[j]
                 vx, vy = float(u[0]) * dt, float(u[1]) * dt
                 a, b = exp_coefficients(w)

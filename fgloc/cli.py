@@ -72,7 +72,20 @@ def _option_hint(e: Exception) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the app, map user errors to one line on stderr and exit 2."""
+    """Entry point: run the app, map user errors to one line on stderr and exit 2.
+
+    Without ``argv`` (the ``fgloc`` console script, ``python -m fgloc.cli``) the process ends here
+    once the command is done, without the interpreter's teardown (:func:`fgloc.app.startup.exit_process`);
+    with ``argv`` (a caller in the same process) it returns the exit code."""
+    code = _main(argv)
+    if argv is None:
+        from fgloc.app.startup import exit_process
+
+        exit_process(code)
+    return code
+
+
+def _main(argv: list[str] | None) -> int:
     logging.basicConfig(level=logging.WARNING, format="fgloc: %(levelname)s: %(message)s")
     # at exit, skip the interpreter's last cycle collection over everything loaded (numba, scipy,
     # gtsam: 0.15-0.3 s of every command); the OS frees the memory

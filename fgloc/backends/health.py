@@ -433,30 +433,24 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
         n = len(members)
         rows = [(loc[a], loc[b], float(pairs[(a, b)]), float(pairs[(a, b)])
                  * math.sqrt(2.0 / max(n_eff.get((a, b), 1e9), 1.0))) for (a, b) in plist if a in loc]
-        N = [[0.0] * n for _ in range(n)]
         rhs = [0.0] * n
         ub = [math.inf] * n
         for a, b, yv, _ in rows:
-            N[a][a] += 1.0
-            N[b][b] += 1.0
-            N[a][b] += 1.0
-            N[b][a] += 1.0
             rhs[a] += yv
             rhs[b] += yv
             ub[a] = min(ub[a], yv)
             ub[b] = min(ub[b], yv)
-        inv = _spd_inverse(N)
+        N, inv, wsq = _hat_system(n, tuple((a, b) for a, b, _, _ in rows))
         v = [math.nan] * n
         if inv is not None:
             v = [sum(inv[i][j] * rhs[j] for j in range(n)) for i in range(n)]
             if not all(x > 0.0 for x in v):
                 v = _nnls_normal(N, rhs, len(rows))
             sd2 = [0.0] * n
-            for a, b, _, sig in rows:
+            for (_, _, _, sig), wr in zip(rows, wsq, strict=True):
                 s2 = sig * sig
                 for m in range(n):
-                    w = inv[m][a] + inv[m][b]
-                    sd2[m] += w * w * s2
+                    sd2[m] += wr[m] * s2
             for m, s_name in enumerate(members):
                 if math.sqrt(max(sd2[m], 0.0)) > 0.5 * max(v[m], prior.get(s_name, 0.0)):
                     v[m] = math.nan  # not resolved
@@ -469,6 +463,33 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
                 continue
             out[s_name] = max(min(val, ub[m]), 0.0)
     return out
+
+
+_HAT_SYSTEMS: dict[tuple[int, tuple[tuple[int, int], ...]], tuple] = {}
+
+
+def _hat_system(n: int, rows: tuple[tuple[int, int], ...]) -> tuple[list[list[float]], list[list[float]] | None,
+                                                                   list[list[float]]]:
+    """A pair set's normal matrix ``N = A^T A`` (``rows``: each pair's two source indices), its
+    inverse (None when singular) and per row the squared weights ``(inv[m][a] + inv[m][b])^2`` of
+    its pair in each source's solution: they depend on which pairs there are only, not on their
+    values (the arbiter solves the same few sets once a second), so they are made once per set."""
+    key = (n, rows)
+    got = _HAT_SYSTEMS.get(key)
+    if got is None:
+        N = [[0.0] * n for _ in range(n)]
+        for a, b in rows:
+            N[a][a] += 1.0
+            N[b][b] += 1.0
+            N[a][b] += 1.0
+            N[b][a] += 1.0
+        inv = _spd_inverse(N)
+        wsq = [[(inv[m][a] + inv[m][b]) * (inv[m][a] + inv[m][b]) for m in range(n)] for a, b in rows] \
+            if inv is not None else []
+        if len(_HAT_SYSTEMS) > 256:
+            _HAT_SYSTEMS.clear()
+        got = _HAT_SYSTEMS[key] = (N, inv, wsq)
+    return got
 
 
 def _nnls_normal(N: list[list[float]], rhs: list[float], n_rows: int) -> list[float]:
@@ -676,7 +697,11 @@ class LatencyEstimator:
             N = Aw.T @ Aw + prior
             sol = np.linalg.solve(N, Aw.T @ yw)
             z = np.abs(y - A @ sol) / s
-            w = np.sqrt(np.where(z <= self.huber_k, 1.0, self.huber_k / np.maximum(z, 1e-12)))
+            w_new = np.sqrt(np.where(z <= self.huber_k, 1.0, self.huber_k / np.maximum(z, 1e-12)))
+            if np.array_equal(w_new, w):
+                break   # the same weights: every further iteration repeats this one exactly (the usual case:
+                        # no pair beyond huber_k, the weights all 1 after the first)
+            w = w_new
         res = (y - A @ sol) / s * w
         scale2 = max(float(res @ res) / max(len(a) - 3, 1), 1.0)
         sig = math.sqrt(scale2 * float(np.linalg.inv(N)[0, 0])) if N[0, 0] > 1e-8 else math.inf

@@ -42,6 +42,11 @@ def between1(a: FloatArray, b: FloatArray) -> FloatArray:
     """:func:`fgloc.geometry.between` (``a^-1 (+) b``) of two single poses in scalar maths, the same
     operations in the same order (the same bits where numpy's and libm's cos / sin agree): the
     array version costs ~15 us per call, and this runs for every odometry message and scan."""
+    return np.array(_between1(a, b))
+
+
+def _between1(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
+    """:func:`between1` as a tuple of floats (for the per-message checks: no array made)."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
     b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
     c, s = math.cos(a2), math.sin(a2)
@@ -49,7 +54,7 @@ def between1(a: FloatArray, b: FloatArray) -> FloatArray:
     i1 = s * a0 - c * a1
     i2 = (-a2 + math.pi) % (2.0 * math.pi) - math.pi
     c, s = math.cos(i2), math.sin(i2)
-    return np.array([i0 + c * b0 - s * b1, i1 + s * b0 + c * b1, (i2 + b2 + math.pi) % (2.0 * math.pi) - math.pi])
+    return i0 + c * b0 - s * b1, i1 + s * b0 + c * b1, (i2 + b2 + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _exp_of(tw: FloatArray, dt: float) -> tuple[float, float, float]:
@@ -290,12 +295,12 @@ class OdometryTracker:
             unused = self._unused(cov)
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
-        delta = between1(prev[1], pose)
+        delta = _between1(prev[1], pose)
         if mode != "always" and self._agrees(t, delta, _exp_of(tw, dt), unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             return tw, cov
-        u = se2_log(delta) / dt
+        u = se2_log(np.array(delta)) / dt
         self.from_poses += 1
         self._derived = True
         if dt < self._baseline():
@@ -313,7 +318,8 @@ class OdometryTracker:
             return MAX_BASELINE_S
         return min(BASELINE_FRACTION * (st[-1] - st[0]) / (len(st) - 1), MAX_BASELINE_S)
 
-    def _agrees(self, t: float, delta: FloatArray, d_tw: FloatArray | tuple[float, float, float],
+    def _agrees(self, t: float, delta: FloatArray | tuple[float, float, float],
+                d_tw: FloatArray | tuple[float, float, float],
                 unused: tuple[bool, bool, bool]) -> bool:
         """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``
         (running sums in Python floats: this runs for every odometry message that carries a pose)."""
@@ -347,4 +353,4 @@ class OdometryTracker:
         if cov is None:
             return (False, False, False)
         c = cov if isinstance(cov, np.ndarray) and cov.shape == (3, 3) else np.asarray(cov, dtype=float).reshape(3, 3)
-        return (bool(c[0, 0] >= UNUSED_VAR), bool(c[1, 1] >= UNUSED_VAR), bool(c[2, 2] >= UNUSED_VAR))
+        return (c.item(0) >= UNUSED_VAR, c.item(4) >= UNUSED_VAR, c.item(8) >= UNUSED_VAR)

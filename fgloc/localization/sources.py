@@ -243,6 +243,7 @@ class SourceRouter:
         self._chains: dict[str, StaticTransform | None] = {}
         self._rotations: dict[str, tuple[StaticTransform, np.ndarray]] = {}   # the mounts' rotations by frame
         self._warned: set[str] = set()
+        self._twist_uses: dict[str, tuple[SourceSpec, bool, bool]] = {}   # _twist_use's answers by source
         self.state: dict[str, _State] = {}
         self._tilt: tuple[float, float, float] | None = None   # t, roll, pitch of the base (levelling IMU)
         self._tilt_source: str | None = None
@@ -366,7 +367,8 @@ class SourceRouter:
         cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
         tw_msg, cov_msg = tw.copy(), cov
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
-        if spec.differential or not any(spec.uses(c) for c in ("vx", "vy", "vyaw")):
+        velocities, whole_twist = self._twist_use(spec)
+        if spec.differential or not velocities:
             # robot_localization's differential mode: the twist of the pose increments
             pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
             if pose is not None and st.prev_pose is not None and not msg.stamp > st.prev_pose[0]:
@@ -404,7 +406,7 @@ class SourceRouter:
         default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))
         if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
             cov = np.diag(np.square(default))
-        if spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential:
+        if whole_twist:
             out = cov  # the default layout: the message's whole covariance, exactly as before
         else:
             out = np.zeros((3, 3))
@@ -424,6 +426,17 @@ class SourceRouter:
         m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
                      msg.frame_id, msg.child_frame_id)
         self.loc.on_odometry(m)
+
+    def _twist_use(self, spec: SourceSpec) -> tuple[bool, bool]:
+        """Whether an odometry source fuses any of vx, vy, vyaw, and whether it takes the message's
+        whole twist and covariance as they are (all three, ``covariance: message``, not differential):
+        worked out once per source (every odometry message asks)."""
+        got = self._twist_uses.get(spec.name)
+        if got is None or got[0] is not spec:
+            got = self._twist_uses[spec.name] = (
+                spec, any(spec.uses(c) for c in ("vx", "vy", "vyaw")),
+                spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"} and not spec.differential)
+        return got[1], got[2]
 
     def _levelled(self, st: _State, t: float, tw: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The body twist projected onto the ground plane through the levelling IMU's latest

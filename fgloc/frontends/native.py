@@ -819,11 +819,14 @@ class NativeMatcher(FrontendBase):
 
 
     # -------------------------------------------------------------- matching
-    def _refine_from(self, px: FloatArray, py: FloatArray, start: FloatArray) -> tuple[FloatArray, float]:
-        """LM from ``start``; the pose and its robust cost under the last stage's kernel."""
+    def _refine_from(self, px: FloatArray, py: FloatArray, start: FloatArray, first_stage: int = 0
+                     ) -> tuple[FloatArray, float]:
+        """LM from ``start`` over the annealing stages from ``first_stage`` on; the pose and its
+        robust cost under the last stage's kernel."""
         pose, _, cost = _refine(
             self.field, self.A, self.b, self.far, px, py, np.asarray(start, dtype=float),
-            self.scales, self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m,
+            self.scales[first_stage:], self.outliers[first_stage:], self.loss, self.max_iterations, self.tolerance,
+            *self._lb, self.depth_m,
         )
         return pose, float(cost)
 
@@ -848,12 +851,21 @@ class NativeMatcher(FrontendBase):
     def _aliases(self, px: FloatArray, py: FloatArray, pose: FloatArray, cov: FloatArray
                  ) -> list[tuple[FloatArray, float]]:
         """Refined poses at other local maxima of the likelihood-field score along the fix's least
-        constrained direction (``ALIAS_RANGE_M``): a corridor's doors, a row of shelves."""
+        constrained direction (``ALIAS_RANGE_M``): a corridor's doors, a row of shelves.
+
+        Each from the second annealing stage on (when there are several): the first stage's wide
+        kernel (outliers out to ``outlier_schedule_m[0]``, 1 m) pulls a start 0.25-2 m off back into
+        the fix's own basin, which is no alias (on the office run with every scan matched, 156 of the
+        167 alias refinements that weighed in ended within 4 mm of the fix); from the second stage
+        the candidate settles where it is and is weighed by how well the scan fits there (aliases
+        0.2-0.9 m off that weighed in: 10 from the first stage, 11 from the second), in 27 passes
+        over the points instead of 37."""
         stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
         starts = _alias_starts(self.lik, self.Ac, self.bc, px, py, stride, pose, float(cov[0, 0]),
                                float(cov[0, 1]), float(cov[1, 1]), ALIAS_STEP_M,
                                int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO)
-        return [self._refine_from(px, py, st) for st in starts]
+        first = 1 if len(self.scales) > 1 else 0
+        return [self._refine_from(px, py, st, first) for st in starts]
 
     def _heading_check(self, px: FloatArray, py: FloatArray, pose: FloatArray, cost: float, guess: FloatArray
                        ) -> tuple[FloatArray, float]:

@@ -23,7 +23,7 @@ from fgloc.types import PoseFix, Trajectory
 FloatArray = NDArray[np.float64]
 
 
-_DEFAULT_COV: dict[tuple[float, float, float], FloatArray] = {}
+_DEFAULT_COV: dict[tuple[float, float, float], tuple[FloatArray, list[float]]] = {}
 
 
 def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> FloatArray:
@@ -33,9 +33,27 @@ def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float,
         v = c.ravel().tolist()  # scalar checks: every odometry message passes here
         if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
             return c
+    return _default_cov(default_sigmas)[0]
+
+
+def twist_covariance_values(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> list[float]:
+    """:func:`twist_covariance`'s 9 entries (row by row) as floats, without the array (every odometry
+    message of the smoother: one ``tolist`` instead of four numpy calls)."""
+    if cov is not None:
+        if isinstance(cov, np.ndarray) and cov.dtype == np.float64 and cov.size == 9:
+            v = cov.ravel().tolist()
+        else:
+            v = np.asarray(cov, dtype=float).reshape(3, 3).ravel().tolist()
+        if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
+            return v
+    return _default_cov(default_sigmas)[1]
+
+
+def _default_cov(default_sigmas: tuple[float, float, float]) -> tuple[FloatArray, list[float]]:
     d = _DEFAULT_COV.get(default_sigmas)
     if d is None:
-        d = _DEFAULT_COV[default_sigmas] = np.diag(np.square(default_sigmas))
+        m = np.diag(np.square(default_sigmas))
+        d = _DEFAULT_COV[default_sigmas] = (m, m.ravel().tolist())
     return d
 
 

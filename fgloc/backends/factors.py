@@ -86,9 +86,10 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
         # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
         p00 = p01 = p02 = p11 = p12 = p22 = 0.0
     last = hi - 1
+    done = None   # the state after the last step that ended on a sample's stamp (for ``mark``)
     while t < t1 - 1e-12:
-        j = min(i, last)
-        t_next = min(ts[i], t1) if i < hi else t1
+        j = i if i < last else last
+        t_next = (ts[i] if ts[i] < t1 else t1) if i < hi else t1
         dt = t_next - t
         if dt > 0:
             u = us[j]
@@ -120,9 +121,11 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
             ct, st = math.cos(th), math.sin(th)
             x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
         if mark is not None and i < hi and ts[i] <= t1:   # this step ended on sample i's stamp
-            mark[:] = [t_next, x, y, th, p00, p01, p02, p11, p12, p22]
+            done = (t_next, x, y, th, p00, p01, p02, p11, p12, p22)
         t = t_next
         i += 1
+    if done is not None:
+        mark[:] = done  # type: ignore[index]
     cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
     return np.array([x, y, wrap_scalar(th)]), cov
 

@@ -55,7 +55,7 @@ from operator import sub
 import gtsam
 import numpy as np
 
-from fgloc.backends.base import Backend, FloatArray, twist_covariance
+from fgloc.backends.base import Backend, FloatArray, twist_covariance_values
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.factors import (
     aligned_between_factor,
@@ -90,12 +90,18 @@ from fgloc.geometry import exp as se2_exp
 from fgloc.types import PoseFix, Trajectory
 
 
+def _symbol(c: str, i: int) -> int:
+    """``gtsam.symbol(c, i)`` in Python (GTSAM's layout: the character in the top 8 bits of the 64-bit
+    key, the index below; no call into GTSAM per key)."""
+    return (ord(c) << 56) | int(i)
+
+
 def X(i: int) -> int:
-    return int(gtsam.symbol("x", i))
+    return _symbol("x", i)
 
 
 def O(j: int) -> int:  # noqa: E743
-    return int(gtsam.symbol("o", j))
+    return _symbol("o", j)
 
 
 MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
@@ -453,7 +459,7 @@ class SlidingWindowSmoother(Backend):
         if ch.key is None or t - ch.t >= self.cfg.offset_interval_s:
             n = self._next_sym.get(ch.char, 0)
             self._next_sym[ch.char] = n + 1
-            new = int(gtsam.symbol(ch.char, n))
+            new = _symbol(ch.char, n)
             est = ch.prior_mean if ch.estimate is None else ch.estimate
             if ch.key is None:
                 graph.add(gtsam.PriorFactorVector(new, ch.prior_mean, gtsam.noiseModel.Diagonal.Sigmas(ch.prior_sigma)))
@@ -634,7 +640,7 @@ class SlidingWindowSmoother(Backend):
             for _ in range(want - len(self._ballast)):
                 n = self._next_sym.get(BALLAST, 0)
                 self._next_sym[BALLAST] = n + 1
-                k = int(gtsam.symbol(BALLAST, n))
+                k = _symbol(BALLAST, n)
                 graph.add(gtsam.PriorFactorVector(k, _ZERO1, _UNIT1))
                 vals.insert(k, _ZERO1)
                 self._ballast.append(k)
@@ -660,18 +666,17 @@ class SlidingWindowSmoother(Backend):
             h.skip("not finite")
             return
         h.accepted += 1
-        c = twist_covariance(twist_cov, self.cfg.encoder_sigmas)
+        cl = twist_covariance_values(twist_cov, self.cfg.encoder_sigmas)  # the entries as floats, once
         still = abs(u0) < 1e-3 and abs(u1) < 1e-3 and abs(u2) < 1e-3
         t = float(t)
         for gb in self.gbias.values():
             gb.set_still(t, still)
         self.odo_t.append(t)
         self.odo_u.append((u0, u1, u2))
-        cl = c.reshape(9).tolist()  # the entries as floats once (numpy's scalar indexing: ~0.1 us each)
         if cl[0] <= TWIST_VAR_MAX and cl[4] <= TWIST_VAR_MAX and cl[8] <= TWIST_VAR_MAX:
             self.odo_c.append((cl[0], cl[1], cl[2], cl[4], cl[5], cl[8]))   # upper6(c): _bounded leaves it
         else:
-            self.odo_c.append(upper6(_bounded(c, TWIST_VAR_MAX)))
+            self.odo_c.append(upper6(_bounded(np.array(cl).reshape(3, 3), TWIST_VAR_MAX)))
         self._arb_add("odom", RATE, 0.05, t, u2, cl[8])
         self._process_pending(t)
         # keep a bounded history: the window plus a margin
@@ -689,7 +694,7 @@ class SlidingWindowSmoother(Backend):
             return
         h = self._source(f"{source}.yaw", "heading")
         self.calib.add_compass(t, yaw, rate)
-        var = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
+        var = yaw_var if math.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
         for gb in self.gbias.values():
             gb.add_heading(f"{source}.yaw", float(t), float(yaw), float(var) * self._noise_of(f"{source}.yaw")[0] ** 2)
         h.accepted += 1
@@ -1069,11 +1074,12 @@ class SlidingWindowSmoother(Backend):
             self.stats["fixes_used"] += 1
             self._source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
-            self.calib.add_fix(t - lat, float(fix.pose[2]))
-            var_yaw = float(self._fix_cov(fix.cov)[2, 2])
+            yaw_fix = float(fix.pose[2])
+            self.calib.add_fix(t - lat, yaw_fix)
+            var_yaw = self._fix_cov_list(fix.cov)[8]
             for gb in self.gbias.values():
-                gb.add_heading("scan", t - lat, float(fix.pose[2]), var_yaw)
-            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - lat, float(fix.pose[2]), var_yaw)
+                gb.add_heading("scan", t - lat, yaw_fix, var_yaw)
+            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
         self.kf_t.append(t)
         self.kf_key.append(k)
         self.window.append((t, k))
@@ -1098,13 +1104,16 @@ class SlidingWindowSmoother(Backend):
                          bend: bool = True) -> gtsam.NonlinearFactor:
         """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated
         (``bend=False``: ``d``'s translation was integrated along the gyro's heading)."""
-        c = np.array(c, dtype=float)
+        # the yaw row and column times k_yaw, the yaw variance plus (rel * yaw)^2 and the timing's: as
+        # floats (the same operations as on the array), one array made at the end
+        a = np.asarray(c, dtype=float).reshape(9).tolist()
         k_yaw, rel = self._noise_of("odom")
         if k_yaw != 1.0 or rel > 0.0:
-            c[2, :] *= k_yaw
-            c[:, 2] *= k_yaw
-            c[2, 2] += (rel * d[2]) ** 2
-        c[2, 2] += self._timing_var(self.kf_t[-1], t)
+            a[6], a[7], a[8] = a[6] * k_yaw, a[7] * k_yaw, a[8] * k_yaw
+            a[2], a[5], a[8] = a[2] * k_yaw, a[5] * k_yaw, a[8] * k_yaw
+            a[8] += (rel * float(d[2])) ** 2
+        a[8] += self._timing_var(self.kf_t[-1], t)
+        c = np.array(a).reshape(3, 3)
         if not self.cfg.odom_gains:
             return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
         # a scale is estimated only once something else observes it (held at its estimate until

@@ -942,10 +942,16 @@ class GyroBias:
         if not self._pending or not self.series:
             return
         covered = self.series[-1][0]
-        ready = sorted(p for p in self._pending if p[0] <= covered)
-        if not ready:
-            return
-        self._pending = [p for p in self._pending if p[0] > covered]
+        pend = self._pending
+        if len(pend) == 1:  # the usual case: one reading waiting (the same as the general case's lists)
+            if pend[0][0] > covered:
+                return
+            ready, self._pending = pend, []
+        else:
+            ready = sorted(p for p in pend if p[0] <= covered)
+            if not ready:
+                return
+            self._pending = [p for p in pend if p[0] > covered]
         for t, source, yaw, var in ready:
             g = self._integral_at(t)
             if g is None:

@@ -80,11 +80,18 @@ def mount_rotation(tf: StaticTransform | None) -> FloatArray:
     return np.array(quaternion_matrix(0.0, 0.0, math.sin(h), math.cos(h))).reshape(3, 3)
 
 
-def _cov_ok(c: FloatArray | None) -> str | None:
-    """None if the covariance is usable (or absent), else why not."""
+def _cov_values(c: FloatArray | None) -> list[float] | None:
+    """A 3x3 covariance's 9 entries (row by row) as floats, None when absent (one ``tolist`` per
+    covariance: :func:`_cov_ok` and :func:`_zz` read the same list)."""
     if c is None:
         return None
-    a = c.ravel() if isinstance(c, np.ndarray) and c.size == 9 else np.asarray(c, dtype=float).reshape(9)
+    return (c.ravel() if isinstance(c, np.ndarray) and c.size == 9 else np.asarray(c, dtype=float).reshape(9)).tolist()
+
+
+def _cov_ok(a: list[float] | None) -> str | None:
+    """None if the covariance (:func:`_cov_values`) is usable (or absent), else why not."""
+    if a is None:
+        return None
     d0, d1, d2 = float(a[0]), float(a[4]), float(a[8])
     if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
         return "covariance with a NaN/inf diagonal"
@@ -93,28 +100,30 @@ def _cov_ok(c: FloatArray | None) -> str | None:
     return None
 
 
-def _zz(r: tuple[float, float, float], c: FloatArray) -> float:
-    """``(R C R^T)[2, 2]`` for ``R``'s last row ``r`` (a 3x3 covariance's variance about base z)."""
-    a = (c.ravel() if isinstance(c, np.ndarray) and c.size == 9 else np.asarray(c, dtype=float).reshape(9)).tolist()
+def _zz(r: tuple[float, float, float], a: list[float]) -> float:
+    """``(R C R^T)[2, 2]`` for ``R``'s last row ``r`` and ``C``'s entries ``a`` (:func:`_cov_values`):
+    a 3x3 covariance's variance about base z."""
     r0, r1, r2 = r
     return ((r0 * a[0] + r1 * a[3] + r2 * a[6]) * r0 + (r0 * a[1] + r1 * a[4] + r2 * a[7]) * r1
             + (r0 * a[2] + r1 * a[5] + r2 * a[8]) * r2)
 
 
-def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
+def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list[str]]:
     """The reading rotated into base_link, and the reasons for every part that was dropped
-    (scalar maths: every IMU message passes here)."""
+    (scalar maths: every IMU message passes here).  ``R_bi``: the 3x3 mount rotation, or its 9
+    entries row by row as a list of floats (a caller that keeps them: no conversion per message)."""
     problems: list[str] = []
     yaw: float | None = None
     yaw_var = float("nan")
     tilt: tuple[float, float] | None = None
-    b = np.asarray(R_bi, dtype=float).ravel().tolist()   # R_bi row-major
+    b = R_bi if isinstance(R_bi, list) else np.asarray(R_bi, dtype=float).ravel().tolist()   # R_bi row-major
     q = msg.orientation_xyzw
     if q is not None:
         qa = _unit_floats(q, 4)
         n = math.sqrt(qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]) if qa is not None \
             else float("nan")
-        why = _cov_ok(msg.orientation_cov)
+        oc = _cov_values(msg.orientation_cov)
+        why = _cov_ok(oc)
         if not math.isfinite(n) or n < 1e-9:
             problems.append("imu: orientation quaternion all zeros / not finite")
         elif abs(n - 1.0) > QUATERNION_NORM_TOLERANCE:
@@ -132,8 +141,8 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
             r22 = w20 * b[6] + w21 * b[7] + w22 * b[8]
             yaw = math.atan2(r10, r00)
             tilt = (math.atan2(r21, r22), math.asin(max(-1.0, min(1.0, -r20))))
-            if msg.orientation_cov is not None:
-                yaw_var = _zz((b[6], b[7], b[8]), msg.orientation_cov)
+            if oc is not None:
+                yaw_var = _zz((b[6], b[7], b[8]), oc)
                 if not yaw_var > 0:
                     yaw_var = float("nan")
     rate: float | None = None
@@ -142,7 +151,8 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
     w = msg.angular_velocity_radps
     if w is not None:
         wa = _unit_floats(w, 3)
-        why = _cov_ok(msg.angular_velocity_cov)
+        wc = _cov_values(msg.angular_velocity_cov)
+        why = _cov_ok(wc)
         if wa is None or not (math.isfinite(wa[0]) and math.isfinite(wa[1]) and math.isfinite(wa[2])):
             problems.append("imu: angular velocity not finite")
         elif why is not None:
@@ -153,8 +163,8 @@ def imu_in_base(msg: Imu, R_bi: FloatArray) -> tuple[BaseImu, list[str]]:
             rate = wb2
             if tilt is not None and math.cos(tilt[1]) > 0.1:
                 heading_rate = (math.sin(tilt[0]) * wb1 + math.cos(tilt[0]) * wb2) / math.cos(tilt[1])
-            if msg.angular_velocity_cov is not None:
-                rate_var = _zz((b[6], b[7], b[8]), msg.angular_velocity_cov)
+            if wc is not None:
+                rate_var = _zz((b[6], b[7], b[8]), wc)
                 if not rate_var > 0:
                     rate_var = float("nan")
     return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate), problems

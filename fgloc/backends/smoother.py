@@ -706,7 +706,9 @@ class SlidingWindowSmoother(Backend):
         """A yaw rate (rad/s, base_link z) from a gyro: integrated between keyframes, bias estimated."""
         name = f"{source}.gyro"
         h = self._source(name, "gyro")
-        buf = self.gyro.setdefault(name, ([], [], []))
+        buf = self.gyro.get(name)
+        if buf is None:
+            buf = self.gyro[name] = ([], [], [])
         if buf[0] and t <= buf[0][-1]:
             h.skip("late or repeated stamp")
             return

@@ -74,6 +74,7 @@ DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
 _IDENTITY = np.eye(3)
 _IDENTITY.flags.writeable = False
+_IDENTITY_ENTRY = (None, _IDENTITY, _IDENTITY.ravel().tolist())
 #: a differential source's message stamped before the previous one: skipped, so that the next
 #: increment spans from the newest pose (resetting the reference to it lost the increment before)
 OUT_OF_ORDER = "differential: stamp not after the previous message's (out of order)"
@@ -241,7 +242,8 @@ class SourceRouter:
         # every tf link by child frame: an IMU mounted through a chain (base_link -> plate -> imu)
         self._links: dict[str, StaticTransform] = {}
         self._chains: dict[str, StaticTransform | None] = {}
-        self._rotations: dict[str, tuple[StaticTransform, np.ndarray]] = {}   # the mounts' rotations by frame
+        # the mounts' rotations by frame (and their entries as floats)
+        self._rotations: dict[str, tuple[StaticTransform | None, np.ndarray, list[float]]] = {}
         self._warned: set[str] = set()
         self._twist_uses: dict[str, tuple[SourceSpec, bool, bool]] = {}   # _twist_use's answers by source
         self.state: dict[str, _State] = {}
@@ -469,12 +471,20 @@ class SourceRouter:
     def _rotation(self, tr: StaticTransform | None) -> np.ndarray:
         """``mount_rotation(tr)``, computed once per transform (every IMU message asks; a new
         transform of the same frame replaces it)."""
+        return self._rotation_entry(tr)[1]
+
+    def _rotation_values(self, tr: StaticTransform | None) -> list[float]:
+        """:meth:`_rotation`'s 9 entries row by row as floats (what :func:`imu_in_base` reads), kept with it."""
+        return self._rotation_entry(tr)[2]
+
+    def _rotation_entry(self, tr: StaticTransform | None) -> tuple[StaticTransform | None, np.ndarray, list[float]]:
         if tr is None:
-            return _IDENTITY
+            return _IDENTITY_ENTRY
         got = self._rotations.get(tr.child)
         if got is None or got[0] is not tr:
-            got = self._rotations[tr.child] = (tr, mount_rotation(tr))
-        return got[1]
+            R = mount_rotation(tr)
+            got = self._rotations[tr.child] = (tr, R, R.ravel().tolist())
+        return got
 
     def _imu(self, spec: SourceSpec, st: _State, msg: Imu | CompassHeading) -> None:
         h = st.health
@@ -482,7 +492,7 @@ class SourceRouter:
             mount = self._mount(msg.frame_id)
             if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
                 st.extra["no_transform"] = True
-            base, problems = imu_in_base(_needed(spec, msg), self._rotation(mount))
+            base, problems = imu_in_base(_needed(spec, msg), self._rotation_values(mount))
             for p in problems:
                 self._skip(st, p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var

@@ -425,11 +425,16 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
     if not pairs:
         return {}
     n_eff = n_eff or {}
-    srcs = sorted({s for p in pairs for s in p})
-    plist = list(pairs)
+    plist = tuple(pairs)
+    groups = _GROUPS.get(plist)
+    if groups is None:  # the connected groups and each one's source indices: once per pair set
+        srcs = sorted({s for p in pairs for s in p})
+        groups = [(members, {s: i for i, s in enumerate(members)}) for members in _components(srcs, list(plist))]
+        if len(_GROUPS) > 256:
+            _GROUPS.clear()
+        _GROUPS[plist] = groups
     out: dict[str, float] = {}
-    for members in _components(srcs, plist):
-        loc = {s: i for i, s in enumerate(members)}
+    for members, loc in groups:
         n = len(members)
         rows = [(loc[a], loc[b], float(pairs[(a, b)]), float(pairs[(a, b)])
                  * math.sqrt(2.0 / max(n_eff.get((a, b), 1e9), 1.0))) for (a, b) in plist if a in loc]
@@ -466,6 +471,7 @@ def cornered_hat(names: list[str], pairs: dict[tuple[str, str], float],
 
 
 _HAT_SYSTEMS: dict[tuple[int, tuple[tuple[int, int], ...]], tuple] = {}
+_GROUPS: dict[tuple[tuple[str, str], ...], list[tuple[list[str], dict[str, int]]]] = {}
 
 
 def _hat_system(n: int, rows: tuple[tuple[int, int], ...]) -> tuple[list[list[float]], list[list[float]] | None,

@@ -804,6 +804,7 @@ class GyroBias:
         self._bad_since: dict[str, float] = {}
         # the gyro's raw integral (trapezoid over readings): (t, G, rate, var)
         self.series: deque[tuple[float, float, float, float]] = deque(maxlen=int(history))
+        self._stamps: deque[float] = deque(maxlen=int(history))   # series' stamps (for bisection)
         self._pending: list[tuple[float, str, float, float]] = []
         self._reanchor: set[str] = set()
         # per heading source: [EW mean of yn^2, EW mean of n * mean(yn)^2 over a window, the window's sum
@@ -832,6 +833,7 @@ class GyroBias:
                 self._reanchor.update(self.idx)
         v = var if math.isfinite(var) and var > 0 else 1e-4
         self.series.append((float(t), g, float(rate), v))
+        self._stamps.append(float(t))
         if self._still_since is not None and t - self._still_since >= self.still_s and t <= self._still_until:
             self._update_still(float(t), float(rate), v)
         self._process()
@@ -870,7 +872,11 @@ class GyroBias:
         s = self.series
         if not s or t < s[0][0] or t > s[-1][0]:
             return None
-        lo, hi = bracket(s, t)
+        # bracket(s, t) by bisection on the stamps (in C): the last reading at or before t, at most
+        # the last but one (readings strictly increasing)
+        n = len(s)
+        lo = min(bisect_right(self._stamps, t) - 1, n - 2) if n > 1 else 0
+        hi = lo + 1 if n > 1 else 0
         a, b = s[lo], s[hi]
         if b[0] - a[0] > MAX_GYRO_GAP_S:
             return None

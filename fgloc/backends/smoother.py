@@ -46,7 +46,7 @@ optimizes the whole run with Levenberg-Marquardt, initialized from the fixed-lag
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right, insort
+from bisect import bisect_left, bisect_right
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -130,63 +130,14 @@ def _all_finite(*arrays: FloatArray) -> bool:
     return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
 
 
-PERIOD_STAMPS = 50   # median_spacing: the median spacing of the last this many stamps
-
-
-def median_spacing(ts: list[float]) -> float:
+def _period(ts: list[float]) -> float:
     """Median spacing of the last readings (inf with fewer than 3)."""
     if len(ts) < 3:
         return math.inf
-    last = ts[-PERIOD_STAMPS:]
-    return _median_sorted(sorted(map(sub, last[1:], last[:-1])))  # np.median's, without numpy's overhead
-
-
-def _median_sorted(d: list[float]) -> float:
+    last = ts[-50:]
+    d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
     m = len(d) // 2
     return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
-
-
-class RunningSpacing:
-    """:func:`median_spacing` of one stamp list (strictly increasing, growing at its end, trimmed at its
-    start), kept up to date: the last stamps' spacings in arrival order and sorted, a new stamp's
-    spacing inserted and the oldest one's removed (bisection) instead of sorting them all at
-    every call (the smoother asks at every keyframe, its odometry list changed since the last)."""
-
-    def __init__(self, ts: list[float]) -> None:
-        self.ts = ts
-        self.tail: deque[float] = deque()     # the last PERIOD_STAMPS stamps
-        self.gaps: deque[float] = deque()     # their spacings, in order
-        self.sorted: list[float] = []         # the same, sorted
-
-    def _rebuild(self) -> None:
-        last = self.ts[-PERIOD_STAMPS:]
-        self.tail = deque(last)
-        self.gaps = deque(map(sub, last[1:], last[:-1]))
-        self.sorted = sorted(self.gaps)
-
-    def value(self) -> float:
-        ts, tail = self.ts, self.tail
-        if len(ts) < 3:
-            return math.inf
-        if not tail or len(tail) > len(ts):   # (trimmed into the window: from what is left)
-            self._rebuild()
-        elif ts[-1] != tail[-1]:
-            i = bisect_right(ts, tail[-1])
-            if i == 0 or ts[i - 1] != tail[-1] or len(ts) - i >= PERIOD_STAMPS:
-                self._rebuild()   # not the list it followed, or too many new stamps: from scratch
-            else:
-                srt = self.sorted
-                for t in ts[i:]:
-                    g = t - tail[-1]
-                    self.gaps.append(g)
-                    insort(srt, g)
-                    tail.append(t)
-                    if len(tail) > PERIOD_STAMPS:
-                        tail.popleft()
-                        del srt[bisect_left(srt, self.gaps.popleft())]
-                if len(tail) > len(ts):   # trimmed into the window since: its older stamps are gone
-                    self._rebuild()
-        return _median_sorted(self.sorted)
 
 
 #: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,
@@ -364,7 +315,7 @@ class SlidingWindowSmoother(Backend):
         self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
         self._long_pair_t = -np.inf
         self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
-        self._periods: dict[int, RunningSpacing] = {}   # _period_of's memory, by list
+        self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
         self.sources: dict[str, SourceHealth] = {}
         self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
@@ -588,14 +539,15 @@ class SlidingWindowSmoother(Backend):
         self._fix_pairs = keep
 
     def _period_of(self, ts: list[float]) -> float:
-        """:func:`median_spacing` of a stamp list (a stamp list only grows at its end with later stamps, or
-        loses its oldest), kept up to date per list (:class:`RunningSpacing`)."""
-        got = self._periods.get(id(ts))
-        if got is None or got.ts is not ts:
+        """:func:`_period` of a stamp list, remembered until it changes (a stamp list only grows at
+        its end with later stamps, or loses its oldest: its length and last stamp tell)."""
+        key = (id(ts), len(ts), ts[-1] if ts else None)
+        got = self._periods.get(key)
+        if got is None or got[0] is not ts:
             if len(self._periods) > 8:
                 self._periods.clear()
-            got = self._periods[id(ts)] = RunningSpacing(ts)
-        return got.value()
+            got = self._periods[key] = (ts, _period(ts))
+        return got[1]
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""

@@ -136,11 +136,14 @@ class McapViewRecorder:
             self.errors += 1
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
-        name, schema = self._json_schemas[topic]
         try:
             data = _JSON(obj).encode()
         except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
             data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
+        self._write_json_bytes(topic, data, stamp)
+
+    def _write_json_bytes(self, topic: str, data: bytes, stamp: float) -> None:
+        name, schema = self._json_schemas[topic]
         self._emit(topic, name, schema, data, self._ns(stamp), "jsonschema", "json")
         self.count += 1
 
@@ -169,8 +172,19 @@ class McapViewRecorder:
                 self._write(ch.POSE_COVARIANCE, enc.covariance_scene(view.fused), view.stamp)
             else:
                 self._covariance(view)
-            self._write_json(ch.FUSED, enc.fused_json(view.fused), view.stamp)
-        self._write_json(ch.FIX, enc.fix_json(view.stamp, view.status, view.reason, view.fix, view.fused), view.stamp)
+            # the JSON text formatted directly (encode.fused_json_text), the dict and the json module
+            # only for what it does not take (NaN ...): the same bytes
+            text = enc.fused_json_text(view.fused)
+            if text is None:
+                self._write_json(ch.FUSED, enc.fused_json(view.fused), view.stamp)
+            else:
+                self._write_json_bytes(ch.FUSED, text.encode(), view.stamp)
+        text = enc.fix_json_text(view.stamp, view.status, view.reason, view.fix, view.fused)
+        if text is None:
+            self._write_json(ch.FIX, enc.fix_json(view.stamp, view.status, view.reason, view.fix, view.fused),
+                             view.stamp)
+        else:
+            self._write_json_bytes(ch.FIX, text.encode(), view.stamp)
         if view.fix is not None and view.status in (ACCEPTED, REJECTED):
             topic = ch.FIX_ACCEPTED if view.status == ACCEPTED else ch.FIX_REJECTED
             self._write(topic, enc.pose_message(view.fix), view.stamp)

@@ -2,7 +2,7 @@
 
     python tools/eval_frontends_real.py [--logs intel fr079 aces mit-csail] [--scans 1000] [--start S]
                                         [--cache DIR] [--seeds 0 1] [--skip-sim] [--skip-real]
-                                        [--backends smoother ekf]
+                                        [--backends smoother ekf] [--carmen-odometry log|laser]
 
 Real logs (``../shared/data/radish``): the whole log is mapped once by ``fgloc.mapping`` (GraphSlam;
 cached under ``--cache``), which gives every scan a SLAM pose in one map frame.  A segment of
@@ -212,7 +212,8 @@ def nees_of(fixes, ref) -> dict:
 
 
 def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None,
-             gmapping_dir: Path | None = None, overrides: dict | None = None, start: int | None = None) -> dict:
+             gmapping_dir: Path | None = None, overrides: dict | None = None, start: int | None = None,
+             carmen_odometry: str = "log") -> dict:
     from fgloc.config import load_config
     from fgloc.eval.metrics import split_errors, within_radius
     from fgloc.geometry import wrap_angle
@@ -236,6 +237,9 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     # read as `fgloc run` reads the log (open_log: log-time order, CARMEN's out-of-place stamps repaired)
     msgs = [(topic, m) for topic, m in open_log(LOGS[name]).messages(["/odom", "/scan"])
             if t0 - 1e-6 <= m.stamp <= t1 + 1e-6]  # type: ignore[attr-defined]
+    if carmen_odometry == "laser":
+        msgs = sorted([(tp, m) for tp, m in msgs if tp != "/odom"] + laser_odometry(name, recs, t0, t1),
+                      key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
     # the SLAM poses stamped as the localizer sees the same scans (the mapper keeps the file's
     # stamps, open_log repairs a CARMEN line's out-of-place stamp: intel 434 scans, up to 1.7 s)
     own = np.array([r.stamp for r in recs])
@@ -329,6 +333,43 @@ def odometry_timing(msgs, ref, t0: float, t1: float, pair_s: float = 0.5) -> dic
     return {"odo_rms0_deg": rms(0.0), "odo_shift_s": float(shifts[k]), "odo_rms_shift_deg": r[k]}
 
 
+def carried_poses(name: str) -> tuple[list[np.ndarray | None], bool]:
+    """The odometry pose each (front) laser line of a CARMEN log carries, in scan order (a record's
+    ``index``), and whether the log's odometry is taken from them (no ODOM lines)."""
+    from fgloc.io.carmen import CarmenReader
+
+    reader = CarmenReader(LOGS[name])
+    carried: list[np.ndarray | None] = []
+    for topic, m in reader:
+        if topic == "/scan" and "rear" not in m.frame_id:  # type: ignore[attr-defined]
+            p = reader.last_laser_pose
+            carried.append(None if p is None else np.asarray(p, dtype=float).copy())
+    return carried, bool(reader.stats.get("odom_from_laser"))
+
+
+def laser_odometry(name: str, recs, t0: float, t1: float) -> list:
+    """``/odom`` messages from the poses the laser lines carry, each stamped 1 us before its scan as
+    ``open_log`` stamps it (pose-derived twist): an experiment (``--carmen-odometry laser``), not what
+    ``fgloc run`` reads from a log with ODOM lines."""
+    from fgloc.geometry import between
+    from fgloc.mapping.source import open_log_scan_stamps
+    from fgloc.types import Odometry
+
+    carried, _ = carried_poses(name)
+    stamps = open_log_scan_stamps(LOGS[name], recs)
+    pts = sorted((float(t), carried[r.index]) for r, t in zip(recs, stamps, strict=True)
+                 if r.index < len(carried) and carried[r.index] is not None and t0 - 1e-6 <= t <= t1 + 1e-6)
+    out: list = []
+    prev: tuple[float, np.ndarray] | None = None
+    for t, p in pts:
+        if prev is not None and t <= prev[0]:
+            continue
+        tw = np.zeros(3) if prev is None else between(prev[1], p) / (t - prev[0])
+        out.append(("/odom", Odometry(stamp=t - 1e-6, twist=tw, pose=p.copy())))
+        prev = (t, p)
+    return out
+
+
 def carried_timing(name: str, recs, s0: int, s1: int, msgs, window_s: float = 0.5) -> dict:
     """When each segment scan was taken on the odometry's clock, by the odometry pose its CARMEN laser
     line carries (``FLASER ... odom_x odom_y odom_theta``: the robot's odometry when the scan was
@@ -339,16 +380,10 @@ def carried_timing(name: str, recs, s0: int, s1: int, msgs, window_s: float = 0.
     5 deg/s there: the timing is observable); ``t' - t`` negative: the scan's pose is the odometry's
     of before its stamp.  Empty for a log without ODOM lines (its odometry is the carried poses)."""
     from fgloc.geometry import wrap_angle
-    from fgloc.io.carmen import CarmenReader
     from fgloc.mapping.source import open_log_scan_stamps
 
-    reader = CarmenReader(LOGS[name])
-    carried: list[np.ndarray | None] = []
-    for topic, m in reader:
-        if topic == "/scan" and "rear" not in m.frame_id:  # type: ignore[attr-defined]
-            p = reader.last_laser_pose
-            carried.append(None if p is None else np.asarray(p, dtype=float).copy())
-    if reader.stats.get("odom_from_laser"):
+    carried, from_laser = carried_poses(name)
+    if from_laser:
         return {}
     seg = recs[s0:s1 + 1]
     stamps = open_log_scan_stamps(LOGS[name], seg)
@@ -459,6 +494,9 @@ def main() -> int:
                     help="folder with aces-corrected.log.gz / csail-corrected.log.gz (intel, fr079: the shared data)")
     ap.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
                     help="configuration overrides for the real-log runs (YAML values), e.g. smoother.adapt_noise=false")
+    ap.add_argument("--carmen-odometry", choices=["log", "laser"], default="log",
+                    help="laser: an experiment, the real logs' odometry taken from the poses their laser lines "
+                         "carry, stamped as the scans (log: as fgloc run reads it)")
     ap.add_argument("--skip-sim", action="store_true")
     ap.add_argument("--hard", action="store_true", help="also the changed world with 28 more pallets along the path")
     ap.add_argument("--skip-real", action="store_true")
@@ -482,7 +520,7 @@ def main() -> int:
                     acc = (None if acc_s == "none" else 0.025 if acc_s == "half-cell"
                            else measured_accuracy(name, args.cache) if acc_s == "measured" else float(acc_s))
                     rows.append(run_real(name, args.cache, args.scans, be, acc, args.gmapping_dir, overrides,
-                                         args.start))
+                                         args.start, args.carmen_odometry))
                     print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
     if not args.skip_sim:
         for seed in args.seeds:

@@ -578,7 +578,8 @@ def main() -> int:
         if c:
             used = f"{c['offset_s']:+.3f} s in use" if c["applied"] else "not used (0)"
             why = ("" if c["applied"] else ", odometry fast" if not c["slow"] else
-                   ", odometry stamps in bursts" if not c["regular"] else ", not confident")
+                   ", odometry stamps in bursts (its timing carried as yaw variance in the smoother)"
+                   if not c["regular"] else ", not confident")
             print(f"\n{r['log']} (map accuracy {r.get('accuracy', '-')}): odometry clock offset (localization.clock) "
                   f"{used}: estimate {c['estimate_s']:+.3f} +- {max(c['sigma_s'], 0):.3f} s, last fit "
                   f"{c['fit_s']:+.3f} s (fixes' turn / odometry's {c['yaw_scale'] or float('nan'):.3f}), "

@@ -2,7 +2,7 @@
 
     python tools/eval_frontends_real.py [--logs intel fr079 aces mit-csail] [--scans 1000] [--start S]
                                         [--cache DIR] [--seeds 0 1] [--skip-sim] [--skip-real]
-                                        [--backends smoother ekf]
+                                        [--backends smoother ekf] [--carmen-odometry log|laser]
 
 Real logs (``../shared/data/radish``): the whole log is mapped once by ``fgloc.mapping`` (GraphSlam;
 cached under ``--cache``), which gives every scan a SLAM pose in one map frame.  A segment of
@@ -151,6 +151,7 @@ def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir
     sys.path.insert(0, str(REPO / "tools"))
     from eval_radish import reference_trajectory  # type: ignore[import-not-found]
 
+    from fgloc.eval.metrics import three_cornered_hat
     from fgloc.geometry import wrap_angle
 
     ref, _ = reference_trajectory(path, recs, mount)
@@ -177,10 +178,17 @@ def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir
             e_s = np.degrees(wrap_angle(y - s[hit, 2]))
             e_g = np.degrees(wrap_angle(y - g[hit, 2] - dth))
             agree = np.abs(e_yaw[hit]) <= REF_AGREE_DEG
+            # the three-cornered hat over these keyframes: the localizer's, SLAM's and GMapping's own
+            # heading error (deg, signed root of the variance: negative = errors not independent)
+            hat = three_cornered_hat(float(np.mean(e_s**2)), float(np.mean(e_g**2)),
+                                     float(np.mean(e_yaw[hit] ** 2)))
             out.update({"gm_kf_n": int(hit.sum()), "est_vs_slam_deg": float(np.sqrt(np.mean(e_s**2))),
                         "est_vs_gm_deg": float(np.sqrt(np.mean(e_g**2))), "agree_n": int(agree.sum()),
+                        "slam_vs_gm_kf_deg": float(np.sqrt(np.mean(e_yaw[hit] ** 2))),
                         "est_vs_slam_agree_deg": float(np.sqrt(np.mean(e_s[agree] ** 2))) if agree.any()
-                        else float("nan")})
+                        else float("nan"),
+                        **{f"hat_{k}_deg": float(np.sign(v) * np.sqrt(abs(v)))
+                           for k, v in zip(("est", "slam", "gm"), hat, strict=True)}})
     return out
 
 
@@ -204,7 +212,8 @@ def nees_of(fixes, ref) -> dict:
 
 
 def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None,
-             gmapping_dir: Path | None = None, overrides: dict | None = None, start: int | None = None) -> dict:
+             gmapping_dir: Path | None = None, overrides: dict | None = None, start: int | None = None,
+             carmen_odometry: str = "log") -> dict:
     from fgloc.config import load_config
     from fgloc.eval.metrics import split_errors, within_radius
     from fgloc.geometry import wrap_angle
@@ -228,6 +237,9 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     # read as `fgloc run` reads the log (open_log: log-time order, CARMEN's out-of-place stamps repaired)
     msgs = [(topic, m) for topic, m in open_log(LOGS[name]).messages(["/odom", "/scan"])
             if t0 - 1e-6 <= m.stamp <= t1 + 1e-6]  # type: ignore[attr-defined]
+    if carmen_odometry == "laser":
+        msgs = sorted([(tp, m) for tp, m in msgs if tp != "/odom"] + laser_odometry(name, recs, t0, t1),
+                      key=lambda tm: tm[1].stamp)  # type: ignore[attr-defined]
     # the SLAM poses stamped as the localizer sees the same scans (the mapper keeps the file's
     # stamps, open_log repairs a CARMEN line's out-of-place stamp: intel 434 scans, up to 1.7 s)
     own = np.array([r.stamp for r in recs])
@@ -257,6 +269,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
            "odom_clock": loc.stats.get("odom_clock")}
     res.update(heading_views(est, ref, t0, t1))
     res.update(odometry_timing(msgs, ref, t0, t1))
+    res.update(carried_timing(name, recs, s0, s1, msgs))
     res.update(nees_of(loc.fixes, ref))
     res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir, est))
     return res
@@ -318,6 +331,94 @@ def odometry_timing(msgs, ref, t0: float, t1: float, pair_s: float = 0.5) -> dic
     r = [rms(float(s)) for s in shifts]
     k = int(np.argmin(r))
     return {"odo_rms0_deg": rms(0.0), "odo_shift_s": float(shifts[k]), "odo_rms_shift_deg": r[k]}
+
+
+def carried_poses(name: str) -> tuple[list[np.ndarray | None], bool]:
+    """The odometry pose each (front) laser line of a CARMEN log carries, in scan order (a record's
+    ``index``), and whether the log's odometry is taken from them (no ODOM lines)."""
+    from fgloc.io.carmen import CarmenReader
+
+    reader = CarmenReader(LOGS[name])
+    carried: list[np.ndarray | None] = []
+    for topic, m in reader:
+        if topic == "/scan" and "rear" not in m.frame_id:  # type: ignore[attr-defined]
+            p = reader.last_laser_pose
+            carried.append(None if p is None else np.asarray(p, dtype=float).copy())
+    return carried, bool(reader.stats.get("odom_from_laser"))
+
+
+def laser_odometry(name: str, recs, t0: float, t1: float) -> list:
+    """``/odom`` messages from the poses the laser lines carry, each stamped 1 us before its scan as
+    ``open_log`` stamps it (pose-derived twist): an experiment (``--carmen-odometry laser``), not what
+    ``fgloc run`` reads from a log with ODOM lines."""
+    from fgloc.geometry import between
+    from fgloc.mapping.source import open_log_scan_stamps
+    from fgloc.types import Odometry
+
+    carried, _ = carried_poses(name)
+    stamps = open_log_scan_stamps(LOGS[name], recs)
+    pts = sorted((float(t), carried[r.index]) for r, t in zip(recs, stamps, strict=True)
+                 if r.index < len(carried) and carried[r.index] is not None and t0 - 1e-6 <= t <= t1 + 1e-6)
+    out: list = []
+    prev: tuple[float, np.ndarray] | None = None
+    for t, p in pts:
+        if prev is not None and t <= prev[0]:
+            continue
+        tw = np.zeros(3) if prev is None else between(prev[1], p) / (t - prev[0])
+        out.append(("/odom", Odometry(stamp=t - 1e-6, twist=tw, pose=p.copy())))
+        prev = (t, p)
+    return out
+
+
+def carried_timing(name: str, recs, s0: int, s1: int, msgs, window_s: float = 0.5) -> dict:
+    """When each segment scan was taken on the odometry's clock, by the odometry pose its CARMEN laser
+    line carries (``FLASER ... odom_x odom_y odom_theta``: the robot's odometry when the scan was
+    logged; ``fgloc.io.carmen`` reads it only for the mount, the stamp repair and, in a log without
+    ODOM lines, as the odometry): the time ``t'`` within ``+-window_s`` of the scan's stamp ``t`` at
+    which the log's odometry (as ``open_log`` stamps it) passes closest to that pose (5 ms grid, metres
+    plus 0.5 m per radian).  Counted where it passes within 1 cm / 0.6 deg while moving (0.05 m/s or
+    5 deg/s there: the timing is observable); ``t' - t`` negative: the scan's pose is the odometry's
+    of before its stamp.  Empty for a log without ODOM lines (its odometry is the carried poses)."""
+    from fgloc.geometry import wrap_angle
+    from fgloc.mapping.source import open_log_scan_stamps
+
+    carried, from_laser = carried_poses(name)
+    if from_laser:
+        return {}
+    seg = recs[s0:s1 + 1]
+    stamps = open_log_scan_stamps(LOGS[name], seg)
+    od = sorted((float(m.stamp), *np.asarray(m.pose, dtype=float)) for topic, m in msgs
+                if topic == "/odom" and getattr(m, "pose", None) is not None)
+    if len(od) < 10:
+        return {}
+    a = np.array(od)
+    ot, ox, oy, oth = a[:, 0], a[:, 1], a[:, 2], np.unwrap(a[:, 3])
+    grid = np.arange(-window_s, window_s + 1e-9, 0.005)
+    dts = []
+    for r, t in zip(seg, stamps, strict=True):
+        c = carried[r.index] if r.index < len(carried) else None
+        if c is None or t - window_s < ot[0] or t + window_s > ot[-1]:
+            continue
+        tg = t + grid
+        gx, gy, gth = np.interp(tg, ot, ox), np.interp(tg, ot, oy), np.interp(tg, ot, oth)
+        d_xy = np.hypot(gx - c[0], gy - c[1])
+        d_th = np.abs(wrap_angle(gth - c[2]))
+        k = int(np.argmin(d_xy + 0.5 * d_th))
+        if d_xy[k] > 0.01 or d_th[k] > np.radians(0.6) or k in (0, len(grid) - 1):
+            continue
+        k0, k1 = max(k - 2, 0), min(k + 2, len(grid) - 1)
+        dt = tg[k1] - tg[k0]
+        speed = np.hypot(gx[k1] - gx[k0], gy[k1] - gy[k0]) / dt
+        rate = abs(gth[k1] - gth[k0]) / dt
+        if speed >= 0.05 or rate >= np.radians(5.0):
+            dts.append(float(grid[k]))
+    if not dts:
+        return {}
+    d = np.array(dts)
+    return {"carried_n": len(d), "carried_median_s": float(np.median(d)),
+            "carried_p90_abs_s": float(np.percentile(np.abs(d), 90)),
+            "carried_over_50ms": int(np.count_nonzero(np.abs(d) > 0.05)),
+            "carried_over_150ms": int(np.count_nonzero(np.abs(d) > 0.15))}
 
 
 def changed_world(hard: bool) -> dict:
@@ -393,6 +494,9 @@ def main() -> int:
                     help="folder with aces-corrected.log.gz / csail-corrected.log.gz (intel, fr079: the shared data)")
     ap.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
                     help="configuration overrides for the real-log runs (YAML values), e.g. smoother.adapt_noise=false")
+    ap.add_argument("--carmen-odometry", choices=["log", "laser"], default="log",
+                    help="laser: an experiment, the real logs' odometry taken from the poses their laser lines "
+                         "carry, stamped as the scans (log: as fgloc run reads it)")
     ap.add_argument("--skip-sim", action="store_true")
     ap.add_argument("--hard", action="store_true", help="also the changed world with 28 more pallets along the path")
     ap.add_argument("--skip-real", action="store_true")
@@ -416,7 +520,7 @@ def main() -> int:
                     acc = (None if acc_s == "none" else 0.025 if acc_s == "half-cell"
                            else measured_accuracy(name, args.cache) if acc_s == "measured" else float(acc_s))
                     rows.append(run_real(name, args.cache, args.scans, be, acc, args.gmapping_dir, overrides,
-                                         args.start))
+                                         args.start, args.carmen_odometry))
                     print(f"done {name} {be} accuracy {acc_s}", file=sys.stderr)
     if not args.skip_sim:
         for seed in args.seeds:
@@ -464,12 +568,18 @@ def main() -> int:
     for name, r in timing.items():
         print(f"\n{name}: odometry yaw change over scan pairs 0.5 s apart vs SLAM: {r['odo_rms0_deg']:.2f} deg RMS "
               f"at the scans' stamps, {r['odo_rms_shift_deg']:.2f} deg read {r['odo_shift_s']:+.2f} s off them")
+    for name, r in {r["log"]: r for r in rows if "carried_n" in r}.items():
+        print(f"\n{name}: the odometry pose each scan's laser line carries is the log's odometry at its stamp "
+              f"{r['carried_median_s']:+.3f} s (median over {r['carried_n']} scans taken while moving), "
+              f"|offset| 90th percentile {r['carried_p90_abs_s']:.3f} s; {r['carried_over_50ms']} scans more "
+              f"than 50 ms off, {r['carried_over_150ms']} more than 150 ms")
     for r in rows:
         c = r.get("odom_clock")
         if c:
             used = f"{c['offset_s']:+.3f} s in use" if c["applied"] else "not used (0)"
             why = ("" if c["applied"] else ", odometry fast" if not c["slow"] else
-                   ", odometry stamps in bursts" if not c["regular"] else ", not confident")
+                   ", odometry stamps in bursts (its timing carried as yaw variance in the smoother)"
+                   if not c["regular"] else ", not confident")
             print(f"\n{r['log']} (map accuracy {r.get('accuracy', '-')}): odometry clock offset (localization.clock) "
                   f"{used}: estimate {c['estimate_s']:+.3f} +- {max(c['sigma_s'], 0):.3f} s, last fit "
                   f"{c['fit_s']:+.3f} s (fixes' turn / odometry's {c['yaw_scale'] or float('nan'):.3f}), "
@@ -480,13 +590,22 @@ def main() -> int:
         print(f"\n{name}: SLAM vs GMapping over the segment ({r['gm_n']} scans, rigid alignment): "
               f"{r['gm_rmse_m']:.3f} m / {r['gm_rmse_deg']:.2f} deg RMS, median {r['gm_median_abs_deg']:.2f} deg "
               "(the reference's own error is of this order)")
-    for r in rows:
-        if "gm_kf_n" in r:
-            print(f"\n{r['log']} (map accuracy {r.get('accuracy', '-')}): heading RMSE at the {r['gm_kf_n']} "
-                  f"keyframes GMapping also has: vs SLAM {r['est_vs_slam_deg']:.3f} deg, "
-                  f"vs GMapping {r['est_vs_gm_deg']:.3f} deg, "
-                  f"vs SLAM where the references agree within {REF_AGREE_DEG:g} deg ({r['agree_n']} keyframes) "
-                  f"{r['est_vs_slam_agree_deg']:.3f} deg")
+    if any("gm_kf_n" in r for r in rows):
+        # beside the full figure, never instead of it: the heading at the keyframes GMapping also has,
+        # against either reference, where the two agree, and each one's own error by the three-cornered hat
+        print(f"\n| run | map accuracy_m | keyframes GMapping has | heading RMSE vs SLAM deg | vs GMapping deg "
+              f"| SLAM vs GMapping deg | vs SLAM where the references agree within {REF_AGREE_DEG:g} deg (n) "
+              "| own error (three-cornered hat): localizer / SLAM / GMapping deg |")
+        print("|---|--:|--:|--:|--:|--:|--:|--:|")
+        for r in rows:
+            if "gm_kf_n" in r:
+                h = (r["hat_est_deg"], r["hat_slam_deg"], r["hat_gm_deg"])
+                print(f"| {r['log']} | {r.get('accuracy', '-')} | {r['gm_kf_n']} | {r['est_vs_slam_deg']:.3f} "
+                      f"| {r['est_vs_gm_deg']:.3f} | {r['slam_vs_gm_kf_deg']:.3f} "
+                      f"| {r['est_vs_slam_agree_deg']:.3f} ({r['agree_n']}) | {h[0]:.3f} / {h[1]:.3f} / {h[2]:.3f} |")
+        print("(the hat assumes independent errors: an error the localizer shares with SLAM (the same scans, "
+              "the map built from SLAM's other passes) cancels in their pair and is counted to GMapping; "
+              "a negative entry: not independent)")
     return 0
 
 

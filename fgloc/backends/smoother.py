@@ -320,6 +320,10 @@ class SlidingWindowSmoother(Backend):
         self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
         self._turned = 0.0
+        #: the odometry's stamps cannot be placed against the scans' (set by the localizer: a slow
+        #: odometry written in bursts, which its OdometryClock cannot shift): its timing variance is
+        #: used as with ``slow_odom_timing`` (see :meth:`_timing_var`)
+        self.odom_timing_unknown = False
         # differential orientation sources (readings until their keyframe) and further twist sources
         self.rel_pending: list[tuple[float, float, float, str]] = []
         self._rel_gated: dict[str, int] = {}
@@ -1147,7 +1151,7 @@ class SlidingWindowSmoother(Backend):
         odometry (CARMEN: 80-120 ms on fr079 / aces, intel's bursts) gave two consecutive increments
         +-5-13 deg off in turns where they claimed 0.3-1.4 deg, and they outvoted the keyframe's fix."""
         n = min(len(self.odo_t), TIMING_MESSAGES)
-        if not self.cfg.slow_odom_timing or n < 3:
+        if not (self.cfg.slow_odom_timing or self.odom_timing_unknown) or n < 3:
             return 0.0
         per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
         if not per > MAX_REF_PERIOD_S:

@@ -445,3 +445,17 @@ def split_errors(err_xy_m: FloatArray, err_yaw_rad: FloatArray, mask: NDArray[np
         out[part] = {"n": float(np.count_nonzero(sel)), "rmse_m": _rms(e[sel]), "max_m": _max(e[sel]),
                      "rmse_deg": math.degrees(_rms(y[sel])) if np.any(sel) else float("nan")}
     return out
+
+
+# --------------------------------------------------------------------------- reference error
+def three_cornered_hat(v_ab: float, v_ac: float, v_bc: float) -> tuple[float, float, float]:
+    """Each of three estimates' own error variance ``(v_a, v_b, v_c)`` from the mean squares of their
+    pairwise differences (``v_ab``: of ``a - b``), assuming their errors independent:
+    ``v_a = (v_ab + v_ac - v_bc) / 2`` and so on (the three-cornered hat).  Used to split a
+    localizer's error against a SLAM reference into its own and the reference's with a second
+    reference (GMapping's).  An error two of them share cancels in their pair and is counted to the
+    third; a negative value says the errors are not independent.  Unclipped."""
+    a = 0.5 * (v_ab + v_ac - v_bc)
+    b = 0.5 * (v_ab + v_bc - v_ac)
+    c = 0.5 * (v_ac + v_bc - v_ab)
+    return float(a), float(b), float(c)

@@ -25,7 +25,9 @@ at offset 0: a wheel slip or a wrong fix costs every offset the same).  The esti
   writes its messages in bursts (intel: 69 % of the segment's odometry steps under 2 ms, a median
   step of 0.8 ms for a mean of 100 ms) stamps each burst when it is written: no one offset
   describes it (its fix pairs gave a cost curve with a kink and a flat side, and a 0.1 s shift
-  made its heading 6.6 deg RMS against SLAM instead of 0.59);
+  made its heading 6.6 deg RMS against SLAM instead of 0.59).  For such an odometry the localizer
+  has the smoother carry the timing as yaw variance instead (``SlidingWindowSmoother.
+  odom_timing_unknown``: ``(period * w)^2`` at each end of a keyframe's odometry factor);
 * it is confident: at least :data:`MIN_PAIRS` pairs, the best offset inside the grid, its cost
   below offset 0's by :data:`MIN_GAIN` (in units of the residuals' variance), its standard
   deviation (the cost's curvature) at most :data:`MAX_SIGMA_S`, every offset whose cost is

@@ -39,6 +39,7 @@ import numpy as np
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, FloatArray
+from fgloc.backends.smoother import SlidingWindowSmoother
 from fgloc.geometry import compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
@@ -188,6 +189,9 @@ class Localizer:
         tw, cov = self.odom.step(t, tw, cov, pose)
         if self.clock is not None:
             self.clock.add_odometry(t_raw, float(self.odom.pose[2]))
+            if isinstance(self.backend, SlidingWindowSmoother):
+                # stamps in bursts: no offset places them, the smoother carries their timing variance
+                self.backend.odom_timing_unknown = self.clock.slow and not self.clock.regular
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)

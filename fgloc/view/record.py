@@ -89,7 +89,9 @@ class McapViewRecorder:
         self._trajectory = encode.GrowingPoses()  # the trajectory's poses sent so far, kept
         # per (topic, schema name): the writer's write(data, log_time_ns) with the channel looked up
         # once (a writer with raw_writer, as fgloc's LogWriter), else None (write_raw each time)
-        self._raw: dict[tuple[str, str], Callable[[bytes, int], None] | None] = {}
+        self._raw: dict[tuple[str, str], Callable[[bytes, int], None]] = {}
+        self._proto: dict[str, tuple[type, Callable[[bytes, int], None]]] = {}  # per topic: its class, _sink
+        self._json_sinks: dict[str, Callable[[bytes, int], None]] = {}
         self._last_ns = 0
         # the log time (ns) to write at now, or None (then the stamp): fgloc run puts the channels at
         # the log time of the input being processed, beside the inputs on the input's recording clock
@@ -112,39 +114,57 @@ class McapViewRecorder:
             s = self._schemas[cls] = (sch.name, sch.encoding, bytes(sch.data))
         return s
 
-    def _emit(self, topic: str, name: str, schema: bytes, data: bytes, log_time_ns: int, schema_encoding: str,
-              message_encoding: str) -> None:
+    def _sink(self, topic: str, name: str, schema: bytes, schema_encoding: str,
+              message_encoding: str) -> Callable[[bytes, int], None]:
+        """``write(data, log_time_ns)`` on ``topic`` with this schema: the writer's ``raw_writer`` (its
+        channel looked up once; made at the topic's first message, as the first ``write_raw`` would
+        register it), else ``write_raw`` each time."""
         key = (topic, name)
-        if key in self._raw:
-            raw = self._raw[key]
-        else:
-            make = getattr(self.writer, "raw_writer", None)
-            raw = self._raw[key] = None if make is None else make(topic, name, schema, schema_encoding,
-                                                                  message_encoding)
+        raw = self._raw.get(key)
         if raw is None:
-            self.writer.write_raw(topic, name, schema, data, log_time_ns, schema_encoding=schema_encoding,
-                                  message_encoding=message_encoding)
-        else:
-            raw(data, log_time_ns)
+            make = getattr(self.writer, "raw_writer", None)
+            if make is not None:
+                raw = make(topic, name, schema, schema_encoding, message_encoding)
+            else:
+                write_raw = self.writer.write_raw
+
+                def raw(data: bytes, log_time_ns: int) -> None:
+                    write_raw(topic, name, schema, data, log_time_ns, schema_encoding=schema_encoding,
+                              message_encoding=message_encoding)
+            self._raw[key] = raw
+        return raw
 
     def _write(self, topic: str, msg: Any, stamp: float) -> None:
+        self._write_ns(topic, msg, self._ns(stamp))
+
+    def _write_ns(self, topic: str, msg: Any, log_time_ns: int) -> None:
         try:
-            name, encoding, data = self._schema(type(msg))
-            self._emit(topic, name, data, msg.encode(), self._ns(stamp), encoding, "protobuf")
+            cls = type(msg)
+            hit = self._proto.get(topic)  # (message class, write) of the topic's last message
+            if hit is None or hit[0] is not cls:
+                name, encoding, data = self._schema(cls)
+                hit = self._proto[topic] = (cls, self._sink(topic, name, data, encoding, "protobuf"))
+            hit[1](msg.encode(), log_time_ns)
             self.count += 1
         except (TypeError, ValueError, OverflowError):
             self.errors += 1
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
+        self._write_json_ns(topic, obj, self._ns(stamp))
+
+    def _write_json_ns(self, topic: str, obj: dict[str, Any], log_time_ns: int) -> None:
         try:
             data = _JSON(obj).encode()
         except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
             data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
-        self._write_json_bytes(topic, data, stamp)
+        self._write_json_bytes(topic, data, log_time_ns)
 
-    def _write_json_bytes(self, topic: str, data: bytes, stamp: float) -> None:
-        name, schema = self._json_schemas[topic]
-        self._emit(topic, name, schema, data, self._ns(stamp), "jsonschema", "json")
+    def _write_json_bytes(self, topic: str, data: bytes, log_time_ns: int) -> None:
+        write = self._json_sinks.get(topic)
+        if write is None:
+            name, schema = self._json_schemas[topic]
+            write = self._json_sinks[topic] = self._sink(topic, name, schema, "jsonschema", "json")
+        write(data, log_time_ns)
         self.count += 1
 
     # ------------------------------------------------------------------ ViewSink
@@ -157,39 +177,41 @@ class McapViewRecorder:
 
     def on_scan(self, view: ScanView) -> None:
         enc = self._enc
-        if self._due(self._last_scan, view.stamp, self.scan_period_s):
-            self._last_scan = view.stamp
-            self._write(ch.SCAN, enc.scan_message(view.scan), view.stamp)
-        if view.status == PREDICTED and not self._due(self._last_pose, view.stamp, self.predicted_period_s):
+        stamp = view.stamp
+        ns = self._ns(stamp)  # every message of the scan at the same log time
+        if self._due(self._last_scan, stamp, self.scan_period_s):
+            self._last_scan = stamp
+            self._write_ns(ch.SCAN, enc.scan_message(view.scan), ns)
+        if view.status == PREDICTED and not self._due(self._last_pose, stamp, self.predicted_period_s):
             return
-        self._last_pose = view.stamp
+        self._last_pose = stamp
+        fused = view.fused
         if view.transforms:
-            st = view.fused.stamp if view.fused is not None else view.stamp
-            self._write(ch.TF, enc.transforms_message(view.transforms, st), view.stamp)
-        if view.fused is not None:
-            self._write(ch.POSE, enc.pose_message(view.fused), view.stamp)
+            self._write_ns(ch.TF, enc.transforms_message(view.transforms, fused.stamp if fused is not None else stamp),
+                           ns)
+        if fused is not None:
+            self._write_ns(ch.POSE, enc.pose_message(fused), ns)
             if self.covariance_period_s <= 0:
-                self._write(ch.POSE_COVARIANCE, enc.covariance_scene(view.fused), view.stamp)
+                self._write_ns(ch.POSE_COVARIANCE, enc.covariance_scene(fused), ns)
             else:
-                self._covariance(view)
+                self._covariance(view, ns)
             # the JSON text formatted directly (encode.fused_json_text), the dict and the json module
             # only for what it does not take (NaN ...): the same bytes
-            text = enc.fused_json_text(view.fused)
+            text = enc.fused_json_text(fused)
             if text is None:
-                self._write_json(ch.FUSED, enc.fused_json(view.fused), view.stamp)
+                self._write_json_ns(ch.FUSED, enc.fused_json(fused), ns)
             else:
-                self._write_json_bytes(ch.FUSED, text.encode(), view.stamp)
-        text = enc.fix_json_text(view.stamp, view.status, view.reason, view.fix, view.fused)
+                self._write_json_bytes(ch.FUSED, text.encode(), ns)
+        text = enc.fix_json_text(stamp, view.status, view.reason, view.fix, fused)
         if text is None:
-            self._write_json(ch.FIX, enc.fix_json(view.stamp, view.status, view.reason, view.fix, view.fused),
-                             view.stamp)
+            self._write_json_ns(ch.FIX, enc.fix_json(stamp, view.status, view.reason, view.fix, fused), ns)
         else:
-            self._write_json_bytes(ch.FIX, text.encode(), view.stamp)
+            self._write_json_bytes(ch.FIX, text.encode(), ns)
         if view.fix is not None and view.status in (ACCEPTED, REJECTED):
             topic = ch.FIX_ACCEPTED if view.status == ACCEPTED else ch.FIX_REJECTED
-            self._write(topic, enc.pose_message(view.fix), view.stamp)
+            self._write_ns(topic, enc.pose_message(view.fix), ns)
 
-    def _covariance(self, view: ScanView) -> None:
+    def _covariance(self, view: ScanView, log_time_ns: int) -> None:
         """The uncertainty in the robot's frame, re-drawn every ``covariance_period_s`` or on change."""
         fused = view.fused
         assert fused is not None
@@ -203,7 +225,7 @@ class McapViewRecorder:
                 return
         self._last_cov = (view.stamp, (s0, s1, s2))
         base = view.transforms[-1].parent if view.transforms else BASE_FRAME
-        self._write(ch.POSE_COVARIANCE, body_covariance_scene(fused, base), view.stamp)
+        self._write_ns(ch.POSE_COVARIANCE, body_covariance_scene(fused, base), log_time_ns)
 
     def on_particles(self, stamp: float, frame_id: str, poses: np.ndarray) -> None:
         if stamp - self._last_particles < self.particles_period_s:

@@ -5,6 +5,7 @@ light per-scan channels untouched; the drawn ellipse is the same as the live vie
 from __future__ import annotations
 
 import base64
+import json
 import math
 
 import numpy as np
@@ -111,3 +112,48 @@ def test_unmatched_scans_recorded_at_a_bounded_rate(short_sim, tmp_path):
     for s in kept:  # a predicted scan is kept only 0.5 s after the previous recorded scan
         prev = [t for t in stamps if t < s]
         assert not prev or s - prev[-1] >= 0.5 - 1e-6
+
+
+class _RawOnly:
+    """A writer with ``write_raw`` only (no ``raw_writer``): every message as given."""
+
+    def __init__(self) -> None:
+        self.messages: list[tuple] = []
+
+    def write_raw(self, topic, schema_name, schema_data, data, log_time_ns, schema_encoding="", message_encoding=""):
+        self.messages.append((topic, schema_name, bytes(schema_data), schema_encoding, message_encoding, data,
+                              log_time_ns))
+
+
+class _WithRawWriter(_RawOnly):
+    """The same, through ``raw_writer(topic, ...)`` (as fgloc's LogWriter offers)."""
+
+    def raw_writer(self, topic, schema_name, schema_data, schema_encoding, message_encoding):
+        def write(data, log_time_ns):
+            self.messages.append((topic, schema_name, bytes(schema_data), schema_encoding, message_encoding, data,
+                                  log_time_ns))
+        return write
+
+
+def test_recorder_writes_the_same_through_write_raw_and_raw_writer(short_sim):
+    pytest.importorskip("foxglove")
+    from fgloc.view.feed import ViewFeed
+    from fgloc.view.record import McapViewRecorder
+
+    got = []
+    for writer in (_RawOnly(), _WithRawWriter()):
+        loc = Localizer(short_sim.map, short_sim.laser_mount, backend="smoother", frontend="native",
+                        initial_pose=short_sim.ground_truth.poses[0])
+        rec = McapViewRecorder(writer, covariance_period_s=1.0)
+        feed = ViewFeed(loc, [rec])
+        Session(loc, sinks=[feed]).run(short_sim.messages)
+        feed.close()
+        assert rec.errors == 0 and rec.count == len(writer.messages)
+        got.append(writer.messages)
+    assert got[0] == got[1]
+    topics = {m[0] for m in got[0]}
+    assert {ch.MAP, ch.SCAN, ch.TF, ch.POSE, ch.FUSED, ch.FIX, ch.HEALTH, ch.POSE_COVARIANCE} <= topics
+    fused = [json.loads(m[5]) for m in got[0] if m[0] == ch.FUSED]
+    assert fused and all(len(f["cov"]) == 9 and f["sigma_x_m"] > 0 for f in fused)
+    ns = [m[6] for m in got[0]]
+    assert ns == sorted(ns)  # no clock: each scan's messages at its stamp, the stamps in order

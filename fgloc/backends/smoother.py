@@ -753,7 +753,10 @@ class SlidingWindowSmoother(Backend):
         the gyro's random walk wobbled the heading.  With the shares the factors of consecutive
         intervals add up to the exact variance of the gyro's integral over them.  ``want_var=False``:
         the variance is not computed (returned as 0)."""
-        ts, rs, vs = self.gyro.get(name, ([], [], []))
+        got = self.gyro.get(name)   # (no default: .get's would build three lists at every call)
+        if got is None:
+            return None
+        ts, rs, vs = got
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
         i = max(bisect_right(ts, t0) - 1, 0)

@@ -41,8 +41,8 @@ is taken from every laser line's odometry pose instead (ROBOTLASER1: with its tv
 twist by finite difference of consecutive poses, zero for the first), yielded after its scan
 with the scan's stamp.
 
-ODOM stamps in bursts: a logger that writes its ODOM lines in bursts (intel: 69 % of the steps
-under 2 ms for a 100 ms mean) stamps them when they were written, not when each pose was
+ODOM stamps in bursts: a logger that writes its ODOM lines in bursts (intel: median spacing 0.9 ms
+for a mean of 113 ms over the whole log) stamps them when they were written, not when each pose was
 measured; each front laser line's odometry pose is the odometry when that scan was logged.  So
 when the peek window's ODOM stamps are not regular (the median spacing of the increasing
 stamps below ``BURST_REGULAR`` of their mean, the definition of

@@ -4,7 +4,8 @@ A map is built from the excerpt with fgloc.mapping; the pipeline's Localizer (de
 configuration: smoother + native, relocalization on) then tracks the excerpt's second half
 from the SLAM pose at its first scan, fed the CARMEN messages as `fgloc run` reads them (open_log). CARMEN
 odometry leaves tv = rv = 0 (intel) or rv = 0 (fr079): the localizer must take the motion from
-the odometry poses.  Bounds are about 1.5x what it reaches; the SLAM trajectory is the
+the odometry poses (fr079; intel's ODOM stamps come in bursts, so the reader takes the poses its
+laser lines carry, with twists from them).  Bounds are about 1.5x what it reaches; the SLAM trajectory is the
 reference for the absolute errors (same map frame), the GMapping-corrected poses for the
 relation errors.
 """
@@ -58,8 +59,11 @@ def test_tracks_the_second_half_without_relocalizing(localized):
     pos_b, yaw_b, *_ = CASES[name]
     assert loc.stats["relocalizations"] == 0
     assert loc.stats["fixes"] > 0.7 * (loc.stats["fixes"] + loc.stats["no_fix"])
-    # odometry came from the poses (the CARMEN twists are zero / incomplete)
-    assert loc.stats.get("odometry_from_poses", 0) > 0
+    # fr079's ODOM lines leave rv = 0: the localizer takes the motion from their poses; intel's
+    # ODOM stamps come in bursts, so the reader hands out the laser lines' poses with twists
+    # derived from them (fgloc.io.carmen) and the localizer has nothing to rebuild
+    from_poses = loc.stats.get("odometry_from_poses", 0)
+    assert (from_poses > 0) if name == "fr079" else (from_poses == 0)
     inside = (est.stamps >= slam.stamps[0]) & (est.stamps <= slam.stamps[-1])
     assert inside.sum() > 100
     gt = slam.interpolate(est.stamps[inside])

@@ -10,8 +10,10 @@ from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
 from fgloc.geometry import exp as se2_exp
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import wrap_scalar
+from fgloc.localization import Localizer
 from fgloc.localization.odometry import between1
-from fgloc.types import PoseFix
+from fgloc.maps import OccupancyMap
+from fgloc.types import Odometry, PoseFix, StaticTransform
 
 SPEED_MPS, TURN_RADPS = 0.5, 0.6   # a steady turn
 FIX_PERIOD_S = 0.42                # fr079's fix spacing (every other scan of 4.7 Hz)
@@ -22,11 +24,14 @@ def _pose(t: float) -> np.ndarray:
     return se2_exp(np.array([SPEED_MPS, 0.0, TURN_RADPS]) * t)
 
 
-def _keyframe_heading(odom_period_s: float, timing: bool = True) -> tuple[float, float, float]:
+def _keyframe_heading(odom_period_s: float, timing: bool = True, unknown: bool = False) -> tuple[float, float, float]:
     """Smoothed heading at the skewed scan's keyframe (rad), its fix's heading and the odometry's
     (the true pose at the stamp); odometry exact, pose-derived (the twist over each period, the
-    localizer's pose-delta noise), the other fixes exact with a 1 deg claim."""
+    localizer's pose-delta noise), the other fixes exact with a 1 deg claim.  ``timing``: the
+    opt-in ``slow_odom_timing``; ``unknown``: the smoother told the odometry's stamps cannot be
+    placed (the localizer's flag for a bursty odometry, test_heading_bursts)."""
     sm = SlidingWindowSmoother(SmootherConfig(slow_odom_timing=timing))
+    sm.odom_timing_unknown = unknown
     sm.initialize(0.0, _pose(0.0), np.eye(3) * 1e-6)
     t_fix = np.arange(FIX_PERIOD_S, 11.0, FIX_PERIOD_S)
     k_bad = len(t_fix) // 2
@@ -70,4 +75,49 @@ def test_slow_odometry_timing_is_opt_in():
     # the two odometry increments around the skewed scan keep their claim and outvote its fix
     est, fix, odo = _keyframe_heading(0.12, timing=False)
     assert abs(np.degrees(wrap_scalar(est - fix))) > 2.0
+    assert SmootherConfig().slow_odom_timing is False
+
+
+# An odometry written in bursts (issue 13 item 4: intel's logger, 69 % of its odometry steps under
+# 2 ms for a mean of 100 ms) has no one clock offset (localization.clock leaves it alone); the smoother
+# carries its timing variance instead, so a scan stamped off its pose keeps its fix in a turn.  An
+# odometry with regular stamps (its offset measured and applied) and a fast one are left as they were.
+
+
+def _odometry_stamps(kind: str) -> list[float]:
+    """Stamps over 12 s: ``regular`` 8 Hz, ``bursts`` pairs 1 ms apart every 0.2 s (mean 0.1 s, median
+    spacing 1 ms: the logger's bursts), ``fast`` 50 Hz."""
+    if kind == "regular":
+        return [float(t) for t in np.arange(0.125, 12.0, 0.125)]
+    if kind == "fast":
+        return [float(t) for t in np.arange(0.02, 12.0, 0.02)]
+    return sorted([float(t) for t in np.arange(0.2, 12.0, 0.2)] + [float(t) + 0.001 for t in np.arange(0.2, 12.0, 0.2)])
+
+
+def _flag_after(kind: str) -> bool:
+    occ = OccupancyMap(np.zeros((20, 20), dtype=np.int16), 0.1)
+    loc = Localizer(occ, StaticTransform("base_link", "laser", np.zeros(3)), "smoother", "native",
+                    initial_pose=np.zeros(3))
+    prev = 0.0
+    for t in _odometry_stamps(kind):
+        twist = se2_log(between1(_pose(prev), _pose(t))) / (t - prev)
+        loc.on_odometry(Odometry(stamp=t, twist=twist, pose=_pose(t)))
+        prev = t
+    assert isinstance(loc.backend, SlidingWindowSmoother)
+    return bool(loc.backend.odom_timing_unknown)
+
+
+def test_the_localizer_flags_only_a_slow_bursty_odometry():
+    assert _flag_after("bursts") is True
+    assert _flag_after("regular") is False   # its offset is measured and applied (OdometryClock)
+    assert _flag_after("fast") is False      # 50 Hz places the motion; the latency estimator measures a lag
+
+
+def test_a_scan_stamped_off_keeps_its_fix_when_the_odometry_timing_is_unknown():
+    # the turn above: 8 Hz odometry (0.12 s), one scan's pose 0.12 s after its stamp
+    est, fix, odo = _keyframe_heading(0.12, timing=False, unknown=True)
+    assert abs(np.degrees(wrap_scalar(fix - odo))) > 4.0      # the scan's pose is 4.1 deg from the odometry's
+    assert abs(np.degrees(wrap_scalar(est - fix))) < 1.0      # the keyframe carries the scan's pose (0.46 deg off)
+    est, fix, odo = _keyframe_heading(0.12, timing=False, unknown=False)
+    assert abs(np.degrees(wrap_scalar(est - fix))) > 2.0      # known timing: the odometry keeps its weight (2.37)
     assert SmootherConfig().slow_odom_timing is False

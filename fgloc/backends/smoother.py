@@ -130,6 +130,33 @@ def _all_finite(*arrays: FloatArray) -> bool:
     return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
 
 
+def _rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
+                   weights: dict[int, float] | None = None) -> float | None:
+    """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
+    interpolated between them, from reading ``i`` on (the one at or before ``t0``); None where two
+    readings the interval needs are more than ``max_gap`` apart.  ``weights``: each reading's
+    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`)."""
+    d = 0.0
+    n = len(ts)
+    while i < n - 1 and ts[i] < t1:
+        ta, tb = ts[i], ts[i + 1]
+        a, b = max(ta, t0), min(tb, t1)
+        if b > a:
+            h = tb - ta
+            if h > max_gap:
+                return None
+            fa, fb = (a - ta) / h, (b - ta) / h
+            # weights of reading i and i+1 in the integral over [a, b]
+            wi = (b - a) * (1.0 - 0.5 * (fa + fb))
+            wj = (b - a) * 0.5 * (fa + fb)
+            d += wi * rs[i] + wj * rs[i + 1]
+            if weights is not None:
+                weights[i] = weights.get(i, 0.0) + wi
+                weights[i + 1] = weights.get(i + 1, 0.0) + wj
+        i += 1
+    return d
+
+
 def _period(ts: list[float]) -> float:
     """Median spacing of the last readings (inf with fewer than 3)."""
     if len(ts) < 3:
@@ -759,26 +786,11 @@ class SlidingWindowSmoother(Backend):
         ts, rs, vs = got
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
-        i = max(bisect_right(ts, t0) - 1, 0)
-        d = 0.0
-        w: dict[int, float] = {}
         n = len(ts)
-        while i < n - 1 and ts[i] < t1:
-            ta, tb = ts[i], ts[i + 1]
-            a, b = max(ta, t0), min(tb, t1)
-            if b > a:
-                h = tb - ta
-                if h > max_gap:
-                    return None
-                fa, fb = (a - ta) / h, (b - ta) / h
-                # weights of reading i and i+1 in the integral over [a, b]
-                wi = (b - a) * (1.0 - 0.5 * (fa + fb))
-                wj = (b - a) * 0.5 * (fa + fb)
-                d += wi * rs[i] + wj * rs[i + 1]
-                if want_var:
-                    w[i] = w.get(i, 0.0) + wi
-                    w[i + 1] = w.get(i + 1, 0.0) + wj
-            i += 1
+        w: dict[int, float] = {}
+        d = _rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap, w if want_var else None)
+        if d is None:
+            return None
         var = 0.0
         for m, ww in w.items():
             # the gaps either side (at the buffer's ends: the one gap known, twice)
@@ -842,21 +854,12 @@ class SlidingWindowSmoother(Backend):
             dt = tn - t
             if dt > 0:
                 # _gyro_increment(name, t, tn, want_var=False) for this step, the gyro index carried
-                # from step to step instead of searched (the same sums in the same order)
+                # from step to step instead of searched
                 while g + 1 < ng and gts[g + 1] <= t:
                     g += 1
-                k = g
-                d = 0.0
-                while k < ng - 1 and gts[k] < tn:
-                    ta, tb = gts[k], gts[k + 1]
-                    a, b = max(ta, t), min(tb, tn)
-                    if b > a:
-                        h = tb - ta
-                        if h > max_gap:
-                            return None
-                        fa, fb = (a - ta) / h, (b - ta) / h
-                        d += (b - a) * (1.0 - 0.5 * (fa + fb)) * grs[k] + (b - a) * 0.5 * (fa + fb) * grs[k + 1]
-                    k += 1
+                d = _rate_integral(gts, grs, t, tn, g, max_gap)
+                if d is None:
+                    return None
                 w = d - bias * (tn - t)
                 u = self.odo_u[j]
                 vx, vy = float(u[0]) * dt, float(u[1]) * dt
@@ -1175,11 +1178,9 @@ class SlidingWindowSmoother(Backend):
         """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""
         if not self.odo_t:
             return np.zeros(3)
-        i = min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)
-        u0, u1, u2 = self.odo_u[i]
-        gv, gw = float(self._gains[0]), float(self._gains[1])
-        w = self._gyro_rate_at(t)
-        return np.array([u0 * gv, u1 * gv, u2 * gw if w is None else w])
+        u0, u1, _ = self.odo_u[min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)]
+        gv = float(self._gains[0])
+        return np.array([u0 * gv, u1 * gv, self._yaw_rate_at(t)])
 
     def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,
                     vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:

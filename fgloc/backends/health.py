@@ -33,6 +33,7 @@ import math
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass, field
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -374,15 +375,16 @@ class Arbiter:
 def bracket(series: deque, t: float) -> tuple[int, int]:
     """The indices ``lo, hi`` of the samples (tuples whose first item is the time, in time order)
     around ``t``: ``series[lo][0] <= t`` and ``hi = lo + 1`` (``0, 0`` for one sample).  The
-    caller checks ``series[0][0] <= t <= series[-1][0]``."""
-    lo, hi = 0, len(series) - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if series[mid][0] <= t:
-            lo = mid
-        else:
-            hi = mid
-    return lo, hi
+    caller checks ``series[0][0] <= t <= series[-1][0]``.  (Bisection in C, keyed on the time:
+    the last sample at or before ``t``, at most the last but one.)"""
+    n = len(series)
+    if n < 2:
+        return 0, 0
+    lo = max(min(bisect_right(series, t, key=_time) - 1, n - 2), 0)
+    return lo, lo + 1
+
+
+_time = itemgetter(0)
 
 
 def _median_abs(inc: dict[str, tuple[float, float]]) -> float:
@@ -535,14 +537,28 @@ def _nnls_normal(N: list[list[float]], rhs: list[float], n_rows: int) -> list[fl
 _EPS = float(np.finfo(float).eps)
 
 
-def _spd_solve(N: list[list[float]], b: list[float]) -> list[float]:
-    """``N^-1 b`` for a small symmetric positive definite ``N`` (Cholesky, scalar maths)."""
+def _cholesky(N: list[list[float]], tol: float | None) -> list[list[float]] | None:
+    """The lower Cholesky factor of a small symmetric matrix (scalar maths).  ``tol`` None: a pivot
+    is clamped at 1e-300 (positive definite by construction); else None when one is not above ``tol``."""
     n = len(N)
     L = [[0.0] * n for _ in range(n)]
     for j in range(n):
-        L[j][j] = math.sqrt(max(N[j][j] - sum(L[j][k] * L[j][k] for k in range(j)), 1e-300))
+        d = N[j][j] - sum(L[j][k] * L[j][k] for k in range(j))
+        if tol is None:
+            d = max(d, 1e-300)
+        elif not d > tol:
+            return None
+        L[j][j] = math.sqrt(d)
         for i in range(j + 1, n):
             L[i][j] = (N[i][j] - sum(L[i][k] * L[j][k] for k in range(j))) / L[j][j]
+    return L
+
+
+def _spd_solve(N: list[list[float]], b: list[float]) -> list[float]:
+    """``N^-1 b`` for a small symmetric positive definite ``N`` (Cholesky, scalar maths)."""
+    n = len(N)
+    L = _cholesky(N, None)
+    assert L is not None
     y = [0.0] * n
     for i in range(n):
         y[i] = (b[i] - sum(L[i][k] * y[k] for k in range(i))) / L[i][i]
@@ -556,15 +572,9 @@ def _spd_inverse(N: list[list[float]]) -> list[list[float]] | None:
     """The inverse of a small symmetric positive semi-definite matrix (Cholesky, scalar maths),
     None when it is singular (a pivot below 1e-9 of the largest diagonal entry)."""
     n = len(N)
-    tol = 1e-9 * max(N[i][i] for i in range(n))
-    L = [[0.0] * n for _ in range(n)]
-    for j in range(n):
-        d = N[j][j] - sum(L[j][k] * L[j][k] for k in range(j))
-        if not d > tol:
-            return None
-        L[j][j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            L[i][j] = (N[i][j] - sum(L[i][k] * L[j][k] for k in range(j))) / L[j][j]
+    L = _cholesky(N, 1e-9 * max(N[i][i] for i in range(n)))
+    if L is None:
+        return None
     # L^-1 by forward substitution, then N^-1 = L^-T L^-1
     Li = [[0.0] * n for _ in range(n)]
     for i in range(n):
@@ -804,7 +814,6 @@ class GyroBias:
         self._bad_since: dict[str, float] = {}
         # the gyro's raw integral (trapezoid over readings): (t, G, rate, var)
         self.series: deque[tuple[float, float, float, float]] = deque(maxlen=int(history))
-        self._stamps: deque[float] = deque(maxlen=int(history))   # series' stamps (for bisection)
         self._pending: list[tuple[float, str, float, float]] = []
         self._reanchor: set[str] = set()
         # per heading source: [EW mean of yn^2, EW mean of n * mean(yn)^2 over a window, the window's sum
@@ -833,7 +842,6 @@ class GyroBias:
                 self._reanchor.update(self.idx)
         v = var if math.isfinite(var) and var > 0 else 1e-4
         self.series.append((float(t), g, float(rate), v))
-        self._stamps.append(float(t))
         if self._still_since is not None and t - self._still_since >= self.still_s and t <= self._still_until:
             self._update_still(float(t), float(rate), v)
         self._process()
@@ -872,11 +880,7 @@ class GyroBias:
         s = self.series
         if not s or t < s[0][0] or t > s[-1][0]:
             return None
-        # bracket(s, t) by bisection on the stamps (in C): the last reading at or before t, at most
-        # the last but one (readings strictly increasing)
-        n = len(s)
-        lo = min(bisect_right(self._stamps, t) - 1, n - 2) if n > 1 else 0
-        hi = lo + 1 if n > 1 else 0
+        lo, hi = bracket(s, t)
         a, b = s[lo], s[hi]
         if b[0] - a[0] > MAX_GYRO_GAP_S:
             return None

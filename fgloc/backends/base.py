@@ -23,22 +23,18 @@ from fgloc.types import PoseFix, Trajectory
 FloatArray = NDArray[np.float64]
 
 
-_DEFAULT_COV: dict[tuple[float, float, float], tuple[FloatArray, list[float]]] = {}
+_DEFAULT_COV: dict[tuple[float, float, float], list[float]] = {}
 
 
 def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> FloatArray:
-    """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad."""
-    if cov is not None:
-        c = np.asarray(cov, dtype=float).reshape(3, 3)
-        v = c.ravel().tolist()  # scalar checks: every odometry message passes here
-        if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
-            return c
-    return _default_cov(default_sigmas)[0]
+    """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad (a new array)."""
+    return np.array(twist_covariance_values(cov, default_sigmas)).reshape(3, 3)
 
 
 def twist_covariance_values(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> list[float]:
     """:func:`twist_covariance`'s 9 entries (row by row) as floats, without the array (every odometry
-    message of the smoother: one ``tolist`` instead of four numpy calls)."""
+    message of the smoother: one ``tolist`` instead of four numpy calls).  The default's list is
+    shared between calls: read it, do not change it."""
     if cov is not None:
         if isinstance(cov, np.ndarray) and cov.dtype == np.float64 and cov.size == 9:
             v = cov.ravel().tolist()
@@ -46,14 +42,9 @@ def twist_covariance_values(cov: FloatArray | None, default_sigmas: tuple[float,
             v = np.asarray(cov, dtype=float).reshape(3, 3).ravel().tolist()
         if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
             return v
-    return _default_cov(default_sigmas)[1]
-
-
-def _default_cov(default_sigmas: tuple[float, float, float]) -> tuple[FloatArray, list[float]]:
     d = _DEFAULT_COV.get(default_sigmas)
     if d is None:
-        m = np.diag(np.square(default_sigmas))
-        d = _DEFAULT_COV[default_sigmas] = (m, m.ravel().tolist())
+        d = _DEFAULT_COV[default_sigmas] = np.diag(np.square(default_sigmas)).ravel().tolist()
     return d
 
 

@@ -45,8 +45,8 @@ ODOM stamps in bursts: a logger that writes its ODOM lines in bursts (intel: med
 for a mean of 113 ms over the whole log) stamps them when they were written, not when each pose was
 measured; each front laser line's odometry pose is the odometry when that scan was logged.  So
 when the peek window's ODOM stamps are not regular (the median spacing of the increasing
-stamps below ``BURST_REGULAR`` of their mean, the definition of
-``fgloc.localization.clock.REGULAR``; from ``BURST_MIN_STAMPS`` stamps on) and every front
+stamps below ``BURST_REGULAR`` of their mean: :func:`fgloc.io.source.stamp_spacing`, the
+rule ``fgloc.localization.clock`` uses; from three stamps on) and every front
 laser line there carries an odometry pose, the ODOM lines are read and counted but not yielded;
 odometry comes from the front laser lines' poses (FLASER twist by finite difference; CarmenSource
 takes it again over the stamps it yields, its repaired ones, in its order), each yielded just
@@ -78,7 +78,7 @@ import numpy as np
 from fgloc.errors import LogError, read_user_head
 from fgloc.geometry import between
 from fgloc.io.ros import stamp_to_ns
-from fgloc.io.source import LogSource, Record, TopicInfo
+from fgloc.io.source import REGULAR, LogSource, Record, TopicInfo, stamp_spacing
 from fgloc.io.topics import LASER_SCAN, ODOMETRY, TF_MESSAGE, Topics
 from fgloc.types import LaserScan, Odometry, StaticTransform
 
@@ -89,10 +89,8 @@ NO_RETURN_FRACTION = 0.005
 SICK_MAX_RANGE_M = 80.0
 RANGE_MIN_M = 0.0
 #: ODOM stamps are regular when their median spacing is at least this share of the mean spacing
-#: (``fgloc.localization.clock.REGULAR``); below it they come in bursts
-BURST_REGULAR = 0.5
-#: increasing ODOM stamps the peek window needs before their spacing is judged
-BURST_MIN_STAMPS = 3
+#: (fgloc.io.source's rule, shared with fgloc.localization.clock); below it they come in bursts
+BURST_REGULAR = REGULAR
 #: s, odometry from a laser line's pose (bursty ODOM) is stamped this much before its scan
 CARRIED_LEAD_S = 1e-6
 
@@ -208,19 +206,6 @@ def _parse_laser(tok: list[str]) -> _Laser:
     else:
         raise ValueError("laser line without timestamp")
     return _Laser(kind, stamp, ranges, laser_pose, odom_pose, -math.pi / 2, flaser_angle_increment(n))
-
-
-def stamp_spacing(stamps: list[float]) -> tuple[float, float] | None:
-    """``(median, mean)`` spacing (s) of the increasing stamps among ``stamps`` (a stamp not after
-    the last one kept is left out, as ``fgloc.localization.clock`` does); None with fewer than
-    ``BURST_MIN_STAMPS`` of them."""
-    kept: list[float] = []
-    for t in stamps:
-        if not kept or t > kept[-1]:
-            kept.append(t)
-    if len(kept) < max(BURST_MIN_STAMPS, 2):
-        return None
-    return float(np.median(np.diff(np.asarray(kept)))), (kept[-1] - kept[0]) / (len(kept) - 1)
 
 
 @dataclass

@@ -37,6 +37,27 @@ from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory
 
 log = logging.getLogger(__name__)
 
+#: a message stream's stamps are regular when their median spacing is at least this share of their
+#: mean spacing; below it they come in bursts (a logger that stamps several messages when it writes
+#: them: the stamps do not say when each was measured).  fgloc.io.carmen and fgloc.localization.clock
+REGULAR = 0.5
+#: increasing stamps :func:`stamp_spacing` needs before a spacing is judged
+SPACING_MIN_STAMPS = 3
+
+
+def stamp_spacing(stamps: Iterable[float]) -> tuple[float, float] | None:
+    """``(median, mean)`` spacing (s) of the increasing stamps among ``stamps`` (a stamp not after
+    the last one kept is left out); None with fewer than ``SPACING_MIN_STAMPS`` of them.  Regular
+    stamps: ``median >= REGULAR * mean``."""
+    kept: list[float] = []
+    for t in stamps:
+        if not kept or t > kept[-1]:
+            kept.append(t)
+    if len(kept) < max(SPACING_MIN_STAMPS, 2):
+        return None
+    return float(np.median(np.diff(np.asarray(kept)))), (kept[-1] - kept[0]) / (len(kept) - 1)
+
+
 MAX_TF_MESSAGES = 2000  # /tf messages looked through for the laser mount
 
 

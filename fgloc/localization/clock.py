@@ -54,6 +54,7 @@ import numpy as np
 
 from fgloc.backends.smoother import MAX_REF_PERIOD_S
 from fgloc.geometry import wrap_angle, wrap_scalar
+from fgloc.io.source import REGULAR, stamp_spacing
 
 MAX_OFFSET_S = 0.3     # s, the offsets considered: +- this (a driver's latency, not a wrong clock)
 GRID_STEP_S = 0.01     # s, the grid of offsets
@@ -73,7 +74,6 @@ INTERVAL_COST = 9.0
 YAW_SCALE_TOL = 0.2    # the fixes' turn over the odometry's at the best offset within 1 +- this,
 SCALE_TURN_RAD = math.radians(5.0)   # over the pairs in which the odometry turns at least this,
 MIN_TURNING_PAIRS = 10               # at least this many
-REGULAR = 0.5          # regular stamps: the median spacing at least this share of the mean spacing
 MAX_PAIRS = 4000       # the residual curves kept (the oldest dropped)
 REFIT_EVERY = 10       # new pairs between fits
 SLEW = 0.5             # the offset in use moves by at most this share of the raw stamps' spacing
@@ -145,11 +145,11 @@ class OdometryClock:
         self._last_yaw = yaw_rad
         self._stamps.append(t_raw)
         self._count += 1
-        n = len(self._stamps)
-        if n >= 3 and (self._count < 20 or self._count % 20 == 0):
-            mean = (self._stamps[-1] - self._stamps[0]) / (n - 1)
+        spacing = stamp_spacing(self._stamps) if self._count < 20 or self._count % 20 == 0 else None
+        if spacing is not None:  # (the stamps kept are increasing already)
+            median, mean = spacing
             self.slow = mean > SLOW_PERIOD_S
-            self.regular = float(np.median(np.diff(np.asarray(self._stamps)))) >= REGULAR * mean
+            self.regular = median >= REGULAR * mean
         if not self.slow:
             if self._raw_t or self._pending:
                 self._raw_t.clear()

@@ -8,7 +8,6 @@ Pure functions, no I/O; importing this module needs foxglove-sdk (``pip install
 from __future__ import annotations
 
 import math
-from json.encoder import encode_basestring_ascii as _json_str
 from typing import Any
 
 import numpy as np
@@ -206,60 +205,6 @@ def fix_json(stamp: float, status: str, reason: str, fix: PoseFix | None, fused:
             dyaw = math.remainder(float(fix.pose[2] - fused.pose[2]), 2.0 * math.pi)
             out.update({"offset_from_fused_m": math.hypot(dx, dy), "offset_from_fused_deg": math.degrees(dyaw)})
     return out
-
-
-def _json_num(v: float | None) -> str:
-    return "null" if v is None else repr(v)
-
-
-def fused_json_text(fused: PoseFix) -> str | None:
-    """:func:`fused_json` as compact JSON (``json.dumps(.., separators=(",", ":"))``'s text), formatted
-    directly: the dict and the json module's encoder were a third of the channel's cost (the float reprs
-    are the rest).  None when a value is not a finite float or a field not a string: then the caller
-    takes :func:`fused_json` and the json module (NaN -> null ...)."""
-    c = np.asarray(fused.cov, dtype=float).reshape(9)
-    cov = c.tolist()
-    p = fused.pose
-    stamp, x, y, yaw = float(fused.stamp), float(p[0]), float(p[1]), math.degrees(float(p[2]))
-    frame_id, source = fused.frame_id, fused.source
-    if type(frame_id) is not str or type(source) is not str or not math.isfinite(stamp + x + y + yaw + sum(cov)):
-        return None
-    sx, sy, syaw = _sigmas_flat(c)
-    c0, c1, c2, c3, c4, c5, c6, c7, c8 = cov
-    r2, r5 = repr(c2), repr(c5)
-    # the mirrored entries are mostly the same number (a repr each is most of this function's time);
-    # a zero is formatted anew (0.0 == -0.0, their reprs differ)
-    r6 = r2 if c6 == c2 and c2 != 0.0 else repr(c6)
-    r7 = r5 if c7 == c5 and c5 != 0.0 else repr(c7)
-    return (f'{{"stamp":{stamp!r},"frame_id":{_json_str(frame_id)},"source":{_json_str(source)},"x_m":{x!r},'
-            f'"y_m":{y!r},"yaw_deg":{yaw!r},"sigma_x_m":{_json_num(sx)},"sigma_y_m":{_json_num(sy)},'
-            f'"sigma_yaw_deg":{_json_num(syaw)},"cov":[{c0!r},{c1!r},{r2},{c3!r},{c4!r},{r5},{r6},{r7},{c8!r}]}}')
-
-
-def fix_json_text(stamp: float, status: str, reason: str, fix: PoseFix | None, fused: PoseFix | None) -> str | None:
-    """:func:`fix_json` as compact JSON text, formatted directly (see :func:`fused_json_text`); None:
-    take :func:`fix_json` and the json module."""
-    stamp = float(stamp)
-    if type(status) is not str or type(reason) is not str or not math.isfinite(stamp):
-        return None
-    head = f'{{"stamp":{stamp!r},"status":{_json_str(status)},"reason":{_json_str(reason)}'
-    if fix is None:
-        return head + "}"
-    source = fix.source
-    q, x, y, yaw = float(fix.quality), float(fix.pose[0]), float(fix.pose[1]), math.degrees(float(fix.pose[2]))
-    if type(source) is not str or not math.isfinite(q + x + y + yaw):
-        return None
-    sx, sy, syaw = sigmas(fix.cov)
-    text = (f'{head},"source":{_json_str(source)},"quality":{q!r},"x_m":{x!r},"y_m":{y!r},"yaw_deg":{yaw!r},'
-            f'"sigma_x_m":{_json_num(sx)},"sigma_y_m":{_json_num(sy)},"sigma_yaw_deg":{_json_num(syaw)}')
-    if fused is None:
-        return text + "}"
-    dx, dy = float(fix.pose[0] - fused.pose[0]), float(fix.pose[1] - fused.pose[1])
-    off_m = math.hypot(dx, dy)
-    off_deg = math.degrees(math.remainder(float(fix.pose[2] - fused.pose[2]), 2.0 * math.pi))
-    if not math.isfinite(off_m + off_deg):
-        return None
-    return f'{text},"offset_from_fused_m":{off_m!r},"offset_from_fused_deg":{off_deg!r}}}'
 
 
 # JSON schemas of the JSON channels (what Foxglove's plot / raw-message panels list)

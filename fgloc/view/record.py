@@ -157,9 +157,6 @@ class McapViewRecorder:
             data = _JSON(obj).encode()
         except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
             data = json.dumps(json_ready(obj), separators=(",", ":")).encode()
-        self._write_json_bytes(topic, data, log_time_ns)
-
-    def _write_json_bytes(self, topic: str, data: bytes, log_time_ns: int) -> None:
         write = self._json_sinks.get(topic)
         if write is None:
             name, schema = self._json_schemas[topic]
@@ -195,18 +192,8 @@ class McapViewRecorder:
                 self._write_ns(ch.POSE_COVARIANCE, enc.covariance_scene(fused), ns)
             else:
                 self._covariance(view, ns)
-            # the JSON text formatted directly (encode.fused_json_text), the dict and the json module
-            # only for what it does not take (NaN ...): the same bytes
-            text = enc.fused_json_text(fused)
-            if text is None:
-                self._write_json_ns(ch.FUSED, enc.fused_json(fused), ns)
-            else:
-                self._write_json_bytes(ch.FUSED, text.encode(), ns)
-        text = enc.fix_json_text(stamp, view.status, view.reason, view.fix, fused)
-        if text is None:
-            self._write_json_ns(ch.FIX, enc.fix_json(stamp, view.status, view.reason, view.fix, fused), ns)
-        else:
-            self._write_json_bytes(ch.FIX, text.encode(), ns)
+            self._write_json_ns(ch.FUSED, enc.fused_json(fused), ns)
+        self._write_json_ns(ch.FIX, enc.fix_json(stamp, view.status, view.reason, view.fix, fused), ns)
         if view.fix is not None and view.status in (ACCEPTED, REJECTED):
             topic = ch.FIX_ACCEPTED if view.status == ACCEPTED else ch.FIX_REJECTED
             self._write_ns(topic, enc.pose_message(view.fix), ns)

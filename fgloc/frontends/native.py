@@ -351,10 +351,7 @@ def _refine(field, A, b, far, px, py, pose0, scales, outliers, loss, max_iter, t
                     improved = True
                     break
                 lam *= 10.0
-            if converged or not improved:
-                break
-            step = math.sqrt(d[0] * d[0] + d[1] * d[1]) + abs(d[2])
-            if step < tol:
+            if converged or not improved:   # (a step that was tried is at least tol long)
                 break
     return pose, it_total, cost
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from fgloc.errors import LogError, read_user_head
 from fgloc.io.mcap_format import MCAP_MAGIC
-from fgloc.io.rosbag1 import ROSBAG1_MAGIC
+from fgloc.io.rosbag1 import is_ros1_head
 from fgloc.io.rosbag2 import SQLITE_MAGIC
 from fgloc.io.source import LogSource
 from fgloc.io.topics import Topics
@@ -59,7 +59,7 @@ def detect_format(path: str | Path) -> tuple[str, Path]:
     head = read_user_head(p, 4096)
     if head.startswith(MCAP_MAGIC):
         return "mcap", p
-    if head.startswith(ROSBAG1_MAGIC):
+    if is_ros1_head(head):
         return "rosbag1", p
     if head.startswith(SQLITE_MAGIC):
         return "rosbag2", p

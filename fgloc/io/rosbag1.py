@@ -2,25 +2,38 @@
 
 Messages come in record-time order; the conversion rules are those of :mod:`fgloc.io.ros`
 (ROS 1 and ROS 2 messages of these types have the same fields but for the header's ``seq``).
+A bag ``rosbags`` cannot open through its index (format 1.2, an index the 2010 recorder wrote
+with wrong lengths, a killed recording without one) is read by walking its records
+(:mod:`fgloc.io.bagwalk`), with a warning that says why.
 """
 
 from __future__ import annotations
 
+import logging
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from fgloc.errors import LogError
 from fgloc.io.bags import BagSource
+from fgloc.io.bagwalk import ROS1_MAGICS, WalkedBag
 from fgloc.io.topics import Topics
 
+log = logging.getLogger(__name__)
+
 ROSBAG1_MAGIC = b"#ROSBAG V2.0"
+
+
+def is_ros1_head(head: bytes) -> bool:
+    """Whether a file's first bytes are a ROS 1 bag's first line (any format version)."""
+    return head.startswith(ROS1_MAGICS)
 
 
 def is_rosbag1(path: str | Path) -> bool:
     try:
         with Path(path).open("rb") as f:
-            return f.read(len(ROSBAG1_MAGIC)) == ROSBAG1_MAGIC
+            return is_ros1_head(f.read(16))
     except OSError:
         return False
 
@@ -35,7 +48,41 @@ class Rosbag1Source(BagSource):
     def __init__(self, path: str | Path, topics: Topics | None = None) -> None:
         if not Path(path).exists():
             raise LogError(f"{path}: bag file not found")
+        self._walked: WalkedBag | None = None
         super().__init__(path, topics)
+        self.indexed = self._walked is None
+        if self._walked is not None and self._walked.broke:
+            self.truncated = self._walked.broke
+
+    def _open_reader(self) -> Any:
+        if self._walked is not None:
+            return self._walked
+        from rosbags.rosbag1 import Reader, ReaderError
+
+        reader = Reader(self.path)
+        try:
+            reader.open()
+            return reader
+        except OSError as e:
+            raise LogError(f"{self.path}: cannot read {self.what} ({e.strerror or e})") from None
+        except (ReaderError, AssertionError, struct.error, ValueError, KeyError, IndexError, EOFError) as e:
+            why = str(e).rstrip(".") or f"{type(e).__name__} in its index"
+        walked = WalkedBag(self.path)
+        walked.open()  # LogError: not even its records read
+        if not walked.connections and walked.broke:
+            raise LogError(f"{self.path}: cannot read ROS 1 bag ({why}; walking its records: {walked.broke})")
+        broke = f"; {walked.broke}" if walked.broke else ""
+        if walked.version == "1.2":  # a format of its own, not a damaged bag: said only when cut
+            log.log(logging.WARNING if broke else logging.INFO,
+                    "%s: format 1.2 bag (ROS before 1.1) read record by record: %d messages%s",
+                    self.path, walked.message_count, broke)
+        else:
+            fix = (f"; {walked.bad_index_lengths} index record(s) with a wrong length field"
+                   if walked.bad_index_lengths else "")
+            log.warning("%s: bag not read through its index (%s%s); read by walking its records: %d messages%s",
+                        self.path, why, fix, walked.message_count, broke)
+        self._walked = walked
+        return walked
 
     def _reader(self) -> Any:
         from rosbags.rosbag1 import Reader

@@ -43,6 +43,7 @@ OP_CHUNK_INFO = 0x06
 OP_CONNECTION = 0x07
 INDEX_ENTRY_V1 = 12    # time (8) + offset in the chunk (4): what every format 2.0 reader reads
 MAX_HEADER = 1 << 24   # a record header longer than this is damage, not a header
+CHUNK_CACHE = 4        # decompressed chunks kept while reading messages in time order
 
 
 class BagFormatError(ValueError):
@@ -186,10 +187,10 @@ class WalkedBag:
                 self.broke = f"damaged record at byte {pos} ({e}); {len(self._entries)} messages read before it"
                 return
             if rec is None:
-                self.broke = (f"file ends at byte {len(data)} inside a record starting at byte {pos}; "
-                              f"{len(self._entries)} complete messages read")
                 if v2:
                     self._cut_chunk(data, pos)
+                self.broke = (f"file ends at byte {len(data)} inside a record starting at byte {pos}; "
+                              f"{len(self._entries)} complete messages read")
                 return
             f, start, end = rec
             op = f["op"][0]
@@ -319,7 +320,7 @@ class WalkedBag:
         """``(connection, record time ns, raw message bytes)`` in record-time order."""
         wanted = {c.id for c in connections} if connections else set(self._conns)
         by_id = {c.id: c for c in self.connections}
-        cached: tuple[int, bytes] = (-2, b"")
+        cache: dict[int, bytes] = {}  # the chunks read last (chunks whose times overlap alternate)
         with self.path.open("rb") as fh:
             for e in self._entries:
                 if e.conn not in wanted:
@@ -328,9 +329,13 @@ class WalkedBag:
                     fh.seek(e.start)
                     raw = fh.read(e.end - e.start)
                 else:
-                    if cached[0] != e.chunk:
+                    body = cache.pop(e.chunk, None)
+                    if body is None:
                         kind, start, end = self._chunks[e.chunk]
                         fh.seek(start)
-                        cached = (e.chunk, _decompress(kind, fh.read(end - start)))
-                    raw = cached[1][e.start:e.end]
+                        body = _decompress(kind, fh.read(end - start))
+                        if len(cache) >= CHUNK_CACHE:
+                            del cache[next(iter(cache))]
+                    cache[e.chunk] = body  # most recently used last
+                    raw = body[e.start:e.end]
                 yield by_id[e.conn], e.time_ns, raw

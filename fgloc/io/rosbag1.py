@@ -71,6 +71,8 @@ class Rosbag1Source(BagSource):
         walked.open()  # LogError: not even its records read
         if not walked.connections and walked.broke:
             raise LogError(f"{self.path}: cannot read ROS 1 bag ({why}; walking its records: {walked.broke})")
+        if walked.broke and walked.broke.startswith("file ends"):
+            why = "the file is cut short"  # what rosbags tripped over is a consequence
         broke = f"; {walked.broke}" if walked.broke else ""
         if walked.version == "1.2":  # a format of its own, not a damaged bag: said only when cut
             log.log(logging.WARNING if broke else logging.INFO,

@@ -66,11 +66,15 @@ def _messages(ts):
     return out
 
 
-def _write_v2(path, chunk_bytes=None, bz2=False):
+def _write_v2(path, chunk_bytes=None, bz2=False, by_topic=False):
+    """``by_topic``: every message of one topic before the next's (a script's bag: file order is
+    not time order, the chunks' times overlap)."""
     from rosbags.rosbag1 import Writer
 
     ts = _store()
     msgs = _messages(ts)
+    if by_topic:
+        msgs = sorted(msgs, key=lambda m: m[0])
     w = Writer(path)
     if chunk_bytes is not None:
         w.chunk_threshold = chunk_bytes
@@ -156,17 +160,33 @@ def test_recording_killed_before_its_index(tmp_path, bz2):
     """``index_pos`` 0 and no index section (a ``.bag.active`` file): every chunk is read."""
     good, active = tmp_path / "good.bag", tmp_path / "run.bag.active"
     _write_v2(good, chunk_bytes=2000, bz2=bz2)
-    data = bytearray(good.read_bytes())
-    recs = list(_top_records(bytes(data)))
-    first_conn_outside = min(pos for pos, f, _, _ in recs if f["op"] == b"\x07")
-    header_pos, header, _, _ = recs[0]
-    assert header["op"] == b"\x03"
-    i = data.index(b"index_pos=", header_pos)
-    struct.pack_into("<Q", data, i + len("index_pos="), 0)
-    active.write_bytes(bytes(data[:first_conn_outside]))
+    _unindexed(good, active)
     src = open_log(active)
     assert src.summary()["indexed"] is False and src.truncated is None
     _same(_records(active), _records(good))
+
+
+def _unindexed(good, path):
+    """``good`` with ``index_pos`` 0 and its index section cut off (a killed recording)."""
+    data = bytearray(good.read_bytes())
+    recs = list(_top_records(bytes(data)))
+    first_conn_outside = min(pos for pos, f, _, _ in recs if f["op"] == b"\x07")
+    i = data.index(b"index_pos=", recs[0][0])
+    struct.pack_into("<Q", data, i + len("index_pos="), 0)
+    path.write_bytes(bytes(data[:first_conn_outside]))
+
+
+def test_walked_messages_come_in_time_order(tmp_path):
+    """A bag written topic by topic (all scans, then all odometry, ...) in small chunks: the
+    walked bag gives the records in log-time order, as the indexed read does."""
+    good, walked = tmp_path / "good.bag", tmp_path / "walked.bag"
+    _write_v2(good, chunk_bytes=1500, by_topic=True)
+    _unindexed(good, walked)
+    want = _records(good)
+    times = [ns for _, ns, _ in want]
+    assert times == sorted(times) and [t for t, _, _ in want][:3] == ["/odom", "/scan", "/tf"]
+    assert open_log(walked).summary()["indexed"] is False
+    _same(_records(walked), want)
 
 
 def test_file_cut_inside_its_last_chunk(tmp_path, caplog):
@@ -184,6 +204,8 @@ def test_file_cut_inside_its_last_chunk(tmp_path, caplog):
     assert src.truncated is not None and f"inside a record starting at byte {pos}" in src.truncated
     got = _records(cut)
     assert 0 < len(got) < len(want)
+    assert src.truncated.endswith(f"; {len(got)} complete messages read")
+    assert "the file is cut short" in caplog.text
     # every complete chunk and the complete part of the cut one: the first messages of the log
     assert len(got) > sum(1 for t, ns, _ in want if ns < _chunk_start_ns(data, pos))
     _same(got, [w for w in want if (w[0], w[1]) in {(t, ns) for t, ns, _ in got}])

@@ -29,6 +29,9 @@ IMU = "sensor_msgs/msg/Imu"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
 READ_TYPES = (LASER_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED)
+#: other names of these types, with the same fields: ROS 1 before Hydro (2013) published tf as
+#: ``tf/tfMessage`` (the same ``geometry_msgs/TransformStamped[] transforms`` and md5 as tf2's)
+TYPE_ALIASES = {"tf/msg/tfMessage": TF_MESSAGE}
 
 
 @dataclass
@@ -60,9 +63,11 @@ ROLE_TYPES = {
 
 
 def normalize_type(name: str) -> str:
-    """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``."""
+    """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``; an alias
+    (``tf/tfMessage``) -> the type fgloc reads it as (``TYPE_ALIASES``)."""
     parts = name.split("/")
-    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+    full = f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
+    return TYPE_ALIASES.get(full, full)
 
 
 def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -> dict[str, str]:

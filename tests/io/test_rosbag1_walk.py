@@ -28,12 +28,13 @@ def _store():
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC)
-    if "tf2_msgs/msg/TFMessage" not in ts.fielddefs:
-        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    for name in ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage"):  # tf/tfMessage: ROS before Hydro
+        if name not in ts.fielddefs:
+            ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", name))
     return ts
 
 
-def _messages(ts):
+def _messages(ts, tf_type="tf2_msgs/msg/TFMessage"):
     """``(topic, type, time ns, ROS 1 bytes)`` of a short drive: scans, odometry and tf."""
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
@@ -56,7 +57,7 @@ def _messages(ts):
             twist=T["geometry_msgs/msg/TwistWithCovariance"](
                 twist=T["geometry_msgs/msg/Twist"](linear=V3(x=0.4, y=0.0, z=0.0), angular=V3(x=0.0, y=0.0, z=0.0)),
                 covariance=np.zeros(36)))
-        tf = T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
+        tf = T[tf_type](transforms=[T["geometry_msgs/msg/TransformStamped"](
             header=Header(seq=0, stamp=stamp, frame_id="base_link"), child_frame_id="laser",
             transform=T["geometry_msgs/msg/Transform"](translation=V3(x=0.2, y=0.0, z=0.1),
                                                        rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0)))])
@@ -66,13 +67,13 @@ def _messages(ts):
     return out
 
 
-def _write_v2(path, chunk_bytes=None, bz2=False, by_topic=False):
+def _write_v2(path, chunk_bytes=None, bz2=False, by_topic=False, tf_type="tf2_msgs/msg/TFMessage"):
     """``by_topic``: every message of one topic before the next's (a script's bag: file order is
     not time order, the chunks' times overlap)."""
     from rosbags.rosbag1 import Writer
 
     ts = _store()
-    msgs = _messages(ts)
+    msgs = _messages(ts, tf_type)
     if by_topic:
         msgs = sorted(msgs, key=lambda m: m[0])
     w = Writer(path)
@@ -262,6 +263,27 @@ def test_format_1_2_bag(tmp_path, capsys):
     _same(_records(old), _records(good))
     assert main(["info", str(old)]) == 0
     assert f"{N}  nav_msgs/msg/Odometry" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("fmt", ["2.0", "1.2"])
+def test_tf_of_ros_before_hydro(tmp_path, fmt, caplog):
+    """``/tf`` as ``tf/tfMessage`` (every bag before 2013) is read as tf: the laser mount comes
+    from it, and no warning says the topic is skipped or the laser assumed at the centre."""
+    new, old = tmp_path / "tf2.bag", tmp_path / f"tf_{fmt}.bag"
+    _write_v2(new)
+    if fmt == "2.0":
+        _write_v2(old, tf_type="tf/msg/tfMessage")
+    else:
+        _write_v12(old, _messages(_store(), "tf/msg/tfMessage"), _store())
+    with caplog.at_level(logging.INFO):
+        src = open_log(old)
+        assert src.topic_types()["/tf"] == "tf2_msgs/msg/TFMessage"
+        assert src.laser_mount().pose == pytest.approx([0.2, 0.0, 0.0])
+    assert "skipped" not in caplog.text and "robot centre" not in caplog.text
+    got, want = _records(old), _records(new)
+    _same(got, want)
+    tfs = [(m[0].parent, m[0].child, m[0].pose.tolist()) for t, _, m in got if t == "/tf"]
+    assert tfs == [("base_link", "laser", pytest.approx([0.2, 0.0, 0.0]))] * N
 
 
 def test_unread_bag_versions_are_one_line_errors(tmp_path, capsys):

@@ -2,10 +2,23 @@
 with ``rosbags`` (:class:`Rosbag2Source`): the default storage of ROS 2 Humble (sqlite3) needs
 no ROS install.  A folder holding a single uncompressed ``.mcap`` is read by
 :class:`~fgloc.io.mcap_reader.McapSource` instead (see :func:`fgloc.io.formats.open_log`).
+
+A recording that did not end cleanly (killed, power lost) leaves a folder without
+``metadata.yaml`` (the recorder writes it when it closes) and, with SQLite's write-ahead log
+(Foxy's and Galactic's recorder, Humble's ``resilient`` preset), its last messages in
+``<file>.db3-wal`` beside the database.  A lone ``.db3`` is read without the metadata, and a
+``-wal`` file's messages are read from a copy the log is merged into (``rosbags`` opens
+databases immutable, which leaves the ``-wal`` out); where that cannot be done (split or
+compressed bags) a warning says how many bytes are left out.
 """
 
 from __future__ import annotations
 
+import logging
+import shutil
+import sqlite3
+import tempfile
+import weakref
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,7 +27,21 @@ from fgloc.errors import LogError
 from fgloc.io.bags import BagSource
 from fgloc.io.topics import Topics
 
+log = logging.getLogger(__name__)
+
 SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _wal(db: Path) -> Path:
+    return db.with_name(db.name + "-wal")
+
+
+def _count(db: Path) -> int:
+    con = sqlite3.connect(f"file:{db}?immutable=1", uri=True)
+    try:
+        return int(con.execute("SELECT COUNT(*) FROM messages").fetchone()[0])
+    finally:
+        con.close()
 
 
 class Rosbag2Source(BagSource):
@@ -30,12 +57,56 @@ class Rosbag2Source(BagSource):
             p = p.parent
         if not p.exists():
             raise LogError(f"{p}: bag folder not found")
+        self._open_path = self._unclean(p)
         super().__init__(p, topics)
+
+    def _unclean(self, p: Path) -> Path:
+        """What ``rosbags`` opens for ``p``: ``p`` itself, its lone ``.db3`` when it has no
+        ``metadata.yaml``, or a copy of that file with its ``-wal`` merged in (see the module doc)."""
+        dbs = [p] if p.is_file() else sorted(p.glob("*.db3"))
+        meta = p.is_dir() and (p / "metadata.yaml").is_file()
+        if p.is_dir() and not meta:
+            n = len(dbs) + len(list(p.glob("*.mcap")))
+            if n > 1:
+                raise LogError(f"{p}: no metadata.yaml beside its {n} storage files (a split recording that "
+                               f"did not end cleanly); `ros2 bag reindex {p}` writes one")
+            if len(dbs) == 1:
+                log.warning("%s: no metadata.yaml (a recording that did not end cleanly?); reading %s alone",
+                            p, dbs[0].name)
+        walled = [db for db in dbs if _wal(db).is_file() and _wal(db).stat().st_size > 0]
+        if not walled:
+            return dbs[0] if p.is_dir() and not meta and dbs else p
+        if len(dbs) > 1 or (meta and _compressed(p)):
+            log.warning("%s: %s not read: %s (a recording that did not end cleanly; open the database once "
+                        "with sqlite3 to merge them)", p, ", ".join(f"{_wal(db).name} ({_wal(db).stat().st_size} "
+                                                                    "bytes)" for db in walled),
+                        "the recorder's last messages, not yet merged into the database")
+            return p
+        return self._merged(dbs[0])
+
+    def _merged(self, db: Path) -> Path:
+        tmp = Path(tempfile.mkdtemp(prefix="fgloc-wal-"))
+        weakref.finalize(self, shutil.rmtree, tmp, True)
+        copy = tmp / db.name
+        try:
+            shutil.copyfile(db, copy)
+            shutil.copyfile(_wal(db), _wal(copy))
+            con = sqlite3.connect(copy)  # recovers the log's committed transactions
+            try:
+                con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            finally:
+                con.close()
+            before, after = _count(db), _count(copy)
+        except (OSError, sqlite3.Error) as e:
+            raise LogError(f"{db}: cannot merge {_wal(db).name} into a copy of the database ({e})") from None
+        log.warning("%s: %s holds %d messages not yet merged into the database (a recording that did not end "
+                    "cleanly); read from a merged copy: %d messages", db, _wal(db).name, after - before, after)
+        return copy
 
     def _reader(self) -> Any:
         from rosbags.rosbag2 import Reader
 
-        return Reader(self.path)
+        return Reader(self._open_path)
 
     def _reader_errors(self) -> tuple[type[Exception], ...]:
         from rosbags.rosbag2.errors import ReaderError
@@ -46,3 +117,9 @@ class Rosbag2Source(BagSource):
 def iter_rosbag2(path: str | Path, topics: Topics | None = None) -> Iterator[tuple[str, object]]:
     """``(topic, message)`` of a rosbag2 folder's role topics in record-time order."""
     return Rosbag2Source(path, topics).messages()
+
+
+def _compressed(folder: Path) -> bool:
+    from fgloc.io.formats import _compressed_bag
+
+    return _compressed_bag(folder)

@@ -7,7 +7,7 @@ from pathlib import Path
 from fgloc.errors import LogError, read_user_head
 from fgloc.io.mcap_format import MCAP_MAGIC
 from fgloc.io.rosbag1 import is_ros1_head
-from fgloc.io.rosbag2 import SQLITE_MAGIC
+from fgloc.io.rosbag2 import SQLITE_MAGIC, compressed_bag
 from fgloc.io.source import LogSource
 from fgloc.io.topics import Topics
 
@@ -30,19 +30,6 @@ def _bag_files(folder: Path) -> list[Path]:
     return files or sorted([*folder.glob("*.mcap"), *folder.glob("*.db3")])
 
 
-def _compressed_bag(folder: Path) -> bool:
-    meta = folder / "metadata.yaml"
-    if not meta.is_file():
-        return False
-    try:
-        import yaml
-
-        info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information") or {}
-    except Exception:  # noqa: BLE001
-        return False
-    return bool(info.get("compression_mode")) and str(info.get("compression_mode")).lower() != "none"
-
-
 def detect_format(path: str | Path) -> tuple[str, Path]:
     """``(format, path to open)``: ``"mcap"`` (also a rosbag2 folder holding one uncompressed
     ``.mcap``: the path is then that file), ``"rosbag2"``, ``"rosbag1"`` or ``"carmen"``."""
@@ -53,7 +40,7 @@ def detect_format(path: str | Path) -> tuple[str, Path]:
         files = _bag_files(p)
         if not files and not (p / "metadata.yaml").is_file():
             raise LogError(f"{p}: is a directory without a log (no metadata.yaml, .db3 or .mcap file in it)")
-        if len(files) == 1 and read_user_head(files[0], 8) == MCAP_MAGIC and not _compressed_bag(p):
+        if len(files) == 1 and read_user_head(files[0], 8) == MCAP_MAGIC and not compressed_bag(p):
             return "mcap", files[0]
         return "rosbag2", p
     head = read_user_head(p, 4096)

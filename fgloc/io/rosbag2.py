@@ -76,7 +76,7 @@ class Rosbag2Source(BagSource):
         walled = [db for db in dbs if _wal(db).is_file() and _wal(db).stat().st_size > 0]
         if not walled:
             return dbs[0] if p.is_dir() and not meta and dbs else p
-        if len(dbs) > 1 or (meta and _compressed(p)):
+        if len(dbs) > 1 or (meta and compressed_bag(p)):
             log.warning("%s: %s not read: %s (a recording that did not end cleanly; open the database once "
                         "with sqlite3 to merge them)", p, ", ".join(f"{_wal(db).name} ({_wal(db).stat().st_size} "
                                                                     "bytes)" for db in walled),
@@ -119,7 +119,15 @@ def iter_rosbag2(path: str | Path, topics: Topics | None = None) -> Iterator[tup
     return Rosbag2Source(path, topics).messages()
 
 
-def _compressed(folder: Path) -> bool:
-    from fgloc.io.formats import _compressed_bag
+def compressed_bag(folder: Path) -> bool:
+    """Whether a rosbag2 folder's metadata.yaml says its messages or files are compressed."""
+    meta = folder / "metadata.yaml"
+    if not meta.is_file():
+        return False
+    try:
+        import yaml
 
-    return _compressed_bag(folder)
+        info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information") or {}
+    except Exception:  # noqa: BLE001
+        return False
+    return bool(info.get("compression_mode")) and str(info.get("compression_mode")).lower() != "none"

@@ -9,6 +9,7 @@ bag's messages keep their CDR bytes for copying (:class:`fgloc.io.source.Record`
 from __future__ import annotations
 
 import logging
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -101,7 +102,7 @@ class BagSource(LogSource):
             return
         reader = self._open_reader()
         try:
-            for conn, t, raw in reader.messages(connections=conns):
+            for conn, t, raw in self._resumable(reader, conns):
                 fn = convs.get(conn.id)
                 if fn is None:
                     continue
@@ -118,8 +119,38 @@ class BagSource(LogSource):
                                     self.path, conn.topic, conn.msgtype, e)
                     continue
                 yield Record(conn.topic, out, int(t), bytes(raw) if self.ros2 else None, infos[conn.id])
-        except self._reader_errors() as e:
-            self.truncated = f"{self.what} data unreadable after the messages read so far ({e})"
-            log.warning("%s: %s; stopping there", self.path, self.truncated)
         finally:
             reader.close()
+
+    def _resumable(self, reader: Any, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
+        """``reader.messages(conns)``; when it fails on damaged data, the rest from
+        :meth:`_resume` (after the ``(time, count at that time)`` already given), else stop
+        there with :attr:`truncated` saying why."""
+        errors: tuple[type[Exception], ...] = (*self._reader_errors(), AssertionError, struct.error, EOFError,
+                                                OSError, ValueError, KeyError, IndexError, RuntimeError)
+        last_t, at_last = -1, 0
+        it = reader.messages(connections=conns)
+        while True:
+            try:
+                conn, t, raw = next(it)
+            except StopIteration:
+                return
+            except errors as e:
+                rest = self._resume(conns, last_t, at_last, e)
+                if rest is None:
+                    self.truncated = f"{self.what} data unreadable after the messages read so far ({e})"
+                    log.warning("%s: %s; stopping there", self.path, self.truncated)
+                    return
+                yield from rest
+                return
+            if t == last_t:
+                at_last += 1
+            else:
+                last_t, at_last = int(t), 1
+            yield conn, t, raw
+
+    def _resume(self, conns: list[Any], after_t: int, n_at_t: int,
+                error: Exception) -> Iterator[tuple[Any, int, Any]] | None:
+        """The messages of ``conns`` after the first ``n_at_t`` at log time ``after_t`` (and
+        all before it), read another way after ``error``; None: no other way (the default)."""
+        return None

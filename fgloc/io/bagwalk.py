@@ -101,6 +101,31 @@ def _record(buf: bytes | memoryview, pos: int) -> tuple[dict[str, bytes], int, i
     return f, start, start + dlen
 
 
+def _plausible(f: dict[str, bytes]) -> bool:
+    """A message record's header (``conn`` and ``time``) or a connection record's (``conn``)."""
+    op = f["op"][0]
+    timed = op == OP_CONNECTION or (op == OP_MSG_DATA and len(f.get("time", b"")) == 8)
+    return len(f.get("conn", b"")) == 4 and timed
+
+
+def _resync(body: bytes, start: int) -> int | None:
+    """The first offset from ``start`` where a message or connection record parses and fits."""
+    i = start
+    while True:
+        found = [j for j in (body.find(b"op=\x02", i), body.find(b"op=\x07", i)) if j >= 0]
+        if not found:
+            return None
+        j = min(found)
+        for s in range(max(start, j - 64), j):
+            try:
+                rec = _record(body, s)
+            except BagFormatError:
+                continue
+            if rec is not None and rec[0]["op"][0] in (OP_MSG_DATA, OP_CONNECTION) and _plausible(rec[0]):
+                return s
+        i = j + 1
+
+
 def _normalize_topic(name: str) -> str:
     return ("/" if name.startswith("/") else "") + "/".join(x for x in name.split("/") if x)
 
@@ -136,6 +161,7 @@ class WalkedBag:
     end_time: int = 0
     version: str = ""
     broke: str | None = None          # where a cut or damaged file stopped being readable
+    damaged: dict[int, str] = field(default_factory=dict)  # chunk offset -> what was skipped in it
     bad_index_lengths: int = 0        # index-data records whose length field disagreed with their count
     _entries: list[_Entry] = field(default_factory=list)
     _conns: dict[int, dict[str, Any]] = field(default_factory=dict)
@@ -228,13 +254,14 @@ class WalkedBag:
         return end
 
     def _chunk(self, data: Any, pos: int, f: dict[str, bytes], start: int, end: int) -> None:
+        """A chunk's records; one that does not decompress is skipped (its length, in the
+        record outside it, still says where the next record starts)."""
         kind = f.get("compression", b"none")
         try:
             body = _decompress(kind, bytes(data[start:end]))
-        except BagFormatError:
-            raise
         except Exception as e:  # noqa: BLE001 - a chunk that does not decompress is damage
-            raise BagFormatError(f"chunk does not decompress: {e}") from None
+            self.damaged[pos] = f"chunk does not decompress ({e})"
+            return
         self._chunks[pos] = (kind, start, end)
         self._chunk_records(body, pos)
 
@@ -249,24 +276,42 @@ class WalkedBag:
         if f.get("op") != bytes([OP_CHUNK]) or f.get("compression", b"none") != b"none" or start > len(data):
             return
         self._chunks[pos] = (b"none", start, len(data))
-        try:
-            self._chunk_records(bytes(data[start:]), pos)
-        except BagFormatError:
-            pass
+        self._chunk_records(bytes(data[start:]), pos, cut=True)
 
-    def _chunk_records(self, body: bytes, chunk_pos: int) -> None:
+    def _chunk_records(self, body: bytes, chunk_pos: int, cut: bool = False) -> None:
+        """The connection and message records of a chunk's ``body``.  A record that does not
+        parse (or, in a complete chunk, runs past its end) is skipped: the walk goes on at the
+        next offset where a message or connection record parses (noted in :attr:`damaged`).
+        ``cut``: the file ends in this chunk; a record running past it is where it ends."""
         p = 0
+        skipped = 0
         while p < len(body):
-            rec = _record(body, p)
-            if rec is None:
-                return
-            f, start, end = rec
-            op = f["op"][0]
-            if op == OP_CONNECTION:
-                self._connection_record(f, body[start:end])
-            elif op == OP_MSG_DATA:
-                self._entries.append(_Entry(_time_ns(f.get("time", b"")), _uint(f, "conn"), chunk_pos, start, end))
-            p = end
+            try:
+                rec = _record(body, p)
+                if rec is None and cut:
+                    break
+                if rec is None:
+                    raise BagFormatError("record runs past the chunk's end")
+                f, start, end = rec
+                op = f["op"][0]
+                if op == OP_CONNECTION:
+                    self._connection_record(f, body[start:end])
+                elif op == OP_MSG_DATA:
+                    entry = _Entry(_time_ns(f.get("time", b"")), _uint(f, "conn"), chunk_pos, start, end)
+                    self._entries.append(entry)
+                else:
+                    raise BagFormatError(f"op {op} inside a chunk")
+                p = end
+            except BagFormatError as e:
+                skipped += 1
+                if skipped == 1:
+                    self.damaged[chunk_pos] = f"damaged record at byte {p} of the chunk ({e})"
+                q = _resync(body, p + 1)
+                if q is None:
+                    break
+                p = q
+        if skipped > 1:
+            self.damaged[chunk_pos] += f" and {skipped - 1} more"
 
     def _connection_record(self, f: dict[str, bytes], data: bytes) -> None:
         cid = _uint(f, "conn")

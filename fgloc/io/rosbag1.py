@@ -74,6 +74,7 @@ class Rosbag1Source(BagSource):
         if walked.broke and walked.broke.startswith("file ends"):
             why = "the file is cut short"  # what rosbags tripped over is a consequence
         broke = f"; {walked.broke}" if walked.broke else ""
+        broke += "".join(f"; chunk at byte {pos}: {why}" for pos, why in walked.damaged.items())
         if walked.version == "1.2":  # a format of its own, not a damaged bag: said only when cut
             log.log(logging.WARNING if broke else logging.INFO,
                     "%s: format 1.2 bag (ROS before 1.1) read record by record: %d messages%s",
@@ -84,7 +85,35 @@ class Rosbag1Source(BagSource):
             log.warning("%s: bag not read through its index (%s%s); read by walking its records: %d messages%s",
                         self.path, why, fix, walked.message_count, broke)
         self._walked = walked
+        self._damaged.update(walked.damaged)
         return walked
+
+    def _resume(self, conns: list[Any], after_t: int, n_at_t: int,
+                error: Exception) -> Iterator[tuple[Any, int, Any]] | None:
+        """After damage the index-driven read stumbled on (``error``): the rest by walking the
+        records, where damaged records are skipped (ties in file order, as both reads give them)."""
+        if self._walked is not None:
+            return None  # the walk itself failed: nothing else to try
+        walked = WalkedBag(self.path)
+        walked.open()
+        self._damaged.update(walked.damaged)
+        log.warning("%s: damaged data after t=%.3f (%s); the rest read by walking its records%s", self.path,
+                    after_t * 1e-9, str(error).rstrip(".") or type(error).__name__,
+                    "".join(f"; chunk at byte {pos}: {why}" for pos, why in walked.damaged.items()))
+
+        def rest() -> Iterator[tuple[Any, int, Any]]:
+            skip = n_at_t
+            for conn, t, raw in walked.messages(conns):
+                if t < after_t:
+                    continue
+                if t == after_t and skip > 0:
+                    skip -= 1
+                    continue
+                yield conn, t, raw
+            if walked.broke:
+                self.truncated = walked.broke
+
+        return rest()
 
     def _reader(self) -> Any:
         from rosbags.rosbag1 import Reader

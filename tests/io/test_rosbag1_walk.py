@@ -265,6 +265,81 @@ def test_format_1_2_bag(tmp_path, capsys):
     assert f"{N}  nav_msgs/msg/Odometry" in capsys.readouterr().out
 
 
+def _message_records(data: bytes):
+    """``(offset of the header, data start, fields)`` of the message records in a format 2.0
+    bag's uncompressed chunks, in file order."""
+    out = []
+    for _pos, f, start, dlen in _top_records(data):
+        if f["op"] != b"\x05":
+            continue
+        assert f["compression"] == b"none"
+        p = start
+        while p < start + dlen:
+            (hlen,) = struct.unpack_from("<I", data, p)
+            g = _fields(data[p + 4:p + 4 + hlen])
+            (n,) = struct.unpack_from("<I", data, p + 4 + hlen)
+            if g["op"] == b"\x02":
+                out.append((p, p + 8 + hlen, g))
+            p += 8 + hlen + n
+    return out
+
+
+@pytest.mark.parametrize("damage", ["op", "length"])
+@pytest.mark.parametrize("indexed", [True, False])
+def test_damaged_message_record_is_skipped(tmp_path, caplog, damage, indexed):
+    """One damaged message record (its op byte, or its data length) in the middle of a bag:
+    every other message is read (before: the read stopped there, the rest of the log lost)."""
+    good, bad = tmp_path / "good.bag", tmp_path / "bad.bag"
+    _write_v2(good, chunk_bytes=2000)
+    data = bytearray(good.read_bytes())
+    recs = _message_records(bytes(data))
+    at, data_start, f = recs[len(recs) // 2]
+    if damage == "op":
+        i = data.index(b"op=\x02", at)
+        data[i + 3] = 0x09
+    else:
+        struct.pack_into("<I", data, data_start - 4, 0x7FFFFFFF)
+    bad.write_bytes(bytes(data))
+    if not indexed:
+        unindexed = tmp_path / "bad.bag.active"
+        _unindexed(bad, unindexed)
+        bad = unindexed
+    t_lost = struct.unpack("<II", f["time"])
+    lost_ns = t_lost[0] * 10**9 + t_lost[1]
+    want = _records(good)
+    with caplog.at_level(logging.WARNING):
+        src = open_log(bad)
+        got = [(r.topic, r.log_time_ns, r.msg) for r in src.records(TOPICS)]
+    assert len(got) == len(want) - 1
+    assert [(t, ns) for t, ns, _ in want if (t, ns) not in {(a, b) for a, b, _ in got}] == [
+        (next(t for t, ns, _ in want if ns == lost_ns), lost_ns)]
+    _same(got, [w for w in want if w[1] != lost_ns or (w[0], w[1]) in {(a, b) for a, b, _ in got}])
+    assert src.truncated is None and src.damage() == "1 damaged chunk(s) skipped"
+    assert "damaged record at byte" in caplog.text
+    if indexed:
+        assert "the rest read by walking its records" in caplog.text
+
+
+def test_chunk_that_does_not_decompress(tmp_path, caplog):
+    """A bz2 chunk whose bytes are damaged: its messages are lost, every other chunk's read."""
+    good, bad = tmp_path / "good.bag", tmp_path / "bad.bag"
+    _write_v2(good, chunk_bytes=2000, bz2=True)
+    data = bytearray(good.read_bytes())
+    chunks = [(pos, start, dlen) for pos, f, start, dlen in _top_records(bytes(data)) if f["op"] == b"\x05"]
+    pos, start, dlen = chunks[len(chunks) // 2]
+    for i in range(start + dlen // 3, start + dlen // 3 + 32):
+        data[i] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    want = _records(good)
+    with caplog.at_level(logging.WARNING):
+        src = open_log(bad)
+        got = [(r.topic, r.log_time_ns, r.msg) for r in src.records(TOPICS)]
+    assert 0 < len(want) - len(got) < len(want) // 2
+    _same(got, [w for w in want if (w[0], w[1]) in {(a, b) for a, b, _ in got}])
+    assert f"chunk at byte {pos}: chunk does not decompress" in caplog.text
+    assert src.truncated is None and src.damage() == "1 damaged chunk(s) skipped"
+
+
 @pytest.mark.parametrize("fmt", ["2.0", "1.2"])
 def test_tf_of_ros_before_hydro(tmp_path, fmt, caplog):
     """``/tf`` as ``tf/tfMessage`` (every bag before 2013) is read as tf: the laser mount comes

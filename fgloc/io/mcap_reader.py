@@ -8,6 +8,10 @@ The order is MCAP log time, ties by position in the file, as ``mcap``'s own read
 (fgloc writes log time = header stamp; a ROS recorder writes its receive time, so stamps there
 can be slightly out of order across topics).
 
+Channels in ROS 1 encoding (``ros1`` messages with a ``ros1msg`` schema: what the ``mcap``
+command line's ``convert`` and other bag-to-MCAP converters write) are decoded with the schema's
+own definition; their records carry no bytes to copy (they are re-encoded as ROS 2 on writing).
+
 Damage: a chunk that fails its CRC, does not decompress or whose records do not parse is
 skipped, counted (``damaged_chunks``) and logged, and reading goes on with the next chunk.  A
 file without a usable summary (a recorder killed before writing it, a writer that leaves it
@@ -73,9 +77,16 @@ class _Channel:
         self._path = path
         self._generic: Callable[[bytes], Any] | None = None
         self._generic_failed = False
+        self.ros1 = False  # ROS 1 serialization: decoded by the schema's definition, no CDR bytes to copy
         self._convert = FROM_ROS.get(info.type)
         if self._convert is None:
             log.warning("%s: topic %s has type %s, which fgloc does not read; skipped", path, info.topic, info.type)
+            return
+        if info.message_encoding == "ros1":
+            if schema is None or schema.encoding != "ros1msg" or not schema.data.strip():
+                log.warning("%s: topic %s is ROS 1 encoded without a ros1msg definition; skipped", path, info.topic)
+                return
+            self.usable = self.ros1 = True
             return
         if info.message_encoding != "cdr":
             log.warning("%s: topic %s has message encoding %s, not cdr; skipped",
@@ -100,6 +111,8 @@ class _Channel:
         standard message is fixed by its type."""
         if self._generic is not None or self._generic_failed:
             return self._generic
+        if self.ros1:
+            return self._ros1_decoder()
         from mcap.records import Schema
         from mcap_ros2.decoder import DecoderFactory
 
@@ -115,6 +128,24 @@ class _Channel:
         except Exception as e:  # noqa: BLE001 - a definition mcap_ros2 cannot parse
             log.warning("%s: cannot decode topic %s (%s); skipped", self._path, self.topic, e)
             self._generic_failed = True
+        return self._generic
+
+    def _ros1_decoder(self) -> Callable[[bytes], Any] | None:
+        """``rosbags``' ROS 1 deserializer, with the types of the schema's definition (its own
+        name and dependencies, ``MSG:`` sections as a bag's connection header has them)."""
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        from rosbags.typesys.msg import normalize_msgtype
+
+        assert self._schema is not None
+        name = normalize_msgtype(self._schema.name)
+        try:
+            store = get_typestore(Stores.EMPTY)
+            store.register(get_types_from_msg(self._schema.data.decode(), name))
+        except Exception as e:  # noqa: BLE001 - a definition rosbags cannot parse
+            log.warning("%s: cannot decode topic %s (%s); skipped", self._path, self.topic, e)
+            self._generic_failed = True
+            return None
+        self._generic = lambda data: store.deserialize_ros1(data, name)
         return self._generic
 
     def decode_generic(self, data: bytes, source: LogSource) -> object:
@@ -303,7 +334,7 @@ class McapSource(LogSource):
                 elif is_tf:
                     self.note_tf(*obj)
                     obj = obj[0]
-                append((lt, offset, idx, Record(topic, obj, lt, data, info)))
+                append((lt, offset, idx, Record(topic, obj, lt, None if ch.ros1 else data, info)))
         out.sort()  # (log time, offset, index) are unique: records are never compared
         return out
 

@@ -220,6 +220,9 @@ class WalkedBag:
                 return
             f, start, end = rec
             op = f["op"][0]
+            if op == OP_BAG_HEADER and f.get("encryptor"):
+                raise LogError(f"{self.path}: encrypted ROS 1 bag ({f['encryptor'].decode('latin-1')}); "
+                               "decrypt it first (`rosbag decrypt`)")
             try:
                 if v2 and op == OP_CHUNK:
                     self._chunk(data, pos, f, start, end)

@@ -361,6 +361,26 @@ def test_tf_of_ros_before_hydro(tmp_path, fmt, caplog):
     assert tfs == [("base_link", "laser", pytest.approx([0.2, 0.0, 0.0]))] * N
 
 
+def test_encrypted_bag_is_a_one_line_error(tmp_path, capsys):
+    """``rosbag encrypt``'s bags (an ``encryptor`` in the bag header): no attempt to walk
+    ciphertext, one line that says what to do."""
+    good, enc = tmp_path / "good.bag", tmp_path / "secret.bag"
+    _write_v2(good)
+    data = good.read_bytes()
+    pos, f, start, dlen = next(_top_records(data))
+    assert f["op"] == b"\x03"
+    fields = {"encryptor": b"rosbag/AesCbcEncryptor", **f}
+    head = b"".join(struct.pack("<I", len(k) + 1 + len(v)) + k.encode() + b"=" + v for k, v in fields.items())
+    size = start + dlen - pos  # the header record keeps its size: the padding shrinks
+    record = struct.pack("<I", len(head)) + head
+    record += struct.pack("<I", size - len(record) - 4) + b" " * (size - len(record) - 4)
+    enc.write_bytes(data[:pos] + record + data[pos + size:])
+    assert main(["info", str(enc)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"{enc}: encrypted ROS 1 bag (rosbag/AesCbcEncryptor); decrypt it first" in err
+
+
 def test_unread_bag_versions_are_one_line_errors(tmp_path, capsys):
     old = tmp_path / "ancient.bag"
     old.write_bytes(b"#ROSRECORD V1.1\n" + b"\x00" * 64)

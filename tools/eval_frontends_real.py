@@ -59,6 +59,7 @@ LOGS = {
 WINDOW_MARGIN_S = 30.0  # the map leaves out the keyframes this close in time to the segment
 COVER_RADIUS_M = 2.0  # a segment scan within this of a map keyframe is "mapped"
 REF_AGREE_DEG = 0.5  # where SLAM and GMapping agree this well in heading, the reference is taken as settled
+PARTLY_UNMAPPED = 0.1  # a fix whose scan sends this share of its beams into unmapped space (breakdown only)
 
 
 def slam_of(name: str, cache: Path):
@@ -192,23 +193,49 @@ def reference_floor(name: str, recs, mount, slam, s0: int, s1: int, gmapping_dir
     return out
 
 
-def nees_of(fixes, ref) -> dict:
+def fix_errors(fixes, ref) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fixes' stamps, errors ``[ex, ey, eyaw]`` against ``ref`` (interpolated at their stamps)
+    and covariances."""
     from fgloc.geometry import wrap_angle
+
+    st = np.array([f.stamp for f in fixes], dtype=float)
+    P = np.array([f.cov for f in fixes], dtype=float).reshape(-1, 3, 3)
+    e = np.array([f.pose for f in fixes], dtype=float).reshape(-1, 3) - ref.interpolate(st).reshape(-1, 3)
+    e[:, 2] = wrap_angle(e[:, 2])
+    return st, e, P
+
+
+def nees_of(fixes, ref) -> dict:
+    from fgloc.eval.metrics import nees_summary
 
     if not fixes:
         return {"n": 0}
-    st = np.array([f.stamp for f in fixes])
-    P = np.array([f.cov for f in fixes])
-    e = np.array([f.pose for f in fixes]) - ref.interpolate(st)
-    e[:, 2] = wrap_angle(e[:, 2])
-    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(P), e)
-    ax = e**2 / np.einsum("nii->ni", P)
-    return {"n": len(fixes), "nees_mean": float(nees.mean()), "nees_median": float(np.median(nees)),
-            "nees_x": float(ax[:, 0].mean()), "nees_y": float(ax[:, 1].mean()), "nees_yaw": float(ax[:, 2].mean()),
-            "fix_rmse_m": float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))),
-            "fix_rmse_deg": float(np.degrees(np.sqrt(np.mean(e[:, 2] ** 2)))),
-            "sigma_xy_med_m": float(np.median(np.sqrt(0.5 * (P[:, 0, 0] + P[:, 1, 1])))),
-            "sigma_yaw_med_deg": float(np.degrees(np.median(np.sqrt(P[:, 2, 2]))))}
+    _, e, P = fix_errors(fixes, ref)
+    s = nees_summary(e, P)
+    s["fix_rmse_m"], s["fix_rmse_deg"] = s.pop("rmse_m"), s.pop("rmse_deg")
+    return s
+
+
+def nees_breakdown(fixes, ref, kf_stamps: np.ndarray, shares: np.ndarray) -> dict:
+    """The fixes' NEES beside the full figure, never instead of it: at the SLAM keyframes' scans
+    (the graph's own poses) and between them (a keyframe's pose plus SLAM's tracked offset: is the
+    reference's interpolation part of the NEES?), and for the fixes of scans with at least
+    ``PARTLY_UNMAPPED`` of their beams ending in space the map does not have (cast from the SLAM pose,
+    ``fgloc.localization.coverage.unmapped_share``) and the rest."""
+    from fgloc.eval.metrics import nees_summary
+
+    if not fixes:
+        return {}
+    st, e, P = fix_errors(fixes, ref)
+    kf = np.sort(np.asarray(kf_stamps, dtype=float))
+    j = np.clip(np.searchsorted(kf, st), 1, max(len(kf) - 1, 1)) if len(kf) else np.zeros(len(st), dtype=int)
+    at_kf = (np.minimum(np.abs(kf[j] - st), np.abs(kf[j - 1] - st)) < 1e-6) if len(kf) > 1 else \
+        np.zeros(len(st), dtype=bool)
+    part = np.asarray(shares, dtype=float) >= PARTLY_UNMAPPED
+    return {"nees_parts": {"keyframes": nees_summary(e[at_kf], P[at_kf]),
+                           "between": nees_summary(e[~at_kf], P[~at_kf]),
+                           "partly_unmapped": nees_summary(e[part], P[part]),
+                           "mapped": nees_summary(e[~part], P[~part])}}
 
 
 def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float | None,
@@ -219,6 +246,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     from fgloc.geometry import wrap_angle
     from fgloc.io import open_log
     from fgloc.localization import Localizer, Session
+    from fgloc.localization.coverage import unmapped_share
     from fgloc.mapping.source import open_log_scan_stamps
     from fgloc.types import Trajectory
 
@@ -243,7 +271,8 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     # the SLAM poses stamped as the localizer sees the same scans (the mapper keeps the file's
     # stamps, open_log repairs a CARMEN line's out-of-place stamp: intel 434 scans, up to 1.7 s)
     own = np.array([r.stamp for r in recs])
-    ref = Trajectory.from_unsorted(open_log_scan_stamps(LOGS[name], recs), slam.scan_trajectory.interpolate(own))
+    scan_t = open_log_scan_stamps(LOGS[name], recs)
+    ref = Trajectory.from_unsorted(scan_t, slam.scan_trajectory.interpolate(own))
     p0 = ref.interpolate(np.array([t0]))[0]
     loc = Localizer(occ, mount, backend, "native", initial_pose=p0, config=load_config(overrides=overrides or None))
     tw = time.perf_counter()
@@ -271,6 +300,12 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     res.update(odometry_timing(msgs, ref, t0, t1))
     res.update(carried_timing(name, recs, s0, s1, msgs))
     res.update(nees_of(loc.fixes, ref))
+    pos = {r.index: i for i, r in enumerate(recs)}
+    kf_t = np.array([scan_t[pos[k.scan_index]] for k in slam.keyframes if k.scan_index in pos])
+    scans = {float(m.stamp): m for topic, m in msgs if topic == "/scan"}  # type: ignore[attr-defined]
+    shares = np.array([unmapped_share(occ, mount, scans[f.stamp], ref.interpolate(np.array([f.stamp]))[0])
+                       if f.stamp in scans else 0.0 for f in loc.fixes])
+    res.update(nees_breakdown(loc.fixes, ref, kf_t, shares))
     res.update(reference_floor(name, recs, mount, slam, s0, s1, gmapping_dir, est))
     return res
 
@@ -540,6 +575,28 @@ def main() -> int:
               f"| {_f(r, 'nees_mean', '.2f')} ({_f(r, 'nees_median', '.2f')}) "
               f"| {_f(r, 'nees_x', '.2f')} / {_f(r, 'nees_y', '.2f')} / {_f(r, 'nees_yaw', '.2f')} "
               f"| {r['fixes']} / {r['no_fix']} / {r['reloc']} |")
+    if any("nees_parts" in r for r in rows):
+        # beside the full figure, never instead of it: which fixes carry the NEES (mean (median) n,
+        # per-axis x / y / yaw, fix RMSE m / deg)
+        print(f"\n| run | map accuracy_m | all fixes | at SLAM keyframes | between keyframes | scans with >= "
+              f"{100 * PARTLY_UNMAPPED:.0f} % of beams into unmapped space (at the SLAM pose) | the other fixes "
+              "| worst 5 % of the fixes' share of the NEES sum |")
+        print("|---|--:|--:|--:|--:|--:|--:|--:|")
+
+        def cell(s: dict) -> str:
+            if not s.get("n"):
+                return "-"
+            return (f"{s['nees_mean']:.2f} ({s['nees_median']:.2f}) n={s['n']}: {s['nees_x']:.2f} / "
+                    f"{s['nees_y']:.2f} / {s['nees_yaw']:.2f}, {s['rmse_m']:.4f} m / {s['rmse_deg']:.3f} deg")
+        for r in rows:
+            if "nees_parts" not in r:
+                continue
+            q = r["nees_parts"]
+            allf = {**{k: r[k] for k in ("n", "nees_mean", "nees_median", "nees_x", "nees_y", "nees_yaw")},
+                    "rmse_m": r["fix_rmse_m"], "rmse_deg": r["fix_rmse_deg"]}
+            print(f"| {r['log']} | {r.get('accuracy', '-')} | {cell(allf)} | {cell(q['keyframes'])} "
+                  f"| {cell(q['between'])} | {cell(q['partly_unmapped'])} | {cell(q['mapped'])} "
+                  f"| {100 * r['worst_share']:.0f} % |")
     print("\n| run | map accuracy_m | heading RMSE deg | mean heading offset deg | RMSE about that mean deg | "
           "median abs deg | RMSE without the worst 2 % deg | relation heading RMS (1-2 s) deg |")
     print("|---|--:|--:|--:|--:|--:|--:|--:|")

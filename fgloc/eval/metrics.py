@@ -459,3 +459,32 @@ def three_cornered_hat(v_ab: float, v_ac: float, v_bc: float) -> tuple[float, fl
     b = 0.5 * (v_ab + v_bc - v_ac)
     c = 0.5 * (v_ac + v_bc - v_ab)
     return float(a), float(b), float(c)
+
+
+# --------------------------------------------------------------------------- covariance consistency
+def nees_summary(err: FloatArray, cov: FloatArray, worst_share: float = 0.05) -> dict[str, float]:
+    """How well covariances ``cov`` (N x 3 x 3, m^2 / rad^2) cover the pose errors ``err`` (N x 3,
+    ``[ex_m, ey_m, eyaw_rad]``, the yaw wrapped): the NEES ``e^T P^-1 e`` (3 on average when the
+    covariances are honest; chi-square's median 2.37) as ``nees_mean`` / ``nees_median``, the per-axis
+    means ``e_i^2 / P_ii`` (``nees_x`` / ``nees_y`` / ``nees_yaw``, 1 each when honest), the errors'
+    RMSE (``rmse_m`` over the position, ``rmse_deg``), the median sigmas (``sigma_xy_med_m``:
+    ``sqrt((P_xx + P_yy) / 2)``, ``sigma_yaw_med_deg``), and ``worst_share``: the share of the NEES
+    sum that the worst ``worst_share`` of the poses (at least one) carry (0.05 for chi-square's 3
+    dof over many poses: a larger share says a few outliers set the mean).  ``{"n": 0}`` without
+    poses."""
+    e = np.asarray(err, dtype=float).reshape(-1, 3)
+    P = np.asarray(cov, dtype=float).reshape(-1, 3, 3)
+    n = len(e)
+    if n == 0:
+        return {"n": 0}
+    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(P), e)
+    ax = e**2 / np.einsum("nii->ni", P)
+    k = max(1, int(round(worst_share * n)))
+    total = float(nees.sum())
+    return {"n": n, "nees_mean": float(nees.mean()), "nees_median": float(np.median(nees)),
+            "nees_x": float(ax[:, 0].mean()), "nees_y": float(ax[:, 1].mean()), "nees_yaw": float(ax[:, 2].mean()),
+            "rmse_m": float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))),
+            "rmse_deg": math.degrees(float(np.sqrt(np.mean(e[:, 2] ** 2)))),
+            "sigma_xy_med_m": float(np.median(np.sqrt(0.5 * (P[:, 0, 0] + P[:, 1, 1])))),
+            "sigma_yaw_med_deg": math.degrees(float(np.median(np.sqrt(P[:, 2, 2])))),
+            "worst_share": float(np.sort(nees)[-k:].sum() / total) if total > 0 else float("nan")}

@@ -41,6 +41,21 @@ def test_worst_share_says_when_a_few_fixes_set_the_mean():
     assert s["nees_mean"] == pytest.approx(101 / 21)
     assert s["nees_median"] == pytest.approx(1.0)
     assert s["worst_share"] == pytest.approx(81 / 101)  # the worst 5 % of 21: one fix
+    assert s["nees_trimmed"] == pytest.approx(1.0)  # the other 20
+
+
+def test_chi_square_reference_values():
+    """Honest covariances over many poses: mean 3, the worst 5 % carry ~17 % of the sum, the rest
+    average ~2.63 (chi-square, 3 dof)."""
+    rng = np.random.default_rng(0)
+    L = np.array([[0.02, 0.0, 0.0], [0.01, 0.03, 0.0], [0.0, 0.002, 0.01]])
+    P = L @ L.T
+    e = rng.standard_normal((200_000, 3)) @ L.T
+    s = nees_summary(e, np.broadcast_to(P, (len(e), 3, 3)))
+    assert s["nees_mean"] == pytest.approx(3.0, abs=0.03)
+    assert s["nees_median"] == pytest.approx(2.366, abs=0.03)
+    assert s["worst_share"] == pytest.approx(0.167, abs=0.005)
+    assert s["nees_trimmed"] == pytest.approx(2.631, abs=0.03)
 
 
 def test_no_poses():

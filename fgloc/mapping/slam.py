@@ -29,7 +29,7 @@ import gtsam
 import numpy as np
 
 from fgloc.geometry import between, compose, compose1, inverse, rotate_covariance, transform_points
-from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
+from fgloc.mapping.occupancy import LogOddsGrid, scan_beams, scan_endpoints
 from fgloc.mapping.scanmatch import (
     BufferPool,
     DistanceGrid,
@@ -54,7 +54,8 @@ class MapperConfig:
     kf_dist_m: float = 0.25           # new keyframe after this much translation
     kf_angle_deg: float = 12.0        # ... or this much rotation
     max_range_m: float = 25.0         # returns beyond are not used as hits
-    carve_range_m: float = 8.0        # no-return beams carve free space up to here
+    carve_range_m: float = 8.0        # no-return beams carve free space up to here (or to the first
+                                      # cell the returns made occupied: occupancy.py)
     match_voxel_m: float = 0.0        # scan point subsampling for matching (0: every return)
     submap_keyframes: int = 25        # local submaps of N keyframes, a new one every N/2 (tracking
                                       # matches against the older one: the last N/2..N keyframes)
@@ -533,15 +534,15 @@ def build_occupancy(result: SlamResult, records: Sequence[ScanRecord], mount: St
     beams = []
     for kf, pose in zip(result.keyframes, result.keyframe_poses, strict=True):
         sc = by_index[kf.scan_index].scan
-        ends, hit = scan_endpoints(sc.ranges, sc.angles, sc.range_min, sc.range_max,
-                                   cfg.max_range_m, cfg.carve_range_m)
+        ends, hit, missing = scan_beams(sc.ranges, sc.angles, sc.range_min, sc.range_max,
+                                        cfg.max_range_m, cfg.carve_range_m)
         lp = compose(pose, mnt)
-        beams.append((lp[:2], transform_points(lp, ends), hit))
-    hits = np.concatenate([e[h] for _, e, h in beams] + [result.keyframe_poses[:, :2]])
+        beams.append((lp[:2], transform_points(lp, ends), hit, missing))
+    hits = np.concatenate([e[h] for _, e, h, _ in beams] + [result.keyframe_poses[:, :2]])
     lo = hits.min(axis=0) - 1.0
     hi = hits.max(axis=0) + 1.0
     grid = LogOddsGrid(lo[0], lo[1], hi[0], hi[1], cfg.resolution)
-    for org, ends, hit in beams:
-        grid.add_beams(org, ends, hit)
+    for org, ends, hit, missing in beams:
+        grid.add_beams(org, ends, hit, missing)  # no-return beams stop at the walls the returns saw
     return grid.to_map()
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fgloc.geometry import between, compose, inverse, transform_points
-from fgloc.mapping.occupancy import LogOddsGrid, scan_endpoints
+from fgloc.mapping.occupancy import LogOddsGrid, scan_beams, scan_endpoints
 from fgloc.mapping.scanmatch import build_distance_grid, correlative_search, match_covariance, refine
 
 
@@ -111,3 +111,40 @@ def dist_at(grid, xy):
     out = np.full(len(xy), grid.dmax_m)
     out[ok] = grid.dist[iy[ok], ix[ok]]
     return out
+
+
+def test_no_return_beams_do_not_erase_walls_the_returns_saw():
+    """A driver reporting +inf for a dark wall: the no-return beams carve free space up to the
+    wall the other scans' returns put in the map, never through it, whatever the scan order."""
+    wall_x, res = 3.0, 0.05
+    angles = np.radians(np.linspace(-40.0, 40.0, 161))
+    seen = (wall_x / np.cos(angles)).astype(np.float32)       # the wall, seen from (0, 0)
+    dark = np.full_like(seen, np.inf)                          # the same wall, no return
+
+    def grid(order):
+        g = LogOddsGrid(-1.0, -4.0, 10.0, 4.0, res)
+        for origin, ranges in order:
+            ends, hit, missing = scan_beams(ranges, angles, 0.1, 30.0, 25.0, 8.0)
+            g.add_beams(np.asarray(origin), ends + np.asarray(origin), hit, missing)
+        return g, g.to_map()
+
+    g0, ref = grid([((0.0, 0.0), seen)])
+    dark_scans = [((0.0, dy), dark) for dy in (-0.6, -0.3, 0.3, 0.6) for _ in range(3)]
+    g1, after = grid([((0.0, 0.0), seen)] + dark_scans)
+    g2, before = grid(dark_scans + [((0.0, 0.0), seen)])
+    cols = int((wall_x - g0.x0) / res)
+    wall = ref.data[:, cols - 1:cols + 2] == 100
+    assert int(wall.sum()) == 80                                # the wall's cells from the returns
+    for m in (after, before):                                  # ... all kept, in either order
+        assert np.array_equal(m.data[:, cols - 1:cols + 2] == 100, wall)
+        assert np.array_equal(m.data, after.data)
+    rows = slice(int((-2.0 - g0.y0) / res), int((2.0 - g0.y0) / res))  # the wall's middle, |y| < 2 m
+    beyond = after.data[rows, cols + 2:]                       # nothing carved behind it
+    assert int((beyond == 0).sum()) == 0
+    assert int((after.data == 0).sum()) > int((ref.data == 0).sum())  # the dark beams did clear free space
+    # without the no-return flags (every non-hit carves through): the wall goes
+    g3 = LogOddsGrid(-1.0, -4.0, 10.0, 4.0, res)
+    for origin, ranges in [((0.0, 0.0), seen)] + dark_scans:
+        ends, hit = scan_endpoints(ranges, angles, 0.1, 30.0, 25.0, 8.0)
+        g3.add_beams(np.asarray(origin), ends + np.asarray(origin), hit)
+    assert int((g3.to_map().data[:, cols - 1:cols + 2] == 100).sum()) == 0

@@ -16,6 +16,7 @@ import sys
 
 import typer
 
+from fgloc.app import mounts
 from fgloc.errors import FglocError
 
 app = typer.Typer(
@@ -59,6 +60,7 @@ OPTION_HINTS = {
     "--initial-pose": "--initial-pose needs three values X Y YAW (m, m, rad; base_link in the map frame), "
                       "e.g. --initial-pose 2.5 3.0 0.0",
     "--laser-mount": "--laser-mount needs three values X Y YAW (m, m, rad; base_link -> laser)",
+    **mounts.HINTS,  # --static-transform-xyzw before --static-transform: the first name found in the message wins
 }
 
 

@@ -262,7 +262,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                        f"{topics_line(summ)}")
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
     mode = "map" if occ_map is not None else "odom"
-    laser_mount = _laser_mount(reader, n_scan, config)
+    laser_mount, mirror_scans = _laser_mount(reader, n_scan, config)
     loc = Localizer(occ_map, laser_mount, backend=req.backend, frontend=req.frontend, initial_pose=pose0,
                     config=config)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -298,7 +298,10 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         reader.collect_ground_truth = reader.has(topics.ground_truth)
         try:
             feed = session.feed
-            for topic, msg in paced(_copied(reader.records(want), writer, clock, spent), realtime):
+            inputs = _copied(reader.records(want), writer, clock, spent)
+            if mirror_scans:
+                inputs = _mirrored_scans(inputs, scan_topic, laser_mount.child.lstrip("/"))
+            for topic, msg in paced(inputs, realtime):
                 feed(topic, msg)
             t_fin = PHASE_CLOCK()
             final = session.finish()
@@ -370,25 +373,38 @@ def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocCo
     return dataclasses.replace(config, sources=sources)
 
 
-def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> Any:
-    """``base_link -> laser``: the config's (``sources.static_transforms``) when it names the scan's
-    frame, else the log's; no lookup (and no 'no transform' warning) in a log without scans."""
+def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> tuple[Any, bool]:
+    """``(base_link -> laser, mirrored)``: the config's (``sources.static_transforms``, ``--static-transform``)
+    when it names the scan's frame, else the log's; no lookup (and no 'no transform' warning) in a
+    log without scans.  ``mirrored``: the configured laser is upside down, so its scans are to be
+    read mirrored (:func:`fgloc.mapping.source.planar_mount`; the log's own upside-down tf is
+    handled by the reader)."""
     import numpy as np
 
     from fgloc.localization.frames import mount_of, parse_static_transforms
+    from fgloc.mapping.source import planar_mount
     from fgloc.types import StaticTransform
 
     if n_scan == 0:
-        return StaticTransform("base_link", "laser", np.zeros(3))
+        return StaticTransform("base_link", "laser", np.zeros(3)), False
     mine = mount_of(reader.scan_frame(), parse_static_transforms(config.sources.static_transforms))
     if mine is None:
-        return reader.laser_mount()
-    from fgloc.backends.imu import mount_rotation
+        return reader.laser_mount(), False
+    try:
+        return planar_mount(mine)
+    except ConfigError as e:
+        raise ConfigError(f"sources.static_transforms: {e}") from None
 
-    if float(mount_rotation(mine)[2, 2]) < 0.99:  # more than ~8 deg of roll / pitch
-        raise ConfigError(f"sources.static_transforms: the laser {mine.child} is not mounted level (roll / pitch); "
-                          "fgloc takes a tilted or upside-down laser from the log's /tf_static only")
-    return StaticTransform(mine.parent, mine.child, mine.pose, mine.z)
+
+def _mirrored_scans(messages: Any, scan_topic: str, frame: str) -> Any:
+    """``(topic, message)`` with the scans of ``frame`` on ``scan_topic`` mirrored (an upside-down laser
+    whose mount the user gave); the recording keeps the log's own (copied before)."""
+    from fgloc.io.ros import mirror_scan
+
+    for topic, msg in messages:
+        if topic == scan_topic and getattr(msg, "frame_id", "").lstrip("/") == frame:
+            msg = mirror_scan(msg)
+        yield topic, msg
 
 
 class _LogClock:

@@ -15,6 +15,8 @@ from typing import Annotated
 
 import typer
 
+from fgloc.app import mounts
+
 
 def _bars(no_progress: bool):
     from tqdm import tqdm
@@ -43,14 +45,22 @@ def map_cmd(
     odom_topic: Annotated[str, typer.Option(help="odometry topic (MCAP)")] = "/odom",
     no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    static_transform: Annotated[tuple[str, str, float, float, float, float, float, float] | None,
+                                typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
+    static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
+                                     typer.Option("--static-transform-xyzw", help=mounts.XYZW_HELP)] = None,
 ) -> None:
     """Build a map (ray-traced log-odds occupancy) and the optimized trajectory from a log, and
     self-check it: re-match the scans of every place against the map of the other passes."""
     import yaml
 
     from fgloc.errors import ConfigError
+    from fgloc.localization.frames import parse_static_transforms
     from fgloc.mapping.build import build_map
     from fgloc.mapping.slam import MapperConfig
+
+    entries = mounts.static_transform_entries(static_transform, static_transform_xyzw)
+    transforms = parse_static_transforms(entries, source=mounts.RPY_OPTION)
 
     opts: dict = {}
     if config is not None:
@@ -67,7 +77,8 @@ def map_cmd(
     cfg = MapperConfig.from_dict(opts)
     bars, factory = _bars(no_progress)
     try:
-        out = build_map(log, outdir, cfg, start, end, factory, scan_topic, odom_topic, self_check=not no_check)
+        out = build_map(log, outdir, cfg, start, end, factory, scan_topic, odom_topic, self_check=not no_check,
+                        static_transforms=transforms)
     finally:
         for b in bars:
             b.close()

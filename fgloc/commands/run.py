@@ -12,6 +12,7 @@ from typing import Any
 
 import typer
 
+from fgloc.app import mounts
 from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
 from fgloc.errors import ConfigError
@@ -125,9 +126,9 @@ def register(app: typer.Typer) -> None:
         odom_topic: str | None = typer.Option(None, "--odom-topic", help="nav_msgs/Odometry topic [/odom]"),
         imu_topic: str | None = typer.Option(None, "--imu-topic", help="sensor_msgs/Imu (compass) topic [/imu]"),
         static_transform: tuple[str, str, float, float, float, float, float, float] | None = typer.Option(
-            None, "--static-transform", help="PARENT CHILD X Y Z ROLL PITCH YAW (m, deg): a mount the log lacks, "
-            "e.g. base_link imu_link 0 -0.3 0.52 90 0 -90 (wins over the log's /tf_static; more in the config's "
-            "sources.static_transforms)"),
+            None, "--static-transform", help=mounts.RPY_HELP + "; more in the config's sources.static_transforms"),
+        static_transform_xyzw: tuple[str, str, float, float, float, float, float, float, float] | None = typer.Option(
+            None, "--static-transform-xyzw", help=mounts.XYZW_HELP),
         outdir: Path = typer.Option(..., "-o", "--output", help="output folder (never an input's folder "
                                     "file: run.mcap, config.yaml ... are refused if they are inputs)"),
         force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc run did not write"),
@@ -146,15 +147,13 @@ def register(app: typer.Typer) -> None:
         try:
             if backend not in ("ekf", "smoother", "batch"):
                 raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
-            from fgloc.localization.frames import static_transform_entry  # lazy: keeps `fgloc --help` light
-
             req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                              initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
                              config=config,
                              scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
                              view=view, realtime=realtime, force=force,
-                             static_transforms=[] if static_transform is None else
-                             [static_transform_entry(*static_transform)])
+                             static_transforms=mounts.static_transform_entries(static_transform,
+                                                                               static_transform_xyzw))
             r = run_request(req, progress=progress_bar(quiet), announce=_announce)
         finally:
             resume_gc()  # an error before the set-up was done: an in-process caller keeps its collector

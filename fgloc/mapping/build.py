@@ -29,7 +29,7 @@ from fgloc.mapping.selfcheck import (
 from fgloc.mapping.slam import MapperConfig, SlamResult, build_occupancy, run_slam
 from fgloc.mapping.source import ScanRecord, log_messages, pair_scans
 from fgloc.maps import OccupancyMap
-from fgloc.types import StaticTransform, Trajectory
+from fgloc.types import StaticTransform, Trajectory, Transform3D
 
 ProgressFactory = Callable[[int, str], Callable[[int], None]]
 
@@ -46,10 +46,12 @@ class MapOutput:
 
 
 def load_records(log: str | Path, start: float | None = None, end: float | None = None,
-                 scan_topic: str = "/scan", odom_topic: str = "/odom"
+                 scan_topic: str = "/scan", odom_topic: str = "/odom",
+                 static_transforms: list[Transform3D] | None = None,
                  ) -> tuple[list[ScanRecord], StaticTransform]:
-    """Scans with odometry from ``log``; ``start``/``end`` keep scans in that fraction [0, 1] of the log."""
-    recs, mount = pair_scans(log_messages(log, scan_topic, odom_topic))
+    """Scans with odometry from ``log``; ``start``/``end`` keep scans in that fraction [0, 1] of the log;
+    ``static_transforms``: mounts the log lacks (the laser's wins over the log's)."""
+    recs, mount = pair_scans(log_messages(log, scan_topic, odom_topic, static_transforms or ()))
     if start is not None or end is not None:
         n = len(recs)
         a = int(round((start or 0.0) * n))
@@ -108,15 +110,17 @@ def build_map(
     odom_topic: str = "/odom",
     self_check: bool = True,
     check_config: CheckConfig | None = None,
+    static_transforms: list[Transform3D] | None = None,
 ) -> MapOutput:
     """Map ``log`` into ``outdir``: map.yaml/.pgm, map.png, trajectory.tum (every scan),
     trajectory_keyframes.tum, mapping.yaml (statistics, loop closures, warnings) and, with
-    ``self_check``, check.yaml and check.png."""
+    ``self_check``, check.yaml and check.png.  ``static_transforms``: mounts the log lacks
+    (``fgloc map --static-transform``; the laser's wins over the log's)."""
     cfg = config or MapperConfig()
     outdir = Path(outdir)
     _fixed_mmap_threshold()
     t0 = time.perf_counter()
-    recs, mount = load_records(log, start, end, scan_topic, odom_topic)
+    recs, mount = load_records(log, start, end, scan_topic, odom_topic, static_transforms)
     t1 = time.perf_counter()
     res = run_slam(recs, mount, cfg, _progress(progress_factory, len(recs), "mapping"))
     _release_memory()

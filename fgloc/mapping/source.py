@@ -11,14 +11,14 @@ dead-reckoned from its twist.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from fgloc.errors import LogError
-from fgloc.geometry import compose, wrap_angle
+from fgloc.errors import ConfigError, LogError
+from fgloc.geometry import compose, quaternion_matrix, wrap_angle
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
 
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
@@ -39,13 +39,66 @@ def is_carmen(path: str | Path) -> bool:
     return any(name.endswith(s) for s in CARMEN_SUFFIXES)
 
 
+ROBOT_FRAMES = ("base_link", "base_footprint")
+LEVEL_COS = 0.99  # the laser's z axis within ~8 deg of vertical (up, or down: upside down)
+
+
+def planar_mount(t: StaticTransform) -> tuple[StaticTransform, bool]:
+    """A robot -> laser transform (a :class:`~fgloc.types.Transform3D` with its whole rotation, or a
+    planar one) as the 2-D mount the scans are used with, and whether they are to be read mirrored.
+
+    A level laser is its (x, y, yaw); one mounted upside down (its z axis down: rolled or pitched
+    by pi, ``R = Rz(yaw) Rx(pi)``) is the upright laser at the same place and yaw whose scans are
+    the log's mirrored (angles negated), as :mod:`fgloc.io` reads a log's upside-down tf and nav2
+    does.  A tilted laser (z axis more than ~8 deg off vertical) is a :class:`ConfigError`: its
+    beams do not sweep the plane the map is of."""
+    q = getattr(t, "rotation_xyzw", None)
+    if q is None:
+        return t, False
+    r = quaternion_matrix(*(float(v) for v in np.asarray(q, dtype=float) / float(np.linalg.norm(q))))
+    mount = StaticTransform(t.parent, t.child, np.array([t.pose[0], t.pose[1], np.arctan2(r[3], r[0])]), t.z)
+    if r[8] >= LEVEL_COS:
+        return mount, False
+    if r[8] <= -LEVEL_COS:
+        return mount, True
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(r[8])))))
+    raise ConfigError(f"the laser {t.child} is tilted {tilt:.1f} deg from level (roll / pitch): fgloc maps and "
+                      "localizes with a level or upside-down (roll 180) laser")
+
+
+def with_mount(messages: Iterable[tuple[str, object]], mount: StaticTransform,
+               mirrored: bool) -> Iterator[tuple[str, object]]:
+    """``messages`` with the user's laser ``mount`` in place of the log's (it comes first on
+    ``/tf_static``; the log's transforms to the same frame are dropped) and, ``mirrored``, that
+    frame's scans mirrored (:func:`planar_mount`)."""
+    from fgloc.io.ros import mirror_scan
+
+    frame = mount.child.lstrip("/")
+    yield "/tf_static", [mount]
+    for topic, msg in messages:
+        if topic == "/tf_static" and isinstance(msg, list):
+            msg = [t for t in msg if not (isinstance(t, StaticTransform) and t.child.lstrip("/") == frame)]
+        elif mirrored and isinstance(msg, LaserScan) and msg.frame_id.lstrip("/") == frame:
+            msg = mirror_scan(msg)
+        yield topic, msg
+
+
+def user_mount(frame: str, transforms: Sequence[StaticTransform]) -> StaticTransform | None:
+    """The user's robot -> ``frame`` transform among ``transforms``, if any."""
+    f = frame.lstrip("/")
+    return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in ROBOT_FRAMES), None)
+
+
 def log_messages(
-    path: str | Path, scan_topic: str = "/scan", odom_topic: str = "/odom"
+    path: str | Path, scan_topic: str = "/scan", odom_topic: str = "/odom",
+    static_transforms: Sequence[StaticTransform] = (),
 ) -> Iterator[tuple[str, object]]:
     """``(topic, msg)`` of any log :func:`fgloc.io.open_log` reads (MCAP, rosbag2, ROS 1 bag; CARMEN
     through ``iter_carmen`` in file order).
 
     Topics are normalised to ``/scan``, ``/odom`` and ``/tf_static`` (the laser mount first).
+    ``static_transforms``: mounts the log lacks (``fgloc map --static-transform``); the one to the
+    scans' frame wins over the log's (:func:`planar_mount`: an upside-down laser's scans mirrored).
     """
     from fgloc.io import open_log
     from fgloc.io.topics import Topics
@@ -59,18 +112,30 @@ def log_messages(
         # (intel rotational relation error 0.47 -> 0.56 +- 1.54 deg)
         from fgloc.io.carmen import iter_carmen
 
-        yield from iter_carmen(p)
+        it = iter_carmen(p)
+        if static_transforms:  # the scans' frame (read up to the first scan), then from the top again
+            frame = next((m.frame_id for _, m in it if isinstance(m, LaserScan) and "rear" not in m.frame_id),
+                         "laser")
+            it = iter_carmen(p)
+            mine = user_mount(frame, static_transforms)
+            if mine is not None:
+                it = with_mount(it, *planar_mount(mine))
+        yield from it
         return
     src = open_log(p, Topics(scan=scan_topic, odom=odom_topic))
     src.require(scan_topic)
     skew = src.clock_skew([scan_topic, odom_topic]) if src.has(odom_topic) else None
     if skew is not None:  # scans would be paired with odometry from another time
         raise LogError(f"{p}: {skew}")
-    yield "/tf_static", [src.laser_mount()]
+    mine = user_mount(src.scan_frame(), static_transforms)
     rename = {scan_topic: "/scan", odom_topic: "/odom"}
     wanted = [t for t in (scan_topic, odom_topic) if src.has(t)]
-    for topic, msg in src.messages(wanted):
-        yield rename.get(topic, topic), msg
+    msgs = ((rename.get(topic, topic), msg) for topic, msg in src.messages(wanted))
+    if mine is not None:  # the user's mount: the log's is not looked up (nor its scans mirrored by it)
+        yield from with_mount(msgs, *planar_mount(mine))
+        return
+    yield "/tf_static", [src.laser_mount()]
+    yield from msgs
 
 
 def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord], StaticTransform]:

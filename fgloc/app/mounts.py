@@ -1,0 +1,67 @@
+"""``--static-transform`` / ``--static-transform-xyzw``: a sensor mount the log lacks, given on the
+command line.  ``fgloc run`` and ``fgloc map`` take the same two options (their help texts are
+here) and read them with :func:`static_transform_entries`, into ``sources.static_transforms``
+entries (REP 103 frames; angles in degrees about the parent's fixed x, y, z axes, as
+``static_transform_publisher``'s yaw pitch roll; a laser mounted upside down is ROLL 180).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from fgloc.errors import ConfigError
+
+RPY_OPTION = "--static-transform"
+XYZW_OPTION = "--static-transform-xyzw"
+RPY_HELP = ("PARENT CHILD X Y Z ROLL PITCH YAW (m, deg; REP 103): a mount the log lacks, e.g. base_link "
+            "imu_link 0 -0.3 0.52 90 0 -90, or an upside-down laser base_link laser 0.2 0 0 180 0 0 "
+            "(wins over the log's tf)")
+XYZW_HELP = ("PARENT CHILD X Y Z QX QY QZ QW (m, unit quaternion): the same mount given as a quaternion, "
+             "e.g. base_link laser 0.2 0 0 1 0 0 0 (upside down)")
+#: usage errors of the options (a value that is not a number): one line naming what they take
+HINTS = {
+    XYZW_OPTION: f"{XYZW_OPTION} needs nine values PARENT CHILD X Y Z QX QY QZ QW (m, unit quaternion), "
+                 f"e.g. {XYZW_OPTION} base_link laser 0.2 0 0 1 0 0 0",
+    RPY_OPTION: f"{RPY_OPTION} needs eight values PARENT CHILD X Y Z ROLL PITCH YAW (m, deg), "
+                f"e.g. {RPY_OPTION} base_link laser 0.2 0 0 180 0 0",
+}
+
+
+def static_transform_entries(rpy: tuple[Any, ...] | None = None,
+                             xyzw: tuple[Any, ...] | None = None) -> list[dict[str, Any]]:
+    """``sources.static_transforms`` entries of the two options' values (None: not given), checked:
+    one-line :class:`ConfigError` naming the option for anything wrong (a non-finite number, a
+    quaternion that is not of unit length, a parent that is not on the robot, one child twice)."""
+    from fgloc.localization.frames import ROBOT_FRAMES
+
+    entries: list[tuple[str, dict[str, Any]]] = []
+    if rpy is not None:
+        parent, child, *nums = rpy
+        entries.append((RPY_OPTION, {"parent": parent, "child": child, "xyz": [float(v) for v in nums[:3]],
+                                     "rpy_deg": [float(v) for v in nums[3:6]]}))
+    if xyzw is not None:
+        parent, child, *nums = xyzw
+        entries.append((XYZW_OPTION, {"parent": parent, "child": child, "xyz": [float(v) for v in nums[:3]],
+                                      "xyzw": [float(v) for v in nums[3:7]]}))
+    seen: set[str] = set()
+    for option, e in entries:
+        parent, child = str(e["parent"]).lstrip("/"), str(e["child"]).lstrip("/")
+        e["parent"], e["child"] = parent, child
+        values = e["xyz"] + e.get("rpy_deg", e.get("xyzw", []))
+        if not all(math.isfinite(v) for v in values):
+            raise ConfigError(f"{option} {parent} {child}: every value must be a finite number, got "
+                              f"{' '.join(f'{v:g}' for v in values)}")
+        if parent not in ROBOT_FRAMES:
+            raise ConfigError(f"{option}: parent frame {parent!r}: fgloc takes mounts on the robot "
+                              f"({' or '.join(ROBOT_FRAMES)})")
+        if not child or child in ROBOT_FRAMES:
+            raise ConfigError(f"{option}: child frame {child!r}: name the sensor's frame (the scans' frame_id)")
+        if child in seen:
+            raise ConfigError(f"{option}: child frame {child!r} given by both options")
+        seen.add(child)
+        if "xyzw" in e:
+            n = math.sqrt(sum(v * v for v in e["xyzw"]))
+            if abs(n - 1.0) > 0.01:
+                raise ConfigError(f"{option} {parent} {child}: QX QY QZ QW is not a unit quaternion (norm {n:.4f})")
+    return [e for _, e in entries]

@@ -43,6 +43,7 @@ __all__ = [
     "deskew_offsets",
     "voxel_downsample",
     "FixAcceptance",
+    "registration_sigma",
 ]
 
 
@@ -376,6 +377,19 @@ def registration_floor(H: FloatArray, sigma_m: float) -> FloatArray:
     if lever2 > 0:
         out[2, 2] = sigma_m**2 / lever2
     return out
+
+
+def registration_sigma(accuracy_m: float, resolution_m: float) -> float:
+    """The part of a map's accuracy (1 sigma, m) that moves a whole fix: ``sqrt(accuracy^2 -
+    resolution^2 / 12)``, 0 when the accuracy is no more than the raster's.  A wall is known to its
+    cell (uniform over it: ``resolution / sqrt(12)``), but each wall sits differently in its cells:
+    that part differs from wall to wall, the scan's residuals see it and the per-run covariance
+    carries it (``fgloc map``'s ``accuracy_m`` adds it to the passes' registration in quadrature).
+    What no residual can see is the rest: the passes' registration, which moves every wall the scan
+    sees together (the registration floor, :func:`registration_floor`)."""
+    acc = float(accuracy_m)
+    raster2 = float(resolution_m) ** 2 / 12.0
+    return math.sqrt(acc * acc - raster2) if acc * acc > raster2 else 0.0
 
 
 def map_accuracy(occ_map: OccupancyMap, value: float | str, where: str) -> float:

@@ -46,6 +46,7 @@ from .base import (
     map_accuracy,
     no_fix,
     registration_floor,
+    registration_sigma,
 )
 
 
@@ -154,6 +155,7 @@ class KissMatcher(FrontendBase):
         self.config = conf
         super().__init__(occ_map, laser_mount, conf.preprocess)
         self.map_accuracy_m = map_accuracy(occ_map, conf.map_accuracy_m, "kiss")
+        self.floor_sigma_m = registration_sigma(self.map_accuracy_m, occ_map.resolution)
         try:
             from kiss_icp.mapping import VoxelHashMap
             from kiss_icp.registration import Registration
@@ -303,7 +305,7 @@ class KissMatcher(FrontendBase):
                           n_inliers=n_in, quality=quality, **info)
         sigma2 = float(np.sum(w * r2)) / max(2.0 * w.sum() - 3.0, 1.0)
         cov = self.accept.finish(self.accept.inflate(sigma2 * np.linalg.inv(H))
-                                 + registration_floor(H, self.map_accuracy_m))
+                                 + registration_floor(H, self.floor_sigma_m))
         info["sigma_m"] = math.sqrt(sigma2)
         info["time_s"] = time.perf_counter() - t0
         return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)

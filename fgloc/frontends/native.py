@@ -34,10 +34,12 @@ Pipeline for one scan (points already de-skewed in ``base_link``, see :mod:`.bas
    the fixes were 2-3 cm off where the scan evidence says 6 mm: NEES 38-80.  So the map's accuracy
    (``map_accuracy_m``: the map YAML's ``accuracy_m``, which ``fgloc map`` writes from its
    self-check: the r.m.s. offset at which the passes register, and the raster, 3.3 cm on ACES; a
-   map that declares none: no floor, ``base.map_accuracy``) is added, stretched along the scan's
-   weak direction, over the points' moment arm in heading: NEES 1.8-2.6 on the Radish segments
-   (``tools/eval_frontends_real.py``); the simulator's map declares 0 (its world rasterized), its
-   fixes keep NEES ~2.4-2.9.  With the floor the smoother weighs the CARMEN odometry more, whose
+   map that declares none: no floor, ``base.map_accuracy``) less the raster's part
+   (``base.registration_sigma``: a wall known to its cell differs from wall to wall, the residuals
+   see it and the per-run term above carries it; the simulator's maps, their world rasterized, need
+   no floor) is added, stretched along the scan's weak direction, over the points' moment arm in
+   heading (``tools/eval_frontends_real.py``: see the README's real-map table); the simulator's map
+   declares 0, its fixes keep NEES ~2.4-2.9.  With the floor the smoother weighs the CARMEN odometry more, whose
    pose-derived twist noise (``pipeline.pose_delta_*``) is tighter than that odometry: see the
    README's real-map table for the heading it costs.
 5. **Heading check**: after the refinement from the guess, the likelihood-field score over
@@ -83,6 +85,7 @@ from .base import (
     map_accuracy,
     no_fix,
     registration_floor,
+    registration_sigma,
 )
 
 LOSS_HUBER = 0
@@ -786,6 +789,7 @@ class NativeMatcher(FrontendBase):
         self.far = float(conf.field_max_dist_m)
         self.depth_min_quality = float(conf.depth_min_quality)
         self.map_accuracy_m = map_accuracy(occ_map, conf.map_accuracy_m, "native")
+        self.floor_sigma_m = registration_sigma(self.map_accuracy_m, occ_map.resolution)
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(conf.backface_cos))
 
         k = max(int(conf.field_upsample), 1)
@@ -979,8 +983,8 @@ class NativeMatcher(FrontendBase):
         # turns a -0.0 off the diagonal into +0.0 either way)
         if spread is not None:
             cov = cov + spread / wsum
-        if self.map_accuracy_m > 0:
-            cov = cov + registration_floor(H, self.map_accuracy_m)
+        if self.floor_sigma_m > 0:
+            cov = cov + registration_floor(H, self.floor_sigma_m)
         cov = self.accept.finish(cov)
         info["sigma_m"] = math.sqrt(sigma2)
         info["surface_depth_m"] = self.depth_m

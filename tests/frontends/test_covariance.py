@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from fgloc.errors import ConfigError
+from fgloc.frontends.base import registration_sigma
 from fgloc.frontends.native import NativeMatcher, registration_floor
 from fgloc.maps import OccupancyMap
 
@@ -63,17 +64,32 @@ def test_fix_covariance_takes_the_maps_accuracy(scan_and_maps):
     c0 = _cov(m0, scan, pose)
     # the world is the map: only the scan's own evidence (a few mm)
     assert math.sqrt(np.linalg.eigvalsh(c0[:2, :2]).max()) < 0.01
-    # undeclared: no floor; half a cell (2.5 cm) configured: at least that along the weakest direction,
-    # >= 2.5 cm / 2^(1/4) across
+    # undeclared: no floor; half a cell (2.5 cm) configured: the floor is its part beyond the raster's
+    # (5 cm cells: 2.04 cm), at least that along the weakest direction, >= 2.04 cm / 2^(1/4) across
     assert _cov(undeclared, scan, pose) == pytest.approx(c0)
     cu = _cov(undeclared, scan, pose, map_accuracy_m=0.025)
+    s = registration_sigma(0.025, m0.resolution)
     ev = np.linalg.eigvalsh(cu[:2, :2])
-    assert ev.max() >= 0.025**2 and ev.min() >= 0.025**2 / math.sqrt(2) * 0.999
+    assert ev.max() >= s**2 and ev.min() >= s**2 / math.sqrt(2) * 0.999
     assert cu[2, 2] > c0[2, 2]
     # a declared accuracy is used as it is; a configured number overrides the map's
     cd = _cov(declared, scan, pose)
-    assert np.linalg.eigvalsh(cd[:2, :2]).max() >= 0.03**2
+    assert np.linalg.eigvalsh(cd[:2, :2]).max() >= registration_sigma(0.03, m0.resolution) ** 2
     assert _cov(declared, scan, pose, map_accuracy_m=0.0) == pytest.approx(c0)
     assert _cov(m0, scan, pose, map_accuracy_m=0.025) == pytest.approx(cu)
     with pytest.raises(ConfigError):
         NativeMatcher(m0, MOUNT, map_accuracy_m="sometimes")
+
+
+def test_the_rasters_part_of_the_accuracy_is_no_floor(scan_and_maps):
+    """``accuracy_m`` counts the raster (a wall known to its cell, ``res / sqrt(12)``; ``fgloc map``
+    adds it to the passes' registration in quadrature).  Each wall sits differently in its cells, so
+    the scan's residuals see that part and the per-run covariance carries it (the simulator's maps,
+    their world rasterized: NEES ~2.6 with no floor); the floor is the rest, the passes' registration."""
+    assert registration_sigma(0.025, 0.05) == pytest.approx(math.sqrt(0.025**2 - 0.05**2 / 12))
+    assert registration_sigma(0.0222, 0.05) == pytest.approx(0.01687, abs=1e-5)
+    assert registration_sigma(0.03, 0.0) == 0.03
+    assert registration_sigma(0.01, 0.05) == 0.0 and registration_sigma(0.0, 0.05) == 0.0
+    scan, pose, m0, _, _ = scan_and_maps
+    raster = OccupancyMap(m0.data, m0.resolution, m0.origin, accuracy_m=m0.resolution / math.sqrt(12))
+    assert _cov(raster, scan, pose) == pytest.approx(_cov(m0, scan, pose))

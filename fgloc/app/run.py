@@ -247,6 +247,16 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     cfg_path = req.config if isinstance(req.config, (str, Path)) else None
     check_outputs(outdir, [log, req.map_yaml, cfg_path], req.force)
     reader = open_log(log, topics)
+    from fgloc.mapping.source import pick_topics
+
+    # a default topic the log lacks: its only one of that type (fgloc import's rule), said on stderr;
+    # a topic named on the command line is kept, and a config with sources names the inputs it wants
+    picked = pick_topics(reader, log, {"scan": (scan_topic, req.scan_topic is not None),
+                                       "odom": (odom_topic, req.odom_topic is not None or bool(src)),
+                                       "imu": (imu_topic, req.imu_topic is not None or bool(src))})
+    scan_topic, odom_topic, imu_topic = picked["scan"], picked["odom"], picked["imu"]
+    topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic)
+    reader.topics = topics
     summ = reader.summary()
     counts = {t: v["count"] for t, v in summ["topics"].items()}
     n_scan, n_odom, n_imu = counts.get(scan_topic, 0), counts.get(odom_topic, 0), counts.get(imu_topic, 0)
@@ -256,6 +266,11 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     if n_odom == 0 and n_imu == 0 and n_scan == 0:
         raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; its "
                        f"topics: {topics_line(summ)}")
+    configured = [t for t in src if t not in (scan_topic, odom_topic, imu_topic) and reader.has(t)]
+    if req.map_yaml is None and n_odom == 0 and n_imu == 0 and not configured:
+        raise LogError(f"{log}: the log has laser scans only ({n_scan} on {scan_topic}), no odometry or IMU: "
+                       f"localize them on a map with --map MAP.yaml (fgloc map needs odometry too), or name the "
+                       f"odometry / IMU topic with --odom-topic / --imu-topic; its topics: {topics_line(summ)}")
     if req.map_yaml is not None and n_scan == 0:
         raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
                        f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "

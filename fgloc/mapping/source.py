@@ -11,15 +11,20 @@ dead-reckoned from its twist.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fgloc.errors import ConfigError, LogError
 from fgloc.geometry import compose, quaternion_matrix, wrap_angle
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
+
+if TYPE_CHECKING:
+    from typing import Any
 
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
 
@@ -38,6 +43,8 @@ def is_carmen(path: str | Path) -> bool:
     name = str(path).lower()
     return any(name.endswith(s) for s in CARMEN_SUFFIXES)
 
+
+log = logging.getLogger(__name__)
 
 ROBOT_FRAMES = ("base_link", "base_footprint")
 LEVEL_COS = 0.99  # the laser's z axis within ~8 deg of vertical (up, or down: upside down)
@@ -89,6 +96,27 @@ def user_mount(frame: str, transforms: Sequence[StaticTransform]) -> StaticTrans
     return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in ROBOT_FRAMES), None)
 
 
+def pick_topics(src: Any, path: str | Path, wanted: dict[str, tuple[str, bool]]) -> dict[str, str]:
+    """``{role: topic}`` for ``wanted`` ``{role: (topic, named)}`` (roles of :class:`fgloc.io.topics.Topics`):
+    the rule ``fgloc import`` follows (:func:`fgloc.io.topics.choose_topics`).  A topic the user
+    named is kept as it is (the caller checks it exists); a role's default topic that the log lacks
+    is replaced by the log's only topic of that role's type, with a warning saying so."""
+    from fgloc.io.topics import Topics, choose_topics
+
+    types = {t: ty for t, ty in src.topic_types().items() if src.has(t)}
+    default = Topics()
+    guess = {role: t for t, role in choose_topics(types, default, path).items()}
+    out: dict[str, str] = {}
+    for role, (topic, named) in wanted.items():
+        g = guess.get(role)
+        if named or src.has(topic) or topic != getattr(default, role) or g is None or g == topic:
+            out[role] = topic
+            continue
+        log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
+        out[role] = g
+    return out
+
+
 def log_messages(
     path: str | Path, scan_topic: str = "/scan", odom_topic: str = "/odom",
     static_transforms: Sequence[StaticTransform] = (),
@@ -99,6 +127,8 @@ def log_messages(
     Topics are normalised to ``/scan``, ``/odom`` and ``/tf_static`` (the laser mount first).
     ``static_transforms``: mounts the log lacks (``fgloc map --static-transform``); the one to the
     scans' frame wins over the log's (:func:`planar_mount`: an upside-down laser's scans mirrored).
+    A default topic the log lacks is its only topic of that type (:func:`pick_topics`: a name other
+    than the default is the user's, kept).  No odometry is a one-line :class:`LogError`.
     """
     from fgloc.io import open_log
     from fgloc.io.topics import Topics
@@ -115,7 +145,7 @@ def log_messages(
         it = iter_carmen(p)
         if static_transforms:  # the scans' frame (read up to the first scan), then from the top again
             frame = next((m.frame_id for _, m in it if isinstance(m, LaserScan) and "rear" not in m.frame_id),
-                         "laser")
+                         "laser")  # the front laser's (CARMEN's RLASER lines are left out beside it)
             it = iter_carmen(p)
             mine = user_mount(frame, static_transforms)
             if mine is not None:
@@ -123,7 +153,14 @@ def log_messages(
         yield from it
         return
     src = open_log(p, Topics(scan=scan_topic, odom=odom_topic))
+    picked = pick_topics(src, p, {"scan": (scan_topic, False), "odom": (odom_topic, False)})
+    scan_topic, odom_topic = picked["scan"], picked["odom"]
+    src.topics = Topics(scan=scan_topic, odom=odom_topic)
     src.require(scan_topic)
+    if not src.has(odom_topic):
+        have = ", ".join(f"{t} ({v['type']}, {v['count']})" for t, v in sorted(src.summary()["topics"].items()))
+        raise LogError(f"{p}: no odometry on {odom_topic}: fgloc map pairs every scan with wheel odometry (name "
+                       f"its topic with --odom-topic); its topics: {have or 'none'}")
     skew = src.clock_skew([scan_topic, odom_topic]) if src.has(odom_topic) else None
     if skew is not None:  # scans would be paired with odometry from another time
         raise LogError(f"{p}: {skew}")
@@ -138,16 +175,26 @@ def log_messages(
     yield from msgs
 
 
-def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord], StaticTransform]:
+def rear_frames(frames: Iterable[str]) -> set[str]:
+    """The frames of a scan stream to leave out: ``*rear*`` ones when the stream mixes them with
+    others (CARMEN's front and rear lasers on one topic); none when it has one laser, whatever its
+    name (a topic the user chose, a robot with a rear laser only)."""
+    fs = {f.lstrip("/") for f in frames}
+    rear = {f for f in fs if "rear" in f}
+    return rear if rear and rear != fs else set()
+
+
+def pair_scans(messages: Iterable[tuple[str, object]],
+               name: str | Path = "log") -> tuple[list[ScanRecord], StaticTransform]:
     """Collect scans with odometry poses and the ``base_link -> laser`` mount (identity if absent).
 
     The mount is the transform whose child is the scans' ``frame_id`` (REP 105 frame names
     vary: ``base_scan``, ``laser_link``, ...); failing that, the last one to a ``*laser*``
-    frame (CARMEN's front laser).
+    frame (CARMEN's front laser).  Scans of a rear laser are left out only beside a front one
+    (:func:`rear_frames`).  ``name``: the log, for the one-line errors.
     """
     mount = StaticTransform("base_link", "laser", np.zeros(3))
     by_child: dict[str, StaticTransform] = {}
-    scan_frame: str | None = None
     events: list[tuple[int, object]] = []  # (kind 0 odom / 1 scan, msg)
     odo_stamps: list[float] = []
     odo_poses: list[FloatArray] = []
@@ -175,14 +222,17 @@ def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord]
             odo_poses.append(pose)
             events.append((0, len(odo_stamps) - 1))
         elif topic == "/scan" and isinstance(msg, LaserScan):
-            if np.isfinite(msg.stamp) and "rear" not in msg.frame_id:
+            if np.isfinite(msg.stamp):
                 events.append((1, msg))
-                if scan_frame is None:
-                    scan_frame = msg.frame_id.lstrip("/")
+    drop = rear_frames({m.frame_id for k, m in events if k == 1 and isinstance(m, LaserScan)})
+    if drop:
+        events = [(k, m) for k, m in events if k == 0 or not (isinstance(m, LaserScan)
+                                                                 and m.frame_id.lstrip("/") in drop)]
+    scan_frame = next((m.frame_id.lstrip("/") for k, m in events if k == 1 and isinstance(m, LaserScan)), None)
     if scan_frame is not None and scan_frame in by_child:
         mount = by_child[scan_frame]
     if not odo_stamps:
-        raise LogError("log has no odometry messages")
+        raise LogError(f"{name}: no odometry messages: fgloc map pairs every scan with wheel odometry")
     st = np.asarray(odo_stamps)
     po = np.asarray(odo_poses)
     # each scan between the odometry messages before and after it in the file: interpolated when
@@ -205,7 +255,7 @@ def pair_scans(messages: Iterable[tuple[str, object]]) -> tuple[list[ScanRecord]
             n_pending += 1
     after.extend([-1] * n_pending)
     if not scans:
-        raise LogError("log has no laser scans")
+        raise LogError(f"{name}: no laser scans")
     t = np.array([sc.stamp for sc in scans], dtype=float)
     i0 = np.asarray(before, dtype=np.int64)
     i1 = np.asarray(after, dtype=np.int64)
@@ -239,7 +289,9 @@ def open_log_scan_stamps(path: str | Path, records: list[ScanRecord]) -> FloatAr
         return own
     from fgloc.io.carmen import carmen_file_order
 
-    fixed = np.array([m.stamp for t, m in carmen_file_order(path) if t == "/scan" and isinstance(m, LaserScan)
-                      and np.isfinite(m.stamp) and "rear" not in m.frame_id], dtype=float)
+    scans = [m for t, m in carmen_file_order(path)
+             if t == "/scan" and isinstance(m, LaserScan) and np.isfinite(m.stamp)]
+    drop = rear_frames({m.frame_id for m in scans})
+    fixed = np.array([m.stamp for m in scans if m.frame_id.lstrip("/") not in drop], dtype=float)
     idx = np.array([r.index for r in records], dtype=np.int64)
     return fixed[idx] if len(fixed) > int(idx.max(initial=-1)) else own

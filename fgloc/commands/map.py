@@ -41,8 +41,10 @@ def map_cmd(
     config: Annotated[Path | None, typer.Option(help="YAML with mapping options (MapperConfig fields)")] = None,
     start: Annotated[float | None, typer.Option(help="first fraction of the scans to use (0..1)")] = None,
     end: Annotated[float | None, typer.Option(help="last fraction of the scans to use (0..1)")] = None,
-    scan_topic: Annotated[str, typer.Option(help="scan topic (MCAP)")] = "/scan",
-    odom_topic: Annotated[str, typer.Option(help="odometry topic (MCAP)")] = "/odom",
+    scan_topic: Annotated[str, typer.Option(help="sensor_msgs/LaserScan topic (a log without /scan: its only "
+                                            "LaserScan topic)")] = "/scan",
+    odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
+                                            "Odometry topic)")] = "/odom",
     no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
     static_transform: Annotated[tuple[str, str, float, float, float, float, float, float] | None,
@@ -108,8 +110,10 @@ def map_check_cmd(
                                                     "next to the map, i.e. the mapping run's own)")] = None,
     mode: Annotated[str, typer.Option(help="consistency (passes vs each other), localization (log vs map, "
                                       "changed world) or auto (localization when --trajectory is given)")] = "auto",
-    scan_topic: Annotated[str, typer.Option(help="scan topic (MCAP)")] = "/scan",
-    odom_topic: Annotated[str, typer.Option(help="odometry topic (MCAP)")] = "/odom",
+    scan_topic: Annotated[str, typer.Option(help="sensor_msgs/LaserScan topic (a log without /scan: its only "
+                                            "LaserScan topic)")] = "/scan",
+    odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
+                                            "Odometry topic)")] = "/odom",
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
 ) -> None:
     """Check a map against a log: which regions disagree between passes (and which loop closures

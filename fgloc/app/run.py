@@ -103,6 +103,7 @@ class RunResult:
     # the last ones at the end is in it), view (the view's channels), localize (the rest of the loop),
     # finish (final smoothing), outputs (TUM, config, evaluation), total (the whole run_log call)
     timings: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # what the result may be wrong about, one line each
 
     @property
     def lost_share(self) -> float:
@@ -356,6 +357,9 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         log=log, lost_s=float(loc.stats.get("lost_s", 0.0)), ended_lost=bool(loc.stats.get("ended_lost", False)),
         damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
     )
+    result.warnings = scale_warnings(loc.stats, mount_assumed=(
+        n_scan > 0 and mode == "map" and not config.sources.static_transforms
+        and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
     gt = reader.ground_truth() if reader.has(topics.ground_truth) else None
     if gt is not None and len(final) > 1:
         from fgloc.eval.metrics import evaluate
@@ -386,6 +390,28 @@ def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocCo
     kept = [e for e in config.sources.static_transforms if str(e.get("child", "")).lstrip("/") not in children]
     sources = dataclasses.replace(config.sources, static_transforms=[*kept, *entries])
     return dataclasses.replace(config, sources=sources)
+
+
+#: wheels rarely misjudge distance by half: a speed scale (reported / true) outside this is a scan
+#: geometry that disagrees with the wheels (a laser mount that is wrong, e.g. missing or upside down)
+SPEED_SCALE_PLAUSIBLE = (1 / 1.5, 1.5)
+
+
+def scale_warnings(stats: dict[str, Any], mount_assumed: bool) -> list[str]:
+    """One line per odometry source whose speed scale against the scan fixes is implausible
+    (:data:`SPEED_SCALE_PLAUSIBLE`), naming the laser mount as the first suspect when the log had
+    none (``mount_assumed``: no tf, none configured)."""
+    out = []
+    lo, hi = SPEED_SCALE_PLAUSIBLE
+    for name, d in (stats.get("sources") or {}).items():
+        sc = d.get("speed_scale")
+        if sc is None or lo <= float(sc) <= hi:
+            continue
+        why = ("the log has no transform to the laser and it was taken at the robot centre, upright: give its "
+               "mount with --static-transform PARENT CHILD X Y Z ROLL PITCH YAW (an upside-down laser is ROLL 180)"
+               if mount_assumed else "check the laser mount and the odometry's units")
+        out.append(f"{name}: the wheels report {float(sc):.2f}x the distance the scan fixes moved: {why}")
+    return out
 
 
 def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> tuple[Any, bool]:

@@ -84,6 +84,8 @@ def _print_run_summary(r: RunResult) -> None:
             say(f"  {title}, by reason:")
             for why, n in reasons.items():
                 say(f"    {n:6d}  {why}")
+    for w in r.warnings:
+        say(f"  {_styled('warning:', '33', tty)} {w}")
     if r.truncated:
         say(f"  {_styled('log truncated:', '33', tty)} {r.truncated}")
     if r.damage:

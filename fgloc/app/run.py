@@ -248,7 +248,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     cfg_path = req.config if isinstance(req.config, (str, Path)) else None
     check_outputs(outdir, [log, req.map_yaml, cfg_path], req.force)
     reader = open_log(log, topics)
-    from fgloc.mapping.source import pick_topics
+    from fgloc.io.topics import pick_topics
 
     # a default topic the log lacks: its only one of that type (fgloc import's rule), said on stderr;
     # a topic named on the command line is kept, and a config with sources names the inputs it wants
@@ -418,12 +418,12 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> tuple[Any, bo
     """``(base_link -> laser, mirrored)``: the config's (``sources.static_transforms``, ``--static-transform``)
     when it names the scan's frame, else the log's; no lookup (and no 'no transform' warning) in a
     log without scans.  ``mirrored``: the configured laser is upside down, so its scans are to be
-    read mirrored (:func:`fgloc.mapping.source.planar_mount`; the log's own upside-down tf is
+    read mirrored (:func:`fgloc.io.tf.planar_mount`; the log's own upside-down tf is
     handled by the reader)."""
     import numpy as np
 
-    from fgloc.localization.frames import mount_of, parse_static_transforms
-    from fgloc.mapping.source import planar_mount
+    from fgloc.io.tf import mount_of, planar_mount
+    from fgloc.localization.frames import parse_static_transforms
     from fgloc.types import StaticTransform
 
     if n_scan == 0:

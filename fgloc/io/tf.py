@@ -9,12 +9,16 @@ same place sees mirrored (``angle_min`` and ``angle_increment`` negated), as nav
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
-from fgloc.geometry import compose
+from fgloc.errors import ConfigError
+from fgloc.geometry import compose, quaternion_matrix
 from fgloc.types import StaticTransform
 
-BASE_FRAMES = ("base_link", "base_footprint")
+BASE_FRAMES = ("base_link", "base_footprint")  #: the robot's own frames (REP 105)
+LEVEL_COS = 0.99  # a laser's z axis within ~8 deg of vertical (up, or down: upside down)
 MAX_CHAIN = 32
 
 
@@ -50,3 +54,32 @@ class TfTree:
             z += tr.z
             cur = tr.parent
         return None
+
+
+def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransform | None:
+    """The robot (``BASE_FRAMES``) -> ``frame`` transform among ``transforms`` (a user's mounts), if any."""
+    f = frame.lstrip("/")
+    return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in BASE_FRAMES), None)
+
+
+def planar_mount(t: StaticTransform) -> tuple[StaticTransform, bool]:
+    """A robot -> laser transform (a :class:`~fgloc.types.Transform3D` with its whole rotation, or a
+    planar one) as the 2-D mount the scans are used with, and whether they are to be read mirrored.
+
+    A level laser is its (x, y, yaw); one mounted upside down (its z axis down: rolled or pitched
+    by pi, ``R = Rz(yaw) Rx(pi)``) is the upright laser at the same place and yaw whose scans are
+    the log's mirrored (angles negated), as :mod:`fgloc.io` reads a log's upside-down tf and nav2
+    does.  A tilted laser (z axis more than ~8 deg off vertical) is a :class:`ConfigError`: its
+    beams do not sweep the plane the map is of."""
+    q = getattr(t, "rotation_xyzw", None)
+    if q is None:
+        return t, False
+    r = quaternion_matrix(*(float(v) for v in np.asarray(q, dtype=float) / float(np.linalg.norm(q))))
+    mount = StaticTransform(t.parent, t.child, np.array([t.pose[0], t.pose[1], np.arctan2(r[3], r[0])]), t.z)
+    if r[8] >= LEVEL_COS:
+        return mount, False
+    if r[8] <= -LEVEL_COS:
+        return mount, True
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(r[8])))))
+    raise ConfigError(f"the laser {t.child} is tilted {tilt:.1f} deg from level (roll / pitch): fgloc maps and "
+                      "localizes with a level or upside-down (roll 180) laser")

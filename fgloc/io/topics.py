@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 from fgloc.errors import LogError
 
@@ -101,3 +102,22 @@ def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -
             log.info("using %s (%s) as the %s topic", same[0], want, role)
             chosen[same[0]] = role
     return chosen
+
+
+def pick_topics(src: Any, path: str | Path, wanted: dict[str, tuple[str, bool]]) -> dict[str, str]:
+    """``{role: topic}`` for ``wanted`` ``{role: (topic, named)}`` (roles of :class:`fgloc.io.topics.Topics`):
+    the rule ``fgloc import`` follows (:func:`fgloc.io.topics.choose_topics`).  A topic the user
+    named is kept as it is (the caller checks it exists); a role's default topic that the log lacks
+    is replaced by the log's only topic of that role's type, with a warning saying so."""
+    types = {t: ty for t, ty in src.topic_types().items() if src.has(t)}
+    default = Topics()
+    guess = {role: t for t, role in choose_topics(types, default, path).items()}
+    out: dict[str, str] = {}
+    for role, (topic, named) in wanted.items():
+        g = guess.get(role)
+        if named or src.has(topic) or topic != getattr(default, role) or g is None or g == topic:
+            out[role] = topic
+            continue
+        log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
+        out[role] = g
+    return out

@@ -27,9 +27,10 @@ import numpy as np
 from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
 from fgloc.geometry import quaternion_matrix, rpy_quaternion
-from fgloc.types import StaticTransform, Transform3D
+from fgloc.io.tf import BASE_FRAMES
+from fgloc.types import Transform3D
 
-ROBOT_FRAMES = ("base_link", "base_footprint")
+ROBOT_FRAMES = BASE_FRAMES  # the robot's own frames (one home: fgloc.io.tf)
 KEYS = ("parent", "child", "xyz", "rpy_deg", "xyzw")
 
 
@@ -120,9 +121,3 @@ def entry_of_publisher_args(args: Sequence[float | str]) -> dict[str, Any] | Non
     yaw, pitch, roll = nums[3:6]
     return {"parent": parent, "child": child, "xyz": xyz,
             "rpy_deg": [round(math.degrees(v), 6) for v in (roll, pitch, yaw)]}
-
-
-def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransform | None:
-    """The configured robot -> ``frame`` transform, if any."""
-    f = frame.lstrip("/")
-    return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in ROBOT_FRAMES), None)

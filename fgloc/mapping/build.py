@@ -51,7 +51,7 @@ def load_records(log: str | Path, start: float | None = None, end: float | None 
                  ) -> tuple[list[ScanRecord], StaticTransform]:
     """Scans with odometry from ``log``; ``start``/``end`` keep scans in that fraction [0, 1] of the log;
     ``static_transforms``: mounts the log lacks (the laser's wins over the log's); a default topic
-    the log lacks is its only one of that type (:func:`fgloc.mapping.source.pick_topics`)."""
+    the log lacks is its only one of that type (:func:`fgloc.io.topics.pick_topics`)."""
     recs, mount = pair_scans(log_messages(log, scan_topic, odom_topic, static_transforms or ()), log)
     if start is not None or end is not None:
         n = len(recs)

@@ -15,16 +15,14 @@ import logging
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fgloc.errors import ConfigError, LogError
-from fgloc.geometry import compose, quaternion_matrix, wrap_angle
+from fgloc.errors import LogError
+from fgloc.geometry import compose, wrap_angle
+from fgloc.io.tf import mount_of, planar_mount
+from fgloc.io.topics import pick_topics
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
-
-if TYPE_CHECKING:
-    from typing import Any
 
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
 
@@ -46,31 +44,6 @@ def is_carmen(path: str | Path) -> bool:
 
 log = logging.getLogger(__name__)
 
-ROBOT_FRAMES = ("base_link", "base_footprint")
-LEVEL_COS = 0.99  # the laser's z axis within ~8 deg of vertical (up, or down: upside down)
-
-
-def planar_mount(t: StaticTransform) -> tuple[StaticTransform, bool]:
-    """A robot -> laser transform (a :class:`~fgloc.types.Transform3D` with its whole rotation, or a
-    planar one) as the 2-D mount the scans are used with, and whether they are to be read mirrored.
-
-    A level laser is its (x, y, yaw); one mounted upside down (its z axis down: rolled or pitched
-    by pi, ``R = Rz(yaw) Rx(pi)``) is the upright laser at the same place and yaw whose scans are
-    the log's mirrored (angles negated), as :mod:`fgloc.io` reads a log's upside-down tf and nav2
-    does.  A tilted laser (z axis more than ~8 deg off vertical) is a :class:`ConfigError`: its
-    beams do not sweep the plane the map is of."""
-    q = getattr(t, "rotation_xyzw", None)
-    if q is None:
-        return t, False
-    r = quaternion_matrix(*(float(v) for v in np.asarray(q, dtype=float) / float(np.linalg.norm(q))))
-    mount = StaticTransform(t.parent, t.child, np.array([t.pose[0], t.pose[1], np.arctan2(r[3], r[0])]), t.z)
-    if r[8] >= LEVEL_COS:
-        return mount, False
-    if r[8] <= -LEVEL_COS:
-        return mount, True
-    tilt = float(np.degrees(np.arccos(min(1.0, abs(r[8])))))
-    raise ConfigError(f"the laser {t.child} is tilted {tilt:.1f} deg from level (roll / pitch): fgloc maps and "
-                      "localizes with a level or upside-down (roll 180) laser")
 
 
 def with_mount(messages: Iterable[tuple[str, object]], mount: StaticTransform,
@@ -88,33 +61,6 @@ def with_mount(messages: Iterable[tuple[str, object]], mount: StaticTransform,
         elif mirrored and isinstance(msg, LaserScan) and msg.frame_id.lstrip("/") == frame:
             msg = mirror_scan(msg)
         yield topic, msg
-
-
-def user_mount(frame: str, transforms: Sequence[StaticTransform]) -> StaticTransform | None:
-    """The user's robot -> ``frame`` transform among ``transforms``, if any."""
-    f = frame.lstrip("/")
-    return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in ROBOT_FRAMES), None)
-
-
-def pick_topics(src: Any, path: str | Path, wanted: dict[str, tuple[str, bool]]) -> dict[str, str]:
-    """``{role: topic}`` for ``wanted`` ``{role: (topic, named)}`` (roles of :class:`fgloc.io.topics.Topics`):
-    the rule ``fgloc import`` follows (:func:`fgloc.io.topics.choose_topics`).  A topic the user
-    named is kept as it is (the caller checks it exists); a role's default topic that the log lacks
-    is replaced by the log's only topic of that role's type, with a warning saying so."""
-    from fgloc.io.topics import Topics, choose_topics
-
-    types = {t: ty for t, ty in src.topic_types().items() if src.has(t)}
-    default = Topics()
-    guess = {role: t for t, role in choose_topics(types, default, path).items()}
-    out: dict[str, str] = {}
-    for role, (topic, named) in wanted.items():
-        g = guess.get(role)
-        if named or src.has(topic) or topic != getattr(default, role) or g is None or g == topic:
-            out[role] = topic
-            continue
-        log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
-        out[role] = g
-    return out
 
 
 def log_messages(
@@ -147,7 +93,7 @@ def log_messages(
             frame = next((m.frame_id for _, m in it if isinstance(m, LaserScan) and "rear" not in m.frame_id),
                          "laser")  # the front laser's (CARMEN's RLASER lines are left out beside it)
             it = iter_carmen(p)
-            mine = user_mount(frame, static_transforms)
+            mine = mount_of(frame, static_transforms)
             if mine is not None:
                 it = with_mount(it, *planar_mount(mine))
         yield from it
@@ -164,7 +110,7 @@ def log_messages(
     skew = src.clock_skew([scan_topic, odom_topic]) if src.has(odom_topic) else None
     if skew is not None:  # scans would be paired with odometry from another time
         raise LogError(f"{p}: {skew}")
-    mine = user_mount(src.scan_frame(), static_transforms)
+    mine = mount_of(src.scan_frame(), static_transforms)
     rename = {scan_topic: "/scan", odom_topic: "/odom"}
     wanted = [t for t in (scan_topic, odom_topic) if src.has(t)]
     msgs = ((rename.get(topic, topic), msg) for topic, msg in src.messages(wanted))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from fgloc.errors import ConfigError
+from fgloc.io.tf import mount_of
 from fgloc.localization.frames import (
     entry_of_publisher_args,
-    mount_of,
     parse_static_transforms,
     static_transform_entry,
 )

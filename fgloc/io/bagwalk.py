@@ -209,21 +209,17 @@ class WalkedBag:
         while pos < len(data):
             try:
                 rec = _record(data, pos)
-            except BagFormatError as e:
-                self.broke = f"damaged record at byte {pos} ({e}); {len(self._entries)} messages read before it"
-                return
-            if rec is None:
-                if v2:
-                    self._cut_chunk(data, pos)
-                self.broke = (f"file ends at byte {len(data)} inside a record starting at byte {pos}; "
-                              f"{len(self._entries)} complete messages read")
-                return
-            f, start, end = rec
-            op = f["op"][0]
-            if op == OP_BAG_HEADER and f.get("encryptor"):
-                raise LogError(f"{self.path}: encrypted ROS 1 bag ({f['encryptor'].decode('latin-1')}); "
-                               "decrypt it first (`rosbag decrypt`)")
-            try:
+                if rec is None:
+                    if v2:
+                        self._cut_chunk(data, pos)
+                    self.broke = (f"file ends at byte {len(data)} inside a record starting at byte {pos}; "
+                                  f"{len(self._entries)} complete messages read")
+                    return
+                f, start, end = rec
+                op = f["op"][0]
+                if op == OP_BAG_HEADER and f.get("encryptor"):
+                    raise LogError(f"{self.path}: encrypted ROS 1 bag ({f['encryptor'].decode('latin-1')}); "
+                                   "decrypt it first (`rosbag decrypt`)")
                 if v2 and op == OP_CHUNK:
                     self._chunk(data, pos, f, start, end)
                 elif v2 and op == OP_CONNECTION:

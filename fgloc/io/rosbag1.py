@@ -22,8 +22,6 @@ from fgloc.io.topics import Topics
 
 log = logging.getLogger(__name__)
 
-ROSBAG1_MAGIC = b"#ROSBAG V2.0"
-
 
 def is_ros1_head(head: bytes) -> bool:
     """Whether a file's first bytes are a ROS 1 bag's first line (any format version)."""
@@ -57,15 +55,14 @@ class Rosbag1Source(BagSource):
     def _open_reader(self) -> Any:
         if self._walked is not None:
             return self._walked
-        from rosbags.rosbag1 import Reader, ReaderError
-
-        reader = Reader(self.path)
+        reader = self._reader()
         try:
             reader.open()
             return reader
         except OSError as e:
             raise LogError(f"{self.path}: cannot read {self.what} ({e.strerror or e})") from None
-        except (ReaderError, AssertionError, struct.error, ValueError, KeyError, IndexError, EOFError) as e:
+        except (*self._reader_errors(), AssertionError, struct.error, ValueError, KeyError, IndexError,  # type: ignore[misc]
+                EOFError) as e:
             why = str(e).rstrip(".") or f"{type(e).__name__} in its index"
         walked = WalkedBag(self.path)
         walked.open()  # LogError: not even its records read

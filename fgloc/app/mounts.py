@@ -33,13 +33,12 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
     """``sources.static_transforms`` entries of the two options' values (None: not given), checked:
     one-line :class:`ConfigError` naming the option for anything wrong (a non-finite number, a
     quaternion that is not of unit length, a parent that is not on the robot, one child twice)."""
-    from fgloc.localization.frames import ROBOT_FRAMES
+    from fgloc.localization.frames import ROBOT_FRAMES, static_transform_entry
 
     entries: list[tuple[str, dict[str, Any]]] = []
     if rpy is not None:
         parent, child, *nums = rpy
-        entries.append((RPY_OPTION, {"parent": parent, "child": child, "xyz": [float(v) for v in nums[:3]],
-                                     "rpy_deg": [float(v) for v in nums[3:6]]}))
+        entries.append((RPY_OPTION, static_transform_entry(parent, child, *(float(v) for v in nums[:6]))))
     if xyzw is not None:
         parent, child, *nums = xyzw
         entries.append((XYZW_OPTION, {"parent": parent, "child": child, "xyz": [float(v) for v in nums[:3]],

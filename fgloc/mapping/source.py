@@ -11,7 +11,6 @@ dead-reckoned from its twist.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,10 +39,6 @@ class ScanRecord:
 def is_carmen(path: str | Path) -> bool:
     name = str(path).lower()
     return any(name.endswith(s) for s in CARMEN_SUFFIXES)
-
-
-log = logging.getLogger(__name__)
-
 
 
 def with_mount(messages: Iterable[tuple[str, object]], mount: StaticTransform,

@@ -1,5 +1,5 @@
 """``--static-transform`` / ``--static-transform-xyzw``: a sensor mount the log lacks, given on the
-command line.  ``fgloc run`` and ``fgloc map`` take the same two options (their help texts are
+command line.  ``fgloc run``, ``fgloc map`` and ``fgloc map-check`` take the same two options (their help texts are
 here) and read them with :func:`static_transform_entries`, into ``sources.static_transforms``
 entries (REP 103 frames; angles in degrees about the parent's fixed x, y, z axes, as
 ``static_transform_publisher``'s yaw pitch roll; a laser mounted upside down is ROLL 180).

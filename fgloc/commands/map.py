@@ -115,15 +115,23 @@ def map_check_cmd(
     odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
                                             "Odometry topic)")] = "/odom",
     no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    static_transform: Annotated[tuple[str, str, float, float, float, float, float, float] | None,
+                                typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
+    static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
+                                     typer.Option("--static-transform-xyzw", help=mounts.XYZW_HELP)] = None,
 ) -> None:
     """Check a map against a log: which regions disagree between passes (and which loop closures
     are suspect), or where the world no longer matches the map.  Exit 0 when it passes, 1 when
     it flags something."""
+    from fgloc.localization.frames import parse_static_transforms
     from fgloc.mapping.build import map_check
 
+    entries = mounts.static_transform_entries(static_transform, static_transform_xyzw)
+    transforms = parse_static_transforms(entries, source=mounts.RPY_OPTION)
     bars, factory = _bars(no_progress)
     try:
-        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, scan_topic, odom_topic)
+        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, scan_topic, odom_topic,
+                        static_transforms=transforms)
     finally:
         for b in bars:
             b.close()

@@ -221,6 +221,7 @@ def map_check(
     progress_factory: ProgressFactory | None = None,
     scan_topic: str = "/scan",
     odom_topic: str = "/odom",
+    static_transforms: list[Transform3D] | None = None,
 ) -> CheckResult:
     """Self-check ``log`` against the map ``map_yaml``; writes check.yaml / check.png to ``outdir``
     (default: the map's folder).
@@ -229,7 +230,8 @@ def map_check(
     the map's own trajectory, ``trajectory.tum`` next to the map unless ``trajectory`` is given);
     "localization" compares the log's scans at the poses of ``trajectory`` (e.g. ``fgloc run``'s
     trajectory.tum) with the map and reports changed-world regions; "auto" picks consistency
-    when no trajectory is given, localization otherwise.
+    when no trajectory is given, localization otherwise.  ``static_transforms``: mounts the log
+    lacks (``fgloc map-check --static-transform``, as given to ``fgloc map`` and ``fgloc run``).
     """
     map_yaml = Path(map_yaml)
     occ = OccupancyMap.load(map_yaml)
@@ -243,7 +245,8 @@ def map_check(
     traj = read_tum(tpath)
     if len(traj) == 0:
         raise LogError(f"{tpath}: trajectory has no poses")
-    recs, mount = load_records(log, scan_topic=scan_topic, odom_topic=odom_topic)
+    recs, mount = load_records(log, scan_topic=scan_topic, odom_topic=odom_topic,
+                               static_transforms=static_transforms)
     out = Path(outdir) if outdir is not None else map_yaml.parent
     if mode == "consistency":
         loops = read_loops(map_yaml.parent / "mapping.yaml")

@@ -110,3 +110,20 @@ def test_bad_mounts_are_one_line_errors(flipped_log, capsys, command, args, mess
     assert rc == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fgloc: error: ") and message in lines[0], err
+
+
+def test_map_check_takes_the_mount_too(flipped_log, capsys):
+    """``fgloc map-check`` reads the log's scans as ``fgloc map`` did: with the mount given to map, the
+    map's own scans at the map's own poses match it; without, the scans read at the robot centre
+    and unmirrored flag the whole room as changed (what it printed before it took the option)."""
+    d = flipped_log["dir"]
+    mount = ["--static-transform", "base_link", "laser", "0.2", "0", "0.1", "0", "180", "0"]
+    out = d / "map_for_check"
+    assert main(["map", str(flipped_log["log"]), "-o", str(out), "--no-progress", "--no-check", *mount]) == 0
+    check = ["map-check", str(out / "map.yaml"), str(flipped_log["log"]), "--trajectory",
+             str(out / "trajectory.tum"), "--no-progress"]
+    capsys.readouterr()
+    assert main([*check, "-o", str(d / "check_mount"), *mount]) == 0
+    assert "MATCHES" in capsys.readouterr().out
+    assert main([*check, "-o", str(d / "check_none")]) == 1
+    assert "CHANGED" in capsys.readouterr().out

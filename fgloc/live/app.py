@@ -119,7 +119,7 @@ class LiveSession:
                 host, port, on_scan=lambda scan, arrival: self.runner.push("scan", scan, arrival),
                 range_min=lc.range_min_m, range_max=lc.range_max_m, angle_offset_deg=lc.angle_offset_deg,
                 time_increment_from=lc.time_increment_from, align_clock=lc.align_clock,
-                stall_timeout_s=lc.stall_timeout_s, on_event=ev,
+                stall_timeout_s=lc.stall_timeout_s, on_event=ev, layer_field=lc.layer_field,
             )
             self.runner.sources["laser"] = self.laser.counters
         self._t0 = time.monotonic()

@@ -40,6 +40,9 @@ class LaserConfig:
         "measurement_frequency", "beam timing for de-skew: 1 / measurement frequency, or rotation: scan_time * "
         "angular step / 360 deg", choices=("measurement_frequency", "rotation"))
     stall_timeout_s: float = setting(1.0, "reconnect when connected but silent this long", gt=0)
+    layer_field: int = setting(0, "multi-layer scanners (MRS1000: one telegram per layer): the layer-angle "
+                               "field (signed, 1/100 deg) of the planar layer to localize with; the other "
+                               "layers are counted (other_layer) and skipped", min=-32768, max=32767)
     mount: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "base_link -> laser [x_m, y_m, yaw_rad]")
 
 

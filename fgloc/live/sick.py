@@ -18,6 +18,17 @@ IEEE-754 float32 bit pattern in hex (``3F800000`` = 1.0).  Distances (DIST1) are
 after scaling; 0 means no echo -> ``+inf`` (REP 117).  The device angle 0 is 90 deg to
 the right of the scanner's forward axis on the LMS1xx, hence the default
 ``angle_offset_deg = -90`` to get REP 103 angles (x forward, counter-clockwise).
+Device angles grow counter-clockwise seen from above (the LMS1xx, TiM5xx/7xx, LMS5xx and
+MRS1000 drivers map a beam to ``start + k * step - 90 deg`` without reversing the order).
+
+Real-device variants handled here: a scale factor of 2.0 (LMS5xx: DIST1 in 2 mm units),
+RSSI channels (16 or 8 bit) and further echoes (DIST2..) beside DIST1, a name block (TiM:
+``1 7 <name>``), a multi-layer scanner's layer-angle field (MRS1000: the reserved token,
+``FE0C FF06 0 FA``: one telegram per layer; only ``layer_field`` is used, the others are
+counted), a measurement frequency sent in Hz instead of 100 Hz (a firmware inconsistency
+sick_scan_xd also corrects; told apart by the mirror's beam rate), ``sFA`` error answers
+(counted by SOPAS error code and reported) and CoLa-B (binary) telegrams, which are
+counted and reported (this client speaks CoLa-A only).
 
 Parsing is pure (:func:`parse_lmdscandata`, :class:`ColaFramer`); :class:`SickClient`
 is the threaded TCP client with reconnect and back-off.
@@ -45,6 +56,7 @@ log = logging.getLogger(__name__)
 
 STX = 0x02
 ETX = 0x03
+COLA_B_HEADER = b"\x02\x02\x02\x02"
 MAX_TELEGRAM = 64 * 1024
 
 
@@ -65,6 +77,7 @@ class FramerStats:
     telegrams: int = 0
     garbage_bytes: int = 0  # bytes outside STX..ETX
     truncated: int = 0  # STX seen again before ETX, or telegram too long
+    cola_b_headers: int = 0  # 02 02 02 02: a CoLa-B (binary) telegram start, which this framer cannot read
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -78,6 +91,7 @@ class ColaFramer:
     stats: FramerStats = field(default_factory=FramerStats)
     _buf: bytearray = field(default_factory=bytearray)
     _in: bool = False
+    _tail: bytes = b""  # the last 3 bytes fed, to find a CoLa-B header split across chunks
 
     def reset(self) -> None:
         """Forget a partial telegram (e.g. after a reconnect); counted as truncated."""
@@ -90,6 +104,9 @@ class ColaFramer:
         self.stats.bytes_in += len(chunk)
         out: list[bytes] = []
         data = bytes(chunk)
+        if 2 in data:
+            self.stats.cola_b_headers += (self._tail + data).count(COLA_B_HEADER)
+        self._tail = (self._tail + data)[-3:]
         pos = 0
         n = len(data)
         while pos < n:
@@ -160,6 +177,8 @@ class ScanTelegram:
     start_angle_deg: float
     step_deg: float
     values: np.ndarray  # raw uint16 values of the distance channel
+    layer_field: int = 0  # the signed layer-angle field (0 on single-layer scanners; MRS1000: 1/100 deg)
+    meas_freq_in_hz: bool = False  # the measurement frequency field was in Hz, not 100 Hz (corrected)
 
 
 _HEX_TOKEN = re.compile(rb"[0-9A-Fa-f]{1,8}")
@@ -181,6 +200,28 @@ def _uint(tok: bytes, what: str, bits: int = 32) -> int:
 
 def _i32(v: int) -> int:
     return v - (1 << 32) if v >= (1 << 31) else v
+
+
+def _i16(v: int) -> int:
+    return v - (1 << 16) if v >= (1 << 15) else v
+
+
+def beam_rate_hz(meas_field: int, scan_freq_hz: float, step_deg: float) -> tuple[float, bool]:
+    """The beam (measurement) frequency from the telegram's field, and whether it was in Hz.
+
+    The field is in 100 Hz; some firmware sends Hz (sick_scan_xd divides a field above 10000
+    by 100 "due to firmware inconsistency", which would also wrongly divide an LMS4000's
+    600 Hz x 4320 beams = 25920).  A rotating mirror fires ``scan frequency x 360 deg / step``
+    beams a second (LMS1xx 50 Hz x 720 = 36000 = field 168 hex; TiM571 15 Hz x 1080 = 16200 =
+    field A2 hex), so the reading nearer that (by ratio) is taken.  0 stays 0 (no beam timing).
+    """
+    as_100hz = meas_field * 100.0
+    if meas_field == 0 or not scan_freq_hz > 0 or not step_deg > 0:
+        return as_100hz, False
+    rotation = scan_freq_hz * 360.0 / step_deg
+    if abs(math.log(meas_field / rotation)) < abs(math.log(as_100hz / rotation)):
+        return float(meas_field), True
+    return as_100hz, False
 
 
 def _f32(tok: bytes, what: str) -> float:
@@ -225,11 +266,12 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
     scount = _uint(tok[i + 6], "scan_counter", 16)
     t_start = _uint(tok[i + 7], "time_since_startup", 32)
     t_tx = _uint(tok[i + 8], "time_of_transmission", 32)
-    # inputs(2) outputs(2) reserved / layer angle(1)
-    for k in range(9, 14):
+    # inputs(2) outputs(2) reserved / layer angle(1, signed: MRS1000 FE0C FF06 0 FA)
+    for k in range(9, 13):
         _uint(tok[i + k], "io", 16)
+    layer = _i16(_uint(tok[i + 13], "layer_angle", 16))
     scan_freq = _uint(tok[i + 14], "scan_freq", 32) / 100.0
-    meas_freq = _uint(tok[i + 15], "meas_freq", 32) * 100.0
+    meas_field = _uint(tok[i + 15], "meas_freq", 32)
     i += 16
     n_enc = _uint(tok[i], "n_encoders", 16)
     if n_enc > 8:
@@ -266,6 +308,7 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
                 if step == 0 or not scale > 0:
                     raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
                 vals = _u16_values(tok[i : i + n], name)
+                meas_freq, in_hz = beam_rate_hz(meas_field, scan_freq, step / 10000.0)
                 found = ScanTelegram(
                     command=tok[0].decode(),
                     version=version,
@@ -284,6 +327,8 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
                     start_angle_deg=start / 10000.0,
                     step_deg=step / 10000.0,
                     values=vals,
+                    layer_field=layer,
+                    meas_freq_in_hz=in_hz,
                 )
             else:
                 _check_run(tok[i : i + n], bits, name)  # a channel not used is still checked
@@ -360,11 +405,25 @@ def encode_lmdscandata(
     angle_offset_deg: float = -90.0,
     command: str = "sSN",
     serial: int = 0x1234567,
+    *,
+    scale: float | None = None,
+    rssi_bits: int | None = None,
+    name: str | None = None,
+    layer_field: int = 0,
+    meas_freq_in_hz: bool = False,
 ) -> bytes:
-    """Encode a LaserScan as an LMDscandata payload (no STX/ETX): DIST1 in mm, scale 1 or 2."""
+    """Encode a LaserScan as an LMDscandata payload (no STX/ETX): DIST1 in mm, scale 1 or 2.
+
+    Real-device shapes (for the emulator and tests): ``scale=2.0`` (LMS5xx: 2 mm units),
+    ``rssi_bits=16`` (TiM5xx/TiM571: RSSI1 as a second 16-bit channel) or ``8`` (TiM55x,
+    LMS1xx: an 8-bit channel), ``name`` (a name block ``1 <len> <name>``, as TiMs send),
+    ``layer_field`` (MRS1000's signed layer angle, 1/100 deg) and ``meas_freq_in_hz``
+    (the measurement frequency in Hz, as some firmware sends it).
+    """
     r = np.asarray(scan.ranges, dtype=np.float64)
     finite = np.isfinite(r) & (r > 0)
-    scale = 1.0 if not finite.any() or np.max(r[finite]) * 1000.0 <= 65535 else 2.0
+    if scale is None:
+        scale = 1.0 if not finite.any() or np.max(r[finite]) * 1000.0 <= 65535 else 2.0
     vals = np.zeros(len(r), dtype=np.int64)
     vals[finite] = np.clip(np.round(r[finite] * 1000.0 / scale), 1, 65535).astype(np.int64)
     start = int(round((math.degrees(scan.angle_min) - angle_offset_deg) * 10000.0))
@@ -372,17 +431,30 @@ def encode_lmdscandata(
     freq = int(round(100.0 / scan.scan_time)) if scan.scan_time > 0 else 2500
     # measurement frequency in 100 Hz: 1 / time_increment (0 = no beam timing, instantaneous scan)
     mfreq = int(round(0.01 / scan.time_increment)) if scan.time_increment > 0 else 0
+    if meas_freq_in_hz:
+        mfreq = int(round(1.0 / scan.time_increment)) if scan.time_increment > 0 else 0
     scale_hex = struct.unpack(">I", struct.pack(">f", scale))[0]
+    n16 = 2 if rssi_bits == 16 else 1
     head = [
         command, "LMDscandata", "1", "1", _hx(serial), "0", "0",
         _hx(telegram_counter & 0xFFFF), _hx(scan_counter & 0xFFFF),
         _hx(time_since_startup_us), _hx(time_of_transmission_us),
-        "0", "0", "0", "0", "0", _hx(freq), _hx(mfreq),
+        "0", "0", "0", "0", format(layer_field & 0xFFFF, "X"), _hx(freq), _hx(mfreq),
         "0",  # encoders
-        "1", "DIST1", format(scale_hex, "X"), "0", _hx(start), _hx(step), _hx(len(vals)),
+        str(n16), "DIST1", format(scale_hex, "X"), "0", _hx(start), _hx(step), _hx(len(vals)),
     ]
-    tail = ["0", "0", "0", "0", "0", "0"]  # 8-bit channels, position, name, comment, time, events
-    return " ".join(head + [format(int(v), "X") for v in vals] + tail).encode("ascii")
+    body = [format(int(v), "X") for v in vals]
+    # a remission made up from the range (the device's is the echo strength): no echo -> 0
+    rssi = np.where(vals > 0, 200 - np.minimum(vals // 200, 150), 0)
+    rssi_block = ["RSSI1", "3F800000", "0", _hx(start), _hx(step), _hx(len(vals))] + [format(int(v), "X")
+                                                                                   for v in rssi]
+    if rssi_bits == 16:
+        body += rssi_block
+    tail = ["1", *rssi_block] if rssi_bits == 8 else ["0"]  # the 8-bit channels
+    tail += ["0"]  # position
+    tail += ["1", format(len(name), "X"), name] if name is not None else ["0"]
+    tail += ["0", "0", "0"]  # comment, time, events
+    return " ".join(head + body + tail).encode("ascii")
 
 
 # ----------------------------------------------------------------------------- client
@@ -398,11 +470,36 @@ class SickStats:
     malformed_by_reason: dict[str, int] = field(default_factory=dict)
     other_telegrams: int = 0  # acks (sEA), errors (sFA), ...
     device_errors: int = 0  # sFA answers or device status != 0 0
+    device_error_codes: dict[str, int] = field(default_factory=dict)  # sFA answers by SOPAS error name
     scan_counter_gaps: int = 0
+    other_layer: int = 0  # telegrams of a multi-layer scanner's other layers (MRS1000), skipped
+    meas_freq_in_hz: int = 0  # scans whose measurement frequency field was in Hz (corrected)
 
     def count_malformed(self, reason: str) -> None:
         self.malformed += 1
         self.malformed_by_reason[reason] = self.malformed_by_reason.get(reason, 0) + 1
+
+
+# SOPAS error codes of an ``sFA <code>`` answer (hex), from the CoLa telegram listing.
+SOPAS_ERRORS = {
+    0x1: "METHODIN_ACCESSDENIED", 0x2: "METHODIN_UNKNOWNINDEX", 0x3: "VARIABLE_UNKNOWNINDEX",
+    0x4: "LOCALCONDITIONFAILED", 0x5: "INVALID_DATA", 0x6: "UNKNOWN_ERROR", 0x7: "BUFFER_OVERFLOW",
+    0x8: "BUFFER_UNDERFLOW", 0x9: "ERROR_UNKNOWN_TYPE", 0xA: "VARIABLE_WRITE_ACCESSDENIED",
+    0xB: "UNKNOWN_CMD_FOR_NAMESERVER", 0xC: "UNKNOWN_COLA_COMMAND", 0xD: "METHODIN_SERVER_BUSY",
+    0xE: "FLEX_OUT_OF_BOUNDS", 0xF: "EVENTREG_UNKNOWNINDEX", 0x10: "COLA_A_VALUE_OVERFLOW",
+    0x11: "COLA_A_INVALID_CHARACTER",
+}
+
+
+def sopas_error_name(payload: bytes) -> str:
+    """``sFA 5`` -> ``"INVALID_DATA"``; an unknown or missing code -> ``"code <token>"``."""
+    tok = payload.split()
+    code = tok[1] if len(tok) > 1 else b"?"
+    if _HEX_TOKEN.fullmatch(code) is not None:
+        name = SOPAS_ERRORS.get(int(code, 16))
+        if name is not None:
+            return name
+    return "code " + code[:8].decode("ascii", "replace")
 
 
 class SickClient(SensorThread):
@@ -432,8 +529,10 @@ class SickClient(SensorThread):
         backoff_min_s: float = 0.1,
         backoff_max_s: float = 2.0,
         on_event: Callable[[str], None] | None = None,
+        layer_field: int = 0,
     ) -> None:
         super().__init__(on_event, backoff_min_s, backoff_max_s)
+        self.layer_field = layer_field
         self.host, self.port = host, port
         self.on_scan = on_scan
         self.range_min, self.range_max = range_min, range_max
@@ -486,7 +585,13 @@ class SickClient(SensorThread):
         if not (head.startswith(b"sSN LMDscandata") or head.startswith(b"sRA LMDscandata")):
             self.stats.other_telegrams += 1
             if head.startswith(b"sFA"):
+                # the device refused a command (e.g. sEN LMDscandata: it will not stream)
                 self.stats.device_errors += 1
+                name = sopas_error_name(payload)
+                codes = self.stats.device_error_codes
+                codes[name] = codes.get(name, 0) + 1
+                if codes[name] <= 3:
+                    self.on_event(f"{self.label}: the device answered sFA ({name}) to a command")
             return None
         try:
             t = parse_lmdscandata(payload)
@@ -495,6 +600,11 @@ class SickClient(SensorThread):
             return None
         if t.status != (0, 0):
             self.stats.device_errors += 1
+        if t.meas_freq_in_hz:
+            self.stats.meas_freq_in_hz += 1
+            if self.stats.meas_freq_in_hz == 1:
+                self.on_event(f"{self.label}: measurement frequency sent in Hz, not 100 Hz; read as "
+                              f"{t.meas_freq_hz:.0f} Hz (the mirror's beam rate)")
         if self._last_scan_counter is not None:
             gap = (t.scan_counter - self._last_scan_counter - 1) & 0xFFFF
             if 0 < gap < 0x8000:
@@ -513,6 +623,13 @@ class SickClient(SensorThread):
             stamp = self.clock.to_host(start_dev * 1e-6, arrival)
         else:
             stamp = arrival - period
+        if t.layer_field != self.layer_field:
+            # a multi-layer scanner (MRS1000): one telegram per layer, each tilted; only one is planar
+            self.stats.other_layer += 1
+            if self.stats.other_layer == 1:
+                self.on_event(f"{self.label}: multi-layer telegrams; localizing with layer field "
+                              f"{self.layer_field}, skipping layer {t.layer_field} and any other")
+            return None
         scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, self.angle_offset_deg, self.frame_id,
                                 self.time_increment_from)
         self.stats.scans += 1
@@ -526,7 +643,9 @@ class SickClient(SensorThread):
             "scans": st.scans, "malformed": st.malformed, "malformed_by_reason": dict(st.malformed_by_reason),
             "garbage_bytes": self.framer.stats.garbage_bytes, "truncated": self.framer.stats.truncated,
             "connects": st.connects, "disconnects": st.disconnects, "scan_gaps": st.scan_counter_gaps,
-            "device_errors": st.device_errors, "thread_failure": self.failure,
+            "device_errors": st.device_errors, "device_error_codes": dict(st.device_error_codes),
+            "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
+            "cola_b_headers": self.framer.stats.cola_b_headers, "thread_failure": self.failure,
         }
 
     def serve(self) -> None:
@@ -567,8 +686,12 @@ class SickClient(SensorThread):
                     now = time.time()
                     last_data = time.monotonic()
                     got_any = True
+                    n_b = self.framer.stats.cola_b_headers
                     for payload in self.framer.feed(chunk):
                         self.handle_payload(payload, now)
+                    if self.framer.stats.cola_b_headers > n_b and n_b < 3:
+                        self.on_event(f"{self.label}: the device sends CoLa-B (binary) telegrams, which fgloc "
+                                      f"cannot read: set it to CoLa-A (ASCII), e.g. in SOPAS ET")
                 try:
                     sock.sendall(frame("sEN LMDscandata 0"))
                 except OSError:

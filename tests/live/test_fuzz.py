@@ -180,10 +180,13 @@ def telegrams(draw):
         "scan_counter": draw(U16), "t_start": draw(U32), "t_tx": draw(U32), "scale": draw(F32_SCALE),
         "offset": draw(F32_OFFSET), "start": draw(I32), "step": draw(st.integers(1, 0xFFFF)),
         "values": draw(st.lists(U16, min_size=n, max_size=n)),
+        # the layer-angle token (signed 16 bit): 0 on single-layer scanners, MRS1000 FE0C FF06 0 FA
+        "layer": draw(st.one_of(st.just(0), st.integers(-0x8000, 0x7FFF))),
     }
     head = [draw(st.sampled_from([b"sSN", b"sRA"])), b"LMDscandata", _hx(draw(U16)), _hx(draw(U16)),
             _hx(draw(U32)), b"0", b"0", _hx(draw(U16)), _hx(want["scan_counter"]), _hx(want["t_start"]),
-            _hx(want["t_tx"])] + [_hx(draw(U16)) for _ in range(5)] + [_hx(draw(U32)), _hx(draw(U32))]
+            _hx(want["t_tx"])] + [_hx(draw(U16)) for _ in range(4)] + [_hx(want["layer"] & 0xFFFF)] + [
+            _hx(draw(U32)), _hx(draw(U32))]
     n_enc = draw(st.integers(0, 2))
     head += [_hx(n_enc)] + [_hx(draw(U32 if k % 2 == 0 else U16)) for k in range(2 * n_enc)]
     dist = [b"DIST1", _f32_hex(want["scale"]), _f32_hex(want["offset"]), _hx(want["start"] & 0xFFFFFFFF),
@@ -244,6 +247,7 @@ def test_cola_every_valid_telegram_parses_to_what_was_sent(t):
     assert got.scale == want["scale"] and got.offset == want["offset"]
     assert got.start_angle_deg == want["start"] / 10000.0 and got.step_deg == want["step"] / 10000.0
     assert got.values.tolist() == want["values"]
+    assert got.layer_field == want["layer"]
 
 
 @FUZZ
@@ -257,7 +261,7 @@ def test_cola_stream_every_valid_scan_delivered_every_bad_one_counted(items, gar
     for k, (kind, tok, want) in enumerate(items):
         stream += garbage[k % len(garbage)] + frame(b" ".join(tok))
         if kind == "ok":
-            sent.append(want)
+            sent.append(want)  # a telegram of another layer than the client's (0) is counted, not localized
         else:
             n_bad += 1
     scans = []
@@ -266,7 +270,9 @@ def test_cola_stream_every_valid_scan_delivered_every_bad_one_counted(items, gar
     _feed_in_chunks(lambda chunk: [client.handle_payload(p, 1.0) for p in client.framer.feed(chunk)],
                     bytes(stream), sizes)
     st_ = client.stats
-    assert st_.scans == len(scans) == len(sent)
+    other_layer = [w for w in sent if w["layer"] != 0]
+    sent = [w for w in sent if w["layer"] == 0]
+    assert st_.scans == len(scans) == len(sent) and st_.other_layer == len(other_layer)
     assert st_.malformed == n_bad and "internal_error" not in st_.malformed_by_reason
     for s, want in zip(scans, sent, strict=True):
         v = np.asarray(want["values"], dtype=np.float64)

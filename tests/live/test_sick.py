@@ -171,7 +171,7 @@ def test_every_token_replaced_by_nasty_values_never_escapes():
             client.handle_payload(b" ".join(t), 1000.0 + n * 0.04)
             n += 1
     st = client.stats
-    assert st.scans + st.malformed + st.other_telegrams == n
+    assert st.scans + st.malformed + st.other_telegrams + st.other_layer == n
     assert st.malformed > 0 and st.scans > 0
     for s in scans:
         assert s.angle_increment > 0 and len(s.ranges) == 10

@@ -1,0 +1,173 @@
+"""SICK device variants beyond the project's emulator: a multi-layer MRS1000, a measurement
+frequency sent in Hz, sFA refusals and CoLa-B (binary) telegrams.  Each is parsed right or a
+counted, reported skip; never a silent wrong scan, never a dead client thread."""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from fgloc.live.sick import SickClient, encode_lmdscandata, frame, parse_lmdscandata, telegram_to_scan
+from fgloc.types import LaserScan
+
+
+def _client(events=None, **kw):
+    scans: list[LaserScan] = []
+    c = SickClient("127.0.0.1", 1, on_scan=lambda s, t: scans.append(s), align_clock=False,
+                   on_event=(events.append if events is not None else None), **kw)
+    return c, scans
+
+
+# ----------------------------------------------------------------------------- multi-layer (MRS1000)
+# An MRS1000 sends one telegram per layer, the layer in the token after the outputs (signed, 1/100 deg):
+# FE0C FF06 0 FA (Ydeback/SICK-MRS1000-Line-Follower preprocess.py layerCheck).  Only layer 0 is planar:
+# the tilted ones see the floor or over obstacles.  Before: all four were localized as planar scans.
+
+def _flat(r: float, n: int = 271) -> LaserScan:
+    return LaserScan(stamp=0.0, angle_min=math.radians(-135), angle_increment=math.radians(1.0), range_min=0.05,
+                     range_max=50.0, ranges=np.full(n, r, dtype=np.float32), scan_time=0.02,
+                     time_increment=1 / 18000)
+
+
+def test_mrs1000_layers_only_the_planar_one_is_localized():
+    events: list[str] = []
+    c, scans = _client(events)
+    layers = {-500: 2.0, -250: 3.0, 0: 4.0, 250: 5.0}  # each layer its own range, to tell them apart
+    for k in range(3):
+        for j, (layer, r) in enumerate(layers.items()):
+            p = encode_lmdscandata(_flat(r), 4 * k + j, 4 * k + j, 1000 + 5000 * k, 2000 + 5000 * k,
+                                   layer_field=layer)
+            assert p.split()[15] == format(layer & 0xFFFF, "X").encode()
+            c.handle_payload(p, 100.0 + 0.02 * k)
+    assert len(scans) == c.stats.scans == 3
+    assert all(np.allclose(s.ranges, 4.0) for s in scans)
+    assert c.stats.other_layer == 9 and c.stats.malformed == 0 and c.stats.scan_counter_gaps == 0
+    assert any("multi-layer" in e for e in events)
+
+
+def test_mrs1000_configured_layer_is_the_one_used():
+    c, scans = _client(layer_field=-250)
+    for j, layer in enumerate((-500, -250, 0, 250)):
+        c.handle_payload(encode_lmdscandata(_flat(2.0 + j), j, j, 1000, 2000, layer_field=layer), 100.0)
+    assert len(scans) == 1 and np.allclose(scans[0].ranges, 3.0) and c.stats.other_layer == 3
+
+
+# ----------------------------------------------------------------------------- beam timing
+# The measurement frequency field is in 100 Hz; some firmware sends Hz (sick_scan_xd:
+# "due firmware inconsistency", driver/src/sick_lmd_scandata_parser.cpp).  Before: an LMS1xx
+# sending 36000 (Hz) got a beam time of 1/3.6 MHz, 100x too short for de-skewing.
+
+HAND_LMS1XX = (
+    b"sRA LMDscandata 1 1 89A27F 0 0 343 347 27477BA9 2747813B 0 0 7 0 0 1388 168 0 1 "
+    b"DIST1 3F800000 00000000 FFF92230 1388 5 2E6 0 3E8 FFFF 1F4 0 0 0 0 0 0"
+)
+
+
+def test_measurement_frequency_in_hz_is_read_as_the_mirrors_beam_rate():
+    events: list[str] = []
+    c, scans = _client(events)
+    c.handle_payload(HAND_LMS1XX.replace(b" 1388 168 ", b" 1388 8CA0 "), 1.0)  # 36000 Hz as Hz
+    c.handle_payload(HAND_LMS1XX, 1.02)  # 168 hex x 100 Hz
+    assert [s.time_increment for s in scans] == pytest.approx([1 / 36000, 1 / 36000], rel=1e-9)
+    assert c.stats.meas_freq_in_hz == 1 and any("in Hz" in e for e in events)
+
+
+def test_lms4000_beam_rate_above_10000_is_not_divided():
+    """600 Hz x 4320 beams a turn (0.0833 deg) = field 25920 (x 100 Hz): right as sent; sick_scan_xd's
+    'divide a field > 10000 by 100' rule would make it 100x too long."""
+    tok = HAND_LMS1XX.split()
+    tok[16], tok[17] = format(60000, "X").encode(), format(25920, "X").encode()  # scan 600.00 Hz
+    tok[tok.index(b"DIST1") + 4] = format(833, "X").encode()  # 0.0833 deg
+    t = parse_lmdscandata(b" ".join(tok))
+    assert t.meas_freq_hz == 2_592_000.0 and not t.meas_freq_in_hz
+    assert telegram_to_scan(t, 0.0).time_increment == pytest.approx(1 / 2_592_000)
+
+
+# ----------------------------------------------------------------------------- device refusals
+
+
+def test_sfa_answer_is_counted_by_error_name_and_reported():
+    """A device that refuses sEN LMDscandata answers sFA <code> and never streams: before, one
+    more 'device_errors' with no reason; now the SOPAS error's name, counted and reported."""
+    events: list[str] = []
+    c, _ = _client(events)
+    for p in (b"sFA 5", b"sFA 5", b"sFA A", b"sFA", b"sFA 7FFF"):
+        assert c.handle_payload(p, 1.0) is None
+    assert c.stats.device_error_codes == {"INVALID_DATA": 2, "VARIABLE_WRITE_ACCESSDENIED": 1, "code ?": 1,
+                                          "code 7FFF": 1}
+    assert c.stats.device_errors == 5 and c.stats.malformed == 0
+    assert sum("sFA (INVALID_DATA)" in e for e in events) == 2
+
+
+def _cola_b(payload_ascii_head: bytes, body: bytes) -> bytes:
+    """A CoLa-B telegram: 02 02 02 02, big-endian length, payload, XOR checksum."""
+    payload = payload_ascii_head + body
+    ck = 0
+    for b in payload:
+        ck ^= b
+    return b"\x02\x02\x02\x02" + struct.pack(">I", len(payload)) + payload + bytes([ck])
+
+
+def test_cola_b_device_over_tcp_is_reported_not_silent():
+    """A laser configured for CoLa-B (binary; sick_scan_xd's default dialect) streams telegrams this
+    CoLa-A client cannot read.  Before: counted as garbage / other telegrams, nothing said, the
+    localizer just never got a scan.  Now the headers are counted and the reason is reported; the
+    client thread stays alive."""
+    # binary LMDscandata head as sick_scan_xd's parser reads it (version, device, serial, status, counters,
+    # times, inputs, outputs, layer, scan / measurement frequency, encoders, one 16-bit channel ...)
+    body = struct.pack(">HHIBBHHIIBBBBhIIH", 1, 1, 0x1234, 0, 0, 1, 1, 1000, 2000, 0, 0, 0, 0, 0, 2500, 360, 0)
+    body += struct.pack(">H5sffiHH", 1, b"DIST1", 1.0, 0.0, -450000, 5000, 3) + struct.pack(">HHH", 1000, 3, 2000)
+    tele = _cola_b(b"sSN LMDscandata ", body + struct.pack(">HHHHHH", 0, 0, 0, 0, 0, 0))
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    port = srv.getsockname()[1]
+    stop = threading.Event()
+
+    def serve():
+        conn, _ = srv.accept()
+        with conn:
+            conn.recv(100)  # sEN LMDscandata 1 (in CoLa-A)
+            while not stop.is_set():
+                try:
+                    conn.sendall(tele)
+                except OSError:
+                    return
+                stop.wait(0.02)
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    events: list[str] = []
+    scans: list[LaserScan] = []
+    c = SickClient("127.0.0.1", port, on_scan=lambda s, t: scans.append(s), on_event=events.append,
+                   stall_timeout_s=30.0)
+    c.start()
+    try:
+        deadline = time.monotonic() + 60.0  # generous: a loaded machine; the assertions are on content
+        while c.framer.stats.cola_b_headers < 5 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        cnt = c.counters()
+        assert cnt["cola_b_headers"] >= 5 and cnt["scans"] == 0 and cnt["thread_failure"] is None
+        assert c.thread is not None and c.thread.is_alive()
+        assert 1 <= sum("CoLa-B" in e for e in events) <= 3  # reported, not once per telegram
+    finally:
+        stop.set()
+        c.stop()
+        srv.close()
+
+
+def test_cola_a_framer_counts_cola_b_headers_split_across_chunks():
+    from fgloc.live.sick import ColaFramer
+
+    f = ColaFramer()
+    tele = _cola_b(b"sRA LMDscandata ", b"\x00\x01\x03\x02\x05")
+    stream = frame("sEA LMDscandata 1") + tele + tele
+    for i in range(0, len(stream), 3):  # 3-byte chunks: every header is split
+        f.feed(stream[i : i + 3])
+    assert f.stats.cola_b_headers == 2

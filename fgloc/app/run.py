@@ -272,6 +272,12 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         raise LogError(f"{log}: the log has laser scans only ({n_scan} on {scan_topic}), no odometry or IMU: "
                        f"localize them on a map with --map MAP.yaml (fgloc map needs odometry too), or name the "
                        f"odometry / IMU topic with --odom-topic / --imu-topic; its topics: {topics_line(summ)}")
+    if req.map_yaml is None and n_odom == 0 and not configured:
+        # an IMU turns the robot but never moves it: every pose would stay at the start (a robot that
+        # drove a 123 s loop was written as 895 poses at x = y = 0, rc 0)
+        raise LogError(f"{log}: no odometry, and the IMU ({n_imu} on {imu_topic}) gives heading only: without a "
+                       f"map every pose would stay at the start; localize on a map with --map MAP.yaml, or name "
+                       f"the odometry topic with --odom-topic; its topics: {topics_line(summ)}")
     if req.map_yaml is not None and n_scan == 0:
         raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
                        f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "

@@ -1,6 +1,7 @@
 """Which topics ``fgloc map`` and ``fgloc run`` read, on logs written here: one rule for a default
 topic the log lacks (its only topic of that type, as ``fgloc import``; said on stderr), a
-scan-only log refused up front with a one-line ``fgloc: error: FILE: problem``, and a laser
+scan-only log refused up front with a one-line ``fgloc: error: FILE: problem`` (one with an IMU
+but no odometry too, without a map), and a laser
 whose frame is called ``rear_laser`` kept unless a front laser shares its topic."""
 
 from __future__ import annotations
@@ -12,12 +13,13 @@ from fgloc.cli import main
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.tum import read_tum
 from fgloc.mapping.source import pair_scans, rear_frames
-from fgloc.types import LaserScan, Odometry, Trajectory
+from fgloc.types import Imu, LaserScan, Odometry, Trajectory
 
 from . import synth
 
 
-def _write(path, n=60, scan_topic="/scan", odom_topic: str | None = "/odom", frame="laser"):
+def _write(path, n=60, scan_topic="/scan", odom_topic: str | None = "/odom", frame="laser",
+           imu_topic: str | None = None):
     world = synth.world_grid()
     full = synth.ring_drive(laps=1)
     traj = Trajectory(full.stamps[:n], full.poses[:n])
@@ -27,6 +29,10 @@ def _write(path, n=60, scan_topic="/scan", odom_topic: str | None = "/odom", fra
         for k, (t, p) in enumerate(zip(traj.stamps, traj.poses, strict=True)):
             if odom_topic is not None:
                 w.write(odom_topic, Odometry(stamp=float(t) - 0.01, twist=np.zeros(3), pose=odom[k].copy()))
+            if imu_topic is not None:
+                yaw = float(p[2])
+                w.write(imu_topic, Imu(stamp=float(t) - 0.005, angular_velocity_radps=np.zeros(3),
+                                       orientation_xyzw=np.array([0.0, 0.0, np.sin(yaw / 2), np.cos(yaw / 2)])))
             sc = synth.scan_at(world, p, float(t), rng=rng)
             sc.frame_id = frame
             w.write(scan_topic, sc)
@@ -56,6 +62,27 @@ def test_a_scan_only_log_is_refused_up_front(tmp_path, capsys):
     assert err.strip() == (
         f"fgloc: error: {log}: no odometry on /odom: fgloc map pairs every scan with wheel odometry (name its "
         "topic with --odom-topic); its topics: /scan (sensor_msgs/msg/LaserScan, 60)")
+
+
+def test_scans_and_an_imu_without_odometry_are_refused_without_a_map(tmp_path, capsys):
+    """An IMU turns the robot but never moves it: without odometry and without a map every pose
+    would stay at the start (an Isaac Sim log with /scan and /imu_data, a robot driving a 123 s loop,
+    was written as 895 poses at x = y = 0 with rc 0).  With the map, the scans place the robot."""
+    log = _write(tmp_path / "scan_imu.mcap", odom_topic=None, imu_topic="/imu")
+    out = tmp_path / "run"
+    rc, _, err = _cli(["run", str(log), "-o", str(out), "-q"], capsys)
+    assert rc == 2
+    assert err.strip() == (
+        f"fgloc: error: {log}: no odometry, and the IMU (60 on /imu) gives heading only: without a map every "
+        "pose would stay at the start; localize on a map with --map MAP.yaml, or name the odometry topic with "
+        "--odom-topic; its topics: /imu (sensor_msgs/msg/Imu, 60), /scan (sensor_msgs/msg/LaserScan, 60)")
+    assert not out.exists()
+    mp = tmp_path / "world.yaml"
+    synth.world_grid().save(mp)
+    rc, so, err = _cli(["run", str(log), "-o", str(out), "-q", "--map", str(mp)], capsys)
+    assert rc == 0, err
+    traj = read_tum(out / "trajectory.tum")
+    assert np.ptp(traj.poses[:, 0]) > 1.0 or np.ptp(traj.poses[:, 1]) > 1.0   # the robot moves
 
 
 def test_the_only_topic_of_a_type_stands_in_for_a_missing_default(tmp_path, capsys, caplog):

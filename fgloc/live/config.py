@@ -34,7 +34,10 @@ class LaserConfig:
 
     range_min_m: float = setting(0.5, "shorter ranges are invalid (paper Table 2: 0.5-50 m)", min=0)
     range_max_m: float = setting(50.0, "longer ranges are invalid", gt=0)
-    angle_offset_deg: float = setting(-90.0, "LMS1xx device angle 0 is the scanner's right side")
+    angle_offset_deg: float | None = setting(
+        None, "REP 103 angle = device angle + this; null = by the device family (sRN DeviceIdent): -90 for "
+        "LMS1xx, LMS5xx, TiM5xx/7xx, MRS1000 (device 0 deg is the scanner's right side), 0 for TiM240, "
+        "LRS4xxx, NAV2xx")
     align_clock: bool = setting(True, "device 'time since startup' -> host time")
     time_increment_from: str = setting(
         "measurement_frequency", "beam timing for de-skew: 1 / measurement frequency, or rotation: scan_time * "

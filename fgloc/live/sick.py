@@ -473,6 +473,7 @@ class SickStats:
     device_error_codes: dict[str, int] = field(default_factory=dict)  # sFA answers by SOPAS error name
     scan_counter_gaps: int = 0
     other_layer: int = 0  # telegrams of a multi-layer scanner's other layers (MRS1000), skipped
+    unsupported_device: int = 0  # scans of a device whose angles run clockwise (NAV3xx, LRS36xx, OEM15xx)
     meas_freq_in_hz: int = 0  # scans whose measurement frequency field was in Hz (corrected)
 
     def count_malformed(self, reason: str) -> None:
@@ -489,6 +490,36 @@ SOPAS_ERRORS = {
     0xE: "FLEX_OUT_OF_BOUNDS", 0xF: "EVENTREG_UNKNOWNINDEX", 0x10: "COLA_A_VALUE_OVERFLOW",
     0x11: "COLA_A_INVALID_CHARACTER",
 }
+
+
+# Device families whose angle convention is not the LMS1xx's (device 0 deg = the scanner's right side,
+# so REP 103 = device - 90 deg), from sick_scan_xd's per-family table (driver/src/sick_generic_parser.cpp:
+# setScanAngleShift / setScanMirroredAndShifted) and its README (the TiM240's frame is ROS's already).
+# ``(ident prefix, REP 103 = device + offset deg, or None: clockwise device angles, not supported)``
+DEVICE_FAMILIES: tuple[tuple[str, float | None], ...] = (
+    ("TIM24", 0.0), ("LRS4", 0.0), ("NAV2", 0.0),
+    ("NAV3", None), ("LRS36", None), ("OEM15", None),
+)
+DEFAULT_ANGLE_OFFSET_DEG = -90.0  # LMS1xx, LMS5xx, TiM5xx/7xx, MRS1000, LMS4000
+
+
+def device_angle_offset(ident: str) -> tuple[float | None, bool]:
+    """``(offset_deg, known)`` for a DeviceIdent name: the offset is None for a family whose angles
+    run clockwise (NAV3xx, LRS36xx, OEM15xx); ``known`` is False for a name not in
+    :data:`DEVICE_FAMILIES` (the LMS1xx convention, -90 deg, applies)."""
+    up = ident.upper()
+    for prefix, off in DEVICE_FAMILIES:
+        if up.startswith(prefix):
+            return off, True
+    return DEFAULT_ANGLE_OFFSET_DEG, False
+
+
+def parse_device_ident(payload: bytes) -> tuple[str, str]:
+    """``sRA DeviceIdent <len> <name> <len> <version>`` -> ``(name, version)`` (either may be "")."""
+    tok = payload.split()
+    name = tok[3].decode("ascii", "replace") if len(tok) > 3 else ""
+    version = tok[5].decode("ascii", "replace") if len(tok) > 5 else ""
+    return name, version
 
 
 def sopas_error_name(payload: bytes) -> str:
@@ -521,7 +552,7 @@ class SickClient(SensorThread):
         on_scan: Callable[[LaserScan, float], None],
         range_min: float = 0.05,
         range_max: float = 50.0,
-        angle_offset_deg: float = -90.0,
+        angle_offset_deg: float | None = -90.0,
         frame_id: str = "laser",
         time_increment_from: str = "measurement_frequency",
         align_clock: bool = True,
@@ -536,7 +567,9 @@ class SickClient(SensorThread):
         self.host, self.port = host, port
         self.on_scan = on_scan
         self.range_min, self.range_max = range_min, range_max
-        self.angle_offset_deg = angle_offset_deg
+        self.angle_offset_deg = angle_offset_deg  # None: by the device family (sRN DeviceIdent)
+        self.device_ident: str | None = None
+        self._family_offset_deg: float | None = DEFAULT_ANGLE_OFFSET_DEG
         self.frame_id = frame_id
         self.time_increment_from = time_increment_from
         self.align_clock = align_clock
@@ -584,6 +617,8 @@ class SickClient(SensorThread):
         head = payload[:16]
         if not (head.startswith(b"sSN LMDscandata") or head.startswith(b"sRA LMDscandata")):
             self.stats.other_telegrams += 1
+            if head.startswith(b"sRA DeviceIdent"):
+                self._device_ident(payload)
             if head.startswith(b"sFA"):
                 # the device refused a command (e.g. sEN LMDscandata: it will not stream)
                 self.stats.device_errors += 1
@@ -630,11 +665,34 @@ class SickClient(SensorThread):
                 self.on_event(f"{self.label}: multi-layer telegrams; localizing with layer field "
                               f"{self.layer_field}, skipping layer {t.layer_field} and any other")
             return None
-        scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, self.angle_offset_deg, self.frame_id,
+        offset = self.angle_offset_deg if self.angle_offset_deg is not None else self._family_offset_deg
+        if offset is None or self._family_offset_deg is None:
+            # device angles running clockwise: read as counter-clockwise they would be a mirrored scan
+            self.stats.unsupported_device += 1
+            return None
+        scan = telegram_to_scan(t, stamp, self.range_min, self.range_max, offset, self.frame_id,
                                 self.time_increment_from)
         self.stats.scans += 1
         self.on_scan(scan, arrival)
         return scan
+
+    def _device_ident(self, payload: bytes) -> None:
+        name, version = parse_device_ident(payload)
+        off, known = device_angle_offset(name)
+        first = self.device_ident != name
+        self.device_ident, self._family_offset_deg = name, off
+        if not first:
+            return
+        if off is None:
+            self.on_event(f"{self.label}: {name} {version}: its scan angles run clockwise, which fgloc does not "
+                          f"read; its scans are counted (unsupported_device) and skipped")
+        elif self.angle_offset_deg is None:
+            how = "its family's" if known else "the LMS1xx convention,"
+            self.on_event(f"{self.label}: {name} {version}: device angle + {off:g} deg = REP 103 ({how} "
+                          f"laser.angle_offset_deg)")
+        elif known and off != self.angle_offset_deg:
+            self.on_event(f"{self.label}: {name} {version}: its family's angle offset is {off:g} deg, "
+                          f"laser.angle_offset_deg is {self.angle_offset_deg:g}: check the scan's orientation")
 
     def counters(self) -> dict[str, Any]:
         """Every laser counter, for the status line and the summary."""
@@ -645,6 +703,7 @@ class SickClient(SensorThread):
             "connects": st.connects, "disconnects": st.disconnects, "scan_gaps": st.scan_counter_gaps,
             "device_errors": st.device_errors, "device_error_codes": dict(st.device_error_codes),
             "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
+            "unsupported_device": st.unsupported_device, "device": self.device_ident,
             "cola_b_headers": self.framer.stats.cola_b_headers, "thread_failure": self.failure,
         }
 
@@ -669,7 +728,8 @@ class SickClient(SensorThread):
             self.on_event(f"{self.label}: connected")
             try:
                 sock.settimeout(0.1)
-                sock.sendall(frame("sEN LMDscandata 1"))
+                # who it is (the family's angle convention), then stream; answered in this order
+                sock.sendall(frame("sRN DeviceIdent") + frame("sEN LMDscandata 1"))
                 last_data = time.monotonic()
                 got_any = False
                 while not self.stop_event.is_set():

@@ -318,7 +318,14 @@ class SickEmulator:
         scan_topic: str = "/scan",
         clock: ReplayClock | None = None,
         inject: dict[int, bytes] | None = None,
+        device_ident: str = "10 LMS10x_FieldEval 10 V1.36-21.10.2010",
+        telegram: dict | None = None,
     ) -> None:
+        """``device_ident``: the ``sRA DeviceIdent`` answer's fields (the LMS1xx manual's example);
+        ``telegram``: :func:`encode_lmdscandata` keywords giving a real device's telegram shape
+        (e.g. a TiM571's ``{"rssi_bits": 16, "name": "..."}``, an LMS5xx's ``{"scale": 2.0}``)."""
+        self.device_ident = device_ident
+        self.telegram_kw = dict(telegram or {})
         scans = [m for t, m in messages if t == scan_topic and isinstance(m, LaserScan)]
         scans.sort(key=lambda m: m.stamp)
         if t_start is not None:
@@ -457,8 +464,10 @@ class SickEmulator:
             k = max(0, min(self.sent_scans, len(self.scans) - 1))
             h = time.time()
             reply = frame(encode_lmdscandata(self.scans[k], k, k, self._dev_us(h), self._dev_us(h),
-                                             self.angle_offset_deg, command="sRA"))
+                                             self.angle_offset_deg, command="sRA", **self.telegram_kw))
             on = self._streaming
+        elif cmd == b"sRN DeviceIdent":
+            reply, on = frame("sRA DeviceIdent " + self.device_ident), self._streaming
         else:
             reply, on = frame("sFA 1"), self._streaming
         with self._lock:
@@ -481,7 +490,7 @@ class SickEmulator:
                     time_increment=sc.time_increment / self.speed, scan_time=period / self.speed,
                 )
                 payload = encode_lmdscandata(scaled, k, k, self._dev_us(h_start), self._dev_us(h_send),
-                                             self.angle_offset_deg)
+                                             self.angle_offset_deg, **self.telegram_kw)
                 out = frame(payload)
                 bad = self.malformed_prob > 0 and self.rng.random() < self.malformed_prob
                 if bad:

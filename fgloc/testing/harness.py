@@ -50,7 +50,9 @@ def replay_live(
     lead_s: float = 1.0,
     status_sink: Any = None,
     warmup: bool = True,
+    sick_kw: dict[str, Any] | None = None,
 ) -> LiveReplay:
+    """``sick_kw``: :class:`SickEmulator` keywords (a real device's telegram shape, DeviceIdent, ...)."""
     from fgloc.localization import Localizer
 
     rp = robot if isinstance(robot, RobotParams) else RobotParams.from_dict(robot)
@@ -85,7 +87,7 @@ def replay_live(
     loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
                     config=cfg)
     pair = EmulatorPair.create(messages, rp, mode=mode, speed=speed, t_start=t_start, duration=duration,
-                               lead_s=lead_s)
+                               lead_s=lead_s, sick_kw=sick_kw)
     sess = LiveSession(loc, pair.stm32.url, pair.sick.address, config=cfg, record=record, publish=publish,
                        status_sink=status_sink)
     sess.start()

@@ -171,3 +171,62 @@ def test_cola_a_framer_counts_cola_b_headers_split_across_chunks():
     for i in range(0, len(stream), 3):  # 3-byte chunks: every header is split
         f.feed(stream[i : i + 3])
     assert f.stats.cola_b_headers == 2
+
+
+# ----------------------------------------------------------------------------- angle convention by family
+# SICK families differ: LMS1xx/LMS5xx/TiM5xx/TiM7xx/MRS1000 count angles from the scanner's right side
+# (REP 103 = device - 90 deg), the TiM240's frame is ROS's already (sick_scan_xd README: "does not require
+# a coordinate conversion of 90 degrees"), NAV3xx/LRS36xx/OEM15xx count clockwise (sick_scan_xd mirrors
+# them).  Before: -90 deg for every device, so a TiM240's scan came out rotated by 90 deg.
+
+def _tim240_like() -> bytes:
+    """A 240 deg scan in the TiM240's frame: start -120 deg, 1 deg steps, 241 beams."""
+    s = LaserScan(stamp=0.0, angle_min=math.radians(-120), angle_increment=math.radians(1.0), range_min=0.05,
+                  range_max=50.0, ranges=np.linspace(1.0, 3.0, 241).astype(np.float32), scan_time=1 / 14.4)
+    p = encode_lmdscandata(s, 1, 1, 1000, 2000, angle_offset_deg=0.0)
+    assert b" FFEDB080 2710 F1 " in p  # start -1200000 (1/10000 deg), step 1 deg, 241 values
+    return p
+
+
+@pytest.mark.parametrize("ident, offset_deg", [
+    (b"sRA DeviceIdent 10 LMS10x_FieldEval 10 V1.36-21.10.2010", -90.0),
+    (b"sRA DeviceIdent 8 MRS1xxxx 8 1.3.0.0R", -90.0),
+    (b"sRA DeviceIdent 6 TiM240 6 V1.0.0", 0.0),
+    (b"sRA DeviceIdent 3 XYZ 1 1", -90.0),  # unknown family: the LMS1xx convention
+])
+def test_angle_offset_by_device_family(ident, offset_deg):
+    events: list[str] = []
+    c, scans = _client(events, angle_offset_deg=None)
+    c.handle_payload(ident, 1.0)
+    c.handle_payload(_tim240_like(), 1.1)
+    assert math.degrees(scans[0].angle_min) == pytest.approx(-120.0 + offset_deg)
+    assert c.counters()["device"] == ident.split()[3].decode() and any("REP 103" in e for e in events)
+
+
+def test_tim240_forward_beam_is_rep103_zero():
+    c, scans = _client(angle_offset_deg=None)
+    c.handle_payload(b"sRA DeviceIdent 6 TiM240 6 V1.0.0", 1.0)
+    c.handle_payload(_tim240_like(), 1.1)
+    s = scans[0]
+    assert math.degrees(s.angle_min + 120 * s.angle_increment) == pytest.approx(0.0, abs=1e-9)  # the 121st beam
+    assert s.ranges[120] == pytest.approx(2.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("offset", [None, -90.0])
+def test_clockwise_family_is_skipped_and_reported_not_mirrored(offset):
+    events: list[str] = []
+    c, scans = _client(events, angle_offset_deg=offset)
+    c.handle_payload(b"sRA DeviceIdent 6 NAV350 6 V1.0.0", 1.0)
+    for k in range(3):
+        c.handle_payload(_tim240_like(), 1.1 + k)
+    assert scans == [] and c.stats.unsupported_device == 3
+    assert sum("clockwise" in e for e in events) == 1
+
+
+def test_explicit_offset_kept_but_a_family_mismatch_is_reported():
+    events: list[str] = []
+    c, scans = _client(events, angle_offset_deg=-90.0)
+    c.handle_payload(b"sRA DeviceIdent 6 TiM240 6 V1.0.0", 1.0)
+    c.handle_payload(_tim240_like(), 1.1)
+    assert math.degrees(scans[0].angle_min) == pytest.approx(-210.0)
+    assert any("check the scan's orientation" in e for e in events)

@@ -4,6 +4,9 @@ Topics of the types fgloc reads are converted with the same rules as the MCAP re
 (:mod:`fgloc.io.ros`).  Messages come in record-time order (the bag's log time); a type the
 bag defines that the type store lacks is registered from the bag's own definition.  A ROS 2
 bag's messages keep their CDR bytes for copying (:class:`fgloc.io.source.Record`).
+
+Topic names are the ones ROS resolves: a relative name a recorder stored (``scan``, as format-1.2
+bags and some writers do) is the root namespace's ``/scan`` (:func:`resolved_topic`).
 """
 
 from __future__ import annotations
@@ -22,6 +25,12 @@ from fgloc.io.topics import TF_MESSAGE, Topics, normalize_type
 log = logging.getLogger(__name__)
 
 
+def resolved_topic(name: str) -> str:
+    """A bag's topic name as ROS resolves it: a relative name (no leading ``/``) is in the root
+    namespace, as the recording node in the root namespace published it (``scan`` -> ``/scan``)."""
+    return name if name.startswith("/") or not name else "/" + name
+
+
 class BagSource(LogSource):
     """Base of :class:`~fgloc.io.rosbag1.Rosbag1Source` and :class:`~fgloc.io.rosbag2.Rosbag2Source`."""
 
@@ -35,7 +44,7 @@ class BagSource(LogSource):
         try:
             self._conns = list(reader.connections)
             for c in self._conns:
-                info = self._topic_info.setdefault(c.topic, TopicInfo(normalize_type(c.msgtype)))
+                info = self._topic_info.setdefault(resolved_topic(c.topic), TopicInfo(normalize_type(c.msgtype)))
                 info.count += int(c.msgcount)
             self._n = sum(int(c.msgcount) for c in self._conns)
             if self._n:
@@ -77,25 +86,26 @@ class BagSource(LogSource):
         return self._store
 
     def _channel_info(self, c: Any) -> ChannelInfo:
+        topic = resolved_topic(c.topic)
         if not self.ros2:
-            return ChannelInfo(c.topic, normalize_type(c.msgtype))
+            return ChannelInfo(topic, normalize_type(c.msgtype))
         md = getattr(c, "msgdef", None)
         fmt = getattr(getattr(md, "format", None), "name", "NONE")
         text = getattr(md, "data", "") or ""
         enc = {"MSG": "ros2msg", "IDL": "ros2idl"}.get(fmt, "") if text else ""
-        return ChannelInfo(c.topic, normalize_type(c.msgtype), c.msgtype, enc, text.encode(), "cdr")
+        return ChannelInfo(topic, normalize_type(c.msgtype), c.msgtype, enc, text.encode(), "cdr")
 
     def _records(self, want: set[str]) -> Iterator[Record]:
         store = self._typestore()
         deserialize = store.deserialize_cdr if self.ros2 else store.deserialize_ros1
-        conns = [c for c in self._conns if c.topic in want]
+        conns = [c for c in self._conns if resolved_topic(c.topic) in want]
         convs: dict[int, Any] = {}
         infos: dict[int, ChannelInfo] = {}
         for c in conns:
             fn = FROM_ROS.get(normalize_type(c.msgtype))
             if fn is None:
                 log.warning("%s: topic %s has type %s, which fgloc does not read; skipped",
-                            self.path, c.topic, c.msgtype)
+                            self.path, resolved_topic(c.topic), c.msgtype)
             convs[c.id] = fn
             infos[c.id] = self._channel_info(c)
         if not conns:
@@ -106,19 +116,20 @@ class BagSource(LogSource):
                 fn = convs.get(conn.id)
                 if fn is None:
                     continue
+                topic = infos[conn.id].topic
                 try:
                     ros = deserialize(raw, conn.msgtype)
-                    out = fn(ros, conn.topic)
+                    out = fn(ros, topic)
                     if normalize_type(conn.msgtype) == TF_MESSAGE:
                         self.note_tf(out, tf_flips(ros))
                 except Exception as e:  # noqa: BLE001 - an undecodable message is skipped
-                    n = self.undecodable.get(conn.topic, 0)
-                    self.undecodable[conn.topic] = n + 1
+                    n = self.undecodable.get(topic, 0)
+                    self.undecodable[topic] = n + 1
                     if n == 0:
                         log.warning("%s: cannot decode %s (%s): %s; skipping such messages",
-                                    self.path, conn.topic, conn.msgtype, e)
+                                    self.path, topic, conn.msgtype, e)
                     continue
-                yield Record(conn.topic, out, int(t), bytes(raw) if self.ros2 else None, infos[conn.id])
+                yield Record(topic, out, int(t), bytes(raw) if self.ros2 else None, infos[conn.id])
         finally:
             reader.close()
 

@@ -17,6 +17,7 @@ import pytest
 from fgloc.cli import main
 from fgloc.errors import LogError
 from fgloc.io import open_log
+from fgloc.io.tum import read_tum
 from fgloc.types import LaserScan, Odometry
 
 N = 12
@@ -263,6 +264,26 @@ def test_format_1_2_bag(tmp_path, capsys):
     _same(_records(old), _records(good))
     assert main(["info", str(old)]) == 0
     assert f"{N}  nav_msgs/msg/Odometry" in capsys.readouterr().out
+
+
+def test_relative_topic_names_are_the_root_namespaces(tmp_path, capsys, caplog):
+    """A recorder that stored relative names (``scan``, ``odom``, ``tf``: format-1.2 bags, The
+    Construct's ``laser_scan``) is read under the names ROS resolves them to (``/scan`` ...): the
+    default topics match with no fallback said, and a name given with its slash is found (before:
+    ``--scan-topic /laser_scan`` was "no such topic" on a bag listing ``laser_scan``)."""
+    good, old = tmp_path / "good.bag", tmp_path / "relative.bag"
+    msgs = _write_v2(good)
+    _write_v12(old, [(t.lstrip("/"), typ, ns, raw) for t, typ, ns, raw in msgs], _store())
+    src = open_log(old)
+    assert sorted(src.summary()["topics"]) == ["/odom", "/scan", "/tf"]
+    _same(_records(old), _records(good))
+    assert main(["info", str(old)]) == 0
+    assert [ln.split()[0] for ln in capsys.readouterr().out.splitlines()[1:]] == ["/odom", "/scan", "/tf"]
+    caplog.clear()
+    out = tmp_path / "run"
+    assert main(["run", str(old), "-o", str(out), "-q", "--scan-topic", "/scan", "--odom-topic", "/odom"]) == 0
+    assert not [r for r in caplog.records if "the log's only topic of that type" in r.getMessage()]
+    assert len(read_tum(out / "trajectory.tum")) > 0
 
 
 def _message_records(data: bytes):

@@ -10,6 +10,10 @@ A recording that did not end cleanly (killed, power lost) leaves a folder withou
 ``-wal`` file's messages are read from a copy the log is merged into (``rosbags`` opens
 databases immutable, which leaves the ``-wal`` out); where that cannot be done (split or
 compressed bags) a warning says how many bytes are left out.
+
+``fgloc info`` calls a folder *indexed* when it is read through its ``metadata.yaml`` with nothing
+left in a ``-wal`` (a clean recording, whose counts and time span the recorder wrote); one read
+without it, or with unmerged messages, is *not indexed*.
 """
 
 from __future__ import annotations
@@ -59,6 +63,8 @@ class Rosbag2Source(BagSource):
             raise LogError(f"{p}: bag folder not found")
         self._open_path = self._unclean(p)
         super().__init__(p, topics)
+        self.indexed = (self._open_path == p and p.is_dir() and (p / "metadata.yaml").is_file()
+                        and not any(_wal(db).is_file() and _wal(db).stat().st_size > 0 for db in p.glob("*.db3")))
 
     def _unclean(self, p: Path) -> Path:
         """What ``rosbags`` opens for ``p``: ``p`` itself, its lone ``.db3`` when it has no

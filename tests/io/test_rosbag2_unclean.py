@@ -153,3 +153,14 @@ def test_run_reads_every_message(tmp_path, capsys, wal):
     assert main(["run", str(killed), "-o", str(tmp_path / "out"), "-q"]) == 0
     out = capsys.readouterr().out
     assert f"scans {N}, " in out and f"odometry {N + EXTRA if wal else N}, " in out
+
+
+def test_info_calls_a_clean_folder_indexed(tmp_path, capsys):
+    """``fgloc info``: a folder read through its metadata.yaml is indexed (every rosbag2 folder
+    was "not indexed" before); one without it, or with messages left in a -wal, is not."""
+    good, killed, _ = _killed(tmp_path)
+    _, with_meta, _ = _killed(tmp_path / "m", with_metadata=True)
+    for folder, word in ((good, "indexed"), (killed, "not indexed"), (with_meta, "not indexed")):
+        capsys.readouterr()
+        assert main(["info", str(folder)]) == 0
+        assert capsys.readouterr().out.splitlines()[0].endswith(f"), {word}"), folder

@@ -1,4 +1,5 @@
-"""``fgloc import`` (ROS 1 bag / ROS 2 bag / CARMEN -> MCAP) and ``fgloc info`` (what a log holds)."""
+"""``fgloc import`` (ROS 1 bag / ROS 2 bag / CARMEN / another MCAP -> fgloc's MCAP) and ``fgloc info``
+(what a log holds)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ def register(app: typer.Typer) -> None:
     @app.command("import")
     def import_cmd(
         src: Annotated[Path, typer.Argument(
-            help="ROS 1 .bag, ROS 2 bag folder (.db3 or split .mcap) or CARMEN .clf/.log (also .gz/.bz2)")],
+            help="ROS 1 .bag, ROS 2 bag folder (.db3 or split .mcap), an MCAP (ROS 1 or ROS 2 encoded) or "
+                 "CARMEN .clf/.log (also .gz/.bz2)")],
         output: Annotated[Path, typer.Option("-o", "--output", help="MCAP log to write")],
         scan_topic: Annotated[str, typer.Option(help="LaserScan topic in a bag")] = "/scan",
         odom_topic: Annotated[str, typer.Option(help="Odometry topic in a bag")] = "/odom",
@@ -30,8 +32,8 @@ def register(app: typer.Typer) -> None:
         force: Annotated[bool, typer.Option("--force", help="overwrite an existing output not written by fgloc")
                          ] = False,
     ) -> None:
-        """Convert a ROS 1 bag, a ROS 2 bag folder or a CARMEN log into fgloc's ROS 2 MCAP form
-        (fgloc run / map / info also read them directly)."""
+        """Convert a ROS 1 bag, a ROS 2 bag folder, an MCAP or a CARMEN log into fgloc's ROS 2 MCAP
+        form (fgloc run / map / info also read them directly)."""
         from fgloc.io.convert import import_log
         from fgloc.io.topics import Topics
 

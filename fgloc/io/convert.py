@@ -1,6 +1,6 @@
-"""``import_log``: ROS 1 bags, ROS 2 bag folders (SQLite .db3 or split MCAP) and CARMEN logs
-into fgloc's ROS 2 MCAP form, through the same readers ``fgloc run`` uses
-(:func:`fgloc.io.open_log`)."""
+"""``import_log``: ROS 1 bags, ROS 2 bag folders (SQLite .db3 or split MCAP), MCAP files (ROS 1
+encoded, as ``mcap convert`` writes them, or ROS 2) and CARMEN logs into fgloc's ROS 2 MCAP form,
+through the same readers ``fgloc run`` uses (:func:`fgloc.io.open_log`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fgloc.errors import LogError
-from fgloc.io.formats import detect_format, open_log
+from fgloc.io.formats import open_log
 from fgloc.io.mcap_format import MCAP_MAGIC
 from fgloc.io.mcap_writer import LIBRARY, LogWriter
 from fgloc.io.topics import Topics, choose_topics
@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 class ImportResult:
     src: Path
     dst: Path
-    format: str                      # "rosbag1", "rosbag2" or "carmen"
+    format: str                      # "rosbag1", "rosbag2", "mcap" or "carmen"
     counts: dict[str, int] = field(default_factory=dict)  # output topic -> messages
     seconds: float = 0.0
     skipped: dict[str, int] = field(default_factory=dict)  # bad lines / undecodable messages
@@ -79,8 +79,8 @@ def check_output(dst: Path, inputs: list[Path], force: bool = False) -> None:
 def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
                progress: bool | None = None, max_range_m: float | None = None,
                force: bool = False) -> ImportResult:
-    """Convert a ROS 1 ``.bag``, a ROS 2 bag folder or a CARMEN ``.clf/.log`` (plain/gz/bz2) into
-    ``dst`` (MCAP).
+    """Convert a ROS 1 ``.bag``, a ROS 2 bag folder, an MCAP (ROS 1 or ROS 2 encoded) or a CARMEN
+    ``.clf/.log`` (plain/gz/bz2) into ``dst`` (MCAP).
 
     ``topics`` names the source topics of a bag (outputs use the default names; a role whose
     default topic is absent takes the only topic of its type).  Each message keeps its log
@@ -96,9 +96,6 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
 
     src, dst = Path(src), Path(dst)
     check_output(dst, [src], force)
-    fmt, _ = detect_format(src)
-    if fmt == "mcap":
-        raise LogError(f"{src}: already an MCAP log; nothing to import")
     source = open_log(src, Topics(), max_range_m=max_range_m)
     available = source.topic_types()
     chosen = choose_topics(available, topics or Topics(), src)

@@ -139,3 +139,25 @@ def test_run_on_ros1_encoded_mcap(tmp_path, capsys):
         got = [m for _, m in src.messages(["/scan"])]
     assert len(got) == N
     np.testing.assert_allclose(got[-1].ranges, np.linspace(0.5, 6.0, 360).astype(np.float32) + np.float32(0.09))
+
+
+def test_import_converts_an_mcap(tmp_path, capsys):
+    """fgloc import takes an MCAP like a bag (it said "already an MCAP log; nothing to import",
+    though run reads it): a ROS 1-encoded one comes out in ROS 2 (cdr) with the bag's records."""
+    bag, mcap = tmp_path / "run.bag", tmp_path / "run.mcap"
+    _bag(bag)
+    _converted(bag, mcap)
+    out = tmp_path / "imported.mcap"
+    assert main(["import", str(mcap), "-o", str(out)]) == 0
+    assert "imported mcap run.mcap" in capsys.readouterr().out
+    from mcap.reader import make_reader
+
+    with out.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert {ch.topic: ch.message_encoding for ch in summary.channels.values()} == {
+        "/scan": "cdr", "/odom": "cdr", "/imu": "cdr", "/tf": "cdr"}
+    got, want = _records(out), _records(bag)
+    assert [(t, n, type(m)) for t, n, m in got] == [(t, n, type(m)) for t, n, m in want]
+    assert main(["import", str(out), "-o", str(out), "--force"]) == 2   # never the input itself
+    assert "is the input" in capsys.readouterr().err

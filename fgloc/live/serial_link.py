@@ -23,7 +23,7 @@ from fgloc.geometry import compose1, wrap_angle
 from fgloc.geometry import exp as se2_exp
 from fgloc.live.clock import ClockSync
 from fgloc.live.config import RobotParams
-from fgloc.live.serial_protocol import COUNT_MOD, FrameParser, SensorFrame
+from fgloc.live.serial_protocol import COUNT_MOD, SYNC, FrameParser, SensorFrame
 from fgloc.live.worker import SensorThread
 from fgloc.types import CompassHeading, Odometry
 
@@ -256,6 +256,11 @@ class SerialLink(SensorThread):
                 continue
             backoff = self.backoff_min_s
             self.opens += 1
+            if self.parser.pending >= len(SYNC):
+                # a frame cut by the disconnect (unplugged, port closed): its rest is never coming, and
+                # joined to the new port's first bytes it would fail its CRC and count as line corruption
+                self.parser.stats.truncated += 1
+                self.parser.reset_buffer()
             self.connected = True
             self.on_event(f"serial {self.url or port}: open")
             try:

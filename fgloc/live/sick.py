@@ -561,9 +561,12 @@ class SickClient(SensorThread):
         backoff_max_s: float = 2.0,
         on_event: Callable[[str], None] | None = None,
         layer_field: int = 0,
+        first_data_timeout_s: float = 5.0,
     ) -> None:
         super().__init__(on_event, backoff_min_s, backoff_max_s)
         self.layer_field = layer_field
+        self.first_data_timeout_s = first_data_timeout_s  # a scanner still spinning up gets this long
+        self._stream_acked = False  # sEA LMDscandata 1 seen on this connection
         self.host, self.port = host, port
         self.on_scan = on_scan
         self.range_min, self.range_max = range_min, range_max
@@ -619,6 +622,8 @@ class SickClient(SensorThread):
             self.stats.other_telegrams += 1
             if head.startswith(b"sRA DeviceIdent"):
                 self._device_ident(payload)
+            elif payload.split() == [b"sEA", b"LMDscandata", b"1"]:
+                self._stream_acked = True
             if head.startswith(b"sFA"):
                 # the device refused a command (e.g. sEN LMDscandata: it will not stream)
                 self.stats.device_errors += 1
@@ -676,6 +681,18 @@ class SickClient(SensorThread):
         self.on_scan(scan, arrival)
         return scan
 
+    def _stall_reason(self, got_scans: bool, bytes0: int, limit_s: float) -> str:
+        """Why a connection is given up as stalled, as far as the device let it be known."""
+        if got_scans:
+            return f"no data for {limit_s:g} s (stalled)"
+        if self.framer.stats.bytes_in == bytes0:
+            return (f"no answer to sRN DeviceIdent / sEN LMDscandata 1 in {limit_s:g} s (not a SICK CoLa-A "
+                    f"port, or a device set to CoLa-B?)")
+        if self._stream_acked:
+            return (f"sEN LMDscandata 1 acknowledged but no scan in {limit_s:g} s (is the scanner measuring? "
+                    f"SOPAS ET shows its state; sMN LMCstartmeas starts it)")
+        return f"no scan in {limit_s:g} s and sEN LMDscandata 1 not acknowledged (see the answers above)"
+
     def _device_ident(self, payload: bytes) -> None:
         name, version = parse_device_ident(payload)
         off, known = device_angle_offset(name)
@@ -730,22 +747,24 @@ class SickClient(SensorThread):
                 sock.settimeout(0.1)
                 # who it is (the family's angle convention), then stream; answered in this order
                 sock.sendall(frame("sRN DeviceIdent") + frame("sEN LMDscandata 1"))
+                self._stream_acked = False
+                scans0, bytes0 = self.stats.scans, self.framer.stats.bytes_in
                 last_data = time.monotonic()
-                got_any = False
                 while not self.stop_event.is_set():
                     try:
                         chunk = sock.recv(65536)
                     except TimeoutError:
                         # a scanner still spinning up gets longer before it counts as stalled
-                        limit = self.stall_timeout_s if got_any else max(self.stall_timeout_s, 5.0)
+                        got_scans = self.stats.scans > scans0
+                        limit = self.stall_timeout_s if got_scans else max(self.stall_timeout_s,
+                                                                           self.first_data_timeout_s)
                         if time.monotonic() - last_data > limit:
-                            raise ConnectionError("no data (stalled)") from None
+                            raise ConnectionError(self._stall_reason(got_scans, bytes0, limit)) from None
                         continue
                     if not chunk:
                         raise ConnectionError("closed by peer")
                     now = time.time()
                     last_data = time.monotonic()
-                    got_any = True
                     n_b = self.framer.stats.cola_b_headers
                     for payload in self.framer.feed(chunk):
                         self.handle_payload(payload, now)

@@ -230,3 +230,72 @@ def test_explicit_offset_kept_but_a_family_mismatch_is_reported():
     c.handle_payload(_tim240_like(), 1.1)
     assert math.degrees(scans[0].angle_min) == pytest.approx(-210.0)
     assert any("check the scan's orientation" in e for e in events)
+
+
+# ----------------------------------------------------------------------------- a device that does not stream
+# Before: every one of these ended in "connection lost (no data (stalled)); reconnecting", whatever the
+# device had said; now the reason names what the device did.
+
+def _serve_answers(answers: dict[bytes, bytes]):
+    """A TCP server that answers CoLa-A commands from ``answers`` (nothing for others), never streams."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(4)
+    srv.settimeout(0.2)
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                continue
+            conn.settimeout(0.2)
+            buf = b""
+            with conn:
+                while not stop.is_set():
+                    try:
+                        data = conn.recv(4096)
+                    except TimeoutError:
+                        continue
+                    except OSError:
+                        break
+                    if not data:
+                        break
+                    buf += data
+                    while b"\x03" in buf:
+                        cmd, _, buf = buf.partition(b"\x03")
+                        reply = answers.get(cmd[cmd.rfind(b"\x02") + 1 :])
+                        if reply:
+                            conn.sendall(frame(reply))
+
+    th = threading.Thread(target=serve, daemon=True)
+    th.start()
+    return srv, stop
+
+
+@pytest.mark.parametrize("answers, reason", [
+    ({}, "no answer to sRN DeviceIdent / sEN LMDscandata 1"),
+    ({b"sRN DeviceIdent": b"sRA DeviceIdent 6 TiM571 5 V3.5", b"sEN LMDscandata 1": b"sEA LMDscandata 1"},
+     "acknowledged but no scan"),
+    ({b"sEN LMDscandata 1": b"sFA 1"}, "not acknowledged"),
+])
+def test_a_device_that_does_not_stream_is_reported_with_what_it_said(answers, reason):
+    srv, stop = _serve_answers(answers)
+    events: list[str] = []
+    c = SickClient("127.0.0.1", srv.getsockname()[1], on_scan=lambda s, t: None, on_event=events.append,
+                   stall_timeout_s=0.2, first_data_timeout_s=0.2)
+    c.start()
+    try:
+        deadline = time.monotonic() + 60.0
+        while c.stats.disconnects < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        lost = [e for e in events if "connection lost" in e]
+        assert len(lost) >= 2 and all(reason in e for e in lost), events
+        assert c.failure is None and c.thread is not None and c.thread.is_alive()
+        if b"sEN LMDscandata 1" in answers and answers[b"sEN LMDscandata 1"].startswith(b"sFA"):
+            assert c.stats.device_error_codes["METHODIN_ACCESSDENIED"] >= 2
+    finally:
+        c.stop()
+        stop.set()
+        srv.close()

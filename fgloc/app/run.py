@@ -284,7 +284,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                        f"{topics_line(summ)}")
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
     mode = "map" if occ_map is not None else "odom"
-    laser_mount, mirror_scans = _laser_mount(reader, n_scan, config)
+    laser_mount, mirror_scans = _laser_mount(reader, n_scan, config, req.static_transforms)
     loc = Localizer(occ_map, laser_mount, backend=req.backend, frontend=req.frontend, initial_pose=pose0,
                     config=config)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -420,14 +420,17 @@ def scale_warnings(stats: dict[str, Any], mount_assumed: bool) -> list[str]:
     return out
 
 
-def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> tuple[Any, bool]:
+def _laser_mount(reader: Any, n_scan: int, config: FglocConfig,
+                 cli: list[dict] | None = None) -> tuple[Any, bool]:
     """``(base_link -> laser, mirrored)``: the config's (``sources.static_transforms``, ``--static-transform``)
     when it names the scan's frame, else the log's; no lookup (and no 'no transform' warning) in a
     log without scans.  ``mirrored``: the configured laser is upside down, so its scans are to be
     read mirrored (:func:`fgloc.io.tf.planar_mount`; the log's own upside-down tf is
-    handled by the reader)."""
+    handled by the reader).  ``cli``: the command line's entries, so that a tilted mount's error
+    names the option it came from (else the config's key)."""
     import numpy as np
 
+    from fgloc.app.mounts import RPY_OPTION, XYZW_OPTION
     from fgloc.io.tf import mount_of, planar_mount
     from fgloc.localization.frames import parse_static_transforms
     from fgloc.types import StaticTransform
@@ -437,10 +440,9 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig) -> tuple[Any, bo
     mine = mount_of(reader.scan_frame(), parse_static_transforms(config.sources.static_transforms))
     if mine is None:
         return reader.laser_mount(), False
-    try:
-        return planar_mount(mine)
-    except ConfigError as e:
-        raise ConfigError(f"sources.static_transforms: {e}") from None
+    given = next((e for e in cli or () if str(e.get("child", "")).lstrip("/") == mine.child.lstrip("/")), None)
+    where = "sources.static_transforms" if given is None else XYZW_OPTION if "xyzw" in given else RPY_OPTION
+    return planar_mount(mine, where)
 
 
 def _mirrored_scans(messages: Any, scan_topic: str, frame: str) -> Any:

@@ -62,15 +62,20 @@ def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransfo
     return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in BASE_FRAMES), None)
 
 
-def planar_mount(t: StaticTransform) -> tuple[StaticTransform, bool]:
+#: who gives the mounts planar_mount checks, by default (its ConfigError names it)
+MOUNT_OPTIONS = "--static-transform / --static-transform-xyzw"
+
+
+def planar_mount(t: StaticTransform, given_by: str = MOUNT_OPTIONS) -> tuple[StaticTransform, bool]:
     """A robot -> laser transform (a :class:`~fgloc.types.Transform3D` with its whole rotation, or a
     planar one) as the 2-D mount the scans are used with, and whether they are to be read mirrored.
 
     A level laser is its (x, y, yaw); one mounted upside down (its z axis down: rolled or pitched
     by pi, ``R = Rz(yaw) Rx(pi)``) is the upright laser at the same place and yaw whose scans are
     the log's mirrored (angles negated), as :mod:`fgloc.io` reads a log's upside-down tf and nav2
-    does.  A tilted laser (z axis more than ~8 deg off vertical) is a :class:`ConfigError`: its
-    beams do not sweep the plane the map is of."""
+    does.  A tilted laser (z axis more than ~8 deg off vertical) is a :class:`ConfigError` naming
+    ``given_by`` (the option or config key the mount came from): its beams do not sweep the plane
+    the map is of."""
     q = getattr(t, "rotation_xyzw", None)
     if q is None:
         return t, False
@@ -81,5 +86,6 @@ def planar_mount(t: StaticTransform) -> tuple[StaticTransform, bool]:
     if r[8] <= -LEVEL_COS:
         return mount, True
     tilt = float(np.degrees(np.arccos(min(1.0, abs(r[8])))))
-    raise ConfigError(f"the laser {t.child} is tilted {tilt:.1f} deg from level (roll / pitch): fgloc maps and "
-                      "localizes with a level or upside-down (roll 180) laser")
+    raise ConfigError(f"{given_by} {t.parent} {t.child}: the laser is tilted {tilt:.1f} deg from level (roll / "
+                      "pitch); fgloc maps and localizes with a level laser or one upside down (ROLL 180 or "
+                      "PITCH 180): check the ROLL and PITCH given")

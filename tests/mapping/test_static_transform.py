@@ -94,7 +94,10 @@ def test_without_the_mount_the_map_is_wrong(flipped_log, capsys):
     (["--static-transform-xyzw", "base_link", "laser", "0.2", "0", "0", "1", "0", "0", "0.5"],
      "--static-transform-xyzw base_link laser: QX QY QZ QW is not a unit quaternion (norm 1.1180)"),
     (["--static-transform", "base_link", "laser", "0.2", "0", "0", "40", "0", "0"],
-     "the laser laser is tilted 40.0 deg from level"),
+     "base_link laser: the laser is tilted 40.0 deg from level (roll / pitch); fgloc maps and localizes with a "
+     "level laser or one upside down (ROLL 180 or PITCH 180): check the ROLL and PITCH given"),
+    (["--static-transform-xyzw", "base_link", "laser", "0.2", "0", "0", "0.3420", "0", "0", "0.9397"],
+     "base_link laser: the laser is tilted 40.0 deg from level"),
     (["--static-transform", "odom", "laser", "0.2", "0", "0", "180", "0", "0"],
      "--static-transform: parent frame 'odom': fgloc takes mounts on the robot"),
     (["--static-transform", "base_link", "laser", "nan", "0", "0", "180", "0", "0"],

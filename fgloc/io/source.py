@@ -31,7 +31,7 @@ import numpy as np
 
 from fgloc.errors import LogError
 from fgloc.io.ros import mirror_scan
-from fgloc.io.tf import TfTree
+from fgloc.io.tf import TfTree, frame_name
 from fgloc.io.topics import Topics
 from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory
 
@@ -90,6 +90,11 @@ class TopicInfo:
     type: str
     count: int = 0
 
+
+
+def _edge(t: StaticTransform) -> tuple[str, str]:
+    """A transform's ``(parent, child)`` as tf2 names the frames (:func:`fgloc.io.tf.frame_name`)."""
+    return frame_name(t.parent), frame_name(t.child)
 
 class LogSource:
     """Base of every log format's reader (see the module doc).  Subclasses fill
@@ -202,23 +207,24 @@ class LogSource:
         """``(parent, child)`` of the flipped transforms on the chains from the mirrored scan frames."""
         out: set[tuple[str, str]] = set()
         for frame in self._mirror_frames:
-            cur = frame
+            cur = frame_name(frame)
             for _ in range(64):
                 tr = self._tf.parents.get(cur)
                 if tr is None:
                     break
-                if self._tf.flipped.get((tr.parent, tr.child), False):
-                    out.add((tr.parent, tr.child))
-                cur = tr.parent
+                edge = (frame_name(tr.parent), frame_name(tr.child))
+                if self._tf.flipped.get(edge, False):
+                    out.add(edge)
+                cur = edge[0]
         return out
 
     def _mirrored(self, it: Iterator[Record], edges: set[tuple[str, str]]) -> Iterator[Record]:
         for rec in it:
             if isinstance(rec.msg, LaserScan) and rec.msg.frame_id.lstrip("/") in self._mirror_frames:
                 rec = rec._replace(msg=mirror_scan(rec.msg))
-            elif edges and isinstance(rec.msg, list) and any((t.parent, t.child) in edges for t in rec.msg):
+            elif edges and isinstance(rec.msg, list) and any(_edge(t) in edges for t in rec.msg):
                 rec = rec._replace(msg=[StaticTransform(t.parent, t.child, t.pose, t.z)
-                                        if (t.parent, t.child) in edges else t for t in rec.msg])
+                                        if _edge(t) in edges else t for t in rec.msg])
             yield rec
 
     def _records(self, want: set[str]) -> Iterator[Record]:
@@ -227,7 +233,7 @@ class LogSource:
     def note_tf(self, transforms: list[StaticTransform], flips: list[bool]) -> None:
         for tr, flip in zip(transforms, flips, strict=True):
             if flip:
-                self._tf.flipped[(tr.parent, tr.child)] = True
+                self._tf.flipped[_edge(tr)] = True
 
     # -- derived -----------------------------------------------------------------------------
     def clock_offsets(self, topics: Iterable[str]) -> dict[str, float]:
@@ -299,7 +305,7 @@ class LogSource:
     def _use_mount(self, found: tuple[StaticTransform, bool], frame: str) -> StaticTransform:
         mount, mirrored = found
         if mirrored:
-            self._mirror_frames.add(frame)
+            self._mirror_frames.add(frame_name(frame))
             log.info("%s: laser %s is mounted upside down; its scans are read mirrored", self.path, frame)
         return mount
 

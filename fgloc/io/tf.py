@@ -22,8 +22,20 @@ LEVEL_COS = 0.99  # a laser's z axis within ~8 deg of vertical (up, or down: ups
 MAX_CHAIN = 32
 
 
+def frame_name(frame: str) -> str:
+    """A tf frame as tf2 names it: without ROS 1's leading ``/`` (``/laser`` is ``laser``)."""
+    return frame.lstrip("/")
+
+
+def is_base_frame(frame: str) -> bool:
+    """One of the robot's own frames (:data:`BASE_FRAMES`), also under a tf prefix or namespace
+    (``tb3_0/base_link``, ``/robot1/base_footprint``: a multi-robot log's frames)."""
+    return frame_name(frame).rsplit("/", 1)[-1] in BASE_FRAMES
+
+
 class TfTree:
-    """Transforms by child frame (the first one seen wins) and their upside-down flags."""
+    """Transforms by child frame (the first one seen wins) and their upside-down flags; frames
+    are compared as tf2 names them (:func:`frame_name`)."""
 
     def __init__(self) -> None:
         self.parents: dict[str, StaticTransform] = {}
@@ -31,28 +43,29 @@ class TfTree:
 
     def add(self, transforms: list[StaticTransform], flips: list[bool] | None = None) -> None:
         for k, tr in enumerate(transforms):
-            self.parents.setdefault(tr.child, tr)
+            self.parents.setdefault(frame_name(tr.child), tr)
             if flips is not None and flips[k]:
-                self.flipped[(tr.parent, tr.child)] = True
+                self.flipped[(frame_name(tr.parent), frame_name(tr.child))] = True
 
     def chain(self, frame: str) -> tuple[StaticTransform, bool] | None:
-        """``(base -> frame, mirrored)`` or None when no chain reaches a base frame: the 2-D
-        mount and whether an odd number of the transforms on the way turn the z axis down."""
-        pose, z, cur, mirrored = np.zeros(3), 0.0, frame, False
+        """``(base -> frame, mirrored)`` or None when no chain reaches a base frame (a prefixed
+        one too: :func:`is_base_frame`): the 2-D mount and whether an odd number of the
+        transforms on the way turn the z axis down."""
+        pose, z, cur, mirrored = np.zeros(3), 0.0, frame_name(frame), False
         for _ in range(MAX_CHAIN):
-            if cur in BASE_FRAMES:
+            if is_base_frame(cur):
                 return StaticTransform(cur, frame, pose, z), mirrored
             tr = self.parents.get(cur)
             if tr is None:
                 return None
-            if self.flipped.get((tr.parent, tr.child), False):
+            if self.flipped.get((frame_name(tr.parent), frame_name(tr.child)), False):
                 # R = Rz(yaw) Rx(pi): a child pose (x, y, th) is (x, -y, -th) before the yaw
                 pose = np.array([pose[0], -pose[1], -pose[2]])
                 z = -z
                 mirrored = not mirrored
             pose = compose(tr.pose, pose)
             z += tr.z
-            cur = tr.parent
+            cur = frame_name(tr.parent)
         return None
 
 

@@ -153,6 +153,77 @@ def frame(payload: str | bytes) -> bytes:
     return b"\x02" + b + b"\x03"
 
 
+def frame_b(payload: bytes) -> bytes:
+    """A CoLa-B telegram: ``02 02 02 02``, the payload length (u32, big-endian), the payload, and the
+    XOR of the payload's bytes."""
+    ck = 0
+    for b in payload:
+        ck ^= b
+    return COLA_B_HEADER + struct.pack(">I", len(payload)) + payload + bytes([ck])
+
+
+@dataclass
+class ColaBFramer:
+    """Incremental CoLa-B de-framer: ``feed(chunk) -> list[bytes]`` (payloads whose checksum holds).
+
+    Bytes before a header are garbage; a header with a length above ``max_len`` or a payload whose
+    XOR checksum fails discards only the header's first byte, and the search goes on after it.
+    """
+
+    max_len: int = MAX_TELEGRAM
+    stats: FramerStats = field(default_factory=FramerStats)
+    bad_checksum: int = 0
+    _buf: bytearray = field(default_factory=bytearray)
+
+    def reset(self) -> None:
+        if self._buf:
+            self.stats.truncated += 1
+            self.stats.garbage_bytes += len(self._buf)
+        self._buf.clear()
+
+    def feed(self, chunk: bytes | bytearray) -> list[bytes]:
+        self.stats.bytes_in += len(chunk)
+        self._buf += chunk
+        buf = self._buf
+        out: list[bytes] = []
+        while True:
+            i = buf.find(COLA_B_HEADER)
+            if i < 0:
+                keep = 0  # up to 3 trailing 02 bytes: a header split across reads
+                while keep < min(3, len(buf)) and buf[len(buf) - 1 - keep] == 2:
+                    keep += 1
+                self.stats.garbage_bytes += len(buf) - keep
+                del buf[: len(buf) - keep]
+                break
+            if i > 0:
+                self.stats.garbage_bytes += i
+                del buf[:i]
+            if len(buf) < 8:
+                break
+            (n,) = struct.unpack_from(">I", buf, 4)
+            if n > self.max_len:
+                self.stats.truncated += 1
+                self.stats.garbage_bytes += 1
+                del buf[:1]
+                continue
+            if len(buf) < 9 + n:
+                break
+            payload = bytes(buf[8 : 8 + n])
+            ck = 0
+            for b in payload:
+                ck ^= b
+            if ck != buf[8 + n]:
+                self.bad_checksum += 1
+                self.stats.garbage_bytes += 1
+                del buf[:1]
+                continue
+            del buf[: 9 + n]
+            self.stats.cola_b_headers += 1
+            self.stats.telegrams += 1
+            out.append(payload)
+        return out
+
+
 # ----------------------------------------------------------------------------- telegram
 
 
@@ -353,6 +424,80 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
     return found
 
 
+class _BinReader:
+    """Big-endian fields of a CoLa-B payload; reading past its end is a :class:`TelegramError`."""
+
+    def __init__(self, data: bytes, pos: int) -> None:
+        self.data, self.pos = data, pos
+
+    def take(self, fmt: str, what: str) -> tuple[Any, ...]:
+        n = struct.calcsize(">" + fmt)
+        if self.pos + n > len(self.data):
+            raise TelegramError("truncated", f"{what} at byte {self.pos}")
+        v = struct.unpack_from(">" + fmt, self.data, self.pos)
+        self.pos += n
+        return v
+
+
+def parse_lmdscandata_binary(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
+    """Parse one CoLa-B LMDscandata payload (``sSN LMDscandata `` + binary fields, big-endian).
+
+    The same fields as the CoLa-A telegram at fixed widths (the layout sick_scan_xd's
+    ``parseCommonBinaryResultTelegram`` reads): u16 version, device; u32 serial; 2 x u8 status;
+    u16 telegram, scan counter; u32 time since start-up, of transmission; 2 x u8 inputs, outputs;
+    i16 layer angle; u32 scan frequency (1/100 Hz), measurement frequency (100 Hz); u16 encoders
+    [u32 position, u16 speed]; u16 16-bit channels [5-char name, f32 scale, f32 offset, i32 start
+    angle, u16 step, u16 count, u16 values]; u16 8-bit channels [same, u8 values].  Raises
+    :class:`TelegramError` (and nothing else) for any malformed input.  The position / name /
+    comment / time / event blocks after the channels are not read (the frame's checksum vouches
+    for its length).
+    """
+    head = payload[:16]
+    if head not in (b"sSN LMDscandata ", b"sRA LMDscandata "):
+        raise TelegramError("not_scan", repr(payload[:24]))
+    r = _BinReader(payload, 16)
+    version, device, serial, st1, st2, tcount, scount, t_start, t_tx = r.take("HHIBBHHII", "header")
+    r.take("BBBB", "inputs/outputs")
+    (layer,) = r.take("h", "layer angle")
+    scan_field, meas_field = r.take("II", "frequencies")
+    scan_freq = scan_field / 100.0
+    (n_enc,) = r.take("H", "encoders")
+    if n_enc > 8:
+        raise TelegramError("bad_count", f"{n_enc} encoders")
+    r.take("IH" * n_enc, "encoder")
+    found: ScanTelegram | None = None
+    for width in ("H", "B"):
+        (n_ch,) = r.take("H", "channel count")
+        if n_ch > 8:
+            raise TelegramError("bad_count", f"{n_ch} channels")
+        for _ in range(n_ch):
+            raw_name, scale, offset, start, step, n = r.take("5sffiHH", "channel header")
+            name = raw_name.decode("ascii", "replace")
+            if not (math.isfinite(scale) and math.isfinite(offset)):
+                raise TelegramError("bad_number", f"{name}: scale / offset not finite")
+            if r.pos + n * struct.calcsize(width) > len(payload):
+                raise TelegramError("wrong_count", f"{name}: {n} values announced, the telegram is shorter")
+            vals = np.frombuffer(payload, dtype=">u2" if width == "H" else "u1", count=n, offset=r.pos)
+            r.pos += n * struct.calcsize(width)
+            if name == channel and found is None and width == "H":
+                if n == 0:
+                    raise TelegramError("bad_count", f"{name}: no values")
+                if step == 0 or not scale > 0:
+                    raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
+                meas_freq, in_hz = beam_rate_hz(meas_field, scan_freq, step / 10000.0)
+                found = ScanTelegram(
+                    command=payload[:3].decode(), version=version, device=device, serial=serial, status=(st1, st2),
+                    telegram_counter=tcount, scan_counter=scount, time_since_startup_us=t_start,
+                    time_of_transmission_us=t_tx, scan_freq_hz=scan_freq, meas_freq_hz=meas_freq, channel=name,
+                    scale=float(scale), offset=float(offset), start_angle_deg=start / 10000.0,
+                    step_deg=step / 10000.0, values=vals.astype(np.int64), layer_field=int(layer),
+                    meas_freq_in_hz=in_hz,
+                )
+    if found is None:
+        raise TelegramError("no_channel", channel)
+    return found
+
+
 def telegram_to_scan(
     t: ScanTelegram,
     stamp: float,
@@ -514,16 +659,35 @@ def device_angle_offset(ident: str) -> tuple[float | None, bool]:
     return DEFAULT_ANGLE_OFFSET_DEG, False
 
 
-def parse_device_ident(payload: bytes) -> tuple[str, str]:
-    """``sRA DeviceIdent <len> <name> <len> <version>`` -> ``(name, version)`` (either may be "")."""
+def parse_device_ident(payload: bytes, binary: bool = False) -> tuple[str, str]:
+    """``sRA DeviceIdent <len> <name> <len> <version>`` -> ``(name, version)`` (either may be "");
+    in CoLa-B the lengths are u16 (``sRA DeviceIdent \\x00\\x08MRS6124R\\x00\\x0a1.1.0.565C``)."""
+    if binary:
+        out: list[str] = []
+        pos = 16
+        for _ in range(2):
+            if pos + 2 > len(payload):
+                break
+            n = int.from_bytes(payload[pos : pos + 2], "big")
+            out.append(payload[pos + 2 : pos + 2 + n].decode("ascii", "replace"))
+            pos += 2 + n
+        out += ["", ""]
+        return out[0], out[1]
     tok = payload.split()
     name = tok[3].decode("ascii", "replace") if len(tok) > 3 else ""
     version = tok[5].decode("ascii", "replace") if len(tok) > 5 else ""
     return name, version
 
 
-def sopas_error_name(payload: bytes) -> str:
-    """``sFA 5`` -> ``"INVALID_DATA"``; an unknown or missing code -> ``"code <token>"``."""
+def sopas_error_name(payload: bytes, binary: bool = False) -> str:
+    """``sFA 5`` -> ``"INVALID_DATA"``; an unknown or missing code -> ``"code <token>"``.  In CoLa-B
+    the code is a u16 after ``sFA``."""
+    if binary:
+        rest = payload[3:].lstrip(b" ")
+        if len(rest) >= 2:
+            v = int.from_bytes(rest[:2], "big")
+            return SOPAS_ERRORS.get(v, f"code {v:X}")
+        return "code ?"
     tok = payload.split()
     code = tok[1] if len(tok) > 1 else b"?"
     if _HEX_TOKEN.fullmatch(code) is not None:
@@ -579,6 +743,8 @@ class SickClient(SensorThread):
         self.stall_timeout_s = stall_timeout_s
         self.stats = SickStats()
         self.framer = ColaFramer()
+        self.framer_b = ColaBFramer()
+        self.dialect = "A"  # CoLa-A (ASCII); "B" once the device is found to speak CoLa-B (binary)
         self.clock = ClockSync()
         self._sock: socket.socket | None = None
         self._t_ext_tx = 0
@@ -594,12 +760,18 @@ class SickClient(SensorThread):
         sock = self._sock
         if sock is not None:
             try:
-                sock.sendall(frame("sEN LMDscandata 0"))
+                sock.sendall(self._stop_command())
             except OSError:
                 pass
 
+    def _stop_command(self) -> bytes:
+        return frame_b(b"sEN LMDscandata \x00") if self.dialect == "B" else frame("sEN LMDscandata 0")
+
+    def _bytes_in(self) -> int:
+        return self.framer.stats.bytes_in + self.framer_b.stats.bytes_in
+
     # -- processing (also used directly by tests)
-    def handle_payload(self, payload: bytes, arrival: float) -> LaserScan | None:
+    def handle_payload(self, payload: bytes, arrival: float, binary: bool = False) -> LaserScan | None:
         """Process one de-framed telegram; returns the scan (and calls on_scan) if valid.
 
         Never raises: a malformed telegram is counted per reason (``stats.malformed_by_reason``);
@@ -608,7 +780,7 @@ class SickClient(SensorThread):
         stream goes on with the next telegram.
         """
         try:
-            return self._handle(payload, arrival)
+            return self._handle(payload, arrival, binary)
         except Exception as e:  # noqa: BLE001 - one bad telegram must never stop the laser
             self.stats.count_malformed("internal_error")
             if self.stats.malformed_by_reason["internal_error"] <= 3:
@@ -616,25 +788,26 @@ class SickClient(SensorThread):
             log.debug("telegram %r", payload[:80], exc_info=True)
             return None
 
-    def _handle(self, payload: bytes, arrival: float) -> LaserScan | None:
+    def _handle(self, payload: bytes, arrival: float, binary: bool = False) -> LaserScan | None:
         head = payload[:16]
         if not (head.startswith(b"sSN LMDscandata") or head.startswith(b"sRA LMDscandata")):
             self.stats.other_telegrams += 1
             if head.startswith(b"sRA DeviceIdent"):
-                self._device_ident(payload)
-            elif payload.split() == [b"sEA", b"LMDscandata", b"1"]:
+                self._device_ident(payload, binary)
+            elif payload in (b"sEA LMDscandata \x01", b"sEA LMDscandata 1") or (
+                    payload.split() == [b"sEA", b"LMDscandata", b"1"]):
                 self._stream_acked = True
             if head.startswith(b"sFA"):
                 # the device refused a command (e.g. sEN LMDscandata: it will not stream)
                 self.stats.device_errors += 1
-                name = sopas_error_name(payload)
+                name = sopas_error_name(payload, binary)
                 codes = self.stats.device_error_codes
                 codes[name] = codes.get(name, 0) + 1
                 if codes[name] <= 3:
                     self.on_event(f"{self.label}: the device answered sFA ({name}) to a command")
             return None
         try:
-            t = parse_lmdscandata(payload)
+            t = parse_lmdscandata_binary(payload) if binary else parse_lmdscandata(payload)
         except TelegramError as e:
             self.stats.count_malformed(e.reason)
             return None
@@ -685,16 +858,16 @@ class SickClient(SensorThread):
         """Why a connection is given up as stalled, as far as the device let it be known."""
         if got_scans:
             return f"no data for {limit_s:g} s (stalled)"
-        if self.framer.stats.bytes_in == bytes0:
-            return (f"no answer to sRN DeviceIdent / sEN LMDscandata 1 in {limit_s:g} s (not a SICK CoLa-A "
-                    f"port, or a device set to CoLa-B?)")
+        if self._bytes_in() == bytes0:
+            return (f"no answer to sRN DeviceIdent / sEN LMDscandata 1 (CoLa-{self.dialect}) in {limit_s:g} s "
+                    f"(not a SICK port, or a device set to the other CoLa dialect?)")
         if self._stream_acked:
             return (f"sEN LMDscandata 1 acknowledged but no scan in {limit_s:g} s (is the scanner measuring? "
                     f"SOPAS ET shows its state; sMN LMCstartmeas starts it)")
         return f"no scan in {limit_s:g} s and sEN LMDscandata 1 not acknowledged (see the answers above)"
 
-    def _device_ident(self, payload: bytes) -> None:
-        name, version = parse_device_ident(payload)
+    def _device_ident(self, payload: bytes, binary: bool = False) -> None:
+        name, version = parse_device_ident(payload, binary)
         off, known = device_angle_offset(name)
         first = self.device_ident != name
         self.device_ident, self._family_offset_deg = name, off
@@ -721,7 +894,9 @@ class SickClient(SensorThread):
             "device_errors": st.device_errors, "device_error_codes": dict(st.device_error_codes),
             "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
             "unsupported_device": st.unsupported_device, "device": self.device_ident,
-            "cola_b_headers": self.framer.stats.cola_b_headers, "thread_failure": self.failure,
+            "cola_b_headers": self.framer.stats.cola_b_headers, "dialect": self.dialect,
+            "cola_b_telegrams": self.framer_b.stats.telegrams, "cola_b_bad_checksum": self.framer_b.bad_checksum,
+            "thread_failure": self.failure,
         }
 
     def serve(self) -> None:
@@ -739,6 +914,7 @@ class SickClient(SensorThread):
             self.stats.connects += 1
             self.connected = True
             self.framer.reset()
+            self.framer_b.reset()
             self._last_tx = None
             self._last_scan_counter = None
             self.clock.reset()  # the device may have rebooted: its clock restarts
@@ -746,9 +922,12 @@ class SickClient(SensorThread):
             try:
                 sock.settimeout(0.1)
                 # who it is (the family's angle convention), then stream; answered in this order
-                sock.sendall(frame("sRN DeviceIdent") + frame("sEN LMDscandata 1"))
+                if self.dialect == "B":
+                    sock.sendall(frame_b(b"sRN DeviceIdent") + frame_b(b"sEN LMDscandata \x01"))
+                else:
+                    sock.sendall(frame("sRN DeviceIdent") + frame("sEN LMDscandata 1"))
                 self._stream_acked = False
-                scans0, bytes0 = self.stats.scans, self.framer.stats.bytes_in
+                scans0, bytes0 = self.stats.scans, self._bytes_in()
                 last_data = time.monotonic()
                 while not self.stop_event.is_set():
                     try:
@@ -759,20 +938,34 @@ class SickClient(SensorThread):
                         limit = self.stall_timeout_s if got_scans else max(self.stall_timeout_s,
                                                                            self.first_data_timeout_s)
                         if time.monotonic() - last_data > limit:
-                            raise ConnectionError(self._stall_reason(got_scans, bytes0, limit)) from None
+                            silent = self._bytes_in() == bytes0
+                            reason = self._stall_reason(got_scans, bytes0, limit)
+                            if silent:
+                                # a device set to the other dialect may ignore these commands: try it
+                                self.dialect = "B" if self.dialect == "A" else "A"
+                                reason += f"; trying CoLa-{self.dialect} next"
+                            raise ConnectionError(reason) from None
                         continue
                     if not chunk:
                         raise ConnectionError("closed by peer")
                     now = time.time()
                     last_data = time.monotonic()
-                    n_b = self.framer.stats.cola_b_headers
-                    for payload in self.framer.feed(chunk):
-                        self.handle_payload(payload, now)
-                    if self.framer.stats.cola_b_headers > n_b and n_b < 3:
-                        self.on_event(f"{self.label}: the device sends CoLa-B (binary) telegrams, which fgloc "
-                                      f"cannot read: set it to CoLa-A (ASCII), e.g. in SOPAS ET")
+                    if self.dialect == "A":
+                        n_b = self.framer.stats.cola_b_headers
+                        for payload in self.framer.feed(chunk):
+                            self.handle_payload(payload, now)
+                        if self.framer.stats.cola_b_headers > n_b:
+                            # the device speaks CoLa-B: read this chunk again as such, and from now on
+                            self.dialect = "B"
+                            self.on_event(f"{self.label}: the device sends CoLa-B (binary) telegrams; reading "
+                                          f"CoLa-B")
+                            chunk = chunk[chunk.find(b"\x02"):] if b"\x02" in chunk else chunk
+                        else:
+                            continue
+                    for payload in self.framer_b.feed(chunk):
+                        self.handle_payload(payload, now, binary=True)
                 try:
-                    sock.sendall(frame("sEN LMDscandata 0"))
+                    sock.sendall(self._stop_command())
                 except OSError:
                     pass
             except (OSError, ConnectionError) as e:

@@ -13,7 +13,14 @@ import time
 import numpy as np
 import pytest
 
-from fgloc.live.sick import SickClient, encode_lmdscandata, frame, parse_lmdscandata, telegram_to_scan
+from fgloc.live.sick import (
+    SickClient,
+    TelegramError,
+    encode_lmdscandata,
+    frame,
+    parse_lmdscandata,
+    telegram_to_scan,
+)
 from fgloc.types import LaserScan
 
 
@@ -106,7 +113,8 @@ def test_sfa_answer_is_counted_by_error_name_and_reported():
 
 
 def _cola_b(payload_ascii_head: bytes, body: bytes) -> bytes:
-    """A CoLa-B telegram: 02 02 02 02, big-endian length, payload, XOR checksum."""
+    """A CoLa-B telegram: 02 02 02 02, big-endian length, payload, XOR checksum (written out here, not
+    with fgloc's frame_b, so the test does not check the code against itself)."""
     payload = payload_ascii_head + body
     ck = 0
     for b in payload:
@@ -114,52 +122,119 @@ def _cola_b(payload_ascii_head: bytes, body: bytes) -> bytes:
     return b"\x02\x02\x02\x02" + struct.pack(">I", len(payload)) + payload + bytes([ck])
 
 
-def test_cola_b_device_over_tcp_is_reported_not_silent():
-    """A laser configured for CoLa-B (binary; sick_scan_xd's default dialect) streams telegrams this
-    CoLa-A client cannot read.  Before: counted as garbage / other telegrams, nothing said, the
-    localizer just never got a scan.  Now the headers are counted and the reason is reported; the
-    client thread stays alive."""
-    # binary LMDscandata head as sick_scan_xd's parser reads it (version, device, serial, status, counters,
-    # times, inputs, outputs, layer, scan / measurement frequency, encoders, one 16-bit channel ...)
-    body = struct.pack(">HHIBBHHIIBBBBhIIH", 1, 1, 0x1234, 0, 0, 1, 1, 1000, 2000, 0, 0, 0, 0, 0, 2500, 360, 0)
+def _binary_scan(counter: int) -> bytes:
+    """A CoLa-B LMDscandata as sick_scan_xd's parseCommonBinaryResultTelegram reads it: LMS1xx-like,
+    25 Hz, DIST1 1000 / 3 / 2000 mm from -45 deg in 0.5 deg steps, an RSSI1 8-bit channel."""
+    body = struct.pack(">HHIBBHHIIBBBBhIIH", 1, 1, 0x1234, 0, 0, counter, counter, 1000 + 40_000 * counter,
+                       21_000 + 40_000 * counter, 0, 0, 0, 0, 0, 2500, 180, 0)
     body += struct.pack(">H5sffiHH", 1, b"DIST1", 1.0, 0.0, -450000, 5000, 3) + struct.pack(">HHH", 1000, 3, 2000)
-    tele = _cola_b(b"sSN LMDscandata ", body + struct.pack(">HHHHHH", 0, 0, 0, 0, 0, 0))
+    body += struct.pack(">H5sffiHH", 1, b"RSSI1", 1.0, 0.0, -450000, 5000, 3) + bytes([200, 10, 150])
+    return _cola_b(b"sSN LMDscandata ", body + struct.pack(">HHHHH", 0, 0, 0, 0, 0))
+
+
+def _serve_cola_b(ascii_too: bool):
+    """A CoLa-B laser on a real TCP socket: answers binary sRN DeviceIdent / sEN LMDscandata and then
+    streams; an ASCII command is answered only if ``ascii_too`` (then it streams binary anyway, as a
+    device set to CoLa-B does for an sEN it was given before)."""
     srv = socket.socket()
     srv.bind(("127.0.0.1", 0))
-    srv.listen(1)
-    port = srv.getsockname()[1]
+    srv.listen(4)
+    srv.settimeout(0.2)
     stop = threading.Event()
 
     def serve():
-        conn, _ = srv.accept()
-        with conn:
-            conn.recv(100)  # sEN LMDscandata 1 (in CoLa-A)
-            while not stop.is_set():
-                try:
-                    conn.sendall(tele)
-                except OSError:
-                    return
-                stop.wait(0.02)
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                continue
+            conn.settimeout(0.02)
+            buf, streaming, k = b"", False, 0
+            with conn:
+                while not stop.is_set():
+                    try:
+                        data = conn.recv(4096)
+                        if not data:
+                            break
+                        buf += data
+                    except TimeoutError:
+                        pass
+                    except OSError:
+                        break
+                    if buf.startswith(b"\x02\x02\x02\x02") and len(buf) >= 8:
+                        n = struct.unpack(">I", buf[4:8])[0]
+                        if len(buf) >= 9 + n:
+                            cmd, buf = buf[8 : 8 + n], buf[9 + n :]
+                            if cmd == b"sRN DeviceIdent":
+                                conn.sendall(_cola_b(b"sRA DeviceIdent ", b"\x00\x08LMS511-1\x00\x04V1.0"))
+                            elif cmd == b"sEN LMDscandata \x01":
+                                conn.sendall(_cola_b(b"sEA LMDscandata ", b"\x01"))
+                                streaming = True
+                    elif b"\x03" in buf:
+                        buf = buf[buf.index(b"\x03") + 1 :]
+                        streaming = streaming or ascii_too
+                    if streaming:
+                        try:
+                            conn.sendall(_binary_scan(k))
+                        except OSError:
+                            break
+                        k += 1
 
-    th = threading.Thread(target=serve, daemon=True)
-    th.start()
+    threading.Thread(target=serve, daemon=True).start()
+    return srv, stop
+
+
+@pytest.mark.parametrize("ascii_too", [True, False])
+def test_cola_b_laser_over_tcp_is_read(ascii_too):
+    """A laser set to CoLa-B (binary; sick_scan_xd's default dialect).  Before: its telegrams were garbage
+    to the CoLa-A framer, nothing said, the localizer never got a scan.  Now: CoLa-B found in the
+    stream (ascii_too) or tried after an unanswered CoLa-A start (not ascii_too), and read."""
+    srv, stop = _serve_cola_b(ascii_too)
     events: list[str] = []
     scans: list[LaserScan] = []
-    c = SickClient("127.0.0.1", port, on_scan=lambda s, t: scans.append(s), on_event=events.append,
-                   stall_timeout_s=30.0)
+    c = SickClient("127.0.0.1", srv.getsockname()[1], on_scan=lambda s, t: scans.append(s), on_event=events.append,
+                   angle_offset_deg=None, stall_timeout_s=0.2, first_data_timeout_s=0.2)
     c.start()
     try:
         deadline = time.monotonic() + 60.0  # generous: a loaded machine; the assertions are on content
-        while c.framer.stats.cola_b_headers < 5 and time.monotonic() < deadline:
+        while len(scans) < 5 and time.monotonic() < deadline:
             time.sleep(0.02)
         cnt = c.counters()
-        assert cnt["cola_b_headers"] >= 5 and cnt["scans"] == 0 and cnt["thread_failure"] is None
-        assert c.thread is not None and c.thread.is_alive()
-        assert 1 <= sum("CoLa-B" in e for e in events) <= 3  # reported, not once per telegram
+        assert len(scans) >= 5 and cnt["dialect"] == "B" and cnt["thread_failure"] is None
+        assert cnt["cola_b_bad_checksum"] == 0
+        s = scans[-1]
+        assert math.degrees(s.angle_min) == pytest.approx(-135.0) and math.degrees(s.angle_increment) == 0.5
+        assert s.ranges.tolist() == pytest.approx([1.0, 0.003, 2.0]) and s.scan_time == pytest.approx(0.04)
+        assert s.time_increment == pytest.approx(1 / 18000)
+        if ascii_too:
+            assert sum("CoLa-B" in e for e in events) == 1
+        else:
+            assert any("trying CoLa-B next" in e for e in events) and cnt["device"] == "LMS511-1"
     finally:
-        stop.set()
         c.stop()
+        stop.set()
         srv.close()
+
+
+def test_cola_b_framer_checksum_and_split_reads():
+    from fgloc.live.sick import ColaBFramer, parse_lmdscandata_binary
+
+    good = _binary_scan(7)
+    bad = bytearray(_binary_scan(8))
+    bad[40] ^= 0x10  # one bit flipped: checksum fails
+    stream = b"noise" + good + bytes(bad) + b"\x02\x02" + good
+    f = ColaBFramer()
+    out = []
+    for i in range(0, len(stream), 5):
+        out += f.feed(stream[i : i + 5])
+    assert len(out) == 2 and f.bad_checksum == 1
+    t = parse_lmdscandata_binary(out[0])
+    assert (t.scan_counter, t.values.tolist(), t.start_angle_deg, t.step_deg) == (7, [1000, 3, 2000], -45.0, 0.5)
+    # a cut anywhere in the fields read is a typed error, never an exception (the 10 bytes of block
+    # flags after the channels are not read: the checksum vouches for the frame)
+    for cut in range(16, len(out[0]) - 10):
+        with pytest.raises(TelegramError):
+            parse_lmdscandata_binary(out[0][:cut])
 
 
 def test_cola_a_framer_counts_cola_b_headers_split_across_chunks():
@@ -299,3 +374,32 @@ def test_a_device_that_does_not_stream_is_reported_with_what_it_said(answers, re
         c.stop()
         stop.set()
         srv.close()
+
+
+def test_cola_b_mutated_telegrams_are_typed_errors_or_sane_scans():
+    """5000 random byte changes / cuts of a binary scan: the parser returns a scan or raises
+    TelegramError, nothing else; the client counts each."""
+    import random
+
+    from fgloc.live.sick import parse_lmdscandata_binary
+
+    payload = _binary_scan(3)[8:-1]
+    rng = random.Random(5)
+    c, scans = _client()
+    n_ok = n_err = 0
+    for k in range(5000):
+        b = bytearray(payload)
+        for _ in range(rng.randint(1, 4)):
+            b[rng.randrange(16, len(b))] = rng.randrange(256)
+        if rng.random() < 0.3:
+            b = b[: rng.randrange(16, len(b))]
+        try:
+            t = parse_lmdscandata_binary(bytes(b))
+            assert t.step_deg > 0 and t.scale > 0 and len(t.values) > 0
+            n_ok += 1
+        except TelegramError:
+            n_err += 1
+        c.handle_payload(bytes(b), 1.0 + k, binary=True)
+    assert n_ok + n_err == 5000 and n_err > 0 and n_ok > 0
+    assert c.stats.scans + c.stats.malformed + c.stats.other_layer == 5000
+    assert "internal_error" not in c.stats.malformed_by_reason

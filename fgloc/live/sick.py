@@ -57,7 +57,10 @@ log = logging.getLogger(__name__)
 STX = 0x02
 ETX = 0x03
 COLA_B_HEADER = b"\x02\x02\x02\x02"
-MAX_TELEGRAM = 64 * 1024
+# 5 echoes + 5 16-bit remission channels (LMDscandatacfg 1F 00 1 1, as sick_scan_xd's README shows an
+# MRS6124 set) of 1141 beams (LMS5xx, 0.1667 deg) are ~57 KB of CoLa-A: room for that and more
+MAX_TELEGRAM = 256 * 1024
+MAX_CHANNELS = 32  # per kind (16-bit, 8-bit); DIST1-5, RSSI1-5, ANGL (azimuth correction), VANG (MRS6000)
 
 
 class TelegramError(ValueError):
@@ -357,7 +360,7 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
             raise TelegramError("truncated", "channel count")
         n_ch = _uint(tok[i], "n_channels", 16)
         i += 1
-        if n_ch > 8:
+        if n_ch > MAX_CHANNELS:
             raise TelegramError("bad_count", f"{n_ch} channels")
         for _ in range(n_ch):
             if i + 6 > len(tok):
@@ -468,7 +471,7 @@ def parse_lmdscandata_binary(payload: bytes, channel: str = "DIST1") -> ScanTele
     found: ScanTelegram | None = None
     for width in ("H", "B"):
         (n_ch,) = r.take("H", "channel count")
-        if n_ch > 8:
+        if n_ch > MAX_CHANNELS:
             raise TelegramError("bad_count", f"{n_ch} channels")
         for _ in range(n_ch):
             raw_name, scale, offset, start, step, n = r.take("5sffiHH", "channel header")

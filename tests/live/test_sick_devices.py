@@ -403,3 +403,27 @@ def test_cola_b_mutated_telegrams_are_typed_errors_or_sane_scans():
     assert n_ok + n_err == 5000 and n_err > 0 and n_ok > 0
     assert c.stats.scans + c.stats.malformed + c.stats.other_layer == 5000
     assert "internal_error" not in c.stats.malformed_by_reason
+
+
+def test_five_echoes_and_five_16bit_remission_channels():
+    """LMDscandatacfg 1F 00 1 1 (all 5 echoes, remission, 16-bit: how sick_scan_xd's README shows an
+    MRS6124 configured) on an LMS5xx-like 190 deg at 0.1667 deg: 10 16-bit channels of 1141 values,
+    ~57 KB of CoLa-A.  Before: more than 8 channels was 'bad_count', every scan skipped.  DIST1 is used."""
+    n = 1141
+    rng = np.random.default_rng(1)
+    head = b"sSN LMDscandata 1 1 1234567 0 0 10 10 3E8 7D0 0 0 0 0 0 9C4 168 0 A"
+    chans = []
+    dist1 = rng.integers(1, 0xFFFF, n)
+    for name in (b"DIST1", b"DIST2", b"DIST3", b"DIST4", b"DIST5", b"RSSI1", b"RSSI2", b"RSSI3", b"RSSI4", b"RSSI5"):
+        vals = dist1 if name == b"DIST1" else rng.integers(0, 0xFFFF, n)
+        chans.append(b" ".join([name, b"3F800000", b"00000000", b"FFF92230", b"683", format(n, "X").encode()]
+                               + [format(int(v), "X").encode() for v in vals]))
+    payload = b" ".join([head, *chans, b"0 0 0 0 0 0"])
+    assert len(payload) > 50_000
+    from fgloc.live.sick import ColaFramer
+
+    f = ColaFramer()
+    out = [p for i in range(0, len(payload) + 2, 4096) for p in f.feed(frame(payload)[i : i + 4096])]
+    assert out == [payload] and f.stats.truncated == 0
+    t = parse_lmdscandata(out[0])
+    assert t.values.tolist() == dist1.tolist() and t.step_deg == pytest.approx(0.1667)

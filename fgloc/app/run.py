@@ -147,14 +147,18 @@ def _check_inputs(reader: Any, log: Path, summary: dict[str, Any],
                   roles: tuple[tuple[str, str, str, bool], ...]) -> None:
     """One-line errors for inputs that cannot be localized with: a topic the user named that is
     absent, a role's topic of another type (it would be skipped and the run would 'succeed'
-    empty), topics stamped by different clocks.  Each names the log's topics."""
+    empty), topics stamped by different clocks.  Each names the log's topics.  A multi-echo scan
+    serves for a LaserScan (its first echoes)."""
+    from fgloc.io.topics import LASER_SCAN, role_reads
+
     types = reader.topic_types()
     for option, topic, want, named in roles:
         have = types.get(topic)
         if named and not reader.has(topic):
             raise LogError(f"{log}: {option} {topic}: no such topic with messages in the log; its topics: "
                            f"{topics_line(summary)}")
-        if have is not None and reader.has(topic) and have != want:
+        if have is not None and reader.has(topic) and have != want and not (want == LASER_SCAN
+                                                                             and role_reads("scan", have)):
             raise LogError(f"{log}: topic '{topic}' has type {have}, expected {want} (rename with {option}); "
                            f"its topics: {topics_line(summary)}")
     skew = reader.clock_skew([t for _, t, _, _ in roles])

@@ -102,7 +102,7 @@ class _Channel:
                 IMU: fastcdr.decode_imus,
                 TF_MESSAGE: fastcdr.decode_tf_messages,
                 POSE_COV_STAMPED: lambda d: fastcdr.decode_pose_fixes(d, topic),
-            }[info.type]
+            }.get(info.type)  # None: the generic decoder (a multi-echo scan)
 
     def generic(self) -> Callable[[bytes], Any] | None:
         """mcap_ros2's decoder of this channel.  A schema that is missing, empty or not

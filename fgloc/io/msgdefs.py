@@ -37,6 +37,14 @@ MSG_TEXT: dict[str, str] = {
         "float32 range_min\nfloat32 range_max\n"
         "float32[] ranges\nfloat32[] intensities\n"
     ),
+    "sensor_msgs/LaserEcho": "float32[] echoes\n",
+    "sensor_msgs/MultiEchoLaserScan": (
+        "std_msgs/Header header\n"
+        "float32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
+        "float32 time_increment\nfloat32 scan_time\n"
+        "float32 range_min\nfloat32 range_max\n"
+        "LaserEcho[] ranges\nLaserEcho[] intensities\n"
+    ),
     "sensor_msgs/Imu": (
         "std_msgs/Header header\n"
         "geometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n"

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
-from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
+from fgloc.io.topics import IMU, LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
 from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 COV_IDX = (0, 1, 5)  # x, y, yaw (or vx, vy, wz) inside a ROS 6x6 covariance
@@ -241,6 +241,26 @@ def scan_from_ros(m: Any, topic: str) -> LaserScan:
     )
 
 
+def multi_echo_scan_from_ros(m: Any, topic: str) -> LaserScan:
+    """A ``sensor_msgs/MultiEchoLaserScan`` as the scan of its first echoes (what cartographer and
+    laser_proc's ``first`` echo filter take); a beam without an echo is a no-return (+inf, REP 117),
+    and intensities are kept only when every beam has one."""
+    ranges = np.array([e.echoes[0] if len(e.echoes) else np.inf for e in m.ranges], dtype=np.float32)
+    inten = [e.echoes[0] if len(e.echoes) else np.nan for e in m.intensities]
+    return LaserScan(
+        stamp=header_stamp(m.header),
+        angle_min=float(m.angle_min),
+        angle_increment=float(m.angle_increment),
+        range_min=float(m.range_min),
+        range_max=float(m.range_max),
+        ranges=ranges,
+        time_increment=float(m.time_increment),
+        scan_time=float(m.scan_time),
+        intensities=np.asarray(inten, dtype=np.float32) if len(inten) == len(ranges) and ranges.size else None,
+        frame_id=m.header.frame_id,
+    )
+
+
 def odom_from_ros(m: Any, topic: str) -> Odometry:
     pcov = m.pose.covariance
     p = m.pose.pose
@@ -335,6 +355,7 @@ def mirror_scan(scan: LaserScan) -> LaserScan:
 
 FROM_ROS: dict[str, Callable[[Any, str], object]] = {
     LASER_SCAN: scan_from_ros,
+    MULTI_ECHO_SCAN: multi_echo_scan_from_ros,
     ODOMETRY: odom_from_ros,
     IMU: imu_from_ros,
     TF_MESSAGE: tf_from_ros,

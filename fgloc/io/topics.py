@@ -25,11 +25,14 @@ from fgloc.errors import LogError
 log = logging.getLogger(__name__)
 
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
+#: a multi-echo laser's scan (urg_node's ``echoes``, cartographer's ``horizontal_laser_2d``): read
+#: as a :class:`~fgloc.types.LaserScan` of its first echoes (:func:`fgloc.io.ros.multi_echo_scan_from_ros`)
+MULTI_ECHO_SCAN = "sensor_msgs/msg/MultiEchoLaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 IMU = "sensor_msgs/msg/Imu"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
-READ_TYPES = (LASER_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED)
+READ_TYPES = (LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED)
 #: other names of these types, with the same fields: ROS 1 before Hydro (2013) published tf as
 #: ``tf/tfMessage`` (the same ``geometry_msgs/TransformStamped[] transforms`` and md5 as tf2's)
 TYPE_ALIASES = {"tf/msg/tfMessage": TF_MESSAGE}
@@ -63,6 +66,16 @@ ROLE_TYPES = {
 }
 
 
+#: other types a role reads (the scan role: a multi-echo scan's first echoes)
+ROLE_ALSO = {"scan": (MULTI_ECHO_SCAN,)}
+
+
+def role_reads(role: str, type_name: str) -> bool:
+    """Whether a topic of ``type_name`` (any spelling) serves ``role`` (``ROLE_TYPES``, ``ROLE_ALSO``)."""
+    t = normalize_type(type_name)
+    return t == ROLE_TYPES[role] or t in ROLE_ALSO.get(role, ())
+
+
 def normalize_type(name: str) -> str:
     """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``; an alias
     (``tf/tfMessage``) -> the type fgloc reads it as (``TYPE_ALIASES``)."""
@@ -85,7 +98,7 @@ def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -
     for f in fields(Topics):
         role, name = f.name, getattr(topics, f.name)
         want = ROLE_TYPES[role]
-        if normalize_type(available.get(name, "")) == want:
+        if role_reads(role, available.get(name, "")):
             chosen[name] = role
             continue
         if name in available:
@@ -97,7 +110,7 @@ def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -
         if role in ("tf", "tf_static", "ground_truth", "fused"):
             continue  # never guessed
         same = [t for t, ty in available.items()
-                if normalize_type(ty) == want and t not in chosen and t not in named]
+                if role_reads(role, ty) and t not in chosen and t not in named]
         if len(same) == 1:
             log.info("using %s (%s) as the %s topic", same[0], want, role)
             chosen[same[0]] = role

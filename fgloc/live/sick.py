@@ -605,6 +605,31 @@ def encode_lmdscandata(
     return " ".join(head + body + tail).encode("ascii")
 
 
+def lmdscandata_to_binary(payload: bytes) -> bytes:
+    """A CoLa-A LMDscandata payload (as :func:`encode_lmdscandata` writes it) in CoLa-B form: the same
+    fields at the widths :func:`parse_lmdscandata_binary` reads.  For the emulator and tests."""
+    tok = payload.split()
+    h = [int(t, 16) for t in tok[2:18]]
+    out = tok[0] + b" LMDscandata " + struct.pack(">HHIBBHHIIBBBBhII", h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7],
+                                                   h[8], h[9], h[10], h[11], h[12], _i16(h[13]), h[14], h[15])
+    i = 18
+    n_enc = int(tok[i], 16)
+    out += struct.pack(">H", n_enc) + b"".join(struct.pack(">IH", int(tok[i + 1 + 2 * k], 16),
+                                                            int(tok[i + 2 + 2 * k], 16)) for k in range(n_enc))
+    i += 1 + 2 * n_enc
+    for width in ("H", "B"):
+        n_ch = int(tok[i], 16)
+        out += struct.pack(">H", n_ch)
+        i += 1
+        for _ in range(n_ch):
+            name, scale, offset = tok[i][:5].ljust(5), int(tok[i + 1], 16), int(tok[i + 2], 16)
+            start, step, n = _i32(int(tok[i + 3], 16)), int(tok[i + 4], 16), int(tok[i + 5], 16)
+            out += name + struct.pack(">IIiHH", scale, offset, start, step, n)
+            out += struct.pack(f">{n}{width}", *(int(t, 16) for t in tok[i + 6 : i + 6 + n]))
+            i += 6 + n
+    return out + b"\x00\x00" * 5  # position, name, comment, time, events: absent
+
+
 # ----------------------------------------------------------------------------- client
 
 

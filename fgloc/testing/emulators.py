@@ -32,7 +32,7 @@ import numpy as np
 from fgloc.geometry import wrap_angle
 from fgloc.live.serial_link import RobotParams, kinematics_of
 from fgloc.live.serial_protocol import FLAG_COUNTS, FLAG_GYRO, FLAG_HEADING, encode_sensor_frame
-from fgloc.live.sick import encode_lmdscandata, frame
+from fgloc.live.sick import COLA_B_HEADER, encode_lmdscandata, frame, frame_b, lmdscandata_to_binary
 from fgloc.types import CompassHeading, Imu, LaserScan, Odometry
 
 log = logging.getLogger(__name__)
@@ -320,12 +320,18 @@ class SickEmulator:
         inject: dict[int, bytes] | None = None,
         device_ident: str = "10 LMS10x_FieldEval 10 V1.36-21.10.2010",
         telegram: dict | None = None,
+        dialect: str = "A",
     ) -> None:
         """``device_ident``: the ``sRA DeviceIdent`` answer's fields (the LMS1xx manual's example);
         ``telegram``: :func:`encode_lmdscandata` keywords giving a real device's telegram shape
-        (e.g. a TiM571's ``{"rssi_bits": 16, "name": "..."}``, an LMS5xx's ``{"scale": 2.0}``)."""
+        (e.g. a TiM571's ``{"rssi_bits": 16, "name": "..."}``, an LMS5xx's ``{"scale": 2.0}``);
+        ``dialect="B"``: a device set to CoLa-B (binary): every answer and telegram in CoLa-B, to
+        commands in either dialect."""
+        if dialect not in ("A", "B"):
+            raise ValueError(f"dialect must be 'A' or 'B', got {dialect!r}")
         self.device_ident = device_ident
         self.telegram_kw = dict(telegram or {})
+        self.dialect = dialect
         scans = [m for t, m in messages if t == scan_topic and isinstance(m, LaserScan)]
         scans.sort(key=lambda m: m.stamp)
         if t_start is not None:
@@ -449,27 +455,55 @@ class SickEmulator:
                         self._streaming = False
                 continue
             buf += data
-            while b"\x03" in buf:
-                cmd, _, buf = buf.partition(b"\x03")
-                cmd = cmd[cmd.rfind(b"\x02") + 1 :].strip()
-                self._answer(client, cmd)
+            while True:
+                if buf.startswith(COLA_B_HEADER):
+                    if len(buf) < 8 or len(buf) < 9 + int.from_bytes(buf[4:8], "big"):
+                        break
+                    n = int.from_bytes(buf[4:8], "big")
+                    cmd, buf = buf[8 : 8 + n], buf[9 + n :]
+                    # the binary argument of sEN as its CoLa-A digit
+                    cmd = cmd[:-1] + b"%d" % cmd[-1] if cmd.startswith(b"sEN ") and cmd[-1] < 2 else cmd
+                    self._answer(client, cmd.strip())
+                elif b"\x03" in buf and not buf.startswith(b"\x02\x02"):
+                    cmd, _, buf = buf.partition(b"\x03")
+                    cmd = cmd[cmd.rfind(b"\x02") + 1 :].strip()
+                    self._answer(client, cmd)
+                else:
+                    break
+
+    def _frame(self, payload: bytes) -> bytes:
+        """A telegram in the emulated device's dialect (a CoLa-A payload turned binary for CoLa-B)."""
+        if self.dialect == "A":
+            return frame(payload)
+        if payload.startswith((b"sSN LMDscandata", b"sRA LMDscandata")):
+            return frame_b(lmdscandata_to_binary(payload))
+        if payload.startswith(b"sRA DeviceIdent "):
+            parts = payload[16:].split(b" ")
+            name, version = parts[1] if len(parts) > 1 else b"", parts[3] if len(parts) > 3 else b""
+            return frame_b(b"sRA DeviceIdent " + len(name).to_bytes(2, "big") + name
+                           + len(version).to_bytes(2, "big") + version)
+        if payload.startswith(b"sEA LMDscandata "):
+            return frame_b(b"sEA LMDscandata " + bytes([int(payload[16:])]))
+        if payload.startswith(b"sFA "):
+            return frame_b(b"sFA" + int(payload[4:], 16).to_bytes(2, "big"))
+        return frame_b(payload)
 
     def _answer(self, client: socket.socket, cmd: bytes) -> None:
         reply: bytes
         if cmd == b"sEN LMDscandata 1":
-            reply, on = frame("sEA LMDscandata 1"), True
+            reply, on = self._frame(b"sEA LMDscandata 1"), True
         elif cmd == b"sEN LMDscandata 0":
-            reply, on = frame("sEA LMDscandata 0"), False
+            reply, on = self._frame(b"sEA LMDscandata 0"), False
         elif cmd == b"sRN LMDscandata":
             k = max(0, min(self.sent_scans, len(self.scans) - 1))
             h = time.time()
-            reply = frame(encode_lmdscandata(self.scans[k], k, k, self._dev_us(h), self._dev_us(h),
+            reply = self._frame(encode_lmdscandata(self.scans[k], k, k, self._dev_us(h), self._dev_us(h),
                                              self.angle_offset_deg, command="sRA", **self.telegram_kw))
             on = self._streaming
         elif cmd == b"sRN DeviceIdent":
-            reply, on = frame("sRA DeviceIdent " + self.device_ident), self._streaming
+            reply, on = self._frame(b"sRA DeviceIdent " + self.device_ident.encode()), self._streaming
         else:
-            reply, on = frame("sFA 1"), self._streaming
+            reply, on = self._frame(b"sFA 1"), self._streaming
         with self._lock:
             if self._client is client:
                 self._streaming = on
@@ -491,7 +525,7 @@ class SickEmulator:
                 )
                 payload = encode_lmdscandata(scaled, k, k, self._dev_us(h_start), self._dev_us(h_send),
                                              self.angle_offset_deg, **self.telegram_kw)
-                out = frame(payload)
+                out = self._frame(payload)
                 bad = self.malformed_prob > 0 and self.rng.random() < self.malformed_prob
                 if bad:
                     cut = payload[: self.rng.randint(20, max(21, len(payload) - 5))]

@@ -113,3 +113,14 @@ def test_tim571_shaped_laser_live_trajectory(tmp_path):
     lc = summary.counters["laser"]
     assert lc["device"] == "TiM571-2050101" and lc["device_errors"] == 0 and lc["other_layer"] == 0
     assert r["live_online"] < 0.03 and r["live_smoothed"] < 0.03, r
+
+
+def test_cola_b_laser_live_trajectory(tmp_path):
+    """The laser set to CoLa-B (binary, sick_scan_xd's dialect): the live client finds it in the first
+    answer, reads every scan in CoLa-B, and the trajectory matches fgloc run on the same log."""
+    occ, mount, gt, msgs = world(duration=6.0)
+    r, summary = _compare(msgs, occ, mount, gt, {"drive": "mecanum"}, tmp_path, speed=2.0, mode="tcp",
+                          slack_m=0.0005, sick_kw={"dialect": "B"})
+    lc = summary.counters["laser"]
+    assert lc["dialect"] == "B" and lc["cola_b_bad_checksum"] == 0 and lc["malformed"] == 0
+    assert r["live_online"] < 0.03 and r["live_smoothed"] < 0.03, r

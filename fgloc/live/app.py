@@ -120,6 +120,7 @@ class LiveSession:
                 range_min=lc.range_min_m, range_max=lc.range_max_m, angle_offset_deg=lc.angle_offset_deg,
                 time_increment_from=lc.time_increment_from, align_clock=lc.align_clock,
                 stall_timeout_s=lc.stall_timeout_s, on_event=ev, layer_field=lc.layer_field,
+                start_measurement=lc.start_measurement,
             )
             self.runner.sources["laser"] = self.laser.counters
         self._t0 = time.monotonic()

@@ -43,6 +43,10 @@ class LaserConfig:
         "measurement_frequency", "beam timing for de-skew: 1 / measurement frequency, or rotation: scan_time * "
         "angular step / 360 deg", choices=("measurement_frequency", "rotation"))
     stall_timeout_s: float = setting(1.0, "reconnect when connected but silent this long", gt=0)
+    start_measurement: bool = setting(
+        False, "on connecting, log in as authorized client (SICK's default password) and send sMN "
+        "LMCstartmeas and sMN Run before streaming: for a scanner left in standby (it changes the device's "
+        "state)")
     layer_field: int = setting(0, "multi-layer scanners (MRS1000: one telegram per layer): the layer-angle "
                                "field (signed, 1/100 deg) of the planar layer to localize with; the other "
                                "layers are counted (other_layer) and skipped", min=-32768, max=32767)

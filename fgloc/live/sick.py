@@ -754,8 +754,10 @@ class SickClient(SensorThread):
         on_event: Callable[[str], None] | None = None,
         layer_field: int = 0,
         first_data_timeout_s: float = 5.0,
+        start_measurement: bool = False,
     ) -> None:
         super().__init__(on_event, backoff_min_s, backoff_max_s)
+        self.start_measurement = start_measurement
         self.layer_field = layer_field
         self.first_data_timeout_s = first_data_timeout_s  # a scanner still spinning up gets this long
         self._stream_acked = False  # sEA LMDscandata 1 seen on this connection
@@ -792,6 +794,19 @@ class SickClient(SensorThread):
             except OSError:
                 pass
 
+    def _start_commands(self) -> bytes:
+        """sRN DeviceIdent, (with ``start_measurement``: log in as authorized client with its default
+        password, sMN LMCstartmeas, sMN Run,) sEN LMDscandata 1, in the current dialect."""
+        if self.dialect == "B":
+            cmds = [b"sRN DeviceIdent"]
+            if self.start_measurement:
+                cmds += [b"sMN SetAccessMode \x03\xf4\x72\x47\x44", b"sMN LMCstartmeas", b"sMN Run"]
+            return b"".join(frame_b(c) for c in cmds + [b"sEN LMDscandata \x01"])
+        cmds = [b"sRN DeviceIdent"]
+        if self.start_measurement:
+            cmds += [b"sMN SetAccessMode 03 F4724744", b"sMN LMCstartmeas", b"sMN Run"]
+        return b"".join(frame(c) for c in cmds + [b"sEN LMDscandata 1"])
+
     def _stop_command(self) -> bytes:
         return frame_b(b"sEN LMDscandata \x00") if self.dialect == "B" else frame("sEN LMDscandata 0")
 
@@ -825,6 +840,9 @@ class SickClient(SensorThread):
             elif payload in (b"sEA LMDscandata \x01", b"sEA LMDscandata 1") or (
                     payload.split() == [b"sEA", b"LMDscandata", b"1"]):
                 self._stream_acked = True
+            if head.startswith(b"sAN SetAccessMode") and payload[-1:] in (b"0", b"\x00"):
+                self.on_event(f"{self.label}: the device refused the login (sMN SetAccessMode 03, default "
+                              f"password): it will not start measuring on request")
             if head.startswith(b"sFA"):
                 # the device refused a command (e.g. sEN LMDscandata: it will not stream)
                 self.stats.device_errors += 1
@@ -890,8 +908,10 @@ class SickClient(SensorThread):
             return (f"no answer to sRN DeviceIdent / sEN LMDscandata 1 (CoLa-{self.dialect}) in {limit_s:g} s "
                     f"(not a SICK port, or a device set to the other CoLa dialect?)")
         if self._stream_acked:
+            how = ("it was told sMN LMCstartmeas and Run" if self.start_measurement
+                   else "laser.start_measurement: true sends sMN LMCstartmeas")
             return (f"sEN LMDscandata 1 acknowledged but no scan in {limit_s:g} s (is the scanner measuring? "
-                    f"SOPAS ET shows its state; sMN LMCstartmeas starts it)")
+                    f"{how}; SOPAS ET shows its state)")
         return f"no scan in {limit_s:g} s and sEN LMDscandata 1 not acknowledged (see the answers above)"
 
     def _device_ident(self, payload: bytes, binary: bool = False) -> None:
@@ -950,10 +970,7 @@ class SickClient(SensorThread):
             try:
                 sock.settimeout(0.1)
                 # who it is (the family's angle convention), then stream; answered in this order
-                if self.dialect == "B":
-                    sock.sendall(frame_b(b"sRN DeviceIdent") + frame_b(b"sEN LMDscandata \x01"))
-                else:
-                    sock.sendall(frame("sRN DeviceIdent") + frame("sEN LMDscandata 1"))
+                sock.sendall(self._start_commands())
                 self._stream_acked = False
                 scans0, bytes0 = self.stats.scans, self._bytes_in()
                 last_data = time.monotonic()

@@ -321,17 +321,23 @@ class SickEmulator:
         device_ident: str = "10 LMS10x_FieldEval 10 V1.36-21.10.2010",
         telegram: dict | None = None,
         dialect: str = "A",
+        measuring: bool = True,
     ) -> None:
         """``device_ident``: the ``sRA DeviceIdent`` answer's fields (the LMS1xx manual's example);
         ``telegram``: :func:`encode_lmdscandata` keywords giving a real device's telegram shape
         (e.g. a TiM571's ``{"rssi_bits": 16, "name": "..."}``, an LMS5xx's ``{"scale": 2.0}``);
         ``dialect="B"``: a device set to CoLa-B (binary): every answer and telegram in CoLa-B, to
-        commands in either dialect."""
+        commands in either dialect; ``measuring=False``: a device left in standby (it acknowledges
+        sEN LMDscandata but sends nothing until logged in (sMN SetAccessMode 03 F4724744), told
+        sMN LMCstartmeas and sMN Run)."""
         if dialect not in ("A", "B"):
             raise ValueError(f"dialect must be 'A' or 'B', got {dialect!r}")
         self.device_ident = device_ident
         self.telegram_kw = dict(telegram or {})
         self.dialect = dialect
+        self.measuring = measuring
+        self._logged_in = False
+        self._start_requested = False
         scans = [m for t, m in messages if t == scan_topic and isinstance(m, LaserScan)]
         scans.sort(key=lambda m: m.stamp)
         if t_start is not None:
@@ -439,6 +445,7 @@ class SickEmulator:
                 with self._lock:
                     self._client = c
                     self._streaming = False
+                    self._logged_in = False
                 buf = b""
                 continue
             try:
@@ -486,6 +493,9 @@ class SickEmulator:
             return frame_b(b"sEA LMDscandata " + bytes([int(payload[16:])]))
         if payload.startswith(b"sFA "):
             return frame_b(b"sFA" + int(payload[4:], 16).to_bytes(2, "big"))
+        if payload.startswith(b"sAN "):
+            head, _, val = payload.rpartition(b" ")
+            return frame_b(head + b" " + bytes([int(val)]))
         return frame_b(payload)
 
     def _answer(self, client: socket.socket, cmd: bytes) -> None:
@@ -502,6 +512,17 @@ class SickEmulator:
             on = self._streaming
         elif cmd == b"sRN DeviceIdent":
             reply, on = self._frame(b"sRA DeviceIdent " + self.device_ident.encode()), self._streaming
+        elif cmd.startswith(b"sMN SetAccessMode"):
+            ok = cmd[18:] in (b"03 F4724744", b"\x03\xf4\x72\x47\x44")  # authorized client, its default password
+            self._logged_in = ok
+            reply, on = self._frame(b"sAN SetAccessMode %d" % ok), self._streaming
+        elif cmd == b"sMN LMCstartmeas":
+            self._start_requested = self._start_requested or self._logged_in
+            reply = self._frame(b"sAN LMCstartmeas 0" if self._logged_in else b"sFA 1")
+            on = self._streaming
+        elif cmd == b"sMN Run":
+            self.measuring = self.measuring or self._start_requested
+            reply, on = self._frame(b"sAN Run 1"), self._streaming
         else:
             reply, on = self._frame(b"sFA 1"), self._streaming
         with self._lock:
@@ -535,7 +556,7 @@ class SickEmulator:
                 if not _wait_until(h_send, self._stop):
                     return
                 with self._lock:
-                    c, on = self._client, self._streaming
+                    c, on = self._client, self._streaming and self.measuring
                     if c is not None and on:
                         try:
                             c.sendall(out)

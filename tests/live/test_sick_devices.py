@@ -427,3 +427,34 @@ def test_five_echoes_and_five_16bit_remission_channels():
     assert out == [payload] and f.stats.truncated == 0
     t = parse_lmdscandata(out[0])
     assert t.values.tolist() == dist1.tolist() and t.step_deg == pytest.approx(0.1667)
+
+
+# ----------------------------------------------------------------------------- a scanner left in standby
+# It acknowledges sEN LMDscandata and sends nothing until an authorized client starts the measurement
+# (sMN SetAccessMode 03 F4724744, sMN LMCstartmeas, sMN Run: the sequence sick_scan_xd's TiM5xx start-up
+# log, doc/tim5xx_startup_sequence.txt, shows).  Opt-in: it changes the device's state.
+
+@pytest.mark.parametrize("dialect, start", [("A", False), ("A", True), ("B", True)])
+def test_scanner_in_standby_started_only_when_asked(synth, dialect, start):
+    from fgloc.testing.emulators import SickEmulator
+
+    emu = SickEmulator(synth, speed=1.0, start_host=time.time() + 0.3, measuring=False, dialect=dialect)
+    events: list[str] = []
+    scans: list[LaserScan] = []
+    c = SickClient("127.0.0.1", emu.port, on_scan=lambda s, t: scans.append(s), on_event=events.append,
+                   start_measurement=start, stall_timeout_s=0.3, first_data_timeout_s=0.3)
+    c.dialect = dialect  # as if found on an earlier connection
+    c.start()
+    emu.start()
+    try:
+        deadline = time.monotonic() + 60.0  # generous: the assertions are on content, not time
+        while time.monotonic() < deadline and not (len(scans) >= 5 or c.stats.disconnects >= 2 or emu.done.is_set()):
+            time.sleep(0.02)
+        if start:
+            assert len(scans) >= 5 and emu.measuring and c.stats.device_errors == 0
+        else:
+            assert scans == [] and not emu.measuring
+            assert any("acknowledged but no scan" in e and "laser.start_measurement" in e for e in events), events
+    finally:
+        c.stop()
+        emu.stop()

@@ -12,6 +12,18 @@ from fgloc.io.source import LogSource
 from fgloc.io.topics import Topics
 
 FORMATS = ("mcap", "rosbag2", "rosbag1", "carmen")
+LFS_POINTER = b"version https://git-lfs.github.com/spec/"
+
+
+def lfs_pointer_error(p: Path, head: bytes) -> LogError | None:
+    """A one-line error for a Git LFS pointer file (what a clone without git-lfs holds in place of
+    a log: three text lines naming the real file's hash and size), else None."""
+    if not head.startswith(LFS_POINTER):
+        return None
+    size = next((ln.split()[1] for ln in head.decode("utf-8", "replace").splitlines()
+                 if ln.startswith("size ") and len(ln.split()) == 2), "?")
+    return LogError(f"{p}: a Git LFS pointer, not the log ({size} bytes not downloaded): fetch it with "
+                    "`git lfs pull` in its repository")
 
 
 def _bag_files(folder: Path) -> list[Path]:
@@ -40,10 +52,17 @@ def detect_format(path: str | Path) -> tuple[str, Path]:
         files = _bag_files(p)
         if not files and not (p / "metadata.yaml").is_file():
             raise LogError(f"{p}: is a directory without a log (no metadata.yaml, .db3 or .mcap file in it)")
+        for f in files:
+            err = lfs_pointer_error(f, read_user_head(f, 200))
+            if err is not None:
+                raise err
         if len(files) == 1 and read_user_head(files[0], 8) == MCAP_MAGIC and not compressed_bag(p):
             return "mcap", files[0]
         return "rosbag2", p
     head = read_user_head(p, 4096)
+    err = lfs_pointer_error(p, head)
+    if err is not None:
+        raise err
     if head.startswith(MCAP_MAGIC):
         return "mcap", p
     if is_ros1_head(head):

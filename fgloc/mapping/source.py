@@ -77,6 +77,9 @@ def log_messages(
     p = Path(path)
     if not p.exists():
         raise LogError(f"{p}: log file not found")
+    from fgloc.io.formats import detect_format
+
+    detect_format(p)  # one-line errors for what is no log at all (an empty file, a Git LFS pointer)
     if is_carmen(p):
         # CARMEN in file order: open_log yields ipc-time order, and real logs (intel) have ipc
         # stamps that jump backwards, where sorting pairs scans with the wrong odometry

@@ -646,6 +646,7 @@ class SickStats:
     device_error_codes: dict[str, int] = field(default_factory=dict)  # sFA answers by SOPAS error name
     scan_counter_gaps: int = 0
     other_layer: int = 0  # telegrams of a multi-layer scanner's other layers (MRS1000), skipped
+    layers_seen: set[int] = field(default_factory=set)  # the layer fields seen (at most 64 kept)
     unsupported_device: int = 0  # scans of a device whose angles run clockwise (NAV3xx, LRS36xx, OEM15xx)
     meas_freq_in_hz: int = 0  # scans whose measurement frequency field was in Hz (corrected)
 
@@ -882,12 +883,15 @@ class SickClient(SensorThread):
             stamp = self.clock.to_host(start_dev * 1e-6, arrival)
         else:
             stamp = arrival - period
+        if len(self.stats.layers_seen) < 64:
+            self.stats.layers_seen.add(t.layer_field)
         if t.layer_field != self.layer_field:
             # a multi-layer scanner (MRS1000): one telegram per layer, each tilted; only one is planar
             self.stats.other_layer += 1
-            if self.stats.other_layer == 1:
-                self.on_event(f"{self.label}: multi-layer telegrams; localizing with layer field "
-                              f"{self.layer_field}, skipping layer {t.layer_field} and any other")
+            if self.stats.other_layer in (1, 100) and self.stats.scans == 0:
+                seen = " ".join(str(v) for v in sorted(self.stats.layers_seen))
+                self.on_event(f"{self.label}: multi-layer telegrams (layer fields seen: {seen}); localizing "
+                              f"with laser.layer_field {self.layer_field}, skipping the others")
             return None
         offset = self.angle_offset_deg if self.angle_offset_deg is not None else self._family_offset_deg
         if offset is None or self._family_offset_deg is None:
@@ -942,6 +946,7 @@ class SickClient(SensorThread):
             "device_errors": st.device_errors, "device_error_codes": dict(st.device_error_codes),
             "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
             "unsupported_device": st.unsupported_device, "device": self.device_ident,
+            "layers_seen": sorted(st.layers_seen),
             "cola_b_headers": self.framer.stats.cola_b_headers, "dialect": self.dialect,
             "cola_b_telegrams": self.framer_b.stats.telegrams, "cola_b_bad_checksum": self.framer_b.bad_checksum,
             "thread_failure": self.failure,

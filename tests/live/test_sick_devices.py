@@ -55,7 +55,20 @@ def test_mrs1000_layers_only_the_planar_one_is_localized():
     assert len(scans) == c.stats.scans == 3
     assert all(np.allclose(s.ranges, 4.0) for s in scans)
     assert c.stats.other_layer == 9 and c.stats.malformed == 0 and c.stats.scan_counter_gaps == 0
-    assert any("multi-layer" in e for e in events)
+    assert any("multi-layer" in e for e in events) and c.counters()["layers_seen"] == [-500, -250, 0, 250]
+
+
+def test_multi_layer_scanner_without_a_zero_layer_says_which_layers_it_has():
+    """An MRS6124's 24 layers sit at multiples of 0.625 deg from -13.19 deg (sick_scan_xd's parser
+    comment): none is 0, so nothing is localized until laser.layer_field names one; the event line and
+    the counters list the fields seen."""
+    events: list[str] = []
+    c, scans = _client(events)
+    fields = [-2638 + 125 * k for k in range(24)]
+    for k in range(150):
+        c.handle_payload(encode_lmdscandata(_flat(3.0), k, k, 1000, 2000, layer_field=fields[k % 24]), 100.0)
+    assert scans == [] and c.stats.other_layer == 150 and c.counters()["layers_seen"] == fields
+    assert sum("multi-layer" in e for e in events) == 2 and " -138 " in events[-1]
 
 
 def test_mrs1000_configured_layer_is_the_one_used():

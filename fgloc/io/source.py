@@ -118,6 +118,7 @@ class LogSource:
         self._end_ns: int | None = None
         self._n = 0
         self._tf = TfTree()
+        self._unstamped: dict[str, bool] = {}      # topics whose first header stamp is 0 (clock_offsets)
         self._mirror_frames: set[str] = set()     # scan frames read mirrored (laser_mount)
         # True: a source that can (McapSource) keeps what ground_truth() needs while records() reads
         # the log through, so that ground_truth() after that pass reads nothing again
@@ -250,6 +251,7 @@ class LogSource:
                 st = getattr(rec.msg, "stamp", None)
                 if st is not None and math.isfinite(float(st)):
                     out[t] = float(st) - rec.log_time_ns * 1e-9
+                    self._unstamped[t] = float(st) == 0.0
                 break
         return out
 
@@ -264,8 +266,10 @@ class LogSource:
         d = off[hi] - off[lo]
         if d <= tolerance_s:
             return None
+        unset = [t for t in (hi, lo) if self._unstamped.get(t)]
+        why = f" (the first {unset[0]} header stamp is 0: does its driver leave the stamps unset?)" if unset else ""
         return (f"{hi} and {lo} are stamped by different clocks: relative to the recording time their "
-                f"header stamps differ by {d:.1f} s")
+                f"header stamps differ by {d:.1f} s{why}")
 
     def scan_frame(self) -> str:
         """The ``frame_id`` of the first scan (``laser`` if none)."""

@@ -323,7 +323,8 @@ class SickEmulator:
         dialect: str = "A",
         measuring: bool = True,
     ) -> None:
-        """``device_ident``: the ``sRA DeviceIdent`` answer's fields (the LMS1xx manual's example);
+        """``device_ident``: the ``sRA DeviceIdent`` answer's fields (default: the example answer SICK's
+        telegram listing gives, as ansarid/pysicktim and zh3305/LMS5xxConnector quote it);
         ``telegram``: :func:`encode_lmdscandata` keywords giving a real device's telegram shape
         (e.g. a TiM571's ``{"rssi_bits": 16, "name": "..."}``, an LMS5xx's ``{"scale": 2.0}``);
         ``dialect="B"``: a device set to CoLa-B (binary): every answer and telegram in CoLa-B, to

@@ -471,3 +471,46 @@ def test_scanner_in_standby_started_only_when_asked(synth, dialect, start):
     finally:
         c.stop()
         emu.stop()
+
+
+# CoLa-B telegrams as zh3305/LMS5xxConnector's tests give them, from the SICK telegram listing's examples
+# (LMS5xxConnectorTest/CoLaBUnitTest.cs @ 1143bd1fa39bab72ee8d242b97459a518a445520): a DeviceIdent answer,
+# the sEN / sEA LMDscandata pair and an sRA LMDscandata of 21 beams.  They check this client's CoLa-B
+# framing (length, XOR checksum), its binary commands and its binary scan parser against a third party.
+DOC_B_IDENT = bytes.fromhex(
+    "02020202 00000034 7352412044657669636549 64656E7420 0010 4C4D5331 30785F4669656C644576616C"
+    " 0010 56312E33362D32312E31302E32303130 62".replace(" ", ""))
+DOC_B_SEN = bytes.fromhex("02020202000000117345 4E204C4D447363616E646174612001 33".replace(" ", ""))
+DOC_B_SEA = bytes.fromhex("02020202000000117345 41204C4D447363616E646174612001 3C".replace(" ", ""))
+DOC_B_SCAN = bytes.fromhex("""
+    02 02 02 02 00 00 00 83 73 52 41 20 4C 4D 44 73 63 61 6E 64 61 74 61 20 00 01 00 01 00 89
+    A2 7F 00 00 03 43 03 47 27 47 7B A9 27 47 81 3B 00 00 07 00 00 00 00 00 13 88 00 00 01 68
+    00 00 00 01 44 49 53 54 31 3F 80 00 00 00 00 00 00 00 01 86 A0 13 88 00 15 08 93 08 95 08
+    AF 08 B3 08 B0 08 A4 08 B0 08 BF 08 B9 08 BA 08 D0 08 D3 08 CF 08 DE 08 EB 08 E3 08 FE 08
+    EC 09 03 08 FD 08 FD 00 00 00 00 00 00 00 00 00 00 00 00 2B""".replace("\n", " ").replace(" ", ""))
+
+
+def test_documented_cola_b_telegrams_frame_command_and_parse():
+    from fgloc.live.sick import ColaBFramer, frame_b, parse_device_ident, parse_lmdscandata_binary
+
+    assert frame_b(b"sEN LMDscandata \x01") == DOC_B_SEN  # the start command this client sends in CoLa-B
+    f = ColaBFramer()
+    out = [p for i in range(0, 400, 7) for p in f.feed((DOC_B_IDENT + DOC_B_SEA + DOC_B_SCAN)[i : i + 7])]
+    # the DeviceIdent and sEA checksums hold; the scan example's does not (its payload XORs to CB, it
+    # says 2B: the listing's sample values were edited, the ASCII twin of this example has others), so
+    # the framer drops it as a bad checksum, as it would a corrupted telegram
+    assert len(out) == 2 and f.bad_checksum == 1
+    assert parse_device_ident(out[0], binary=True) == ("LMS10x_FieldEval", "V1.36-21.10.2010")
+    out.append(DOC_B_SCAN[8:-1])
+    t = parse_lmdscandata_binary(out[2])
+    assert (t.command, t.serial, t.telegram_counter, t.scan_counter) == ("sRA", 0x89A27F, 0x343, 0x347)
+    assert (t.time_since_startup_us, t.time_of_transmission_us) == (0x27477BA9, 0x2747813B)
+    assert (t.scan_freq_hz, t.meas_freq_hz, t.start_angle_deg, t.step_deg) == (50.0, 36000.0, 10.0, 0.5)
+    assert t.values.tolist()[:3] == [0x893, 0x895, 0x8AF] and len(t.values) == 21 and t.values[-1] == 0x8FD
+    events: list[str] = []
+    c, scans = _client(events, angle_offset_deg=None)
+    for p in out:
+        c.handle_payload(p, 1.0, binary=True)
+    assert c.counters()["device"] == "LMS10x_FieldEval" and c._stream_acked
+    assert len(scans) == 1 and math.degrees(scans[0].angle_min) == pytest.approx(-80.0)
+    assert scans[0].ranges[0] == pytest.approx(2.195)

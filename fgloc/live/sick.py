@@ -57,6 +57,9 @@ log = logging.getLogger(__name__)
 STX = 0x02
 ETX = 0x03
 COLA_B_HEADER = b"\x02\x02\x02\x02"
+# the start of a CoLa-A answer or scan: STX, a SOPAS command type, a space (never in a CoLa-B stream: there
+# STX is followed by STX or by the length's zero bytes, and a binary value would have to spell this out)
+_COLA_A_TELEGRAM = re.compile(rb"\x02s(?:SN|RA|EA|FA|AN|WA) [A-Za-z]")
 # 5 echoes + 5 16-bit remission channels (LMDscandatacfg 1F 00 1 1, as sick_scan_xd's README shows an
 # MRS6124 set) of 1141 beams (LMS5xx, 0.1667 deg) are ~57 KB of CoLa-A: room for that and more
 MAX_TELEGRAM = 256 * 1024
@@ -1014,6 +1017,14 @@ class SickClient(SensorThread):
                             continue
                     for payload in self.framer_b.feed(chunk):
                         self.handle_payload(payload, now, binary=True)
+                    m = _COLA_A_TELEGRAM.search(chunk)
+                    if m is not None:
+                        # the device answers in CoLa-A (set back to it): read it as such from here on
+                        self.dialect = "A"
+                        self.framer_b.reset()
+                        self.on_event(f"{self.label}: the device sends CoLa-A telegrams; reading CoLa-A")
+                        for payload in self.framer.feed(chunk[m.start() :]):
+                            self.handle_payload(payload, now)
                 try:
                     sock.sendall(self._stop_command())
                 except OSError:

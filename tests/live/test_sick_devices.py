@@ -514,3 +514,30 @@ def test_documented_cola_b_telegrams_frame_command_and_parse():
     assert c.counters()["device"] == "LMS10x_FieldEval" and c._stream_acked
     assert len(scans) == 1 and math.degrees(scans[0].angle_min) == pytest.approx(-80.0)
     assert scans[0].ranges[0] == pytest.approx(2.195)
+
+
+def test_client_left_in_cola_b_reads_a_cola_a_laser():
+    """The client found CoLa-B on an earlier connection, the laser was set back to CoLa-A: it answers the
+    binary start commands in CoLa-A (the emulator does, as a device answering in its own dialect would).
+    Before (fa53d6b): CoLa-A telegrams were garbage to the CoLa-B framer for as long as they kept coming,
+    with no stall to end it.  Now the client reads CoLa-A from the first such telegram on."""
+    from fgloc.testing.emulators import SickEmulator
+
+    from .streams import synthetic_messages
+
+    emu = SickEmulator(synthetic_messages(), speed=1.0, start_host=time.time() + 0.3)
+    events: list[str] = []
+    scans: list[LaserScan] = []
+    c = SickClient("127.0.0.1", emu.port, on_scan=lambda s, t: scans.append(s), on_event=events.append)
+    c.dialect = "B"
+    c.start()
+    emu.start()
+    try:
+        deadline = time.monotonic() + 60.0
+        while len(scans) < 5 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert len(scans) >= 5 and c.dialect == "A" and c.stats.malformed == 0
+        assert sum("reading CoLa-A" in e for e in events) == 1
+    finally:
+        c.stop()
+        emu.stop()

@@ -1003,6 +1003,7 @@ class SickClient(SensorThread):
                         raise ConnectionError("closed by peer")
                     now = time.time()
                     last_data = time.monotonic()
+                    started_in_b = self.dialect == "B"
                     if self.dialect == "A":
                         n_b = self.framer.stats.cola_b_headers
                         for payload in self.framer.feed(chunk):
@@ -1017,7 +1018,7 @@ class SickClient(SensorThread):
                             continue
                     for payload in self.framer_b.feed(chunk):
                         self.handle_payload(payload, now, binary=True)
-                    m = _COLA_A_TELEGRAM.search(chunk)
+                    m = _COLA_A_TELEGRAM.search(chunk) if started_in_b else None  # (else read as CoLa-A above)
                     if m is not None:
                         # the device answers in CoLa-A (set back to it): read it as such from here on
                         self.dialect = "A"

@@ -541,3 +541,36 @@ def test_client_left_in_cola_b_reads_a_cola_a_laser():
     finally:
         c.stop()
         emu.stop()
+
+
+def test_stray_cola_b_header_in_a_cola_a_stream_never_duplicates_a_scan():
+    """Line noise with four STX bytes in a CoLa-A stream looks like a CoLa-B header: the client tries
+    CoLa-B and, on the CoLa-A scans that follow in the same read, goes back.  Each scan is delivered
+    once (a scan read as CoLa-A before the switch must not be read again after it)."""
+    s = LaserScan(stamp=0.0, angle_min=math.radians(-135), angle_increment=math.radians(1.0), range_min=0.05,
+                  range_max=50.0, ranges=np.linspace(1.0, 3.0, 271).astype(np.float32), scan_time=0.04)
+    burst = frame(b"sEA LMDscandata 1") + b"\x02\x02\x02\x02zz" + b"".join(
+        frame(encode_lmdscandata(s, k, k, 40_000 * k, 40_000 * k + 20_000)) for k in range(3))
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    got: list[int] = []
+    c = SickClient("127.0.0.1", srv.getsockname()[1], on_scan=lambda sc, t: got.append(c._last_scan_counter or 0),
+                   stall_timeout_s=30.0)
+    c.start()
+    try:
+        conn, _ = srv.accept()
+        with conn:
+            conn.recv(100)
+            conn.sendall(burst)
+            tail = b"".join(frame(encode_lmdscandata(s, k, k, 40_000 * k, 40_000 * k + 20_000)) for k in range(3, 6))
+            deadline = time.monotonic() + 60.0
+            while c.stats.scans < 3 and time.monotonic() < deadline and c.dialect == "A":
+                time.sleep(0.01)
+            conn.sendall(tail)
+            while c.stats.scans < 6 and time.monotonic() < deadline:
+                time.sleep(0.01)
+    finally:
+        c.stop()
+        srv.close()
+    assert got == [0, 1, 2, 3, 4, 5] and c.stats.malformed == 0

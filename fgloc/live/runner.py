@@ -280,6 +280,9 @@ class LiveRunner:
         err = (f"ser crc {ser.get('crc_errors', 0)} len {ser.get('length_errors', 0)} "
                f"junk {ser.get('garbage_bytes', 0)}B drop {ser.get('dropped', 0)} | "
                f"las bad {las.get('malformed', 0)} reconn {las.get('disconnects', 0)}")
+        skipped = las.get("other_layer", 0) + las.get("unsupported_device", 0)
+        if skipped:  # scans of other layers (MRS1000) or of a clockwise device: said, not hidden
+            err += f" skip {skipped}"
         from fgloc.localization.sources import status_line
 
         router = getattr(self.session, "sources", None)

@@ -574,3 +574,20 @@ def test_stray_cola_b_header_in_a_cola_a_stream_never_duplicates_a_scan():
         c.stop()
         srv.close()
     assert got == [0, 1, 2, 3, 4, 5] and c.stats.malformed == 0
+
+
+def test_status_line_shows_skipped_laser_scans():
+    """Scans skipped as another layer's or a clockwise device's are on the status line, not only in the
+    summary (before: 'las bad 0 reconn 0' while no scan was used)."""
+    from fgloc.live.app import LiveSession
+    from fgloc.localization import Localizer
+    from fgloc.types import StaticTransform
+
+    sess = LiveSession(Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf"), None, None)
+    c, _ = _client()
+    for j, layer in enumerate((-500, -250, 0, 250)):
+        c.handle_payload(encode_lmdscandata(_flat(2.0), j, j, 1000, 2000, layer_field=layer), 100.0)
+    sess.runner.sources["laser"] = c.counters
+    assert "las bad 0 reconn 0 skip 3" in sess.runner.status_line()
+    sess.runner.sources["laser"] = _client()[0].counters
+    assert "reconn 0 skip" not in sess.runner.status_line()

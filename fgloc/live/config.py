@@ -30,7 +30,7 @@ class SerialConfig:
 
 @dataclass(frozen=True)
 class LaserConfig:
-    """``laser:`` the SICK LMS1xx-class scanner over TCP (``fgloc live --laser``)."""
+    """``laser:`` the SICK scanner over TCP, CoLa-A or CoLa-B (``fgloc live --laser``)."""
 
     range_min_m: float = setting(0.5, "shorter ranges are invalid (paper Table 2: 0.5-50 m)", min=0)
     range_max_m: float = setting(50.0, "longer ranges are invalid", gt=0)

@@ -1,4 +1,4 @@
-"""SICK LMS1xx-class laser scanners over TCP: CoLa-A (ASCII) framing and LMDscandata.
+"""SICK laser scanners over TCP: CoLa-A (ASCII) and CoLa-B (binary) framing, LMDscandata.
 
 CoLa-A telegrams are ``STX (0x02) <ASCII tokens separated by spaces> ETX (0x03)``.
 The scan telegram (``sSN LMDscandata`` when streamed after ``sEN LMDscandata 1``,
@@ -6,7 +6,7 @@ The scan telegram (``sSN LMDscandata`` when streamed after ``sEN LMDscandata 1``
 
     sSN LMDscandata <version> <device> <serial> <status1> <status2>
         <telegram_counter> <scan_counter> <time_since_startup_us> <time_of_transmission_us>
-        <inputs1> <inputs2> <outputs1> <outputs2> <reserved> <scan_freq_1/100Hz> <meas_freq_100Hz>
+        <inputs1> <inputs2> <outputs1> <outputs2> <layer angle> <scan_freq_1/100Hz> <meas_freq_100Hz>
         <n_encoders> [<enc_pos> <enc_speed>]*n
         <n_16bit_channels> [<name> <scale f32> <offset f32> <start_angle i32 1/10000deg>
                             <step u16 1/10000deg> <n_values> <v>*n]*n
@@ -15,23 +15,29 @@ The scan telegram (``sSN LMDscandata`` when streamed after ``sEN LMDscandata 1``
 
 Numbers are hexadecimal without leading zeros; the scale factor and offset are the
 IEEE-754 float32 bit pattern in hex (``3F800000`` = 1.0).  Distances (DIST1) are mm
-after scaling; 0 means no echo -> ``+inf`` (REP 117).  The device angle 0 is 90 deg to
-the right of the scanner's forward axis on the LMS1xx, hence the default
-``angle_offset_deg = -90`` to get REP 103 angles (x forward, counter-clockwise).
-Device angles grow counter-clockwise seen from above (the LMS1xx, TiM5xx/7xx, LMS5xx and
-MRS1000 drivers map a beam to ``start + k * step - 90 deg`` without reversing the order).
+after scaling; 0 means no echo -> ``+inf`` (REP 117).  CoLa-B carries the same fields at
+fixed widths, big-endian, framed as ``02 02 02 02 <u32 length> <payload> <XOR checksum>``
+(:class:`ColaBFramer`, :func:`parse_lmdscandata_binary`).
+
+Angles: device angles grow counter-clockwise seen from above (the LMS1xx, TiM5xx/7xx, LMS5xx
+and MRS1000 drivers map a beam to ``start + k * step - 90 deg`` without reversing the
+order); on those families device 0 deg is the scanner's right side, so REP 103 (x forward)
+is device - 90 deg.  The TiM240, LRS4xxx and NAV2xx count from straight ahead (offset 0);
+NAV3xx, LRS36xx and OEM15xx count clockwise and are not read.  The client asks
+``sRN DeviceIdent`` and picks the family's offset unless one is configured.
 
 Real-device variants handled here: a scale factor of 2.0 (LMS5xx: DIST1 in 2 mm units),
 RSSI channels (16 or 8 bit) and further echoes (DIST2..) beside DIST1, a name block (TiM:
-``1 7 <name>``), a multi-layer scanner's layer-angle field (MRS1000: the reserved token,
-``FE0C FF06 0 FA``: one telegram per layer; only ``layer_field`` is used, the others are
-counted), a measurement frequency sent in Hz instead of 100 Hz (a firmware inconsistency
-sick_scan_xd also corrects; told apart by the mirror's beam rate), ``sFA`` error answers
-(counted by SOPAS error code and reported) and CoLa-B (binary) telegrams, which are
-counted and reported (this client speaks CoLa-A only).
+``1 7 <name>``), a multi-layer scanner's layer-angle field (MRS1000: ``FE0C FF06 0 FA``,
+one telegram per layer; only ``layer_field`` is used, the others are counted), a
+measurement frequency sent in Hz instead of 100 Hz (a firmware inconsistency sick_scan_xd
+also corrects; told apart by the mirror's beam rate), ``sFA`` error answers (counted by
+SOPAS error name and reported), a scanner left in standby (reported; started on request
+with ``start_measurement``) and either CoLa dialect (found in the stream, or tried after an
+unanswered start).
 
-Parsing is pure (:func:`parse_lmdscandata`, :class:`ColaFramer`); :class:`SickClient`
-is the threaded TCP client with reconnect and back-off.
+Parsing is pure (:func:`parse_lmdscandata`, :func:`parse_lmdscandata_binary`, the framers);
+:class:`SickClient` is the threaded TCP client with reconnect and back-off.
 """
 
 from __future__ import annotations
@@ -730,7 +736,9 @@ def sopas_error_name(payload: bytes, binary: bool = False) -> str:
 
 
 class SickClient(SensorThread):
-    """Threaded CoLa-A client: connect, ``sEN LMDscandata 1``, stream, reconnect with back-off.
+    """Threaded SICK client: connect, ``sRN DeviceIdent`` (the family's angle convention),
+    optionally start the measurement, ``sEN LMDscandata 1``, stream, reconnect with back-off;
+    in CoLa-A, or CoLa-B once the device is found to speak it (``dialect``).
 
     ``on_scan(scan, arrival_host_time)`` is called from the client thread for each valid
     scan.  Stamps: the scanner's ``time_since_startup`` (scan start) mapped to host time

@@ -385,7 +385,7 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
                 raise TelegramError("bad_count", f"{n} values")
             if i + n > len(tok):
                 raise TelegramError("wrong_count", f"{name}: {n} announced, {len(tok) - i} left")
-            if name == channel and found is None:
+            if name == channel and found is None and bits == 16:  # an 8-bit channel cannot hold mm
                 if n == 0:
                     raise TelegramError("bad_count", f"{name}: no values")
                 if step == 0 or not scale > 0:

@@ -591,3 +591,15 @@ def test_status_line_shows_skipped_laser_scans():
     assert "las bad 0 reconn 0 skip 3" in sess.runner.status_line()
     sess.runner.sources["laser"] = _client()[0].counters
     assert "reconn 0 skip" not in sess.runner.status_line()
+
+
+def test_distance_channel_only_from_the_16_bit_block():
+    """DIST1 sent only as an 8-bit channel (values 0..255: not mm): not a scan of 0-0.255 m ranges but a
+    counted 'no_channel' telegram; the binary parser already took DIST from 16-bit channels only."""
+    tok = HAND_LMS1XX.split()
+    i = tok.index(b"DIST1")
+    eight = [b"0", b"1"] + tok[i : i + 6] + [b"2E", b"0", b"3E", b"FF", b"1F"]
+    bad = b" ".join(tok[:i - 1] + eight + [b"0"] * 5)
+    with pytest.raises(TelegramError) as e:
+        parse_lmdscandata(bad)
+    assert e.value.reason == "no_channel"

@@ -157,6 +157,19 @@ def _rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: in
     return d
 
 
+def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArray, inc_cov: FloatArray) -> FloatArray:
+    """The map-frame covariance of ``pose1 = pose0 (+) d``: ``cov0_map`` (``pose0``'s, map frame) carried
+    along, its heading's uncertainty swept over the distance from ``pose0`` to ``pose1``, plus the
+    increment's covariance ``inc_cov`` (frame of ``pose0``, as :func:`~fgloc.backends.factors.integrate_twist`
+    gives it) rotated into the map.  (``inc_cov`` added as it is gave a robot heading along map +y its
+    along-track variance on map x, and no heading sweep: tests/backends/test_smoother.py.)"""
+    dx, dy = float(pose1[0]) - float(pose0[0]), float(pose1[1]) - float(pose0[1])
+    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+    c, s = math.cos(float(pose0[2])), math.sin(float(pose0[2]))
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return J @ np.asarray(cov0_map, dtype=float) @ J.T + R @ np.asarray(inc_cov, dtype=float) @ R.T
+
+
 def _period(ts: list[float]) -> float:
     """Median spacing of the last readings (inf with fewer than 3)."""
     if len(ts) < 3:
@@ -897,7 +910,9 @@ class SlidingWindowSmoother(Backend):
             return self._pred_cache[1], self._pred_cache[2]
         d, c = self._integrate(self.kf_t[-1], t)
         d = self._corrected(d, self.kf_t[-1], t)
-        pose, cov = compose1(self.kf_pose[k], d), self._last_cov + c
+        p0 = self.kf_pose[k]
+        pose = compose1(p0, d)
+        cov = carried_covariance(self._last_cov, p0, pose, c)
         self._pred_cache = (key, pose, cov)
         return pose, cov
 
@@ -1003,6 +1018,10 @@ class SlidingWindowSmoother(Backend):
             # a scan right on top of the previous keyframe adds nothing but conditioning trouble
             self.stats["merged_keyframes"] = self.stats.get("merged_keyframes", 0) + 1
             return False
+        if fix is not None and self.cfg.fix_gate is not None:
+            # the gate's marginal is fresh (it is otherwise computed only when an output asks for it:
+            # without outputs, the gate judged against the start prior the whole run)
+            self._update_covariance()
         pred, pred_cov = self.predict(t)
         used = False
         if fix is not None:
@@ -1106,7 +1125,7 @@ class SlidingWindowSmoother(Backend):
             self._flush_acc()
         else:  # online estimate until the next solver update: the odometry prediction
             self.stats["keyframes"] += 1
-            self._record_online(t, pred, self._last_cov + c)
+            self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred, c))
 
     def _noise_of(self, name: str) -> tuple[float, float]:
         return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
@@ -1556,7 +1575,9 @@ class SlidingWindowSmoother(Backend):
         vals.insert(k, gtsam.Pose2(*guess))
         used = False
         if fix is not None:
-            pred_cov = self._last_cov + c1
+            if self.cfg.fix_gate is not None:
+                self._update_covariance()
+            pred_cov = carried_covariance(self._last_cov, np.array([pa.x(), pa.y(), pa.theta()]), guess, c1)
             if self._gate(fix, guess, pred_cov):
                 graph.add(fix_factor(k, fix.pose, self._fix_weighted_cov(fix.cov), self.cfg.fix_kernel,
                                      self.cfg.fix_kernel_k))
@@ -1596,6 +1617,7 @@ class SlidingWindowSmoother(Backend):
         if k is None or k not in self.kf_pose:
             return
         self._cov_stale = None
+        self._pred_cache = None
         try:
             body = np.asarray(self.isam.marginalCovariance(k))
         except (RuntimeError, IndexError):

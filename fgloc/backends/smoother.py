@@ -171,11 +171,18 @@ def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArra
     increment's covariance ``inc_cov`` (frame of ``pose0``, as :func:`~fgloc.backends.factors.integrate_twist`
     gives it) rotated into the map.  (``inc_cov`` added as it is gave a robot heading along map +y its
     along-track variance on map x, and no heading sweep: tests/backends/test_smoother.py.)"""
+    # J P J^T (J = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]) plus R c R^T, in scalars (at every prediction)
     dx, dy = float(pose1[0]) - float(pose0[0]), float(pose1[1]) - float(pose0[1])
-    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-    c, s = math.cos(float(pose0[2])), math.sin(float(pose0[2]))
-    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return J @ np.asarray(cov0_map, dtype=float) @ J.T + R @ np.asarray(inc_cov, dtype=float) @ R.T
+    p00, p01, p02, _, p11, p12, _, _, p22 = np.asarray(cov0_map, dtype=float).reshape(9).tolist()
+    c00, c01, c02, _, c11, c12, _, _, c22 = np.asarray(inc_cov, dtype=float).reshape(9).tolist()
+    cs, sn = math.cos(float(pose0[2])), math.sin(float(pose0[2]))
+    a00 = p00 - 2.0 * dy * p02 + dy * dy * p22 + cs * cs * c00 - 2.0 * cs * sn * c01 + sn * sn * c11
+    a01 = p01 + dx * p02 - dy * p12 - dx * dy * p22 + cs * sn * (c00 - c11) + (cs * cs - sn * sn) * c01
+    a02 = p02 - dy * p22 + cs * c02 - sn * c12
+    a11 = p11 + 2.0 * dx * p12 + dx * dx * p22 + sn * sn * c00 + 2.0 * cs * sn * c01 + cs * cs * c11
+    a12 = p12 + dx * p22 + sn * c02 + cs * c12
+    a22 = p22 + c22
+    return np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
 
 
 def _period(ts: list[float]) -> float:

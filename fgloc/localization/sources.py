@@ -611,6 +611,7 @@ class SourceRouter:
             return
         t = float(msg.stamp)
         if spec.gate is not None:
+            be.current(covariance=True)  # a fresh marginal to gate against (not the one an output last asked for)
             pred, pcov = be.predict(t)
             e = pose - pred
             e[2] = wrap_angle(e[2])

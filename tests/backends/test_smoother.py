@@ -111,6 +111,49 @@ def test_online_covariance_is_the_marginal_in_the_map_frame(synth_noisy):
     assert 1e-4 < np.sqrt(cov[0, 0]) < 0.02 and np.sqrt(cov[2, 2]) < np.deg2rad(0.5)
 
 
+def test_prediction_covariance_is_carried_into_the_map_frame():
+    """A robot heading along map +y whose odometry is unsure of its speed (along the track) and sure
+    of its sideways slip: the predicted covariance holds the along-track variance on map y, and the
+    start's heading variance swept over the distance on map x.  (It added the increment's covariance,
+    which is in the robot's frame, to the map-frame marginal as it was: map x 5.1e-5 m^2, map y 1.0e-6,
+    where this gives map x 3.06e-4 (1 deg of heading over 1 m) and map y 5.1e-5.)"""
+    sm = SlidingWindowSmoother(SmootherConfig(q_slip=(0.0, 0.0, 0.0), gyro=False))
+    yaw_var = np.deg2rad(1.0) ** 2
+    sm.initialize(0.0, np.array([0.0, 0.0, np.pi / 2]), np.diag([1e-6, 1e-6, yaw_var]))
+    twist_cov = np.diag([0.05**2, 1e-8, 1e-8])
+    for i in range(1, 51):  # 1 m/s for 1 s along the robot's x (map +y)
+        sm.add_odometry(i * 0.02, np.array([1.0, 0.0, 0.0]), twist_cov)
+    pose, cov = sm.predict(1.0)
+    assert np.allclose(pose, [0.0, 1.0, np.pi / 2], atol=1e-9)
+    along = 0.05**2 * 0.02  # the twist's variance over 50 steps of 0.02 s (integrate_twist's model)
+    assert np.isclose(cov[1, 1], 1e-6 + along, rtol=1e-6)
+    assert np.isclose(cov[0, 0], 1e-6 + yaw_var * 1.0**2, rtol=1e-3)  # heading swept over 1 m
+    assert np.isclose(cov[0, 2], -yaw_var * 1.0, rtol=1e-3)
+
+
+def test_fix_gate_judges_against_a_fresh_marginal():
+    """The optional Mahalanobis gate compares a fix with the prediction's covariance.  The smoother
+    computes its marginal only when an output asks for it, so without outputs the gate judged every
+    fix against the start prior: a loose start (1 m) let a fix 0.3 m off through (squared distance
+    0.09) after 3 s of 1 cm fixes that pin the robot (800 with the marginal).  The gate now refreshes
+    the marginal: the same fix is rejected, with or without an output asking for the covariance."""
+    for ask in (False, True):
+        sm = SlidingWindowSmoother(SmootherConfig(fix_gate=16.27))
+        sm.initialize(0.0, np.zeros(3), np.diag([1.0, 1.0, 0.1]))
+        cov = np.diag([1e-4, 1e-4, np.deg2rad(0.5) ** 2])
+        for i in range(1, 31):  # standing still, a fix every 0.1 s
+            t = i * 0.1
+            for j in range(5):
+                sm.add_odometry(t - 0.08 + 0.02 * j, np.zeros(3), None)
+            assert sm.add_keyframe(t, PoseFix(t, np.zeros(3), cov))
+            if ask:
+                sm.current()
+        sm.add_odometry(3.1, np.zeros(3), None)
+        used = sm.add_keyframe(3.1, PoseFix(3.1, np.array([0.3, 0.0, 0.0]), cov))
+        assert not used and sm.stats["fixes_rejected"] == 1, ask
+        assert np.linalg.norm(sm.current()[1][:2]) < 0.01
+
+
 def _no_heading_run(sm: SlidingWindowSmoother, duration_s: float = 200.0) -> tuple[np.ndarray, np.ndarray]:
     """Wheel odometry whose yaw rate is not fused (robot_localization's 1e6 variance) and nothing
     else that measures the heading: the heading's uncertainty grows without bound until GTSAM

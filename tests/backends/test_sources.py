@@ -320,3 +320,28 @@ def test_an_imu_mounted_through_a_chain_of_transforms():
     (c,) = loc.compass
     assert c.yaw_rad == pytest.approx(base_yaw, abs=1e-9) and c.yaw_rate_radps == pytest.approx(w, abs=1e-12)
     assert "mount" not in router.health()["imu"]  # found: no 'no transform: identity'
+
+
+def test_a_pose_sources_gate_judges_against_a_fresh_marginal():
+    """A pose source's Mahalanobis gate compares the pose with the prediction's covariance; the
+    smoother's marginal is computed only when asked, so without an output asking the gate judged
+    against the start prior (1 m here): a pose 0.3 m off passed after 3 s of 1 cm poses standing
+    still.  It is gated now."""
+    from fgloc.backends.smoother import SlidingWindowSmoother
+
+    specs = {"mocap": {"type": "pose", "topic": "/pose", "frame_id": "map", "covariance": "fixed",
+                       "sigmas": [0.01, 0.01, 0.01], "gate": 16.27}}
+    loc, router = _router(specs)
+    sm = SlidingWindowSmoother()
+    sm.initialize(0.0, np.zeros(3), np.diag([1.0, 1.0, 0.1]))
+    loc.backend = sm  # type: ignore[assignment]
+    mocap = router.specs[0]
+    for i in range(1, 31):
+        t = i * 0.1
+        for j in range(5):
+            sm.add_odometry(t - 0.08 + 0.02 * j, np.zeros(3), None)
+        router.on_message(mocap, PoseFix(t, np.zeros(3), np.eye(3), frame_id="map"))
+    sm.add_odometry(3.1, np.zeros(3), None)
+    router.on_message(mocap, PoseFix(3.1, np.array([0.3, 0.0, 0.0]), np.eye(3), frame_id="map"))
+    h = router.health()["mocap"]
+    assert h["accepted"] == 30 and h["gated"] == 1

@@ -28,8 +28,11 @@ header.frame_id``; :mod:`fgloc.backends.imu`): any 3-D mount when the message is
 :class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
 :class:`~fgloc.types.Transform3D` (every log reader's tf, and ``static_transforms``); with a
 planar transform or a yaw-only reading (:class:`~fgloc.types.CompassHeading`: fgloc's serial
-link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity
-with one warning.
+link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity,
+with one warning once :data:`MOUNT_WAIT_S` of its stamps passed without one (a ROS 2 recorder
+logs ``/tf_static`` after the first IMU messages; a mount that arrives is applied from then on and
+the summary says after how many).  A configured source (``sources.inputs``) that gets no message
+in the whole log is a warning at the end (:meth:`SourceRouter.silent_sources`).
 
 Bad input is counted and skipped, never raised: an IMU quaternion of zeros or not of unit
 length, a covariance with a NaN or negative diagonal (each only when the source uses that

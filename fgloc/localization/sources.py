@@ -28,8 +28,11 @@ header.frame_id``; :mod:`fgloc.backends.imu`): any 3-D mount when the message is
 :class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
 :class:`~fgloc.types.Transform3D` (every log reader's tf, and ``static_transforms``); with a
 planar transform or a yaw-only reading (:class:`~fgloc.types.CompassHeading`: fgloc's serial
-link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity
-with one warning.
+link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity,
+with one warning once :data:`MOUNT_WAIT_S` of its stamps passed without one (a ROS 2 recorder
+logs ``/tf_static`` after the first IMU messages; a mount that arrives is applied from then on and
+the summary says after how many).  A configured source (``sources.inputs``) that gets no message
+in the whole log is a warning at the end (:meth:`SourceRouter.silent_sources`).
 
 Bad input is counted and skipped, never raised: an IMU quaternion of zeros or not of unit
 length, a covariance with a NaN or negative diagonal (each only when the source uses that
@@ -71,10 +74,17 @@ TYPES = ("odometry", "imu", "pose")
 POLICIES = ("message", "fixed", "scaled", "floor")
 DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
 DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
+#: the ROS message types (``pkg/Type``) a source of each type reads
+MESSAGE_TYPES = {"odometry": ("nav_msgs/Odometry",), "imu": ("sensor_msgs/Imu",),
+                 "pose": ("geometry_msgs/PoseWithCovarianceStamped",)}
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
 _IDENTITY = np.eye(3)
 _IDENTITY.flags.writeable = False
 _IDENTITY_ENTRY = (None, _IDENTITY, _IDENTITY.ravel().tolist())
+#: s (of an IMU's stamps): an IMU frame without a mount is warned about only after this long without
+#: one, or at the end of the log: a ROS 2 recorder logs /tf_static up to tens of ms after the first
+#: IMU messages (TurtleBot3 bags: 0-53 ms), and a mount that arrives is applied from then on
+MOUNT_WAIT_S = 1.0
 #: a differential source's message stamped before the previous one: skipped, so that the next
 #: increment spans from the newest pose (resetting the reference to it lost the increment before)
 OUT_OF_ORDER = "differential: stamp not after the previous message's (out of order)"
@@ -227,6 +237,8 @@ class _State:
     prev_pose: tuple[float, np.ndarray] | None = None
     prev_yaw: tuple[float, float] | None = None
     fused: bool = True
+    messages: int = 0          # every message routed to the source, whatever became of it
+    vy_max: float = 0.0        # the largest |lateral velocity| an odometry's messages reported (m/s)
     extra: dict = field(default_factory=dict)
 
 
@@ -249,6 +261,10 @@ class SourceRouter:
         self.state: dict[str, _State] = {}
         self._tilt: tuple[float, float, float] | None = None   # t, roll, pitch of the base (levelling IMU)
         self._tilt_source: str | None = None
+        self.configured_inputs = False  # the specs came from a config's sources.inputs (install_sources)
+        #: the log's topics and their message types (``{"/imu": "sensor_msgs/msg/Imu"}``), when the
+        #: caller knows them: a silent source's warning names the log's topics of its type
+        self.log_topics: dict[str, str] | None = None
         first: dict[str, str] = {}
         for s in specs:
             kind = {"odometry": "odometry", "imu": "imu", "pose": "pose"}[s.type]
@@ -315,6 +331,7 @@ class SourceRouter:
 
     def on_message(self, spec: SourceSpec, msg: object) -> None:
         st = self.state[spec.name]
+        st.messages += 1
         try:
             if spec.type == "odometry" and isinstance(msg, Odometry):
                 self._odometry(spec, st, msg)
@@ -368,6 +385,10 @@ class SourceRouter:
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
         cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
         tw_msg, cov_msg = tw.copy(), cov
+        if tw.shape == (3,):
+            vy = abs(float(tw[1]))
+            if vy > st.vy_max:  # (a NaN never is)
+                st.vy_max = vy
         pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
         velocities, whole_twist = self._twist_use(spec)
         if spec.differential or not velocities:
@@ -456,17 +477,36 @@ class SourceRouter:
         return J @ np.asarray(tw, dtype=float), J @ np.asarray(cov, dtype=float) @ J.T
 
     # ------------------------------------------------------------------ IMU
-    def _mount(self, frame: str, warn: bool = True) -> StaticTransform | None:
+    def _mount(self, frame: str) -> StaticTransform | None:
         f = frame.lstrip("/")
         if f in ("", "base_link", "base_footprint"):
             return None
         tr = self.mounts.get(f)
         if tr is None:
             tr = self._chain(f)
-        if tr is None and warn and f not in self._warned:
+        return tr
+
+    def _unmounted(self, st: _State, frame: str, t: float) -> None:
+        """An IMU message of ``frame`` without a mount (yet): taken as identity, counted; warned about
+        once :data:`MOUNT_WAIT_S` of its stamps have passed without one (or at :meth:`finish`)."""
+        f = frame.lstrip("/")
+        st.extra["no_transform"] = st.extra.get("no_transform", 0) + 1
+        st.extra["no_transform_frame"] = f
+        since = st.extra.setdefault("no_transform_since", t)
+        if t - since >= MOUNT_WAIT_S:
+            self._warn_mount(f)
+
+    def _warn_mount(self, f: str) -> None:
+        if f not in self._warned:
             self._warned.add(f)
             log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", f)
-        return tr
+
+    @staticmethod
+    def _mounted(st: _State) -> None:
+        """The mount arrived after messages taken as identity (a /tf_static logged late)."""
+        if st.extra.get("no_transform"):
+            st.extra["mount_late"] = st.extra.get("mount_late", 0) + int(st.extra.pop("no_transform"))
+            st.extra.pop("no_transform_since", None)
 
     def _rotation(self, tr: StaticTransform | None) -> np.ndarray:
         """``mount_rotation(tr)``, computed once per transform (every IMU message asks; a new
@@ -491,7 +531,9 @@ class SourceRouter:
         if isinstance(msg, Imu):
             mount = self._mount(msg.frame_id)
             if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
-                st.extra["no_transform"] = True
+                self._unmounted(st, msg.frame_id, float(msg.stamp))
+            elif mount is not None:
+                self._mounted(st)
             base, problems = imu_in_base(_needed(spec, msg), self._rotation_values(mount))
             for p in problems:
                 self._skip(st, p)
@@ -514,7 +556,7 @@ class SourceRouter:
                 self._skip(st, "imu: angular velocity covariance with a NaN or negative diagonal")
                 rate = None
             # a yaw-only reading: an unknown yaw mount is absorbed by the heading offset estimate
-            mount = self._mount(msg.frame_id, warn=False)
+            mount = self._mount(msg.frame_id)
             if mount is not None:
                 R = self._rotation(mount)
                 if yaw is not None:  # the reader gave the sensor frame's yaw: undo the mount's
@@ -644,6 +686,10 @@ class SourceRouter:
             d["use"] = list(s.use)
             if st.extra.get("no_transform"):
                 d["mount"] = "no transform: identity"
+            elif st.extra.get("mount_late"):
+                k = int(st.extra["mount_late"])
+                d["mount"] = f"from tf after {k} message{'s' if k != 1 else ''} (identity until then)"
+                d["mount_late"] = int(st.extra["mount_late"])
             if st.extra.get("levelled"):
                 d["levelled"] = int(st.extra["levelled"])
                 d["tilt_max_deg"] = round(math.degrees(st.extra.get("tilt_max_rad", 0.0)), 2)
@@ -667,11 +713,23 @@ class SourceRouter:
                         d[f"{key}_noise_per_turn"] = round(c, 3)
                     if shown is not None and claimed:
                         d[f"{key}_shown_vs_claimed"] = round(shown / claimed, 3)
+            if s.type == "odometry" and st.fused and not s.differential:
+                # twists the localizer's tracker replaced by pose increments (pipeline.pose_deltas)
+                n_poses = int(self.loc.stats.get("odometry_from_poses", 0) or 0)
+                if n_poses:
+                    d["from_poses"] = n_poses
+                    mode = getattr(getattr(self.loc, "pcfg", None), "pose_deltas", "auto")
+                    d["from_poses_why"] = "pipeline.pose_deltas: always" if mode == "always" else \
+                        "the twist disagreed with the poses (pipeline.pose_deltas: auto)"
+                if st.messages:
+                    d["vy_max_mps"] = round(st.vy_max, 4)
             if s.type == "odometry" and st.fused and hasattr(be, "odom_scales"):
                 sc = be.odom_scales()
                 d["speed_scale"] = round(float(sc[0]), 4)
                 d["yaw_rate_scale"] = round(float(sc[1]), 4)
-            if s.type == "imu":
+            if self.configured_inputs and not st.messages:
+                d["silent"] = True  # a configured source the log never fed
+            if s.type == "imu" and st.messages:
                 b = None
                 if hasattr(be, "gyro_bias"):
                     b = be.gyro_bias(s.name if st.extra.get("second") else "imu")
@@ -692,23 +750,64 @@ class SourceRouter:
         return out
 
     def finish(self) -> None:
+        for s in self.specs:
+            st = self.state[s.name]
+            if st.extra.get("no_transform"):  # the log ended before MOUNT_WAIT_S without a mount
+                self._warn_mount(str(st.extra.get("no_transform_frame", "")))
+        for line in self.silent_sources():
+            log.warning("%s", line)
         self.loc.stats["sources"] = self.health()
-        self.loc.stats["motion_model"] = motion_model(self.loc.backend)
+        odo = [s for s in self.specs if s.type == "odometry" and self.state[s.name].fused]
+        st0 = self.state[odo[0].name] if odo else None
+        vy = None if st0 is None or not st0.messages or odo[0].differential else st0.vy_max
+        self.loc.stats["motion_model"] = motion_model(self.loc.backend, vy)
+
+    def silent_sources(self) -> list[str]:
+        """One line per configured source (``sources.inputs``) that got no message in the whole run:
+        the run went on without it (a ported robot_localization config naming a topic the log does
+        not have).  The log's topics of that type are named when :attr:`log_topics` (topic ->
+        message type, set by the caller that read the log) is known.  The default layout's sources
+        are not configured: a log without ``/imu`` is a wheels-only log, not a mistake."""
+        if not self.configured_inputs:
+            return []
+        out = []
+        for s in self.specs:
+            if self.state[s.name].messages:
+                continue
+            line = f"sources.inputs.{s.name}: no message on {s.topic} in the whole log; ran without it"
+            if self.log_topics is not None:
+                want = MESSAGE_TYPES[s.type]
+                have = sorted(t for t, typ in self.log_topics.items() if typ.replace("/msg/", "/") in want)
+                what = "/".join(sorted({w.split("/")[-1] for w in want}))
+                line += f" (the log's {what} topics: {', '.join(have) if have else 'none'})"
+            out.append(line)
+        return out
 
 
-def motion_model(backend: Any) -> str:
-    """Which body twist the back-end integrates, and why (the run summary's line)."""
+def motion_model(backend: Any, vy_max_mps: float | None = None) -> str:
+    """Which body twist the back-end integrates, and why (the run summary's line); ``vy_max_mps``:
+    the largest lateral velocity the odometry's messages reported (None: unknown)."""
     st = getattr(backend, "stats", {})
     if "omni" not in st:  # the smoother / batch integrate the odometry's whole twist
+        if vy_max_mps == 0.0:
+            return "differential: the odometry's lateral velocity is 0 throughout (its whole twist is integrated)"
+        if vy_max_mps is not None:
+            return ("omni: the odometry's whole twist (vx, vy, w) is integrated (lateral velocity up to "
+                    f"{vy_max_mps:.3f} m/s)")
         return "omni: the odometry's whole twist (vx, vy, w) is integrated"
+    v = getattr(getattr(backend, "cfg", None), "omni_vy_mps", None)
     if st.get("omni_since") is not None:
-        v = getattr(getattr(backend, "cfg", None), "omni_vy_mps", None)
         return "omni [x, y, yaw, vx, vy, w]: the odometry reported lateral velocity" + (f" (> {v} m/s)" if v else "")
     if st.get("omni"):
         return "omni [x, y, yaw, vx, vy, w] (configured: ekf.omni true)"
     cfg = getattr(backend, "cfg", None)
-    why = "configured: ekf.omni false" if getattr(cfg, "omni", None) is False else \
-        "the odometry never reported lateral velocity"
+    if getattr(cfg, "omni", None) is False:
+        why = "configured: ekf.omni false"
+    elif vy_max_mps:
+        why = (f"the lateral velocity it was handed stayed under ekf.omni_vy_mps {v} m/s; the messages reported up to "
+               f"{vy_max_mps:.3f} m/s")
+    else:
+        why = "the odometry never reported lateral velocity"
     return f"differential [x, y, yaw, v, w] ({why})"
 
 
@@ -723,6 +822,11 @@ def summary_lines(stats: dict[str, Any]) -> list[str]:
         if d.get("topic"):
             head += f" ({d.get('kind')} {d['topic']}: {' '.join(d.get('use', []))})"
         parts = [f"{d.get('accepted', 0)} accepted"]
+        if d.get("silent"):
+            parts.append("no message on the topic in the whole log")
+        if d.get("from_poses"):
+            parts.append(f"{d['from_poses']} of {d.get('accepted', 0)} from pose increments: "
+                         f"{d.get('from_poses_why', 'the twist disagreed with the poses')}")
         gated = int(d.get("gated", 0)) + sum(int(v) for k, v in d.items() if k.endswith("_gated"))
         if gated:
             parts.append(f"{gated} gated")
@@ -803,6 +907,8 @@ def install_sources(session: Any) -> SourceRouter:
     specs = parse_sources(cfg, topics)
     static = cfg.get("static_transforms") if isinstance(cfg, dict) else getattr(cfg, "static_transforms", None)
     router = SourceRouter(loc, specs, parse_static_transforms(static))
+    inputs = cfg.get("inputs") if isinstance(cfg, dict) else getattr(cfg, "inputs", None)
+    router.configured_inputs = bool(inputs)
     # the default kinds' topics now belong to the sources
     for t in [t for t, k in session.routes.table.items() if k in ("odom", "imu")]:
         del session.routes.table[t]

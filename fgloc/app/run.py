@@ -272,6 +272,14 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; its "
                        f"topics: {topics_line(summ)}")
     configured = [t for t in src if t not in (scan_topic, odom_topic, imu_topic) and reader.has(t)]
+    if src and not any(reader.has(t) for t in src):
+        # a converted robot_localization file names its robot's topics; this log has others
+        kinds = [f"{t} ({v['type']}, {v['count']})" for t, v in summ["topics"].items() if v["count"]
+                 and v["type"].replace("/msg/", "/") in (ODOMETRY.replace("/msg/", "/"), IMU.replace("/msg/", "/"))]
+        raise LogError(f"{log}: none of the config's sources is in the log (sources.inputs: "
+                       + ", ".join(f"{t} ({k})" for t, k in src.items()) + "); "
+                       + (f"its odometry / IMU topics: {', '.join(kinds)}: set sources.inputs.NAME.topic"
+                          if kinds else f"its topics: {topics_line(summ)}"))
     if req.map_yaml is None and n_odom == 0 and n_imu == 0 and not configured:
         raise LogError(f"{log}: the log has laser scans only ({n_scan} on {scan_topic}), no odometry or IMU: "
                        f"localize them on a map with --map MAP.yaml (fgloc map needs odometry too), or name the "
@@ -319,6 +327,8 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         if bar is not None:
             sinks.append(_ProgressSink(bar))
         session = Session(loc, Routes.default(topics), sinks, covariance_period_s=req.covariance_period_s)
+        # a configured source silent the whole log is warned about with the log's topics of its type
+        session.sources.log_topics = {t: v["type"] for t, v in summ["topics"].items()}
         setup_done()  # the CLI paused the cyclic collector for the imports and the set-up (fgloc.app.startup)
         # the evaluation's ground truth taken on the way through the log, not read again after it
         reader.collect_ground_truth = reader.has(topics.ground_truth)

@@ -129,3 +129,23 @@ def test_a_rear_laser_beside_a_front_one_is_left_out():
     recs, _ = pair_scans(msgs)
     assert [r.stamp for r in recs] == pytest.approx([0.2, 0.4, 0.6])
     assert [r.odom[0] for r in recs] == pytest.approx([0.2, 0.4, 0.6])
+
+
+def test_a_config_whose_sources_are_not_in_the_log_names_the_logs_topics(tmp_path, capsys):
+    """A converted robot_localization file names its robot's topics.  On a log with other ones it
+    said "the log has laser scans only ..., no odometry or IMU" although the log had /odom and
+    /imu (a public TurtleBot3 bag with a classmate's ekf.yaml); now it says which of the config's
+    topics are missing and which odometry / IMU topics the log has."""
+    log = _write(tmp_path / "tb3.mcap", imu_topic="/imu")
+    cfg = tmp_path / "rl.yaml"
+    cfg.write_text("sources:\n  inputs:\n"
+                   "    odom0: {type: odometry, topic: /diff_drive_controller/odom, use: [vx, vyaw]}\n"
+                   "    imu0: {type: imu, topic: /imu_broadcaster/imu, use: [vyaw]}\n")
+    out = tmp_path / "run"
+    rc, _, err = _cli(["run", str(log), "--config", str(cfg), "-o", str(out), "-q"], capsys)
+    assert rc == 2
+    assert err.strip() == (
+        f"fgloc: error: {log}: none of the config's sources is in the log (sources.inputs: "
+        "/diff_drive_controller/odom (odometry), /imu_broadcaster/imu (imu)); its odometry / IMU topics: "
+        "/imu (sensor_msgs/msg/Imu, 60), /odom (nav_msgs/msg/Odometry, 60): set sources.inputs.NAME.topic")
+    assert not out.exists()

@@ -103,7 +103,9 @@ def _print_run_summary(r: RunResult) -> None:
         if r.metrics_online is not None:
             rows[f"{r.backend} (online)"] = [r.metrics_online]
         say("  vs /ground_truth" + (" (SE(2)-aligned, odom frame)" if r.mode == "odom" else "") + ":")
-        header, body = comparison_cells(rows, extra=False)
+        # no paper column: its numbers are the paper's robot's, not a reference for this log
+        # (fgloc eval --paper and fgloc bench paper put them beside a run of the paper's experiment)
+        header, body = comparison_cells(rows, extra=False, paper_column=False)
         lines += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
     if r.eval_error:
         say(f"  evaluation skipped: {r.eval_error}")

@@ -83,16 +83,18 @@ def _rows(extra: bool) -> tuple[Row, ...]:
 
 
 def comparison_cells(
-    rows: Mapping[str, Sequence[Metrics]], extra: bool = True
+    rows: Mapping[str, Sequence[Metrics]], extra: bool = True, paper_column: bool = True
 ) -> tuple[list[str], list[list[str]]]:
-    """Header and body cells of the comparison (shared by the rich and text formatters)."""
-    header = ["metric", "unit", "paper (EKF)"] + [
+    """Header and body cells of the comparison (shared by the rich and text formatters).
+    ``paper_column``: the paper's reported values beside ours (the paper's experiment only: on
+    any other log they are not a reference)."""
+    header = ["metric", "unit", *(["paper (EKF)"] if paper_column else [])] + [
         f"{name} (n={len(ms)})" if len(ms) > 1 else name for name, ms in rows.items()
     ]
     body: list[list[str]] = []
     for r in _rows(extra):
         paper = "-" if r.paper is None else f"{r.paper:g}"
-        cells = [r.label, r.unit, paper]
+        cells = [r.label, r.unit, *([paper] if paper_column else [])]
         for ms in rows.values():
             cells.append(format_cell([float(getattr(m, r.key)) for m in ms], r.digits))
         body.append(cells)

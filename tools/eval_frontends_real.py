@@ -248,7 +248,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     from fgloc.localization import Localizer, Session
     from fgloc.localization.coverage import unmapped_share
     from fgloc.mapping.source import open_log_scan_stamps
-    from fgloc.types import Trajectory
+    from fgloc.types import LaserScan, Trajectory
 
     recs, mount, slam = slam_of(name, cache)
     key = cache / (f"{name}_{n_scans}_map.pkl" if start is None else f"{name}_{n_scans}_from{start}_map.pkl")
@@ -302,7 +302,7 @@ def run_real(name: str, cache: Path, n_scans: int, backend: str, accuracy: float
     res.update(nees_of(loc.fixes, ref))
     pos = {r.index: i for i, r in enumerate(recs)}
     kf_t = np.array([scan_t[pos[k.scan_index]] for k in slam.keyframes if k.scan_index in pos])
-    scans = {float(m.stamp): m for topic, m in msgs if topic == "/scan"}  # type: ignore[attr-defined]
+    scans = {float(m.stamp): m for topic, m in msgs if topic == "/scan" and isinstance(m, LaserScan)}
     shares = np.array([unmapped_share(occ, mount, scans[f.stamp], ref.interpolate(np.array([f.stamp]))[0])
                        if f.stamp in scans else 0.0 for f in loc.fixes])
     res.update(nees_breakdown(loc.fixes, ref, kf_t, shares))

@@ -103,19 +103,16 @@ def test_a_progress_sink_does_not_ask_for_the_fused_pose(short_sim):
     assert len(seen) == len(short_sim.messages) and calls == []
 
 
-def test_run_summary_compares_with_the_logs_ground_truth_not_the_papers_numbers(offset_log, short_sim, tmp_path,
-                                                                                 capsys):
+def test_run_summary_compares_with_the_logs_ground_truth_not_the_papers_numbers(offset_log, short_sim, tmp_path):
     """``fgloc run`` on a log with /ground_truth prints the errors; the paper's reported values (its
     robot, its hall) are no reference for a user's log and were printed beside them as "paper (EKF)"
     (probe10, on a Gazebo TurtleBot3 log).  ``fgloc eval --paper`` and ``fgloc bench paper`` keep them."""
-    from fgloc.commands.run import _print_run_summary
+    from fgloc.commands.run import run_summary_lines
 
     r = run_log(RunRequest(log=offset_log / "log.mcap", outdir=tmp_path / "out", map_yaml=offset_log / "map.yaml",
                            initial_pose=tuple(short_sim.ground_truth.poses[0]), view_channels=False))
     assert r.metrics is not None
-    capsys.readouterr()
-    _print_run_summary(r)
-    out = capsys.readouterr().out
+    out = "\n".join(run_summary_lines(r))
     header = next(line for line in out.splitlines() if line.strip().startswith("metric"))
     assert header.split() == ["metric", "unit", "smoother", "(final)", "smoother", "(online)"]
     assert "0.0203" not in out and "paper" not in out

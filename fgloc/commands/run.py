@@ -54,9 +54,13 @@ def _print_run_summary(r: RunResult) -> None:
     """The run's summary on stdout, plain lines (bold / colour on a terminal only).
 
     Plain ``print``: rich's console cost every run ~0.03 s of CPU to import and lay out a few
-    lines (and wrapped them at 80 columns in a pipe); the comparison table is
-    the cells of :func:`fgloc.eval.paper.comparison_cells`, as ``fgloc bench paper`` prints them."""
-    tty = sys.stdout.isatty()
+    lines (and wrapped them at 80 columns in a pipe)."""
+    print("\n".join(run_summary_lines(r, tty=sys.stdout.isatty())), flush=True)
+
+
+def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
+    """``fgloc run``'s summary as lines; ``tty``: bold / colour escapes.  The comparison table is the
+    cells of :func:`fgloc.eval.paper.comparison_cells`, as ``fgloc bench paper`` prints them."""
     lines: list[str] = []
     say = lines.append
     st = r.stats
@@ -110,7 +114,7 @@ def _print_run_summary(r: RunResult) -> None:
     if r.eval_error:
         say(f"  evaluation skipped: {r.eval_error}")
     say(f"  wrote {r.outdir}/: {', '.join(r.written)}")
-    print("\n".join(lines), flush=True)
+    return lines
 
 
 # ---------------------------------------------------------------------- CLI

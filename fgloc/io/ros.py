@@ -225,28 +225,8 @@ def quaternion_yaw(q: Any) -> float:
     return float(quaternion_to_yaw(q.x, q.y, q.z, q.w))
 
 
-def scan_from_ros(m: Any, topic: str) -> LaserScan:
-    inten = np.asarray(m.intensities, dtype=np.float32)
-    return LaserScan(
-        stamp=header_stamp(m.header),
-        angle_min=float(m.angle_min),
-        angle_increment=float(m.angle_increment),
-        range_min=float(m.range_min),
-        range_max=float(m.range_max),
-        ranges=np.asarray(m.ranges, dtype=np.float32),
-        time_increment=float(m.time_increment),
-        scan_time=float(m.scan_time),
-        intensities=inten if len(inten) else None,
-        frame_id=m.header.frame_id,
-    )
-
-
-def multi_echo_scan_from_ros(m: Any, topic: str) -> LaserScan:
-    """A ``sensor_msgs/MultiEchoLaserScan`` as the scan of its first echoes (what cartographer and
-    laser_proc's ``first`` echo filter take); a beam without an echo is a no-return (+inf, REP 117),
-    and intensities are kept only when every beam has one."""
-    ranges = np.array([e.echoes[0] if len(e.echoes) else np.inf for e in m.ranges], dtype=np.float32)
-    inten = [e.echoes[0] if len(e.echoes) else np.nan for e in m.intensities]
+def _laser_scan(m: Any, ranges: np.ndarray, intensities: np.ndarray | None) -> LaserScan:
+    """A ``LaserScan`` with a decoded scan message's header and geometry, and these beams."""
     return LaserScan(
         stamp=header_stamp(m.header),
         angle_min=float(m.angle_min),
@@ -256,9 +236,24 @@ def multi_echo_scan_from_ros(m: Any, topic: str) -> LaserScan:
         ranges=ranges,
         time_increment=float(m.time_increment),
         scan_time=float(m.scan_time),
-        intensities=np.asarray(inten, dtype=np.float32) if len(inten) == len(ranges) and ranges.size else None,
+        intensities=intensities,
         frame_id=m.header.frame_id,
     )
+
+
+def scan_from_ros(m: Any, topic: str) -> LaserScan:
+    inten = np.asarray(m.intensities, dtype=np.float32)
+    return _laser_scan(m, np.asarray(m.ranges, dtype=np.float32), inten if len(inten) else None)
+
+
+def multi_echo_scan_from_ros(m: Any, topic: str) -> LaserScan:
+    """A ``sensor_msgs/MultiEchoLaserScan`` as the scan of its first echoes (what cartographer and
+    laser_proc's ``first`` echo filter take); a beam without an echo is a no-return (+inf, REP 117),
+    and intensities are kept only when every beam has one."""
+    ranges = np.array([e.echoes[0] if len(e.echoes) else np.inf for e in m.ranges], dtype=np.float32)
+    inten = [e.echoes[0] if len(e.echoes) else np.nan for e in m.intensities]
+    keep = len(inten) == len(ranges) and ranges.size
+    return _laser_scan(m, ranges, np.asarray(inten, dtype=np.float32) if keep else None)
 
 
 def odom_from_ros(m: Any, topic: str) -> Odometry:

@@ -48,6 +48,9 @@ def detect_format(path: str | Path) -> tuple[str, Path]:
     p = Path(path)
     if not p.exists():
         raise LogError(f"{p}: log file not found")
+    if p.is_file() and p.name == "metadata.yaml":
+        # a rosbag2 folder given by its metadata file (as `ros2 bag info` prints it): the folder is the log
+        p = p.parent
     if p.is_dir():
         files = _bag_files(p)
         if not files and not (p / "metadata.yaml").is_file():

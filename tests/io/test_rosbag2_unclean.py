@@ -164,3 +164,13 @@ def test_info_calls_a_clean_folder_indexed(tmp_path, capsys):
         capsys.readouterr()
         assert main(["info", str(folder)]) == 0
         assert capsys.readouterr().out.splitlines()[0].endswith(f"), {word}"), folder
+
+
+def test_a_rosbag2_folder_given_by_its_metadata_yaml_is_read_as_the_folder(tmp_path):
+    """``fgloc info BAG/metadata.yaml`` answered "not a CARMEN log?" (probe10, on a public
+    TurtleBot3 recording): the metadata file names the folder's log, so the folder is read."""
+    bag = tmp_path / "rec"
+    _write(bag)
+    via_yaml = open_log(bag / "metadata.yaml").summary()["topics"]
+    assert {t: v["count"] for t, v in via_yaml.items()} == {"/scan": N, "/odom": N}
+    assert via_yaml == open_log(bag).summary()["topics"]

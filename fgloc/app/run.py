@@ -229,7 +229,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     from fgloc.config import FglocConfig, load_config
     from fgloc.io import open_log
     from fgloc.io.mcap_writer import LogWriter
-    from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, Topics
+    from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, Topics, normalize_type
     from fgloc.io.tum import write_tum
     from fgloc.localization import Localizer, RecorderSink, Routes, Session
     from fgloc.maps import OccupancyMap
@@ -274,8 +274,8 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     configured = [t for t in src if t not in (scan_topic, odom_topic, imu_topic) and reader.has(t)]
     if src and not any(reader.has(t) for t in src):
         # a converted robot_localization file names its robot's topics; this log has others
-        kinds = [f"{t} ({v['type']}, {v['count']})" for t, v in summ["topics"].items() if v["count"]
-                 and v["type"].replace("/msg/", "/") in (ODOMETRY.replace("/msg/", "/"), IMU.replace("/msg/", "/"))]
+        kinds = [f"{t} ({v['type']}, {v['count']})" for t, v in summ["topics"].items()
+                 if v["count"] and normalize_type(v["type"]) in (ODOMETRY, IMU)]
         raise LogError(f"{log}: none of the config's sources is in the log (sources.inputs: "
                        + ", ".join(f"{t} ({k})" for t, k in src.items()) + "); "
                        + (f"its odometry / IMU topics: {', '.join(kinds)}: set sources.inputs.NAME.topic"

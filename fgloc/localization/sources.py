@@ -59,6 +59,7 @@ from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
 from fgloc.geometry import between, matrix_quaternion, rotate_covariance, wrap_angle, wrap_scalar
 from fgloc.geometry import log as se2_log
+from fgloc.io.topics import IMU, ODOMETRY, POSE_COV_STAMPED, normalize_type
 from fgloc.localization.frames import ROBOT_FRAMES, parse_static_transforms, transform_of
 from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform
 
@@ -74,9 +75,8 @@ TYPES = ("odometry", "imu", "pose")
 POLICIES = ("message", "fixed", "scaled", "floor")
 DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose": ("x", "y", "yaw")}
 DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
-#: the ROS message types (``pkg/Type``) a source of each type reads
-MESSAGE_TYPES = {"odometry": ("nav_msgs/Odometry",), "imu": ("sensor_msgs/Imu",),
-                 "pose": ("geometry_msgs/PoseWithCovarianceStamped",)}
+#: the ROS message type a source of each type reads (as :func:`fgloc.io.topics.normalize_type` spells it)
+MESSAGE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
 _IDENTITY = np.eye(3)
 _IDENTITY.flags.writeable = False
@@ -777,8 +777,8 @@ class SourceRouter:
             line = f"sources.inputs.{s.name}: no message on {s.topic} in the whole log; ran without it"
             if self.log_topics is not None:
                 want = MESSAGE_TYPES[s.type]
-                have = sorted(t for t, typ in self.log_topics.items() if typ.replace("/msg/", "/") in want)
-                what = "/".join(sorted({w.split("/")[-1] for w in want}))
+                have = sorted(t for t, typ in self.log_topics.items() if normalize_type(typ) == want)
+                what = want.split("/")[-1]
                 line += f" (the log's {what} topics: {', '.join(have) if have else 'none'})"
             out.append(line)
         return out

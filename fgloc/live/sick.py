@@ -165,13 +165,18 @@ def frame(payload: str | bytes) -> bytes:
     return b"\x02" + b + b"\x03"
 
 
-def frame_b(payload: bytes) -> bytes:
-    """A CoLa-B telegram: ``02 02 02 02``, the payload length (u32, big-endian), the payload, and the
-    XOR of the payload's bytes."""
+def cola_b_checksum(payload: bytes | bytearray) -> int:
+    """A CoLa-B telegram's checksum: the XOR of its payload's bytes."""
     ck = 0
     for b in payload:
         ck ^= b
-    return COLA_B_HEADER + struct.pack(">I", len(payload)) + payload + bytes([ck])
+    return ck
+
+
+def frame_b(payload: bytes) -> bytes:
+    """A CoLa-B telegram: ``02 02 02 02``, the payload length (u32, big-endian), the payload, and
+    :func:`cola_b_checksum`."""
+    return COLA_B_HEADER + struct.pack(">I", len(payload)) + payload + bytes([cola_b_checksum(payload)])
 
 
 @dataclass
@@ -221,10 +226,7 @@ class ColaBFramer:
             if len(buf) < 9 + n:
                 break
             payload = bytes(buf[8 : 8 + n])
-            ck = 0
-            for b in payload:
-                ck ^= b
-            if ck != buf[8 + n]:
+            if cola_b_checksum(payload) != buf[8 + n]:
                 self.bad_checksum += 1
                 self.stats.garbage_bytes += 1
                 del buf[:1]
@@ -307,6 +309,14 @@ def beam_rate_hz(meas_field: int, scan_freq_hz: float, step_deg: float) -> tuple
     return as_100hz, False
 
 
+def _check_distance_channel(name: str, n: int, step: int, scale: float) -> None:
+    """The distance channel's header, in either dialect: values present, a positive step and scale."""
+    if n == 0:
+        raise TelegramError("bad_count", f"{name}: no values")
+    if step == 0 or not scale > 0:
+        raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
+
+
 def _f32(tok: bytes, what: str) -> float:
     v = _uint(tok, what, 32)
     f = struct.unpack(">f", v.to_bytes(4, "big"))[0]
@@ -386,10 +396,7 @@ def parse_lmdscandata(payload: bytes, channel: str = "DIST1") -> ScanTelegram:
             if i + n > len(tok):
                 raise TelegramError("wrong_count", f"{name}: {n} announced, {len(tok) - i} left")
             if name == channel and found is None and bits == 16:  # an 8-bit channel cannot hold mm
-                if n == 0:
-                    raise TelegramError("bad_count", f"{name}: no values")
-                if step == 0 or not scale > 0:
-                    raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
+                _check_distance_channel(name, n, step, scale)
                 vals = _u16_values(tok[i : i + n], name)
                 meas_freq, in_hz = beam_rate_hz(meas_field, scan_freq, step / 10000.0)
                 found = ScanTelegram(
@@ -492,10 +499,7 @@ def parse_lmdscandata_binary(payload: bytes, channel: str = "DIST1") -> ScanTele
             vals = np.frombuffer(payload, dtype=">u2" if width == "H" else "u1", count=n, offset=r.pos)
             r.pos += n * struct.calcsize(width)
             if name == channel and found is None and width == "H":
-                if n == 0:
-                    raise TelegramError("bad_count", f"{name}: no values")
-                if step == 0 or not scale > 0:
-                    raise TelegramError("bad_number", f"{name}: step {step}, scale {scale}: must be > 0")
+                _check_distance_channel(name, n, step, scale)
                 meas_freq, in_hz = beam_rate_hz(meas_field, scan_freq, step / 10000.0)
                 found = ScanTelegram(
                     command=payload[:3].decode(), version=version, device=device, serial=serial, status=(st1, st2),

@@ -71,8 +71,8 @@ class TfTree:
 
 def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransform | None:
     """The robot (``BASE_FRAMES``) -> ``frame`` transform among ``transforms`` (a user's mounts), if any."""
-    f = frame.lstrip("/")
-    return next((t for t in transforms if t.child.lstrip("/") == f and t.parent.lstrip("/") in BASE_FRAMES), None)
+    f = frame_name(frame)
+    return next((t for t in transforms if frame_name(t.child) == f and frame_name(t.parent) in BASE_FRAMES), None)
 
 
 #: who gives the mounts planar_mount checks, by default (its ConfigError names it)

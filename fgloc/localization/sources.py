@@ -77,6 +77,8 @@ DEFAULT_USE = {"odometry": ("vx", "vy", "vyaw"), "imu": ("yaw", "vyaw"), "pose":
 DEFAULT_TOPIC = {"odometry": "/odom", "imu": "/imu", "pose": "/pose"}
 #: the ROS message type a source of each type reads (as :func:`fgloc.io.topics.normalize_type` spells it)
 MESSAGE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
+#: an IMU frame that needs no mount: none given, or the robot's own (:data:`~fgloc.localization.frames.ROBOT_FRAMES`)
+_OWN_FRAMES = ("", *ROBOT_FRAMES)
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
 _IDENTITY = np.eye(3)
 _IDENTITY.flags.writeable = False
@@ -479,7 +481,7 @@ class SourceRouter:
     # ------------------------------------------------------------------ IMU
     def _mount(self, frame: str) -> StaticTransform | None:
         f = frame.lstrip("/")
-        if f in ("", "base_link", "base_footprint"):
+        if f in _OWN_FRAMES:
             return None
         tr = self.mounts.get(f)
         if tr is None:
@@ -530,7 +532,7 @@ class SourceRouter:
         h = st.health
         if isinstance(msg, Imu):
             mount = self._mount(msg.frame_id)
-            if mount is None and msg.frame_id.lstrip("/") not in ("", "base_link", "base_footprint"):
+            if mount is None and msg.frame_id.lstrip("/") not in _OWN_FRAMES:
                 self._unmounted(st, msg.frame_id, float(msg.stamp))
             elif mount is not None:
                 self._mounted(st)

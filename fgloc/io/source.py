@@ -31,7 +31,7 @@ import numpy as np
 
 from fgloc.errors import LogError
 from fgloc.io.ros import mirror_scan
-from fgloc.io.tf import TfTree, frame_name
+from fgloc.io.tf import TfTree, frame_name, tf_edge
 from fgloc.io.topics import Topics
 from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory
 
@@ -90,11 +90,6 @@ class TopicInfo:
     type: str
     count: int = 0
 
-
-
-def _edge(t: StaticTransform) -> tuple[str, str]:
-    """A transform's ``(parent, child)`` as tf2 names the frames (:func:`fgloc.io.tf.frame_name`)."""
-    return frame_name(t.parent), frame_name(t.child)
 
 class LogSource:
     """Base of every log format's reader (see the module doc).  Subclasses fill
@@ -213,7 +208,7 @@ class LogSource:
                 tr = self._tf.parents.get(cur)
                 if tr is None:
                     break
-                edge = (frame_name(tr.parent), frame_name(tr.child))
+                edge = tf_edge(tr)
                 if self._tf.flipped.get(edge, False):
                     out.add(edge)
                 cur = edge[0]
@@ -223,9 +218,9 @@ class LogSource:
         for rec in it:
             if isinstance(rec.msg, LaserScan) and rec.msg.frame_id.lstrip("/") in self._mirror_frames:
                 rec = rec._replace(msg=mirror_scan(rec.msg))
-            elif edges and isinstance(rec.msg, list) and any(_edge(t) in edges for t in rec.msg):
+            elif edges and isinstance(rec.msg, list) and any(tf_edge(t) in edges for t in rec.msg):
                 rec = rec._replace(msg=[StaticTransform(t.parent, t.child, t.pose, t.z)
-                                        if _edge(t) in edges else t for t in rec.msg])
+                                        if tf_edge(t) in edges else t for t in rec.msg])
             yield rec
 
     def _records(self, want: set[str]) -> Iterator[Record]:
@@ -234,7 +229,7 @@ class LogSource:
     def note_tf(self, transforms: list[StaticTransform], flips: list[bool]) -> None:
         for tr, flip in zip(transforms, flips, strict=True):
             if flip:
-                self._tf.flipped[_edge(tr)] = True
+                self._tf.flipped[tf_edge(tr)] = True
 
     # -- derived -----------------------------------------------------------------------------
     def clock_offsets(self, topics: Iterable[str]) -> dict[str, float]:

@@ -27,6 +27,11 @@ def frame_name(frame: str) -> str:
     return frame.lstrip("/")
 
 
+def tf_edge(t: StaticTransform) -> tuple[str, str]:
+    """A transform's ``(parent, child)`` as tf2 names the frames (:func:`frame_name`)."""
+    return frame_name(t.parent), frame_name(t.child)
+
+
 def is_base_frame(frame: str) -> bool:
     """One of the robot's own frames (:data:`BASE_FRAMES`), also under a tf prefix or namespace
     (``tb3_0/base_link``, ``/robot1/base_footprint``: a multi-robot log's frames)."""
@@ -45,7 +50,7 @@ class TfTree:
         for k, tr in enumerate(transforms):
             self.parents.setdefault(frame_name(tr.child), tr)
             if flips is not None and flips[k]:
-                self.flipped[(frame_name(tr.parent), frame_name(tr.child))] = True
+                self.flipped[tf_edge(tr)] = True
 
     def chain(self, frame: str) -> tuple[StaticTransform, bool] | None:
         """``(base -> frame, mirrored)`` or None when no chain reaches a base frame (a prefixed
@@ -58,7 +63,7 @@ class TfTree:
             tr = self.parents.get(cur)
             if tr is None:
                 return None
-            if self.flipped.get((frame_name(tr.parent), frame_name(tr.child)), False):
+            if self.flipped.get(tf_edge(tr), False):
                 # R = Rz(yaw) Rx(pi): a child pose (x, y, th) is (x, -y, -th) before the yaw
                 pose = np.array([pose[0], -pose[1], -pose[2]])
                 z = -z

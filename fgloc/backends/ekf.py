@@ -270,9 +270,6 @@ class EKF:
             q[i] = 0.0
         return np.diag(q) * dt
 
-    def _F(self, dt: float) -> FloatArray:
-        return self._F_at(self.x, dt)
-
     def _propagate(self, x: FloatArray, P: FloatArray, dt: float,
                    quiet: tuple[int, ...] = ()) -> tuple[FloatArray, FloatArray]:
         """``x``, ``P`` carried over ``dt`` (> 0) in steps of at most :data:`MAX_PREDICT_STEP_S`."""

@@ -8,9 +8,12 @@ entries (REP 103 frames; angles in degrees about the parent's fixed x, y, z axes
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fgloc.errors import ConfigError
+
+if TYPE_CHECKING:  # the CLI imports this module: numpy only when a command runs
+    from fgloc.types import Transform3D
 
 RPY_OPTION = "--static-transform"
 XYZW_OPTION = "--static-transform-xyzw"
@@ -33,6 +36,7 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
     """``sources.static_transforms`` entries of the two options' values (None: not given), checked:
     one-line :class:`ConfigError` naming the option for anything wrong (a non-finite number, a
     quaternion that is not of unit length, a parent that is not on the robot, one child twice)."""
+    from fgloc.io.tf import frame_name
     from fgloc.localization.frames import ROBOT_FRAMES, static_transform_entry
 
     entries: list[tuple[str, dict[str, Any]]] = []
@@ -45,7 +49,7 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
                                       "xyzw": [float(v) for v in nums[3:7]]}))
     seen: set[str] = set()
     for option, e in entries:
-        parent, child = str(e["parent"]).lstrip("/"), str(e["child"]).lstrip("/")
+        parent, child = frame_name(str(e["parent"])), frame_name(str(e["child"]))
         e["parent"], e["child"] = parent, child
         values = e["xyz"] + e.get("rpy_deg", e.get("xyzw", []))
         if not all(math.isfinite(v) for v in values):
@@ -64,3 +68,12 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
             if abs(n - 1.0) > 0.01:
                 raise ConfigError(f"{option} {parent} {child}: QX QY QZ QW is not a unit quaternion (norm {n:.4f})")
     return [e for _, e in entries]
+
+
+def static_transforms(rpy: tuple[Any, ...] | None = None, xyzw: tuple[Any, ...] | None = None) -> list[Transform3D]:
+    """The two options' mounts as :class:`~fgloc.types.Transform3D` (what ``fgloc map`` and
+    ``fgloc map-check`` hand the mapper): :func:`static_transform_entries`, then
+    :func:`~fgloc.localization.frames.parse_static_transforms` naming the option in its errors."""
+    from fgloc.localization.frames import parse_static_transforms
+
+    return parse_static_transforms(static_transform_entries(rpy, xyzw), source=RPY_OPTION)

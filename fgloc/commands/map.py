@@ -57,12 +57,10 @@ def map_cmd(
     import yaml
 
     from fgloc.errors import ConfigError
-    from fgloc.localization.frames import parse_static_transforms
     from fgloc.mapping.build import build_map
     from fgloc.mapping.slam import MapperConfig
 
-    entries = mounts.static_transform_entries(static_transform, static_transform_xyzw)
-    transforms = parse_static_transforms(entries, source=mounts.RPY_OPTION)
+    transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
 
     opts: dict = {}
     if config is not None:
@@ -123,11 +121,9 @@ def map_check_cmd(
     """Check a map against a log: which regions disagree between passes (and which loop closures
     are suspect), or where the world no longer matches the map.  Exit 0 when it passes, 1 when
     it flags something."""
-    from fgloc.localization.frames import parse_static_transforms
     from fgloc.mapping.build import map_check
 
-    entries = mounts.static_transform_entries(static_transform, static_transform_xyzw)
-    transforms = parse_static_transforms(entries, source=mounts.RPY_OPTION)
+    transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
     bars, factory = _bars(no_progress)
     try:
         res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, scan_topic, odom_topic,

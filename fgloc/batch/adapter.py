@@ -68,8 +68,10 @@ class SeedOutcome:
 # ---------------------------------------------------------------------------- localize
 def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: list[float] | None,
                  config_path: Path | None, backend: str, frontend: str,
-                 scan_topic: str, odom_topic: str, imu_topic: str) -> LocalizeOutcome:
-    """``fgloc run LOG [--map] [--initial-pose] ... -o OUTDIR`` as a library call (no progress bar)."""
+                 scan_topic: str | None, odom_topic: str | None, imu_topic: str | None) -> LocalizeOutcome:
+    """``fgloc run LOG [--map] [--initial-pose] ... -o OUTDIR`` as a library call (no progress bar).
+    A topic None is not named: :func:`fgloc.app.run.run_log` resolves it as ``fgloc run`` does
+    (the default name, the config's sources, else the log's only topic of that type)."""
     from fgloc.app.run import RunRequest, run_log
 
     if backend not in ("ekf", "smoother", "batch"):

@@ -62,8 +62,8 @@ def _run(prepare: Callable[[], list[Job]], outdir: Path, opts: EngineOptions, de
 
 def batch_run(logs: list[str], outdir: Path, opts: EngineOptions, manifest: Path | None = None,
               map_yaml: Path | None = None, initial_pose: list[float] | None = None, config: Path | None = None,
-              backend: str = "smoother", frontend: str = "native", scan_topic: str = "/scan",
-              odom_topic: str = "/odom", imu_topic: str = "/imu", allow_lost: bool = False) -> BatchReport:
+              backend: str = "smoother", frontend: str = "native", scan_topic: str | None = None,
+              odom_topic: str | None = None, imu_topic: str | None = None, allow_lost: bool = False) -> BatchReport:
     """Localize every log (``fgloc run`` each) into ``outdir/<name>/``; ``outdir/summary.csv``."""
     if backend not in ("ekf", "smoother", "batch"):
         raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")

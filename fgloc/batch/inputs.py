@@ -1,7 +1,7 @@
 """Which logs a batch covers and the jobs made from them.
 
-* ``LOGS`` arguments are files, folders (searched recursively for ``*.mcap``, and for mapping
-  CARMEN ``*.clf``/``.clf.gz``/``.clf.bz2`` too; a folder holding ``metadata.yaml`` is a ROS 2
+* ``LOGS`` arguments are files, folders (searched recursively for ``*.mcap``, ROS 1 ``*.bag`` and
+  CARMEN ``*.clf``/``.clf.gz``/``.clf.bz2``; a folder holding ``metadata.yaml`` is a ROS 2
   bag and counts as one log) or glob patterns (``'runs/**/*.mcap'``, quoted so that the shell
   leaves them to us).  Files under the batch's own output folder are never picked up.
 * ``--manifest FILE``: a CSV with the header ``log,map,x,y,yaw`` (extra columns ignored), one
@@ -24,8 +24,10 @@ from typing import Any
 from fgloc.batch.jobs import Job
 from fgloc.errors import ConfigError
 
-RUN_SUFFIXES = (".mcap",)
-MAP_SUFFIXES = (".mcap", ".clf", ".clf.gz", ".clf.bz2")
+#: the log files a folder is searched for (every format fgloc run and fgloc map read; a rosbag2
+#: folder is found by its metadata.yaml)
+RUN_SUFFIXES = (".mcap", ".bag", ".clf", ".clf.gz", ".clf.bz2")
+MAP_SUFFIXES = RUN_SUFFIXES
 STRIP_SUFFIXES = (".mcap", ".clf", ".log", ".gz", ".bz2", ".db3", ".bag")
 GLOB_CHARS = set("*?[")
 
@@ -188,7 +190,7 @@ def _abs(p: Path | None) -> str | None:
 
 def run_jobs(logs: list[Path], outdir: Path, map_yaml: Path | None = None, initial_pose: list[float] | None = None,
              config: Path | None = None, backend: str = "smoother", frontend: str = "native",
-             scan_topic: str = "/scan", odom_topic: str = "/odom", imu_topic: str = "/imu",
+             scan_topic: str | None = None, odom_topic: str | None = None, imu_topic: str | None = None,
              manifest: list[dict[str, Any]] | None = None, allow_lost: bool = False) -> list[Job]:
     """``fgloc run`` jobs: the LOGS with the common options, then the manifest's rows."""
     entries: list[tuple[Path, Path | None, list[float] | None]] = [(p, map_yaml, initial_pose) for p in logs]

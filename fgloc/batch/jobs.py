@@ -238,8 +238,7 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]
         pose = p.get("initial_pose")
         r = adapter.localize_log(inputs["log"], outdir, inputs.get("map"), list(pose) if pose else None,
                                  inputs.get("config"), p.get("backend", "smoother"), p.get("frontend", "native"),
-                                 p.get("scan_topic", "/scan"), p.get("odom_topic", "/odom"),
-                                 p.get("imu_topic", "/imu"))
+                                 p.get("scan_topic"), p.get("odom_topic"), p.get("imu_topic"))
         row = {"duration_s": r.log_s, "poses": r.poses, "x_real_time": _ratio(r.log_s, r.wall_s),
                "lost_time_s": r.lost_s if r.mode == "map" else None, "rmse_m": r.position_rmse_m,
                "heading_rmse_deg": r.heading_rmse_deg, "mode": r.mode, "note": r.note}

@@ -75,9 +75,14 @@ def run_cmd(
         "--initial-pose", help="X Y YAW for every log (manifest rows may give their own)")] = None,
     config: Annotated[Path | None, typer.Option("--config", help="YAML overriding the built-in config "
                                                                      "(`fgloc config show`)")] = None,
-    scan_topic: Annotated[str, typer.Option("--scan-topic")] = "/scan",
-    odom_topic: Annotated[str, typer.Option("--odom-topic")] = "/odom",
-    imu_topic: Annotated[str, typer.Option("--imu-topic")] = "/imu",
+    scan_topic: Annotated[str | None, typer.Option("--scan-topic", help="as fgloc run's [default: /scan, else "
+                                                                       "the log's only LaserScan topic]")] = None,
+    odom_topic: Annotated[str | None, typer.Option("--odom-topic", help="as fgloc run's [default: /odom or the "
+                                                                       "config's sources, else the log's only "
+                                                                       "Odometry topic]")] = None,
+    imu_topic: Annotated[str | None, typer.Option("--imu-topic", help="as fgloc run's [default: /imu or the "
+                                                                     "config's sources, else the log's only Imu "
+                                                                     "topic]")] = None,
     allow_lost: Annotated[bool, typer.Option("--allow-lost", help="a log whose localizer was lost (fgloc run "
                                                                  "exits 3) counts as done, not failed (finished "
                                                                  "logs are judged again, not re-run)")] = False,

@@ -225,22 +225,62 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     Foxglove view says where it serves (``req.view``).
     """
     t_start = PHASE_CLOCK()
-    from fgloc.app.startup import setup_done
+    config = _effective_config(req)
+    inputs = _open_inputs(req, config)
+    session, mirror_scans = _build_session(req, config, inputs)
+    Path(req.outdir).mkdir(parents=True, exist_ok=True)
+    loop = _localize(req, session, inputs, mirror_scans, t_start, progress, announce)
+    result = _write_outputs(req, config, session.loc, inputs, loop)
+    _evaluate(result, inputs, loop.final, session.loc.online_trajectory())
+    result.timings = loop.timings(PHASE_CLOCK())
+    return result
+
+
+@dataclass
+class _Inputs:
+    """The log opened and checked (:func:`_open_inputs`): its reader, the topic of each role, the
+    message counts, the config's source topics and the topics to read."""
+
+    log: Path
+    reader: Any
+    topics: Any  # fgloc.io.topics.Topics
+    summary: dict[str, Any]
+    counts: dict[str, int]
+    sources: dict[str, str]  # the config's sources: topic -> type
+    initial_pose: np.ndarray | None
+
+    def count(self, topic: str) -> int:
+        return self.counts.get(topic, 0)
+
+    @property
+    def n_scan(self) -> int:
+        return self.count(self.topics.scan)
+
+    def wanted(self) -> set[str]:
+        """Every topic localized with: every configured source's (a second IMU, a pose source),
+        not only the first of each."""
+        t = self.topics
+        return {x for x in (t.scan, t.odom, t.imu, t.tf_static, *self.sources) if self.reader.has(x)}
+
+
+def _effective_config(req: RunRequest) -> FglocConfig:
+    """The run's config: the request's (or its YAML over the defaults) with ``--static-transform``."""
     from fgloc.config import FglocConfig, load_config
-    from fgloc.io import open_log
-    from fgloc.io.mcap_writer import LogWriter
-    from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, Topics, normalize_type
-    from fgloc.io.tum import write_tum
-    from fgloc.localization import Localizer, RecorderSink, Routes, Session
-    from fgloc.maps import OccupancyMap
 
     config = req.config if isinstance(req.config, FglocConfig) else load_config(req.config)
     if req.static_transforms:
         config = _with_static_transforms(config, req.static_transforms)
-    log = Path(req.log)
-    outdir = Path(req.outdir)
+    return config
+
+
+def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
+    """Check the arguments and the outputs, open the log, choose each role's topic and check
+    that the log can be localized with (one-line errors naming the log's topics)."""
+    from fgloc.io import open_log
+    from fgloc.io.topics import Topics, pick_topics
     from fgloc.localization.sources import source_topics
 
+    log = Path(req.log)
     # a config's sources: name the odometry / IMU topics (a converted robot_localization file)
     src = source_topics(config.sources)
     scan_topic = req.scan_topic or "/scan"
@@ -250,21 +290,30 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     pose0 = _initial_pose(req.initial_pose)
     _check_map_arg(req.map_yaml)
     cfg_path = req.config if isinstance(req.config, (str, Path)) else None
-    check_outputs(outdir, [log, req.map_yaml, cfg_path], req.force)
+    check_outputs(Path(req.outdir), [log, req.map_yaml, cfg_path], req.force)
     reader = open_log(log, topics)
-    from fgloc.io.topics import pick_topics
-
     # a default topic the log lacks: its only one of that type (fgloc import's rule), said on stderr;
     # a topic named on the command line is kept, and a config with sources names the inputs it wants
     picked = pick_topics(reader, log, {"scan": (scan_topic, req.scan_topic is not None),
                                        "odom": (odom_topic, req.odom_topic is not None or bool(src)),
                                        "imu": (imu_topic, req.imu_topic is not None or bool(src))})
-    scan_topic, odom_topic, imu_topic = picked["scan"], picked["odom"], picked["imu"]
-    topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic)
+    topics = Topics(scan=picked["scan"], odom=picked["odom"], imu=picked["imu"])
     reader.topics = topics
     summ = reader.summary()
-    counts = {t: v["count"] for t, v in summ["topics"].items()}
-    n_scan, n_odom, n_imu = counts.get(scan_topic, 0), counts.get(odom_topic, 0), counts.get(imu_topic, 0)
+    inputs = _Inputs(log, reader, topics, summ, {t: v["count"] for t, v in summ["topics"].items()}, src, pose0)
+    _check_localizable(req, inputs)
+    return inputs
+
+
+def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
+    """One-line errors for a log that cannot be localized as asked: a role's topic absent or of
+    another type, no input at all, none of the config's sources, scans only without a map, an IMU
+    alone without a map, a map without scans."""
+    from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, normalize_type
+
+    log, reader, summ, src = inputs.log, inputs.reader, inputs.summary, inputs.sources
+    scan_topic, odom_topic, imu_topic = inputs.topics.scan, inputs.topics.odom, inputs.topics.imu
+    n_scan, n_odom, n_imu = inputs.count(scan_topic), inputs.count(odom_topic), inputs.count(imu_topic)
     _check_inputs(reader, log, summ, (("--scan-topic", scan_topic, LASER_SCAN, req.scan_topic is not None),
                                       ("--odom-topic", odom_topic, ODOMETRY, req.odom_topic is not None),
                                       ("--imu-topic", imu_topic, IMU, req.imu_topic is not None)))
@@ -294,27 +343,71 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
                        f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "
                        f"{topics_line(summ)}")
+
+
+def _build_session(req: RunRequest, config: FglocConfig, inputs: _Inputs) -> tuple[Any, bool]:
+    """The map, the laser mount and the session (:func:`fgloc.localization.build_session`; its
+    sinks are added by :func:`_localize`), and whether the scans are to be read mirrored."""
+    from fgloc.localization import Routes, build_session
+    from fgloc.maps import OccupancyMap
+
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
-    mode = "map" if occ_map is not None else "odom"
-    laser_mount, mirror_scans = _laser_mount(reader, n_scan, config, req.static_transforms)
-    loc = Localizer(occ_map, laser_mount, backend=req.backend, frontend=req.frontend, initial_pose=pose0,
-                    config=config)
-    outdir.mkdir(parents=True, exist_ok=True)
-    # every configured source's topic is read (a second IMU, a pose source), not only the first of each
-    want = {t for t in (scan_topic, odom_topic, imu_topic, topics.tf_static, *src) if reader.has(t)}
-    total = sum(counts.get(t, 0) for t in want)
-    t_wall = PHASE_CLOCK()
+    laser_mount, mirror_scans = _laser_mount(inputs.reader, inputs.n_scan, config, req.static_transforms)
+    session = build_session(occ_map, laser_mount, backend=req.backend, frontend=req.frontend,
+                            initial_pose=inputs.initial_pose, config=config, routes=Routes.default(inputs.topics),
+                            covariance_period_s=req.covariance_period_s)
+    # a configured source silent the whole log is warned about with the log's topics of its type
+    session.sources.log_topics = {t: v["type"] for t, v in inputs.summary["topics"].items()}
+    return session, mirror_scans
+
+
+@dataclass
+class _Loop:
+    """What :func:`_localize` measured: the final trajectory and the phases' clock readings."""
+
+    final: Any  # Trajectory
+    t_start: float  # run_log called
+    t_wall: float  # the loop began (set-up done)
+    t_fin: float  # the log was read: final smoothing began
+    t_done: float  # final smoothing done
+    t_closed: float  # run.mcap and the view closed
+    spent: dict[str, float]  # read, write, view: seconds inside the loop
+
+    @property
+    def wall_s(self) -> float:
+        return self.t_closed - self.t_wall
+
+    def timings(self, t_end: float) -> dict[str, float]:
+        spent, loop = self.spent, self.t_fin - self.t_wall
+        return {
+            "setup_s": self.t_wall - self.t_start, "read_s": spent["read"], "write_s": spent["write"],
+            "view_s": spent["view"], "localize_s": max(0.0, loop - spent["read"] - spent["write"] - spent["view"]),
+            "finish_s": self.t_done - self.t_fin, "outputs_s": t_end - self.t_closed, "total_s": t_end - self.t_start,
+        }
+
+
+def _localize(req: RunRequest, session: Any, inputs: _Inputs, mirror_scans: bool, t_start: float,
+              progress: Callable[[int | None], Any] | None, announce: Callable[[str], None] | None) -> _Loop:
+    """Feed the log through the session with its sinks (``run.mcap``: the inputs' own bytes and
+    ``/fused_pose``; the view; the progress bar), then the final smoothing."""
+    from fgloc.app.startup import setup_done
+    from fgloc.io.mcap_writer import LogWriter
+    from fgloc.localization import RecorderSink
     from fgloc.view import ViewHook, check_rate, paced
 
+    reader, topics, loc = inputs.reader, inputs.topics, session.loc
+    want = inputs.wanted()
+    total = sum(inputs.count(t) for t in want)
+    t_wall = PHASE_CLOCK()
     realtime = check_rate(req.realtime)
     spent = {"read": 0.0, "write": 0.0, "view": 0.0}
     clock = _LogClock()
-    with LogWriter(outdir / "run.mcap") as writer, \
+    with LogWriter(Path(req.outdir) / "run.mcap") as writer, \
             ViewHook(loc, topics, view=req.view, record_to=writer if req.view_channels else None,
                      announce=announce) as view:
         # the inputs are copied by _copied (their own bytes); the recorder writes /fused_pose
-        sinks: list[Any] = [_TimedSink(RecorderSink(writer, topics.fused, record_inputs=False,
-                                                    log_time_ns=clock.now), spent, "write")]
+        session.add_sink(_TimedSink(RecorderSink(writer, topics.fused, record_inputs=False, log_time_ns=clock.now),
+                                    spent, "write"))
         if view.active:
             rec = view.recorder
             if rec is not None and hasattr(rec, "clock"):
@@ -322,22 +415,19 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                 rec.scan_period_s = req.view_scan_period_s
                 rec.covariance_period_s = req.view_covariance_period_s
                 rec.predicted_period_s = req.view_predicted_period_s
-            sinks.append(_TimedSink(view, spent, "view"))  # the Foxglove view and its channels (fgloc.view)
+            session.add_sink(_TimedSink(view, spent, "view"))  # the Foxglove view and its channels (fgloc.view)
         bar = progress(total) if progress is not None else None
         if bar is not None:
-            sinks.append(_ProgressSink(bar))
-        session = Session(loc, Routes.default(topics), sinks, covariance_period_s=req.covariance_period_s)
-        # a configured source silent the whole log is warned about with the log's topics of its type
-        session.sources.log_topics = {t: v["type"] for t, v in summ["topics"].items()}
+            session.add_sink(_ProgressSink(bar))
         setup_done()  # the CLI paused the cyclic collector for the imports and the set-up (fgloc.app.startup)
         # the evaluation's ground truth taken on the way through the log, not read again after it
         reader.collect_ground_truth = reader.has(topics.ground_truth)
         try:
             feed = session.feed
-            inputs = _copied(reader.records(want), writer, clock, spent)
+            messages = _copied(reader.records(want), writer, clock, spent)
             if mirror_scans:
-                inputs = _mirrored_scans(inputs, scan_topic, laser_mount.child.lstrip("/"))
-            for topic, msg in paced(inputs, realtime):
+                messages = _mirrored_scans(messages, topics.scan, loc.laser_mount.child.lstrip("/"))
+            for topic, msg in paced(messages, realtime):
                 feed(topic, msg)
             t_fin = PHASE_CLOCK()
             final = session.finish()
@@ -347,10 +437,20 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
                 bar.close()
     t_closed = PHASE_CLOCK()
     spent["write"] += t_closed - t_done  # the file's last chunk and its index (and the view's last messages)
-    wall = t_closed - t_wall
+    return _Loop(final, t_start, t_wall, t_fin, t_done, t_closed, spent)
+
+
+def _write_outputs(req: RunRequest, config: FglocConfig, loc: Any, inputs: _Inputs, loop: _Loop) -> RunResult:
+    """``trajectory.tum``, ``online.tum``, ``fixes.tum`` (each when not empty) and ``config.yaml``
+    (the effective config and a ``run:`` section); the result without its evaluation."""
+    from fgloc.config.schema import to_dict
+    from fgloc.io.tum import write_tum
+    from fgloc.io.yamlio import write_yaml
+
+    outdir, final, reader, topics = Path(req.outdir), loop.final, inputs.reader, inputs.topics
     online = loc.online_trajectory()
     fixes = loc.fixes_trajectory()
-    frame = "odom" if mode == "odom" else "map"
+    mode = "map" if loc.map is not None else "odom"
     written = []
     if len(final):
         written.append(write_tum(outdir / "trajectory.tum", final))
@@ -358,29 +458,35 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         written.append(write_tum(outdir / "online.tum", online))
     if len(fixes):
         written.append(write_tum(outdir / "fixes.tum", fixes))
-    from fgloc.config.schema import to_dict
-    from fgloc.io.yamlio import write_yaml
-
+    pose0 = inputs.initial_pose
     effective = to_dict(config)
     effective["run"] = {
-        "log": str(log), "map": str(req.map_yaml) if req.map_yaml else None, "mode": mode, "backend": req.backend,
-        "frontend": loc.frontend_name, "initial_pose": None if pose0 is None else pose0.tolist(),
-        "topics": {"scan": scan_topic, "odom": odom_topic, "imu": imu_topic},
+        "log": str(inputs.log), "map": str(req.map_yaml) if req.map_yaml else None, "mode": mode,
+        "backend": req.backend, "frontend": loc.frontend_name,
+        "initial_pose": None if pose0 is None else pose0.tolist(),
+        "topics": {"scan": topics.scan, "odom": topics.odom, "imu": topics.imu},
     }
     write_yaml(outdir / "config.yaml", effective)
-    sim_s = float(final.duration) if len(final) else float(summ.get("duration") or 0.0)
+    sim_s = float(final.duration) if len(final) else float(inputs.summary.get("duration") or 0.0)
     result = RunResult(
-        mode=mode, frame=frame, backend=req.backend, frontend=loc.frontend_name, poses=len(final),
-        online_poses=len(online), fixes=len(fixes), stats=loc.stats, wall_s=wall, log_s=sim_s,
+        mode=mode, frame=mode, backend=req.backend, frontend=loc.frontend_name, poses=len(final),
+        online_poses=len(online), fixes=len(fixes), stats=loc.stats, wall_s=loop.wall_s, log_s=sim_s,
         truncated=reader.truncated, outdir=outdir,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
-        log=log, lost_s=float(loc.stats.get("lost_s", 0.0)), ended_lost=bool(loc.stats.get("ended_lost", False)),
+        log=inputs.log, lost_s=float(loc.stats.get("lost_s", 0.0)),
+        ended_lost=bool(loc.stats.get("ended_lost", False)),
         damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
     )
     result.warnings = scale_warnings(loc.stats, mount_assumed=(
-        n_scan > 0 and mode == "map" and not config.sources.static_transforms
+        inputs.n_scan > 0 and mode == "map" and not config.sources.static_transforms
         and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
-    gt = reader.ground_truth() if reader.has(topics.ground_truth) else None
+    return result
+
+
+def _evaluate(result: RunResult, inputs: _Inputs, final: Any, online: Any) -> None:
+    """The final and online trajectories against the log's ``/ground_truth``, when it has one."""
+    reader, mode = inputs.reader, result.mode
+    gt = reader.ground_truth() if reader.has(inputs.topics.ground_truth) else None
     if gt is not None and len(final) > 1:
         from fgloc.eval.metrics import evaluate
 
@@ -389,14 +495,6 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
             result.metrics_online = evaluate(online, gt, align=(mode == "odom")) if len(online) > 1 else None
         except LogError as e:
             result.eval_error = str(e)
-    t_end = PHASE_CLOCK()
-    loop = t_fin - t_wall
-    result.timings = {
-        "setup_s": t_wall - t_start, "read_s": spent["read"], "write_s": spent["write"], "view_s": spent["view"],
-        "localize_s": max(0.0, loop - spent["read"] - spent["write"] - spent["view"]),
-        "finish_s": t_done - t_fin, "outputs_s": t_end - t_closed, "total_s": t_end - t_start,
-    }
-    return result
 
 
 def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocConfig:

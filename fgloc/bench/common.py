@@ -16,17 +16,17 @@ def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
     ``initial_pose`` defaults to the ground truth's first pose (``use_initial=False``: none,
     global localization).  ``config``: a :class:`fgloc.config.FglocConfig` (None: the defaults).
     """
-    from fgloc.localization import Localizer, Session
+    from fgloc.localization import build_session
 
     pose0 = initial_pose
     if pose0 is None and use_initial:
         pose0 = sim.ground_truth.poses[0]
-    loc = Localizer(sim.map, sim.laser_mount, backend=backend, frontend=frontend, initial_pose=pose0,
-                    config=config)
+    session = build_session(sim.map, sim.laser_mount, backend=backend, frontend=frontend, initial_pose=pose0,
+                            config=config)
     t0 = time.perf_counter()
-    final = Session(loc).run(sim.messages)
+    final = session.run(sim.messages)
     wall = time.perf_counter() - t0
-    return final, loc.online_trajectory(), loc, wall
+    return final, session.loc.online_trajectory(), session.loc, wall
 
 
 def localize_variants(sim: Any, variants: Any, config: Any = None) -> dict[str, tuple[Any, float]]:

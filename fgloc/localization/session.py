@@ -41,10 +41,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from fgloc.localization.localizer import Localizer
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, Trajectory
+from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from fgloc.maps import OccupancyMap
 
 DEFAULT_TOPICS = {"scan": "/scan", "odom": "/odom", "imu": "/imu"}
 COVARIANCE_PERIOD_S = 1.0  # log time between two marginal covariances of the fused pose (0: every scan)
@@ -224,6 +229,21 @@ class Session:
         if fresh and fused is not None:
             self._cov_stamp = stamp
         return fused
+
+
+def build_session(occ_map: OccupancyMap | None, laser_mount: StaticTransform, *, backend: str = "smoother",
+                  frontend: str = "native", initial_pose: np.ndarray | None = None, config: Any = None,
+                  routes: Routes | None = None, sinks: Iterable[Sink] = (),
+                  covariance_period_s: float | None = None) -> Session:
+    """The one way a session is built (``fgloc run``, ``fgloc live``, the benches): a
+    :class:`Localizer` on ``occ_map`` (None: odom-frame fusion) with the laser at ``laser_mount``,
+    the named back-end and front-end, ``initial_pose`` (None: global localization) and ``config``
+    (a :class:`~fgloc.config.FglocConfig`, a mapping, or None: the defaults), driven by a
+    :class:`Session` with ``routes`` (None: the default topics) and ``sinks``.  The localizer is
+    ``session.loc``; more sinks may be added with :meth:`Session.add_sink`."""
+    loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
+                    config=config)
+    return Session(loc, routes, sinks, covariance_period_s=covariance_period_s)
 
 
 # ---------------------------------------------------------------------- sinks

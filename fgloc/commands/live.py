@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
 from pathlib import Path
 
 import typer
@@ -41,30 +39,9 @@ def register(app: typer.Typer) -> None:
         """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP."""
         import math
 
-        import numpy as np
-
-        from fgloc.errors import ConfigError
-        from fgloc.live.app import LiveSession, load_config
+        from fgloc.live.app import LiveRequest, run_live
         from fgloc.live.publish import dumps
-        from fgloc.maps import load_map
 
-        if not serial and not laser:
-            raise ConfigError("fgloc live: give --serial URL and/or --laser HOST:PORT")
-        if backend not in ("smoother", "ekf"):
-            raise ConfigError(f"--backend {backend}: expected smoother or ekf")
-        cfg = load_config(config)
-        if not any(math.isnan(v) for v in laser_mount):
-            from fgloc.config import parse_config
-
-            cfg = parse_config({"laser": {"mount": list(laser_mount)}}, source="--laser-mount", base=cfg)
-        occ = load_map(map_yaml) if map_yaml is not None else None
-        init = None if any(math.isnan(v) for v in initial_pose) else np.array(initial_pose, dtype=float)
-
-        from fgloc.localization import Localizer
-        from fgloc.types import StaticTransform
-
-        mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
-        loc = Localizer(occ, mount, backend=backend, frontend=frontend, initial_pose=init, config=cfg)
         tty = sys.stderr.isatty()
         last_len = [0]
 
@@ -85,71 +62,18 @@ def register(app: typer.Typer) -> None:
             sys.stderr.write(("\n" if tty and not quiet else "") + f"fgloc live: {msg}\n")
             sys.stderr.flush()
 
-        session = LiveSession(loc, serial, laser, config=cfg, record=record, publish=publish or None,
-                              status_sink=status, event_sink=event)
-        viewer = None
-        if view is not None:  # the Foxglove view (fgloc.view), also recorded into --record
-            from fgloc.view import ViewHook
-
-            try:
-                viewer = ViewHook(loc, None, view=view, record_to=session.recorder, announce=event)
-            except BaseException:
-                session.close()
-                raise
-            session.runner.session.add_sink(viewer)
-        stop = session.runner.stop_event
-        hits = [0]
-
-        def on_signal(signum, frame) -> None:  # noqa: ANN001
-            hits[0] += 1
-            stop.set()
-            if hits[0] > 1:
-                raise KeyboardInterrupt
-
-        old = {}
-        if threading.current_thread() is threading.main_thread():
-            for s in (signal.SIGINT, signal.SIGTERM):
-                old[s] = signal.signal(s, on_signal)
-        def dead_workers() -> list[str]:
-            """Sensor threads that died (a bug: bad input is counted, never fatal)."""
-            return [f"{name} thread died ({w.failure})" for name, w in (("serial", session.serial),
-                                                                         ("laser", session.laser))
-                    if w is not None and w.failure]
-
-        try:
-            session.start()
-            session.runner.run(duration=duration, until=lambda: bool(dead_workers()))
-        finally:
-            if viewer is not None:
-                session.runner.drain()  # the backlog reaches the view (and its channels the recording)
-                viewer.close()
-            summary = session.close()
-            for s, h in old.items():
-                signal.signal(s, h)
+        def stopped() -> None:
             if tty and not quiet:
                 sys.stderr.write("\n")
-        traj = session.live_trajectory()
-        if out is not None and len(traj):
-            from fgloc.io.tum import write_tum
 
-            write_tum(out, traj)
-        if out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
-            from fgloc.io.tum import write_tum
-
-            write_tum(out_smoothed, session.smoothed)
-        failed = dead_workers()
-        report = {
-            "duration_s": round(summary.duration_s, 2),
-            "poses": summary.n_poses,
-            "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms},
-            "health": summary.health,
-            "counters": summary.counters,
-            "record": str(record) if record else None,
-            "failed_threads": failed,
-        }
-        if viewer is not None:
-            report["view"] = viewer.stats()
-        print(dumps(report, indent=1))  # standard JSON: unknown numbers (NaN) are null
-        if failed:
-            sys.stderr.write(f"fgloc live: error: {'; '.join(failed)}; stopped\n")
+        req = LiveRequest(serial=serial, laser=laser, map_yaml=map_yaml, backend=backend, frontend=frontend,
+                          initial_pose=None if any(math.isnan(v) for v in initial_pose) else initial_pose,
+                          config=config,
+                          laser_mount=None if any(math.isnan(v) for v in laser_mount) else laser_mount,
+                          record=record, publish=publish or [], duration_s=duration, out=out,
+                          out_smoothed=out_smoothed, view=view)
+        r = run_live(req, status_sink=status, event_sink=event, on_stopped=stopped)
+        print(dumps(r.report, indent=1))  # standard JSON: unknown numbers (NaN) are null
+        if r.failed:
+            sys.stderr.write(f"fgloc live: error: {'; '.join(r.failed)}; stopped\n")
             raise SystemExit(EXIT_THREAD_DIED)

@@ -1,16 +1,22 @@
-"""Assemble a live session: config -> serial link + laser client + localizer + outputs.
+"""Assemble a live session: config -> serial link + laser client + localization session + outputs.
 
-:class:`LiveSession` is what ``fgloc live`` runs and what the end-to-end tests drive
-(``start()``, ``runner.run(...)``, ``close()``).  ``close()`` stops the sensor
-threads, fuses what is still queued, closes the recording (a valid MCAP) and
-returns the summary.
+:func:`run_live` is ``fgloc live`` as a library function (a :class:`LiveRequest` in, a
+:class:`LiveReport` out): it builds the localization session with
+:func:`fgloc.localization.build_session`, wraps it in a :class:`LiveSession` (and the
+Foxglove view), runs until the duration, a signal or a dead sensor thread, and writes the
+trajectories asked for.  :class:`LiveSession` is what the end-to-end tests drive
+(``start()``, ``runner.run(...)``, ``close()``).  ``close()`` stops the sensor threads,
+fuses what is still queued, closes the recording (a valid MCAP) and returns the summary.
 """
 
 from __future__ import annotations
 
 import math
+import signal
+import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +30,7 @@ from fgloc.types import StaticTransform, Trajectory
 if TYPE_CHECKING:
     from fgloc.config import FglocConfig
     from fgloc.live.sick import SickClient
+    from fgloc.localization import Session
 
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> FglocConfig:
     """The one fgloc config (:func:`fgloc.config.load_config`); kept here for old callers."""
@@ -51,11 +58,12 @@ class LiveSummary:
 
 
 class LiveSession:
-    """Serial + laser + localizer + recorder + publisher, wired through a :class:`LiveRunner`."""
+    """Serial + laser + a localization session (:func:`fgloc.localization.build_session`) +
+    recorder + publisher, wired through a :class:`LiveRunner`."""
 
     def __init__(
         self,
-        localizer: Any,
+        session: Session,
         serial_url: str | None,
         laser: str | None,
         config: FglocConfig | None = None,
@@ -94,7 +102,7 @@ class LiveSession:
                 event_sink(msg)
 
         self.runner = LiveRunner(
-            localizer, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
+            session, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
             event_sink=ev, laser_mount=self.laser_mount,
             silence_s=cfg.health.silence_s,
         )
@@ -167,3 +175,134 @@ class LiveSession:
             n_poses=len(self.runner.live_stamps),
             events=list(self.events),
         )
+
+
+@dataclass
+class LiveRequest:
+    """What ``fgloc live`` runs (its arguments)."""
+
+    serial: str | None = None  # pyserial URL of the STM32 stream
+    laser: str | None = None  # SICK scanner HOST:PORT
+    map_yaml: Path | None = None  # map_server YAML (None: odometry + compass only)
+    backend: str = "smoother"
+    frontend: str = "native"
+    initial_pose: tuple[float, float, float] | None = None  # x_m, y_m, yaw_rad in the map
+    config: Path | None = None  # YAML overlaid on the defaults
+    laser_mount: tuple[float, float, float] | None = None  # base_link -> laser x_m, y_m, yaw_rad (over laser.mount)
+    record: Path | None = None  # every received message into this MCAP
+    publish: list[str] = field(default_factory=list)  # udp://HOST:PORT
+    duration_s: float | None = None  # stop after this long (None: until a signal)
+    out: Path | None = None  # the live fused trajectory (online poses) as TUM
+    out_smoothed: Path | None = None  # the localizer's smoothed trajectory at exit as TUM
+    view: str | None = None  # [HOST:]PORT: serve a Foxglove WebSocket view
+
+
+@dataclass
+class LiveReport:
+    """What :func:`run_live` did: ``report`` is what ``fgloc live`` prints (JSON), ``failed`` the
+    sensor threads that died (a bug: bad input is counted, never fatal)."""
+
+    report: dict[str, Any]
+    failed: list[str]
+
+
+def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
+                 event_sink: Callable[[str], None] | None = None) -> LiveSession:
+    """The config, the map and the localization session of ``req``, in a :class:`LiveSession`
+    reading its serial stream and laser (not started)."""
+    import numpy as np
+
+    from fgloc.localization import build_session
+    from fgloc.maps import load_map
+
+    if not req.serial and not req.laser:
+        raise ConfigError("fgloc live: give --serial URL and/or --laser HOST:PORT")
+    if req.backend not in ("smoother", "ekf"):
+        raise ConfigError(f"--backend {req.backend}: expected smoother or ekf")
+    cfg = load_config(req.config)
+    if req.laser_mount is not None:
+        from fgloc.config import parse_config
+
+        cfg = parse_config({"laser": {"mount": list(req.laser_mount)}}, source="--laser-mount", base=cfg)
+    occ = load_map(req.map_yaml) if req.map_yaml is not None else None
+    init = None if req.initial_pose is None else np.array(req.initial_pose, dtype=float)
+    mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
+    session = build_session(occ, mount, backend=req.backend, frontend=req.frontend, initial_pose=init, config=cfg)
+    return LiveSession(session, req.serial, req.laser, config=cfg, record=req.record, publish=req.publish or None,
+                       status_sink=status_sink, event_sink=event_sink)
+
+
+def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
+             event_sink: Callable[[str], None] | None = None,
+             on_stopped: Callable[[], None] | None = None) -> LiveReport:
+    """``fgloc live``: build the session (:func:`live_session`), serve the view, run until
+    ``req.duration_s``, SIGINT / SIGTERM (a second one interrupts) or a dead sensor thread, close
+    and write ``req.out`` / ``req.out_smoothed``.  ``status_sink(line)``: the status line;
+    ``event_sink(line)``: events (sensor silent / back, the view's address); ``on_stopped()``:
+    called once the session is closed (the CLI ends its status line)."""
+    session = live_session(req, status_sink, event_sink)
+    viewer = None
+    if req.view is not None:  # the Foxglove view (fgloc.view), also recorded into --record
+        from fgloc.view import ViewHook
+
+        try:
+            viewer = ViewHook(session.runner.loc, None, view=req.view, record_to=session.recorder,
+                              announce=event_sink)
+        except BaseException:
+            session.close()
+            raise
+        session.runner.session.add_sink(viewer)
+    stop = session.runner.stop_event
+    hits = [0]
+
+    def on_signal(signum, frame) -> None:  # noqa: ANN001
+        hits[0] += 1
+        stop.set()
+        if hits[0] > 1:
+            raise KeyboardInterrupt
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            old[s] = signal.signal(s, on_signal)
+
+    def dead_workers() -> list[str]:
+        """Sensor threads that died (a bug: bad input is counted, never fatal)."""
+        return [f"{name} thread died ({w.failure})" for name, w in (("serial", session.serial),
+                                                                     ("laser", session.laser))
+                if w is not None and w.failure]
+
+    try:
+        session.start()
+        session.runner.run(duration=req.duration_s, until=lambda: bool(dead_workers()))
+    finally:
+        if viewer is not None:
+            session.runner.drain()  # the backlog reaches the view (and its channels the recording)
+            viewer.close()
+        summary = session.close()
+        for s, h in old.items():
+            signal.signal(s, h)
+        if on_stopped is not None:
+            on_stopped()
+    traj = session.live_trajectory()
+    if req.out is not None and len(traj):
+        from fgloc.io.tum import write_tum
+
+        write_tum(req.out, traj)
+    if req.out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
+        from fgloc.io.tum import write_tum
+
+        write_tum(req.out_smoothed, session.smoothed)
+    failed = dead_workers()
+    report = {
+        "duration_s": round(summary.duration_s, 2),
+        "poses": summary.n_poses,
+        "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms},
+        "health": summary.health,
+        "counters": summary.counters,
+        "record": str(req.record) if req.record else None,
+        "failed_threads": failed,
+    }
+    if viewer is not None:
+        report["view"] = viewer.stats()
+    return LiveReport(report, failed)

@@ -75,14 +75,15 @@ class _LiveTrack(BaseSink):
 
 
 class LiveRunner:
-    """Glue between the sensor threads and the localization session.  Not tied to any I/O itself:
+    """Glue between the sensor threads and a localization session (built by
+    :func:`fgloc.localization.build_session`; the runner adds its sinks to it).  Not tied to any I/O itself:
     ``recorder`` (``write(topic, msg, stamp)``), ``publisher`` (``pose(fix, latency_ms)``,
     ``status(...)``) and ``status_sink(line)`` are optional callables/objects; ``sinks`` are
     more :class:`fgloc.localization.Sink` s (a viewer)."""
 
     def __init__(
         self,
-        localizer: Any,
+        session: Session,
         recorder: Any = None,
         publisher: Any = None,
         status_sink: Callable[[str], None] | None = None,
@@ -95,7 +96,7 @@ class LiveRunner:
         reorder_s: float = 0.15,
         sinks: list[Any] | None = None,
     ) -> None:
-        self.loc = localizer
+        self.loc = session.loc
         self.recorder = recorder
         self.publisher = publisher
         self.status_sink = status_sink
@@ -134,7 +135,9 @@ class LiveRunner:
             out.append(self._rec_sink)
         if publisher is not None:
             out.append(UdpSink(publisher, lambda: self.last_latency_ms, close_publisher=False))
-        self.session = Session(localizer, sinks=out + list(sinks or []))
+        self.session = session
+        for sink in out + list(sinks or []):
+            session.add_sink(sink)
 
     # ---------------------------------------------------------------- producer side
     def push(self, kind: str, msg: Any, arrival: float) -> None:

@@ -53,7 +53,7 @@ def replay_live(
     sick_kw: dict[str, Any] | None = None,
 ) -> LiveReplay:
     """``sick_kw``: :class:`SickEmulator` keywords (a real device's telegram shape, DeviceIdent, ...)."""
-    from fgloc.localization import Localizer
+    from fgloc.localization import build_session
 
     rp = robot if isinstance(robot, RobotParams) else RobotParams.from_dict(robot)
     over: dict[str, Any] = {
@@ -84,11 +84,11 @@ def replay_live(
         cfg = parse_config(live_overrides, source="overrides", base=cfg)
     if warmup and occ_map is not None:
         _warm_up(messages, occ_map, laser_mount, backend, frontend, initial_pose, cfg, t_start)
-    loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
-                    config=cfg)
+    session = build_session(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
+                            config=cfg)
     pair = EmulatorPair.create(messages, rp, mode=mode, speed=speed, t_start=t_start, duration=duration,
                                lead_s=lead_s, sick_kw=sick_kw)
-    sess = LiveSession(loc, pair.stm32.url, pair.sick.address, config=cfg, record=record, publish=publish,
+    sess = LiveSession(session, pair.stm32.url, pair.sick.address, config=cfg, record=record, publish=publish,
                        status_sink=status_sink)
     sess.start()
     if mode == "tcp":
@@ -109,7 +109,7 @@ def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: Stat
              frontend: str, initial_pose: np.ndarray | None, config: Any, t_start: float | None) -> None:
     """Run a throwaway localizer over the first scans so JIT compilation (numba) and caches are
     done before the replay clock starts, as they would be on a robot that has run once before."""
-    from fgloc.localization import Localizer, Session
+    from fgloc.localization import build_session
 
     first: list[tuple[str, object]] = []
     n_scans = 0
@@ -120,6 +120,5 @@ def _warm_up(messages: list[tuple[str, object]], occ_map: Any, laser_mount: Stat
         n_scans += topic == "/scan"
         if n_scans >= 5:
             break
-    loc = Localizer(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
-                    config=config)
-    Session(loc).run(first)
+    build_session(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
+                  config=config).run(first)

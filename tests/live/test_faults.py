@@ -13,7 +13,7 @@ from fgloc.io import open_log
 from fgloc.live.app import LiveSession, load_config
 from fgloc.live.serial_protocol import SYNC
 from fgloc.live.sick import encode_lmdscandata, frame
-from fgloc.localization import Localizer
+from fgloc.localization import build_session
 from fgloc.testing.emulators import EmulatorPair
 from fgloc.types import CompassHeading, LaserScan, Odometry, StaticTransform
 
@@ -46,9 +46,9 @@ def test_garbage_and_a_negative_scale_telegram_mid_stream(tmp_path):
     pair = EmulatorPair.create(msgs, cfg.robot, mode="pty", speed=1.0, lead_s=0.5,
                                stm32_kw={"inject": {k: _serial_garbage(rng) for k in (n_frames // 3, n_frames // 2)}},
                                sick_kw={"inject": {INJECT_SCAN: laser_junk}})
-    loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
+    session = build_session(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
     rec = tmp_path / "live.mcap"
-    sess = LiveSession(loc, pair.stm32.url, pair.sick.address, config=cfg, record=rec)
+    sess = LiveSession(session, pair.stm32.url, pair.sick.address, config=cfg, record=rec)
     sess.start()
     pair.start()
     r = sess.runner

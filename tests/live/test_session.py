@@ -15,7 +15,7 @@ import numpy as np
 
 from fgloc.io import open_log
 from fgloc.live.app import LiveSession, load_config
-from fgloc.localization import Localizer
+from fgloc.localization import build_session
 from fgloc.testing.emulators import EmulatorPair
 from fgloc.types import StaticTransform
 
@@ -46,9 +46,9 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
                                stm32_kw={"corrupt_prob": 0.05, "garbage_prob": 0.05},
                                sick_kw={"malformed_prob": 0.1})
     udp = _udp_listener()
-    loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
+    session = build_session(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
     rec = tmp_path / "live.mcap"
-    sess = LiveSession(loc, pair.stm32.url, pair.sick.address, config=cfg, record=rec,
+    sess = LiveSession(session, pair.stm32.url, pair.sick.address, config=cfg, record=rec,
                        publish=[f"udp://127.0.0.1:{udp.getsockname()[1]}"])
     sess.start()
     pair.start()

@@ -580,10 +580,11 @@ def test_status_line_shows_skipped_laser_scans():
     """Scans skipped as another layer's or a clockwise device's are on the status line, not only in the
     summary (before: 'las bad 0 reconn 0' while no scan was used)."""
     from fgloc.live.app import LiveSession
-    from fgloc.localization import Localizer
+    from fgloc.localization import build_session
     from fgloc.types import StaticTransform
 
-    sess = LiveSession(Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf"), None, None)
+    sess = LiveSession(build_session(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf"), None,
+                       None)
     c, _ = _client()
     for j, layer in enumerate((-500, -250, 0, 250)):
         c.handle_payload(encode_lmdscandata(_flat(2.0), j, j, 1000, 2000, layer_field=layer), 100.0)

@@ -228,9 +228,10 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     config = _effective_config(req)
     inputs = _open_inputs(req, config)
     session, mirror_scans = _build_session(req, config, inputs)
-    Path(req.outdir).mkdir(parents=True, exist_ok=True)
-    loop = _localize(req, session, inputs, mirror_scans, t_start, progress, announce)
-    result = _write_outputs(req, config, session.loc, inputs, loop)
+    outdir = Path(req.outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    loop = _localize(req, outdir, session, inputs, mirror_scans, t_start, progress, announce)
+    result = _write_outputs(req, outdir, config, session.loc, inputs, loop)
     _evaluate(result, inputs, loop.final, session.loc.online_trajectory())
     result.timings = loop.timings(PHASE_CLOCK())
     return result
@@ -386,9 +387,9 @@ class _Loop:
         }
 
 
-def _localize(req: RunRequest, session: Any, inputs: _Inputs, mirror_scans: bool, t_start: float,
+def _localize(req: RunRequest, outdir: Path, session: Any, inputs: _Inputs, mirror_scans: bool, t_start: float,
               progress: Callable[[int | None], Any] | None, announce: Callable[[str], None] | None) -> _Loop:
-    """Feed the log through the session with its sinks (``run.mcap``: the inputs' own bytes and
+    """Feed the log through the session with its sinks (``outdir/run.mcap``: the inputs' own bytes and
     ``/fused_pose``; the view; the progress bar), then the final smoothing."""
     from fgloc.app.startup import setup_done
     from fgloc.io.mcap_writer import LogWriter
@@ -402,7 +403,7 @@ def _localize(req: RunRequest, session: Any, inputs: _Inputs, mirror_scans: bool
     realtime = check_rate(req.realtime)
     spent = {"read": 0.0, "write": 0.0, "view": 0.0}
     clock = _LogClock()
-    with LogWriter(Path(req.outdir) / "run.mcap") as writer, \
+    with LogWriter(outdir / "run.mcap") as writer, \
             ViewHook(loc, topics, view=req.view, record_to=writer if req.view_channels else None,
                      announce=announce) as view:
         # the inputs are copied by _copied (their own bytes); the recorder writes /fused_pose
@@ -440,14 +441,15 @@ def _localize(req: RunRequest, session: Any, inputs: _Inputs, mirror_scans: bool
     return _Loop(final, t_start, t_wall, t_fin, t_done, t_closed, spent)
 
 
-def _write_outputs(req: RunRequest, config: FglocConfig, loc: Any, inputs: _Inputs, loop: _Loop) -> RunResult:
+def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any, inputs: _Inputs,
+                   loop: _Loop) -> RunResult:
     """``trajectory.tum``, ``online.tum``, ``fixes.tum`` (each when not empty) and ``config.yaml``
     (the effective config and a ``run:`` section); the result without its evaluation."""
     from fgloc.config.schema import to_dict
     from fgloc.io.tum import write_tum
     from fgloc.io.yamlio import write_yaml
 
-    outdir, final, reader, topics = Path(req.outdir), loop.final, inputs.reader, inputs.topics
+    final, reader, topics = loop.final, inputs.reader, inputs.topics
     online = loc.online_trajectory()
     fixes = loc.fixes_trajectory()
     mode = "map" if loc.map is not None else "odom"

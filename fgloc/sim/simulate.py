@@ -18,18 +18,19 @@ Sensors (defaults follow the paper's Table 2; every number is in the scenario):
   -> -inf; mounted off the robot's centre (``/tf_static`` base_link -> laser);
 * every sensor has its own clock phase (unsynchronized).
 
-World and motion: the builtin hall is continuous geometry (polygons, circles; laser
-ranges by exact ray intersection, compiled with numba), rotated ``world_rotation_deg``
-against the map grid, with ``map_changes`` (furniture moved since mapping); the robot's
-map is its 0.05 m rasterization (a cell is occupied when it intersects a solid).  A
-map_server YAML as ``map`` makes a grid world instead: every cell that is not free is
-solid (the Willow Garage map stores walls as grey "unknown" pixels), ray cast with
-:meth:`OccupancyMap.raycast`.  The robot drives the route's legs facing the direction of
-travel (0.8 m/s, 0.5 m/s^2), stops at each waypoint and turns in place to the next leg's
-heading (0.8 rad/s, 1.5 rad/s^2): the heading changes at the rectangle's corners.  The
-true motion is sampled at 500 Hz (wheel angles are integrated at that rate);
-``/ground_truth`` (nav_msgs/Odometry, pose in ``map``) and ``SimResult.ground_truth`` are
-at ``ground_truth_rate_hz`` (100 Hz).  Stamps start at 0 s.
+World and motion: the builtin hall is continuous geometry (polygons, circles; laser ranges by
+exact ray intersection, compiled with numba), rotated ``world_rotation_deg`` against the map
+grid, with ``map_changes`` (furniture moved, turned, removed or added since mapping, pallets,
+closed doors: :data:`CHANGE_KINDS`); the robot's map is the unchanged hall's 0.05 m
+rasterization (a cell is occupied when it intersects a solid). A map_server YAML as ``map``
+makes a grid world instead: every cell that is not free is solid (the Willow Garage map stores
+walls as grey "unknown" pixels), ray cast with :meth:`OccupancyMap.raycast` (its
+``map_changes`` add solids or clear boxes of cells). The robot drives the route's legs facing
+the direction of travel (0.8 m/s, 0.5 m/s^2), stops at each waypoint and turns in place to the
+next leg's heading (0.8 rad/s, 1.5 rad/s^2): the heading changes at the rectangle's corners.
+The true motion is sampled at 500 Hz (wheel angles are integrated at that rate);
+``/ground_truth`` (nav_msgs/Odometry, pose in ``map``) and ``SimResult.ground_truth`` are at
+``ground_truth_rate_hz`` (100 Hz). Stamps start at 0 s.
 
 Robots beyond the paper's (every key in the scenario):
 
@@ -180,7 +181,7 @@ def load_scenario(path_or_dict: str | Path | dict) -> dict:
     """A scenario dict merged over the defaults; relative map paths resolve against the YAML's folder."""
     if isinstance(path_or_dict, dict):
         check_scenario(path_or_dict, "scenario")
-        return _merge(DEFAULT_SCENARIO, path_or_dict)
+        return _merge(_defaults_for(path_or_dict), path_or_dict)
     path = Path(path_or_dict)
     try:
         data = yaml.safe_load(path.read_text())
@@ -195,29 +196,127 @@ def load_scenario(path_or_dict: str | Path | dict) -> dict:
     if isinstance(m, str) and m != "hall" and not Path(m).is_absolute():
         cand = [path.parent / m, Path.cwd() / m]
         data["map"] = str(next((c for c in cand if c.exists()), cand[0]))
-    return _merge(DEFAULT_SCENARIO, data)
+    return _merge(_defaults_for(data), data)
+
+
+def _defaults_for(data: dict) -> dict:
+    """The defaults a scenario is merged over: the default ``map_changes`` are the builtin hall's
+    furniture, so a map_server world starts without changes."""
+    if data.get("map", "hall") == "hall":
+        return DEFAULT_SCENARIO
+    return {**DEFAULT_SCENARIO, "map_changes": []}
 
 
 # ------------------------------------------------------------------- worlds
-class GridWorld:
-    """A world made from a map_server map: every cell that is not free is solid."""
+#: the kinds of ``map_changes`` entries (the world as it is now, against the map made before):
+#: ``polygon``/``circle`` with ``shift: [dx, dy]`` (m) and/or ``rotate_deg`` (about its centre) moves a
+#: piece of the builtin hall (its index), ``remove: true`` takes it away; ``add: [[x, y], ...]`` (a
+#: convex polygon, map frame) and ``add_circle: [x, y, r]`` put new solids in (furniture, a pallet, a
+#: closed door); ``clear: [x0, y0, x1, y1]`` (map_server worlds) empties a box of solid cells
+CHANGE_KINDS = ("polygon", "circle", "add", "add_circle", "clear")
 
-    def __init__(self, occ: OccupancyMap):
+
+def _change_error(i: int, ch: Any, problem: str) -> ConfigError:
+    return ConfigError(f"map_changes[{i}]: {problem} (got {ch!r}; kinds: {', '.join(CHANGE_KINDS)})")
+
+
+def _moved(shape: FloatArray, ch: dict) -> FloatArray:
+    """A polygon's vertices (or a circle's centre, one row) rotated about their mean and shifted."""
+    out = np.asarray(shape, dtype=float).reshape(-1, 2).copy()
+    rot = float(ch.get("rotate_deg") or 0.0)
+    if rot:
+        c, s = np.cos(np.deg2rad(rot)), np.sin(np.deg2rad(rot))
+        ctr = out.mean(axis=0)
+        out = (out - ctr) @ np.array([[c, s], [-s, c]]) + ctr
+    return out + np.asarray(ch.get("shift", (0.0, 0.0)), dtype=float).reshape(2)
+
+
+def apply_changes(world: World, changes: list[dict]) -> tuple[list[FloatArray], FloatArray]:
+    """The polygons and circles of ``world`` after ``changes`` (see :data:`CHANGE_KINDS`)."""
+    polys: list[FloatArray | None] = [np.asarray(p, dtype=float).copy() for p in world.polygons]
+    circles: list[FloatArray | None] = [np.asarray(c, dtype=float).copy() for c in world.circles]
+    added: list[FloatArray] = []
+    added_c: list[FloatArray] = []
+    for i, ch in enumerate(changes):
+        if not isinstance(ch, dict) or sum(k in ch for k in CHANGE_KINDS) != 1:
+            raise _change_error(i, ch, "one kind per entry")
+        if "add" in ch:
+            p = np.asarray(ch["add"], dtype=float)
+            if p.ndim != 2 or p.shape[1] != 2 or len(p) < 3 or not np.isfinite(p).all():
+                raise _change_error(i, ch, "add: a polygon of at least 3 [x, y] vertices")
+            added.append(p)
+        elif "add_circle" in ch:
+            c = np.asarray(ch["add_circle"], dtype=float).reshape(-1)
+            if c.shape != (3,) or not np.isfinite(c).all() or c[2] <= 0:
+                raise _change_error(i, ch, "add_circle: [x, y, radius > 0]")
+            added_c.append(c)
+        elif "clear" in ch:
+            raise _change_error(i, ch, "clear: only in a map_server world (the hall's pieces are removed by index)")
+        else:
+            kind = "polygon" if "polygon" in ch else "circle"
+            items = polys if kind == "polygon" else circles
+            j = int(ch[kind])
+            if not 0 <= j < len(items) or items[j] is None:
+                raise _change_error(i, ch, f"no {kind} {j} (the hall has {len(items)})")
+            item = items[j]
+            assert item is not None
+            if ch.get("remove"):
+                items[j] = None
+            elif kind == "polygon":
+                items[j] = _moved(item, ch)
+            else:
+                items[j] = np.r_[_moved(item[:2], ch)[0], item[2]]
+    polys_out = [p for p in polys if p is not None] + added
+    circ = [c for c in circles if c is not None] + added_c
+    return polys_out, np.asarray(circ, dtype=float).reshape(-1, 3)
+
+
+class GridWorld:
+    """A world made from a map_server map: every cell that is not free is solid; ``changes``
+    (:data:`CHANGE_KINDS`: ``add``, ``add_circle``, ``clear``) edit it after the map was made."""
+
+    def __init__(self, occ: OccupancyMap, changes: list[dict] | None = None):
         solid = ~occ.free
+        segs: list[FloatArray] = []
+        circles: list[FloatArray] = []
+        for i, ch in enumerate(changes or []):
+            if not isinstance(ch, dict) or sum(k in ch for k in CHANGE_KINDS) != 1:
+                raise _change_error(i, ch, "one kind per entry")
+            if "clear" in ch:
+                box = np.asarray(ch["clear"], dtype=float).reshape(-1)
+                if box.shape != (4,) or not np.isfinite(box).all():
+                    raise _change_error(i, ch, "clear: [x0, y0, x1, y1]")
+                rows, cols = np.indices(solid.shape)
+                xy = occ.grid_to_world(rows.ravel(), cols.ravel()).reshape(*solid.shape, 2)
+                inside = (xy[..., 0] >= min(box[0], box[2])) & (xy[..., 0] <= max(box[0], box[2])) \
+                    & (xy[..., 1] >= min(box[1], box[3])) & (xy[..., 1] <= max(box[1], box[3]))
+                solid = solid & ~inside
+            elif "polygon" in ch or "circle" in ch:
+                raise _change_error(i, ch, "a map_server world has no numbered pieces: clear a box, add solids")
+            else:
+                w = World([], np.zeros((0, 3)))
+                p, c = apply_changes(w, [ch])
+                for poly in p:
+                    segs.append(np.column_stack([poly, np.roll(poly, -1, axis=0)]))
+                circles.extend(c)
         self.solid_map = OccupancyMap(np.where(solid, OCCUPIED, FREE).astype(np.int16), occ.resolution, occ.origin)
-        self.circles = np.zeros((0, 3))
+        self.segments = np.vstack(segs) if segs else np.zeros((0, 4))
+        self.circles = np.asarray(circles, dtype=float).reshape(-1, 3)
 
     def raycast(self, origins: FloatArray, angles: FloatArray, max_range: float,
                 extra_circles: FloatArray | None = None) -> FloatArray:
         r = self.solid_map.raycast(origins, angles, max_range)
-        if extra_circles is not None and len(extra_circles):
+        circles = self.circles if extra_circles is None or not len(extra_circles) else np.vstack(
+            [self.circles, extra_circles])
+        if len(circles) or len(self.segments):
             from fgloc.sim.world import raycast_geometry
 
-            r = np.minimum(r, raycast_geometry(origins, angles, np.zeros((0, 4)), extra_circles, max_range))
+            r = np.minimum(r, raycast_geometry(origins, angles, self.segments, circles, max_range))
         return r
 
 
-def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
+def build_world(sc: dict) -> tuple[Any, OccupancyMap]:
+    """The world as it is now (the scenario's ``map_changes`` applied) and the robot's map of it as it was."""
     if sc["map"] == "hall":
         mapped = paper_hall()
         rot = float(sc.get("world_rotation_deg") or 0.0)
@@ -226,15 +325,10 @@ def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
             mapped = mapped.rotated(np.deg2rad(rot), ((b[0] + b[2]) / 2, (b[1] + b[3]) / 2))
         occ = mapped.rasterize(float(sc.get("map_resolution_m", 0.05)))
         occ.accuracy_m = 0.0  # the map is the world rasterized: no registration error beyond its cells
-        polys = [p.copy() for p in mapped.polygons]
-        for ch in sc.get("map_changes") or []:
-            i = int(ch["polygon"])
-            if not 0 <= i < len(polys):
-                raise ConfigError(f"map_changes: no polygon {i} (the hall has {len(polys)})")
-            polys[i] = polys[i] + np.asarray(ch["shift"], dtype=float)
-        return World(polys, mapped.circles, mapped.bounds, mapped.interior), occ
+        polys, circles = apply_changes(mapped, sc.get("map_changes") or [])
+        return World(polys, circles, mapped.bounds, mapped.interior), occ
     occ = load_map(sc["map"])
-    gw = GridWorld(occ)
+    gw = GridWorld(occ, sc.get("map_changes") or [])
     # The robot's map: free cells stay free, solid cells bordering free space are walls.
     from scipy.ndimage import binary_dilation
 
@@ -246,7 +340,8 @@ def _build_world(sc: dict) -> tuple[Any, OccupancyMap]:
 
 
 # -------------------------------------------------------------------- motion
-def _true_motion(sc: dict) -> Plan:
+def true_motion(sc: dict) -> Plan:
+    """The robot's true motion along the scenario's route (a kidnapping applied)."""
     route = np.asarray(sc["route"], dtype=float)
     loops = int(sc.get("loops", 1))
     if loops > 1:
@@ -482,8 +577,8 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
     sc = load_scenario(path_or_dict)
     rng = np.random.default_rng(seed)
     rngs = rng.spawn(4)
-    world, occ = _build_world(sc)
-    plan = _true_motion(sc)
+    world, occ = build_world(sc)
+    plan = true_motion(sc)
     if sc["map"] == "hall" and not world.is_free(plan.poses[::25, :2], clearance=0.3).all():
         raise ConfigError("scenario route runs into an obstacle")
     off_deg = sc["compass"].get("offset_deg")

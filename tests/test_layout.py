@@ -220,3 +220,79 @@ SCRIPTS = sorted([*REPO.joinpath("tests").rglob("*.py"), *REPO.joinpath("tools")
 def test_tests_and_tools_use_no_private_fgloc_name(path):
     uses = private_uses(path.read_text(encoding="utf-8"), "tests", False, set(MODULES))
     assert not uses, f"{path.relative_to(REPO)} uses private names of fgloc modules: {uses}"
+
+
+# ------------------------------------------------------------------ back-end / front-end dispatch
+#: objects named as a back-end or a front-end (``backend``, ``be``, ``self.loc.frontend`` ...)
+ENGINE_NAMES = {"backend", "be", "frontend", "fe"}
+#: attribute names too common to say what they are asked of (a message's ``name``, a config's ``cfg``)
+GENERIC_NAMES = {"name", "stats", "sources", "cfg", "reset", "finish", "current", "initialize", "match", "map"}
+#: getattr / hasattr dispatch the sources router still does, by module prefix (empty it as it switches
+#: to the contract: fgloc.backends.contract's methods and capabilities)
+DISPATCH_ALLOWED: dict[str, set[str]] = {
+    "fgloc/localization/sources": {"add_velocity", "encoder_sigmas", "add_relative_yaw", "add_gyro", "arb",
+                                   "sources", "odom_scales", "gyro_bias", "frontend", "latency_estimate",
+                                   "latency_est", "stats", "cfg"},
+}
+
+
+def _contract_names() -> set[str]:
+    """The public members of the back-end and front-end contracts, the capabilities' names, and
+    back-end internals that were once reached from outside."""
+    from fgloc.backends.contract import Backend, Capability
+    from fgloc.frontends.base import FrontendBase, ScanMatcher
+
+    names = {n for c in (Backend, FrontendBase, ScanMatcher) for n in dir(c) if not n.startswith("_")}
+    names |= {c.value for c in Capability} | set(ENGINE_NAMES) | {"particles"}
+    names |= {"arb", "latency_est", "gbias", "encoder_sigmas"}
+    return names - GENERIC_NAMES
+
+
+def _engine_like(node: ast.AST) -> bool:
+    return (isinstance(node, ast.Name) and node.id in ENGINE_NAMES) or \
+        (isinstance(node, ast.Attribute) and node.attr in ENGINE_NAMES)
+
+
+def engine_dispatch(source: str, contract: set[str]) -> list[tuple[int, str]]:
+    """``getattr(obj, "x", ...)`` / ``hasattr(obj, "x")`` where ``obj`` is named as a back-end or
+    front-end, or ``x`` is a member of their contracts: ``(line, x)`` for each."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in ("getattr", "hasattr") and len(node.args) >= 2):
+            continue
+        obj, attr = node.args[0], node.args[1]
+        name = attr.value if isinstance(attr, ast.Constant) and isinstance(attr.value, str) else None
+        if _engine_like(obj) or (name is not None and name in contract):
+            found.append((node.lineno, name if name is not None else ast.unparse(attr)))
+    return found
+
+
+@pytest.mark.parametrize("source, found", [
+    ("getattr(self.loc.backend, 'add_gyro', None)\n", [(1, "add_gyro")]),
+    ("hasattr(be, 'odom_scales')\n", [(1, "odom_scales")]),
+    ("getattr(backend, 'stats', {})\n", [(1, "stats")]),
+    ("getattr(self.loc, 'frontend', None)\n", [(1, "frontend")]),
+    ("getattr(fe, 'particles', None)\n", [(1, "particles")]),
+    ("getattr(thing, 'measures_velocity', False)\n", [(1, "measures_velocity")]),
+    ("getattr(be, key)\n", [(1, "key")]),
+    ("getattr(msg, 'stamp', None)\nhasattr(writer, 'close')\ngetattr(topics, 'scan', '/scan')\n", []),
+    ("getattr(config, 'name', None)\ngetattr(self.session, 'sources', None)\n", []),
+])
+def test_the_dispatch_check_tells_engines_from_other_objects(source, found):
+    assert engine_dispatch(source, _contract_names()) == found
+
+
+def test_no_getattr_or_hasattr_dispatch_on_backends_or_frontends():
+    """Back-ends and front-ends are called through their contracts (fgloc.backends.contract,
+    fgloc.frontends.base): what only some do is a declared capability, not a ``hasattr``."""
+    contract = _contract_names()
+    found: dict[str, list[str]] = {}
+    for path in MODULES.values():
+        rel = str(path.relative_to(REPO))
+        allowed = next((a for prefix, a in DISPATCH_ALLOWED.items() if rel.startswith(prefix)), set())
+        bad = [f"{line}: {x}" for line, x in engine_dispatch(path.read_text(encoding="utf-8"), contract)
+               if x not in allowed]
+        if bad:
+            found[rel] = bad
+    assert not found, f"getattr / hasattr on a back-end or front-end (use the contract): {found}"

@@ -35,11 +35,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance, with_rotation
 from fgloc.backends.compass import CompassCalibrator
+from fgloc.backends.contract import Capability, SourceNoise, latency_fit_of
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
@@ -85,10 +87,10 @@ def _period(series: deque) -> float:
 
 class EKFBackend(Backend):
     name = "ekf"
-    #: the odometry twist measures the filter's velocity state (its pose integrates that state), so
-    #: the localizer hands it a velocity after a burst of pose stamps, not the burst's pose increment
-    #: over its microseconds (:meth:`fgloc.localization.odometry.OdometryTracker.velocity_measurement`)
-    measures_velocity = True
+    #: the odometry twist measures the filter's velocity state (its pose integrates that state)
+    capabilities = frozenset({Capability.MEASURES_VELOCITY, Capability.GYRO, Capability.VELOCITY,
+                              Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,
+                              Capability.LATENCY})
 
     def __init__(self, config: EKFConfig | None = None) -> None:
         super().__init__()
@@ -97,7 +99,6 @@ class EKFBackend(Backend):
         self.ekf = EKF(c)
         self.ekf.x = np.zeros(self.ekf.n)
         self.ekf.P = np.eye(self.ekf.n)
-        self.encoder_sigmas = c.encoder_sigmas
         self.compass_sigma = c.compass_sigma
         self.compass_rate_sigma = c.compass_rate_sigma
         self.use_compass_yaw = c.use_compass_yaw
@@ -144,6 +145,36 @@ class EKFBackend(Backend):
     def initialized(self) -> bool:
         return self.ekf.initialized
 
+    @property
+    def encoder_sigmas(self) -> tuple[float, float, float]:
+        return self.cfg.encoder_sigmas
+
+    def source_health(self) -> Mapping[str, SourceHealth]:
+        return self.sources
+
+    def source_noise(self, name: str) -> SourceNoise | None:
+        if name not in self.arb.streams:
+            return None
+        k, c = self.arb.noise(name)
+        return SourceNoise(k, c, self.arb.shown_sigma(name), self.arb.claimed_sigma(name))
+
+    def motion_summary(self, vy_max_mps: float | None = None) -> str:
+        """The filter's state (differential or omni) and why."""
+        v = self.cfg.omni_vy_mps
+        if self.stats.get("omni_since") is not None:
+            return ("omni [x, y, yaw, vx, vy, w]: the odometry reported lateral velocity"
+                    + (f" (> {v} m/s)" if v else ""))
+        if self.stats.get("omni"):
+            return "omni [x, y, yaw, vx, vy, w] (configured: ekf.omni true)"
+        if self.cfg.omni is False:
+            why = "configured: ekf.omni false"
+        elif vy_max_mps:
+            why = (f"the lateral velocity it was handed stayed under ekf.omni_vy_mps {v} m/s; the messages reported "
+                   f"up to {vy_max_mps:.3f} m/s")
+        else:
+            why = "the odometry never reported lateral velocity"
+        return f"differential [x, y, yaw, v, w] ({why})"
+
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
         self.ekf.initialize(t, pose, cov)
         self._consecutive_rejects = 0
@@ -172,6 +203,9 @@ class EKFBackend(Backend):
         if self.cfg.latency_s is not None:
             return float(self.cfg.latency_s)
         return self.latency_est.value() if self.cfg.latency else 0.0
+
+    def latency_fit(self) -> tuple[float, float] | None:
+        return latency_fit_of(self.latency_est.estimate())
 
     def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """The odometry increment with the gyro's rotation where it covers ``(t0, t1]`` (else the

@@ -56,7 +56,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from operator import sub
 
@@ -65,6 +65,7 @@ import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance_values
 from fgloc.backends.compass import CompassCalibrator
+from fgloc.backends.contract import Capability, SourceNoise, latency_fit_of
 from fgloc.backends.factors import (
     aligned_between_factor,
     between_factor,
@@ -349,6 +350,9 @@ class BatchConfig:
 
 class SlidingWindowSmoother(Backend):
     name = "smoother"
+    capabilities = frozenset({Capability.ODOMETRY_CLOCK, Capability.GYRO, Capability.VELOCITY,
+                              Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,
+                              Capability.LATENCY})
 
     def __init__(self, config: SmootherConfig | None = None) -> None:
         super().__init__()
@@ -439,6 +443,22 @@ class SlidingWindowSmoother(Backend):
     @property
     def initialized(self) -> bool:
         return self.t0 is not None
+
+    @property
+    def encoder_sigmas(self) -> tuple[float, float, float]:
+        return self.cfg.encoder_sigmas
+
+    def set_odometry_timing_unknown(self, unknown: bool) -> None:
+        self.odom_timing_unknown = bool(unknown)
+
+    def source_health(self) -> Mapping[str, SourceHealth]:
+        return self.sources
+
+    def source_noise(self, name: str) -> SourceNoise | None:
+        if name not in self.arb.streams:
+            return None
+        k, c = self.arb.noise(name)
+        return SourceNoise(k, c, self.arb.shown_sigma(name), self.arb.claimed_sigma(name))
 
     def set_compass_offset(self, offset: float) -> None:
         self.calib.offset = float(offset)
@@ -554,6 +574,9 @@ class SlidingWindowSmoother(Backend):
         if self.cfg.latency_s is not None:
             return float(self.cfg.latency_s)
         return self.latency_est.value() if self.cfg.latency else 0.0
+
+    def latency_fit(self) -> tuple[float, float] | None:
+        return latency_fit_of(self.latency_est.estimate())
 
     def _latency_pairs(self) -> None:
         """Feed the latency estimator with the fix pairs the gyro / odometry now cover."""

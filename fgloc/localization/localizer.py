@@ -38,8 +38,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends import make_backend
-from fgloc.backends.base import Backend, FloatArray
-from fgloc.backends.smoother import SlidingWindowSmoother
+from fgloc.backends.base import Backend, Capability, FloatArray
 from fgloc.geometry import compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
@@ -116,8 +115,8 @@ class Localizer:
         self.odom = OdometryTracker(self.pcfg)
         # a slow odometry's stamps on the scans' clock (clock.py: its offset estimated from the fixes), for
         # a back-end that integrates the increments between keyframes (not the EKF, which filters at them)
-        self.clock = OdometryClock() if (config.smoother.odom_clock and occ_map is not None and not getattr(
-            self.backend, "measures_velocity", False)) else None
+        self.clock = OdometryClock() if (config.smoother.odom_clock and occ_map is not None
+                                         and Capability.ODOMETRY_CLOCK in self.backend.capabilities) else None
         self.reloc: Relocalizer | None = None
         if self.frontend is not None and occ_map is not None:
             self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)
@@ -189,13 +188,12 @@ class Localizer:
         tw, cov = self.odom.step(t, tw, cov, pose)
         if self.clock is not None:
             self.clock.add_odometry(t_raw, float(self.odom.pose[2]))
-            if isinstance(self.backend, SlidingWindowSmoother):
-                # stamps in bursts: no offset places them, the smoother carries their timing variance
-                self.backend.odom_timing_unknown = self.clock.slow and not self.clock.regular
+            # stamps in bursts: no offset places them, the back-end carries their timing variance
+            self.backend.set_odometry_timing_unknown(self.clock.slow and not self.clock.regular)
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
-        if getattr(self.backend, "measures_velocity", False):
+        if Capability.MEASURES_VELOCITY in self.backend.capabilities:
             # a filter whose velocity state the twist measures (the EKF) gets a velocity from a bursty
             # source's poses; a smoother integrates the increments (exact at every pose stamp)
             vm = self.odom.velocity_measurement()
@@ -234,7 +232,7 @@ class Localizer:
             return None
         self.stats["scans"] += 1
         self._last_scan_t = t
-        if self.backend.initialized and not getattr(self.backend, "measures_velocity", False):
+        if self.backend.initialized and Capability.MEASURES_VELOCITY not in self.backend.capabilities:
             # after a burst of odometry stamps a back-end that integrates the increments (the smoother)
             # is handed the plausible velocity up to this scan: its prediction here, its gate on this
             # scan's fix and its online pose hold that, not the burst's twist

@@ -334,9 +334,9 @@ class ViewFeed:
                         self.transforms(fused, stamp, scan.frame_id or self.mount.child))
 
     def _particles(self, stamp: float) -> None:
-        fe = getattr(self.loc, "frontend", None)
-        pf = bool(getattr(fe, "is_particle_filter", False)) or getattr(self.loc, "frontend_name", "") == "amcl"
-        p = getattr(fe, "particles", None) if pf else None
+        fe = self.loc.frontend
+        # a particle filter's belief (FrontendBase.is_particle_filter): its ``particles`` (N, 3)
+        p = fe.particles if fe is not None and fe.is_particle_filter else None
         if not isinstance(p, np.ndarray) or p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
             return
         step = max(1, -(-len(p) // self.max_particles))
@@ -356,13 +356,13 @@ class ViewFeed:
     def health(self, stamp: float) -> dict[str, Any]:
         """Per-source health at log time ``stamp`` (JSON-ready)."""
         st = self.loc.stats
-        be = getattr(self.loc, "backend", None)
+        be = self.loc.backend
         skipped = st.get("skipped_reasons", {}) or {}
 
         def skips(prefix: str) -> int:
             return int(sum(v for k, v in skipped.items() if str(k).startswith(prefix)))
 
-        offset = be.compass_offset() if be is not None and hasattr(be, "compass_offset") else None
+        offset = be.compass_offset()
         rates = self.rates_hz(stamp)
         sources = {
             "scan": {"count": self.counts["scan"], "rate_hz": rates["scan"], "skipped": skips("scan"),
@@ -381,11 +381,10 @@ class ViewFeed:
                           "global_searches": st.get("global_searches", 0),
                           "no_fix_reasons": dict(getattr(self.loc, "no_fix_reasons", {}) or {}),
                           "skipped_reasons": dict(skipped)},
-            "backend": {"name": getattr(self.loc, "backend_name", ""),
-                        **(dict(be.stats) if be is not None and isinstance(getattr(be, "stats", None), dict) else {})},
-            "frontend": getattr(self.loc, "frontend_name", ""),
-            # a back-end's online calibration (wheel scale, gyro bias, latencies ...), if it offers one
-            "estimates": _estimates(be),
+            "backend": {"name": self.loc.backend_name, **dict(be.stats)},
+            "frontend": self.loc.frontend_name,
+            # the back-end's online calibration (compass offset, wheel scales, gyro biases, latency)
+            "estimates": be.estimates().as_dict(),
         })
 
 
@@ -395,17 +394,6 @@ def _inverse1(p: Any) -> tuple[float, float, float]:
     x, y, yaw = float(p[0]), float(p[1]), float(p[2])
     c, s = math.cos(yaw), math.sin(yaw)
     return -c * x - s * y, s * x - c * y, (-yaw + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def _estimates(backend: Any) -> dict[str, Any]:
-    get = getattr(backend, "estimates", None)
-    if not callable(get):
-        return {}
-    try:
-        out = get()
-    except Exception:  # noqa: BLE001 - the view must not fail on a back-end's report
-        return {}
-    return dict(out) if isinstance(out, dict) else {}
 
 
 def json_ready(v: Any) -> Any:

@@ -10,10 +10,21 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fgloc.backends.contract import Capability
 from fgloc.geometry import compose1 as se2_compose
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.sources import SourceRouter, parse_sources
 from fgloc.types import Imu, Odometry
+
+_METHODS = {Capability.GYRO: "add_gyro", Capability.VELOCITY: "add_velocity",
+            Capability.RELATIVE_YAW: "add_relative_yaw"}
+
+
+def without_capability(monkeypatch: pytest.MonkeyPatch, cls: type, cap: Capability) -> None:
+    """``cls`` (a back-end class) as a back-end without the input capability ``cap``: not declared,
+    and its method gone for a caller that still asks with ``getattr``."""
+    monkeypatch.setattr(cls, "capabilities", cls.capabilities - {cap})  # type: ignore[attr-defined]
+    monkeypatch.setattr(cls, _METHODS[cap], None)
 
 
 @dataclass

@@ -8,9 +8,10 @@ import math
 
 import numpy as np
 import pytest
-from conftest import AHRS_SPECS, differential_ahrs_log, route
+from conftest import AHRS_SPECS, differential_ahrs_log, route, without_capability
 from scipy.spatial.transform import Rotation
 
+from fgloc.backends.contract import Capability
 from fgloc.backends.ekf_backend import EKFBackend
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources
@@ -40,7 +41,7 @@ def test_without_the_heading_path_the_jittered_rates_lose_the_heading(monkeypatc
     """What the router did before (the increments as rates d_yaw / d_t): the same log ends
     metres off; the figure shows what the heading path fixes."""
     msgs, truth = differential_ahrs_log()
-    monkeypatch.delattr(EKFBackend, "add_relative_yaw")
+    without_capability(monkeypatch, EKFBackend, Capability.RELATIVE_YAW)
     pose, _ = _run(msgs)
     assert float(np.hypot(*(pose[:2] - truth[:2]))) > 1.0
 

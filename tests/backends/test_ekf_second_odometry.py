@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from conftest import without_capability
 
+from fgloc.backends.contract import Capability
 from fgloc.backends.ekf_backend import EKFBackend
 from fgloc.backends.smoother import SlidingWindowSmoother
 from fgloc.localization import Localizer
@@ -64,7 +66,7 @@ def test_an_outlier_of_the_second_source_is_gated():
 def test_a_backend_without_velocity_updates_skips_the_second_source_with_the_reason(monkeypatch):
     # both shipped back-ends take a second source (EKFBackend and, since the smoother-rl work,
     # SlidingWindowSmoother.add_velocity); a back-end without add_velocity must skip it, saying why
-    monkeypatch.delattr(SlidingWindowSmoother, "add_velocity")
+    without_capability(monkeypatch, SlidingWindowSmoother, Capability.VELOCITY)
     loc = Localizer(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="smoother")
     sp = parse_sources(SPECS)
     router = SourceRouter(loc, sp)

@@ -9,8 +9,9 @@ import math
 import gtsam
 import numpy as np
 import pytest
-from conftest import AHRS_SPECS, differential_ahrs_log, route
+from conftest import AHRS_SPECS, differential_ahrs_log, route, without_capability
 
+from fgloc.backends.contract import Capability
 from fgloc.backends.factors import relative_yaw_error, relative_yaw_factor
 from fgloc.backends.smoother import SlidingWindowSmoother
 from fgloc.localization import Localizer
@@ -66,7 +67,7 @@ def test_without_the_heading_path_the_smoother_takes_jittered_rates(monkeypatch:
     """What the router did before for the smoother (the increments as rates d_yaw / d_t): the same
     log ends metres off (7.9 m measured)."""
     _, truth = differential_ahrs_log()
-    monkeypatch.delattr(SlidingWindowSmoother, "add_relative_yaw")
+    without_capability(monkeypatch, SlidingWindowSmoother, Capability.RELATIVE_YAW)
     pose, _ = _run()
     assert float(np.hypot(*(pose[:2] - truth[:2]))) > 1.0
 

@@ -50,8 +50,8 @@ class Collect:
         self.closed += 1
 
 
-def _run(sim, frontend="native", config=None, **kw):
-    loc = Localizer(sim.map, sim.laser_mount, backend="smoother", frontend=frontend,
+def _run(sim, frontend="native", config=None, backend="smoother", **kw):
+    loc = Localizer(sim.map, sim.laser_mount, backend=backend, frontend=frontend,
                     initial_pose=sim.ground_truth.poses[0], config=config)
     sink = Collect()
     feed = ViewFeed(loc, [sink], **kw)
@@ -102,6 +102,25 @@ def test_feed_shows_every_scan_with_status_transforms_and_health(short_sim):
     sizes = [len(p) for _, _, p in sink.trajectories]
     assert sizes == sorted(sizes) and sizes[-1] > 10 and sink.trajectories[-1][1] == "map"
     assert not sink.particles  # native: no particle cloud
+
+
+@pytest.mark.parametrize("backend", ["smoother", "ekf"])
+def test_health_shows_the_backends_estimates(short_sim, backend):
+    """The health panel's ``estimates`` are what the back-end estimated (Backend.estimates): the
+    compass offset, the odometry's scales, the gyro's bias and the scans' latency, near the
+    simulation's truth (offset -23.9 deg, gyro bias 0.002 rad/s, exact wheels, no scan delay)."""
+    loc, sink, _ = _run(short_sim, backend=backend)
+    est = sink.health[-1]["estimates"]
+    assert set(est) == {"compass_offset_rad", "odom_speed_scale", "odom_yaw_rate_scale", "gyro_bias_radps",
+                        "latency_s", "latency_estimate_s", "latency_sigma_s"}
+    assert math.degrees(abs(est["compass_offset_rad"] - short_sim.compass_offset_rad)) < 1.0
+    assert est["odom_speed_scale"] == pytest.approx(1.0, abs=0.05)
+    assert est["odom_yaw_rate_scale"] == pytest.approx(1.0, abs=0.05)
+    assert set(est["gyro_bias_radps"]) == {"imu"}
+    assert est["gyro_bias_radps"]["imu"] == pytest.approx(0.002, abs=0.002)
+    assert est["latency_s"] == 0.0 and abs(est["latency_estimate_s"]) < 0.01
+    # early on, nothing is estimated yet but the compass offset's guess: only what is known is shown
+    assert "latency_estimate_s" not in sink.health[0]["estimates"]
 
 
 def test_feed_never_changes_the_localization(short_sim):

@@ -48,16 +48,24 @@ def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[s
     return cfg, notes, text
 
 
+def _used(cfg: dict[str, Any]) -> set[str]:
+    inputs = ((cfg.get("sources") or {}).get("inputs") or {}).values()
+    return {c for s in inputs for c in (s.get("use") or ())}
+
+
+def _moves(cfg: dict[str, Any]) -> bool:
+    """Whether a converted r_l config has a source of translation (else it is an error: a typo or a
+    sensor fgloc does not read left the robot without motion)."""
+    return bool(_used(cfg) & {"x", "y", "vx", "vy"})
+
+
 def conversion_warnings(kind: str, cfg: dict[str, Any]) -> list[str]:
-    """What the converted config cannot do that the ROS node did: no source of translation or of
-    heading left (an r_l file whose only position source fgloc does not read, e.g. a twistN)."""
+    """What the converted config cannot do that the ROS node did: no source of heading left."""
     if kind != "rl":
         return []
     inputs = ((cfg.get("sources") or {}).get("inputs") or {}).values()
-    used = {c for s in inputs for c in (s.get("use") or ())}
+    used = _used(cfg)
     out = []
-    if not used & {"x", "y", "vx", "vy"}:
-        out.append("no source of translation left: without scans and a map fgloc will not move the robot")
     if inputs and not used & {"yaw", "vyaw"}:
         out.append("no source of heading left: without scans and a map the heading is the first one")
     return out
@@ -67,10 +75,16 @@ def _write(kind: str, path: Path, output: Path | None, node: str | None, force: 
     import sys
 
     from fgloc.app.files import write_text_output
+    from fgloc.errors import ConfigError
 
     cfg, notes, text = convert_file(kind, path, node)
     for n in notes:
         print(f"not carried over: {n}")
+    if kind == "rl" and not _moves(cfg):  # nothing written: a config that cannot move the robot
+        why = [n for n in notes if "skipped" in n or "did you mean" in n or "not read by fgloc" in n]
+        raise ConfigError(f"{path}: the converted config has no source of motion (no input fgloc reads gives x, y, "
+                          "vx or vy)" + (f": {why[0]}" if why else "")
+                          + (f" (and {len(why) - 1} more above)" if len(why) > 1 else ""))
     for w in conversion_warnings(kind, cfg):
         print(f"fgloc: warning: {path}: {w}", file=sys.stderr)
     if output is None:

@@ -42,6 +42,31 @@ PLANAR = {0: "x", 1: "y", 5: "yaw", 6: "vx", 7: "vy", 11: "vyaw"}
 NAMES15 = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz", "vroll", "vpitch", "vyaw", "ax", "ay", "az")
 SENSOR = re.compile(r"^(odom|imu|pose|twist)(\d+)$")
 IGNORED_QUIETLY = {"use_sim_time"}
+#: the parameters of a robot_localization filter node (ekf_node / ukf_node), for "did you mean"
+FILTER_PARAMS = (
+    "frequency", "sensor_timeout", "two_d_mode", "transform_time_offset", "transform_timeout", "print_diagnostics",
+    "debug", "debug_out_file", "map_frame", "odom_frame", "base_link_frame", "base_link_frame_output",
+    "world_frame", "publish_tf", "publish_acceleration", "permit_corrected_publication", "reset_on_time_jump",
+    "predict_to_current_time", "smooth_lagged_data", "history_length", "use_control", "stamped_control",
+    "control_timeout", "control_config", "acceleration_limits", "deceleration_limits", "acceleration_gains",
+    "deceleration_gains", "process_noise_covariance", "initial_estimate_covariance",
+    "dynamic_process_noise_covariance", "initial_state", "tf_prefix", "silent_tf_failure", "disabled_at_startup",
+    "gravitational_acceleration", "alpha", "kappa", "beta", "use_sim_time")
+#: the per-sensor parameters (``odom0_config`` ...)
+SENSOR_SUFFIXES = ("config", "differential", "relative", "queue_size", "nodelay", "rejection_threshold",
+                   "pose_rejection_threshold", "twist_rejection_threshold",
+                   "linear_acceleration_rejection_threshold", "angular_velocity_rejection_threshold",
+                   "remove_gravitational_acceleration", "pose_use_child_frame")
+#: GPS: what fgloc would need to fuse a sensor_msgs/NavSatFix (docs/porting.md, "GPS")
+GPS_NEEDS = ("sensor_msgs/NavSatFix (GPS) is not read by fgloc: fusing it needs a datum that turns latitude / "
+             "longitude into the map frame (navsat_transform_node's job, with magnetic_declination_radians and "
+             "yaw_offset) and the antenna's mount; fgloc fuses positions given as "
+             "geometry_msgs/PoseWithCovarianceStamped in the map frame (a source of type: pose) "
+             "(docs/porting.md, GPS)")
+#: a navsat_transform_node's parameters (a file holding one beside the filter)
+NAVSAT_PARAMS = ("magnetic_declination_radians", "yaw_offset", "zero_altitude", "broadcast_utm_transform",
+                 "broadcast_cartesian_transform", "use_odometry_yaw", "wait_for_datum", "datum",
+                 "publish_filtered_gps")
 
 
 def _looks_like_rl(d: Any) -> bool:
@@ -83,6 +108,7 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
     notes: list[str] = []
     if others:
         notes.append(f"converted node {name}; not converted: {', '.join(others)} (pick one with --node)")
+    notes += [f"{n} (navsat_transform_node): {GPS_NEEDS}" for n in _navsat_nodes(data)]
     inputs: dict[str, dict[str, Any]] = {}
     used: set[str] = set()
     world = str(p.get("world_frame", p.get("odom_frame", "odom")))
@@ -99,6 +125,13 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         cfg_key = f"{key}_config"
         vec = p.get(cfg_key)
         used.add(cfg_key)
+        if vec is None:
+            used.update(f"{key}_{x}" for x in SENSOR_SUFFIXES)
+            typo = [k for k in map(str, p) if k not in (cfg_key, key) and _suggest(k, [cfg_key])]
+            used.update(typo[:1])
+            notes.append(f"{key} ({topic}): no {cfg_key}, so robot_localization fuses nothing from it; skipped"
+                         + (f" ({typo[0]}: did you mean {cfg_key}?)" if typo else ""))
+            continue
         flags = [as_bool(v) for v in vec] if isinstance(vec, (list, tuple)) else [False] * 15
         if len(flags) == 12:  # hydro / groovy: the same first 12 variables, no accelerations
             flags += [False] * 3
@@ -245,8 +278,43 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
             continue
         m = re.match(r"^(odom|imu|pose|twist)(\d+)_(.+)$", ks)
         why = _why(m.group(3) if m else ks)
+        if why == "no fgloc equivalent":
+            g = re.match(r"^gps(\d+)(_.*)?$", ks)
+            known = [*FILTER_PARAMS, *(f"{k}_{x}" for k in map(str, p) if SENSOR.match(k) for x in SENSOR_SUFFIXES)]
+            near = _suggest(ks, known)
+            if g:
+                why = GPS_NEEDS
+            elif near:
+                why = f"not a robot_localization parameter (did you mean {near}?)"
         notes.append(f"{ks}: {why}")
     return out, notes
+
+
+def _suggest(name: str, known: list[str] | tuple[str, ...]) -> str | None:
+    """The known parameter ``name`` is most likely a misspelling of, or None."""
+    import difflib
+
+    if name in known:
+        return None
+    hit = difflib.get_close_matches(name, known, n=1, cutoff=0.85)
+    return hit[0] if hit else None
+
+
+def _navsat_nodes(data: Any) -> list[str]:
+    """Names of the navsat_transform_node parameter sets in a parameter file (a GPS setup)."""
+    found: list[str] = []
+
+    def walk(name: str, d: Any, depth: int) -> None:
+        if not isinstance(d, dict) or depth > 4:
+            return
+        if sum(k in d for k in NAVSAT_PARAMS) >= 2:
+            found.append(name or "(top level)")
+            return
+        for k, v in d.items():
+            walk(f"{name}/{k}" if name else str(k), v, depth + 1)
+
+    walk("", data, 0)
+    return [n.removesuffix("/ros__parameters") for n in found]
 
 
 def _why(param: str) -> str:

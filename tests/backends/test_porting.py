@@ -141,3 +141,20 @@ def test_converted_husky_config_runs_a_skid_steer_log_with_its_topics():
         # wheels' yaw from their radius mismatch (~0.005 rad/s at 0.7 m/s) and the gyro bias are
         # barely separable so soon; measured 0.04 m (EKF), 0.37 m (smoother)
         assert err < 0.03 * gt.path_length(), (backend, err)
+
+
+def test_misspelt_parameters_get_a_suggestion_and_gps_says_what_it_needs():
+    """A misspelt name is not 'no fgloc equivalent' but 'did you mean'; gpsN and a navsat_transform
+    node say what GPS would need."""
+    vel = [False] * 6 + [True, True] + [False] * 7
+    cfg, notes = from_robot_localization({
+        "ekf_se_map": {"frequncy": 30, "odom0": "/odom", "odom0_config": vel, "odom0_queue_sise": 5,
+                       "gps0": "/gps/fix"},
+        "navsat_transform": {"magnetic_declination_radians": 0.0, "yaw_offset": 0.0, "zero_altitude": True}})
+    assert parse_config(cfg).sources.inputs["odom0"]["use"] == ["vx", "vy"]
+    j = "\n".join(notes)
+    assert "frequncy: not a robot_localization parameter (did you mean frequency?)" in j
+    assert "odom0_queue_sise: not a robot_localization parameter (did you mean odom0_queue_size?)" in j
+    assert "gps0: sensor_msgs/NavSatFix (GPS) is not read by fgloc: fusing it needs a datum" in j
+    assert "navsat_transform (navsat_transform_node): sensor_msgs/NavSatFix (GPS)" in j
+    assert "no fgloc equivalent" not in j

@@ -116,19 +116,25 @@ def test_nav2_left_out_parameters_take_the_nodes_defaults(tmp_path: Path) -> Non
     assert not any(n.startswith(("odom_alpha1", "laser_z_hit", "kld_err")) for n in notes)
 
 
-def test_no_translation_left_is_a_one_line_warning(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """An r_l file whose only velocity source is a twistN (not read by fgloc): converted, with a warning."""
+def test_no_source_of_motion_is_a_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An r_l file whose odometry's _config is misspelt: robot_localization fuses nothing from it, and
+    the converted config would not move the robot: exit 2 with the suggestion, nothing written."""
     from fgloc.cli import main
 
     p = tmp_path / "ekf.yaml"
     vel = [False] * 6 + [True, True, False, False, False, True] + [False] * 3
     p.write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": {
-        "twist0": "/spot/odometry/twist", "twist0_config": vel,
+        "odom0": "/wheel/odom", "odom0_confg": vel,
         "imu0": "/imu", "imu0_config": [False] * 5 + [True] + [False] * 9}}}))
-    assert main(["config", "from-robot-localization", str(p), "-o", str(tmp_path / "out.yaml")]) == 0
-    err = capsys.readouterr().err
-    assert err.count("warning") == 1 and "no source of translation left" in err
-    assert "# WARNING: no source of translation left" in (tmp_path / "out.yaml").read_text()
+    assert main(["config", "from-robot-localization", str(p), "-o", str(tmp_path / "out.yaml")]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert err.count("\n") == 0
+    assert err == (f"fgloc: error: {p}: the converted config has no source of motion (no input fgloc reads gives "
+                   "x, y, vx or vy): odom0 (/wheel/odom): no odom0_config, so robot_localization fuses nothing "
+                   "from it; skipped (odom0_confg: did you mean odom0_config?)")
+    assert "not carried over: odom0 (/wheel/odom)" in captured.out
+    assert not (tmp_path / "out.yaml").exists()
 
 
 def test_mounts_on_the_filters_own_base_frame_carry_over_as_base_links(tmp_path: Path) -> None:

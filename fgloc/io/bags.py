@@ -40,6 +40,7 @@ class BagSource(LogSource):
     def __init__(self, path: str | Path, topics: Topics | None = None) -> None:
         super().__init__(path, topics)
         self._store: Any = None
+        self._cdr_store: Any = None  # the ROS 2 type store a ROS 1 bag's other types are converted with
         reader = self._open_reader()
         try:
             self._conns = list(reader.connections)
@@ -101,8 +102,15 @@ class BagSource(LogSource):
         conns = [c for c in self._conns if resolved_topic(c.topic) in want]
         convs: dict[int, Any] = {}
         infos: dict[int, ChannelInfo] = {}
+        raw: dict[int, Any] = {}  # types fgloc does not read, kept (keep_other_types): CDR bytes of a message
         for c in conns:
             fn = FROM_ROS.get(normalize_type(c.msgtype))
+            if fn is None and self.keep_other_types:
+                conv = self._to_cdr(c)
+                if conv is not None:
+                    raw[c.id] = conv
+                    infos[c.id] = conv[1]
+                    continue
             if fn is None:
                 log.warning("%s: topic %s has type %s, which fgloc does not read; skipped",
                             self.path, resolved_topic(c.topic), c.msgtype)
@@ -112,13 +120,19 @@ class BagSource(LogSource):
             return
         reader = self._open_reader()
         try:
-            for conn, t, raw in self._resumable(reader, conns):
+            for conn, t, data in self._resumable(reader, conns):
                 fn = convs.get(conn.id)
                 if fn is None:
+                    keep = raw.get(conn.id)
+                    if keep is not None:
+                        try:
+                            yield Record(keep[1].topic, None, int(t), bytes(keep[0](data)), keep[1])
+                        except Exception:  # noqa: BLE001 - counted as undecodable, as a read type's would be
+                            self.undecodable[keep[1].topic] = self.undecodable.get(keep[1].topic, 0) + 1
                     continue
                 topic = infos[conn.id].topic
                 try:
-                    ros = deserialize(raw, conn.msgtype)
+                    ros = deserialize(data, conn.msgtype)
                     out = fn(ros, topic)
                     if normalize_type(conn.msgtype) == TF_MESSAGE:
                         self.note_tf(out, tf_flips(ros))
@@ -129,9 +143,35 @@ class BagSource(LogSource):
                         log.warning("%s: cannot decode %s (%s): %s; skipping such messages",
                                     self.path, topic, conn.msgtype, e)
                     continue
-                yield Record(topic, out, int(t), bytes(raw) if self.ros2 else None, infos[conn.id])
+                yield Record(topic, out, int(t), bytes(data) if self.ros2 else None, infos[conn.id])
         finally:
             reader.close()
+
+    def _to_cdr(self, c: Any) -> tuple[Any, ChannelInfo] | None:
+        """``(bytes -> ROS 2 CDR bytes, channel)`` of a connection whose type fgloc does not read: a
+        ROS 2 bag's bytes as they are, a ROS 1 bag's converted by rosbags (the header's ``seq``
+        dropped, as rosbags' own bag converter does) with the ROS 2 definition it generates; None
+        when rosbags cannot."""
+        if self.ros2:
+            return (lambda d: d), self._channel_info(c)
+        try:
+            from rosbags.convert.converter import generate_message_converter
+            from rosbags.typesys import Stores, get_typestore
+
+            src = self._typestore()
+            if self._cdr_store is None:
+                dst = get_typestore(Stores.EMPTY)
+                header = get_typestore(Stores.ROS2_HUMBLE).fielddefs["std_msgs/msg/Header"]
+                dst.register({**src.fielddefs, "std_msgs/msg/Header": header})
+                self._cdr_store = dst
+            dst = self._cdr_store
+            conv = generate_message_converter(src, dst, c.msgtype, c.msgtype, {}, src_is2=False, dst_is2=True)
+            text = dst.generate_msgdef(c.msgtype, ros_version=2)[0]
+        except Exception as e:  # noqa: BLE001 - that topic is not imported (said by fgloc import)
+            log.info("%s: cannot convert %s (%s) to ROS 2: %s", self.path, resolved_topic(c.topic), c.msgtype, e)
+            return None
+        return conv, ChannelInfo(resolved_topic(c.topic), normalize_type(c.msgtype), c.msgtype, "ros2msg",
+                                 text.encode(), "cdr")
 
     def _resumable(self, reader: Any, conns: list[Any]) -> Iterator[tuple[Any, int, Any]]:
         """``reader.messages(conns)``; when it fails on damaged data, the rest from

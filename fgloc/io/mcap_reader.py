@@ -68,7 +68,7 @@ Entry = tuple[int, int, int, Record]  # (log time, chunk offset, index in chunk,
 class _Channel:
     """How one channel is decoded: batch fast codec, generic fallback, or skipped."""
 
-    def __init__(self, info: ChannelInfo, schema: SchemaRec | None, path: Path) -> None:
+    def __init__(self, info: ChannelInfo, schema: SchemaRec | None, path: Path, keep_other: bool = False) -> None:
         self.info = info
         self.topic = info.topic
         self.usable = False
@@ -79,6 +79,11 @@ class _Channel:
         self._generic_failed = False
         self.ros1 = False  # ROS 1 serialization: decoded by the schema's definition, no CDR bytes to copy
         self._convert = FROM_ROS.get(info.type)
+        # a type fgloc does not read, kept as its CDR bytes (LogSource.keep_other_types)
+        self.raw = self._convert is None and keep_other and info.message_encoding == "cdr"
+        if self.raw:
+            self.usable = True
+            return
         if self._convert is None:
             log.warning("%s: topic %s has type %s, which fgloc does not read; skipped", path, info.topic, info.type)
             return
@@ -297,7 +302,7 @@ class McapSource(LogSource):
             info = ChannelInfo(rec.topic, self._type_of(rec), "" if s is None else s.name,
                                "" if s is None else s.encoding, b"" if s is None else s.data,
                                rec.message_encoding)
-            ch = self._channels[cid] = _Channel(info, s, self.path)
+            ch = self._channels[cid] = _Channel(info, s, self.path, self.keep_other_types)
         return ch
 
     def _want_ids(self, want: set[str]) -> set[int]:
@@ -316,6 +321,10 @@ class McapSource(LogSource):
         for cid, group in by_ch.items():
             ch = self._channel(cid)
             if ch is None or not ch.usable:
+                continue
+            if ch.raw:
+                for lt, idx, _c, data in group:
+                    append((lt, offset, idx, Record(ch.topic, None, lt, data, ch.info)))
                 continue
             datas = [m[3] for m in group]
             objs: list[Any] = ch.fast(datas) if ch.fast is not None else [None] * len(datas)

@@ -115,6 +115,9 @@ class LogSource:
         self._tf = TfTree()
         self._unstamped: dict[str, bool] = {}      # topics whose first header stamp is 0 (clock_offsets)
         self._mirror_frames: set[str] = set()     # scan frames read mirrored (laser_mount)
+        # True (fgloc import): records of types fgloc does not read come too, as ``msg`` None with their
+        # ROS 2 CDR bytes and channel (a ROS 1 bag's converted by rosbags), instead of being skipped
+        self.keep_other_types = False
         # True: a source that can (McapSource) keeps what ground_truth() needs while records() reads
         # the log through, so that ground_truth() after that pass reads nothing again
         self.collect_ground_truth = False

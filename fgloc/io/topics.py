@@ -84,6 +84,16 @@ def normalize_type(name: str) -> str:
     return TYPE_ALIASES.get(full, full)
 
 
+def resolve_name(name: str) -> str:
+    """A topic name as ROS resolves it in the root namespace, where recorders and fgloc's defaults
+    live: ``scan`` -> ``/scan`` (a relative name), ``/scan/`` -> ``/scan``; ``""`` stays ``""``."""
+    name = name.strip()
+    if not name:
+        return name
+    name = "/" + name.strip("/")
+    return name
+
+
 def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -> dict[str, str]:
     """``{source topic: role}`` for the roles whose topic (or a unique same-type topic) exists.
 

@@ -127,14 +127,75 @@ def test_bag_converts_with_equal_values(tmp_path):
     assert mount.pose == pytest.approx([0.3, -0.05, 0.1]) and mount.z == pytest.approx(0.2)
 
 
-def test_bag_scan_topic_guessed_and_cli(tmp_path, capsys):
+def test_bag_topics_keep_their_names_unless_renamed(tmp_path, capsys):
+    """fgloc import keeps every topic's name (a config ported from the robot's own setup still fits);
+    --rename OLD=NEW renames, and says so."""
     bag = tmp_path / "run.bag"
     _write_bag(bag, scan_topic="/front_laser")
     out = tmp_path / "o.mcap"
-    assert main(["import", str(bag), "-o", str(out)]) == 0  # the only LaserScan topic is used
+    assert main(["import", str(bag), "-o", str(out)]) == 0
     stdout = capsys.readouterr().out
-    assert f"/scan: {N}" in stdout and "rosbag1" in stdout
-    assert open_log(out).summary()["topics"]["/scan"]["count"] == N
+    assert f"/front_laser: {N}" in stdout and "rosbag1" in stdout and "dropped" not in stdout
+    assert open_log(out).summary()["topics"]["/front_laser"]["count"] == N
+    assert main(["import", str(bag), "-o", str(out), "--rename", "front_laser=/scan"]) == 0
+    stdout = capsys.readouterr().out
+    assert "renamed: /front_laser -> /scan" in stdout
+    assert set(open_log(out).summary()["topics"]) == {"/scan", "/odom", "/imu", "/tf", "/tf_static"}
+    assert main(["import", str(bag), "-o", str(out), "--rename", "/front_laser"]) == 2
+    assert capsys.readouterr().err.strip() == ("fgloc: error: --rename /front_laser: give OLD=NEW, e.g. "
+                                               "--rename /imu/data=/imu")
+    assert main(["import", str(bag), "-o", str(out), "--topic", "/imu"]) == 0
+    stdout = capsys.readouterr().out
+    assert f"(/imu: {N})" in stdout and f"dropped: /odom: {N} message(s), not asked for (--topic)" in stdout
+
+
+def test_other_types_are_kept_and_nothing_is_dropped_silently(shared_data, tmp_path, capsys):
+    """robot_localization's Husky bag: /fix (sensor_msgs/NavSatFix, a type fgloc does not read) is
+    converted by rosbags and kept, with every name as recorded."""
+    bag = shared_data / "robot_localization" / "test1.bag"
+    out = tmp_path / "t1.mcap"
+    assert main(["import", str(bag), "-o", str(out)]) == 0
+    stdout = capsys.readouterr().out
+    assert "(/fix: 989, /husky_velocity_controller/odom: 3952, /imu/data: 11865)" in stdout
+    assert "dropped" not in stdout
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with out.open("rb") as fh:
+        fixes = [m for _s, c, _r, m in make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+            topics=["/fix"])]
+    assert len(fixes) == 989 and 40 < fixes[0].latitude < 50 and fixes[0].header.frame_id
+
+
+def test_a_type_that_cannot_be_copied_is_counted_and_named(tmp_path, capsys):
+    """A ROS 1-encoded MCAP's topic of a type fgloc does not read cannot be written as ROS 2: it is
+    listed as dropped, with its count and the reason."""
+    from mcap.writer import Writer as McapWriter
+
+    bag = tmp_path / "run.bag"
+    _write_bag(bag)
+    mid = tmp_path / "ros1.mcap"
+    # the same messages in an MCAP of ROS 1 encoding, plus a std_msgs/String topic
+    from rosbags.rosbag1 import Reader
+
+    with Reader(bag) as r, mid.open("wb") as fh:
+        w = McapWriter(fh)
+        w.start("ros1", "test")
+        ids = {}
+        for c in r.connections:
+            sid = w.register_schema(c.msgtype.replace("/msg/", "/"), "ros1msg", c.msgdef.data.encode())
+            ids[c.id] = w.register_channel(c.topic, "ros1", sid)
+        sid = w.register_schema("std_msgs/String", "ros1msg", b"string data")
+        chatter = w.register_channel("/chatter", "ros1", sid)
+        for c, t, raw in r.messages():
+            w.add_message(ids[c.id], t, bytes(raw), t)
+        for k in range(3):
+            w.add_message(chatter, 1_000_000_000 + k, (2).to_bytes(4, "little") + b"hi", 1_000_000_000 + k)
+        w.finish()
+    assert main(["import", str(mid), "-o", str(tmp_path / "o.mcap")]) == 0
+    stdout = capsys.readouterr().out
+    assert "dropped: /chatter: 3 message(s), type std_msgs/msg/String that fgloc does not read" in stdout
+    assert f"/base_scan: {N}" in stdout
 
 
 def test_bag_without_usable_topics(tmp_path, capsys):

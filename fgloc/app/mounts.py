@@ -77,3 +77,21 @@ def static_transforms(rpy: tuple[Any, ...] | None = None, xyzw: tuple[Any, ...] 
     from fgloc.localization.frames import parse_static_transforms
 
     return parse_static_transforms(static_transform_entries(rpy, xyzw), source=RPY_OPTION)
+
+
+def check_frames(entries: list[dict[str, Any]], sensor_frames: dict[str, str], path: Any = "log",
+                 what: str = "sensor") -> None:
+    """One-line :class:`ConfigError` for a command-line mount whose child frame is none of the log's
+    ``sensor_frames`` (``{frame: what carries it}``, e.g. ``{"rplidar_link": "its scans"}``): such a
+    mount would be silently unused.  ``what``: the kind of frame the command uses a mount for."""
+    from fgloc.io.tf import frame_name
+
+    for e in entries:
+        child = frame_name(str(e.get("child", "")))
+        if child in sensor_frames:
+            continue
+        option = XYZW_OPTION if "xyzw" in e else RPY_OPTION
+        have = "; ".join(f"{where} are in '{f}'" for f, where in sensor_frames.items()) or "it has no sensor frames"
+        best = next(iter(sensor_frames), "FRAME")
+        raise ConfigError(f"{path}: {option} {e.get('parent')} {child}: the log has no {what} frame '{child}' "
+                          f"({have}): give the {what}'s frame as CHILD, e.g. {option} {e.get('parent')} {best} ...")

@@ -284,9 +284,11 @@ def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
     log = Path(req.log)
     # a config's sources: name the odometry / IMU topics (a converted robot_localization file)
     src = source_topics(config.sources)
-    scan_topic = req.scan_topic or "/scan"
-    odom_topic = req.odom_topic or next((t for t, k in src.items() if k == "odometry"), "/odom")
-    imu_topic = req.imu_topic or next((t for t, k in src.items() if k == "imu"), "/imu")
+    named = _named_topics(req)
+    scan_topic = named["scan"] if named["scan"] is not None else "/scan"
+    odom_topic = named["odom"] if named["odom"] is not None else \
+        next((t for t, k in src.items() if k == "odometry"), "/odom")
+    imu_topic = named["imu"] if named["imu"] is not None else next((t for t, k in src.items() if k == "imu"), "/imu")
     topics = Topics(scan=scan_topic, odom=odom_topic, imu=imu_topic)
     pose0 = _initial_pose(req.initial_pose)
     _check_map_arg(req.map_yaml)
@@ -295,15 +297,24 @@ def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
     reader = open_log(log, topics)
     # a default topic the log lacks: its only one of that type (fgloc import's rule), said on stderr;
     # a topic named on the command line is kept, and a config with sources names the inputs it wants
-    picked = pick_topics(reader, log, {"scan": (scan_topic, req.scan_topic is not None),
-                                       "odom": (odom_topic, req.odom_topic is not None or bool(src)),
-                                       "imu": (imu_topic, req.imu_topic is not None or bool(src))})
+    picked = pick_topics(reader, log, {"scan": (scan_topic, named["scan"] is not None),
+                                       "odom": (odom_topic, named["odom"] is not None or bool(src)),
+                                       "imu": (imu_topic, named["imu"] is not None or bool(src))})
     topics = Topics(scan=picked["scan"], odom=picked["odom"], imu=picked["imu"])
     reader.topics = topics
     summ = reader.summary()
     inputs = _Inputs(log, reader, topics, summ, {t: v["count"] for t, v in summ["topics"].items()}, src, pose0)
     _check_localizable(req, inputs)
     return inputs
+
+
+def _named_topics(req: RunRequest) -> dict[str, str | None]:
+    """The topics the request names, resolved as ROS resolves names (``scan`` -> ``/scan``); None: not
+    named; ``""``: none of that input."""
+    from fgloc.io.topics import resolve_name
+
+    return {k: None if v is None else resolve_name(v) for k, v in
+            (("scan", req.scan_topic), ("odom", req.odom_topic), ("imu", req.imu_topic))}
 
 
 def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
@@ -315,9 +326,10 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
     log, reader, summ, src = inputs.log, inputs.reader, inputs.summary, inputs.sources
     scan_topic, odom_topic, imu_topic = inputs.topics.scan, inputs.topics.odom, inputs.topics.imu
     n_scan, n_odom, n_imu = inputs.count(scan_topic), inputs.count(odom_topic), inputs.count(imu_topic)
-    _check_inputs(reader, log, summ, (("--scan-topic", scan_topic, LASER_SCAN, req.scan_topic is not None),
-                                      ("--odom-topic", odom_topic, ODOMETRY, req.odom_topic is not None),
-                                      ("--imu-topic", imu_topic, IMU, req.imu_topic is not None)))
+    named = _named_topics(req)
+    _check_inputs(reader, log, summ, (("--scan-topic", scan_topic, LASER_SCAN, bool(named["scan"])),
+                                      ("--odom-topic", odom_topic, ODOMETRY, bool(named["odom"])),
+                                      ("--imu-topic", imu_topic, IMU, bool(named["imu"]))))
     if n_odom == 0 and n_imu == 0 and n_scan == 0:
         raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; its "
                        f"topics: {topics_line(summ)}")
@@ -353,6 +365,13 @@ def _build_session(req: RunRequest, config: FglocConfig, inputs: _Inputs) -> tup
     from fgloc.maps import OccupancyMap
 
     occ_map = OccupancyMap.load(req.map_yaml) if req.map_yaml is not None else None
+    if req.static_transforms:  # a command-line mount of a frame the log's sensors do not have is an error
+        from fgloc.app.mounts import check_frames
+
+        t = inputs.topics
+        imus = [t.imu, *(x for x, k in inputs.sources.items() if k == "imu")]
+        check_frames(req.static_transforms, _sensor_frames(inputs.reader, t.scan if inputs.n_scan else None, imus),
+                     inputs.log)
     laser_mount, mirror_scans = _laser_mount(inputs.reader, inputs.n_scan, config, req.static_transforms)
     session = build_session(occ_map, laser_mount, backend=req.backend, frontend=req.frontend,
                             initial_pose=inputs.initial_pose, config=config, routes=Routes.default(inputs.topics),
@@ -557,6 +576,22 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig,
     given = next((e for e in cli or () if str(e.get("child", "")).lstrip("/") == mine.child.lstrip("/")), None)
     where = "sources.static_transforms" if given is None else XYZW_OPTION if "xyzw" in given else RPY_OPTION
     return planar_mount(mine, where)
+
+
+def _sensor_frames(reader: Any, scan_topic: str | None, imu_topics: list[str]) -> dict[str, str]:
+    """``{frame: what carries it}`` of the log's scans and IMU messages (each topic's first message)."""
+    from fgloc.io.tf import frame_name
+
+    out: dict[str, str] = {}
+    if scan_topic is not None:
+        out[reader.scan_frame()] = "its scans"
+    for t in dict.fromkeys(imu_topics):
+        if reader.has(t):
+            first = next(iter(reader.messages([t])), None)
+            frame = frame_name(str(getattr(first[1], "frame_id", "") or "")) if first else ""
+            if frame:
+                out.setdefault(frame, f"its {t} messages")
+    return out
 
 
 def _mirrored_scans(messages: Any, scan_topic: str, frame: str) -> Any:

@@ -116,6 +116,9 @@ def map_log(log: Path, outdir: Path, resolution: float, config_path: Path | None
     opts = mapper_options(config_path)
     opts["resolution"] = resolution
     cfg = MapperConfig.from_dict(opts)
+    from fgloc.io.topics import resolve_name
+
+    scan_topic, odom_topic = resolve_name(scan_topic), resolve_name(odom_topic)
     out = build_map(log, outdir, cfg, start, end, None, scan_topic, odom_topic)
     traj = out.slam.scan_trajectory
     res = MapOutcome(scans=out.n_scans, keyframes=int(out.slam.stats.get("keyframes", len(out.slam.keyframes))),

@@ -75,9 +75,12 @@ def map_cmd(
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")
     cfg = MapperConfig.from_dict(opts)
+    from fgloc.io.topics import resolve_name
+
     bars, factory = _bars(no_progress)
     try:
-        out = build_map(log, outdir, cfg, start, end, factory, scan_topic, odom_topic, self_check=not no_check,
+        out = build_map(log, outdir, cfg, start, end, factory, resolve_name(scan_topic), resolve_name(odom_topic),
+                        self_check=not no_check,
                         static_transforms=transforms)
     finally:
         for b in bars:
@@ -121,12 +124,14 @@ def map_check_cmd(
     """Check a map against a log: which regions disagree between passes (and which loop closures
     are suspect), or where the world no longer matches the map.  Exit 0 when it passes, 1 when
     it flags something."""
+    from fgloc.io.topics import resolve_name
     from fgloc.mapping.build import map_check
 
     transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
     bars, factory = _bars(no_progress)
     try:
-        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, scan_topic, odom_topic,
+        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, resolve_name(scan_topic),
+                        resolve_name(odom_topic),
                         static_transforms=transforms)
     finally:
         for b in bars:

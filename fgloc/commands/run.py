@@ -129,12 +129,12 @@ def register(app: typer.Typer) -> None:
         config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
                                                        "(`fgloc config init` writes one)"),
         scan_topic: str | None = typer.Option(None, "--scan-topic", help="sensor_msgs/LaserScan topic "
-                                              "[default: /scan, else the log's only LaserScan topic; a name given "
-                                              "must exist]"),
+                                              "(scan is /scan) [default: /scan, else the log's only LaserScan topic; "
+                                              "a name given must exist; \"\": none]"),
         odom_topic: str | None = typer.Option(None, "--odom-topic", help="nav_msgs/Odometry topic [/odom, else "
-                                              "the log's only Odometry topic]"),
+                                              "the log's only Odometry topic; \"\": none]"),
         imu_topic: str | None = typer.Option(None, "--imu-topic", help="sensor_msgs/Imu (compass) topic [/imu, "
-                                             "else the log's only Imu topic]"),
+                                             "else the log's only Imu topic; \"\": none]"),
         static_transform: tuple[str, str, float, float, float, float, float, float] | None = typer.Option(
             None, "--static-transform", help=mounts.RPY_HELP + "; more in the config's sources.static_transforms"),
         static_transform_xyzw: tuple[str, str, float, float, float, float, float, float, float] | None = typer.Option(

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fgloc.errors import LogError
+from fgloc.errors import ConfigError, LogError
 from fgloc.geometry import compose, wrap_angle
 from fgloc.io.tf import mount_of, planar_mount
 from fgloc.io.topics import pick_topics
@@ -92,6 +92,7 @@ def log_messages(
                          "laser")  # the front laser's (CARMEN's RLASER lines are left out beside it)
             it = iter_carmen(p)
             mine = mount_of(frame, static_transforms)
+            _check_mount_frames(static_transforms, frame, p)
             if mine is not None:
                 it = with_mount(it, *planar_mount(mine))
         yield from it
@@ -109,6 +110,8 @@ def log_messages(
     if skew is not None:  # scans would be paired with odometry from another time
         raise LogError(f"{p}: {skew}")
     mine = mount_of(src.scan_frame(), static_transforms)
+    if static_transforms:
+        _check_mount_frames(static_transforms, src.scan_frame(), p)
     rename = {scan_topic: "/scan", odom_topic: "/odom"}
     wanted = [t for t in (scan_topic, odom_topic) if src.has(t)]
     msgs = ((rename.get(topic, topic), msg) for topic, msg in src.messages(wanted))
@@ -117,6 +120,20 @@ def log_messages(
         return
     yield "/tf_static", [src.laser_mount()]
     yield from msgs
+
+
+def _check_mount_frames(static_transforms: Sequence[StaticTransform], scan_frame: str, path: Path) -> None:
+    """A given mount that is not the laser's (the only one mapping uses) is a one-line error, not
+    silently unused."""
+    from fgloc.io.tf import frame_name
+
+    other = [t for t in static_transforms if frame_name(t.child) != frame_name(scan_frame)]
+    if other:
+        t = other[0]
+        raise ConfigError(f"{path}: --static-transform {t.parent} {frame_name(t.child)}: the log's scans are in "
+                          f"'{frame_name(scan_frame)}', not '{frame_name(t.child)}' (mapping uses the laser's mount "
+                          f"only): give the scans' frame as CHILD, e.g. --static-transform {t.parent} "
+                          f"{frame_name(scan_frame)} ...")
 
 
 def rear_frames(frames: Iterable[str]) -> set[str]:

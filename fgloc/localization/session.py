@@ -6,11 +6,13 @@ A :class:`Session` wraps a :class:`~fgloc.localization.localizer.Localizer`.  It
 them to the localizer and tells every sink what happened.  ``fgloc run``, ``fgloc live`` and
 the benches all drive the same session; only the sinks differ.
 
-Routing (:class:`Routes`) is a table ``topic -> kind`` plus ``kind -> handler``: the default
-kinds are ``odom`` (``nav_msgs/Odometry``), ``imu`` (``sensor_msgs/Imu`` as a compass) and
-``scan`` (``sensor_msgs/LaserScan``).  A different input layout (several odometry or IMU
-sources, robot_localization style) swaps in another table or registers more kinds
-(:meth:`Session.register`), without touching the session.
+Routing is one layer, built once with the session: a table ``topic -> kind`` (:class:`Routes`)
+and ``kind -> handler``, the handlers of :class:`~fgloc.localization.sources.SourceRouter`
+(one per configured source, ``source:NAME``; ``scan``; ``tf``), each of which checks its
+messages and hands them to the localizer or the back-end.  The routes given name the scan topic
+and the default layout's odometry / IMU topics (``odom``, ``imu``); the config's ``sources:``
+name the rest.  A message dispatched by kind ``odom`` / ``imu`` goes to the first source of that
+type.
 
 The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what you need):
 
@@ -44,7 +46,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from fgloc.localization.localizer import Localizer
-from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
+from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
 
 if TYPE_CHECKING:
     import numpy as np
@@ -121,18 +123,21 @@ class Session:
         self.last_fused: PoseFix | None = None
         self.covariance_period_s = COVARIANCE_PERIOD_S if covariance_period_s is None else float(covariance_period_s)
         self._cov_stamp: float | None = None  # scan stamp of the last marginal covariance
-        self.handlers: dict[str, Callable[[object], None]] = {
-            "odom": self._odometry, "imu": self._compass, "scan": self._scan,
-        }
-        # per-source inputs (fgloc.localization.sources, the fusion engineer's): the odom / imu
-        # topics (or the config's sources:) go through the source router
-        from fgloc.localization.sources import install_sources
+        # the inputs (fgloc.localization.sources): one handler per configured source, built once; the
+        # odom / imu topics given name the default layout's sources and are routed to them
+        from fgloc.localization.sources import SourceRouter
+        from fgloc.localization.sources.router import DISPATCH_KINDS, TF_TOPICS
 
-        self.sources = install_sources(self)
-
-    def register(self, kind: str, handler: Callable[[object], None]) -> None:
-        """Handle messages of ``kind`` with ``handler(msg)`` (route topics to it with :class:`Routes`)."""
-        self.handlers[kind] = handler
+        given = self.routes.table
+        self.sources = SourceRouter.from_config(localizer, {k: t for t, k in given.items() if k in DISPATCH_KINDS},
+                                                self._localized)
+        table = {t: k for t, k in given.items() if k not in DISPATCH_KINDS}
+        table.update(self.sources.topic_kinds())
+        for tf_topic in TF_TOPICS:
+            table.setdefault(tf_topic, "tf")
+        self.routes = Routes(table)
+        #: kind -> handler: the scans, each source, the dispatch kinds (odom, imu) and tf
+        self.handlers: dict[str, Callable[[object], None]] = self.sources.kinds()
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -165,7 +170,7 @@ class Session:
                 self.sink_errors += 1
 
     def dispatch(self, kind: str, msg: object) -> None:
-        """One input message by kind (``odom``, ``imu``, ``scan`` or a registered one)."""
+        """One input message by kind (``odom``, ``imu``, ``scan``, ``tf`` or ``source:NAME``)."""
         h = self.handlers.get(kind)
         if h is not None:
             h(msg)
@@ -193,19 +198,9 @@ class Session:
             except Exception:  # noqa: BLE001
                 self.sink_errors += 1
 
-    # ------------------------------------------------------------------ handlers
-    def _odometry(self, msg: object) -> None:
-        if isinstance(msg, Odometry):
-            self.loc.on_odometry(msg)
-
-    def _compass(self, msg: object) -> None:
-        if isinstance(msg, CompassHeading):
-            self.loc.on_compass(msg)
-
-    def _scan(self, msg: object) -> None:
-        if not isinstance(msg, LaserScan):
-            return
-        fix = self.loc.on_scan(msg)
+    # ------------------------------------------------------------------ scans
+    def _localized(self, msg: LaserScan, fix: PoseFix | None) -> None:
+        """After a scan was localized: the sinks are told (with the fused pose when one wants it)."""
         if not self.sinks:
             return  # nobody asks for the fused pose (its covariance is not free for a smoother)
         if self._known != self.sinks:

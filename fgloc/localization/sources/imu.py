@@ -1,0 +1,192 @@
+"""IMU sources (``sensor_msgs/Imu``, or the yaw-only :class:`~fgloc.types.CompassHeading`).
+
+An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
+header.frame_id``, or ``sources.static_transforms``: :class:`~fgloc.localization.frames.MountTable`;
+the maths in :mod:`fgloc.backends.imu`): any 3-D mount when the message is a whole
+:class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
+:class:`~fgloc.types.Transform3D`; with a planar transform or a yaw-only reading (fgloc's serial
+link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity,
+with one warning once :data:`~fgloc.localization.frames.MOUNT_WAIT_S` of its stamps passed
+without one (a mount that arrives is applied from then on, and the summary says after how many).
+
+The first IMU gives the heading (and its rate) to the localizer; a second one only its yaw rate
+(its heading is in another world frame).  ``use: [..., roll, pitch]``: its attitude levels the
+odometry and its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``.
+``differential``: orientation increments, as a heading with the source's own offset for a
+back-end that takes them (``add_relative_yaw``), else as a yaw rate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from fgloc.backends.imu import imu_in_base
+from fgloc.geometry import wrap_angle, wrap_scalar
+from fgloc.io.topics import IMU
+from fgloc.localization.frames import MOUNT_WAIT_S, OWN_FRAMES
+from fgloc.localization.sources.handler import SourceHandler
+from fgloc.localization.sources.odometry import MAX_TILT_RAD
+from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, TILT, SourceSpec, SourceType
+from fgloc.types import CompassHeading, Imu
+
+
+def needed(spec: SourceSpec, msg: Imu) -> Imu:
+    """``msg`` without the fields ``spec`` does not use (their faults are none of its business):
+    the orientation serves yaw, roll / pitch and orientation increments, the angular velocity
+    vyaw (and a levelling IMU's heading rate)."""
+    orient = spec.uses("yaw") or spec.uses("roll")
+    rates = spec.uses("vyaw")
+    if orient and rates:
+        return msg
+    return replace(msg, orientation_xyzw=msg.orientation_xyzw if orient else None,
+                   orientation_cov=msg.orientation_cov if orient else None,
+                   angular_velocity_radps=msg.angular_velocity_radps if rates else None,
+                   angular_velocity_cov=msg.angular_velocity_cov if rates else None)
+
+
+class ImuHandler(SourceHandler):
+    """An IMU source's messages into the localizer (see the module docstring)."""
+
+    accepts = (Imu, CompassHeading)
+    group = "heading"  # the first IMU gives the heading; a second one its yaw rate
+
+    def handle(self, msg: Imu | CompassHeading) -> None:
+        spec, st, ctx, mounts = self.spec, self.state, self.ctx, self.ctx.mounts
+        h = st.health
+        if isinstance(msg, Imu):
+            mount = mounts.mount(msg.frame_id)
+            if mount is None and msg.frame_id.lstrip("/") not in OWN_FRAMES:
+                self.unmounted(msg.frame_id, float(msg.stamp))
+            elif mount is not None:
+                self.mounted()
+            base, problems = imu_in_base(needed(spec, msg), mounts.rotation_values(mount))
+            for p in problems:
+                self.skip(p)
+            yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
+            if spec.uses("roll") and base.roll_pitch_rad is not None:
+                if ctx.tilt_source in (None, spec.name):  # the first levelling IMU levels
+                    ctx.tilt_source = spec.name
+                    ctx.tilt = (float(msg.stamp), *base.roll_pitch_rad)
+                # the heading's rate on a slope; a tilt no ground robot drives on (an upside-down or
+                # left-handed mount, as _levelled refuses it) keeps the base's own z rate
+                if base.heading_rate_radps is not None and max(map(abs, base.roll_pitch_rad)) <= MAX_TILT_RAD:
+                    rate = base.heading_rate_radps
+        else:
+            yaw, rate = msg.yaw_rad, msg.yaw_rate_radps
+            yaw_var, rate_var = float(msg.yaw_var), float(msg.yaw_rate_var)
+            if yaw is not None and (yaw_var < 0 or math.isinf(yaw_var)):
+                self.skip("imu: orientation covariance with a NaN or negative diagonal")
+                yaw = None
+            if rate is not None and (rate_var < 0 or math.isinf(rate_var)):
+                self.skip("imu: angular velocity covariance with a NaN or negative diagonal")
+                rate = None
+            # a yaw-only reading: an unknown yaw mount is absorbed by the heading offset estimate
+            mount = mounts.mount(msg.frame_id)
+            if mount is not None:
+                R = mounts.rotation(mount)
+                if yaw is not None:  # the reader gave the sensor frame's yaw: undo the mount's
+                    yaw = float(wrap_angle(yaw - math.atan2(R[1, 0], R[0, 0])))
+                if rate is not None:
+                    if abs(R[2, 2]) < 0.9:
+                        # the sensor's z axis is not the base's: its z rate is not the yaw rate, and
+                        # a reader that gives only z cannot say what is (a skip only if it is used)
+                        if spec.uses("vyaw"):
+                            self.skip("imu: yaw rate of a tilted mount not in the message (needs the whole Imu)")
+                        rate = None
+                    else:
+                        rate = rate * float(np.sign(R[2, 2]))
+        t = float(msg.stamp)
+        add_rel = getattr(self.loc.backend, "add_relative_yaw", None)
+        if spec.differential and yaw is not None and spec.uses("yaw") and not spec.uses("vyaw") \
+                and add_rel is not None:
+            # orientation increments as a heading with the source's own offset (a back-end that
+            # takes them: the EKF), not as a rate d_yaw / d_t, which stamp jitter turns into spikes
+            if st.prev_yaw is not None and not t > st.prev_yaw[0]:
+                self.skip(f"imu: {OUT_OF_ORDER}")
+                return
+            st.prev_yaw = (t, yaw)
+            add_rel(t, float(yaw), spec.variance("yaw", yaw_var), "imu" if not st.extra.get("second") else spec.name)
+            h.accepted += 1
+            return
+        if spec.differential and yaw is not None:
+            # orientation increments as a yaw rate (robot_localization's imuN_differential)
+            var = yaw_var if math.isfinite(yaw_var) else 1e-4
+            if st.prev_yaw is not None and not t > st.prev_yaw[0]:
+                self.skip(f"imu: {OUT_OF_ORDER}")
+                return
+            prev, st.prev_yaw = st.prev_yaw, (t, yaw)
+            prev_var, st.extra["prev_yaw_var"] = st.extra.get("prev_yaw_var", var), var
+            if prev is not None and t > prev[0] and spec.uses("yaw"):
+                d_rate = wrap_scalar(yaw - prev[1]) / (t - prev[0])
+                if rate is None or not spec.uses("vyaw"):  # r_l's variance (differential_cov)
+                    rate, rate_var = d_rate, (var + prev_var) * (t - prev[0])
+            yaw = None
+        if yaw is not None and spec.uses("yaw"):
+            yaw_var = spec.variance("yaw", yaw_var)
+        else:
+            yaw = None
+        if rate is not None and spec.uses("vyaw"):
+            rate_var = spec.variance("vyaw", rate_var)
+        elif not (spec.differential and rate is not None):
+            rate = None
+        if yaw is None and rate is None:
+            if not h.skipped:  # an empty reading: the localizer counts it as it always did
+                self.loc.on_compass(CompassHeading(t, None, None))
+            return
+        if st.extra.get("second"):
+            yaw = None  # a second IMU's heading is in another world frame: only its rate is fused
+            if rate is None:
+                return
+            add_gyro = getattr(self.loc.backend, "add_gyro", None)
+            if add_gyro is not None and self.loc.backend.initialized:
+                add_gyro(t, rate, rate_var, spec.name)
+            h.accepted += 1
+            return
+        h.accepted += 1
+        self.loc.on_compass(CompassHeading(t, yaw, rate, yaw_var if yaw is not None else float("nan"),
+                                           rate_var if rate is not None else float("nan"), frame_id="base_link"))
+
+    def unmounted(self, frame: str, t: float) -> None:
+        """An IMU message of ``frame`` without a mount (yet): taken as identity, counted; warned about
+        once :data:`MOUNT_WAIT_S` of its stamps have passed without one (or at :meth:`finish`)."""
+        f, st = frame.lstrip("/"), self.state
+        st.extra["no_transform"] = st.extra.get("no_transform", 0) + 1
+        st.extra["no_transform_frame"] = f
+        since = st.extra.setdefault("no_transform_since", t)
+        if t - since >= MOUNT_WAIT_S:
+            self.ctx.mounts.warn_missing(f)
+
+    def mounted(self) -> None:
+        """The mount arrived after messages taken as identity (a /tf_static logged late)."""
+        st = self.state
+        if st.extra.get("no_transform"):
+            st.extra["mount_late"] = st.extra.get("mount_late", 0) + int(st.extra.pop("no_transform"))
+            st.extra.pop("no_transform_since", None)
+
+
+    def finish(self) -> None:
+        st = self.state
+        if st.extra.get("no_transform"):  # the log ended before MOUNT_WAIT_S without a mount
+            self.ctx.mounts.warn_missing(str(st.extra.get("no_transform_frame", "")))
+
+
+    # ------------------------------------------------------------------ report
+    def backend_streams(self) -> list[str]:
+        name = self.spec.name if self.state.extra.get("second") else "imu"
+        return [f"{name}.yaw", f"{name}.gyro"]
+
+    def report_estimates(self, d: dict[str, Any]) -> None:
+        be = self.loc.backend
+        if self.state.messages:
+            b = None
+            if hasattr(be, "gyro_bias"):
+                b = be.gyro_bias(self.spec.name if self.state.extra.get("second") else "imu")
+            if b is not None:
+                d["gyro_bias_radps"] = round(float(b), 7)
+
+
+SOURCE = SourceType("imu", IMU, "/imu", ("yaw", "vyaw"), COMPONENTS + TILT, ImuHandler)

@@ -1,0 +1,185 @@
+"""Odometry sources (``nav_msgs/Odometry``): the body twist the localizer integrates.
+
+The first odometry source is the one the localizer integrates (its tracker and the back-end's
+odometry factor / prediction); a second one is fused as velocity measurements by a back-end
+that takes them (the EKF's ``add_velocity``) and skipped by one that does not.  A
+``differential`` source (or one that uses no velocity) gives the twist of its pose increments,
+as robot_localization's ``odomN_differential`` does (:func:`differential_cov`); an axis used as
+a velocity beside the increments of the others keeps the message's velocity.  With a levelling
+IMU (``use: [..., roll, pitch]``) the twist is projected onto the ground plane.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from fgloc.geometry import between, rotate_covariance
+from fgloc.geometry import log as se2_log
+from fgloc.io.topics import ODOMETRY
+from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad
+from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, SourceSpec, SourceType
+from fgloc.types import Odometry
+
+#: an attitude older than this (s) does not level an odometry message
+MAX_TILT_AGE_S = 0.5
+#: a base tilted more than this (rad) is no ground robot on a slope but a wrong mount: not levelled
+MAX_TILT_RAD = math.radians(45.0)
+
+
+def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt: float) -> np.ndarray:
+    """The covariance of a differential source's twist, as robot_localization computes it (its
+    ``*_differential`` mode, which the ported configs were tuned with): the two poses' covariances
+    (``[x, y, yaw]``, the xy block turned from the source's frame into the earlier pose's body
+    frame) summed and multiplied by ``dt``.  (Not ``(C1 + C2) / dt^2``: an odometry's poses are
+    integrated, consecutive ones almost perfectly correlated, and that formula made the increments
+    of r_l's test2.bag 125000 times less certain than robot_localization takes them, so the
+    filter ignored them.)"""
+    return np.asarray(rotate_covariance(np.asarray(cov) + np.asarray(prev_cov), -prev_yaw) * dt, dtype=float)
+
+
+
+class OdometryHandler(SourceHandler):
+    """An odometry source's messages into the localizer (see the module docstring)."""
+
+    accepts = (Odometry,)
+    group = "twist"  # the first twist source is integrated; a second one is velocity measurements
+    second_fused = False
+
+    def __init__(self, spec: SourceSpec, ctx: SourceContext, fused: bool = True, second: bool = False) -> None:
+        super().__init__(spec, ctx, fused, second)
+        #: whether the source fuses any of vx, vy, vyaw, and whether it takes the message's whole
+        #: twist and covariance as they are (all three, ``covariance: message``, not differential)
+        self.velocities = any(spec.uses(c) for c in ("vx", "vy", "vyaw"))
+        self.whole_twist = (spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"}
+                            and not spec.differential)
+
+    def handle(self, msg: Odometry) -> None:
+        spec, st = self.spec, self.state
+        h = st.health
+        # a second odometry source: its velocities are measurements in a back-end that takes them
+        # (the EKF's add_velocity; the smoothers' integrate them into a factor of their own); a
+        # back-end without add_velocity integrates one twist source and skips it
+        add_vel = None if st.fused else getattr(self.loc.backend, "add_velocity", None)
+        if not st.fused and add_vel is None:
+            self.skip("a second odometry source (this back-end integrates one twist source; the EKF fuses "
+                       "its velocities)")
+            return
+        if cov_bad(msg.twist_cov) or (spec.differential and cov_bad(msg.pose_cov)):
+            self.skip("covariance with a NaN or negative diagonal")
+            return
+        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
+        cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
+        tw_msg, cov_msg = tw.copy(), cov
+        if tw.shape == (3,):
+            vy = abs(float(tw[1]))
+            if vy > st.vy_max:  # (a NaN never is)
+                st.vy_max = vy
+        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        velocities, whole_twist = self.velocities, self.whole_twist
+        if spec.differential or not velocities:
+            # robot_localization's differential mode: the twist of the pose increments
+            pc = None if msg.pose_cov is None else np.asarray(msg.pose_cov, dtype=float).reshape(3, 3)
+            if pose is not None and st.prev_pose is not None and not msg.stamp > st.prev_pose[0]:
+                # out of order: the increments go on from the newest pose (none is lost)
+                self.skip(OUT_OF_ORDER)
+                return
+            prev, st.prev_pose = st.prev_pose, (None if pose is None else (float(msg.stamp), pose))
+            prev_pc, st.extra["prev_pose_cov"] = st.extra.get("prev_pose_cov"), pc
+            if pose is None:
+                self.skip("differential source without poses")
+                return
+            if prev is None or not msg.stamp > prev[0]:
+                return
+            dt = float(msg.stamp) - prev[0]
+            tw = se2_log(between(prev[1], pose)) / dt
+            cov = None if pc is None else \
+                differential_cov(pc, pc if prev_pc is None else prev_pc, float(prev[1][2]), dt)
+            comps: tuple[str, ...] = ("x", "y", "yaw")
+            mixed = [i for i, (pc_, vc) in enumerate((("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
+                     if not spec.uses(pc_) and spec.uses(vc)]
+            if mixed:
+                # an axis fused as a velocity beside the increments of the others (r_l: x, y, vyaw)
+                dflt = np.square(list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02)))
+                tw = tw.copy()
+                cov = np.diag(dflt) if cov is None else cov.copy()
+                comps = tuple(("vx", "vy", "vyaw")[i] if i in mixed else c for i, c in enumerate(comps))
+                for i in mixed:
+                    tw[i] = tw_msg[i]
+                    cov[i, :] = 0.0
+                    cov[:, i] = 0.0
+                    ok = cov_msg is not None and float(cov_msg[i, i]) > 0
+                    cov[i, i] = float(cov_msg[i, i]) if ok and cov_msg is not None else float(dflt[i])
+        else:
+            comps = ("vx", "vy", "vyaw")
+        default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))
+        if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
+            cov = np.diag(np.square(default))
+        if whole_twist:
+            out = cov  # the default layout: the message's whole covariance, exactly as before
+        else:
+            out = np.zeros((3, 3))
+            for i, c in enumerate(comps):
+                v = spec.variance(c, float(cov[i, i]))
+                out[i, i] = v if math.isfinite(v) else default[i] ** 2
+            # a diff drive that does not report vy: 0 with the message's (small) variance, as before
+            if comps[1] == "vy" and not spec.uses("vy"):
+                out[1, 1] = float(cov[1, 1])
+        tw, out = self.levelled(float(msg.stamp), tw, out)
+        if add_vel is not None:
+            used = tuple(spec.uses(p) or spec.uses(v) for p, v in (("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
+            add_vel(float(msg.stamp), tw, out, used, spec.name)
+            h.accepted += 1
+            return
+        h.accepted += 1
+        m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
+                     msg.frame_id, msg.child_frame_id)
+        self.loc.on_odometry(m)
+
+    def levelled(self, t: float, tw: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body twist projected onto the ground plane through the levelling IMU's latest
+        roll / pitch: ``[vx cos p + vy sin r sin p, vy cos r, w]`` (unchanged without one)."""
+        tilt, st = self.ctx.tilt, self.state
+        if tilt is None or abs(t - tilt[0]) > MAX_TILT_AGE_S:
+            return tw, cov
+        _, r, p = tilt
+        if abs(r) > MAX_TILT_RAD or abs(p) > MAX_TILT_RAD:
+            st.extra["tilt_implausible"] = st.extra.get("tilt_implausible", 0) + 1
+            return tw, cov
+        cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)
+        J = np.array([[cp, sr * sp, 0.0], [0.0, cr, 0.0], [0.0, 0.0, 1.0]])
+        st.extra["levelled"] = st.extra.get("levelled", 0) + 1
+        st.extra["tilt_max_rad"] = max(st.extra.get("tilt_max_rad", 0.0), abs(r), abs(p))
+        return J @ np.asarray(tw, dtype=float), J @ np.asarray(cov, dtype=float) @ J.T
+
+
+    # ------------------------------------------------------------------ report
+    def backend_streams(self) -> list[str]:
+        return ["odom"] if self.state.fused else [self.spec.name]
+
+    def reports_noise(self) -> bool:
+        # the noise an odometry's yaw rate showed: only when the source fuses its yaw
+        return self.spec.uses("vyaw") or self.spec.uses("yaw")
+
+    def report_estimates(self, d: dict[str, Any]) -> None:
+        s, st, loc = self.spec, self.state, self.loc
+        be = loc.backend
+        if st.fused and not s.differential:
+            # twists the localizer's tracker replaced by pose increments (pipeline.pose_deltas)
+            n_poses = int(loc.stats.get("odometry_from_poses", 0) or 0)
+            if n_poses:
+                d["from_poses"] = n_poses
+                mode = getattr(getattr(loc, "pcfg", None), "pose_deltas", "auto")
+                d["from_poses_why"] = "pipeline.pose_deltas: always" if mode == "always" else \
+                    "the twist disagreed with the poses (pipeline.pose_deltas: auto)"
+            if st.messages:
+                d["vy_max_mps"] = round(st.vy_max, 4)
+        if st.fused and hasattr(be, "odom_scales"):
+            sc = be.odom_scales()
+            d["speed_scale"] = round(float(sc[0]), 4)
+            d["yaw_rate_scale"] = round(float(sc[1]), 4)
+
+
+SOURCE = SourceType("odometry", ODOMETRY, "/odom", ("vx", "vy", "vyaw"), COMPONENTS, OdometryHandler)

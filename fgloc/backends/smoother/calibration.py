@@ -1,0 +1,182 @@
+"""Calibration variables: the chains (slowly varying ``Vector`` variables tied by a random walk: the
+odometry's speed and yaw-rate scales, a gyro's bias in the graph, a differential orientation's
+offset, a further twist source's alignment), the compass-to-map offset variables ``o<j>`` and
+the scans' latency estimate."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+from fgloc.backends.contract import latency_fit_of
+from fgloc.backends.factors import offset_pose, pose_offset
+from fgloc.backends.health import fix_speed
+from fgloc.backends.smoother.keys import O, symbol
+from fgloc.backends.smoother.state import Chain
+from fgloc.backends.smoother.streams import MAX_REF_PERIOD_S, Streams
+from fgloc.geometry import wrap_angle, wrap_scalar
+
+#: m, the prior / random-walk sigma of a compass-offset variable's position (always 0: it enters
+#: no other factor, any sigma holds it there; see factors.compass_factor)
+OFFSET_XY_SIGMA = 1.0
+
+
+class Calibration(Streams):
+    """The calibration variables and estimates."""
+
+    def set_compass_offset(self, offset: float) -> None:
+        self.calib.offset = float(offset)
+
+    def _chain(self, name: str, char: str, mean: list[float], sigma: list[float], rw: list[float]) -> Chain:
+        ch = self.chains.get(name)
+        if ch is None:
+            ch = self.chains[name] = Chain(char, np.asarray(mean, dtype=float), np.asarray(sigma, dtype=float),
+                                            np.asarray(rw, dtype=float))
+            ch.estimate = ch.prior_mean.copy()
+        return ch
+
+    def _chain_key(self, ch: Chain, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                   ts: dict) -> int:
+        """The chain's variable for time ``t`` (a new one each ``offset_interval_s``), kept in the window."""
+        if ch.key is None or t - ch.t >= self.cfg.offset_interval_s:
+            n = self._next_sym.get(ch.char, 0)
+            self._next_sym[ch.char] = n + 1
+            new = symbol(ch.char, n)
+            est = ch.prior_mean if ch.estimate is None else ch.estimate
+            if ch.key is None:
+                graph.add(gtsam.PriorFactorVector(new, ch.prior_mean, gtsam.noiseModel.Diagonal.Sigmas(ch.prior_sigma)))
+            else:
+                dt = max(t - ch.t, 1e-3)
+                graph.add(gtsam.BetweenFactorVector(ch.key, new, np.zeros(len(ch.prior_mean)),
+                                                    gtsam.noiseModel.Diagonal.Sigmas(ch.rw_sigma * math.sqrt(dt))))
+                ts[ch.key] = float(t)
+            vals.insert(new, np.asarray(est, dtype=float))
+            ch.key, ch.t = new, float(t)
+        ts[ch.key] = float(t)
+        return ch.key
+
+    def _refresh_chains(self) -> None:
+        """Read the calibration estimates back after a solver update."""
+        for name, ch in self.chains.items():
+            if ch.key is None:
+                continue
+            try:
+                ch.estimate = np.asarray(self.isam.calculateEstimateVector(ch.key), dtype=float)
+            except (RuntimeError, IndexError):
+                continue
+            if name in ("odom_speed_scale", "odom_yaw_scale"):
+                sc = float(ch.estimate[0])
+                if math.isfinite(sc) and sc > 0.05:
+                    self._gains[0 if name == "odom_speed_scale" else 1] = 1.0 / sc
+                    self.arb.set_correction("odom", gain=float(self._gains[1]))
+            elif name.startswith("gyro_bias:"):
+                self.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
+
+    def gains(self) -> FloatArray:
+        """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""
+        return self._gains.copy()
+
+    def odom_scales(self) -> FloatArray:
+        """The odometry's estimated ``[speed, yaw-rate]`` scales (reported / true)."""
+        return 1.0 / self._gains
+
+    def _new_offset(self, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                    ts: dict) -> None:
+        o = O(self.next_o)
+        self.next_o += 1
+        if self.cur_o is None:
+            if self.calib.calibrated:
+                guess, sig = float(self.calib.offset or 0.0), self.cfg.calibrated_offset_sigma
+            else:
+                guess, sig = self._offset_guess(), self.cfg.offset_prior_sigma
+            graph.add(gtsam.PriorFactorPose2(o, offset_pose(guess), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([OFFSET_XY_SIGMA, OFFSET_XY_SIGMA, sig]))))
+        else:
+            guess = self._offset_estimate()
+            dt = max(t - self.cur_o_t, 1e-3)
+            sigmas = np.array([OFFSET_XY_SIGMA, OFFSET_XY_SIGMA, self.cfg.offset_rw_sigma * np.sqrt(dt)])
+            graph.add(gtsam.BetweenFactorPose2(self.cur_o, o, gtsam.Pose2(0.0, 0.0, 0.0),
+                                               gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
+            ts[self.cur_o] = float(t)
+        vals.insert(o, offset_pose(guess))
+        ts[o] = float(t)
+        self.cur_o, self.cur_o_t = o, float(t)
+
+    def _offset_guess(self) -> float:
+        if self.calib.offset is not None:
+            return float(self.calib.offset)
+        if self.calib.has_readings:
+            c = self.calib.compass_at(self.t0 or 0.0)
+            if c is not None:
+                return float(wrap_angle(c - self._init_yaw))
+        return 0.0
+
+    def _offset_estimate(self) -> float:
+        if self.cur_o is None:
+            return self._offset_guess()
+        if self._acc is not None and self._acc[1].exists(self.cur_o):
+            return pose_offset(self._acc[1].atPose2(self.cur_o))
+        try:
+            return pose_offset(self.isam.calculateEstimatePose2(self.cur_o))
+        except (RuntimeError, IndexError):  # not (or no longer) in the window
+            return self._offset_guess()
+
+    def compass_offset(self) -> float | None:
+        """Current estimate of the compass-to-map offset (radians), None before any is known."""
+        if self.cur_o is None:
+            return self.calib.offset
+        return self._offset_estimate()
+
+    def latency_estimate(self) -> float:
+        """The scan latency (s) in use: configured, estimated once significant, or 0."""
+        if self.cfg.latency_s is not None:
+            return float(self.cfg.latency_s)
+        return self.latency_est.value() if self.cfg.latency else 0.0
+
+    def latency_fit(self) -> tuple[float, float] | None:
+        return latency_fit_of(self.latency_est.estimate())
+
+    def _latency_pairs(self) -> None:
+        """Feed the latency estimator with the fix pairs the gyro / odometry now cover."""
+        if not self.cfg.latency or self.cfg.latency_s is not None:
+            self._fix_pairs.clear()
+            return
+        covered = self.odo_t[-1] if self.odo_t else -np.inf
+        for ts_, _, _ in self.gyro.values():
+            if ts_:
+                covered = min(covered, ts_[-1])
+        keep = []
+        odo_period = self._period_of(self.odo_t)
+        last_fix = self._recent_fixes[-1][0] if self._recent_fixes else -np.inf
+        yaw_period = self._period_of(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
+        for pair in self._fix_pairs:
+            ta, tb, pa, pb, ca, cb = pair
+            if tb > covered or tb > last_fix - 0.25:
+                keep.append(pair)
+                continue
+            # a reference slower than ~20 Hz cannot resolve a lag of tens of ms (the motion inside
+            # one of its periods is not known): such a reference gives no pairs
+            # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
+            if odo_period > MAX_REF_PERIOD_S:
+                continue
+            yaw_ref_ok = yaw_period <= MAX_REF_PERIOD_S
+            if yaw_ref_ok:
+                wa, wb = self._yaw_rate_at(ta), self._yaw_rate_at(tb)
+                d_ref = self._rotation_between(ta, tb)
+                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+                var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
+                self.latency_est.add(-(wb - wa), r, var, d_ref, 0)
+            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
+            if tb - ta < 0.5:
+                continue
+            d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
+            dist_ref = float(np.hypot(d[0], d[1]))
+            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
+            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
+            va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
+            if va is not None and vb is not None:
+                self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
+        self._fix_pairs = keep

@@ -1,0 +1,74 @@
+"""Covariances as GTSAM can use them: priors made well-conditioned, bounded variances, and a pose
+covariance carried along an odometry increment."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+
+#: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,
+#: robot_localization's 1e6): bounded to it, a weak prior, so the integrated odometry factor stays
+#: a well-conditioned system (1e6 made iSAM2 report an indeterminate system on r_l's test1.bag)
+TWIST_VAR_MAX = 100.0
+
+
+#: m^2, m^2, rad^2: the prior of a restart after a solver failure is the last marginal's diagonal,
+#: at most this.  A restart from the marginal inflated (x4 per failure, up to 100 m^2 / pi^2) or
+#: with its correlations failed again at the next keyframe: on a run without any heading source
+#: (r_l's test1.bag with odom0 vx, vy only) every keyframe after the first failure was one
+RESTART_VAR_MAX = np.array([1.0, 1.0, 1.0])
+
+
+#: the prior of a start when none is given (m, m, rad)
+DEFAULT_INITIAL_SIGMAS = np.array([0.1, 0.1, np.deg2rad(5.0)])
+
+
+def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArray, inc_cov: FloatArray) -> FloatArray:
+    """The map-frame covariance of ``pose1 = pose0 (+) d``: ``cov0_map`` (``pose0``'s, map frame) carried
+    along, its heading's uncertainty swept over the distance from ``pose0`` to ``pose1``, plus the
+    increment's covariance ``inc_cov`` (frame of ``pose0``, as :func:`~fgloc.backends.factors.integrate_twist`
+    gives it) rotated into the map.  (``inc_cov`` added as it is gave a robot heading along map +y its
+    along-track variance on map x, and no heading sweep: tests/backends/test_smoother.py.)"""
+    # J P J^T (J = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]) plus R c R^T, in scalars (at every prediction)
+    dx, dy = float(pose1[0]) - float(pose0[0]), float(pose1[1]) - float(pose0[1])
+    p00, p01, p02, _, p11, p12, _, _, p22 = np.asarray(cov0_map, dtype=float).reshape(9).tolist()
+    c00, c01, c02, _, c11, c12, _, _, c22 = np.asarray(inc_cov, dtype=float).reshape(9).tolist()
+    cs, sn = math.cos(float(pose0[2])), math.sin(float(pose0[2]))
+    a00 = p00 - 2.0 * dy * p02 + dy * dy * p22 + cs * cs * c00 - 2.0 * cs * sn * c01 + sn * sn * c11
+    a01 = p01 + dx * p02 - dy * p12 - dx * dy * p22 + cs * sn * (c00 - c11) + (cs * cs - sn * sn) * c01
+    a02 = p02 - dy * p22 + cs * c02 - sn * c12
+    a11 = p11 + 2.0 * dx * p12 + dx * dx * p22 + sn * sn * c00 + 2.0 * cs * sn * c01 + cs * cs * c11
+    a12 = p12 + dx * p22 + sn * c02 + cs * c12
+    a22 = p22 + c22
+    return np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
+
+
+def prior_covariance(cov: FloatArray | None, var_max: FloatArray | None = None) -> FloatArray:
+    """A prior covariance GTSAM can use: symmetric, finite, positive semi-definite (when it is not,
+    its eigenvalues are raised to 1e-6 of the largest), each variance at most ``var_max``; the
+    default start prior when ``cov`` is None or not finite.  (The prior factor adds 1e-9 to each
+    variance.)"""
+    if cov is None:
+        return np.diag(DEFAULT_INITIAL_SIGMAS**2)
+    c = np.asarray(cov, dtype=float).reshape(3, 3)
+    if not np.all(np.isfinite(c)):
+        return np.diag(DEFAULT_INITIAL_SIGMAS**2)
+    c = 0.5 * (c + c.T)
+    w, v = np.linalg.eigh(c)
+    if w[0] < 0.0:
+        c = (v * np.maximum(w, 1e-6 * max(float(w[-1]), 1e-9))) @ v.T
+    return bounded_covariance(c, var_max) if var_max is not None else c
+
+
+def bounded_covariance(c: FloatArray, var_max: float | FloatArray) -> FloatArray:
+    """``c`` with each variance at most ``var_max`` (rows / columns scaled: stays positive definite)."""
+    if isinstance(var_max, float) and c[0, 0] <= var_max and c[1, 1] <= var_max and c[2, 2] <= var_max:
+        return c  # (the common case, without numpy's per-call overhead)
+    d = np.diag(c)
+    if np.all(d <= var_max):
+        return c
+    f = np.sqrt(np.minimum(1.0, np.asarray(var_max, dtype=float) / np.maximum(d, 1e-300)))
+    return np.asarray(c, dtype=float) * np.outer(f, f)

@@ -1,0 +1,355 @@
+"""Graph building at each keyframe: the odometry factor (scales estimated), the compass and fix
+factors, the gyro's yaw-increment factors, and a late scan's keyframe between its neighbours."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import gtsam
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+from fgloc.backends.factors import (
+    between_factor,
+    compass_factor,
+    fix_factor,
+    gyro_factor,
+    scaled_between_factor,
+    yaw_increment_factor,
+)
+from fgloc.backends.health import ANGLE_ABSOLUTE
+from fgloc.backends.smoother.covariance import carried_covariance
+from fgloc.backends.smoother.further import FurtherSourceFactors
+from fgloc.backends.smoother.streams import all_finite
+from fgloc.geometry import compose1, wrap_scalar
+from fgloc.geometry import exp as se2_exp
+from fgloc.types import PoseFix
+
+#: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
+GYRO_LIVE_S = 0.25
+
+
+class KeyframeGraph(FurtherSourceFactors):
+    """The factors of each keyframe."""
+
+    def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        """Queue a keyframe; it is added once odometry up to ``t`` has arrived (or ``max_wait`` passed).
+
+        Returns True if the fix passed the gate against the prediction.
+        """
+        if not self.initialized or not math.isfinite(float(t)):
+            return False
+        t = float(t)
+        if fix is not None and not all_finite(fix.pose, fix.cov):
+            self._source("scan", "pose").skip("fix not finite")
+            fix = None
+        if t <= self.kf_t[-1]:
+            if t == self.kf_t[-1]:
+                return False
+            return self._late_keyframe(t, fix)
+        last = self.pending_kf[-1][0] if self.pending_kf else self.kf_t[-1]
+        if t - last < self.cfg.min_keyframe_dt_s:
+            # a scan right on top of the previous keyframe adds nothing but conditioning trouble
+            self.stats["merged_keyframes"] = self.stats.get("merged_keyframes", 0) + 1
+            return False
+        if fix is not None and self.cfg.fix_gate is not None:
+            # the gate's marginal is fresh (it is otherwise computed only when an output asks for it:
+            # without outputs, the gate judged against the start prior the whole run)
+            self._update_covariance()
+        pred, pred_cov = self.predict(t)
+        used = False
+        if fix is not None:
+            if self._gate(fix, pred, pred_cov):
+                used = True
+                self._rejects = 0
+            else:
+                self._rejects += 1
+                self.stats["fixes_rejected"] += 1
+                if self._rejects >= self.cfg.max_rejections:
+                    self._process_pending(np.inf)
+                    self.stats["resets"] = self.stats.get("resets", 0) + 1
+                    self.initialize(t, fix.pose, self._fix_cov(fix.cov))
+                    self.stats["keyframes"] += 1
+                    return True
+        self.pending_kf.append((t, fix if used else None))
+        self.pending_kf.sort(key=lambda p: p[0])
+        self._process_pending(t)
+        return used
+
+    def _process_pending(self, now: float) -> None:
+        while self.pending_kf:
+            t = self.pending_kf[0][0]
+            have_odo = bool(self.odo_t) and self.odo_t[-1] >= t - 1e-9 and self._gyros_cover(t)
+            if not (have_odo or now - t >= self.cfg.max_wait_s):
+                return
+            t, fix = self.pending_kf.pop(0)
+            self._add_keyframe_now(t, fix)
+
+    def _gyros_cover(self, t: float) -> bool:
+        """Every gyro still reading (one within :data:`GYRO_LIVE_S` of ``t``) has reached ``t``, so
+        the keyframe's chord can run along its heading.  A keyframe made before (its gyro reading
+        arriving after the odometry's) kept the wheels' own arc, bent by their yaw: on r_l's
+        Jackal bag, IMU and wheels both at 50 Hz, 75 % of the keyframes, with wheels that report
+        4.7 times the turn, drove the smoother's path 1.0 deg crabwise."""
+        if not self.cfg.gyro_chord:
+            return True
+        for ts_, _, _ in self.gyro.values():
+            if ts_ and t - GYRO_LIVE_S <= ts_[-1] < t - 1e-9:
+                return False
+        return True
+
+    def _add_keyframe_now(self, t: float, fix: PoseFix | None) -> None:
+        used = fix is not None
+        k_prev, t_prev = self.kf_key[-1], self.kf_t[-1]
+        k = self._new_x(t)
+        if self._acc is None:
+            self._acc = (gtsam.NonlinearFactorGraph(), gtsam.Values(), {}, [], [])
+        graph, vals, ts, pairs, keys = self._acc
+        ts[k] = t
+        d, c = self._integrate(t_prev, t)
+        chord = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
+        if chord is None:
+            pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
+        else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
+            pred = compose1(self.kf_pose[k_prev], np.array([chord[0] * self._gains[0], chord[1] * self._gains[0],
+                                                            chord[2]]))
+            d = np.array([chord[0], chord[1], d[2]])
+        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=chord is None))
+        pairs.append(((k_prev, k), graph.size() - 1))
+        # initial value: the odometry prediction, so robust weights start from a consistent point
+        vals.insert(k, gtsam.Pose2(*pred))
+        if t - self.cur_o_t >= self.cfg.offset_interval_s:
+            self._new_offset(t, graph, vals, ts)
+        # compass readings since the previous keyframe (late ones go to this keyframe too)
+        readings = [r for r in self.compass_pending if r[0] <= t + 1e-9]
+        self.compass_pending = [r for r in self.compass_pending if r[0] > t + 1e-9]
+        m = self._compass_measurement(t, readings)
+        if m is not None:
+            sigma = m[1]
+            if self.cfg.adapt_noise and readings:
+                sigma *= self._noise_of(f"{readings[0][3]}.yaw")[0]
+            graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
+                                     self.cfg.compass_kernel, self.cfg.compass_kernel_k))
+            ts[self.cur_o] = t  # type: ignore[index]
+            self.stats["compass_factors"] += 1
+        self._add_relative_yaw_factors(k, t, pred, graph, vals, ts)
+        if used:
+            assert fix is not None
+            graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
+            self.stats["fixes_used"] += 1
+            self._source("scan", "pose").accepted += 1
+            lat = self.latency_estimate()
+            yaw_fix = float(fix.pose[2])
+            self.calib.add_fix(t - lat, yaw_fix)
+            var_yaw = self._fix_cov_list(fix.cov)[8]
+            for gb in self.gbias.values():
+                gb.add_heading("scan", t - lat, yaw_fix, var_yaw)
+            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
+        self.kf_t.append(t)
+        self.kf_key.append(k)
+        self.window.append((t, k))
+        self.kf_pose[k] = pred
+        keys.append(k)
+        self._add_gyro_factors(t, graph, vals, ts)
+        self._add_velocity_factors(t, graph, vals, ts)
+        if self.cfg.adapt_noise:
+            self.arb.update(t)
+        self._latency_pairs()
+        if len(keys) >= max(1, int(self.cfg.update_every)):
+            self._flush_acc()
+        else:  # online estimate until the next solver update: the odometry prediction
+            self.stats["keyframes"] += 1
+            self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred, c))
+
+    def _odometry_factor(self, ki: int, kj: int, d: FloatArray, c: FloatArray, t: float,
+                         graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
+                         bend: bool = True) -> gtsam.NonlinearFactor:
+        """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated
+        (``bend=False``: ``d``'s translation was integrated along the gyro's heading)."""
+        # the yaw row and column times k_yaw, the yaw variance plus (rel * yaw)^2 and the timing's: as
+        # floats (the same operations as on the array), one array made at the end
+        a = np.asarray(c, dtype=float).reshape(9).tolist()
+        k_yaw, rel = self._noise_of("odom")
+        if k_yaw != 1.0 or rel > 0.0:
+            a[6], a[7], a[8] = a[6] * k_yaw, a[7] * k_yaw, a[8] * k_yaw
+            a[2], a[5], a[8] = a[2] * k_yaw, a[5] * k_yaw, a[8] * k_yaw
+            a[8] += (rel * float(d[2])) ** 2
+        a[8] += self._timing_var(self.kf_t[-1], t)
+        c = np.array(a).reshape(3, 3)
+        if not self.cfg.odom_gains:
+            return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
+        # a scale is estimated only once something else observes it (held at its estimate until
+        # then): the speed scale from positions (fixes), the yaw-rate scale from any other yaw source
+        ks_v = ks_w = None
+        latency_known = not self.cfg.latency or self.cfg.latency_s is not None or self.latency_est.settled()
+        if (self.stats["fixes_used"] > 0 and latency_known) or "odom_speed_scale" in self.chains:
+            ch = self._chain("odom_speed_scale", "g", [1.0], [self.cfg.odom_speed_scale_prior],
+                             [self.cfg.odom_scale_rw])
+            ks_v = self._chain_key(ch, t, graph, vals, ts)
+        self._turned += abs(float(d[2]))
+        if (self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0)) \
+                or "odom_yaw_scale" in self.chains:
+            # observable once the robot has turned (a radian) with another yaw source to compare;
+            # 0.1 rad (3218db0) let a barely observable scale add noise: the paper run replayed from
+            # a live recording went 7.1 -> 8.2 mm online RMSE (tests/live/test_end_to_end.py flaked)
+            ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
+            ks_w = self._chain_key(ch, t, graph, vals, ts)
+        fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
+        return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
+                                     k=self.cfg.odom_kernel_k, bend=bend)
+
+    def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
+        e = fix.pose - pred
+        e[2] = wrap_scalar(float(e[2]))
+        if self.cfg.fix_gate_m is not None and float(np.hypot(e[0], e[1])) > self.cfg.fix_gate_m:
+            return False
+        if self.cfg.fix_gate_theta is not None and abs(float(e[2])) > self.cfg.fix_gate_theta:
+            return False
+        if self.cfg.fix_gate is None:
+            return True
+        S = pred_cov + fix.cov
+        try:
+            d2 = float(e @ np.linalg.solve(S, e))
+        except np.linalg.LinAlgError:
+            return False
+        return bool(np.isfinite(d2) and d2 <= self.cfg.fix_gate)
+
+    def _fix_weighted_cov(self, cov: FloatArray) -> FloatArray:
+        """A fix's covariance as its factor uses it: floored (:meth:`_fix_cov`), its heading
+        weighted by the noise the fixes' headings show against the other yaw sources (the arbiter's
+        :meth:`~fgloc.backends.health.Arbiter.shown_k`: over 0.125 s blocks and, for slowly varying
+        errors, over 0.5 s and 2 s blocks).  Without it, a front-end whose headings are 5-10x better
+        than the floor left the heading to the relative sources between fixes over a long window: the
+        paper run's smoother heading took on the gyro's random walk and the wheels' drift on
+        straight legs (online 0.032 deg against its fixes' 0.024)."""
+        a = self._fix_cov_list(cov)
+        if self.cfg.adapt_noise:
+            k = self.arb.shown_k("scan")
+            if k != 1.0:  # the heading's row, then its column, times k
+                a[6], a[7], a[8] = a[6] * k, a[7] * k, a[8] * k
+                a[2], a[5], a[8] = a[2] * k, a[5] * k, a[8] * k
+        return np.array(a).reshape(3, 3)
+
+    def _fix_cov(self, cov: FloatArray) -> FloatArray:
+        return np.array(self._fix_cov_list(cov)).reshape(3, 3)
+
+    def _fix_cov_list(self, cov: FloatArray) -> list[float]:
+        """A fix's covariance with its floors, row by row as 9 floats (scalar maths: once per keyframe)."""
+        a = np.asarray(cov, dtype=float).reshape(9).tolist()
+        a[0] = max(a[0], self.cfg.fix_min_sigma_xy**2)
+        a[4] = max(a[4], self.cfg.fix_min_sigma_xy**2)
+        a[8] = max(a[8], self.cfg.fix_min_sigma_theta**2)
+        return a
+
+    def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,
+                    vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
+        """The scan-to-map fix on keyframe ``k`` (at the scan stamp): with its latency estimated,
+        configured, or none."""
+        cov = self._fix_weighted_cov(fix.cov)
+        pose = np.asarray(fix.pose, dtype=float)
+        # a fix stamped late is the pose that long before its stamp: carried forward by the motion
+        lat = self.latency_estimate()
+        if lat != 0.0:
+            pose = compose1(pose, se2_exp(self._twist_at(t) * lat))
+        # pairs for the latency estimate: consecutive fixes (turns starting / ending) and, once a
+        # second, fixes ~1 s apart (a start from standstill: the lag is v * latency)
+        p_now = np.asarray(fix.pose, dtype=float)
+        if self._last_fix is not None and 0.0 < t - self._last_fix[0] <= 0.3:
+            self._fix_pairs.append((self._last_fix[0], t, self._last_fix[1], p_now, self._last_fix[2], cov))
+        if t - self._long_pair_t >= 1.0:
+            old = [f for f in self._recent_fixes if 0.8 <= t - f[0] <= 1.2]
+            if old:
+                f0 = old[0]
+                self._fix_pairs.append((f0[0], t, f0[1], p_now, f0[2], cov))
+                self._long_pair_t = t
+        self._last_fix = (t, p_now, cov)
+        self._recent_fixes.append(self._last_fix)
+        return fix_factor(k, pose, cov, self.cfg.fix_kernel, self.cfg.fix_kernel_k)
+
+    def _add_gyro_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                          ts: dict) -> None:
+        """Gyro yaw-increment factors for every keyframe interval the gyro now covers (a bursty
+        IMU's readings arrive after the keyframe: its factors follow at the next one)."""
+        if not self.cfg.gyro:
+            return
+        for name, (gts, _, _) in self.gyro.items():
+            if not gts:
+                continue
+            for ta, tb, ka, kb in self._covered_intervals(t_now, self._gyro_done.get(name, -np.inf), gts[-1]):
+                r = self._gyro_increment(name, ta, tb)
+                self._gyro_done[name] = tb
+                if r is None:
+                    continue
+                k_g, rel = self._noise_of(name)
+                var = k_g * k_g * (r[1] + 1e-10 * (tb - ta)) + (rel * r[0]) ** 2
+                gb = self.gbias.get(name)
+                if gb is not None:  # the bias known beside the graph: its uncertainty on the increment
+                    graph.add(yaw_increment_factor(ka, kb, r[0], math.sqrt(var + (gb.sigma() * (tb - ta)) ** 2)))
+                else:
+                    d_raw = r[0] + self.gyro_bias_of(name) * (tb - ta)  # the factor carries the bias variable
+                    ch = self._chain(f"gyro_bias:{name}", "b", [0.0], [self.cfg.gyro_bias_prior_radps],
+                                     [self.cfg.gyro_bias_rw_radps])
+                    kbias = self._chain_key(ch, tb, graph, vals, ts)
+                    graph.add(gyro_factor(ka, kb, kbias, d_raw, tb - ta, math.sqrt(var)))
+                if ka not in ts:
+                    ts[ka] = ta
+                self.stats["gyro_factors"] += 1
+
+    def _late_keyframe(self, t: float, fix: PoseFix | None) -> bool:
+        """A scan older than the newest keyframe: own keyframe between its neighbours."""
+        self._flush_acc()
+        i = int(np.searchsorted(self.kf_t, t))  # kf_t[i-1] < t < kf_t[i]
+        if i == 0 or not self.window or self.kf_t[i - 1] < self.window[0][0]:
+            self.stats["dropped_late"] += 1
+            return False
+        ka, kb = self.kf_key[i - 1], self.kf_key[i]
+        ta, tb = self.kf_t[i - 1], self.kf_t[i]
+        idx_ab = self.between_idx.get((ka, kb))
+        if idx_ab is None or ka not in self.kf_pose:
+            self.stats["dropped_late"] += 1
+            return False
+        k = self._new_x(t)
+        graph = gtsam.NonlinearFactorGraph()
+        vals = gtsam.Values()
+        d1, c1 = self._integrate(ta, t)
+        d2, c2 = self._integrate(t, tb)
+        graph.add(between_factor(ka, k, d1, c1, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
+        graph.add(between_factor(k, kb, d2, c2, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k))
+        pa = self.isam.calculateEstimatePose2(ka)
+        guess = compose1(np.array([pa.x(), pa.y(), pa.theta()]), d1)
+        vals.insert(k, gtsam.Pose2(*guess))
+        used = False
+        if fix is not None:
+            if self.cfg.fix_gate is not None:
+                self._update_covariance()
+            pred_cov = carried_covariance(self._last_cov, np.array([pa.x(), pa.y(), pa.theta()]), guess, c1)
+            if self._gate(fix, guess, pred_cov):
+                graph.add(fix_factor(k, fix.pose, self._fix_weighted_cov(fix.cov), self.cfg.fix_kernel,
+                                     self.cfg.fix_kernel_k))
+                used = True
+                self.stats["fixes_used"] += 1
+            else:
+                self.stats["fixes_rejected"] += 1
+        ts = {k: t}
+        self._register(graph, vals, ts)
+        self._remove_registered(idx_ab)
+        try:
+            idx = self._update(graph, vals, ts, remove=[idx_ab])
+        except RuntimeError:
+            self._restart_after_failure([])
+            return False
+        del self.between_idx[(ka, kb)]
+        self.between_idx[(ka, k)] = idx[0]
+        self.between_idx[(k, kb)] = idx[1]
+        self.kf_t.insert(i, t)
+        self.kf_key.insert(i, k)
+        w = list(self.window)
+        j = next((n for n, (tw, _) in enumerate(w) if tw > t), len(w))
+        w.insert(j, (t, k))
+        self.window = deque(w)
+        p = self.isam.calculateEstimatePose2(k)
+        self.kf_pose[k] = np.array([p.x(), p.y(), p.theta()])
+        self.stats["late_scans"] += 1
+        self.stats["keyframes"] += 1
+        return used

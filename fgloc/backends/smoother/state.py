@@ -1,0 +1,157 @@
+"""What the smoother keeps: its sensor buffers, keyframes, iSAM2 instance and calibration chains
+(:class:`SmootherState`, the first of the smoother's layers), and each input source's health and
+noise bookkeeping."""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from fgloc.backends.base import Backend, FloatArray
+from fgloc.backends.compass import CompassCalibrator
+from fgloc.backends.contract import SourceNoise
+from fgloc.backends.health import Arbiter, GyroBias, LatencyEstimator, SourceHealth
+from fgloc.backends.smoother.config import SmootherConfig
+from fgloc.backends.smoother.keys import BALLAST
+from fgloc.types import PoseFix
+
+
+@dataclass
+class Chain:
+    """A slowly varying calibration variable (``Vector``): one per ``offset_interval_s``, tied by a random walk."""
+
+    char: str
+    prior_mean: FloatArray
+    prior_sigma: FloatArray
+    rw_sigma: FloatArray           # per sqrt(s)
+    key: int | None = None
+    t: float = -np.inf
+    estimate: FloatArray | None = None
+
+
+class SmootherState(Backend):
+    """The smoother's state (set up and reset here); the layers above add what it does with it."""
+
+    def __init__(self, config: SmootherConfig | None = None) -> None:
+        super().__init__()
+        self.cfg = config or SmootherConfig()
+        self.calib = CompassCalibrator(self.cfg.calibration_fixes)
+        self._q_slip = np.asarray(self.cfg.q_slip, dtype=float)
+        self.next_x = 0  # key counters never restart, so keys stay unique across resets
+        self.next_o = 0
+        self._next_sym: dict[str, int] = {}
+        self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0, "gyro_factors": 0})
+        # sensor streams and what is known about each source (kept across re-initializations)
+        self.gyro: dict[str, tuple[list[float], list[float], list[float]]] = {}
+        self._gyro_done: dict[str, float] = {}
+        self.chains: dict[str, Chain] = {}
+        # long blocks: whether the fixes' heading errors vary slowly (see _fix_weighted_cov)
+        self.arb = Arbiter(long_blocks=(4, 16))
+        self.latency_est = LatencyEstimator()
+        self._last_fix: tuple[float, FloatArray, FloatArray] | None = None
+        self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._long_pair_t = -np.inf
+        self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
+        self.sources: dict[str, SourceHealth] = {}
+        self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
+        self._gains = np.ones(2)
+        self._turned = 0.0
+        #: the odometry's stamps cannot be placed against the scans' (set by the localizer: a slow
+        #: odometry written in bursts, which its OdometryClock cannot shift): its timing variance is
+        #: used as with ``slow_odom_timing`` (see :meth:`_timing_var`)
+        self.odom_timing_unknown = False
+        # differential orientation sources (readings until their keyframe) and further twist sources
+        self.rel_pending: list[tuple[float, float, float, str]] = []
+        self._rel_gated: dict[str, int] = {}
+        self.vel: dict[str, tuple[list[float], list[FloatArray], list[FloatArray]]] = {}
+        self._vel_done: dict[str, float] = {}
+        self._vel_translates: dict[str, bool] = {}
+        self._reset_state()
+
+    # ------------------------------------------------------------------ state
+    def _reset_state(self) -> None:
+        p = gtsam.ISAM2Params()
+        # per variable type: the poses and offsets at the configured threshold, the calibration
+        # variables at their own scale (a 0.01 s / 0.01 rad/s threshold would never relinearize them)
+        th = float(self.cfg.relinearize_threshold)
+        tm = gtsam.ISAM2ThresholdMap()
+        for sym, v in (("x", [th] * 3), ("o", [th] * 3), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
+                       ("l", [th * 1e-2]), ("r", [th]),
+                       ("a", [th * 0.1, th * 0.1]), (BALLAST, [th])):
+            tm.insert((sym, np.asarray(v, dtype=float)))
+        p.setRelinearizeThreshold(tm)
+        p.relinearizeSkip = self.cfg.relinearize_skip
+        p.findUnusedFactorSlots = False
+        self.isam = gtsam.IncrementalFixedLagSmoother(self.cfg.lag_s, p)
+        self._ballast: list[int] = []     # inert variables (see _with_ballast)
+        self._ballast_t = -np.inf         # when they were last stamped, and how many there were
+        self._ballast_n = 0
+        self._t_latest = -np.inf          # the newest timestamp given to the smoother
+        self.kf_t: list[float] = []          # keyframe times, increasing (window + history)
+        self.kf_key: list[int] = []          # keys, same order
+        self.kf_pose: dict[int, FloatArray] = {}   # latest estimate per key
+        self.window: deque[tuple[float, int]] = deque()
+        self.smoothed: dict[int, tuple[float, FloatArray]] = {}
+        self.between_idx: dict[tuple[int, int], int] = {}
+        self.cur_o: int | None = None
+        self.cur_o_t = -np.inf
+        self.odo_t: list[float] = []
+        self.odo_u: list[tuple[float, float, float]] = []   # (vx, vy, w) per message
+        self.odo_c: list[tuple[float, float, float, float, float, float]] = []  # covariances (upper6)
+        self.compass_pending: list[tuple[float, float, float, str]] = []  # t, yaw (compass), var, source
+        self.t0: float | None = None
+        self._rejects = 0
+        self._last_cov = np.eye(3) * 1e-2
+        self._cov_stale: int | None = None
+        self._init_yaw = 0.0
+        self.pending_kf: list[tuple[float, PoseFix | None]] = []
+        self._pred_cache: tuple | None = None
+        self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
+        self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
+        for ch in self.chains.values():  # calibration carries over a re-initialization as a prior
+            if ch.key is not None and ch.estimate is not None:
+                ch.prior_mean = ch.estimate.copy()
+            ch.key, ch.t = None, -np.inf
+        for src in self._gyro_done:
+            self._gyro_done[src] = -np.inf
+        self.rel_pending.clear()
+        self._vel_done = dict.fromkeys(self._vel_done, -np.inf)
+
+    @property
+    def initialized(self) -> bool:
+        return self.t0 is not None
+
+    @property
+    def encoder_sigmas(self) -> tuple[float, float, float]:
+        return self.cfg.encoder_sigmas
+
+    def set_odometry_timing_unknown(self, unknown: bool) -> None:
+        self.odom_timing_unknown = bool(unknown)
+
+    def source_health(self) -> Mapping[str, SourceHealth]:
+        return self.sources
+
+    def source_noise(self, name: str) -> SourceNoise | None:
+        if name not in self.arb.streams:
+            return None
+        k, c = self.arb.noise(name)
+        return SourceNoise(k, c, self.arb.shown_sigma(name), self.arb.claimed_sigma(name))
+
+    def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
+        """One reading of source ``name`` for the arbiter (registered at its first), when noise is adapted."""
+        if self.cfg.adapt_noise:
+            self.arb.add_reading(name, kind, rel_prior, t, value, var)
+
+    def _source(self, name: str, kind: str) -> SourceHealth:
+        h = self.sources.get(name)
+        if h is None:
+            h = self.sources[name] = SourceHealth(name, kind)
+        return h
+
+    def _noise_of(self, name: str) -> tuple[float, float]:
+        return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)

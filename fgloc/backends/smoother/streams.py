@@ -1,0 +1,281 @@
+"""The buffered sensor streams, queried between any two stamps: the odometry's integrated increment,
+a gyro's bias-free yaw change, the heading change from whichever covers an interval, the twist and
+yaw rate at a stamp, and the timing uncertainty of a slow odometry."""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_left, bisect_right
+from operator import sub
+
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+from fgloc.backends.factors import integrate_heading, integrate_twist_lists, scaled_delta
+from fgloc.backends.smoother.state import SmootherState
+from fgloc.geometry import exp_coefficients, wrap_scalar
+
+MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
+
+
+#: the odometry's mean message period for :meth:`SlidingWindowSmoother._timing_var` is taken over this many
+TIMING_MESSAGES = 200
+
+
+def all_finite(*arrays: FloatArray) -> bool:
+    """Every entry of the (small) arrays finite (scalar checks: np.all(np.isfinite(...)) costs ~4 us each)."""
+    return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
+
+
+def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
+                   weights: dict[int, float] | None = None) -> float | None:
+    """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
+    interpolated between them, from reading ``i`` on (the one at or before ``t0``); None where two
+    readings the interval needs are more than ``max_gap`` apart.  ``weights``: each reading's
+    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`)."""
+    d = 0.0
+    n = len(ts)
+    while i < n - 1 and ts[i] < t1:
+        ta, tb = ts[i], ts[i + 1]
+        a, b = max(ta, t0), min(tb, t1)
+        if b > a:
+            h = tb - ta
+            if h > max_gap:
+                return None
+            fa, fb = (a - ta) / h, (b - ta) / h
+            # weights of reading i and i+1 in the integral over [a, b]
+            wi = (b - a) * (1.0 - 0.5 * (fa + fb))
+            wj = (b - a) * 0.5 * (fa + fb)
+            d += wi * rs[i] + wj * rs[i + 1]
+            if weights is not None:
+                weights[i] = weights.get(i, 0.0) + wi
+                weights[i + 1] = weights.get(i + 1, 0.0) + wj
+        i += 1
+    return d
+
+
+def median_period(ts: list[float]) -> float:
+    """Median spacing of the last readings (inf with fewer than 3)."""
+    if len(ts) < 3:
+        return math.inf
+    last = ts[-50:]
+    d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
+    m = len(d) // 2
+    return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
+
+
+class Streams(SmootherState):
+    """Queries on the sensor buffers (no graph change)."""
+
+    def _period_of(self, ts: list[float]) -> float:
+        """:func:`_period` of a stamp list, remembered until it changes (a stamp list only grows at
+        its end with later stamps, or loses its oldest: its length and last stamp tell)."""
+        key = (id(ts), len(ts), ts[-1] if ts else None)
+        got = self._periods.get(key)
+        if got is None or got[0] is not ts:
+            if len(self._periods) > 8:
+                self._periods.clear()
+            got = self._periods[key] = (ts, median_period(ts))
+        return got[1]
+
+    def _gyro_increment(self, name: str, t0: float, t1: float, max_gap: float = 0.25, want_var: bool = True
+                        ) -> tuple[float, float] | None:
+        """Bias-free gyro yaw change over ``(t0, t1]`` and its variance, or None when the readings
+        do not cover the interval.  A gyro reading is the rate at its stamp: the rate is
+        interpolated linearly between readings and integrated exactly (holding a reading over the
+        interval before it would lead the heading by half a reading period).
+
+        The variance is each reading's share of its whole weight: a reading with weight ``w`` here
+        and ``W`` over all intervals adds ``var * w * W`` (not ``var * w^2``).  Neighbouring
+        keyframe intervals share readings, so their increments are correlated; independent
+        factors with ``var * w^2`` each claimed the integrated gyro 2-3x better (in variance) than
+        it is once keyframes come faster than readings (paper run: 25 Hz scans, 20 Hz gyro), and
+        the gyro's random walk wobbled the heading.  With the shares the factors of consecutive
+        intervals add up to the exact variance of the gyro's integral over them.  ``want_var=False``:
+        the variance is not computed (returned as 0)."""
+        got = self.gyro.get(name)   # (no default: .get's would build three lists at every call)
+        if got is None:
+            return None
+        ts, rs, vs = got
+        if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
+            return None
+        n = len(ts)
+        w: dict[int, float] = {}
+        d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap, w if want_var else None)
+        if d is None:
+            return None
+        var = 0.0
+        for m, ww in w.items():
+            # the gaps either side (at the buffer's ends: the one gap known, twice)
+            before = ts[m] - ts[m - 1] if m > 0 else None
+            after = ts[m + 1] - ts[m] if m + 1 < n else None
+            if before is None:
+                before = after if after is not None else 0.0
+            if after is None:
+                after = before
+            var += vs[m] * ww * max(0.5 * (min(before, max_gap) + min(after, max_gap)), ww)
+        return d - self.gyro_bias_of(name) * (t1 - t0), var
+
+    def _gyro_rate_at(self, t: float) -> float | None:
+        """The first gyro's bias-corrected rate at ``t`` (interpolated), or None."""
+        for name, (ts, rs, _) in self.gyro.items():
+            if ts and ts[0] <= t <= ts[-1]:
+                i = min(max(bisect_left(ts, t), 1), len(ts) - 1)
+                ta, tb = ts[i - 1], ts[i]
+                f = (t - ta) / (tb - ta) if tb > ta else 1.0
+                return rs[i - 1] + f * (rs[i] - rs[i - 1]) - self.gyro_bias_of(name)
+        return None
+
+    def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
+        if not self.odo_t:
+            return np.zeros(3), np.diag(np.square(self.cfg.encoder_sigmas)) * max(t1 - t0, 1e-3) ** 2
+        # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
+        i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
+        i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
+        # the predictions integrate from the newest keyframe again and again (~4 times per keyframe,
+        # to later and later stamps): each resumes from the last one's completed steps
+        mark = self._int_marks.get(t0)
+        if mark is None:
+            if len(self._int_marks) >= 4:
+                del self._int_marks[next(iter(self._int_marks))]
+            mark = self._int_marks[t0] = []
+        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
+
+    def _chord_along_gyro(self, t0: float, t1: float) -> FloatArray | None:
+        """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's
+        (bias-corrected) heading, ``[x, y, gyro yaw]`` in the frame at ``t0``; None when no gyro
+        covers the interval (each odometry twist held backwards, as :func:`integrate_twist`)."""
+        if not self.gyro or not self.odo_t:
+            return None
+        name = next(iter(self.gyro))
+        gts, grs, _ = self.gyro[name]
+        ng = len(gts)
+        # the gyro's coverage of the whole interval (what each step's _gyro_increment checks: a step
+        # it does not cover makes the chord None, whichever step it is)
+        if not gts or gts[-1] < t1 - 1e-9 or gts[0] > t0 + 1e-9:
+            return None
+        bias = self.gyro_bias_of(name)
+        max_gap = 0.25
+        ts = self.odo_t
+        n = len(ts)
+        i = bisect_right(ts, t0)
+        g = max(bisect_right(gts, t0) - 1, 0)   # the gyro reading at or before the step's start
+        t, x, y, th = t0, 0.0, 0.0, 0.0
+        while t < t1 - 1e-12:
+            j = min(i, n - 1)
+            tn = min(ts[i], t1) if i < n else t1
+            dt = tn - t
+            if dt > 0:
+                # _gyro_increment(name, t, tn, want_var=False) for this step, the gyro index carried
+                # from step to step instead of searched
+                while g + 1 < ng and gts[g + 1] <= t:
+                    g += 1
+                d = rate_integral(gts, grs, t, tn, g, max_gap)
+                if d is None:
+                    return None
+                w = d - bias * (tn - t)
+                u = self.odo_u[j]
+                vx, vy = float(u[0]) * dt, float(u[1]) * dt
+                a, b = exp_coefficients(w)
+                dx, dy = a * vx - b * vy, b * vx + a * vy
+                c, s_ = math.cos(th), math.sin(th)
+                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+            t = tn
+            i += 1
+        return np.array([x, y, wrap_scalar(th)])
+
+    def _rotation_between(self, t0: float, t1: float) -> float:
+        """Heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``): a gyro's when it covers
+        the interval, else the odometry's (times its yaw-rate gain)."""
+        if t0 == t1:
+            return 0.0
+        a, b = (t0, t1) if t1 > t0 else (t1, t0)
+        for name in self.gyro:
+            r = self._gyro_increment(name, a, b, want_var=False)
+            if r is not None:
+                return r[0] if t1 > t0 else -r[0]
+        if not self.odo_t:
+            return 0.0
+        i0 = max(bisect_right(self.odo_t, a) - 1, 0)
+        i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
+        th = integrate_heading(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]), a, b)
+        th *= float(self._gains[1])
+        return th if t1 > t0 else -th
+
+    def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
+        """An odometry increment with the current gains (and the gyro's rotation when it covers it)."""
+        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8:
+            return d
+        for name in self.gyro:  # the first gyro that covers the interval turns it
+            r = self._gyro_increment(name, t0, t1, want_var=False)
+            if r is not None and abs(d[2]) > 1e-9:
+                return scaled_delta(d, (float(self._gains[0]), r[0] / d[2]), jacobian=False)[0]
+            if r is not None:
+                out = scaled_delta(d, self._gains, jacobian=False)[0]
+                out[2] = r[0]
+                return out
+        return scaled_delta(d, self._gains, jacobian=False)[0]
+
+    def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float, str]]
+                             ) -> tuple[float, float] | None:
+        """Readings carried to ``t_k`` by the odometry rotation and averaged (circularly)."""
+        if not readings:
+            return None
+        ref = None
+        acc = 0.0
+        var = 0.0
+        for tc, yaw, v, _src in readings:
+            z = yaw + self._rotation_between(tc, t_k)
+            if ref is None:
+                ref = z
+            acc += wrap_scalar(z - ref)
+            var += v
+        n = len(readings)
+        assert ref is not None
+        return wrap_scalar(ref + acc / n), math.sqrt(var / n / n)
+
+    def _timing_var(self, t0: float, t1: float) -> float:
+        """Yaw variance (rad^2) of a keyframe interval's odometry increment from where in time the odometry
+        places the motion, when it is too slow to place it (mean message period over its last
+        ``TIMING_MESSAGES`` messages above :data:`MAX_REF_PERIOD_S`: the latency estimator takes no pairs from
+        it either): its pose at each keyframe stamp, against the scan's, is known to about one period, so
+        ``(period * w)^2`` at each end, ``w`` the yaw rate there.  Not modelled, a scan stamped off its
+        odometry (CARMEN: 80-120 ms on fr079 / aces, intel's bursts) gave two consecutive increments
+        +-5-13 deg off in turns where they claimed 0.3-1.4 deg, and they outvoted the keyframe's fix."""
+        n = min(len(self.odo_t), TIMING_MESSAGES)
+        if not (self.cfg.slow_odom_timing or self.odom_timing_unknown) or n < 3:
+            return 0.0
+        per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
+        if not per > MAX_REF_PERIOD_S:
+            return 0.0
+        wa, wb = self._yaw_rate_at(t0), self._yaw_rate_at(t1)
+        return per * per * (wa * wa + wb * wb)
+
+    def _yaw_rate_at(self, t: float) -> float:
+        """:meth:`_twist_at`'s yaw rate alone (no array made)."""
+        if not self.odo_t:
+            return 0.0
+        w = self._gyro_rate_at(t)
+        if w is not None:
+            return float(w)
+        return float(self.odo_u[min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)][2] * float(self._gains[1]))
+
+    def _twist_at(self, t: float) -> FloatArray:
+        """The body twist at ``t``: odometry times its gains, the gyro's yaw rate when there is one."""
+        if not self.odo_t:
+            return np.zeros(3)
+        u0, u1, _ = self.odo_u[min(bisect_left(self.odo_t, t), len(self.odo_t) - 1)]
+        gv = float(self._gains[0])
+        return np.array([u0 * gv, u1 * gv, self._yaw_rate_at(t)])
+
+    def gyro_bias(self, source: str = "imu") -> float:
+        """The estimated bias (rad/s) of ``source``'s gyro (0 before it is estimated)."""
+        return self.gyro_bias_of(f"{source}.gyro")
+
+    def gyro_bias_of(self, name: str) -> float:
+        """The estimated bias (rad/s) of the gyro stream ``name`` (``SOURCE.gyro``)."""
+        gb = self.gbias.get(name)
+        if gb is not None:
+            return gb.value()
+        ch = self.chains.get(f"gyro_bias:{name}")
+        return float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0

@@ -1,0 +1,196 @@
+"""The fixed-lag window on ``gtsam.IncrementalFixedLagSmoother``: updates (with the inert ballast that
+keeps iSAM2's re-elimination incremental), the keyframes leaving the window (their smoothed value),
+the marginal covariance, and the restart after a solver failure."""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections import deque
+from collections.abc import Iterator
+
+import gtsam
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+from fgloc.backends.smoother.calibration import Calibration
+from fgloc.backends.smoother.covariance import RESTART_VAR_MAX
+from fgloc.backends.smoother.keys import BALLAST, X, symbol
+
+_ZERO1 = np.zeros(1)
+
+
+_UNIT1 = gtsam.noiseModel.Isotropic.Sigma(1, 1.0)
+
+
+class FixedLagWindow(Calibration):
+    """iSAM2's window: updates, marginalization, outputs of the solved keyframes."""
+
+    def _new_x(self, t: float) -> int:
+        k = X(self.next_x)
+        self.next_x += 1
+        return k
+
+    def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
+                remove: list[int] | None = None) -> list[int]:
+        tsm = gtsam.FixedLagSmootherKeyTimestampMap()
+        for k, t in ts.items():
+            tsm.insert((k, t))
+        if ts:
+            self._capture_leaving(max(ts.values()))
+            self._t_latest = max(self._t_latest, max(ts.values()))
+        n = graph.size()
+        graph, vals = self._with_ballast(graph, vals, tsm)
+        self.isam.update(graph, vals, tsm, remove or [])
+        return list(self.isam.getISAM2Result().getNewFactorsIndices())[:n]
+
+    def _with_ballast(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                      tsm: gtsam.FixedLagSmootherKeyTimestampMap) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+        """The update's factors and values with enough inert variables in iSAM2 (``z<j>``: a
+        ``Vector1`` each, under its own prior, tied to nothing, kept in the window) that its
+        re-elimination stays incremental.
+
+        iSAM2 re-eliminates in batch, relinearizing every factor of the window, whenever the
+        variables an update affects reach 65 % of all it holds (GTSAM's fixed ``batchThreshold``).
+        The fixed-lag marginalization marks the path from the oldest keyframe to the root at
+        every update, so on a 2 s window (~35 variables) 29 % of the office log's updates went
+        batch: 3 of 4 calls of the Python factors were relinearizations of factors whose
+        variables had not moved, which give the cached linear factors again (a factor's
+        linearization depends on its variables' linearization points only).  With at least 0.6
+        inert variables per live one the affected share stays below 0.65: the same linear
+        systems, solved incrementally (results equal to rounding; the inert ones never move, so
+        they are never relinearized)."""
+        live = self.isam.getLinearizationPoint().size() - len(self._ballast) + vals.size()
+        want = int(0.6 * live) + 2
+        if len(self._ballast) < want:
+            graph, vals = gtsam.NonlinearFactorGraph(graph), gtsam.Values(vals)
+            for _ in range(want - len(self._ballast)):
+                n = self._next_sym.get(BALLAST, 0)
+                self._next_sym[BALLAST] = n + 1
+                k = symbol(BALLAST, n)
+                graph.add(gtsam.PriorFactorVector(k, _ZERO1, _UNIT1))
+                vals.insert(k, _ZERO1)
+                self._ballast.append(k)
+        t = self._t_latest if math.isfinite(self._t_latest) else 0.0
+        if t - self._ballast_t > 0.5 * self.cfg.lag_s or len(self._ballast) > self._ballast_n:
+            # stamped anew every half lag (new ones at once): they stay in the window, never among the
+            # keys the update marginalizes, and every key keeps its ordering group (GTSAM puts every
+            # stamped key in group 1 whatever its stamp), so the same update as stamping them every time
+            for k in self._ballast:
+                tsm.insert((k, t))
+            self._ballast_t, self._ballast_n = t, len(self._ballast)
+        return graph, vals
+
+    def _flush_acc(self) -> None:
+        """Hand the accumulated keyframes' factors to iSAM2 (one update)."""
+        if self._acc is None:
+            return
+        graph, vals, ts, pairs, keys = self._acc
+        self._acc = None
+        self._register(graph, vals, ts)
+        try:
+            idx = self._update(graph, vals, ts)
+        except RuntimeError:
+            self._restart_after_failure(keys)
+            return
+        for pair, pos in pairs:
+            self.between_idx[pair] = idx[pos]
+        self._refresh_chains()
+        for kk in keys[:-1]:
+            p = self.isam.calculateEstimatePose2(kk)
+            self.kf_pose[kk] = np.array([p.x(), p.y(), p.theta()])
+        self._after_keyframe(self.kf_t[-1])
+
+    def _restart_after_failure(self, drop: list[int]) -> None:
+        """GTSAM found the system ill-conditioned (e.g. ``Indeterminate linear system`` on degenerate
+        input): counted, and the smoother restarts at the newest keyframe's prediction with the
+        last marginal as its prior (bounded, :data:`RESTART_VAR_MAX`); the keyframes in ``drop``
+        (not solved) leave the window."""
+        self.stats["solver_failures"] = self.stats.get("solver_failures", 0) + 1
+        t_last, k_last = self.kf_t[-1], self.kf_key[-1]
+        pose = self.kf_pose.get(k_last)
+        if pose is None or not np.all(np.isfinite(pose)):
+            pose = next((p for _, p in sorted(self.smoothed.values(), key=lambda v: -v[0])
+                         if np.all(np.isfinite(p))), np.zeros(3))
+        self.window = deque(w for w in self.window if w[1] not in drop)
+        self.initialize(t_last, np.array(pose, dtype=float), np.diag(np.minimum(
+            np.abs(np.diag(self._last_cov)), RESTART_VAR_MAX)))
+
+    def _register(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict) -> None:
+        """Hook for the batch smoother (keeps a copy of every factor)."""
+
+    def _after_keyframe(self, t: float) -> None:
+        k = self.kf_key[-1]
+        pose = self.isam.calculateEstimatePose2(k)
+        self.kf_pose[k] = np.array([pose.x(), pose.y(), pose.theta()])
+        self._cov_stale = k
+        if self.cfg.online_covariance:
+            self._update_covariance()
+        self.stats["keyframes"] += 1
+        self._record_online(t, self.kf_pose[k], self._last_cov)
+
+    def _capture_leaving(self, t_new: float) -> None:
+        """Record the keyframes the next update will marginalize (their final smoothed value)."""
+        horizon = t_new - self.cfg.lag_s + 1e-6
+        while self.window and self.window[0][0] < horizon:
+            tk, kk = self.window.popleft()
+            try:
+                p = self.isam.calculateEstimatePose2(kk)
+                self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+            except (RuntimeError, IndexError):
+                if kk in self.kf_pose:
+                    self.smoothed[kk] = (tk, self.kf_pose[kk].copy())
+            self.kf_pose.pop(kk, None)
+
+    def _remove_registered(self, isam_index: int) -> None:
+        """Hook for the batch smoother."""
+
+    def _update_covariance(self) -> None:
+        """Marginal covariance of the newest solved keyframe, rotated into the map frame."""
+        k = self._cov_stale
+        if k is None or k not in self.kf_pose:
+            return
+        self._cov_stale = None
+        self._pred_cache = None
+        try:
+            body = np.asarray(self.isam.marginalCovariance(k))
+        except (RuntimeError, IndexError):
+            return
+        c, s_ = math.cos(self.kf_pose[k][2]), math.sin(self.kf_pose[k][2])
+        R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        self._last_cov = R @ body @ R.T
+
+    def current(self, covariance: bool = True) -> tuple[float, FloatArray, FloatArray] | None:
+        """Newest keyframe estimate; its covariance is computed here on demand (iSAM2 marginal;
+        ``covariance=False``: the last one computed)."""
+        if not self.kf_key:
+            return None
+        if covariance:
+            self._update_covariance()
+        return self.kf_t[-1], self.kf_pose[self.kf_key[-1]].copy(), self._last_cov.copy()
+
+    def _flush_window(self) -> None:
+        for tk, kk in self.window:
+            try:
+                p = self.isam.calculateEstimatePose2(kk)
+            except (RuntimeError, IndexError):
+                continue
+            self.smoothed[kk] = (tk, np.array([p.x(), p.y(), p.theta()]))
+        self.window.clear()
+
+    def _covered_intervals(self, t_now: float, done: float,
+                           last_t: float) -> Iterator[tuple[float, float, int, int]]:
+        """The keyframe intervals ``(ta, tb, ka, kb)`` a source's readings up to ``last_t`` now cover and
+        that have no factor of it yet: starting at a keyframe >= ``done`` (the end of its last interval)
+        and inside the window (never on a keyframe about to be marginalized)."""
+        horizon = t_now - self.cfg.lag_s + 0.25
+        i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
+        while i < len(self.kf_t):
+            ta, tb = self.kf_t[i - 1], self.kf_t[i]
+            if tb > last_t + 1e-9:
+                return
+            ka, kb = self.kf_key[i - 1], self.kf_key[i]
+            i += 1
+            if ta < done - 1e-9 or ta < horizon or ka not in self.kf_pose or kb not in self.kf_pose:
+                continue
+            yield ta, tb, ka, kb

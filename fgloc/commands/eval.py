@@ -1,6 +1,14 @@
-"""``fgloc eval``: error metrics of estimated trajectories against a reference, or relation errors.
+"""``fgloc eval``: error metrics of estimated trajectories against a reference, or relation errors;
+``fgloc export``: a log's topic (or any trajectory fgloc reads) as a TUM file.
+
+Every trajectory argument is a TUM file, a log with a topic (``run.mcap:/fused_pose``,
+``robot.bag:/odom``; without one the log's /fused_pose, /ground_truth or only pose topic) or a
+CARMEN log (its laser lines' poses): :mod:`fgloc.eval.trajectories`.
 
     fgloc eval EST.tum GT.tum [--plots DIR] [--json]
+    fgloc eval out/run.mcap sim/log.mcap                    # /fused_pose against /ground_truth
+    fgloc eval out/trajectory.tum robot.bag:/odometry/filtered
+    fgloc export robot.bag:/odom -o odom.tum
     fgloc eval EKF.tum SMOOTHER.tum GT.tum --plots DIR      # several estimates, one reference (last)
     fgloc eval --relations FILE TRAJ.tum                    # Kuemmerle et al. relations metric
     fgloc eval --reference REF.tum TRAJ.tum                 # relations built from a reference trajectory
@@ -15,7 +23,7 @@ from typing import Annotated, Any
 
 import typer
 
-from fgloc.errors import FglocError, LogError
+from fgloc.errors import ConfigError, FglocError, LogError
 
 # (Metrics key, label, unit, format) in display order; None key = section break
 _TABLE_ROWS: list[tuple[str, str, str, str] | None] = [
@@ -117,9 +125,9 @@ def _relations_cmd(
         if e.name in ("fgloc.eval.relations",):
             raise FglocError("relations evaluator not available (fgloc.eval.relations is missing)") from None
         raise
-    from fgloc.io.tum import read_tum
+    from fgloc.eval.trajectories import read_trajectory
 
-    traj = read_tum(traj_path)
+    traj, _ = read_trajectory(traj_path)
     if relations is not None:
         if not relations.is_file():
             raise LogError(f"{relations}: relations file not found")
@@ -127,7 +135,7 @@ def _relations_cmd(
         source = {"relations": str(relations)}
     else:
         assert reference is not None
-        ref = read_tum(reference)
+        ref, _ = read_trajectory(reference)
         rels = R.relations_from_reference(ref, min_dt=min_dt, max_dt=max_dt)
         source = {"reference": str(reference)}
     if not rels:
@@ -161,8 +169,9 @@ def eval_cmd(
     files: Annotated[
         list[Path],
         typer.Argument(
-            help="EST.tum [EST2.tum ...] GT.tum (the last file is the reference), "
-            "or one TRAJ.tum with --relations / --reference",
+            help="EST [EST2 ...] REF (the last is the reference), or one TRAJ with --relations / --reference; "
+            "each a TUM file, a log[:TOPIC] (MCAP, rosbag2, ROS 1 bag: Odometry or PoseWithCovarianceStamped "
+            "poses; default /fused_pose, /ground_truth or the only such topic) or a CARMEN log",
             show_default=False,
             metavar="FILES",
         ),
@@ -195,6 +204,9 @@ def eval_cmd(
         float, typer.Option("--t-offset", help="Add this to the estimates' stamps before association (s)")
     ] = 0.0,
     paper: Annotated[bool, typer.Option("--paper", help="Show the paper's reported values beside ours")] = False,
+    topic: Annotated[
+        str | None, typer.Option("--topic", help="the topic of every log argument that names none (LOG:TOPIC)")
+    ] = None,
     max_assoc_dt: Annotated[
         float, typer.Option("--max-assoc-dt", help="Relations: max stamp difference to a pose (s)")
     ] = 0.05,
@@ -212,21 +224,28 @@ def eval_cmd(
     """
     if relations is not None or reference is not None:
         if relations is not None and reference is not None:
-            raise typer.BadParameter("give --relations or --reference, not both")
+            raise ConfigError("fgloc eval: give --relations or --reference, not both")
         if len(files) != 1:
-            raise typer.BadParameter("with --relations / --reference give exactly one TRAJ.tum")
+            raise ConfigError(f"fgloc eval: with --relations / --reference give exactly one trajectory, got "
+                              f"{len(files)}")
         _relations_cmd(files[0], relations, reference, max_assoc_dt, as_json, min_dt, max_dt)
         return
     if len(files) < 2:
-        raise typer.BadParameter("give EST.tum and GT.tum (the reference last)")
+        raise ConfigError(f"{files[0]}: fgloc eval needs an estimate and a reference (the reference last), e.g. "
+                          "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
     from fgloc.eval.metrics import AssociationError, evaluate
-    from fgloc.io.tum import read_tum
+    from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
 
     gt_path, est_paths = files[-1], files[:-1]
-    gt = read_tum(gt_path)
-    ests = {lab: read_tum(p) for lab, p in zip(_labels(est_paths), est_paths, strict=True)}
+    gt, gt_src = read_trajectory(gt_path, topic)
+    read = [read_trajectory(p, topic) for p in est_paths]
+    labels = [f"{lab}:{r[1].topic}" if r[1].topic else lab for lab, r in zip(_labels([r[1].path for r in read]), read,
+                                                                              strict=True)]
+    if len(set(labels)) < len(labels):
+        labels = [str(p) for p in est_paths]
+    ests = {lab: tr for lab, (tr, _src) in zip(labels, read, strict=True)}
     if t_offset:
         ests = {lab: Trajectory(tr.stamps + t_offset, tr.poses, tr.frame_id) for lab, tr in ests.items()}
     results = {}
@@ -236,13 +255,13 @@ def eval_cmd(
                 est, gt, max_gap=max_gap, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s
             )
         except AssociationError as e:
-            raise LogError(f"{p} vs {gt_path}: {e}") from None
+            raise LogError(f"{p} vs {gt_src.label}: {e}") from None
 
     written: list[Path] = []
     if plots is not None:
         from fgloc.eval.plots import plot_all
 
-        fx = read_tum(fixes) if fixes is not None else None
+        fx = read_trajectory(fixes)[0] if fixes is not None else None
         occ = None
         if map_yaml is not None:
             from fgloc.maps import load_map
@@ -252,7 +271,7 @@ def eval_cmd(
 
     if as_json:
         docs = [
-            {"label": lab, "estimate": str(p), "reference": str(gt_path), "metrics": m.to_dict()}
+            {"label": lab, "estimate": str(p), "reference": gt_src.label, "metrics": m.to_dict()}
             for (lab, m), p in zip(results.items(), est_paths, strict=True)
         ]
         out: Any = docs[0] if len(docs) == 1 else docs
@@ -265,10 +284,35 @@ def eval_cmd(
     from rich.console import Console
 
     console = Console()
-    console.print(_metrics_table(results, gt_path.name, paper))
+    console.print(_metrics_table(results, gt_src.path.name + ("" if gt_src.topic is None else f":{gt_src.topic}"),
+                                 paper))
     if written:
         console.print(f"plots: {len(written)} PNG files in {plots}")
 
 
+def export_cmd(
+    src: Annotated[str, typer.Argument(help="a log[:TOPIC] (MCAP, rosbag2, ROS 1 bag), a CARMEN log or a TUM file",
+                                       metavar="LOG[:TOPIC]")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="the TUM file to write")],
+    topic: Annotated[str | None, typer.Option("--topic", help="the topic (instead of LOG:TOPIC)")] = None,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing file")] = False,
+) -> None:
+    """Write a log's Odometry / PoseWithCovarianceStamped topic (or a CARMEN log's laser poses) as a
+    TUM file, as evo reads it."""
+    from fgloc.app.files import OutputError, check_not_input
+    from fgloc.eval.trajectories import read_trajectory
+    from fgloc.io.tum import write_tum
+
+    tr, where = read_trajectory(src, topic)
+    check_not_input(output, [where.path])
+    if output.is_dir():
+        raise OutputError(f"{output}: is a folder, expected a .tum file name")
+    if output.exists() and not force:
+        raise OutputError(f"{output}: exists; pass --force to overwrite it")
+    write_tum(output, tr)
+    print(f"wrote {output}: {len(tr)} poses of {where.label} ({tr.frame_id} frame, {tr.duration:.1f} s)")
+
+
 def register(app: typer.Typer) -> None:
     app.command("eval")(eval_cmd)
+    app.command("export")(export_cmd)

@@ -110,7 +110,8 @@ def test_eval_too_few_poses(files, capsys):
 
 def test_eval_needs_two_files(files, capsys):
     assert main(["eval", str(files / "gt.tum")]) == 2
-    assert "GT.tum" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "needs an estimate and a reference" in err and "GT.tum" in err
 
 
 def test_eval_reference_relations(files, capsys):

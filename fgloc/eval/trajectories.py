@@ -1,0 +1,164 @@
+"""Trajectories from every file fgloc writes or reads, for ``fgloc eval`` and ``fgloc export``.
+
+A trajectory is named ``FILE`` or ``FILE:TOPIC`` (``run.mcap:/fused_pose``, ``log.bag:/odom``); the
+file's kind is found by its content:
+
+* a TUM file (``timestamp x y z qx qy qz qw`` lines): its poses;
+* a log (ROS 2 MCAP, rosbag2 folder, ROS 1 bag): the poses of a ``nav_msgs/Odometry`` or
+  ``geometry_msgs/PoseWithCovarianceStamped`` topic, at their header stamps.  Without a topic:
+  ``/fused_pose`` (what ``fgloc run`` writes), else ``/ground_truth``, else the log's only topic of
+  those types; several candidates are a one-line error naming them;
+* a CARMEN log (raw or a SLAM-corrected one): the pose each laser line carries (``x y theta``, the
+  laser's pose; corrected in a corrected log) at its ipc timestamp; ``FILE:/odom`` is the odometry
+  as ``fgloc run`` reads it.
+
+Errors are one-line :class:`~fgloc.errors.LogError` naming the file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fgloc.errors import LogError
+from fgloc.types import Trajectory
+
+#: topics taken without being named, in this order
+PREFERRED_TOPICS = ("/fused_pose", "/ground_truth")
+CARMEN_LASER = "laser"  # the CARMEN pseudo-topic of the laser lines' poses
+
+
+@dataclass
+class TrajectorySource:
+    """Where a trajectory was read from: the file, its kind and the topic (None for TUM)."""
+
+    path: Path
+    kind: str  # "tum", "carmen" or a log format ("mcap", "rosbag1", "rosbag2")
+    topic: str | None = None
+
+    @property
+    def label(self) -> str:
+        return str(self.path) if self.topic is None else f"{self.path}:{self.topic}"
+
+
+def split_spec(spec: str | Path) -> tuple[Path, str | None]:
+    """``FILE`` or ``FILE:TOPIC`` -> ``(path, topic or None)``; a path that exists is never split."""
+    s = str(spec)
+    if Path(s).exists() or ":" not in s:
+        return Path(s), None
+    head, _, topic = s.rpartition(":")
+    if not head:
+        return Path(s), None
+    from fgloc.io.topics import resolve_name
+
+    return Path(head), resolve_name(topic) or None
+
+
+def _is_tum(path: Path) -> bool:
+    """A text file whose first data line is numbers (eight in a good one: read_tum says what is wrong)."""
+    from fgloc.io.carmen import open_text
+
+    try:
+        with open_text(path) as f:
+            for k, line in enumerate(f):
+                s = line.strip()
+                if s and not s.startswith("#"):
+                    parts = s.replace(",", " ").split()
+                    try:
+                        [float(v) for v in parts]
+                    except ValueError:
+                        return False
+                    return True
+                if k > 1000:
+                    return False
+    except (OSError, EOFError, UnicodeError):
+        return False
+    return False
+
+
+def read_trajectory(spec: str | Path, topic: str | None = None) -> tuple[Trajectory, TrajectorySource]:
+    """The trajectory ``spec`` names (see the module doc); ``topic`` is used when ``spec`` names none."""
+    from fgloc.io.formats import detect_format
+
+    path, named = split_spec(spec)
+    topic = named or (None if not topic else topic)
+    if topic is not None:
+        from fgloc.io.topics import resolve_name
+
+        topic = resolve_name(topic)
+    kind, _ = detect_format(path)  # one-line errors for a missing file, an empty one, a Git LFS pointer
+    if kind == "carmen" and not path.is_dir() and _is_tum(path):
+        if topic is not None:
+            raise LogError(f"{path}: a TUM file has no topics (drop ':{topic}')")
+        from fgloc.io.tum import read_tum
+
+        return read_tum(path), TrajectorySource(path, "tum")
+    if kind == "carmen" and topic in (None, "/" + CARMEN_LASER):
+        return _carmen_laser_poses(path), TrajectorySource(path, "carmen", "/" + CARMEN_LASER)
+    return _log_topic(path, kind, topic)
+
+
+def _carmen_laser_poses(path: Path) -> Trajectory:
+    from fgloc.io.carmen import LASER_KINDS, _parse_laser, open_text
+
+    stamps: list[float] = []
+    poses: list[np.ndarray] = []
+    with open_text(path) as f:
+        for line in f:
+            tok = line.split()
+            if not tok or tok[0] not in LASER_KINDS or tok[0] == "RLASER":
+                continue
+            try:
+                las = _parse_laser(tok)
+            except (ValueError, IndexError, OverflowError):
+                continue
+            if las.laser_pose is not None:
+                stamps.append(las.stamp)
+                poses.append(las.laser_pose)
+    if not stamps:
+        raise LogError(f"{path}: no laser lines with poses (FLASER / ROBOTLASER1 'x y theta') to read a "
+                       f"trajectory from (not a CARMEN log?)")
+    return Trajectory.from_unsorted(np.asarray(stamps), np.asarray(poses), "map")
+
+
+def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, TrajectorySource]:
+    from fgloc.io import open_log
+    from fgloc.io.topics import ODOMETRY, POSE_COV_STAMPED, normalize_type
+
+    src = open_log(path)
+    types = {t: normalize_type(ty) for t, ty in src.topic_types().items() if src.has(t)}
+    posed = [t for t, ty in sorted(types.items()) if ty in (ODOMETRY, POSE_COV_STAMPED)]
+    listing = ", ".join(f"{t} ({types[t]})" for t in posed) or "none"
+    if topic is None:
+        topic = next((t for t in PREFERRED_TOPICS if t in posed), None)
+        if topic is None:
+            if len(posed) != 1:
+                raise LogError(f"{path}: which trajectory? name a topic as {path}:TOPIC (its pose topics: "
+                               f"{listing})" if posed else
+                               f"{path}: no nav_msgs/Odometry or geometry_msgs/PoseWithCovarianceStamped topic to "
+                               f"read a trajectory from (its topics: {', '.join(sorted(types)) or 'none'})")
+            topic = posed[0]
+    elif topic not in types:
+        raise LogError(f"{path}: no topic {topic} (its pose topics: {listing})")
+    elif topic not in posed:
+        raise LogError(f"{path}: {topic} is {types[topic]}, not nav_msgs/Odometry or "
+                       f"geometry_msgs/PoseWithCovarianceStamped (its pose topics: {listing})")
+    stamps: list[float] = []
+    poses: list[np.ndarray] = []
+    frames: set[str] = set()
+    for _t, msg in src.messages([topic]):
+        pose = getattr(msg, "pose", None)
+        if pose is None:
+            continue
+        p = np.asarray(pose, dtype=float).reshape(-1)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            continue
+        stamps.append(float(msg.stamp))  # type: ignore[attr-defined]
+        poses.append(p)
+        frames.add(str(getattr(msg, "frame_id", "") or ""))
+    if not stamps:
+        raise LogError(f"{path}: {topic} has no finite poses")
+    frame = next(iter(frames)) if len(frames) == 1 and "" not in frames else "map"
+    return Trajectory.from_unsorted(np.asarray(stamps), np.asarray(poses), frame), TrajectorySource(path, kind, topic)

@@ -7,7 +7,52 @@ from pathlib import Path
 
 import typer
 
-EXIT_THREAD_DIED = 1  # a sensor thread died: the session stopped (the summary is still printed)
+EXIT_THREAD_DIED = 1  # a sensor thread died, or a sensor asked for never delivered: the summary is still printed
+
+
+def check_serial_path(serial: str | None) -> None:
+    """A serial device path (not a pyserial URL) that does not exist or cannot be opened for reading
+    and writing is a one-line :class:`~fgloc.errors.ConfigError` before anything starts (a port that
+    existed and goes away later is reconnected to)."""
+    import os
+
+    from fgloc.errors import ConfigError
+
+    if not serial or "://" in serial:
+        return
+    if not os.path.exists(serial):
+        raise ConfigError(f"{serial}: no such serial port (is the adapter plugged in? see ls /dev/ttyUSB* "
+                          "/dev/ttyACM*; a pyserial URL such as socket://HOST:PORT works too)")
+    if not os.access(serial, os.R_OK | os.W_OK):
+        raise ConfigError(f"{serial}: permission denied (add your user to the port's group, e.g. sudo usermod "
+                          "-aG dialout $USER, then log in again)")
+
+
+def silent_sensors(report: dict, serial: str | None, laser: str | None) -> list[str]:
+    """The sensors asked for that delivered nothing the whole session (one phrase each)."""
+    c = report.get("counters") or {}
+    out = []
+    if serial and not (c.get("serial") or {}).get("frames_ok"):
+        out.append(f"serial {serial}: no frame received")
+    if laser and not (c.get("laser") or {}).get("scans"):
+        connected = (c.get("laser") or {}).get("connects")
+        out.append(f"laser {laser}: no scan received" + ("" if connected else " (never connected)"))
+    return out
+
+
+def summary_line(report: dict) -> str:
+    """The session in one line (``--json`` prints the whole report)."""
+    c = report.get("counters") or {}
+    ser, las = c.get("serial"), c.get("laser")
+    parts = [f"{report.get('duration_s', 0):.1f} s, {report.get('poses', 0)} poses, "
+             f"{c.get('scans_fused', 0)} scans fused, {c.get('fixes', 0)} fixes"]
+    if ser is not None:
+        parts.append(f"serial {ser.get('frames_ok', 0)} frames (crc errors {ser.get('crc_errors', 0)}, dropped "
+                     f"{ser.get('dropped', 0)}, disconnects {ser.get('disconnects', 0)})")
+    if las is not None:
+        parts.append(f"laser {las.get('scans', 0)} scans (malformed {las.get('malformed', 0)}, connects "
+                     f"{las.get('connects', 0)})")
+    return "fgloc live: " + "; ".join(parts)
 
 
 def register(app: typer.Typer) -> None:
@@ -18,27 +63,29 @@ def register(app: typer.Typer) -> None:
         map_yaml: Path = typer.Option(None, "--map", help="map_server MAP.yaml (without: odometry + compass only)"),
         backend: str = typer.Option("smoother", "--backend", help="smoother | ekf"),
         frontend: str = typer.Option("native", "--frontend", help="scan matcher: native | amcl | kiss"),
-        initial_pose: tuple[float, float, float] = typer.Option(
-            (float("nan"), float("nan"), float("nan")), "--initial-pose", help="X Y YAW (m, m, rad) in the map"
+        initial_pose: tuple[float, float, float] | None = typer.Option(
+            None, "--initial-pose", help="X Y YAW (m, m, rad) in the map; without it: global localization"
         ),
         record: Path = typer.Option(None, "--record", help="record every received message to this MCAP"),
         publish: list[str] = typer.Option(None, "--publish", help="udp://127.0.0.1:PORT (JSON lines; repeatable)"),
         duration: float = typer.Option(None, "--duration", help="stop after S seconds (default: until Ctrl-C)"),
         config: Path = typer.Option(None, "--config", help="YAML overlaid on the defaults (`fgloc config show`; "
                                     "`fgloc config init` writes one)"),
-        laser_mount: tuple[float, float, float] = typer.Option(
-            (float("nan"), float("nan"), float("nan")), "--laser-mount", help="base_link->laser X Y YAW"
+        laser_mount: tuple[float, float, float] | None = typer.Option(
+            None, "--laser-mount", help="base_link->laser X Y YAW (m, m, rad) [default: the config's laser.mount]"
         ),
-        out: Path = typer.Option(None, "--out", help="write the live fused trajectory (online poses) as TUM"),
+        out: Path = typer.Option(None, "-o", "--output", help="write the live fused trajectory (online poses) as TUM"),
+        out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
+        as_json: bool = typer.Option(False, "--json", help="print the whole report (every counter) as JSON at the "
+                                     "end, not one summary line"),
         out_smoothed: Path = typer.Option(None, "--out-smoothed",
                                           help="write the localizer's smoothed trajectory at exit as TUM"),
-        quiet: bool = typer.Option(False, "--quiet", help="no status line"),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help="no status line"),
         view: str = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
                                  "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
     ) -> None:
-        """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP."""
-        import math
-
+        """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP.  Exit 0 done, 1 a
+        sensor thread died or a sensor asked for delivered nothing, 2 a usage error (a missing serial port)."""
         from fgloc.live.app import LiveRequest, run_live
         from fgloc.live.publish import dumps
 
@@ -66,14 +113,20 @@ def register(app: typer.Typer) -> None:
             if tty and not quiet:
                 sys.stderr.write("\n")
 
+        check_serial_path(serial)
         req = LiveRequest(serial=serial, laser=laser, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                          initial_pose=None if any(math.isnan(v) for v in initial_pose) else initial_pose,
-                          config=config,
-                          laser_mount=None if any(math.isnan(v) for v in laser_mount) else laser_mount,
-                          record=record, publish=publish or [], duration_s=duration, out=out,
+                          initial_pose=initial_pose, config=config, laser_mount=laser_mount,
+                          record=record, publish=publish or [], duration_s=duration, out=out or out_old,
                           out_smoothed=out_smoothed, view=view)
         r = run_live(req, status_sink=status, event_sink=event, on_stopped=stopped)
-        print(dumps(r.report, indent=1))  # standard JSON: unknown numbers (NaN) are null
+        if as_json:
+            print(dumps(r.report, indent=1))  # standard JSON: unknown numbers (NaN) are null
+        else:
+            print(summary_line(r.report))
         if r.failed:
             sys.stderr.write(f"fgloc live: error: {'; '.join(r.failed)}; stopped\n")
+            raise SystemExit(EXIT_THREAD_DIED)
+        silent = silent_sensors(r.report, serial, laser)
+        if silent:
+            sys.stderr.write(f"fgloc live: error: {'; '.join(silent)} in {r.report.get('duration_s', 0):.1f} s\n")
             raise SystemExit(EXIT_THREAD_DIED)

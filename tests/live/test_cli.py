@@ -27,7 +27,7 @@ def test_dead_laser_thread_is_reported_and_exit_is_nonzero(monkeypatch, capsys):
 
     monkeypatch.setattr(SickClient, "serve", broken_serve)
     t0 = time.monotonic()
-    code = main(["live", "--laser", "127.0.0.1:9", "--backend", "ekf", "--duration", "20", "--quiet"])
+    code = main(["live", "--laser", "127.0.0.1:9", "--backend", "ekf", "--duration", "20", "--quiet", "--json"])
     elapsed = time.monotonic() - t0
     out, err = capsys.readouterr()
     assert code == 1
@@ -40,12 +40,39 @@ def test_dead_laser_thread_is_reported_and_exit_is_nonzero(monkeypatch, capsys):
 
 @pytest.mark.parametrize("flag", ["--serial", "--laser"])
 def test_summary_is_strict_json_with_an_absent_sensor(flag, capsys):
-    """Issue 12 item 7: no messages at all -> latency percentiles are unknown: null, not NaN."""
+    """Issue 12 item 7: no messages at all -> latency percentiles are unknown: null, not NaN; a sensor
+    that delivered nothing the whole session is a one-line error, exit 1."""
     target = "loop://" if flag == "--serial" else "127.0.0.1:9"  # port 9: nothing listens
-    code = main(["live", flag, target, "--backend", "ekf", "--duration", "0.5", "--quiet"])
-    out, _ = capsys.readouterr()
-    assert code == 0
+    code = main(["live", flag, target, "--backend", "ekf", "--duration", "0.5", "--quiet", "--json"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    what = "serial loop://: no frame received" if flag == "--serial" else \
+        "laser 127.0.0.1:9: no scan received (never connected)"
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"fgloc live: error: {what} in 0.") and last.endswith(" s")
     report = _strict_json(out)
     assert report["poses"] == 0
     assert report["latency_ms"] == {"p50": None, "p99": None}
     assert report["failed_threads"] == []
+
+
+def test_a_missing_serial_port_is_one_line_and_exit_2(tmp_path, capsys):
+    """A serial device path that does not exist: one line before anything starts, exit 2; the default
+    output is one summary line, not the JSON counters."""
+    code = main(["live", "--serial", str(tmp_path / "ttyUSB9"), "--duration", "0.5", "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == ""
+    assert err.strip() == (f"fgloc: error: {tmp_path / 'ttyUSB9'}: no such serial port (is the adapter plugged in? "
+                           "see ls /dev/ttyUSB* /dev/ttyACM*; a pyserial URL such as socket://HOST:PORT works too)")
+    code = main(["live", "--serial", "loop://", "--duration", "0.3", "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 1 and out.count("\n") == 1 and out.startswith("fgloc live: 0.")
+
+
+def test_help_shows_no_nan_defaults():
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "fgloc.cli", "live", "--help"], capture_output=True, text=True,
+                         timeout=120, env={"COLUMNS": "200", "PATH": ""}).stdout
+    assert "nan" not in out and "--initial-pose" in out and "global localization" in out

@@ -106,7 +106,7 @@ def test_cli_sigint_closes_recording(tmp_path):
     rec = tmp_path / "cli.mcap"
     out = tmp_path / "live.tum"
     cmd = [sys.executable, "-m", "fgloc.cli", "live", "--serial", pair.stm32.url, "--laser", pair.sick.address,
-           "--backend", "ekf", "--record", str(rec), "--out", str(out), "--quiet"]
+           "--backend", "ekf", "--record", str(rec), "--out", str(out), "--quiet", "--json"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     pair.start()

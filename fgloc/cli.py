@@ -39,8 +39,19 @@ def _register_all() -> None:
             reg(app)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from fgloc import __version__
+
+        print(f"fgloc {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(
+    version: bool = typer.Option(False, "--version", "-V", is_eager=True, callback=_print_version,
+                                 help="print the fgloc version and exit"),
+) -> None:
     """Indoor robot localization without ROS."""
 
 
@@ -57,9 +68,10 @@ _register_all()
 
 #: options whose usage errors get a message that names the values and their units
 OPTION_HINTS = {
-    "--initial-pose": "--initial-pose needs three values X Y YAW (m, m, rad; base_link in the map frame), "
-                      "e.g. --initial-pose 2.5 3.0 0.0",
-    "--laser-mount": "--laser-mount needs three values X Y YAW (m, m, rad; base_link -> laser)",
+    "--initial-pose": "--initial-pose needs three values X Y YAW (m, m, rad or with its unit: 90deg; base_link in "
+                      "the map frame), e.g. --initial-pose 2.5 3.0 0.0",
+    "--laser-mount": "--laser-mount needs three values X Y YAW (m, m, rad or with its unit: 180deg; base_link -> "
+                     "laser)",
     **mounts.HINTS,  # --static-transform-xyzw before --static-transform: the first name found in the message wins
 }
 

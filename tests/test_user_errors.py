@@ -73,3 +73,55 @@ def test_relative_topic_names_resolve_as_ros_does_and_empty_is_none(short_log, t
     assert "compass 0," in out and "compass 0," not in fgloc("run", short_log["log"], "-o", a, *common)[1]
     rc, _, err = fgloc("run", short_log["log"], "-o", c, *common, "--scan-topic", "laser_scan")
     assert rc == 2 and one_error_line(err).startswith(f"{short_log['log']}: --scan-topic /laser_scan: no such topic")
+
+
+# ------------------------------------------------------------------ one spelling for each option
+def test_version_flag():
+    from fgloc import __version__
+
+    for flag in ("--version", "-V"):
+        rc, out, _ = fgloc(flag)
+        assert rc == 0 and out.strip() == f"fgloc {__version__}"
+
+
+def test_yaw_with_its_unit_is_the_same_pose(short_log, tmp_path):
+    """--initial-pose takes the yaw in radians or with its unit (90deg); a yaw that is surely degrees
+    given bare is a one-line error saying so; a word is one line too."""
+    common = ("--map", short_log["map"], "-q")
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert fgloc("run", short_log["log"], "-o", a, *common, "--initial-pose", "2.5", "3", "0")[0] == 0
+    assert fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "0deg")[0] == 0
+    assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
+    from fgloc.app.units import pose_arg
+
+    assert pose_arg(("1", "2", "90deg")) == pytest.approx((1.0, 2.0, 1.5707963267948966))
+    assert pose_arg(("1", "2", "-1.2rad")) == (1.0, 2.0, -1.2)
+    rc, _, err = fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "90")
+    assert rc == 2 and "yaw 90 is in radians (did you mean 1.5708 for 90 deg?)" in one_error_line(err)
+    rc, _, err = fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "east")
+    assert rc == 2 and one_error_line(err) == ("--initial-pose: 'east' is not an angle (a number, optionally with "
+                                               "deg or rad: 90deg, 1.5708rad)")
+
+
+def test_output_and_quiet_spellings(short_log, tmp_path, capsys):
+    """-o/--output everywhere (simulate's old --out kept hidden); -q/--quiet everywhere (map's old
+    --no-progress kept hidden); no carriage-return bars into a pipe."""
+    rc, _, err = fgloc("simulate", "paper", "--output", tmp_path / "s1", "--seed", "3")
+    assert rc == 0, err
+    rc, _, err = fgloc("simulate", "paper", "--out", tmp_path / "s2", "--seed", "3")
+    assert rc == 0, err
+    assert (tmp_path / "s1" / "log.mcap").stat().st_size == (tmp_path / "s2" / "log.mcap").stat().st_size
+    rc, _, err = fgloc("simulate", "paper")
+    assert rc == 2 and one_error_line(err) == "fgloc simulate paper: give the output folder with -o / --output"
+    for flag in ("-q", "--quiet", "--no-progress"):
+        rc, out, err = fgloc("map", short_log["log"], "-o", tmp_path / f"m{flag}", "--no-check", flag)
+        assert rc == 0, err
+        assert "\r" not in err
+    rc, _, err = fgloc("map", short_log["log"], "-o", tmp_path / "m4", "--no-check")
+    assert rc == 0 and "\r" not in err  # not a terminal: no bar
+    import subprocess
+    import sys
+
+    helps = subprocess.run([sys.executable, "-m", "fgloc.cli", "map", "--help"], capture_output=True, text=True,
+                           timeout=120).stdout
+    assert "--quiet" in helps and "--no-progress" not in helps

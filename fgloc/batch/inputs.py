@@ -17,7 +17,6 @@ from __future__ import annotations
 import csv
 import glob
 import io
-import math
 from pathlib import Path
 from typing import Any
 
@@ -171,12 +170,13 @@ def read_manifest(path: Path) -> list[dict[str, Any]]:
         if any(vals):
             if not all(vals):
                 raise ConfigError(f"{path}:{k}: give all of x, y, yaw or none of them")
+            from fgloc.app.units import pose_arg
+
             try:
-                pose = [float(v) for v in vals]
-            except ValueError:
-                raise ConfigError(f"{path}:{k}: x, y, yaw must be numbers, got {','.join(vals)}") from None
-            if not all(math.isfinite(v) for v in pose):
-                raise ConfigError(f"{path}:{k}: x, y, yaw must be finite")
+                pose = list(pose_arg((vals[0], vals[1], vals[2]), f"{path}:{k}") or ())
+            except ConfigError:
+                raise ConfigError(f"{path}:{k}: x, y, yaw must be numbers (the yaw in rad, or with its unit: "
+                                  f"90deg), got {','.join(vals)}") from None
         rows.append({"log": log.resolve(), "map": None if mp is None else mp.resolve(), "pose": pose})
     if not rows:
         raise ConfigError(f"{path}: manifest has no rows")

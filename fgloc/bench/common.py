@@ -10,11 +10,13 @@ import numpy as np
 
 
 def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
-                 initial_pose: np.ndarray | None = None, use_initial: bool = True) -> tuple[Any, Any, Any, float]:
+                 initial_pose: np.ndarray | None = None, use_initial: bool = True,
+                 progress: Any = None) -> tuple[Any, Any, Any, float]:
     """Run one back-end/front-end on a simulated run; returns (final, online, localizer, wall_s).
 
     ``initial_pose`` defaults to the ground truth's first pose (``use_initial=False``: none,
     global localization).  ``config``: a :class:`fgloc.config.FglocConfig` (None: the defaults).
+    ``progress``: wraps the message list (e.g. ``lambda m: tqdm(m)``) to show how far it is.
     """
     from fgloc.localization import build_session
 
@@ -24,7 +26,7 @@ def localize_sim(sim: Any, backend: str, frontend: str, config: Any = None,
     session = build_session(sim.map, sim.laser_mount, backend=backend, frontend=frontend, initial_pose=pose0,
                             config=config)
     t0 = time.perf_counter()
-    final = session.run(sim.messages)
+    final = session.run(sim.messages if progress is None else progress(sim.messages))
     wall = time.perf_counter() - t0
     return final, session.loc.online_trajectory(), session.loc, wall
 

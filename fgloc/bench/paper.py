@@ -80,20 +80,26 @@ def bench_paper(seeds: int, outdir: Path | None, variants: Any = PAPER_VARIANTS,
 
 
 def claims(rows: dict[str, list[Any]]) -> list[str]:
-    """The issue's accuracy targets, each as one line with the measured value."""
+    """The issue's accuracy targets, each as one line with the measured value and whether it is met
+    (``met`` / ``MISSED`` after each target)."""
     def mean(label: str, key: str) -> float:
         return float(np.mean([getattr(m, key) for m in rows[label]]))
+
+    def mark(ok: bool) -> str:
+        return "met" if ok else "MISSED"
 
     out = []
     if "smoother fixed-lag" in rows:
         p, h = mean("smoother fixed-lag", "position_rmse_m"), mean("smoother fixed-lag", "heading_rmse_deg")
-        out.append(f"smoother fixed-lag: position RMSE {p:.4f} m (target <= 0.010), "
-                   f"heading RMSE {h:.3f} deg (target <= 0.30)")
+        out.append(f"smoother fixed-lag: position RMSE {p:.4f} m (target <= 0.010: {mark(p <= 0.010)}), "
+                   f"heading RMSE {h:.3f} deg (target <= 0.30: {mark(h <= 0.30)})")
         for ekf in ("EKF+AMCL (paper)", "EKF+native"):
             if ekf in rows:
                 e = mean(ekf, "position_rmse_m")
-                out.append(f"smoother vs {ekf}: {100 * (1 - p / e):.0f} % lower position RMSE (target >= 30 %)")
+                gain = 1 - p / e
+                out.append(f"smoother vs {ekf}: {100 * gain:.0f} % lower position RMSE (target >= 30 %: "
+                           f"{mark(gain >= 0.30)})")
         if "batch" in rows:
             b = mean("batch", "position_rmse_m")
-            out.append(f"fixed-lag / batch position RMSE: {p / b:.2f}x (target <= 1.2x)")
+            out.append(f"fixed-lag / batch position RMSE: {p / b:.2f}x (target <= 1.2x: {mark(p / b <= 1.2)})")
     return out

@@ -66,13 +66,15 @@ def _report(rep, title: str) -> None:
 def run_cmd(
     outdir: Annotated[Path, typer.Option("-o", "--output", help="OUTDIR: OUTDIR/<log>/ per log, summary.csv")],
     logs: Annotated[list[str] | None, typer.Argument(help="MCAP logs, folders, globs")] = None,
-    manifest: Annotated[Path | None, typer.Option("--manifest", help="CSV 'log,map,x,y,yaw', one log per row")] = None,
+    manifest: Annotated[Path | None, typer.Option("--manifest", help="CSV 'log,map,x,y,yaw' (m, m, rad "
+                                                               "or 90deg), one log per row")] = None,
     map_yaml: Annotated[Path | None, typer.Option("--map", help="map_server YAML for every log (manifest rows "
                                                                 "may name their own)")] = None,
     backend: Annotated[str, typer.Option("--backend", help="ekf | smoother | batch")] = "smoother",
     frontend: Annotated[str, typer.Option("--frontend", help="amcl | kiss | native")] = "native",
-    initial_pose: Annotated[tuple[float, float, float] | None, typer.Option(
-        "--initial-pose", help="X Y YAW for every log (manifest rows may give their own)")] = None,
+    initial_pose: Annotated[tuple[str, str, str] | None, typer.Option(
+        "--initial-pose", help="X Y YAW for every log (m, m and rad, or the yaw with its unit: 90deg; manifest "
+                               "rows may give their own)")] = None,
     config: Annotated[Path | None, typer.Option("--config", help="YAML overriding the built-in config "
                                                                      "(`fgloc config show`)")] = None,
     scan_topic: Annotated[str | None, typer.Option("--scan-topic", help="as fgloc run's [default: /scan, else "
@@ -94,10 +96,11 @@ def run_cmd(
     quiet: Annotated[bool, QUIET] = False,
 ) -> None:
     """Localize many logs as `fgloc run` does each: OUTDIR/<log>/ and OUTDIR/summary.csv."""
+    from fgloc.app.units import pose_arg
     from fgloc.batch import batch_run
 
     rep = batch_run(list(logs or []), outdir, _opts(engine, jobs, address, ship_inputs, force, quiet), manifest,
-                    map_yaml, list(initial_pose) if initial_pose else None, config, backend, frontend,
+                    map_yaml, list(pose_arg(initial_pose) or ()) or None, config, backend, frontend,
                     scan_topic, odom_topic, imu_topic, allow_lost)
     _report(rep, f"fgloc batch run: {len(rep.rows)} log(s)")
 
@@ -154,10 +157,13 @@ def bench_paper_cmd(
     res = batch_bench_paper(seeds, outdir, _opts(engine, jobs, address, ship_inputs, force, quiet), config,
                             no_amcl, list(only) if only else None, not no_plots)
     if res.table:
-        # plain Markdown, as `fgloc bench paper` prints it
-        print(res.table)
+        from fgloc.eval.paper import show_comparison, styled_claim
+
+        # as `fgloc bench paper` prints it: drawn on a terminal, Markdown into a pipe or a file
+        show_comparison(res.rows, title=f"paper replica: {len(next(iter(res.rows.values())))} seed(s), mean ± std "
+                        "over seeds")
         for line in res.claims:
-            con.print("  " + line)
+            con.print("  " + styled_claim(line), highlight=False)
         con.print("  wall time per run: " + ", ".join(f"{k} {v:.1f} s" for k, v in res.walls.items()))
         con.print(f"  wrote {outdir}/table.md, metrics.yaml and {max(0, len(res.files) - 2)} plots")
     elif not res.batch.interrupted:

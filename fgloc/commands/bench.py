@@ -32,7 +32,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
 
         from fgloc.bench import PAPER_VARIANTS, bench_paper, claims, frontend_available
-        from fgloc.eval.paper import comparison_text
+        from fgloc.eval.paper import show_comparison, styled_claim
 
         if seeds < 1:
             raise ConfigError("--seeds must be at least 1")
@@ -42,10 +42,10 @@ def register(app: typer.Typer) -> None:
             con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
         variants = tuple(v for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl"))
         res = bench_paper(seeds, outdir, variants, config, jobs)
-        # plain Markdown (pasteable into the README), never truncated by the terminal width
-        print(comparison_text(res["rows"], title=f"paper replica: {seeds} seed(s), mean ± std over seeds"))
+        # a drawn table on a terminal; Markdown (pasteable into the README) into a pipe or a file
+        show_comparison(res["rows"], title=f"paper replica: {seeds} seed(s), mean ± std over seeds")
         for line in claims(res["rows"]):
-            con.print("  " + line)
+            con.print("  " + styled_claim(line), highlight=False)
         con.print("  wall time per run: " + ", ".join(f"{k} {v:.1f} s" for k, v in res["walls"].items()))
         if outdir is not None:
             con.print(f"  wrote {outdir}/table.md, metrics.yaml and {len(res['files'])} plots")
@@ -116,32 +116,50 @@ def register(app: typer.Typer) -> None:
         outdir: Path = typer.Option(Path("fgloc-demo"), "-o", "--output", help="plots and trajectories"),
     ) -> None:
         """The paper experiment (seed 0) localized by the paper's EKF and the smoother; table and plots."""
+        import sys
+
         from rich.console import Console
+        from tqdm import tqdm
 
         from fgloc.bench import frontend_available, localize_sim
         from fgloc.config import load_config
         from fgloc.eval.metrics import evaluate
-        from fgloc.eval.paper import comparison_text
+        from fgloc.eval.paper import show_comparison
         from fgloc.eval.plots import plot_all
         from fgloc.io.tum import write_tum
         from fgloc.sim import simulate_paper, write_sim
 
-        con = Console()
+        con = Console(stderr=True)
+        tty = sys.stderr.isatty()
         t0 = time.perf_counter()
-        with con.status("simulating the paper experiment (seed 0)"):
-            sim = simulate_paper(seed=0)
+
+        def stage(text: str) -> None:  # a line per stage into a pipe or a log file; the bars say it on a terminal
+            if not tty:
+                print(f"fgloc demo: {text} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+        ekf_fe = "amcl" if frontend_available("amcl") else "native"
+        runs = ((f"EKF+{ekf_fe} (paper's filter)", "ekf", ekf_fe), ("smoother+native", "smoother", "native"))
+        stage(f"simulating the paper experiment (seed 0), then localizing it {len(runs)} times")
+        with tqdm(total=100, desc="simulating", unit="%", disable=not tty, leave=False,
+                  bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}") as bar:
+            def sim_progress(frac: float) -> None:
+                bar.update(max(0, round(100 * frac) - bar.n))
+
+            sim = simulate_paper(seed=0, progress=sim_progress)
             write_sim(sim, outdir / "sim")
         config = load_config()
         trajs, rows = {}, {}
-        ekf_fe = "amcl" if frontend_available("amcl") else "native"
-        for label, backend, frontend in ((f"EKF+{ekf_fe} (paper's filter)", "ekf", ekf_fe),
-                                         ("smoother+native", "smoother", "native")):
-            with con.status(f"localizing: {label}"):
-                final, _online, _loc, _ = localize_sim(sim, backend, frontend, config)
+        for k, (label, backend, frontend) in enumerate(runs, start=1):
+            stage(f"localizing {k}/{len(runs)}: {label}")
+            final, _online, _loc, _ = localize_sim(
+                sim, backend, frontend, config,
+                progress=lambda msgs, label=label: tqdm(msgs, desc=f"localizing: {label}", unit="msg",
+                                                        disable=not tty, leave=False, mininterval=0.5))
             trajs[label] = final
             rows[label] = [evaluate(final, sim.ground_truth)]
             write_tum(outdir / f"{backend}.tum", final)
-        print(comparison_text(rows, title="paper replica, seed 0: the paper's numbers vs fgloc"))
+        stage("plotting")
+        show_comparison(rows, title="paper replica, seed 0: the paper's numbers vs fgloc")
         files = plot_all(trajs, sim.ground_truth, outdir, occ_map=sim.map, title="paper replica, seed 0")
         con.print(f"wrote {len(files)} plots, ekf.tum, smoother.tum and the simulated log to {outdir} "
                   f"in {time.perf_counter() - t0:.0f} s")

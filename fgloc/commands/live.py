@@ -63,16 +63,18 @@ def register(app: typer.Typer) -> None:
         map_yaml: Path = typer.Option(None, "--map", help="map_server MAP.yaml (without: odometry + compass only)"),
         backend: str = typer.Option("smoother", "--backend", help="smoother | ekf"),
         frontend: str = typer.Option("native", "--frontend", help="scan matcher: native | amcl | kiss"),
-        initial_pose: tuple[float, float, float] | None = typer.Option(
-            None, "--initial-pose", help="X Y YAW (m, m, rad) in the map; without it: global localization"
+        initial_pose: tuple[str, str, str] | None = typer.Option(
+            None, "--initial-pose", help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
+            "without it: global localization"
         ),
         record: Path = typer.Option(None, "--record", help="record every received message to this MCAP"),
         publish: list[str] = typer.Option(None, "--publish", help="udp://127.0.0.1:PORT (JSON lines; repeatable)"),
         duration: float = typer.Option(None, "--duration", help="stop after S seconds (default: until Ctrl-C)"),
         config: Path = typer.Option(None, "--config", help="YAML overlaid on the defaults (`fgloc config show`; "
                                     "`fgloc config init` writes one)"),
-        laser_mount: tuple[float, float, float] | None = typer.Option(
-            None, "--laser-mount", help="base_link->laser X Y YAW (m, m, rad) [default: the config's laser.mount]"
+        laser_mount: tuple[str, str, str] | None = typer.Option(
+            None, "--laser-mount", help="base_link->laser X Y YAW (m, m and rad, or the yaw with its unit: 180deg) "
+            "[default: the config's laser.mount]"
         ),
         out: Path = typer.Option(None, "-o", "--output", help="write the live fused trajectory (online poses) as TUM"),
         out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
@@ -86,6 +88,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP.  Exit 0 done, 1 a
         sensor thread died or a sensor asked for delivered nothing, 2 a usage error (a missing serial port)."""
+        from fgloc.app.units import pose_arg
         from fgloc.live.app import LiveRequest, run_live
         from fgloc.live.publish import dumps
 
@@ -115,7 +118,8 @@ def register(app: typer.Typer) -> None:
 
         check_serial_path(serial)
         req = LiveRequest(serial=serial, laser=laser, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                          initial_pose=initial_pose, config=config, laser_mount=laser_mount,
+                          initial_pose=pose_arg(initial_pose), config=config,
+                          laser_mount=pose_arg(laser_mount, "--laser-mount"),
                           record=record, publish=publish or [], duration_s=duration, out=out or out_old,
                           out_smoothed=out_smoothed, view=view)
         r = run_live(req, status_sink=status, event_sink=event, on_stopped=stopped)

@@ -18,18 +18,36 @@ import typer
 from fgloc.app import mounts
 
 
-def _bars(no_progress: bool):
+class _Bar:
+    """A progress callback over a tqdm bar, whose total a check sets once it knows it (``set_total``)."""
+
+    def __init__(self, bar) -> None:  # noqa: ANN001
+        self.bar = bar
+
+    def __call__(self, n: int) -> None:
+        self.bar.update(n)
+
+    def set_total(self, total: int) -> None:
+        self.bar.total = total
+        self.bar.refresh()
+
+
+def _bars(quiet: bool):
+    """``(bars, factory)``: one tqdm bar per stage (mapping, self-check / map-check) with its total, on
+    a terminal only (a pipe or a log file gets no carriage-return lines)."""
+    import sys
+
     from tqdm import tqdm
 
     bars: list = []
+    show = not quiet and sys.stderr.isatty()
 
     def factory(n: int, what: str = "mapping"):
         for b in bars:  # one bar at a time: the previous stage is done
             b.close()
-        unit = "scan" if what == "mapping" else "test"
-        bar = tqdm(total=n or None, unit=unit, desc=what, disable=no_progress, leave=True)
+        bar = tqdm(total=n or None, unit="scan", desc=what, disable=not show, leave=False)
         bars.append(bar)
-        return bar.update
+        return _Bar(bar)
 
     return bars, factory
 
@@ -46,7 +64,9 @@ def map_cmd(
     odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
                                             "Odometry topic)")] = "/odom",
     no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
-    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (none either when stderr is not a "
+                                        "terminal)")] = False,
+    no_progress: Annotated[bool, typer.Option("--no-progress", hidden=True, help="the old name of --quiet")] = False,
     static_transform: Annotated[tuple[str, str, float, float, float, float, float, float] | None,
                                 typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
     static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
@@ -77,7 +97,7 @@ def map_cmd(
     cfg = MapperConfig.from_dict(opts)
     from fgloc.io.topics import resolve_name
 
-    bars, factory = _bars(no_progress)
+    bars, factory = _bars(quiet or no_progress)
     try:
         out = build_map(log, outdir, cfg, start, end, factory, resolve_name(scan_topic), resolve_name(odom_topic),
                         self_check=not no_check,
@@ -115,7 +135,9 @@ def map_check_cmd(
                                             "LaserScan topic)")] = "/scan",
     odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
                                             "Odometry topic)")] = "/odom",
-    no_progress: Annotated[bool, typer.Option("--no-progress", help="no progress bar")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (none either when stderr is not a "
+                                        "terminal)")] = False,
+    no_progress: Annotated[bool, typer.Option("--no-progress", hidden=True, help="the old name of --quiet")] = False,
     static_transform: Annotated[tuple[str, str, float, float, float, float, float, float] | None,
                                 typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
     static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
@@ -128,7 +150,7 @@ def map_check_cmd(
     from fgloc.mapping.build import map_check
 
     transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
-    bars, factory = _bars(no_progress)
+    bars, factory = _bars(quiet or no_progress)
     try:
         res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, resolve_name(scan_topic),
                         resolve_name(odom_topic),

@@ -14,6 +14,7 @@ import typer
 from fgloc.app import mounts
 from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
+from fgloc.app.units import pose_arg
 from fgloc.errors import ConfigError
 
 __all__ = ["register"]
@@ -124,8 +125,9 @@ def register(app: typer.Typer) -> None:
         map_yaml: Path | None = typer.Option(None, "--map", help="map_server YAML; without it: odom-frame fusion"),
         backend: str = typer.Option("smoother", "--backend", help="ekf | smoother | batch"),
         frontend: str = typer.Option("native", "--frontend", help="amcl | kiss | native"),
-        initial_pose: tuple[float, float, float] | None = typer.Option(
-            None, "--initial-pose", help="X Y YAW (m, m, rad) in the map; without it: global localization"),
+        initial_pose: tuple[str, str, str] | None = typer.Option(
+            None, "--initial-pose", help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
+            "without it: global localization"),
         config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
                                                        "(`fgloc config init` writes one)"),
         scan_topic: str | None = typer.Option(None, "--scan-topic", help="sensor_msgs/LaserScan topic "
@@ -158,7 +160,7 @@ def register(app: typer.Typer) -> None:
             if backend not in ("ekf", "smoother", "batch"):
                 raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
             req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
-                             initial_pose=(initial_pose[0], initial_pose[1], initial_pose[2]) if initial_pose else None,
+                             initial_pose=pose_arg(initial_pose),
                              config=config,
                              scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,
                              view=view, realtime=realtime, force=force,

@@ -61,13 +61,25 @@ def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: st
 
 @simulate_app.command("paper")
 def paper(
-    out: Path = typer.Option(..., "-o", "--out", help="output folder"),
+    out: Path = typer.Option(None, "-o", "--output", help="output folder (required)"),
+    out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
     seed: int = typer.Option(0, help="random seed (same seed, same run)"),
 ) -> None:
     """The paper's run: mecanum robot, 78 m rectangle at 0.8 m/s, encoders + compass + 270 deg laser."""
     from fgloc.sim import simulate_paper
 
-    _simulate_and_write(lambda cb: simulate_paper(seed=seed, progress=cb), "the paper run", out)
+    dest = _output(out, out_old, "paper")
+    _simulate_and_write(lambda cb: simulate_paper(seed=seed, progress=cb), "the paper run", dest)
+
+
+def _output(out: Path | None, out_old: Path | None, what: str) -> Path:
+    """``-o/--output`` (or the old ``--out``); a one-line error without either."""
+    from fgloc.errors import ConfigError
+
+    dest = out or out_old
+    if dest is None:
+        raise ConfigError(f"fgloc simulate {what}: give the output folder with -o / --output")
+    return dest
 
 
 @simulate_app.command("scenario")
@@ -75,14 +87,16 @@ def scenario(
     file: str = typer.Argument(..., help="a scenario YAML file, or the name of a shipped one "
                                "(paper, wheel_slip, compass_disturbance, kidnap, blackout, obstacles, willow, "
                                "skid_steer, ...: `fgloc simulate list`)"),
-    out: Path = typer.Option(..., "-o", "--out", help="output folder"),
+    out: Path = typer.Option(None, "-o", "--output", help="output folder (required)"),
+    out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
     seed: int = typer.Option(0, help="random seed"),
 ) -> None:
     """A YAML scenario: map, route, drive, noise and faults."""
     from fgloc.sim import run_scenario
 
+    dest = _output(out, out_old, "scenario")
     path = _scenario_file(file)
-    _simulate_and_write(lambda cb: run_scenario(path, seed=seed, progress=cb), file, out)
+    _simulate_and_write(lambda cb: run_scenario(path, seed=seed, progress=cb), file, dest)
 
 
 def _scenario_file(name_or_path: str) -> str:

@@ -147,3 +147,24 @@ def comparison_text(
     if title:
         out.insert(0, title)
     return "\n".join(out)
+
+
+def show_comparison(rows: Mapping[str, Sequence[Metrics]], title: str | None = None, extra: bool = True,
+                    tty: bool | None = None) -> None:
+    """Print the comparison: a drawn table on a terminal (:func:`comparison_table`), Markdown
+    (:func:`comparison_text`) into a pipe or a file, where it is pasted into documents."""
+    import sys
+
+    if tty is None:
+        tty = sys.stdout.isatty()
+    if tty:
+        from rich.console import Console
+
+        Console().print(comparison_table(rows, title=title, extra=extra))
+    else:
+        print(comparison_text(rows, title=title, extra=extra))
+
+
+def styled_claim(line: str) -> str:
+    """A target line for rich: a missed target in bold red, a met one in green."""
+    return line.replace("MISSED", "[bold red]MISSED[/bold red]").replace(": met)", ": [green]met[/green])")

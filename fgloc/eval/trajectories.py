@@ -101,22 +101,9 @@ def read_trajectory(spec: str | Path, topic: str | None = None) -> tuple[Traject
 
 
 def _carmen_laser_poses(path: Path) -> Trajectory:
-    from fgloc.io.carmen import LASER_KINDS, _parse_laser, open_text
+    from fgloc.io.carmen import laser_line_poses
 
-    stamps: list[float] = []
-    poses: list[np.ndarray] = []
-    with open_text(path) as f:
-        for line in f:
-            tok = line.split()
-            if not tok or tok[0] not in LASER_KINDS or tok[0] == "RLASER":
-                continue
-            try:
-                las = _parse_laser(tok)
-            except (ValueError, IndexError, OverflowError):
-                continue
-            if las.laser_pose is not None:
-                stamps.append(las.stamp)
-                poses.append(las.laser_pose)
+    stamps, poses = laser_line_poses(path)
     if not stamps:
         raise LogError(f"{path}: no laser lines with poses (FLASER / ROBOTLASER1 'x y theta') to read a "
                        f"trajectory from (not a CARMEN log?)")

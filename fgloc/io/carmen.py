@@ -208,6 +208,26 @@ def _parse_laser(tok: list[str]) -> _Laser:
     return _Laser(kind, stamp, ranges, laser_pose, odom_pose, -math.pi / 2, flaser_angle_increment(n))
 
 
+def laser_line_poses(path: str | Path) -> tuple[list[float], list[np.ndarray]]:
+    """``(ipc stamps, poses)`` of the front laser lines' ``x y theta`` (the laser's pose: corrected in
+    a SLAM-corrected log), in file order; malformed lines and lines without a pose are left out."""
+    stamps: list[float] = []
+    poses: list[np.ndarray] = []
+    with open_text(path) as f:
+        for line in f:
+            tok = line.split()
+            if not tok or tok[0] not in LASER_KINDS or tok[0] == "RLASER":
+                continue
+            try:
+                las = _parse_laser(tok)
+            except (ValueError, IndexError, OverflowError):
+                continue
+            if las.laser_pose is not None:
+                stamps.append(las.stamp)
+                poses.append(las.laser_pose)
+    return stamps, poses
+
+
 @dataclass
 class _Peek:
     mounts: dict[str, np.ndarray] = field(default_factory=dict)

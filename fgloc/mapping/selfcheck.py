@@ -320,6 +320,13 @@ def _summarize_regions(checks: list[ScanCheck], cfg: CheckConfig) -> list[Region
     return out
 
 
+def _set_total(progress: Callable[[int], None] | None, total: int) -> None:
+    """Tell a progress callback that has ``set_total`` (the CLI's bar) how many scans a check tests."""
+    set_total = getattr(progress, "set_total", None)
+    if callable(set_total):
+        set_total(total)
+
+
 # ---------------------------------------------------------------------------- consistency
 def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, trajectory: Trajectory,
                       loops: Sequence[LoopInfo] = (), config: CheckConfig | None = None,
@@ -377,6 +384,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
     by_region: dict[tuple[int, int], list[int]] = {}
     for k, key in zip(tst, t_keys, strict=True):
         by_region.setdefault(key, []).append(int(k))
+    _set_total(progress, len(tst))
     checks: list[ScanCheck] = []
     reg_sq: list[float] = []  # registration residuals of the consistent scans (see _registration)
     reg_yaw: list[float] = []
@@ -407,7 +415,7 @@ def check_consistency(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
                 checks.append(ScanCheck(float(st_all[k]), poses[k].copy(), key, int(p), status, off, f0, f1, ov,
                                         float(s_all[k])))
             if progress is not None:
-                progress(len(tests))
+                progress(len(members))  # the pass's test scans are done (the total: every test scan)
         if len(pts_cache) > 20000:  # bounded memory on long logs
             pts_cache.clear()
 
@@ -617,6 +625,7 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
     occ_xy = occ.grid_to_world(rows, cols)
     grid = build_distance_grid(occ_xy, min(cfg.resolution, occ.resolution), cfg.dmax_m, cfg.window_m + 1.0)
     tst = _pick_by_travel(poses, cfg.test_step_m * 0.5, cfg.test_step_deg)
+    _set_total(progress, len(tst))
     coarse_cache: list = []
     checks: list[ScanCheck] = []
     cell = cfg.change_cell_m
@@ -629,6 +638,8 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
         pose = poses[k]
         pts = _scan_points(rec, mount, cfg)
         key = _region_key(pose[:2], cfg.region_m)
+        if progress is not None:
+            progress(1)
         if len(pts) < 10:
             checks.append(ScanCheck(float(rec.stamp), pose.copy(), key, 0, NO_OVERLAP, np.zeros(3), 0, 0, 0))
             continue
@@ -642,8 +653,6 @@ def check_against_map(records: Sequence[ScanRecord], mount_pose: FloatArray, tra
                 obs.setdefault(c, set()).add(n_t)
             for a, b in np.floor(xy / cell).astype(np.int64):
                 cnt[(int(a), int(b))] = cnt.get((int(a), int(b)), 0) + 1
-        if progress is not None:
-            progress(1)
     changes: list[ChangeRegion] = []
     pts_out = {}
     for kind, obs, cnt in (("added", add_obs, add_cnt), ("removed", rem_obs, rem_cnt)):

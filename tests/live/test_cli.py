@@ -75,4 +75,5 @@ def test_help_shows_no_nan_defaults():
 
     out = subprocess.run([sys.executable, "-m", "fgloc.cli", "live", "--help"], capture_output=True, text=True,
                          timeout=120, env={"COLUMNS": "200", "PATH": ""}).stdout
-    assert "nan" not in out and "--initial-pose" in out and "global localization" in out
+    flat = " ".join(out.split())
+    assert "nan" not in flat and "--initial-pose" in flat and "global localization" in flat

@@ -229,11 +229,7 @@ ENGINE_NAMES = {"backend", "be", "frontend", "fe"}
 GENERIC_NAMES = {"name", "stats", "sources", "cfg", "reset", "finish", "current", "initialize", "match", "map"}
 #: getattr / hasattr dispatch the sources router still does, by module prefix (empty it as it switches
 #: to the contract: fgloc.backends.contract's methods and capabilities)
-DISPATCH_ALLOWED: dict[str, set[str]] = {
-    "fgloc/localization/sources": {"add_velocity", "encoder_sigmas", "add_relative_yaw", "add_gyro", "arb",
-                                   "sources", "odom_scales", "gyro_bias", "frontend", "latency_estimate",
-                                   "latency_est", "stats", "cfg"},
-}
+DISPATCH_ALLOWED: dict[str, set[str]] = {}
 
 
 def _contract_names() -> set[str]:

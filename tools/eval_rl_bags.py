@@ -63,6 +63,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from fgloc.backends.contract import Capability
+
 FILTER_TYPES = ("ekf_localization_node", "ukf_localization_node", "ekf_node", "ukf_node")
 
 
@@ -243,6 +245,7 @@ class _Recorder:
     frontend = None
     initialized = True
     encoder_sigmas = (0.01, 0.01, 0.02)
+    capabilities = frozenset({Capability.GYRO})  # a back-end double: takes a second IMU's yaw rate
 
     def __init__(self) -> None:
         self.backend = self

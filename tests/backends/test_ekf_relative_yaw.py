@@ -64,6 +64,7 @@ def test_the_offset_is_reanchored_after_a_reinitialized_ahrs():
 class _RelBackend:
     """A back-end that takes differential orientations as headings (records them)."""
 
+    capabilities = frozenset({Capability.RELATIVE_YAW})
     initialized = True
     encoder_sigmas = (0.01, 0.01, 0.02)
 
@@ -72,6 +73,12 @@ class _RelBackend:
 
     def add_relative_yaw(self, t, yaw, var, source):
         self.rel.append((t, yaw, var, source))
+
+    def source_health(self):
+        return {}
+
+    def source_noise(self, name):
+        return None
 
 
 class _Loc:

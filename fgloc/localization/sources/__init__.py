@@ -53,10 +53,10 @@ bias and latency, and the noise it showed against what its messages claimed;
 
 from fgloc.localization.sources.config import SOURCE_TYPES, SourcesConfig, parse_sources, source_topics
 from fgloc.localization.sources.odometry import differential_cov
-from fgloc.localization.sources.report import motion_model, status_line, summary_lines
+from fgloc.localization.sources.report import status_line, summary_lines
 from fgloc.localization.sources.router import SourceRouter
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, TILT, UNUSED_VAR, SourceSpec, fused_components
 
 __all__ = ["COMPONENTS", "OUT_OF_ORDER", "SOURCE_TYPES", "TILT", "UNUSED_VAR", "SourceRouter", "SourceSpec",
-           "SourcesConfig", "differential_cov", "fused_components", "motion_model", "parse_sources",
+           "SourcesConfig", "differential_cov", "fused_components", "parse_sources",
            "source_topics", "status_line", "summary_lines"]

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from fgloc.backends.contract import Capability
 from fgloc.backends.imu import imu_in_base
 from fgloc.geometry import wrap_angle, wrap_scalar
 from fgloc.io.topics import IMU
@@ -100,16 +101,17 @@ class ImuHandler(SourceHandler):
                     else:
                         rate = rate * float(np.sign(R[2, 2]))
         t = float(msg.stamp)
-        add_rel = getattr(self.loc.backend, "add_relative_yaw", None)
+        be = self.loc.backend
         if spec.differential and yaw is not None and spec.uses("yaw") and not spec.uses("vyaw") \
-                and add_rel is not None:
+                and Capability.RELATIVE_YAW in be.capabilities:
             # orientation increments as a heading with the source's own offset (a back-end that
             # takes them: the EKF), not as a rate d_yaw / d_t, which stamp jitter turns into spikes
             if st.prev_yaw is not None and not t > st.prev_yaw[0]:
                 self.skip(f"imu: {OUT_OF_ORDER}")
                 return
             st.prev_yaw = (t, yaw)
-            add_rel(t, float(yaw), spec.variance("yaw", yaw_var), "imu" if not st.extra.get("second") else spec.name)
+            be.add_relative_yaw(t, float(yaw), spec.variance("yaw", yaw_var),
+                                "imu" if not st.extra.get("second") else spec.name)
             h.accepted += 1
             return
         if spec.differential and yaw is not None:
@@ -141,9 +143,8 @@ class ImuHandler(SourceHandler):
             yaw = None  # a second IMU's heading is in another world frame: only its rate is fused
             if rate is None:
                 return
-            add_gyro = getattr(self.loc.backend, "add_gyro", None)
-            if add_gyro is not None and self.loc.backend.initialized:
-                add_gyro(t, rate, rate_var, spec.name)
+            if Capability.GYRO in be.capabilities and be.initialized:
+                be.add_gyro(t, rate, rate_var, spec.name)
             h.accepted += 1
             return
         h.accepted += 1
@@ -181,12 +182,9 @@ class ImuHandler(SourceHandler):
 
     def report_estimates(self, d: dict[str, Any]) -> None:
         be = self.loc.backend
-        if self.state.messages:
-            b = None
-            if hasattr(be, "gyro_bias"):
-                b = be.gyro_bias(self.spec.name if self.state.extra.get("second") else "imu")
-            if b is not None:
-                d["gyro_bias_radps"] = round(float(b), 7)
+        if self.state.messages and Capability.GYRO_BIAS in be.capabilities:
+            b = be.gyro_bias(self.spec.name if self.state.extra.get("second") else "imu")
+            d["gyro_bias_radps"] = round(float(b), 7)
 
 
 SOURCE = SourceType("imu", IMU, "/imu", ("yaw", "vyaw"), COMPONENTS + TILT, ImuHandler)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from fgloc.backends.contract import Capability
 from fgloc.geometry import between, rotate_covariance
 from fgloc.geometry import log as se2_log
 from fgloc.io.topics import ODOMETRY
@@ -62,8 +63,9 @@ class OdometryHandler(SourceHandler):
         # a second odometry source: its velocities are measurements in a back-end that takes them
         # (the EKF's add_velocity; the smoothers' integrate them into a factor of their own); a
         # back-end without add_velocity integrates one twist source and skips it
-        add_vel = None if st.fused else getattr(self.loc.backend, "add_velocity", None)
-        if not st.fused and add_vel is None:
+        be = self.loc.backend
+        velocity = not st.fused and Capability.VELOCITY in be.capabilities
+        if not st.fused and not velocity:
             self.skip("a second odometry source (this back-end integrates one twist source; the EKF fuses "
                        "its velocities)")
             return
@@ -102,7 +104,7 @@ class OdometryHandler(SourceHandler):
                      if not spec.uses(pc_) and spec.uses(vc)]
             if mixed:
                 # an axis fused as a velocity beside the increments of the others (r_l: x, y, vyaw)
-                dflt = np.square(list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02)))
+                dflt = np.square(list(be.encoder_sigmas))
                 tw = tw.copy()
                 cov = np.diag(dflt) if cov is None else cov.copy()
                 comps = tuple(("vx", "vy", "vyaw")[i] if i in mixed else c for i, c in enumerate(comps))
@@ -114,7 +116,7 @@ class OdometryHandler(SourceHandler):
                     cov[i, i] = float(cov_msg[i, i]) if ok and cov_msg is not None else float(dflt[i])
         else:
             comps = ("vx", "vy", "vyaw")
-        default = list(getattr(self.loc.backend, "encoder_sigmas", None) or (0.01, 0.01, 0.02))
+        default = list(be.encoder_sigmas)
         if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
             cov = np.diag(np.square(default))
         if whole_twist:
@@ -128,9 +130,9 @@ class OdometryHandler(SourceHandler):
             if comps[1] == "vy" and not spec.uses("vy"):
                 out[1, 1] = float(cov[1, 1])
         tw, out = self.levelled(float(msg.stamp), tw, out)
-        if add_vel is not None:
+        if velocity:
             used = tuple(spec.uses(p) or spec.uses(v) for p, v in (("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
-            add_vel(float(msg.stamp), tw, out, used, spec.name)
+            be.add_velocity(float(msg.stamp), tw, out, used, spec.name)
             h.accepted += 1
             return
         h.accepted += 1
@@ -176,7 +178,7 @@ class OdometryHandler(SourceHandler):
                     "the twist disagreed with the poses (pipeline.pose_deltas: auto)"
             if st.messages:
                 d["vy_max_mps"] = round(st.vy_max, 4)
-        if st.fused and hasattr(be, "odom_scales"):
+        if st.fused and Capability.ODOM_SCALES in be.capabilities:
             sc = be.odom_scales()
             d["speed_scale"] = round(float(sc[0]), 4)
             d["yaw_rate_scale"] = round(float(sc[1]), 4)

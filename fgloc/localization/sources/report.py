@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from fgloc.backends.contract import Capability
 from fgloc.localization.sources.handler import SourceHandler
 
 
@@ -20,7 +21,6 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> dict[s
     """One source's health: counts, checks, and what the back-end estimated about it."""
     s, st = h.spec, h.state
     be = loc.backend
-    arb = getattr(be, "arb", None)
     d = st.health.to_dict()
     d["topic"] = s.topic
     d["use"] = list(s.use)
@@ -35,15 +35,15 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> dict[s
         d["tilt_max_deg"] = round(math.degrees(st.extra.get("tilt_max_rad", 0.0)), 2)
     if st.extra.get("tilt_implausible"):
         d["tilt_implausible"] = int(st.extra["tilt_implausible"])
-    bhs = getattr(be, "sources", {})
+    bhs = be.source_health()
     for n in h.backend_streams():
         bh = bhs.get(n)
         if bh is not None:
             d[f"{n.split('.')[-1] if '.' in n else 'backend'}_gated"] = bh.gated
-        # the noise an odometry's yaw rate showed: only when the source fuses its yaw
-        if arb is not None and n in arb.streams and h.reports_noise():
-            shown, claimed = arb.shown_sigma(n), arb.claimed_sigma(n)
-            k, c = arb.noise(n)
+        # the noise the stream showed against the others (an odometry's: only when it fuses its yaw)
+        noise = be.source_noise(n) if h.reports_noise() else None
+        if noise is not None:
+            shown, claimed, k, c = noise.shown_sigma, noise.claimed_sigma, noise.k_claimed, noise.per_turn
             key = n.split(".")[-1] if "." in n else "noise"
             d[f"{key}_noise_x_claimed" if key != "noise" else "noise_x_claimed"] = round(k, 3)
             if c > 0:
@@ -60,45 +60,16 @@ def scan_report(loc: Any) -> dict[str, Any] | None:
     """The scan source's health: the front-end's fixes accepted and gated, the scan latency (None:
     no front-end, or a back-end that does not estimate the latency)."""
     be = loc.backend
-    if getattr(loc, "frontend", None) is None or not hasattr(be, "latency_estimate"):
+    if loc.frontend is None or Capability.LATENCY not in be.capabilities:
         return None
-    lat = getattr(be, "latency_est", None)
     d = {"kind": "pose", "accepted": int(loc.stats.get("fixes", 0)),
          "gated": int(be.stats.get("fixes_rejected", 0)),
          "latency_s": round(float(be.latency_estimate()), 4)}
-    if lat is not None:
-        est, sig = lat.estimate()
-        if math.isfinite(sig):
-            d["latency_estimate_s"] = round(est, 4)
-            d["latency_sigma_s"] = round(sig, 4)
+    fit = be.latency_fit()
+    if fit is not None:
+        d["latency_estimate_s"] = round(fit[0], 4)
+        d["latency_sigma_s"] = round(fit[1], 4)
     return d
-
-
-def motion_model(backend: Any, vy_max_mps: float | None = None) -> str:
-    """Which body twist the back-end integrates, and why (the run summary's line); ``vy_max_mps``:
-    the largest lateral velocity the odometry's messages reported (None: unknown)."""
-    st = getattr(backend, "stats", {})
-    if "omni" not in st:  # the smoother / batch integrate the odometry's whole twist
-        if vy_max_mps == 0.0:
-            return "differential: the odometry's lateral velocity is 0 throughout (its whole twist is integrated)"
-        if vy_max_mps is not None:
-            return ("omni: the odometry's whole twist (vx, vy, w) is integrated (lateral velocity up to "
-                    f"{vy_max_mps:.3f} m/s)")
-        return "omni: the odometry's whole twist (vx, vy, w) is integrated"
-    v = getattr(getattr(backend, "cfg", None), "omni_vy_mps", None)
-    if st.get("omni_since") is not None:
-        return "omni [x, y, yaw, vx, vy, w]: the odometry reported lateral velocity" + (f" (> {v} m/s)" if v else "")
-    if st.get("omni"):
-        return "omni [x, y, yaw, vx, vy, w] (configured: ekf.omni true)"
-    cfg = getattr(backend, "cfg", None)
-    if getattr(cfg, "omni", None) is False:
-        why = "configured: ekf.omni false"
-    elif vy_max_mps:
-        why = (f"the lateral velocity it was handed stayed under ekf.omni_vy_mps {v} m/s; the messages reported up to "
-               f"{vy_max_mps:.3f} m/s")
-    else:
-        why = "the odometry never reported lateral velocity"
-    return f"differential [x, y, yaw, v, w] ({why})"
 
 
 def summary_lines(stats: dict[str, Any]) -> list[str]:

@@ -22,7 +22,7 @@ from fgloc.localization.frames import MountTable, parse_static_transforms
 from fgloc.localization.sources.config import SOURCE_TYPES, parse_sources
 from fgloc.localization.sources.handler import SourceContext, SourceHandler, SourceState
 from fgloc.localization.sources.odometry import OdometryHandler
-from fgloc.localization.sources.report import motion_model, scan_report, source_report
+from fgloc.localization.sources.report import scan_report, source_report
 from fgloc.localization.sources.scan import ScanHandler
 from fgloc.localization.sources.spec import SourceSpec
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -120,7 +120,7 @@ class SourceRouter:
         odo = [h for h in self.handlers.values() if isinstance(h, OdometryHandler) and h.state.fused]
         h0 = odo[0] if odo else None
         vy = None if h0 is None or not h0.state.messages or h0.spec.differential else h0.state.vy_max
-        self.loc.stats["motion_model"] = motion_model(self.loc.backend, vy)
+        self.loc.stats["motion_model"] = self.loc.backend.motion_summary(vy)
 
     def silent_sources(self) -> list[str]:
         """One line per configured source (``sources.inputs``) that got no message in the whole run:

@@ -14,6 +14,7 @@ from fgloc.types import CompassHeading, Imu, Odometry, PoseFix, StaticTransform,
 
 
 class _Backend:
+    capabilities: frozenset = frozenset()
     initialized = True
     encoder_sigmas = (0.01, 0.01, 0.02)
     stats: dict = {}
@@ -27,6 +28,12 @@ class _Backend:
     def add_keyframe(self, t, fix):
         self.keyframes.append(fix)
         return True
+
+    def source_health(self):
+        return {}
+
+    def source_noise(self, name):
+        return None
 
 
 class _Loc:
@@ -157,14 +164,14 @@ def test_default_layout_reproduces_direct_feeding_exactly():
 def test_summary_lines_name_the_motion_model_and_each_source():
     from fgloc.backends.ekf import EKFConfig
     from fgloc.backends.ekf_backend import EKFBackend
-    from fgloc.localization.sources import motion_model, summary_lines
+    from fgloc.localization.sources import summary_lines
 
     ekf = EKFBackend(EKFConfig())
-    assert motion_model(ekf).startswith("differential")
+    assert ekf.motion_summary().startswith("differential")
     ekf.initialize(0.0, np.zeros(3))
     ekf.add_odometry(0.1, np.array([0.5, 0.3, 0.0]), None)  # lateral velocity: a mecanum base
-    assert motion_model(ekf).startswith("omni") and "lateral velocity" in motion_model(ekf)
-    stats = {"motion_model": motion_model(ekf),
+    assert ekf.motion_summary().startswith("omni") and "lateral velocity" in ekf.motion_summary()
+    stats = {"motion_model": ekf.motion_summary(),
              "sources": {"odom": {"kind": "odometry", "topic": "/odom", "use": ["vx", "vyaw"], "accepted": 10,
                                   "gated": 0, "skipped": 2, "yaw_rate_scale": 2.31, "noise_shown_vs_claimed": 4.0},
                          "imu": {"kind": "imu", "topic": "/imu", "use": ["yaw"], "accepted": 7, "gated": 0,

@@ -270,8 +270,8 @@ class _Recorder:
 def sources_dead_reckoning(bag: Path, config: Path) -> tuple[np.ndarray, str] | None:
     """Item 5 of the module doc: ``(final x, y, what heading)`` or None (no odometry / heading)."""
     from fgloc.config import load_config
+    from fgloc.frames.static import parse_static_transforms
     from fgloc.io import open_log
-    from fgloc.localization.frames import parse_static_transforms
     from fgloc.localization.sources import SourceRouter, parse_sources
 
     cfg = load_config(config)

@@ -36,8 +36,8 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
     """``sources.static_transforms`` entries of the two options' values (None: not given), checked:
     one-line :class:`ConfigError` naming the option for anything wrong (a non-finite number, a
     quaternion that is not of unit length, a parent that is not on the robot, one child twice)."""
-    from fgloc.io.tf import frame_name
-    from fgloc.localization.frames import ROBOT_FRAMES, static_transform_entry
+    from fgloc.frames.static import ROBOT_FRAMES, static_transform_entry
+    from fgloc.frames.tf import frame_name
 
     entries: list[tuple[str, dict[str, Any]]] = []
     if rpy is not None:
@@ -73,8 +73,8 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
 def static_transforms(rpy: tuple[Any, ...] | None = None, xyzw: tuple[Any, ...] | None = None) -> list[Transform3D]:
     """The two options' mounts as :class:`~fgloc.types.Transform3D` (what ``fgloc map`` and
     ``fgloc map-check`` hand the mapper): :func:`static_transform_entries`, then
-    :func:`~fgloc.localization.frames.parse_static_transforms` naming the option in its errors."""
-    from fgloc.localization.frames import parse_static_transforms
+    :func:`~fgloc.frames.static.parse_static_transforms` naming the option in its errors."""
+    from fgloc.frames.static import parse_static_transforms
 
     return parse_static_transforms(static_transform_entries(rpy, xyzw), source=RPY_OPTION)
 
@@ -84,7 +84,7 @@ def check_frames(entries: list[dict[str, Any]], sensor_frames: dict[str, str], p
     """One-line :class:`ConfigError` for a command-line mount whose child frame is none of the log's
     ``sensor_frames`` (``{frame: what carries it}``, e.g. ``{"rplidar_link": "its scans"}``): such a
     mount would be silently unused.  ``what``: the kind of frame the command uses a mount for."""
-    from fgloc.io.tf import frame_name
+    from fgloc.frames.tf import frame_name
 
     for e in entries:
         child = frame_name(str(e.get("child", "")))

@@ -522,7 +522,7 @@ def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocCo
     """``config`` with ``entries`` in ``sources.static_transforms`` (replacing the same child frame)."""
     import dataclasses
 
-    from fgloc.localization.frames import parse_static_transforms
+    from fgloc.frames.static import parse_static_transforms
 
     parse_static_transforms(entries, source="--static-transform")  # one-line errors, before reading the log
     children = {str(e.get("child", "")).lstrip("/") for e in entries}
@@ -558,14 +558,14 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig,
     """``(base_link -> laser, mirrored)``: the config's (``sources.static_transforms``, ``--static-transform``)
     when it names the scan's frame, else the log's; no lookup (and no 'no transform' warning) in a
     log without scans.  ``mirrored``: the configured laser is upside down, so its scans are to be
-    read mirrored (:func:`fgloc.io.tf.planar_mount`; the log's own upside-down tf is
+    read mirrored (:func:`fgloc.frames.tf.planar_mount`; the log's own upside-down tf is
     handled by the reader).  ``cli``: the command line's entries, so that a tilted mount's error
     names the option it came from (else the config's key)."""
     import numpy as np
 
     from fgloc.app.mounts import RPY_OPTION, XYZW_OPTION
-    from fgloc.io.tf import mount_of, planar_mount
-    from fgloc.localization.frames import parse_static_transforms
+    from fgloc.frames.static import parse_static_transforms
+    from fgloc.frames.tf import mount_of, planar_mount
     from fgloc.types import StaticTransform
 
     if n_scan == 0:
@@ -580,7 +580,7 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig,
 
 def _sensor_frames(reader: Any, scan_topic: str | None, imu_topics: list[str]) -> dict[str, str]:
     """``{frame: what carries it}`` of the log's scans and IMU messages (each topic's first message)."""
-    from fgloc.io.tf import frame_name
+    from fgloc.frames.tf import frame_name
 
     out: dict[str, str] = {}
     if scan_topic is not None:

@@ -78,7 +78,7 @@ def check_sources(sources: SourcesConfig, source: str = "config") -> None:
     if sources.inputs:
         parse_sources(sources, source=source)
     if sources.static_transforms:
-        from fgloc.localization.frames import parse_static_transforms
+        from fgloc.frames.static import parse_static_transforms
 
         parse_static_transforms(sources.static_transforms, source=source)
 

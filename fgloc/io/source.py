@@ -30,8 +30,8 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from fgloc.errors import LogError
+from fgloc.frames.tf import TfTree, frame_name, tf_edge
 from fgloc.io.ros import mirror_scan
-from fgloc.io.tf import TfTree, frame_name, tf_edge
 from fgloc.io.topics import Topics
 from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory
 

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from fgloc.errors import ConfigError, LogError
+from fgloc.frames.tf import mount_of, planar_mount
 from fgloc.geometry import compose, wrap_angle
-from fgloc.io.tf import mount_of, planar_mount
 from fgloc.io.topics import pick_topics
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
 
@@ -125,7 +125,7 @@ def log_messages(
 def _check_mount_frames(static_transforms: Sequence[StaticTransform], scan_frame: str, path: Path) -> None:
     """A given mount that is not the laser's (the only one mapping uses) is a one-line error, not
     silently unused."""
-    from fgloc.io.tf import frame_name
+    from fgloc.frames.tf import frame_name
 
     other = [t for t in static_transforms if frame_name(t.child) != frame_name(scan_frame)]
     if other:

@@ -9,7 +9,7 @@ lack (r_l's own ``test1.bag``: the IMU mount).  :func:`read_launch` returns
   :func:`~fgloc.porting.from_robot_localization` / :func:`~fgloc.porting.from_nav2` (``--node``
   picks one when several match);
 * the robot mounts of the ``static_transform_publisher`` nodes (``tf`` / ``tf2_ros``) as
-  ``sources.static_transforms`` entries (:mod:`fgloc.localization.frames`); a node's own name
+  ``sources.static_transforms`` entries (:mod:`fgloc.frames.static`); a node's own name
   for the robot frame (robot_localization's ``base_link_frame``, amcl's ``base_frame_id``, e.g.
   ``mustang_base``) is a robot frame too, and its mounts are carried over as ``base_link``'s
   (fgloc's name for the robot; a note says so);
@@ -31,7 +31,7 @@ from typing import Any
 import yaml
 
 from fgloc.errors import ConfigError
-from fgloc.localization.frames import ROBOT_FRAMES, entry_of_publisher_args
+from fgloc.frames.static import ROBOT_FRAMES, entry_of_publisher_args
 
 PUBLISHERS = ("static_transform_publisher",)
 

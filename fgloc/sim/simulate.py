@@ -70,8 +70,8 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from fgloc.backends.imu import imu_message
 from fgloc.errors import ConfigError
+from fgloc.frames.imu import imu_message
 from fgloc.geometry import compose, interpolate_poses, inverse, wrap_angle
 from fgloc.kinematics import QuadratureEncoder, make_kinematics
 from fgloc.maps import FREE, OCCUPIED, OccupancyMap, load_map
@@ -474,7 +474,7 @@ def _imu(sc: dict, plan: Plan, offset: float, mount: Transform3D,
     """``sensor_msgs/Imu`` messages ``(arrival, topic, msg)`` of a 9-axis IMU mounted with ``mount``."""
     from scipy.spatial.transform import Rotation
 
-    from fgloc.backends.imu import mount_rotation
+    from fgloc.frames.imu import mount_rotation
 
     c = {**IMU_DEFAULTS, **(sc.get("imu") or {})}
     rate = float(c["rate_hz"])
@@ -661,7 +661,7 @@ def write_sim(result: SimResult, outdir: str | Path) -> Path:
 
 
 def _imu_as_heading(msg: Imu, mount: StaticTransform | None) -> CompassHeading:
-    from fgloc.backends.imu import imu_in_base, mount_rotation
+    from fgloc.frames.imu import imu_in_base, mount_rotation
 
     b, _ = imu_in_base(msg, mount_rotation(mount))
     return CompassHeading(b.stamp, b.yaw_rad, b.yaw_rate_radps, b.yaw_var, b.yaw_rate_var, frame_id="base_link")

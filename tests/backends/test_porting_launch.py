@@ -11,7 +11,7 @@ import yaml
 from fgloc.commands.porting import convert_file
 from fgloc.config import parse_config
 from fgloc.errors import ConfigError
-from fgloc.localization.frames import parse_static_transforms
+from fgloc.frames.static import parse_static_transforms
 
 LAUNCH = """<launch>
   <arg name="imu_yaw" default="-1.570796327"/>

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from fgloc.frames.static import transform_of
 from fgloc.io import open_log
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.msgdefs import SEPARATOR, full_text
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.topics import Topics
-from fgloc.localization.frames import transform_of
 from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
 
 T0 = 1_700_000_000.0

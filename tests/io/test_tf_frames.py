@@ -11,9 +11,9 @@ import logging
 import numpy as np
 import pytest
 
+from fgloc.frames.tf import is_base_frame
 from fgloc.io import open_log
 from fgloc.io.mcap_writer import LogWriter
-from fgloc.io.tf import is_base_frame
 from fgloc.types import LaserScan, Odometry, StaticTransform
 
 N = 5

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from fgloc.errors import ConfigError
-from fgloc.io.tf import mount_of
-from fgloc.localization.frames import (
+from fgloc.frames.static import (
     entry_of_publisher_args,
     parse_static_transforms,
     static_transform_entry,
 )
+from fgloc.frames.tf import mount_of
 from fgloc.localization.sources import SourceRouter, parse_sources
 from fgloc.types import CompassHeading, Imu, StaticTransform
 

@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 from fgloc.app.run import RunRequest, run_log
+from fgloc.frames.static import static_transform_entry
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.tum import read_tum
-from fgloc.localization.frames import static_transform_entry
 from fgloc.types import CompassHeading, Odometry
 
 HEADING = 0.5  # rad: the base's true heading; the IMU is yawed -90 deg on it

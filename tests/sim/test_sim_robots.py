@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fgloc.backends.imu import imu_in_base, mount_rotation
+from fgloc.frames.imu import imu_in_base, mount_rotation
 from fgloc.geometry import wrap_angle
 from fgloc.sim import load_scenario, run_scenario
 from fgloc.sim.simulate import scrub_factor

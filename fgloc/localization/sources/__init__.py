@@ -24,7 +24,7 @@ a Mahalanobis (squared) gate against the prediction (pose sources).  ``frame_id`
 pose source must be in.  The scan-to-map front-end is always a source (``scan``).
 
 An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
-header.frame_id``; :mod:`.imu`, the maths in :mod:`fgloc.backends.imu`): any 3-D mount when the message is a whole
+header.frame_id``; :mod:`.imu`, the maths in :mod:`fgloc.frames.imu`): any 3-D mount when the message is a whole
 :class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
 :class:`~fgloc.types.Transform3D` (every log reader's tf, and ``static_transforms``); with a
 planar transform or a yaw-only reading (:class:`~fgloc.types.CompassHeading`: fgloc's serial

@@ -29,7 +29,7 @@ class SourcesConfig:
                            "empty: odom (/odom: vx, vy, vyaw) and imu (/imu: yaw, vyaw)")
     static_transforms: list[dict] = setting([], "mounts the log lacks: [{parent: base_link, child: imu_link, "
                                       "xyz: [x, y, z], rpy_deg: [roll, pitch, yaw] | xyzw: [qx, qy, qz, qw]}]; "
-                                      "they win over the log's /tf_static (fgloc.localization.frames)")
+                                      "they win over the log's /tf_static (fgloc.frames.static)")
 
 
 def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: str = "config") -> list[SourceSpec]:

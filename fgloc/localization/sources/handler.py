@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from fgloc.backends.health import SourceHealth
-from fgloc.localization.frames import MountTable
+from fgloc.frames.mounts import MountTable
 from fgloc.localization.sources.spec import SourceSpec
 
 

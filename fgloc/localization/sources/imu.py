@@ -1,12 +1,12 @@
 """IMU sources (``sensor_msgs/Imu``, or the yaw-only :class:`~fgloc.types.CompassHeading`).
 
 An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
-header.frame_id``, or ``sources.static_transforms``: :class:`~fgloc.localization.frames.MountTable`;
-the maths in :mod:`fgloc.backends.imu`): any 3-D mount when the message is a whole
+header.frame_id``, or ``sources.static_transforms``: :class:`~fgloc.frames.mounts.MountTable`;
+the maths in :mod:`fgloc.frames.imu`): any 3-D mount when the message is a whole
 :class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
 :class:`~fgloc.types.Transform3D`; with a planar transform or a yaw-only reading (fgloc's serial
 link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity,
-with one warning once :data:`~fgloc.localization.frames.MOUNT_WAIT_S` of its stamps passed
+with one warning once :data:`~fgloc.frames.mounts.MOUNT_WAIT_S` of its stamps passed
 without one (a mount that arrives is applied from then on, and the summary says after how many).
 
 The first IMU gives the heading (and its rate) to the localizer; a second one only its yaw rate
@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from fgloc.backends.contract import Capability
-from fgloc.backends.imu import imu_in_base
+from fgloc.frames.imu import imu_in_base
+from fgloc.frames.mounts import MOUNT_WAIT_S, OWN_FRAMES
 from fgloc.geometry import wrap_angle, wrap_scalar
 from fgloc.io.topics import IMU
-from fgloc.localization.frames import MOUNT_WAIT_S, OWN_FRAMES
 from fgloc.localization.sources.handler import SourceHandler
 from fgloc.localization.sources.odometry import MAX_TILT_RAD
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, TILT, SourceSpec, SourceType

@@ -17,8 +17,9 @@ import logging
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from fgloc.frames.mounts import MountTable
+from fgloc.frames.static import parse_static_transforms
 from fgloc.io.topics import normalize_type
-from fgloc.localization.frames import MountTable, parse_static_transforms
 from fgloc.localization.sources.config import SOURCE_TYPES, parse_sources
 from fgloc.localization.sources.handler import SourceContext, SourceHandler, SourceState
 from fgloc.localization.sources.odometry import OdometryHandler

@@ -13,40 +13,25 @@ config (``sources.static_transforms``) or the command line (``fgloc run --static
 ``rpy_deg`` is roll, pitch, yaw in degrees about the parent's fixed x, y, z axes (REP 103, as
 ``static_transform_publisher``'s ``yaw pitch roll``); ``xyzw`` a quaternion instead.  A
 configured transform wins over one of the same child frame in the log.  Only mounts on the robot
-(parent ``base_link`` or ``base_footprint``) are used.  :class:`MountTable` is the sensors'
-mounts a session looks up: the configured ones, then the log's tf (chains composed).  Core
-maths and checks: no I/O (a missing mount is one logged warning).
+(parent ``base_link`` or ``base_footprint``) are used.  Checks only: no I/O.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
 
-from fgloc.backends.imu import mount_rotation
 from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
-from fgloc.geometry import matrix_quaternion, quaternion_matrix, rpy_quaternion
-from fgloc.io.tf import BASE_FRAMES
-from fgloc.types import StaticTransform, Transform3D
+from fgloc.frames.tf import BASE_FRAMES
+from fgloc.geometry import quaternion_matrix, rpy_quaternion
+from fgloc.types import Transform3D
 
-log = logging.getLogger(__name__)
-
-ROBOT_FRAMES = BASE_FRAMES  # the robot's own frames (one home: fgloc.io.tf)
-#: a sensor frame that needs no mount: none given, or the robot's own
-OWN_FRAMES = ("", *ROBOT_FRAMES)
+ROBOT_FRAMES = BASE_FRAMES  # the robot's own frames (fgloc.frames.tf)
 KEYS = ("parent", "child", "xyz", "rpy_deg", "xyzw")
-#: s (of an IMU's stamps): an IMU frame without a mount is warned about only after this long without
-#: one, or at the end of the log: a ROS 2 recorder logs /tf_static up to tens of ms after the first
-#: IMU messages (TurtleBot3 bags: 0-53 ms), and a mount that arrives is applied from then on
-MOUNT_WAIT_S = 1.0
-_IDENTITY = np.eye(3)
-_IDENTITY.flags.writeable = False
-_IDENTITY_ENTRY = (None, _IDENTITY, _IDENTITY.ravel().tolist())
 
 
 def _numbers(v: Any, n: int, where: str) -> list[float]:
@@ -136,94 +121,3 @@ def entry_of_publisher_args(args: Sequence[float | str]) -> dict[str, Any] | Non
     yaw, pitch, roll = nums[3:6]
     return {"parent": parent, "child": child, "xyz": xyz,
             "rpy_deg": [round(math.degrees(v), 6) for v in (roll, pitch, yaw)]}
-
-
-def _same_rotation(a: StaticTransform, b: StaticTransform) -> bool:
-    qa, qb = getattr(a, "rotation_xyzw", None), getattr(b, "rotation_xyzw", None)
-    if qa is None or qb is None:
-        return qa is None and qb is None and float(a.pose[2]) == float(b.pose[2])
-    return bool(np.array_equal(np.asarray(qa), np.asarray(qb)))
-
-
-class MountTable:
-    """The sensors' mounts on the robot: the configured ones (``sources.static_transforms``) win
-    over the log's tf (:meth:`add_tf`); a sensor mounted through a chain (``base_link -> plate ->
-    imu``) gets the chain's rotation composed.  Rotations are computed once per transform."""
-
-    def __init__(self, configured: Sequence[StaticTransform] | None = None) -> None:
-        self.configured = {t.child.lstrip("/"): t for t in configured or ()}
-        self.mounts: dict[str, StaticTransform] = dict(self.configured)
-        # every tf link by child frame: a sensor mounted through a chain (base_link -> plate -> imu)
-        self._links: dict[str, StaticTransform] = {}
-        self._chains: dict[str, StaticTransform | None] = {}
-        # the mounts' rotations by frame (and their entries as floats)
-        self._rotations: dict[str, tuple[StaticTransform | None, np.ndarray, list[float]]] = {}
-        self._warned: set[str] = set()
-
-    def add_tf(self, msg: object) -> None:
-        """A ``/tf_static`` or ``/tf`` message (a list of transforms): the mounts on the robot and
-        every link (configured frames and the robot's own are not overridden)."""
-        if isinstance(msg, (list, tuple)):
-            for tr in msg:
-                if not isinstance(tr, StaticTransform):
-                    continue
-                child = tr.child.lstrip("/")
-                if child in self.configured or child in ROBOT_FRAMES:
-                    continue
-                if tr.parent.lstrip("/") in ROBOT_FRAMES:
-                    self.mounts[child] = tr
-                old = self._links.get(child)
-                if old is None or not _same_rotation(old, tr) or old.parent != tr.parent:
-                    self._chains.clear()
-                self._links[child] = tr
-
-    def chain(self, frame: str) -> StaticTransform | None:
-        """``base_link -> frame`` through the tf links (rotation composed; None: no chain)."""
-        if frame in self._chains:
-            return self._chains[frame]
-        R, cur, out = np.eye(3), frame, None
-        for _ in range(32):
-            tr = self._links.get(cur)
-            if tr is None:
-                break
-            R = mount_rotation(tr) @ R
-            cur = tr.parent.lstrip("/")
-            if cur in ROBOT_FRAMES:
-                out = transform_of(cur, frame, [0.0, 0.0, 0.0], matrix_quaternion(R).tolist())
-                break
-        self._chains[frame] = out
-        return out
-
-    def mount(self, frame: str) -> StaticTransform | None:
-        """The robot -> ``frame`` mount (None: the robot's own frame, or none known yet)."""
-        f = frame.lstrip("/")
-        if f in OWN_FRAMES:
-            return None
-        tr = self.mounts.get(f)
-        if tr is None:
-            tr = self.chain(f)
-        return tr
-
-    def rotation(self, tr: StaticTransform | None) -> np.ndarray:
-        """``mount_rotation(tr)``, computed once per transform (every IMU message asks; a new
-        transform of the same frame replaces it)."""
-        return self._rotation_entry(tr)[1]
-
-    def rotation_values(self, tr: StaticTransform | None) -> list[float]:
-        """:meth:`rotation`'s 9 entries row by row as floats (what ``imu_in_base`` reads), kept with it."""
-        return self._rotation_entry(tr)[2]
-
-    def _rotation_entry(self, tr: StaticTransform | None) -> tuple[StaticTransform | None, np.ndarray, list[float]]:
-        if tr is None:
-            return _IDENTITY_ENTRY
-        got = self._rotations.get(tr.child)
-        if got is None or got[0] is not tr:
-            R = mount_rotation(tr)
-            got = self._rotations[tr.child] = (tr, R, R.ravel().tolist())
-        return got
-
-    def warn_missing(self, frame: str) -> None:
-        """One warning per frame: no mount, taken as mounted like base_link."""
-        if frame not in self._warned:
-            self._warned.add(frame)
-            log.warning("no transform base_link -> %s: the IMU is taken as mounted like base_link", frame)

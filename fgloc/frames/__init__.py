@@ -1,0 +1,17 @@
+"""Frames and mounts, one home: where each sensor is on the robot.
+
+* :mod:`fgloc.frames.tf` - tf frame names (:func:`~fgloc.frames.tf.frame_name`, the robot's own
+  :data:`~fgloc.frames.tf.BASE_FRAMES`), a log's tf chains to the laser
+  (:class:`~fgloc.frames.tf.TfTree`, upside-down links), a user's laser mount as a level or
+  upside-down 2-D mount (:func:`~fgloc.frames.tf.planar_mount`);
+* :mod:`fgloc.frames.static` - static transforms a user gives (``sources.static_transforms``,
+  ``--static-transform``, a launch file's ``static_transform_publisher``): parsed and checked;
+* :mod:`fgloc.frames.mounts` - :class:`~fgloc.frames.mounts.MountTable`: the sensors' mounts a
+  session looks up (configured ones first, then the log's tf, chains composed);
+* :mod:`fgloc.frames.imu` - a ``sensor_msgs/Imu`` through its mount into ``base_link`` (REP 145),
+  the mount's rotation.
+
+Bottom layer (like :mod:`fgloc.geometry`): every other package may import it.  The command-line
+options that give a mount (their help texts and option-named errors) are in
+:mod:`fgloc.app.mounts`.
+"""

@@ -85,12 +85,34 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", "-q", help="no status line"),
         view: str = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
                                  "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
+        ros2: bool = typer.Option(False, "--ros2", help="a ROS 2 peer over DDS, in place of nav2's AMCL: the "
+                                  "robot's /scan, /odom, /imu, /tf, /map in; /amcl_pose, map -> odom on /tf, "
+                                  "/fgloc/status out (config section ros2)"),
+        domain: int = typer.Option(None, "--domain", help="--ros2: DDS domain (default $ROS_DOMAIN_ID, else 0)"),
+        interface: str = typer.Option(None, "--interface", help="--ros2: network interface (name or address) "
+                                      "DDS uses"),
+        scan_topic: str = typer.Option(None, "--scan-topic", help="--ros2: LaserScan topic (ros2.scan_topic)"),
     ) -> None:
-        """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP.  Exit 0 done, 1 a
-        sensor thread died or a sensor asked for delivered nothing, 2 a usage error (a missing serial port)."""
+        """Localize live: STM32 wheel counts + compass over serial, SICK laser over TCP; or (--ros2) a ROS 2
+        robot's topics over DDS.  Exit 0 done, 1 a sensor thread died or a sensor asked for delivered
+        nothing, 2 a usage error (a missing serial port)."""
         from fgloc.app.units import pose_arg
         from fgloc.live.app import LiveRequest, run_live
         from fgloc.live.publish import dumps
+
+        if ros2:
+            from fgloc.errors import ConfigError
+            from fgloc.ros2.live import live_ros2
+            from fgloc.ros2.live import summary_line as ros2_summary
+
+            if serial or laser:
+                raise ConfigError("fgloc live: --ros2 takes the robot's sensors from DDS; leave out --serial / --laser")
+            rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend, initial_pose=pose_arg(initial_pose),
+                            record=record, publish=publish, duration=duration, config=config, out=out or out_old,
+                            out_smoothed=out_smoothed, quiet=quiet, view=view, domain=domain, interface=interface,
+                            scan_topic=scan_topic)
+            print(dumps(rep, indent=1) if as_json else ros2_summary(rep))
+            return
 
         tty = sys.stderr.isatty()
         last_len = [0]

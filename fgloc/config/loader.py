@@ -24,6 +24,7 @@ from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.config import HealthConfig, LaserConfig, RobotParams, SerialConfig
 from fgloc.localization.config import PipelineConfig
 from fgloc.localization.sources import SourcesConfig, parse_sources
+from fgloc.ros2.config import Ros2Config
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,7 @@ class FglocConfig:
     serial: SerialConfig = section(SerialConfig, "fgloc live: the STM32 serial link")
     laser: LaserConfig = section(LaserConfig, "fgloc live: the SICK laser")
     health: HealthConfig = section(HealthConfig, "fgloc live: sensor health monitoring")
+    ros2: Ros2Config = section(Ros2Config, "fgloc live --ros2 / fgloc replay --ros2: a ROS 2 peer over DDS")
 
 
 SECTIONS = tuple(f.name for f in fields(FglocConfig))

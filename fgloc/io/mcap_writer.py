@@ -30,7 +30,8 @@ from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, Stati
 LIBRARY = "fgloc"
 
 
-def _encoder(msg: object) -> tuple[str, Callable[[Any, float], bytes]] | None:
+def message_encoder(msg: object) -> tuple[str, Callable[[Any, float], bytes]] | None:
+    """``(ROS 2 type, encode(msg, stamp) -> CDR bytes)`` of an fgloc message (None: not one of these)."""
     if isinstance(msg, LaserScan):
         return LASER_SCAN, fastcdr.encode_laser_scan
     if isinstance(msg, Odometry):
@@ -107,7 +108,7 @@ class LogWriter:
     # -- writing -----------------------------------------------------------------------------
     def write(self, topic: str, msg: object, stamp: float | None = None, log_time_ns: int | None = None) -> None:
         """Write one message; ``stamp`` overrides ``msg.stamp`` (header and log time)."""
-        enc = _encoder(msg)
+        enc = message_encoder(msg)
         if enc is None:
             if not _is_tf(msg):
                 raise TypeError(f"cannot write {type(msg).__name__} to a log")

@@ -1,4 +1,4 @@
-"""ROS 2 message definitions (``ros2msg``) for the types fgloc logs, as rosbag2 stores them.
+"""ROS 2 message definitions (``ros2msg``) for the types fgloc logs and publishes, as rosbag2 stores them.
 
 The field lines are those of the ROS 2 (Humble .. Jazzy) ``.msg`` files (comments left out;
 same-package types written relative, defaults kept).  :func:`full_text` concatenates a type
@@ -52,6 +52,19 @@ MSG_TEXT: dict[str, str] = {
         "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n"
     ),
     "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+    # what fgloc publishes live (fgloc.ros2): a map, the simulated clock, its status
+    "nav_msgs/MapMetaData": (
+        "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\n"
+        "geometry_msgs/Pose origin\n"
+    ),
+    "nav_msgs/OccupancyGrid": "std_msgs/Header header\nMapMetaData info\nint8[] data\n",
+    "rosgraph_msgs/Clock": "builtin_interfaces/Time clock\n",
+    "diagnostic_msgs/KeyValue": "string key\nstring value\n",
+    "diagnostic_msgs/DiagnosticStatus": (
+        "byte OK=0\nbyte WARN=1\nbyte ERROR=2\nbyte STALE=3\n"
+        "byte level\nstring name\nstring message\nstring hardware_id\nKeyValue[] values\n"
+    ),
+    "diagnostic_msgs/DiagnosticArray": "std_msgs/Header header\nDiagnosticStatus[] status\n",
 }
 
 _FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
@@ -138,3 +151,20 @@ def is_standard(type_name: str, encoding: str, data: bytes) -> bool:
         return False
     want = _sections(full_text(type_name), type_name)
     return all(got.get(k) == v for k, v in want.items()) and set(got) <= set(want) | {""}
+
+
+def fields(type_name: str) -> dict[str, list[tuple[str, str, str]]]:
+    """Every type ``type_name`` reaches, ``{pkg/Type: [(field type, array suffix, field name)]}``,
+    from :data:`MSG_TEXT` (constants and defaults dropped; nested types absolute, ``pkg/Type``;
+    the suffix is ``""``, ``"[]"``, ``"[N]"`` or ``"[<=N]"``)."""
+    out: dict[str, list[tuple[str, str, str]]] = {}
+    for name, lines in _sections(full_text(type_name), type_name).items():
+        if not name:
+            continue
+        rows = []
+        for line in lines:
+            typ, field = line.rsplit(" ", 1)
+            base, _, arr = typ.partition("[")
+            rows.append((base, "[" + arr if arr else "", field))
+        out[name] = rows
+    return out

@@ -129,6 +129,7 @@ class Localizer:
         self._last_kf_t = -math.inf
         self._scan_count = 0
         self._lost = initial_pose is None and not self.odom_mode
+        self._reinit: FloatArray | None = None  # reinitialize(): the prior of the pose to start again from
         self._t_bad_since: float | None = None  # first informative scan of the current no-fix streak
         self._dead_reckoned_since: float | None = None  # first scan outside the map since the last used fix
         self._reacquiring = False  # back on the map after dead reckoning: fixes checked globally
@@ -386,6 +387,17 @@ class Localizer:
         return compose1(pose_a, d)
 
     # ------------------------------------------------------------------ start-up / recovery
+    def reinitialize(self, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        """Start again from ``pose`` (an operator's estimate in the map: RViz's 2D Pose Estimate on
+        /initialpose): the next scan is matched from it as from an initial pose, and the back-end is
+        restarted on that fix (on ``pose`` with ``cov``, default the initial-pose prior, when none)."""
+        if self.odom_mode:
+            return
+        self.initial_pose = np.asarray(pose, dtype=float).reshape(3)
+        self._reinit = self._initial_cov() if cov is None else np.asarray(cov, dtype=float).reshape(3, 3)
+        self._lost = True
+        self.stats["reinitializations"] = self.stats.get("reinitializations", 0) + 1
+
     def _initial_cov(self) -> FloatArray:
         sxy = self.pcfg.initial_sigma_xy_m
         syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)
@@ -426,7 +438,8 @@ class Localizer:
     def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
         fe = self.frontend
         t = float(msg.stamp)
-        if self.initial_pose is not None and not self.backend.initialized:
+        if self.initial_pose is not None and (not self.backend.initialized or self._reinit is not None):
+            reinit, self._reinit = self._reinit, None
             res = fe.match(msg, self.initial_pose, odom_delta)
             fix = res.to_fix(t, fe.name)
             if fix is not None:
@@ -434,7 +447,7 @@ class Localizer:
                 self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)
                 return fix
             self.last_reason = f"initial pose: {res.why}"
-            self._start(t, self.initial_pose, self._initial_cov())
+            self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit)
             return None
         self._global_tries += 1
         if fe.supports_global:

@@ -1,0 +1,189 @@
+"""ROS 2 CDR bytes <-> fgloc objects for DDS, with fgloc's one set of codecs.
+
+Decoding: the fixed-layout batch decoders of :mod:`fgloc.io.fastcdr` (one message at a time
+here) and, for another layout or type, mcap_ros2's generic decoder on the standard definition
+(:func:`fgloc.io.msgdefs.full_text`) followed by :data:`fgloc.io.ros.FROM_ROS`: the same path
+a log's message takes.  Encoding: :func:`fgloc.io.mcap_writer.message_encoder` (fastcdr) for
+fgloc's messages, mcap_ros2's generic encoder for the few others (a map, the clock, the status).
+
+A message that does not decode raises :class:`Undecodable` (the caller counts it by topic).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from fgloc.io import fastcdr
+from fgloc.io.msgdefs import MSG_TEXT, full_text, short_name
+from fgloc.io.ros import (
+    FROM_ROS,
+    header_stamp,
+    quaternion_yaw,
+    ros_header,
+    stamp_to_sec_nsec,
+    tf_flips,
+    tf_from_ros,
+    yaw_quaternion,
+)
+from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, normalize_type
+from fgloc.maps import OccupancyMap
+from fgloc.types import StaticTransform
+
+OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
+CLOCK = "rosgraph_msgs/msg/Clock"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+class Undecodable(ValueError):
+    """A message whose bytes are not a valid message of its topic's type."""
+
+
+_FAST: dict[str, Callable[[Sequence[bytes]], list[Any]]] = {
+    LASER_SCAN: fastcdr.decode_laser_scans,
+    ODOMETRY: fastcdr.decode_odometries,
+    IMU: fastcdr.decode_imus,
+    TF_MESSAGE: fastcdr.decode_tf_messages,
+}
+
+
+@functools.cache
+def _generic_decoder(type_name: str) -> Callable[[bytes], Any]:
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    schema = Schema(id=1, name=type_name, encoding="ros2msg", data=full_text(type_name).encode())
+    dec = DecoderFactory().decoder_for("cdr", schema)
+    if dec is None:
+        raise Undecodable(f"no decoder for {type_name}")
+    return dec  # type: ignore[no-any-return]
+
+
+@functools.cache
+def _generic_encoder(type_name: str) -> Callable[[Any], bytes]:
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    name = short_name(type_name)
+    return serialize_dynamic(name, full_text(type_name))[name]
+
+
+def known(type_name: str) -> bool:
+    """Whether fgloc has the definition of ROS 2 type ``type_name`` (any spelling)."""
+    return short_name(normalize_type(type_name)) in MSG_TEXT
+
+
+def decode_generic(type_name: str, data: bytes) -> Any:
+    """mcap_ros2's decoded message object (attribute access) of ``data``."""
+    try:
+        return _generic_decoder(normalize_type(type_name))(bytes(data))
+    except Undecodable:
+        raise
+    except Exception as e:  # noqa: BLE001 - any failure of the generic codec is a bad message
+        raise Undecodable(f"{type(e).__name__}: {e}") from None
+
+
+def decode(type_name: str, data: bytes, topic: str = "") -> object:
+    """The fgloc object of a message (what a log reader gives for it): LaserScan, Odometry, Imu,
+    ``list[Transform3D]``, PoseFix; an :class:`OccupancyMap` for a map."""
+    t = normalize_type(type_name)
+    if len(data) < 4:
+        raise Undecodable(f"{len(data)} bytes: shorter than the CDR header")
+    fast = _FAST.get(t)
+    if fast is not None:
+        with np.errstate(over="ignore", invalid="ignore"):
+            obj = fast([data])[0]
+        if obj is not None:
+            return obj[0] if t == TF_MESSAGE else obj
+    if t == POSE_COV_STAMPED:
+        with np.errstate(over="ignore", invalid="ignore"):
+            fix = fastcdr.decode_pose_fixes([data], topic)[0]
+        if fix is not None:
+            return fix
+    if t == OCCUPANCY_GRID:
+        return map_from_grid(decode_generic(t, data))
+    conv = FROM_ROS.get(t)
+    if conv is None:
+        raise Undecodable(f"fgloc does not read {t}")
+    msg = decode_generic(t, data)
+    try:
+        return conv(msg, topic)
+    except Exception as e:  # noqa: BLE001
+        raise Undecodable(f"{type(e).__name__}: {e}") from None
+
+
+def decode_tf(data: bytes) -> tuple[list[StaticTransform], list[bool], list[float]]:
+    """A TFMessage's transforms, whether each turns the child's z axis down
+    (:func:`fgloc.io.ros.tf_flips`) and each transform's header stamp."""
+    m = decode_generic(TF_MESSAGE, data)
+    try:
+        return tf_from_ros(m, ""), tf_flips(m), [header_stamp(t.header) for t in m.transforms]
+    except Exception as e:  # noqa: BLE001
+        raise Undecodable(f"{type(e).__name__}: {e}") from None
+
+
+def encode(msg: object, stamp: float | None = None) -> tuple[str, bytes]:
+    """``(ROS 2 type, CDR bytes)`` of an fgloc message (a transform list: a TFMessage)."""
+    from fgloc.io.mcap_writer import message_encoder
+
+    enc = message_encoder(msg)
+    if enc is None:
+        if isinstance(msg, list | tuple) and all(isinstance(x, StaticTransform) for x in msg):
+            return TF_MESSAGE, fastcdr.encode_tf(list(msg), float(0.0 if stamp is None else stamp))
+        raise TypeError(f"cannot encode {type(msg).__name__} as a ROS 2 message")
+    type_name, fn = enc
+    return type_name, fn(msg, float(msg.stamp if stamp is None else stamp))  # type: ignore[attr-defined]
+
+
+def encode_generic(type_name: str, fields: dict) -> bytes:
+    """CDR of a message given as a dict of its fields (mcap_ros2's generic encoder)."""
+    return _generic_encoder(normalize_type(type_name))(fields)
+
+
+# ------------------------------------------------------------------------------------ maps
+def grid_fields(m: OccupancyMap, stamp: float, frame_id: str = "map") -> dict:
+    """A ``nav_msgs/OccupancyGrid`` of a map as map_server publishes it (row 0 at the origin,
+    100 occupied, 0 free, -1 unknown; a scale map's values as they are)."""
+    sec, nsec = stamp_to_sec_nsec(stamp)
+    x, y, yaw = (float(v) for v in m.origin)
+    data = np.clip(np.asarray(m.data), -1, 100).astype(np.int8)
+    return {
+        "header": ros_header(stamp, frame_id),
+        "info": {"map_load_time": {"sec": sec, "nanosec": nsec}, "resolution": float(m.resolution),
+                 "width": m.width, "height": m.height,
+                 "origin": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": yaw_quaternion(yaw)}},
+        "data": data.ravel().tobytes(),
+    }
+
+
+def encode_map(m: OccupancyMap, stamp: float, frame_id: str = "map") -> bytes:
+    return encode_generic(OCCUPANCY_GRID, grid_fields(m, stamp, frame_id))
+
+
+def map_from_grid(msg: Any) -> OccupancyMap:
+    """An :class:`OccupancyMap` of a decoded ``nav_msgs/OccupancyGrid`` (trinary when every cell
+    is -1, 0 or 100, as map_server's trinary maps; else its values read as scale)."""
+    info = msg.info
+    w, h = int(info.width), int(info.height)
+    raw = msg.data
+    cells = np.frombuffer(bytes(raw), dtype=np.int8) if isinstance(raw, bytes | bytearray | memoryview) \
+        else np.asarray(raw, dtype=np.int16)
+    if w <= 0 or h <= 0 or cells.size != w * h:
+        raise Undecodable(f"map of {w} x {h} cells with {cells.size} values")
+    data = cells.astype(np.int16).reshape(h, w)
+    values = np.unique(data)
+    trinary = bool(np.all(np.isin(values, (-1, 0, 100))))
+    o = info.origin
+    res = float(info.resolution)
+    if not (math.isfinite(res) and res > 0):
+        raise Undecodable(f"map resolution {res}")
+    origin = np.array([o.position.x, o.position.y, quaternion_yaw(o.orientation)])
+    return OccupancyMap(data, res, origin, mode="trinary" if trinary else "scale")
+
+
+def encode_clock(t: float) -> bytes:
+    sec, nsec = stamp_to_sec_nsec(t)
+    return encode_generic(CLOCK, {"clock": {"sec": sec, "nanosec": nsec}})

@@ -1,0 +1,152 @@
+"""``fgloc live --ros2``: the command's work (options in, summary out), around :class:`Ros2Live`."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def summary_line(report: dict[str, Any]) -> str:
+    """The session in one line (``--json`` prints the whole report)."""
+    r = report.get("ros2") or {}
+    if "waiting_for" in report:
+        return f"fgloc live: stopped while waiting for {report['waiting_for']}"
+    c = report.get("counters") or {}
+    lat = r.get("scan_to_tf_ms") or {}
+    line = (f"fgloc live: {report.get('duration_s', 0):.1f} s, {r.get('published', 0)} poses published, "
+            f"{c.get('scans_fused', 0)} scans fused, {c.get('fixes', 0)} fixes, scan -> tf p50 "
+            f"{lat.get('p50', float('nan')):.2f} ms p99 {lat.get('p99', float('nan')):.2f} ms")
+    probs = r.get("problems") or []
+    return line + ("; DDS: " + "; ".join(probs) if probs else "")
+
+
+def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
+              initial_pose: tuple[float, float, float] | None,
+              record: Path | None, publish: list[str] | None, duration: float | None, config: Path | None,
+              out: Path | None, out_smoothed: Path | None, quiet: bool, view: str | None,
+              domain: int | None, interface: str | None, scan_topic: str | None) -> dict[str, Any]:
+    """Run until Ctrl-C (or ``duration``); print the status line on stderr; return the summary."""
+    from fgloc.config import load_config, parse_config
+    from fgloc.errors import ConfigError
+    from fgloc.live.app import LiveSession
+    from fgloc.localization import Session, build_session
+    from fgloc.maps import load_map
+    from fgloc.ros2.node import Ros2Live
+    from fgloc.ros2.transport import CycloneTransport
+
+    if backend not in ("smoother", "ekf"):
+        raise ConfigError(f"--backend {backend}: expected smoother or ekf")
+    cfg = load_config(config)
+    over = {k: v for k, v in (("domain_id", domain), ("interface", interface), ("scan_topic", scan_topic))
+            if v is not None}
+    if over:
+        cfg = parse_config({"ros2": over}, source="command line", base=cfg)
+    occ = load_map(map_yaml) if map_yaml is not None else None
+    init = None if initial_pose is None else np.array(initial_pose, dtype=float)
+    tty = sys.stderr.isatty()
+    last_len = [0]
+    n_lines = [0]
+
+    def status(line: str) -> None:
+        if quiet:
+            return
+        if tty:
+            sys.stderr.write("\r" + line + " " * max(0, last_len[0] - len(line)))
+            last_len[0] = len(line)
+        else:
+            n_lines[0] += 1
+            if n_lines[0] % 20 == 1:  # every 5 s when not a terminal
+                sys.stderr.write(line + "\n")
+        sys.stderr.flush()
+
+    def event(msg: str) -> None:
+        sys.stderr.write(("\n" if tty and not quiet else "") + f"fgloc live: {msg}\n")
+        sys.stderr.flush()
+
+    viewer: list[Any] = []
+
+    def make_session(occ_map: Any, mount: Any) -> Session:
+        return build_session(occ_map, mount, backend=backend, frontend=frontend, initial_pose=init, config=cfg)
+
+    def make_live(session: Session) -> LiveSession:
+        live = LiveSession(session, None, None, config=cfg, record=record, publish=publish or None,
+                           event_sink=event)
+        if view is not None:
+            from fgloc.view import ViewHook
+
+            try:
+                viewer.append(ViewHook(session.loc, None, view=view, record_to=live.recorder, announce=event))
+            except BaseException:
+                live.close()
+                raise
+            session.add_sink(viewer[0])
+        return live
+
+    transport = CycloneTransport(cfg.ros2.domain_id, cfg.ros2.interface)
+    try:
+        node = Ros2Live(cfg, transport, make_session, make_live, occ_map=occ, event=event)
+    except BaseException:
+        transport.close()
+        raise
+    stop = threading.Event()
+    hits = [0]
+
+    def on_signal(signum, frame) -> None:  # noqa: ANN001
+        hits[0] += 1
+        stop.set()
+        if hits[0] > 1:
+            raise KeyboardInterrupt
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            old[s] = signal.signal(s, on_signal)
+    event(f"joined DDS domain {transport.domain_id}" + (f" on {cfg.ros2.interface}" if cfg.ros2.interface else "")
+          + f"; subscribed to {', '.join(i.topic for i in node.inputs)}")
+    last = [0.0]
+
+    def shown() -> bool:
+        now = time.monotonic()
+        if now - last[0] >= 0.25:
+            last[0] = now
+            status(node.status_line())
+        return False
+
+    summary = None
+    try:
+        transport.start()
+        node.run(stop, duration=duration, until=shown)
+    finally:
+        if viewer and node.runner is not None:
+            node.runner.drain()
+            viewer[0].close()
+        summary = node.close()
+        for s, h in old.items():
+            signal.signal(s, h)
+        if tty and not quiet:
+            sys.stderr.write("\n")
+    report: dict[str, Any] = {"ros2": node.report()}
+    if summary is not None:
+        session = node.session
+        traj = session.live_trajectory()
+        from fgloc.io.tum import write_tum
+
+        if out is not None and len(traj):
+            write_tum(out, traj)
+        if out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
+            write_tum(out_smoothed, session.smoothed)
+        report.update({"duration_s": round(summary.duration_s, 2), "poses": summary.n_poses,
+                       "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms},
+                       "health": summary.health, "counters": summary.counters,
+                       "record": str(record) if record else None})
+    else:
+        report["waiting_for"] = node.startup.waiting_for
+    if viewer:
+        report["view"] = viewer[0].stats()
+    return report

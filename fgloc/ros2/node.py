@@ -1,0 +1,523 @@
+"""``fgloc live --ros2``: the localizer as a ROS 2 peer, a drop-in for nav2's AMCL.
+
+:class:`Ros2Live` joins a DDS domain (:mod:`fgloc.ros2.transport`), subscribes to the robot's
+scan, odometry / IMU / pose sources (the config's ``sources:``), ``/tf``, ``/tf_static``, the map
+(nav2 map_server's ``/map``, unless ``--map FILE``) and ``/initialpose``, and runs the same
+:class:`~fgloc.localization.Localizer` and :class:`~fgloc.localization.Session` as ``fgloc run``
+through the live runner (:class:`fgloc.live.app.LiveSession`: its queue, reorder buffer, sensor
+health, recording, UDP publisher and Foxglove view).  It publishes what nav2's AMCL publishes:
+
+* ``/amcl_pose`` (``geometry_msgs/PoseWithCovarianceStamped``, reliable, transient local, depth 1)
+  after each localized scan, in ``global_frame_id``;
+* ``map -> odom`` on ``/tf`` (tf2's broadcaster QoS), stamped ``transform_tolerance_s`` after
+  the pose it comes from (AMCL's post-dating, so that tf users may extrapolate that far);
+  ``odom -> base`` at the pose's stamp comes from the robot's ``/tf`` (nav2's way) or, when the
+  robot does not publish it, from its odometry messages' poses;
+* ``/fgloc/status`` (``diagnostic_msgs/DiagnosticArray``, one status per input and output topic,
+  one for the pose): what each topic received and every DDS problem, named.
+
+Start-up: messages are kept (``startup_buffer_s``) until the map and the laser mount are known
+(the mount: the config's ``sources.static_transforms``, else the tf chain from the robot to the
+scan's frame, else after ``mount_wait_s`` the robot centre, said); then the localizer is built and
+the kept messages are fused first, in their order, so nothing before the start is lost.
+
+Never blocks, never dies: DDS hands the bytes to a receive thread that decodes them (an
+undecodable message is counted on its topic) and queues them; the fusion loop is the caller's; a
+reliable subscriber that stalls costs at most a few milliseconds per write, then the sample is
+dropped and counted (:data:`fgloc.ros2.qos.MAX_BLOCKING_S`); a publisher of another type or with
+a QoS that cannot match, a publisher that vanishes and returns, are counted and named on the
+status line and on ``/fgloc/status``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fgloc.geometry import compose, inverse, wrap_scalar
+from fgloc.io.ros import mirror_scan
+from fgloc.io.tf import TfTree, frame_name, is_base_frame, mount_of, planar_mount
+from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
+from fgloc.localization.session import BaseSink
+from fgloc.ros2 import codec, qos
+from fgloc.ros2.codec import DIAGNOSTIC_ARRAY, OCCUPANCY_GRID, Undecodable
+from fgloc.ros2.transport import EndpointHealth, Transport
+from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
+
+SENSOR_TYPES = (LASER_SCAN, ODOMETRY, IMU)
+SOURCE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
+OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
+ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
+LATENCIES_KEPT = 100_000
+
+
+class OdomFrame:
+    """The robot's ``odom -> base`` pose over time: from ``/tf`` when the robot publishes it there
+    (the ``odom_frame_id`` parent to one of its base frames), else from its odometry's poses."""
+
+    def __init__(self, odom_frame: str = "odom") -> None:
+        self.odom_frame = frame_name(odom_frame)
+        self.from_tf = False
+        self.base_frame = ""
+        self._t: deque[float] = deque(maxlen=ODOM_HISTORY)
+        self._p: deque[np.ndarray] = deque(maxlen=ODOM_HISTORY)
+        self._lock = threading.Lock()
+
+    def _add(self, t: float, pose: np.ndarray) -> None:
+        with self._lock:
+            if self._t and t < self._t[-1]:
+                return  # out of order: the history stays sorted
+            self._t.append(t)
+            self._p.append(np.asarray(pose, dtype=float).copy())
+
+    def add_tf(self, transforms: list[StaticTransform], stamps: list[float]) -> None:
+        for tr, stamp in zip(transforms, stamps, strict=True):
+            if frame_name(tr.parent) == self.odom_frame and is_base_frame(tr.child):
+                if not self.from_tf:
+                    with self._lock:
+                        self._t.clear()
+                        self._p.clear()
+                    self.from_tf = True
+                    self.base_frame = frame_name(tr.child)
+                self._add(float(stamp), tr.pose)
+
+    def add_odometry(self, msg: Odometry) -> None:
+        if self.from_tf or msg.pose is None or frame_name(msg.frame_id) != self.odom_frame:
+            return
+        self.base_frame = frame_name(msg.child_frame_id)
+        self._add(float(msg.stamp), msg.pose)
+
+    def at(self, t: float, max_gap_s: float = 0.5) -> np.ndarray | None:
+        """The pose at ``t``: interpolated (linear in x, y; the shortest arc in yaw), held from the
+        nearest one at most ``max_gap_s`` beyond the history; None without one."""
+        with self._lock:
+            if not self._t:
+                return None
+            ts = self._t
+            if t >= ts[-1]:
+                return self._p[-1].copy() if t - ts[-1] <= max_gap_s else None
+            if t <= ts[0]:
+                return self._p[0].copy() if ts[0] - t <= max_gap_s else None
+            arr = np.fromiter(ts, dtype=float, count=len(ts))
+            k = int(np.searchsorted(arr, t))
+            t0, t1 = arr[k - 1], arr[k]
+            p0, p1 = self._p[k - 1], self._p[k]
+        a = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
+        return np.array([p0[0] + a * (p1[0] - p0[0]), p0[1] + a * (p1[1] - p0[1]),
+                         wrap_scalar(float(p0[2]) + a * wrap_scalar(float(p1[2] - p0[2])))])
+
+
+def map_to_odom(map_base: np.ndarray, odom_base: np.ndarray) -> np.ndarray:
+    """``map -> odom`` so that ``map -> odom -> base`` is the fused pose: ``T_mb T_ob^-1``."""
+    return compose(map_base, inverse(odom_base))
+
+
+class Ros2Outputs(BaseSink):
+    """The session sink publishing /amcl_pose and map -> odom after each localized scan, and
+    measuring scan arrival (DDS) -> transform published."""
+
+    wants_messages = False
+
+    def __init__(self, live: Ros2Live) -> None:
+        self.live = live
+        c = live.cfg.ros2
+        tr = live.transport
+        self.pose_pub = tr.publisher(c.pose_topic, POSE_COV_STAMPED, qos.LATCHED_PUB)
+        self.tf_pub = tr.publisher("/tf", TF_MESSAGE, qos.TF) if c.tf_broadcast else None
+        self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)
+        self.published = 0
+        self.no_odom = 0
+        self.last_map_odom: np.ndarray | None = None
+
+    def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
+        if fused is None or fused.frame_id != "map":
+            return
+        c = self.live.cfg.ros2
+        t = float(fused.stamp)
+        pose = PoseFix(t, fused.pose, fused.cov, fused.quality, fused.source, c.global_frame_id)
+        self.pose_pub.write(codec.encode(pose)[1])
+        if self.tf_pub is not None:
+            odom = self.live.odom_frame.at(t)
+            if odom is None:
+                self.no_odom += 1
+            else:
+                mo = map_to_odom(np.asarray(fused.pose, dtype=float), odom)
+                self.last_map_odom = mo
+                tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
+                self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
+        self.published += 1
+        arrival = self.live.runner.scan_arrival if self.live.runner is not None else 0.0
+        if arrival > 0 and not self.live.flushing:  # a scan kept from before the start is not live
+            self.latencies_ms.append((time.time() - arrival) * 1e3)
+
+    def latency_percentiles(self) -> tuple[float, float]:
+        if not self.latencies_ms:
+            return float("nan"), float("nan")
+        a = np.fromiter(self.latencies_ms, dtype=float)
+        return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+
+@dataclass
+class _Input:
+    topic: str
+    type_name: str
+    kind: str  # the session kind it is dispatched as ("scan", "source:NAME", "tf", "initialpose", "map")
+    health: EndpointHealth | None = None
+
+
+@dataclass
+class StartupState:
+    buffered: deque[tuple[str, Any, float]] = field(default_factory=deque)
+    dropped: int = 0
+    scan_frame: str | None = None
+    first_scan: LaserScan | None = None
+    first_scan_at: float | None = None
+    waiting_for: str = ""
+
+
+class Ros2Live:
+    """fgloc on a ROS 2 graph (see the module docstring).
+
+    ``occ_map``: the map (``--map FILE``) or None to take it from ``ros2.map_topic``;
+    ``make_session(map, laser_mount) -> Session`` builds the localization session
+    (:func:`fgloc.localization.build_session`) once the map and the mount are known;
+    ``make_live(session) -> LiveSession`` wraps it for live use (recording, UDP publishing, view:
+    the caller's options)."""
+
+    def __init__(self, cfg: Any, transport: Transport, make_session: Callable[[Any, StaticTransform], Any],
+                 make_live: Callable[[Any], Any], occ_map: Any = None,
+                 event: Callable[[str], None] | None = None) -> None:
+        from fgloc.localization.sources import parse_sources
+
+        self.cfg = cfg
+        self.transport = transport
+        self.make_session = make_session
+        self.make_live = make_live
+        self.occ_map = occ_map
+        self.event = event or (lambda s: None)
+        self.odom_frame = OdomFrame(cfg.ros2.odom_frame_id)
+        self.tf = TfTree()
+        self.session: Any = None  # LiveSession once started
+        self.runner: Any = None
+        self.loc: Any = None
+        self.outputs: Ros2Outputs | None = None
+        self.mirrored = False
+        self.startup = StartupState()
+        self._lock = threading.Lock()
+        self.maps_ignored = 0
+        self.flushing = False  # fusing the messages kept from before the start
+        self.initial_pose: PoseFix | None = None
+        c = cfg.ros2
+        sensor = qos.SENSOR_DATA if c.sensor_reliability == "best_effort" else qos.DEFAULT
+        self.scan_topic = c.scan_topic
+        self.inputs: list[_Input] = [_Input(c.scan_topic, LASER_SCAN, "scan")]
+        specs = parse_sources(cfg.sources, {"odom": "/odom", "imu": "/imu"})
+        for s in specs:
+            self.inputs.append(_Input(s.topic, SOURCE_TYPES[s.type], f"source:{s.name}"))
+        self.inputs += [_Input("/tf", TF_MESSAGE, "tf"), _Input("/tf_static", TF_MESSAGE, "tf"),
+                        _Input(c.initial_pose_topic, POSE_COV_STAMPED, "initialpose")]
+        if occ_map is None:
+            self.inputs.append(_Input(c.map_topic, OCCUPANCY_GRID, "map"))
+        profiles = {"tf": qos.TF, "initialpose": qos.INITIAL_POSE_SUB, "map": qos.MAP_SUB}
+        for inp in self.inputs:
+            prof = qos.TF_STATIC_SUB if inp.topic == "/tf_static" else profiles.get(inp.kind, sensor)
+            inp.health = transport.subscribe(inp.topic, inp.type_name, prof, self._handler(inp))
+        self.status_pub = transport.publisher(c.status_topic, DIAGNOSTIC_ARRAY, qos.DEFAULT)
+        self._last_status = 0.0
+        self._t0 = time.monotonic()
+
+    # ---------------------------------------------------------------- receive (DDS thread)
+    def _handler(self, inp: _Input) -> Callable[[bytes, float], None]:
+        return lambda data, arrival: self._receive(inp, data, arrival)
+
+    def _receive(self, inp: _Input, data: bytes, arrival: float) -> None:
+        assert inp.health is not None
+        try:
+            if inp.type_name == TF_MESSAGE:
+                msg: Any = codec.decode_tf(data)
+            else:
+                msg = codec.decode(inp.type_name, data, inp.topic)
+        except Undecodable as e:
+            inp.health.undecodable += 1
+            inp.health.last_error = str(e)[:80]
+            return
+        if inp.kind == "tf":
+            tfs, flips, stamps = msg
+            self.odom_frame.add_tf(tfs, stamps)
+            with self._lock:
+                self.tf.add(tfs, flips)
+            msg = tfs
+        elif inp.kind.startswith("source:") and isinstance(msg, Odometry):
+            self.odom_frame.add_odometry(msg)
+        elif inp.kind == "scan" and isinstance(msg, LaserScan):
+            if self.startup.scan_frame is None:
+                self.startup.scan_frame = msg.frame_id
+                self.startup.first_scan = msg
+                self.startup.first_scan_at = time.monotonic()
+            if self.mirrored:
+                msg = mirror_scan(msg)
+        if inp.kind == "map":
+            self._map(msg)
+            return
+        if inp.kind == "initialpose":
+            if isinstance(msg, PoseFix):
+                self.initial_pose = msg
+        with self._lock:
+            if self.runner is None:
+                self._keep(inp.kind, msg, arrival)
+                return
+        self.runner.push(inp.kind, msg, arrival)
+
+    def _keep(self, kind: str, msg: Any, arrival: float) -> None:
+        b = self.startup.buffered
+        b.append((kind, msg, arrival))
+        horizon = arrival - self.cfg.ros2.startup_buffer_s
+        while b and b[0][2] < horizon:
+            b.popleft()
+            self.startup.dropped += 1
+
+    def _map(self, m: Any) -> None:
+        if self.occ_map is None:
+            self.occ_map = m
+            self.event(f"map from {self.cfg.ros2.map_topic}: {m.width} x {m.height} cells of {m.resolution:g} m")
+        elif not (m.data.shape == self.occ_map.data.shape and m.equals(self.occ_map)):
+            self.maps_ignored += 1
+            if self.maps_ignored == 1:
+                self.event(f"a new map on {self.cfg.ros2.map_topic}: not used (restart fgloc to localize on it)")
+
+    # ---------------------------------------------------------------- start-up (caller's thread)
+    def _mount(self) -> tuple[StaticTransform, bool] | None:
+        frame = self.startup.scan_frame
+        if frame is None:
+            return None
+        from fgloc.localization.frames import parse_static_transforms
+
+        mine = mount_of(frame, parse_static_transforms(self.cfg.sources.static_transforms))
+        if mine is not None:
+            return planar_mount(mine, "sources.static_transforms")
+        with self._lock:
+            found = self.tf.chain(frame)
+        if found is not None:
+            return found
+        waited = time.monotonic() - (self.startup.first_scan_at or time.monotonic())
+        if waited >= self.cfg.ros2.mount_wait_s:
+            self.event(f"no transform from the robot to the scan frame '{frame}' after "
+                       f"{self.cfg.ros2.mount_wait_s:g} s: assuming the laser at the robot centre, upright")
+            return StaticTransform("base_link", frame_name(frame), np.zeros(3)), False
+        return None
+
+    def try_start(self) -> bool:
+        """Build the localizer and the session once the map and the mount are known."""
+        if self.runner is not None:
+            return True
+        if self.occ_map is None:
+            self.startup.waiting_for = f"the map on {self.cfg.ros2.map_topic}"
+            return False
+        if self.startup.scan_frame is None:
+            self.startup.waiting_for = f"a scan on {self.scan_topic}"
+            return False
+        found = self._mount()
+        if found is None:
+            self.startup.waiting_for = f"a transform from the robot to '{self.startup.scan_frame}' (/tf_static)"
+            return False
+        mount, mirrored = found
+        mount = StaticTransform(frame_name(mount.parent), frame_name(mount.child), mount.pose, mount.z)
+        loc_session = self.make_session(self.occ_map, mount)
+        loc = loc_session.loc
+        if self.initial_pose is not None and loc.initial_pose is None:
+            loc.initial_pose = np.asarray(self.initial_pose.pose, dtype=float)
+        session = self.make_live(loc_session)
+        runner = session.runner
+        runner.topics.update({inp.kind: inp.topic for inp in self.inputs})
+        from fgloc.live.runner import SensorHealth
+
+        runner.health = {inp.kind: SensorHealth(inp.topic) for inp in self.inputs
+                         if inp.kind == "scan" or inp.kind.startswith("source:")}
+        runner.session.register("initialpose", self._on_initial_pose)
+        self.outputs = Ros2Outputs(self)
+        runner.session.add_sink(self.outputs)
+        self.loc, self.session = loc, session
+        self._warm_up(loc, mount)
+        with self._lock:
+            self.mirrored = mirrored
+            kept = list(self.startup.buffered)
+            self.startup.buffered.clear()
+            self.runner = runner  # from now on the receive thread queues into the runner
+        # the messages kept before the start are fused now, every scan (none is skipped as a backlog)
+        self.flushing = True
+        try:
+            for kind, msg, arrival in kept:
+                if mirrored and kind == "scan" and isinstance(msg, LaserScan):
+                    msg = mirror_scan(msg)
+                runner.process(kind, msg, arrival)
+        finally:
+            self.flushing = False
+        self.startup.waiting_for = ""
+        self.event(f"localizing: laser mount {mount.parent} -> {mount.child} "
+                   f"({mount.pose[0]:.3f}, {mount.pose[1]:.3f}, {math.degrees(mount.pose[2]):.1f} deg)"
+                   + (", upside down" if mirrored else "") + f"; {len(kept)} messages kept from before the start")
+        return True
+
+    def _warm_up(self, loc: Any, mount: StaticTransform) -> None:
+        """Match the first scan once with a throwaway front-end on the map: its compiled kernels are
+        loaded now, not while the first live scans wait behind it (they would be skipped as a backlog)."""
+        scan = self.startup.first_scan
+        if scan is None or loc.frontend is None or loc.map is None:
+            return
+        from fgloc.frontends import make_frontend
+
+        m = loc.map
+        guess = loc.initial_pose if loc.initial_pose is not None else np.array(
+            [m.origin[0] + 0.5 * m.width * m.resolution, m.origin[1] + 0.5 * m.height * m.resolution, 0.0])
+        try:
+            make_frontend(loc.frontend_name, m, mount, self.cfg).match(scan, guess, None)
+        except Exception:  # noqa: BLE001 - a warm-up only
+            pass
+
+    def _on_initial_pose(self, msg: object) -> None:
+        if not isinstance(msg, PoseFix) or self.loc is None:
+            return
+        if frame_name(msg.frame_id) not in ("", frame_name(self.cfg.ros2.global_frame_id)):
+            self.event(f"{self.cfg.ros2.initial_pose_topic} in frame '{msg.frame_id}', not "
+                       f"'{self.cfg.ros2.global_frame_id}': ignored")
+            return
+        cov = msg.cov if msg.cov is not None and np.all(np.diag(msg.cov) > 0) else None
+        self.loc.reinitialize(np.asarray(msg.pose, dtype=float), cov)
+        x, y, yaw = msg.pose
+        self.event(f"{self.cfg.ros2.initial_pose_topic}: re-initialized at {x:.2f} {y:.2f} {math.degrees(yaw):.1f} deg")
+
+    # ---------------------------------------------------------------- the loop
+    def step(self) -> None:
+        if self.runner is None:
+            if not self.try_start():
+                time.sleep(0.02)
+        else:
+            self.runner.step()
+        self.tick()
+
+    def run(self, stop: threading.Event, duration: float | None = None,
+            until: Callable[[], bool] | None = None) -> None:
+        t0 = time.monotonic()
+        while not stop.is_set():
+            self.step()
+            if duration is not None and time.monotonic() - t0 >= duration:
+                break
+            if until is not None and until():
+                break
+
+    def tick(self, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        if now - self._last_status >= self.cfg.ros2.status_period_s:
+            self._last_status = now
+            try:
+                self.status_pub.write(codec.encode_generic(DIAGNOSTIC_ARRAY, self.diagnostics()))
+            except Exception as e:  # noqa: BLE001 - the status never stops localization
+                self.status_pub.health.last_error = f"{type(e).__name__}: {e}"
+                self.status_pub.health.dropped += 1
+
+    # ---------------------------------------------------------------- status
+    def problems(self) -> list[str]:
+        """``topic: problem`` for every DDS problem seen, one phrase each."""
+        out = []
+        for h in self.transport.health():
+            out += [f"{h.topic} {p}" for p in h.problems()]
+        if self.maps_ignored:
+            out.append(f"{self.cfg.ros2.map_topic} {self.maps_ignored} new map(s) not used")
+        if self.outputs is not None and self.outputs.no_odom:
+            out.append(f"map->odom not published {self.outputs.no_odom}x (no odom->base pose at the scan's stamp)")
+        return out
+
+    def status_line(self) -> str:
+        if self.runner is None:
+            got = ", ".join(f"{inp.topic} {inp.health.messages}" for inp in self.inputs
+                            if inp.health is not None and inp.health.messages)
+            line = f"waiting for {self.startup.waiting_for or 'inputs'} | received: {got or 'nothing yet'}"
+        else:
+            r = self.runner
+            now = time.monotonic()
+            rates = " | ".join(f"{h.name} {h.rate_hz(now):4.1f}Hz" + {"ok": "", "waiting": "?", "silent": "!SILENT"}
+                               [h.state] for h in r.health.values())
+            p50, p99 = self.outputs.latency_percentiles() if self.outputs is not None else (math.nan, math.nan)
+            pose = "pose --"
+            if r.last_fix is not None:
+                x, y, yaw = r.last_fix.pose
+                pose = f"pose {x:7.2f} {y:7.2f} {math.degrees(yaw):6.1f}deg" + (" LOST" if self.loc.lost else "")
+            line = (f"{rates} | scan->tf p50 {p50:4.1f} p99 {p99:4.1f} ms | {pose} | fixes {r.counters['fixes']} "
+                    f"skip {r.counters['scans_skipped_backlog']}")
+        probs = self.problems()
+        return line + (" | DDS: " + "; ".join(probs) if probs else "")
+
+    def diagnostics(self) -> dict:
+        """The ``/fgloc/status`` message: one status per DDS endpoint and one for the pose."""
+        from fgloc.io.ros import ros_header
+
+        statuses = []
+        now = time.time()
+        for h in self.transport.health():
+            probs = h.problems()
+            stale = h.direction == "sub" and h.type in SENSOR_TYPES and h.messages > 0 and now - h.last_arrival > 2.0
+            level = ERROR if (h.incompatible_qos or h.other_type) else WARN if probs else STALE if stale else OK
+            values = {k: str(v) for k, v in h.as_dict().items() if k not in ("topic", "direction")}
+            statuses.append({"level": level, "name": f"fgloc: {h.direction} {h.topic}",
+                             "message": "; ".join(probs) or "ok", "hardware_id": h.topic,
+                             "values": [{"key": k, "value": v} for k, v in values.items()]})
+        statuses.append(self._pose_status())
+        return {"header": ros_header(now, ""), "status": statuses}
+
+    def _pose_status(self) -> dict:
+        vals: dict[str, str] = {}
+        if self.runner is None:
+            level, msg = STALE, f"waiting for {self.startup.waiting_for or 'inputs'}"
+        else:
+            r, loc = self.runner, self.loc
+            fix = r.last_fix
+            if fix is None:
+                level, msg = WARN, "no pose yet"
+            elif loc.lost:
+                level, msg = ERROR, "lost: searching globally"
+            else:
+                level, msg = OK, "tracking"
+            if fix is not None:
+                x, y, yaw = (float(v) for v in fix.pose)
+                vals.update(x_m=f"{x:.4f}", y_m=f"{y:.4f}", yaw_deg=f"{math.degrees(yaw):.3f}",
+                            stamp=f"{fix.stamp:.6f}")
+                if fix.cov is not None:
+                    vals["sigma_xy_m"] = f"{math.sqrt(max(fix.cov[0, 0], fix.cov[1, 1], 0.0)):.4f}"
+            vals.update(fixes=str(r.counters["fixes"]), scans=str(r.counters["scans_fused"]),
+                        scans_skipped_backlog=str(r.counters["scans_skipped_backlog"]),
+                        localizer_errors=str(r.counters["localizer_errors"]))
+            if self.outputs is not None:
+                p50, p99 = self.outputs.latency_percentiles()
+                vals.update(scan_to_tf_p50_ms=f"{p50:.2f}", scan_to_tf_p99_ms=f"{p99:.2f}")
+            router = getattr(r.session, "sources", None)
+            if router is not None:
+                from fgloc.localization.sources import status_line
+
+                vals["sources"] = status_line(router.health())
+        return {"level": level, "name": "fgloc: pose", "message": msg, "hardware_id": "fgloc",
+                "values": [{"key": k, "value": v} for k, v in vals.items()]}
+
+    def report(self) -> dict[str, Any]:
+        """The DDS part of ``fgloc live``'s JSON summary."""
+        out: dict[str, Any] = {"domain_id": self.transport.domain_id,
+                               "endpoints": [h.as_dict() for h in self.transport.health()],
+                               "problems": self.problems(), "startup_dropped": self.startup.dropped}
+        if self.outputs is not None:
+            p50, p99 = self.outputs.latency_percentiles()
+            out.update(published=self.outputs.published, scan_to_tf_ms={"p50": p50, "p99": p99})
+        return out
+
+    def close(self) -> Any:
+        """Stop receiving, close the session (fuses the backlog, closes the recording); its summary."""
+        self.transport.close()
+        if self.session is not None:
+            return self.session.close()
+        return None
+

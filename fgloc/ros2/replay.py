@@ -1,0 +1,138 @@
+"""``fgloc replay LOG --ros2``: a log published on DDS as the robot that recorded it would.
+
+Every topic of a type fgloc reads (:data:`fgloc.io.topics.READ_TYPES`) is published with its ROS 2
+type at the log's pace (``rate`` x real time; 0: as fast as the subscribers take it): a ROS 2
+input's CDR bytes as they were recorded, the other formats' messages (ROS 1, CARMEN) encoded by
+fgloc's codecs.  QoS as ``ros2 bag play`` offers it by default (reliable, volatile, depth 10);
+``/tf`` as tf2's broadcaster, ``/tf_static`` as tf2's static broadcaster (transient local: a
+subscriber that starts later still gets it), with every static transform of the log merged into
+the one message, as ``static_transform_publisher`` nodes leave it.  A log without ``/tf_static``
+gets the laser mount the log reader finds (``fgloc run``'s) published there.  With a map
+(``--map``) it is published once on ``/map`` as map_server does (transient local).  ``clock``:
+``/clock`` (``rosgraph_msgs/Clock``) at ``clock_hz`` of log time, for nodes with use_sim_time.
+
+Topics of other types are not published (named in :attr:`ReplayStats.skipped`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fgloc.io.topics import READ_TYPES, TF_MESSAGE, normalize_type
+from fgloc.ros2 import codec, qos
+from fgloc.ros2.transport import Transport
+from fgloc.types import StaticTransform
+
+TF_STATIC = "/tf_static"
+
+
+@dataclass
+class ReplayStats:
+    published: dict[str, int] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)  # topic -> why it is not published
+    dropped: int = 0
+    messages: int = 0
+    log_s: float = 0.0
+    wall_s: float = 0.0
+    late_s: float = 0.0  # the most the publishing fell behind the log's pace
+
+
+def _merge_static(merged: dict[str, StaticTransform], tfs: list[StaticTransform]) -> list[StaticTransform]:
+    for t in tfs:
+        merged[t.child.lstrip("/")] = t
+    return list(merged.values())
+
+
+def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool = False, clock_hz: float = 40.0,
+           occ_map: Any = None, map_topic: str = "/map", map_frame: str = "map",
+           stop: Callable[[], bool] | None = None, progress: Callable[[int], Any] | None = None,
+           wait_for_subscribers_s: float = 0.0) -> ReplayStats:
+    """Publish ``log`` (see the module docstring); returns what was published.  ``progress(total)``
+    makes a progress bar (``update(n)``); ``wait_for_subscribers_s``: wait up to this long, before the
+    first message, for every topic's publisher to match a subscriber (a test's live node)."""
+    from fgloc.io import open_log
+
+    reader = open_log(Path(log))
+    summ = reader.summary()
+    stats = ReplayStats()
+    types = {t: normalize_type(v["type"]) for t, v in summ["topics"].items() if v["count"]}
+    topics = {t: ty for t, ty in types.items() if ty in READ_TYPES}
+    for t, ty in types.items():
+        if t not in topics:
+            stats.skipped[t] = f"{ty}: not a type fgloc reads"
+    pubs: dict[str, Any] = {}
+    for t, ty in sorted(topics.items()):
+        prof = qos.TF_STATIC_PUB if t == TF_STATIC else qos.TF if t == "/tf" else qos.DEFAULT
+        pubs[t] = transport.publisher(t, ty, prof)
+    static_pub = pubs.get(TF_STATIC)
+    if static_pub is None and any(ty == "sensor_msgs/msg/LaserScan" for ty in topics.values()):
+        static_pub = transport.publisher(TF_STATIC, TF_MESSAGE, qos.TF_STATIC_PUB)
+        mount = reader.laser_mount()
+        start = summ.get("start") or 0.0
+        static_pub.write(codec.encode([mount], float(start))[1])
+        stats.published[TF_STATIC] = 1
+    clock_pub = transport.publisher("/clock", codec.CLOCK, qos.CLOCK) if clock else None
+    if occ_map is not None:
+        map_pub = transport.publisher(map_topic, codec.OCCUPANCY_GRID, qos.LATCHED_PUB)
+        map_pub.write(codec.encode_map(occ_map, float(summ.get("start") or 0.0), map_frame))
+        stats.published[map_topic] = 1
+    transport.start()
+    if wait_for_subscribers_s > 0:
+        t_end = time.monotonic() + wait_for_subscribers_s
+        while time.monotonic() < t_end and not all(p.health.matched for p in pubs.values()):
+            time.sleep(0.02)
+    merged: dict[str, StaticTransform] = {}
+    total = sum(summ["topics"][t]["count"] for t in topics)
+    bar = progress(total) if progress is not None else None
+    t0_wall = time.monotonic()
+    t0_log: float | None = None
+    next_clock = -1.0
+    pending = 0
+    try:
+        for rec in reader.records(set(topics)):
+            if stop is not None and stop():
+                break
+            t_log = rec.log_time_ns * 1e-9
+            if t0_log is None:
+                t0_log = t_log
+            if rate > 0:
+                due = t0_wall + (t_log - t0_log) / rate
+                wait = due - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+                else:
+                    stats.late_s = max(stats.late_s, -wait)
+            if clock_pub is not None and t_log >= next_clock:
+                clock_pub.write(codec.encode_clock(t_log))
+                next_clock = t_log + 1.0 / clock_hz
+            topic = rec.topic
+            if topic == TF_STATIC:
+                tfs = codec.decode_tf(rec.data)[0] if rec.data is not None else list(rec.msg)  # type: ignore[call-overload]
+                data = codec.encode(_merge_static(merged, tfs), t_log)[1]
+            elif rec.data is not None and rec.channel is not None and codec.known(rec.channel.type):
+                data = rec.data
+            else:
+                stamp = getattr(rec.msg, "stamp", None)
+                data = codec.encode(rec.msg, t_log if stamp is None else None)[1]
+            if pubs[topic].write(data):
+                stats.published[topic] = stats.published.get(topic, 0) + 1
+            else:
+                stats.dropped += 1
+            stats.messages += 1
+            pending += 1
+            if bar is not None and pending >= 64:
+                bar.update(pending)
+                pending = 0
+        if t0_log is not None:
+            stats.log_s = t_log - t0_log
+    finally:
+        if bar is not None:
+            bar.update(pending)
+            if hasattr(bar, "close"):
+                bar.close()
+        stats.wall_s = time.monotonic() - t0_wall
+    return stats

@@ -1,0 +1,415 @@
+"""The DDS transport: a participant in a ROS 2 domain, raw-CDR publishers and subscriptions,
+and every endpoint's health.
+
+:class:`Transport` is the interface the live node and the replay use; :class:`CycloneTransport`
+implements it with Eclipse Cyclone DDS (one of ROS 2's tier-1 middlewares; its Python wheel
+bundles the C library).  Messages cross it as the CDR bytes ROS 2 puts on the wire (encapsulation
+header included): fgloc encodes and decodes them itself (:mod:`fgloc.ros2.codec`), Cyclone only
+carries them.  Names and QoS follow ROS 2 (:mod:`fgloc.ros2.names`, :mod:`fgloc.ros2.qos`).
+
+Health (:class:`EndpointHealth`, one per topic and direction) counts what the DDS layer reports
+and what a ROS 2 node would only log: messages, undecodable ones (counted by the caller), peers
+matched now, peers that vanished and came back, a peer whose QoS cannot match (the policy named),
+endpoints of the same topic with another type (from DDS discovery, the built-in publication and
+subscription topics), samples the reader lost, and writes dropped because a reliable
+subscriber stalled (a writer waits at most :data:`fgloc.ros2.qos.MAX_BLOCKING_S`).
+
+Threads: one receive thread waits on all readers and hands each sample's bytes to its
+subscription's callback (which must not block: the live node decodes and queues); Cyclone's
+own threads call the status listeners, which only update counters.  Nothing here opens a socket
+of its own: the ports are DDS's (RTPS over UDP: discovery and user traffic, by domain id).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+from xml.sax.saxutils import quoteattr
+
+from fgloc.errors import ConfigError
+from fgloc.ros2.names import dds_topic, dds_type, ros_topic, ros_type
+from fgloc.ros2.qos import Profile, to_dds
+
+#: DDS QoS policy ids (DDS 2.2.3; Cyclone's dds_qos_policy_id_t) as an incompatible-QoS status names them
+POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE", 5: "LATENCY_BUDGET",
+                6: "OWNERSHIP", 7: "OWNERSHIP_STRENGTH", 8: "LIVELINESS", 9: "TIME_BASED_FILTER",
+                10: "PARTITION", 11: "RELIABILITY", 12: "DESTINATION_ORDER", 13: "HISTORY",
+                14: "RESOURCE_LIMITS", 15: "ENTITY_FACTORY", 16: "WRITER_DATA_LIFECYCLE",
+                17: "READER_DATA_LIFECYCLE", 18: "TOPIC_DATA", 19: "GROUP_DATA", 20: "TRANSPORT_PRIORITY",
+                21: "LIFESPAN", 22: "DURABILITY_SERVICE", 23: "PROPERTY", 24: "TYPE_CONSISTENCY_ENFORCEMENT",
+                25: "DATA_REPRESENTATION"}
+MAX_DOMAIN_ID = 232  # ROS 2's largest domain id (RTPS port mapping with the default port parameters)
+INSTALL_HINT = 'the ROS 2 transport needs Eclipse Cyclone DDS: pip install "fgloc[ros2]"'
+
+Callback = Callable[[bytes, float], None]  # (CDR bytes, arrival time.time())
+
+
+@dataclass
+class EndpointHealth:
+    """What happened on one topic in one direction (see the module docstring)."""
+
+    topic: str
+    type: str
+    direction: str  # "sub" | "pub"
+    qos: Profile
+    messages: int = 0
+    undecodable: int = 0
+    dropped: int = 0
+    callback_errors: int = 0
+    matched: int = 0
+    lost: int = 0
+    returned: int = 0
+    incompatible_qos: int = 0
+    incompatible_policy: str = ""
+    sample_lost: int = 0
+    other_type: dict[str, int] = field(default_factory=dict)
+    last_arrival: float = float("nan")
+    last_error: str = ""
+    _missing: int = 0  # peers lost and not back yet
+
+    def problems(self) -> list[str]:
+        """One short phrase per problem seen (empty when none)."""
+        out = []
+        if self.undecodable:
+            out.append(f"{self.undecodable} undecodable" + (f" ({self.last_error})" if self.last_error else ""))
+        if self.incompatible_qos:
+            peer = "publisher" if self.direction == "sub" else "subscriber"
+            out.append(f"{self.incompatible_qos} {peer}(s) with incompatible QoS ({self.incompatible_policy})")
+        for t, n in self.other_type.items():
+            out.append(f"{n} endpoint(s) with another type {ros_type(t)}")
+        if self.lost:
+            peer = "publisher" if self.direction == "sub" else "subscriber"
+            out.append(f"{peer} vanished {self.lost}x, back {self.returned}x")
+        if self.dropped:
+            out.append(f"{self.dropped} dropped (a reliable subscriber stalled)")
+        if self.sample_lost:
+            out.append(f"{self.sample_lost} samples lost")
+        if self.callback_errors:
+            out.append(f"{self.callback_errors} handler errors")
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        d = {k: getattr(self, k) for k in ("topic", "type", "direction", "messages", "undecodable", "dropped",
+                                          "matched", "lost", "returned", "incompatible_qos", "incompatible_policy",
+                                          "sample_lost", "callback_errors")}
+        d["qos"] = f"{self.qos.reliability}/{self.qos.durability}/{self.qos.depth}"
+        d["other_type"] = {ros_type(k): v for k, v in self.other_type.items()}
+        return d
+
+
+class Publisher(Protocol):
+    health: EndpointHealth
+
+    def write(self, data: bytes) -> bool: ...
+
+
+class Transport(Protocol):
+    """What the live node and the replay need from a middleware."""
+
+    domain_id: int
+
+    def publisher(self, topic: str, type_name: str, qos: Profile) -> Publisher: ...
+
+    def subscribe(self, topic: str, type_name: str, qos: Profile, callback: Callback) -> EndpointHealth: ...
+
+    def start(self) -> None: ...
+
+    def health(self) -> list[EndpointHealth]: ...
+
+    def close(self) -> None: ...
+
+
+def domain_from_env(value: int | None = None) -> int:
+    """``value``, else ``$ROS_DOMAIN_ID``, else 0 (ROS 2's rule); a one-line error when invalid."""
+    if value is None:
+        raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        if not raw:
+            return 0
+        if not raw.isdigit():
+            raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: expected an integer 0..{MAX_DOMAIN_ID}")
+        value = int(raw)
+    if not 0 <= int(value) <= MAX_DOMAIN_ID:
+        raise ConfigError(f"domain id {value}: expected 0..{MAX_DOMAIN_ID} (ROS_DOMAIN_ID)")
+    return int(value)
+
+
+def cyclone_config(interface: str | None) -> str | None:
+    """Cyclone DDS XML binding the participant to one network interface (a name such as ``eth0``
+    or ``lo``, or an address); None leaves Cyclone's choice (or ``$CYCLONEDDS_URI``)."""
+    if not interface:
+        return None
+    iface = interface.strip()
+    looks_address = iface.replace(".", "").isdigit() or ":" in iface
+    attr = f"address={quoteattr(iface)}" if looks_address else f"name={quoteattr(iface)}"
+    return (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface {attr}/>'
+            f"</Interfaces></General></Domain></CycloneDDS>")
+
+
+_DOMAINS: dict[int, tuple[str | None, Any]] = {}  # a process configures each domain id once
+
+
+def _domain(make: Any, domain_id: int, xml: str | None) -> Any:
+    have = _DOMAINS.get(domain_id)
+    if have is not None:
+        if have[0] != xml:
+            raise ConfigError(f"DDS domain {domain_id} is already joined by this process with another interface")
+        return have[1]
+    dom = make(domain_id, xml) if xml is not None else None
+    _DOMAINS[domain_id] = (xml, dom)
+    return dom
+
+
+class _Writer:
+    def __init__(self, writer: Any, health: EndpointHealth) -> None:
+        from cyclonedds._clayer import ddspy_write
+
+        self._w = writer
+        self._write = ddspy_write
+        self.health = health
+
+    def write(self, data: bytes) -> bool:
+        """Publish ``data`` (CDR, header included); False when dropped (counted)."""
+        if len(data) % 4:  # DDS payloads are padded to 4 bytes (the encapsulation's padding)
+            data = data + b"\x00" * (4 - len(data) % 4)
+        try:
+            ret = self._write(self._w._ref, data)
+        except Exception as e:  # noqa: BLE001 - a publishing failure never stops the caller
+            ret = -1
+            self.health.last_error = f"{type(e).__name__}: {e}"
+        if ret < 0:
+            self.health.dropped += 1
+            return False
+        self.health.messages += 1
+        return True
+
+
+class CycloneTransport:
+    """A ROS 2 peer on DDS domain ``domain_id`` (see the module docstring).  ``interface``: the
+    network interface (name or address) DDS uses; None: Cyclone's default / ``$CYCLONEDDS_URI``."""
+
+    def __init__(self, domain_id: int | None = None, interface: str | None = None) -> None:
+        try:
+            from cyclonedds.core import Listener, Qos  # noqa: F401
+            from cyclonedds.domain import Domain, DomainParticipant
+            from cyclonedds.qos import Policy
+        except ImportError:
+            raise ConfigError(INSTALL_HINT) from None
+        self.domain_id = domain_from_env(domain_id)
+        self.interface = interface
+        xml = cyclone_config(interface)
+        try:
+            self._domain = _domain(Domain, self.domain_id, xml)
+            # the participant's USER_DATA as rmw_cyclonedds writes it (ROS 2 tools read the enclave)
+            self._dp = DomainParticipant(self.domain_id, qos=Qos(Policy.Userdata(b"enclave=/;")))
+        except Exception as e:  # noqa: BLE001 - a bad interface / config: one line
+            raise ConfigError(f"DDS domain {self.domain_id}"
+                              + (f", interface {interface}" if interface else "") + f": {e}") from None
+        self._topics: dict[str, tuple[str, Any]] = {}  # DDS topic name -> (DDS type, Topic)
+        self._subs: list[tuple[Any, EndpointHealth, Callback]] = []
+        self._pubs: list[tuple[Any, EndpointHealth]] = []
+        self._endpoints: list[EndpointHealth] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._builtin: list[tuple[Any, str]] = []
+        self._remote: dict[Any, tuple[str, str, str]] = {}  # endpoint key -> (kind, DDS topic, DDS type)
+        self.receive_errors = 0
+
+    # ---------------------------------------------------------------- entities
+    def _topic(self, topic: str, type_name: str) -> tuple[str, Any]:
+        from cyclonedds.topic import Topic
+
+        from fgloc.ros2.msgtypes import idl_class
+
+        name = dds_topic(topic)
+        want = dds_type(type_name)
+        have = self._topics.get(name)
+        if have is not None:
+            if have[0] != want:
+                raise ConfigError(f"{topic}: used as {ros_type(have[0])} and as {type_name} in one node")
+            return name, have[1]
+        t = Topic(self._dp, name, idl_class(type_name))
+        self._topics[name] = (want, t)
+        return name, t
+
+    def publisher(self, topic: str, type_name: str, qos: Profile) -> _Writer:
+        from cyclonedds.core import Listener
+        from cyclonedds.pub import DataWriter
+
+        _, t = self._topic(topic, type_name)
+        h = EndpointHealth(topic, type_name, "pub", qos)
+        listener = Listener(on_publication_matched=lambda _w, s: self._matched(h, s),
+                            on_offered_incompatible_qos=lambda _w, s: self._incompatible(h, s))
+        w = DataWriter(self._dp, t, qos=to_dds(qos), listener=listener)
+        with self._lock:
+            self._pubs.append((w, h))
+            self._endpoints.append(h)
+        return _Writer(w, h)
+
+    def subscribe(self, topic: str, type_name: str, qos: Profile, callback: Callback) -> EndpointHealth:
+        from cyclonedds.core import Listener
+        from cyclonedds.sub import DataReader
+
+        _, t = self._topic(topic, type_name)
+        h = EndpointHealth(topic, type_name, "sub", qos)
+
+        def lost(_r: Any, s: Any) -> None:
+            h.sample_lost = int(s.total_count)
+
+        listener = Listener(on_subscription_matched=lambda _r, s: self._matched(h, s),
+                            on_requested_incompatible_qos=lambda _r, s: self._incompatible(h, s),
+                            on_sample_lost=lost)
+        r = DataReader(self._dp, t, qos=to_dds(qos), listener=listener)
+        with self._lock:
+            self._subs.append((r, h, callback))
+            self._endpoints.append(h)
+        return h
+
+    @staticmethod
+    def _matched(h: EndpointHealth, s: Any) -> None:
+        change = int(s.current_count_change)
+        h.matched = int(s.current_count)
+        if change < 0:
+            h.lost += -change
+            h._missing += -change
+        elif change > 0 and h._missing > 0:
+            back = min(change, h._missing)
+            h.returned += back
+            h._missing -= back
+
+    @staticmethod
+    def _incompatible(h: EndpointHealth, s: Any) -> None:
+        h.incompatible_qos = int(s.total_count)
+        h.incompatible_policy = POLICY_NAMES.get(int(s.last_policy_id), f"policy {int(s.last_policy_id)}")
+
+    # ---------------------------------------------------------------- receiving
+    def start(self) -> None:
+        """Start the receive thread (subscriptions made later are read too)."""
+        if self._thread is not None:
+            return
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+
+        self._builtin = [(BuiltinDataReader(self._dp, BuiltinTopicDcpsPublication), "pub"),
+                         (BuiltinDataReader(self._dp, BuiltinTopicDcpsSubscription), "sub")]
+        self._thread = threading.Thread(target=self._loop, name="fgloc-dds", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        from cyclonedds._clayer import ddspy_take
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.util import duration
+
+        mask = SampleState.Any | ViewState.Any | InstanceState.Any
+        ws = WaitSet(self._dp)
+        attached: set[int] = set()
+        conds = []
+        next_discovery = 0.0
+        while not self._stop.is_set():
+            with self._lock:
+                subs = list(self._subs)
+            for r, _, _ in subs:
+                if id(r) not in attached:
+                    c = ReadCondition(r, mask)
+                    ws.attach(c)
+                    conds.append(c)
+                    attached.add(id(r))
+            try:
+                ws.wait(duration(milliseconds=50))
+            except Exception:  # noqa: BLE001 - a wait interrupted at shutdown
+                if self._stop.is_set():
+                    break
+            for r, h, cb in subs:
+                while True:
+                    try:
+                        got = ddspy_take(r._ref, mask, 64)
+                    except Exception:  # noqa: BLE001
+                        self.receive_errors += 1
+                        break
+                    if isinstance(got, int) or not got:
+                        break
+                    now = time.time()
+                    for data, info in got:
+                        if not info.valid_data:
+                            continue
+                        h.last_arrival = now
+                        h.messages += 1
+                        try:
+                            cb(data, now)
+                        except Exception as e:  # noqa: BLE001 - a handler error is counted, never fatal
+                            h.callback_errors += 1
+                            h.last_error = f"{type(e).__name__}: {e}"
+                    if len(got) < 64:
+                        break
+            now = time.monotonic()
+            if now >= next_discovery:
+                next_discovery = now + 0.25
+                self._discovery()
+
+    def _discovery(self) -> None:
+        """Remote endpoints from DDS discovery: those on our topics with another type."""
+        changed = False
+        for reader, kind in self._builtin:
+            try:
+                samples = reader.take(256)
+            except Exception:  # noqa: BLE001
+                continue
+            for s in samples:
+                info = getattr(s, "sample_info", None)
+                key = getattr(s, "key", None)
+                if key is None:
+                    continue
+                from cyclonedds.core import InstanceState
+
+                alive = info is None or info.instance_state == InstanceState.Alive
+                if alive and getattr(s, "topic_name", None):
+                    self._remote[key] = (kind, s.topic_name, s.type_name)
+                else:
+                    self._remote.pop(key, None)
+                changed = True
+        if not changed:
+            return
+        with self._lock:
+            ends = list(self._endpoints)
+        for h in ends:
+            name, want = dds_topic(h.topic), dds_type(h.type)
+            peer = "pub" if h.direction == "sub" else "sub"
+            other: dict[str, int] = {}
+            for kind, topic, typ in self._remote.values():
+                if kind == peer and topic == name and typ != want:
+                    other[typ] = other.get(typ, 0) + 1
+            h.other_type = other
+
+    # ---------------------------------------------------------------- state
+    def health(self) -> list[EndpointHealth]:
+        with self._lock:
+            return list(self._endpoints)
+
+    def remote_topics(self) -> dict[str, set[str]]:
+        """ROS topics seen in discovery, with their ROS types (writers and readers)."""
+        out: dict[str, set[str]] = {}
+        for _, topic, typ in self._remote.values():
+            t = ros_topic(topic)
+            if t is not None:
+                out.setdefault(t, set()).add(ros_type(typ))
+        return out
+
+    def close(self) -> None:
+        """Stop receiving and leave the domain (peers see the endpoints go at once)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        with self._lock:
+            self._subs.clear()
+            self._pubs.clear()
+        self._builtin = []
+        self._topics.clear()
+        dp, self._dp = self._dp, None  # type: ignore[assignment]
+        if dp is not None:
+            try:
+                dp.__del__()  # dds_delete: the participant and everything in it
+            except Exception:  # noqa: BLE001
+                pass

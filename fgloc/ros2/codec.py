@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+import struct
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -155,12 +156,19 @@ def grid_fields(m: OccupancyMap, stamp: float, frame_id: str = "map") -> dict:
         "info": {"map_load_time": {"sec": sec, "nanosec": nsec}, "resolution": float(m.resolution),
                  "width": m.width, "height": m.height,
                  "origin": {"position": {"x": x, "y": y, "z": 0.0}, "orientation": yaw_quaternion(yaw)}},
-        "data": data.ravel().tobytes(),
+        "data": data.ravel(),
     }
 
 
 def encode_map(m: OccupancyMap, stamp: float, frame_id: str = "map") -> bytes:
-    return encode_generic(OCCUPANCY_GRID, grid_fields(m, stamp, frame_id))
+    """The ``nav_msgs/OccupancyGrid`` CDR of a map: the fields before the cells by the generic encoder,
+    the ``int8[]`` cells (the last field: a uint32 count, then the bytes) appended as one block."""
+    f = grid_fields(m, stamp, frame_id)
+    cells = f.pop("data").tobytes()
+    head = encode_generic(OCCUPANCY_GRID, {**f, "data": []})
+    if head[-4:] != b"\x00\x00\x00\x00":
+        raise ValueError("unexpected OccupancyGrid layout")
+    return head[:-4] + struct.pack("<I", len(cells)) + cells
 
 
 def map_from_grid(msg: Any) -> OccupancyMap:

@@ -8,7 +8,7 @@ through the live runner (:class:`fgloc.live.app.LiveSession`: its queue, reorder
 health, recording, UDP publisher and Foxglove view).  It publishes what nav2's AMCL publishes:
 
 * ``/amcl_pose`` (``geometry_msgs/PoseWithCovarianceStamped``, reliable, transient local, depth 1)
-  after each localized scan, in ``global_frame_id``;
+  after each localized scan, stamped with the scan (as AMCL), in ``global_frame_id``;
 * ``map -> odom`` on ``/tf`` (tf2's broadcaster QoS), stamped ``transform_tolerance_s`` after
   the pose it comes from (AMCL's post-dating, so that tf users may extrapolate that far);
   ``odom -> base`` at the pose's stamp comes from the robot's ``/tf`` (nav2's way) or, when the
@@ -56,6 +56,7 @@ SOURCE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
 OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
 ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
 LATENCIES_KEPT = 100_000
+SENSOR_DEPTH = 100  # samples a sensor subscription holds until the receive thread takes them
 
 
 class OdomFrame:
@@ -94,20 +95,25 @@ class OdomFrame:
         self.base_frame = frame_name(msg.child_frame_id)
         self._add(float(msg.stamp), msg.pose)
 
-    def at(self, t: float, max_gap_s: float = 0.5) -> np.ndarray | None:
-        """The pose at ``t``: interpolated (linear in x, y; the shortest arc in yaw), held from the
-        nearest one at most ``max_gap_s`` beyond the history; None without one."""
+    def at(self, t: float, max_gap_s: float = 0.2) -> np.ndarray | None:
+        """The pose at ``t``: interpolated (linear in x, y; the shortest arc in yaw) between the two
+        poses around it; after the newest one (a scan stamped after the last odometry that came)
+        extrapolated at the last two poses' velocity, at most ``max_gap_s``; None without."""
         with self._lock:
             if not self._t:
                 return None
             ts = self._t
-            if t >= ts[-1]:
-                return self._p[-1].copy() if t - ts[-1] <= max_gap_s else None
-            if t <= ts[0]:
-                return self._p[0].copy() if ts[0] - t <= max_gap_s else None
-            arr = np.fromiter(ts, dtype=float, count=len(ts))
-            k = int(np.searchsorted(arr, t))
-            t0, t1 = arr[k - 1], arr[k]
+            if t >= ts[-1] or t <= ts[0]:
+                last = t >= ts[-1]
+                if abs(t - (ts[-1] if last else ts[0])) > max_gap_s:
+                    return None
+                if len(ts) < 2:
+                    return self._p[-1].copy()
+                k = len(ts) - 1 if last else 1
+            else:
+                arr = np.fromiter(ts, dtype=float, count=len(ts))
+                k = int(np.searchsorted(arr, t))
+            t0, t1 = ts[k - 1], ts[k]
             p0, p1 = self._p[k - 1], self._p[k]
         a = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
         return np.array([p0[0] + a * (p1[0] - p0[0]), p0[1] + a * (p1[1] - p0[1]),
@@ -140,15 +146,18 @@ class Ros2Outputs(BaseSink):
         if fused is None or fused.frame_id != "map":
             return
         c = self.live.cfg.ros2
-        t = float(fused.stamp)
-        pose = PoseFix(t, fused.pose, fused.cov, fused.quality, fused.source, c.global_frame_id)
+        # as AMCL: the pose at the scan's stamp (the back-end's estimate there, which fgloc run writes to
+        # online.tum), with the fused pose's covariance
+        t = float(stamp)
+        at_scan = np.asarray(self.live.loc.backend.predict(t)[0], dtype=float)
+        pose = PoseFix(t, at_scan, fused.cov, fused.quality, fused.source, c.global_frame_id)
         self.pose_pub.write(codec.encode(pose)[1])
         if self.tf_pub is not None:
             odom = self.live.odom_frame.at(t)
             if odom is None:
                 self.no_odom += 1
             else:
-                mo = map_to_odom(np.asarray(fused.pose, dtype=float), odom)
+                mo = map_to_odom(at_scan, odom)
                 self.last_map_odom = mo
                 tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
                 self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
@@ -214,8 +223,11 @@ class Ros2Live:
         self.maps_ignored = 0
         self.flushing = False  # fusing the messages kept from before the start
         self.initial_pose: PoseFix | None = None
+        self._pending_pose: PoseFix | None = None  # an /initialpose to apply at the next scan
         c = cfg.ros2
-        sensor = qos.SENSOR_DATA if c.sensor_reliability == "best_effort" else qos.DEFAULT
+        # ROS 2's sensor-data QoS; the depth is the reader's own (not matched against the publisher): deep
+        # enough that a pause of the fusion loop (a slow scan match) loses no odometry
+        sensor = (qos.SENSOR_DATA if c.sensor_reliability == "best_effort" else qos.DEFAULT).with_depth(SENSOR_DEPTH)
         self.scan_topic = c.scan_topic
         self.inputs: list[_Input] = [_Input(c.scan_topic, LASER_SCAN, "scan")]
         specs = parse_sources(cfg.sources, {"odom": "/odom", "imu": "/imu"})
@@ -341,6 +353,14 @@ class Ros2Live:
         runner.health = {inp.kind: SensorHealth(inp.topic) for inp in self.inputs
                          if inp.kind == "scan" or inp.kind.startswith("source:")}
         runner.session.register("initialpose", self._on_initial_pose)
+        fuse_scan = runner.session.handlers["scan"]
+
+        def scan_then(msg: object) -> None:  # a pending /initialpose is applied at the next scan
+            if self._pending_pose is not None and isinstance(msg, LaserScan):
+                self._apply_initial_pose(float(msg.stamp))
+            fuse_scan(msg)
+
+        runner.session.register("scan", scan_then)
         self.outputs = Ros2Outputs(self)
         runner.session.add_sink(self.outputs)
         self.loc, self.session = loc, session
@@ -388,10 +408,25 @@ class Ros2Live:
             self.event(f"{self.cfg.ros2.initial_pose_topic} in frame '{msg.frame_id}', not "
                        f"'{self.cfg.ros2.global_frame_id}': ignored")
             return
+        self._pending_pose = msg
+
+    def _apply_initial_pose(self, t_scan: float) -> None:
+        """Re-initialize at the pending /initialpose, moved by the robot's odometry from its stamp to the
+        scan's (as AMCL does; a pose stamped 0, or older than the odometry kept, is taken as it is)."""
+        msg, self._pending_pose = self._pending_pose, None
+        assert msg is not None
+        pose = np.asarray(msg.pose, dtype=float)
+        moved = ""
+        if msg.stamp > 0:
+            o0, o1 = self.odom_frame.at(float(msg.stamp), max_gap_s=0.5), self.odom_frame.at(t_scan, max_gap_s=0.5)
+            if o0 is not None and o1 is not None:
+                pose = compose(pose, compose(inverse(o0), o1))
+                moved = f", moved by the odometry over {t_scan - msg.stamp:.2f} s"
         cov = msg.cov if msg.cov is not None and np.all(np.diag(msg.cov) > 0) else None
-        self.loc.reinitialize(np.asarray(msg.pose, dtype=float), cov)
-        x, y, yaw = msg.pose
-        self.event(f"{self.cfg.ros2.initial_pose_topic}: re-initialized at {x:.2f} {y:.2f} {math.degrees(yaw):.1f} deg")
+        self.loc.reinitialize(pose, cov)
+        x, y, yaw = pose
+        self.event(f"{self.cfg.ros2.initial_pose_topic}: re-initialized at {x:.2f} {y:.2f} "
+                   f"{math.degrees(yaw):.1f} deg{moved}")
 
     # ---------------------------------------------------------------- the loop
     def step(self) -> None:

@@ -53,7 +53,8 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
            wait_for_subscribers_s: float = 0.0) -> ReplayStats:
     """Publish ``log`` (see the module docstring); returns what was published.  ``progress(total)``
     makes a progress bar (``update(n)``); ``wait_for_subscribers_s``: wait up to this long, before the
-    first message, for every topic's publisher to match a subscriber (a test's live node)."""
+    first message, for subscribers (a node started before the replay): until every topic that discovery
+    shows a subscriber of is matched."""
     from fgloc.io import open_log
 
     reader = open_log(Path(log))
@@ -82,9 +83,16 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
         stats.published[map_topic] = 1
     transport.start()
     if wait_for_subscribers_s > 0:
+        # until some subscriber is there and every topic that discovery shows a subscriber of is matched
         t_end = time.monotonic() + wait_for_subscribers_s
-        while time.monotonic() < t_end and not all(p.health.matched for p in pubs.values()):
-            time.sleep(0.02)
+
+        def ready() -> bool:
+            wanted = [p for t, p in pubs.items() if transport.remote_endpoints(t, "sub")]
+            return bool(wanted) and all(p.health.matched for p in wanted)
+
+        while time.monotonic() < t_end and not ready():
+            time.sleep(0.05)
+        time.sleep(0.2)
     merged: dict[str, StaticTransform] = {}
     total = sum(summ["topics"][t]["count"] for t in topics)
     bar = progress(total) if progress is not None else None

@@ -1,0 +1,32 @@
+"""DDS tests: every participant on the loopback interface, in a domain of this test process's own."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+
+import pytest
+
+pytest.importorskip("cyclonedds")
+
+LOOPBACK = "lo"
+
+
+def domain_for(offset: int = 0) -> int:
+    """A DDS domain unlikely to be shared with another test process on this machine (0..232)."""
+    return 1 + (os.getpid() * 7 + offset) % 200
+
+
+@pytest.fixture
+def dds_domain(request: pytest.FixtureRequest) -> int:
+    return domain_for(abs(hash(request.node.name)) % 97)
+
+
+def wait_for(cond: Callable[[], bool], timeout: float = 10.0, step: float = 0.02) -> bool:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()

@@ -1,0 +1,187 @@
+"""A ROS 2 peer written for the tests with Cyclone DDS directly (not fgloc's code): the message types
+typed out by hand from the ROS 2 ``.msg`` files, the names and QoS as a ROS 2 node's, so that what
+fgloc publishes is read back by something that shares nothing with it but DDS.
+
+(No ``from __future__ import annotations`` here: Cyclone DDS reads the field types at class creation.)"""
+
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import cyclonedds.idl.types as t
+from cyclonedds.core import Listener
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: t.int32
+    nanosec: t.uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: t.float64
+    y: t.float64
+    z: t.float64
+    w: t.float64
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point
+    orientation: Quaternion
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose
+    covariance: t.array[t.float64, 36]
+
+
+@dataclass
+class PoseWithCovarianceStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"):
+    header: Header
+    pose: PoseWithCovariance
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3
+    rotation: Quaternion
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: t.sequence[TransformStamped]
+
+
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
+    key: str
+    value: str
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+    level: t.uint8
+    name: str
+    message: str
+    hardware_id: str
+    values: t.sequence[KeyValue]
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+    header: Header
+    status: t.sequence[DiagnosticStatus]
+
+
+def yaw(q: Quaternion) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def stamp(h: Header) -> float:
+    return h.stamp.sec + h.stamp.nanosec * 1e-9
+
+
+def _qos(reliable: bool, transient_local: bool, depth: int) -> Qos:
+    return Qos(Policy.Reliability.Reliable(0) if reliable else Policy.Reliability.BestEffort,
+               Policy.Durability.TransientLocal if transient_local else Policy.Durability.Volatile,
+               Policy.History.KeepLast(depth), Policy.DataRepresentation(use_cdrv0_representation=True))
+
+
+class Peer:
+    """Reads /amcl_pose (as nav2 consumers do: reliable, transient local), /tf and /fgloc/status;
+    writes /initialpose as RViz does (reliable, volatile)."""
+
+    def __init__(self, domain: int, interface: str = "lo") -> None:
+        xml = (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="{interface}"/>'
+               '</Interfaces></General></Domain></CycloneDDS>')
+        self.domain = Domain(domain, xml)  # kept: the participant's configuration lives with it
+        self.dp = DomainParticipant(domain)
+        self.poses: list[tuple[float, float, float, float, str]] = []  # stamp, x, y, yaw, frame
+        self.tfs: list[tuple[float, str, str, float, float, float]] = []  # stamp, parent, child, x, y, yaw
+        self.status: list[DiagnosticArray] = []
+        self._lock = threading.Lock()
+        self._pose = DataReader(self.dp, Topic(self.dp, "rt/amcl_pose", PoseWithCovarianceStamped),
+                                _qos(True, True, 5000))
+        self._tf = DataReader(self.dp, Topic(self.dp, "rt/tf", TFMessage), _qos(True, False, 5000))
+        self._status = DataReader(self.dp, Topic(self.dp, "rt/fgloc/status", DiagnosticArray), _qos(True, False, 100))
+        self._init = DataWriter(self.dp, Topic(self.dp, "rt/initialpose", PoseWithCovarianceStamped),
+                                _qos(True, False, 1), listener=Listener())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            for s in self._pose.take(500):
+                if isinstance(s, PoseWithCovarianceStamped):
+                    p = s.pose.pose
+                    with self._lock:
+                        self.poses.append((stamp(s.header), p.position.x, p.position.y, yaw(p.orientation),
+                                           s.header.frame_id))
+            for s in self._tf.take(500):
+                if isinstance(s, TFMessage):
+                    with self._lock:
+                        for tr in s.transforms:
+                            v = tr.transform.translation
+                            self.tfs.append((stamp(tr.header), tr.header.frame_id, tr.child_frame_id, v.x, v.y,
+                                             yaw(tr.transform.rotation)))
+            for s in self._status.take(50):
+                if isinstance(s, DiagnosticArray):
+                    with self._lock:
+                        self.status.append(s)
+            time.sleep(0.01)
+
+    def initial_pose(self, t: float, x: float, y: float, th: float, sigma_xy: float = 0.1,
+                     sigma_yaw: float = 0.1) -> None:
+        cov = [0.0] * 36
+        cov[0] = cov[7] = sigma_xy ** 2
+        cov[35] = sigma_yaw ** 2
+        msg = PoseWithCovarianceStamped(
+            Header(Time(int(math.floor(t)), int(round((t - math.floor(t)) * 1e9)) % 1_000_000_000), "map"),
+            PoseWithCovariance(Pose(Point(x, y, 0.0), Quaternion(0.0, 0.0, math.sin(th / 2), math.cos(th / 2))), cov))
+        self._init.write(msg)
+
+    def initial_pose_matched(self) -> bool:
+        return len(self._init.get_matched_subscriptions()) > 0
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)

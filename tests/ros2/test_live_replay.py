@@ -1,0 +1,245 @@
+"""Two real processes over real DDS on loopback: ``fgloc replay --ros2`` publishes a simulated log,
+``fgloc live --ros2`` localizes it, and an independent ROS 2 peer (tests/ros2/independent.py, Cyclone DDS
+directly) reads /amcl_pose, map -> odom on /tf and /fgloc/status, and sends /initialpose.
+
+The reference is ``fgloc run`` on the same log: its ``online.tum`` is the same session's pose at each
+scan's stamp as it was known then (what /amcl_pose carries), so the live one must agree within 5 mm (the
+live runner releases odometry by stamp, the log by log time: a message in another order moves a
+smoothed pose by far less)."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .conftest import LOOPBACK, wait_for
+
+TOL_M = 0.005
+
+
+def _simulate(out: Path, route: list[list[float]], faults: dict | None = None, seed: int = 0) -> Path:
+    from fgloc.sim import run_scenario, write_sim
+
+    write_sim(run_scenario({"name": "ros2", "route": route, "faults": faults or {}}, seed=seed), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 7-second paper-hall run (5 m straight), and fgloc run on it."""
+    from fgloc.app.run import RunRequest, run_log
+
+    d = _simulate(tmp_path_factory.mktemp("ros2sim"), [[2.5, 3.0], [7.5, 3.0]])
+    run_log(RunRequest(log=d / "log.mcap", outdir=d / "run", map_yaml=d / "map.yaml", initial_pose=(2.5, 3.0, 0.0)))
+    return d
+
+
+def _fgloc(*args: str) -> list[str]:
+    return [sys.executable, "-m", "fgloc.cli", *args]
+
+
+def _live(domain: int, d: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen(_fgloc("live", "--ros2", "--domain", str(domain), "--interface", LOOPBACK, "--quiet",
+                                   "--duration", "240", *extra),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=d)
+
+
+def _replay(domain: int, log: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run(_fgloc("replay", str(log), "--ros2", "--domain", str(domain), "--interface", LOOPBACK,
+                                 "--wait", "60", "--quiet", *extra),
+                          capture_output=True, text=True, timeout=300)
+
+
+def _stop(p: subprocess.Popen) -> tuple[int, dict, str]:
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=120)
+    return p.returncode, (json.loads(out) if out.strip().startswith("{") else {}), err
+
+
+def _settle(peer, n_expected: int, timeout: float = 60.0) -> None:
+    """Wait until the peer has every pose or they stop coming."""
+    last, t_last = -1, time.monotonic()
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        n = len(peer.poses)
+        if n >= n_expected:
+            return
+        if n != last:
+            last, t_last = n, time.monotonic()
+        elif time.monotonic() - t_last > 5.0:
+            return
+        time.sleep(0.1)
+
+
+class _Online:
+    """fgloc run's online.tum, looked up by stamp (within a microsecond: TUM files keep 9 decimals)."""
+
+    def __init__(self, d: Path) -> None:
+        from fgloc.io.tum import read_tum
+
+        tr = read_tum(d / "run" / "online.tum")
+        self.t, self.p = tr.stamps, tr.poses
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def get(self, t: float) -> np.ndarray | None:
+        k = int(np.searchsorted(self.t, t - 1e-6))
+        return self.p[k] if k < len(self.t) and abs(self.t[k] - t) <= 1e-6 else None
+
+
+def _odom_poses(d: Path) -> tuple[np.ndarray, np.ndarray]:
+    from fgloc.io import open_log
+
+    r = open_log(d / "log.mcap")
+    rows = [(m.stamp, *m.pose) for _, m in r.messages(["/odom"]) if m.pose is not None]
+    a = np.array(rows)
+    return a[:, 0], a[:, 1:]
+
+
+def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_path: Path) -> None:
+    from fgloc.geometry import compose, wrap_angle
+    from fgloc.io import open_log
+
+    from .independent import Peer
+
+    d = short_log
+    peer = Peer(dds_domain)
+    rec = tmp_path / "live.mcap"
+    live = _live(dds_domain, d, "--map", str(d / "map.yaml"), "--initial-pose", "2.5", "3.0", "0.0",
+                 "--record", str(rec))
+    try:
+        rep = _replay(dds_domain, d / "log.mcap")
+        assert rep.returncode == 0, rep.stderr
+        assert "/scan" in rep.stdout and "on domain" in rep.stdout
+        ref = _Online(d)
+        _settle(peer, len(ref))
+    finally:
+        code, report, err = _stop(live)
+        peer.close()
+    assert code == 0, err
+    got = {e["topic"]: e["messages"] for e in report["ros2"]["endpoints"] if e["direction"] == "sub"}
+    counts = {t: v["count"] for t, v in open_log(d / "log.mcap").summary()["topics"].items()}
+    assert all(got[t] == counts[t] for t in ("/scan", "/odom", "/imu", "/tf_static")), (got, counts)
+    # /amcl_pose (read back by the independent peer) against fgloc run's fused pose at the same stamps
+    poses = peer.poses
+    assert len(poses) >= 0.95 * len(ref), (len(poses), len(ref), err)
+    assert {p[4] for p in poses} == {"map"}
+    common = [(p, q) for p in poses if (q := ref.get(p[0])) is not None]
+    assert len(common) >= 0.95 * len(ref)
+    err_m = np.array([math.hypot(p[1] - q[0], p[2] - q[1]) for p, q in common])
+    err_yaw = np.array([abs(float(wrap_angle(p[3] - q[2]))) for p, q in common])
+    assert err_m.max() <= TOL_M, f"max {err_m.max():.4f} m"
+    assert np.degrees(err_yaw.max()) < 0.5
+    # map -> odom on /tf, post-dated by the transform tolerance (1 s), composed with the log's own
+    # odom -> base_link at the pose's stamp, is fgloc run's pose too
+    tfs = [t for t in peer.tfs if t[1] == "map" and t[2] == "odom"]
+    assert len(tfs) >= 0.95 * len(poses)
+    ts, op = _odom_poses(d)
+    tf_err = []
+    for s, _, _, x, y, th in tfs:
+        q = ref.get(s - 1.0)
+        if q is None:
+            continue
+        # the log's odom -> base_link at the pose's stamp, interpolated between its odometry messages
+        odom = np.array([np.interp(s - 1.0, ts, op[:, k]) for k in range(2)] + [0.0])
+        k = min(int(np.searchsorted(ts, s - 1.0)), len(ts) - 1)
+        odom[2] = op[k, 2] if abs(ts[k] - (s - 1.0)) < 1e-3 else np.interp(s - 1.0, ts, np.unwrap(op[:, 2]))
+        base = compose(np.array([x, y, th]), odom)
+        tf_err.append(math.hypot(base[0] - q[0], base[1] - q[1]))
+    assert len(tf_err) >= 0.95 * len(common)
+    assert max(tf_err) <= TOL_M
+    # the live report: every scan fused, none lost to a backlog, the DDS problems (a replay that ended)
+    assert report["ros2"]["published"] == len(poses)
+    scan_ep = next(e for e in report["ros2"]["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub")
+    assert scan_ep["messages"] == open_log(d / "log.mcap").summary()["topics"]["/scan"]["count"]
+    assert scan_ep["undecodable"] == 0 and scan_ep["qos"] == "best_effort/volatile/100"
+    # /fgloc/status: a DiagnosticArray naming each topic and the pose
+    assert peer.status, "no /fgloc/status"
+    names = {s.name for s in peer.status[-1].status}
+    assert {"fgloc: sub /scan", "fgloc: pub /amcl_pose", "fgloc: pose"} <= names
+    # Ctrl-C left the recording complete: every scan received is in it, readable
+    r = open_log(rec)
+    assert r.summary()["topics"]["/scan"]["count"] == scan_ep["messages"]
+
+
+def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: Path, dds_domain: int) -> None:
+    """The robot is carried 4 m ahead at t = 4 s; fgloc's own relocalization is switched off, so only an
+    operator's /initialpose (RViz's 2D Pose Estimate) can bring it back.  Meanwhile a publisher of another
+    type on /imu and undecodable bytes on /scan are counted and named, and localization goes on."""
+    from fgloc.io.tum import read_tum
+    from fgloc.ros2 import qos
+    from fgloc.ros2.transport import CycloneTransport
+
+    from .independent import Peer
+
+    d = _simulate(tmp_path / "kid", [[2.5, 3.0], [14.5, 3.0]], faults={"kidnap": {"time": 4.0, "skip_s": 5.0}})
+    cfg = tmp_path / "noreloc.yaml"
+    cfg.write_text("pipeline: {relocalize_after: 100000, lost_after_s: 1000.0}\n")
+    gt = read_tum(d / "ground_truth.tum")
+    peer = Peer(dds_domain)
+    live = _live(dds_domain, tmp_path, "--map", str(d / "map.yaml"), "--initial-pose", "2.5", "3.0", "0.0",
+                 "--config", str(cfg))
+    rogue = CycloneTransport(dds_domain, LOOPBACK)
+    try:
+        rogue.start()
+        rogue.publisher("/imu", "nav_msgs/msg/Odometry", qos.DEFAULT)
+        garbage = rogue.publisher("/scan", "sensor_msgs/msg/LaserScan", qos.DEFAULT)
+        assert wait_for(lambda: garbage.health.matched == 1, 30.0)
+        sent = [0]
+        # valid CDR (Cyclone DDS drops structurally broken samples itself) that is not a valid message: a
+        # frame id that is not UTF-8
+        from fgloc.ros2 import codec
+        from fgloc.types import LaserScan
+
+        bad = codec.encode(LaserScan(1.0, -1.0, 0.1, 0.1, 10.0, np.ones(5, np.float32), frame_id="laser"))[1]
+        bad = bad.replace(b"laser", b"las\xffr")
+
+        def counted() -> bool:  # bad scans on /scan until /fgloc/status says they were counted
+            garbage.write(bad)
+            sent[0] += 1
+            return any(v.key == "undecodable" and v.value != "0" for a in peer.status[-1:] for st in a.status
+                       if st.name == "fgloc: sub /scan" for v in st.values)
+
+        assert wait_for(counted, 30.0, step=0.3)
+        proc = subprocess.Popen(_fgloc("replay", str(d / "log.mcap"), "--ros2", "--domain", str(dds_domain),
+                                       "--interface", LOOPBACK, "--wait", "60", "--quiet"),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # after the kidnap: wait for poses past t = 6 s, then tell fgloc where the robot is
+        assert wait_for(lambda: any(p[0] > 6.0 for p in peer.poses), 120.0), "no pose after the kidnap"
+        assert wait_for(peer.initial_pose_matched, 10.0)
+        t_now = max(p[0] for p in peer.poses)
+        t_ip = t_now + 0.3
+        x, y, th = (float(np.interp(t_ip, gt.stamps, gt.poses[:, k])) for k in range(3))
+        peer.initial_pose(t_ip, x, y, th)
+        proc.communicate(timeout=300)
+        _settle(peer, 10**9, timeout=30.0)
+    finally:
+        code, report, err = _stop(live)
+        peer.close()
+        rogue.close()
+    assert code == 0, err
+    poses = np.array([p[:4] for p in peer.poses])
+
+    def error(row: np.ndarray) -> float:
+        gx, gy = (float(np.interp(row[0], gt.stamps, gt.poses[:, k])) for k in range(2))
+        return math.hypot(row[1] - gx, row[2] - gy)
+
+    before = [error(r) for r in poses if 5.0 < r[0] < t_now]
+    after = [error(r) for r in poses if r[0] > t_ip + 1.0]
+    assert before and min(before) > 1.0, "the kidnap was not felt (relocalization not off?)"
+    assert after and max(after) < 0.05, f"after /initialpose: max error {max(after):.3f} m; {err[-1500:]}"
+    assert report["counters"]["localizer"]["reinitializations"] == 1
+    probs = "; ".join(report["ros2"]["problems"])
+    scan_ep = next(e for e in report["ros2"]["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub")
+    assert 1 <= scan_ep["undecodable"] <= sent[0]
+    assert f"/scan {scan_ep['undecodable']} undecodable" in probs
+    assert "/imu" in probs and "another type nav_msgs/msg/Odometry" in probs

@@ -352,15 +352,16 @@ class Ros2Live:
 
         runner.health = {inp.kind: SensorHealth(inp.topic) for inp in self.inputs
                          if inp.kind == "scan" or inp.kind.startswith("source:")}
-        runner.session.register("initialpose", self._on_initial_pose)
-        fuse_scan = runner.session.handlers["scan"]
+        handlers = runner.session.handlers
+        handlers["initialpose"] = self._on_initial_pose
+        fuse_scan = handlers["scan"]
 
         def scan_then(msg: object) -> None:  # a pending /initialpose is applied at the next scan
             if self._pending_pose is not None and isinstance(msg, LaserScan):
                 self._apply_initial_pose(float(msg.stamp))
             fuse_scan(msg)
 
-        runner.session.register("scan", scan_then)
+        handlers["scan"] = scan_then
         self.outputs = Ros2Outputs(self)
         runner.session.add_sink(self.outputs)
         self.loc, self.session = loc, session

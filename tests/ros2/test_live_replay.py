@@ -211,7 +211,7 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
 
         assert wait_for(counted, 30.0, step=0.3)
         proc = subprocess.Popen(_fgloc("replay", str(d / "log.mcap"), "--ros2", "--domain", str(dds_domain),
-                                       "--interface", LOOPBACK, "--wait", "60", "--quiet"),
+                                       "--interface", LOOPBACK, "--wait", "60", "--quiet", "--rate", "0.7"),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         # after the kidnap: wait for poses past t = 6 s, then tell fgloc where the robot is
         assert wait_for(lambda: any(p[0] > 6.0 for p in peer.poses), 120.0), "no pose after the kidnap"
@@ -234,9 +234,14 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
         return math.hypot(row[1] - gx, row[2] - gy)
 
     before = [error(r) for r in poses if 5.0 < r[0] < t_now]
-    after = [error(r) for r in poses if r[0] > t_ip + 1.0]
     assert before and min(before) > 1.0, "the kidnap was not felt (relocalization not off?)"
-    assert after and max(after) < 0.05, f"after /initialpose: max error {max(after):.3f} m; {err[-1500:]}"
+    # the pose is re-initialized at the first scan fgloc fuses after /initialpose came (later than t_ip when
+    # the live loop lags the replay): from there on every pose is right
+    after = [error(r) for r in sorted(poses.tolist()) if r[0] > t_ip]
+    good = next((k for k, e in enumerate(after) if e < 0.05), None)
+    assert good is not None, f"never relocalized; {err[-1500:]}"
+    assert max(after[good:]) < 0.05 and min(after[:good], default=1.0) > 1.0
+    assert len(after) - good >= 10
     assert report["counters"]["localizer"]["reinitializations"] == 1
     probs = "; ".join(report["ros2"]["problems"])
     scan_ep = next(e for e in report["ros2"]["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub")

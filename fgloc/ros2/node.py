@@ -41,9 +41,9 @@ from typing import Any
 
 import numpy as np
 
+from fgloc.frames.tf import TfTree, frame_name, is_base_frame, mount_of, planar_mount
 from fgloc.geometry import compose, inverse, wrap_scalar
 from fgloc.io.ros import mirror_scan
-from fgloc.io.tf import TfTree, frame_name, is_base_frame, mount_of, planar_mount
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
 from fgloc.localization.session import BaseSink
 from fgloc.ros2 import codec, qos
@@ -309,7 +309,7 @@ class Ros2Live:
         frame = self.startup.scan_frame
         if frame is None:
             return None
-        from fgloc.localization.frames import parse_static_transforms
+        from fgloc.frames.static import parse_static_transforms
 
         mine = mount_of(frame, parse_static_transforms(self.cfg.sources.static_transforms))
         if mine is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable
@@ -18,9 +19,13 @@ def domain_for(offset: int = 0) -> int:
     return 1 + (os.getpid() * 7 + offset) % 200
 
 
+_NEXT = itertools.count(1)
+
+
 @pytest.fixture
-def dds_domain(request: pytest.FixtureRequest) -> int:
-    return domain_for(abs(hash(request.node.name)) % 97)
+def dds_domain() -> int:
+    """A domain of its own for each test (a process configures a domain once)."""
+    return domain_for(next(_NEXT))
 
 
 def wait_for(cond: Callable[[], bool], timeout: float = 10.0, step: float = 0.02) -> bool:

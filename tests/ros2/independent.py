@@ -132,7 +132,10 @@ class Peer:
     def __init__(self, domain: int, interface: str = "lo") -> None:
         xml = (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="{interface}"/>'
                '</Interfaces></General></Domain></CycloneDDS>')
-        self.domain = Domain(domain, xml)  # kept: the participant's configuration lives with it
+        try:
+            self.domain = Domain(domain, xml)  # kept: the participant's configuration lives with it
+        except Exception:  # noqa: BLE001 - this process configured the domain already (on loopback)
+            self.domain = None
         self.dp = DomainParticipant(domain)
         self.poses: list[tuple[float, float, float, float, str]] = []  # stamp, x, y, yaw, frame
         self.tfs: list[tuple[float, str, str, float, float, float]] = []  # stamp, parent, child, x, y, yaw

@@ -41,19 +41,18 @@ import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray, twist_covariance, with_rotation
 from fgloc.backends.compass import CompassCalibrator
-from fgloc.backends.contract import Capability, SourceNoise, latency_fit_of
+from fgloc.backends.contract import Capability, SourceNoise
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
     INSTANT_RATE,
     RATE,
     Arbiter,
-    GyroBias,
-    LatencyEstimator,
     SourceHealth,
     bracket,
     fix_speed,
 )
+from fgloc.backends.inputs import InputBook
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import wrap_scalar
 from fgloc.types import PoseFix, Trajectory
@@ -108,10 +107,7 @@ class EKFBackend(Backend):
         self._compass_gated_run = 0
         self._gyro_gated_run = 0
         self._rel_gated: dict[str, int] = {}   # per differential orientation source: gated in a row
-        self.arb = Arbiter()
-        self.gbias: dict[str, GyroBias] = {}  # per gyro: its bias, estimated beside the filter
-        self.sources: dict[str, SourceHealth] = {}
-        self.latency_est = LatencyEstimator()
+        self.inputs = InputBook(Arbiter(), c.adapt_noise, c.latency, c.latency_s)
         # motion integrals for the latency estimate: (t, yaw, w) from the gyro (or the odometry),
         # (t, distance, v) from the odometry, each at its own stamps
         self._yaw_series: deque[tuple[float, float, float]] = deque(maxlen=4000)
@@ -119,28 +115,12 @@ class EKFBackend(Backend):
         self._yaw_int = 0.0
         self._dist_int = 0.0
         self._last_rate: tuple[float, float] | None = None
-        self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
-        self._long_pair_t = -math.inf
-        self._pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
         self._turned = 0.0
         self._last_odom_t: float | None = None
         self._odom_steps: deque[float] = deque(maxlen=BURST_WINDOW)  # the last odometry stamp steps (s)
         self.stats["omni"] = bool(self.ekf.omni)
 
     # ------------------------------------------------------------------ helpers
-    def _source(self, name: str, kind: str) -> SourceHealth:
-        h = self.sources.get(name)
-        if h is None:
-            h = self.sources[name] = SourceHealth(name, kind)
-        return h
-
-    def _noise(self, name: str) -> tuple[float, float]:
-        return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
-
-    def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
-        if self.cfg.adapt_noise:
-            self.arb.add_reading(name, kind, rel_prior, t, value, var)
-
     @property
     def initialized(self) -> bool:
         return self.ekf.initialized
@@ -150,13 +130,10 @@ class EKFBackend(Backend):
         return self.cfg.encoder_sigmas
 
     def source_health(self) -> Mapping[str, SourceHealth]:
-        return self.sources
+        return self.inputs.health
 
     def source_noise(self, name: str) -> SourceNoise | None:
-        if name not in self.arb.streams:
-            return None
-        k, c = self.arb.noise(name)
-        return SourceNoise(k, c, self.arb.shown_sigma(name), self.arb.claimed_sigma(name))
+        return self.inputs.source_noise(name)
 
     def motion_summary(self, vy_max_mps: float | None = None) -> str:
         """The filter's state (differential or omni) and why."""
@@ -196,16 +173,14 @@ class EKFBackend(Backend):
         return math.exp(float(self.ekf.x[i])) if i is not None else 1.0
 
     def gyro_bias(self, source: str = "imu") -> float:
-        gb = self.gbias.get(f"{source}.gyro")
+        gb = self.inputs.gyro_bias.get(f"{source}.gyro")
         return gb.value() if gb is not None else 0.0
 
     def latency_estimate(self) -> float:
-        if self.cfg.latency_s is not None:
-            return float(self.cfg.latency_s)
-        return self.latency_est.value() if self.cfg.latency else 0.0
+        return self.inputs.latency()
 
     def latency_fit(self) -> tuple[float, float] | None:
-        return latency_fit_of(self.latency_est.estimate())
+        return self.inputs.latency_fit()
 
     def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """The odometry increment with the gyro's rotation where it covers ``(t0, t1]`` (else the
@@ -222,19 +197,18 @@ class EKFBackend(Backend):
     # ------------------------------------------------------------------ inputs
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
         tw = np.asarray(twist, dtype=float)
-        h = self._source("odom", "odometry")
+        h = self.inputs.source("odom", "odometry")
         if self.cfg.omni is None and not self.ekf.omni and abs(float(tw[1])) > self.cfg.omni_vy_mps:
             self.ekf.to_omni()  # the odometry reports lateral velocity: a mecanum / omni base
             self.stats["omni"] = True
             self.stats["omni_since"] = float(t)
         cov = np.array(twist_covariance(twist_cov, self.encoder_sigmas), dtype=float)
         still = bool(np.all(np.abs(tw) < STILL_TWIST))
-        for gb in self.gbias.values():
-            gb.set_still(float(t), still)
-        self._arb_add("odom", RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
+        self.inputs.standstill(float(t), still)
+        self.inputs.reading("odom", RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
         si = self.ekf.aug.get(YAW_SCALE_STATE)
         gain = 1.0 / self._yaw_scale()
-        self.arb.set_correction("odom", gain=gain)
+        self.inputs.arb.set_correction("odom", gain=gain)
         # motion integrals (held backwards, as the twist is the mean since the last message)
         v = float(np.hypot(tw[0], tw[1]))
         if self._dist_series and t > self._dist_series[-1][0]:
@@ -248,7 +222,7 @@ class EKFBackend(Backend):
             return
         if t < (self.ekf.t or -np.inf):
             self.stats["late"] += 1
-        k, rel = self._noise("odom")
+        k, rel = self.inputs.noise("odom")
         if k != 1.0 or rel > 0.0:
             cov[2, :] *= k
             cov[:, 2] *= k
@@ -287,7 +261,7 @@ class EKFBackend(Backend):
         gated at the chi-square 99.9 % quantile (a lost visual track), its yaw rate weighted by the
         noise it shows against the other yaw sources.  The first odometry source alone drives the
         motion integrals, scale and standstill (:meth:`add_odometry`)."""
-        h = self._source(source, "odometry")
+        h = self.inputs.source(source, "odometry")
         tw = np.asarray(twist, dtype=float).reshape(-1)
         cov = np.asarray(twist_cov, dtype=float).reshape(3, 3)
         if tw.shape != (3,) or not (math.isfinite(t) and np.all(np.isfinite(tw))):
@@ -297,14 +271,14 @@ class EKFBackend(Backend):
         if not comps:
             return
         if used[2]:
-            self._arb_add(source, RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
+            self.inputs.reading(source, RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
         if not self.initialized:
             return
         if t < (self.ekf.t or -math.inf):
             self.stats["late"] += 1
         c = cov[np.ix_(comps, comps)].copy()
         if 2 in comps:
-            k, rel = self._noise(source)
+            k, rel = self.inputs.noise(source)
             j = comps.index(2)
             c[j, :] *= k
             c[:, j] *= k
@@ -316,15 +290,12 @@ class EKFBackend(Backend):
             h.gated += 1
 
     def _has_gyro(self) -> bool:
-        return bool(self.gbias)
+        return bool(self.inputs.gyro_bias)
 
     def _odometry_sole(self) -> bool:
         """Whether the odometry is the only source of the velocities (no gyro, no second odometry)."""
-        return not self.gbias and not any(h.kind == "odometry" and n != "odom" for n, h in self.sources.items())
-
-    def _heading_for_bias(self, name: str, t: float, yaw: float, var: float) -> None:
-        for gb in self.gbias.values():
-            gb.add_heading(name, t, yaw, var)
+        return not self.inputs.gyro_bias and not any(h.kind == "odometry" and n != "odom"
+                                                     for n, h in self.inputs.health.items())
 
     def add_compass(self, t: float, yaw: float | None, yaw_var: float,
                     rate: float | None, rate_var: float, source: str = "imu") -> None:
@@ -333,24 +304,24 @@ class EKFBackend(Backend):
             rate = None
         if yaw is not None:
             self.calib.add_compass(t, yaw, rate)
-            vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
-            self._arb_add(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(vy))
-            self._heading_for_bias(f"{source}.yaw", t, float(yaw), vy * self._noise(f"{source}.yaw")[0] ** 2)
+            vy = self.inputs.variance(yaw_var, self.compass_sigma)
+            self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(vy))
+            self.inputs.heading(f"{source}.yaw", t, float(yaw), vy * self.inputs.noise(f"{source}.yaw")[0] ** 2)
         if not self.initialized:
             return
         th = self.calib.to_map(yaw) if (yaw is not None and self.use_compass_yaw) else None
-        vy = yaw_var if np.isfinite(yaw_var) and yaw_var > 0 else self.compass_sigma**2
-        vr = rate_var if np.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
+        vy = self.inputs.variance(yaw_var, self.compass_sigma)
+        vr = self.inputs.variance(rate_var, self.compass_rate_sigma)
         if th is not None:
-            vy *= self._noise(f"{source}.yaw")[0] ** 2
-            h = self._source(f"{source}.yaw", "heading")
+            vy *= self.inputs.noise(f"{source}.yaw")[0] ** 2
+            h = self.inputs.source(f"{source}.yaw", "heading")
             if self.ekf.update_compass(t, th, vy, rate, vr):
                 h.accepted += 1
                 self._compass_gated_run = 0
                 return
             h.gated += 1
             self._compass_gated_run += 1
-            k_y, _ = self._noise(f"{source}.yaw")
+            k_y, _ = self.inputs.noise(f"{source}.yaw")
             if self._compass_gated_run >= self.cfg.compass_recover_after and k_y < 3.0:
                 # gated for a while although it agrees with the other sources: the filter's heading
                 # drifted (e.g. on a wheel yaw that lies), not the compass; re-open the heading
@@ -366,18 +337,15 @@ class EKFBackend(Backend):
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
         """A yaw rate (rad/s, base_link z) measuring ``w + bias`` (a bias state per gyro)."""
         name = f"{source}.gyro"
-        h = self._source(name, "gyro")
-        if not (math.isfinite(t) and math.isfinite(rate)):
-            h.skip("not finite")
+        h = self.inputs.source(name, "gyro")
+        if not self.inputs.finite(h, t, rate):
             return
-        var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.compass_rate_sigma**2
-        self._arb_add(name, INSTANT_RATE, 0.01, t, float(rate), float(var))
-        gb = self.gbias.get(name)
-        if gb is None:
-            gb = self.gbias[name] = GyroBias(self.cfg.gyro_bias_prior_radps, math.sqrt(self.cfg.gyro_bias_q))
+        var = self.inputs.variance(rate_var, self.compass_rate_sigma)
+        self.inputs.reading(name, INSTANT_RATE, 0.01, t, float(rate), float(var))
+        gb = self.inputs.gyro(name, self.cfg.gyro_bias_prior_radps, math.sqrt(self.cfg.gyro_bias_q))
         gb.add_rate(float(t), float(rate), float(var))
         b = gb.value()
-        self.arb.set_correction(name, bias=b)
+        self.inputs.arb.set_correction(name, bias=b)
         # the motion integral (readings interpolated)
         if self._last_rate is not None and t > self._last_rate[0]:
             self._yaw_int += 0.5 * (self._last_rate[1] + rate - b) * (t - self._last_rate[0])
@@ -386,7 +354,7 @@ class EKFBackend(Backend):
             self._yaw_series.append((float(t), self._yaw_int, float(rate) - b))
         if not self.initialized:
             return
-        k, rel = self._noise(name)
+        k, rel = self.inputs.noise(name)
         var = k * k * var + (rel * rate) ** 2 + gb.sigma() ** 2
         if self.ekf.update_gyro(t, float(rate) - b, var, None, CHI2_999[1] * 4):
             h.accepted += 1
@@ -394,7 +362,7 @@ class EKFBackend(Backend):
         else:
             h.gated += 1
             self._gyro_gated_run += 1
-            k_g, _ = self._noise(name)
+            k_g, _ = self.inputs.noise(name)
             if self._gyro_gated_run >= GYRO_RECOVER_AFTER and k_g < 3.0:
                 # gated again and again while it agrees with the other yaw sources: the filter's
                 # yaw rate is what is off (a slow process noise, a lying wheel), not the gyro
@@ -418,15 +386,14 @@ class EKFBackend(Backend):
         whatever the stamps.  Gated ``compass_recover_after`` times in a row (a re-initialized
         AHRS), the offset is re-anchored."""
         name = f"{source}.yaw"
-        h = self._source(name, "heading")
-        if not (math.isfinite(t) and math.isfinite(yaw)):
-            h.skip("not finite")
+        h = self.inputs.source(name, "heading")
+        if not self.inputs.finite(h, t, yaw):
             return
-        v = var if math.isfinite(var) and var > 0 else self.compass_sigma**2
-        self._arb_add(name, ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(v))
-        k, _ = self._noise(name)
+        v = self.inputs.variance(var, self.compass_sigma)
+        self.inputs.reading(name, ANGLE_ABSOLUTE, 0.02, t, float(yaw), float(v))
+        k, _ = self.inputs.noise(name)
         v *= k * k
-        self._heading_for_bias(name, t, float(yaw), v)
+        self.inputs.heading(name, t, float(yaw), v)
         if not self.initialized:
             return
         if t < (self.ekf.t or -math.inf):
@@ -465,12 +432,13 @@ class EKFBackend(Backend):
             return False
         used = False
         if self.cfg.adapt_noise:
-            self.arb.update(t)
+            self.inputs.arb.update(t)
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
             pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)
-            self._latency_pair(t, pose, cov)
-            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - self.latency_estimate(), float(pose[2]), float(cov[2, 2]))
+            self.inputs.add_fix(t, pose, cov)
+            self.inputs.reading("scan", ANGLE_ABSOLUTE, 0.005, t - self.latency_estimate(), float(pose[2]),
+                                float(cov[2, 2]))
             t_meas = t - self.latency_estimate()  # a late-stamped scan shows the pose this long before
             heading = (t_meas, float(pose[2]), max(float(cov[2, 2]), self.cfg.map_min_sigma_theta**2))
             if self.ekf.t is not None and t_meas < self.ekf.t:
@@ -483,13 +451,13 @@ class EKFBackend(Backend):
                 cov = cov + self.ekf.process_noise(dt)[:3, :3]
                 t_meas = self.ekf.t
             used = self.ekf.update_map(t_meas, pose, cov, gate=not force)
-            h = self._source("scan", "pose")
+            h = self.inputs.source("scan", "pose")
             if used:
                 h.accepted += 1
                 self._consecutive_rejects = 0
                 self.stats["fixes_used"] += 1
                 self.calib.add_fix(t_meas, float(pose[2]))
-                self._heading_for_bias("scan", *heading)
+                self.inputs.heading("scan", *heading)
             else:
                 h.gated += 1
                 self._consecutive_rejects += 1
@@ -501,20 +469,6 @@ class EKFBackend(Backend):
         return used
 
     # ------------------------------------------------------------------ latency
-    def _latency_pair(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
-        if not self.cfg.latency or self.cfg.latency_s is not None:
-            return
-        if self._recent_fixes and 0.0 < t - self._recent_fixes[-1][0] <= 0.3:
-            f = self._recent_fixes[-1]
-            self._pairs.append((f[0], t, f[1], pose.copy(), f[2], cov.copy()))
-        if t - self._long_pair_t >= 1.0:
-            old = [f for f in self._recent_fixes if 0.8 <= t - f[0] <= 1.2]
-            if old:
-                f = old[0]
-                self._pairs.append((f[0], t, f[1], pose.copy(), f[2], cov.copy()))
-                self._long_pair_t = t
-        self._recent_fixes.append((t, pose.copy(), cov.copy()))
-
     @staticmethod
     def _series_at(m: deque, t: float, held: bool = False) -> tuple[float, float] | None:
         """Integral and rate at ``t``; ``held``: the rate is the mean since the previous sample
@@ -528,13 +482,14 @@ class EKFBackend(Backend):
         return float(a[1] + f * (b[1] - a[1])), rate
 
     def _process_pairs(self) -> None:
-        if not self._pairs or not self._yaw_series or not self._dist_series:
+        book = self.inputs
+        if not book.fix_pairs or not self._yaw_series or not self._dist_series:
             return
         covered = min(self._yaw_series[-1][0], self._dist_series[-1][0])
         keep = []
-        for pair in self._pairs:
+        for pair in book.fix_pairs:
             ta, tb, pa, pb, ca, cb = pair
-            if tb > covered or not self._recent_fixes or tb > self._recent_fixes[-1][0] - 0.25:
+            if tb > covered or not book.recent_fixes or tb > book.recent_fixes[-1][0] - 0.25:
                 keep.append(pair)
                 continue
             ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
@@ -548,15 +503,15 @@ class EKFBackend(Backend):
             if _period(self._yaw_series) <= MAX_REF_PERIOD_S:
                 d_ref = yb[0] - ya[0]
                 r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-                self.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
+                book.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
             dist_ref = db[0] - da[0]
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + 1e-6
             # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
-            va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
+            va, vb = fix_speed(book.recent_fixes, ta), fix_speed(book.recent_fixes, tb)
             if tb - ta >= 0.5 and va is not None and vb is not None:  # the fixes' own speeds: immune to wheel slip
-                self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
-        self._pairs = keep
+                book.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
+        book.fix_pairs = keep
 
     # ------------------------------------------------------------------ outputs
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:

@@ -30,7 +30,7 @@ def test_a_differential_orientation_keeps_the_heading_beside_a_gyro_with_a_scale
     pose, loc = _run(msgs)
     be = loc.backend
     assert isinstance(be, EKFBackend)
-    assert be.sources["imu1.yaw"].accepted > 4000 and be.sources["imu1.yaw"].gated == 0
+    assert be.source_health()["imu1.yaw"].accepted > 4000 and be.source_health()["imu1.yaw"].gated == 0
     err = float(np.hypot(*(pose[:2] - truth[:2])))
     # 40 m driven, 8 rad turned (the gyro alone would lose 0.96 rad of heading on the way)
     assert err < 0.1, err

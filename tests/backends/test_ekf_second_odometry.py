@@ -49,7 +49,7 @@ def test_the_ekf_fuses_a_second_odometry_sources_yaw_rate():
     pose, truth, loc, router = _run(SPECS)
     be = loc.backend
     assert isinstance(be, EKFBackend)
-    assert be.sources["visual"].accepted >= 380 and be.sources["visual"].gated == 0
+    assert be.source_health()["visual"].accepted >= 380 and be.source_health()["visual"].gated == 0
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.02   # 3.8 rad turned
     # 19 m driven; 0.094 m: the filter's yaw rate starts one message (0.05 s) after the turn
     assert float(np.hypot(*(pose[:2] - truth[:2]))) < 0.15
@@ -59,7 +59,7 @@ def test_the_ekf_fuses_a_second_odometry_sources_yaw_rate():
 
 def test_an_outlier_of_the_second_source_is_gated():
     pose, truth, loc, _ = _run(SPECS, outlier_at=200)
-    assert loc.backend.sources["visual"].gated == 1
+    assert loc.backend.source_health()["visual"].gated == 1
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.02
 
 

@@ -207,7 +207,7 @@ def test_non_finite_inputs_are_counted_not_solved():
             fix = PoseFix(t, np.array([np.nan if bad else 0.5 * t, 0.0, 0.0]), np.eye(3) * 1e-4)
             sm.add_keyframe(t, fix)
     tr = sm.finish()
-    assert sm.sources["odom"].skipped_reasons == {"not finite": 1}
-    assert sm.sources["scan"].skipped_reasons == {"fix not finite": 1}
+    assert sm.source_health()["odom"].skipped_reasons == {"not finite": 1}
+    assert sm.source_health()["scan"].skipped_reasons == {"fix not finite": 1}
     assert sm.stats.get("solver_failures", 0) == 0
     assert abs(tr.poses[-1][0] - 1.0) < 0.01

@@ -57,7 +57,7 @@ def test_a_differential_orientation_keeps_the_smoothers_heading_beside_a_gyro_wi
     pose, loc = _run()
     be = loc.backend
     assert isinstance(be, SlidingWindowSmoother)
-    assert be.stats["relative_yaw_factors"] >= be.stats["keyframes"] - 1 and be.sources["imu1.yaw"].gated == 0
+    assert be.stats["relative_yaw_factors"] >= be.stats["keyframes"] - 1 and be.source_health()["imu1.yaw"].gated == 0
     assert be.stats.get("relative_yaw_reanchored", 0) == 0
     assert float(np.hypot(*(pose[:2] - truth[:2]))) < 0.1   # 0.039 m measured
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.01
@@ -85,6 +85,6 @@ def test_the_smoothers_offset_is_reanchored_after_a_reinitialized_ahrs():
             be.add_keyframe(t, None)
     traj = be.finish()
     assert be.stats["relative_yaw_reanchored"] == 1
-    assert be.sources["ahrs.yaw"].gated > 0
+    assert be.source_health()["ahrs.yaw"].gated > 0
     assert float(np.max(np.abs(traj.poses[:, 2]))) < 0.01
     assert float(traj.poses[-1][0]) == pytest.approx(3.9, abs=0.02)

@@ -101,7 +101,7 @@ def test_the_smoother_fuses_a_second_odometry_sources_yaw_rate():
     pose, truth, loc = _arc(YAW_ONLY, lambda v, w: np.array([v, 0.0, w]))
     be = loc.backend
     assert isinstance(be, SlidingWindowSmoother)
-    assert be.sources["visual"].accepted >= 395 and be.sources["visual"].gated == 0
+    assert be.source_health()["visual"].accepted >= 395 and be.source_health()["visual"].gated == 0
     assert be.stats["velocity_factors"] >= 150       # every keyframe interval (155 measured)
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.005   # 0.2 mrad measured
     assert float(np.hypot(*(pose[:2] - truth[:2]))) < 0.1                      # 0.049 m measured
@@ -112,7 +112,7 @@ def test_an_outlier_of_the_second_source_is_gated_against_the_gyro():
     """A 25 rad/s spike (a lost track) is gated against the keyframes' turn, which the gyro gives
     (with the wheels' unused yaw alone nothing could tell it from a turn: not gated then)."""
     pose, truth, loc = _arc(YAW_ONLY, lambda v, w: np.array([v, 0.0, w]), outlier_at=200, gyro=True)
-    assert loc.backend.sources["visual"].gated >= 1         # 2 keyframe intervals hold it
+    assert loc.backend.source_health()["visual"].gated >= 1         # 2 keyframe intervals hold it
     assert abs(math.remainder(float(pose[2]) - truth[2], 2 * math.pi)) < 0.005   # 1.6 mrad measured
 
 

@@ -11,7 +11,6 @@ import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.contract import latency_fit_of
 from fgloc.backends.factors import offset_pose, pose_offset
 from fgloc.backends.health import fix_speed
 from fgloc.backends.smoother.keys import O, symbol
@@ -71,9 +70,9 @@ class Calibration(Streams):
                 sc = float(ch.estimate[0])
                 if math.isfinite(sc) and sc > 0.05:
                     self._gains[0 if name == "odom_speed_scale" else 1] = 1.0 / sc
-                    self.arb.set_correction("odom", gain=float(self._gains[1]))
+                    self.inputs.arb.set_correction("odom", gain=float(self._gains[1]))
             elif name.startswith("gyro_bias:"):
-                self.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
+                self.inputs.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""
@@ -132,17 +131,16 @@ class Calibration(Streams):
 
     def latency_estimate(self) -> float:
         """The scan latency (s) in use: configured, estimated once significant, or 0."""
-        if self.cfg.latency_s is not None:
-            return float(self.cfg.latency_s)
-        return self.latency_est.value() if self.cfg.latency else 0.0
+        return self.inputs.latency()
 
     def latency_fit(self) -> tuple[float, float] | None:
-        return latency_fit_of(self.latency_est.estimate())
+        return self.inputs.latency_fit()
 
     def _latency_pairs(self) -> None:
         """Feed the latency estimator with the fix pairs the gyro / odometry now cover."""
-        if not self.cfg.latency or self.cfg.latency_s is not None:
-            self._fix_pairs.clear()
+        book = self.inputs
+        if not book.latency_estimated:
+            book.fix_pairs.clear()
             return
         covered = self.odo_t[-1] if self.odo_t else -np.inf
         for ts_, _, _ in self.gyro.values():
@@ -150,9 +148,9 @@ class Calibration(Streams):
                 covered = min(covered, ts_[-1])
         keep = []
         odo_period = self._period_of(self.odo_t)
-        last_fix = self._recent_fixes[-1][0] if self._recent_fixes else -np.inf
+        last_fix = book.recent_fixes[-1][0] if book.recent_fixes else -np.inf
         yaw_period = self._period_of(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
-        for pair in self._fix_pairs:
+        for pair in book.fix_pairs:
             ta, tb, pa, pb, ca, cb = pair
             if tb > covered or tb > last_fix - 0.25:
                 keep.append(pair)
@@ -168,7 +166,7 @@ class Calibration(Streams):
                 d_ref = self._rotation_between(ta, tb)
                 r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
                 var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
-                self.latency_est.add(-(wb - wa), r, var, d_ref, 0)
+                book.latency_est.add(-(wb - wa), r, var, d_ref, 0)
             # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
             if tb - ta < 0.5:
                 continue
@@ -176,7 +174,7 @@ class Calibration(Streams):
             dist_ref = float(np.hypot(d[0], d[1]))
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
-            va, vb = fix_speed(self._recent_fixes, ta), fix_speed(self._recent_fixes, tb)
+            va, vb = fix_speed(book.recent_fixes, ta), fix_speed(book.recent_fixes, tb)
             if va is not None and vb is not None:
-                self.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
-        self._fix_pairs = keep
+                book.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
+        book.fix_pairs = keep

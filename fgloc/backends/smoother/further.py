@@ -50,8 +50,8 @@ class FurtherSourceFactors(FixedLagWindow):
                 continue
             z, sigma = m
             name = f"{source}.yaw"
-            h = self._source(name, "heading")
-            sigma *= self._noise_of(name)[0]
+            h = self.inputs.source(name, "heading")
+            sigma *= self.inputs.noise(name)[0]
             ch = self._chain(f"relative_yaw:{source}", "r", [0.0], [RELATIVE_YAW_PRIOR_SIGMA],
                              [self.cfg.relative_yaw_rw_sigma])
             gate = self.cfg.fix_gate_theta
@@ -120,7 +120,7 @@ class FurtherSourceFactors(FixedLagWindow):
             return None
         d, c = integrate_twist(np.asarray(vts[j0 - 1:j1 + 1]), np.asarray(vus[j0 - 1:j1 + 1]),
                                np.asarray(vcs[j0 - 1:j1 + 1]), ta, tb, self._q_slip)
-        k_yaw, rel = self._noise_of(name)
+        k_yaw, rel = self.inputs.noise(name)
         if k_yaw != 1.0 or rel > 0.0:
             c[2, :] *= k_yaw
             c[:, 2] *= k_yaw
@@ -148,7 +148,7 @@ class FurtherSourceFactors(FixedLagWindow):
         for g in self.gyro:  # the keyframes' turn is the gyro's where it covers them: its uncertainty
             r = self._gyro_increment(g, ta, tb)
             if r is not None:
-                gb = self.gbias.get(g)
+                gb = self.inputs.gyro_bias.get(g)
                 c1 = c1.copy()
                 c1[2, :2] = c1[:2, 2] = 0.0
                 c1[2, 2] = r[1] + ((gb.sigma() if gb is not None else 0.0) * (tb - ta)) ** 2
@@ -158,7 +158,7 @@ class FurtherSourceFactors(FixedLagWindow):
             d2 = float(e @ np.linalg.solve(S, e))
         except np.linalg.LinAlgError:
             d2 = math.inf
-        h = self._source(name, "odometry")
+        h = self.inputs.source(name, "odometry")
         if not d2 <= CHI2_3_999:
             h.gated += 1
             return None

@@ -42,7 +42,7 @@ class KeyframeGraph(FurtherSourceFactors):
             return False
         t = float(t)
         if fix is not None and not all_finite(fix.pose, fix.cov):
-            self._source("scan", "pose").skip("fix not finite")
+            self.inputs.source("scan", "pose").skip("fix not finite")
             fix = None
         if t <= self.kf_t[-1]:
             if t == self.kf_t[-1]:
@@ -128,7 +128,7 @@ class KeyframeGraph(FurtherSourceFactors):
         if m is not None:
             sigma = m[1]
             if self.cfg.adapt_noise and readings:
-                sigma *= self._noise_of(f"{readings[0][3]}.yaw")[0]
+                sigma *= self.inputs.noise(f"{readings[0][3]}.yaw")[0]
             graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
                                      self.cfg.compass_kernel, self.cfg.compass_kernel_k))
             ts[self.cur_o] = t  # type: ignore[index]
@@ -138,14 +138,13 @@ class KeyframeGraph(FurtherSourceFactors):
             assert fix is not None
             graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
             self.stats["fixes_used"] += 1
-            self._source("scan", "pose").accepted += 1
+            self.inputs.source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
             yaw_fix = float(fix.pose[2])
             self.calib.add_fix(t - lat, yaw_fix)
             var_yaw = self._fix_cov_list(fix.cov)[8]
-            for gb in self.gbias.values():
-                gb.add_heading("scan", t - lat, yaw_fix, var_yaw)
-            self._arb_add("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
+            self.inputs.heading("scan", t - lat, yaw_fix, var_yaw)
+            self.inputs.reading("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
         self.kf_t.append(t)
         self.kf_key.append(k)
         self.window.append((t, k))
@@ -154,7 +153,7 @@ class KeyframeGraph(FurtherSourceFactors):
         self._add_gyro_factors(t, graph, vals, ts)
         self._add_velocity_factors(t, graph, vals, ts)
         if self.cfg.adapt_noise:
-            self.arb.update(t)
+            self.inputs.arb.update(t)
         self._latency_pairs()
         if len(keys) >= max(1, int(self.cfg.update_every)):
             self._flush_acc()
@@ -170,7 +169,7 @@ class KeyframeGraph(FurtherSourceFactors):
         # the yaw row and column times k_yaw, the yaw variance plus (rel * yaw)^2 and the timing's: as
         # floats (the same operations as on the array), one array made at the end
         a = np.asarray(c, dtype=float).reshape(9).tolist()
-        k_yaw, rel = self._noise_of("odom")
+        k_yaw, rel = self.inputs.noise("odom")
         if k_yaw != 1.0 or rel > 0.0:
             a[6], a[7], a[8] = a[6] * k_yaw, a[7] * k_yaw, a[8] * k_yaw
             a[2], a[5], a[8] = a[2] * k_yaw, a[5] * k_yaw, a[8] * k_yaw
@@ -182,7 +181,7 @@ class KeyframeGraph(FurtherSourceFactors):
         # a scale is estimated only once something else observes it (held at its estimate until
         # then): the speed scale from positions (fixes), the yaw-rate scale from any other yaw source
         ks_v = ks_w = None
-        latency_known = not self.cfg.latency or self.cfg.latency_s is not None or self.latency_est.settled()
+        latency_known = not self.inputs.latency_estimated or self.inputs.latency_est.settled()
         if (self.stats["fixes_used"] > 0 and latency_known) or "odom_speed_scale" in self.chains:
             ch = self._chain("odom_speed_scale", "g", [1.0], [self.cfg.odom_speed_scale_prior],
                              [self.cfg.odom_scale_rw])
@@ -225,7 +224,7 @@ class KeyframeGraph(FurtherSourceFactors):
         straight legs (online 0.032 deg against its fixes' 0.024)."""
         a = self._fix_cov_list(cov)
         if self.cfg.adapt_noise:
-            k = self.arb.shown_k("scan")
+            k = self.inputs.arb.shown_k("scan")
             if k != 1.0:  # the heading's row, then its column, times k
                 a[6], a[7], a[8] = a[6] * k, a[7] * k, a[8] * k
                 a[2], a[5], a[8] = a[2] * k, a[5] * k, a[8] * k
@@ -254,17 +253,7 @@ class KeyframeGraph(FurtherSourceFactors):
             pose = compose1(pose, se2_exp(self._twist_at(t) * lat))
         # pairs for the latency estimate: consecutive fixes (turns starting / ending) and, once a
         # second, fixes ~1 s apart (a start from standstill: the lag is v * latency)
-        p_now = np.asarray(fix.pose, dtype=float)
-        if self._last_fix is not None and 0.0 < t - self._last_fix[0] <= 0.3:
-            self._fix_pairs.append((self._last_fix[0], t, self._last_fix[1], p_now, self._last_fix[2], cov))
-        if t - self._long_pair_t >= 1.0:
-            old = [f for f in self._recent_fixes if 0.8 <= t - f[0] <= 1.2]
-            if old:
-                f0 = old[0]
-                self._fix_pairs.append((f0[0], t, f0[1], p_now, f0[2], cov))
-                self._long_pair_t = t
-        self._last_fix = (t, p_now, cov)
-        self._recent_fixes.append(self._last_fix)
+        self.inputs.add_fix(t, fix.pose, cov)
         return fix_factor(k, pose, cov, self.cfg.fix_kernel, self.cfg.fix_kernel_k)
 
     def _add_gyro_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
@@ -281,9 +270,9 @@ class KeyframeGraph(FurtherSourceFactors):
                 self._gyro_done[name] = tb
                 if r is None:
                     continue
-                k_g, rel = self._noise_of(name)
+                k_g, rel = self.inputs.noise(name)
                 var = k_g * k_g * (r[1] + 1e-10 * (tb - ta)) + (rel * r[0]) ** 2
-                gb = self.gbias.get(name)
+                gb = self.inputs.gyro_bias.get(name)
                 if gb is not None:  # the bias known beside the graph: its uncertainty on the increment
                     graph.add(yaw_increment_factor(ka, kb, r[0], math.sqrt(var + (gb.sigma() * (tb - ta)) ** 2)))
                 else:

@@ -12,7 +12,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray, twist_covariance_values
 from fgloc.backends.contract import Capability
 from fgloc.backends.factors import upper6
-from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, GyroBias
+from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, bounded_covariance, carried_covariance, prior_covariance
 from fgloc.backends.smoother.keyframes import KeyframeGraph
 from fgloc.geometry import compose1
@@ -75,7 +75,7 @@ class SlidingWindowSmoother(KeyframeGraph):
 
     # ------------------------------------------------------------------ inputs
     def add_odometry(self, t: float, twist: FloatArray, twist_cov: FloatArray | None) -> None:
-        h = self._source("odom", "odometry")
+        h = self.inputs.source("odom", "odometry")
         if self.odo_t and t <= self.odo_t[-1]:
             self.stats["late"] += 1
             h.skip("late")
@@ -88,15 +88,14 @@ class SlidingWindowSmoother(KeyframeGraph):
         cl = twist_covariance_values(twist_cov, self.cfg.encoder_sigmas)  # the entries as floats, once
         still = abs(u0) < 1e-3 and abs(u1) < 1e-3 and abs(u2) < 1e-3
         t = float(t)
-        for gb in self.gbias.values():
-            gb.set_still(t, still)
+        self.inputs.standstill(t, still)
         self.odo_t.append(t)
         self.odo_u.append((u0, u1, u2))
         if cl[0] <= TWIST_VAR_MAX and cl[4] <= TWIST_VAR_MAX and cl[8] <= TWIST_VAR_MAX:
             self.odo_c.append((cl[0], cl[1], cl[2], cl[4], cl[5], cl[8]))   # upper6(c): bounded_covariance leaves it
         else:
             self.odo_c.append(upper6(bounded_covariance(np.array(cl).reshape(3, 3), TWIST_VAR_MAX)))
-        self._arb_add("odom", RATE, 0.05, t, u2, cl[8])
+        self.inputs.reading("odom", RATE, 0.05, t, u2, cl[8])
         self._process_pending(t)
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
@@ -111,42 +110,39 @@ class SlidingWindowSmoother(KeyframeGraph):
             self.add_gyro(t, rate, rate_var, source)
         if yaw is None:
             return
-        h = self._source(f"{source}.yaw", "heading")
+        h = self.inputs.source(f"{source}.yaw", "heading")
         self.calib.add_compass(t, yaw, rate)
-        var = yaw_var if math.isfinite(yaw_var) and yaw_var > 0 else self.cfg.compass_sigma**2
-        for gb in self.gbias.values():
-            gb.add_heading(f"{source}.yaw", float(t), float(yaw), float(var) * self._noise_of(f"{source}.yaw")[0] ** 2)
+        var = self.inputs.variance(yaw_var, self.cfg.compass_sigma)
+        self.inputs.heading(f"{source}.yaw", float(t), float(yaw),
+                            float(var) * self.inputs.noise(f"{source}.yaw")[0] ** 2)
         h.accepted += 1
-        self._arb_add(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
+        self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
         self.compass_pending.append((float(t), float(yaw), float(var), source))
         self._process_pending(float(t))
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
         """A yaw rate (rad/s, base_link z) from a gyro: integrated between keyframes, bias estimated."""
         name = f"{source}.gyro"
-        h = self._source(name, "gyro")
+        h = self.inputs.source(name, "gyro")
         buf = self.gyro.get(name)
         if buf is None:
             buf = self.gyro[name] = ([], [], [])
         if buf[0] and t <= buf[0][-1]:
             h.skip("late or repeated stamp")
             return
-        if not (math.isfinite(t) and math.isfinite(rate)):
-            h.skip("not finite")
+        if not self.inputs.finite(h, t, rate):
             return
-        var = rate_var if math.isfinite(rate_var) and rate_var > 0 else self.cfg.gyro_sigma_radps**2
+        var = self.inputs.variance(rate_var, self.cfg.gyro_sigma_radps)
         h.accepted += 1
         if not self.cfg.gyro_bias_in_graph:
-            gb = self.gbias.get(name)
-            if gb is None:
-                gb = self.gbias[name] = GyroBias(self.cfg.gyro_bias_prior_radps, self.cfg.gyro_bias_rw_radps)
+            gb = self.inputs.gyro(name, self.cfg.gyro_bias_prior_radps, self.cfg.gyro_bias_rw_radps)
             gb.add_rate(float(t), float(rate), float(var))
-            self.arb.set_correction(name, bias=gb.value())
+            self.inputs.arb.set_correction(name, bias=gb.value())
         buf[0].append(float(t))
         buf[1].append(float(rate))
         buf[2].append(float(var))
         self._gyro_done.setdefault(name, -np.inf)
-        self._arb_add(name, INSTANT_RATE, 0.01, float(t), float(rate), float(var))
+        self.inputs.reading(name, INSTANT_RATE, 0.01, float(t), float(rate), float(var))
         if len(buf[0]) > 8192 and self.kf_t:
             horizon = self.kf_t[-1] - self.cfg.lag_s - 2.0
             i = bisect_left(buf[0], horizon)
@@ -167,14 +163,13 @@ class SlidingWindowSmoother(KeyframeGraph):
         not used; :data:`REANCHOR_AFTER` keyframes of it in a row (a re-initialized AHRS) and the
         offset is anchored again."""
         name = f"{source}.yaw"
-        h = self._source(name, "heading")
-        if not (math.isfinite(t) and math.isfinite(yaw)):
-            h.skip("not finite")
+        h = self.inputs.source(name, "heading")
+        if not self.inputs.finite(h, t, yaw):
             return
-        v = var if math.isfinite(var) and var > 0 else self.cfg.compass_sigma**2
-        self._arb_add(name, ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(v))
-        for gb in self.gbias.values():  # its increments observe a gyro's bias (its frame never enters)
-            gb.add_heading(name, float(t), float(yaw), float(v) * self._noise_of(name)[0] ** 2)
+        v = self.inputs.variance(var, self.cfg.compass_sigma)
+        self.inputs.reading(name, ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(v))
+        # its increments observe a gyro's bias (its frame never enters)
+        self.inputs.heading(name, float(t), float(yaw), float(v) * self.inputs.noise(name)[0] ** 2)
         if not self.initialized:
             return
         self.rel_pending.append((float(t), float(yaw), float(v), source))
@@ -195,7 +190,7 @@ class SlidingWindowSmoother(KeyframeGraph):
         against the graph: r_l's groovy test1.bag's stereo odometer reports 11 % less distance than
         the wheels and 2.3 deg sideways.  The first source alone carries the yaw-rate scale, the
         standstill and the motion integrals."""
-        h = self._source(source, "odometry")
+        h = self.inputs.source(source, "odometry")
         tw = np.asarray(twist, dtype=float).reshape(-1)
         cov = np.asarray(twist_cov, dtype=float).reshape(3, 3)
         if tw.shape != (3,) or not (math.isfinite(t) and np.all(np.isfinite(tw)) and np.all(np.isfinite(cov))):
@@ -212,7 +207,7 @@ class SlidingWindowSmoother(KeyframeGraph):
                 c[:, i] = 0.0
                 c[i, i] = TWIST_VAR_MAX
         if used[2]:
-            self._arb_add(source, RATE, 0.05, float(t), float(tw[2]), float(c[2, 2]))
+            self.inputs.reading(source, RATE, 0.05, float(t), float(tw[2]), float(c[2, 2]))
         buf[0].append(float(t))
         buf[1].append(tw)
         buf[2].append(bounded_covariance(c, TWIST_VAR_MAX))

@@ -14,7 +14,8 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import SourceNoise
-from fgloc.backends.health import Arbiter, GyroBias, LatencyEstimator, SourceHealth
+from fgloc.backends.health import Arbiter, SourceHealth
+from fgloc.backends.inputs import InputBook
 from fgloc.backends.smoother.config import SmootherConfig
 from fgloc.backends.smoother.keys import BALLAST
 from fgloc.types import PoseFix
@@ -49,16 +50,11 @@ class SmootherState(Backend):
         self.gyro: dict[str, tuple[list[float], list[float], list[float]]] = {}
         self._gyro_done: dict[str, float] = {}
         self.chains: dict[str, Chain] = {}
-        # long blocks: whether the fixes' heading errors vary slowly (see _fix_weighted_cov)
-        self.arb = Arbiter(long_blocks=(4, 16))
-        self.latency_est = LatencyEstimator()
-        self._last_fix: tuple[float, FloatArray, FloatArray] | None = None
-        self._recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
-        self._long_pair_t = -np.inf
-        self._fix_pairs: list[tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]] = []
+        # per-source health, noise, gyro biases (unless cfg.gyro_bias_in_graph) and latency pairs; the
+        # arbiter's long blocks: whether the fixes' heading errors vary slowly (see _fix_weighted_cov)
+        self.inputs = InputBook(Arbiter(long_blocks=(4, 16)), self.cfg.adapt_noise, self.cfg.latency,
+                                self.cfg.latency_s)
         self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
-        self.sources: dict[str, SourceHealth] = {}
-        self.gbias: dict[str, GyroBias] = {}   # per gyro stream, unless cfg.gyro_bias_in_graph
         self._gains = np.ones(2)
         self._turned = 0.0
         #: the odometry's stamps cannot be placed against the scans' (set by the localizer: a slow
@@ -134,24 +130,7 @@ class SmootherState(Backend):
         self.odom_timing_unknown = bool(unknown)
 
     def source_health(self) -> Mapping[str, SourceHealth]:
-        return self.sources
+        return self.inputs.health
 
     def source_noise(self, name: str) -> SourceNoise | None:
-        if name not in self.arb.streams:
-            return None
-        k, c = self.arb.noise(name)
-        return SourceNoise(k, c, self.arb.shown_sigma(name), self.arb.claimed_sigma(name))
-
-    def _arb_add(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
-        """One reading of source ``name`` for the arbiter (registered at its first), when noise is adapted."""
-        if self.cfg.adapt_noise:
-            self.arb.add_reading(name, kind, rel_prior, t, value, var)
-
-    def _source(self, name: str, kind: str) -> SourceHealth:
-        h = self.sources.get(name)
-        if h is None:
-            h = self.sources[name] = SourceHealth(name, kind)
-        return h
-
-    def _noise_of(self, name: str) -> tuple[float, float]:
-        return self.arb.noise(name) if self.cfg.adapt_noise else (1.0, 0.0)
+        return self.inputs.source_noise(name)

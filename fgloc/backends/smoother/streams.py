@@ -274,7 +274,7 @@ class Streams(SmootherState):
 
     def gyro_bias_of(self, name: str) -> float:
         """The estimated bias (rad/s) of the gyro stream ``name`` (``SOURCE.gyro``)."""
-        gb = self.gbias.get(name)
+        gb = self.inputs.gyro_bias.get(name)
         if gb is not None:
             return gb.value()
         ch = self.chains.get(f"gyro_bias:{name}")

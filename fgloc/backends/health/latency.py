@@ -1,0 +1,162 @@
+"""The scans' latency from how the fixes' increments lag a reference's, and the time-series helpers
+it uses."""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections import deque
+from operator import itemgetter
+from typing import Any
+
+import numpy as np
+
+
+class LatencyEstimator:
+    """A source's constant time offset (its stamps this late) from how its pose increments lag.
+
+    A fix stamped ``delta`` late shows the pose at ``t - delta``.  Over two fixes ``a, b`` its
+    yaw change is the reference's (gyro / odometry, correctly stamped) over
+    ``(t_a - delta, t_b - delta)``, i.e. ``r = d_fix - d_ref(t_a, t_b) ~= -delta (w_b - w_a)``,
+    and likewise the distance driven with the speeds ``v``.  Only changes of motion (a turn
+    starting or ending, a start from standstill) carry information, and only increments enter,
+    so a compass offset or a map bias never does.  A scale error of the reference (``beta *
+    d_ref``) is fitted alongside, so a wheel-radius error is not taken for a latency.  The fit
+    is robust (Huber weights, iterated): wheel slip or a kidnapping makes a few pairs wrong, not
+    the lag.  The latency is used once significant (``significance`` sigmas from zero, with at
+    least ``min_pairs`` pairs): an undetectable latency is taken as none rather than as the
+    noise of its estimate.
+    """
+
+    def __init__(self, min_pairs: int = 50, significance: float = 3.0, huber_k: float = 2.0,
+                 var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2),
+                 max_latency_s: float = 0.3, max_rows: int = 20000, refit_every: int = 25,
+                 refit_share: float = 0.025) -> None:
+        self.var_floor = (float(var_floor[0]), float(var_floor[1]))
+        self.max_latency_s = float(max_latency_s)
+        self.min_pairs = int(min_pairs)
+        self.significance = float(significance)
+        self.huber_k = float(huber_k)
+        self.refit_every = int(refit_every)
+        self.refit_share = float(refit_share)
+        self.max_rows = int(max_rows)
+        self.rows: deque[tuple[float, float, float, float, int]] = deque(maxlen=int(max_rows))
+        # the rows as an array, appended in place (the fit read them all through np.asarray, every
+        # refit: O(rows) Python objects converted again); its last len(rows) lines are the rows
+        self._buf = np.empty((64, 5))
+        self._nbuf = 0
+        self.n = 0
+        self.rejected = 0
+        self._fit: tuple[int, float, float] | None = None   # (n, delta, sigma)
+        self._fit_n = 0
+        self._refit_after: float = 0   # refit once n - _fit_n reaches this (0: no fit yet)
+
+    def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
+        """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
+        reference increment ``ref`` (``kind`` 0: a yaw pair, 1: a distance pair)."""
+        if not (math.isfinite(x) and math.isfinite(r) and math.isfinite(var) and math.isfinite(ref)) or var <= 0:
+            return
+        # floors: a fix's own covariance leaves out the reference's noise and the map's
+        var = max(var, self.var_floor[int(kind)])
+        # no latency up to max_latency_s (and no scale error up to 10 %) explains this pair: a
+        # kidnapping, a wrong fix; never evidence
+        if abs(r) > self.max_latency_s * abs(x) + 0.1 * abs(ref) + 5.0 * math.sqrt(var):
+            self.rejected += 1
+            return
+        row = (float(x), float(r), float(var), float(ref), int(kind))
+        self.rows.append(row)
+        if self._nbuf == len(self._buf):
+            keep = self._buf[self._nbuf - len(self.rows) + 1:self._nbuf]   # the rows still kept
+            self._buf = np.empty((max(64, 2 * len(keep) + 2), 5))
+            self._buf[:len(keep)] = keep
+            self._nbuf = len(keep)
+        self._buf[self._nbuf] = row
+        self._nbuf += 1
+        self.n += 1
+
+    def _refit(self) -> tuple[float, float]:
+        # refit after refit_every new pairs, or once they are refit_share of the rows fitted: a refit reads
+        # every row (up to max_rows), so a fixed count made its cost grow with the log (quadratic)
+        if self.n - self._fit_n < self._refit_after:   # (the threshold is the fit's: one test per call)
+            return self._fit[1], self._fit[2]  # type: ignore[index]
+        if not self.rows:
+            return 0.0, math.inf
+        a = self._buf[self._nbuf - len(self.rows):self._nbuf]
+        A = np.zeros((len(a), 3))
+        A[:, 0] = a[:, 0]
+        kind = a[:, 4].astype(int)
+        A[kind == 0, 1] = a[kind == 0, 3]
+        A[kind == 1, 2] = a[kind == 1, 3]
+        y = a[:, 1]
+        s = np.sqrt(a[:, 2])
+        w = np.ones(len(a))
+        prior = np.diag([1e-9, 1e-2, 1e-2])  # the scale errors: a weak prior at 0 (10 %)
+        sol: np.ndarray = np.zeros(3)
+        N = prior
+        for _ in range(6):
+            Aw = A * (w / s)[:, None]
+            yw = y * w / s
+            N = Aw.T @ Aw + prior
+            sol = np.linalg.solve(N, Aw.T @ yw)
+            z = np.abs(y - A @ sol) / s
+            w_new = np.sqrt(np.where(z <= self.huber_k, 1.0, self.huber_k / np.maximum(z, 1e-12)))
+            if np.array_equal(w_new, w):
+                break   # the same weights: every further iteration repeats this one exactly (the usual case:
+                        # no pair beyond huber_k, the weights all 1 after the first)
+            w = w_new
+        res = (y - A @ sol) / s * w
+        scale2 = max(float(res @ res) / max(len(a) - 3, 1), 1.0)
+        sig = math.sqrt(scale2 * float(np.linalg.inv(N)[0, 0])) if N[0, 0] > 1e-8 else math.inf
+        self._fit = (self.n, float(sol[0]), sig)
+        self._fit_n = self.n
+        # the fit holds until refit_every / refit_share new pairs; below min_pairs until any new one
+        self._refit_after = max(self.refit_every, self.refit_share * min(self.n, self.max_rows)) \
+            if self.n >= self.min_pairs else 1
+        return self._fit[1], self._fit[2]
+
+    def estimate(self) -> tuple[float, float]:
+        """``(delta_s, sigma_s)`` of the robust fit (inf sigma before any information)."""
+        return self._refit()
+
+    def value(self) -> float:
+        """The latency to correct for: the estimate once significant, else 0."""
+        d, s = self.estimate()
+        if self.n >= self.min_pairs and abs(d) > self.significance * s:
+            return d
+        return 0.0
+
+    def settled(self, sigma_s: float = 0.005) -> bool:
+        """Enough evidence to decide (significant, or known to within ``sigma_s``)."""
+        d, s = self.estimate()
+        return self.n >= self.min_pairs and (abs(d) > self.significance * s or s < sigma_s)
+
+
+def fix_speed(fixes: Any, t: float, half_s: float = 0.2) -> float | None:
+    """The speed (m/s) the fixes themselves show around ``t`` (over ``t +- half_s``), or None.
+
+    A latency regressor from the fixes, not the odometry: wheel slip changes what the wheels
+    report, never how fast the fixes move."""
+    before = after = None
+    for f in fixes:
+        if f[0] <= t - half_s:
+            before = f
+        elif f[0] >= t + half_s and after is None:
+            after = f
+    if before is None or after is None or after[0] - before[0] > 4 * half_s:
+        return None
+    return float(np.hypot(after[1][0] - before[1][0], after[1][1] - before[1][1])) / (after[0] - before[0])
+
+
+def bracket(series: deque, t: float) -> tuple[int, int]:
+    """The indices ``lo, hi`` of the samples (tuples whose first item is the time, in time order)
+    around ``t``: ``series[lo][0] <= t`` and ``hi = lo + 1`` (``0, 0`` for one sample).  The
+    caller checks ``series[0][0] <= t <= series[-1][0]``.  (Bisection in C, keyed on the time:
+    the last sample at or before ``t``, at most the last but one.)"""
+    n = len(series)
+    if n < 2:
+        return 0, 0
+    lo = max(min(bisect_right(series, t, key=_time) - 1, n - 2), 0)
+    return lo, lo + 1
+
+
+_time = itemgetter(0)

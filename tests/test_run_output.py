@@ -50,7 +50,7 @@ def test_run_copies_the_inputs_and_writes_on_the_input_clock(offset_log, short_s
     assert got == src  # every input, its own bytes at its own log time: no decode / encode round trip
     input_times = {t for _, t in src}
     fused = list(open_log(out / "run.mcap").records(["/fused_pose"]))
-    assert len(fused) == r.stats["scans"]
+    assert len(fused) == r.stats.scans
     for rec in fused:
         # written while its scan was processed: at that input's log time, stamped with the pose's own time
         assert rec.log_time_ns in input_times

@@ -50,7 +50,8 @@ def _scenario(name: str, seed: int) -> Any:
 
 
 def _health(loc: Any) -> dict[str, Any]:
-    return dict(loc.stats.get("sources") or {})
+    """Each source's report as plain values (:meth:`fgloc.localization.sources.report.SourceReport.to_dict`)."""
+    return {name: r.to_dict() for name, r in (loc.stats.get("sources") or {}).items()}
 
 
 def skid_no_map(seed: int) -> list[dict[str, Any]]:

@@ -381,19 +381,21 @@ def run_fgloc(bag: Path, config: Path, backend: str, odom_topic: str | None, imu
     return {"final": final, "stats": r.stats, "wall_s": r.wall_s}
 
 
-def source_line(stats: dict[str, Any]) -> str:
-    """The per-source health the run summary should show, in one line."""
+def source_line(stats: Any) -> str:
+    """The per-source health the run summary should show, in one line (``stats``: a
+    :class:`fgloc.localization.stats.RunStats`)."""
     parts = []
-    for name, h in (stats.get("sources") or {}).items():
+    for name, r in stats.sources.items():
+        h = r.to_dict()
         keys = [k for k in ("accepted", "gated", "backend_gated", "yaw_gated", "skipped", "speed_scale",
                             "yaw_rate_scale", "gyro_bias_radps", "yaw_shown_vs_claimed") if k in h]
         parts.append(f"{name}: " + " ".join(f"{k}={h[k]}" for k in keys))
-    be = stats.get("backend") or {}
+    be = stats.backend
     extra = {k: be[k] for k in ("gated", "compass_recoveries", "solver_failures", "gyro_factors",
                                 "relative_yaw_factors", "relative_yaw_reanchored", "velocity_factors",
                                 "velocity_gaps") if k in be}
-    if stats.get("odometry_from_poses"):
-        extra["odometry_from_poses"] = stats["odometry_from_poses"]
+    if stats.counters.get("odometry_from_poses"):
+        extra["odometry_from_poses"] = stats.counters["odometry_from_poses"]
     return "; ".join(parts) + (f"; backend {extra}" if extra else "")
 
 

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from fgloc.config import FglocConfig
+    from fgloc.localization.stats import RunStats
 
 #: the clock of ``RunResult.timings`` and ``wall_s`` (seconds); a benchmark sets ``time.thread_time``
 #: to split the run's CPU time into its phases (``tools/bench_parts.py``)
@@ -74,7 +75,7 @@ def _default_config() -> FglocConfig:
 
 @dataclass
 class RunResult:
-    """What :func:`run_log` did (the CLI prints it; ``stats`` are the localizer's counters)."""
+    """What :func:`run_log` did (the CLI prints it; ``stats``: the localizer's counters)."""
 
     mode: str  # "map" or "odom"
     frame: str
@@ -83,7 +84,7 @@ class RunResult:
     poses: int
     online_poses: int
     fixes: int
-    stats: dict[str, Any]
+    stats: RunStats
     wall_s: float
     log_s: float
     outdir: Path
@@ -132,7 +133,7 @@ class RunResult:
         d = {k: getattr(self, k) for k in ("mode", "frame", "backend", "frontend", "poses", "online_poses",
                                           "fixes", "wall_s", "log_s", "truncated", "written", "eval_error",
                                           "lost_s", "ended_lost", "damaged_chunks", "damage", "timings")}
-        d["stats"] = yaml_ready(self.stats)
+        d["stats"] = yaml_ready(self.stats.to_dict())
         d["outdir"] = str(self.outdir)
         return d
 
@@ -467,6 +468,7 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
     from fgloc.config.schema import to_dict
     from fgloc.io.tum import write_tum
     from fgloc.io.yamlio import write_yaml
+    from fgloc.localization.stats import RunStats
 
     final, reader, topics = loop.final, inputs.reader, inputs.topics
     online = loc.online_trajectory()
@@ -491,14 +493,14 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
     sim_s = float(final.duration) if len(final) else float(inputs.summary.get("duration") or 0.0)
     result = RunResult(
         mode=mode, frame=mode, backend=req.backend, frontend=loc.frontend_name, poses=len(final),
-        online_poses=len(online), fixes=len(fixes), stats=loc.stats, wall_s=loop.wall_s, log_s=sim_s,
+        online_poses=len(online), fixes=len(fixes), stats=RunStats.of(loc.stats), wall_s=loop.wall_s, log_s=sim_s,
         truncated=reader.truncated, outdir=outdir,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
         log=inputs.log, lost_s=float(loc.stats.get("lost_s", 0.0)),
         ended_lost=bool(loc.stats.get("ended_lost", False)),
         damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
     )
-    result.warnings = scale_warnings(loc.stats, mount_assumed=(
+    result.warnings = scale_warnings(result.stats, mount_assumed=(
         inputs.n_scan > 0 and mode == "map" and not config.sources.static_transforms
         and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
     return result
@@ -536,14 +538,14 @@ def _with_static_transforms(config: FglocConfig, entries: list[dict]) -> FglocCo
 SPEED_SCALE_PLAUSIBLE = (1 / 1.5, 1.5)
 
 
-def scale_warnings(stats: dict[str, Any], mount_assumed: bool) -> list[str]:
+def scale_warnings(stats: RunStats, mount_assumed: bool) -> list[str]:
     """One line per odometry source whose speed scale against the scan fixes is implausible
     (:data:`SPEED_SCALE_PLAUSIBLE`), naming the laser mount as the first suspect when the log had
     none (``mount_assumed``: no tf, none configured)."""
     out = []
     lo, hi = SPEED_SCALE_PLAUSIBLE
-    for name, d in (stats.get("sources") or {}).items():
-        sc = d.get("speed_scale")
+    for name, d in stats.sources.items():
+        sc = d.speed_scale
         if sc is None or lo <= float(sc) <= hi:
             continue
         why = ("the log has no transform to the laser and it was taken at the robot centre, upright: give its "

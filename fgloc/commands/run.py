@@ -67,23 +67,23 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
     speed = r.log_s / r.wall_s if r.wall_s > 0 else float("inf")
     say(f"{_styled('fgloc run', '1', tty)}: {r.backend} back-end, {r.frontend} front-end, "
         f"{r.mode} frame; {r.poses} poses over {r.log_s:.1f} s in {r.wall_s:.1f} s ({speed:.0f}x real time)")
-    say(f"  scans {st['scans']}, fixes {st['fixes']}, no fix {st['no_fix']}, rejected {st['rejected']}, "
-        f"odometry {st['odometry']}, compass {st['compass']}, skipped {st['skipped']}, "
-        f"relocalizations {st['relocalizations']}")
+    say(f"  scans {st.scans}, fixes {st.fixes}, no fix {st.no_fix}, rejected {st.rejected}, "
+        f"odometry {st.odometry}, compass {st.compass}, skipped {st.skipped}, "
+        f"relocalizations {st.relocalizations}")
     if r.mode == "map":
-        say(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.get('lost_events', 0)} "
+        say(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.lost_events} "
             f"time(s) after tracking){', ' + _styled('lost at the end', '1;31', tty) if r.ended_lost else ''}")
     from fgloc.localization.sources import summary_lines
 
     for line in summary_lines(st):  # the motion model and each input source's health (issue 17)
         say(f"  {line}")
-    be = st.get("backend") or {}
+    be = st.backend
     if be.get("solver_failures"):  # the smoother restarted from its prediction: the estimate is not smoothed there
         say(f"  {_styled('back-end:', '33', tty)} {be['solver_failures']} solver failure(s), each a restart from "
             "the odometry prediction (an input that leaves a variable unconstrained, e.g. no heading source)")
     if be.get("compass_recoveries"):
         say(f"  back-end: heading re-opened to the compass {be['compass_recoveries']} time(s)")
-    for title, reasons in (("skipped", st.get("skipped_reasons")), ("no fix", st.get("no_fix_reasons"))):
+    for title, reasons in (("skipped", st.skipped_reasons), ("no fix", st.no_fix_reasons)):
         if reasons:  # grouped by kind (fgloc.localization.localizer.reason_kind): a few lines at most
             say(f"  {title}, by reason:")
             for why, n in reasons.items():

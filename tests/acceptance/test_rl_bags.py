@@ -182,8 +182,8 @@ def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dic
     case = cases["test2.bag"]
     r = run_log(RunRequest(log=case.bag, outdir=work / "no-topics", backend="ekf", config=converted["test2.bag"][0],
                            force=True, view_channels=False))
-    assert r.stats["sources"]["odom0"]["accepted"] == 3060
-    assert r.stats["sources"]["imu0"]["accepted"] == 3061
+    assert r.stats.sources["odom0"].accepted == 3060
+    assert r.stats.sources["imu0"].accepted == 3061
 
 
 def test_no_heading_source_is_no_traceback(tool: ModuleType, cases: dict[str, Any], work: Path) -> None:
@@ -199,8 +199,8 @@ def test_no_heading_source_is_no_traceback(tool: ModuleType, cases: dict[str, An
     r = run_log(RunRequest(log=cases["test1.bag"].bag, outdir=work / "no-heading", backend="smoother", config=cfg,
                            force=True, view_channels=False))
     assert r.poses > 1000
-    assert r.stats["sources"]["odom0"]["accepted"] == 3952
-    assert isinstance(r.stats["backend"].get("solver_failures", 0), int)
+    assert r.stats.sources["odom0"].accepted == 3952
+    assert isinstance(r.stats.backend.get("solver_failures", 0), int)
 
 
 def test_groovy_test1_smoother_fuses_the_second_odometry_and_the_differential_imu(
@@ -211,8 +211,8 @@ def test_groovy_test1_smoother_fuses_the_second_odometry_and_the_differential_im
         pytest.skip("groovy-devel's test1.bag and test_ekf_localization_node_test_bag1.test not found")
     res = tool.run_fgloc(cases["groovy/test1.bag"].bag, converted["groovy/test1.bag"][0], "smoother", None, None,
                          work / "groovy-test1-sources")
-    src, be = res["stats"]["sources"], res["stats"]["backend"]
-    assert src["odom1"]["accepted"] == 1313 and src["odom1"].get("skipped", 0) == 0
-    assert be["velocity_factors"] > 1200 and src["odom1"]["backend_gated"] < 100   # 1241 and 28 at 1st commit
+    src, be = res["stats"].sources, res["stats"].backend
+    assert src["odom1"].accepted == 1313 and src["odom1"].skipped == 0
+    assert be["velocity_factors"] > 1200 and src["odom1"].stream_gated["backend"] < 100   # 1241 and 28 at 1st commit
     assert be["relative_yaw_factors"] >= be["keyframes"] - 1 and be.get("relative_yaw_reanchored", 0) == 0
-    assert src["imu0"]["gyro_bias_radps"] == pytest.approx(0.00257, abs=0.0005)  # imu1's increments observe it
+    assert src["imu0"].gyro_bias_radps == pytest.approx(0.00257, abs=0.0005)  # imu1's increments observe it

@@ -112,7 +112,7 @@ def test_the_router_hands_a_differential_orientation_as_a_heading_through_its_mo
                                         frame_id="base_link"))
     got = [(t, round(y, 9), s) for t, y, _, s in loc.backend.rel]
     assert got == [(1.0, 0.2, "imu"), (1.0, 0.2, "imu1"), (1.1, 0.3, "imu"), (1.1, 0.3, "imu1")]
-    assert router.health()["imu0"]["skipped"] == 1 and router.health()["imu0"]["accepted"] == 2
+    assert router.health()["imu0"].skipped == 1 and router.health()["imu0"].accepted == 2
     router.on_message(specs[2], Imu(2.0, Rotation.from_euler("z", 0.1).as_quat(), np.array([0.0, 0.0, 0.4]),
                                     np.eye(3) * 1e-4, np.eye(3) * 1e-4, frame_id="base_link"))
     assert len(loc.backend.rel) == 4

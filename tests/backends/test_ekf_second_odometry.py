@@ -54,7 +54,7 @@ def test_the_ekf_fuses_a_second_odometry_sources_yaw_rate():
     # 19 m driven; 0.094 m: the filter's yaw rate starts one message (0.05 s) after the turn
     assert float(np.hypot(*(pose[:2] - truth[:2]))) < 0.15
     h = router.health()
-    assert h["visual"]["accepted"] >= 395 and h["visual"].get("skipped", 0) == 0
+    assert h["visual"].accepted >= 395 and h["visual"].skipped == 0
 
 
 def test_an_outlier_of_the_second_source_is_gated():
@@ -72,6 +72,6 @@ def test_a_backend_without_velocity_updates_skips_the_second_source_with_the_rea
     router = SourceRouter(loc, sp)
     for k in range(1, 4):
         router.on_message(sp[1], Odometry(0.1 * k, np.array([1.0, 0.0, 0.2]), np.eye(3) * 1e-4))
-    assert router.health()["visual"]["skipped"] == 3
+    assert router.health()["visual"].skipped == 3
     (reason,) = loc.stats["skipped_reasons"]
     assert "second odometry source" in reason and "EKF fuses its velocities" in reason

@@ -131,8 +131,8 @@ def test_converted_husky_config_runs_a_skid_steer_log_with_its_topics():
         loc = Localizer(None, sim.laser_mount, backend=backend, config=cfg)
         tr = Session(loc).run(msgs)
         h = loc.stats["sources"]
-        assert h["odom0"]["accepted"] > 0.95 * len(sim.topic("/odom"))
-        assert h["imu0"]["accepted"] > 0.95 * len(sim.topic("/imu"))
+        assert h["odom0"].accepted > 0.95 * len(sim.topic("/odom"))
+        assert h["imu0"].accepted > 0.95 * len(sim.topic("/imu"))
         gt = sim.ground_truth
         T = compose(gt.interpolate(tr.stamps[0])[0], inverse(tr.poses[0]))
         end = compose(T, tr.poses[-1:])[0]

@@ -21,6 +21,7 @@ from fgloc.geometry import exp as se2_exp
 from fgloc.localization import Localizer, Session
 from fgloc.localization.clock import OdometryClock
 from fgloc.localization.odometry import between1
+from fgloc.localization.stats import RunStats
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory
 
@@ -106,9 +107,9 @@ def test_offset_of_a_slow_odometry_is_estimated_and_applied(lagging):
     # and the run's summary says so (fgloc run prints these lines)
     from fgloc.localization.sources import summary_lines
 
-    line = [x for x in summary_lines(loc.stats) if x.startswith("odometry clock")]
+    line = [x for x in summary_lines(RunStats.of(loc.stats)) if x.startswith("odometry clock")]
     assert len(line) == 1 and "stamps moved +0.1" in line[0], line
-    assert not any(x.startswith("odometry clock") for x in summary_lines(lagging[False][0].stats))
+    assert not any(x.startswith("odometry clock") for x in summary_lines(RunStats.of(lagging[False][0].stats)))
 
 
 def test_turns_integrated_at_the_right_time(lagging):

@@ -47,10 +47,10 @@ def test_static_transform_turns_the_imu_into_base_link(log_and_config: tuple[Pat
             # no --odom-topic / --imu-topic: the config's sources name the topics
             r = run_log(RunRequest(log=log, outdir=tmp_path / name, backend=backend, config=cfg, force=True,
                                    view_channels=False, static_transforms=tfs))
-        assert r.stats["sources"]["odom0"]["accepted"] == 201
-        assert r.stats["sources"]["imu0"]["accepted"] == 201
+        assert r.stats.sources["odom0"].accepted == 201
+        assert r.stats.sources["imu0"].accepted == 201
         # odom0 does not fuse its yaw: no noise figure for it in the health (and no 'noise_noise_' key)
-        assert not [k for k in r.stats["sources"]["odom0"] if "noise" in k], r.stats["sources"]["odom0"]
+        assert not r.stats.sources["odom0"].noise, r.stats.sources["odom0"]
         finals[name] = read_tum(tmp_path / name / "trajectory.tum").poses[-1]
     # 10 m along the base's heading, read through the mount; without it, along the IMU's x axis
     x, y = finals["with"][:2]

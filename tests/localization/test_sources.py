@@ -118,13 +118,13 @@ def test_bad_input_is_counted_and_skipped_never_raised():
     router.on_message(pose, PoseFix(2.0, np.zeros(3), np.eye(3) * 0.01, frame_id="map"))   # fine
     h = router.health()
     assert loc.compass == [] and loc.odometry == []
-    reasons = h["imu"]["skipped_reasons"]
+    reasons = h["imu"].skipped_reasons
     assert reasons["imu: orientation quaternion all zeros / not finite"] == 1
     assert reasons["imu: orientation quaternion not unit length"] == 1
     assert reasons["imu: orientation covariance with a NaN/inf diagonal"] == 1
     assert reasons["imu: angular velocity covariance with a negative diagonal"] == 1
-    assert h["wheels"]["skipped_reasons"] == {"covariance with a NaN or negative diagonal": 1}
-    assert h["mocap"]["skipped_reasons"] == {"pose in frame 'odom', not 'map'": 1} and h["mocap"]["accepted"] == 1
+    assert h["wheels"].skipped_reasons == {"covariance with a NaN or negative diagonal": 1}
+    assert h["mocap"].skipped_reasons == {"pose in frame 'odom', not 'map'": 1} and h["mocap"].accepted == 1
     assert len(loc.backend.keyframes) == 1
 
 
@@ -158,25 +158,27 @@ def test_default_layout_reproduces_direct_feeding_exactly():
     b = Session(loc).run(sim.messages)
     assert np.array_equal(a.stamps, b.stamps) and np.array_equal(a.poses, b.poses)
     h = loc.stats["sources"]
-    assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu"))
+    assert h["odom"].accepted == len(sim.topic("/odom")) and h["imu"].accepted == len(sim.topic("/imu"))
 
 
 def test_summary_lines_name_the_motion_model_and_each_source():
     from fgloc.backends.ekf import EKFConfig
     from fgloc.backends.ekf_backend import EKFBackend
     from fgloc.localization.sources import summary_lines
+    from fgloc.localization.sources.report import SourceReport, StreamNoise
+    from fgloc.localization.stats import RunStats
 
     ekf = EKFBackend(EKFConfig())
     assert ekf.motion_summary().startswith("differential")
     ekf.initialize(0.0, np.zeros(3))
     ekf.add_odometry(0.1, np.array([0.5, 0.3, 0.0]), None)  # lateral velocity: a mecanum base
     assert ekf.motion_summary().startswith("omni") and "lateral velocity" in ekf.motion_summary()
-    stats = {"motion_model": ekf.motion_summary(),
-             "sources": {"odom": {"kind": "odometry", "topic": "/odom", "use": ["vx", "vyaw"], "accepted": 10,
-                                  "gated": 0, "skipped": 2, "yaw_rate_scale": 2.31, "noise_shown_vs_claimed": 4.0},
-                         "imu": {"kind": "imu", "topic": "/imu", "use": ["yaw"], "accepted": 7, "gated": 0,
-                                 "skipped": 0, "gyro_bias_radps": 0.002, "gyro_gated": 3},
-                         "scan": {"kind": "pose", "accepted": 5, "gated": 1, "latency_s": 0.035}}}
+    stats = RunStats(motion_model=ekf.motion_summary(), sources={
+        "odom": SourceReport("odometry", topic="/odom", use=["vx", "vyaw"], accepted=10, skipped=2,
+                             yaw_rate_scale=2.31, noise={"noise": StreamNoise(1.0, shown_vs_claimed=4.0)}),
+        "imu": SourceReport("imu", topic="/imu", use=["yaw"], accepted=7, gyro_bias_radps=0.002,
+                            stream_gated={"gyro": 3}),
+        "scan": SourceReport("pose", accepted=5, gated=1, latency_s=0.035)})
     lines = summary_lines(stats)
     assert lines[0].startswith("motion model: omni")
     assert lines[1] == ("odom (odometry /odom: vx vyaw): 10 accepted, 2 skipped; yaw-rate scale 2.310 "
@@ -198,8 +200,8 @@ def test_messages_dispatched_by_kind_go_through_the_first_source():
     session.dispatch("imu", CompassHeading(t_end, 0.1, 0.0, -1.0, 1e-4))  # negative yaw variance: rate used
     session.finish()
     h = loc.stats["sources"]
-    assert h["odom"]["accepted"] == len(sim.topic("/odom")) and h["imu"]["accepted"] == len(sim.topic("/imu")) + 1
-    assert h["imu"]["skipped"] == 1 and loc.stats["skipped_reasons"] == {
+    assert h["odom"].accepted == len(sim.topic("/odom")) and h["imu"].accepted == len(sim.topic("/imu")) + 1
+    assert h["imu"].skipped == 1 and loc.stats["skipped_reasons"] == {
         "imu: imu: orientation covariance with a NaN or negative diagonal": 1}
 
 
@@ -243,7 +245,7 @@ def test_an_implausible_tilt_keeps_the_base_z_rate():
     router.on_message(specs["wheels"], Odometry(1.01, np.array([1.0, 0.0, -0.25]), np.diag([1e-4, 1e-4, 4e-4])))
     assert loc.compass[0].yaw_rate_radps == pytest.approx(-0.25)
     np.testing.assert_allclose(loc.odometry[0].twist, [1.0, 0.0, -0.25])
-    assert router.health()["wheels"]["tilt_implausible"] == 1
+    assert router.health()["wheels"].tilt_implausible == 1
 
 
 def test_faults_of_a_field_the_source_does_not_use_are_not_counted():
@@ -251,7 +253,7 @@ def test_faults_of_a_field_the_source_does_not_use_are_not_counted():
     for use, skipped in ((["vyaw"], 0), (["yaw", "vyaw"], 1)):
         loc, router = _router({"imu0": {"type": "imu", "topic": "/imu", "use": use}})
         router.on_message(router.specs[0], Imu(1.0, np.zeros(4), np.array([0.0, 0.0, 0.1]), None, np.eye(3) * 1e-6))
-        assert router.health()["imu0"].get("skipped", 0) == skipped
+        assert router.health()["imu0"].skipped == skipped
         assert loc.compass[0].yaw_rate_radps == pytest.approx(0.1) and loc.compass[0].yaw_rad is None
 
 
@@ -279,7 +281,7 @@ def test_imu_roll_pitch_level_the_odometry_and_give_the_heading_rate():
             var_x = 1e-4 * (math.cos(p) ** 2 + (math.sin(r) * math.sin(p)) ** 2)
             assert loc.odometry[0].twist_cov[0, 0] == pytest.approx(var_x)
             h = router.health()["wheels"]
-            assert h["levelled"] == 1 and h["tilt_max_deg"] == pytest.approx(10.0, abs=1e-6)
+            assert h.levelled == 1 and h.tilt_max_deg == pytest.approx(10.0, abs=1e-6)
             np.testing.assert_allclose(loc.odometry[1].twist, [1.0, 0.2, 0.1])  # 0.68 s later: too old to level
         else:
             np.testing.assert_allclose(tw, [1.0, 0.2, 0.1])
@@ -301,7 +303,7 @@ def test_a_differential_source_out_of_order_skips_the_message_not_the_increment(
     rates = [(c.stamp, c.yaw_rate_radps) for c in loc.compass if c.yaw_rate_radps is not None]
     assert [t for t, _ in rates] == [1.1, 1.2, 1.3]
     assert sum(r * 0.1 for _, r in rates) == pytest.approx(0.3)
-    assert router.health()["imu0"]["skipped_reasons"] == {
+    assert router.health()["imu0"].skipped_reasons == {
         "imu: differential: stamp not after the previous message's (out of order)": 1}
     loc, router = _router({"odom0": {"type": "odometry", "use": ["x", "y"], "differential": True}})
     for t, x in ((1.0, 0.0), (1.1, 0.1), (1.05, 0.05), (1.2, 0.2)):
@@ -326,7 +328,7 @@ def test_an_imu_mounted_through_a_chain_of_transforms():
                                            frame_id="imu_link"))
     (c,) = loc.compass
     assert c.yaw_rad == pytest.approx(base_yaw, abs=1e-9) and c.yaw_rate_radps == pytest.approx(w, abs=1e-12)
-    assert "mount" not in router.health()["imu"]  # found: no 'no transform: identity'
+    assert router.health()["imu"].mount is None  # found: no 'no transform: identity'
 
 
 def test_a_pose_sources_gate_judges_against_a_fresh_marginal():
@@ -351,4 +353,4 @@ def test_a_pose_sources_gate_judges_against_a_fresh_marginal():
     sm.add_odometry(3.1, np.zeros(3), None)
     router.on_message(mocap, PoseFix(3.1, np.array([0.3, 0.0, 0.0]), np.eye(3), frame_id="map"))
     h = router.health()["mocap"]
-    assert h["accepted"] == 30 and h["gated"] == 1
+    assert h.accepted == 30 and h.gated == 1

@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources, summary_lines
+from fgloc.localization.stats import RunStats
 from fgloc.types import Imu, Odometry, StaticTransform, Transform3D
 
 MOUNT = StaticTransform("base_link", "laser", np.zeros(3))
@@ -44,9 +45,9 @@ def test_the_summary_says_how_much_odometry_came_from_pose_increments(backend: s
     router.finish()
     n = int(loc.stats["odometry_from_poses"])
     assert 150 < n < 200
-    line = next(x for x in summary_lines(loc.stats) if x.startswith("odom "))
+    line = next(x for x in summary_lines(RunStats.of(loc.stats)) if x.startswith("odom "))
     assert f"{n} of 200 from pose increments: the twist disagreed with the poses" in line, line
-    assert loc.stats["sources"]["odom"]["vy_max_mps"] == pytest.approx(0.2)
+    assert loc.stats["sources"]["odom"].vy_max_mps == pytest.approx(0.2)
 
 
 def test_a_lateral_velocity_of_exactly_zero_is_a_differential_drive_for_the_smoother_too() -> None:
@@ -82,7 +83,7 @@ def test_a_configured_source_the_log_never_feeds_is_a_warning(caplog: pytest.Log
     warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warned == ["sources.inputs.imu0: no message on /imu_broadcaster/imu in the whole log; ran without it "
                       "(the log's Imu topics: /imu)"], warned
-    line = next(x for x in summary_lines(loc.stats) if x.startswith("imu0 "))
+    line = next(x for x in summary_lines(RunStats.of(loc.stats)) if x.startswith("imu0 "))
     assert "0 accepted, no message on the topic in the whole log" in line and "gyro bias" not in line, line
     # the default layout (no sources configured): a log without /imu is a wheels-only log, no warning
     caplog.clear()
@@ -117,7 +118,7 @@ def test_a_mount_logged_after_the_first_imu_messages_is_no_missing_transform(cap
         router.finish()
     assert not [r for r in caplog.records if "no transform" in r.getMessage()], caplog.text
     imu = loc.stats["sources"]["imu"]
-    assert imu["mount"] == "from tf after 3 messages (identity until then)"
+    assert imu.mount == "from tf after 3 messages (identity until then)"
     # a frame whose mount never comes: warned once, after a second of its stamps (not at the first message)
     caplog.clear()
     loc, router = _router("ekf")
@@ -132,7 +133,7 @@ def test_a_mount_logged_after_the_first_imu_messages_is_no_missing_transform(cap
         router.finish()
     assert [r.getMessage() for r in caplog.records if "no transform" in r.getMessage()] == [
         "no transform base_link -> imu_link: the IMU is taken as mounted like base_link"]
-    assert loc.stats["sources"]["imu"]["mount"] == "no transform: identity"
+    assert loc.stats["sources"]["imu"].mount == "no transform: identity"
     # a log shorter than the wait: warned at the end
     caplog.clear()
     loc, router = _router("ekf")

@@ -27,8 +27,8 @@ def test_skid_steer_imu_turned_about_x_no_map_within_1_percent():
     err = float(np.hypot(*(end[:2] - gt.interpolate(tr.stamps[-1])[0][:2])))
     assert err < 0.01 * gt.path_length()  # measured 0.08 m of 154 m (25 m before issue 17)
     h = loc.stats["sources"]
-    assert h["odom"]["yaw_rate_scale"] == pytest.approx(2.3, abs=0.3)  # the scrub, 1.4-2.5
-    assert h["imu"]["gyro_bias_radps"] == pytest.approx(0.002, abs=0.001)
+    assert h["odom"].yaw_rate_scale == pytest.approx(2.3, abs=0.3)  # the scrub, 1.4-2.5
+    assert h["imu"].gyro_bias_radps == pytest.approx(0.002, abs=0.001)
 
 
 def test_late_scans_latency_estimated_within_5_ms():
@@ -37,7 +37,7 @@ def test_late_scans_latency_estimated_within_5_ms():
     tr = Session(loc).run(sim.messages)
     assert loc.backend.latency_estimate() == pytest.approx(0.035, abs=0.005)
     assert evaluate(tr, sim.ground_truth).position_rmse_m <= 0.01  # 0.0054 (0.024 uncorrected)
-    assert loc.stats["sources"]["scan"]["latency_s"] == pytest.approx(0.035, abs=0.005)
+    assert loc.stats["sources"]["scan"].latency_s == pytest.approx(0.035, abs=0.005)
 
 
 def test_mecanum_strafing_ekf_within_1_2x_of_its_fixes():
@@ -60,4 +60,4 @@ def test_skid_steer_with_map_within_3_cm_and_half_a_degree_no_false_latency(back
     assert ev.position_rmse_m <= 0.03 and ev.heading_rmse_deg <= 0.5  # 0.0033 m, 0.11 / 0.03 deg
     # the scans are stamped on time: de-skewed with the wheels' scrubbed yaw they read as ~25 ms late
     assert abs(loc.backend.latency_estimate()) < 0.005
-    assert loc.stats["sources"]["imu"]["gyro_bias_radps"] == pytest.approx(0.002, rel=0.1)  # 0.00205
+    assert loc.stats["sources"]["imu"].gyro_bias_radps == pytest.approx(0.002, rel=0.1)  # 0.00205

@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from fgloc.backends.health import SourceHealth
 from fgloc.frames.mounts import MountTable
 from fgloc.localization.sources.spec import SourceSpec
+
+if TYPE_CHECKING:
+    from fgloc.localization.sources.report import SourceReport
 
 
 def cov_bad(c: Any) -> bool:
@@ -114,5 +117,5 @@ class SourceHandler:
         """Whether the noise the back-end saw on this source's streams is reported."""
         return True
 
-    def report_estimates(self, d: dict[str, Any]) -> None:
-        """Add what the back-end estimated about this source to its report ``d``."""
+    def report_estimates(self, r: SourceReport) -> None:
+        """Add what the back-end estimated about this source to its report ``r``."""

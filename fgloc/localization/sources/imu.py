@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from fgloc.localization.sources.handler import SourceHandler
 from fgloc.localization.sources.odometry import MAX_TILT_RAD
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, TILT, SourceSpec, SourceType
 from fgloc.types import CompassHeading, Imu
+
+if TYPE_CHECKING:
+    from fgloc.localization.sources.report import SourceReport
 
 
 def needed(spec: SourceSpec, msg: Imu) -> Imu:
@@ -180,11 +183,11 @@ class ImuHandler(SourceHandler):
         name = self.spec.name if self.state.extra.get("second") else "imu"
         return [f"{name}.yaw", f"{name}.gyro"]
 
-    def report_estimates(self, d: dict[str, Any]) -> None:
+    def report_estimates(self, r: SourceReport) -> None:
         be = self.loc.backend
         if self.state.messages and Capability.GYRO_BIAS in be.capabilities:
             b = be.gyro_bias(self.spec.name if self.state.extra.get("second") else "imu")
-            d["gyro_bias_radps"] = round(float(b), 7)
+            r.gyro_bias_radps = round(float(b), 7)
 
 
 SOURCE = SourceType("imu", IMU, "/imu", ("yaw", "vyaw"), COMPONENTS + TILT, ImuHandler)

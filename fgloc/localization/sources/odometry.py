@@ -12,7 +12,7 @@ IMU (``use: [..., roll, pitch]``) the twist is projected onto the ground plane.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from fgloc.io.topics import ODOMETRY
 from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, SourceSpec, SourceType
 from fgloc.types import Odometry
+
+if TYPE_CHECKING:
+    from fgloc.localization.sources.report import SourceReport
 
 #: an attitude older than this (s) does not level an odometry message
 MAX_TILT_AGE_S = 0.5
@@ -165,23 +168,23 @@ class OdometryHandler(SourceHandler):
         # the noise an odometry's yaw rate showed: only when the source fuses its yaw
         return self.spec.uses("vyaw") or self.spec.uses("yaw")
 
-    def report_estimates(self, d: dict[str, Any]) -> None:
+    def report_estimates(self, r: SourceReport) -> None:
         s, st, loc = self.spec, self.state, self.loc
         be = loc.backend
         if st.fused and not s.differential:
             # twists the localizer's tracker replaced by pose increments (pipeline.pose_deltas)
             n_poses = int(loc.stats.get("odometry_from_poses", 0) or 0)
             if n_poses:
-                d["from_poses"] = n_poses
+                r.from_poses = n_poses
                 mode = getattr(getattr(loc, "pcfg", None), "pose_deltas", "auto")
-                d["from_poses_why"] = "pipeline.pose_deltas: always" if mode == "always" else \
+                r.from_poses_why = "pipeline.pose_deltas: always" if mode == "always" else \
                     "the twist disagreed with the poses (pipeline.pose_deltas: auto)"
             if st.messages:
-                d["vy_max_mps"] = round(st.vy_max, 4)
+                r.vy_max_mps = round(st.vy_max, 4)
         if st.fused and Capability.ODOM_SCALES in be.capabilities:
             sc = be.odom_scales()
-            d["speed_scale"] = round(float(sc[0]), 4)
-            d["yaw_rate_scale"] = round(float(sc[1]), 4)
+            r.speed_scale = round(float(sc[0]), 4)
+            r.yaw_rate_scale = round(float(sc[1]), 4)
 
 
 SOURCE = SourceType("odometry", ODOMETRY, "/odom", ("vx", "vy", "vyaw"), COMPONENTS, OdometryHandler)

@@ -23,7 +23,7 @@ from fgloc.io.topics import normalize_type
 from fgloc.localization.sources.config import SOURCE_TYPES, parse_sources
 from fgloc.localization.sources.handler import SourceContext, SourceHandler, SourceState
 from fgloc.localization.sources.odometry import OdometryHandler
-from fgloc.localization.sources.report import scan_report, source_report
+from fgloc.localization.sources.report import SourceReport, scan_report, source_report
 from fgloc.localization.sources.scan import ScanHandler
 from fgloc.localization.sources.spec import SourceSpec
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -104,7 +104,7 @@ class SourceRouter:
         self.ctx.mounts.add_tf(msg)
 
     # ------------------------------------------------------------------ health
-    def health(self) -> dict[str, dict[str, Any]]:
+    def health(self) -> dict[str, SourceReport]:
         """Per source: counts, and what the back-end estimated about it (:mod:`.report`)."""
         out = {s.name: source_report(self.handlers[s.name], self.loc, self.configured_inputs) for s in self.specs}
         scan = scan_report(self.loc)

@@ -8,11 +8,9 @@ import math
 import numpy as np
 
 from fgloc.backends.contract import Backend, Capability, Estimates, FloatArray, SourceNoise
-from fgloc.geometry import exp as se2_exp
-from fgloc.geometry import log as se2_log
 
 __all__ = ["Backend", "Capability", "Estimates", "FloatArray", "SourceNoise", "twist_covariance",
-           "twist_covariance_values", "with_rotation"]
+           "twist_covariance_values"]
 
 
 _DEFAULT_COV: dict[tuple[float, float, float], list[float]] = {}
@@ -38,12 +36,3 @@ def twist_covariance_values(cov: FloatArray | None, default_sigmas: tuple[float,
     if d is None:
         d = _DEFAULT_COV[default_sigmas] = np.diag(np.square(default_sigmas)).ravel().tolist()
     return d
-
-
-def with_rotation(delta: FloatArray, rotation: float, speed_gain: float = 1.0) -> FloatArray:
-    """An SE(2) increment of a constant twist, its rotation replaced by ``rotation`` (rad) and its
-    translation speed times ``speed_gain`` (the arc keeps its shape as a constant twist)."""
-    u = se2_log(np.asarray(delta, dtype=float))
-    u[:2] *= speed_gain
-    u[2] = rotation
-    return se2_exp(u)

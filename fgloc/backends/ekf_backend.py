@@ -39,7 +39,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from fgloc.backends.base import Backend, FloatArray, twist_covariance, with_rotation
+from fgloc.backends.base import Backend, FloatArray, twist_covariance
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import Capability, SourceNoise
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
@@ -54,7 +54,7 @@ from fgloc.backends.health import (
 )
 from fgloc.backends.inputs import InputBook
 from fgloc.geometry import log as se2_log
-from fgloc.geometry import wrap_scalar
+from fgloc.geometry import with_rotation, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
 MAX_REF_PERIOD_S = 0.06

@@ -209,11 +209,6 @@ def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "h
     return gtsam.PriorFactorPose2(key, gtsam.Pose2(*pose), robust(base, kernel, k))
 
 
-def compass_error(theta: float, offset: float, z: float) -> float:
-    """Compass residual ``wrap(theta + offset - z)`` (radians)."""
-    return wrap_scalar(theta + offset - z)
-
-
 def offset_pose(offset: float) -> gtsam.Pose2:
     """The compass-offset variable's value for ``offset`` (``compass_yaw = map_yaw + offset``):
     the compass frame's pose in the map, ``(0, 0, -offset)`` (see :func:`compass_factor`)."""

@@ -59,7 +59,7 @@ from numpy.typing import NDArray
 
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
-from fgloc.geometry import wrap_angle
+from fgloc.geometry import compose1, wrap_angle
 from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, njit, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
@@ -653,7 +653,7 @@ class AMCL:
             if od.shape != (3,) or not np.all(np.isfinite(od)):
                 return no_fix("odometry delta is not a finite [dx, dy, dyaw]")
             # the filter moves with the odometry even when the scan is unusable
-            self._acc = _compose1(self._acc, od)
+            self._acc = compose1(self._acc, od)
         pts, why = self.pre(scan, od)
         if pts is None:
             return no_fix(why)
@@ -665,7 +665,7 @@ class AMCL:
                               n_inliers=len(pts))
             mask, share = self._cluster(self.particles, self.weights)
             mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
-            return self._result(_compose1(mean, self._acc), cov, share, len(pts), updated=False)
+            return self._result(compose1(mean, self._acc), cov, share, len(pts), updated=False)
         if np.any(self._acc != 0):
             self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
                                            self.rng)
@@ -769,11 +769,6 @@ class AMCL:
         # wide: the back-end weighs the fix by it
         out_cov = (self._refined_cov if refined else self.cov_scale * cov) + self.cov_floor
         return MatchResult(True, mean, out_cov, quality=float(share), n_inliers=n_pts, info=info)
-
-
-def _compose1(a: FloatArray, b: FloatArray) -> FloatArray:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], float(wrap_angle(a[2] + b[2]))])
 
 
 #: the defaults as a plain mapping (derived from :class:`AMCLConfig`)

@@ -36,7 +36,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import compose1
+from fgloc.geometry import compose1, inverse1
 from fgloc.geometry import exp as se2_exp
 from fgloc.io.yamlio import yaml_ready
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
@@ -250,7 +250,7 @@ class ViewFeed:
                 if odom is None:  # no odometry (scans only): the map holds base_link directly
                     out.append(StaticTransform(MAP_FRAME, base, pose))
                 else:
-                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, _inverse1(odom))))  # type: ignore[arg-type]
+                    out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, inverse1(odom))))  # type: ignore[arg-type]
                     out.append(StaticTransform(ODOM_FRAME, base, odom))
         elif (odom := self.odom_pose_at(stamp)) is not None:
             out.append(StaticTransform(ODOM_FRAME, base, odom))
@@ -386,14 +386,6 @@ class ViewFeed:
             # the back-end's online calibration (compass offset, wheel scales, gyro biases, latency)
             "estimates": be.estimates().as_dict(),
         })
-
-
-def _inverse1(p: Any) -> tuple[float, float, float]:
-    """:func:`fgloc.geometry.inverse` of one pose in scalar maths (the same operations, the same bits;
-    numpy on a 3-vector cost ~10 us per scan)."""
-    x, y, yaw = float(p[0]), float(p[1]), float(p[2])
-    c, s = math.cos(yaw), math.sin(yaw)
-    return -c * x - s * y, s * x - c * y, (-yaw + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def json_ready(v: Any) -> Any:

@@ -22,9 +22,9 @@ times the current estimate, so a short genuine disturbance (a +25 deg compass st
 wheel slip) moves them little while a persistent disagreement takes over within a minute.
 The back-ends still reject short disturbances with their robust kernels and gates.
 
-:class:`SourceHealth` counts each source's accepted, gated and skipped inputs and carries
-what the back-end estimated about it (scale, bias, latency) for the run summary and the
-live status line.  Core maths only: no I/O.
+:class:`SourceHealth` counts each source's accepted, gated and skipped inputs for the run
+summary and the live status line (what the back-end estimated about its inputs is
+:meth:`fgloc.backends.contract.Backend.estimates`).  Core maths only: no I/O.
 
 Modules: :mod:`.arbiter` (the arbiter) and :mod:`.cornered_hat` (its solver), :mod:`.source_health`,
 :mod:`.latency` (the scans' latency), :mod:`.gyro_bias` (a gyro's bias beside the estimator).

@@ -10,6 +10,14 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
+#: the skip reason of the tests that read the real logs (README, "Data and attribution": where to get them)
+SHARED_DATA_MISSING = (
+    "real logs not found at {d} (set FGLOC_SHARED_DATA): radish/*.clf.bz2 and radish-reference/ (the Freiburg "
+    "SLAM evaluation page), robot_localization/ and robot_localization-groovy/ (test bags and .test files of "
+    "cra-ros-pkg/robot_localization, noetic-devel and groovy-devel), maps/willow-2010-02-18-0.10 (turtlebot_apps); "
+    "see README, Data and attribution")
+
+
 def _shared_data_dir() -> Path:
     env = os.environ.get("FGLOC_SHARED_DATA")
     return Path(env) if env else REPO.parent / "shared" / "data"
@@ -20,7 +28,7 @@ def shared_data() -> Path:
     """``../shared/data`` beside the checkout (or ``$FGLOC_SHARED_DATA``)."""
     d = _shared_data_dir()
     if not d.is_dir():
-        pytest.skip(f"shared data folder not found at {d}")
+        pytest.skip(SHARED_DATA_MISSING.format(d=d))
     return d
 
 

@@ -16,6 +16,9 @@ this process, single-threaded where the library allows it; the first ``--warmup`
 scans of each row are run but not timed (numba compilation, caches).
 
     python tools/bench_frontends.py [--scans 500] [--offset] [--synthetic]
+
+The small-gicp and Open3D rows need the bench extra (``pip install "fgloc[bench]"``; Open3D's wheel
+also needs ``sudo apt-get install libusb-1.0-0 libgl1``); without it they say "not available".
 """
 
 from __future__ import annotations

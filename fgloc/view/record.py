@@ -98,6 +98,9 @@ class McapViewRecorder:
         self.clock: Callable[[], int | None] | None = None
         self.count = 0
         self.errors = 0
+        # the map, given before the first input (stamp 0): written with the first message after it, at
+        # that message's log time, so that a recording starts at the log's start and not in 1970
+        self._pending_map: Any = None
 
     def _ns(self, stamp: float) -> int:
         if self.clock is not None and (now := self.clock()) is not None:
@@ -137,7 +140,13 @@ class McapViewRecorder:
     def _write(self, topic: str, msg: Any, stamp: float) -> None:
         self._write_ns(topic, msg, self._ns(stamp))
 
+    def _flush_map(self, log_time_ns: int) -> None:
+        occ, self._pending_map = self._pending_map, None
+        self._write_ns(ch.MAP, self._enc.grid_message(occ, log_time_ns * 1e-9), log_time_ns)
+
     def _write_ns(self, topic: str, msg: Any, log_time_ns: int) -> None:
+        if self._pending_map is not None:
+            self._flush_map(log_time_ns)
         try:
             cls = type(msg)
             hit = self._proto.get(topic)  # (message class, write) of the topic's last message
@@ -153,6 +162,8 @@ class McapViewRecorder:
         self._write_json_ns(topic, obj, self._ns(stamp))
 
     def _write_json_ns(self, topic: str, obj: dict[str, Any], log_time_ns: int) -> None:
+        if self._pending_map is not None:
+            self._flush_map(log_time_ns)
         try:
             data = _JSON(obj).encode()
         except (TypeError, ValueError):  # numpy values, NaN: the slow, careful way
@@ -166,6 +177,9 @@ class McapViewRecorder:
 
     # ------------------------------------------------------------------ ViewSink
     def on_map(self, occ_map: Any, stamp: float) -> None:
+        if not (math.isfinite(stamp) and stamp > 0):  # before any input: at the next message's log time
+            self._pending_map = occ_map
+            return
         self._write(ch.MAP, self._enc.grid_message(occ_map, stamp), stamp)
 
     @staticmethod
@@ -228,7 +242,8 @@ class McapViewRecorder:
         self._write_json(ch.HEALTH, health, stamp)
 
     def close(self) -> None:
-        pass
+        if self._pending_map is not None:  # nothing came after it: at the last time known
+            self._flush_map(self._last_ns)
 
 
 def _sigma(v: float) -> float:

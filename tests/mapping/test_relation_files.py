@@ -43,7 +43,8 @@ def test_relation_file_has_no_metre_errors(shared_data, name):
         pytest.skip(f"no {name}.relations in data/radish or $FGLOC_RELATIONS (only aces.relations is shipped)")
     log = shared_data / "radish" / LOGS[name]
     if not log.is_file():
-        pytest.skip(f"{log} not found")
+        pytest.skip(f"{log} not found (the Radish logs come from the Freiburg SLAM evaluation page; README, "
+                    "Data and attribution)")
     recs, mount = load_records(log)
     traj = run_slam(recs, mount).scan_trajectory
     et, er, unmatched = relation_errors(traj, read_relations(rel))

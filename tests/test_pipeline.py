@@ -389,7 +389,9 @@ def test_run_ending_lost_exits_3_unless_allowed(world_log, tmp_path, capsys):
                          "-o", str(tmp_path / "b"), "-q", "--allow-lost"], capsys)
     assert rc == 0 and err.strip() == ""
     # the no-fix reasons come grouped: a few lines, not one per number
-    reason_lines = [ln for ln in out.splitlines() if ln.startswith("    ")]
+    lines = out.splitlines()
+    at = lines.index("  no fix, by reason:")
+    reason_lines = [ln for ln in lines[at + 1:] if ln.startswith("    ") and ln.strip()[:1].isdigit()]
     assert 1 <= len(reason_lines) <= 10
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+from pathlib import Path
 
 import pytest
 
@@ -92,15 +93,18 @@ def test_yaw_with_its_unit_is_the_same_pose(short_log, tmp_path):
     assert fgloc("run", short_log["log"], "-o", a, *common, "--initial-pose", "2.5", "3", "0")[0] == 0
     assert fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "0deg")[0] == 0
     assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
-    from fgloc.app.units import pose_arg
+    from fgloc.app.units import pose_arg, pose_value
 
-    assert pose_arg(("1", "2", "90deg")) == pytest.approx((1.0, 2.0, 1.5707963267948966))
-    assert pose_arg(("1", "2", "-1.2rad")) == (1.0, 2.0, -1.2)
+    assert pose_arg((1.0, 2.0, pose_value("90deg"))) == pytest.approx((1.0, 2.0, 1.5707963267948966))
+    assert pose_arg((1.0, 2.0, pose_value("-1.2rad"))) == (1.0, 2.0, -1.2)
     rc, _, err = fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "90")
     assert rc == 2 and "yaw 90 is in radians (did you mean 1.5708 for 90 deg?)" in one_error_line(err)
     rc, _, err = fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5", "3", "east")
-    assert rc == 2 and one_error_line(err) == ("--initial-pose: 'east' is not an angle (a number, optionally with "
-                                               "deg or rad: 90deg, 1.5708rad)")
+    assert rc == 2 and one_error_line(err).startswith("--initial-pose needs three values X Y YAW (m, m, rad or with "
+                                                      "its unit: 90deg")
+    rc, _, err = fgloc("run", short_log["log"], "-o", b, *common, "--initial-pose", "2.5deg", "3", "0")
+    assert rc == 2 and one_error_line(err) == ("--initial-pose: X and Y are metres; only YAW takes a unit (e.g. "
+                                               "--initial-pose 2.5 3.0 90deg)")
 
 
 def test_output_and_quiet_spellings(short_log, tmp_path, capsys):
@@ -125,3 +129,51 @@ def test_output_and_quiet_spellings(short_log, tmp_path, capsys):
     helps = subprocess.run([sys.executable, "-m", "fgloc.cli", "map", "--help"], capture_output=True, text=True,
                            timeout=120).stdout
     assert "--quiet" in helps and "--no-progress" not in helps
+
+
+# ------------------------------------------------------------------ AMCL on a robot that stands still
+def test_amcl_on_a_standing_robot_gives_a_pose_and_says_why_it_waits(short_log):
+    """nav2's parameters, global localization, the robot standing: AMCL updates once and then waits
+    for update_min_d / update_min_a motion.  A pose anyway (the cloud's, as nav2 publishes it), every
+    scan counted as no fix with the reason, and no literal 'N' in a grouped reason."""
+    import dataclasses
+
+    import numpy as np
+    import yaml
+
+    from fgloc.config import parse_config
+    from fgloc.io import open_log
+    from fgloc.localization import build_session
+    from fgloc.localization.localizer import reason_kind
+    from fgloc.maps import OccupancyMap
+    from fgloc.porting import from_nav2
+    from fgloc.types import Odometry
+
+    nav2 = Path(__file__).parent / "backends" / "data" / "porting" / "nav2_params_amcl.yaml"
+    cfg = parse_config(from_nav2(yaml.safe_load(nav2.read_text()))[0])
+    src = open_log(short_log["log"])
+    scan = next(m for t, m in src.messages(["/scan"]))
+    session = build_session(OccupancyMap.load(short_log["map"]), src.laser_mount(), frontend="amcl", config=cfg)
+    for k in range(12):
+        t = float(scan.stamp) + 0.1 * k
+        session.feed("/odom", Odometry(t - 0.01, np.zeros(3), np.eye(3) * 1e-4, np.zeros(3), np.eye(3) * 1e-4))
+        session.feed("/scan", dataclasses.replace(scan, stamp=t))
+    final = session.finish()
+    st = session.loc.stats
+    assert len(final) > 0  # a pose anyway
+    assert st["fixes"] == 0 and st["no_fix"] == 12
+    reasons = st["no_fix_reasons"]
+    assert reasons.get("global localization: waiting for motion", 0) >= 10, reasons
+    assert not any(" N " in k or "N%" in k for k in reasons)
+    assert reason_kind("outside the map: the beams end in unmapped space (62 %), dead reckoning (x)") == \
+        "outside the map: the beams end in unmapped space, dead reckoning"
+
+
+def test_latency_line_is_not_contradictory():
+    from fgloc.localization.sources.report import summary_lines
+
+    lines = summary_lines({"sources": {"scan": {"kind": "pose", "accepted": 10, "gated": 0, "latency_s": 0.0,
+                                                "latency_estimate_s": 0.1196, "latency_sigma_s": 0.0113,
+                                                "latency_not_applied": "7 of the 30 fix pairs it needs"}}})
+    line = next(ln for ln in lines if "latency" in ln)
+    assert "latency 0.0 ms in use; measured 119.6 +- 11.3 ms, not applied (7 of the 30 fix pairs it needs)" in line

@@ -1,5 +1,9 @@
 """Angles on the command line with their unit: ``--initial-pose 2.5 3 90deg`` (or ``1.571rad``, or a
-bare number in the option's own unit, which every help text names)."""
+bare number in the option's own unit, which every help text names).
+
+:func:`pose_value` is the option's parser (typer applies it to each of the three values; a value
+that is not a number is click's usage error naming the option); :func:`pose_arg` checks the
+triple."""
 
 from __future__ import annotations
 
@@ -10,30 +14,29 @@ from fgloc.errors import ConfigError
 UNITS = {"deg": math.pi / 180.0, "°": math.pi / 180.0, "rad": 1.0}
 
 
-def angle_rad(text: str | float, option: str, default_unit: str = "rad") -> float:
-    """``text`` in radians: ``90deg``, ``90°``, ``1.5708rad`` or a bare number in ``default_unit``."""
+class _Angle(float):
+    """A value given with an angle unit (already in radians)."""
+
+
+def pose_value(text: str | float) -> float:
+    """One value of ``X Y YAW``: a number, or an angle with its unit (``90deg``, ``1.5708rad``: radians)."""
+    if isinstance(text, float):
+        return text
     s = str(text).strip().lower()
-    unit = next((u for u in UNITS if s.endswith(u)), default_unit)
-    num = s[: -len(unit)] if s.endswith(unit) else s
-    try:
-        v = float(num)
-    except ValueError:
-        raise ConfigError(f"{option}: {text!r} is not an angle (a number, optionally with deg or rad: 90deg, "
-                          "1.5708rad)") from None
-    if not math.isfinite(v):
-        raise ConfigError(f"{option}: the angle must be finite, got {text!r}")
-    return v * UNITS[unit]
+    unit = next((u for u in UNITS if s.endswith(u)), None)
+    if unit is None:
+        return float(s)  # ValueError: click's one-line usage error for the option
+    return _Angle(float(s[: -len(unit)]) * UNITS[unit])
 
 
-def pose_arg(values: tuple[str, str, str] | None, option: str = "--initial-pose") -> tuple[float, float, float] | None:
-    """``X Y YAW`` of a command line (metres; the yaw in radians or with a unit) as floats, None if absent."""
+def pose_arg(values: tuple[float, float, float] | None, option: str = "--initial-pose"
+             ) -> tuple[float, float, float] | None:
+    """``X Y YAW`` as parsed by :func:`pose_value` (metres; the yaw in radians), None if absent."""
     if values is None:
         return None
     x, y, yaw = values
-    try:
-        xy = (float(x), float(y))
-    except ValueError:
-        raise ConfigError(f"{option}: X and Y are metres (numbers), got {x!r} {y!r}") from None
-    if not all(math.isfinite(v) for v in xy):
-        raise ConfigError(f"{option}: X and Y must be finite, got {x!r} {y!r}")
-    return xy[0], xy[1], angle_rad(yaw, option)
+    if isinstance(x, _Angle) or isinstance(y, _Angle):
+        raise ConfigError(f"{option}: X and Y are metres; only YAW takes a unit (e.g. {option} 2.5 3.0 90deg)")
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise ConfigError(f"{option}: X Y YAW must be finite numbers")
+    return float(x), float(y), float(yaw)

@@ -170,11 +170,11 @@ def read_manifest(path: Path) -> list[dict[str, Any]]:
         if any(vals):
             if not all(vals):
                 raise ConfigError(f"{path}:{k}: give all of x, y, yaw or none of them")
-            from fgloc.app.units import pose_arg
+            from fgloc.app.units import pose_arg, pose_value
 
             try:
-                pose = list(pose_arg((vals[0], vals[1], vals[2]), f"{path}:{k}") or ())
-            except ConfigError:
+                pose = list(pose_arg((float(vals[0]), float(vals[1]), pose_value(vals[2])), f"{path}:{k}") or ())
+            except (ValueError, ConfigError):
                 raise ConfigError(f"{path}:{k}: x, y, yaw must be numbers (the yaw in rad, or with its unit: "
                                   f"90deg), got {','.join(vals)}") from None
         rows.append({"log": log.resolve(), "map": None if mp is None else mp.resolve(), "pose": pose})

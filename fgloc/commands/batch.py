@@ -16,6 +16,8 @@ from typing import Annotated
 
 import typer
 
+from fgloc.app.units import pose_value
+
 ENGINE = typer.Option("--engine", help="local (process pool) | ray")
 JOBS = typer.Option("--jobs", "-j", help="worker processes (local) / CPUs of the local Ray instance; default all")
 ADDRESS = typer.Option("--address", help="join this Ray cluster (HOST:PORT; default $RAY_ADDRESS); "
@@ -72,8 +74,9 @@ def run_cmd(
                                                                 "may name their own)")] = None,
     backend: Annotated[str, typer.Option("--backend", help="ekf | smoother | batch")] = "smoother",
     frontend: Annotated[str, typer.Option("--frontend", help="amcl | kiss | native")] = "native",
-    initial_pose: Annotated[tuple[str, str, str] | None, typer.Option(
-        "--initial-pose", help="X Y YAW for every log (m, m and rad, or the yaw with its unit: 90deg; manifest "
+    initial_pose: Annotated[tuple[float, float, float] | None, typer.Option(
+        "--initial-pose", parser=pose_value,
+        help="X Y YAW for every log (m, m and rad, or the yaw with its unit: 90deg; manifest "
                                "rows may give their own)")] = None,
     config: Annotated[Path | None, typer.Option("--config", help="YAML overriding the built-in config "
                                                                      "(`fgloc config show`)")] = None,

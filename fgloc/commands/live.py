@@ -7,6 +7,8 @@ from pathlib import Path
 
 import typer
 
+from fgloc.app.units import pose_value
+
 EXIT_THREAD_DIED = 1  # a sensor thread died, or a sensor asked for never delivered: the summary is still printed
 
 
@@ -63,8 +65,9 @@ def register(app: typer.Typer) -> None:
         map_yaml: Path = typer.Option(None, "--map", help="map_server MAP.yaml (without: odometry + compass only)"),
         backend: str = typer.Option("smoother", "--backend", help="smoother | ekf"),
         frontend: str = typer.Option("native", "--frontend", help="scan matcher: native | amcl | kiss"),
-        initial_pose: tuple[str, str, str] | None = typer.Option(
-            None, "--initial-pose", help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
+        initial_pose: tuple[float, float, float] | None = typer.Option(
+            None, "--initial-pose", parser=pose_value,
+            help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
             "without it: global localization"
         ),
         record: Path = typer.Option(None, "--record", help="record every received message to this MCAP"),
@@ -72,8 +75,9 @@ def register(app: typer.Typer) -> None:
         duration: float = typer.Option(None, "--duration", help="stop after S seconds (default: until Ctrl-C)"),
         config: Path = typer.Option(None, "--config", help="YAML overlaid on the defaults (`fgloc config show`; "
                                     "`fgloc config init` writes one)"),
-        laser_mount: tuple[str, str, str] | None = typer.Option(
-            None, "--laser-mount", help="base_link->laser X Y YAW (m, m and rad, or the yaw with its unit: 180deg) "
+        laser_mount: tuple[float, float, float] | None = typer.Option(
+            None, "--laser-mount", parser=pose_value,
+            help="base_link->laser X Y YAW (m, m and rad, or the yaw with its unit: 180deg) "
             "[default: the config's laser.mount]"
         ),
         out: Path = typer.Option(None, "-o", "--output", help="write the live fused trajectory (online poses) as TUM"),

@@ -14,7 +14,7 @@ import typer
 from fgloc.app import mounts
 from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
-from fgloc.app.units import pose_arg
+from fgloc.app.units import pose_arg, pose_value
 from fgloc.errors import ConfigError
 
 __all__ = ["register"]
@@ -125,8 +125,9 @@ def register(app: typer.Typer) -> None:
         map_yaml: Path | None = typer.Option(None, "--map", help="map_server YAML; without it: odom-frame fusion"),
         backend: str = typer.Option("smoother", "--backend", help="ekf | smoother | batch"),
         frontend: str = typer.Option("native", "--frontend", help="amcl | kiss | native"),
-        initial_pose: tuple[str, str, str] | None = typer.Option(
-            None, "--initial-pose", help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
+        initial_pose: tuple[float, float, float] | None = typer.Option(
+            None, "--initial-pose", parser=pose_value,
+            help="X Y YAW in the map: m, m and rad, or the yaw with its unit (90deg); "
             "without it: global localization"),
         config: Path | None = typer.Option(None, "--config", help="YAML overlaid on the defaults "
                                                        "(`fgloc config init` writes one)"),

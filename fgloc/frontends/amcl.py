@@ -661,8 +661,9 @@ class AMCL:
         moved_a = abs(float(self._acc[2]))
         if not (self._force_update or moved_d >= self.update_min_d or moved_a >= self.update_min_a):
             if not self.fix_without_update:
-                return no_fix(f"update thresholds not met (moved {moved_d:.3f} m, {moved_a:.3f} rad)",
-                              n_inliers=len(pts))
+                return no_fix(f"waiting for motion (update_min_d {self.update_min_d:g} m / update_min_a "
+                              f"{self.update_min_a:g} rad not reached: moved {moved_d:.3f} m, {moved_a:.3f} rad since "
+                              "the last update)", n_inliers=len(pts))
             mask, share = self._cluster(self.particles, self.weights)
             mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
             return self._result(compose1(mean, self._acc), cov, share, len(pts), updated=False)
@@ -755,8 +756,12 @@ class AMCL:
                 refined: bool = False) -> MatchResult:
         sx = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
         sa = math.sqrt(max(float(cov[2, 2]), 0.0))
-        info = {"particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
-                "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined}
+        # estimate / estimate_cov: the heaviest cluster's mean and covariance, also when it is no fix (what
+        # nav2 publishes as amcl_pose from the first update on: the localizer starts from it, still lost)
+        info: dict[str, Any] = {
+                "particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
+                "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined,
+                "estimate": np.array(mean, dtype=float), "estimate_cov": np.array(cov, dtype=float)}
         if not bool(self.map.in_bounds(mean[None, :2])[0]):
             return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
         if self._global:

@@ -281,7 +281,7 @@ class KissMatcher(FrontendBase):
         if rejected is not None:
             return rejected
         if back > self.max_backface_fraction:
-            return no_fix(f"kiss: {100 * back:.0f}% of the matched points lie on the back of walls",
+            return no_fix(f"kiss: matched points lie on the back of walls ({100 * back:.0f} %)",
                           n_inliers=n_in, quality=quality, **info)
         rejected = self.accept.jumped(pose, guess, n_in, quality, **info)
         if rejected is not None:

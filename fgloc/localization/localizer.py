@@ -64,7 +64,8 @@ def reason_kind(reason: str) -> str:
     ("update thresholds not met (moved 0.064 m ...)" -> "update thresholds not met")."""
     r = re.sub(r"\([^)]*\)?", "", str(reason))
     r = re.sub(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", "N", r)
-    r = re.sub(r"\s+", " ", r).strip(" :,;.")
+    r = re.sub(r"\s+", " ", r)
+    r = re.sub(r" ([,;:])", r"\1", r).strip(" :,;.")
     return r[:70] or "no fix"
 
 
@@ -269,7 +270,12 @@ class Localizer:
         self._odom_at_last_scan = np.array(odom_now, dtype=float)
         self._last_matched_t = t
         if not matching:
-            return self._localize_globally(msg, odom_delta)
+            gfix = self._localize_globally(msg, odom_delta)
+            if gfix is None:  # a scan without a fix while not localized: counted with its reason
+                self.stats["no_fix"] += 1
+                kind = reason_kind(self.last_reason)
+                self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
+            return gfix
         guess = self.guess(t)
         res = fe.match(msg, guess, odom_delta)
         fix = res.to_fix(t, fe.name)
@@ -311,7 +317,7 @@ class Localizer:
             self.last_reason = res_why
             if unmapped:
                 self.stats["unmapped_scans"] = self.stats.get("unmapped_scans", 0) + 1
-                self.last_reason = (f"outside the map: {100 * share:.0f} % of the beams end in unmapped space, "
+                self.last_reason = (f"outside the map: the beams end in unmapped space ({100 * share:.0f} %), "
                                     f"dead reckoning ({res.why})")
             kind = reason_kind(self.last_reason)
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
@@ -467,6 +473,14 @@ class Localizer:
                 self.last_reason = f"global localization: {res.why}"
             if self.backend.initialized:
                 self.backend.add_keyframe(t, None)
+            else:
+                # a pose anyway, as nav2's amcl publishes its cloud's mean from the first update on: the
+                # back-end starts there with the cloud's covariance; the localizer stays lost (global
+                # search goes on, the front-end keeps its cloud) until a converged fix
+                pose = fix.pose if fix is not None else res.info.get("estimate")
+                cov = fix.cov if fix is not None else res.info.get("estimate_cov")
+                if pose is not None and cov is not None and np.all(np.isfinite(pose)) and np.all(np.isfinite(cov)):
+                    self.backend.initialize(t, np.asarray(pose, dtype=float), np.asarray(cov, dtype=float) + EPS_COV)
             return None
         assert self.reloc is not None
         gfix = self.reloc.search(msg)

@@ -128,7 +128,7 @@ def test_bad_input_gives_no_fix():
     r = a.match(_scan(good), pose)
     assert r.ok and np.hypot(*(r.pose[:2] - pose[:2])) < 0.1
     r = a.match(_scan(good), pose, np.zeros(3))
-    assert not r.ok and "thresholds" in r.reason
+    assert not r.ok and r.reason.startswith("waiting for motion (update_min_d ")
 
 
 @pytest.mark.parametrize("model", ["differential", "omni"])
@@ -257,7 +257,7 @@ def test_two_modes_are_not_converged_one_wide_mode_is(paper_scans):
     a.reset(p, np.diag([0.4**2, 0.4**2, np.radians(8) ** 2]))
     a._force_update = False
     r = a.match(d.scans[100], p, np.zeros(3))
-    assert r.reason.startswith("update thresholds")  # nothing moved: no update, no fix
+    assert r.reason.startswith("waiting for motion (update_min_d")  # nothing moved: no update, no fix
     a2 = AMCL.from_config(d.map, d.laser_mount, {"estimate": "mean", "fix_without_update": True})
     a2.reset(p, np.diag([0.4**2, 0.4**2, np.radians(8) ** 2]))
     a2._force_update = False

@@ -70,6 +70,7 @@ class SourceReport:
     latency_s: float | None = None  # the scans' latency in use
     latency_estimate_s: float | None = None
     latency_sigma_s: float | None = None
+    latency_not_applied: str | None = None  # why the measured latency is not the one in use
 
     @property
     def all_gated(self) -> int:
@@ -84,7 +85,7 @@ class SourceReport:
             d["skipped_reasons"] = dict(self.skipped_reasons)
         d.update(self.estimates)
         for k in ("topic", "mount", "vy_max_mps", "speed_scale", "yaw_rate_scale", "gyro_bias_radps", "latency_s",
-                  "latency_estimate_s", "latency_sigma_s"):
+                  "latency_estimate_s", "latency_sigma_s", "latency_not_applied"):
             v = getattr(self, k)
             if v is not None:
                 d[k] = v
@@ -156,6 +157,14 @@ def scan_report(loc: Any) -> SourceReport | None:
     if fit is not None:
         r.latency_estimate_s = round(fit[0], 4)
         r.latency_sigma_s = round(fit[1], 4)
+        if abs(r.latency_s - r.latency_estimate_s) > 5e-5:  # measured, but another value is in use
+            section = {"ekf": "ekf"}.get(str(getattr(loc, "backend_name", "")), "smoother")
+            cfg = getattr(getattr(loc, "config", None), section, None)  # the run's config section, not the back-end
+            r.latency_not_applied = (
+                f"{section}.latency_s {cfg.latency_s:g} s is configured"
+                if cfg is not None and cfg.latency_s is not None else
+                f"{section}.latency is off" if cfg is not None and not cfg.latency
+                else "not significant yet")
     return r
 
 
@@ -188,9 +197,15 @@ def summary_lines(stats: RunStats) -> list[str]:
         if d.gyro_bias_radps is not None:
             est.append(f"gyro bias {d.gyro_bias_radps:.5f} rad/s")
         if d.latency_s is not None:
-            s = f"latency {1000 * d.latency_s:.1f} ms"
-            if d.latency_estimate_s is not None:
-                s += f" (estimate {1000 * d.latency_estimate_s:.1f} +- {1000 * (d.latency_sigma_s or 0):.1f})"
+            used, sig = 1000 * d.latency_s, 1000 * (d.latency_sigma_s or 0)
+            if d.latency_not_applied and d.latency_estimate_s is not None:
+                # the estimate is not the value in use: say which is which, and why
+                s = (f"latency {used:.1f} ms in use; measured {1000 * d.latency_estimate_s:.1f} +- {sig:.1f} ms, "
+                     f"not applied ({d.latency_not_applied})")
+            elif d.latency_estimate_s is not None:
+                s = f"latency {used:.1f} +- {sig:.1f} ms (estimated)"
+            else:
+                s = f"latency {used:.1f} ms"
             est.append(s)
         for key, what in (("noise", "yaw"), ("yaw", "heading"), ("gyro", "gyro")):
             sn = d.noise.get(key)

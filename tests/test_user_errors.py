@@ -170,10 +170,14 @@ def test_amcl_on_a_standing_robot_gives_a_pose_and_says_why_it_waits(short_log):
 
 
 def test_latency_line_is_not_contradictory():
-    from fgloc.localization.sources.report import summary_lines
+    from fgloc.localization.sources.report import SourceReport, summary_lines
+    from fgloc.localization.stats import RunStats
 
-    lines = summary_lines({"sources": {"scan": {"kind": "pose", "accepted": 10, "gated": 0, "latency_s": 0.0,
-                                                "latency_estimate_s": 0.1196, "latency_sigma_s": 0.0113,
-                                                "latency_not_applied": "not significant yet"}}})
+    rep = SourceReport("pose", accepted=10, latency_s=0.0, latency_estimate_s=0.1196, latency_sigma_s=0.0113,
+                       latency_not_applied="not significant yet")
+    lines = summary_lines(RunStats(sources={"scan": rep}))
     line = next(ln for ln in lines if "latency" in ln)
     assert "latency 0.0 ms in use; measured 119.6 +- 11.3 ms, not applied (not significant yet)" in line
+    rep.latency_s, rep.latency_not_applied = 0.1196, None
+    line = next(ln for ln in summary_lines(RunStats(sources={"scan": rep})) if "latency" in ln)
+    assert "latency 119.6 +- 11.3 ms (estimated)" in line

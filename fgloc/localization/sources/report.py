@@ -151,13 +151,14 @@ def scan_report(loc: Any) -> SourceReport | None:
     be = loc.backend
     if loc.frontend is None or Capability.LATENCY not in be.capabilities:
         return None
+    used = round(float(be.latency_estimate()), 4)
     r = SourceReport("pose", accepted=int(loc.stats.get("fixes", 0)), gated=int(be.stats.get("fixes_rejected", 0)),
-                     latency_s=round(float(be.latency_estimate()), 4))
+                     latency_s=used)
     fit = be.latency_fit()
     if fit is not None:
         r.latency_estimate_s = round(fit[0], 4)
         r.latency_sigma_s = round(fit[1], 4)
-        if abs(r.latency_s - r.latency_estimate_s) > 5e-5:  # measured, but another value is in use
+        if abs(used - r.latency_estimate_s) > 5e-5:  # measured, but another value is in use
             section = {"ekf": "ekf"}.get(str(getattr(loc, "backend_name", "")), "smoother")
             cfg = getattr(getattr(loc, "config", None), section, None)  # the run's config section, not the back-end
             r.latency_not_applied = (

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from fgloc.geometry import quaternion_to_yaw
 from fgloc.io import fastcdr
 from fgloc.io.msgdefs import MSG_TEXT, full_text, short_name
 from fgloc.io.ros import (
@@ -105,7 +106,8 @@ def decode(type_name: str, data: bytes, topic: str = "") -> object:
         if fix is not None:
             return fix
     if t == OCCUPANCY_GRID:
-        return map_from_grid(decode_generic(t, data))
+        fast_map = _decode_map(data)
+        return fast_map if fast_map is not None else map_from_grid(decode_generic(t, data))
     conv = FROM_ROS.get(t)
     if conv is None:
         raise Undecodable(f"fgloc does not read {t}")
@@ -172,24 +174,50 @@ def encode_map(m: OccupancyMap, stamp: float, frame_id: str = "map") -> bytes:
 
 
 def map_from_grid(msg: Any) -> OccupancyMap:
-    """An :class:`OccupancyMap` of a decoded ``nav_msgs/OccupancyGrid`` (trinary when every cell
-    is -1, 0 or 100, as map_server's trinary maps; else its values read as scale)."""
-    info = msg.info
-    w, h = int(info.width), int(info.height)
+    """An :class:`OccupancyMap` of a decoded ``nav_msgs/OccupancyGrid`` (see :func:`grid_map`)."""
+    info, o = msg.info, msg.info.origin
     raw = msg.data
     cells = np.frombuffer(bytes(raw), dtype=np.int8) if isinstance(raw, bytes | bytearray | memoryview) \
         else np.asarray(raw, dtype=np.int16)
+    q = o.orientation
+    return grid_map(int(info.width), int(info.height), float(info.resolution), o.position.x, o.position.y,
+                    quaternion_yaw(q), cells)
+
+
+def grid_map(w: int, h: int, res: float, x: float, y: float, yaw: float, cells: np.ndarray) -> OccupancyMap:
+    """A map of OccupancyGrid cells (row-major from the origin): trinary when every cell is -1, 0 or
+    100, as map_server's trinary maps; else its values read as scale."""
     if w <= 0 or h <= 0 or cells.size != w * h:
         raise Undecodable(f"map of {w} x {h} cells with {cells.size} values")
-    data = cells.astype(np.int16).reshape(h, w)
-    values = np.unique(data)
-    trinary = bool(np.all(np.isin(values, (-1, 0, 100))))
-    o = info.origin
-    res = float(info.resolution)
     if not (math.isfinite(res) and res > 0):
         raise Undecodable(f"map resolution {res}")
-    origin = np.array([o.position.x, o.position.y, quaternion_yaw(o.orientation)])
-    return OccupancyMap(data, res, origin, mode="trinary" if trinary else "scale")
+    data = cells.astype(np.int16).reshape(h, w)
+    trinary = bool(np.all(np.isin(np.unique(data), (-1, 0, 100))))
+    return OccupancyMap(data, res, np.array([x, y, yaw]), mode="trinary" if trinary else "scale")
+
+
+def _decode_map(data: bytes) -> OccupancyMap | None:
+    """A little-endian ``nav_msgs/OccupancyGrid`` read with struct and numpy (its cells as one block;
+    the generic decoder makes a Python list of them); None when the layout does not apply."""
+    buf = memoryview(data)
+    if len(buf) < 16 or bytes(buf[:2]) != fastcdr.CDR_LE[:2]:
+        return None
+    try:
+        (n,) = struct.unpack_from("<I", buf, 12)
+        p = 16 + n  # after the frame id (its length counts the NUL)
+        p += (-(p - 4)) % 4
+        _sec, _nsec, res, w, h = struct.unpack_from("<iIfII", buf, p)
+        p += 20
+        p += (-(p - 4)) % 8
+        x, y, _z, qx, qy, qz, qw = struct.unpack_from("<7d", buf, p)
+        p += 56
+        (count,) = struct.unpack_from("<I", buf, p)
+        if p + 4 + count > len(buf):
+            return None
+        cells = np.frombuffer(buf, dtype=np.int8, count=count, offset=p + 4)
+    except (struct.error, ValueError):
+        return None
+    return grid_map(w, h, res, x, y, float(quaternion_to_yaw(qx, qy, qz, qw)), cells)
 
 
 def encode_clock(t: float) -> bytes:

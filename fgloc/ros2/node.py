@@ -265,6 +265,8 @@ class Ros2Live:
             self.odom_frame.add_tf(tfs, stamps)
             with self._lock:
                 self.tf.add(tfs, flips)
+            if inp.topic != "/tf_static":
+                return  # /tf: the odometry frame and the mount lookup; the session takes the static mounts
             msg = tfs
         elif inp.kind.startswith("source:") and isinstance(msg, Odometry):
             self.odom_frame.add_odometry(msg)
@@ -368,22 +370,28 @@ class Ros2Live:
         self._warm_up(loc, mount)
         with self._lock:
             self.mirrored = mirrored
-            kept = list(self.startup.buffered)
-            self.startup.buffered.clear()
-            self.runner = runner  # from now on the receive thread queues into the runner
-        # the messages kept before the start are fused now, every scan (none is skipped as a backlog)
+        # the messages kept before the start, and those that come while they are fused, are fused in their
+        # order, every scan (none is skipped as a backlog); once caught up, the receive thread queues into
+        # the runner
         self.flushing = True
+        kept = 0
         try:
-            for kind, msg, arrival in kept:
+            while True:
+                with self._lock:
+                    if not self.startup.buffered:
+                        self.runner = runner
+                        break
+                    kind, msg, arrival = self.startup.buffered.popleft()
                 if mirrored and kind == "scan" and isinstance(msg, LaserScan):
                     msg = mirror_scan(msg)
                 runner.process(kind, msg, arrival)
+                kept += 1
         finally:
             self.flushing = False
         self.startup.waiting_for = ""
         self.event(f"localizing: laser mount {mount.parent} -> {mount.child} "
                    f"({mount.pose[0]:.3f}, {mount.pose[1]:.3f}, {math.degrees(mount.pose[2]):.1f} deg)"
-                   + (", upside down" if mirrored else "") + f"; {len(kept)} messages kept from before the start")
+                   + (", upside down" if mirrored else "") + f"; {kept} messages kept from before the start fused")
         return True
 
     def _warm_up(self, loc: Any, mount: StaticTransform) -> None:
@@ -393,12 +401,14 @@ class Ros2Live:
         if scan is None or loc.frontend is None or loc.map is None:
             return
         from fgloc.frontends import make_frontend
+        from fgloc.maps import OccupancyMap
 
-        m = loc.map
-        guess = loc.initial_pose if loc.initial_pose is not None else np.array(
-            [m.origin[0] + 0.5 * m.width * m.resolution, m.origin[1] + 0.5 * m.height * m.resolution, 0.0])
+        # a small room (the kernels are compiled per argument types, not per map): cheap on any map
+        grid = np.zeros((200, 200), dtype=np.int16)
+        grid[[0, -1], :] = grid[:, [0, -1]] = 100
+        room = OccupancyMap(grid, 0.05, np.array([-5.0, -5.0, 0.0]))
         try:
-            make_frontend(loc.frontend_name, m, mount, self.cfg).match(scan, guess, None)
+            make_frontend(loc.frontend_name, room, mount, self.cfg).match(scan, np.zeros(3), None)
         except Exception:  # noqa: BLE001 - a warm-up only
             pass
 

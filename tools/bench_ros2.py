@@ -1,0 +1,138 @@
+"""fgloc over DDS, measured: scan arrival -> map->odom published latency, and the live node's memory.
+
+Two processes on this machine over Cyclone DDS on the loopback interface: ``fgloc replay LOG --ros2``
+publishes a log, ``fgloc live --ros2`` localizes it; this script samples the live process's resident
+memory (psutil) while the replay runs and prints
+
+* the latency from a scan's arrival (taken from DDS) to its map -> odom transform published, p50 / p99
+  (``fgloc live``'s own measurement, over every scan fused live; the scans kept from before the start
+  are not counted), and the scans fused / skipped as a backlog;
+* the resident memory: after the first minute of log, then every quarter of the run, and its slope
+  over the run after the first minute (MB per minute of log), which is ~0 when memory is flat.
+
+    python tools/bench_ros2.py                         # the paper run (110 s), rate 1
+    python tools/bench_ros2.py --loops 6 --rate 2      # 11 minutes of log, twice real time: memory
+    python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose   # any log (its map on /map)
+    python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose --compare RUN_DIR
+
+``--compare RUN_DIR`` (a ``fgloc run`` of the same log, with the same map and start): /amcl_pose is also
+read here and compared with RUN_DIR/online.tum at the same stamps (max, median, p99 of the distance).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+
+def fgloc(*args: str) -> list[str]:
+    return [sys.executable, "-m", "fgloc.cli", *args]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--log", type=Path, help="a log (default: fgloc simulate paper, --loops times round)")
+    ap.add_argument("--map", type=Path, help="its map, published by the replay on /map")
+    ap.add_argument("--loops", type=int, default=1, help="simulated runs: times round the paper's rectangle")
+    ap.add_argument("--rate", type=float, default=1.0, help="replay rate (x real time)")
+    ap.add_argument("--domain", type=int, default=1 + os.getpid() % 200)
+    ap.add_argument("--no-initial-pose", action="store_true", help="global localization at the start")
+    ap.add_argument("--out", type=Path, help="write the samples and the report (JSON) here")
+    ap.add_argument("--compare", type=Path, help="a fgloc run output folder of the same log: compare /amcl_pose")
+    a = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
+    init = ["--initial-pose", "2.5", "3.0", "0.0"]
+    if a.log is None:
+        from fgloc.sim import run_scenario, write_sim
+
+        t0 = time.monotonic()
+        write_sim(run_scenario({"name": "bench", "loops": a.loops}, seed=0), tmp)
+        log, map_yaml = tmp / "log.mcap", tmp / "map.yaml"
+        print(f"simulated the paper run x{a.loops} in {time.monotonic() - t0:.0f} s", flush=True)
+    else:
+        log, map_yaml = a.log, a.map
+        if a.no_initial_pose:
+            init = []
+    common = ["--domain", str(a.domain), "--interface", "lo"]
+    poses: list[tuple[float, float, float]] = []
+    sub = None
+    if a.compare is not None:
+        from fgloc.ros2 import codec, qos
+        from fgloc.ros2.transport import CycloneTransport
+
+        sub = CycloneTransport(a.domain, "lo")
+
+        def on_pose(data: bytes, arrival: float) -> None:
+            f = codec.decode("geometry_msgs/msg/PoseWithCovarianceStamped", data)
+            poses.append((f.stamp, f.pose[0], f.pose[1]))  # type: ignore[attr-defined]
+
+        sub.subscribe("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", qos.LATCHED_PUB.with_depth(5000),
+                      on_pose)
+        sub.start()
+    live = subprocess.Popen(fgloc("live", "--ros2", *common, "--quiet", "--json", *init), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc = psutil.Process(live.pid)
+    replay = subprocess.Popen(fgloc("replay", str(log), "--ros2", *common, "--rate", str(a.rate), "--wait", "60",
+                                    "--quiet", *(["--map", str(map_yaml)] if map_yaml else [])),
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t_start = time.monotonic()
+    samples: list[tuple[float, float]] = []  # wall s since the replay started, RSS MB
+    while replay.poll() is None:
+        samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
+        time.sleep(2.0)
+    rep_out = replay.stdout.read() if replay.stdout else ""
+    time.sleep(3.0)  # the live node's backlog
+    samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
+    live.send_signal(signal.SIGINT)
+    out, err = live.communicate(timeout=300)
+    report = json.loads(out)
+    r2 = report["ros2"]
+    c = report["counters"]
+    lat = r2["scan_to_tf_ms"]
+    print(rep_out.strip().splitlines()[0] if rep_out.strip() else "replay: no output")
+    print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
+          f"poses published {r2['published']}")
+    print(f"scan arrival -> map->odom published: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms")
+    t = np.array([s[0] for s in samples]) * a.rate / 60.0  # minutes of log
+    m = np.array([s[1] for s in samples])
+    after = t >= min(1.0, 0.25 * t[-1])
+    if after.sum() >= 3:
+        slope = float(np.polyfit(t[after], m[after], 1)[0])
+        marks = [float(np.interp(q * t[-1], t, m)) for q in (0.25, 0.5, 0.75, 1.0)]
+        first = float(np.interp(min(1.0, 0.25 * t[-1]), t, m))
+        print(f"live RSS: {first:.0f} MB after {min(1.0, 0.25 * t[-1]):.1f} min of log; at 1/4, 1/2, 3/4, end of "
+              f"{t[-1]:.1f} min: " + ", ".join(f"{v:.0f}" for v in marks)
+              + f" MB; slope {slope:+.2f} MB per minute of log")
+    if a.compare is not None and sub is not None:
+        from fgloc.io.tum import read_tum
+
+        sub.close()
+        ref = read_tum(a.compare / "online.tum")
+        d = []
+        for t_s, x, y in poses:
+            k = int(np.searchsorted(ref.stamps, t_s - 1e-6))
+            if k < len(ref.stamps) and abs(ref.stamps[k] - t_s) <= 1e-6:
+                d.append(float(np.hypot(x - ref.poses[k, 0], y - ref.poses[k, 1])))
+        if d:
+            print(f"/amcl_pose vs {a.compare}/online.tum: {len(d)} of {len(ref.stamps)} stamps; distance max "
+                  f"{1e3 * max(d):.2f} mm, median {1e3 * float(np.median(d)):.2f} mm, "
+                  f"p99 {1e3 * float(np.percentile(d, 99)):.2f} mm")
+    if r2["problems"]:
+        print("DDS: " + "; ".join(r2["problems"]))
+    if a.out is not None:
+        a.out.write_text(json.dumps({"samples": samples, "rate": a.rate, "report": report}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -15,6 +15,10 @@ memory (psutil) while the replay runs and prints
     python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose   # any log (its map on /map)
     python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose --compare RUN_DIR
 
+``--receive-only``: the second process is not ``fgloc live`` but fgloc's DDS receive path alone
+(:class:`fgloc.ros2.transport.CycloneTransport` and :func:`fgloc.ros2.codec.decode` on the sensor
+topics, no localizer): its memory is the DDS layer's own.
+
 ``--compare RUN_DIR`` (a ``fgloc run`` of the same log, with the same map and start): /amcl_pose is also
 read here and compared with RUN_DIR/online.tum at the same stamps (max, median, p99 of the distance).
 """
@@ -39,6 +43,29 @@ def fgloc(*args: str) -> list[str]:
     return [sys.executable, "-m", "fgloc.cli", *args]
 
 
+RECEIVER = """
+import sys, time
+from fgloc.ros2 import codec, qos
+from fgloc.ros2.transport import CycloneTransport
+tr = CycloneTransport(int(sys.argv[1]), "lo")
+n = [0]
+for topic, typ in (("/scan", "sensor_msgs/msg/LaserScan"), ("/odom", "nav_msgs/msg/Odometry"),
+                   ("/imu", "sensor_msgs/msg/Imu"), ("/tf_static", "tf2_msgs/msg/TFMessage")):
+    prof = qos.TF_STATIC_SUB if topic == "/tf_static" else qos.SENSOR_DATA.with_depth(100)
+    def on(data, arrival, typ=typ, topic=topic):
+        codec.decode_tf(data) if topic == "/tf_static" else codec.decode(typ, data, topic)
+        n[0] += 1
+    tr.subscribe(topic, typ, prof, on)
+tr.start()
+try:
+    while True:
+        time.sleep(1.0)
+except KeyboardInterrupt:
+    pass
+print('{"received": %d}' % n[0])
+"""
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--log", type=Path, help="a log (default: fgloc simulate paper, --loops times round)")
@@ -48,6 +75,7 @@ def main() -> int:
     ap.add_argument("--domain", type=int, default=1 + os.getpid() % 200)
     ap.add_argument("--no-initial-pose", action="store_true", help="global localization at the start")
     ap.add_argument("--out", type=Path, help="write the samples and the report (JSON) here")
+    ap.add_argument("--receive-only", action="store_true", help="fgloc's DDS receive path alone, no localizer")
     ap.add_argument("--compare", type=Path, help="a fgloc run output folder of the same log: compare /amcl_pose")
     a = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
@@ -79,8 +107,9 @@ def main() -> int:
         sub.subscribe("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", qos.LATCHED_PUB.with_depth(5000),
                       on_pose)
         sub.start()
-    live = subprocess.Popen(fgloc("live", "--ros2", *common, "--quiet", "--json", *init), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    cmd = [sys.executable, "-c", RECEIVER, str(a.domain)] if a.receive_only else \
+        fgloc("live", "--ros2", *common, "--quiet", "--json", *init)
+    live = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(live.pid)
     replay = subprocess.Popen(fgloc("replay", str(log), "--ros2", *common, "--rate", str(a.rate), "--wait", "60",
                                     "--quiet", *(["--map", str(map_yaml)] if map_yaml else [])),
@@ -96,13 +125,17 @@ def main() -> int:
     live.send_signal(signal.SIGINT)
     out, err = live.communicate(timeout=300)
     report = json.loads(out)
-    r2 = report["ros2"]
-    c = report["counters"]
-    lat = r2["scan_to_tf_ms"]
     print(rep_out.strip().splitlines()[0] if rep_out.strip() else "replay: no output")
-    print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
-          f"poses published {r2['published']}")
-    print(f"scan arrival -> map->odom published: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms")
+    if a.receive_only:
+        print(f"receive-only: {report['received']} messages decoded")
+        report = {"ros2": {"problems": []}}
+    else:
+        r2 = report["ros2"]
+        c = report["counters"]
+        lat = r2["scan_to_tf_ms"]
+        print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
+              f"poses published {r2['published']}")
+        print(f"scan arrival -> map->odom published: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms")
     t = np.array([s[0] for s in samples]) * a.rate / 60.0  # minutes of log
     m = np.array([s[1] for s in samples])
     after = t >= min(1.0, 0.25 * t[-1])
@@ -127,8 +160,8 @@ def main() -> int:
             print(f"/amcl_pose vs {a.compare}/online.tum: {len(d)} of {len(ref.stamps)} stamps; distance max "
                   f"{1e3 * max(d):.2f} mm, median {1e3 * float(np.median(d)):.2f} mm, "
                   f"p99 {1e3 * float(np.percentile(d, 99)):.2f} mm")
-    if r2["problems"]:
-        print("DDS: " + "; ".join(r2["problems"]))
+    if report["ros2"]["problems"]:
+        print("DDS: " + "; ".join(report["ros2"]["problems"]))
     if a.out is not None:
         a.out.write_text(json.dumps({"samples": samples, "rate": a.rate, "report": report}, indent=1))
     return 0

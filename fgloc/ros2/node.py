@@ -365,7 +365,7 @@ class Ros2Live:
 
         handlers["scan"] = scan_then
         self.outputs = Ros2Outputs(self)
-        runner.session.add_sink(self.outputs)
+        runner.session.sinks.insert(0, self.outputs)  # first: map -> odom goes out before the recording
         self.loc, self.session = loc, session
         self._warm_up(loc, mount)
         with self._lock:

@@ -13,8 +13,9 @@ estimate it keeps (odometry scales, gyro biases, scan latency).  A caller asks
 ``Capability.X in backend.capabilities``; a back-end without it raises ``NotImplementedError``
 for the input, and reports the neutral value (scale 1, bias 0, latency 0) for the estimate.
 
-Adding a back-end: subclass :class:`Backend`, implement the abstract methods, declare the
-capabilities it has and implement their methods, register it in :func:`fgloc.backends.make_backend`.
+Adding a back-end: subclass :class:`Backend`, implement the abstract methods and
+:meth:`Backend.from_config`, declare the capabilities it has and implement their methods, and add it
+to :data:`fgloc.backends.REGISTRY` (its config section to :class:`fgloc.config.FglocConfig`).
 """
 
 from __future__ import annotations
@@ -59,6 +60,9 @@ class Capability(Enum):
     GYRO_BIAS = "gyro_bias"
     #: :meth:`Backend.latency_estimate`, :meth:`Backend.latency_fit`: the scans' latency is estimated
     LATENCY = "latency"
+    #: memory and time per input stay bounded however long it runs: ``fgloc live`` takes it (a batch
+    #: optimization over the whole run does not)
+    LIVE = "live"
 
 
 @dataclass(frozen=True)
@@ -114,6 +118,12 @@ class Backend(ABC):
         self._online_c: list[FloatArray] = []
 
     # ------------------------------------------------------------------ every back-end
+    @classmethod
+    def from_config(cls, config: Any = None) -> Backend:
+        """The back-end with its sections of ``config`` (a :class:`fgloc.config.FglocConfig`; None:
+        the defaults).  Default: no section."""
+        return cls()
+
     @property
     @abstractmethod
     def initialized(self) -> bool: ...

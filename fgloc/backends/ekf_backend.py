@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -89,7 +90,12 @@ class EKFBackend(Backend):
     #: the odometry twist measures the filter's velocity state (its pose integrates that state)
     capabilities = frozenset({Capability.MEASURES_VELOCITY, Capability.GYRO, Capability.VELOCITY,
                               Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,
-                              Capability.LATENCY})
+                              Capability.LATENCY, Capability.LIVE})
+
+    @classmethod
+    def from_config(cls, config: Any = None) -> EKFBackend:
+        """With ``config.ekf``."""
+        return cls(None if config is None else config.ekf)
 
     def __init__(self, config: EKFConfig | None = None) -> None:
         super().__init__()

@@ -109,3 +109,21 @@ def test_estimates_are_what_the_methods_report(name):
     noise = be.source_noise("imu.gyro")
     assert noise is not None and noise.k_claimed >= 0.0
     assert be.source_noise("no such stream") is None
+
+
+def test_backends_are_selected_by_capability():
+    """The registry answers which back-ends have a capability; a name is checked against it (the
+    live commands need Capability.LIVE: the batch smoother keeps every factor to the end)."""
+    from fgloc.backends import REGISTRY, backend_names, check_backend
+    from fgloc.errors import ConfigError
+
+    assert backend_names() == BACKENDS == tuple(REGISTRY)
+    assert backend_names(Capability.LIVE) == ("ekf", "smoother")
+    assert backend_names(Capability.MEASURES_VELOCITY) == ("ekf",)
+    assert check_backend(" Smoother ", Capability.LIVE) == "smoother"
+    with pytest.raises(ConfigError, match=r"--backend batch: expected ekf or smoother"):
+        check_backend("batch", Capability.LIVE)
+    with pytest.raises(ConfigError, match=r"unknown back-end 'smother' \(choose ekf, smoother or batch\).*smoother"):
+        check_backend("smother")
+    for name, cls in REGISTRY.items():
+        assert type(make_backend(name)) is cls and cls.name == name

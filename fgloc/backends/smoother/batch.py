@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
+from fgloc.backends.contract import Capability
 from fgloc.backends.smoother.config import BatchConfig, SmootherConfig
 from fgloc.backends.smoother.sliding_window import SlidingWindowSmoother
 from fgloc.types import Trajectory
@@ -15,6 +18,13 @@ class BatchSmoother(SlidingWindowSmoother):
     """All factors of the run, optimized at :meth:`finish` by Levenberg-Marquardt."""
 
     name = "batch"
+    #: every factor is kept until the end
+    capabilities = SlidingWindowSmoother.capabilities - {Capability.LIVE}
+
+    @classmethod
+    def from_config(cls, config: Any = None) -> BatchSmoother:
+        """With ``config.smoother`` and ``config.batch``."""
+        return cls(None, None) if config is None else cls(config.smoother, config.batch)
 
     def __init__(self, config: SmootherConfig | None = None, batch: BatchConfig | None = None) -> None:
         self.max_iterations = (batch or BatchConfig()).max_iterations

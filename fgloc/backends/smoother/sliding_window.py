@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -26,7 +27,12 @@ class SlidingWindowSmoother(KeyframeGraph):
 
     capabilities = frozenset({Capability.ODOMETRY_CLOCK, Capability.GYRO, Capability.VELOCITY,
                               Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,
-                              Capability.LATENCY})
+                              Capability.LATENCY, Capability.LIVE})
+
+    @classmethod
+    def from_config(cls, config: Any = None) -> SlidingWindowSmoother:
+        """With ``config.smoother``."""
+        return cls(None if config is None else config.smoother)
 
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
         """(Re)start at ``pose`` (map ``[x, y, yaw]``) with prior ``cov`` (made well-conditioned).

@@ -40,6 +40,20 @@ class Odometry:
 
 
 @dataclass
+class Twist:
+    """A body twist with its covariance (``geometry_msgs/TwistWithCovarianceStamped``), planar.
+
+    ``twist`` is ``[vx_mps, vy_mps, wz_radps]`` in ``frame_id`` (the frame the sensor reports
+    it in, usually ``base_link``); ``twist_cov`` its 3x3 covariance (None if unknown).
+    """
+
+    stamp: float
+    twist: FloatArray
+    twist_cov: FloatArray | None = None
+    frame_id: str = "base_link"
+
+
+@dataclass
 class CompassHeading:
     """Absolute heading from a compass / IMU (``sensor_msgs/Imu``).
 

@@ -42,7 +42,7 @@ import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw
 from fgloc.io.ros import COV_IDX9, cov6_of, cov9_full, cov9_of, stamp_to_sec_nsec
-from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D, Twist
 
 CDR_LE = b"\x00\x01\x00\x00"
 _F7 = struct.Struct("<7f")
@@ -113,6 +113,14 @@ def encode_odometry(m: Odometry, stamp: float) -> bytes:
         pcov[0] = -1.0
     vals = [pose[0], pose[1], 0.0, *_quat(pose[2]), *pcov, tw[0], tw[1], 0.0, 0.0, 0.0, tw[2], *cov6_of(m.twist_cov)]
     return b"".join([CDR_LE, head, child, b"\x00" * _pad(n, 8), struct.pack("<85d", *vals)])
+
+
+def encode_twist(m: Twist, stamp: float) -> bytes:
+    """A ``geometry_msgs/TwistWithCovarianceStamped`` (z, roll and pitch rates 0)."""
+    head = _header_bytes(stamp, m.frame_id)
+    tw = [float(v) for v in m.twist]
+    vals = [tw[0], tw[1], 0.0, 0.0, 0.0, tw[2], *cov6_of(m.twist_cov)]
+    return b"".join([CDR_LE, head, b"\x00" * _pad(len(head), 8), struct.pack("<42d", *vals)])
 
 
 def encode_compass(m: CompassHeading, stamp: float) -> bytes:

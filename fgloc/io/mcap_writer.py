@@ -24,8 +24,8 @@ from fgloc.io.mcap_format import StreamWriter
 from fgloc.io.msgdefs import MSG_TEXT, full_text, short_name
 from fgloc.io.ros import stamp_to_ns
 from fgloc.io.source import Record
-from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
-from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform
+from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, TWIST_COV_STAMPED
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Twist
 
 LIBRARY = "fgloc"
 
@@ -42,6 +42,8 @@ def message_encoder(msg: object) -> tuple[str, Callable[[Any, float], bytes]] | 
         return IMU, fastcdr.encode_compass
     if isinstance(msg, PoseFix):
         return POSE_COV_STAMPED, fastcdr.encode_pose_fix
+    if isinstance(msg, Twist):
+        return TWIST_COV_STAMPED, fastcdr.encode_twist
     return None
 
 

@@ -24,6 +24,7 @@ MSG_TEXT: dict[str, str] = {
     "geometry_msgs/PoseWithCovarianceStamped": "std_msgs/Header header\nPoseWithCovariance pose\n",
     "geometry_msgs/Twist": "Vector3  linear\nVector3  angular\n",
     "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/TwistWithCovarianceStamped": "std_msgs/Header header\nTwistWithCovariance twist\n",
     "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
     "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
     "nav_msgs/Odometry": (

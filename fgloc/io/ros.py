@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 
 from fgloc.geometry import quaternion_to_yaw, yaw_to_quaternion
-from fgloc.io.topics import IMU, LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
-from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D
+from fgloc.io.topics import IMU, LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, TWIST_COV_STAMPED
+from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, PoseFix, StaticTransform, Transform3D, Twist
 
 COV_IDX = (0, 1, 5)  # x, y, yaw (or vx, vy, wz) inside a ROS 6x6 covariance
 COV_IDX9 = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])  # the same rows/columns of the 6x6, flattened
@@ -312,6 +312,12 @@ def fix_from_ros(m: Any, topic: str) -> PoseFix:
     )
 
 
+def twist_from_ros(m: Any, topic: str) -> Twist:
+    tw = m.twist.twist
+    return Twist(stamp=header_stamp(m.header), twist=np.array([tw.linear.x, tw.linear.y, tw.angular.z], dtype=float),
+                 twist_cov=cov3_of(m.twist.covariance), frame_id=m.header.frame_id)
+
+
 def tf_from_ros(m: Any, topic: str) -> list[StaticTransform]:
     out: list[StaticTransform] = []
     for t in m.transforms:
@@ -355,4 +361,5 @@ FROM_ROS: dict[str, Callable[[Any, str], object]] = {
     IMU: imu_from_ros,
     TF_MESSAGE: tf_from_ros,
     POSE_COV_STAMPED: fix_from_ros,
+    TWIST_COV_STAMPED: twist_from_ros,
 }

@@ -32,7 +32,8 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 IMU = "sensor_msgs/msg/Imu"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
-READ_TYPES = (LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED)
+TWIST_COV_STAMPED = "geometry_msgs/msg/TwistWithCovarianceStamped"
+READ_TYPES = (LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, IMU, TF_MESSAGE, POSE_COV_STAMPED, TWIST_COV_STAMPED)
 #: other names of these types, with the same fields: ROS 1 before Hydro (2013) published tf as
 #: ``tf/tfMessage`` (the same ``geometry_msgs/TransformStamped[] transforms`` and md5 as tf2's)
 TYPE_ALIASES = {"tf/msg/tfMessage": TF_MESSAGE}

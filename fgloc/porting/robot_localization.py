@@ -10,6 +10,7 @@ robot_localization                          fgloc
 ``imuN`` + ``imuN_config``                  ``sources.inputs.imuN`` (imu): yaw, vyaw; roll, pitch
                                             (with ``two_d_mode: false``: the odometry levelled)
 ``poseN`` + ``poseN_config``                ``sources.inputs.poseN`` (pose): x, y, yaw
+``twistN`` + ``twistN_config``              ``sources.inputs.twistN`` (twist): vx, vy, vyaw
 ``*_differential``                          ``differential`` (on pose variables, as r_l)
 ``poseN_rejection_threshold`` (Mahalanobis  ``gate`` (its square: fgloc gates on the squared
 distance)                                   distance)
@@ -21,7 +22,7 @@ per second, as r_l scales it by dt)         (vx, vy), ``q_w`` (vyaw)
 ==========================================  ===============================================
 
 Everything else is one note line: 3-D components (z, roll and pitch in two_d_mode, rates,
-accelerations), ``twistN`` (TwistWithCovarianceStamped is not read), ``_relative`` (fgloc
+accelerations), ``_relative`` (fgloc
 estimates each heading source's offset anyway), odometry and IMU rejection thresholds (fgloc
 weights those by the noise they show), queue sizes, ``nodelay``, ``sensor_timeout``,
 control input, tf and debug settings.
@@ -138,21 +139,17 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         if len(flags) != 15:
             notes.append(f"{cfg_key}: {len(flags)} values, expected 15 (or 12 before indigo): source {key} skipped")
             continue
-        on = [NAMES15[j] for j in range(15) if flags[j]]
         levels = kind == "imu" and flags[3] and flags[4] and not as_bool(p.get("two_d_mode", False)) \
             and (flags[5] or flags[11])
         dropped = [NAMES15[j] for j in range(15) if flags[j] and j not in PLANAR and not (levels and j in (3, 4))]
         planar = [PLANAR[j] for j in sorted(PLANAR) if flags[j]]
         diff = as_bool(p.get(f"{key}_differential", False))
         used.add(f"{key}_differential")
-        if kind == "twist":
-            notes.append(f"{key} ({topic}): geometry_msgs/TwistWithCovarianceStamped is not read by fgloc; "
-                         f"not carried over ({', '.join(on) or 'nothing'} fused there)")
-            continue
         if dropped:
             notes.append(f"{cfg_key}: {', '.join(dropped)} not carried over (fgloc estimates x, y, yaw and their "
                          "rates in the plane" + (", no accelerations)" if any(d[0] == "a" for d in dropped) else ")"))
-        entry: dict[str, Any] = {"type": {"odom": "odometry", "imu": "imu", "pose": "pose"}[kind], "topic": topic}
+        entry: dict[str, Any] = {"type": {"odom": "odometry", "imu": "imu", "pose": "pose", "twist": "twist"}[kind],
+                                 "topic": topic}
         if kind == "odom":
             twist = [c for c in planar if c.startswith("v")]
             pose = [c for c in planar if not c.startswith("v")]
@@ -196,6 +193,16 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
                              "it to orientation only)")
                 diff = False
             entry["use"] = use
+        elif kind == "twist":
+            # robot_localization takes a twist's velocities only (its pose variables are ignored)
+            use = [c for c in planar if c.startswith("v")]
+            if not use:
+                notes.append(f"{key}: contributes nothing fgloc can fuse; skipped")
+                continue
+            if diff:
+                notes.append(f"{key}_differential: true has no effect on velocities")
+                diff = False
+            entry["use"] = use
         else:
             use = [c for c in planar if c in ("x", "y", "yaw")]
             if not use:
@@ -225,6 +232,10 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
                 notes.append(f"{k}: {v:g} not carried over (fgloc gates fixes, and weights odometry and IMU by "
                              "the noise they show against the other sources)")
         first_odom = next((n for n, e in inputs.items() if e["type"] == "odometry"), None)
+        first_twist = next((n for n, e in inputs.items() if e["type"] in ("odometry", "twist")), None)
+        if kind == "twist" and first_twist is not None:
+            notes.append(f"{key} ({topic}): fgloc integrates one twist source, the first ({first_twist}); {key}'s "
+                         "velocities are measurements in a back-end that takes a further odometry source")
         if kind == "odom" and first_odom is not None:
             notes.append(f"{key} ({topic}): fgloc integrates one odometry source, the first ({first_odom}); "
                          f"the EKF fuses {key}'s velocities as measurements, the smoother counts its messages as "

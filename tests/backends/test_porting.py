@@ -62,11 +62,12 @@ def test_robot_localization_ros2_example_layout():
     assert src["pose0"] == {"type": "pose", "topic": "/example/pose", "use": ["x", "y"], "frame_id": "odom",
                             "differential": True, "gate": 4.0}
     assert src["imu0"]["use"] == ["yaw", "vyaw", "roll", "pitch"]  # two_d_mode false: roll, pitch level
-    assert "twist0" not in src
+    assert src["twist0"] == {"type": "twist", "topic": "/example/twist", "use": ["vx", "vy"]}  # vz: a note
     assert (c.ekf.q_xy, c.ekf.q_theta, c.ekf.q_v, c.ekf.q_w) == (0.05, 0.06, 0.025, 0.02)
     j = "\n".join(notes)
     for expected in ("odom0_config: absolute x, y of an odometry fused as its increments",
-"twist0 (/example/twist)",
+"twist0 (/example/twist): fgloc integrates one twist source, the first (odom0)",
+                     "twist0_config: vz not carried over",
                      "imu0_config: vroll, vpitch, ax, ay, az not carried over",
                      "two_d_mode: false", "use_control: fgloc has no control input",
                      "odom0_queue_size: a ROS subscription setting", "sensor_timeout:",

@@ -13,18 +13,18 @@ from typing import Any
 
 from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
-from fgloc.localization.sources import imu, odometry, pose
+from fgloc.localization.sources import imu, odometry, pose, twist
 from fgloc.localization.sources.spec import POLICIES, SourceSpec, SourceType, fused_components
 
 #: the source types by name (``sources.inputs.NAME.type``), in the order the errors list them
-SOURCE_TYPES: dict[str, SourceType] = {t.name: t for t in (odometry.SOURCE, imu.SOURCE, pose.SOURCE)}
+SOURCE_TYPES: dict[str, SourceType] = {t.name: t for t in (odometry.SOURCE, imu.SOURCE, pose.SOURCE, twist.SOURCE)}
 
 
 @dataclass(frozen=True)
 class SourcesConfig:
     """``sources:`` per-source inputs (see :mod:`fgloc.localization.sources`)."""
 
-    inputs: dict = setting({}, "name -> {type: odometry|imu|pose, topic, use: [x, y, yaw, vx, vy, vyaw], "
+    inputs: dict = setting({}, "name -> {type: odometry|imu|pose|twist, topic, use: [x, y, yaw, vx, vy, vyaw], "
                            "differential, covariance: message|fixed|scaled|floor, sigmas, scale, gate, frame_id}; "
                            "empty: odom (/odom: vx, vy, vyaw) and imu (/imu: yaw, vyaw)")
     static_transforms: list[dict] = setting([], "mounts the log lacks: [{parent: base_link, child: imu_link, "
@@ -83,6 +83,8 @@ def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: 
         if topic in seen_topics:
             raise ConfigError(f"{where}.topic: {topic} is already source {seen_topics[topic]!r}")
         seen_topics[topic] = str(name)
+        if d.get("differential") and not kind.differential:
+            raise ConfigError(f"{where}.differential: a {typ} source has no poses whose increments it could use")
         out.append(SourceSpec(str(name), typ, topic, use, bool(d.get("differential", False)), pol, sig,
                               float(d.get("scale", 1.0)), None if gate is None else float(gate),
                               None if d.get("frame_id") is None else str(d["frame_id"])))

@@ -12,7 +12,7 @@ IMU (``use: [..., roll, pitch]``) the twist is projected onto the ground plane.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -48,7 +48,7 @@ def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt:
 class OdometryHandler(SourceHandler):
     """An odometry source's messages into the localizer (see the module docstring)."""
 
-    accepts = (Odometry,)
+    accepts: ClassVar[tuple[type, ...]] = (Odometry,)
     group = "twist"  # the first twist source is integrated; a second one is velocity measurements
     second_fused = False
 
@@ -60,7 +60,11 @@ class OdometryHandler(SourceHandler):
         self.whole_twist = (spec.covariance == "message" and set(spec.use) >= {"vx", "vy", "vyaw"}
                             and not spec.differential)
 
-    def handle(self, msg: Odometry) -> None:
+    def handle(self, msg: Any) -> None:
+        self.fuse(msg)
+
+    def fuse(self, msg: Odometry) -> None:
+        """One odometry message's twist (or its pose increment) into the localizer or the back-end."""
         spec, st = self.spec, self.state
         h = st.health
         # a second odometry source: its velocities are measurements in a back-end that takes them

@@ -28,8 +28,9 @@ OUT_OF_ORDER = "differential: stamp not after the previous message's (out of ord
 class SourceType:
     """What a source type declares: its name in ``sources.inputs.NAME.type``, the ROS message it
     reads (as :func:`fgloc.io.topics.normalize_type` spells it), its default topic and ``use``,
-    the components it may use and the handler class that takes its messages
-    (:class:`~fgloc.localization.sources.handler.SourceHandler`)."""
+    the components it may use, the handler class that takes its messages
+    (:class:`~fgloc.localization.sources.handler.SourceHandler`), and whether its messages have
+    poses whose increments ``differential`` can use."""
 
     name: str
     message_type: str
@@ -37,6 +38,7 @@ class SourceType:
     default_use: tuple[str, ...]
     components: tuple[str, ...]
     handler: Any  # type[SourceHandler]
+    differential: bool = True
 
 
 @dataclass

@@ -18,6 +18,7 @@ import typer
 
 from fgloc.app import mounts
 from fgloc.errors import FglocError
+from fgloc.io import stop
 
 app = typer.Typer(
     name="fgloc",
@@ -104,6 +105,14 @@ def _main(argv: list[str] | None) -> int:
     # at exit, skip the interpreter's last cycle collection over everything loaded (numba, scipy,
     # gtsam: 0.15-0.3 s of every command); the OS frees the memory
     atexit.register(gc.freeze)
+    with stop.handling():  # SIGINT / SIGTERM: stop cleanly at the first, at once at the second (fgloc.io.stop)
+        code = _invoke(argv)
+        if code == stop.EXIT_INTERRUPTED and stop.requested() is not None:
+            print(stop.interrupted_line(), file=sys.stderr)
+    return code
+
+
+def _invoke(argv: list[str] | None) -> int:
     try:
         rv = app(args=argv, standalone_mode=False)
     except FglocError as e:
@@ -114,10 +123,18 @@ def _main(argv: list[str] | None) -> int:
         return int(code or 0)
     except typer.Abort:
         print("fgloc: aborted", file=sys.stderr)
-        return 130
+        return stop.EXIT_INTERRUPTED
     except KeyboardInterrupt:
-        print("fgloc: interrupted", file=sys.stderr)
-        return 130
+        if stop.requested() is None:
+            print("fgloc: interrupted", file=sys.stderr)
+        return stop.EXIT_INTERRUPTED
+    except OSError as e:
+        from fgloc.io.outputs import is_disk_error, problem
+
+        if is_disk_error(e):  # a write no output layer saw (the layer names the file it was writing)
+            print(f"fgloc: error: {e.filename or 'disk'}: {problem(e)}", file=sys.stderr)
+            return 2
+        raise
     except Exception as e:  # click usage errors (typer vendors click, so match by shape)
         if hasattr(e, "show") and hasattr(e, "exit_code"):
             hint = _option_hint(e)

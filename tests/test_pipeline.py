@@ -444,7 +444,7 @@ def test_run_never_overwrites_its_input(world_log, tmp_path, capsys):
     other.mkdir()
     (other / "trajectory.tum").write_text("# someone's reference\n")
     rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(other), "-q"], capsys)
-    assert rc == 2 and "not written by fgloc run; pass --force" in err
+    assert rc == 2 and "trajectory.tum, not written by fgloc run; pass --force" in err
     assert (other / "trajectory.tum").read_text() == "# someone's reference\n"
     rc, _, err = _run(["run", str(world_log / "log.mcap"), "-o", str(other), "-q", "--force"], capsys)
     assert rc == 0, err

@@ -4,5 +4,4 @@ The CLI (:mod:`fgloc.commands`) only parses arguments and prints; tests, tools a
 ``fgloc batch`` call these directly.
 
 * :func:`fgloc.app.run.run_log` - localize one log (``fgloc run``).
-* :mod:`fgloc.app.files` - output safety (never overwrite an input).
 """

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from fgloc.config import FglocConfig
+    from fgloc.io.outputs import Outputs
     from fgloc.localization.stats import RunStats
 
 #: the clock of ``RunResult.timings`` and ``wall_s`` (seconds); a benchmark sets ``time.thread_time``
@@ -190,31 +191,30 @@ def _check_map_arg(map_yaml: Path | None) -> None:
                           f"(e.g. {Path(map_yaml).with_suffix('.yaml')}), which says the resolution and origin")
 
 
-def _ours(outdir: Path) -> bool:
-    """Whether ``outdir`` holds a previous fgloc run (its config.yaml has the ``run:`` section)."""
+def legacy_outputs(outdir: Path) -> tuple[str, ...]:
+    """The files of a run folder written before folders had a record of what fgloc wrote (its
+    config.yaml has the ``run:`` section)."""
     import yaml
 
     try:  # libyaml's parser where PyYAML has it (4x faster than the pure-Python one on a run's config.yaml)
         data = yaml.load((outdir / "config.yaml").read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return False
-    return isinstance(data, dict) and isinstance(data.get("run"), dict)
+        return ()
+    return OUTPUT_FILES if isinstance(data, dict) and isinstance(data.get("run"), dict) else ()
+
+
+def run_outputs(outdir: Path, inputs: list[Path | None], force: bool) -> Outputs:
+    """``fgloc run``'s outputs (:class:`fgloc.io.outputs.Outputs`): never an input (even with
+    ``force``); files of the output names that fgloc run did not write only with ``force``;
+    written into a staging folder and published together when the run is complete."""
+    from fgloc.io.outputs import Outputs
+
+    return Outputs(outdir, OUTPUT_FILES, command="run", inputs=inputs, force=force, legacy=legacy_outputs)
 
 
 def check_outputs(outdir: Path, inputs: list[Path | None], force: bool) -> None:
-    """Never overwrite an input (one line, even with ``force``); files of the output names that
-    fgloc run did not write only with ``force``."""
-    from fgloc.app.files import OutputError, check_not_input
-
-    if outdir.exists() and not outdir.is_dir():
-        raise OutputError(f"{outdir}: is a file; -o takes a folder")
-    existing = [outdir / n for n in OUTPUT_FILES if (outdir / n).exists()]
-    for p in existing:
-        check_not_input(p, inputs)
-    if existing and not force and not _ours(outdir):
-        names = ", ".join(p.name for p in existing)
-        raise OutputError(f"{outdir}: holds {names}, not written by fgloc run; pass --force to overwrite, "
-                          f"or choose another -o folder")
+    """The refusals of :func:`run_outputs`, one line each, nothing written."""
+    run_outputs(outdir, inputs, force).check()
 
 
 def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None,
@@ -224,15 +224,19 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     ``progress(total)``: optional factory of a progress bar (an object with ``update(n)`` and
     context-manager methods, e.g. tqdm) over the messages read.  ``announce(line)``: where the
     Foxglove view says where it serves (``req.view``).
+
+    The outputs are checked before the log is opened (:func:`run_outputs`) and published together
+    when the run is complete: an error, a Ctrl-C or a full disk leaves ``req.outdir`` as it was.
+    A stop requested by a signal (:mod:`fgloc.io.stop`) ends the run between two messages.
     """
     t_start = PHASE_CLOCK()
     config = _effective_config(req)
     inputs = _open_inputs(req, config)
     session, mirror_scans = _build_session(req, config, inputs)
-    outdir = Path(req.outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
-    loop = _localize(req, outdir, session, inputs, mirror_scans, t_start, progress, announce)
-    result = _write_outputs(req, outdir, config, session.loc, inputs, loop)
+    with inputs.outputs as outs:
+        loop = _localize(req, outs.dir, session, inputs, mirror_scans, t_start, progress, announce)
+        result = _write_outputs(req, outs.dir, config, session.loc, inputs, loop)
+    result.outdir = outs.folder
     _evaluate(result, inputs, loop.final, session.loc.online_trajectory())
     result.timings = loop.timings(PHASE_CLOCK())
     return result
@@ -250,6 +254,7 @@ class _Inputs:
     counts: dict[str, int]
     sources: dict[str, str]  # the config's sources: topic -> type
     initial_pose: np.ndarray | None
+    outputs: Outputs  # checked, not yet begun (run_log writes through it)
 
     def count(self, topic: str) -> int:
         return self.counts.get(topic, 0)
@@ -294,7 +299,8 @@ def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
     pose0 = _initial_pose(req.initial_pose)
     _check_map_arg(req.map_yaml)
     cfg_path = req.config if isinstance(req.config, (str, Path)) else None
-    check_outputs(Path(req.outdir), [log, req.map_yaml, cfg_path], req.force)
+    outputs = run_outputs(Path(req.outdir), [log, req.map_yaml, cfg_path], req.force)
+    outputs.check()
     reader = open_log(log, topics)
     # a default topic the log lacks: its only one of that type (fgloc import's rule), said on stderr;
     # a topic named on the command line is kept, and a config with sources names the inputs it wants
@@ -304,7 +310,8 @@ def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
     topics = Topics(scan=picked["scan"], odom=picked["odom"], imu=picked["imu"])
     reader.topics = topics
     summ = reader.summary()
-    inputs = _Inputs(log, reader, topics, summ, {t: v["count"] for t, v in summ["topics"].items()}, src, pose0)
+    inputs = _Inputs(log, reader, topics, summ, {t: v["count"] for t, v in summ["topics"].items()}, src, pose0,
+                     outputs)
     _check_localizable(req, inputs)
     return inputs
 
@@ -413,6 +420,7 @@ def _localize(req: RunRequest, outdir: Path, session: Any, inputs: _Inputs, mirr
     ``/fused_pose``; the view; the progress bar), then the final smoothing."""
     from fgloc.app.startup import setup_done
     from fgloc.io.mcap_writer import LogWriter
+    from fgloc.io.stop import checkpoint
     from fgloc.localization import RecorderSink
     from fgloc.view import ViewHook, check_rate, paced
 
@@ -450,6 +458,7 @@ def _localize(req: RunRequest, outdir: Path, session: Any, inputs: _Inputs, mirr
                 messages = _mirrored_scans(messages, topics.scan, loc.laser_mount.child.lstrip("/"))
             for topic, msg in paced(messages, realtime):
                 feed(topic, msg)
+            checkpoint()
             t_fin = PHASE_CLOCK()
             final = session.finish()
             t_done = PHASE_CLOCK()
@@ -621,10 +630,13 @@ def _copied(records: Any, writer: Any, clock: _LogClock, spent: dict[str, float]
     """``(topic, message)`` of ``records``, each first copied into ``writer`` as the log stores it
     (:func:`fgloc.io.mcap_writer.tee`, timed: ``spent['read']`` decoding, ``spent['write']``
     copying) and its log time set on ``clock``."""
+    from fgloc.io.stop import checkpoint
+
     pc = PHASE_CLOCK
     it = iter(records)
     copy = writer.copy
     while True:
+        checkpoint()  # a Ctrl-C / SIGTERM ends the run here, between two messages (fgloc.io.stop)
         t0 = pc()
         rec = next(it, None)
         t1 = pc()

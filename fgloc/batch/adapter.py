@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,23 @@ class SeedOutcome:
     duration_s: float
     poses: dict[str, int]
     written: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------- outputs
+def output_names(kind: str, params: dict[str, Any]) -> tuple[tuple[str, ...], Callable[[Path], Iterable[str]]]:
+    """The files a job of ``kind`` writes in its folder, and the function naming those an earlier
+    version wrote there (see :class:`fgloc.io.outputs.Outputs`)."""
+    if kind == "run":
+        from fgloc.app.run import OUTPUT_FILES, legacy_outputs
+
+        return OUTPUT_FILES, legacy_outputs
+    if kind == "map":
+        from fgloc.mapping.build import MAP_FILES, legacy_map_files
+
+        return MAP_FILES, legacy_map_files
+    labels = [v[0] for v in params.get("variants", [])]
+    names = ("metrics.json", "ground_truth.tum", "map.yaml", "map.pgm", *(f"{variant_slug(x)}.tum" for x in labels))
+    return names, lambda folder: ()
 
 
 # ---------------------------------------------------------------------------- localize

@@ -120,8 +120,13 @@ def batch_bench_paper(seeds: int, outdir: Path, opts: EngineOptions, config: Pat
     """
     import numpy as np
 
+    from fgloc.eval.plots import plot_files
+    from fgloc.io.outputs import Outputs
+
     variants = adapter.paper_variants(no_amcl, only)
     jobs = bench_paper_jobs(seeds, outdir, variants, config, keep_seed0=plots)
+    outs = Outputs(outdir, ("table.md", "metrics.yaml", *plot_files()), command="bench paper", force=opts.force)
+    outs.check()  # before the seeds run: a table.md fgloc did not write is refused at once
     rep = _run(lambda: jobs, outdir, opts, "seeds")
     done = [j for j in jobs if any(r.log == j.name and r.status in ("ok", "done") for r in rep.rows)]
     docs = [adapter.load_seed_metrics(Path(j.outdir)) for j in done]
@@ -134,5 +139,7 @@ def batch_bench_paper(seeds: int, outdir: Path, opts: EngineOptions, config: Pat
     out.table = adapter.paper_table(out.rows, n)
     out.claims = adapter.paper_claims(out.rows)
     seed0 = next((Path(j.outdir) for j in done if j.params.get("keep")), None) if plots else None
-    out.files = adapter.paper_outputs(out.rows, n, Path(outdir), seed0, variants)
+    with outs:
+        staged = adapter.paper_outputs(out.rows, n, outs.dir, seed0, variants)
+    out.files = [outs.final(p.name) for p in staged]
     return out

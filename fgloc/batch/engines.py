@@ -92,17 +92,44 @@ class InlineEngine:
 
 # ---------------------------------------------------------------------------- local pool
 def _worker_main(conn: Connection, fn: JobFn) -> None:
-    """A pool worker: run jobs from ``conn`` until told to stop (None) or the pipe closes."""
+    """A pool worker: run jobs from ``conn`` until told to stop (None) or the pipe closes.
+
+    Ctrl-C is the driver's to handle; SIGTERM (the driver stopping a busy worker, or the driver's
+    death: the parent-death signal) ends the job where its outputs can be discarded whole
+    (:mod:`fgloc.io.stop`), then the worker."""
+    from fgloc.io import stop
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides what Ctrl-C stops
-    while True:
-        try:
-            msg = conn.recv()
-        except (EOFError, OSError):
-            return
-        if msg is None:
-            return
-        i, job, blobs = msg
-        conn.send((i, fn(job, blobs)))
+    parent = os.getppid()
+    _die_with_parent()
+    if os.getppid() != parent:  # the driver died before the parent-death signal was set
+        return
+    with stop.handling():
+        while True:
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError, KeyboardInterrupt):
+                return
+            if msg is None:
+                return
+            i, job, blobs = msg
+            try:
+                res = fn(job, blobs)
+            except KeyboardInterrupt:
+                return
+            conn.send((i, res))
+
+
+def _die_with_parent() -> None:
+    """SIGTERM this process when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere nothing)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(1, int(signal.SIGTERM), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 @dataclass
@@ -136,8 +163,15 @@ class LocalEngine:
         ctx = mp.get_context("spawn")
         queue: deque[tuple[int, Job]] = deque(enumerate(jobs))
         slots: list[_Slot] = []
+        from fgloc.io import stop
+
+        def kill_all() -> None:  # a second Ctrl-C exits at once: no worker goes on as an orphan
+            for s in slots:
+                s.proc.kill()
+
+        unhook = stop.at_hard_exit(kill_all)
         try:
-            slots = [self._start(ctx, fn) for _ in range(min(self.jobs, len(jobs)))]
+            slots += [self._start(ctx, fn) for _ in range(min(self.jobs, len(jobs)))]
             while queue or any(s.current is not None for s in slots):
                 for s in slots:
                     while s.current is None and queue:
@@ -179,6 +213,7 @@ class LocalEngine:
                     yield i, crash_result(job, s.proc.exitcode)
                     self._replace(ctx, fn, slots, s)
         finally:
+            unhook()
             self._stop(slots)
 
     def _replace(self, ctx: Any, fn: JobFn, slots: list[_Slot], dead: _Slot) -> None:

@@ -9,7 +9,10 @@
   ``--map`` (or none), empty ``x,y,yaw`` use ``--initial-pose`` (or global localization).
 * Each log's outputs go to ``OUTDIR/<name>/``, ``<name>`` its file name without the log
   suffixes; logs with the same name get their parent folders' names in front
-  (``day1/run.mcap``, ``day2/run.mcap`` -> ``day1_run``, ``day2_run``).
+  (``day1/run.mcap``, ``day2/run.mcap`` -> ``day1_run``, ``day2_run``).  A name is one harmless
+  path component whatever the log is called (:func:`fgloc.io.outputs.safe_name`: ``...mcap``
+  gives ``__``, never ``..``; no separators, no leading dot), never a file of OUTDIR itself
+  (``summary.csv``): outputs stay inside OUTDIR.
 """
 
 from __future__ import annotations
@@ -103,21 +106,28 @@ def log_stem(p: Path) -> str:
     return name
 
 
+#: files of OUTDIR itself, never a job's folder name
+RESERVED = ("summary.csv", "table.md", "metrics.yaml")
+
+
 def unique_names(paths: list[Path]) -> list[str]:
-    """One output folder name per log: the stem, with parent folder names in front where needed."""
+    """One output folder name per log: the stem, with parent folder names in front where needed;
+    each a single safe path component (:func:`fgloc.io.outputs.safe_name`), none of :data:`RESERVED`."""
+    from fgloc.io.outputs import safe_name
+
     depth = [0] * len(paths)
 
     def name(i: int) -> str:
         p = paths[i]
         parts = [q.name for q in list(p.parents)[: depth[i]]][::-1]
-        return "_".join([*[x for x in parts if x], log_stem(p)])
+        return safe_name("_".join([*[x for x in parts if x], log_stem(p)]), "log")
 
     for _ in range(64):
         names = [name(i) for i in range(len(paths))]
         groups: dict[str, list[int]] = {}
         for i, n in enumerate(names):
             groups.setdefault(n, []).append(i)
-        clash = [i for g in groups.values() if len(g) > 1 for i in g]
+        clash = [i for n, g in groups.items() if len(g) > 1 or n in RESERVED for i in g]
         if not clash:
             return names
         grew = False
@@ -128,11 +138,15 @@ def unique_names(paths: list[Path]) -> list[str]:
         if not grew:
             break
     names = [name(i) for i in range(len(paths))]
-    counts: dict[str, int] = {}
+    counts: dict[str, int] = {n: 1 for n in RESERVED}
     out = []
     for n in names:  # the same name at every depth: number them
         counts[n] = counts.get(n, 0) + 1
-        out.append(n if counts[n] == 1 else f"{n}_{counts[n]}")
+        k = counts[n]
+        while k > 1 and f"{n}_{k}" in names:
+            k += 1
+        counts[n] = k
+        out.append(n if k == 1 else f"{n}_{k}")
     return out
 
 

@@ -14,6 +14,11 @@ A job names its inputs by absolute path (``inputs``: role -> path; roles ``log``
   bytes, which the driver writes into ``job.outdir``.  No shared storage is needed.  Paths of
   the temporary folder in outputs and error messages are replaced by the original paths.
 
+Either way the outputs go through :class:`fgloc.io.outputs.Outputs` (:func:`job_outputs`): the
+job's folder stays inside OUTDIR (never a symbolic link), files there that fgloc did not write
+are refused unless ``--force``, and a job's files are published together when it succeeded
+(an error, a crash or a Ctrl-C leaves the folder as it was).
+
 The result of a job never depends on where it ran: the worker calls the same library
 function the single-log command calls, with the same arguments.
 """
@@ -30,10 +35,13 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fgloc.batch import adapter
 from fgloc.errors import FglocError
+
+if TYPE_CHECKING:
+    from fgloc.io.outputs import Outputs
 
 #: job kinds and the adapter function each one calls
 KINDS = ("run", "map", "bench-paper")
@@ -54,6 +62,8 @@ class Job:
     #: a lost run counts as done, not failed (``--allow-lost``): how the result is judged, not
     #: what is computed, so it is no part of the fingerprint (changing it re-runs nothing)
     accept_lost: bool = False
+    #: replace files in the job's folder that fgloc did not write (``--force``; no part of the fingerprint)
+    force: bool = False
 
     def fingerprint(self) -> str:
         """Hash of kind, options and inputs (path, size, mtime): a finished job whose fingerprint
@@ -176,48 +186,62 @@ def _unlocalize(text: str, pairs: list[tuple[str, str]]) -> str:
     return text
 
 
-def staging_prefix(job: Job) -> str:
-    """Name prefix of the folders a job's outputs are written into before they are moved in place."""
-    return f".{job.name}.partial-"
+def job_outputs(job: Job) -> Outputs:
+    """The job's outputs in ``job.outdir`` (:class:`fgloc.io.outputs.Outputs`): the names the
+    single-log command writes, by that command (``fgloc run`` and ``fgloc batch run`` replace each
+    other's files), the folder confined to OUTDIR."""
+    from fgloc.io.outputs import Outputs, confined
+
+    folder = Path(job.outdir)
+    confined(folder.parent, job.name, folder=True)
+    names, legacy = adapter.output_names(job.kind, job.params)
+
+    def earlier(f: Path) -> list[str]:  # written before folders had a record: the command's own, or batch's marker
+        return [*legacy(f), *_marker_files(f)]
+
+    return Outputs(folder, names, command=job.kind, inputs=job.inputs.values(), force=job.force, legacy=earlier)
+
+
+def _marker_files(folder: Path) -> list[str]:
+    """The files an earlier batch's completion marker lists with their sizes unchanged."""
+    try:
+        doc = json.loads((folder / "batch-done.json").read_text())
+        files = doc.get("files") or {}
+        return [rel for rel, size in files.items() if (folder / rel).stat().st_size == size]
+    except (OSError, ValueError, AttributeError, TypeError):
+        return []
 
 
 # ---------------------------------------------------------------------------- the worker
 def execute(job: Job, blobs: dict[str, Blob] | None = None) -> JobResult:
     """Run one job (in a worker process): never raises for a failing log, returns its error.
 
-    The job writes into a fresh staging folder (shipped: in the worker's temporary folder; by
-    path: ``OUTDIR/.<name>.partial-<host>-<pid>``, same file system), so its outputs are exactly
-    the files found there; on success they are moved into ``job.outdir`` (by path) or returned
-    as bytes (shipped).  Text outputs (YAML, JSON) that name the temporary paths get the
-    original ones.
+    By path the job's outputs are written and published into ``job.outdir`` through
+    :func:`job_outputs`; shipped, they are written into the worker's temporary folder and
+    returned as bytes (the driver publishes them the same way).  Text outputs (YAML, JSON) that
+    name the temporary paths get the original ones.
     """
     t0, c0 = time.perf_counter(), time.process_time()
     host = f"{socket.gethostname()}:{os.getpid()}"
-    final = Path(job.outdir)
     tmp = Path(tempfile.mkdtemp(prefix="fgloc-batch-")) if blobs is not None else None
-    stage = tmp / "out" if tmp is not None else final.parent / f"{staging_prefix(job)}{host.replace(':', '-')}"
     local = dict(job.inputs)
     pairs: list[tuple[str, str]] = []
     try:
         if tmp is not None:
             local = _materialize(job, blobs or {}, tmp)
-        pairs = _replacements(local, job) + [(str(stage), str(final))]
-        shutil.rmtree(stage, ignore_errors=True)
-        row = _run_kind(job, {k: Path(v) for k, v in local.items()}, stage)
-        written = sorted(str(f.relative_to(stage)) for f in stage.rglob("*") if f.is_file())
-        for rel in written:
-            if rel.endswith((".yaml", ".json", ".txt", ".md")):
-                text = (stage / rel).read_text()
-                fixed = _unlocalize(text, pairs)
-                if fixed != text:
-                    (stage / rel).write_text(fixed)
-        files = None
+        pairs = _replacements(local, job)
         if tmp is not None:
+            stage = tmp / "out"
+            row = _run_kind(job, {k: Path(v) for k, v in local.items()}, stage)
+            written = sorted(str(f.relative_to(stage)) for f in stage.rglob("*") if f.is_file()
+                             and not f.name.startswith("."))
+            _unlocalize_files(stage, written, pairs)
             files = {rel: (stage / rel).read_bytes() for rel in written}
         else:
-            for rel in written:
-                (final / rel).parent.mkdir(parents=True, exist_ok=True)
-                os.replace(stage / rel, final / rel)
+            with job_outputs(job) as outs:
+                row = _run_kind(job, {k: Path(v) for k, v in local.items()}, outs.dir)
+                _unlocalize_files(outs.dir, outs.staged(), pairs + [(str(outs.dir), str(outs.folder))])
+            written, files = outs.published, None
         return JobResult(job.name, True, row=row, written=written, files=files, host=host,
                          wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0)
     except KeyboardInterrupt:
@@ -228,7 +252,17 @@ def execute(job: Job, blobs: dict[str, Blob] | None = None) -> JobResult:
         return JobResult(job.name, False, error=msg, traceback=tb, host=host, wall_s=time.perf_counter() - t0,
                          cpu_s=time.process_time() - c0)
     finally:
-        shutil.rmtree(tmp if tmp is not None else stage, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _unlocalize_files(folder: Path, written: list[str], pairs: list[tuple[str, str]]) -> None:
+    for rel in written:
+        if rel.endswith((".yaml", ".json", ".txt", ".md")):
+            text = (folder / rel).read_text()
+            fixed = _unlocalize(text, pairs)
+            if fixed != text:
+                (folder / rel).write_text(fixed)
 
 
 def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]:

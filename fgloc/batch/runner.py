@@ -7,9 +7,12 @@
   ``force`` runs everything again.  A job about to run loses its old marker first.
 * A job that fails (a corrupt log, a missing map, a crashed worker) gets a row with its
   one-line error (and ``error.txt`` with the traceback for unexpected errors); the others go on.
-* Ctrl-C stops the engine (running jobs are abandoned, without markers), keeps every
-  finished job and writes the summary of what finished: running the same command again
-  picks up the rest.
+* Ctrl-C or SIGTERM stops the engine (running jobs are abandoned, without markers, their folders
+  as they were: :func:`fgloc.batch.jobs.job_outputs`), keeps every finished job and writes the
+  summary of what finished: running the same command again picks up the rest.  A second signal
+  ends the batch at once (the workers are killed; finished jobs are kept all the same).
+* Before anything runs, each job's folder is checked (:meth:`fgloc.io.outputs.Outputs.check`):
+  a folder that holds files fgloc did not write is that job's error row unless ``force``.
 """
 
 from __future__ import annotations
@@ -21,10 +24,13 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from fgloc.batch.jobs import Job, JobResult, execute, staging_prefix
-from fgloc.batch.summary import SummaryRow, write_summary_csv
+from fgloc.batch.jobs import Job, JobResult, execute, job_outputs
+from fgloc.batch.summary import COLUMNS, SummaryRow, write_summary_csv
+
+if TYPE_CHECKING:
+    from fgloc.io.outputs import Outputs
 
 MARKER = "batch-done.json"
 MARKER_VERSION = 1
@@ -87,43 +93,66 @@ def write_marker(job: Job, res: JobResult) -> None:
 
 
 def clear_marker(job: Job) -> None:
-    """Before a job runs: its old marker and error go, and so do staging folders that an
-    interrupted run left behind (``OUTDIR/.<name>.partial-*``)."""
-    import shutil
-
+    """Before a job runs: its old marker and error go."""
     for p in (marker_path(job), Path(job.outdir) / "error.txt"):
         try:
             p.unlink()
         except FileNotFoundError:
             pass
-    parent = Path(job.outdir).parent
-    if parent.is_dir():
-        for d in parent.iterdir():
-            if d.name.startswith(staging_prefix(job)) and d.is_dir():
-                shutil.rmtree(d, ignore_errors=True)
 
 
 def _store(job: Job, res: JobResult) -> JobResult:
-    """Driver side: shipped outputs into the job's folder, then the marker (or error.txt)."""
+    """Driver side: shipped outputs into the job's folder (published whole), then the marker (or error.txt)."""
+    from fgloc.io.outputs import OutputError
+
     out = Path(job.outdir)
     try:
         if res.ok and res.files is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            for rel, data in res.files.items():
-                dst = out / rel
-                if out.resolve() not in dst.resolve().parents:
-                    raise OSError(f"output name {rel!r} leaves {out}")
-                dst.parent.mkdir(parents=True, exist_ok=True)
-                dst.write_bytes(data)
+            with job_outputs(job) as outs:
+                for rel, data in res.files.items():
+                    outs.path(rel).write_bytes(data)
             res.files = None
         if res.ok:
             write_marker(job, res)
         elif res.traceback:
             out.mkdir(parents=True, exist_ok=True)
             (out / "error.txt").write_text(res.traceback)
+    except OutputError as e:
+        return JobResult(job.name, False, error=str(e), host=res.host)
     except OSError as e:
         return JobResult(job.name, False, error=f"{out}: cannot write outputs ({e.strerror or e})", host=res.host)
     return res
+
+
+def _refused(job: Job) -> JobResult | None:
+    """The job's error row when its folder cannot take its outputs (checked before it runs)."""
+    from fgloc.io.outputs import OutputError
+
+    try:
+        job_outputs(job).check()
+    except OutputError as e:
+        return JobResult(job.name, False, error=str(e))
+    return None
+
+
+def _summary_outputs(path: Path, force: bool) -> Outputs:
+    """summary.csv, replaced whole: never a file of that name that a batch did not write (unless ``force``)."""
+    from fgloc.io.outputs import Outputs
+
+    def earlier(folder: Path) -> list[str]:
+        try:
+            with (folder / path.name).open() as fh:
+                return [path.name] if fh.readline().strip() == ",".join(COLUMNS) else []
+        except (OSError, UnicodeDecodeError):
+            return []
+
+    return Outputs(path.parent, [path.name], command="batch", force=force, legacy=earlier)
+
+
+def _summary(path: Path, rows: list[SummaryRow], force: bool) -> Path:
+    with _summary_outputs(path, force) as outs:
+        write_summary_csv(outs.path(path.name), rows)
+    return path
 
 
 def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, force: bool = False,
@@ -137,18 +166,26 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
     from tqdm import tqdm
 
     t0 = time.perf_counter()
+    summary_csv = outdir / "summary.csv"
+    _summary_outputs(summary_csv, force).check()  # before any work: a user's summary.csv stays
     outdir.mkdir(parents=True, exist_ok=True)
     rows: dict[str, SummaryRow] = {}
     results: dict[str, JobResult] = {}
     todo: list[Job] = []
     for job in jobs:
+        job.force = force
         doc = None if force else read_marker(job)
         if doc is not None:
             rows[job.name] = SummaryRow.from_marker(job.name, doc, job.accept_lost)
-        else:
-            clear_marker(job)
-            todo.append(job)
-    skipped = len(jobs) - len(todo)
+            continue
+        refused = _refused(job)
+        if refused is not None:
+            results[job.name] = refused
+            rows[job.name] = SummaryRow.from_result(refused, job.accept_lost)
+            continue
+        clear_marker(job)
+        todo.append(job)
+    skipped = len(jobs) - len(todo) - len(results)
     interrupted = False
     failed = 0
     bar = tqdm(total=len(jobs), initial=skipped, desc=desc, unit="log", disable=not progress, leave=False,
@@ -172,6 +209,6 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
         bar.close()
     ordered = [rows.get(j.name) or SummaryRow.not_run(j.name) for j in jobs]
     failed = sum(r.status in ("error", "lost") for r in ordered)
-    csv_path = write_summary_csv(outdir / "summary.csv", ordered)
+    csv_path = _summary(summary_csv, ordered, force)
     return BatchReport(ordered, csv_path, engine.describe(), time.perf_counter() - t0, interrupted,
                        ran=len(results), skipped=skipped, failed=failed, results=results)

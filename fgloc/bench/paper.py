@@ -39,15 +39,24 @@ def _bench_one_seed(args: tuple[int, list[tuple[str, str, str, str]], Any, bool]
 
 
 def bench_paper(seeds: int, outdir: Path | None, variants: Any = PAPER_VARIANTS, config: Any = None,
-                jobs: int = 1, quiet: bool = False) -> dict[str, Any]:
+                jobs: int = 1, quiet: bool = False, force: bool = False) -> dict[str, Any]:
     """Simulate the paper run ``seeds`` times, localize with each variant, compare with the paper.
 
     ``config``: a :class:`fgloc.config.FglocConfig`, a YAML path, or None (the defaults).
     Returns ``{"rows": {label: [Metrics per seed]}, "walls": {label: mean s}, "files", "seeds"}``.
+    ``outdir``'s files are checked first and published together at the end
+    (:class:`fgloc.io.outputs.Outputs`; files fgloc did not write only with ``force``).
     """
     from fgloc.config import FglocConfig, load_config
     from fgloc.io.yamlio import write_yaml
 
+    outs = None
+    if outdir is not None:
+        from fgloc.eval.plots import plot_files
+        from fgloc.io.outputs import Outputs
+
+        outs = Outputs(outdir, ("table.md", "metrics.yaml", *plot_files()), command="bench paper", force=force)
+        outs.check()
     cfg = config if isinstance(config, FglocConfig) else load_config(config)
     tasks = [(s, list(variants), cfg, s == 0 and outdir is not None) for s in range(seeds)]
     results: list[dict[str, Any]] = []
@@ -65,17 +74,18 @@ def bench_paper(seeds: int, outdir: Path | None, variants: Any = PAPER_VARIANTS,
     rows = {label: [r["metrics"][label] for r in results] for label, *_ in variants}
     walls = {label: float(np.mean([r["wall"][label] for r in results])) for label, *_ in variants}
     files: list[Path] = []
-    if outdir is not None:
+    if outs is not None:
         from fgloc.eval.paper import comparison_text
         from fgloc.eval.plots import plot_all
 
-        outdir.mkdir(parents=True, exist_ok=True)
-        r0 = results[0]
-        files = plot_all(r0["traj"], r0["gt"], outdir, occ_map=r0["map"], title="paper replica, seed 0")
-        (outdir / "table.md").write_text(comparison_text(rows, title=f"paper replica, {seeds} seeds") + "\n")
-        summary = {label: {k: [m.to_dict()[k] for m in ms] for k in ("position_rmse_m", "heading_rmse_deg")}
-                   for label, ms in rows.items()}
-        write_yaml(outdir / "metrics.yaml", summary)
+        with outs:
+            r0 = results[0]
+            staged = plot_all(r0["traj"], r0["gt"], outs.dir, occ_map=r0["map"], title="paper replica, seed 0")
+            outs.path("table.md").write_text(comparison_text(rows, title=f"paper replica, {seeds} seeds") + "\n")
+            summary = {label: {k: [m.to_dict()[k] for m in ms] for k in ("position_rmse_m", "heading_rmse_deg")}
+                       for label, ms in rows.items()}
+            write_yaml(outs.path("metrics.yaml"), summary)
+        files = [outs.final(p.name) for p in staged]
     return {"rows": rows, "walls": walls, "files": files, "seeds": seeds}
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -27,6 +28,7 @@ def register(app: typer.Typer) -> None:
                                                        "(`fgloc config show`)"),
         jobs: int = typer.Option(2, "--jobs", "-j", help="parallel processes"),
         no_amcl: bool = typer.Option(False, "--no-amcl", help="skip the EKF+AMCL column"),
+        force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc did not write"),
     ) -> None:
         """The paper experiment over N seeds: the paper's numbers beside EKF, smoother and batch."""
         from rich.console import Console
@@ -41,7 +43,7 @@ def register(app: typer.Typer) -> None:
         if not have_amcl and not no_amcl:
             con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
         variants = tuple(v for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl"))
-        res = bench_paper(seeds, outdir, variants, config, jobs)
+        res = bench_paper(seeds, outdir, variants, config, jobs, force=force)
         # a drawn table on a terminal; Markdown (pasteable into the README) into a pipe or a file
         show_comparison(res["rows"], title=f"paper replica: {seeds} seed(s), mean ± std over seeds")
         for line in claims(res["rows"]):
@@ -114,6 +116,7 @@ def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo_cmd(
         outdir: Path = typer.Option(Path("fgloc-demo"), "-o", "--output", help="plots and trajectories"),
+        force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc did not write"),
     ) -> None:
         """The paper experiment (seed 0) localized by the paper's EKF and the smoother; table and plots."""
         import sys
@@ -139,27 +142,46 @@ def register(app: typer.Typer) -> None:
 
         ekf_fe = "amcl" if frontend_available("amcl") else "native"
         runs = ((f"EKF+{ekf_fe} (paper's filter)", "ekf", ekf_fe), ("smoother+native", "smoother", "native"))
-        stage(f"simulating the paper experiment (seed 0), then localizing it {len(runs)} times")
-        with tqdm(total=100, desc="simulating", unit="%", disable=not tty, leave=False,
-                  bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}") as bar:
-            def sim_progress(frac: float) -> None:
-                bar.update(max(0, round(100 * frac) - bar.n))
+        from fgloc.eval.plots import plot_files
+        from fgloc.io import stop
+        from fgloc.io.outputs import Outputs
+        from fgloc.sim.simulate import SIM_FILES
 
-            sim = simulate_paper(seed=0, progress=sim_progress)
-            write_sim(sim, outdir / "sim")
-        config = load_config()
-        trajs, rows = {}, {}
-        for k, (label, backend, frontend) in enumerate(runs, start=1):
-            stage(f"localizing {k}/{len(runs)}: {label}")
-            final, _online, _loc, _ = localize_sim(
-                sim, backend, frontend, config,
-                progress=lambda msgs, label=label: tqdm(msgs, desc=f"localizing: {label}", unit="msg",
-                                                        disable=not tty, leave=False, mininterval=0.5))
-            trajs[label] = final
-            rows[label] = [evaluate(final, sim.ground_truth)]
-            write_tum(outdir / f"{backend}.tum", final)
-        stage("plotting")
-        show_comparison(rows, title="paper replica, seed 0: the paper's numbers vs fgloc")
-        files = plot_all(trajs, sim.ground_truth, outdir, occ_map=sim.map, title="paper replica, seed 0")
+        outs = Outputs(outdir, (*(f"sim/{n}" for n in SIM_FILES), "ekf.tum", "smoother.tum", *plot_files()),
+                       command="demo", force=force)
+        outs.check()  # before the work: files fgloc did not write are refused at once
+        stage(f"simulating the paper experiment (seed 0), then localizing it {len(runs)} times")
+        with stop.cooperative(), outs:  # a Ctrl-C stops between two messages; the folder stays as it was
+            with tqdm(total=100, desc="simulating", unit="%", disable=not tty, leave=False,
+                      bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}") as bar:
+                def sim_progress(frac: float) -> None:
+                    stop.checkpoint()
+                    bar.update(max(0, round(100 * frac) - bar.n))
+
+                sim = simulate_paper(seed=0, progress=sim_progress)
+                write_sim(sim, outs.dir / "sim")
+            config = load_config()
+            trajs, rows = {}, {}
+            for k, (label, backend, frontend) in enumerate(runs, start=1):
+                stage(f"localizing {k}/{len(runs)}: {label}")
+                final, _online, _loc, _ = localize_sim(
+                    sim, backend, frontend, config,
+                    progress=lambda msgs, label=label: _checked(tqdm(msgs, desc=f"localizing: {label}", unit="msg",
+                                                                     disable=not tty, leave=False, mininterval=0.5)))
+                trajs[label] = final
+                rows[label] = [evaluate(final, sim.ground_truth)]
+                write_tum(outs.path(f"{backend}.tum"), final)
+            stage("plotting")
+            show_comparison(rows, title="paper replica, seed 0: the paper's numbers vs fgloc")
+            files = plot_all(trajs, sim.ground_truth, outs.dir, occ_map=sim.map, title="paper replica, seed 0")
         con.print(f"wrote {len(files)} plots, ekf.tum, smoother.tum and the simulated log to {outdir} "
                   f"in {time.perf_counter() - t0:.0f} s")
+
+
+def _checked(messages: Any) -> Any:
+    """``messages`` with a stop check before each (a Ctrl-C ends the demo between two messages)."""
+    from fgloc.io.stop import checkpoint
+
+    for m in messages:
+        checkpoint()
+        yield m

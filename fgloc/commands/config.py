@@ -30,8 +30,8 @@ def register(app: typer.Typer) -> None:
         force: bool = typer.Option(False, "--force", help="overwrite an existing file"),
     ) -> None:
         """Write a commented starting config (every key with its default)."""
-        from fgloc.app.files import write_text_output
         from fgloc.config import config_yaml
+        from fgloc.io.outputs import write_text_output
 
-        write_text_output(output, config_yaml(), force=force, what="config")
+        write_text_output(output, config_yaml(), force=force, what="config", command="config")
         print(f"wrote {output}")

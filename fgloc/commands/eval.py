@@ -216,6 +216,9 @@ def eval_cmd(
     max_dt: Annotated[
         float, typer.Option("--max-dt", help="--reference: longest time between the two poses of a relation (s)")
     ] = 2.0,
+    force: Annotated[
+        bool, typer.Option("--force", help="--plots: overwrite PNG files that fgloc did not write")
+    ] = False,
 ) -> None:
     """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE.
 
@@ -259,7 +262,8 @@ def eval_cmd(
 
     written: list[Path] = []
     if plots is not None:
-        from fgloc.eval.plots import plot_all
+        from fgloc.eval.plots import plot_all, plot_files
+        from fgloc.io.outputs import Outputs
 
         fx = read_trajectory(fixes)[0] if fixes is not None else None
         occ = None
@@ -267,7 +271,10 @@ def eval_cmd(
             from fgloc.maps import load_map
 
             occ = load_map(map_yaml)
-        written = plot_all(ests, gt, plots, fixes=fx, occ_map=occ, max_gap=max_gap)
+        with Outputs(plots, plot_files(), command="eval", inputs=(*files, fixes, map_yaml), force=force,
+                     option="--plots") as outs:
+            staged = plot_all(ests, gt, outs.dir, fixes=fx, occ_map=occ, max_gap=max_gap)
+        written = [outs.final(p.name) for p in staged]
 
     if as_json:
         docs = [
@@ -299,17 +306,13 @@ def export_cmd(
 ) -> None:
     """Write a log's Odometry / PoseWithCovarianceStamped topic (or a CARMEN log's laser poses) as a
     TUM file, as evo reads it."""
-    from fgloc.app.files import OutputError, check_not_input
     from fgloc.eval.trajectories import read_trajectory
+    from fgloc.io.outputs import OutputFile
     from fgloc.io.tum import write_tum
 
     tr, where = read_trajectory(src, topic)
-    check_not_input(output, [where.path])
-    if output.is_dir():
-        raise OutputError(f"{output}: is a folder, expected a .tum file name")
-    if output.exists() and not force:
-        raise OutputError(f"{output}: exists; pass --force to overwrite it")
-    write_tum(output, tr)
+    with OutputFile(output, command="export", inputs=[where.path], force=force, what=".tum") as out:
+        write_tum(out.path, tr)
     print(f"wrote {output}: {len(tr)} poses of {where.label} ({tr.frame_id} frame, {tr.duration:.1f} s)")
 
 

@@ -87,6 +87,8 @@ def register(app: typer.Typer) -> None:
         out_smoothed: Path = typer.Option(None, "--out-smoothed",
                                           help="write the localizer's smoothed trajectory at exit as TUM"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="no status line"),
+        force: bool = typer.Option(False, "--force", help="overwrite existing --record / --output / --out-smoothed "
+                                   "files (never replaced otherwise: a previous recording stays)"),
         view: str = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
                                  "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),
         ros2: bool = typer.Option(False, "--ros2", help="a ROS 2 peer over DDS, in place of nav2's AMCL: the "
@@ -147,7 +149,7 @@ def register(app: typer.Typer) -> None:
                           initial_pose=pose_arg(initial_pose), config=config,
                           laser_mount=pose_arg(laser_mount, "--laser-mount"),
                           record=record, publish=publish or [], duration_s=duration, out=out or out_old,
-                          out_smoothed=out_smoothed, view=view)
+                          out_smoothed=out_smoothed, view=view, force=force)
         r = run_live(req, status_sink=status, event_sink=event, on_stopped=stopped)
         if as_json:
             print(dumps(r.report, indent=1))  # standard JSON: unknown numbers (NaN) are null
@@ -160,3 +162,12 @@ def register(app: typer.Typer) -> None:
         if silent:
             sys.stderr.write(f"fgloc live: error: {'; '.join(silent)} in {r.report.get('duration_s', 0):.1f} s\n")
             raise SystemExit(EXIT_THREAD_DIED)
+        if r.record_error:  # the recording's disk failed: one line, exit 2 (the other outputs are written)
+            from fgloc.io.outputs import OutputError
+
+            raise OutputError(r.record_error)
+        if r.hurried:  # a second signal hurried the shutdown: what was complete is written
+            from fgloc.io import stop
+
+            stop.note("the final smoothing was skipped" + (" (--out-smoothed not written)" if out_smoothed else ""))
+            raise SystemExit(stop.EXIT_INTERRUPTED)

@@ -16,6 +16,9 @@ from typing import Annotated
 import typer
 
 from fgloc.app import mounts
+from fgloc.io.stop import checkpoint
+
+FORCE_HELP = "overwrite output files that fgloc did not write"
 
 
 class _Bar:
@@ -25,6 +28,7 @@ class _Bar:
         self.bar = bar
 
     def __call__(self, n: int) -> None:
+        checkpoint()  # a Ctrl-C / SIGTERM stops here, between two scans (fgloc.io.stop)
         self.bar.update(n)
 
     def set_total(self, total: int) -> None:
@@ -71,6 +75,7 @@ def map_cmd(
                                 typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
     static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
                                      typer.Option("--static-transform-xyzw", help=mounts.XYZW_HELP)] = None,
+    force: Annotated[bool, typer.Option("--force", help=FORCE_HELP)] = False,
 ) -> None:
     """Build a map (ray-traced log-odds occupancy) and the optimized trajectory from a log, and
     self-check it: re-match the scans of every place against the map of the other passes."""
@@ -95,13 +100,14 @@ def map_cmd(
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")
     cfg = MapperConfig.from_dict(opts)
+    from fgloc.io import stop
     from fgloc.io.topics import resolve_name
 
     bars, factory = _bars(quiet or no_progress)
     try:
-        out = build_map(log, outdir, cfg, start, end, factory, resolve_name(scan_topic), resolve_name(odom_topic),
-                        self_check=not no_check,
-                        static_transforms=transforms)
+        with stop.cooperative():  # stops between scans: never in the middle of numba or GTSAM code
+            out = build_map(log, outdir, cfg, start, end, factory, resolve_name(scan_topic), resolve_name(odom_topic),
+                            self_check=not no_check, static_transforms=transforms, force=force, inputs=(config,))
     finally:
         for b in bars:
             b.close()
@@ -142,6 +148,7 @@ def map_check_cmd(
                                 typer.Option("--static-transform", help=mounts.RPY_HELP)] = None,
     static_transform_xyzw: Annotated[tuple[str, str, float, float, float, float, float, float, float] | None,
                                      typer.Option("--static-transform-xyzw", help=mounts.XYZW_HELP)] = None,
+    force: Annotated[bool, typer.Option("--force", help=FORCE_HELP)] = False,
 ) -> None:
     """Check a map against a log: which regions disagree between passes (and which loop closures
     are suspect), or where the world no longer matches the map.  Exit 0 when it passes, 1 when
@@ -150,11 +157,13 @@ def map_check_cmd(
     from fgloc.mapping.build import map_check
 
     transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
+    from fgloc.io import stop
+
     bars, factory = _bars(quiet or no_progress)
     try:
-        res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, resolve_name(scan_topic),
-                        resolve_name(odom_topic),
-                        static_transforms=transforms)
+        with stop.cooperative():
+            res = map_check(map_yaml, log, outdir, trajectory, mode, None, factory, resolve_name(scan_topic),
+                            resolve_name(odom_topic), static_transforms=transforms, force=force)
     finally:
         for b in bars:
             b.close()

@@ -74,8 +74,8 @@ def conversion_warnings(kind: str, cfg: dict[str, Any]) -> list[str]:
 def _write(kind: str, path: Path, output: Path | None, node: str | None, force: bool) -> None:
     import sys
 
-    from fgloc.app.files import write_text_output
     from fgloc.errors import ConfigError
+    from fgloc.io.outputs import write_text_output
 
     cfg, notes, text = convert_file(kind, path, node)
     for n in notes:
@@ -90,7 +90,7 @@ def _write(kind: str, path: Path, output: Path | None, node: str | None, force: 
     if output is None:
         print(text, end="")
     else:
-        write_text_output(output, text, force=force, what="config")
+        write_text_output(output, text, force=force, what="config", command="config")
         print(f"wrote {output} ({len(notes)} parameter(s) not carried over)")
 
 

@@ -39,15 +39,28 @@ def _progress(text: str):
         bar.update(task, completed=1.0)
 
 
-def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: str, out: Path) -> None:
-    from fgloc.sim import write_sim
+FORCE_HELP = "overwrite output files that fgloc did not write"
 
+
+def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: str, out: Path, force: bool = False,
+                        inputs: tuple[str, ...] = ()) -> None:
+    from fgloc.io import stop
+    from fgloc.io.outputs import Outputs
+    from fgloc.sim import write_sim
+    from fgloc.sim.simulate import SIM_FILES
+
+    outs = Outputs(out, SIM_FILES, command="simulate", inputs=inputs, force=force)
+    outs.check()  # before simulating: a folder holding someone else's map.yaml is refused at once
     t0 = time.perf_counter()
-    with _progress(f"simulating {label}") as update:
-        result = run(update)
+    with stop.cooperative(), _progress(f"simulating {label}") as update:
+        def step(frac: float) -> None:
+            stop.checkpoint()  # Ctrl-C / SIGTERM: between two simulated scans
+            update(frac)
+
+        result = run(step)
     t_sim = time.perf_counter() - t0
-    with _progress(f"writing {out}") as update:
-        write_sim(result, out)
+    with _progress(f"writing {out}") as update, outs:
+        write_sim(result, outs.dir)
         update(1.0)
     counts: dict[str, int] = {}
     for topic, _ in result.messages:
@@ -64,12 +77,13 @@ def paper(
     out: Path = typer.Option(None, "-o", "--output", help="output folder (required)"),
     out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
     seed: int = typer.Option(0, help="random seed (same seed, same run)"),
+    force: bool = typer.Option(False, "--force", help=FORCE_HELP),
 ) -> None:
     """The paper's run: mecanum robot, 78 m rectangle at 0.8 m/s, encoders + compass + 270 deg laser."""
     from fgloc.sim import simulate_paper
 
     dest = _output(out, out_old, "paper")
-    _simulate_and_write(lambda cb: simulate_paper(seed=seed, progress=cb), "the paper run", dest)
+    _simulate_and_write(lambda cb: simulate_paper(seed=seed, progress=cb), "the paper run", dest, force)
 
 
 def _output(out: Path | None, out_old: Path | None, what: str) -> Path:
@@ -90,13 +104,14 @@ def scenario(
     out: Path = typer.Option(None, "-o", "--output", help="output folder (required)"),
     out_old: Path = typer.Option(None, "--out", hidden=True, help="the old name of --output"),
     seed: int = typer.Option(0, help="random seed"),
+    force: bool = typer.Option(False, "--force", help=FORCE_HELP),
 ) -> None:
     """A YAML scenario: map, route, drive, noise and faults."""
     from fgloc.sim import run_scenario
 
     dest = _output(out, out_old, "scenario")
     path = _scenario_file(file)
-    _simulate_and_write(lambda cb: run_scenario(path, seed=seed, progress=cb), file, dest)
+    _simulate_and_write(lambda cb: run_scenario(path, seed=seed, progress=cb), file, dest, force, (path,))
 
 
 def _scenario_file(name_or_path: str) -> str:

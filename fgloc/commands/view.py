@@ -15,6 +15,7 @@ def register(app: typer.Typer) -> None:
     @view.command("layout")
     def layout_cmd(
         out: Path | None = typer.Option(None, "-o", "--output", help="write the layout JSON here (default: stdout)"),
+        force: bool = typer.Option(False, "--force", help="overwrite an existing file"),
     ) -> None:
         """The Foxglove layout for the view channels (Foxglove: Layouts -> Import from file)."""
         from fgloc.view.layout import layout_json
@@ -23,6 +24,7 @@ def register(app: typer.Typer) -> None:
         if out is None:
             print(text, end="")
             return
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text)
+        from fgloc.io.outputs import write_text_output
+
+        write_text_output(out, text, force=force, what="layout", command="view layout")
         print(f"wrote {out} (Foxglove: Layouts -> Import from file)")

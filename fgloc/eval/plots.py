@@ -169,6 +169,15 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
+#: the figures :func:`plot_all` writes, ``{prefix}{name}.png``
+PLOT_NAMES = ("path", "heading", "x_error", "y_error", "heading_error", "track_error", "overview")
+
+
+def plot_files(prefix: str = "") -> list[str]:
+    """The file names :func:`plot_all` writes with this prefix."""
+    return [f"{prefix}{name}.png" for name in PLOT_NAMES]
+
+
 def plot_all(
     est: Trajectory | Mapping[str, Trajectory],
     gt: Trajectory,

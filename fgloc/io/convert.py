@@ -5,7 +5,6 @@ through the same readers ``fgloc run`` uses (:func:`fgloc.io.open_log`)."""
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -15,9 +14,13 @@ from fgloc.errors import LogError
 from fgloc.io.formats import open_log
 from fgloc.io.mcap_format import MCAP_MAGIC
 from fgloc.io.mcap_writer import LIBRARY, LogWriter
+from fgloc.io.outputs import OutputFile
 from fgloc.io.topics import Topics, choose_topics
 
 log = logging.getLogger(__name__)
+
+#: the MCAP header's library of an imported log (an import replaces its own earlier output only)
+IMPORT_LIBRARY = f"{LIBRARY} import"
 
 
 @dataclass
@@ -39,44 +42,35 @@ def _input_files(src: Path) -> list[Path]:
     return [src]
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return a.resolve() == b.resolve()
-
-
-def written_by_fgloc(path: Path) -> bool:
-    """Is ``path`` an MCAP whose header names fgloc as the writing library?"""
+def mcap_library(path: Path) -> str | None:
+    """The library an MCAP's header names (None: not an MCAP, or unreadable)."""
     try:
         with path.open("rb") as f:
             head = f.read(4096)
     except OSError:
-        return False
+        return None
     if not head.startswith(MCAP_MAGIC) or len(head) < 17 or head[8] != 0x01:
-        return False
+        return None
     p = 17
     try:
         n = int.from_bytes(head[p : p + 4], "little")
         p += 4 + n
         m = int.from_bytes(head[p : p + 4], "little")
-        lib = head[p + 4 : p + 4 + m].decode()
+        return head[p + 4 : p + 4 + m].decode()
     except (UnicodeDecodeError, IndexError):
-        return False
-    return lib.split()[0:1] == [LIBRARY] if lib else False
+        return None
 
 
-def check_output(dst: Path, inputs: list[Path], force: bool = False) -> None:
-    """Refuse (one line) an output that is one of the inputs (never, even with ``force``), a
-    directory, or an existing file not written by fgloc (unless ``force``)."""
-    for src in inputs:
-        for f in [src, *_input_files(src)]:
-            if dst.resolve() == f.resolve() or _same_file(dst, f):
-                raise LogError(f"{dst}: is the input {src}; write the output elsewhere")
-    if dst.is_dir():
-        raise LogError(f"{dst}: is a directory; give the output file's name")
-    if dst.exists() and not force and not written_by_fgloc(dst):
-        raise LogError(f"{dst}: exists and was not written by fgloc; pass --force to overwrite it")
+def written_by_import(path: Path) -> bool:
+    """Is ``path`` an MCAP that ``fgloc import`` wrote (its header's library)?"""
+    return mcap_library(path) == IMPORT_LIBRARY
+
+
+def output_file(dst: Path, inputs: list[Path], force: bool = False) -> OutputFile:
+    """The import's output (:class:`fgloc.io.outputs.OutputFile`): an output that is one of the
+    inputs is refused (never, even with ``force``), so is a directory, and an existing file that
+    ``fgloc import`` did not write (unless ``force``: a recording or someone else's file)."""
+    return OutputFile(dst, command="import", inputs=inputs, force=force, ours=written_by_import, what="output log")
 
 
 def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
@@ -97,15 +91,17 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
     reads back in the order the source reads.  ``progress``: a tqdm bar on stderr (None = only when
     stderr is a terminal).  ``max_range_m``: CARMEN no-return threshold override (see
     :mod:`fgloc.io.carmen`).  The output is written to ``dst`` through a temporary file and
-    renamed at the end, so a failed import leaves no half-written log; an output that is the
-    input, or an existing file fgloc did not write (unless ``force``), is refused.
+    renamed at the end (``dst.partial`` meanwhile: :class:`fgloc.io.outputs.OutputFile`), so a
+    failed or interrupted import leaves no half-written log; an output that is the input, or an
+    existing file fgloc import did not write (unless ``force``), is refused.
     """
     from tqdm import tqdm
 
     from fgloc.io.topics import READ_TYPES, normalize_type, resolve_name
 
     src, dst = Path(src), Path(dst)
-    check_output(dst, [src], force)
+    out = output_file(dst, [src], force)
+    out.check()
     source = open_log(src, Topics(), max_range_m=max_range_m)
     available = {t: ty for t, ty in source.topic_types().items() if source.has(t)}
     have_line = ", ".join(f"{t} ({ty})" for t, ty in sorted(source.topic_types().items())) or "none"
@@ -145,10 +141,10 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
     t0 = time.perf_counter()
     counts: Counter[str] = Counter()
     read: Counter[str] = Counter()
-    tmp = dst.with_name(dst.name + ".part")
-    try:
-        with LogWriter(tmp) as w, tqdm(total=total, unit="msg", desc=f"import {src.name}",
-                                       disable=(None if progress is None else not progress), leave=False) as bar:
+    with out:  # written as dst.partial, renamed when complete (fgloc.io.outputs)
+        with LogWriter(out.path, library=IMPORT_LIBRARY) as w, \
+                tqdm(total=total, unit="msg", desc=f"import {src.name}",
+                     disable=(None if progress is None else not progress), leave=False) as bar:
             for rec in source.records(wanted):
                 name = renames.get(rec.topic, rec.topic)
                 if rec.data is not None and rec.channel is not None:  # ROS 2 CDR: copied as it is
@@ -162,10 +158,6 @@ def import_log(src: str | Path, dst: str | Path, topics: Topics | None = None,
                 bar.update()
         if not sum(counts.values()):
             raise LogError(f"{src}: no messages to import")
-        tmp.replace(dst)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     dropped = {}
     for t in sorted(available):
         n = have[t]["count"] - read[t]

@@ -55,7 +55,9 @@ class LogWriter:
     """Write fgloc messages into a ROS 2 MCAP (profile ros2, cdr, ros2msg schemas).
 
     ``profile``/``library``: the MCAP header's (``profile=""`` for a plain MCAP of
-    :meth:`write_raw` messages, as :class:`fgloc.view.record.McapFile`).
+    :meth:`write_raw` messages, as :class:`fgloc.view.record.McapFile`).  ``file``: an open
+    binary file to write to instead of opening ``path`` (e.g. a
+    :class:`fgloc.io.outputs.GuardedFile`; ``path`` then only names it).
 
     A context manager; ``write(topic, msg, stamp=None, log_time_ns=None)`` takes a
     :class:`LaserScan`, :class:`Odometry`, :class:`Imu` (the whole message),
@@ -66,12 +68,12 @@ class LogWriter:
     """
 
     def __init__(self, path: str | Path, chunk_size: int = 1024 * 1024, compression: str = "zstd",
-                 profile: str = "ros2", library: str = LIBRARY) -> None:
+                 profile: str = "ros2", library: str = LIBRARY, file: Any = None) -> None:
         self.path = Path(path)
         try:
-            if self.path.parent != Path(""):
+            if file is None and self.path.parent != Path(""):
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file: IO[bytes] = self.path.open("wb")
+            self._file: IO[bytes] = self.path.open("wb") if file is None else file
         except OSError as e:
             raise LogError(f"{self.path}: cannot write log ({e.strerror or e})") from None
         comp = {"zstd": "zstd", "lz4": "lz4", "none": ""}[compression]
@@ -188,11 +190,16 @@ class LogWriter:
 
     def close(self) -> None:
         if not self._file.closed:
-            for ptopic, pmsg in self._pending_tf:
-                self._emit(ptopic, TF_MESSAGE, fastcdr.encode_tf(pmsg, 0.0), 0.0, None)
-            self._pending_tf = []
-            self._writer.finish()
-            self._file.close()
+            try:
+                for ptopic, pmsg in self._pending_tf:
+                    self._emit(ptopic, TF_MESSAGE, fastcdr.encode_tf(pmsg, 0.0), 0.0, None)
+                self._pending_tf = []
+                self._writer.finish()
+            finally:  # a full disk: the file is closed all the same (its space freed once it is removed)
+                try:
+                    self._file.close()
+                except OSError:
+                    pass
 
     def __enter__(self) -> LogWriter:
         return self

@@ -12,8 +12,6 @@ fuses what is still queued, closes the recording (a valid MCAP) and returns the 
 from __future__ import annotations
 
 import math
-import signal
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -61,7 +59,18 @@ class LiveSession:
     """Serial + laser + a localization session (:func:`fgloc.localization.build_session`) +
     recorder + publisher, wired through a :class:`LiveRunner`."""
 
-    def __init__(
+    def __init__(self, session: Session, serial_url: str | None, laser: str | None, *args: Any, **kwargs: Any) -> None:
+        """See :meth:`_setup` (the arguments); a set-up that fails removes the recording it began."""
+        self.recording: Any = None
+        try:
+            self._setup(session, serial_url, laser, *args, **kwargs)
+        except BaseException:
+            if self.recording is not None:
+                self.recorder.close()
+                self.recording.discard()
+            raise
+
+    def _setup(
         self,
         session: Session,
         serial_url: str | None,
@@ -72,6 +81,7 @@ class LiveSession:
         status_sink: Any = None,
         event_sink: Any = None,
         serial_port: Any = None,
+        record_force: bool = False,
     ) -> None:
         # here, not at the top: every command's config (fgloc.config's live sections) imports this module
         from fgloc.config import parse_config
@@ -87,14 +97,13 @@ class LiveSession:
         self.laser_mount = StaticTransform("base_link", "laser", mount)
         self.recorder: Any = None
         self.record_path = Path(record) if record else None
-        if record:
-            from fgloc.io.mcap_writer import LogWriter
-
-            self.recorder = LogWriter(str(record))
-            if hasattr(self.recorder, "__enter__"):
-                self.recorder.__enter__()
-        self.publisher = UdpPublisher(publish) if publish else None
+        self.record_error: str | None = None  # the recording's disk error, one line
+        self.hurried = False  # a second signal: close without the final smoothing
         self.events: list[str] = []
+        self._event_sink = event_sink
+        if record:
+            self._open_recording(Path(record), record_force)
+        self.publisher = UdpPublisher(publish) if publish else None
 
         def ev(msg: str) -> None:
             self.events.append(f"{time.strftime('%H:%M:%S')} {msg}")
@@ -135,6 +144,56 @@ class LiveSession:
         self.closed = False
         self.smoothed: Trajectory | None = None  # Localizer.finish() at close (fixed-lag / batch result)
 
+    def _open_recording(self, path: Path, force: bool) -> None:
+        """``--record``: written as ``PATH.partial`` (renamed at a clean close), never over an existing
+        file without ``force``; a disk error stops the recording with one event line and keeps
+        what was written (:class:`fgloc.io.outputs.OutputFile`, :class:`~fgloc.io.outputs.GuardedFile`)."""
+        from fgloc.io.mcap_writer import LIBRARY, LogWriter
+        from fgloc.io.outputs import GuardedFile, OutputError, OutputFile, problem
+
+        recording = OutputFile(path, command="live", force=force, precious=True, option="--record",
+                               what="recording")
+        recording.__enter__()
+
+        def failed(e: OSError) -> None:
+            self.record_error = f"{path}: {problem(e)}"
+            msg = f"recording stopped: {path}: {problem(e)} (localization goes on)"
+            self.events.append(f"{time.strftime('%H:%M:%S')} {msg}")
+            if self._event_sink is not None:
+                self._event_sink(msg)
+
+        try:
+            self._record_file = GuardedFile(open(recording.path, "wb"), on_error=failed)  # noqa: SIM115
+            self.recorder = LogWriter(path, file=self._record_file, library=f"{LIBRARY} live")
+        except OSError as e:
+            recording.discard(e)
+            raise OutputError(f"{path}: cannot write the recording ({problem(e)})") from None
+        self.recording = recording
+
+    def _close_recording(self) -> None:
+        """Finish the recording and publish it; after a disk error keep ``PATH.partial`` and say so."""
+        from fgloc.io.outputs import OutputError
+
+        try:
+            self.recorder.close()
+        except OSError as e:  # the guard holds write errors; this is a last resort
+            self._record_file.error = self._record_file.error or e
+        if self._record_file.error is None:
+            try:
+                self.recording.publish()
+                return
+            except OutputError as e:
+                self.record_error = str(e)
+                return
+        self.recording.discard(self._record_file.error)
+        if self.recording.kept is not None:
+            self.record_error = f"{self.record_error}; what was recorded until then is in {self.recording.kept}"
+
+    def hurry(self) -> None:
+        """Close without the final smoothing (a second Ctrl-C): the recording and the live
+        trajectory are still finished."""
+        self.hurried = True
+
     def start(self) -> None:
         self._t0 = time.monotonic()
         if self.serial is not None:
@@ -154,15 +213,15 @@ class LiveSession:
             if self.serial is not None:
                 self.serial.stop()
             self.runner.drain()
-            try:
-                self.smoothed = self.runner.loc.finish()
-            except Exception as e:  # noqa: BLE001 - the live trajectory is already safe
-                self.events.append(f"smoothing at shutdown failed: {type(e).__name__}: {e}")
+            if self.hurried:
+                self.events.append("final smoothing skipped (a second signal)")
+            else:
+                try:
+                    self.smoothed = self.runner.loc.finish()
+                except Exception as e:  # noqa: BLE001 - the live trajectory is already safe
+                    self.events.append(f"smoothing at shutdown failed: {type(e).__name__}: {e}")
             if self.recorder is not None:
-                if hasattr(self.recorder, "__exit__"):
-                    self.recorder.__exit__(None, None, None)
-                elif hasattr(self.recorder, "close"):
-                    self.recorder.close()
+                self._close_recording()
             if self.publisher is not None:
                 self.publisher.close()
         p50, p99 = self.runner.latency_percentiles()
@@ -195,6 +254,7 @@ class LiveRequest:
     out: Path | None = None  # the live fused trajectory (online poses) as TUM
     out_smoothed: Path | None = None  # the localizer's smoothed trajectory at exit as TUM
     view: str | None = None  # [HOST:]PORT: serve a Foxglove WebSocket view
+    force: bool = False  # replace existing record / out / out_smoothed files (never otherwise)
 
 
 @dataclass
@@ -204,6 +264,8 @@ class LiveReport:
 
     report: dict[str, Any]
     failed: list[str]
+    record_error: str | None = None  # the recording's disk error, one line (what was kept where)
+    hurried: bool = False  # a second signal: closed without the final smoothing
 
 
 def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
@@ -229,17 +291,28 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
     mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
     session = build_session(occ, mount, backend=req.backend, frontend=req.frontend, initial_pose=init, config=cfg)
     return LiveSession(session, req.serial, req.laser, config=cfg, record=req.record, publish=req.publish or None,
-                       status_sink=status_sink, event_sink=event_sink)
+                       status_sink=status_sink, event_sink=event_sink, record_force=req.force)
 
 
 def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
              event_sink: Callable[[str], None] | None = None,
              on_stopped: Callable[[], None] | None = None) -> LiveReport:
     """``fgloc live``: build the session (:func:`live_session`), serve the view, run until
-    ``req.duration_s``, SIGINT / SIGTERM (a second one interrupts) or a dead sensor thread, close
-    and write ``req.out`` / ``req.out_smoothed``.  ``status_sink(line)``: the status line;
-    ``event_sink(line)``: events (sensor silent / back, the view's address); ``on_stopped()``:
-    called once the session is closed (the CLI ends its status line)."""
+    ``req.duration_s``, SIGINT / SIGTERM or a dead sensor thread, close and write ``req.out`` /
+    ``req.out_smoothed``.  A second signal skips the final smoothing; the recording and the live
+    trajectory are finished all the same (:mod:`fgloc.io.stop`; a third exits at once).  The
+    output files are checked before the session starts (never over an existing file without
+    ``req.force``).  ``status_sink(line)``: the status line; ``event_sink(line)``: events (sensor
+    silent / back, the view's address, a recording stopped by its disk); ``on_stopped()``: called
+    once the session is closed (the CLI ends its status line)."""
+    from fgloc.io import stop as stopping
+    from fgloc.io.outputs import OutputFile
+    from fgloc.io.tum import write_tum
+
+    tums = {name: OutputFile(p, command="live", force=req.force, option=name, what="trajectory")
+            for name, p in (("-o", req.out), ("--out-smoothed", req.out_smoothed)) if p is not None}
+    for o in tums.values():
+        o.check()
     session = live_session(req, status_sink, event_sink)
     viewer = None
     if req.view is not None:  # the Foxglove view (fgloc.view), also recorded into --record
@@ -253,18 +326,6 @@ def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
             raise
         session.runner.session.add_sink(viewer)
     stop = session.runner.stop_event
-    hits = [0]
-
-    def on_signal(signum, frame) -> None:  # noqa: ANN001
-        hits[0] += 1
-        stop.set()
-        if hits[0] > 1:
-            raise KeyboardInterrupt
-
-    old = {}
-    if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
-            old[s] = signal.signal(s, on_signal)
 
     def dead_workers() -> list[str]:
         """Sensor threads that died (a bug: bad input is counted, never fatal)."""
@@ -272,27 +333,25 @@ def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
                                                                      ("laser", session.laser))
                 if w is not None and w.failure]
 
-    try:
-        session.start()
-        session.runner.run(duration=req.duration_s, until=lambda: bool(dead_workers()))
-    finally:
-        if viewer is not None:
-            session.runner.drain()  # the backlog reaches the view (and its channels the recording)
-            viewer.close()
-        summary = session.close()
-        for s, h in old.items():
-            signal.signal(s, h)
-        if on_stopped is not None:
-            on_stopped()
-    traj = session.live_trajectory()
-    if req.out is not None and len(traj):
-        from fgloc.io.tum import write_tum
-
-        write_tum(req.out, traj)
-    if req.out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
-        from fgloc.io.tum import write_tum
-
-        write_tum(req.out_smoothed, session.smoothed)
+    # SIGINT / SIGTERM: the first stops the session cleanly; a second hurries the shutdown
+    with stopping.cooperative(on_stop=stop.set, on_hurry=session.hurry):
+        try:
+            session.start()
+            session.runner.run(duration=req.duration_s, until=lambda: bool(dead_workers()))
+        finally:
+            if viewer is not None:
+                session.runner.drain()  # the backlog reaches the view (and its channels the recording)
+                viewer.close()
+            summary = session.close()
+            if on_stopped is not None:
+                on_stopped()
+        traj = session.live_trajectory()
+        if "-o" in tums and len(traj):
+            with tums["-o"] as o:
+                write_tum(o.path, traj)
+        if "--out-smoothed" in tums and session.smoothed is not None and len(session.smoothed):
+            with tums["--out-smoothed"] as o:
+                write_tum(o.path, session.smoothed)
     failed = dead_workers()
     report = {
         "duration_s": round(summary.duration_s, 2),
@@ -301,8 +360,9 @@ def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
         "health": summary.health,
         "counters": summary.counters,
         "record": str(req.record) if req.record else None,
+        "record_error": session.record_error,
         "failed_threads": failed,
     }
     if viewer is not None:
         report["view"] = viewer.stats()
-    return LiveReport(report, failed)
+    return LiveReport(report, failed, session.record_error, session.hurried)

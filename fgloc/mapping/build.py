@@ -16,6 +16,8 @@ import numpy as np
 import yaml
 
 from fgloc.errors import LogError, MapError
+from fgloc.io import stop
+from fgloc.io.outputs import Outputs
 from fgloc.io.tum import read_tum, write_tum
 from fgloc.mapping.render import render_check_png, render_map_png
 from fgloc.mapping.selfcheck import (
@@ -32,6 +34,32 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import StaticTransform, Trajectory, Transform3D
 
 ProgressFactory = Callable[[int, str], Callable[[int], None]]
+
+#: the files of ``fgloc map`` and of a check (``fgloc map-check``, the map's self-check)
+CHECK_FILES = ("check.yaml", "check.png")
+MAP_FILES = ("map.yaml", "map.pgm", "map.png", "trajectory.tum", "trajectory_keyframes.tum", "mapping.yaml",
+             *CHECK_FILES)
+
+
+def _yaml_keys(path: Path) -> set[str]:
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return set()
+    return set(doc) if isinstance(doc, dict) else set()
+
+
+def legacy_map_files(folder: Path) -> tuple[str, ...]:
+    """The files of a map folder that fgloc map wrote before folders had a record of it (its
+    mapping.yaml says so)."""
+    return MAP_FILES if {"scans", "stats", "self_check"} <= _yaml_keys(folder / "mapping.yaml") else ()
+
+
+def legacy_check_files(folder: Path) -> tuple[str, ...]:
+    """check.yaml / check.png that fgloc wrote before folders had a record of it."""
+    if legacy_map_files(folder) or {"verdict", "passed", "mode"} <= _yaml_keys(folder / "check.yaml"):
+        return CHECK_FILES
+    return ()
 
 
 @dataclass
@@ -112,29 +140,49 @@ def build_map(
     self_check: bool = True,
     check_config: CheckConfig | None = None,
     static_transforms: list[Transform3D] | None = None,
+    force: bool = False,
+    inputs: tuple[Path | None, ...] = (),
 ) -> MapOutput:
     """Map ``log`` into ``outdir``: map.yaml/.pgm, map.png, trajectory.tum (every scan),
     trajectory_keyframes.tum, mapping.yaml (statistics, loop closures, warnings) and, with
     ``self_check``, check.yaml and check.png.  ``static_transforms``: mounts the log lacks
-    (``fgloc map --static-transform``; the laser's wins over the log's)."""
+    (``fgloc map --static-transform``; the laser's wins over the log's).
+
+    The files are published together at the end (:class:`fgloc.io.outputs.Outputs`): an error or
+    a Ctrl-C leaves ``outdir`` as it was; files there that fgloc did not write are refused
+    (before the log is read) unless ``force``; ``inputs``: other files the command read (a
+    mapping config), never replaced."""
     cfg = config or MapperConfig()
     outdir = Path(outdir)
+    outs = Outputs(outdir, MAP_FILES, command="map", inputs=(log, *inputs), force=force,
+                   legacy=legacy_map_files, shares=("map-check",))
+    outs.check()
+    with outs:
+        return _build_map(log, outs, cfg, start, end, progress_factory, scan_topic, odom_topic, self_check,
+                          check_config, static_transforms)
+
+
+def _build_map(log: str | Path, outs: Outputs, cfg: MapperConfig, start: float | None, end: float | None,
+               progress_factory: ProgressFactory | None, scan_topic: str, odom_topic: str, self_check: bool,
+               check_config: CheckConfig | None, static_transforms: list[Transform3D] | None) -> MapOutput:
+    outdir = outs.folder
     _fixed_mmap_threshold()
     t0 = time.perf_counter()
     recs, mount = load_records(log, start, end, scan_topic, odom_topic, static_transforms)
     t1 = time.perf_counter()
+    stop.checkpoint()
     res = run_slam(recs, mount, cfg, _progress(progress_factory, len(recs), "mapping"))
     _release_memory()
+    stop.checkpoint()
     t2 = time.perf_counter()
     occ = build_occupancy(res, recs, mount, cfg)
     t3 = time.perf_counter()
-    outdir.mkdir(parents=True, exist_ok=True)
-    occ.save(outdir / "map.yaml")
-    write_tum(outdir / "trajectory.tum", res.scan_trajectory)
-    write_tum(outdir / "trajectory_keyframes.tum", res.keyframe_trajectory)
+    occ.save(outs.path("map.yaml"))
+    write_tum(outs.path("trajectory.tum"), res.scan_trajectory)
+    write_tum(outs.path("trajectory_keyframes.tum"), res.keyframe_trajectory)
     kp = res.keyframe_poses
     segs = np.array([[kp[lc.i, :2], kp[lc.j, :2]] for lc in res.loops]).reshape(-1, 2, 2)
-    render_map_png(outdir / "map.png", occ, res.scan_trajectory.poses[:, :2],
+    render_map_png(outs.path("map.png"), occ, res.scan_trajectory.poses[:, :2],
                    f"{Path(log).name}: {len(res.scan_trajectory)} scans, {len(res.keyframes)} keyframes, "
                    f"{len(res.loops)} loop closures", segs)
     _release_memory()
@@ -142,18 +190,19 @@ def build_map(
     loops = loop_infos(res)
     check = None
     if self_check:
+        stop.checkpoint()
         check = check_consistency(recs, np.asarray(mount.pose), res.scan_trajectory, loops, check_config,
                                   _progress(progress_factory, 0, "self-check"))
         if np.isfinite(check.registration_m):  # the map declares what its passes measured
             occ.accuracy_m = round(map_accuracy_m(check.registration_m, occ.resolution), 4)
-            occ.save(outdir / "map.yaml")
-        write_check(outdir, check, occ, res.scan_trajectory, f"{Path(log).name}: self-check")
+            occ.save(outs.path("map.yaml"))
+        write_check(outs.dir, check, occ, res.scan_trajectory, f"{Path(log).name}: self-check")
     t5 = time.perf_counter()
     timings = {"read_s": t1 - t0, "slam_s": t2 - t1, "occupancy_s": t3 - t2, "write_s": t4 - t3,
                "check_s": t5 - t4, "total_s": t5 - t0}
     stats = {k: int(v) for k, v in res.stats.items()}
     warnings = list(res.warnings)
-    (outdir / "mapping.yaml").write_text(yaml.safe_dump({
+    outs.path("mapping.yaml").write_text(yaml.safe_dump({
         "log": str(log), "scans": len(recs), "stats": stats,
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
         "warnings": warnings,
@@ -222,6 +271,7 @@ def map_check(
     scan_topic: str = "/scan",
     odom_topic: str = "/odom",
     static_transforms: list[Transform3D] | None = None,
+    force: bool = False,
 ) -> CheckResult:
     """Self-check ``log`` against the map ``map_yaml``; writes check.yaml / check.png to ``outdir``
     (default: the map's folder).
@@ -232,8 +282,14 @@ def map_check(
     trajectory.tum) with the map and reports changed-world regions; "auto" picks consistency
     when no trajectory is given, localization otherwise.  ``static_transforms``: mounts the log
     lacks (``fgloc map-check --static-transform``, as given to ``fgloc map`` and ``fgloc run``).
+    check.yaml and check.png are published together at the end; files there that fgloc did not
+    write are refused (before any work) unless ``force``.
     """
     map_yaml = Path(map_yaml)
+    out = Path(outdir) if outdir is not None else map_yaml.parent
+    outs = Outputs(out, CHECK_FILES, command="map-check", force=force, legacy=legacy_check_files, shares=("map",),
+                   inputs=(map_yaml, _map_image(map_yaml), log, trajectory))
+    outs.check()
     occ = OccupancyMap.load(map_yaml)
     if mode not in ("auto", "consistency", "localization"):
         raise MapError(f"unknown check mode '{mode}' (auto, consistency or localization)")
@@ -247,7 +303,7 @@ def map_check(
         raise LogError(f"{tpath}: trajectory has no poses")
     recs, mount = load_records(log, scan_topic=scan_topic, odom_topic=odom_topic,
                                static_transforms=static_transforms)
-    out = Path(outdir) if outdir is not None else map_yaml.parent
+    stop.checkpoint()
     if mode == "consistency":
         loops = read_loops(map_yaml.parent / "mapping.yaml")
         res = check_consistency(recs, np.asarray(mount.pose), traj, loops, config,
@@ -257,5 +313,16 @@ def map_check(
                                 _progress(progress_factory, 0, "map-check"))
     if res.stats.get("posed_scans", 0) == 0:
         raise LogError(f"{log}: no scan lies within the time span of {tpath} (is it this log's trajectory?)")
-    write_check(out, res, occ, traj, f"{Path(log).name} vs {map_yaml.name} ({res.mode})")
+    with outs:
+        write_check(outs.dir, res, occ, traj, f"{Path(log).name} vs {map_yaml.name} ({res.mode})")
     return res
+
+
+def _map_image(map_yaml: Path) -> Path | None:
+    """The image a map YAML names (an input of map-check: never overwritten)."""
+    try:
+        doc = yaml.safe_load(map_yaml.read_text())
+        img = doc.get("image") if isinstance(doc, dict) else None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+    return map_yaml.parent / str(img) if img else None

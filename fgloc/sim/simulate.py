@@ -625,6 +625,10 @@ def simulate_paper(seed: int = 0, **overrides: Any) -> SimResult:
     return run_scenario(dict(overrides), seed=seed, progress=progress)
 
 
+#: the files :func:`write_sim` writes
+SIM_FILES = ("log.mcap", "map.yaml", "map.pgm", "ground_truth.tum", "scenario.yaml")
+
+
 def write_sim(result: SimResult, outdir: str | Path) -> Path:
     """Write ``log.mcap``, ``map.yaml`` + ``map.pgm``, ``ground_truth.tum`` and ``scenario.yaml`` into outdir."""
     from fgloc.io.mcap_writer import LogWriter

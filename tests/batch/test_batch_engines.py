@@ -159,7 +159,7 @@ def test_batch_map_writes_what_fgloc_map_writes(batch_logs, tmp_path):
         assert (tmp_path / "out" / "charlie" / f).read_bytes() == (tmp_path / "single" / f).read_bytes()
     row = rep.rows[0]
     assert row.poses is not None and row.poses > 100 and row.rmse_m is not None and row.rmse_m < 0.05
-    assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".")]  # no staging left
+    assert not [p for p in (tmp_path / "out").iterdir() if p.name.startswith(".fgloc-staging")]  # no staging left
 
 
 def test_ray_errors_become_one_line():

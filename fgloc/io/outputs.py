@@ -393,8 +393,9 @@ class Outputs:
                         p.unlink()
                 _fsync_dir(self.folder)
             except OSError as e:
+                err = self._error(e, partly=any(not (stage / rel).exists() for rel in written), name=self._last)
                 self.discard()
-                raise self._error(e) from None
+                raise err from None
             self.discard()
         self.published = written
         return written
@@ -412,6 +413,7 @@ class Outputs:
         if exc is None:
             self.publish()
             return
+        err = self._error(exc) if isinstance(exc, OSError) and is_disk_error(exc) else None
         self.discard()
         for d in self._made:  # deepest first: a folder this command created stays only with outputs in it
             try:
@@ -420,21 +422,41 @@ class Outputs:
                 break
         if isinstance(exc, KeyboardInterrupt):
             stop.note(f"nothing was written to {self.folder} (what it held is unchanged)")
-        elif isinstance(exc, OSError) and is_disk_error(exc):
-            raise self._error(exc) from None
+        elif err is not None:
+            raise err from None
 
-    def _error(self, e: OSError) -> OutputError:
-        """The one line of a write error: the output it hit (by its final name) and the problem."""
-        name = self._last
+    def _newest(self) -> str | None:
+        return _newest_in(self.stage)
+
+    def _error(self, e: OSError, partly: bool = False, name: str | None = None) -> OutputError:
+        """The one line of a write error: the output it hit (by its final name: ``name``, else the
+        staged file written last) and the problem."""
+        name = name or self._newest() or self._last
         fn = e.filename if isinstance(e.filename, str) else None
+        tail = (f"the outputs in {self.folder} were replaced in part; run the command again" if partly
+                else f"nothing was written to {self.folder} (what it held is unchanged)")
         if fn and self.stage is not None and fn.startswith(str(self.stage) + os.sep):
             name = Path(fn).relative_to(self.stage).as_posix()
         elif fn:
-            return OutputError(f"{fn}: {problem(e)}; nothing was written to {self.folder} "
-                               "(what it held is unchanged)")
+            return OutputError(f"{fn}: {problem(e)}; {tail}")
         where = self.folder / name if name else self.folder
-        return OutputError(f"{where}: {problem(e)}; nothing was written to {self.folder} "
-                           "(what it held is unchanged)")
+        return OutputError(f"{where}: {problem(e)}; {tail}")
+
+
+def _newest_in(stage: Path | None) -> str | None:
+    """The staged file written last (the one a write error hit, when nothing else says)."""
+    best: tuple[int, str] | None = None
+    if stage is None:
+        return None
+    for p in stage.rglob("*"):
+        try:
+            st = p.lstat()
+        except OSError:
+            continue
+        rel = p.relative_to(stage).as_posix()
+        if stat.S_ISREG(st.st_mode) and not _layer_file(rel) and (best is None or st.st_mtime_ns >= best[0]):
+            best = (st.st_mtime_ns, rel)
+    return best[1] if best else None
 
 
 def _layer_file(rel: str) -> bool:
@@ -541,6 +563,9 @@ class OutputFile:
             stop.note(f"{self.final} not written" + (f" (what was recorded is in {self.kept})" if self.kept else ""))
         elif isinstance(exc, OSError) and is_disk_error(exc):
             raise self._error(exc) from None
+
+    def _newest(self) -> str | None:
+        return _newest_in(self.stage)
 
     def _error(self, e: OSError) -> OutputError:
         kept = f"; what was written is in {self.kept}" if self.kept else "; nothing was written"

@@ -135,8 +135,8 @@ def test_live_recording_on_a_full_disk_keeps_the_other_outputs(tmp_path, disks):
 
     full = disks.tmpfs(32)
     with LiveFeed(tmp_path, seconds=4.0) as feed:
-        rc, out, err = cli("live", *feed.args, "--duration", "3", "--quiet", "--record", full / "rec.mcap",
-                           "--out", tmp_path / "live.tum")
+        rc, out, err = cli("live", *feed.args, "--duration", "3", "--quiet", "--json", "--record", full / "rec.mcap",
+                           "-o", tmp_path / "live.tum")
     assert rc == 2, err
     line = [ln for ln in err.splitlines() if ln.startswith("fgloc: error: ")]
     assert line == [f"fgloc: error: {full}/rec.mcap: {NOSPACE}; what was recorded until then is in "

@@ -61,8 +61,8 @@ def test_record_onto_an_existing_file_is_refused(tmp_path):
                      "--record", rec)
     assert rc == 2 and "rec.mcap: exists; pass --force" in error_line(err)
     assert rec.read_bytes() == first and not (tmp_path / "rec.mcap.partial").exists()
-    rc, _, err = cli("live", "--serial", "loop://", "--backend", "ekf", "--duration", "0.2", "--quiet",
-                     "--record", rec, "--force")
+    with LiveFeed(tmp_path, seconds=2.0) as feed:
+        rc, _, err = cli("live", *feed.args, "--duration", "1", "--quiet", "--record", rec, "--force")
     assert rc == 0, err
     assert rec.read_bytes() != first
 
@@ -72,7 +72,7 @@ def test_out_files_are_checked_before_the_session(tmp_path):
     tum = tmp_path / "traj.tum"
     tum.write_text("# someone's trajectory\n")
     t0 = time.monotonic()
-    rc, _, err = cli("live", "--serial", "loop://", "--backend", "ekf", "--duration", "30", "--quiet", "--out", tum)
+    rc, _, err = cli("live", "--serial", "loop://", "--backend", "ekf", "--duration", "30", "--quiet", "-o", tum)
     assert rc == 2 and time.monotonic() - t0 < 20
-    assert error_line(err) == f"fgloc: error: {tum}: exists; pass --force to overwrite it, or choose another --out name"
+    assert error_line(err) == f"fgloc: error: {tum}: exists; pass --force to overwrite it, or choose another -o name"
     assert tum.read_text() == "# someone's trajectory\n"

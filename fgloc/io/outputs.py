@@ -207,7 +207,8 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _host() -> str:
+def host_tag() -> str:
+    """This host in a staging folder's name (a folder another host left is not this one's to remove)."""
     return safe_name(socket.gethostname(), "host").replace(".", "_")
 
 
@@ -228,7 +229,7 @@ def remove_stale_staging(folder: Path) -> list[Path]:
         entries = list(folder.iterdir())
     except OSError:
         return removed
-    host = _host()
+    host = host_tag()
     for d in entries:
         if not d.name.startswith(STAGING) or not d.is_dir() or d.is_symlink():
             continue
@@ -315,7 +316,7 @@ class Outputs:
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
             remove_stale_staging(self.folder)
-            stage = self.folder / f"{STAGING}{_host()}.{os.getpid()}.{secrets.token_hex(4)}"
+            stage = self.folder / f"{STAGING}{host_tag()}.{os.getpid()}.{secrets.token_hex(4)}"
             stage.mkdir()
         except OSError as e:
             raise OutputError(f"{e.filename or self.folder}: cannot create the output folder ({problem(e)})") from None

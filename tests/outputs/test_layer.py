@@ -141,7 +141,7 @@ def test_a_link_at_an_output_name_is_replaced_never_written_through(tmp_path):
 
 
 def test_staging_left_by_a_killed_process_is_removed(tmp_path):
-    host = O._host()  # noqa: SLF001 - the name format is the module's
+    host = O.host_tag()
     dead = tmp_path / f"{O.STAGING}{host}.{2**22 + 12345}.ab"  # no such pid (above pid_max's default)
     alive = tmp_path / f"{O.STAGING}{host}.{os.getppid()}.cd"
     other = tmp_path / f"{O.STAGING}another-host.1.ef"

@@ -136,6 +136,8 @@ def _invoke(argv: list[str] | None) -> int:
             return 2
         raise
     except Exception as e:  # click usage errors (typer vendors click, so match by shape)
+        if stop.requested() is not None:  # what a stop left behind (an import cut short): interrupted
+            return stop.EXIT_INTERRUPTED
         if hasattr(e, "show") and hasattr(e, "exit_code"):
             hint = _option_hint(e)
             if hint is not None:

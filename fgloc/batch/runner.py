@@ -190,8 +190,10 @@ def run_batch(jobs: list[Job], outdir: Path, engine: Any, ship: bool = False, fo
     failed = 0
     bar = tqdm(total=len(jobs), initial=skipped, desc=desc, unit="log", disable=not progress, leave=False,
                dynamic_ncols=True)
-    try:
-        with closing(engine.run(fn, todo, ship)) as it:
+    from fgloc.io import stop
+
+    try:  # a signal stops the driver at once (it only waits for its workers: fgloc.io.stop)
+        with stop.immediate(), closing(engine.run(fn, todo, ship)) as it:
             for i, res in it:
                 job = todo[i]
                 res = _store(job, res)

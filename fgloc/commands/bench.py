@@ -151,7 +151,7 @@ def register(app: typer.Typer) -> None:
                        command="demo", force=force)
         outs.check()  # before the work: files fgloc did not write are refused at once
         stage(f"simulating the paper experiment (seed 0), then localizing it {len(runs)} times")
-        with stop.cooperative(), outs:  # a Ctrl-C stops between two messages; the folder stays as it was
+        with outs:  # a Ctrl-C stops between two messages (fgloc.io.stop); the folder stays as it was
             with tqdm(total=100, desc="simulating", unit="%", disable=not tty, leave=False,
                       bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}") as bar:
                 def sim_progress(frac: float) -> None:

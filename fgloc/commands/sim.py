@@ -52,7 +52,7 @@ def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: st
     outs = Outputs(out, SIM_FILES, command="simulate", inputs=inputs, force=force)
     outs.check()  # before simulating: a folder holding someone else's map.yaml is refused at once
     t0 = time.perf_counter()
-    with stop.cooperative(), _progress(f"simulating {label}") as update:
+    with _progress(f"simulating {label}") as update:
         def step(frac: float) -> None:
             stop.checkpoint()  # Ctrl-C / SIGTERM: between two simulated scans
             update(frac)

@@ -506,7 +506,7 @@ class OutputFile:
             raise OutputError(f"{p}: is a directory; give the {self.what} file's name")
         if os.path.lexists(p) and not self.force:
             if self.ours is None:
-                raise OutputError(f"{p}: exists; pass --force to overwrite it, or choose another {self.option} name")
+                raise OutputError(f"{p}: exists; pass --force to overwrite it")
             if p.is_symlink() or not self.ours(p):
                 raise OutputError(f"{p}: exists and was not written by fgloc {self.command}; pass --force to "
                                   f"overwrite it, or choose another {self.option} name")

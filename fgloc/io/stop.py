@@ -3,13 +3,16 @@
 The CLI calls :func:`handling` around every command (a service manager's SIGTERM is handled as
 a Ctrl-C; a signal the parent set to be ignored stays ignored):
 
-* the **first** signal requests a stop.  Work that declared itself :func:`cooperative` (its
-  loops call :func:`checkpoint`: ``fgloc run`` per message, ``fgloc map`` per scan, ``fgloc
-  live`` its stop event) stops at the next check by raising :class:`Interrupted`, so numba or
-  GTSAM code is never left in the middle of a call; other work is interrupted at once
-  (Python's own Ctrl-C behaviour).  Either way the command's staged outputs are discarded, its
-  previous outputs stay as they were (:mod:`fgloc.io.outputs`), and the CLI exits 130 with one
-  line ``fgloc: interrupted (SIGINT)``;
+* the **first** signal requests a stop; the signal handler itself never raises in the middle
+  of the work (a Ctrl-C that landed inside an import, numba's dispatcher or a GTSAM call gave
+  ``ImportError: initialization failed``, a numba ``SystemError`` or a segfault).  The work
+  stops at its next :func:`checkpoint` (``fgloc run`` checks per message, ``fgloc map`` per
+  scan, ``simulate`` per scan, ``demo`` per message) by raising :class:`Interrupted`; work
+  without one is interrupted :data:`GRACE_S` later (a timer signal raises there).  Inside
+  :func:`immediate` (the batch driver waiting for its workers) it is interrupted at once;
+  inside :func:`cooperative` (``fgloc live``: its stop event) never: the work finishes itself.
+  Either way the command's staged outputs are discarded, its output folder stays as it was
+  (:mod:`fgloc.io.outputs`), and the CLI exits 130 with one line ``fgloc: interrupted (SIGINT)``;
 * the **second** signal exits with 130 at once, after the hooks registered with
   :func:`at_hard_exit` (removing staging folders, killing worker processes); a command that
   registered a hurry hook (:func:`cooperative` ``on_hurry``: ``fgloc live`` skips its final
@@ -33,6 +36,9 @@ from contextlib import contextmanager
 #: the exit status of an interrupted command (128 + SIGINT, as a shell reports Ctrl-C)
 EXIT_INTERRUPTED = 130
 
+#: seconds between a first signal and interrupting work that has not reached a checkpoint
+GRACE_S = 1.0
+
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -55,15 +61,17 @@ class _State:
     def __init__(self) -> None:
         self.signum: int | None = None  # the first signal received
         self.count = 0
-        self.cooperative = 0
+        self.cooperative = 0  # the work stops itself (no raise)
+        self.immediate = 0  # raise at the first signal
         self.critical = 0
         self.exit_pending = False
-        self.stop_pending = False  # a first signal held by a critical section (raised when it ends)
-        self.raised = False  # an Interrupted was raised (the CLI prints the line)
+        self.stop_pending = False  # a stop held by a critical section (raised when it ends)
+        self.raised = False  # an Interrupted was raised
         self.on_stop: list[Callable[[], None]] = []
         self.hurry: list[Callable[[], None]] = []
         self.hard_exit: dict[int, Callable[[], None]] = {}
         self.notes: list[str] = []
+        self.alarm = False  # the grace timer is ours
 
 
 _state = _State()
@@ -75,16 +83,12 @@ def requested() -> int | None:
     return _state.signum
 
 
-def interrupted() -> int | None:
-    """The signal whose stop ended the command (an :class:`Interrupted` was raised), or None."""
-    return _state.signum if _state.raised else None
-
-
 def checkpoint() -> None:
     """Raise :class:`Interrupted` when a stop was requested (outside a :func:`critical` section)."""
-    if _state.signum is not None and not _state.critical:
-        _state.raised = True
-        raise Interrupted(_state.signum)
+    st = _state
+    if st.signum is not None and not st.critical:
+        st.raised = True
+        raise Interrupted(st.signum)
 
 
 def note(line: str) -> None:
@@ -92,10 +96,6 @@ def note(line: str) -> None:
     with _lock:
         if line not in _state.notes:
             _state.notes.append(line)
-
-
-def notes() -> list[str]:
-    return list(_state.notes)
 
 
 def interrupted_line() -> str:
@@ -135,6 +135,12 @@ def _hard_exit() -> None:
     os._exit(EXIT_INTERRUPTED)
 
 
+def _raise_now() -> None:
+    st = _state
+    st.raised = True
+    raise Interrupted(st.signum if st.signum is not None else signal.SIGINT)
+
+
 def _on_signal(signum: int, frame: object) -> None:
     st = _state
     st.count += 1
@@ -147,8 +153,11 @@ def _on_signal(signum: int, frame: object) -> None:
         if st.critical:
             st.stop_pending = True
             return
-        st.raised = True
-        raise Interrupted(signum)
+        if st.immediate:
+            _raise_now()
+        if st.alarm:  # the grace: a checkpoint in time stops the work where it is safe to
+            signal.setitimer(signal.ITIMER_REAL, GRACE_S)
+        return
     if st.hurry and st.count == 2:
         for fn in list(st.hurry):
             fn()
@@ -157,6 +166,17 @@ def _on_signal(signum: int, frame: object) -> None:
         st.exit_pending = True
         return
     _hard_exit()
+
+
+def _on_alarm(signum: int, frame: object) -> None:
+    """The grace is over and no checkpoint raised: interrupt the work here."""
+    st = _state
+    if st.signum is None or st.raised or st.cooperative:
+        return
+    if st.critical:
+        st.stop_pending = True
+        return
+    _raise_now()
 
 
 @contextmanager
@@ -172,9 +192,15 @@ def handling() -> Iterator[None]:
                 continue
             old[s] = prev
             signal.signal(s, _on_signal)
+        if old and signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None):
+            old[signal.SIGALRM] = signal.getsignal(signal.SIGALRM)
+            signal.signal(signal.SIGALRM, _on_alarm)
+            _state.alarm = True
     try:
         yield
     finally:
+        if _state.alarm:
+            signal.setitimer(signal.ITIMER_REAL, 0)
         for sig, h in old.items():
             signal.signal(sig, h)  # type: ignore[arg-type]
         _state = _State()
@@ -183,9 +209,8 @@ def handling() -> Iterator[None]:
 @contextmanager
 def cooperative(on_stop: Callable[[], None] | None = None,
                 on_hurry: Callable[[], None] | None = None) -> Iterator[None]:
-    """Within: a first signal only requests the stop (the work calls :func:`checkpoint`, or
-    watches ``on_stop``, called from the handler); ``on_hurry``: called at the second signal
-    instead of exiting (the third exits)."""
+    """Within: a first signal only calls ``on_stop`` (from the handler) and the work stops
+    itself; ``on_hurry``: called at the second signal instead of exiting (the third exits)."""
     st = _state
     st.cooperative += 1
     if on_stop is not None:
@@ -204,6 +229,20 @@ def cooperative(on_stop: Callable[[], None] | None = None,
 
 
 @contextmanager
+def immediate() -> Iterator[None]:
+    """Within: the first signal raises :class:`Interrupted` at once (work that is safe to
+    interrupt anywhere and may wait long: the batch driver waiting for its workers)."""
+    st = _state
+    st.immediate += 1
+    try:
+        if st.signum is not None and not st.raised:
+            _raise_now()
+        yield
+    finally:
+        st.immediate -= 1
+
+
+@contextmanager
 def critical() -> Iterator[None]:
     """A section no signal cuts (publishing outputs): a stop or exit requested meanwhile takes
     effect when it ends (a stop raises :class:`Interrupted` there unless the work is
@@ -217,7 +256,6 @@ def critical() -> Iterator[None]:
     if st.critical == 0:
         if st.exit_pending:
             _hard_exit()
-        if st.stop_pending and st.signum is not None:
+        if st.stop_pending and st.signum is not None and not st.cooperative:
             st.stop_pending = False
-            st.raised = True
-            raise Interrupted(st.signum)
+            _raise_now()

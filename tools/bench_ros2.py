@@ -44,7 +44,7 @@ def fgloc(*args: str) -> list[str]:
 
 
 RECEIVER = """
-import sys, time
+import os, sys, time
 from fgloc.ros2 import codec, qos
 from fgloc.ros2.transport import CycloneTransport
 tr = CycloneTransport(int(sys.argv[1]), "lo")
@@ -62,7 +62,8 @@ try:
         time.sleep(1.0)
 except KeyboardInterrupt:
     pass
-print('{"received": %d}' % n[0])
+print('{"received": %d}' % n[0], flush=True)
+os._exit(0)  # without the interpreter's teardown under Cyclone's threads (as the fgloc command)
 """
 
 

@@ -195,6 +195,15 @@ class Backend(ABC):
         return Trajectory(np.asarray(self._online_t), np.asarray(self._online_p),
                           covs=np.asarray(self._online_c))
 
+    def online_after(self, t: float) -> list[tuple[float, FloatArray, FloatArray]]:
+        """The entries of :meth:`online_trajectory` stamped after ``t``, oldest first, ``(t, pose, cov)``,
+        without building the whole trajectory (a live node publishing each pose as it is known)."""
+        ts = self._online_t
+        k = len(ts)
+        while k > 0 and ts[k - 1] > t:
+            k -= 1
+        return [(ts[i], self._online_p[i], self._online_c[i]) for i in range(k, len(ts))]
+
     def source_health(self) -> Mapping[str, SourceHealth]:
         """Per input stream the back-end saw (``odom``, ``imu.yaw``, ``imu.gyro``, ``scan``, a further
         source's name): what it accepted, gated and skipped."""

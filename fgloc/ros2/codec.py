@@ -191,6 +191,9 @@ def grid_map(w: int, h: int, res: float, x: float, y: float, yaw: float, cells: 
         raise Undecodable(f"map of {w} x {h} cells with {cells.size} values")
     if not (math.isfinite(res) and res > 0):
         raise Undecodable(f"map resolution {res}")
+    # the message's float32 resolution read as the shortest decimal that rounds to it: the map_server
+    # YAML's value (0.03, not 0.029999999329447746, which would misplace a far wall by cells)
+    res = float(str(np.float32(res)))
     data = cells.astype(np.int16).reshape(h, w)
     trinary = bool(np.all(np.isin(np.unique(data), (-1, 0, 100))))
     return OccupancyMap(data, res, np.array([x, y, yaw]), mode="trinary" if trinary else "scale")

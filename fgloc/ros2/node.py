@@ -8,7 +8,8 @@ through the live runner (:class:`fgloc.live.app.LiveSession`: its queue, reorder
 health, recording, UDP publisher and Foxglove view).  It publishes what nav2's AMCL publishes:
 
 * ``/amcl_pose`` (``geometry_msgs/PoseWithCovarianceStamped``, reliable, transient local, depth 1)
-  after each localized scan, stamped with the scan (as AMCL), in ``global_frame_id``;
+  for each localized scan, stamped with the scan (as AMCL), in ``global_frame_id``: the back-end's
+  online estimate there, published as soon as it has it (:class:`Ros2Outputs`);
 * ``map -> odom`` on ``/tf`` (tf2's broadcaster QoS), stamped ``transform_tolerance_s`` after
   the pose it comes from (AMCL's post-dating, so that tf users may extrapolate that far);
   ``odom -> base`` at the pose's stamp comes from the robot's ``/tf`` (nav2's way) or, when the
@@ -126,10 +127,16 @@ def map_to_odom(map_base: np.ndarray, odom_base: np.ndarray) -> np.ndarray:
 
 
 class Ros2Outputs(BaseSink):
-    """The session sink publishing /amcl_pose and map -> odom after each localized scan, and
-    measuring scan arrival (DDS) -> transform published."""
+    """Publishes /amcl_pose and map -> odom for each scan once the back-end knows the pose at its stamp
+    (its online estimate there: what ``fgloc run`` writes to online.tum), and measures scan arrival (DDS)
+    -> transform published.
+
+    A smoother takes a scan's keyframe once the odometry reaches its stamp; a scan stamped after the
+    newest odometry is published when that odometry comes (AMCL, too, waits for ``odom -> base`` at the
+    scan's stamp).  :meth:`publish_new` is called after every message the session handles."""
 
     wants_messages = False
+    wants_fused = False
 
     def __init__(self, live: Ros2Live) -> None:
         self.live = live
@@ -141,30 +148,42 @@ class Ros2Outputs(BaseSink):
         self.published = 0
         self.no_odom = 0
         self.last_map_odom: np.ndarray | None = None
+        self._last_t = -math.inf
+        self._arrivals: deque[tuple[float, float, bool]] = deque(maxlen=64)  # scan stamp, arrival, live
 
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
-        if fused is None or fused.frame_id != "map":
+        r = self.live.runner
+        arrival = r.scan_arrival if r is not None else 0.0
+        self._arrivals.append((float(stamp), arrival, arrival > 0 and not self.live.flushing))
+        self.publish_new()
+
+    def publish_new(self) -> None:
+        loc = self.live.loc
+        if loc is None or loc.odom_mode:
+            return
+        new = loc.backend.online_after(self._last_t)
+        if not new:
             return
         c = self.live.cfg.ros2
-        # as AMCL: the pose at the scan's stamp (the back-end's estimate there, which fgloc run writes to
-        # online.tum), with the fused pose's covariance
-        t = float(stamp)
-        at_scan = np.asarray(self.live.loc.backend.predict(t)[0], dtype=float)
-        pose = PoseFix(t, at_scan, fused.cov, fused.quality, fused.source, c.global_frame_id)
-        self.pose_pub.write(codec.encode(pose)[1])
-        if self.tf_pub is not None:
-            odom = self.live.odom_frame.at(t)
-            if odom is None:
-                self.no_odom += 1
-            else:
-                mo = map_to_odom(at_scan, odom)
-                self.last_map_odom = mo
-                tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
-                self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
-        self.published += 1
-        arrival = self.live.runner.scan_arrival if self.live.runner is not None else 0.0
-        if arrival > 0 and not self.live.flushing:  # a scan kept from before the start is not live
-            self.latencies_ms.append((time.time() - arrival) * 1e3)
+        for t, pose_at, cov in new:
+            self._last_t = t
+            at = np.asarray(pose_at, dtype=float)
+            self.pose_pub.write(codec.encode(PoseFix(t, at, cov, 1.0, "fgloc", c.global_frame_id))[1])
+            if self.tf_pub is not None:
+                odom = self.live.odom_frame.at(t)
+                if odom is None:
+                    self.no_odom += 1
+                else:
+                    mo = map_to_odom(at, odom)
+                    self.last_map_odom = mo
+                    tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
+                    self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
+            self.published += 1
+            for st, arrival, live in self._arrivals:
+                if abs(st - t) < 1e-9:
+                    if live:  # a scan kept from before the start is not live
+                        self.latencies_ms.append((time.time() - arrival) * 1e3)
+                    break
 
     def latency_percentiles(self) -> tuple[float, float]:
         if not self.latencies_ms:
@@ -354,6 +373,8 @@ class Ros2Live:
 
         runner.health = {inp.kind: SensorHealth(inp.topic) for inp in self.inputs
                          if inp.kind == "scan" or inp.kind.startswith("source:")}
+        self.outputs = Ros2Outputs(self)
+        runner.session.sinks.insert(0, self.outputs)  # first: map -> odom goes out before the recording
         handlers = runner.session.handlers
         handlers["initialpose"] = self._on_initial_pose
         fuse_scan = handlers["scan"]
@@ -364,8 +385,17 @@ class Ros2Live:
             fuse_scan(msg)
 
         handlers["scan"] = scan_then
-        self.outputs = Ros2Outputs(self)
-        runner.session.sinks.insert(0, self.outputs)  # first: map -> odom goes out before the recording
+        outputs = self.outputs
+
+        def then_publish(handler: Callable[[object], None]) -> Callable[[object], None]:
+            def handle(msg: object) -> None:  # a pose the back-end now knows is published at once
+                handler(msg)
+                outputs.publish_new()
+            return handle
+
+        for kind in list(handlers):
+            if kind != "scan":  # the scans' sink publishes after each scan
+                handlers[kind] = then_publish(handlers[kind])
         self.loc, self.session = loc, session
         self._warm_up(loc, mount)
         with self._lock:

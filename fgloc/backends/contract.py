@@ -20,7 +20,6 @@ to :data:`fgloc.backends.REGISTRY` (its config section to :class:`fgloc.config.F
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -295,8 +294,3 @@ class Backend(ABC):
         self._online_p.append(np.asarray(pose, dtype=float).copy())
         self._online_c.append(np.asarray(cov, dtype=float).copy())
 
-
-def latency_fit_of(estimate: tuple[float, float]) -> tuple[float, float] | None:
-    """``(estimate, sigma)`` of a latency estimator as :meth:`Backend.latency_fit` reports it."""
-    est, sig = estimate
-    return (float(est), float(sig)) if math.isfinite(sig) else None

@@ -51,14 +51,13 @@ from fgloc.backends.health import (
     Arbiter,
     SourceHealth,
     bracket,
-    fix_speed,
 )
+from fgloc.backends.health.latency import median_period
 from fgloc.backends.inputs import InputBook
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import with_rotation, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
 
-MAX_REF_PERIOD_S = 0.06
 GYRO_RECOVER_AFTER = 5     # gyro readings gated in a row before the filter's yaw rate is re-opened to it
 STILL_TWIST = 1e-3          # |vx|, |vy| (m/s) and |w| (rad/s) below this: the wheels stand still
 #: the odometry's yaw-rate scale (reported / true) stays in these bounds: a skid steer's wheels
@@ -76,13 +75,6 @@ BURST_WINDOW = 16
 #: GAP_MIN_S) is a gap: its twist is taken as the mean over it even beside a gyro
 GAP_FACTOR = 3.0
 GAP_MIN_S = 0.2
-
-
-def _period(series: deque) -> float:
-    if len(series) < 3:
-        return math.inf
-    ts = np.array([x[0] for x in list(series)[-50:]])
-    return float(np.median(np.diff(ts)))
 
 
 class EKFBackend(Backend):
@@ -183,10 +175,10 @@ class EKFBackend(Backend):
         return gb.value() if gb is not None else 0.0
 
     def latency_estimate(self) -> float:
-        return self.inputs.latency()
+        return self.inputs.latency.value()
 
     def latency_fit(self) -> tuple[float, float] | None:
-        return self.inputs.latency_fit()
+        return self.inputs.latency.fit()
 
     def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """The odometry increment with the gyro's rotation where it covers ``(t0, t1]`` (else the
@@ -258,7 +250,7 @@ class EKFBackend(Backend):
         h.accepted += 1
         self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si, held_from=held_from,
                                 keep_w_noise=self._has_gyro(), sole=sole)
-        self._process_pairs()
+        self.inputs.latency.evaluate(self)
 
     def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
                      source: str) -> None:
@@ -378,7 +370,7 @@ class EKFBackend(Backend):
                 self.ekf.update_gyro(t, float(rate) - b, var, None, None)
                 self.stats["gyro_recoveries"] = self.stats.get("gyro_recoveries", 0) + 1
                 self._gyro_gated_run = 0
-        self._process_pairs()
+        self.inputs.latency.evaluate(self)
 
     def add_relative_yaw(self, t: float, yaw: float, var: float, source: str = "imu") -> None:
         """An orientation whose increments are used, not its frame (robot_localization's
@@ -442,7 +434,7 @@ class EKFBackend(Backend):
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
             pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)
-            self.inputs.add_fix(t, pose, cov)
+            self.inputs.latency.add_fix(t, pose, cov)
             self.inputs.reading("scan", ANGLE_ABSOLUTE, 0.005, t - self.latency_estimate(), float(pose[2]),
                                 float(cov[2, 2]))
             t_meas = t - self.latency_estimate()  # a late-stamped scan shows the pose this long before
@@ -487,37 +479,36 @@ class EKFBackend(Backend):
         rate = float(b[2]) if held else float(a[2] + f * (b[2] - a[2]))
         return float(a[1] + f * (b[1] - a[1])), rate
 
-    def _process_pairs(self) -> None:
-        book = self.inputs
-        if not book.fix_pairs or not self._yaw_series or not self._dist_series:
-            return
-        covered = min(self._yaw_series[-1][0], self._dist_series[-1][0])
-        keep = []
-        for pair in book.fix_pairs:
-            ta, tb, pa, pb, ca, cb = pair
-            if tb > covered or not book.recent_fixes or tb > book.recent_fixes[-1][0] - 0.25:
-                keep.append(pair)
-                continue
-            ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
-            da, db = self._series_at(self._dist_series, ta, True), self._series_at(self._dist_series, tb, True)
-            if ya is None or yb is None or da is None or db is None:
-                continue
-            # a reference slower than ~17 Hz cannot resolve a lag of tens of ms: no pairs from it
-            # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
-            if _period(self._dist_series) > MAX_REF_PERIOD_S:
-                continue
-            if _period(self._yaw_series) <= MAX_REF_PERIOD_S:
-                d_ref = yb[0] - ya[0]
-                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-                book.latency_est.add(-(yb[1] - ya[1]), r, float(ca[2, 2] + cb[2, 2]) + 1e-8, d_ref, 0)
-            dist_ref = db[0] - da[0]
-            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
-            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + 1e-6
-            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
-            va, vb = fix_speed(book.recent_fixes, ta), fix_speed(book.recent_fixes, tb)
-            if tb - ta >= 0.5 and va is not None and vb is not None:  # the fixes' own speeds: immune to wheel slip
-                book.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
-        book.fix_pairs = keep
+    def reference_covered_until(self) -> float:
+        """The latency reference (:class:`~fgloc.backends.health.latency.LatencyReference`): the
+        motion integrals of the gyro (or odometry) and of the odometry, at their own stamps."""
+        if not self._yaw_series or not self._dist_series:
+            return -math.inf
+        return min(self._yaw_series[-1][0], self._dist_series[-1][0])
+
+    def reference_periods(self) -> tuple[float, float]:
+        return (median_period([x[0] for x in list(self._dist_series)[-50:]]),
+                median_period([x[0] for x in list(self._yaw_series)[-50:]]))
+
+    def _reference_at(self, ta: float, tb: float) -> tuple[tuple[float, float], ...] | None:
+        ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
+        da, db = self._series_at(self._dist_series, ta, True), self._series_at(self._dist_series, tb, True)
+        if ya is None or yb is None or da is None or db is None:
+            return None
+        return ya, yb, da, db
+
+    def reference_yaw(self, ta: float, tb: float) -> tuple[float, float, float] | None:
+        r = self._reference_at(ta, tb)
+        if r is None:
+            return None
+        ya, yb = r[0], r[1]
+        return yb[0] - ya[0], -(yb[1] - ya[1]), 1e-8
+
+    def reference_distance(self, ta: float, tb: float) -> tuple[float, float] | None:
+        r = self._reference_at(ta, tb)
+        if r is None:
+            return None
+        return r[3][0] - r[2][0], 1e-6
 
     # ------------------------------------------------------------------ outputs
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:

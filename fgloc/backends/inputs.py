@@ -5,30 +5,21 @@ health record (accepted / gated / skipped, and why), the finite checks, the vari
 when a message claims none, the reading handed to the noise arbiter (what the source shows
 against the others, :class:`~fgloc.backends.health.Arbiter`), each gyro's bias estimated beside
 the estimator from the absolute headings and standstill
-(:class:`~fgloc.backends.health.GyroBias`), and the pairs of fixes the scans' latency is
-estimated from (:class:`~fgloc.backends.health.LatencyEstimator`).  Core maths only.
+(:class:`~fgloc.backends.health.GyroBias`), and the scans' latency
+(:class:`~fgloc.backends.health.latency.ScanLatency`).  Core maths only.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 
-import numpy as np
-
-from fgloc.backends.contract import FloatArray, SourceNoise, latency_fit_of
-from fgloc.backends.health import Arbiter, GyroBias, LatencyEstimator, SourceHealth
-
-#: a fix pair: (t_a, t_b, pose_a, pose_b, cov_a, cov_b)
-FixPair = tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]
-#: s: consecutive fixes at most this far apart make a latency pair (turns starting / ending)
-SHORT_PAIR_S = 0.3
-#: s: once a second, a fix and one this far before it (a start from standstill: the lag is v * latency)
-LONG_PAIR_S = (0.8, 1.2)
+from fgloc.backends.contract import SourceNoise
+from fgloc.backends.health import Arbiter, GyroBias, SourceHealth
+from fgloc.backends.health.latency import ScanLatency
 
 
 class InputBook:
-    """Per-source health, noise arbitration, gyro biases and latency pairs of one back-end.
+    """Per-source health, noise arbitration, gyro biases and the scans' latency of one back-end.
 
     ``adapt_noise``: readings go to ``arbiter`` and :meth:`noise` reports what it found (else
     the claimed noise, ``(1, 0)``); ``latency`` / ``latency_s``: the scans' latency estimated,
@@ -39,12 +30,7 @@ class InputBook:
         self.adapt_noise = bool(adapt_noise)
         self.health: dict[str, SourceHealth] = {}
         self.gyro_bias: dict[str, GyroBias] = {}   # per gyro stream estimated beside the estimator
-        self.latency_on = bool(latency)
-        self.latency_s = latency_s
-        self.latency_est = LatencyEstimator()
-        self.recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
-        self.fix_pairs: list[FixPair] = []
-        self._long_pair_t = -math.inf
+        self.latency = ScanLatency(latency, latency_s)
 
     # ------------------------------------------------------------------ health, checks
     def source(self, name: str, kind: str) -> SourceHealth:
@@ -101,37 +87,3 @@ class InputBook:
         """Whether the wheels stand still at ``t`` (then each gyro reading measures its bias)."""
         for gb in self.gyro_bias.values():
             gb.set_still(t, still)
-
-    # ------------------------------------------------------------------ latency
-    @property
-    def latency_estimated(self) -> bool:
-        """Whether the scans' latency is estimated (on, and not configured)."""
-        return self.latency_on and self.latency_s is None
-
-    def latency(self) -> float:
-        """The scans' latency (s) in use: configured, estimated once significant, or 0."""
-        if self.latency_s is not None:
-            return float(self.latency_s)
-        return self.latency_est.value() if self.latency_on else 0.0
-
-    def latency_fit(self) -> tuple[float, float] | None:
-        return latency_fit_of(self.latency_est.estimate())
-
-    def add_fix(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
-        """A fix used at scan stamp ``t``: latency pairs with the previous fix (within
-        :data:`SHORT_PAIR_S`) and, once a second, with one :data:`LONG_PAIR_S` before it
-        (:attr:`fix_pairs`, evaluated by the back-end once its references cover them)."""
-        if not self.latency_estimated:
-            return
-        pose, cov = np.array(pose, dtype=float), np.array(cov, dtype=float)
-        recent = self.recent_fixes
-        if recent and 0.0 < t - recent[-1][0] <= SHORT_PAIR_S:
-            f = recent[-1]
-            self.fix_pairs.append((f[0], t, f[1], pose, f[2], cov))
-        if t - self._long_pair_t >= 1.0:
-            old = [f for f in recent if LONG_PAIR_S[0] <= t - f[0] <= LONG_PAIR_S[1]]
-            if old:
-                f = old[0]
-                self.fix_pairs.append((f[0], t, f[1], pose, f[2], cov))
-                self._long_pair_t = t
-        recent.append((t, pose, cov))

@@ -1,15 +1,37 @@
-"""The scans' latency from how the fixes' increments lag a reference's, and the time-series helpers
-it uses."""
+"""The scans' latency, one home for both back-ends: configured, or estimated from pairs of fixes
+(:class:`ScanLatency`: the pairs collected, evaluated against the back-end's reference motion,
+:class:`LatencyReference`), by a robust fit (:class:`LatencyEstimator`); and the time-series
+helpers it uses (:func:`median_period`, :func:`bracket`, :func:`fix_speed`)."""
 
 from __future__ import annotations
 
 import math
 from bisect import bisect_right
 from collections import deque
-from operator import itemgetter
-from typing import Any
+from operator import itemgetter, sub
+from typing import Any, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
+
+from fgloc.geometry import wrap_scalar
+
+FloatArray = NDArray[np.float64]
+#: s: a latency reference (gyro, odometry) slower than this (~17 Hz) cannot resolve a lag of tens of
+#: ms (the motion inside one of its periods is not known): it gives no pairs (the odometry also
+#: de-skews the scans: a slow odometry bends the fixes in turns)
+MAX_REF_PERIOD_S = 0.06
+#: a fix pair: (t_a, t_b, pose_a, pose_b, cov_a, cov_b)
+FixPair = tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]
+#: s: consecutive fixes at most this far apart make a latency pair (turns starting / ending)
+SHORT_PAIR_S = 0.3
+#: s: once a second, a fix and one this far before it (a start from standstill: the lag is v * latency)
+LONG_PAIR_S = (0.8, 1.2)
+#: s: a pair is evaluated once its later fix is this much older than the newest fix (the fixes'
+#: own speed around it is known)
+SETTLE_S = 0.25
+#: s: distance pairs only this long or longer: a consecutive pair's few cm cannot tell a lag from slip
+MIN_DISTANCE_PAIR_S = 0.5
 
 
 class LatencyEstimator:
@@ -160,3 +182,122 @@ def bracket(series: deque, t: float) -> tuple[int, int]:
 
 
 _time = itemgetter(0)
+
+
+def median_period(ts: list[float]) -> float:
+    """Median spacing of the last (50) stamps ``ts`` (inf with fewer than 3)."""
+    if len(ts) < 3:
+        return math.inf
+    last = ts[-50:]
+    d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
+    m = len(d) // 2
+    return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
+
+
+class LatencyReference(Protocol):
+    """A back-end's reference motion (its gyro / odometry, correctly stamped) for the latency pairs."""
+
+    def reference_covered_until(self) -> float:
+        """The stamp up to which every reference has readings."""
+        ...
+
+    def reference_periods(self) -> tuple[float, float]:
+        """The median message periods (s) of the distance and of the yaw reference."""
+        ...
+
+    def reference_yaw(self, ta: float, tb: float) -> tuple[float, float, float] | None:
+        """``(d_ref, x, var)``: the reference's yaw change over ``(ta, tb]``, the regressor
+        ``x = -(rate_b - rate_a)`` and the variance it adds; None: not known there."""
+        ...
+
+    def reference_distance(self, ta: float, tb: float) -> tuple[float, float] | None:
+        """``(distance, var)``: the reference's distance over ``(ta, tb]`` and the variance it adds."""
+        ...
+
+
+class ScanLatency:
+    """The scans' latency: ``latency_s`` when configured, else (``on``) estimated from pairs of
+    fixes (:meth:`add_fix`) against a reference's motion (:meth:`evaluate`), used once significant."""
+
+    def __init__(self, on: bool, latency_s: float | None) -> None:
+        self.on = bool(on)
+        self.latency_s = latency_s
+        self.est = LatencyEstimator()
+        self.recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self.pairs: list[FixPair] = []
+        self._long_pair_t = -math.inf
+
+    @property
+    def estimated(self) -> bool:
+        """Whether the latency is estimated (on, and not configured)."""
+        return self.on and self.latency_s is None
+
+    def value(self) -> float:
+        """The latency (s) in use: configured, estimated once significant, or 0."""
+        if self.latency_s is not None:
+            return float(self.latency_s)
+        return self.est.value() if self.on else 0.0
+
+    def fit(self) -> tuple[float, float] | None:
+        """The estimator's ``(estimate s, sigma s)`` once its sigma is finite, else None."""
+        est, sig = self.est.estimate()
+        return (float(est), float(sig)) if math.isfinite(sig) else None
+
+    def add_fix(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        """A fix used at scan stamp ``t``: a pair with the previous fix (within :data:`SHORT_PAIR_S`)
+        and, once a second, with one :data:`LONG_PAIR_S` before it."""
+        if not self.estimated:
+            return
+        pose, cov = np.array(pose, dtype=float), np.array(cov, dtype=float)
+        recent = self.recent_fixes
+        if recent and 0.0 < t - recent[-1][0] <= SHORT_PAIR_S:
+            f = recent[-1]
+            self.pairs.append((f[0], t, f[1], pose, f[2], cov))
+        if t - self._long_pair_t >= 1.0:
+            old = [f for f in recent if LONG_PAIR_S[0] <= t - f[0] <= LONG_PAIR_S[1]]
+            if old:
+                f = old[0]
+                self.pairs.append((f[0], t, f[1], pose, f[2], cov))
+                self._long_pair_t = t
+        recent.append((t, pose, cov))
+
+    def evaluate(self, ref: LatencyReference) -> None:
+        """The pairs the reference now covers into the estimator: a yaw pair (the fixes' yaw change
+        against the reference's) where the yaw reference is fast enough, and a distance pair (the
+        regressor from the fixes' own speeds: immune to wheel slip) where the pair is long enough."""
+        if not self.estimated:
+            self.pairs.clear()
+            return
+        if not self.pairs:
+            return
+        covered = ref.reference_covered_until()
+        last_fix = self.recent_fixes[-1][0] if self.recent_fixes else -math.inf
+        periods: tuple[float, float] | None = None
+        keep = []
+        for pair in self.pairs:
+            ta, tb, pa, pb, ca, cb = pair
+            if tb > covered or tb > last_fix - SETTLE_S:
+                keep.append(pair)
+                continue
+            if periods is None:
+                periods = ref.reference_periods()
+            if periods[0] > MAX_REF_PERIOD_S:
+                continue
+            if periods[1] <= MAX_REF_PERIOD_S:
+                y = ref.reference_yaw(ta, tb)
+                if y is not None:
+                    d_ref, x, var = y
+                    r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+                    self.est.add(x, r, float(ca[2, 2] + cb[2, 2]) + var, d_ref, 0)
+            if tb - ta < MIN_DISTANCE_PAIR_S:
+                continue
+            dist = ref.reference_distance(ta, tb)
+            if dist is None:
+                continue
+            dist_ref, var = dist
+            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
+            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + var
+            va, vb = fix_speed(self.recent_fixes, ta), fix_speed(self.recent_fixes, tb)
+            if va is not None and vb is not None:
+                self.est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
+        self.pairs = keep

@@ -12,11 +12,10 @@ import numpy as np
 
 from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import offset_pose, pose_offset
-from fgloc.backends.health import fix_speed
 from fgloc.backends.smoother.keys import O, symbol
 from fgloc.backends.smoother.state import Chain
-from fgloc.backends.smoother.streams import MAX_REF_PERIOD_S, Streams
-from fgloc.geometry import wrap_angle, wrap_scalar
+from fgloc.backends.smoother.streams import Streams
+from fgloc.geometry import wrap_angle
 
 #: m, the prior / random-walk sigma of a compass-offset variable's position (always 0: it enters
 #: no other factor, any sigma holds it there; see factors.compass_factor)
@@ -131,50 +130,28 @@ class Calibration(Streams):
 
     def latency_estimate(self) -> float:
         """The scan latency (s) in use: configured, estimated once significant, or 0."""
-        return self.inputs.latency()
+        return self.inputs.latency.value()
 
     def latency_fit(self) -> tuple[float, float] | None:
-        return self.inputs.latency_fit()
+        return self.inputs.latency.fit()
 
-    def _latency_pairs(self) -> None:
-        """Feed the latency estimator with the fix pairs the gyro / odometry now cover."""
-        book = self.inputs
-        if not book.latency_estimated:
-            book.fix_pairs.clear()
-            return
+    # the latency's reference (health.latency.LatencyReference): the odometry, a gyro's yaw where one covers
+    def reference_covered_until(self) -> float:
         covered = self.odo_t[-1] if self.odo_t else -np.inf
         for ts_, _, _ in self.gyro.values():
             if ts_:
                 covered = min(covered, ts_[-1])
-        keep = []
-        odo_period = self._period_of(self.odo_t)
-        last_fix = book.recent_fixes[-1][0] if book.recent_fixes else -np.inf
-        yaw_period = self._period_of(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t)
-        for pair in book.fix_pairs:
-            ta, tb, pa, pb, ca, cb = pair
-            if tb > covered or tb > last_fix - 0.25:
-                keep.append(pair)
-                continue
-            # a reference slower than ~20 Hz cannot resolve a lag of tens of ms (the motion inside
-            # one of its periods is not known): such a reference gives no pairs
-            # (the odometry also de-skews the scans: slow odometry bends the fixes in turns)
-            if odo_period > MAX_REF_PERIOD_S:
-                continue
-            yaw_ref_ok = yaw_period <= MAX_REF_PERIOD_S
-            if yaw_ref_ok:
-                wa, wb = self._yaw_rate_at(ta), self._yaw_rate_at(tb)
-                d_ref = self._rotation_between(ta, tb)
-                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-                var = float(ca[2, 2] + cb[2, 2]) + (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
-                book.latency_est.add(-(wb - wa), r, var, d_ref, 0)
-            # distance pairs only ~1 s long: a consecutive pair's few cm cannot tell a lag from slip
-            if tb - ta < 0.5:
-                continue
-            d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
-            dist_ref = float(np.hypot(d[0], d[1]))
-            dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
-            var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + float(c[0, 0])
-            va, vb = fix_speed(book.recent_fixes, ta), fix_speed(book.recent_fixes, tb)
-            if va is not None and vb is not None:
-                book.latency_est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
-        book.fix_pairs = keep
+        return covered
+
+    def reference_periods(self) -> tuple[float, float]:
+        return (self._period_of(self.odo_t),
+                self._period_of(next(iter(self.gyro.values()))[0] if self.gyro else self.odo_t))
+
+    def reference_yaw(self, ta: float, tb: float) -> tuple[float, float, float] | None:
+        wa, wb = self._yaw_rate_at(ta), self._yaw_rate_at(tb)
+        d_ref = self._rotation_between(ta, tb)
+        return d_ref, -(wb - wa), (self.cfg.gyro_sigma_radps * (tb - ta)) ** 2
+
+    def reference_distance(self, ta: float, tb: float) -> tuple[float, float] | None:
+        d, c = self._integrate(ta, tb)  # the reported distance: its scale error is fitted alongside
+        return float(np.hypot(d[0], d[1])), float(c[0, 0])

@@ -154,7 +154,7 @@ class KeyframeGraph(FurtherSourceFactors):
         self._add_velocity_factors(t, graph, vals, ts)
         if self.cfg.adapt_noise:
             self.inputs.arb.update(t)
-        self._latency_pairs()
+        self.inputs.latency.evaluate(self)
         if len(keys) >= max(1, int(self.cfg.update_every)):
             self._flush_acc()
         else:  # online estimate until the next solver update: the odometry prediction
@@ -181,7 +181,7 @@ class KeyframeGraph(FurtherSourceFactors):
         # a scale is estimated only once something else observes it (held at its estimate until
         # then): the speed scale from positions (fixes), the yaw-rate scale from any other yaw source
         ks_v = ks_w = None
-        latency_known = not self.inputs.latency_estimated or self.inputs.latency_est.settled()
+        latency_known = not self.inputs.latency.estimated or self.inputs.latency.est.settled()
         if (self.stats["fixes_used"] > 0 and latency_known) or "odom_speed_scale" in self.chains:
             ch = self._chain("odom_speed_scale", "g", [1.0], [self.cfg.odom_speed_scale_prior],
                              [self.cfg.odom_scale_rw])
@@ -253,7 +253,7 @@ class KeyframeGraph(FurtherSourceFactors):
             pose = compose1(pose, se2_exp(self._twist_at(t) * lat))
         # pairs for the latency estimate: consecutive fixes (turns starting / ending) and, once a
         # second, fixes ~1 s apart (a start from standstill: the lag is v * latency)
-        self.inputs.add_fix(t, fix.pose, cov)
+        self.inputs.latency.add_fix(t, fix.pose, cov)
         return fix_factor(k, pose, cov, self.cfg.fix_kernel, self.cfg.fix_kernel_k)
 
     def _add_gyro_factors(self, t_now: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,

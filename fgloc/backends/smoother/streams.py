@@ -6,17 +6,14 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left, bisect_right
-from operator import sub
 
 import numpy as np
 
 from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import integrate_heading, integrate_twist_lists, scaled_delta
+from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import exp_coefficients, wrap_scalar
-
-MAX_REF_PERIOD_S = 0.06  # a latency reference (gyro, odometry) must be at least ~17 Hz
-
 
 #: the odometry's mean message period for :meth:`SlidingWindowSmoother._timing_var` is taken over this many
 TIMING_MESSAGES = 200
@@ -52,16 +49,6 @@ def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int
                 weights[i + 1] = weights.get(i + 1, 0.0) + wj
         i += 1
     return d
-
-
-def median_period(ts: list[float]) -> float:
-    """Median spacing of the last readings (inf with fewer than 3)."""
-    if len(ts) < 3:
-        return math.inf
-    last = ts[-50:]
-    d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
-    m = len(d) // 2
-    return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
 
 
 class Streams(SmootherState):

@@ -369,14 +369,14 @@ class EKF:
         over its period, held backwards as the smoother integrates it), not the velocity at ``t``:
         it measures the velocity at the start of that interval (the filter time) and the filter is
         then carried to ``t`` with it, so that the pose moves by the increment the twist describes.
-        Measured at ``t`` instead, the interval is crossed with the previous message's velocity: a
-        real e-puck's odometry, 1-2 s gaps and 6 ms steps at 0.6 m/s, ended 2.4 m off.  Where other
+        Measured at ``t`` instead, the interval would be crossed with the previous message's velocity
+        (an odometry with gaps of seconds ends metres off).  Where other
         sensors carried the filter past ``held_from`` with the old velocity, the position moves by
         the velocity's change over that part.  ``keep_w_noise``: the yaw rate keeps its process noise
         over the interval (a gyro measures it within).  ``sole``: the odometry is the only source of
         the velocities it measures, whose interval velocity it then is, not a random walk's step from
-        the last (the filter's smoothing kept 83 % of each 0.4 rad/s step of a HeRo's quantized yaw,
-        whose pose-increment rates are exact only integrated whole: 0.65 m off on a 2.4 m path)."""
+        the last (the filter's smoothing would keep only part of each step of a quantized yaw, whose
+        pose-increment rates are exact only integrated whole)."""
         tw = np.asarray(twist, dtype=float)
         cov = np.asarray(twist_cov, dtype=float)
         assert self.t is not None, "EKF not initialized"
@@ -384,8 +384,8 @@ class EKF:
             return self._encoder_at(float(t), tw, cov, yaw_log_scale_index)
         # the interval's velocity is a new one: the random walk over the interval added at its start,
         # and no tie to the pose already travelled (spread over the interval, or correlated with the
-        # pose, a precise twist after a 1.3 s gap moved the pose travelled before it by 0.17 m); a
-        # block of a covariance and the rest with their cross terms zeroed stays positive semidefinite
+        # pose, a precise twist after a gap would move the pose travelled before it); a block of a
+        # covariance and the rest with their cross terms zeroed stays positive semidefinite
         t_meas, dt = self.t, float(t) - self.t
         quiet = tuple(i for i in ((OVX, OVY) if self.omni else (V,)) + (() if keep_w_noise else (self.w_index,)))
         q = np.diag(self.process_noise(dt))

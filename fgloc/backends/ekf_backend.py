@@ -7,7 +7,7 @@ fixes map updates (a late fix, older than the filter time, is first carried forw
 filter's velocities).  The online and the final trajectory are the same: the pose
 right after each scan's fix (a filter does not smooth).
 
-Beyond the paper (issue 17), all switchable in ``ekf:``:
+Beyond the paper, all switchable in ``ekf:``:
 
 * a gyro's yaw rate (an IMU's, or the compass module's) measures ``w + b``; its bias ``b`` is
   estimated beside the filter (:class:`~fgloc.backends.health.GyroBias`: from the absolute
@@ -235,7 +235,7 @@ class EKFBackend(Backend):
             # the interval's mean velocity: for the odometry alone (nothing else measures the velocity
             # it crosses the interval with), or across a gap while other sensors carry the filter (at
             # the regular rate beside a gyro the velocity at the stamp, as robot_localization, whose
-            # ported configs were tuned so, takes it: its test bags end 0.04-0.08 m nearer its result)
+            # ported configs are tuned so, takes it)
             if self.cfg.odom_held_back and (sole or step > max(GAP_FACTOR * typical, GAP_MIN_S)):
                 held_from = self._last_odom_t
         if held_from is not None and any(d < BURST_STEP_S for d in self._odom_steps):

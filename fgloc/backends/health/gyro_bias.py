@@ -16,8 +16,7 @@ class GyroBias:
 
     A wheel's yaw rate cannot tell a gyro's bias from its own scrub or slip: a skid steer
     whose wheels report 0.5 rad/s while driving straight would be read as a 0.5 rad/s gyro
-    bias (robot_localization's Jackal bag: 0.32 rad/s, when the bias was an EKF state beside
-    the wheels' yaw-rate scale).  The bias is therefore estimated from
+    bias.  The bias is therefore estimated from
 
     * absolute headings (an IMU's orientation, a compass, scan-to-map fixes): per heading
       source ``i`` an offset ``c_i`` = its yaw minus the gyro's raw integral ``G(t)``, which
@@ -52,7 +51,7 @@ class GyroBias:
         self.min_dt = 1.0 / float(max_rate_hz)
         self.window_s = float(window_s)
         # state [b, c_1, ..., c_n] and its covariance as plain lists (a handful of entries, updated at
-        # every heading reading: numpy's per-call overhead was most of the filter's time)
+        # every heading reading: numpy's per-call overhead would be most of the filter's time)
         self.x: list[float] = [0.0]
         self.P: list[list[float]] = [[float(prior_sigma) ** 2]]
         self.t: float | None = None

@@ -98,7 +98,7 @@ class LatencyEstimator:
 
     def _refit(self) -> tuple[float, float]:
         # refit after refit_every new pairs, or once they are refit_share of the rows fitted: a refit reads
-        # every row (up to max_rows), so a fixed count made its cost grow with the log (quadratic)
+        # every row (up to max_rows), so a fixed count would make its cost grow with the log (quadratic)
         if self.n - self._fit_n < self._refit_after:   # (the threshold is the fit's: one test per call)
             return self._fit[1], self._fit[2]  # type: ignore[index]
         if not self.rows:

@@ -18,22 +18,15 @@ frame's pose in the map ``Pose2(0, 0, -offset)``, so that every factor on it is 
   an optional Mahalanobis gate ``fix_gate``).  The gate is deliberately loose: a tight gate
   against an odometry prediction locks out the good fixes once the wheels slip; the robust
   kernel bounds the pull of a wrong fix instead.  After ``max_rejections`` in a row the
-  back-end is reset to the fix (the pipeline normally relocalizes first).  Measured on the
-  Radish segments (issue 13, 800 scans, measured map accuracy): the prediction is the less
-  reliable of the two there.  On mit-csail its NEES against SLAM averages 98 (fresh marginal),
-  and half of the good fixes lie beyond chi-square's 99.9 % (16.27) from it, as do 16 of the 22
-  gross ones (> 0.2 m or 3 deg from SLAM), so no threshold on that distance tells them apart.
-  Tried and not kept, heading RMSE with undeclared map accuracy: a fix far from the prediction
-  held until the next fix backs it (fr079 0.533 -> 0.752 deg; with the threshold scaled to the
-  distances the run shows, intel 0.486 -> 1.001 too), and a Cauchy kernel on the fixes (fr079
-  0.533 -> 1.538 deg, mit-csail 1.94 -> 15.4).
+  back-end is reset to the fix (the pipeline normally relocalizes first).  (The measurements
+  behind the loose gate and the Huber kernel: docs/results/fusion.md, "Design evidence".)
 * the compass factors use a Cauchy kernel (redescending): a magnetic disturbance of tens of
   degrees is ignored rather than averaged in.
 * gyro yaw-increment factors ``x<i-1> - x<i>``: the gyro integrated between the keyframes, its
   bias estimated beside the graph from absolute headings and standstill (the default,
   :class:`~fgloc.backends.health.GyroBias`, as the EKF) or, with ``gyro_bias_in_graph``, a graph
-  variable (every yaw source, the wheels too, informs it there: a drone's placeholder yaw rate 0
-  pulled it to a 0.0085 rad/s bias); where the gyro covers a keyframe interval the
+  variable (every yaw source, the wheels too, informs it there: a placeholder yaw rate 0 pulls
+  it); where the gyro covers a keyframe interval the
   odometry's translation is integrated along its heading, the wheels' yaw-rate scale (``k<j>``)
   and speed scale (``g<j>``) are calibration variables.
 

@@ -54,9 +54,7 @@ class SmootherConfig:
                                       "a cautious 1 deg/s, as the EKF's compass_rate_sigma_deg)", gt=0)
     gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
     gyro_bias_rw_radps: float = setting(2e-5, "random walk of the gyro bias (rad/s per sqrt(s))", gt=0)
-    # false by default: beside the graph is closer to robot_localization on 4 of its 5 real bags and
-    # equal on the paper bench and the simulator table; the live divergence it once showed
-    # (tests/live/test_end_to_end.py) was the STM32 emulator's gyro not scaled with the replay speed
+    # false by default (docs/results/fusion.md, "Design evidence")
     gyro_bias_in_graph: bool = setting(False, "the gyro bias as a graph variable, observed by every yaw source (the "
                                        "wheels too); false: estimated beside the graph from absolute headings "
                                        "and standstill only (health.GyroBias, as the EKF)")

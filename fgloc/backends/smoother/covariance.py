@@ -11,14 +11,13 @@ from fgloc.backends.base import FloatArray
 
 #: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,
 #: robot_localization's 1e6): bounded to it, a weak prior, so the integrated odometry factor stays
-#: a well-conditioned system (1e6 made iSAM2 report an indeterminate system on r_l's test1.bag)
+#: a well-conditioned system (iSAM2 reports an indeterminate system with 1e6)
 TWIST_VAR_MAX = 100.0
 
 
 #: m^2, m^2, rad^2: the prior of a restart after a solver failure is the last marginal's diagonal,
-#: at most this.  A restart from the marginal inflated (x4 per failure, up to 100 m^2 / pi^2) or
-#: with its correlations failed again at the next keyframe: on a run without any heading source
-#: (r_l's test1.bag with odom0 vx, vy only) every keyframe after the first failure was one
+#: at most this (a restart from the marginal inflated, or with its correlations, can fail again at
+#: the next keyframe on a run without any heading source)
 RESTART_VAR_MAX = np.array([1.0, 1.0, 1.0])
 
 
@@ -30,8 +29,7 @@ def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArra
     """The map-frame covariance of ``pose1 = pose0 (+) d``: ``cov0_map`` (``pose0``'s, map frame) carried
     along, its heading's uncertainty swept over the distance from ``pose0`` to ``pose1``, plus the
     increment's covariance ``inc_cov`` (frame of ``pose0``, as :func:`~fgloc.backends.factors.integrate_twist`
-    gives it) rotated into the map.  (``inc_cov`` added as it is gave a robot heading along map +y its
-    along-track variance on map x, and no heading sweep: tests/backends/test_smoother.py.)"""
+    gives it) rotated into the map."""
     # J P J^T (J = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]) plus R c R^T, in scalars (at every prediction)
     dx, dy = float(pose1[0]) - float(pose0[0]), float(pose1[1]) - float(pose0[1])
     p00, p01, p02, _, p11, p12, _, _, p22 = np.asarray(cov0_map, dtype=float).reshape(9).tolist()

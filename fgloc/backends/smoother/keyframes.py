@@ -89,9 +89,8 @@ class KeyframeGraph(FurtherSourceFactors):
     def _gyros_cover(self, t: float) -> bool:
         """Every gyro still reading (one within :data:`GYRO_LIVE_S` of ``t``) has reached ``t``, so
         the keyframe's chord can run along its heading.  A keyframe made before (its gyro reading
-        arriving after the odometry's) kept the wheels' own arc, bent by their yaw: on r_l's
-        Jackal bag, IMU and wheels both at 50 Hz, 75 % of the keyframes, with wheels that report
-        4.7 times the turn, drove the smoother's path 1.0 deg crabwise."""
+        arriving after the odometry's) would keep the wheels' own arc, bent by their yaw (a skid
+        steer's wheels report several times the turn: the path drives crabwise)."""
         if not self.cfg.gyro_chord:
             return True
         for ts_, _, _ in self.gyro.values():
@@ -189,9 +188,8 @@ class KeyframeGraph(FurtherSourceFactors):
         self._turned += abs(float(d[2]))
         if (self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0)) \
                 or "odom_yaw_scale" in self.chains:
-            # observable once the robot has turned (a radian) with another yaw source to compare;
-            # 0.1 rad (3218db0) let a barely observable scale add noise: the paper run replayed from
-            # a live recording went 7.1 -> 8.2 mm online RMSE (tests/live/test_end_to_end.py flaked)
+            # observable once the robot has turned (a radian) with another yaw source to compare (a
+            # barely observable scale adds noise)
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
             ks_w = self._chain_key(ch, t, graph, vals, ts)
         fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
@@ -219,9 +217,8 @@ class KeyframeGraph(FurtherSourceFactors):
         weighted by the noise the fixes' headings show against the other yaw sources (the arbiter's
         :meth:`~fgloc.backends.health.Arbiter.shown_k`: over 0.125 s blocks and, for slowly varying
         errors, over 0.5 s and 2 s blocks).  Without it, a front-end whose headings are 5-10x better
-        than the floor left the heading to the relative sources between fixes over a long window: the
-        paper run's smoother heading took on the gyro's random walk and the wheels' drift on
-        straight legs (online 0.032 deg against its fixes' 0.024)."""
+        than the floor would leave the heading to the relative sources between fixes over a long
+        window (the gyro's random walk, the wheels' drift on straight legs)."""
         a = self._fix_cov_list(cov)
         if self.cfg.adapt_noise:
             k = self.inputs.arb.shown_k("scan")

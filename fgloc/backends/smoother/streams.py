@@ -76,8 +76,8 @@ class Streams(SmootherState):
         and ``W`` over all intervals adds ``var * w * W`` (not ``var * w^2``).  Neighbouring
         keyframe intervals share readings, so their increments are correlated; independent
         factors with ``var * w^2`` each claimed the integrated gyro 2-3x better (in variance) than
-        it is once keyframes come faster than readings (paper run: 25 Hz scans, 20 Hz gyro), and
-        the gyro's random walk wobbled the heading.  With the shares the factors of consecutive
+        it is once keyframes come faster than readings, and the gyro's random walk wobbles the
+        heading.  With the shares the factors of consecutive
         intervals add up to the exact variance of the gyro's integral over them.  ``want_var=False``:
         the variance is not computed (returned as 0)."""
         got = self.gyro.get(name)   # (no default: .get's would build three lists at every call)
@@ -227,8 +227,8 @@ class Streams(SmootherState):
         ``TIMING_MESSAGES`` messages above :data:`MAX_REF_PERIOD_S`: the latency estimator takes no pairs from
         it either): its pose at each keyframe stamp, against the scan's, is known to about one period, so
         ``(period * w)^2`` at each end, ``w`` the yaw rate there.  Not modelled, a scan stamped off its
-        odometry (CARMEN: 80-120 ms on fr079 / aces, intel's bursts) gave two consecutive increments
-        +-5-13 deg off in turns where they claimed 0.3-1.4 deg, and they outvoted the keyframe's fix."""
+        odometry (CARMEN logs: 80-120 ms) gives two consecutive increments degrees off in turns where
+        they claim a fraction of that, and they outvote the keyframe's fix."""
         n = min(len(self.odo_t), TIMING_MESSAGES)
         if not (self.cfg.slow_odom_timing or self.odom_timing_unknown) or n < 3:
             return 0.0

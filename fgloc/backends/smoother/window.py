@@ -53,9 +53,8 @@ class FixedLagWindow(Calibration):
         iSAM2 re-eliminates in batch, relinearizing every factor of the window, whenever the
         variables an update affects reach 65 % of all it holds (GTSAM's fixed ``batchThreshold``).
         The fixed-lag marginalization marks the path from the oldest keyframe to the root at
-        every update, so on a 2 s window (~35 variables) 29 % of the office log's updates went
-        batch: 3 of 4 calls of the Python factors were relinearizations of factors whose
-        variables had not moved, which give the cached linear factors again (a factor's
+        every update, so on a small window many updates go batch, relinearizing factors whose
+        variables have not moved, which give the cached linear factors again (a factor's
         linearization depends on its variables' linearization points only).  With at least 0.6
         inert variables per live one the affected share stays below 0.65: the same linear
         systems, solved incrementally (results equal to rounding; the inert ones never move, so

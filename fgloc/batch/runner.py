@@ -103,7 +103,7 @@ def clear_marker(job: Job) -> None:
 
 def _store(job: Job, res: JobResult) -> JobResult:
     """Driver side: shipped outputs into the job's folder (published whole), then the marker (or error.txt)."""
-    from fgloc.io.outputs import OutputError
+    from fgloc.io.outputs import OutputError, OutputFile
 
     out = Path(job.outdir)
     try:
@@ -114,9 +114,10 @@ def _store(job: Job, res: JobResult) -> JobResult:
             res.files = None
         if res.ok:
             write_marker(job, res)
-        elif res.traceback:
+        elif res.traceback and not out.is_symlink():  # never written through a link out of OUTDIR
             out.mkdir(parents=True, exist_ok=True)
-            (out / "error.txt").write_text(res.traceback)
+            with OutputFile(out / "error.txt", command="batch", force=True, what="error") as f:
+                f.path.write_text(res.traceback)
     except OutputError as e:
         return JobResult(job.name, False, error=str(e), host=res.host)
     except OSError as e:

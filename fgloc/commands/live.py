@@ -57,6 +57,20 @@ def summary_line(report: dict) -> str:
     return "fgloc live: " + "; ".join(parts)
 
 
+def _recording_and_hurry(record_error: str | None, hurried: bool, out_smoothed: Path | None) -> None:
+    """Exit 2 with the recording's disk error (the other outputs are written), else 130 when a
+    second signal hurried the shutdown (what was complete is written)."""
+    if record_error:
+        from fgloc.io.outputs import OutputError
+
+        raise OutputError(record_error)
+    if hurried:
+        from fgloc.io import stop
+
+        stop.note("the final smoothing was skipped" + (" (--out-smoothed not written)" if out_smoothed else ""))
+        raise SystemExit(stop.EXIT_INTERRUPTED)
+
+
 def register(app: typer.Typer) -> None:
     @app.command("live")
     def live(
@@ -116,8 +130,9 @@ def register(app: typer.Typer) -> None:
             rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend, initial_pose=pose_arg(initial_pose),
                             record=record, publish=publish, duration=duration, config=config, out=out or out_old,
                             out_smoothed=out_smoothed, quiet=quiet, view=view, domain=domain, interface=interface,
-                            scan_topic=scan_topic)
+                            scan_topic=scan_topic, force=force)
             print(dumps(rep, indent=1) if as_json else ros2_summary(rep))
+            _recording_and_hurry(rep.get("record_error"), bool(rep.get("hurried")), out_smoothed)
             return
 
         tty = sys.stderr.isatty()
@@ -162,12 +177,4 @@ def register(app: typer.Typer) -> None:
         if silent:
             sys.stderr.write(f"fgloc live: error: {'; '.join(silent)} in {r.report.get('duration_s', 0):.1f} s\n")
             raise SystemExit(EXIT_THREAD_DIED)
-        if r.record_error:  # the recording's disk failed: one line, exit 2 (the other outputs are written)
-            from fgloc.io.outputs import OutputError
-
-            raise OutputError(r.record_error)
-        if r.hurried:  # a second signal hurried the shutdown: what was complete is written
-            from fgloc.io import stop
-
-            stop.note("the final smoothing was skipped" + (" (--out-smoothed not written)" if out_smoothed else ""))
-            raise SystemExit(stop.EXIT_INTERRUPTED)
+        _recording_and_hurry(r.record_error, r.hurried, out_smoothed)

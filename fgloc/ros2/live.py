@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 import time
@@ -30,8 +29,10 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
               initial_pose: tuple[float, float, float] | None,
               record: Path | None, publish: list[str] | None, duration: float | None, config: Path | None,
               out: Path | None, out_smoothed: Path | None, quiet: bool, view: str | None,
-              domain: int | None, interface: str | None, scan_topic: str | None) -> dict[str, Any]:
-    """Run until Ctrl-C (or ``duration``); print the status line on stderr; return the summary."""
+              domain: int | None, interface: str | None, scan_topic: str | None, force: bool = False) -> dict[str, Any]:
+    """Run until Ctrl-C (or ``duration``); print the status line on stderr; return the summary.
+    The output files are checked before anything starts (never over an existing file without
+    ``force``, :mod:`fgloc.io.outputs`); a second Ctrl-C skips only the final smoothing."""
     from fgloc.config import load_config, parse_config
     from fgloc.errors import ConfigError
     from fgloc.live.app import LiveSession
@@ -42,6 +43,15 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
 
     if backend not in ("smoother", "ekf"):
         raise ConfigError(f"--backend {backend}: expected smoother or ekf")
+    from fgloc.io import stop as stopping
+    from fgloc.io.outputs import OutputFile
+
+    if record is not None:
+        OutputFile(record, command="live", force=force, precious=True, option="--record").check()
+    tums = {name: OutputFile(p, command="live", force=force, option=name, what="trajectory")
+            for name, p in (("-o", out), ("--out-smoothed", out_smoothed)) if p is not None}
+    for o in tums.values():
+        o.check()
     cfg = load_config(config)
     over = {k: v for k, v in (("domain_id", domain), ("interface", interface), ("scan_topic", scan_topic))
             if v is not None}
@@ -76,7 +86,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
 
     def make_live(session: Session) -> LiveSession:
         live = LiveSession(session, None, None, config=cfg, record=record, publish=publish or None,
-                           event_sink=event)
+                           event_sink=event, record_force=force)
         if view is not None:
             from fgloc.view import ViewHook
 
@@ -95,18 +105,11 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
         transport.close()
         raise
     stop = threading.Event()
-    hits = [0]
 
-    def on_signal(signum, frame) -> None:  # noqa: ANN001
-        hits[0] += 1
-        stop.set()
-        if hits[0] > 1:
-            raise KeyboardInterrupt
+    def hurry() -> None:  # a second Ctrl-C: close without the final smoothing (fgloc.io.stop)
+        if node.session is not None:
+            node.session.hurry()
 
-    old = {}
-    if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
-            old[s] = signal.signal(s, on_signal)
     event(f"joined DDS domain {transport.domain_id}" + (f" on {cfg.ros2.interface}" if cfg.ros2.interface else "")
           + f"; subscribed to {', '.join(i.topic for i in node.inputs)}")
     last = [0.0]
@@ -119,32 +122,34 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
         return False
 
     summary = None
-    try:
-        transport.start()
-        node.run(stop, duration=duration, until=shown)
-    finally:
-        if viewer and node.runner is not None:
-            node.runner.drain()
-            viewer[0].close()
-        summary = node.close()
-        for s, h in old.items():
-            signal.signal(s, h)
-        if tty and not quiet:
-            sys.stderr.write("\n")
+    with stopping.cooperative(on_stop=stop.set, on_hurry=hurry):
+        try:
+            transport.start()
+            node.run(stop, duration=duration, until=shown)
+        finally:
+            if viewer and node.runner is not None:
+                node.runner.drain()
+                viewer[0].close()
+            summary = node.close()
+            if tty and not quiet:
+                sys.stderr.write("\n")
     report: dict[str, Any] = {"ros2": node.report()}
     if summary is not None:
         session = node.session
         traj = session.live_trajectory()
         from fgloc.io.tum import write_tum
 
-        if out is not None and len(traj):
-            write_tum(out, traj)
-        if out_smoothed is not None and session.smoothed is not None and len(session.smoothed):
-            write_tum(out_smoothed, session.smoothed)
+        if "-o" in tums and len(traj):
+            with tums["-o"] as o:
+                write_tum(o.path, traj)
+        if "--out-smoothed" in tums and session.smoothed is not None and len(session.smoothed):
+            with tums["--out-smoothed"] as o:
+                write_tum(o.path, session.smoothed)
         report.update({"duration_s": round(summary.duration_s, 2), "poses": summary.n_poses,
                        "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms},
                        "health": summary.health, "counters": summary.counters,
-                       "record": str(record) if record else None})
+                       "record": str(record) if record else None, "record_error": session.record_error,
+                       "hurried": session.hurried})
     else:
         report["waiting_for"] = node.startup.waiting_for
     if viewer:

@@ -199,3 +199,51 @@ def test_undecodable_messages_raise_one_error() -> None:
                   codec.OCCUPANCY_GRID):
             with pytest.raises(codec.Undecodable):
                 codec.decode(t, bad)
+
+
+# ----------------------------------------------------------------------------- options
+def test_domain_and_interface_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    from fgloc.errors import ConfigError
+    from fgloc.ros2.transport import cyclone_config, domain_from_env
+
+    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+    assert domain_from_env(None) == 0                      # ROS 2's default
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")
+    assert domain_from_env(None) == 42 and domain_from_env(7) == 7
+    for bad in ("x", "-1"):
+        monkeypatch.setenv("ROS_DOMAIN_ID", bad)
+        with pytest.raises(ConfigError, match="ROS_DOMAIN_ID"):
+            domain_from_env(None)
+    with pytest.raises(ConfigError, match="0..232"):
+        domain_from_env(233)
+    assert cyclone_config(None) is None
+    assert '<NetworkInterface name="lo"/>' in (cyclone_config("lo") or "")
+    assert '<NetworkInterface address="192.0.2.7"/>' in (cyclone_config("192.0.2.7") or "")
+
+
+def test_cli_refusals_are_one_line(capsys: pytest.CaptureFixture[str], tmp_path) -> None:
+    from fgloc.cli import main
+
+    assert main(["replay", str(tmp_path / "x.mcap")]) == 2
+    assert "give --ros2" in capsys.readouterr().err
+    assert main(["live", "--ros2", "--serial", "loop://"]) == 2
+    assert "leave out --serial" in capsys.readouterr().err
+
+
+def test_odom_frame_interpolates_and_extrapolates_a_little() -> None:
+    from fgloc.ros2.node import OdomFrame, map_to_odom
+    from fgloc.types import Odometry
+
+    f = OdomFrame("odom")
+    for k in range(5):  # 1 m/s along x, turning 0.1 rad/s
+        f.add_odometry(Odometry(float(k) * 0.1, np.zeros(3), pose=np.array([0.1 * k, 0.0, 0.01 * k])))
+    np.testing.assert_allclose(f.at(0.25), [0.25, 0.0, 0.025])
+    np.testing.assert_allclose(f.at(0.45), [0.45, 0.0, 0.045])   # past the newest: extrapolated
+    assert f.at(0.9) is None and f.at(-0.5) is None               # too far from what was received
+    f.add_odometry(Odometry(0.5, np.zeros(3), frame_id="other", pose=np.array([9.0, 9.0, 0.0])))
+    np.testing.assert_allclose(f.at(0.4), [0.4, 0.0, 0.04])       # another frame's odometry is not this one
+    # map -> odom -> base is the map pose
+    from fgloc.geometry import compose
+
+    mb, ob = np.array([3.0, 1.0, 0.5]), np.array([0.4, -0.2, -0.3])
+    np.testing.assert_allclose(compose(map_to_odom(mb, ob), ob), mb, atol=1e-12)

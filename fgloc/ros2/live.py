@@ -33,16 +33,15 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     """Run until Ctrl-C (or ``duration``); print the status line on stderr; return the summary.
     The output files are checked before anything starts (never over an existing file without
     ``force``, :mod:`fgloc.io.outputs`); a second Ctrl-C skips only the final smoothing."""
+    from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
-    from fgloc.errors import ConfigError
     from fgloc.live.app import LiveSession
     from fgloc.localization import Session, build_session
     from fgloc.maps import load_map
     from fgloc.ros2.node import Ros2Live
     from fgloc.ros2.transport import CycloneTransport
 
-    if backend not in ("smoother", "ekf"):
-        raise ConfigError(f"--backend {backend}: expected smoother or ekf")
+    backend = check_backend(backend, Capability.LIVE)
     from fgloc.io import stop as stopping
     from fgloc.io.outputs import OutputFile
 

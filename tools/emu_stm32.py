@@ -17,7 +17,7 @@ import time
 
 from _emu_common import add_common, load_messages, make_clock
 
-from fgloc.live.app import load_config
+from fgloc.config import load_config
 from fgloc.testing.emulators import Stm32Emulator
 
 

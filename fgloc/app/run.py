@@ -355,8 +355,7 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
                        f"localize them on a map with --map MAP.yaml (fgloc map needs odometry too), or name the "
                        f"odometry / IMU topic with --odom-topic / --imu-topic; its topics: {topics_line(summ)}")
     if req.map_yaml is None and n_odom == 0 and not configured:
-        # an IMU turns the robot but never moves it: every pose would stay at the start (a robot that
-        # drove a 123 s loop was written as 895 poses at x = y = 0, rc 0)
+        # an IMU turns the robot but never moves it: every pose would stay at the start
         raise LogError(f"{log}: no odometry, and the IMU ({n_imu} on {imu_topic}) gives heading only: without a "
                        f"map every pose would stay at the start; localize on a map with --map MAP.yaml, or name "
                        f"the odometry topic with --odom-topic; its topics: {topics_line(summ)}")

@@ -90,7 +90,7 @@ def bench_paper(seeds: int, outdir: Path | None, variants: Any = PAPER_VARIANTS,
 
 
 def claims(rows: dict[str, list[Any]]) -> list[str]:
-    """The issue's accuracy targets, each as one line with the measured value and whether it is met
+    """The replica's accuracy targets, each as one line with the measured value and whether it is met
     (``met`` / ``MISSED`` after each target)."""
     def mean(label: str, key: str) -> float:
         return float(np.mean([getattr(m, key) for m in rows[label]]))

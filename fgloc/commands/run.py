@@ -75,7 +75,7 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
             f"time(s) after tracking){', ' + _styled('lost at the end', '1;31', tty) if r.ended_lost else ''}")
     from fgloc.localization.sources import summary_lines
 
-    for line in summary_lines(st):  # the motion model and each input source's health (issue 17)
+    for line in summary_lines(st):  # the motion model and each input source's health
         say(f"  {line}")
     be = st.backend
     if be.get("solver_failures"):  # the smoother restarted from its prediction: the estimate is not smoothed there

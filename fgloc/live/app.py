@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.errors import ConfigError
-from fgloc.live.config import HealthConfig, LaserConfig, SerialConfig  # noqa: F401 - their home before
 from fgloc.live.serial_link import FrameConverter, SerialLink
 from fgloc.types import StaticTransform, Trajectory
 
@@ -29,13 +28,6 @@ if TYPE_CHECKING:
     from fgloc.config import FglocConfig
     from fgloc.live.sick import SickClient
     from fgloc.localization import Session
-
-def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> FglocConfig:
-    """The one fgloc config (:func:`fgloc.config.load_config`); kept here for old callers."""
-    from fgloc.config import load_config as load
-
-    return load(path, overrides)
-
 
 def parse_host_port(s: str) -> tuple[str, int]:
     host, sep, port = s.rpartition(":")
@@ -281,6 +273,8 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
         raise ConfigError("fgloc live: give --serial URL and/or --laser HOST:PORT")
     if req.backend not in ("smoother", "ekf"):
         raise ConfigError(f"--backend {req.backend}: expected smoother or ekf")
+    from fgloc.config import load_config
+
     cfg = load_config(req.config)
     if req.laser_mount is not None:
         from fgloc.config import parse_config

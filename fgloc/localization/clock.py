@@ -5,7 +5,7 @@ robot (wheels, laser) can sit tens to hundreds of milliseconds apart.  On CARMEN
 6-8 Hz odometry sits 80-120 ms off the scans (fr079, aces: the odometry's yaw over scan pairs fits
 the SLAM reference best read 0.08-0.12 s off the scans' stamps); in turns the back-end then
 integrated each keyframe interval's rotation over the wrong 0.1 s, increments 5-13 deg off where
-they claimed 0.3-1.4 deg, and they outvoted a correct fix (issue 13 item 4).
+they claimed 0.3-1.4 deg, and they outvoted a correct fix.
 
 :class:`OdometryClock` measures that offset from what the localizer already has: an odometry
 message stamped ``s`` is taken to report the motion at ``s + offset`` on the scans' clock.  For

@@ -111,8 +111,8 @@ class OdometryTracker:
 
         A component the source does not fuse (variance ``UNUSED_VAR``) is handed to the back-end as
         0 (with that variance): its value must not shape the others either (a skid steer's wheel yaw
-        rate, 4.7x the true one on r_l's test2.bag, bent every integrated odometry increment's
-        translation).  The dead-reckoned odom pose for the front-ends keeps the message's twist.
+        rate, several times the true one, would bend every integrated increment's translation).  The
+        dead-reckoned odom pose for the front-ends keeps the message's twist.
 
         Scalar maths per message (called at the odometry's rate): no temporary arrays but the
         pose and twist handed on.

@@ -33,7 +33,7 @@ message.  Both are read when the sink is added (the session keeps the lists).
 
 The fused pose's covariance: a smoother's is an iSAM2 marginal (not free), so the session
 refreshes it at most every ``covariance_period_s`` of log time (default
-:data:`COVARIANCE_PERIOD_S`; 0: at every scan, as before).  In between, the fused pose is as
+:data:`COVARIANCE_PERIOD_S`; 0: at every scan).  In between, the fused pose is as
 fresh as ever (the newest keyframe carried to the newest odometry) and its covariance is the
 last marginal plus the odometry noise since that keyframe.
 """

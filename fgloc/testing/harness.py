@@ -15,7 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from fgloc.live.app import LiveSession, LiveSummary, load_config
+from fgloc.config import load_config
+from fgloc.live.app import LiveSession, LiveSummary
 from fgloc.live.serial_link import RobotParams
 from fgloc.testing.emulators import EmulatorPair, ReplayClock
 from fgloc.types import CompassHeading, Imu, LaserScan, Odometry, StaticTransform, Trajectory

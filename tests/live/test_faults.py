@@ -9,8 +9,9 @@ import random
 
 import numpy as np
 
+from fgloc.config import load_config
 from fgloc.io import open_log
-from fgloc.live.app import LiveSession, load_config
+from fgloc.live.app import LiveSession
 from fgloc.live.serial_protocol import SYNC
 from fgloc.live.sick import encode_lmdscandata, frame
 from fgloc.localization import build_session

@@ -13,8 +13,9 @@ import time
 
 import numpy as np
 
+from fgloc.config import load_config
 from fgloc.io import open_log
-from fgloc.live.app import LiveSession, load_config
+from fgloc.live.app import LiveSession
 from fgloc.localization import build_session
 from fgloc.testing.emulators import EmulatorPair
 from fgloc.types import StaticTransform

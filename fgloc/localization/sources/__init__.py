@@ -2,8 +2,7 @@
 
 The ``sources:`` config section lists input sources by name (``inputs:``); empty, the
 default layout is used: ``odom`` (``nav_msgs/Odometry`` on ``/odom``: vx, vy, vyaw) and
-``imu`` (``sensor_msgs/Imu`` on ``/imu``: yaw, vyaw), which reproduces fgloc's behaviour
-before per-source inputs.  Each source::
+``imu`` (``sensor_msgs/Imu`` on ``/imu``: yaw, vyaw), the paper robot's layout.  Each source::
 
     inputs:
       wheels:   {type: odometry, topic: /husky_velocity_controller/odom, use: [vx, vyaw]}

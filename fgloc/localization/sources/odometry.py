@@ -38,9 +38,8 @@ def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt:
     ``*_differential`` mode, which the ported configs were tuned with): the two poses' covariances
     (``[x, y, yaw]``, the xy block turned from the source's frame into the earlier pose's body
     frame) summed and multiplied by ``dt``.  (Not ``(C1 + C2) / dt^2``: an odometry's poses are
-    integrated, consecutive ones almost perfectly correlated, and that formula made the increments
-    of r_l's test2.bag 125000 times less certain than robot_localization takes them, so the
-    filter ignored them.)"""
+    integrated, consecutive ones almost perfectly correlated: that would make the increments far
+    less certain than robot_localization takes them.)"""
     return np.asarray(rotate_covariance(np.asarray(cov) + np.asarray(prev_cov), -prev_yaw) * dt, dtype=float)
 
 
@@ -127,13 +126,13 @@ class OdometryHandler(SourceHandler):
         if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
             cov = np.diag(np.square(default))
         if whole_twist:
-            out = cov  # the default layout: the message's whole covariance, exactly as before
+            out = cov  # all three velocities as the message says: its whole covariance, correlations kept
         else:
             out = np.zeros((3, 3))
             for i, c in enumerate(comps):
                 v = spec.variance(c, float(cov[i, i]))
                 out[i, i] = v if math.isfinite(v) else default[i] ** 2
-            # a diff drive that does not report vy: 0 with the message's (small) variance, as before
+            # a diff drive that does not report vy: 0 with the message's (small) variance
             if comps[1] == "vy" and not spec.uses("vy"):
                 out[1, 1] = float(cov[1, 1])
         tw, out = self.levelled(float(msg.stamp), tw, out)

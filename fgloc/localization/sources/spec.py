@@ -20,7 +20,7 @@ TILT = ("roll", "pitch")   # an IMU's attitude: levels the odometry (not estimat
 POLICIES = ("message", "fixed", "scaled", "floor")
 UNUSED_VAR = 1e6   # a component a source does not contribute: its variance
 #: a differential source's message stamped before the previous one: skipped, so that the next
-#: increment spans from the newest pose (resetting the reference to it lost the increment before)
+#: increment spans from the newest pose (none is lost)
 OUT_OF_ORDER = "differential: stamp not after the previous message's (out of order)"
 
 

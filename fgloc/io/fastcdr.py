@@ -197,30 +197,6 @@ def _aligned(p: int, align: int) -> int:
     return p + (-(p - 4)) % align
 
 
-def decode_scan(data: Buffer) -> dict[str, Any] | None:
-    """The fields of a LaserScan CDR message, or None if it is not little-endian CDR."""
-    buf = memoryview(data)
-    if bytes(buf[:2]) != CDR_LE[:2]:
-        return None
-    try:
-        sec, nsec, _ = _HDR.unpack_from(buf, 4)
-        frame_id, p = _string_at(buf, 12)
-        p = _aligned(p, 4)
-        f7 = _F7.unpack_from(buf, p)
-        p += 28
-        (n,) = _U32.unpack_from(buf, p)
-        p += 4
-        ranges = np.frombuffer(buf, dtype="<f4", count=n, offset=p).astype(np.float32)
-        p += 4 * n
-        (m,) = _U32.unpack_from(buf, p)
-        p += 4
-        inten = np.frombuffer(buf, dtype="<f4", count=m, offset=p).astype(np.float32)
-    except (struct.error, ValueError, UnicodeDecodeError):
-        return None
-    return {"sec": sec, "nanosec": nsec, "frame_id": frame_id, "floats": f7, "ranges": ranges,
-            "intensities": inten}
-
-
 def _scan_layout(data: Buffer) -> tuple[str, int, int, int] | None:
     """``(frame_id, offset of the 7 floats, beams, intensities)`` of a LaserScan, or None."""
     if len(data) < 16 or data[0] != 0 or data[1] != 1:
@@ -518,5 +494,3 @@ def decode_tf_messages(datas: Sequence[Buffer]) -> list[tuple[list[StaticTransfo
         out[i] = (tfs, flips)
     return out
 
-
-BatchDecoder = Callable[[Sequence[Buffer]], list[Any]]

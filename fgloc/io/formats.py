@@ -11,7 +11,6 @@ from fgloc.io.rosbag2 import SQLITE_MAGIC, compressed_bag
 from fgloc.io.source import LogSource
 from fgloc.io.topics import Topics
 
-FORMATS = ("mcap", "rosbag2", "rosbag1", "carmen")
 LFS_POINTER = b"version https://git-lfs.github.com/spec/"
 
 

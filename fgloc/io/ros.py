@@ -295,11 +295,6 @@ def imu_from_ros(m: Any, topic: str) -> Imu:
     )
 
 
-def compass_from_ros(m: Any, topic: str) -> CompassHeading:
-    """The yaw-only view of a sensor_msgs/Imu (:meth:`fgloc.types.Imu.heading`)."""
-    return imu_from_ros(m, topic).heading()
-
-
 def fix_from_ros(m: Any, topic: str) -> PoseFix:
     p = m.pose.pose
     cov = cov3_of(m.pose.covariance)

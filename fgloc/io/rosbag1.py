@@ -28,14 +28,6 @@ def is_ros1_head(head: bytes) -> bool:
     return head.startswith(ROS1_MAGICS)
 
 
-def is_rosbag1(path: str | Path) -> bool:
-    try:
-        with Path(path).open("rb") as f:
-            return is_ros1_head(f.read(16))
-    except OSError:
-        return False
-
-
 class Rosbag1Source(BagSource):
     """A ROS 1 bag as a :class:`~fgloc.io.source.LogSource`."""
 
@@ -121,8 +113,3 @@ class Rosbag1Source(BagSource):
         from rosbags.rosbag1 import ReaderError
 
         return (ReaderError,)
-
-
-def iter_rosbag1(path: str | Path, topics: Topics | None = None) -> Iterator[tuple[str, object]]:
-    """``(topic, message)`` of a ROS 1 bag's role topics in record-time order."""
-    return Rosbag1Source(path, topics).messages()

@@ -23,7 +23,6 @@ import shutil
 import sqlite3
 import tempfile
 import weakref
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -118,11 +117,6 @@ class Rosbag2Source(BagSource):
         from rosbags.rosbag2.errors import ReaderError
 
         return (ReaderError,)
-
-
-def iter_rosbag2(path: str | Path, topics: Topics | None = None) -> Iterator[tuple[str, object]]:
-    """``(topic, message)`` of a rosbag2 folder's role topics in record-time order."""
-    return Rosbag2Source(path, topics).messages()
 
 
 def compressed_bag(folder: Path) -> bool:

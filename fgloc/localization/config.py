@@ -5,7 +5,6 @@ The defaults are here and only here (see :mod:`fgloc.config.schema` for the conv
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from fgloc.backends.global_search import GlobalSearchConfig
@@ -61,7 +60,3 @@ class PipelineConfig:
     pose_delta_tolerance_m: float = setting(0.002, "auto: twist and pose increment agree within this (+10 %)",
                                             min=0)
     pose_delta_tolerance_deg: float = setting(0.1, "... and this in heading (+10 %)", min=0)
-
-    @property
-    def initial_sigma_yaw(self) -> float:
-        return math.radians(self.initial_sigma_yaw_deg)

@@ -292,3 +292,30 @@ def test_no_getattr_or_hasattr_dispatch_on_backends_or_frontends():
         if bad:
             found[rel] = bad
     assert not found, f"getattr / hasattr on a back-end or front-end (use the contract): {found}"
+
+
+def _fgloc_imports(tree: ast.AST, here: str) -> set[str]:
+    """Every fgloc module a module imports, at the top or inside a function."""
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.startswith("fgloc")}
+        elif isinstance(node, ast.ImportFrom):
+            mod = _absolute(node.module, node.level, here, False)
+            if mod.startswith("fgloc"):
+                out |= {f"{mod}.{a.name}" if f"{mod}.{a.name}" in MODULES else mod for a in node.names}
+    return out
+
+
+def test_the_front_ends_import_no_config_but_its_schema():
+    """config.loader composes the front-ends' sections (frontends.factory.FrontendsConfig): a front-end
+    module importing fgloc.config (its loader) would close an import cycle."""
+    found = {}
+    for name, path in MODULES.items():
+        if not name.startswith("fgloc.frontends"):
+            continue
+        bad = sorted(m for m in _fgloc_imports(ast.parse(path.read_text(encoding="utf-8")), name)
+                     if (m == "fgloc.config" or m.startswith("fgloc.config.")) and m != "fgloc.config.schema")
+        if bad:
+            found[name] = bad
+    assert not found, found

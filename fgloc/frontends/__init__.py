@@ -10,7 +10,7 @@ A front-end declares what the localizer needs to know about it
 
 from .amcl import AMCLConfig
 from .base import FrontendBase, MatchResult, PreprocessOptions, ScanMatcher, ScanPreprocessor, no_fix
-from .factory import FRONTENDS, FrontendsConfig, canonical_name, load_frontends_config, make_frontend
+from .factory import FRONTENDS, FrontendsConfig, canonical_name, make_frontend
 from .kiss import KissConfig
 from .native import NativeConfig
 
@@ -26,7 +26,6 @@ __all__ = [
     "ScanMatcher",
     "ScanPreprocessor",
     "canonical_name",
-    "load_frontends_config",
     "make_frontend",
     "no_fix",
 ]

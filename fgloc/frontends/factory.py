@@ -10,10 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from fgloc.config.schema import parse, section, suggest, to_dict
+from fgloc.config.schema import parse, section, suggest
 from fgloc.errors import ConfigError
 from fgloc.maps import OccupancyMap
 from fgloc.types import StaticTransform
@@ -93,15 +92,3 @@ def make_frontend(name: str, occ_map: OccupancyMap, laser_mount: StaticTransform
 
     return AMCL(occ_map, laser_mount, sec)  # type: ignore[return-value]
 
-
-def load_frontends_config(path: str | Path | None = None) -> dict[str, Any]:
-    """The ``frontends:`` section as a plain mapping: the defaults, or ``path`` (a YAML file with a
-    ``frontends:`` section or the bare per-front-end sections) checked and overlaid on them."""
-    if path is None:
-        return to_dict(FrontendsConfig())
-    from fgloc.config import load_config
-
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"{p}: config file not found")
-    return to_dict(load_config(p).frontends)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fgloc.config import load_config
+from fgloc.config.schema import to_dict
 from fgloc.errors import ConfigError
-from fgloc.frontends import PreprocessOptions, ScanMatcher, ScanPreprocessor, load_frontends_config, make_frontend
+from fgloc.frontends import FrontendsConfig, PreprocessOptions, ScanMatcher, ScanPreprocessor, make_frontend
 from fgloc.frontends.base import deskew_offsets, voxel_downsample
 from fgloc.types import LaserScan, StaticTransform
 
@@ -19,7 +21,7 @@ def world():
 
 
 def test_factory_names_and_sections(world):
-    cfg = load_frontends_config()
+    cfg = to_dict(FrontendsConfig())
     assert {"native", "kiss", "amcl"} <= set(cfg)
     for name in ("native", "kiss", "kiss-icp", "KISS_ICP"):
         fe = make_frontend(name, world, MOUNT, cfg)
@@ -41,12 +43,13 @@ def test_factory_errors(world):
     with pytest.raises(ConfigError, match="loss"):
         make_frontend("native", world, MOUNT, {"loss": "l3"})
     with pytest.raises(ConfigError):
-        load_frontends_config("/nonexistent/frontends.yaml")
+        load_config("/nonexistent/frontends.yaml")
 
 
 def test_yaml_defaults_match_constructor_defaults(world):
-    """config/frontends.yaml documents the defaults: building from it equals building from {}."""
-    cfg = load_frontends_config()
+    """The documented defaults (the frontends: section as `fgloc config show` writes it) build the
+    same front-ends as {}."""
+    cfg = to_dict(load_config().frontends)
     for name in ("native", "kiss"):
         a = make_frontend(name, world, MOUNT, cfg)
         b = make_frontend(name, world, MOUNT, {})

@@ -50,10 +50,9 @@ from fgloc.backends.health import (
     RATE,
     Arbiter,
     SourceHealth,
-    bracket,
 )
-from fgloc.backends.health.latency import median_period
 from fgloc.backends.inputs import InputBook
+from fgloc.backends.motion_integrals import MotionIntegrals
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import with_rotation, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
@@ -108,11 +107,7 @@ class EKFBackend(Backend):
         self.inputs = InputBook(Arbiter(), c.adapt_noise, c.latency, c.latency_s)
         # motion integrals for the latency estimate: (t, yaw, w) from the gyro (or the odometry),
         # (t, distance, v) from the odometry, each at its own stamps
-        self._yaw_series: deque[tuple[float, float, float]] = deque(maxlen=4000)
-        self._dist_series: deque[tuple[float, float, float]] = deque(maxlen=4000)
-        self._yaw_int = 0.0
-        self._dist_int = 0.0
-        self._last_rate: tuple[float, float] | None = None
+        self.motion = MotionIntegrals()
         self._turned = 0.0
         self._last_odom_t: float | None = None
         self._odom_steps: deque[float] = deque(maxlen=BURST_WINDOW)  # the last odometry stamp steps (s)
@@ -185,9 +180,9 @@ class EKFBackend(Backend):
         odometry's yaw times its estimated gain)."""
         if t1 <= t0:
             return delta
-        ya, yb = self._series_at(self._yaw_series, t0), self._series_at(self._yaw_series, t1)
-        if ya is not None and yb is not None:
-            return with_rotation(delta, yb[0] - ya[0])
+        rot = self.motion.rotation(t0, t1)
+        if rot is not None:
+            return with_rotation(delta, rot)
         if YAW_SCALE_STATE in self.ekf.aug:
             return with_rotation(delta, float(se2_log(np.asarray(delta, dtype=float))[2]) / self._yaw_scale())
         return delta
@@ -208,14 +203,8 @@ class EKFBackend(Backend):
         gain = 1.0 / self._yaw_scale()
         self.inputs.arb.set_correction("odom", gain=gain)
         # motion integrals (held backwards, as the twist is the mean since the last message)
-        v = float(np.hypot(tw[0], tw[1]))
-        if self._dist_series and t > self._dist_series[-1][0]:
-            t0 = self._dist_series[-1][0]
-            self._dist_int += v * (t - t0)
-            if not self._has_gyro():
-                self._yaw_int += float(tw[2]) * gain * (t - t0)
-                self._yaw_series.append((float(t), self._yaw_int, float(tw[2]) * gain))
-        self._dist_series.append((float(t), self._dist_int, v))
+        self.motion.add_odometry(t, float(np.hypot(tw[0], tw[1])),
+                                 None if self._has_gyro() else float(tw[2]) * gain)
         if not self.initialized:
             return
         if t < (self.ekf.t or -np.inf):
@@ -250,7 +239,7 @@ class EKFBackend(Backend):
         h.accepted += 1
         self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si, held_from=held_from,
                                 keep_w_noise=self._has_gyro(), sole=sole)
-        self.inputs.latency.evaluate(self)
+        self.inputs.latency.evaluate(self.motion)
 
     def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
                      source: str) -> None:
@@ -345,11 +334,7 @@ class EKFBackend(Backend):
         b = gb.value()
         self.inputs.arb.set_correction(name, bias=b)
         # the motion integral (readings interpolated)
-        if self._last_rate is not None and t > self._last_rate[0]:
-            self._yaw_int += 0.5 * (self._last_rate[1] + rate - b) * (t - self._last_rate[0])
-        if self._last_rate is None or t > self._last_rate[0]:
-            self._last_rate = (float(t), float(rate) - b)
-            self._yaw_series.append((float(t), self._yaw_int, float(rate) - b))
+        self.motion.add_gyro(t, rate, b)
         if not self.initialized:
             return
         k, rel = self.inputs.noise(name)
@@ -370,7 +355,7 @@ class EKFBackend(Backend):
                 self.ekf.update_gyro(t, float(rate) - b, var, None, None)
                 self.stats["gyro_recoveries"] = self.stats.get("gyro_recoveries", 0) + 1
                 self._gyro_gated_run = 0
-        self.inputs.latency.evaluate(self)
+        self.inputs.latency.evaluate(self.motion)
 
     def add_relative_yaw(self, t: float, yaw: float, var: float, source: str = "imu") -> None:
         """An orientation whose increments are used, not its frame (robot_localization's
@@ -465,50 +450,6 @@ class EKFBackend(Backend):
         self.stats["keyframes"] += 1
         self._record_online(self.ekf.t or t, self.ekf.pose(), self.ekf.pose_cov())
         return used
-
-    # ------------------------------------------------------------------ latency
-    @staticmethod
-    def _series_at(m: deque, t: float, held: bool = False) -> tuple[float, float] | None:
-        """Integral and rate at ``t``; ``held``: the rate is the mean since the previous sample
-        (odometry), so the sample after ``t`` holds it."""
-        if not m or m[0][0] > t or m[-1][0] < t:
-            return None
-        lo, hi = bracket(m, t)
-        a, b = m[lo], m[hi]
-        f = (t - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 1.0
-        rate = float(b[2]) if held else float(a[2] + f * (b[2] - a[2]))
-        return float(a[1] + f * (b[1] - a[1])), rate
-
-    def reference_covered_until(self) -> float:
-        """The latency reference (:class:`~fgloc.backends.health.latency.LatencyReference`): the
-        motion integrals of the gyro (or odometry) and of the odometry, at their own stamps."""
-        if not self._yaw_series or not self._dist_series:
-            return -math.inf
-        return min(self._yaw_series[-1][0], self._dist_series[-1][0])
-
-    def reference_periods(self) -> tuple[float, float]:
-        return (median_period([x[0] for x in list(self._dist_series)[-50:]]),
-                median_period([x[0] for x in list(self._yaw_series)[-50:]]))
-
-    def _reference_at(self, ta: float, tb: float) -> tuple[tuple[float, float], ...] | None:
-        ya, yb = self._series_at(self._yaw_series, ta), self._series_at(self._yaw_series, tb)
-        da, db = self._series_at(self._dist_series, ta, True), self._series_at(self._dist_series, tb, True)
-        if ya is None or yb is None or da is None or db is None:
-            return None
-        return ya, yb, da, db
-
-    def reference_yaw(self, ta: float, tb: float) -> tuple[float, float, float] | None:
-        r = self._reference_at(ta, tb)
-        if r is None:
-            return None
-        ya, yb = r[0], r[1]
-        return yb[0] - ya[0], -(yb[1] - ya[1]), 1e-8
-
-    def reference_distance(self, ta: float, tb: float) -> tuple[float, float] | None:
-        r = self._reference_at(ta, tb)
-        if r is None:
-            return None
-        return r[3][0] - r[2][0], 1e-6
 
     # ------------------------------------------------------------------ outputs
     def predict(self, t: float) -> tuple[FloatArray, FloatArray]:

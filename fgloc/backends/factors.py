@@ -1,10 +1,8 @@
 """Factor-graph building blocks shared by the fixed-lag and the batch smoother.
 
-* :func:`integrate_twist` - body twists ``[vx, vy, wz]`` integrated between two
-  keyframes into a relative ``Pose2`` with its covariance propagated in GTSAM's
-  right-perturbation (body) tangent space; works for differential drive (``vy``
-  measured as 0 with a small variance: the non-holonomic constraint) and mecanum
-  alike.  It becomes a plain C++ ``BetweenFactorPose2``.
+* :func:`between_factor` - the odometry increment between two keyframes
+  (:func:`fgloc.backends.integration.integrate_twist`) as a plain C++ ``BetweenFactorPose2``
+  (:func:`scaled_between_factor`: with the odometry's speed and yaw-rate scales estimated).
 * :func:`compass_factor` - the compass heading on a ``Pose2`` keyframe against the
   compass-to-map offset, ``e = wrap(theta + offset - z_compass)``: the offset variable is the
   compass frame's pose ``Pose2(0, 0, -offset)``, the factor a C++ ``BetweenFactorPose2`` from it
@@ -20,133 +18,16 @@ frame, ``retract(xi) = pose * Expmap(xi)``.
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
-from collections.abc import Sequence
 
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.geometry import exp_coefficients, wrap_scalar
+from fgloc.geometry import wrap_scalar
 
 FloatArray = NDArray[np.float64]
 
 
-# ---------------------------------------------------------------------- twist integration
-def integrate_twist(stamps: FloatArray, twists: FloatArray, covs: FloatArray, t0: float, t1: float,
-                    q_slip: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
-    """Relative pose ``[x, y, yaw]`` (in the frame of the pose at ``t0``) and its 3x3 covariance.
-
-    ``stamps`` (N,), ``twists`` (N, 3) ``[vx_mps, vy_mps, wz_radps]``, ``covs`` (N, 3, 3).
-    A wheel-encoder twist stamped ``t_i`` is the mean velocity over ``(t_{i-1}, t_i]``, so it
-    is held backwards over that interval; after the last sample the last twist is held.
-    Each step of length ``dt`` adds ``Sigma_u dt^2 + q_slip dt`` (``q_slip`` a 3-vector of
-    spectral densities for wheel slip / model error), propagated as
-    ``Sigma <- Ad(d^-1) Sigma Ad(d^-1)^T + Sigma_step``.
-    """
-    if t1 <= t0 or len(stamps) == 0:
-        return np.zeros(3), np.zeros((3, 3))
-    ts = np.asarray(stamps, dtype=float).tolist()
-    us = np.asarray(twists, dtype=float).reshape(-1, 3).tolist()
-    cs = [upper6(c) for c in np.asarray(covs, dtype=float).reshape(-1, 3, 3)]
-    return integrate_twist_lists(ts, us, cs, 0, len(ts), t0, t1, q_slip)
-
-
-def upper6(c: FloatArray) -> tuple[float, float, float, float, float, float]:
-    """A 3x3 covariance's upper triangle ``(c00, c01, c02, c11, c12, c22)`` as floats (what
-    :func:`integrate_twist_lists` reads of it)."""
-    r = np.asarray(c, dtype=float).reshape(9).tolist()
-    return r[0], r[1], r[2], r[4], r[5], r[8]
-
-
-def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
-                          cs: Sequence[tuple[float, float, float, float, float, float]], lo: int, hi: int,
-                          t0: float, t1: float, q_slip: FloatArray | None = None,
-                          mark: list[float] | None = None) -> tuple[FloatArray, FloatArray]:
-    """:func:`integrate_twist` over the samples ``lo:hi`` of plain lists (stamps, ``(vx, vy, w)``
-    twists, :func:`upper6` covariances): the same arithmetic, without numpy's per-element
-    overhead (the smoother integrates its odometry several times per keyframe).
-
-    ``mark``: a list that receives the integration's state after its last step that ended on a
-    sample's stamp (``[t, x, y, yaw, p00, p01, p02, p11, p12, p22]``: those steps depend on no
-    later sample), and from which a later call with the same ``t0`` (the caller keeps one mark per
-    ``t0``) and samples only appended since resumes when it is at or before ``t1``: the same steps,
-    the same numbers, without integrating the prefix again."""
-    if t1 <= t0 or hi <= lo:
-        return np.zeros(3), np.zeros((3, 3))
-    qx, qy, qt = (0.0, 0.0, 0.0) if q_slip is None else (float(q_slip[0]), float(q_slip[1]), float(q_slip[2]))
-    if mark and mark[0] <= t1:
-        t, x, y, th, p00, p01, p02, p11, p12, p22 = mark
-        i = bisect_right(ts, t, lo, hi)   # the sample after the one the mark ended on
-    else:
-        # index of the first sample with stamp > t0 (its twist covers t0)
-        i = bisect_right(ts, t0, lo, hi)
-        t = t0
-        x = y = th = 0.0
-        # covariance entries (symmetric 3x3, scalar maths: ~10x faster than numpy for 3x3)
-        p00 = p01 = p02 = p11 = p12 = p22 = 0.0
-    last = hi - 1
-    done = None   # the state after the last step that ended on a sample's stamp (for ``mark``)
-    while t < t1 - 1e-12:
-        j = i if i < last else last
-        t_next = (ts[i] if ts[i] < t1 else t1) if i < hi else t1
-        dt = t_next - t
-        if dt > 0:
-            u = us[j]
-            vx, vy, w = u[0] * dt, u[1] * dt, u[2] * dt
-            a, b = exp_coefficients(w)
-            dx, dy = a * vx - b * vy, b * vx + a * vy
-            c, s = math.cos(w), math.sin(w)
-            # A = Ad(d^-1) = [[c, s, iy], [-s, c, -ix], [0, 0, 1]], d^-1 = (ix, iy, -w)
-            ix, iy = -c * dx - s * dy, s * dx - c * dy
-            # B = A P
-            b00 = c * p00 + s * p01 + iy * p02
-            b01 = c * p01 + s * p11 + iy * p12
-            b02 = c * p02 + s * p12 + iy * p22
-            b10 = -s * p00 + c * p01 - ix * p02
-            b11 = -s * p01 + c * p11 - ix * p12
-            b12 = -s * p02 + c * p12 - ix * p22
-            # P' = B A^T + Sigma_u dt^2 + q dt
-            c00, c01, c02, c11, c12, c22 = cs[j]
-            dt2 = dt * dt
-            n00 = b00 * c + b01 * s + b02 * iy
-            n01 = -b00 * s + b01 * c - b02 * ix
-            n11 = -b10 * s + b11 * c - b12 * ix
-            p00 = n00 + c00 * dt2 + qx * dt
-            p01 = n01 + c01 * dt2
-            p02 = b02 + c02 * dt2
-            p11 = n11 + c11 * dt2 + qy * dt
-            p12 = b12 + c12 * dt2
-            p22 = p22 + c22 * dt2 + qt * dt
-            ct, st = math.cos(th), math.sin(th)
-            x, y, th = x + ct * dx - st * dy, y + st * dx + ct * dy, th + w
-        if mark is not None and i < hi and ts[i] <= t1:   # this step ended on sample i's stamp
-            done = (t_next, x, y, th, p00, p01, p02, p11, p12, p22)
-        t = t_next
-        i += 1
-    if done is not None:
-        mark[:] = done  # type: ignore[index]
-    cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
-    return np.array([x, y, wrap_scalar(th)]), cov
-
-
-def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:
-    """Heading change (rad, unwrapped) from ``t0`` to ``t1``, same hold as :func:`integrate_twist`."""
-    if t1 <= t0 or len(stamps) == 0:
-        return 0.0
-    i = int(np.searchsorted(stamps, t0, side="right"))
-    n = len(stamps)
-    t, th = t0, 0.0
-    while t < t1 - 1e-12:
-        j = min(i, n - 1)
-        t_next = min(float(stamps[i]), t1) if i < n else t1
-        th += float(twists[j][2]) * (t_next - t)
-        t = t_next
-        i += 1
-    return th
-
-
-# ---------------------------------------------------------------------- factors
 def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray, min_sigma: float = 1e-4,
                    kernel: str = "none", k: float = 1.345) -> gtsam.BetweenFactorPose2:
     """Integrated-twist factor (C++ ``BetweenFactorPose2``), optionally robust (wheel slip)."""

@@ -6,14 +6,8 @@ import gtsam
 import numpy as np
 import pytest
 
-from fgloc.backends.factors import (
-    body_covariance,
-    compass_factor,
-    fix_factor,
-    integrate_twist,
-    offset_pose,
-    pose_offset,
-)
+from fgloc.backends.factors import body_covariance, compass_factor, fix_factor, offset_pose, pose_offset
+from fgloc.backends.integration import integrate_twist
 from fgloc.geometry import adjoint as se2_adjoint
 from fgloc.geometry import exp as se2_exp
 

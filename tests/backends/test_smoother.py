@@ -158,7 +158,7 @@ def _no_heading_run(sm: SlidingWindowSmoother, duration_s: float = 200.0) -> tup
     """Wheel odometry whose yaw rate is not fused (robot_localization's 1e6 variance) and nothing
     else that measures the heading: the heading's uncertainty grows without bound until GTSAM
     finds the system indeterminate.  Returns the trajectory's last pose and the dead reckoning's."""
-    from fgloc.backends.factors import integrate_twist
+    from fgloc.backends.integration import integrate_twist
 
     rng = np.random.default_rng(0)
     sm.initialize(0.0, np.zeros(3))

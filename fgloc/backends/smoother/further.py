@@ -10,7 +10,8 @@ import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.factors import aligned_between_factor, between_factor, integrate_twist, relative_yaw_factor
+from fgloc.backends.factors import aligned_between_factor, between_factor, relative_yaw_factor
+from fgloc.backends.integration import integrate_twist
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, bounded_covariance
 from fgloc.backends.smoother.window import FixedLagWindow
 from fgloc.geometry import wrap_scalar

@@ -10,8 +10,9 @@ from bisect import bisect_left, bisect_right
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.factors import integrate_heading, integrate_twist_lists, scaled_delta
+from fgloc.backends.factors import scaled_delta
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
+from fgloc.backends.integration import integrate_heading, integrate_twist_lists
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import exp_coefficients, wrap_scalar
 

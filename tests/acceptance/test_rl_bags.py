@@ -13,14 +13,13 @@ The bags are not in this repository: the tests look in ``$FGLOC_RL_BAGS`` (folde
 (12-value _config vectors) with their ``test{1,2,3}.bag`` are used when a folder has them (keys
 ``groovy/testN.bag``: groovy's test1.bag is another robot than noetic's).
 
-Where fgloc does not yet end within r_l's tolerance the test is ``xfail(strict=True)`` with the
-figure measured at the time, so it flips when the fusion work lands.
+Whether fgloc ends within r_l's tolerance, per configuration and back-end, is
+``test_rl_matrix.py``'s (the fusion matrix); this file checks the conversion and the sources.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import math
 import os
 import sys
 from pathlib import Path
@@ -91,61 +90,6 @@ def test_rl_parameters_convert(converted: dict[str, tuple[Path, list[str]]]) -> 
         cfg = yaml.safe_load(converted[bag][0].read_text())
         got = {n: (s["topic"], s["use"]) for n, s in cfg["sources"]["inputs"].items()}
         assert got == sources, bag
-
-
-RUNS = [
-    # bag, back-end, xfail reason (the converted launch file carries test1's IMU mount); figures of
-    # tools/eval_rl_bags.py at 0845aaf + this file's commit
-    ("test2.bag", "ekf", None),  # 0.219 m before the readers gave the whole Imu; 0.016 m now (tol 0.138)
-    # 0.173 m (0.181 at 89c51c0) while 75 % of the keyframes were made before their gyro reading arrived: their
-    # chords kept the wheels' arc, bent by a skid steer's yaw (1.0 deg crabwise on average); 0.062 m (0.055 at
-    # 89c51c0) with the keyframe waiting for the gyro (tol 0.138)
-    ("test2.bag", "smoother", None),
-    ("test1.bag", "ekf", None),       # 0.939 m at the start of session 4, 0.962 m now (tol 1.045)
-    ("test1.bag", "smoother", None),  # 0.385 m, 0.403 m now
-    # 478.9 m at the start of session 4, 1.836 m with imu1's differential yaw as rates d_yaw / d_t (stamp
-    # jitter: spikes the gate dropped); 0.245 m with it as a heading with its own offset, 0.259 m with odom1's
-    # (the stereo odometer's) velocities fused as measurements too, as r_l does (tol 0.381)
-    ("groovy/test1.bag", "ekf", None),
-    # 465.9 m at the start of session 4; 15.534 m with imu1's differential yaw as rates d_yaw / d_t; 0.069 m with
-    # it a heading factor on its own offset chain; 0.226 m with odom1 (the stereo odometer's twist, 11 % short of
-    # the wheels and 2.3 deg sideways) a between-keyframe factor whose scale and yaw misalignment are estimated
-    # (0.432 m with its speed scale alone; tol 0.381)
-    ("groovy/test1.bag", "smoother", None),
-    ("groovy/test2.bag", "ekf",
-     "0.170 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends at "
-     "(1.021, 3.429), 0.162 m from groovy's, and fgloc's EKF 0.016 m from that (1.020 m at the start of "
-     "session 4, when the differential odometry's increments were taken 2C/dt^2 uncertain)"),
-    ("groovy/test2.bag", "smoother",
-     "0.201 m from groovy r_l's final (0.954, 3.281), tolerance 0.100: the same bag's noetic r_l ends 0.162 m "
-     "from it and fgloc's smoother 0.055 m from that (as the EKF, 0.170 / 0.016 m); 0.037 m before the keyframes "
-     "waited for the gyro, when the wheels' bent arcs drove the path 1.0 deg crabwise"),
-    ("groovy/test3.bag", "ekf", None),  # groovy's 12-value vectors skipped both sources at ee92bab; 0.210 m (tol 0.75)
-    # 2.529 m with the gyro bias a graph variable (the AR.Drone's placeholder vyaw 0 pulls it); beside the
-    # graph (the default since the STM32 emulator's replay-speed bug was found) 0.748 m: 2 mm inside tol 0.75;
-    # 0.678 m with the keyframes waiting for the gyro
-    ("groovy/test3.bag", "smoother", None),
-]
-
-
-@pytest.mark.parametrize(("bag", "backend", "xfail"), RUNS,
-                         ids=[f"{b.split('.')[0].replace('/', '-')}-{be}" for b, be, _ in RUNS])
-def test_final_pose_within_rl_tolerance(tool: ModuleType, cases: dict[str, Any], converted: dict[str, Any],
-                                        work: Path, bag: str, backend: str, xfail: str | None,
-                                        request: pytest.FixtureRequest) -> None:
-    """fgloc without a map ends within r_l's own test tolerance of r_l's final position (x, y):
-    ``fgloc run BAG --config CONVERTED``, nothing else given (the config names topics and mounts)."""
-    if bag not in cases:
-        pytest.skip(f"{bag} and its r_l test file not found")
-    if xfail:
-        request.applymarker(pytest.mark.xfail(strict=True, reason=xfail))
-    case = cases[bag]
-    res = tool.run_fgloc(case.bag, converted[bag][0], backend, None, None, work / f"{bag}-{backend}")
-    assert "error" not in res, res.get("error")
-    x, y = float(res["final"][0]), float(res["final"][1])
-    ex, ey, _ = case.expected_xyz
-    err = math.hypot(x - ex, y - ey)
-    assert err < case.tolerance_m, f"final ({x:.3f}, {y:.3f}) is {err:.3f} m from r_l's, tolerance {case.tolerance_m}"
 
 
 def test_converted_launch_file_carries_the_imu_mount(converted: dict[str, Any]) -> None:

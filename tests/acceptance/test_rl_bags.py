@@ -35,7 +35,8 @@ NEEDED = ("test1.bag", "test2.bag", "test_ekf_localization_node_bag1.test", "tes
 def _folders() -> list[Path]:
     env = os.environ.get("FGLOC_RL_BAGS")
     return ([Path(e) for e in env.split(os.pathsep) if e] if env else []) + [
-        REPO / "data" / "robot_localization", REPO.parent / "shared" / "data" / "robot_localization"]
+        REPO / "data" / "robot_localization", REPO.parent / "shared" / "data" / "robot_localization",
+        REPO / "data" / "robot_localization-groovy", REPO.parent / "shared" / "data" / "robot_localization-groovy"]
 
 
 @pytest.fixture(scope="module")

@@ -317,7 +317,7 @@ def with_static_tfs(bag: Path, tfs: list[tuple[Any, ...]], out: Path) -> Path:
     with Reader(bag) as r, Writer(out) as w:
         conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=ts) for c in r.connections}
         tfc = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts, latching=1)
-        t0 = r.start_time
+        t0 = max(r.start_time - 1, 0)  # before every message (at the first one's time it may be read after it)
         stamp = M["builtin_interfaces/msg/Time"](sec=t0 // 10**9, nanosec=t0 % 10**9)
         trs = []
         for parent, child, x, y, z, qx, qy, qz, qw in tfs:

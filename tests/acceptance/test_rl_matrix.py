@@ -39,9 +39,10 @@ CELLS: dict[str, tuple[str, ...]] = {
 #: (log, configuration, back-end) -> why it is not within r_l's tolerance yet (the figure measured
 #: with ``python tools/eval_rl_matrix.py NOETIC GROOVY``)
 KNOWN: dict[tuple[str, str, str], str] = {
-    ("noetic test1", "defaults", "ekf"): "1.541 m (tol 1.045): the defaults fuse the wheels' yaw rate of a skid "
-                                         "steer and the IMU's orientation, which drifts 38 deg against the GPS course",
-    ("noetic test1", "defaults", "smoother"): "77.3 m (tol 1.045)",
+    ("noetic test1", "defaults", "ekf"): "2.068 m (tol 1.045): the defaults fuse the wheels' and the gyro's yaw "
+                                         "rates, which agree with the GPS course, and the IMU's orientation, which "
+                                         "drifts 40 deg against it",
+    ("noetic test1", "defaults", "smoother"): "41.6 m (tol 1.045; 36.1 m from the log's GPS, the EKF 71.0 m)",
     ("noetic test1", "+ gyro", "smoother"): "32.8 m (tol 1.045): r_l's answer follows the IMU's orientation, the "
                                             "gyro does not (49.5 m from the log's GPS, r_l's answer 71.9 m)",
     ("noetic test1", "+ gyro + wheel yaw", "ekf"): "3.227 m (tol 1.045)",

@@ -20,6 +20,8 @@ from fgloc.io.stop import checkpoint
 
 FORCE_HELP = "overwrite output files that fgloc did not write"
 
+EXIT_FLAGGED = 1  # fgloc map / map-check: done, but the check flagged something (README, Exit codes)
+
 
 class _Bar:
     """A progress callback over a tqdm bar, whose total a check sets once it knows it (``set_total``)."""
@@ -78,7 +80,8 @@ def map_cmd(
     force: Annotated[bool, typer.Option("--force", help=FORCE_HELP)] = False,
 ) -> None:
     """Build a map (ray-traced log-odds occupancy) and the optimized trajectory from a log, and
-    self-check it: re-match the scans of every place against the map of the other passes."""
+    self-check it: re-match the scans of every place against the map of the other passes.  Exit 0 done
+    (CONSISTENT or NOT CHECKED), 1 the map is written but its self-check flagged it, 2 a usage error."""
     import yaml
 
     from fgloc.errors import ConfigError
@@ -126,6 +129,10 @@ def map_cmd(
             typer.echo(f"  {line}")
         files += ", check.yaml, check.png"
     typer.echo(f"wrote {outdir}/: {files}")
+    if out.check is not None and not out.check.passed:
+        # as fgloc map-check: the map is written, but its own check flagged it (exit 1; --no-check skips it)
+        typer.echo(f"fgloc map: the self-check flagged the map: see {outdir}/check.png", err=True)
+        raise SystemExit(EXIT_FLAGGED)
 
 
 def map_check_cmd(
@@ -172,7 +179,7 @@ def map_check_cmd(
         typer.echo(f"  {line}")
     typer.echo(f"wrote {outdir if outdir is not None else map_yaml.parent}/check.yaml, check.png")
     if not res.passed:  # SystemExit: fgloc.cli runs click with standalone_mode=False, which swallows typer.Exit codes
-        raise SystemExit(1)
+        raise SystemExit(EXIT_FLAGGED)
 
 
 def register(app: typer.Typer) -> None:

@@ -228,7 +228,8 @@ def write_check(outdir: Path, check: CheckResult, occ: OccupancyMap, trajectory:
         "offset_m": round(r.offset_m, 3), "offset_deg": round(r.offset_deg, 2),
     } for r in check.regions]
     changes = [{"kind": c.kind, "center_m": [round(float(v), 2) for v in c.center],
-                "bbox_m": [round(float(v), 2) for v in c.bbox], "cells": c.cells, "returns": c.observations}
+                "bbox_m": [round(float(v), 2) for v in c.bbox], "cells": c.cells, "returns": c.observations,
+                "share_of_returns": round(float(c.share), 4), "minor": not c.major}
                for c in check.changes]
     doc = {"verdict": check.verdict, "passed": bool(check.passed), "mode": check.mode,
            **({"registration": _registration_doc(check)} if check.mode == "consistency" else {}),

@@ -89,10 +89,10 @@ def render_check_png(path: str | Path, occ: OccupancyMap, result, trajectory_xy:
     for xy, color in ((result.added_xy, (255, 127, 14, 255)), (result.removed_xy, (23, 190, 207, 255))):
         for p in np.asarray(xy, dtype=float).reshape(-1, 2):
             canvas.dot(p, color, 1)
-    for c in result.changes:
+    for c in result.changes:  # a minor change (under change_significant_share of the returns) thin
         b = c.bbox
         canvas.rect((b[0], b[1], b[2], b[3]), None,
-                    (255, 127, 14, 255) if c.kind == "added" else (23, 190, 207, 255), 2)
+                    (255, 127, 14, 255) if c.kind == "added" else (23, 190, 207, 255), 2 if c.major else 1)
     return canvas.save(path)
 
 

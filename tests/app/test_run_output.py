@@ -1,4 +1,4 @@
-"""What `fgloc run` writes and how cheaply (issue 14): the inputs copied into run.mcap as the log
+"""What `fgloc run` writes and how cheaply: the inputs copied into run.mcap as the log
 stores them, its own messages on the input's log-time clock, the fused pose's covariance
 refreshed at a bounded rate, the time split and the damage counters in RunResult."""
 

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from fgloc.backends.base import Backend, FloatArray, twist_covariance
+from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import Capability, SourceNoise
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
@@ -51,7 +51,7 @@ from fgloc.backends.health import (
     Arbiter,
     SourceHealth,
 )
-from fgloc.backends.inputs import InputBook
+from fgloc.backends.inputs import InputBook, twist_covariance
 from fgloc.backends.motion_integrals import MotionIntegrals
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import with_rotation, wrap_scalar

@@ -2,9 +2,10 @@
 
 Every input a back-end takes goes through the same preamble before its own maths: the source's
 health record (accepted / gated / skipped, and why), the finite checks, the variance fallback
-when a message claims none, the reading handed to the noise arbiter (what the source shows
-against the others, :class:`~fgloc.backends.health.Arbiter`), each gyro's bias estimated beside
-the estimator from the absolute headings and standstill
+when a message claims none (:func:`twist_covariance` for an odometry's), the reading handed to
+the noise arbiter (what the source shows against the others,
+:class:`~fgloc.backends.health.Arbiter`), each gyro's bias estimated beside the estimator from
+the absolute headings and standstill
 (:class:`~fgloc.backends.health.GyroBias`), and the scans' latency
 (:class:`~fgloc.backends.health.latency.ScanLatency`).  Core maths only.
 """
@@ -13,9 +14,35 @@ from __future__ import annotations
 
 import math
 
-from fgloc.backends.contract import SourceNoise
+import numpy as np
+
+from fgloc.backends.contract import FloatArray, SourceNoise
 from fgloc.backends.health import Arbiter, GyroBias, SourceHealth
 from fgloc.backends.health.latency import ScanLatency
+
+_DEFAULT_COV: dict[tuple[float, float, float], list[float]] = {}
+
+
+def twist_covariance(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> FloatArray:
+    """The message's 3x3 twist covariance, or a diagonal default when absent / all zero / bad (a new array)."""
+    return np.array(twist_covariance_values(cov, default_sigmas)).reshape(3, 3)
+
+
+def twist_covariance_values(cov: FloatArray | None, default_sigmas: tuple[float, float, float]) -> list[float]:
+    """:func:`twist_covariance`'s 9 entries (row by row) as floats, without the array (every odometry
+    message of the smoother: one ``tolist`` instead of four numpy calls).  The default's list is
+    shared between calls: read it, do not change it."""
+    if cov is not None:
+        if isinstance(cov, np.ndarray) and cov.dtype == np.float64 and cov.size == 9:
+            v = cov.ravel().tolist()
+        else:
+            v = np.asarray(cov, dtype=float).reshape(3, 3).ravel().tolist()
+        if v[0] > 0 and v[4] > 0 and v[8] > 0 and math.isfinite(sum(v)):
+            return v
+    d = _DEFAULT_COV.get(default_sigmas)
+    if d is None:
+        d = _DEFAULT_COV[default_sigmas] = np.diag(np.square(default_sigmas)).ravel().tolist()
+    return d
 
 
 class InputBook:

@@ -10,9 +10,10 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from fgloc.backends.base import FloatArray, twist_covariance_values
+from fgloc.backends.base import FloatArray
 from fgloc.backends.contract import Capability
 from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE
+from fgloc.backends.inputs import twist_covariance_values
 from fgloc.backends.integration import upper6
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, bounded_covariance, carried_covariance, prior_covariance
 from fgloc.backends.smoother.keyframes import KeyframeGraph

@@ -99,6 +99,7 @@ class LiveSession:
 
         def ev(msg: str) -> None:
             self.events.append(f"{time.strftime('%H:%M:%S')} {msg}")
+            self.runner.push("event", msg, time.time())  # into the recording, from the fusion thread
             if event_sink is not None:
                 event_sink(msg)
 

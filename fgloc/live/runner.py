@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import queue
+import struct
 import threading
 import time
 from collections import deque
@@ -29,6 +30,15 @@ from fgloc.localization.session import BaseSink, RecorderSink, Session, UdpSink
 from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
 
 SENSORS = ("odom", "imu", "scan")
+#: what happened to the session (a sensor silent or back, a connection lost, a device clock's step),
+#: recorded as ``std_msgs/msg/String`` beside the inputs, at the host time it was reported
+EVENTS_TOPIC = "/fgloc/events"
+
+
+def string_cdr(text: str) -> bytes:
+    """A ``std_msgs/msg/String`` in CDR (little endian): the encapsulation, the length with its NUL, the text."""
+    b = text.encode("utf-8", "replace")
+    return b"\x00\x01\x00\x00" + struct.pack("<I", len(b) + 1) + b + b"\x00"
 
 
 @dataclass
@@ -102,7 +112,7 @@ class LiveRunner:
         self.status_sink = status_sink
         self.event_sink = event_sink or (lambda s: None)
         self.topics = {"odom": "/odom", "imu": "/imu", "scan": "/scan", "tf_static": "/tf_static",
-                       "fused": "/fused_pose"}
+                       "fused": "/fused_pose", "event": EVENTS_TOPIC}
         self.topics.update(topics or {})
         self.laser_mount = laser_mount
         self.silence_s = silence_s
@@ -156,6 +166,15 @@ class LiveRunner:
         except Exception:  # noqa: BLE001 - a recorder failure must not stop localization
             self.counters["record_errors"] += 1
 
+    def _record_event(self, text: str, t_host: float) -> None:
+        if self.recorder is None or not hasattr(self.recorder, "write_raw"):
+            return
+        try:
+            self.recorder.write_raw(self.topics["event"], "std_msgs/msg/String", b"string data\n", string_cdr(text),
+                                    max(int(round(t_host * 1e9)), 0))
+        except Exception:  # noqa: BLE001 - a recorder failure must not stop localization
+            self.counters["record_errors"] += 1
+
     def _sync_record_errors(self) -> None:
         if self._rec_sink is not None:
             self.counters["record_errors"] += self._rec_sink.errors
@@ -192,6 +211,9 @@ class LiveRunner:
         scan latency is unaffected.  Buffered messages older than ``reorder_s`` (host
         clock) are released by :meth:`flush_reorder`.
         """
+        if kind == "event":
+            self._record_event(str(msg), arrival)
+            return
         now = time.monotonic()
         self._mark(kind, now)
         stamp = float(getattr(msg, "stamp", arrival))
@@ -283,6 +305,9 @@ class LiveRunner:
         err = (f"ser crc {ser.get('crc_errors', 0)} len {ser.get('length_errors', 0)} "
                f"junk {ser.get('garbage_bytes', 0)}B drop {ser.get('dropped', 0)} | "
                f"las bad {las.get('malformed', 0)} reconn {las.get('disconnects', 0)}")
+        steps = ser.get("clock_steps", 0) + las.get("clock_steps", 0)
+        if steps:  # a device clock that stepped (re-anchored; the events say by how much)
+            err += f" | clock steps ser {ser.get('clock_steps', 0)} las {las.get('clock_steps', 0)}"
         skipped = las.get("other_layer", 0) + las.get("unsupported_device", 0)
         if skipped:  # scans of other layers (MRS1000) or of a clockwise device: said, not hidden
             err += f" skip {skipped}"

@@ -21,7 +21,7 @@ import numpy as np
 
 from fgloc.geometry import compose1, wrap_angle
 from fgloc.geometry import exp as se2_exp
-from fgloc.live.clock import ClockSync
+from fgloc.live.clock import ClockStep, ClockSync
 from fgloc.live.config import RobotParams
 from fgloc.live.serial_protocol import COUNT_MOD, SYNC, FrameParser, SensorFrame
 from fgloc.live.worker import SensorThread
@@ -83,6 +83,7 @@ class FrameConverter:
         self.yaw_rate_var = yaw_rate_var
         self.align_clock = align_clock
         self.clock = ClockSync()
+        self.clock_steps: list[ClockStep] = []  # found since the caller last took them (SerialLink reports them)
         self.wrong_wheel_count = 0
         self.bad_dt = 0
         self.implausible_twist = 0
@@ -98,7 +99,8 @@ class FrameConverter:
     def counters(self) -> dict[str, int]:
         return {"wrong_wheel_count": self.wrong_wheel_count, "bad_dt": self.bad_dt,
                 "implausible_twist": self.implausible_twist, "implausible_rate": self.implausible_rate,
-                "counts_rebased": self.counts_rebased}
+                "counts_rebased": self.counts_rebased, "clock_steps": self.clock.n_steps,
+                "clock_outliers": self.clock.outliers}
 
     def plausible(self, twist: np.ndarray) -> bool:
         """Whether a body twist ``[vx, vy, wz]`` is within the robot's limits (with the margin)."""
@@ -110,12 +112,14 @@ class FrameConverter:
         if f.reset:
             self.clock.reset()
             self._prev = None
-        t_dev = f.t_us_unwrapped * 1e-6
-        if self.align_clock:
-            self.clock.update(t_dev, arrival)
-            stamp = self.clock.to_host(t_dev, arrival)
-        else:
-            stamp = arrival
+        t_raw = f.t_us_unwrapped * 1e-6
+        # the clock is followed even when arrival times stamp the messages: its steps are taken out of
+        # the device time the wheel counts are differentiated over
+        step = self.clock.update(t_raw, arrival)
+        if step is not None:
+            self.clock_steps.append(step)
+        t_dev = self.clock.continuous(t_raw)
+        stamp = self.clock.to_host(t_raw, arrival) if self.align_clock else arrival
         if stamp <= self._last_stamp:
             stamp = self._last_stamp + 1e-6
         self._last_stamp = stamp
@@ -222,6 +226,10 @@ class SerialLink(SensorThread):
                 continue
             for kind, msg in msgs:
                 self.on_message(kind, msg, arrival)
+            if self.converter.clock_steps:
+                for step in self.converter.clock_steps:
+                    self.on_event(f"{self.label}: MCU {step.describe()}")
+                self.converter.clock_steps.clear()
         return len(frames)
 
     def _internal_error(self, what: str, e: Exception) -> None:

@@ -661,6 +661,7 @@ class SickStats:
     other_layer: int = 0  # telegrams of a multi-layer scanner's other layers (MRS1000), skipped
     layers_seen: set[int] = field(default_factory=set)  # the layer fields seen (at most 64 kept)
     unsupported_device: int = 0  # scans of a device whose angles run clockwise (NAV3xx, LRS36xx, OEM15xx)
+    implausible_scan_time: int = 0  # transmission minus scan start over two periods (a clock step between)
     meas_freq_in_hz: int = 0  # scans whose measurement frequency field was in Hz (corrected)
 
     def count_malformed(self, reason: str) -> None:
@@ -890,11 +891,20 @@ class SickClient(SensorThread):
             if self._last_tx is None:
                 self._t_ext_tx = t.time_of_transmission_us
             else:
-                self._t_ext_tx += (t.time_of_transmission_us - self._last_tx) & 0xFFFFFFFF
+                # signed: less than half the u32 range forward is time going on (a wrap if the value went
+                # down), a step back is the device's clock stepping back (ClockSync re-anchors on it)
+                self._t_ext_tx += ((t.time_of_transmission_us - self._last_tx + 0x80000000) & 0xFFFFFFFF) - 0x80000000
             self._last_tx = t.time_of_transmission_us
-            # device time of the scan start on the same unwrapped axis
-            start_dev = self._t_ext_tx - ((t.time_of_transmission_us - t.time_since_startup_us) & 0xFFFFFFFF)
-            self.clock.update(self._t_ext_tx * 1e-6, arrival)
+            # device time of the scan start on the same unwrapped axis; a scan longer than two periods
+            # is not one (the clock stepped between the scan's start and its transmission): one period
+            took_us = (t.time_of_transmission_us - t.time_since_startup_us) & 0xFFFFFFFF
+            if took_us > (2.0 * period + 0.02) * 1e6:
+                self.stats.implausible_scan_time += 1
+                took_us = int(period * 1e6)
+            start_dev = self._t_ext_tx - took_us
+            step = self.clock.update(self._t_ext_tx * 1e-6, arrival)
+            if step is not None:
+                self.on_event(f"{self.label}: laser {step.describe()}")
             stamp = self.clock.to_host(start_dev * 1e-6, arrival)
         else:
             stamp = arrival - period
@@ -961,6 +971,8 @@ class SickClient(SensorThread):
             "device_errors": st.device_errors, "device_error_codes": dict(st.device_error_codes),
             "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
             "unsupported_device": st.unsupported_device, "device": self.device_ident,
+            "clock_steps": self.clock.n_steps, "clock_outliers": self.clock.outliers,
+            "implausible_scan_time": st.implausible_scan_time,
             "layers_seen": sorted(st.layers_seen),
             "cola_b_headers": self.framer.stats.cola_b_headers, "dialect": self.dialect,
             "cola_b_telegrams": self.framer_b.stats.telegrams, "cola_b_bad_checksum": self.framer_b.bad_checksum,

@@ -8,6 +8,10 @@
   ``/scan`` as ``sSN LMDscandata`` telegrams after ``sEN LMDscandata 1``; it can drop
   the connection (and refuse new ones for a while) and inject malformed telegrams.
 
+Both can step their device clock mid-run (``clock_steps``: ``[(after_s, step_s), ...]``, the
+device clock jumps by ``step_s`` once the replay is ``after_s`` seconds in): a microcontroller
+reset or re-flash, a scanner re-synchronised, while the sequence and scan counters go on.
+
 Replay timing: message stamp ``s`` is emitted at host time
 ``start_host + (s - s0) / speed`` (``s0`` the first stamp of the run), so a test knows
 the exact host <-> run time mapping (:meth:`ReplayClock.to_host`).
@@ -51,6 +55,12 @@ class ReplayClock:
 
     def to_run(self, h: float | np.ndarray) -> float | np.ndarray:
         return self.s0 + (h - self.start_host) * self.speed
+
+
+def clock_step_us(steps: Iterable[tuple[float, float]], after_s: float) -> int:
+    """The device clock's total step (us) ``after_s`` seconds into the replay: the sum of every
+    ``step_s`` whose ``after_s`` has passed."""
+    return int(round(sum(step for at, step in steps if after_s >= at) * 1e6))
 
 
 def _wait_until(t_host: float, stop: threading.Event) -> bool:
@@ -133,6 +143,7 @@ class Stm32Emulator:
         imu_topic: str = "/imu",
         clock: ReplayClock | None = None,
         inject: dict[int, bytes] | None = None,
+        clock_steps: Iterable[tuple[float, float]] = (),
     ) -> None:
         msgs: list[tuple[str, Odometry | CompassHeading]] = [
             (t, m.heading() if isinstance(m, Imu) else m) for t, m in messages  # a log's Imu: its yaw and yaw rate
@@ -159,6 +170,7 @@ class Stm32Emulator:
         self.rng = random.Random(seed)
         self.stats = InjectStats()
         self.inject = dict(inject or {})  # frame index -> raw bytes written just before that frame
+        self.clock_steps = [(float(a), float(d)) for a, d in clock_steps]  # (s into the replay, MCU clock step s)
         self.sent: list[tuple[str, int]] = []  # ("odom" | "imu", index in self.msgs) of every intact frame written
         self.done = threading.Event()
         self._stop = threading.Event()
@@ -243,6 +255,7 @@ class Stm32Emulator:
             s = float(m.stamp)
             h = float(self.clock.to_host(s))
             t_mcu = int(round(self.mcu_t0_us + (h - self.clock.start_host) * (1.0 + self.drift) * 1e6))
+            t_mcu += clock_step_us(self.clock_steps, s - self.clock.s0)
             if isinstance(m, Odometry):
                 if last_s is not None and s > last_s:
                     phi += np.asarray(kin.inverse(np.asarray(m.twist, dtype=float))) * (s - last_s)
@@ -322,6 +335,7 @@ class SickEmulator:
         telegram: dict | None = None,
         dialect: str = "A",
         measuring: bool = True,
+        clock_steps: Iterable[tuple[float, float]] = (),
     ) -> None:
         """``device_ident``: the ``sRA DeviceIdent`` answer's fields (default: the example answer SICK's
         telegram listing gives, as ansarid/pysicktim and zh3305/LMS5xxConnector quote it);
@@ -330,7 +344,8 @@ class SickEmulator:
         ``dialect="B"``: a device set to CoLa-B (binary): every answer and telegram in CoLa-B, to
         commands in either dialect; ``measuring=False``: a device left in standby (it acknowledges
         sEN LMDscandata but sends nothing until logged in (sMN SetAccessMode 03 F4724744), told
-        sMN LMCstartmeas and sMN Run)."""
+        sMN LMCstartmeas and sMN Run); ``clock_steps``: ``[(after_s, step_s)]``, the device's clock
+        (time since start-up and of transmission) steps by ``step_s`` ``after_s`` seconds into the replay."""
         if dialect not in ("A", "B"):
             raise ValueError(f"dialect must be 'A' or 'B', got {dialect!r}")
         self.device_ident = device_ident
@@ -359,6 +374,7 @@ class SickEmulator:
         self.rng = random.Random(seed)
         self.stats = InjectStats()
         self.inject = dict(inject or {})  # scan index -> raw bytes sent just before that scan's telegram
+        self.clock_steps = [(float(a), float(d)) for a, d in clock_steps]
         self.sent_scans = 0
         self.sent: list[int] = []  # indices (in self.scans) of the scans whose telegrams were sent
         self.done = threading.Event()
@@ -420,7 +436,8 @@ class SickEmulator:
                 self._srv.close()
 
     def _dev_us(self, h: float) -> int:
-        return int(round(self.dev_t0_us + (h - self.clock.start_host) * (1.0 + self.drift) * 1e6)) & 0xFFFFFFFF
+        step = clock_step_us(self.clock_steps, (h - self.clock.start_host) * self.clock.speed)
+        return int(round(self.dev_t0_us + (h - self.clock.start_host) * (1.0 + self.drift) * 1e6 + step)) & 0xFFFFFFFF
 
     def _serve(self) -> None:
         """Accept one client at a time and answer its commands."""

@@ -52,8 +52,10 @@ def replay_live(
     status_sink: Any = None,
     warmup: bool = True,
     sick_kw: dict[str, Any] | None = None,
+    stm32_kw: dict[str, Any] | None = None,
 ) -> LiveReplay:
-    """``sick_kw``: :class:`SickEmulator` keywords (a real device's telegram shape, DeviceIdent, ...)."""
+    """``sick_kw``: :class:`SickEmulator` keywords (a real device's telegram shape, DeviceIdent, clock steps,
+    ...); ``stm32_kw``: :class:`Stm32Emulator` keywords (clock steps, corruption, ...)."""
     from fgloc.localization import build_session
 
     rp = robot if isinstance(robot, RobotParams) else RobotParams.from_dict(robot)
@@ -88,7 +90,7 @@ def replay_live(
     session = build_session(occ_map, laser_mount, backend=backend, frontend=frontend, initial_pose=initial_pose,
                             config=cfg)
     pair = EmulatorPair.create(messages, rp, mode=mode, speed=speed, t_start=t_start, duration=duration,
-                               lead_s=lead_s, sick_kw=sick_kw)
+                               lead_s=lead_s, sick_kw=sick_kw, stm32_kw=stm32_kw)
     sess = LiveSession(session, pair.stm32.url, pair.sick.address, config=cfg, record=record, publish=publish,
                        status_sink=status_sink)
     sess.start()

@@ -522,17 +522,21 @@ class Localizer:
             total += max(0.0, self._last_scan_t - self._lost_since)
         return total
 
-    def current(self, covariance: bool = True) -> PoseFix | None:
-        """Latest fused pose and covariance, predicted to the newest odometry stamp.
-        ``covariance=False``: the back-end's last computed covariance (plus the odometry noise
-        since), not a fresh marginal (see :class:`fgloc.localization.session.Session`)."""
+    def current(self, covariance: bool = True, at: float | None = None) -> PoseFix | None:
+        """Latest fused pose and covariance, predicted to the newest odometry stamp, or to ``at`` (the
+        scan just fused) when that is newer: with the odometry silent the pose of each scan is still
+        its own, never the last keyframe's again.  ``covariance=False``: the back-end's last computed
+        covariance (plus the odometry noise since), not a fresh marginal (see
+        :class:`fgloc.localization.session.Session`)."""
         cur = self.backend.current(covariance)
         if cur is None:
             return None
         t, pose, cov = cur
-        if self.odom.t is not None and self.odom.t > t:
-            pose, cov = self.backend.predict(self.odom.t)
-            t = self.odom.t
+        newest = max(self.odom.t if self.odom.t is not None else -math.inf,
+                     at if at is not None and math.isfinite(at) else -math.inf)
+        if newest > t:
+            pose, cov = self.backend.predict(newest)
+            t = newest
         return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map")
 
     def online_trajectory(self) -> Trajectory:

@@ -220,7 +220,7 @@ class Session:
         last = self._cov_stamp
         fresh = (self.covariance_period_s <= 0 or last is None or not math.isfinite(stamp)
                  or stamp < last or stamp - last >= self.covariance_period_s)
-        fused = self.loc.current(covariance=fresh)
+        fused = self.loc.current(covariance=fresh, at=stamp)
         if fresh and fused is not None:
             self._cov_stamp = stamp
         return fused

@@ -14,7 +14,11 @@ inputs go by path, and the input files' bytes when they are shipped (``ship=True
   address (and no ``RAY_ADDRESS``) it starts a private local Ray instance with ``num_cpus``
   = ``-j`` or all cores (its workers at niceness 0, like the pool's; Ray's own default is 15)
   and shuts it down at the end (the start runs in the background while the driver prepares
-  the jobs, see :meth:`RayEngine.start`); with ``--address HOST:PORT`` or
+  the jobs, see :meth:`RayEngine.start`).  The private instance is the driver's alone: every
+  server of it (GCS, raylet, workers, the driver's own, the agents) listens on the loopback
+  interface only, it asks a random token of every client (Ray's token authentication), it
+  has no dashboard, and it dies with the driver however the driver ends (``kill -9``
+  included: :mod:`fgloc.batch.raywatch`).  With ``--address HOST:PORT`` or
   ``RAY_ADDRESS`` it joins that cluster (fgloc must be installed on its nodes; inputs by
   path need shared storage, ``--ship-inputs`` does not).  At most twice the cluster's CPUs
   are in flight, so shipped inputs do not fill the object store.  A task whose worker
@@ -30,7 +34,9 @@ import logging
 import multiprocessing as mp
 import os
 import re
+import secrets
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -38,6 +44,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
+from pathlib import Path
 from typing import Any
 
 from fgloc.batch.jobs import Blob, Job, JobResult, read_blob
@@ -46,6 +53,8 @@ from fgloc.errors import ConfigError
 JobFn = Callable[[Job, "dict[str, Blob] | None"], JobResult]
 
 RAY_HINT = 'the ray engine needs Ray: pip install "fgloc[cluster]"'
+RAYWATCH_ENV = "FGLOC_RAY_INSTANCE"  # every process of a private instance carries it (raywatch.py)
+LOOPBACK = ("127.0.0.1", "::1", "localhost")
 
 
 def shipped_inputs(job: Job) -> dict[str, Blob]:
@@ -253,6 +262,28 @@ def import_ray() -> Any:
     return ray
 
 
+_TOKEN: list[str] = []
+
+
+def _private_token() -> str:
+    """The token of this process's private instances: one per process (Ray's client keeps the first
+    token it loads for the life of the process), the user's own when ``RAY_AUTH_TOKEN`` is set."""
+    if not _TOKEN:
+        _TOKEN.append(os.environ.get("RAY_AUTH_TOKEN") or secrets.token_hex(32))
+    return _TOKEN[0]
+
+
+def _reload_ray_auth() -> None:
+    """Have Ray's client read ``RAY_AUTH_MODE`` / ``RAY_AUTH_TOKEN`` again (its configuration first,
+    then the token cache, as Ray's own ``ray get-auth-token`` and test utilities do)."""
+    try:
+        raylet: Any = importlib.import_module("ray._raylet")
+    except ImportError:
+        return
+    raylet.Config.initialize("")
+    raylet.AuthenticationTokenLoader.instance().reset_cache()
+
+
 def _ray_task(fn: JobFn, job: Job, roles: list[str], *blobs: Blob) -> JobResult:
     """The Ray task: shipped inputs arrive as top-level arguments (Ray resolves them from the
     object store before the call)."""
@@ -285,6 +316,9 @@ class RayEngine:
         self._hold_until = threading.Event()
         self._error: BaseException | None = None
         self.timings: dict[str, float] = {"start_s": 0.0, "wait_s": 0.0, "stop_s": 0.0}
+        self._watchdog: subprocess.Popen[bytes] | None = None  # a private instance's (raywatch.py)
+        self._saved_env: dict[str, str | None] = {}
+        self._cluster_flag: Any = None  # Ray's constants module, its cluster flag turned off for a private instance
 
     @property
     def ray(self) -> Any:
@@ -334,21 +368,41 @@ class RayEngine:
 
     def _connect_now(self) -> None:
         t0 = time.perf_counter()
+        private = not self.address
+        imported = "ray" in sys.modules
+        if private and not (imported and self.ray.is_initialized()):
+            self._private_env()  # before `import ray`: Ray reads some of it when imported
         ray = import_ray()
         if ray.is_initialized():
             return
+        if private and imported:
+            _reload_ray_auth()  # Ray imported before: its client read the authentication settings then
         kw: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False,
                               "configure_logging": True}
         try:
             if self.address:
                 ray.init(address=self.address, **kw)
             else:
+                # loopback only (Ray listens on every interface unless its node address is loopback,
+                # and resolves a loopback --node-ip-address to the LAN address unless clusters are off)
+                constants: Any = sys.modules.get("ray._private.ray_constants")
+                if constants is not None and getattr(constants, "ENABLE_RAY_CLUSTER", False):
+                    constants.ENABLE_RAY_CLUSTER = False  # (imported before the environment was set)
+                    self._cluster_flag = constants
                 # workers at normal priority, as the local pool's and `fgloc run`: Ray's default
                 # (niceness 15) makes a batch yield to every other process of a shared machine
                 ray.init(address="local", num_cpus=int(self.jobs or os.cpu_count() or 1),
                          include_dashboard=False, _system_config={"worker_niceness": 0}, **kw)
             self._started = True
+            if private:
+                node = str(ray.util.get_node_ip_address())
+                if node not in LOOPBACK:
+                    self.shutdown()
+                    raise ConfigError(f"Ray: the private instance would listen on {node}, not on the loopback "
+                                      f"interface; use --engine local, or a cluster you set up with --address")
         except (ConnectionError, RuntimeError, ValueError) as e:
+            if self._saved_env or self._watchdog is not None:
+                self._restore_env()
             where = self.address or "a local instance"
             hint = ""
             if self.address and os.environ.get("RAY_AUTH_MODE", "").lower() != "token":
@@ -358,13 +412,55 @@ class RayEngine:
         finally:
             self.timings["start_s"] += time.perf_counter() - t0
 
+    def _private_env(self) -> None:
+        """The environment a private instance starts in (restored by :meth:`shutdown`): loopback only,
+        a random token asked of every client, every process tagged for the watchdog, which starts
+        here (:mod:`fgloc.batch.raywatch`)."""
+        tag = secrets.token_hex(8)
+        if os.path.isdir("/proc"):
+            self._watchdog = subprocess.Popen(
+                [sys.executable, "-I", str(Path(__file__).with_name("raywatch.py")), str(os.getpid()), tag],
+                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                start_new_session=True)
+        env = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_AUTH_MODE": "token",
+               "RAY_AUTH_TOKEN": _private_token(), RAYWATCH_ENV: tag}
+        self._saved_env = {k: os.environ.get(k) for k in (*env, "RAY_AUTH_TOKEN_PATH")}
+        os.environ.pop("RAY_AUTH_TOKEN_PATH", None)
+        os.environ.update(env)
+
+    def _restore_env(self) -> None:
+        for k, v in self._saved_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        self._saved_env = {}
+        if "ray" in sys.modules:
+            _reload_ray_auth()  # the process's own settings again (a cluster joined later)
+        if self._cluster_flag is not None:
+            self._cluster_flag.ENABLE_RAY_CLUSTER = True
+            self._cluster_flag = None
+        w, self._watchdog = self._watchdog, None
+        if w is not None:
+            # the pipe closes: the watchdog kills whatever of the instance is left, then exits
+            if w.stdin is not None:
+                w.stdin.close()
+            try:
+                w.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                w.kill()
+                w.wait()
+
     def shutdown(self) -> None:
-        """Disconnect (a private instance stops); waits for a start under way first."""
+        """Disconnect (a private instance stops, and none of its processes outlives this); waits for a
+        start under way first."""
         t0 = time.perf_counter()
         if self._thread is not None:
             self._ready.wait()
         if "ray" in sys.modules and self.ray.is_initialized():
             self.ray.shutdown()
+        if self._saved_env or self._watchdog is not None:
+            self._restore_env()
         if self._thread is not None:
             self._hold_until.set()
             self._thread.join(timeout=10)

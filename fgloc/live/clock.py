@@ -39,7 +39,10 @@ signs, each about the device clock alone (no other sensor is needed):
   affected span.
 
 A confirmed step re-anchors: the filter restarts from the samples after the step (the drift
-estimate is kept), and a :class:`ClockStep` is recorded.  :meth:`ClockSync.continuous` gives
+estimate is kept), and a :class:`ClockStep` is recorded; its size is measured again against the
+fastest sample of each of the first :data:`REFINE_BINS` bins after it (``steps``: found with two
+samples, a step's size carries their delay, 0.4 s on a host so loaded that every thread waited
+that long).  :meth:`ClockSync.continuous` gives
 the device time with the steps taken out, for intervals measured across one (wheel counts
 over a frame period).
 
@@ -50,12 +53,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 #: the steps kept for reporting (the count in ``n_steps`` goes on)
 MAX_STEPS_KEPT = 32
+#: a step is measured again over this many bins after it (its size: the largest of the measures)
+REFINE_BINS = 5
 
 
 @dataclass(frozen=True)
@@ -106,6 +111,8 @@ class ClockSync:
     _high: list[tuple[float, float, float]] = field(default_factory=list)  # (t_dev, t_rx, residual) all > tol
     _high_jitter: float = 0.0  # the 95th percentile of the residuals before the window in _high
     _resid: deque[float] = field(default_factory=deque)  # recent residuals of the samples fed
+    _refine: tuple[ClockStep, float, float, float] | None = None  # the last step and the anchor before it
+    _refine_bins: int = 0
 
     def reset(self) -> None:
         """Forget everything about the device clock (the device restarted)."""
@@ -200,6 +207,9 @@ class ClockSync:
         return None
 
     def _reanchor(self, step: ClockStep, samples: list[tuple[float, float]]) -> None:
+        self._refine, self._refine_bins = None, 0
+        if self._offset is not None:
+            self._refine = (step, self._offset, self._drift, self._t_ref)
         self._restart()
         self._step_total += step.step_s
         self.n_steps += 1
@@ -217,6 +227,11 @@ class ClockSync:
             self._cur_best = (t_dev, d)
         if t_dev - self._cur_start >= self.bin_s:
             self._bins.append(self._cur_best)
+            if self._refine is not None:
+                self._refined(*self._cur_best)
+                self._refine_bins += 1
+                if self._refine_bins >= REFINE_BINS:
+                    self._refine = None
             while len(self._bins) > self.n_bins:
                 self._bins.popleft()
             self._cur_start = t_dev
@@ -226,6 +241,18 @@ class ClockSync:
             # warm-up: the running minimum is the best offset estimate we have
             best = min([b[1] for b in self._bins] + [self._cur_best[1]])
             self._offset, self._t_ref = best, t_dev  # (the drift: 0 from a reset, kept through a step)
+
+    def _refined(self, t_b: float, d_min: float) -> None:
+        """The step measured again as each of the first :data:`REFINE_BINS` bins after it completes:
+        its fastest sample against the old anchor.  Every measure is the step less a delay (a lower
+        bound), the first one too: the largest is kept.  The kept record only (the stamps and
+        :meth:`continuous` already went on with the first measure)."""
+        step, off, drift, t_ref = self._refine  # type: ignore[misc]
+        size = off + drift * (t_b - step.step_s - t_ref) - d_min
+        for i, s in enumerate(self.steps):
+            if s is step and size > s.step_s:
+                self.steps[i] = replace(s, step_s=size)
+                self._refine = (self.steps[i], off, drift, t_ref)
 
     def _fit(self) -> None:
         pts = list(self._bins)

@@ -96,11 +96,12 @@ class FrameConverter:
         self._pose = np.zeros(3)
         self._last_stamp = -math.inf
 
-    def counters(self) -> dict[str, int]:
+    def counters(self) -> dict[str, Any]:
         return {"wrong_wheel_count": self.wrong_wheel_count, "bad_dt": self.bad_dt,
                 "implausible_twist": self.implausible_twist, "implausible_rate": self.implausible_rate,
                 "counts_rebased": self.counts_rebased, "clock_steps": self.clock.n_steps,
-                "clock_outliers": self.clock.outliers}
+                "clock_outliers": self.clock.outliers,
+                "clock_step_sizes_s": [round(st.step_s, 4) for st in self.clock.steps]}
 
     def plausible(self, twist: np.ndarray) -> bool:
         """Whether a body twist ``[vx, vy, wz]`` is within the robot's limits (with the margin)."""

@@ -972,6 +972,7 @@ class SickClient(SensorThread):
             "other_layer": st.other_layer, "meas_freq_in_hz": st.meas_freq_in_hz,
             "unsupported_device": st.unsupported_device, "device": self.device_ident,
             "clock_steps": self.clock.n_steps, "clock_outliers": self.clock.outliers,
+            "clock_step_sizes_s": [round(st.step_s, 4) for st in self.clock.steps],
             "implausible_scan_time": st.implausible_scan_time,
             "layers_seen": sorted(st.layers_seen),
             "cola_b_headers": self.framer.stats.cola_b_headers, "dialect": self.dialect,

@@ -138,3 +138,14 @@ def test_a_starved_reader_is_not_a_step():
     c = ClockSync()
     steps, _ = _stream(c, dev, rx)
     assert steps == [] and c.outliers == 0
+
+
+def test_the_step_is_measured_again_over_the_second_after_it():
+    """Found with two samples both 0.3 s late (a starved reader): reported 0.3 s off; measured again
+    against the fastest sample of the next second, within a millisecond."""
+    dev, rx, host = _jittered(1500, 0.02, step_at=1000, step_s=-3.0)
+    rx[1000:1002] += 0.3
+    c = ClockSync()
+    steps, _ = _stream(c, dev, rx)
+    assert len(steps) == 1 and abs(steps[0].step_s + 3.3) < 0.01
+    assert len(c.steps) == 1 and abs(c.steps[0].step_s + 3.0) < 0.001

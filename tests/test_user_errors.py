@@ -181,3 +181,84 @@ def test_latency_line_is_not_contradictory():
     rep.latency_s, rep.latency_not_applied = 0.1196, None
     line = next(ln for ln in summary_lines(RunStats(sources={"scan": rep})) if "latency" in ln)
     assert "latency 119.6 +- 11.3 ms (estimated)" in line
+
+
+# ------------------------------------------------------------------ the table of docs/user-errors.md
+@pytest.fixture(scope="module")
+def inputs(short_log, tmp_path_factory) -> dict:
+    """Damaged and wrong inputs beside the good short log."""
+    import yaml
+
+    d = tmp_path_factory.mktemp("bad")
+    (d / "empty.mcap").write_bytes(b"")
+    (d / "garbage.bag").write_bytes(bytes(range(256)) * 40)
+    (d / "three.tum").write_text("1 2 3\n")
+    (d / "notes.txt").write_text("my notes\n")
+    (d / "exists.tum").write_text("# not fgloc's\n")
+    vel = [False] * 6 + [True, True, False, False, False, True] + [False] * 3
+    (d / "typo.yaml").write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": {
+        "odom0": "/odom", "odom0_confg": vel, "imu0": "/imu", "imu0_config": [False] * 5 + [True] + [False] * 9}}}))
+    (d / "badkey.yaml").write_text("pipeline:\n  frontend_evry: 1\n")
+    import shutil
+
+    shutil.copy(short_log["log"], d / "run.mcap")  # a log named as fgloc run's output
+    rc, _, err = fgloc("import", short_log["log"], "-o", d / "scans.mcap", "--topic", "/scan", "--topic", "/tf_static")
+    assert rc == 0, err  # scans without odometry
+    return {**short_log, "bad": d}
+
+
+#: (id, command line with {log} {map} {bad} {tmp}, exit status, the start of the one line on stderr or stdout)
+CASES = [
+    ("run-missing-log", "run {bad}/nope.mcap -o {tmp}/o", 2, "{bad}/nope.mcap: log file not found"),
+    ("run-empty-log", "run {bad}/empty.mcap -o {tmp}/o", 2, "{bad}/empty.mcap: empty file (0 bytes), not an MCAP log"),
+    ("run-not-a-log", "run {bad}/garbage.bag -o {tmp}/o", 2, "{bad}/garbage.bag: not a log fgloc reads"),
+    ("run-absent-topic", "run {log} -o {tmp}/o --odom-topic /wheels", 2, "{log}: --odom-topic /wheels: no such topic"),
+    ("run-wrong-type", "run {log} -o {tmp}/o --scan-topic /odom", 2,
+     "{log}: topic '/odom' has type nav_msgs/msg/Odometry"),
+    ("run-yaw-degrees", "run {log} --map {map} --initial-pose 2.5 3 90 -o {tmp}/o", 2,
+     "--initial-pose: yaw 90 is in radians (did you mean 1.5708 for 90 deg?)"),
+    ("run-two-values", "run {log} --initial-pose 2.5 3 -o {tmp}/o", 2, "--initial-pose needs three values X Y YAW"),
+    ("run-map-image", "run {log} --map {dir}/map.pgm -o {tmp}/o", 2, "{dir}/map.pgm: this is the map's image"),
+    ("run-bad-config-key", "run {log} --config {bad}/badkey.yaml -o {tmp}/o", 2,
+     "{bad}/badkey.yaml: pipeline.frontend_evry: unknown key"),
+    ("run-unknown-backend", "run {log} --backend ukf -o {tmp}/o", 2, "unknown back-end 'ukf'"),
+    ("run-output-is-input", "run {bad}/run.mcap -o {bad}", 2, "{bad}/run.mcap"),
+    ("batch-no-match", "batch run {bad}/nothing-*.mcap -o {tmp}/b", 2, "{bad}/nothing-*.mcap: pattern matches no file"),
+    ("batch-engine", "batch run {log} -o {tmp}/b --engine spark", 2, "unknown engine 'spark'"),
+    ("batch-corrupt-log", "batch run {log} {bad}/garbage.bag -o {tmp}/b -j 1 -q", 1, ""),
+    ("map-not-a-log", "map {bad}/garbage.bag -o {tmp}/m -q", 2, "{bad}/garbage.bag: not a log fgloc reads"),
+    ("map-no-odometry", "map {bad}/scans.mcap -o {tmp}/m -q", 2, "{bad}/scans.mcap: no odometry on /odom"),
+    ("map-check-no-map", "map-check {bad}/none.yaml {log} -q", 2, "{bad}/none.yaml"),
+    ("eval-one-file", "eval {dir}/ground_truth.tum", 2, "{dir}/ground_truth.tum: fgloc eval needs an estimate"),
+    ("eval-three-columns", "eval {bad}/three.tum {dir}/ground_truth.tum", 2, "{bad}/three.tum:1: expected 8 numbers"),
+    ("eval-wrong-topic", "eval {dir}/ground_truth.tum {log}:/scan", 2, "{log}: /scan is sensor_msgs/msg/LaserScan"),
+    ("export-exists", "export {log} -o {bad}/exists.tum", 2, "{bad}/exists.tum: exists; pass --force"),
+    ("import-rename-form", "import {log} -o {tmp}/i.mcap --rename /scan", 2, "--rename /scan: give OLD=NEW"),
+    ("import-missing-topic", "import {log} -o {tmp}/i.mcap --topic /laser", 2,
+     "{log}: --topic /laser: no such topic in the log"),
+    ("import-output-is-input", "import {log} -o {log}", 2, "{log}: is the input"),
+    ("port-typo", "config from-robot-localization {bad}/typo.yaml -o {tmp}/c.yaml", 2,
+     "{bad}/typo.yaml: the converted config has no source of motion"),
+    ("port-not-params", "config from-robot-localization {bad}/notes.txt", 2, "{bad}/notes.txt: not a YAML mapping"),
+    ("live-no-sensor", "live --duration 0.1", 2, "fgloc live: give --serial URL and/or --laser HOST:PORT"),
+    ("live-missing-port", "live --serial {bad}/ttyUSB9 --duration 0.1", 2, "{bad}/ttyUSB9: no such serial port"),
+    ("simulate-no-output", "simulate paper", 2, "fgloc simulate paper: give the output folder"),
+    ("simulate-unknown-scenario", "simulate scenario wheelslip -o {tmp}/s", 2,
+     "wheelslip: no such scenario file, and no shipped scenario of that name (did you mean wheel_slip?)"),
+    ("info-missing", "info {bad}/nope.bag", 2, "{bad}/nope.bag: log file not found"),
+    ("config-missing", "config show --config {bad}/none.yaml", 2, "{bad}/none.yaml: config file not found"),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_case(inputs, tmp_path, case):
+    """Each mistake: the documented exit status and one line (``fgloc: error: ...`` for status 2)."""
+    _id, line, rc_want, start = case
+    fmt = {"log": inputs["log"], "map": inputs["map"], "bad": inputs["bad"], "tmp": tmp_path, "dir": inputs["dir"]}
+    rc, out, err = fgloc(*line.format(**fmt).split())
+    assert rc == rc_want, (line, rc, out, err)
+    assert "Traceback" not in out + err
+    if rc_want == 2:
+        msg = one_error_line(err)
+        assert msg.startswith(start.format(**fmt)), msg
+        assert len([ln for ln in err.splitlines() if ln.startswith("fgloc: error:")]) == 1

@@ -124,8 +124,10 @@ def _scenario_file(name_or_path: str) -> str:
     names = scenario_names()
     if name_or_path in names:
         return str(scenario_path(name_or_path))
-    raise ConfigError(f"{name_or_path}: no such scenario file, and no shipped scenario of that name "
-                      f"(shipped: {', '.join(names)})")
+    from fgloc.config.schema import suggest
+
+    raise ConfigError(f"{name_or_path}: no such scenario file, and no shipped scenario of that name"
+                      f"{suggest(Path(name_or_path).stem, names)} (shipped: {', '.join(names)})")
 
 
 @simulate_app.command("list")

@@ -91,9 +91,9 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
     A topic None is not named: :func:`fgloc.app.run.run_log` resolves it as ``fgloc run`` does
     (the default name, the config's sources, else the log's only topic of that type)."""
     from fgloc.app.run import RunRequest, run_log
+    from fgloc.backends import check_backend
 
-    if backend not in ("ekf", "smoother", "batch"):
-        raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
+    backend = check_backend(backend)  # the registry's names, a "did you mean" for a typo
     pose = None if initial_pose is None else (float(initial_pose[0]), float(initial_pose[1]), float(initial_pose[2]))
     r = run_log(RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
                            initial_pose=pose, config=config_path, scan_topic=scan_topic, odom_topic=odom_topic,

@@ -65,8 +65,9 @@ def batch_run(logs: list[str], outdir: Path, opts: EngineOptions, manifest: Path
               backend: str = "smoother", frontend: str = "native", scan_topic: str | None = None,
               odom_topic: str | None = None, imu_topic: str | None = None, allow_lost: bool = False) -> BatchReport:
     """Localize every log (``fgloc run`` each) into ``outdir/<name>/``; ``outdir/summary.csv``."""
-    if backend not in ("ekf", "smoother", "batch"):
-        raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
+    from fgloc.backends import check_backend
+
+    backend = check_backend(backend)  # the registry's names, a "did you mean" for a typo
     if not logs and manifest is None:
         raise ConfigError("give LOGS (files, folders, globs) or --manifest FILE")
 

@@ -44,7 +44,8 @@ def fgloc(*args: str) -> list[str]:
 
 
 RECEIVER = """
-import os, sys, time
+import os, signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)  # a background shell starts children ignoring it
 from fgloc.ros2 import codec, qos
 from fgloc.ros2.transport import CycloneTransport
 tr = CycloneTransport(int(sys.argv[1]), "lo")

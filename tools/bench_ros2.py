@@ -124,7 +124,7 @@ def main() -> int:
     rep_out = replay.stdout.read() if replay.stdout else ""
     time.sleep(3.0)  # the live node's backlog
     samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
-    live.send_signal(signal.SIGINT)
+    live.send_signal(signal.SIGTERM)  # as SIGINT (Ctrl-C); SIGINT stays ignored in a background shell
     out, err = live.communicate(timeout=300)
     report = json.loads(out)
     print(rep_out.strip().splitlines()[0] if rep_out.strip() else "replay: no output")

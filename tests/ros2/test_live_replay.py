@@ -59,7 +59,7 @@ def _replay(domain: int, log: Path, *extra: str) -> subprocess.CompletedProcess:
 
 
 def _stop(p: subprocess.Popen) -> tuple[int, dict, str]:
-    p.send_signal(signal.SIGINT)
+    p.send_signal(signal.SIGTERM)  # handled as Ctrl-C; a SIGINT stays ignored when the tests run in the background
     out, err = p.communicate(timeout=120)
     return p.returncode, (json.loads(out) if out.strip().startswith("{") else {}), err
 

@@ -105,7 +105,9 @@ def _main(argv: list[str] | None) -> int:
     # at exit, skip the interpreter's last cycle collection over everything loaded (numba, scipy,
     # gtsam: 0.15-0.3 s of every command); the OS frees the memory
     atexit.register(gc.freeze)
-    with stop.handling():  # SIGINT / SIGTERM: stop cleanly at the first, at once at the second (fgloc.io.stop)
+    # SIGINT / SIGTERM: stop cleanly at the first, at once at the second (fgloc.io.stop); the
+    # console script exits next, so its handlers stay (a late Ctrl-C is no traceback in the exit)
+    with stop.handling(restore=argv is not None):
         code = _invoke(argv)
         if code == stop.EXIT_INTERRUPTED and stop.requested() is not None:
             print(stop.interrupted_line(), file=sys.stderr)

@@ -72,6 +72,7 @@ class _State:
         self.hard_exit: dict[int, Callable[[], None]] = {}
         self.notes: list[str] = []
         self.alarm = False  # the grace timer is ours
+        self.closed = False  # the command is over (the process is exiting): signals are ignored
 
 
 _state = _State()
@@ -143,6 +144,8 @@ def _raise_now() -> None:
 
 def _on_signal(signum: int, frame: object) -> None:
     st = _state
+    if st.closed:
+        return
     st.count += 1
     if st.count == 1:
         st.signum = signum
@@ -171,7 +174,7 @@ def _on_signal(signum: int, frame: object) -> None:
 def _on_alarm(signum: int, frame: object) -> None:
     """The grace is over and no checkpoint raised: interrupt the work here."""
     st = _state
-    if st.signum is None or st.raised or st.cooperative:
+    if st.signum is None or st.raised or st.cooperative or st.closed:
         return
     if st.critical:
         st.stop_pending = True
@@ -179,10 +182,34 @@ def _on_alarm(signum: int, frame: object) -> None:
     _raise_now()
 
 
+_early: list[int] = []
+
+
+def _record_early(signum: int, frame: object) -> None:
+    if _early:  # a second signal before the command began: nothing to finish
+        try:
+            sys.stderr.write(f"fgloc: interrupted ({signal_name(signum)})\n")
+        except (OSError, ValueError):
+            pass
+        os._exit(EXIT_INTERRUPTED)
+    _early.append(signum)
+
+
+def install_early() -> None:
+    """The ``fgloc`` console script, from its first import on: a signal is only recorded until
+    :func:`handling` takes over and acts on it (the work then stops at its first checkpoint;
+    Python's own handler raised KeyboardInterrupt inside the imports)."""
+    if threading.current_thread() is threading.main_thread():
+        for s in SIGNALS:
+            if signal.getsignal(s) is not signal.SIG_IGN:
+                signal.signal(s, _record_early)
+
+
 @contextmanager
-def handling() -> Iterator[None]:
+def handling(restore: bool = True) -> Iterator[None]:
     """Install the handlers (main thread only) for the duration of one command; restores the
-    previous ones and forgets the command's stop afterwards."""
+    previous ones (``restore``; else, for a process that exits next, they stay and ignore every
+    later signal: a Ctrl-C during the exit is no traceback) and forgets the command's stop."""
     global _state
     old: dict[signal.Signals, object] = {}
     if threading.current_thread() is threading.main_thread():
@@ -190,20 +217,25 @@ def handling() -> Iterator[None]:
             prev = signal.getsignal(s)
             if prev is signal.SIG_IGN:  # e.g. a background job of a shell, or nohup: stays ignored
                 continue
-            old[s] = prev
+            old[s] = signal.default_int_handler if prev is _record_early and s == signal.SIGINT else \
+                signal.SIG_DFL if prev is _record_early else prev
             signal.signal(s, _on_signal)
         if old and signal.getsignal(signal.SIGALRM) in (signal.SIG_DFL, None):
             old[signal.SIGALRM] = signal.getsignal(signal.SIGALRM)
             signal.signal(signal.SIGALRM, _on_alarm)
             _state.alarm = True
+    if _early:  # a signal during the start-up: the first of this command
+        _on_signal(_early.pop(0), None)
     try:
         yield
     finally:
         if _state.alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)
-        for sig, h in old.items():
-            signal.signal(sig, h)  # type: ignore[arg-type]
+        if restore:
+            for sig, h in old.items():
+                signal.signal(sig, h)  # type: ignore[arg-type]
         _state = _State()
+        _state.closed = not restore and bool(old)
 
 
 @contextmanager

@@ -79,10 +79,11 @@ def test_run_stopped_mid_run_then_the_same_command_works(longer, tmp_path, sig):
     assert rc == 130 and err.strip().splitlines()[-1] == (
         f"fgloc: interrupted ({name}): nothing was written to {out} (what it held is unchanged)"), err
     assert not out.exists()
-    p = popen(*_run_args(longer, out, "--realtime", "50"))
-    rc, _, err = _finish(p)
-    assert rc == 0, err
-    assert {"trajectory.tum", "run.mcap", "config.yaml"} <= {f.name for f in out.iterdir()}
+    if sig == signal.SIGINT:  # the same command again (a partial run.mcap made it refuse before)
+        p = popen(*_run_args(longer, out, "--realtime", "50"))
+        rc, _, err = _finish(p)
+        assert rc == 0, err
+        assert {"trajectory.tum", "run.mcap", "config.yaml"} <= {f.name for f in out.iterdir()}
 
 
 def test_run_signals_at_set_up_twice_and_kill_keep_earlier_outputs(longer, tmp_path):
@@ -117,13 +118,20 @@ def test_run_signals_at_set_up_twice_and_kill_keep_earlier_outputs(longer, tmp_p
 
 
 # ---------------------------------------------------------------------------------------- map
+@pytest.fixture(scope="module")
+def earlier_map(longer, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("earlier") / "m"
+    p = popen("map", str(longer / "log.mcap"), "-o", str(out), "-q")
+    assert _finish(p)[0] == 0
+    return out
+
+
 @pytest.mark.parametrize("delay_s", [0.0, 0.6, 1.5], ids=["reading", "mapping", "later"])
-def test_map_ctrl_c_at_several_points_is_a_clean_130(longer, tmp_path, delay_s):
+def test_map_ctrl_c_at_several_points_is_a_clean_130(longer, earlier_map, tmp_path, delay_s):
     """Ctrl-C during `fgloc map` crashed 2 of 41 times (a numba SystemError, a segfault): the
     first signal now only asks, and the mapping stops between two scans.  The earlier map is kept."""
     out = tmp_path / "m"
-    p = popen("map", str(longer / "log.mcap"), "-o", str(out), "-q")
-    assert _finish(p)[0] == 0
+    shutil.copytree(earlier_map, out)
     before = snapshot(out)
     p = popen("map", str(longer / "log.mcap"), "-o", str(out), "-q", "--resolution", "0.04")
     _wait(lambda: _staged(out, "") or p.poll() is not None, what="the map's staging")
@@ -153,10 +161,10 @@ def test_map_sigterm_and_double_sigint(longer, tmp_path):
 
 # ---------------------------------------------------------------------------------------- batch
 @pytest.fixture
-def three_logs(longer, tmp_path) -> Path:
+def two_logs(longer, tmp_path) -> Path:
     d = tmp_path / "logs"
     d.mkdir()
-    for n in ("a", "b", "c"):
+    for n in ("a", "b"):
         shutil.copy(longer / "log.mcap", d / f"{n}.mcap")
     return d
 
@@ -177,7 +185,7 @@ def _workers(pid: int) -> list:
 
 @pytest.mark.parametrize("sigs", [(signal.SIGTERM,), (signal.SIGTERM, signal.SIGTERM), (signal.SIGKILL,)],
                          ids=["SIGTERM", "SIGTERM twice", "SIGKILL"])
-def test_batch_stopped_by_a_service_manager_keeps_finished_logs(three_logs, longer, tmp_path, sigs):
+def test_batch_stopped_by_a_service_manager_keeps_finished_logs(two_logs, longer, tmp_path, sigs):
     """SIGTERM (a service manager's stop) to the batch driver alone: the finished log is kept
     with its marker, no worker outlives the driver (a second signal kills them; SIGKILL of the
     driver reaches them as their parent-death signal), nothing half-written is left in a job's
@@ -185,7 +193,7 @@ def test_batch_stopped_by_a_service_manager_keeps_finished_logs(three_logs, long
     import psutil
 
     out = tmp_path / "out"
-    p = _batch(three_logs, longer, out)
+    p = _batch(two_logs, longer, out)
     _wait(lambda: len(list(out.glob("*/batch-done.json"))) >= 1 or p.poll() is not None, 180, "a finished log")
     workers = _workers(p.pid)
     rc, _, err = _finish(p, *sigs)
@@ -198,12 +206,12 @@ def test_batch_stopped_by_a_service_manager_keeps_finished_logs(three_logs, long
     _, alive = psutil.wait_procs(workers, timeout=15)
     assert not alive
     done = sorted(d.parent.name for d in out.glob("*/batch-done.json"))
-    assert done and len(done) < 3
+    assert done == ["a"]
     assert not staging_left(out)
-    p = _batch(three_logs, longer, out)
+    p = _batch(two_logs, longer, out)
     rc, stdout, err = _finish(p)
     assert rc == 0, err
-    assert f"{len(done)} already done" in stdout and len(list(out.glob("*/batch-done.json"))) == 3
+    assert "1 already done" in stdout and len(list(out.glob("*/batch-done.json"))) == 2
 
 
 # ---------------------------------------------------------------------------------------- live
@@ -227,8 +235,8 @@ def test_live_stops_cleanly_and_a_second_signal_never_loses_the_recording(tmp_pa
     _no_traceback(err)
     if len(sigs) == 1:
         assert rc == 0, err
-    else:
-        assert rc == 130 and "fgloc: interrupted (SIGINT): the final smoothing was skipped" in err, err
+    else:  # 0 when the shutdown was over before the second signal came
+        assert rc == 0 or (rc == 130 and "fgloc: interrupted (SIGINT): the final smoothing was skipped" in err), err
     counts = {t: v["count"] for t, v in open_log(rec).summary()["topics"].items()}
     assert counts.get("/odom", 0) > 20 and counts.get("/scan", 0) > 5, counts
     assert not (tmp_path / "rec.mcap.partial").exists()

@@ -72,6 +72,7 @@ def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -
     if others:
         notes.append(f"converted node {name}; not converted: {', '.join(others)}")
     amcl: dict[str, Any] = {}
+    ros2: dict[str, Any] = {}  # nav2 AMCL's topics and frames, for fgloc live --ros2
     used: set[str] = set()
     for k in SAME:
         if k in p:
@@ -115,6 +116,16 @@ def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -
                          f"{scans[0]} to fgloc run (the others are not used)")
         elif scans:
             notes.append(f"scan_topic: {scans[0]}: pass --scan-topic {scans[0]} to fgloc run")
+        if scans:  # fgloc live --ros2 subscribes to it as nav2 AMCL does
+            ros2["scan_topic"] = scans[0] if scans[0].startswith("/") else "/" + scans[0]
+    # nav2 AMCL's ROS interface, for fgloc live --ros2 (the ros2: section keeps nav2's names)
+    for key, to, conv in (("map_topic", "map_topic", lambda v: v if str(v).startswith("/") else f"/{v}"),
+                          ("global_frame_id", "global_frame_id", str), ("odom_frame_id", "odom_frame_id", str),
+                          ("tf_broadcast", "tf_broadcast", as_bool),
+                          ("transform_tolerance", "transform_tolerance_s", float)):
+        if key in p:
+            used.add(key)
+            ros2[to] = conv(p[key])
     if as_bool(p.get("set_initial_pose", False)):
         used.update({"set_initial_pose", "initial_pose"})
         ip = p.get("initial_pose") or {}
@@ -130,6 +141,8 @@ def from_nav2(data: Any, node: str | None = None, source: str = "nav2 params") -
         notes.append(f"left out, so {'ROS 1 amcl' if ros1 else 'nav2_amcl'}'s defaults (not fgloc's): "
                      + ", ".join(f"{k} {defaults[k]}" for k in filled))
     out: dict[str, Any] = {"frontends": {"amcl": amcl}} if amcl else {}
+    if ros2:
+        out["ros2"] = ros2
     for k in sorted(p):
         ks = str(k)
         if ks in used or ks in QUIET:

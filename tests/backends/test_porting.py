@@ -100,6 +100,9 @@ def test_nav2_amcl_section_converts():
     assert a.robot_model_type == "differential" and a.laser_model_type == "likelihood_field"
     assert any(n.startswith("do_beamskip:") for n in notes) and any("--scan-topic scan" in n for n in notes)
     assert not any(n.startswith(("alpha", "z_hit", "max_beams")) for n in notes)
+    r = parse_config(cfg).ros2  # nav2's ROS interface, for fgloc live --ros2
+    assert (r.scan_topic, r.global_frame_id, r.odom_frame_id, r.tf_broadcast, r.transform_tolerance_s) == \
+        ("/scan", "map", "odom", True, 1.0)
 
 
 def test_cli_writes_a_checked_config(tmp_path, capsys):

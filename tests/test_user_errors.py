@@ -262,3 +262,9 @@ def test_case(inputs, tmp_path, case):
         msg = one_error_line(err)
         assert msg.startswith(start.format(**fmt)), msg
         assert len([ln for ln in err.splitlines() if ln.startswith("fgloc: error:")]) == 1
+
+
+def test_batch_writes_no_bar_into_a_pipe(short_log, tmp_path):
+    rc, out, err = fgloc("batch", "run", short_log["log"], "-o", tmp_path / "b", "-j", "1")
+    assert rc == 0, out + err
+    assert "\r" not in err and "\r" not in out

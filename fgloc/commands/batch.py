@@ -29,9 +29,12 @@ QUIET = typer.Option("--quiet", "-q", help="no progress bar")
 
 
 def _opts(engine: str, jobs: int | None, address: str | None, ship: bool, force: bool, quiet: bool):
+    import sys
+
     from fgloc.batch import EngineOptions
 
-    return EngineOptions(engine, jobs, address, ship, force, not quiet)
+    # a progress bar on a terminal only: a pipe or a log file gets no carriage-return lines
+    return EngineOptions(engine, jobs, address, ship, force, not quiet and sys.stderr.isatty())
 
 
 def _console():

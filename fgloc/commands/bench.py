@@ -43,7 +43,9 @@ def register(app: typer.Typer) -> None:
         if not have_amcl and not no_amcl:
             con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
         variants = tuple(v for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl"))
-        res = bench_paper(seeds, outdir, variants, config, jobs, force=force)
+        import sys
+
+        res = bench_paper(seeds, outdir, variants, config, jobs, quiet=not sys.stderr.isatty(), force=force)
         # a drawn table on a terminal; Markdown (pasteable into the README) into a pipe or a file
         show_comparison(res["rows"], title=f"paper replica: {seeds} seed(s), mean ± std over seeds")
         for line in claims(res["rows"]):

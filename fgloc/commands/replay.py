@@ -32,7 +32,6 @@ def register(app: typer.Typer) -> None:
         quiet: Annotated[bool, typer.Option("--quiet", help="no progress bar")] = False,
     ) -> None:
         """Publish a log on DDS with ROS 2's names, types and QoS (a ROS-free `ros2 bag play`)."""
-        import signal
         import sys
         import threading
 
@@ -47,31 +46,21 @@ def register(app: typer.Typer) -> None:
         occ = load_map(map_yaml) if map_yaml is not None else None
         transport = CycloneTransport(domain, interface)
         stop = threading.Event()
-        hits = [0]
-
-        def on_signal(signum, frame) -> None:  # noqa: ANN001
-            hits[0] += 1
-            stop.set()
-            if hits[0] > 1:
-                raise KeyboardInterrupt
-
-        old = {}
-        if threading.current_thread() is threading.main_thread():
-            for s in (signal.SIGINT, signal.SIGTERM):
-                old[s] = signal.signal(s, on_signal)
         progress = None
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
 
             def progress(total: int):  # noqa: ANN202
                 return tqdm(total=total, unit="msg", desc=f"replay {log.name}", file=sys.stderr)
+        from fgloc.io import stop as stopping
+
+        # SIGINT / SIGTERM: the first ends the replay after the message being published, a second exits
         try:
-            stats = replay(log, transport, rate=rate, clock=clock, clock_hz=clock_hz, occ_map=occ,
-                           stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait)
+            with stopping.cooperative(on_stop=stop.set):
+                stats = replay(log, transport, rate=rate, clock=clock, clock_hz=clock_hz, occ_map=occ,
+                               stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait)
         finally:
             transport.close()
-            for s, h in old.items():
-                signal.signal(s, h)
         parts = ", ".join(f"{t} {n}" for t, n in sorted(stats.published.items()))
         print(f"{log}: published {stats.messages} messages of {stats.log_s:.1f} s in {stats.wall_s:.1f} s on "
               f"domain {transport.domain_id} ({parts})" + (f"; {stats.dropped} dropped" if stats.dropped else ""))

@@ -100,6 +100,9 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
     """The effective configuration: the defaults, overlaid with the YAML file ``path``, then ``overrides``."""
     cfg = FglocConfig()
     if path is not None:
+        from fgloc.config import robot_config_path
+
+        path = robot_config_path(path)  # a shipped robot's config by name (``--config husky``)
         cfg = parse_config(read_yaml(path), source=str(path), base=cfg)
     if overrides:
         cfg = parse_config(overrides, source="overrides", base=cfg)

@@ -66,3 +66,31 @@ def test_interpolate_across_wrap():
     assert np.allclose(p[0, :2], [1.0, 0.0])
     assert abs(wrap_angle(p[0, 2] - np.pi)) < 1e-9  # through 180 deg, not through 0
     assert np.allclose(p[1], poses[0]) and np.allclose(p[2], poses[1])
+
+
+def test_scalar_variants_give_the_array_versions_bits():
+    """The scalar variants for hot paths (inverse1, between_values / between1, exp_values) are the
+    array functions' operations in the same order: the same numbers (bit for bit here, where
+    numpy's and libm's cos / sin agree; to 1e-12 at worst)."""
+    from fgloc.geometry import between1, between_values, exp, exp_values, inverse1
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        a = np.array([*rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)])
+        b = np.array([*rng.uniform(-50, 50, 2), rng.uniform(-np.pi, np.pi)])
+        assert np.allclose(inverse1(a), inverse(a), atol=1e-12, rtol=0)
+        assert np.allclose(between_values(a, b), between(a, b), atol=1e-12, rtol=0)
+        assert np.array_equal(between1(a, b), np.array(between_values(a, b)))
+        tw, dt = rng.uniform(-2, 2, 3), float(rng.uniform(0.001, 0.5))
+        assert np.array_equal(np.array(exp_values(tw, dt)), exp(tw * dt))
+
+
+def test_with_rotation_keeps_the_arc_and_replaces_the_turn():
+    """with_rotation: the increment of the same constant twist with another rotation and a scaled
+    speed (a skid steer's wheels report twice the gyro's turn)."""
+    from fgloc.geometry import exp, log, with_rotation
+
+    d = exp(np.array([1.0, 0.1, 0.6]))
+    out = with_rotation(d, 0.3, speed_gain=0.5)
+    assert np.allclose(log(out), [0.5, 0.05, 0.3], atol=1e-12)
+    assert np.allclose(with_rotation(d, 0.6), d, atol=1e-12)

@@ -227,6 +227,8 @@ class ScanPreprocessor:
         n = len(ranges)
         if n == 0:
             return None, "empty scan"
+        if n > 1 and da == 0.0:
+            return None, "angle_increment 0 (the beams have no directions)"
         if not math.isfinite(rmin):
             rmin = 0.0
         if not (math.isfinite(rmax) and rmax > 0):

@@ -29,7 +29,7 @@ from fgloc.mapping.selfcheck import (
     map_accuracy_m,
 )
 from fgloc.mapping.slam import MapperConfig, SlamResult, build_occupancy, run_slam
-from fgloc.mapping.source import ScanRecord, log_messages, pair_scans
+from fgloc.mapping.source import ScanRecord, has_return, log_messages, pair_scans, scan_problem
 from fgloc.maps import OccupancyMap
 from fgloc.types import StaticTransform, Trajectory, Transform3D
 
@@ -76,11 +76,33 @@ class MapOutput:
 def load_records(log: str | Path, start: float | None = None, end: float | None = None,
                  scan_topic: str = "/scan", odom_topic: str = "/odom",
                  static_transforms: list[Transform3D] | None = None,
+                 skipped: dict[str, int] | None = None,
                  ) -> tuple[list[ScanRecord], StaticTransform]:
     """Scans with odometry from ``log``; ``start``/``end`` keep scans in that fraction [0, 1] of the log;
     ``static_transforms``: mounts the log lacks (the laser's wins over the log's); a default topic
-    the log lacks is its only one of that type (:func:`fgloc.io.topics.pick_topics`)."""
+    the log lacks is its only one of that type (:func:`fgloc.io.topics.pick_topics`).
+
+    Scans that cannot be mapped (:func:`fgloc.mapping.source.scan_problem`) are left out and
+    counted by reason into ``skipped``; a log with no usable scan, or none with a return within
+    range (every beam NaN, inf, 0 or beyond range_max: nothing to map), is a one-line
+    :class:`LogError`, never a map."""
     recs, mount = pair_scans(log_messages(log, scan_topic, odom_topic, static_transforms or ()), log)
+    bad: dict[str, int] = {}
+    kept = []
+    for r in recs:
+        why = scan_problem(r.scan)
+        if why is None:
+            kept.append(r)
+        else:
+            bad[why] = bad.get(why, 0) + 1
+    if skipped is not None:
+        skipped.update(bad)
+    if not kept:
+        raise LogError(f"{log}: no usable scan ({', '.join(f'{n} with {why}' for why, n in bad.items())})")
+    if not any(has_return(r.scan) for r in kept):
+        raise LogError(f"{log}: no scan has a return within range ({len(kept)} scans, every range NaN, inf, 0 "
+                       f"or beyond range_max): nothing to map")
+    recs = kept
     if start is not None or end is not None:
         n = len(recs)
         a = int(round((start or 0.0) * n))
@@ -168,7 +190,8 @@ def _build_map(log: str | Path, outs: Outputs, cfg: MapperConfig, start: float |
     outdir = outs.folder
     _fixed_mmap_threshold()
     t0 = time.perf_counter()
-    recs, mount = load_records(log, start, end, scan_topic, odom_topic, static_transforms)
+    skipped: dict[str, int] = {}
+    recs, mount = load_records(log, start, end, scan_topic, odom_topic, static_transforms, skipped)
     t1 = time.perf_counter()
     stop.checkpoint()
     res = run_slam(recs, mount, cfg, _progress(progress_factory, len(recs), "mapping"))
@@ -202,8 +225,12 @@ def _build_map(log: str | Path, outs: Outputs, cfg: MapperConfig, start: float |
                "check_s": t5 - t4, "total_s": t5 - t0}
     stats = {k: int(v) for k, v in res.stats.items()}
     warnings = list(res.warnings)
+    if skipped:
+        n_skip = sum(skipped.values())
+        warnings.insert(0, f"{n_skip} of {n_skip + len(recs)} scans skipped as unusable: "
+                           + "; ".join(f"{n} with {why}" for why, n in skipped.items()))
     outs.path("mapping.yaml").write_text(yaml.safe_dump({
-        "log": str(log), "scans": len(recs), "stats": stats,
+        "log": str(log), "scans": len(recs), "skipped_scans": dict(skipped), "stats": stats,
         "timings_s": {k: round(v, 3) for k, v in timings.items()},
         "warnings": warnings,
         "self_check": check.verdict if check is not None else "not run",

@@ -11,6 +11,7 @@ dead-reckoned from its twist.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -227,6 +228,24 @@ def pair_scans(messages: Iterable[tuple[str, object]],
         pose[inter] = interpolate_pairs(s0[inter], po[i0[inter]], s1[inter], po[i1[inter]], t[inter])
     recs = [ScanRecord(float(t[k]), pose[k], sc, k) for k, sc in enumerate(scans)]
     return recs, mount
+
+
+def scan_problem(scan: LaserScan) -> str | None:
+    """Why a scan cannot be mapped at all, or None: beams without directions (``angle_increment``
+    0 or not finite with more than one beam, ``angle_min`` not finite)."""
+    if not math.isfinite(scan.angle_min):
+        return "angle_min not finite"
+    if len(scan.ranges) > 1 and not (math.isfinite(scan.angle_increment) and scan.angle_increment != 0.0):
+        return "angle_increment 0 or not finite (the beams have no directions)"
+    return None
+
+
+def has_return(scan: LaserScan) -> bool:
+    """Whether any beam of the scan returned within its ``[range_min, range_max]``."""
+    r = np.asarray(scan.ranges, dtype=float)
+    lo = scan.range_min if math.isfinite(scan.range_min) else 0.0
+    hi = scan.range_max if math.isfinite(scan.range_max) else np.inf
+    return bool(np.any(np.isfinite(r) & (r >= lo) & (r < hi) & (r > 0.0)))
 
 
 def interpolate_pairs(t0: FloatArray, p0: FloatArray, t1: FloatArray, p1: FloatArray, t: FloatArray) -> FloatArray:

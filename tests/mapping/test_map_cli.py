@@ -110,15 +110,16 @@ def test_odometry_jump_is_bridged(tmp_path, capsys):
     assert abs(span_est - span_true) < 0.5
 
 
-def test_all_ranges_at_max(tmp_path, capsys):
+def test_all_ranges_at_max_is_a_one_line_error_not_a_map(tmp_path, capsys):
+    """Every beam at max range: no wall anywhere, nothing to map (before: a map of carved free space
+    only, exit 0, its self-check 'passed')."""
     full = synth.ring_drive(laps=1)
     traj = Trajectory(full.stamps[:40], full.poses[:40])
     ranges = [np.full(180, 81.91) for _ in range(40)]
     rc, out, so, se = _map(tmp_path, _log(tmp_path, "blind", traj, ranges=ranges), capsys)
-    assert rc == 0
-    assert "no scan has a return" in se
-    m = OccupancyMap.load(out / "map.yaml")
-    assert m.occupied.sum() == 0 and m.free.sum() > 0
+    lines = se.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and "no scan has a return within range (40 scans" in lines[0]
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("content", ["", "ODOM 0 0 0 0 0 0 1.0 h 1.0\n", "FLASER 3 1 2\n"])

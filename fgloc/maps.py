@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from fgloc.config.schema import load_yaml
 from fgloc.errors import MapError, read_user_text
 from fgloc.gridmath import raycast_grid
 
@@ -296,7 +297,7 @@ def load_map(yaml_path: str | Path) -> OccupancyMap:
     yaml_path = Path(yaml_path)
     text = read_user_text(yaml_path, "map file", MapError)
     try:
-        meta = yaml.safe_load(text)
+        meta = load_yaml(text)
     except yaml.YAMLError as e:
         line = getattr(getattr(e, "problem_mark", None), "line", None)
         where = f" at line {line + 1}" if line is not None else ""

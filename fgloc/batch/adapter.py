@@ -112,10 +112,12 @@ def mapper_options(config_path: Path | None) -> dict[str, Any]:
     as ``fgloc map`` reads them."""
     import yaml
 
+    from fgloc.config.schema import load_yaml
+
     if config_path is None:
         return {}
     try:
-        opts = yaml.safe_load(Path(config_path).read_text()) or {}
+        opts = load_yaml(Path(config_path).read_text()) or {}
     except (OSError, yaml.YAMLError) as e:
         raise ConfigError(f"{config_path}: cannot read mapping config ({e.__class__.__name__})") from None
     if not isinstance(opts, dict):

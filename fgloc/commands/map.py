@@ -84,6 +84,7 @@ def map_cmd(
     (CONSISTENT or NOT CHECKED), 1 the map is written but its self-check flagged it, 2 a usage error."""
     import yaml
 
+    from fgloc.config.schema import load_yaml
     from fgloc.errors import ConfigError
     from fgloc.mapping.build import build_map
     from fgloc.mapping.slam import MapperConfig
@@ -93,7 +94,7 @@ def map_cmd(
     opts: dict = {}
     if config is not None:
         try:
-            opts = yaml.safe_load(config.read_text()) or {}
+            opts = load_yaml(config.read_text()) or {}
         except (OSError, yaml.YAMLError) as e:
             raise ConfigError(f"{config}: cannot read mapping config ({e.__class__.__name__})") from None
         if not isinstance(opts, dict):

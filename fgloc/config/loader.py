@@ -18,7 +18,7 @@ import yaml
 
 from fgloc.backends.ekf import EKFConfig
 from fgloc.backends.smoother import BatchConfig, SmootherConfig
-from fgloc.config.schema import parse, section, to_yaml
+from fgloc.config.schema import load_yaml, parse, section, to_yaml
 from fgloc.errors import ConfigError, read_user_text
 from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.config import HealthConfig, LaserConfig, RobotParams, SerialConfig
@@ -89,10 +89,12 @@ def read_yaml(path: str | Path) -> Any:
     p = Path(path)
     text = read_user_text(p, "config file", ConfigError)
     try:
-        return yaml.safe_load(text)
+        return load_yaml(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or (str(e) if mark is None else "")
+        where += f" ({problem})" if problem else ""
         raise ConfigError(f"{p}: config does not parse as YAML{where}") from None
 
 

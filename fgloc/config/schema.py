@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import textwrap
 import types
 import typing
@@ -41,13 +42,15 @@ __all__ = ["setting", "section", "radians", "optional_radians", "parse", "to_dic
 
 
 def setting(default: Any, doc: str, *, min: float | None = None, max: float | None = None,  # noqa: A002
-            gt: float | None = None, lt: float | None = None, choices: tuple[Any, ...] | None = None) -> Any:
+            gt: float | None = None, lt: float | None = None, choices: tuple[Any, ...] | None = None,
+            finite: bool = True) -> Any:
     """A documented config field: ``x_m: float = setting(0.1, "what it does", min=0)``.
 
     ``min``/``max`` are inclusive bounds, ``gt``/``lt`` exclusive; for tuples they apply to
-    every element.  ``choices`` lists the accepted values (strings are matched exactly).
+    every element.  ``choices`` lists the accepted values (strings are matched exactly).  A number
+    must be finite (NaN never is accepted; ``.inf`` only with ``finite=False``).
     """
-    md = {"doc": doc, "min": min, "max": max, "gt": gt, "lt": lt, "choices": choices}
+    md = {"doc": doc, "min": min, "max": max, "gt": gt, "lt": lt, "choices": choices, "finite": finite}
     if isinstance(default, (list, dict, set)):
         return field(default_factory=lambda: type(default)(default), metadata=md)
     return field(default=default, metadata=md)
@@ -226,6 +229,8 @@ def _check_range(f: dataclasses.Field, value: Any, raw: Any = None) -> str | Non
             continue
         if isinstance(v, float) and math.isnan(v):
             return "must be a number, got NaN"
+        if isinstance(v, float) and math.isinf(v) and md.get("finite", True):
+            return f"must be a finite number, got {_fmt(shown)}"
         if md.get("min") is not None and v < md["min"]:
             return f"must be >= {md['min']}, got {_fmt(shown)}"
         if md.get("max") is not None and v > md["max"]:
@@ -242,10 +247,53 @@ def _check_range(f: dataclasses.Field, value: Any, raw: Any = None) -> str | Non
 
 
 def _fmt(v: Any) -> str:
+    """A value as its YAML (flow style), at most :data:`SHOWN_CHARS` characters."""
     if isinstance(v, tuple):
         v = list(v)
-    s = yaml.safe_dump(v, default_flow_style=True, width=1000).strip()
-    return s[:-4].strip() if s.endswith("...") else s
+    try:
+        s = yaml.safe_dump(v, default_flow_style=True, width=1000).strip()
+    except (RecursionError, yaml.YAMLError):
+        s = f"a {type(v).__name__} nested too deep to show"
+    s = s[:-4].strip() if s.endswith("...") else s
+    return s if len(s) <= SHOWN_CHARS else s[: SHOWN_CHARS - 3] + "..."
+
+
+SHOWN_CHARS = 120  # a wrong value is shown in an error line up to this long
+
+#: YAML 1.2's floats (core schema): ``1e-3``, ``2E+5``, ``.5``, ``1.``, ``.inf``, ``-.Inf``, ``.nan``.
+#: PyYAML reads YAML 1.1, whose floats need a dot (``1e-3`` was the string "1e-3"), while the YAML
+#: of ROS 2 (yaml-cpp), map_server and most editors is 1.2.
+_FLOAT_12 = re.compile(r"""^(?:[-+]?(?:\.[0-9]+|[0-9]+\.[0-9]*                         # 1.5  .5  1.
+                                    |[0-9]+(?:\.[0-9]*)?[eE][-+]?[0-9]+|\.[0-9]+[eE][-+]?[0-9]+)  # 1e-3  .5E2
+                           |[-+]?\.(?:inf|Inf|INF)
+                           |\.(?:nan|NaN|NAN))$""", re.X)
+_FLOAT_TAG = "tag:yaml.org,2002:float"
+
+
+def yaml12_loader(base: Any) -> Any:
+    """``base`` (a PyYAML safe loader) reading floats as YAML 1.2 does (ints and the rest as before)."""
+    loader: Any = type(f"Yaml12{base.__name__}", (base,), {})
+    loader.yaml_implicit_resolvers = {
+        first: [(tag, rx) for tag, rx in rules if tag != _FLOAT_TAG]
+        for first, rules in base.yaml_implicit_resolvers.items()}
+    loader.add_implicit_resolver(_FLOAT_TAG, _FLOAT_12, list("-+0123456789."))
+    return loader
+
+
+_LOADERS: list[Any] = []
+
+
+def load_yaml(text: str, loader: Any = None) -> Any:
+    """A user's YAML (config files, scenarios, maps, manifests, ROS parameter files), safely: floats as
+    YAML 1.2 reads them (``1e-3`` is a number), and a document nested deeper than Python can follow a
+    :class:`yaml.YAMLError` like any other unreadable YAML (never a RecursionError).  Errors are
+    ``yaml.YAMLError``: the caller names its file.  ``loader``: another (a :func:`yaml12_loader`)."""
+    if not _LOADERS:
+        _LOADERS.append(yaml12_loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)))
+    try:
+        return yaml.load(text, Loader=loader or _LOADERS[0])  # noqa: S506 - a safe loader
+    except RecursionError:
+        raise yaml.YAMLError("nested too deeply to read") from None
 
 
 # ------------------------------------------------------------------ parse

@@ -182,9 +182,11 @@ def load_scenario(path_or_dict: str | Path | dict) -> dict:
     if isinstance(path_or_dict, dict):
         check_scenario(path_or_dict, "scenario")
         return _merge(_defaults_for(path_or_dict), path_or_dict)
+    from fgloc.config.schema import load_yaml
+
     path = Path(path_or_dict)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = load_yaml(path.read_text())
     except FileNotFoundError:
         raise ConfigError(f"{path}: scenario file not found") from None
     except yaml.YAMLError:

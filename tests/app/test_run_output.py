@@ -72,9 +72,9 @@ def test_fused_covariance_refreshed_at_a_bounded_rate_poses_unchanged(short_sim)
         fresh = []
         current = loc.current
 
-        def counted(covariance: bool = True, current=current, fresh=fresh):  # type: ignore[no-untyped-def]
+        def counted(covariance: bool = True, current=current, fresh=fresh, **kw):  # type: ignore[no-untyped-def]
             fresh.append(covariance)
-            return current(covariance)
+            return current(covariance, **kw)
 
         loc.current = counted  # type: ignore[method-assign]
         fused = []
@@ -97,7 +97,7 @@ def test_a_progress_sink_does_not_ask_for_the_fused_pose(short_sim):
                     initial_pose=short_sim.ground_truth.poses[0])
     calls = []
     current = loc.current
-    loc.current = lambda covariance=True: calls.append(covariance) or current(covariance)  # type: ignore[method-assign]
+    loc.current = lambda covariance=True, **kw: calls.append(covariance) or current(covariance, **kw)  # type: ignore[method-assign]
     seen = []
     Session(loc, sinks=[CallbackSink(on_message=lambda t, m: seen.append(t))]).run(short_sim.messages)
     assert len(seen) == len(short_sim.messages) and calls == []

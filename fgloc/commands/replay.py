@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
         from fgloc.ros2.transport import CycloneTransport
 
         occ = load_map(map_yaml) if map_yaml is not None else None
-        transport = CycloneTransport(domain, interface)
+        transport = CycloneTransport(domain, interface, node_name="fgloc_replay")
         stop = threading.Event()
         progress = None
         if not quiet and sys.stderr.isatty():

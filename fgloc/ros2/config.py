@@ -21,6 +21,11 @@ class Ros2Config:
     domain_id: int | None = setting(None, "DDS domain; null = $ROS_DOMAIN_ID, else 0", min=0, max=232)
     interface: str | None = setting(None, "network interface (name such as eth0, or its address) DDS uses; "
                                     "null = Cyclone DDS's choice or $CYCLONEDDS_URI")
+    node_name: str = setting("fgloc", "the ROS 2 node fgloc shows as (ros2 node list), on ros_discovery_info")
+    node_namespace: str = setting("/", "the node's namespace")
+    ros_distro: str | None = setting(None, "ROS 2 distribution of the other nodes (humble or older: 24-byte GIDs "
+                                     "and no type hashes; iron and later: 16-byte GIDs, RIHS01 type hashes); "
+                                     "null = $ROS_DISTRO, else jazzy")
     scan_topic: str = setting("/scan", "sensor_msgs/LaserScan input (nav2 AMCL's scan_topic)")
     map_topic: str = setting("/map", "nav_msgs/OccupancyGrid input, transient local (nav2 AMCL's map_topic); "
                              "--map FILE instead of it")

@@ -97,7 +97,9 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
             session.add_sink(viewer[0])
         return live
 
-    transport = CycloneTransport(cfg.ros2.domain_id, cfg.ros2.interface)
+    c = cfg.ros2
+    transport = CycloneTransport(c.domain_id, c.interface, node_name=c.node_name, namespace=c.node_namespace,
+                                 distro=c.ros_distro)
     try:
         node = Ros2Live(cfg, transport, make_session, make_live, occ_map=occ, event=event)
     except BaseException:

@@ -76,8 +76,9 @@ def compatible(offered: Profile, requested: Profile) -> str | None:
     return None
 
 
-def to_dds(profile: Profile, max_blocking_s: float = MAX_BLOCKING_S) -> Any:
-    """Cyclone DDS QoS of ``profile`` (see the module docstring)."""
+def to_dds(profile: Profile, max_blocking_s: float = MAX_BLOCKING_S, user_data: bytes | None = None) -> Any:
+    """Cyclone DDS QoS of ``profile`` (see the module docstring); ``user_data``: the endpoint's
+    USER_DATA (rmw_cyclonedds_cpp puts the type hash there, :mod:`fgloc.ros2.typehash`)."""
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.util import duration
 
@@ -97,4 +98,6 @@ def to_dds(profile: Profile, max_blocking_s: float = MAX_BLOCKING_S) -> Any:
                                               max_samples=-1, max_instances=-1, max_samples_per_instance=-1)]
     else:
         policies.append(Policy.Durability.Volatile)
+    if user_data:
+        policies.append(Policy.Userdata(bytes(user_data)))
     return Qos(*policies)

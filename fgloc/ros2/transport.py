@@ -32,7 +32,7 @@ from xml.sax.saxutils import quoteattr
 
 from fgloc.errors import ConfigError
 from fgloc.ros2.names import dds_topic, dds_type, ros_topic, ros_type
-from fgloc.ros2.qos import Profile, to_dds
+from fgloc.ros2.qos import RELIABLE, TRANSIENT_LOCAL, Profile, to_dds
 
 #: DDS QoS policy ids (DDS 2.2.3; Cyclone's dds_qos_policy_id_t) as an incompatible-QoS status names them
 POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE", 5: "LATENCY_BUDGET",
@@ -66,6 +66,7 @@ class EndpointHealth:
     incompatible_qos: int = 0
     incompatible_policy: str = ""
     sample_lost: int = 0
+    other_generation: int = 0  # ros_discovery_info: peers of another ROS 2 generation (GID size)
     other_type: dict[str, int] = field(default_factory=dict)
     last_arrival: float = float("nan")
     last_error: str = ""
@@ -90,15 +91,29 @@ class EndpointHealth:
             out.append(f"{self.sample_lost} samples lost")
         if self.callback_errors:
             out.append(f"{self.callback_errors} handler errors")
+        if self.other_generation:
+            out.append(f"{self.other_generation} peer(s) of another ROS 2 generation (Humble and older write "
+                       "24-byte GIDs, Iron and later 16): set ros2.ros_distro or $ROS_DISTRO to theirs")
         return out
 
     def as_dict(self) -> dict[str, Any]:
         d = {k: getattr(self, k) for k in ("topic", "type", "direction", "messages", "undecodable", "dropped",
                                           "matched", "lost", "returned", "incompatible_qos", "incompatible_policy",
-                                          "sample_lost", "callback_errors")}
+                                          "sample_lost", "callback_errors", "other_generation")}
         d["qos"] = f"{self.qos.reliability}/{self.qos.durability}/{self.qos.depth}"
         d["other_type"] = {ros_type(k): v for k, v in self.other_type.items()}
         return d
+
+
+def _user_data_of(sample: Any) -> bytes:
+    """USER_DATA of a DDS built-in topic sample (b"" when none)."""
+    from cyclonedds.qos import Policy
+
+    q = getattr(sample, "qos", None)
+    try:
+        return bytes(q[Policy.Userdata].data) if q is not None and Policy.Userdata in q else b""
+    except Exception:  # noqa: BLE001
+        return b""
 
 
 class Publisher(Protocol):
@@ -198,7 +213,8 @@ class CycloneTransport:
     """A ROS 2 peer on DDS domain ``domain_id`` (see the module docstring).  ``interface``: the
     network interface (name or address) DDS uses; None: Cyclone's default / ``$CYCLONEDDS_URI``."""
 
-    def __init__(self, domain_id: int | None = None, interface: str | None = None) -> None:
+    def __init__(self, domain_id: int | None = None, interface: str | None = None, node_name: str = "fgloc",
+                 namespace: str = "/", distro: str | None = None) -> None:
         try:
             from cyclonedds.core import Listener, Qos  # noqa: F401
             from cyclonedds.domain import Domain, DomainParticipant
@@ -225,6 +241,63 @@ class CycloneTransport:
         self._builtin: list[tuple[Any, str]] = []
         self._remote: dict[Any, tuple[str, str, str]] = {}  # endpoint key -> (kind, DDS topic, DDS type)
         self.receive_errors = 0
+        self._graph_setup(node_name, namespace, distro)
+
+    # ---------------------------------------------------------------- the ROS 2 graph
+    def _graph_setup(self, node_name: str, namespace: str, distro: str | None) -> None:
+        """This participant as one ROS 2 node on ``ros_discovery_info`` (:mod:`fgloc.ros2.graph`)."""
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        from fgloc.ros2 import graph
+        from fgloc.ros2.names import resolve
+
+        self.distro = graph.distro_name(distro)
+        self.type_hashes = not graph.before_iron(self.distro)
+        self._gid_size = graph.gid_size(self.distro)
+        ns = resolve(namespace) if namespace.strip("/") else "/"
+        if not node_name or "/" in node_name:
+            raise ConfigError(f"node name {node_name!r}: expected a name without '/'")
+        self.gid = graph.gid_of(self._dp.guid)
+        self.node = graph.NodeEntities(node_name, ns)
+        prof = Profile(RELIABLE, TRANSIENT_LOCAL, 1, "rmw_cyclonedds_cpp ros_discovery_info")
+        self.graph_health = EndpointHealth(graph.TOPIC, graph.TYPE, "pub", prof)
+        topic = Topic(self._dp, graph.TOPIC, graph.idl_class(self._gid_size))
+        self._graph_topic = topic
+        self._graph_writer = DataWriter(self._dp, topic, qos=to_dds(prof, user_data=self._user_data(graph.TYPE)))
+        self._graph_lock = threading.Lock()
+        self._other_generation: set[Any] = set()
+        self._publish_graph()
+
+    def _user_data(self, type_name: str) -> bytes | None:
+        """``typehash=RIHS01_...;`` as rmw_cyclonedds_cpp writes it (ROS 2 Iron and later)."""
+        if not self.type_hashes:
+            return None
+        from fgloc.ros2.typehash import user_data
+
+        return user_data(type_name)
+
+    def _publish_graph(self, nodes: bool = True) -> None:
+        """Write this participant's ``ParticipantEntitiesInfo`` (again: keep last 1)."""
+        from cyclonedds._clayer import ddspy_write
+
+        from fgloc.ros2 import graph
+
+        with self._graph_lock:
+            info = graph.ParticipantEntities(self.gid, [self.node] if nodes else [])
+            ret = ddspy_write(self._graph_writer._ref, graph.encode(info, self._gid_size))
+        if ret < 0:
+            self.graph_health.dropped += 1
+        else:
+            self.graph_health.messages += 1
+
+    def _add_to_node(self, entity: Any, kind: str) -> None:
+        from fgloc.ros2 import graph
+
+        gid = graph.gid_of(entity.guid)
+        with self._graph_lock:
+            (self.node.readers if kind == "sub" else self.node.writers).append(gid)
+        self._publish_graph()
 
     # ---------------------------------------------------------------- entities
     def _topic(self, topic: str, type_name: str) -> tuple[str, Any]:
@@ -251,10 +324,11 @@ class CycloneTransport:
         h = EndpointHealth(topic, type_name, "pub", qos)
         listener = Listener(on_publication_matched=lambda _w, s: self._matched(h, s),
                             on_offered_incompatible_qos=lambda _w, s: self._incompatible(h, s))
-        w = DataWriter(self._dp, t, qos=to_dds(qos), listener=listener)
+        w = DataWriter(self._dp, t, qos=to_dds(qos, user_data=self._user_data(type_name)), listener=listener)
         with self._lock:
             self._pubs.append((w, h))
             self._endpoints.append(h)
+        self._add_to_node(w, "pub")
         return _Writer(w, h)
 
     def subscribe(self, topic: str, type_name: str, qos: Profile, callback: Callback) -> EndpointHealth:
@@ -270,10 +344,11 @@ class CycloneTransport:
         listener = Listener(on_subscription_matched=lambda _r, s: self._matched(h, s),
                             on_requested_incompatible_qos=lambda _r, s: self._incompatible(h, s),
                             on_sample_lost=lost)
-        r = DataReader(self._dp, t, qos=to_dds(qos), listener=listener)
+        r = DataReader(self._dp, t, qos=to_dds(qos, user_data=self._user_data(type_name)), listener=listener)
         with self._lock:
             self._subs.append((r, h, callback))
             self._endpoints.append(h)
+        self._add_to_node(r, "sub")
         return h
 
     @staticmethod
@@ -363,7 +438,10 @@ class CycloneTransport:
                 self._discovery()
 
     def _discovery(self) -> None:
-        """Remote endpoints from DDS discovery: those on our topics with another type."""
+        """Remote endpoints from DDS discovery: those on our topics with another type; the peers whose
+        ``ros_discovery_info`` is of another ROS 2 generation (Humble and older: 24-byte GIDs)."""
+        from fgloc.ros2 import graph
+
         changed = False
         for reader, kind in self._builtin:
             try:
@@ -380,9 +458,17 @@ class CycloneTransport:
                 alive = info is None or info.instance_state == InstanceState.Alive
                 if alive and getattr(s, "topic_name", None):
                     self._remote[key] = (kind, s.topic_name, s.type_name)
+                    if kind == "pub" and s.topic_name == graph.TOPIC and s.participant_key != self._dp.guid:
+                        # rmw writes the type hash from Iron on: a peer without it sends 24-byte GIDs
+                        if (b"typehash=" in _user_data_of(s)) != self.type_hashes:
+                            self._other_generation.add(key)
+                        else:
+                            self._other_generation.discard(key)
                 else:
                     self._remote.pop(key, None)
+                    self._other_generation.discard(key)
                 changed = True
+        self.graph_health.other_generation = len(self._other_generation)
         if not changed:
             return
         with self._lock:
@@ -399,7 +485,7 @@ class CycloneTransport:
     # ---------------------------------------------------------------- state
     def health(self) -> list[EndpointHealth]:
         with self._lock:
-            return list(self._endpoints)
+            return list(self._endpoints) + [self.graph_health]
 
     def remote_endpoints(self, topic: str, kind: str = "sub") -> int:
         """Endpoints of other participants on ROS topic ``topic`` that discovery has shown (``kind``
@@ -421,6 +507,11 @@ class CycloneTransport:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+        if self._dp is not None:
+            try:
+                self._publish_graph(nodes=False)  # the node leaves the graph (as rmw's node destruction)
+            except Exception:  # noqa: BLE001
+                pass
         with self._lock:
             self._subs.clear()
             self._pubs.clear()

@@ -188,3 +188,97 @@ class Peer:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
+
+
+# ----------------------------------------------------------------------------- the ROS 2 graph
+# rmw_dds_common/msg/{Gid,NodeEntitiesInfo,ParticipantEntitiesInfo}.msg (ROS 2 Iron and later)
+@dataclass
+class Gid(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    data: t.array[t.uint8, 16]  # char[16]: uint8 in IDL (rosidl_adapter)
+
+
+@dataclass
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: t.bounded_str[256]
+    node_name: t.bounded_str[256]
+    reader_gid_seq: t.sequence[Gid]
+    writer_gid_seq: t.sequence[Gid]
+
+
+@dataclass
+class ParticipantEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+    gid: Gid
+    node_entities_info_seq: t.sequence[NodeEntitiesInfo]
+
+
+class GraphPeer:
+    """What rmw_dds_common's GraphCache gathers: ``ros_discovery_info`` (reliable, transient local,
+    keep all, as rmw_cyclonedds_cpp's discovery reader) and DDS's built-in participant, publication
+    and subscription topics.  Everything is kept by GUID, the newest sample of each."""
+
+    def __init__(self, domain: int, interface: str = "lo") -> None:
+        from cyclonedds.builtin import (
+            BuiltinDataReader,
+            BuiltinTopicDcpsParticipant,
+            BuiltinTopicDcpsPublication,
+            BuiltinTopicDcpsSubscription,
+        )
+
+        xml = (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="{interface}"/>'
+               '</Interfaces></General></Domain></CycloneDDS>')
+        try:
+            self.domain = Domain(domain, xml)
+        except Exception:  # noqa: BLE001 - this process configured the domain already (on loopback)
+            self.domain = None
+        self.dp = DomainParticipant(domain)
+        self.info: dict[bytes, ParticipantEntitiesInfo] = {}  # participant GID -> its newest sample
+        # GID -> alive, properties, user data
+        self.participants: dict[bytes, tuple[bool, dict[str, str], bytes]] = {}
+        # GID -> kind, participant GID, topic, type, user data
+        self.endpoints: dict[bytes, tuple[str, bytes, str, str, bytes]] = {}
+        self._lock = threading.Lock()
+        self._info = DataReader(self.dp, Topic(self.dp, "ros_discovery_info", ParticipantEntitiesInfo),
+                                Qos(Policy.Reliability.Reliable(0), Policy.Durability.TransientLocal,
+                                    Policy.History.KeepAll, Policy.DataRepresentation(use_cdrv0_representation=True)))
+        self._builtin = [(BuiltinDataReader(self.dp, BuiltinTopicDcpsParticipant), "participant"),
+                         (BuiltinDataReader(self.dp, BuiltinTopicDcpsPublication), "writer"),
+                         (BuiltinDataReader(self.dp, BuiltinTopicDcpsSubscription), "reader")]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _user_data(q) -> bytes:
+        return bytes(q[Policy.Userdata].data) if q is not None and Policy.Userdata in q else b""
+
+    def _loop(self) -> None:
+        from cyclonedds.core import InstanceState
+
+        while not self._stop.is_set():
+            with self._lock:
+                for s in self._info.take(100):
+                    if isinstance(s, ParticipantEntitiesInfo):
+                        self.info[bytes(s.gid.data)] = s
+                for reader, kind in self._builtin:
+                    for s in reader.take(100):
+                        alive = s.sample_info.instance_state == InstanceState.Alive
+                        key = s.key.bytes
+                        if kind == "participant":
+                            props = {p.key: p.value for p in (s.qos or []) if type(p).__name__ == "Property"}
+                            old = self.participants.get(key)
+                            if old is not None and not alive:
+                                self.participants[key] = (False, old[1], old[2])
+                            elif alive:
+                                self.participants[key] = (True, props, self._user_data(s.qos))
+                        elif alive:
+                            self.endpoints[key] = (kind, s.participant_key.bytes, s.topic_name, s.type_name,
+                                                   self._user_data(s.qos))
+            time.sleep(0.02)
+
+    def snapshot(self):
+        with self._lock:
+            return dict(self.info), dict(self.participants), dict(self.endpoints)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +29,10 @@ if TYPE_CHECKING:
     from fgloc.config import FglocConfig
     from fgloc.live.sick import SickClient
     from fgloc.localization import Session
+
+EVENTS_KEPT = 1_000  # a live session's event lines kept (the newest)
+LIVE_TAIL_S = 600.0  # without -o, the live trajectory's last this many seconds are kept
+
 
 def parse_host_port(s: str) -> tuple[str, int]:
     host, sep, port = s.rpartition(":")
@@ -74,6 +79,7 @@ class LiveSession:
         event_sink: Any = None,
         serial_port: Any = None,
         record_force: bool = False,
+        trajectory_window_s: float | None = None,
     ) -> None:
         # here, not at the top: every command's config (fgloc.config's live sections) imports this module
         from fgloc.config import parse_config
@@ -91,7 +97,7 @@ class LiveSession:
         self.record_path = Path(record) if record else None
         self.record_error: str | None = None  # the recording's disk error, one line
         self.hurried = False  # a second signal: close without the final smoothing
-        self.events: list[str] = []
+        self.events: deque[str] = deque(maxlen=EVENTS_KEPT)  # the newest (a day of flapping sensors is bounded)
         self._event_sink = event_sink
         if record:
             self._open_recording(Path(record), record_force)
@@ -106,7 +112,7 @@ class LiveSession:
         self.runner = LiveRunner(
             session, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
             event_sink=ev, laser_mount=self.laser_mount,
-            silence_s=cfg.health.silence_s,
+            silence_s=cfg.health.silence_s, trajectory_window_s=trajectory_window_s,
         )
         ts, cs, gs = sc.twist_std, sc.compass_std_deg, sc.gyro_std_dps
         conv = FrameConverter(
@@ -224,7 +230,7 @@ class LiveSession:
             health=self.runner.health_states(),
             latency_p50_ms=p50,
             latency_p99_ms=p99,
-            n_poses=len(self.runner.live_stamps),
+            n_poses=self.runner.trajectory.total,
             events=list(self.events),
         )
 
@@ -285,8 +291,10 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
     init = None if req.initial_pose is None else np.array(req.initial_pose, dtype=float)
     mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
     session = build_session(occ, mount, backend=req.backend, frontend=req.frontend, initial_pose=init, config=cfg)
+    # the live trajectory is kept whole for -o only; else its last minutes (memory bounded over days)
     return LiveSession(session, req.serial, req.laser, config=cfg, record=req.record, publish=req.publish or None,
-                       status_sink=status_sink, event_sink=event_sink, record_force=req.force)
+                       status_sink=status_sink, event_sink=event_sink, record_force=req.force,
+                       trajectory_window_s=None if req.out is not None else LIVE_TAIL_S)
 
 
 def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,

@@ -30,6 +30,8 @@ from fgloc.localization.session import BaseSink, RecorderSink, Session, UdpSink
 from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
 
 SENSORS = ("odom", "imu", "scan")
+LATENCIES_KEPT = 30_000  # scans whose latency the summary's percentiles are over (20 min at 25 Hz)
+EVENTS_KEPT = 1_000      # health events kept (the newest)
 #: what happened to the session (a sensor silent or back, a connection lost, a device clock's step),
 #: recorded as ``std_msgs/msg/String`` beside the inputs, at the host time it was reported
 EVENTS_TOPIC = "/fgloc/events"
@@ -53,6 +55,49 @@ class SensorHealth:
     def rate_hz(self, now: float, window: float = 2.0) -> float:
         n = sum(1 for t in self.arrivals if now - t <= window)
         return n / window
+
+
+class TrajectoryBuffer:
+    """Poses with increasing stamps in growing numpy arrays (32 bytes a pose, not a list of arrays at
+    ~190); with ``window_s``, only the last ``window_s`` seconds of them (a live session that
+    writes no trajectory keeps a bounded tail)."""
+
+    def __init__(self, window_s: float | None = None, capacity: int = 1024) -> None:
+        self.window_s = window_s
+        self._t = np.empty(capacity)
+        self._p = np.empty((capacity, 3))
+        self._a = self._n = 0  # the kept poses are [_a, _n)
+        self.total = 0  # every pose appended
+
+    def __len__(self) -> int:
+        return self._n - self._a
+
+    def append(self, t: float, pose: Any) -> None:
+        if self._n > self._a and not t > self._t[self._n - 1]:
+            return
+        if self._n == len(self._t):
+            self._make_room()
+        self._t[self._n] = t
+        self._p[self._n] = pose
+        self._n += 1
+        self.total += 1
+
+    def _make_room(self) -> None:
+        if self.window_s is not None:  # forget what left the window
+            self._a = int(np.searchsorted(self._t[self._a : self._n], self._t[self._n - 1] - self.window_s)) + self._a
+        keep = self._n - self._a
+        size = max(len(self._t), 2 * keep, 1024) if self.window_s is None or keep > len(self._t) // 2 else len(self._t)
+        t, p = np.empty(size), np.empty((size, 3))
+        t[:keep], p[:keep] = self._t[self._a : self._n], self._p[self._a : self._n]
+        self._t, self._p, self._a, self._n = t, p, 0, keep
+
+    @property
+    def stamps(self) -> np.ndarray:
+        return self._t[self._a : self._n]
+
+    @property
+    def poses(self) -> np.ndarray:
+        return self._p[self._a : self._n]
 
 
 @dataclass
@@ -79,9 +124,7 @@ class _LiveTrack(BaseSink):
         r.last_latency_ms = (time.time() - r.scan_arrival) * 1e3
         r.latencies_ms.append(r.last_latency_ms)
         r.last_fix = fused
-        if not r.live_stamps or fused.stamp > r.live_stamps[-1]:
-            r.live_stamps.append(float(fused.stamp))
-            r.live_poses.append(np.asarray(fused.pose, dtype=float).copy())
+        r.trajectory.append(float(fused.stamp), fused.pose)
 
 
 class LiveRunner:
@@ -105,6 +148,7 @@ class LiveRunner:
         sensors: tuple[str, ...] = SENSORS,
         reorder_s: float = 0.15,
         sinks: list[Any] | None = None,
+        trajectory_window_s: float | None = None,
     ) -> None:
         self.loc = session.loc
         self.recorder = recorder
@@ -119,10 +163,9 @@ class LiveRunner:
         self.status_period_s = status_period_s
         self.q: queue.Queue[tuple[str, Any, float]] = queue.Queue()
         self.health = {s: SensorHealth(s) for s in sensors}
-        self.events: list[HealthEvent] = []
-        self.latencies_ms: list[float] = []
-        self.live_stamps: list[float] = []
-        self.live_poses: list[np.ndarray] = []
+        self.events: deque[HealthEvent] = deque(maxlen=EVENTS_KEPT)
+        self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)  # the percentiles' window
+        self.trajectory = TrajectoryBuffer(trajectory_window_s)  # the live trajectory (-o)
         self.counters: dict[str, int] = {"scans_fused": 0, "scans_skipped_backlog": 0, "fixes": 0,
                                          "record_errors": 0, "localizer_errors": 0}
         self.sources: dict[str, Callable[[], dict[str, Any]]] = {}  # name -> counters getter
@@ -261,10 +304,17 @@ class LiveRunner:
             self._loc_error("scan", e)
         self._sync_record_errors()
 
+    @property
+    def live_stamps(self) -> np.ndarray:
+        """The live trajectory's stamps (a view: copy to keep)."""
+        return self.trajectory.stamps
+
+    @property
+    def live_poses(self) -> np.ndarray:
+        return self.trajectory.poses
+
     def live_trajectory(self) -> Trajectory:
-        if not self.live_stamps:
-            return Trajectory(np.zeros(0), np.zeros((0, 3)))
-        return Trajectory(np.array(self.live_stamps), np.array(self.live_poses))
+        return Trajectory(self.live_stamps.copy(), self.live_poses.copy())
 
     def health_states(self) -> dict[str, str]:
         return {k: h.state for k, h in self.health.items()}
@@ -282,10 +332,10 @@ class LiveRunner:
         return out
 
     def latency_percentiles(self, last: int | None = None) -> tuple[float, float]:
-        lat = self.latencies_ms[-last:] if last else self.latencies_ms
-        if not lat:
+        if not self.latencies_ms:
             return float("nan"), float("nan")
-        a = np.asarray(lat)
+        a = np.fromiter(self.latencies_ms, dtype=float, count=len(self.latencies_ms))
+        a = a[-last:] if last else a
         return float(np.percentile(a, 50)), float(np.percentile(a, 99))
 
     def status_line(self) -> str:

@@ -1,0 +1,54 @@
+"""A live session's run-long records are bounded: the live trajectory without -o keeps a tail,
+with -o every pose (compactly); latencies and events keep the newest."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fgloc.live import runner as runner_mod
+from fgloc.live.runner import LiveRunner, TrajectoryBuffer
+from fgloc.localization import build_session
+from fgloc.types import StaticTransform
+
+
+def _poses(n: int, rate_hz: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) / rate_hz
+    return t, np.column_stack([t, -t, np.sin(t)])
+
+
+def test_whole_trajectory_keeps_every_pose_in_order():
+    buf = TrajectoryBuffer()
+    t, p = _poses(5000)
+    for ti, pi in zip(t, p, strict=True):
+        buf.append(ti, pi)
+    buf.append(t[10], p[10])  # not after the last: not kept
+    assert len(buf) == buf.total == 5000
+    assert np.array_equal(buf.stamps, t) and np.array_equal(buf.poses, p)
+    assert len(buf._t) < 2 * 5000  # grows by doubling, not per pose
+
+
+def test_windowed_trajectory_keeps_a_bounded_tail():
+    buf = TrajectoryBuffer(window_s=10.0)
+    t, p = _poses(25 * 3600)  # an hour at 25 Hz
+    for ti, pi in zip(t, p, strict=True):
+        buf.append(ti, pi)
+    assert buf.total == len(t)
+    # at least the last 10 s, at most twice the window's poses, stored in a fixed allocation
+    assert buf.stamps[0] <= t[-1] - 10.0 and buf.stamps[-1] == t[-1]
+    assert 250 <= len(buf) <= 2 * 251 and len(buf._t) <= 1024
+    k = len(buf)
+    assert np.array_equal(buf.stamps, t[-k:]) and np.array_equal(buf.poses, p[-k:])
+
+
+def test_runner_latencies_and_events_are_bounded(monkeypatch):
+    monkeypatch.setattr(runner_mod, "LATENCIES_KEPT", 100)
+    monkeypatch.setattr(runner_mod, "EVENTS_KEPT", 10)
+    session = build_session(None, StaticTransform("base_link", "laser", np.zeros(3)), backend="ekf")
+    r = LiveRunner(session, silence_s=0.1)
+    for i in range(1000):
+        r.latencies_ms.append(float(i))
+        r._mark("odom", 10.0 * i)
+        r.check_health(10.0 * i + 1.0)  # silent, then back at the next message
+    assert len(r.latencies_ms) == 100 and len(r.events) == 10
+    assert r.latency_percentiles()[0] == np.percentile(np.arange(900, 1000), 50)
+    assert r.events[-1].kind == "silent" and r.events[0].t > 10.0 * 990

@@ -39,11 +39,11 @@ import numpy as np
 
 from fgloc.backends import make_backend
 from fgloc.backends.base import Backend, Capability, FloatArray
-from fgloc.geometry import compose1
+from fgloc.geometry import between1, compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
 from fgloc.localization.coverage import unmapped_share
-from fgloc.localization.odometry import OdometryTracker, between1
+from fgloc.localization.odometry import OdometryTracker
 from fgloc.localization.relocalization import Relocalizer, close
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory

@@ -15,7 +15,7 @@ from collections import deque
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.geometry import compose1, exp_coefficients
+from fgloc.geometry import between1, between_values, compose1, exp_values
 from fgloc.geometry import log as se2_log
 from fgloc.localization.config import PipelineConfig
 from fgloc.localization.sources import UNUSED_VAR
@@ -38,36 +38,9 @@ LONG_RATE_WINDOW_S = 5.0
 VELOCITY_SPAN_MAX_S = 0.25
 
 
-def between1(a: FloatArray, b: FloatArray) -> FloatArray:
-    """:func:`fgloc.geometry.between` (``a^-1 (+) b``) of two single poses in scalar maths, the same
-    operations in the same order (the same bits where numpy's and libm's cos / sin agree): the
-    array version costs ~15 us per call, and this runs for every odometry message and scan."""
-    return np.array(_between1(a, b))
-
-
-def _between1(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
-    """:func:`between1` as a tuple of floats (for the per-message checks: no array made)."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    c, s = math.cos(a2), math.sin(a2)
-    i0 = -c * a0 - s * a1
-    i1 = s * a0 - c * a1
-    i2 = (-a2 + math.pi) % (2.0 * math.pi) - math.pi
-    c, s = math.cos(i2), math.sin(i2)
-    return i0 + c * b0 - s * b1, i1 + s * b0 + c * b1, (i2 + b2 + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def _exp_of(tw: FloatArray, dt: float) -> tuple[float, float, float]:
-    """:func:`fgloc.geometry.exp` of ``tw * dt`` (a twist held for ``dt``) in scalar maths: the same
-    operations on the same values (numpy's element-wise product is the float product), as a tuple."""
-    vx, vy, w = float(tw[0]) * dt, float(tw[1]) * dt, float(tw[2]) * dt
-    c, s = exp_coefficients(w)
-    return c * vx - s * vy, s * vx + c * vy, w
-
-
 def _carried(pose: FloatArray, tw: FloatArray, dt: float) -> FloatArray:
     """``compose1(pose, exp(tw * dt))``: ``pose`` carried on with the twist ``tw`` for ``dt``."""
-    return compose1(pose, _exp_of(tw, dt))  # type: ignore[arg-type]
+    return compose1(pose, exp_values(tw, dt))  # type: ignore[arg-type]
 
 
 def _zero_unused(tw: FloatArray, unused: tuple[bool, bool, bool]) -> FloatArray:
@@ -295,8 +268,8 @@ class OdometryTracker:
             unused = self._unused(cov)
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
-        delta = _between1(prev[1], pose)
-        if mode != "always" and self._agrees(t, delta, _exp_of(tw, dt), unused):
+        delta = between_values(prev[1], pose)
+        if mode != "always" and self._agrees(t, delta, exp_values(tw, dt), unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             return tw, cov

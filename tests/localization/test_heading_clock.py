@@ -16,11 +16,10 @@ import numpy as np
 import pytest
 
 from fgloc.config import load_config
-from fgloc.geometry import compose, wrap_angle
+from fgloc.geometry import between1, compose, wrap_angle
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization import Localizer, Session
 from fgloc.localization.clock import OdometryClock
-from fgloc.localization.odometry import between1
 from fgloc.localization.stats import RunStats
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, Odometry, StaticTransform, Trajectory

@@ -7,11 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
+from fgloc.geometry import between1, wrap_scalar
 from fgloc.geometry import exp as se2_exp
 from fgloc.geometry import log as se2_log
-from fgloc.geometry import wrap_scalar
 from fgloc.localization import Localizer
-from fgloc.localization.odometry import between1
 from fgloc.maps import OccupancyMap
 from fgloc.types import Odometry, PoseFix, StaticTransform
 

@@ -52,7 +52,7 @@ from collections import deque
 
 import numpy as np
 
-from fgloc.backends.smoother import MAX_REF_PERIOD_S
+from fgloc.backends.health.latency import MAX_REF_PERIOD_S
 from fgloc.geometry import wrap_angle, wrap_scalar
 from fgloc.io.source import REGULAR, stamp_spacing
 

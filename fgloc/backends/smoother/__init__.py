@@ -60,11 +60,10 @@ The code, one module per responsibility, each a layer of the one class built on 
 ==================  ==================================================================
 """
 
-from fgloc.backends.health.latency import MAX_REF_PERIOD_S
 from fgloc.backends.smoother.batch import BatchSmoother
 from fgloc.backends.smoother.config import BatchConfig, SmootherConfig
 from fgloc.backends.smoother.covariance import carried_covariance, prior_covariance
 from fgloc.backends.smoother.sliding_window import SlidingWindowSmoother
 
-__all__ = ["BatchConfig", "BatchSmoother", "MAX_REF_PERIOD_S", "SlidingWindowSmoother", "SmootherConfig",
-           "carried_covariance", "prior_covariance"]
+__all__ = ["BatchConfig", "BatchSmoother", "SlidingWindowSmoother", "SmootherConfig", "carried_covariance",
+           "prior_covariance"]

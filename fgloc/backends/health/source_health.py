@@ -8,7 +8,7 @@ from typing import Any
 
 @dataclass
 class SourceHealth:
-    """What one input source did during a run (accepted / gated / skipped and the estimates)."""
+    """What one input source did during a run: accepted, gated, skipped (with the reasons)."""
 
     name: str
     kind: str
@@ -16,7 +16,6 @@ class SourceHealth:
     gated: int = 0
     skipped: int = 0
     skipped_reasons: dict[str, int] = field(default_factory=dict)
-    estimates: dict[str, float] = field(default_factory=dict)
 
     def skip(self, reason: str) -> None:
         self.skipped += 1
@@ -27,5 +26,4 @@ class SourceHealth:
                                "skipped": self.skipped}
         if self.skipped_reasons:
             out["skipped_reasons"] = dict(self.skipped_reasons)
-        out.update({k: float(v) for k, v in self.estimates.items()})
         return out

@@ -49,7 +49,6 @@ class SourceReport:
     gated: int = 0
     skipped: int = 0
     skipped_reasons: dict[str, int] = field(default_factory=dict)
-    estimates: dict[str, float] = field(default_factory=dict)  # a handler's own estimates, by name
     topic: str | None = None
     use: list[str] = field(default_factory=list)
     mount: str | None = None  # an IMU's mount when it was not the log's from the start
@@ -83,7 +82,6 @@ class SourceReport:
                              "skipped": self.skipped}
         if self.skipped_reasons:
             d["skipped_reasons"] = dict(self.skipped_reasons)
-        d.update(self.estimates)
         for k in ("topic", "mount", "vy_max_mps", "speed_scale", "yaw_rate_scale", "gyro_bias_radps", "latency_s",
                   "latency_estimate_s", "latency_sigma_s", "latency_not_applied"):
             v = getattr(self, k)
@@ -114,8 +112,8 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> Source
     s, st = h.spec, h.state
     be = loc.backend
     hh = st.health
-    r = SourceReport(hh.kind, hh.accepted, hh.gated, hh.skipped, dict(hh.skipped_reasons),
-                     {k: float(v) for k, v in hh.estimates.items()}, topic=s.topic, use=list(s.use))
+    r = SourceReport(hh.kind, hh.accepted, hh.gated, hh.skipped, dict(hh.skipped_reasons), topic=s.topic,
+                     use=list(s.use))
     if st.extra.get("no_transform"):
         r.mount = "no transform: identity"
     elif st.extra.get("mount_late"):

@@ -107,6 +107,9 @@ class Backend(ABC):
     name: str = "backend"
     #: what this back-end does beyond the common inputs (see :class:`Capability`)
     capabilities: ClassVar[frozenset[Capability]] = frozenset()
+    #: the section of :class:`fgloc.config.FglocConfig` holding its settings (the latency's among
+    #: them); empty: none
+    config_section: ClassVar[str] = ""
     #: counters of the run (keyframes, fixes used / rejected, late inputs, ...), for the run summary
     stats: dict[str, Any]
 

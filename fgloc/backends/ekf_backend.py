@@ -78,6 +78,7 @@ GAP_MIN_S = 0.2
 
 class EKFBackend(Backend):
     name = "ekf"
+    config_section = "ekf"
     #: the odometry twist measures the filter's velocity state (its pose integrates that state)
     capabilities = frozenset({Capability.MEASURES_VELOCITY, Capability.GYRO, Capability.VELOCITY,
                               Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,

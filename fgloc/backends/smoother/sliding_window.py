@@ -25,6 +25,7 @@ class SlidingWindowSmoother(KeyframeGraph):
     """The online fixed-lag estimator (see the package's docstring for its graph)."""
 
     name = "smoother"
+    config_section = "smoother"
 
     capabilities = frozenset({Capability.ODOMETRY_CLOCK, Capability.GYRO, Capability.VELOCITY,
                               Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,

@@ -157,8 +157,8 @@ def scan_report(loc: Any) -> SourceReport | None:
         r.latency_estimate_s = round(fit[0], 4)
         r.latency_sigma_s = round(fit[1], 4)
         if abs(used - r.latency_estimate_s) > 5e-5:  # measured, but another value is in use
-            section = {"ekf": "ekf"}.get(str(getattr(loc, "backend_name", "")), "smoother")
-            cfg = getattr(getattr(loc, "config", None), section, None)  # the run's config section, not the back-end
+            section = be.config_section
+            cfg = getattr(loc.config, section, None) if section else None  # the run's section, not the back-end
             r.latency_not_applied = (
                 f"{section}.latency_s {cfg.latency_s:g} s is configured"
                 if cfg is not None and cfg.latency_s is not None else

@@ -15,7 +15,6 @@ from fgloc.app import mounts
 from fgloc.app.run import RunRequest, RunResult
 from fgloc.app.run import run_log as run_request
 from fgloc.app.units import pose_arg, pose_value
-from fgloc.errors import ConfigError
 
 __all__ = ["register"]
 
@@ -158,9 +157,10 @@ def register(app: typer.Typer) -> None:
 
         pause_gc()  # until run_log's set-up is done (imports, map, localizer): fgloc.app.startup
         try:
-            if backend not in ("ekf", "smoother", "batch"):
-                raise ConfigError(f"unknown back-end '{backend}' (choose ekf, smoother or batch)")
-            req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=backend, frontend=frontend,
+            from fgloc.backends import check_backend
+
+            req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=check_backend(backend),
+                             frontend=frontend,
                              initial_pose=pose_arg(initial_pose),
                              config=config,
                              scan_topic=scan_topic, odom_topic=odom_topic, imu_topic=imu_topic,

@@ -278,8 +278,9 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
 
     if not req.serial and not req.laser:
         raise ConfigError("fgloc live: give --serial URL and/or --laser HOST:PORT")
-    if req.backend not in ("smoother", "ekf"):
-        raise ConfigError(f"--backend {req.backend}: expected smoother or ekf")
+    from fgloc.backends import Capability, check_backend
+
+    backend = check_backend(req.backend, Capability.LIVE)
     from fgloc.config import load_config
 
     cfg = load_config(req.config)
@@ -290,7 +291,7 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
     occ = load_map(req.map_yaml) if req.map_yaml is not None else None
     init = None if req.initial_pose is None else np.array(req.initial_pose, dtype=float)
     mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
-    session = build_session(occ, mount, backend=req.backend, frontend=req.frontend, initial_pose=init, config=cfg)
+    session = build_session(occ, mount, backend=backend, frontend=req.frontend, initial_pose=init, config=cfg)
     # the live trajectory is kept whole for -o only; else its last minutes (memory bounded over days)
     return LiveSession(session, req.serial, req.laser, config=cfg, record=req.record, publish=req.publish or None,
                        status_sink=status_sink, event_sink=event_sink, record_force=req.force,

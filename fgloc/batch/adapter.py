@@ -170,10 +170,9 @@ def _ground_truth(log: Path, scan_topic: str, odom_topic: str):
 def paper_variants(no_amcl: bool = False, only: list[str] | None = None) -> list[Variant]:
     """The columns of ``fgloc bench paper`` (without EKF+AMCL when asked or when AMCL is missing),
     optionally only those whose label is in ``only``."""
-    from fgloc.bench import PAPER_VARIANTS
+    from fgloc.bench import paper_variants as columns
 
-    have_amcl = amcl_available()
-    out = [tuple(v) for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl")]
+    out = list(columns(no_amcl))
     if only:
         labels = [v[0] for v in out]
         bad = [o for o in only if o not in labels]

@@ -9,7 +9,7 @@
 
 from fgloc.bench.common import frontend_available, localize_sim, localize_variants
 from fgloc.bench.faults import FAULTS, bench_faults, kidnap_recovery
-from fgloc.bench.paper import PAPER_VARIANTS, bench_paper, claims
+from fgloc.bench.paper import PAPER_VARIANTS, bench_paper, claims, paper_variants
 
 __all__ = ["FAULTS", "PAPER_VARIANTS", "bench_faults", "bench_paper", "claims", "frontend_available",
-           "kidnap_recovery", "localize_sim", "localize_variants"]
+           "kidnap_recovery", "localize_sim", "localize_variants", "paper_variants"]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from fgloc.bench.common import localize_variants
+from fgloc.bench.common import frontend_available, localize_variants
 
 PAPER_VARIANTS = (
     # (column label, backend, frontend, which trajectory)
@@ -18,6 +18,12 @@ PAPER_VARIANTS = (
     ("smoother fixed-lag", "smoother", "native", "final"),
     ("batch", "batch", "native", "final"),
 )
+
+
+def paper_variants(no_amcl: bool = False) -> tuple[tuple[str, str, str, str], ...]:
+    """The columns of :data:`PAPER_VARIANTS` whose front-end imports here (AMCL's dependencies may
+    be missing), without the AMCL front-end's (``--no-amcl``) when ``no_amcl``."""
+    return tuple(v for v in PAPER_VARIANTS if frontend_available(v[2]) and not (no_amcl and v[2] == "amcl"))
 
 
 def _bench_one_seed(args: tuple[int, list[tuple[str, str, str, str]], Any, bool]) -> dict[str, Any]:

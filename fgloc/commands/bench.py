@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
         """The paper experiment over N seeds: the paper's numbers beside EKF, smoother and batch."""
         from rich.console import Console
 
-        from fgloc.bench import PAPER_VARIANTS, bench_paper, claims, frontend_available
+        from fgloc.bench import bench_paper, claims, frontend_available, paper_variants
         from fgloc.eval.paper import show_comparison, styled_claim
 
         if seeds < 1:
@@ -42,7 +42,7 @@ def register(app: typer.Typer) -> None:
         have_amcl = frontend_available("amcl")
         if not have_amcl and not no_amcl:
             con.print("[yellow]AMCL front-end not available: the EKF+AMCL column is left out[/yellow]")
-        variants = tuple(v for v in PAPER_VARIANTS if not ((no_amcl or not have_amcl) and v[2] == "amcl"))
+        variants = paper_variants(no_amcl)
         import sys
 
         res = bench_paper(seeds, outdir, variants, config, jobs, quiet=not sys.stderr.isatty(), force=force)

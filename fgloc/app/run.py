@@ -499,13 +499,13 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
     }
     write_yaml(outdir / "config.yaml", effective)
     sim_s = float(final.duration) if len(final) else float(inputs.summary.get("duration") or 0.0)
+    stats = RunStats.of(loc.stats)
     result = RunResult(
         mode=mode, frame=mode, backend=req.backend, frontend=loc.frontend_name, poses=len(final),
-        online_poses=len(online), fixes=len(fixes), stats=RunStats.of(loc.stats), wall_s=loop.wall_s, log_s=sim_s,
+        online_poses=len(online), fixes=len(fixes), stats=stats, wall_s=loop.wall_s, log_s=sim_s,
         truncated=reader.truncated, outdir=outdir,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
-        log=inputs.log, lost_s=float(loc.stats.get("lost_s", 0.0)),
-        ended_lost=bool(loc.stats.get("ended_lost", False)),
+        log=inputs.log, lost_s=float(stats.lost_s), ended_lost=bool(stats.ended_lost),
         damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
     )
     result.warnings = scale_warnings(result.stats, mount_assumed=(

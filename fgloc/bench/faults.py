@@ -19,6 +19,7 @@ def bench_faults(backend: str = "smoother", frontend: str = "native", seeds: int
     """Fault scenarios vs the fault-free paper run: position RMSE increase, kidnap recovery time."""
     from fgloc.config import FglocConfig, load_config, scenario_path
     from fgloc.eval.metrics import evaluate
+    from fgloc.localization.stats import RunStats
     from fgloc.sim import run_scenario, simulate_paper
 
     cfg = config if isinstance(config, FglocConfig) else load_config(config)
@@ -38,7 +39,7 @@ def bench_faults(backend: str = "smoother", frontend: str = "native", seeds: int
             m = evaluate(final, sim.ground_truth)
             row: dict[str, Any] = {"seed": seed, "scenario": name, "rmse0": rmse0, "rmse": m.position_rmse_m,
                                    "delta": m.position_rmse_m - rmse0,
-                                   "relocalizations": loc.stats["relocalizations"]}
+                                   "relocalizations": RunStats.of(loc.stats).relocalizations}
             if name == "kidnap":
                 row.update(kidnap_recovery(sim, online))
             out.append(row)

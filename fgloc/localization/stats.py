@@ -1,4 +1,5 @@
-"""What a run counted, typed: :class:`RunStats` (``fgloc run``'s result, its summary, the batch).
+"""What a run counted, typed: :class:`RunStats` (``fgloc run``'s result, its summary, the batch),
+and :class:`LiveCounts` (the counters the view follows while the run goes on).
 
 The localizer counts into ``Localizer.stats`` as it goes (a counter per event, the sources'
 reports and the motion model at the end); :meth:`RunStats.of` is that bag after the run as a
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 from fgloc.localization.sources.report import SourceReport
 
@@ -55,3 +56,25 @@ class RunStats:
         out["sources"] = {k: r.to_dict() for k, r in self.sources.items()}
         out.update(self.counters)
         return out
+
+
+class LiveCounts(NamedTuple):
+    """The localizer's counters while it runs (``Localizer.stats`` now), for the view: read after
+    every scan, so a tuple of the few it shows (:meth:`of` is a handful of lookups)."""
+
+    scans: int = 0
+    fixes: int = 0
+    no_fix: int = 0
+    rejected: int = 0
+    global_searches: int = 0
+    skipped: int = 0
+    relocalizations: int = 0
+    odometry_from_poses: int = 0  # odometry twists the tracker replaced by pose increments
+    skipped_reasons: Mapping[str, int] = {}  # the live bag's own (not a copy)
+
+    @classmethod
+    def of(cls, stats: Mapping[str, Any]) -> LiveCounts:
+        """The counters of a ``Localizer.stats`` bag as they are now."""
+        g = stats.get  # the counters are ints already: read as they are (after every scan)
+        return cls(g("scans", 0), g("fixes", 0), g("no_fix", 0), g("rejected", 0), g("global_searches", 0),
+                   g("skipped", 0), g("relocalizations", 0), g("odometry_from_poses", 0), g("skipped_reasons") or {})

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +41,9 @@ from fgloc.geometry import exp as se2_exp
 from fgloc.io.yamlio import yaml_ready
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 from fgloc.view.channels import BASE_FRAME, MAP_FRAME, ODOM_FRAME
+
+if TYPE_CHECKING:
+    from fgloc.localization.stats import LiveCounts
 
 FloatArray = NDArray[np.float64]
 
@@ -138,7 +141,10 @@ class ViewFeed:
 
     def __init__(self, loc: Any, sinks: Iterable[ViewSink], topics: Any = None, health_period_s: float = 1.0,
                  max_particles: int = 1000) -> None:
+        from fgloc.localization.stats import LiveCounts
+
         self.loc = loc
+        self._counts = LiveCounts.of  # the localizer's counters now (imported with the localizer)
         self.sinks: list[ViewSink] = list(sinks)
         self.scan_topic = getattr(topics, "scan", "/scan")
         self.odom_topic = getattr(topics, "odom", "/odom")
@@ -153,7 +159,7 @@ class ViewFeed:
         self.counts: dict[str, int] = {"scan": 0, "odom": 0, "imu": 0}
         self.status_counts: dict[str, int] = {}
         self._rate_mark: tuple[float, dict[str, int]] | None = None
-        self._pending: tuple[LaserScan, tuple[int, ...]] | None = None
+        self._pending: tuple[LaserScan, tuple[LiveCounts, int]] | None = None
         self._odom_pose: FloatArray | None = None
         self._odom_t: float | None = None
         self._twist = np.zeros(3)
@@ -262,36 +268,34 @@ class ViewFeed:
         return out
 
     # ------------------------------------------------------------------ scans
-    def _snapshot(self) -> tuple[int, ...]:
-        st = self.loc.stats
-        return (st.get("scans", 0), st.get("fixes", 0), st.get("no_fix", 0), st.get("rejected", 0),
-                st.get("global_searches", 0), st.get("skipped", 0), st.get("relocalizations", 0),
-                len(getattr(self.loc, "fixes", ())))
+    def _snapshot(self) -> tuple[LiveCounts, int]:
+        """The localizer's counters and how many fixes it has made, now."""
+        return self._counts(self.loc.stats), len(self.loc.fixes)
 
-    def _status(self, before: tuple[int, ...], what: PoseFix | str | None) -> tuple[str, str, PoseFix | None]:
-        scans0, fixes0, no_fix0, rejected0, global0, _, reloc0, n_fixes0 = before
-        scans, fixes, no_fix, rejected, global_, _, reloc, n_fixes = self._snapshot()
+    def _status(self, before: tuple[LiveCounts, int], what: PoseFix | str | None) -> tuple[str, str, PoseFix | None]:
+        c0, n_fixes0 = before
+        c, n_fixes = self._snapshot()
         fix = what if isinstance(what, PoseFix) else None
-        told = what if isinstance(what, str) else str(getattr(self.loc, "last_reason", "") or "")
-        if scans == scans0:
+        told = what if isinstance(what, str) else str(self.loc.last_reason or "")
+        if c.scans == c0.scans:
             return SKIPPED, told or "scan skipped (bad or repeated stamp)", None
         if self.odom_mode:
             return ODOM_ONLY, told or "no map", None
         if fix is None and n_fixes > n_fixes0:
             fix = self.loc.fixes[-1]
-        if fix is not None and fixes > fixes0:
-            if rejected > rejected0:
+        if fix is not None and c.fixes > c0.fixes:
+            if c.rejected > c0.rejected:
                 return REJECTED, told or "fix rejected by the back-end", fix
-            if global_ > global0:
+            if c.global_searches > c0.global_searches:
                 return ACCEPTED, "global localization", fix
-            if reloc > reloc0:
+            if c.relocalizations > c0.relocalizations:
                 return ACCEPTED, "relocalization", fix
             return ACCEPTED, "", fix
-        if no_fix > no_fix0:
+        if c.no_fix > c0.no_fix:
             return NO_FIX, told or "no fix", None
-        if global_ > global0 or told.startswith("global") or told.startswith("initial"):
+        if c.global_searches > c0.global_searches or told.startswith("global") or told.startswith("initial"):
             return SEARCHING, told or "global localization: no candidate yet", None
-        if reloc > reloc0:
+        if c.relocalizations > c0.relocalizations:
             return SEARCHING, told or "lost: global localization restarted", None
         return PREDICTED, told or "not matched (frontend_every): odometry prediction", None
 
@@ -355,9 +359,9 @@ class ViewFeed:
 
     def health(self, stamp: float) -> dict[str, Any]:
         """Per-source health at log time ``stamp`` (JSON-ready)."""
-        st = self.loc.stats
+        st = self._counts(self.loc.stats)
         be = self.loc.backend
-        skipped = st.get("skipped_reasons", {}) or {}
+        skipped = st.skipped_reasons
 
         def skips(prefix: str) -> int:
             return int(sum(v for k, v in skipped.items() if str(k).startswith(prefix)))
@@ -366,10 +370,10 @@ class ViewFeed:
         rates = self.rates_hz(stamp)
         sources = {
             "scan": {"count": self.counts["scan"], "rate_hz": rates["scan"], "skipped": skips("scan"),
-                     "fixes": int(st.get("fixes", 0)), "no_fix": int(st.get("no_fix", 0)),
-                     "rejected": int(st.get("rejected", 0)), "status": dict(self.status_counts)},
+                     "fixes": st.fixes, "no_fix": st.no_fix,
+                     "rejected": st.rejected, "status": dict(self.status_counts)},
             "odom": {"count": self.counts["odom"], "rate_hz": rates["odom"],
-                     "skipped": skips("odometry"), "from_poses": int(st.get("odometry_from_poses", 0))},
+                     "skipped": skips("odometry"), "from_poses": st.odometry_from_poses},
             "imu": {"count": self.counts["imu"], "rate_hz": rates["imu"], "skipped": skips("compass"),
                     "compass_offset_deg": None if offset is None else math.degrees(float(offset))},
         }
@@ -377,9 +381,9 @@ class ViewFeed:
             "stamp": stamp,
             "frame_id": self.frame,
             "sources": sources,
-            "localizer": {"relocalizations": st.get("relocalizations", 0),
-                          "global_searches": st.get("global_searches", 0),
-                          "no_fix_reasons": dict(getattr(self.loc, "no_fix_reasons", {}) or {}),
+            "localizer": {"relocalizations": st.relocalizations,
+                          "global_searches": st.global_searches,
+                          "no_fix_reasons": dict(self.loc.no_fix_reasons),
                           "skipped_reasons": dict(skipped)},
             "backend": {"name": self.loc.backend_name, **dict(be.stats)},
             "frontend": self.loc.frontend_name,

@@ -404,6 +404,24 @@ class Localizer:
         self._lost = True
         self.stats["reinitializations"] = self.stats.get("reinitializations", 0) + 1
 
+    def replace_map(self, occ_map: OccupancyMap, frontend: Any = None) -> None:
+        """Localize on ``occ_map`` from the next scan on (a map server's new map): its front-end
+        (``frontend``, built by the caller off the fusion thread, else here) and the relocalizer on it.
+        The pose and the back-end go on; :meth:`reinitialize` starts again from a pose on the new map
+        (a particle filter front-end starts there too, or spreads its particles while lost)."""
+        if self.odom_mode:
+            raise ValueError("an odom-frame session has no map to replace")
+        if frontend is None:
+            from fgloc.frontends import make_frontend
+
+            frontend = make_frontend(self.frontend_name, occ_map, self.laser_mount, self.config)
+        self.map = occ_map
+        self.frontend = frontend
+        self.reloc = Relocalizer(self.pcfg, occ_map, self.laser_mount, frontend, self.backend, self.stats)
+        if self._lost and frontend.supports_global:
+            frontend.reset(None)
+        self.stats["map_changes"] = self.stats.get("map_changes", 0) + 1
+
     def _initial_cov(self) -> FloatArray:
         sxy = self.pcfg.initial_sigma_xy_m
         syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)

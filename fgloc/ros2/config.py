@@ -29,6 +29,8 @@ class Ros2Config:
     scan_topic: str = setting("/scan", "sensor_msgs/LaserScan input (nav2 AMCL's scan_topic)")
     map_topic: str = setting("/map", "nav_msgs/OccupancyGrid input, transient local (nav2 AMCL's map_topic); "
                              "--map FILE instead of it")
+    first_map_only: bool = setting(False, "localize on the first map received only (nav2 AMCL's first_map_only); "
+                                   "else each new map from the next scan on, the pose re-initialized where it was")
     initial_pose_topic: str = setting("/initialpose", "geometry_msgs/PoseWithCovarianceStamped that "
                                       "re-initializes the pose (RViz's 2D Pose Estimate)")
     pose_topic: str = setting("/amcl_pose", "the fused pose, PoseWithCovarianceStamped, transient local")

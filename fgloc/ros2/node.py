@@ -20,7 +20,9 @@ health, recording, UDP publisher and Foxglove view).  It publishes what nav2's A
 Start-up: messages are kept (``startup_buffer_s``) until the map and the laser mount are known
 (the mount: the config's ``sources.static_transforms``, else the tf chain from the robot to the
 scan's frame, else after ``mount_wait_s`` the robot centre, said); then the localizer is built and
-the kept messages are fused first, in their order, so nothing before the start is lost.
+the kept messages are fused first, in their order, so nothing before the start is lost.  A new map
+after the start (a map server republishing another one) is localized on from the next scan once its
+front-end is built, the pose re-initialized where it was (``first_map_only``: as nav2's AMCL).
 
 Never blocks, never dies: DDS hands the bytes to a receive thread that decodes them (an
 undecodable message is counted on its topic) and queues them; the fusion loop is the caller's; a
@@ -239,7 +241,10 @@ class Ros2Live:
         self.mirrored = False
         self.startup = StartupState()
         self._lock = threading.Lock()
-        self.maps_ignored = 0
+        self.maps_ignored = 0  # maps after the first with first_map_only
+        self.map_changes = 0  # new maps localized on
+        self.map_errors = 0  # new maps no front-end could be built on
+        self._pending_map: tuple[Any, Any] | None = None  # a new map and its front-end, for the next scan
         self.flushing = False  # fusing the messages kept from before the start
         self.initial_pose: PoseFix | None = None
         self._pending_pose: PoseFix | None = None  # an /initialpose to apply at the next scan
@@ -317,13 +322,64 @@ class Ros2Live:
             self.startup.dropped += 1
 
     def _map(self, m: Any) -> None:
-        if self.occ_map is None:
+        """A map on ``map_topic`` (DDS thread).  Before the start the newest is kept; after it a new map
+        gets its front-end built on a thread of its own (seconds on a large map: the scans go on) and is
+        localized on from the next scan after that (:meth:`_apply_map`).  The same map again (a map
+        server republishing, a second one) changes nothing; with ``first_map_only`` only the first counts."""
+        c = self.cfg.ros2
+        with self._lock:
+            cur = self.occ_map
+            if cur is not None and c.first_map_only:
+                if not (m.data.shape == cur.data.shape and m.equals(cur)):
+                    self.maps_ignored += 1
+                return
+            if cur is not None and m.data.shape == cur.data.shape and m.equals(cur):
+                return
             self.occ_map = m
-            self.event(f"map from {self.cfg.ros2.map_topic}: {m.width} x {m.height} cells of {m.resolution:g} m")
-        elif not (m.data.shape == self.occ_map.data.shape and m.equals(self.occ_map)):
-            self.maps_ignored += 1
-            if self.maps_ignored == 1:
-                self.event(f"a new map on {self.cfg.ros2.map_topic}: not used (restart fgloc to localize on it)")
+            started = self.loc is not None
+        if cur is None:
+            self.event(f"map from {c.map_topic}: {m.width} x {m.height} cells of {m.resolution:g} m")
+        elif started:
+            self._build_frontend(m)
+
+    def _build_frontend(self, m: Any) -> None:
+        loc = self.loc
+
+        def build() -> None:
+            from fgloc.frontends import make_frontend
+
+            try:
+                fe = make_frontend(loc.frontend_name, m, loc.laser_mount, self.cfg)
+            except Exception as e:  # noqa: BLE001 - a map no front-end takes is counted, said, not used
+                self.map_errors += 1
+                self.event(f"a new map on {self.cfg.ros2.map_topic} not used: {type(e).__name__}: {e}")
+                return
+            with self._lock:
+                if self.occ_map is m:  # not replaced meanwhile by a newer one
+                    self._pending_map = (m, fe)
+
+        threading.Thread(target=build, name="fgloc-map", daemon=True).start()
+
+    def _apply_map(self, t_scan: float) -> None:
+        """Localize on the pending new map from the scan at ``t_scan`` on: a pose being tracked is
+        re-initialized where the back-end has it (matched on the new map from there, as after
+        /initialpose: a map moved against the old one moves the pose with it); lost, the global search
+        goes on on the new map."""
+        with self._lock:
+            pending, self._pending_map = self._pending_map, None
+        if pending is None:
+            return
+        m, fe = pending
+        loc = self.loc
+        loc.replace_map(m, fe)
+        self.map_changes += 1
+        how = "lost: searching it globally"
+        if loc.backend.initialized and not loc.lost:
+            pose = np.asarray(loc.guess(t_scan), dtype=float)
+            loc.reinitialize(pose)
+            how = f"re-initialized at {pose[0]:.2f} {pose[1]:.2f} {math.degrees(pose[2]):.1f} deg"
+        self.event(f"a new map on {self.cfg.ros2.map_topic} ({m.width} x {m.height} cells of {m.resolution:g} m): "
+                   f"localizing on it from the scan at {t_scan:.3f}, {how}")
 
     # ---------------------------------------------------------------- start-up (caller's thread)
     def _mount(self) -> tuple[StaticTransform, bool] | None:
@@ -362,7 +418,9 @@ class Ros2Live:
             return False
         mount, mirrored = found
         mount = StaticTransform(frame_name(mount.parent), frame_name(mount.child), mount.pose, mount.z)
-        loc_session = self.make_session(self.occ_map, mount)
+        with self._lock:
+            occ = self.occ_map
+        loc_session = self.make_session(occ, mount)
         loc = loc_session.loc
         if self.initial_pose is not None and loc.initial_pose is None:
             loc.initial_pose = np.asarray(self.initial_pose.pose, dtype=float)
@@ -379,7 +437,9 @@ class Ros2Live:
         handlers["initialpose"] = self._on_initial_pose
         fuse_scan = handlers["scan"]
 
-        def scan_then(msg: object) -> None:  # a pending /initialpose is applied at the next scan
+        def scan_then(msg: object) -> None:  # a new map, then a pending /initialpose, at the next scan
+            if self._pending_map is not None and isinstance(msg, LaserScan):
+                self._apply_map(float(msg.stamp))
             if self._pending_pose is not None and isinstance(msg, LaserScan):
                 self._apply_initial_pose(float(msg.stamp))
             fuse_scan(msg)
@@ -396,7 +456,11 @@ class Ros2Live:
         for kind in list(handlers):
             if kind != "scan":  # the scans' sink publishes after each scan
                 handlers[kind] = then_publish(handlers[kind])
-        self.loc, self.session = loc, session
+        with self._lock:
+            self.loc, self.session = loc, session
+            newer = self.occ_map if self.occ_map is not occ else None
+        if newer is not None:  # a map that came while the localizer was built on the one before
+            self._build_frontend(newer)
         self._warm_up(loc, mount)
         with self._lock:
             self.mirrored = mirrored
@@ -505,7 +569,9 @@ class Ros2Live:
         for h in self.transport.health():
             out += [f"{h.topic} {p}" for p in h.problems()]
         if self.maps_ignored:
-            out.append(f"{self.cfg.ros2.map_topic} {self.maps_ignored} new map(s) not used")
+            out.append(f"{self.cfg.ros2.map_topic} {self.maps_ignored} new map(s) not used (first_map_only)")
+        if self.map_errors:
+            out.append(f"{self.cfg.ros2.map_topic} {self.map_errors} new map(s) unusable")
         if self.outputs is not None and self.outputs.no_odom:
             out.append(f"map->odom not published {self.outputs.no_odom}x (no odom->base pose at the scan's stamp)")
         return out
@@ -584,7 +650,8 @@ class Ros2Live:
         """The DDS part of ``fgloc live``'s JSON summary."""
         out: dict[str, Any] = {"domain_id": self.transport.domain_id,
                                "endpoints": [h.as_dict() for h in self.transport.health()],
-                               "problems": self.problems(), "startup_dropped": self.startup.dropped}
+                               "problems": self.problems(), "startup_dropped": self.startup.dropped,
+                               "map_changes": self.map_changes}
         if self.outputs is not None:
             p50, p99 = self.outputs.latency_percentiles()
             out.update(published=self.outputs.published, scan_to_tf_ms={"p50": p50, "p99": p99})

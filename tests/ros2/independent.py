@@ -111,6 +111,22 @@ class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnosti
     status: t.sequence[DiagnosticStatus]
 
 
+@dataclass
+class MapMetaData(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
+    map_load_time: Time
+    resolution: t.float32
+    width: t.uint32
+    height: t.uint32
+    origin: Pose
+
+
+@dataclass
+class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
+    header: Header
+    info: MapMetaData
+    data: t.sequence[t.int8]
+
+
 def yaw(q: Quaternion) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
@@ -127,7 +143,8 @@ def _qos(reliable: bool, transient_local: bool, depth: int) -> Qos:
 
 class Peer:
     """Reads /amcl_pose (as nav2 consumers do: reliable, transient local), /tf and /fgloc/status;
-    writes /initialpose as RViz does (reliable, volatile)."""
+    writes /initialpose as RViz does (reliable, volatile) and /map as map_server does (reliable,
+    transient local, keep last 1)."""
 
     def __init__(self, domain: int, interface: str = "lo") -> None:
         xml = (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="{interface}"/>'
@@ -147,6 +164,7 @@ class Peer:
         self._status = DataReader(self.dp, Topic(self.dp, "rt/fgloc/status", DiagnosticArray), _qos(True, False, 100))
         self._init = DataWriter(self.dp, Topic(self.dp, "rt/initialpose", PoseWithCovarianceStamped),
                                 _qos(True, False, 1), listener=Listener())
+        self._map: DataWriter | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
@@ -181,6 +199,16 @@ class Peer:
             Header(Time(int(math.floor(t)), int(round((t - math.floor(t)) * 1e9)) % 1_000_000_000), "map"),
             PoseWithCovariance(Pose(Point(x, y, 0.0), Quaternion(0.0, 0.0, math.sin(th / 2), math.cos(th / 2))), cov))
         self._init.write(msg)
+
+    def publish_map(self, cells, width: int, height: int, resolution: float, x: float, y: float) -> None:
+        """An OccupancyGrid: ``cells`` row-major from the origin (100 occupied, 0 free, -1 unknown)."""
+        if self._map is None:
+            self._map = DataWriter(self.dp, Topic(self.dp, "rt/map", OccupancyGrid), _qos(True, True, 1))
+        now = time.time()
+        st = Time(int(now), int((now % 1.0) * 1e9))
+        info = MapMetaData(st, resolution, width, height,
+                           Pose(Point(x, y, 0.0), Quaternion(0.0, 0.0, 0.0, 1.0)))
+        self._map.write(OccupancyGrid(Header(st, "map"), info, [int(v) for v in cells]))
 
     def initial_pose_matched(self) -> bool:
         return len(self._init.get_matched_subscriptions()) > 0

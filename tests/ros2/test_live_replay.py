@@ -64,8 +64,8 @@ def _stop(p: subprocess.Popen) -> tuple[int, dict, str]:
     return p.returncode, (json.loads(out) if out.strip().startswith("{") else {}), err
 
 
-def _settle(peer, n_expected: int, timeout: float = 60.0) -> None:
-    """Wait until the peer has every pose or they stop coming."""
+def _settle(peer, n_expected: int, timeout: float = 60.0, idle_s: float = 5.0) -> None:
+    """Wait until the peer has every pose or none came for ``idle_s``."""
     last, t_last = -1, time.monotonic()
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
@@ -74,7 +74,7 @@ def _settle(peer, n_expected: int, timeout: float = 60.0) -> None:
             return
         if n != last:
             last, t_last = n, time.monotonic()
-        elif time.monotonic() - t_last > 5.0:
+        elif time.monotonic() - t_last > idle_s:
             return
         time.sleep(0.1)
 
@@ -171,11 +171,15 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     assert r.summary()["topics"]["/scan"]["count"] == scan_ep["messages"]
 
 
-def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: Path, dds_domain: int) -> None:
+def test_initialpose_relocalizes_after_a_kidnap_a_new_map_is_used_and_faults_are_named(
+        tmp_path: Path, dds_domain: int) -> None:
     """The robot is carried 4 m ahead at t = 4 s; fgloc's own relocalization is switched off, so only an
-    operator's /initialpose (RViz's 2D Pose Estimate) can bring it back.  Meanwhile a publisher of another
-    type on /imu and undecodable bytes on /scan are counted and named, and localization goes on."""
+    operator's /initialpose (RViz's 2D Pose Estimate) can bring it back.  The map comes on /map from two
+    publishers (the replay and the peer: the same map twice is one map); later the peer publishes a new
+    map, the same hall 10 cm further in y: from then on the poses are on it.  Meanwhile a publisher of
+    another type on /imu and undecodable bytes on /scan are counted and named, and localization goes on."""
     from fgloc.io.tum import read_tum
+    from fgloc.maps import load_map
     from fgloc.ros2 import qos
     from fgloc.ros2.transport import CycloneTransport
 
@@ -185,9 +189,16 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
     cfg = tmp_path / "noreloc.yaml"
     cfg.write_text("pipeline: {relocalize_after: 100000, lost_after_s: 1000.0}\n")
     gt = read_tum(d / "ground_truth.tum")
+    occ = load_map(d / "map.yaml")
+    shift_y = 0.1  # the new map: two cells further in y
+
+    def publish_map(dy: float) -> None:
+        peer.publish_map(occ.data.ravel(), occ.width, occ.height, occ.resolution, float(occ.origin[0]),
+                         float(occ.origin[1]) + dy)
+
     peer = Peer(dds_domain)
-    live = _live(dds_domain, tmp_path, "--map", str(d / "map.yaml"), "--initial-pose", "2.5", "3.0", "0.0",
-                 "--config", str(cfg))
+    publish_map(0.0)
+    live = _live(dds_domain, tmp_path, "--initial-pose", "2.5", "3.0", "0.0", "--config", str(cfg))
     rogue = CycloneTransport(dds_domain, LOOPBACK)
     try:
         rogue.start()
@@ -209,10 +220,12 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
             return any(v.key == "undecodable" and v.value != "0" for a in peer.status[-1:] for st in a.status
                        if st.name == "fgloc: sub /scan" for v in st.values)
 
-        assert wait_for(counted, 30.0, step=0.3)
+        # the replay starts (it waits for fgloc's subscriptions) while the bad scans are sent
         proc = subprocess.Popen(_fgloc("replay", str(d / "log.mcap"), "--ros2", "--domain", str(dds_domain),
-                                       "--interface", LOOPBACK, "--wait", "60", "--quiet", "--rate", "0.7"),
+                                       "--interface", LOOPBACK, "--wait", "60", "--quiet", "--map",
+                                       str(d / "map.yaml")),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert wait_for(counted, 30.0, step=0.3)
         # after the kidnap: wait for poses past t = 6 s, then tell fgloc where the robot is
         assert wait_for(lambda: any(p[0] > 6.0 for p in peer.poses), 120.0), "no pose after the kidnap"
         assert wait_for(peer.initial_pose_matched, 10.0)
@@ -220,8 +233,11 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
         t_ip = t_now + 0.3
         x, y, th = (float(np.interp(t_ip, gt.stamps, gt.poses[:, k])) for k in range(3))
         peer.initial_pose(t_ip, x, y, th)
+        assert wait_for(lambda: any(p[0] > t_ip + 1.5 for p in peer.poses), 60.0)
+        t_map = max(p[0] for p in peer.poses)
+        publish_map(shift_y)
         proc.communicate(timeout=300)
-        _settle(peer, 10**9, timeout=30.0)
+        _settle(peer, 10**9, timeout=30.0, idle_s=1.5)
     finally:
         code, report, err = _stop(live)
         peer.close()
@@ -236,13 +252,24 @@ def test_initialpose_relocalizes_after_a_kidnap_and_faults_are_named(tmp_path: P
     before = [error(r) for r in poses if 5.0 < r[0] < t_now]
     assert before and min(before) > 1.0, "the kidnap was not felt (relocalization not off?)"
     # the pose is re-initialized at the first scan fgloc fuses after /initialpose came (later than t_ip when
-    # the live loop lags the replay): from there on every pose is right
-    after = [error(r) for r in sorted(poses.tolist()) if r[0] > t_ip]
+    # the live loop lags the replay): from there on every pose is right, until the new map
+    after = [error(r) for r in sorted(poses.tolist()) if t_ip < r[0] <= t_map]
     good = next((k for k, e in enumerate(after) if e < 0.05), None)
     assert good is not None, f"never relocalized; {err[-1500:]}"
     assert max(after[good:]) < 0.05 and min(after[:good], default=math.inf) > 1.0
     assert len(after) - good >= 10
-    assert report["counters"]["localizer"]["reinitializations"] == 1
+    # the new map is used from a scan after it came on: the poses move with it (the robot is shift_y
+    # further in y on it), every one from there on
+    rows = sorted(poses.tolist())
+    on_new = [math.hypot(r[1] - float(np.interp(r[0], gt.stamps, gt.poses[:, 0])),
+                         r[2] - shift_y - float(np.interp(r[0], gt.stamps, gt.poses[:, 1]))) for r in rows]
+    k_new = next((k for k, r in enumerate(rows) if r[0] > t_map and on_new[k] < 0.02), None)
+    assert k_new is not None, f"the new map was not used; {err[-1500:]}"
+    assert len(rows) - k_new >= 20 and max(on_new[k_new:]) < 0.02, max(on_new[k_new:])
+    assert all(error(np.array(r)) < 0.02 for r in rows[:k_new] if r[0] > t_map), "a pose between both maps"
+    assert "a new map on /map" in err and report["ros2"]["map_changes"] == 1
+    assert report["counters"]["localizer"]["reinitializations"] == 2  # /initialpose and the new map
+    assert report["counters"]["localizer"]["map_changes"] == 1
     probs = "; ".join(report["ros2"]["problems"])
     scan_ep = next(e for e in report["ros2"]["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub")
     assert 1 <= scan_ep["undecodable"] <= sent[0]

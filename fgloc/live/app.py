@@ -27,6 +27,7 @@ from fgloc.types import StaticTransform, Trajectory
 
 if TYPE_CHECKING:
     from fgloc.config import FglocConfig
+    from fgloc.io.outputs import OutputFile
     from fgloc.live.sick import SickClient
     from fgloc.localization import Session
 
@@ -203,6 +204,19 @@ class LiveSession:
     def live_trajectory(self) -> Trajectory:
         return self.runner.live_trajectory()
 
+    def write_trajectories(self, tums: dict[str, OutputFile]) -> None:
+        """After :meth:`close`: the live trajectory into ``tums["-o"]``, the smoothed one into
+        ``tums["--out-smoothed"]`` (each when asked for and not empty), as TUM."""
+        from fgloc.io.tum import write_tum
+
+        traj = self.live_trajectory()
+        if "-o" in tums and len(traj):
+            with tums["-o"] as o:
+                write_tum(o.path, traj)
+        if "--out-smoothed" in tums and self.smoothed is not None and len(self.smoothed):
+            with tums["--out-smoothed"] as o:
+                write_tum(o.path, self.smoothed)
+
     def close(self) -> LiveSummary:
         """Stop sensors, fuse the backlog, close the recording; idempotent."""
         if not self.closed:
@@ -298,6 +312,18 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
                        trajectory_window_s=None if req.out is not None else LIVE_TAIL_S)
 
 
+def trajectory_outputs(out: Path | None, out_smoothed: Path | None, force: bool) -> dict[str, OutputFile]:
+    """``fgloc live``'s ``-o`` / ``--out-smoothed`` files (those given), checked now: before the
+    session starts, never over an existing file without ``force`` (:mod:`fgloc.io.outputs`)."""
+    from fgloc.io.outputs import OutputFile
+
+    tums = {name: OutputFile(p, command="live", force=force, option=name, what="trajectory")
+            for name, p in (("-o", out), ("--out-smoothed", out_smoothed)) if p is not None}
+    for o in tums.values():
+        o.check()
+    return tums
+
+
 def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
              event_sink: Callable[[str], None] | None = None,
              on_stopped: Callable[[], None] | None = None) -> LiveReport:
@@ -310,13 +336,8 @@ def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
     silent / back, the view's address, a recording stopped by its disk); ``on_stopped()``: called
     once the session is closed (the CLI ends its status line)."""
     from fgloc.io import stop as stopping
-    from fgloc.io.outputs import OutputFile
-    from fgloc.io.tum import write_tum
 
-    tums = {name: OutputFile(p, command="live", force=req.force, option=name, what="trajectory")
-            for name, p in (("-o", req.out), ("--out-smoothed", req.out_smoothed)) if p is not None}
-    for o in tums.values():
-        o.check()
+    tums = trajectory_outputs(req.out, req.out_smoothed, req.force)
     session = live_session(req, status_sink, event_sink)
     viewer = None
     if req.view is not None:  # the Foxglove view (fgloc.view), also recorded into --record
@@ -349,13 +370,7 @@ def run_live(req: LiveRequest, status_sink: Callable[[str], None] | None = None,
             summary = session.close()
             if on_stopped is not None:
                 on_stopped()
-        traj = session.live_trajectory()
-        if "-o" in tums and len(traj):
-            with tums["-o"] as o:
-                write_tum(o.path, traj)
-        if "--out-smoothed" in tums and session.smoothed is not None and len(session.smoothed):
-            with tums["--out-smoothed"] as o:
-                write_tum(o.path, session.smoothed)
+        session.write_trajectories(tums)
     failed = dead_workers()
     report = {
         "duration_s": round(summary.duration_s, 2),

@@ -35,7 +35,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     ``force``, :mod:`fgloc.io.outputs`); a second Ctrl-C skips only the final smoothing."""
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
-    from fgloc.live.app import LiveSession
+    from fgloc.live.app import LiveSession, trajectory_outputs
     from fgloc.localization import Session, build_session
     from fgloc.maps import load_map
     from fgloc.ros2.node import Ros2Live
@@ -47,10 +47,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
 
     if record is not None:
         OutputFile(record, command="live", force=force, precious=True, option="--record").check()
-    tums = {name: OutputFile(p, command="live", force=force, option=name, what="trajectory")
-            for name, p in (("-o", out), ("--out-smoothed", out_smoothed)) if p is not None}
-    for o in tums.values():
-        o.check()
+    tums = trajectory_outputs(out, out_smoothed, force)
     cfg = load_config(config)
     over = {k: v for k, v in (("domain_id", domain), ("interface", interface), ("scan_topic", scan_topic))
             if v is not None}
@@ -137,15 +134,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     report: dict[str, Any] = {"ros2": node.report()}
     if summary is not None:
         session = node.session
-        traj = session.live_trajectory()
-        from fgloc.io.tum import write_tum
-
-        if "-o" in tums and len(traj):
-            with tums["-o"] as o:
-                write_tum(o.path, traj)
-        if "--out-smoothed" in tums and session.smoothed is not None and len(session.smoothed):
-            with tums["--out-smoothed"] as o:
-                write_tum(o.path, session.smoothed)
+        session.write_trajectories(tums)
         report.update({"duration_s": round(summary.duration_s, 2), "poses": summary.n_poses,
                        "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms},
                        "health": summary.health, "counters": summary.counters,

@@ -133,7 +133,7 @@ def test_converted_config_names_the_topics(cases: dict[str, Any], converted: dic
 
 def test_no_heading_source_is_no_traceback(tool: ModuleType, cases: dict[str, Any], work: Path) -> None:
     """test1 with odom0 fusing vx, vy and no IMU (nothing measures the heading): the smoother
-    finishes; solver failures, if any, are counted (ee92bab: 'Indeterminate linear system' raised)."""
+    finishes; solver failures, if any, are counted (GTSAM's 'Indeterminate linear system' is not raised)."""
     import yaml
 
     from fgloc.app.run import RunRequest, run_log

@@ -90,12 +90,17 @@ class KeyframeGraph(FurtherSourceFactors):
         """Every gyro still reading (one within :data:`GYRO_LIVE_S` of ``t``) has reached ``t``, so
         the keyframe's chord can run along its heading.  A keyframe made before (its gyro reading
         arriving after the odometry's) would keep the wheels' own arc, bent by their yaw (a skid
-        steer's wheels report several times the turn: the path drives crabwise)."""
+        steer's wheels report several times the turn: the path drives crabwise).  Without a gyro,
+        where the wheels' yaw rate is not fused, the chord runs along the absolute heading: its
+        reading at ``t`` is waited for the same way."""
         if not self.cfg.gyro_chord:
             return True
         for ts_, _, _ in self.gyro.values():
             if ts_ and t - GYRO_LIVE_S <= ts_[-1] < t - 1e-9:
                 return False
+        hts = self.heading_hist[0]
+        if not self.gyro and hts and t - GYRO_LIVE_S <= hts[-1] < t - 1e-9 and self._wheel_yaw_unfused():
+            return False   # the chord runs along the absolute heading: wait for its reading at t
         return True
 
     def _add_keyframe_now(self, t: float, fix: PoseFix | None) -> None:
@@ -107,14 +112,19 @@ class KeyframeGraph(FurtherSourceFactors):
         graph, vals, ts, pairs, keys = self._acc
         ts[k] = t
         d, c = self._integrate(t_prev, t)
-        chord = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
-        if chord is None:
+        got = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
+        if got is None and self.cfg.gyro_chord and self._wheel_yaw_unfused():
+            got = self._chord_along_heading(t_prev, t)
+        if got is None:
             pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
         else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
+            chord, (p00, p01, p11) = got
             pred = compose1(self.kf_pose[k_prev], np.array([chord[0] * self._gains[0], chord[1] * self._gains[0],
                                                             chord[2]]))
             d = np.array([chord[0], chord[1], d[2]])
-        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=chord is None))
+            # its translation's covariance is the chord's, uncorrelated with the wheels' yaw
+            c = np.array([[p00, p01, 0.0], [p01, p11, 0.0], [0.0, 0.0, float(c[2, 2])]])
+        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=got is None))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
         vals.insert(k, gtsam.Pose2(*pred))

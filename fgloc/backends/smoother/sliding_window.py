@@ -103,7 +103,8 @@ class SlidingWindowSmoother(KeyframeGraph):
             self.odo_c.append((cl[0], cl[1], cl[2], cl[4], cl[5], cl[8]))   # upper6(c): bounded_covariance leaves it
         else:
             self.odo_c.append(upper6(bounded_covariance(np.array(cl).reshape(3, 3), TWIST_VAR_MAX)))
-        self.inputs.reading("odom", RATE, 0.05, t, u2, cl[8])
+        if cl[8] <= TWIST_VAR_MAX:  # a yaw rate the source does not fuse is no yaw source to weigh
+            self.inputs.reading("odom", RATE, 0.05, t, u2, cl[8])
         self._process_pending(t)
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
@@ -126,6 +127,7 @@ class SlidingWindowSmoother(KeyframeGraph):
         h.accepted += 1
         self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
         self.compass_pending.append((float(t), float(yaw), float(var), source))
+        self._add_heading_reading(float(t), float(yaw), source)
         self._process_pending(float(t))
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:

@@ -32,6 +32,7 @@ class Chain:
     key: int | None = None
     t: float = -np.inf
     estimate: FloatArray | None = None
+    stamped: float = -np.inf       # the window stamp its current variable last had
 
 
 class SmootherState(Backend):
@@ -48,6 +49,10 @@ class SmootherState(Backend):
         self.stats.update({"compass_factors": 0, "late_scans": 0, "dropped_late": 0, "gyro_factors": 0})
         # sensor streams and what is known about each source (kept across re-initializations)
         self.gyro: dict[str, tuple[list[float], list[float], list[float]]] = {}
+        # the first absolute heading source's readings (stamps, unwrapped yaw), the last few seconds:
+        # the chord's heading where no gyro covers an interval and the wheels' yaw rate is not fused
+        self.heading_hist: tuple[list[float], list[float]] = ([], [])
+        self._heading_source: str | None = None
         self._gyro_done: dict[str, float] = {}
         self.chains: dict[str, Chain] = {}
         # per-source health, noise, gyro biases (unless cfg.gyro_bias_in_graph) and latency pairs; the
@@ -112,7 +117,7 @@ class SmootherState(Backend):
         for ch in self.chains.values():  # calibration carries over a re-initialization as a prior
             if ch.key is not None and ch.estimate is not None:
                 ch.prior_mean = ch.estimate.copy()
-            ch.key, ch.t = None, -np.inf
+            ch.key, ch.t, ch.stamped = None, -np.inf, -np.inf
         for src in self._gyro_done:
             self._gyro_done[src] = -np.inf
         self.rel_pending.clear()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left, bisect_right
+from operator import sub
 
 import numpy as np
 
@@ -13,6 +14,7 @@ from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import scaled_delta
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
 from fgloc.backends.integration import integrate_heading, integrate_twist_lists
+from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import exp_coefficients, wrap_scalar
 
@@ -129,10 +131,14 @@ class Streams(SmootherState):
             mark = self._int_marks[t0] = []
         return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
 
-    def _chord_along_gyro(self, t0: float, t1: float) -> FloatArray | None:
+    def _chord_along_gyro(self, t0: float, t1: float
+                          ) -> tuple[FloatArray, tuple[float, float, float]] | None:
         """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's
-        (bias-corrected) heading, ``[x, y, gyro yaw]`` in the frame at ``t0``; None when no gyro
-        covers the interval (each odometry twist held backwards, as :func:`integrate_twist`)."""
+        (bias-corrected) heading, ``[x, y, gyro yaw]`` in the frame at ``t0``, and the
+        translation's covariance ``(p_xx, p_xy, p_yy)`` from the odometry's speed variances alone
+        (the heading it is integrated along is the gyro's, not the wheels': their yaw-rate variance
+        does not spread it, a wheel yaw that is not fused least of all); None when no gyro covers
+        the interval (each odometry twist held backwards, as :func:`integrate_twist`)."""
         if not self.gyro or not self.odo_t:
             return None
         name = next(iter(self.gyro))
@@ -144,11 +150,13 @@ class Streams(SmootherState):
             return None
         bias = self.gyro_bias_of(name)
         max_gap = 0.25
+        qx, qy = float(self._q_slip[0]), float(self._q_slip[1])
         ts = self.odo_t
         n = len(ts)
         i = bisect_right(ts, t0)
         g = max(bisect_right(gts, t0) - 1, 0)   # the gyro reading at or before the step's start
         t, x, y, th = t0, 0.0, 0.0, 0.0
+        p00 = p01 = p11 = 0.0
         while t < t1 - 1e-12:
             j = min(i, n - 1)
             tn = min(ts[i], t1) if i < n else t1
@@ -168,9 +176,87 @@ class Streams(SmootherState):
                 dx, dy = a * vx - b * vy, b * vx + a * vy
                 c, s_ = math.cos(th), math.sin(th)
                 x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+                # the step's (vx, vy) covariance * dt^2 (+ slip), turned into the frame at t0
+                cv = self.odo_c[j]
+                dt2 = dt * dt
+                s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
+                p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
+                p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
+                p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
             t = tn
             i += 1
-        return np.array([x, y, wrap_scalar(th)])
+        return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
+
+    def _add_heading_reading(self, t: float, yaw: float, source: str) -> None:
+        """Keep the first absolute heading source's readings (unwrapped) for :meth:`_chord_along_heading`."""
+        if self._heading_source is None:
+            self._heading_source = source
+        if source != self._heading_source:
+            return
+        ts, ys = self.heading_hist
+        if ts and t <= ts[-1]:
+            return
+        ts.append(t)
+        ys.append(yaw if not ys else ys[-1] + wrap_scalar(yaw - ys[-1]))
+        if len(ts) > 4096 and self.kf_t:
+            i = bisect_left(ts, self.kf_t[-1] - self.cfg.lag_s - 2.0)
+            if i > 0:
+                del ts[:i], ys[:i]
+
+    def _wheel_yaw_unfused(self) -> bool:
+        """The odometry's yaw rate is not fused (handed as 0 with a variance of at least
+        :data:`TWIST_VAR_MAX`): integrated as it is, every keyframe's chord would run straight
+        along the heading at its start, whatever the robot turned."""
+        return bool(self.odo_c) and self.odo_c[-1][5] >= TWIST_VAR_MAX
+
+    def _chord_along_heading(self, t0: float, t1: float
+                             ) -> tuple[FloatArray, tuple[float, float, float]] | None:
+        """:meth:`_chord_along_gyro`'s chord and covariance, the odometry's translation integrated
+        along the absolute heading readings (a compass, an IMU's orientation: linearly interpolated)
+        where no gyro covers the interval and the wheels' yaw rate is not fused; None when the
+        readings do not cover ``[t0, t1]`` or are further apart than 0.25 s."""
+        hts, hys = self.heading_hist
+        if not self.odo_t or not hts or hts[0] > t0 + 1e-9 or hts[-1] < t1 - 1e-9:
+            return None
+        j0 = max(bisect_right(hts, t0) - 1, 0)
+        j1 = min(bisect_left(hts, t1), len(hts) - 1)
+        if j1 > j0 and max(map(sub, hts[j0 + 1:j1 + 1], hts[j0:j1])) > 0.25:
+            return None
+
+        def heading(t: float) -> float:
+            i = min(max(bisect_right(hts, t), 1), len(hts) - 1)
+            ta, tb = hts[i - 1], hts[i]
+            f = (t - ta) / (tb - ta) if tb > ta else 1.0
+            return hys[i - 1] + f * (hys[i] - hys[i - 1])
+
+        qx, qy = float(self._q_slip[0]), float(self._q_slip[1])
+        ts = self.odo_t
+        n = len(ts)
+        i = bisect_right(ts, t0)
+        h0 = heading(t0)
+        t, x, y, th = t0, 0.0, 0.0, 0.0
+        p00 = p01 = p11 = 0.0
+        while t < t1 - 1e-12:
+            j = min(i, n - 1)
+            tn = min(ts[i], t1) if i < n else t1
+            dt = tn - t
+            if dt > 0:
+                w = heading(tn) - h0 - th
+                u = self.odo_u[j]
+                vx, vy = float(u[0]) * dt, float(u[1]) * dt
+                a, b = exp_coefficients(w)
+                dx, dy = a * vx - b * vy, b * vx + a * vy
+                c, s_ = math.cos(th), math.sin(th)
+                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+                cv = self.odo_c[j]
+                dt2 = dt * dt
+                s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
+                p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
+                p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
+                p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
+            t = tn
+            i += 1
+        return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
 
     def _rotation_between(self, t0: float, t1: float) -> float:
         """Heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``): a gyro's when it covers

@@ -39,10 +39,28 @@ class FixedLagWindow(Calibration):
         if ts:
             self._capture_leaving(max(ts.values()))
             self._t_latest = max(self._t_latest, max(ts.values()))
+        self._stamp_chains(ts, tsm)
         n = graph.size()
         graph, vals = self._with_ballast(graph, vals, tsm)
         self.isam.update(graph, vals, tsm, remove or [])
         return list(self.isam.getISAM2Result().getNewFactorsIndices())[:n]
+
+    def _stamp_chains(self, ts: dict, tsm: gtsam.FixedLagSmootherKeyTimestampMap) -> None:
+        """Keep each calibration chain's current variable in the window while its factors pause
+        (a visual odometer's gap, a gyro that stopped): stamped anew every half lag.  Left to leave
+        the window, it was marginalized, and the chain's next factor named a variable iSAM2 no
+        longer had (``timestamp supplied for key 'a125', but no value exists``)."""
+        t = self._t_latest
+        if not math.isfinite(t):
+            return
+        for ch in self.chains.values():
+            if ch.key is None:
+                continue
+            if ch.key in ts:
+                ch.stamped = max(ch.stamped, float(ts[ch.key]))
+            elif t - ch.stamped > 0.5 * self.cfg.lag_s:
+                tsm.insert((ch.key, t))
+                ch.stamped = t
 
     def _with_ballast(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
                       tsm: gtsam.FixedLagSmootherKeyTimestampMap) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:

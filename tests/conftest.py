@@ -9,6 +9,34 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+#: pytest-xdist (pyproject's ``-n 2 --dist loadgroup``) sends a whole file to one worker, so its
+#: module fixtures are made once; the tests that keep real time (live replays through the emulators,
+#: DDS peers, the viewer's websocket) form one unit run one after another on one worker, and so do
+#: those that start Ray instances: neither kind ever runs beside another of its kind
+SERIAL_GROUPS = {"live": "realtime", "ros2": "realtime", "view": "realtime", "batch": "ray"}
+
+
+def xdist_unit(nodeid: str) -> str:
+    """The unit of work a test is sent to a worker with: its group of :data:`SERIAL_GROUPS`, else its file."""
+    path = nodeid.split("::", 1)[0]
+    parts = path.split("/")
+    return SERIAL_GROUPS.get(parts[1], path) if len(parts) > 2 and parts[0] == "tests" else path
+
+
+try:
+    from xdist.scheduler import LoadScopeScheduling
+except ImportError:  # pytest-xdist is in the test extra; without it the suite runs in one process
+    LoadScopeScheduling = None
+
+if LoadScopeScheduling is not None:
+    class _UnitScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_unit(nodeid)
+
+    @pytest.hookimpl(tryfirst=True, optionalhook=True)
+    def pytest_xdist_make_scheduler(config, log):
+        return _UnitScheduling(config, log) if config.getvalue("dist") == "loadgroup" else None
+
 
 #: the skip reason of the tests that read the real logs (README, "Data and attribution": where to get them)
 SHARED_DATA_MISSING = (

@@ -180,6 +180,7 @@ class LiveRunner:
         self._reorder: list[tuple[float, int, str, Any]] = []
         self._seq = 0
         self.scan_arrival = 0.0  # host arrival time of the scan being fused (for its latency)
+        self._last_arrival = 0.0  # host arrival time of the last message processed
         self.last_latency_ms = float("nan")
         self._rec_sink = RecorderSink(recorder, self.topics["fused"], tolerate=(Exception,)) \
             if recorder is not None else None
@@ -257,6 +258,7 @@ class LiveRunner:
         if kind == "event":
             self._record_event(str(msg), arrival)
             return
+        self._last_arrival = arrival
         now = time.monotonic()
         self._mark(kind, now)
         stamp = float(getattr(msg, "stamp", arrival))
@@ -288,7 +290,11 @@ class LiveRunner:
                 self._loc_error(kind, e)
 
     def flush_reorder(self, all_: bool = False) -> None:
-        horizon = time.time() - self.reorder_s
+        # the horizon runs on the messages' arrival while a backlog is queued (a busy host releases
+        # odometry in the order an idle one would: never ahead of a scan still in the queue), on the
+        # host clock once the queue is empty (a silent laser does not hold odometry back)
+        now = time.time() if self.q.empty() else self._last_arrival
+        horizon = now - self.reorder_s
         self._release((lambda s: True) if all_ else (lambda s: s < horizon))
 
     def _loc_error(self, kind: str, e: Exception) -> None:

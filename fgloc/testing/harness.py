@@ -33,6 +33,34 @@ class LiveReplay:
     emulators: EmulatorPair
 
 
+def live_config_overrides(messages: list[tuple[str, object]], rp: RobotParams,
+                          laser_mount: StaticTransform) -> dict[str, Any]:
+    """The live config a robot that recorded ``messages`` would have: its geometry, laser mount and range
+    limits, and its sensors' noise as a spec sheet would give it (a config overlay for ``load_config``)."""
+    over: dict[str, Any] = {
+        "robot": {"drive": rp.drive, "wheel_radius_m": rp.wheel_radius_m, "track_width_m": rp.track_width_m,
+                  "wheelbase_m": rp.wheelbase_m, "counts_per_rev": rp.counts_per_rev},
+        "laser": {"mount": [float(v) for v in laser_mount.pose]},
+    }
+    # the robot's sensor noise, as its spec sheet would give it to the live config
+    odom = next((m for t, m in messages if t == "/odom" and isinstance(m, Odometry)), None)
+    if odom is not None and odom.twist_cov is not None:
+        over["serial"] = {"twist_std": [float(v) for v in np.sqrt(np.diag(odom.twist_cov))]}
+    imu = next((m if isinstance(m, CompassHeading) else m.heading() for t, m in messages
+                if t == "/imu" and isinstance(m, CompassHeading | Imu)), None)
+    if imu is not None:
+        ser = over.setdefault("serial", {})
+        if np.isfinite(imu.yaw_var):
+            ser["compass_std_deg"] = float(np.degrees(np.sqrt(imu.yaw_var)))
+        if np.isfinite(imu.yaw_rate_var):
+            ser["gyro_std_dps"] = float(np.degrees(np.sqrt(imu.yaw_rate_var)))
+    scan = next((m for t, m in messages if t == "/scan" and isinstance(m, LaserScan)), None)
+    if scan is not None:
+        over["laser"]["range_min_m"] = float(scan.range_min)
+        over["laser"]["range_max_m"] = float(scan.range_max)
+    return over
+
+
 def replay_live(
     messages: list[tuple[str, object]],
     occ_map: Any,
@@ -59,27 +87,7 @@ def replay_live(
     from fgloc.localization import build_session
 
     rp = robot if isinstance(robot, RobotParams) else RobotParams.from_dict(robot)
-    over: dict[str, Any] = {
-        "robot": {"drive": rp.drive, "wheel_radius_m": rp.wheel_radius_m, "track_width_m": rp.track_width_m,
-                  "wheelbase_m": rp.wheelbase_m, "counts_per_rev": rp.counts_per_rev},
-        "laser": {"mount": [float(v) for v in laser_mount.pose]},
-    }
-    # the robot's sensor noise, as its spec sheet would give it to the live config
-    odom = next((m for t, m in messages if t == "/odom" and isinstance(m, Odometry)), None)
-    if odom is not None and odom.twist_cov is not None:
-        over["serial"] = {"twist_std": [float(v) for v in np.sqrt(np.diag(odom.twist_cov))]}
-    imu = next((m if isinstance(m, CompassHeading) else m.heading() for t, m in messages
-                if t == "/imu" and isinstance(m, CompassHeading | Imu)), None)
-    if imu is not None:
-        ser = over.setdefault("serial", {})
-        if np.isfinite(imu.yaw_var):
-            ser["compass_std_deg"] = float(np.degrees(np.sqrt(imu.yaw_var)))
-        if np.isfinite(imu.yaw_rate_var):
-            ser["gyro_std_dps"] = float(np.degrees(np.sqrt(imu.yaw_rate_var)))
-    scans = [m for t, m in messages if t == "/scan" and isinstance(m, LaserScan)]
-    if scans:
-        over["laser"]["range_min_m"] = float(scans[0].range_min)
-        over["laser"]["range_max_m"] = float(scans[0].range_max)
+    over = live_config_overrides(messages, rp, laser_mount)
     cfg = load_config(overrides=over)
     if live_overrides:
         from fgloc.config import parse_config

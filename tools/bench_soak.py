@@ -1,0 +1,154 @@
+#!/usr/bin/env python
+"""Soak: `fgloc live` over a long run against the emulators, its resident memory sampled.
+
+A robot drives laps of a room (:func:`fgloc.testing.soak.lap_world`: odometry 50 Hz, compass 20 Hz,
+scans 25 Hz of 541 beams) for ``--minutes`` of log; this process replays it
+through the STM32 emulator (fgloc's serial frames over a real TCP socket, pyserial's ``socket://``) and the
+SICK emulator (CoLa-A over real TCP) at ``--speed`` times real time, into ``fgloc live`` in its own process
+(the map, the start pose, a config with the robot's geometry and noise), and samples that process's RSS
+(psutil) as the replay goes.  At the end it stops `fgloc live` with SIGINT and prints
+
+* the RSS after the first ``--settle`` minutes of log, at each quarter and at the end; the largest rise
+  over the settled RSS (the issue's bound: within 20 MB); the slope of a line fitted after settling
+  (MB per hour of log) and what it makes in a day;
+* the scans sent, fused and skipped as a backlog (an accelerated replay on a busy machine skips scans:
+  those exercise the input paths and the recording, not the localizer, so the slope per fused scan is
+  printed too).
+
+    python tools/bench_soak.py                                    # 60 min of log at 4x (15 min), smoother
+    python tools/bench_soak.py --minutes 60 --speed 4 --record --png soak.png
+    python tools/bench_soak.py --minutes 10 --speed 2 -o          # -o keeps every pose (32 B each)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--minutes", type=float, default=60.0, help="minutes of log replayed")
+    ap.add_argument("--speed", type=float, default=4.0, help="replay speed (1 = real time)")
+    ap.add_argument("--settle", type=float, default=5.0, help="minutes of log before the memory is judged")
+    ap.add_argument("--backend", default="smoother")
+    ap.add_argument("--frontend", default="native")
+    ap.add_argument("--record", action="store_true", help="fgloc live --record (into a temporary folder)")
+    ap.add_argument("-o", "--output", action="store_true", help="fgloc live -o (keeps the whole trajectory)")
+    ap.add_argument("--sample-s", type=float, default=2.0, help="wall seconds between RSS samples")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--png", type=Path, help="plot RSS over minutes of log into this PNG")
+    ap.add_argument("--csv", type=Path, help="write the samples (log min, wall s, RSS MB) here")
+    a = ap.parse_args(argv)
+
+    import yaml
+    from tqdm import tqdm
+
+    from fgloc.live.serial_link import RobotParams
+    from fgloc.testing.emulators import EmulatorPair
+    from fgloc.testing.harness import live_config_overrides
+    from fgloc.testing.soak import lap_world
+
+    world = lap_world(seed=a.seed)
+    duration_s = a.minutes * 60.0
+    msgs = list(world.messages(duration_s))  # the lap's scans share their range arrays: an hour costs little
+    rp = RobotParams.from_dict({"drive": "mecanum"})
+    tmp = Path(tempfile.mkdtemp(prefix="fgloc-soak-"))
+    map_yaml = world.map.save(tmp / "map.yaml")
+    cfg = tmp / "robot.yaml"
+    cfg.write_text(yaml.safe_dump(live_config_overrides(msgs, rp, world.mount)))
+    x, y, yaw = (float(v) for v in world.pose(0.0))
+    # the emulators listen now and start the replay 15 s from now: `fgloc live` starts and connects meanwhile
+    pair = EmulatorPair.create(msgs, rp, mode="tcp", speed=a.speed, duration=duration_s, lead_s=15.0)
+    del msgs
+    cmd = [sys.executable, "-m", "fgloc.cli", "live", "--serial", pair.stm32.url, "--laser", pair.sick.address,
+           "--map", str(map_yaml), "--initial-pose", f"{x}", f"{y}", f"{yaw}", "--config", str(cfg),
+           "--backend", a.backend, "--frontend", a.frontend, "--json", "-q"]
+    if a.record:
+        cmd += ["--record", str(tmp / "live.mcap")]
+    if a.output:
+        cmd += ["-o", str(tmp / "live.tum")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ps = psutil.Process(proc.pid)
+    pair.start()
+    samples: list[tuple[float, float, float]] = []  # (log min, wall s since the replay started, RSS MB)
+    start = pair.clock.start_host
+    n_scans = len(pair.sick.scans)
+    with tqdm(total=round(a.minutes, 1), desc=f"replaying at {a.speed:g}x", unit="log min") as bar:
+        while not (pair.stm32.done.is_set() and pair.sick.done.is_set()):
+            time.sleep(a.sample_s)
+            if proc.poll() is not None:
+                break
+            wall = time.time() - start
+            if wall > 0:
+                samples.append((wall * a.speed / 60.0, wall, ps.memory_info().rss / 2**20))
+                bar.n = round(min(samples[-1][0], a.minutes), 1)
+                bar.set_postfix_str(f"RSS {samples[-1][2]:.0f} MB")
+    time.sleep(1.0)
+    if proc.poll() is None:
+        samples.append(((time.time() - start) * a.speed / 60.0, time.time() - start, ps.memory_info().rss / 2**20))
+        proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=600)
+    pair.stop()
+    if proc.returncode not in (0, 130):
+        print(f"fgloc live exited {proc.returncode}:\n{err[-3000:]}", file=sys.stderr)
+        return 1
+    report = json.loads(out)
+    c = report.get("counters", {})
+    s = np.array(samples)
+    if a.csv:
+        np.savetxt(a.csv, s, delimiter=",", header="log_min,wall_s,rss_mb", fmt="%.3f")
+    settled = s[s[:, 0] >= a.settle]
+    print(f"\nfgloc live --backend {a.backend} --frontend {a.frontend}{' --record' if a.record else ''}"
+          f"{' -o' if a.output else ''}: {a.minutes:g} min of log at {a.speed:g}x over real TCP "
+          f"({len(s)} samples)")
+    print(f"scans sent {n_scans}, read {c.get('laser', {}).get('scans', 0)}, fused {c.get('scans_fused', 0)}, "
+          f"skipped as a backlog {c.get('scans_skipped_backlog', 0)}; fixes {c.get('fixes', 0)}; "
+          f"latency p50 {report['latency_ms']['p50']:.1f} ms p99 {report['latency_ms']['p99']:.1f} ms")
+    if len(settled) < 3:
+        print(f"too short to judge: fewer than 3 samples after {a.settle:g} min of log")
+        return 1
+    base = float(settled[0, 2])
+    marks = [(f"{m:.3g} min", float(np.interp(m, s[:, 0], s[:, 2])))
+             for m in (1.0, a.settle, *(q * a.minutes for q in (0.25, 0.5, 0.75)))] + [("end", float(s[-1, 2]))]
+    print("RSS: " + ", ".join(f"{k} {v:.1f} MB" for k, v in marks))
+    rise = float(settled[:, 2].max() - base)
+    slope_h = float(np.polyfit(settled[:, 0], settled[:, 2], 1)[0]) * 60.0
+    fused = max(int(c.get("scans_fused", 0)), 1)
+    per_scan = slope_h * 2**20 / (fused / (s[-1, 0] / 60.0))
+    print(f"after {a.settle:g} min of log: largest rise {rise:.1f} MB over {base:.1f} MB; slope {slope_h:+.1f} MB "
+          f"per hour of log ({slope_h * 24:+.0f} MB a day), {per_scan:+.0f} B per fused scan")
+    print(f"files in {tmp}")
+    if a.png:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        ax.plot(s[:, 0], s[:, 2], lw=1)
+        ax.axvline(a.settle, color="0.6", ls="--", lw=0.8)
+        ax.axhspan(base, base + 20.0, color="tab:green", alpha=0.1, label="settled RSS + 20 MB")
+        ax.set_xlabel("minutes of log")
+        ax.set_ylabel("fgloc live RSS (MB)")
+        ax.set_title(f"fgloc live, {a.backend}, {a.speed:g}x over TCP: {slope_h:+.1f} MB per hour of log")
+        ax.legend(loc="lower right")
+        fig.tight_layout()
+        fig.savefig(a.png, dpi=110)
+        print(f"plot: {a.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

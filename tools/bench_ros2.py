@@ -78,6 +78,9 @@ def main() -> int:
     ap.add_argument("--no-initial-pose", action="store_true", help="global localization at the start")
     ap.add_argument("--out", type=Path, help="write the samples and the report (JSON) here")
     ap.add_argument("--receive-only", action="store_true", help="fgloc's DDS receive path alone, no localizer")
+    ap.add_argument("--now", action="store_true", help="replay with the header stamps on the wall clock (as a "
+                    "robot's drivers stamp them)")
+    ap.add_argument("--config", type=Path, help="fgloc live's --config")
     ap.add_argument("--compare", type=Path, help="a fgloc run output folder of the same log: compare /amcl_pose")
     a = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
@@ -110,11 +113,13 @@ def main() -> int:
                       on_pose)
         sub.start()
     cmd = [sys.executable, "-c", RECEIVER, str(a.domain)] if a.receive_only else \
-        fgloc("live", "--ros2", *common, "--quiet", "--json", *init)
+        fgloc("live", "--ros2", *common, "--quiet", "--json", *init,
+              *(["--config", str(a.config)] if a.config else []))
     live = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc = psutil.Process(live.pid)
     replay = subprocess.Popen(fgloc("replay", str(log), "--ros2", *common, "--rate", str(a.rate), "--wait", "60",
-                                    "--quiet", *(["--map", str(map_yaml)] if map_yaml else [])),
+                                    "--quiet", *(["--map", str(map_yaml)] if map_yaml else []),
+                                    *(["--now"] if a.now else [])),
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t_start = time.monotonic()
     samples: list[tuple[float, float]] = []  # wall s since the replay started, RSS MB
@@ -138,6 +143,15 @@ def main() -> int:
         print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
               f"poses published {r2['published']}")
         print(f"scan arrival -> map->odom published: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms")
+        scan = next((e for e in r2["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub"), {})
+        if scan.get("delivery_ms"):
+            print(f"/scan written -> taken by fgloc's receive thread: p50 {scan['delivery_ms']['p50']:.2f} ms, "
+                  f"p99 {scan['delivery_ms']['p99']:.2f} ms")
+        ready = r2.get("inputs_in_to_tf_ms")
+        if ready:
+            print(f"the scan and the odometry / IMU past its stamp in -> map->odom published: "
+                  f"p50 {ready['p50']:.2f} ms, "
+                  f"p99 {ready['p99']:.2f} ms")
     t = np.array([s[0] for s in samples]) * a.rate / 60.0  # minutes of log
     m = np.array([s[1] for s in samples])
     after = t >= min(1.0, 0.25 * t[-1])
@@ -153,11 +167,21 @@ def main() -> int:
 
         sub.close()
         ref = read_tum(a.compare / "online.tum")
-        d = []
-        for t_s, x, y in poses:
-            k = int(np.searchsorted(ref.stamps, t_s - 1e-6))
-            if k < len(ref.stamps) and abs(ref.stamps[k] - t_s) <= 1e-6:
-                d.append(float(np.hypot(x - ref.poses[k, 0], y - ref.poses[k, 1])))
+
+        def matched(offset: float, tol: float) -> list[tuple[int, float, float]]:
+            out = []
+            for t_s, x, y in poses:
+                k = int(np.searchsorted(ref.stamps, t_s - offset - tol))
+                if k < len(ref.stamps) and abs(ref.stamps[k] - (t_s - offset)) <= tol:
+                    out.append((k, x, y))
+            return out
+
+        offset, tol = 0.0, 1e-6
+        if a.now and poses:  # the stamps were moved onto the wall clock by one offset: find it
+            tol = 5e-6  # float64 seconds since 1970: ~0.2 us
+            first = min(p[0] for p in poses)
+            offset = max((first - s for s in ref.stamps[:200]), key=lambda o: len(matched(o, tol)))
+        d = [float(np.hypot(x - ref.poses[k, 0], y - ref.poses[k, 1])) for k, x, y in matched(offset, tol)]
         if d:
             print(f"/amcl_pose vs {a.compare}/online.tum: {len(d)} of {len(ref.stamps)} stamps; distance max "
                   f"{1e3 * max(d):.2f} mm, median {1e3 * float(np.median(d)):.2f} mm, "

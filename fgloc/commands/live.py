@@ -127,10 +127,17 @@ def register(app: typer.Typer) -> None:
 
             if serial or laser:
                 raise ConfigError("fgloc live: --ros2 takes the robot's sensors from DDS; leave out --serial / --laser")
-            rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend, initial_pose=pose_arg(initial_pose),
-                            record=record, publish=publish, duration=duration, config=config, out=out or out_old,
-                            out_smoothed=out_smoothed, quiet=quiet, view=view, domain=domain, interface=interface,
-                            scan_topic=scan_topic, force=force)
+            from fgloc.app.startup import pause_gc, resume_gc, setup_done
+
+            pause_gc()  # until the localizer is built and the kept messages fused (fgloc.app.startup)
+            try:
+                rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend,
+                                initial_pose=pose_arg(initial_pose), record=record, publish=publish, duration=duration,
+                                config=config, out=out or out_old, out_smoothed=out_smoothed, quiet=quiet, view=view,
+                                domain=domain, interface=interface, scan_topic=scan_topic, force=force,
+                                on_started=setup_done)
+            finally:
+                resume_gc()
             print(dumps(rep, indent=1) if as_json else ros2_summary(rep))
             _recording_and_hurry(rep.get("record_error"), bool(rep.get("hurried")), out_smoothed)
             return

@@ -20,6 +20,9 @@ def register(app: typer.Typer) -> None:
                                             "for nodes with use_sim_time")] = False,
         clock_hz: Annotated[float, typer.Option("--clock-hz", help="/clock messages per second of log time",
                                                 min=0.1)] = 40.0,
+        now: Annotated[bool, typer.Option("--now", help="header stamps moved onto the wall clock (the "
+                                          "first message's is the moment it is published), as a robot's "
+                                          "drivers stamp them: for nodes without use_sim_time")] = False,
         map_yaml: Annotated[Path | None, typer.Option("--map", help="map_server MAP.yaml to publish on /map "
                                                       "(transient local, as map_server)")] = None,
         domain: Annotated[int | None, typer.Option("--domain", help="DDS domain (default $ROS_DOMAIN_ID, "
@@ -58,7 +61,7 @@ def register(app: typer.Typer) -> None:
         try:
             with stopping.cooperative(on_stop=stop.set):
                 stats = replay(log, transport, rate=rate, clock=clock, clock_hz=clock_hz, occ_map=occ,
-                               stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait)
+                               stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait, now=now)
         finally:
             transport.close()
         parts = ", ".join(f"{t} {n}" for t, n in sorted(stats.published.items()))

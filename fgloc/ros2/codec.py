@@ -226,3 +226,41 @@ def _decode_map(data: bytes) -> OccupancyMap | None:
 def encode_clock(t: float) -> bytes:
     sec, nsec = stamp_to_sec_nsec(t)
     return encode_generic(CLOCK, {"clock": {"sec": sec, "nanosec": nsec}})
+
+
+def _aligned(pos: int, n: int) -> int:
+    """``pos`` moved up to a multiple of ``n`` from the CDR origin (byte 4, after the encapsulation)."""
+    return 4 + -(-(pos - 4) // n) * n
+
+
+def restamp(type_name: str, data: bytes, new_ns: Callable[[int], int]) -> bytes:
+    """The same CDR message with each header stamp (nanoseconds) ``t`` replaced by ``new_ns(t)``: a message
+    that starts with a ``std_msgs/Header`` (every type fgloc reads but tf), its header; a TFMessage, each
+    transform's.  Only the stamp bytes change.  Raises :class:`Undecodable` when the bytes are not that."""
+    buf = bytearray(data)
+    if bytes(buf[:2]) != b"\x00\x01":
+        raise Undecodable("not little-endian CDR")
+
+    def patch(off: int) -> None:
+        sec, nsec = struct.unpack_from("<iI", buf, off)
+        t = new_ns(sec * 1_000_000_000 + nsec)
+        struct.pack_into("<iI", buf, off, t // 1_000_000_000, t % 1_000_000_000)
+
+    try:
+        if normalize_type(type_name) != TF_MESSAGE:
+            patch(4)
+            return bytes(buf)
+        (n,) = struct.unpack_from("<I", buf, 4)
+        pos = 8
+        for _ in range(n):  # geometry_msgs/TransformStamped: header, child_frame_id, 7 float64
+            pos = _aligned(pos, 4)
+            patch(pos)
+            (ln,) = struct.unpack_from("<I", buf, pos + 8)
+            pos = _aligned(pos + 12 + ln, 4)
+            (ln,) = struct.unpack_from("<I", buf, pos)
+            pos = _aligned(pos + 4 + ln, 8) + 56
+        if pos > len(buf):
+            raise struct.error("truncated")
+    except struct.error as e:
+        raise Undecodable(f"{type_name}: {e}") from None
+    return bytes(buf)

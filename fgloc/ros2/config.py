@@ -45,6 +45,10 @@ class Ros2Config:
     sensor_reliability: str = setting("best_effort", "QoS of the scan / odometry / IMU subscriptions: "
                                       "best_effort (ROS 2's sensor data QoS: matches every publisher) or reliable",
                                       choices=("best_effort", "reliable"))
+    reorder_s: float = setting(0.0, "odometry / IMU messages wait this long past their stamps (host clock) to be "
+                               "handed on in stamp order across topics; 0: as they come, sorted among those "
+                               "received together (a scan's pose waits for the odometry past its stamp: a hold "
+                               "here delays it as long)", min=0)
     startup_buffer_s: float = setting(30.0, "messages kept while waiting for the map and the laser mount "
                                       "(fused once they are there)", gt=0)
     mount_wait_s: float = setting(2.0, "after the first scan, wait this long for a transform to its frame; "

@@ -59,6 +59,7 @@ SOURCE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
 OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
 ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
 LATENCIES_KEPT = 100_000
+ARRIVALS_KEPT = 256  # messages per source whose arrival is kept (2.5 s of a 100 Hz IMU)
 SENSOR_DEPTH = 100  # samples a sensor subscription holds until the receive thread takes them
 
 
@@ -123,6 +124,39 @@ class OdomFrame:
                          wrap_scalar(float(p0[2]) + a * wrap_scalar(float(p1[2] - p0[2])))])
 
 
+class Arrivals:
+    """When each odometry / IMU source's recent messages arrived, by stamp: the moment the inputs a scan's
+    pose waits for (each source past the scan's stamp: the back-end's keyframe needs them) were all in."""
+
+    def __init__(self, keep: int = ARRIVALS_KEPT) -> None:
+        self.keep = keep
+        self._by: dict[str, deque[tuple[float, float]]] = {}
+        self._lock = threading.Lock()
+
+    def add(self, kind: str, stamp: float, arrival: float) -> None:
+        with self._lock:
+            d = self._by.get(kind)
+            if d is None:
+                d = self._by[kind] = deque(maxlen=self.keep)
+            if math.isfinite(stamp) and (not d or stamp >= d[-1][0]):
+                d.append((stamp, arrival))
+
+    def all_in(self, t: float) -> float | None:
+        """The latest arrival among each source's first message stamped at or after ``t`` (a source with
+        none yet is not waited for: None when no source has one)."""
+        out = None
+        with self._lock:
+            for d in self._by.values():
+                first = None
+                for stamp, arrival in reversed(d):
+                    if stamp < t:
+                        break
+                    first = arrival
+                if first is not None:
+                    out = first if out is None else max(out, first)
+        return out
+
+
 def map_to_odom(map_base: np.ndarray, odom_base: np.ndarray) -> np.ndarray:
     """``map -> odom`` so that ``map -> odom -> base`` is the fused pose: ``T_mb T_ob^-1``."""
     return compose(map_base, inverse(odom_base))
@@ -135,7 +169,11 @@ class Ros2Outputs(BaseSink):
 
     A smoother takes a scan's keyframe once the odometry reaches its stamp; a scan stamped after the
     newest odometry is published when that odometry comes (AMCL, too, waits for ``odom -> base`` at the
-    scan's stamp).  :meth:`publish_new` is called after every message the session handles."""
+    scan's stamp).  :meth:`publish_new` is called after every message the session handles.
+
+    Two latencies per scan fused live: from its arrival to its pose published (``latencies_ms``), and
+    from the moment the odometry / IMU past its stamp were in as well (``ready_ms``: fgloc's own share;
+    the rest is the wait for the robot's odometry, which AMCL has too)."""
 
     wants_messages = False
     wants_fused = False
@@ -147,6 +185,7 @@ class Ros2Outputs(BaseSink):
         self.pose_pub = tr.publisher(c.pose_topic, POSE_COV_STAMPED, qos.LATCHED_PUB)
         self.tf_pub = tr.publisher("/tf", TF_MESSAGE, qos.TF) if c.tf_broadcast else None
         self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)
+        self.ready_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)
         self.published = 0
         self.no_odom = 0
         self.last_map_odom: np.ndarray | None = None
@@ -184,13 +223,17 @@ class Ros2Outputs(BaseSink):
             for st, arrival, live in self._arrivals:
                 if abs(st - t) < 1e-9:
                     if live:  # a scan kept from before the start is not live
-                        self.latencies_ms.append((time.time() - arrival) * 1e3)
+                        now = time.time()
+                        self.latencies_ms.append((now - arrival) * 1e3)
+                        inputs_in = self.live.arrivals.all_in(t)
+                        self.ready_ms.append((now - max(arrival, inputs_in or arrival)) * 1e3)
                     break
 
-    def latency_percentiles(self) -> tuple[float, float]:
-        if not self.latencies_ms:
+    def latency_percentiles(self, ready: bool = False) -> tuple[float, float]:
+        lat = self.ready_ms if ready else self.latencies_ms
+        if not lat:
             return float("nan"), float("nan")
-        a = np.fromiter(self.latencies_ms, dtype=float)
+        a = np.fromiter(lat, dtype=float)
         return float(np.percentile(a, 50)), float(np.percentile(a, 99))
 
 
@@ -223,7 +266,7 @@ class Ros2Live:
 
     def __init__(self, cfg: Any, transport: Transport, make_session: Callable[[Any, StaticTransform], Any],
                  make_live: Callable[[Any], Any], occ_map: Any = None,
-                 event: Callable[[str], None] | None = None) -> None:
+                 event: Callable[[str], None] | None = None, on_started: Callable[[], None] | None = None) -> None:
         from fgloc.localization.sources import parse_sources
 
         self.cfg = cfg
@@ -232,7 +275,9 @@ class Ros2Live:
         self.make_live = make_live
         self.occ_map = occ_map
         self.event = event or (lambda s: None)
+        self.on_started = on_started
         self.odom_frame = OdomFrame(cfg.ros2.odom_frame_id)
+        self.arrivals = Arrivals()
         self.tf = TfTree()
         self.session: Any = None  # LiveSession once started
         self.runner: Any = None
@@ -292,8 +337,10 @@ class Ros2Live:
             if inp.topic != "/tf_static":
                 return  # /tf: the odometry frame and the mount lookup; the session takes the static mounts
             msg = tfs
-        elif inp.kind.startswith("source:") and isinstance(msg, Odometry):
-            self.odom_frame.add_odometry(msg)
+        elif inp.kind.startswith("source:"):
+            self.arrivals.add(inp.kind, float(getattr(msg, "stamp", math.nan)), arrival)
+            if isinstance(msg, Odometry):
+                self.odom_frame.add_odometry(msg)
         elif inp.kind == "scan" and isinstance(msg, LaserScan):
             if self.startup.scan_frame is None:
                 self.startup.scan_frame = msg.frame_id
@@ -427,6 +474,7 @@ class Ros2Live:
         session = self.make_live(loc_session)
         runner = session.runner
         runner.topics.update({inp.kind: inp.topic for inp in self.inputs})
+        runner.reorder_s = self.cfg.ros2.reorder_s
         from fgloc.live.runner import SensorHealth
 
         runner.health = {inp.kind: SensorHealth(inp.topic) for inp in self.inputs
@@ -486,6 +534,8 @@ class Ros2Live:
         self.event(f"localizing: laser mount {mount.parent} -> {mount.child} "
                    f"({mount.pose[0]:.3f}, {mount.pose[1]:.3f}, {math.degrees(mount.pose[2]):.1f} deg)"
                    + (", upside down" if mirrored else "") + f"; {kept} messages kept from before the start fused")
+        if self.on_started is not None:
+            self.on_started()
         return True
 
     def _warm_up(self, loc: Any, mount: StaticTransform) -> None:
@@ -654,7 +704,9 @@ class Ros2Live:
                                "map_changes": self.map_changes}
         if self.outputs is not None:
             p50, p99 = self.outputs.latency_percentiles()
-            out.update(published=self.outputs.published, scan_to_tf_ms={"p50": p50, "p99": p99})
+            r50, r99 = self.outputs.latency_percentiles(ready=True)
+            out.update(published=self.outputs.published, scan_to_tf_ms={"p50": p50, "p99": p99},
+                       inputs_in_to_tf_ms={"p50": r50, "p99": r99})
         return out
 
     def close(self) -> Any:

@@ -10,6 +10,9 @@ the one message, as ``static_transform_publisher`` nodes leave it.  A log withou
 gets the laser mount the log reader finds (``fgloc run``'s) published there.  With a map
 (``--map``) it is published once on ``/map`` as map_server does (transient local).  ``clock``:
 ``/clock`` (``rosgraph_msgs/Clock``) at ``clock_hz`` of log time, for nodes with use_sim_time.
+``now``: every header stamp moved onto the wall clock (the first message's log time is the moment it
+is published, later ones at the replay's rate), as a robot's drivers stamp them: for nodes on the
+system clock (tf2 drops transforms older than its buffer) and to measure latencies as on a robot.
 
 Topics of other types are not published (named in :attr:`ReplayStats.skipped`).
 """
@@ -47,10 +50,15 @@ def _merge_static(merged: dict[str, StaticTransform], tfs: list[StaticTransform]
     return list(merged.values())
 
 
+def _wall_clock(log0_ns: int, wall0_ns: int, scale: float) -> Callable[[int], int]:
+    """Log time (ns) -> wall clock (ns): ``log0_ns`` is ``wall0_ns``, the rest ``scale`` x as far apart."""
+    return lambda t_ns: wall0_ns + round((t_ns - log0_ns) * scale)
+
+
 def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool = False, clock_hz: float = 40.0,
            occ_map: Any = None, map_topic: str = "/map", map_frame: str = "map",
            stop: Callable[[], bool] | None = None, progress: Callable[[int], Any] | None = None,
-           wait_for_subscribers_s: float = 0.0) -> ReplayStats:
+           wait_for_subscribers_s: float = 0.0, now: bool = False) -> ReplayStats:
     """Publish ``log`` (see the module docstring); returns what was published.  ``progress(total)``
     makes a progress bar (``update(n)``); ``wait_for_subscribers_s``: wait up to this long, before the
     first message, for subscribers (a node started before the replay): until every topic that discovery
@@ -70,11 +78,12 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
         prof = qos.TF_STATIC_PUB if t == TF_STATIC else qos.TF if t == "/tf" else qos.DEFAULT
         pubs[t] = transport.publisher(t, ty, prof)
     static_pub = pubs.get(TF_STATIC)
+    mount_pub = None
     if static_pub is None and any(ty == "sensor_msgs/msg/LaserScan" for ty in topics.values()):
-        static_pub = transport.publisher(TF_STATIC, TF_MESSAGE, qos.TF_STATIC_PUB)
-        mount = reader.laser_mount()
-        start = summ.get("start") or 0.0
-        static_pub.write(codec.encode([mount], float(start))[1])
+        static_pub = mount_pub = transport.publisher(TF_STATIC, TF_MESSAGE, qos.TF_STATIC_PUB)
+        if not now:  # else once the wall clock's offset is known, before the first message
+            mount_pub.write(codec.encode([reader.laser_mount()], float(summ.get("start") or 0.0))[1])
+            mount_pub = None
         stats.published[TF_STATIC] = 1
     clock_pub = transport.publisher("/clock", codec.CLOCK, qos.CLOCK) if clock else None
     if occ_map is not None:
@@ -100,13 +109,19 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
     t0_log: float | None = None
     next_clock = -1.0
     pending = 0
+    scale = 1.0 / rate if rate > 0 else 1.0
+    to_wall: Callable[[int], int] = lambda t_ns: t_ns  # noqa: E731
     try:
         for rec in reader.records(set(topics)):
             if stop is not None and stop():
                 break
             t_log = rec.log_time_ns * 1e-9
-            if t0_log is None:
-                t0_log = t_log
+            if t0_log is None:  # the log's pace (and --now's stamps) from the first message on
+                t0_log, t0_wall = t_log, time.monotonic()
+                if now:
+                    to_wall = _wall_clock(rec.log_time_ns, time.time_ns(), scale)
+                    if mount_pub is not None:
+                        mount_pub.write(codec.encode([reader.laser_mount()], time.time())[1])
             if rate > 0:
                 due = t0_wall + (t_log - t0_log) / rate
                 wait = due - time.monotonic()
@@ -115,7 +130,7 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
                 else:
                     stats.late_s = max(stats.late_s, -wait)
             if clock_pub is not None and t_log >= next_clock:
-                clock_pub.write(codec.encode_clock(t_log))
+                clock_pub.write(codec.encode_clock(to_wall(rec.log_time_ns) * 1e-9 if now else t_log))
                 next_clock = t_log + 1.0 / clock_hz
             topic = rec.topic
             if topic == TF_STATIC:
@@ -126,6 +141,12 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
             else:
                 stamp = getattr(rec.msg, "stamp", None)
                 data = codec.encode(rec.msg, t_log if stamp is None else None)[1]
+            if now:
+                try:
+                    data = codec.restamp(topics[topic], data, to_wall)
+                except codec.Undecodable:
+                    stats.dropped += 1
+                    continue
             if pubs[topic].write(data):
                 stats.published[topic] = stats.published.get(topic, 0) + 1
             else:

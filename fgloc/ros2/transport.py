@@ -25,10 +25,13 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 from xml.sax.saxutils import quoteattr
+
+import numpy as np
 
 from fgloc.errors import ConfigError
 from fgloc.ros2.names import dds_topic, dds_type, ros_topic, ros_type
@@ -42,6 +45,7 @@ POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE
                 17: "READER_DATA_LIFECYCLE", 18: "TOPIC_DATA", 19: "GROUP_DATA", 20: "TRANSPORT_PRIORITY",
                 21: "LIFESPAN", 22: "DURABILITY_SERVICE", 23: "PROPERTY", 24: "TYPE_CONSISTENCY_ENFORCEMENT",
                 25: "DATA_REPRESENTATION"}
+DELIVERIES_KEPT = 10_000  # per subscription: the newest samples' delivery delays
 MAX_DOMAIN_ID = 232  # ROS 2's largest domain id (RTPS port mapping with the default port parameters)
 INSTALL_HINT = 'the ROS 2 transport needs Eclipse Cyclone DDS: pip install "fgloc[ros2]"'
 
@@ -69,6 +73,9 @@ class EndpointHealth:
     other_generation: int = 0  # ros_discovery_info: peers of another ROS 2 generation (GID size)
     other_type: dict[str, int] = field(default_factory=dict)
     last_arrival: float = float("nan")
+    #: written (the sample's DDS source timestamp, the writer's clock) -> handed to the callback, ms: the
+    #: transport's own delay when both ends share a clock (the same machine)
+    delivery_ms: deque[float] = field(default_factory=lambda: deque(maxlen=DELIVERIES_KEPT))
     last_error: str = ""
     _missing: int = 0  # peers lost and not back yet
 
@@ -102,6 +109,10 @@ class EndpointHealth:
                                           "sample_lost", "callback_errors", "other_generation")}
         d["qos"] = f"{self.qos.reliability}/{self.qos.durability}/{self.qos.depth}"
         d["other_type"] = {ros_type(k): v for k, v in self.other_type.items()}
+        if self.delivery_ms:
+            a = np.fromiter(self.delivery_ms, dtype=float)
+            d["delivery_ms"] = {"p50": round(float(np.percentile(a, 50)), 3),
+                                "p99": round(float(np.percentile(a, 99)), 3)}
         return d
 
 
@@ -424,8 +435,9 @@ class CycloneTransport:
             if batch:
                 batch.sort(key=lambda b: (b[0], b[1]))
                 now = time.time()
-                for _, _, h, cb, data in batch:
+                for written, _, h, cb, data in batch:
                     h.last_arrival = now
+                    h.delivery_ms.append(now * 1e3 - written * 1e-6)
                     h.messages += 1
                     try:
                         cb(data, now)

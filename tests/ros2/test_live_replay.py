@@ -80,20 +80,31 @@ def _settle(peer, n_expected: int, timeout: float = 60.0, idle_s: float = 5.0) -
 
 
 class _Online:
-    """fgloc run's online.tum, looked up by stamp (within a microsecond: TUM files keep 9 decimals)."""
+    """fgloc run's online.tum, looked up by stamp: ``offset_s`` later (the replay moved the stamps onto the
+    wall clock), within ``tol_s`` (TUM files keep 9 decimals; a stamp since 1970 as float64, ~0.2 us)."""
 
-    def __init__(self, d: Path) -> None:
+    def __init__(self, d: Path, offset_s: float = 0.0, tol_s: float = 1e-6) -> None:
         from fgloc.io.tum import read_tum
 
         tr = read_tum(d / "run" / "online.tum")
         self.t, self.p = tr.stamps, tr.poses
+        self.offset_s, self.tol_s = offset_s, tol_s
 
     def __len__(self) -> int:
         return len(self.t)
 
     def get(self, t: float) -> np.ndarray | None:
-        k = int(np.searchsorted(self.t, t - 1e-6))
-        return self.p[k] if k < len(self.t) and abs(self.t[k] - t) <= 1e-6 else None
+        t = t - self.offset_s
+        k = int(np.searchsorted(self.t, t - self.tol_s))
+        return self.p[k] if k < len(self.t) and abs(self.t[k] - t) <= self.tol_s else None
+
+    def find_offset(self, stamps: list[float]) -> None:
+        """The one offset that puts the most of ``stamps`` on this file's (tried: from the first stamp)."""
+        first = min(stamps)
+        best = max((first - t for t in self.t[:100]),
+                   key=lambda o: sum(abs(self.t[min(int(np.searchsorted(self.t, s - o)), len(self.t) - 1)] - (s - o))
+                                     <= self.tol_s for s in stamps))
+        self.offset_s = float(best)
 
 
 def _odom_poses(d: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -117,10 +128,11 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     live = _live(dds_domain, d, "--map", str(d / "map.yaml"), "--initial-pose", "2.5", "3.0", "0.0",
                  "--record", str(rec))
     try:
-        rep = _replay(dds_domain, d / "log.mcap")
+        # stamped as a robot's drivers stamp (on the wall clock): nothing waits for the host clock to pass them
+        rep = _replay(dds_domain, d / "log.mcap", "--now")
         assert rep.returncode == 0, rep.stderr
         assert "/scan" in rep.stdout and "on domain" in rep.stdout
-        ref = _Online(d)
+        ref = _Online(d, tol_s=5e-6)
         _settle(peer, len(ref))
     finally:
         code, report, err = _stop(live)
@@ -133,6 +145,8 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     poses = peer.poses
     assert len(poses) >= 0.95 * len(ref), (len(poses), len(ref), err)
     assert {p[4] for p in poses} == {"map"}
+    ref.find_offset([p[0] for p in poses])
+    assert abs(ref.offset_s - time.time()) < 600  # the stamps were on the wall clock
     common = [(p, q) for p in poses if (q := ref.get(p[0])) is not None]
     assert len(common) >= 0.95 * len(ref)
     err_m = np.array([math.hypot(p[1] - q[0], p[2] - q[1]) for p, q in common])
@@ -145,8 +159,9 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     assert len(tfs) >= 0.95 * len(poses)
     ts, op = _odom_poses(d)
     tf_err = []
-    for s, _, _, x, y, th in tfs:
-        q = ref.get(s - 1.0)
+    for s_wall, _, _, x, y, th in tfs:
+        q = ref.get(s_wall - 1.0)
+        s = s_wall - ref.offset_s
         if q is None:
             continue
         # the log's odom -> base_link at the pose's stamp, interpolated between its odometry messages
@@ -162,6 +177,10 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     scan_ep = next(e for e in report["ros2"]["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub")
     assert scan_ep["messages"] == open_log(d / "log.mcap").summary()["topics"]["/scan"]["count"]
     assert scan_ep["undecodable"] == 0 and scan_ep["qos"] == "best_effort/volatile/100"
+    assert scan_ep["delivery_ms"]["p50"] >= 0.0  # written (the sample's source timestamp) -> received
+    # the latency from the scan and from the moment the odometry / IMU past its stamp were in as well
+    total, own = report["ros2"]["scan_to_tf_ms"], report["ros2"]["inputs_in_to_tf_ms"]
+    assert 0.0 <= own["p50"] <= total["p50"] and own["p99"] <= total["p99"]
     # /fgloc/status: a DiagnosticArray naming each topic and the pose
     assert peer.status, "no /fgloc/status"
     names = {s.name for s in peer.status[-1].status}

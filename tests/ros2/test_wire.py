@@ -166,6 +166,38 @@ def test_fgloc_bytes_are_xcdr1_le_and_read_by_cyclone(type_name: str) -> None:
         np.testing.assert_allclose(back.angular_velocity_radps, msg.angular_velocity_radps)
 
 
+@pytest.mark.parametrize("type_name", list(_samples()))
+def test_restamp_moves_every_header_stamp_and_nothing_else(type_name: str) -> None:
+    """``fgloc replay --now``: the header stamps (each transform's in a TFMessage, frame names of every
+    length) moved by an exact number of nanoseconds, as Cyclone's deserializer reads them; with the stamps
+    put back, Cyclone serializes the original bytes."""
+    pytest.importorskip("cyclonedds")
+    from fgloc.ros2 import codec
+    from fgloc.ros2.msgtypes import idl_class
+    from fgloc.types import Transform3D
+
+    msg = _samples()[type_name]
+    if type_name == "tf2_msgs/msg/TFMessage":  # three transforms: frame names of 4, 5 and 7 bytes with the NUL
+        msg = msg + [Transform3D("odom", "base", np.array([1.0, 2.0, 0.0]), 0.0, np.array([0.0, 0.0, 0.0, 1.0])),
+                     Transform3D("map", "odom_b", np.array([-3.0, 0.5, 0.0]), 0.0, np.array([0.0, 0.0, 0.6, 0.8]))]
+    data = codec.encode(msg, 12.25 if type_name == "tf2_msgs/msg/TFMessage" else None)[1]
+    shift = 1_765_000_000_987_654_321
+    moved = codec.restamp(type_name, data, lambda t: t + shift)
+    assert len(moved) == len(data) and moved != data
+    cls = idl_class(type_name)
+    a, b = cls.deserialize(data), cls.deserialize(moved)
+    headers = [(x.header, y.header) for x, y in zip(a.transforms, b.transforms, strict=True)] \
+        if type_name == "tf2_msgs/msg/TFMessage" else [(a.header, b.header)]
+    for h0, h1 in headers:
+        t0 = h0.stamp.sec * 1_000_000_000 + h0.stamp.nanosec
+        assert h1.stamp.sec * 1_000_000_000 + h1.stamp.nanosec == t0 + shift
+        h1.stamp = h0.stamp
+    assert b == a
+    assert codec.restamp(type_name, moved, lambda t: t - shift) == data
+    with pytest.raises(codec.Undecodable):
+        codec.restamp(type_name, data[:6], lambda t: t)
+
+
 def test_map_clock_and_status_round_trip_through_cyclone() -> None:
     pytest.importorskip("cyclonedds")
     from fgloc.maps import OccupancyMap

@@ -165,16 +165,29 @@ def domain_from_env(value: int | None = None) -> int:
     return int(value)
 
 
+#: DDS vendor ids whose XTypes type information Cyclone DDS is told to ignore (matching those endpoints by
+#: type name, as rmw_cyclonedds_cpp's endpoints, which carry none, are matched): eProsima Fast DDS (1.15),
+#: whose type objects this Cyclone cannot resolve ("invalid type object"), so that an endpoint of
+#: rmw_fastrtps would never match one of fgloc's
+IGNORE_TYPE_INFORMATION_OF = "1.15"
+
+
 def cyclone_config(interface: str | None) -> str | None:
-    """Cyclone DDS XML binding the participant to one network interface (a name such as ``eth0``
-    or ``lo``, or an address); None leaves Cyclone's choice (or ``$CYCLONEDDS_URI``)."""
+    """Cyclone DDS XML: the participant bound to one network interface (a name such as ``eth0`` or
+    ``lo``, or an address; None: Cyclone's choice), the type information of Fast DDS peers ignored
+    (:data:`IGNORE_TYPE_INFORMATION_OF`).  None when no interface is given and ``$CYCLONEDDS_URI`` is set
+    (the user's configuration, as it is)."""
+    compat = (f"<Compatibility><IgnoreTypeInformation>{IGNORE_TYPE_INFORMATION_OF}</IgnoreTypeInformation>"
+              "</Compatibility>")
     if not interface:
-        return None
+        if os.environ.get("CYCLONEDDS_URI"):
+            return None
+        return f'<CycloneDDS><Domain id="any">{compat}</Domain></CycloneDDS>'
     iface = interface.strip()
     looks_address = iface.replace(".", "").isdigit() or ":" in iface
     attr = f"address={quoteattr(iface)}" if looks_address else f"name={quoteattr(iface)}"
     return (f'<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface {attr}/>'
-            f"</Interfaces></General></Domain></CycloneDDS>")
+            f"</Interfaces></General>{compat}</Domain></CycloneDDS>")
 
 
 _DOMAINS: dict[int, tuple[str | None, Any]] = {}  # a process configures each domain id once

@@ -248,9 +248,16 @@ def test_domain_and_interface_options(monkeypatch: pytest.MonkeyPatch) -> None:
             domain_from_env(None)
     with pytest.raises(ConfigError, match="0..232"):
         domain_from_env(233)
-    assert cyclone_config(None) is None
-    assert '<NetworkInterface name="lo"/>' in (cyclone_config("lo") or "")
+    # Fast DDS' (vendor 1.15) type information is ignored: its endpoints match fgloc's by type name, as
+    # rmw_cyclonedds_cpp's (which send none) do; else Cyclone cannot resolve Fast DDS' type objects and never
+    # matches them (tools/interop_ros2.py against rclpy on rmw_fastrtps_cpp: 0 poses delivered before)
+    monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
+    ignore = "<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation></Compatibility>"
+    assert ignore in (cyclone_config(None) or "")
+    assert '<NetworkInterface name="lo"/>' in (cyclone_config("lo") or "") and ignore in (cyclone_config("lo") or "")
     assert '<NetworkInterface address="192.0.2.7"/>' in (cyclone_config("192.0.2.7") or "")
+    monkeypatch.setenv("CYCLONEDDS_URI", "file:///etc/cyclonedds.xml")
+    assert cyclone_config(None) is None  # the user's own configuration, as it is
 
 
 def test_cli_refusals_are_one_line(capsys: pytest.CaptureFixture[str], tmp_path) -> None:

@@ -6,7 +6,7 @@ scans 25 Hz of 541 beams) for ``--minutes`` of log; this process replays it
 through the STM32 emulator (fgloc's serial frames over a real TCP socket, pyserial's ``socket://``) and the
 SICK emulator (CoLa-A over real TCP) at ``--speed`` times real time, into ``fgloc live`` in its own process
 (the map, the start pose, a config with the robot's geometry and noise), and samples that process's RSS
-(psutil) as the replay goes.  At the end it stops `fgloc live` with SIGINT and prints
+(psutil) as the replay goes.  At the end it stops `fgloc live` with SIGTERM (a service manager's stop) and prints
 
 * the RSS after the first ``--settle`` minutes of log, at each quarter and at the end; the largest rise
   over the settled RSS (the issue's bound: within 20 MB); the slope of a line fitted after settling
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     time.sleep(1.0)
     if proc.poll() is None:
         samples.append(((time.time() - start) * a.speed / 60.0, time.time() - start, ps.memory_info().rss / 2**20))
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGTERM)  # SIGINT: a shell's background job ignores it
     out, err = proc.communicate(timeout=600)
     pair.stop()
     if proc.returncode not in (0, 130):
@@ -115,7 +115,10 @@ def main(argv: list[str] | None = None) -> int:
           f"({len(s)} samples)")
     print(f"scans sent {n_scans}, read {c.get('laser', {}).get('scans', 0)}, fused {c.get('scans_fused', 0)}, "
           f"skipped as a backlog {c.get('scans_skipped_backlog', 0)}; fixes {c.get('fixes', 0)}; "
-          f"latency p50 {report['latency_ms']['p50']:.1f} ms p99 {report['latency_ms']['p99']:.1f} ms")
+          f"latency p50 {report['latency_ms']['p50']:.1f} ms p99 {report['latency_ms']['p99']:.1f} ms; "
+          f"at most {c.get('queue_max', 0)} messages queued")
+    if c.get("queue_max", 0) > 500:  # 2 s of input at 4x
+        print("  fgloc live fell behind the replay (its queue holds messages): try a lower --speed")
     if len(settled) < 3:
         print(f"too short to judge: fewer than 3 samples after {a.settle:g} min of log")
         return 1

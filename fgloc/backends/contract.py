@@ -21,6 +21,7 @@ to :data:`fgloc.backends.REGISTRY` (its config section to :class:`fgloc.config.F
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from bisect import bisect_left
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
@@ -118,6 +119,9 @@ class Backend(ABC):
         self._online_t: list[float] = []
         self._online_p: list[FloatArray] = []
         self._online_c: list[FloatArray] = []
+        #: the run-long records (the online trajectory, a smoother's smoothed keyframes) kept this many
+        #: seconds back; None: the whole run (the outputs of a run)
+        self.history_s: float | None = None
 
     # ------------------------------------------------------------------ every back-end
     @classmethod
@@ -296,4 +300,8 @@ class Backend(ABC):
         self._online_t.append(float(t))
         self._online_p.append(np.asarray(pose, dtype=float).copy())
         self._online_c.append(np.asarray(cov, dtype=float).copy())
+        h = self.history_s
+        if h is not None and t - self._online_t[0] > 2.0 * h:  # amortized: cut once twice the history is held
+            k = bisect_left(self._online_t, t - h)
+            del self._online_t[:k], self._online_p[:k], self._online_c[:k]
 

@@ -167,7 +167,8 @@ class LiveRunner:
         self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)  # the percentiles' window
         self.trajectory = TrajectoryBuffer(trajectory_window_s)  # the live trajectory (-o)
         self.counters: dict[str, int] = {"scans_fused": 0, "scans_skipped_backlog": 0, "fixes": 0,
-                                         "record_errors": 0, "localizer_errors": 0}
+                                         "record_errors": 0, "localizer_errors": 0,
+                                         "queue_max": 0}  # the most messages seen waiting (a host too slow)
         self.sources: dict[str, Callable[[], dict[str, Any]]] = {}  # name -> counters getter
         self._pending_scans = 0
         self._lock = threading.Lock()
@@ -378,6 +379,7 @@ class LiveRunner:
         """Process queued messages (up to ~50 ms worth); returns False if nothing came."""
         got = False
         t_end = time.monotonic() + 0.05
+        self.counters["queue_max"] = max(self.counters["queue_max"], self.q.qsize())
         while True:
             try:
                 kind, msg, arrival = self.q.get(timeout=timeout if not got else 0.0)

@@ -112,6 +112,7 @@ class Localizer:
         }
         self.no_fix_reasons: dict[str, int] = {}
         self.fixes: list[PoseFix] = []
+        self.history_s: float | None = None  # keep_history()
         self.last_reason = ""
         self.odom = OdometryTracker(self.pcfg)
         # a slow odometry's stamps on the scans' clock (clock.py: its offset estimated from the fixes), for
@@ -310,7 +311,7 @@ class Localizer:
                     res_why = (f"re-acquiring the map after dead reckoning: a place {best_q:.2f} explains the "
                                "scan better than the tracked one")
         if fix is not None:
-            self.fixes.append(fix)
+            self._keep_fix(fix)
             self.stats["fixes"] += 1
         else:
             self.stats["no_fix"] += 1
@@ -455,7 +456,7 @@ class Localizer:
             self.frontend.reset(pose)
 
     def _accept(self, fix: PoseFix) -> PoseFix:
-        self.fixes.append(fix)
+        self._keep_fix(fix)
         self.stats["fixes"] += 1
         return fix
 
@@ -577,6 +578,19 @@ class Localizer:
             self.stats["lost_s"] = self.lost_time_s()
             self.stats["ended_lost"] = bool(self._lost)
         return tr
+
+    def keep_history(self, seconds: float | None) -> None:
+        """Keep the run-long records (the accepted fixes, the back-end's online trajectory and smoothed
+        keyframes) only ``seconds`` back; None: the whole run.  A live session that writes none of them
+        runs for days in bounded memory (:meth:`finish` then smooths the last ``seconds``)."""
+        self.history_s = seconds
+        self.backend.history_s = seconds
+
+    def _keep_fix(self, fix: PoseFix) -> None:
+        self.fixes.append(fix)
+        h = self.history_s
+        if h is not None and fix.stamp - self.fixes[0].stamp > 2.0 * h:  # amortized: once twice the history
+            self.fixes = [f for f in self.fixes if f.stamp >= fix.stamp - h]
 
     def fixes_trajectory(self) -> Trajectory:
         """The front-end's fixes as a trajectory (map frame)."""

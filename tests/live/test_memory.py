@@ -52,3 +52,33 @@ def test_runner_latencies_and_events_are_bounded(monkeypatch):
     assert len(r.latencies_ms) == 100 and len(r.events) == 10
     assert r.latency_percentiles()[0] == np.percentile(np.arange(900, 1000), 50)
     assert r.events[-1].kind == "silent" and r.events[0].t > 10.0 * 990
+
+
+def test_a_bounded_history_keeps_the_last_seconds_and_changes_no_estimate():
+    """The localizer's run-long records (fixes, the back-end's online trajectory, the smoother's smoothed
+    keyframes and keyframe index) cut to ``keep_history(h)``: at most about 2 h of them held, and every
+    pose the same as with the whole history."""
+    from fgloc.testing.soak import feed_live, lap_world
+
+    w = lap_world()
+    runs = {}
+    for h in (None, 2.0):
+        session = build_session(w.map, w.mount, backend="smoother", frontend="native", initial_pose=w.pose(0.0))
+        session.loc.keep_history(h)
+        r = LiveRunner(session, trajectory_window_s=h)
+        feed_live(r, w.messages(12.0))
+        runs[h] = (session.loc, r, session.loc.online_trajectory(), session.loc.finish())
+    loc_all, r_all, online_all, final_all = runs[None]
+    loc, r, online, final = runs[2.0]
+    be = loc.backend
+    t_end = float(online_all.stamps[-1])
+    for name, stamps in (("fixes", [f.stamp for f in loc.fixes]), ("online", online.stamps),
+                         ("smoothed", [v[0] for v in be.smoothed.values()]), ("keyframes", be.kf_t)):
+        assert 2.0 - 0.5 <= t_end - min(stamps) <= 2 * 2.0 + 0.5, name  # the last 2-4 s, not 12
+    assert len(loc_all.fixes) > 2 * len(loc.fixes) and len(online_all) > 2 * len(online)
+    # the same estimates where both have them
+    k = np.searchsorted(online_all.stamps, online.stamps)
+    assert np.array_equal(online_all.stamps[k], online.stamps) and np.array_equal(online_all.poses[k], online.poses)
+    k = np.searchsorted(final_all.stamps, final.stamps)
+    assert np.array_equal(final_all.stamps[k], final.stamps) and np.allclose(final_all.poses[k], final.poses, atol=1e-9)
+    assert r.trajectory.total == r_all.trajectory.total == r.counters["scans_fused"] == 300

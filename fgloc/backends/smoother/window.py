@@ -158,6 +158,22 @@ class FixedLagWindow(Calibration):
                 if kk in self.kf_pose:
                     self.smoothed[kk] = (tk, self.kf_pose[kk].copy())
             self.kf_pose.pop(kk, None)
+        h = self.history_s
+        if h is not None and self.kf_t and t_new - self.kf_t[0] > 2.0 * h:
+            self._forget_before(t_new - h)
+
+    def _forget_before(self, t: float) -> None:
+        """Drop what a bounded history (``history_s``) no longer keeps: the smoothed keyframes, the
+        keyframe times and keys, the between-factor indices from before ``t`` (never the window's)."""
+        if self.window:
+            t = min(t, self.window[0][0])
+        k = bisect_right(self.kf_t, t) - 1  # keep the keyframe before t: an interval needs both ends
+        if k <= 0:
+            return
+        gone = set(self.kf_key[:k])
+        del self.kf_t[:k], self.kf_key[:k]
+        self.smoothed = {kk: v for kk, v in self.smoothed.items() if v[0] >= t}
+        self.between_idx = {pair: i for pair, i in self.between_idx.items() if pair[0] not in gone}
 
     def _remove_registered(self, isam_index: int) -> None:
         """Hook for the batch smoother."""

@@ -156,7 +156,8 @@ class LaserScan:
 class PoseFix:
     """A pose with covariance (``geometry_msgs/PoseWithCovarianceStamped``) in ``frame_id``.
 
-    ``cov`` is 3x3 over ``[x, y, yaw]``.  ``quality`` is a front-end score in [0, 1].
+    ``cov`` is 3x3 over ``[x, y, yaw]``.  ``quality`` is a front-end score in [0, 1].  ``status``:
+    a fused pose's (``ok``, ``degraded``, ``suspect``, ``lost``; :mod:`fgloc.localization.monitor`).
     """
 
     stamp: float
@@ -165,6 +166,7 @@ class PoseFix:
     quality: float = 1.0
     source: str = ""
     frame_id: str = "map"
+    status: str = ""
 
 
 @dataclass

@@ -23,6 +23,7 @@ from fgloc.errors import ConfigError, read_user_text
 from fgloc.frontends.factory import FrontendsConfig
 from fgloc.live.config import HealthConfig, LaserConfig, RobotParams, SerialConfig
 from fgloc.localization.config import PipelineConfig
+from fgloc.localization.monitor import IntegrityConfig
 from fgloc.localization.sources import SourcesConfig, parse_sources
 from fgloc.ros2.config import Ros2Config
 
@@ -34,6 +35,8 @@ class FglocConfig:
     pipeline: PipelineConfig = section(PipelineConfig, "the localizer: tracking, relocalization, odometry handling")
     sources: SourcesConfig = section(SourcesConfig, "per-source inputs, robot_localization style (odometry, IMU, "
                                      "pose topics and what each contributes)")
+    integrity: IntegrityConfig = section(IntegrityConfig, "no jumps and a status for every pose: the jump gate and "
+                                         "the consistency monitor")
     frontends: FrontendsConfig = section(FrontendsConfig, "scan-to-map front-ends (--frontend picks one)")
     ekf: EKFConfig = section(EKFConfig, "the paper's EKF back-end (--backend ekf), state [x, y, theta, v, w]")
     smoother: SmootherConfig = section(SmootherConfig, "the fixed-lag iSAM2 smoother (--backend smoother, the "

@@ -5,7 +5,7 @@ Every datagram is one UTF-8 JSON object terminated by ``\\n`` (schema in
 
     {"type": "pose", "seq": 12, "stamp": 1732233600.123, "frame_id": "map",
      "x": 1.23, "y": -0.5, "yaw": 0.01, "cov": [9 floats, row-major x,y,yaw],
-     "quality": 0.93, "source": "ekf", "latency_ms": 2.1}
+     "quality": 0.93, "source": "ekf", "latency_ms": 2.1, "status": "ok"}
     {"type": "status", "stamp": ..., "health": {"laser": "ok", ...}, "counters": {...}}
 """
 
@@ -123,6 +123,7 @@ class UdpPublisher:
                 "quality": float(fix.quality),
                 "source": fix.source,
                 "latency_ms": latency_ms,
+                "status": fix.status or None,
             }
         )
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -43,6 +44,8 @@ from fgloc.geometry import between1, compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
 from fgloc.localization.coverage import unmapped_share
+from fgloc.localization.gate import GateVerdict, JumpGate
+from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning
 from fgloc.localization.odometry import OdometryTracker
 from fgloc.localization.relocalization import Relocalizer, close
 from fgloc.maps import OccupancyMap
@@ -57,6 +60,11 @@ COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset fil
 #: wall) is one the map cannot judge: no fix there is not counted towards being lost (coverage.py)
 UNMAPPED_SHARE = 0.5
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
+#: the map does not fit the log: lost at least this share of the run, and fixes accepted on fewer than
+#: this share of the scans matched (a right map with a wrong start relocalizes and tracks; a building
+#: the map lacks is dead-reckoned, not lost)
+MISMATCH_LOST_SHARE = 0.5
+MISMATCH_MATCHED_SHARE = 0.1
 
 
 def reason_kind(reason: str) -> str:
@@ -122,6 +130,26 @@ class Localizer:
         self.reloc: Relocalizer | None = None
         if self.frontend is not None and occ_map is not None:
             self.reloc = Relocalizer(self.pcfg, occ_map, laser_mount, self.frontend, self.backend, self.stats)
+        # no jumps (gate.py) and a status for every pose (monitor.py)
+        self.icfg = config.integrity
+        self.monitor = ConsistencyMonitor(self.icfg)
+        self.gate = JumpGate(self.icfg, occ_map, laser_mount) if occ_map is not None and self.icfg.gate else None
+        self.last_gate: GateVerdict | None = None  # the gate's verdict on the last scan's fix (None: not judged)
+        self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
+        self._t_used: float | None = None  # stamp of the last fix the back-end accepted
+        self._t_held_since: float | None = None  # first fix of the current run of held / rejected ones
+        self._converged = False  # the pose was started from a fix, or a fix was accepted since
+        # odom frame: the fused path against odometry + IMU dead reckoning (a diverging configuration)
+        self.dead_reckoning = DeadReckoning() if self.odom_mode else None
+        self._divergence: tuple[float, float, float] | None = None  # (m, m driven, limit m) when over the limit
+        self._worst_divergence: tuple[float, float, float, float, float] | None = None  # ratio, m, driven, limit, t
+        self._divergence_t = -math.inf
+        self._ever_converged = False
+        self.stats["held_jumps"] = 0
+        self.stats["confirmed_jumps"] = 0
+        #: called with the stamp of each pose added without a scan (a silent laser, a log without scans):
+        #: the session tells its sinks (Session sets it)
+        self.pose_listener: Callable[[float], None] | None = None
         self._last_stamp: dict[str, float] = {}
         self._odom_at_last_scan: FloatArray | None = None
         self._last_matched_t: float | None = None
@@ -129,6 +157,7 @@ class Localizer:
         self._global_tries = 0
         self._last_compass: tuple[float, float] | None = None
         self._last_kf_t = -math.inf
+        self._last_dr_t = -math.inf
         self._scan_count = 0
         self._lost = initial_pose is None and not self.odom_mode
         self._reinit: FloatArray | None = None  # reinitialize(): the prior of the pose to start again from
@@ -142,6 +171,7 @@ class Localizer:
         # dead-reckon through space the map does not have (a wrong map or initial pose is lost)
         self._pose_confirmed = False
         self._last_scan_t: float | None = None
+        self._first_scan_t: float | None = None
         self.stats["lost_events"] = 0
         if self._lost and self.frontend is not None and self.frontend.supports_global:
             self.frontend.reset(None)
@@ -207,8 +237,12 @@ class Localizer:
                 self.stats["odometry_burst_velocities"] = self.stats.get("odometry_burst_velocities", 0) + 1
         if vm is not None:
             self.backend.add_odometry(t, tw, cov)
+        if self.dead_reckoning is not None:
+            self.dead_reckoning.odometry(t, tw)
         if self.odom_mode:
             self._odom_mode_step(t, scan=False)
+        else:
+            self._dead_reckon(t)
 
     def on_compass(self, msg: CompassHeading) -> None:
         t = float(msg.stamp)
@@ -222,6 +256,8 @@ class Localizer:
         self.stats["compass"] += 1
         if yaw is not None:
             self._last_compass = (t, float(yaw))
+            if self.dead_reckoning is not None:
+                self.dead_reckoning.compass(t, float(yaw))
             if self.reloc is not None:
                 self.reloc.last_compass = self._last_compass
         self.backend.add_compass(t, yaw, float(msg.yaw_var), rate, float(msg.yaw_rate_var))
@@ -230,11 +266,19 @@ class Localizer:
         """Track one scan; the front-end's fix, or None (:attr:`last_reason` says why)."""
         t = float(msg.stamp)
         self.last_reason = ""
+        self.last_gate = None
         if not self._monotonic("scan", t):
             self.last_reason = "scan skipped (bad or repeated stamp)"
             return None
+        fix = self._on_scan(msg, t)
+        self._record_status(t)
+        return fix
+
+    def _on_scan(self, msg: LaserScan, t: float) -> PoseFix | None:
         self.stats["scans"] += 1
         self._last_scan_t = t
+        if self._first_scan_t is None:
+            self._first_scan_t = t
         if self.backend.initialized and Capability.MEASURES_VELOCITY not in self.backend.capabilities:
             # after a burst of odometry stamps a back-end that integrates the increments (the smoother)
             # is handed the plausible velocity up to this scan: its prediction here, its gate on this
@@ -322,16 +366,44 @@ class Localizer:
                                     f"dead reckoning ({res.why})")
             kind = reason_kind(self.last_reason)
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
-        used = self.backend.add_keyframe(t, fix)
-        if used and fix is not None and self.clock is not None:
-            self.clock.add_fix(t, float(fix.pose[2]))
-        if fix is not None and not used:
+        held = False
+        if fix is not None and self.gate is not None:
+            verdict = self._gate(t, fix, msg)
+            if not verdict.take:
+                held = True
+                self.stats["held_jumps"] += 1
+                self.last_reason = verdict.why
+            elif verdict.confirmed:
+                self.stats["confirmed_jumps"] += 1
+        kf_fix = None if held else fix
+        used = self.backend.add_keyframe(t, kf_fix)
+        if used and kf_fix is not None and self.clock is not None:
+            self.clock.add_fix(t, float(kf_fix.pose[2]))
+        if kf_fix is not None and not used:
             self.stats["rejected"] += 1
             self.last_reason = "fix rejected by the back-end"
+        if self.gate is not None and used:
+            self.gate.accepted()  # (a fix the gate held leaves no previous one to follow: gate.py)
+        if used:
+            self._t_used = t
+            self._converged = True
+            self._ever_converged = True
+            self._t_held_since = None
+            self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
+            if self.last_gate is not None:
+                self.monitor.add_nis(self.last_gate.d2)
+        elif fix is None:
+            self._t_held_since = None
+        elif self._t_held_since is None:
+            self._t_held_since = t  # the map points elsewhere than the back-end goes
         # a scan with too few returns (blackout, blocked laser) says nothing about being lost;
         # neither does a particle filter skipping an update (its motion thresholds) or
         # converging again after its own recovery: it counts only when the back-end rejects its fix
-        if fe.is_particle_filter:
+        # nor does a fix the jump gate held back: the map explains the scan about as well at the
+        # odometry's pose (gate.py)
+        if held:
+            informative = False
+        elif fe.is_particle_filter:
             informative = fix is not None
         else:
             informative = fix is not None or (int(np.count_nonzero(msg.valid_mask())) >= 30 and not unmapped)
@@ -366,6 +438,83 @@ class Localizer:
                         self._lost_since = self._t_bad_since
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
+
+    def _gate(self, t: float, fix: PoseFix, msg: LaserScan) -> GateVerdict:
+        """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py)."""
+        assert self.gate is not None
+        if t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t:
+            # a smoother's marginal is computed on demand: without one the gate would judge against the
+            # start prior the whole run
+            self.backend.current(covariance=True)
+            self._cov_t = t
+        pred, pred_cov = self.backend.predict(t)
+        verdict = self.gate.check(fix, pred, pred_cov, msg, self.odom.pose_at(t), t, self.backend.motion_correction)
+        self.last_gate = verdict
+        return verdict
+
+    def _first_convergence(self, t: float, pose: FloatArray) -> None:
+        """The map confirmed a pose for the first time at ``t``: if it is not where ``--initial-pose`` said
+        (beyond 3 sigma of its prior), that start did not fit the map, and every pose before is lost."""
+        p0 = self.initial_pose
+        if p0 is None:
+            return
+        d = float(np.hypot(pose[0] - p0[0], pose[1] - p0[1]))
+        a = abs(math.degrees(float(np.angle(np.exp(1j * (pose[2] - p0[2]))))))
+        if d <= 3 * self.pcfg.initial_sigma_xy_m and a <= 3 * self.pcfg.initial_sigma_yaw_deg:
+            return
+        self.monitor.amend(-math.inf, t, LOST, "lost: the initial pose does not fit the map")
+        n = sum(1 for x in self.monitor.t if x < t)
+        self.monitor.verdict(
+            "initial_pose", f"the initial pose ({p0[0]:.2f} m, {p0[1]:.2f} m, {math.degrees(p0[2]):.0f} deg) does "
+            f"not fit the map: the scans matched {d:.2f} m / {a:.0f} deg from it, at t = {t:.1f} s "
+            f"({n} pose(s) before are marked lost)", False)
+
+    def _check_divergence(self, t: float) -> None:
+        """Odom frame, at most once a second: how far the fused pose is from dead reckoning."""
+        dr = self.dead_reckoning
+        if dr is None or t - self._divergence_t < 1.0:
+            return
+        self._divergence_t = t
+        cur = self.backend.current(covariance=False)
+        d = None if cur is None else dr.divergence(cur[1])
+        if d is None:
+            return
+        limit = max(self.icfg.divergence_min_m, self.icfg.divergence_share * dr.distance_m)
+        self._divergence = (d, dr.distance_m, limit) if d > limit else None
+        if d > limit and (self._worst_divergence is None or d / limit > self._worst_divergence[0]):
+            self._worst_divergence = (d / limit, d, dr.distance_m, limit, t)
+
+    def _record_status(self, t: float) -> None:
+        """The status of the pose at scan stamp ``t`` (monitor.py)."""
+        status, why = self.pose_status(t)
+        self.monitor.record(t, status, why)
+
+    def pose_status(self, t: float) -> tuple[str, str]:
+        """``(status, why)`` of the pose now (``t``: the newest stamp), see :mod:`fgloc.localization.monitor`."""
+        if self.odom_mode:
+            if not self.backend.initialized:
+                return LOST, "no pose yet"
+            self._check_divergence(t)
+            if self._divergence is not None:
+                d, dist, limit = self._divergence
+                return SUSPECT, f"{d:.1f} m from odometry + IMU dead reckoning after {dist:.0f} m driven"
+            return OK, ""
+        silent = self._last_scan_t is not None and t - self._last_scan_t >= self.icfg.laser_silent_after_s
+        if not self.backend.initialized:
+            return LOST, "no pose yet: searching the map"
+        if self._lost:
+            return LOST, "lost: searching the map"
+        if not self._converged:
+            return LOST, "not converged: the start pose is not confirmed by the map yet"
+        since = t - (self._t_used if self._t_used is not None else t)
+        if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
+            return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
+        if silent:
+            assert self._last_scan_t is not None
+            return DEGRADED, f"dead reckoning: no scan for {t - self._last_scan_t:.1f} s"
+        if since >= self.icfg.degraded_after_s:
+            return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
+        return OK, ""
 
     def guess(self, t: float) -> FloatArray:
         """The pose guess for the front-end at scan stamp ``t``: the back-end's prediction.
@@ -436,10 +585,23 @@ class Localizer:
         if self._lost_since is None:
             self._lost_since = self._t_bad_since if self._t_bad_since is not None else t
 
-    def _start(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+    def _start(self, t: float, pose: FloatArray, cov: FloatArray, converged: bool = True) -> None:
+        """(Re)start the back-end at ``pose``; ``converged``: a fix (or a confirmed relocalization) put it
+        there, not a start pose the map has not confirmed."""
+        self._converged = converged
+        if converged:
+            self._t_used = t
+            if not self._ever_converged:
+                self._first_convergence(t, np.asarray(pose, dtype=float))
+            self._ever_converged = True
         if self._lost_since is not None:
             self._lost_total_s += max(0.0, t - self._lost_since)
+            # the poses since the localizer went wrong were not where they said
+            self.monitor.amend(self._lost_since, t, LOST, "lost: the pose was wrong until a relocalization")
             self._lost_since = None
+        self._t_held_since = None
+        if self.gate is not None:
+            self.gate.reset()
         self._t_bad_since = None
         self._dead_reckoned_since = None
         self._reacquiring = False
@@ -458,6 +620,7 @@ class Localizer:
     def _accept(self, fix: PoseFix) -> PoseFix:
         self._keep_fix(fix)
         self.stats["fixes"] += 1
+        self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
         return fix
 
     def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
@@ -472,7 +635,7 @@ class Localizer:
                 self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)
                 return fix
             self.last_reason = f"initial pose: {res.why}"
-            self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit)
+            self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit, converged=False)
             return None
         self._global_tries += 1
         if fe.supports_global:
@@ -523,10 +686,41 @@ class Localizer:
             self.backend.set_compass_offset(0.0)
             self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
             self._last_kf_t = t
+            if self.dead_reckoning is not None:
+                self.dead_reckoning.start(t, np.array([0.0, 0.0, yaw]))
+            self._record_status(t)
             return
         if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= self.pcfg.odom_keyframe_interval_s):
             self.backend.add_keyframe(t, None)
             self._last_kf_t = t
+            if not scan:  # a wheels + IMU log: its poses told to the sinks too
+                self._pose_added(t)
+        else:
+            self._dead_reckon(t)
+
+    def _laser_silent(self, t: float) -> bool:
+        """No scan yet, or none for ``integrity.laser_silent_after_s``."""
+        last = self._last_scan_t
+        return last is None or t - last >= self.icfg.laser_silent_after_s
+
+    def _dead_reckon(self, t: float) -> None:
+        """Odometry at ``t``: while the laser is silent, a dead-reckoned pose every
+        ``integrity.dead_reckoning_period_s``: the back-end's prediction (its covariance grows with the
+        odometry's), in the online trajectory and told to the sinks; the back-end's graph is left as it is."""
+        if not self.backend.initialized or self._last_scan_t is None or not self._laser_silent(t):
+            return
+        if t - self._last_dr_t < self.icfg.dead_reckoning_period_s:
+            return
+        self.backend.record_prediction(t)
+        self._last_dr_t = t
+        self.stats["dead_reckoned_poses"] = self.stats.get("dead_reckoned_poses", 0) + 1
+        self._pose_added(t)
+
+    def _pose_added(self, t: float) -> None:
+        """A pose without a scan at ``t``: its status, and :attr:`pose_listener` (the session's sinks)."""
+        self._record_status(t)
+        if self.pose_listener is not None:
+            self.pose_listener(t)
 
     # ------------------------------------------------------------------ outputs
     @property
@@ -556,7 +750,8 @@ class Localizer:
         if newest > t:
             pose, cov = self.backend.predict(newest)
             t = newest
-        return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map")
+        return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map",
+                       status=self.monitor.current[0])
 
     def online_trajectory(self) -> Trajectory:
         """Fused pose at each scan (keyframe) time, as known online."""
@@ -577,6 +772,8 @@ class Localizer:
         if not self.odom_mode:
             self.stats["lost_s"] = self.lost_time_s()
             self.stats["ended_lost"] = bool(self._lost)
+        self._assess()
+        self.stats["status"] = self.monitor.summary(tr.stamps)
         return tr
 
     def keep_history(self, seconds: float | None) -> None:
@@ -585,12 +782,45 @@ class Localizer:
         runs for days in bounded memory (:meth:`finish` then smooths the last ``seconds``)."""
         self.history_s = seconds
         self.backend.history_s = seconds
+        self.monitor.history_s = seconds
 
     def _keep_fix(self, fix: PoseFix) -> None:
         self.fixes.append(fix)
         h = self.history_s
         if h is not None and fix.stamp - self.fixes[0].stamp > 2.0 * h:  # amortized: once twice the history
             self.fixes = [f for f in self.fixes if f.stamp >= fix.stamp - h]
+
+    def _assess(self) -> None:
+        """The run-level verdicts (monitor.py): no scan ever matched the map; in the odom frame, a
+        fused path that ends far from dead reckoning."""
+        if self.odom_mode:
+            self._divergence_t = -math.inf
+            if self._last_kf_t > -math.inf:
+                self._check_divergence(self._last_kf_t)
+            if self._worst_divergence is not None:
+                _, d, dist, limit, t = self._worst_divergence
+                self.monitor.verdict(
+                    "diverging", f"the fusion diverged from odometry + IMU dead reckoning: {d:.1f} m apart at "
+                    f"t = {t:.1f} s after {dist:.0f} m driven (more than {limit:.1f} m, integrity.divergence_share); "
+                    "check the sources' configuration (each source's mount and components)", True)
+            return
+        used = int(self.stats.get("fixes_used", 0))
+        scans = int(self.stats["scans"])
+        if used == 0 and scans > 0:
+            found = f"0 of {self.stats['fixes']} fixes accepted" if self.stats["fixes"] else "no fix"
+            self.monitor.verdict(
+                "no_fix", f"no scan matched the map: {found} in {scans} scans, every pose is dead reckoning (does "
+                "this map fit this log? is the laser's mount right?)", True)
+            return
+        span = (self._last_scan_t - self._first_scan_t) if self._first_scan_t is not None and \
+            self._last_scan_t is not None else 0.0
+        lost_share = self.lost_time_s() / span if span > 0 else 0.0
+        matched = max(scans / self.pcfg.frontend_every, 1.0)
+        if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
+                f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "
+                f"{100 * lost_share:.0f} % of the run (is it the map of this building, its right version?)", True)
 
     def fixes_trajectory(self) -> Trajectory:
         """The front-end's fixes as a trajectory (map frame)."""

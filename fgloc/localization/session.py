@@ -21,7 +21,11 @@ The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what y
 ``on_scan(stamp, scan, fix_or_reason, fused)``
     after each scan was localized: ``fix_or_reason`` is the front-end's
     :class:`~fgloc.types.PoseFix`, or a ``str`` saying why there is none; ``fused`` is the
-    localizer's fused pose (``PoseFix`` in ``map`` / ``odom``) or None before start-up;
+    localizer's fused pose (``PoseFix`` in ``map`` / ``odom``, with its ``status``) or None
+    before start-up;
+``on_pose(stamp, fused)``
+    a fused pose the localizer added without a scan: dead reckoning while the laser is silent,
+    the poses of a log without scans (optional: a sink without it is not called);
 ``close()``
     once, at the end (:meth:`Session.finish`).
 
@@ -79,6 +83,9 @@ class BaseSink:
 
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
         pass
+
+    def on_pose(self, stamp: float, fused: PoseFix) -> None:
+        """A fused pose without a scan (dead reckoning while the laser is silent; a log without scans)."""
 
     def close(self) -> None:
         pass
@@ -138,6 +145,7 @@ class Session:
         self.routes = Routes(table)
         #: kind -> handler: the scans, each source, the dispatch kinds (odom, imu) and tf
         self.handlers: dict[str, Callable[[object], None]] = self.sources.kinds()
+        localizer.pose_listener = self._pose_added
 
     def add_sink(self, sink: Sink) -> None:
         self.sinks.append(sink)
@@ -215,6 +223,25 @@ class Session:
                 self.sink_errors += 1
 
 
+    def _pose_added(self, stamp: float) -> None:
+        """A pose without a scan (a silent laser, a log without scans): the sinks' ``on_pose``."""
+        if not self.sinks:
+            return
+        if self._known != self.sinks:
+            self._refresh()
+        fused = self._fused(stamp) if self._wants_fused else None
+        if fused is None:
+            return
+        self.last_fused = fused
+        for s in self.sinks:
+            on_pose = getattr(s, "on_pose", None)
+            if on_pose is None:
+                continue
+            try:
+                on_pose(stamp, fused)
+            except Exception:  # noqa: BLE001
+                self.sink_errors += 1
+
     def _fused(self, stamp: float) -> PoseFix | None:
         """The fused pose; its covariance a fresh marginal only every ``covariance_period_s``."""
         last = self._cov_stamp
@@ -284,6 +311,9 @@ class RecorderSink(BaseSink):
             except self.tolerate:
                 self.errors += 1
 
+    def on_pose(self, stamp: float, fused: PoseFix) -> None:
+        self.on_scan(stamp, None, "", fused)  # type: ignore[arg-type]  # the scan is not read
+
     def close(self) -> None:
         if self.close_writer:
             if hasattr(self.writer, "__exit__"):
@@ -324,6 +354,9 @@ class UdpSink(BaseSink):
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
         if fused is not None:
             self.publisher.pose(fused, self.latency_ms())
+
+    def on_pose(self, stamp: float, fused: PoseFix) -> None:
+        self.publisher.pose(fused, float("nan"))
 
     def close(self) -> None:
         if self.close_publisher:

@@ -1,0 +1,268 @@
+"""No jumps: a fix that moves the robot further than odometry and covariance allow is held back.
+
+A fix is taken when it agrees with what the odometry says since the last accepted fix, either way:
+
+* with the back-end's prediction at the scan stamp (the fused pose carried on by the odometry,
+  with its covariance): ``d2 = e^T (P_pred + R_fix)^-1 e`` of the position within
+  ``integrity.gate_chi2``; or
+* with the previous fix, when the back-end took it and it was sure of its position (its position
+  sigma, in every direction, within twice the prediction's and the allowance below for the motion
+  since the fix before), carried on by the odometry's motion since
+  (:meth:`Backend.motion_correction`: a gyro's turn where it covers it), with an allowance for an
+  odometry that slips or scrubs beyond what it reports: ``integrity.odometry_slip`` times the
+  distance and the turn it reported in between (the odometry motion model of AMCL and most particle
+  filters).  A back-end whose online estimate lags the fixes (a smoother outvoted by odometry that
+  slips 30 %) does not make the fixes that follow each other as the wheels roughly say look like
+  jumps.
+
+A fix that agrees with neither is a jump the odometry does not explain.  It is taken only on
+evidence the matcher did not produce itself: the scan's agreement with the map
+(:func:`scan_agreement`, the mean Gaussian likelihood of its beam endpoints on the map's distance
+field) must be clearly better at the fix than anywhere near the prediction
+(``integrity.confirm_agreement``; the best of a few poses within 3 sigma of the prediction's
+covariance, :func:`neighbourhood`): the map itself says the odometry is wrong.  Otherwise the fix is
+held back (the back-end dead-reckons), and the next fix has no previous one to follow: it must
+agree with the prediction, or the map must confirm it.
+
+So a run of consistent wrong fixes does not pull the trajectory: in a world that changed since its
+map (a row of shelves along a mapped wall, seen 0.3 m closer) the matcher lands on the same wrong
+place scan after scan; the first of them jumps 0.3 m from the fix before it while the wheels moved
+6 cm, and each following one is 0.3 m from the prediction, which the held fixes do not move, while
+the map explains the scan about as well near the prediction as at the fix.  A kidnapping beyond the
+front-end's window leaves no fix to judge (the relocalizer handles it).
+
+Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of
+:func:`scan_agreement`) to the covariances: a jump smaller than the map can tell apart is no jump
+(an odometry whose stamps come in bursts, as in the Radish logs, is often a few centimetres off
+between two scans while its covariance claims millimetres). The gate judges positions: a heading
+the fixes correct (an odometry that turned a few degrees wrong, as real wheels do in every turn) is
+left to the back-end's own weighting.
+
+One gate for every back-end: the localizer applies it before :meth:`Backend.add_keyframe`.
+Core maths only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fgloc.geometry import between1, compose1, wrap_scalar
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, PoseFix, StaticTransform
+
+if TYPE_CHECKING:
+    from fgloc.localization.monitor import IntegrityConfig
+
+FloatArray = np.ndarray
+
+#: beams whose endpoint the map's distance field does not cover (off the grid) count as this far (m)
+OFF_GRID_M = 10.0
+#: the prediction's agreement is the best within this many sigmas of its covariance (neighbourhood())
+NEIGHBOURHOOD_SIGMAS = 3.0
+#: a fix whose position sigma is within this many of the prediction's (and the slip allowance) is sure
+#: enough for the next fix to follow it
+SURE_SIGMAS = 2.0
+
+
+def scan_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: FloatArray,
+                   sigma_m: float, points: FloatArray | None = None) -> float:
+    """How well ``scan`` agrees with the map at ``base_link`` pose ``pose``: the mean over its valid
+    beams of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance from the beam's endpoint to the nearest
+    occupied cell (bilinear on the map's distance field).  1: every endpoint on a mapped wall; 0: none
+    near one.  NaN for a scan without valid beams.  ``points``: the scan's endpoints in the laser
+    frame when the caller has them (``scan.points()``)."""
+    return float(agreements(occ_map, laser_mount, scan, np.asarray(pose, dtype=float).reshape(1, 3), sigma_m,
+                            points)[0])
+
+
+def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, poses: FloatArray,
+               sigma_m: float, points: FloatArray | None = None) -> FloatArray:
+    """:func:`scan_agreement` at each of ``poses`` ``(K, 3)``."""
+    pts = scan.points() if points is None else points
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    if len(pts) == 0:
+        return np.full(len(poses), np.nan)
+    m = np.asarray(laser_mount.pose, dtype=float)
+    cb, sb = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    ox = poses[:, 0] + cb * m[0] - sb * m[1]  # the laser in the map frame, per pose
+    oy = poses[:, 1] + sb * m[0] + cb * m[1]
+    yaw = poses[:, 2] + m[2]
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    qx = ox[:, None] + c * pts[None, :, 0] - s * pts[None, :, 1]
+    qy = oy[:, None] + s * pts[None, :, 0] + c * pts[None, :, 1]
+    d = occ_map.distance_at(np.column_stack([qx.ravel(), qy.ravel()]), outside=OFF_GRID_M)
+    d = np.where(np.isfinite(d), d, OFF_GRID_M).reshape(len(poses), len(pts))
+    return np.asarray(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2), axis=1), dtype=float)
+
+
+def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, floor_rad: float) -> FloatArray:
+    """Poses around ``pose`` as far as ``cov`` allows: ``0, +-k sigma`` in x and y and ``0, +-k sigma / 2,
+    +-k sigma`` in heading (each sigma at least its floor), ``(45, 3)``."""
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
+    sx, sy, sth = max(k * float(sd[0]), floor_m), max(k * float(sd[1]), floor_m), max(k * float(sd[2]), floor_rad)
+    gx, gy, gth = np.meshgrid([-sx, 0.0, sx], [-sy, 0.0, sy], [-sth, -sth / 2, 0.0, sth / 2, sth], indexing="ij")
+    out = np.column_stack([gx.ravel(), gy.ravel(), gth.ravel()]) + np.asarray(pose, dtype=float).reshape(1, 3)
+    return np.asarray(out, dtype=float)
+
+
+def agreement_sigma(occ_map: OccupancyMap, configured_m: float | None) -> float:
+    """The distance scale of :func:`scan_agreement`: the configured one, else the map's cell (a wall
+    known to its cell) or its declared accuracy, whichever is larger."""
+    if configured_m is not None:
+        return float(configured_m)
+    acc = getattr(occ_map, "accuracy_m", None)
+    acc = float(acc) if acc is not None and math.isfinite(float(acc)) else 0.0
+    return max(float(occ_map.resolution), acc)
+
+
+def innovation(fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> tuple[FloatArray, float]:
+    """``(e, d2)``: the fix minus the prediction (heading wrapped) and the squared Mahalanobis distance
+    of its position under ``pred_cov + fix.cov`` (inf when that is singular or not finite)."""
+    e = np.asarray(fix.pose, dtype=float) - np.asarray(pred, dtype=float)
+    e[2] = wrap_scalar(float(e[2]))
+    return e, _mahalanobis2(e, np.asarray(pred_cov, dtype=float) + np.asarray(fix.cov, dtype=float))
+
+
+def slip_allowance(delta: FloatArray | None, slip: float) -> FloatArray:
+    """``diag((s d)^2, (s d)^2, (s dtheta)^2)``: what an odometry that reported the motion ``delta``
+    ``[dx, dy, dtheta]`` may be off by when it slips by the fraction ``s`` of it."""
+    if delta is None:
+        return np.zeros((3, 3))
+    d = float(math.hypot(float(delta[0]), float(delta[1])))
+    return np.diag([(slip * d) ** 2, (slip * d) ** 2, (slip * float(delta[2])) ** 2])
+
+
+@dataclass
+class GateVerdict:
+    """What :meth:`JumpGate.check` decided about one fix."""
+
+    take: bool
+    d2: float                      # squared Mahalanobis distance of the fix's position from the prediction's
+    jump_m: float                  # its distance from the prediction
+    jump_deg: float
+    agree_pred: float | None = None  # best scan_agreement near the prediction (only computed beyond the gate)
+    agree_fix: float | None = None   # ... and at the fix
+    why: str = ""
+    confirmed: bool = False        # taken beyond the gate because the map confirmed it
+    d2_previous: float | None = None  # ... from the previous fix carried by the odometry (None: no previous)
+
+
+@dataclass
+class _Previous:
+    """The previous fix, taken and sure: its pose and covariance, the odometry pose and stamp then."""
+
+    pose: FloatArray
+    cov: FloatArray
+    odom: FloatArray
+    t: float
+
+
+Motion = Callable[[float, float, FloatArray], FloatArray]
+
+
+class JumpGate:
+    """Holds back fixes that jump further than odometry and covariance allow (module docstring).
+
+    The localizer calls :meth:`check` for every fix while tracking, :meth:`accepted` when the back-end
+    took the fix the gate passed, and :meth:`reset` when it (re)starts the pose or a fix was not used."""
+
+    def __init__(self, cfg: IntegrityConfig, occ_map: OccupancyMap, laser_mount: StaticTransform) -> None:
+        self.cfg = cfg
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.sigma_m = agreement_sigma(occ_map, cfg.agreement_sigma_m)
+        self.previous: _Previous | None = None
+        self._pending: _Previous | None = None  # what the fix just passed becomes when the back-end takes it
+        self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
+
+    def reset(self) -> None:
+        """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
+        self.previous = None
+        self._pending = None
+        self._last_odom = None
+
+    def accepted(self) -> None:
+        """The back-end took the fix :meth:`check` passed last."""
+        self.previous = self._pending
+        self._pending = None
+
+    def check(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
+              odom_pose: FloatArray, t: float, motion: Motion | None = None) -> GateVerdict:
+        """Take or hold ``fix`` (stamp ``t``) against the back-end's prediction ``(pred, pred_cov)`` there
+        and the previous fix; ``odom_pose``: the dead-reckoned odometry pose at ``t``;
+        ``motion(t0, t1, delta)``: the odometry's increment as the back-end believes it happened."""
+
+        self._pending = None
+        R = np.asarray(fix.cov, dtype=float)
+        P = np.asarray(pred_cov, dtype=float)
+        # a jump smaller than the map can tell apart (its cell or declared accuracy) is no jump
+        floor = np.diag([self.sigma_m**2, self.sigma_m**2, 0.0])
+        e, d2 = innovation(fix, pred, P + floor)
+        jump_m = float(math.hypot(float(e[0]), float(e[1])))
+        jump_deg = math.degrees(abs(float(e[2])))
+        take = d2 <= self.cfg.gate_chi2
+        d2_prev: float | None = None
+        # what the odometry may have slipped since the last fix judged (for the fix's sureness, below)
+        last = self._last_odom
+        allow = slip_allowance(None if last is None else between1(last, odom_pose), self.cfg.odometry_slip)
+        self._last_odom = np.array(odom_pose, dtype=float)
+        prev = self.previous
+        if prev is not None:
+            delta = between1(prev.odom, odom_pose)
+            if motion is not None and t > prev.t:
+                delta = motion(prev.t, t, delta)
+            ec = np.asarray(fix.pose, dtype=float) - compose1(prev.pose, delta)
+            ec[2] = wrap_scalar(float(ec[2]))
+            d2_prev = _mahalanobis2(ec, R + prev.cov + floor + slip_allowance(delta, self.cfg.odometry_slip))
+            take = take or d2_prev <= self.cfg.gate_chi2
+        if take:
+            if float(np.min(np.linalg.eigvalsh(SURE_SIGMAS**2 * (P + allow)[:2, :2] - R[:2, :2]))) >= 0.0:
+                # a fix about as sure of its position as the prediction in every direction is the next one's
+                # to follow; after a vaguer one (a matcher unsure between two places) the next has none
+                self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
+                                          float(t))
+            return GateVerdict(True, d2, jump_m, jump_deg, d2_previous=d2_prev)
+        pts = scan.points()
+        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
+        # the heading that moves the scan's median return by it
+        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
+        near = neighbourhood(pred, P, NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
+                             self.sigma_m / max(r_med, self.sigma_m) / 2)
+        a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
+                       self.sigma_m, pts)
+        a_pred, a_fix = float(np.max(a[:-1])), float(a[-1])
+        v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev)
+        if not (math.isfinite(a_pred) and math.isfinite(a_fix)):
+            v.take = True  # nothing to judge by: as without the gate
+        elif a_pred <= a_fix * (1.0 - self.cfg.confirm_agreement):
+            v.take = v.confirmed = True
+            v.why = (f"a jump of {jump_m:.2f} m / {jump_deg:.1f} deg the map confirms (agreement {a_fix:.2f} at "
+                     f"the fix, at most {a_pred:.2f} near the odometry's prediction)")
+        else:
+            v.why = (f"held back: a jump of {jump_m:.2f} m / {jump_deg:.1f} deg from the odometry's prediction "
+                     f"(d2 {d2:.0f}) that the map does not confirm (agreement {a_fix:.2f} at the fix, "
+                     f"{a_pred:.2f} near the prediction)")
+        if v.take:
+            self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
+                                      float(t))
+        else:
+            self.previous = None
+        return v
+
+
+def _mahalanobis2(e: FloatArray, S: FloatArray) -> float:
+    """The squared Mahalanobis distance of the position part of ``e`` under the position block of ``S``."""
+    try:
+        d2 = float(e[:2] @ np.linalg.solve(S[:2, :2], e[:2]))
+    except np.linalg.LinAlgError:
+        return math.inf
+    return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
+
+
+__all__ = ["GateVerdict", "JumpGate", "agreement_sigma", "agreements", "innovation", "neighbourhood",
+           "scan_agreement", "slip_allowance"]

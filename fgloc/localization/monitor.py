@@ -1,0 +1,285 @@
+"""It knows when it is wrong: every pose gets a status, ``ok``, ``degraded``, ``suspect`` or ``lost``.
+
+* ``ok`` - the map confirms the pose: a fix was accepted within ``integrity.degraded_after_s`` and
+  nothing below contradicts it (in an ``odom``-frame run without a map: the fusion agrees with
+  dead reckoning);
+* ``degraded`` - dead reckoning, nothing contradicts it: no fix accepted for a while (the laser
+  silent, space the map does not have, scans that match nothing, fixes held back by the jump gate
+  of :mod:`fgloc.localization.gate`); the covariance grows with the odometry;
+* ``suspect`` - something contradicts the pose: the map keeps pointing elsewhere (fixes held back
+  or rejected for longer than ``integrity.suspect_after_s``), or, in an ``odom``-frame run, the
+  fused path left odometry + IMU dead reckoning (:class:`DeadReckoning`) further than a drifting
+  odometry explains (``integrity.divergence_share`` of the distance driven);
+* ``lost`` - the localizer does not know where the robot is in the map: no pose yet, a start pose
+  the map has not confirmed, a global search, and (decided afterwards) the span before a
+  relocalization moved the pose elsewhere.
+
+:class:`ConsistencyMonitor` keeps one record per pose the localizer produced (at each scan, and
+at each dead-reckoned pose while no scan arrives), amends them when a relocalization shows the
+pose was wrong before it, and answers the status at any output stamp.  It also keeps the
+run-level verdicts (:attr:`ConsistencyMonitor.verdicts`): no scan ever matched the map, the map
+does not fit the log, the initial pose did not fit the map, the fusion diverged.
+
+Core logic only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fgloc.config.schema import setting
+
+OK = "ok"
+DEGRADED = "degraded"
+SUSPECT = "suspect"
+LOST = "lost"
+#: the statuses, best first (the run summary counts them in this order)
+STATUSES = (OK, DEGRADED, SUSPECT, LOST)
+
+
+@dataclass(frozen=True)
+class IntegrityConfig:
+    """``integrity:`` the jump gate and the consistency monitor (:mod:`fgloc.localization.gate`,
+    :mod:`fgloc.localization.monitor`)."""
+
+    gate: bool = setting(True, "hold back a fix that jumps further from the last accepted one, carried by the "
+                         "odometry, than the covariances allow, unless the map confirms it")
+    gate_chi2: float = setting(13.82, "... a jump: the squared Mahalanobis distance of the fix's position from the "
+                               "prediction's and from the previous fix's beyond this (chi-square, 2 dof, 99.9 %)", gt=0)
+    covariance_period_s: float = setting(1.0, "... judged with a back-end covariance at most this old (log time; a "
+                                         "smoother's marginal is not free)", gt=0)
+    odometry_slip: float = setting(0.5, "... a fix following the previous one as the odometry says, within this "
+                                   "fraction of the distance and the turn it reported (slip, scrub), is no jump", min=0)
+    confirm_agreement: float = setting(0.5, "... taken anyway when the scan's agreement with the map near the "
+                                       "prediction is this fraction below its agreement at the fix", min=0, max=1)
+    agreement_sigma_m: float | None = setting(None, "distance scale of the scan's agreement with the map (null: "
+                                              "the map's cell or its declared accuracy, whichever is larger)", gt=0)
+    degraded_after_s: float = setting(1.0, "no accepted fix for this long: degraded (dead reckoning)", gt=0)
+    suspect_after_s: float = setting(3.0, "fixes held back or rejected for this long: suspect (the map keeps "
+                                     "pointing elsewhere)", gt=0)
+    laser_silent_after_s: float = setting(1.0, "no scan for this long: the laser is silent ...", gt=0)
+    dead_reckoning_period_s: float = setting(0.1, "... and a dead-reckoned pose is written this often (log time)",
+                                             gt=0)
+    divergence_share: float = setting(0.05, "odom frame (no map): the fused path more than this share of the distance "
+                                      "driven from odometry + IMU dead reckoning is suspect ...", gt=0)
+    divergence_min_m: float = setting(5.0, "... and more than this (m); at the end of the run: unusable", gt=0)
+    max_bad_share: float = setting(0.2, "fgloc run exits 3 when more than this share of the poses is suspect or "
+                                   "lost (--allow-lost: exit 0)", min=0, max=1)
+
+
+@dataclass
+class Verdict:
+    """A run-level finding: a one-line message, and whether it makes the run unusable."""
+
+    kind: str        # no_fix, map_mismatch, initial_pose, diverging
+    message: str
+    unusable: bool
+
+
+class ConsistencyMonitor:
+    """The status of every pose (see the module docstring)."""
+
+    def __init__(self, cfg: IntegrityConfig | None = None) -> None:
+        self.cfg = cfg or IntegrityConfig()
+        self.t: list[float] = []
+        self.status: list[str] = []
+        self.why: list[str] = []
+        self.verdicts: list[Verdict] = []
+        self._nis: deque[float] = deque(maxlen=20)
+        #: keep the records only this far back (s; None: the whole run): a live session runs for days
+        self.history_s: float | None = None
+
+    # ------------------------------------------------------------------ records
+    def record(self, t: float, status: str, why: str = "") -> None:
+        """The status of the pose at ``t`` (a later stamp than the last record; an equal one replaces it)."""
+        t = float(t)
+        if self.t and t <= self.t[-1]:
+            if t < self.t[-1]:
+                return
+            self.status[-1], self.why[-1] = status, why
+            return
+        self.t.append(t)
+        self.status.append(status)
+        self.why.append(why)
+        h = self.history_s
+        if h is not None and t - self.t[0] > 2.0 * h:  # amortized: once twice the history
+            i = bisect_right(self.t, t - h)
+            del self.t[:i], self.status[:i], self.why[:i]
+
+    def amend(self, t0: float, t1: float, status: str, why: str) -> int:
+        """Set the records in ``[t0, t1]`` that are better than ``status`` to it (decided afterwards:
+        the span before a relocalization was lost); how many changed."""
+        rank = STATUSES.index(status)
+        i = bisect_right(self.t, float(t0) - 1e-9)
+        n = 0
+        while i < len(self.t) and self.t[i] <= t1 + 1e-9:
+            if STATUSES.index(self.status[i]) < rank:
+                self.status[i], self.why[i] = status, why
+                n += 1
+            i += 1
+        return n
+
+    @property
+    def current(self) -> tuple[str, str]:
+        """The newest record's status and why (``lost`` before any)."""
+        return (self.status[-1], self.why[-1]) if self.status else (LOST, "no pose yet")
+
+    def at(self, stamps: Any) -> tuple[list[str], list[str]]:
+        """Status and why at each of ``stamps``: the newest record at or before it (``lost`` before the first)."""
+        out_s, out_w = [], []
+        for t in np.asarray(stamps, dtype=float).reshape(-1):
+            i = bisect_right(self.t, float(t) + 1e-9) - 1
+            if i < 0:
+                out_s.append(LOST)
+                out_w.append("no pose yet")
+            else:
+                out_s.append(self.status[i])
+                out_w.append(self.why[i])
+        return out_s, out_w
+
+    def counts(self, stamps: Any = None) -> dict[str, int]:
+        """How many poses have each status (the records, or the statuses at ``stamps``)."""
+        sts = self.status if stamps is None else self.at(stamps)[0]
+        return {s: sum(1 for x in sts if x == s) for s in STATUSES}
+
+    # ------------------------------------------------------------------ signals
+    def add_nis(self, d2: float) -> None:
+        if math.isfinite(d2):
+            self._nis.append(float(d2))
+
+    def nis_mean(self) -> float | None:
+        """Mean normalized innovation squared of the last accepted fixes (3 when consistent)."""
+        return float(np.mean(self._nis)) if len(self._nis) >= 5 else None
+
+    def verdict(self, kind: str, message: str, unusable: bool) -> None:
+        if all(v.kind != kind for v in self.verdicts):
+            self.verdicts.append(Verdict(kind, message, unusable))
+
+    def summary(self, stamps: Any) -> dict[str, Any]:
+        """The statuses at ``stamps`` (the poses written) counted, and the run-level verdicts."""
+        counts = self.counts(stamps)
+        n = max(sum(counts.values()), 1)
+        bad = (counts[SUSPECT] + counts[LOST]) / n
+        return {"counts": counts, "bad_share": bad,
+                "verdicts": [{"kind": v.kind, "message": v.message, "unusable": v.unusable} for v in self.verdicts]}
+
+
+class DeadReckoning:
+    """Odometry + IMU dead reckoning beside the fusion, to tell when the fused path leaves it (a
+    configuration that makes the back-end diverge): the odometry's twist integrated along the
+    compass / IMU heading (its absolute yaw, aligned with the fused heading at the start) when there
+    is one, else along the odometry's own turn when it reports one; none when neither (a
+    configuration whose heading comes from relative yaw or a gyro alone: nothing independent to
+    compare with).  Started at the fused start pose (:meth:`start`)."""
+
+    MAX_DT_S = 0.5  # an odometry gap longer than this is not integrated (its twist is unknown over it)
+
+    def __init__(self) -> None:
+        self.t: float | None = None
+        self.wheels: np.ndarray | None = None
+        self.compassed: np.ndarray | None = None
+        self.distance_m = 0.0
+        self._compass: tuple[float, float] | None = None  # (stamp, yaw) of the last compass reading
+        self._offset: float | None = None  # compass yaw - fused yaw at the start
+        self.compass_readings = 0  # absolute yaw readings since the start
+        self.turned = False  # the odometry reported a turn
+
+    def start(self, t: float, pose: Any) -> None:
+        p = np.asarray(pose, dtype=float).reshape(3)
+        self.t = float(t)
+        self.wheels = p.copy()
+        self.compassed = p.copy()
+        if self._compass is not None:
+            self._offset = self._compass[1] - float(p[2])
+
+    def compass(self, t: float, yaw: float) -> None:
+        self._compass = (float(t), float(yaw))
+        if self._offset is None and self.compassed is not None:
+            self._offset = float(yaw) - float(self.compassed[2])  # the first reading after the start
+        if self._offset is not None:
+            self.compass_readings += 1
+
+    def odometry(self, t: float, twist: Any) -> None:
+        if self.t is None or self.wheels is None or self.compassed is None:
+            return
+        dt = float(t) - self.t
+        self.t = float(t)
+        if not 0 < dt <= self.MAX_DT_S:
+            return
+        vx, vy, w = (float(v) for v in np.asarray(twist, dtype=float).reshape(3))
+        self.distance_m += math.hypot(vx, vy) * dt
+        self.turned = self.turned or abs(w) > 1e-4
+        for p, heading in ((self.wheels, None), (self.compassed, self._heading(t))):
+            th = float(p[2]) + 0.5 * w * dt if heading is None else heading
+            c, s_ = math.cos(th), math.sin(th)
+            p[0] += (c * vx - s_ * vy) * dt
+            p[1] += (s_ * vx + c * vy) * dt
+            p[2] = float(p[2]) + w * dt if heading is None else heading
+
+    def _heading(self, t: float) -> float | None:
+        if self._compass is None or self._offset is None or abs(float(t) - self._compass[0]) > self.MAX_DT_S:
+            return None
+        return self._compass[1] - self._offset
+
+    def divergence(self, pose: Any) -> float | None:
+        """How far (m) the fused ``pose`` is from the dead reckoning along the compass heading (when
+        there were absolute yaw readings), else along the odometry's turn (when it reported one)."""
+        q = self.compassed if self.compass_readings > 0 else self.wheels if self.turned else None
+        if q is None:
+            return None
+        p = np.asarray(pose, dtype=float).reshape(3)
+        return math.hypot(float(p[0] - q[0]), float(p[1] - q[1]))
+
+
+#: the status file beside ``trajectory.tum`` (``trajectory_status.csv``): its first line
+STATUS_HEADER = ("# fgloc pose status: one row per pose of trajectory.tum (same stamps, s); x y in m, yaw in rad; "
+                 "cov_*: the pose's covariance as known online, at the nearest online pose (m^2, m rad, rad^2); "
+                 "status ok / degraded / suspect / lost; why: what made it so")
+STATUS_COLUMNS = ("t", "x", "y", "yaw", "status", "cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw",
+                  "why")
+
+
+def status_rows(poses: Any, online: Any, monitor: ConsistencyMonitor) -> list[list[Any]]:
+    """One row per pose of the trajectory ``poses`` (:data:`STATUS_COLUMNS`): its status and why, and
+    the covariance of the ``online`` trajectory's pose nearest in time (NaN when it has none)."""
+    st = np.asarray(poses.stamps, dtype=float)
+    status, why = monitor.at(st)
+    cov = np.full((len(st), 3, 3), np.nan)
+    o_t = np.asarray(online.stamps, dtype=float)
+    o_c = getattr(online, "covs", None)
+    if o_c is not None and len(o_t):
+        j = np.clip(np.searchsorted(o_t, st), 0, len(o_t) - 1)
+        jm = np.clip(j - 1, 0, len(o_t) - 1)
+        j = np.where(np.abs(o_t[jm] - st) < np.abs(o_t[j] - st), jm, j)
+        cov[:] = np.asarray(o_c, dtype=float)[j]
+    rows = []
+    for k in range(len(st)):
+        c = cov[k]
+        p = poses.poses[k]
+        rows.append([float(st[k]), float(p[0]), float(p[1]), float(p[2]), status[k], float(c[0, 0]), float(c[0, 1]),
+                     float(c[0, 2]), float(c[1, 1]), float(c[1, 2]), float(c[2, 2]), why[k]])
+    return rows
+
+
+def status_csv(rows: list[list[Any]]) -> str:
+    """The text of ``trajectory_status.csv`` (:data:`STATUS_HEADER`, a column line, one line per row)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    buf.write(STATUS_HEADER + "\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(STATUS_COLUMNS)
+    for r in rows:
+        w.writerow([f"{r[0]:.9f}", *(repr(v) for v in r[1:4]), r[4], *(repr(v) for v in r[5:11]), r[11]])
+    return buf.getvalue()
+
+
+__all__ = ["DEGRADED", "LOST", "OK", "STATUSES", "STATUS_COLUMNS", "STATUS_HEADER", "SUSPECT", "ConsistencyMonitor",
+           "DeadReckoning", "IntegrityConfig", "Verdict", "status_csv", "status_rows"]

@@ -1,0 +1,155 @@
+"""No jumps (fgloc.localization.gate): a fix the odometry does not explain is held back unless the map
+confirms it; a run of consistent wrong fixes in a changed world does not pull either back-end."""
+
+from __future__ import annotations
+
+import sys
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fgloc.config import load_config
+from fgloc.localization import Localizer, Session
+from fgloc.localization.gate import JumpGate, agreements, neighbourhood, scan_agreement, slip_allowance
+from fgloc.localization.monitor import IntegrityConfig
+from fgloc.types import PoseFix
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "frontends"))
+from synth import MOUNT, make_map, make_scan  # noqa: E402
+
+SCEN = Path(str(resources.files("fgloc.config") / "scenarios"))
+TIGHT = np.diag([0.003**2, 0.003**2, np.radians(0.05) ** 2])
+
+
+@pytest.fixture(scope="module")
+def room():
+    return make_map()
+
+
+def _fix(pose, cov=TIGHT, t=1.0):
+    return PoseFix(t, np.asarray(pose, dtype=float), np.asarray(cov, dtype=float), quality=0.9, source="test")
+
+
+def test_agreement_is_highest_at_the_true_pose(room):
+    truth = np.array([8.0, 5.0, 0.3])
+    scan = make_scan(room, truth)
+    here = scan_agreement(room, MOUNT, scan, truth, 0.05)
+    assert here > 0.8  # endpoints on the cells' faces, half a cell from their centres
+    for off in ([0.3, 0, 0], [0, 0.3, 0], [0, 0, np.radians(5)]):
+        assert scan_agreement(room, MOUNT, scan, truth + np.array(off), 0.05) < here - 0.1
+    many = agreements(room, MOUNT, scan, np.vstack([truth, truth + [0.3, 0, 0]]), 0.05)
+    assert many[0] == pytest.approx(here) and many[1] < here
+
+
+def test_neighbourhood_spans_three_sigma_and_its_floors():
+    nb = neighbourhood(np.zeros(3), np.diag([0.01**2, 0.02**2, 0.001**2]), 3.0, 0.025, 0.004)
+    assert nb.shape == (45, 3)
+    assert np.ptp(nb[:, 0]) == pytest.approx(0.06) and np.ptp(nb[:, 1]) == pytest.approx(0.12)
+    assert np.ptp(nb[:, 2]) == pytest.approx(0.008)  # 3 sigma (0.003) is below the floor
+
+
+def test_slip_allowance_grows_with_the_motion():
+    a = slip_allowance(np.array([0.3, 0.4, 0.2]), 0.5)
+    np.testing.assert_allclose(np.diag(a), [0.25**2, 0.25**2, 0.1**2])
+    assert not slip_allowance(None, 0.5).any()
+
+
+def test_gate_holds_a_jump_the_map_does_not_refute_and_takes_one_it_confirms(room):
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    truth = np.array([8.0, 5.0, 0.0])
+    scan = make_scan(room, truth)
+    pred_cov = np.diag([0.004**2, 0.004**2, np.radians(0.2) ** 2])
+    # the prediction is right, the fix 0.3 m off: the map explains the scan better at the prediction
+    v = gate.check(_fix(truth + [0.0, 0.3, 0.0]), truth, pred_cov, scan, np.zeros(3), 1.0)
+    assert not v.take and v.d2 > 20 and "held back" in v.why
+    assert v.agree_pred is not None and v.agree_fix is not None and v.agree_pred > v.agree_fix
+    # the prediction drifted 0.3 m, the fix is right: the map confirms the fix
+    v = gate.check(_fix(truth), truth + [0.0, 0.3, 0.0], pred_cov, scan, np.zeros(3), 1.0)
+    assert v.take and v.confirmed and "confirms" in v.why
+    # within the covariances: taken without looking at the map
+    v = gate.check(_fix(truth + [0.005, 0.0, 0.0]), truth, pred_cov, scan, np.zeros(3), 1.0)
+    assert v.take and not v.confirmed and v.agree_pred is None
+
+
+def test_gate_follows_fixes_that_follow_each_other_as_a_slipping_odometry_says(room):
+    """A back-end that lags its fixes (its prediction 0.3 m behind) does not make fixes that follow
+    each other as the wheels roughly say (30 % slip) look like jumps; a 0.3 m step from the previous
+    fix over a 6 cm motion is one."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    pred_cov = np.diag([0.004**2, 0.004**2, np.radians(0.2) ** 2])
+    p0 = np.array([4.0, 3.0, 0.0])
+    v = gate.check(_fix(p0), p0, pred_cov, make_scan(room, p0), np.zeros(3), 1.0)
+    assert v.take
+    gate.accepted()
+    # the wheels say 6.4 cm, the robot moved 4.9 cm; the back-end's prediction lags 0.3 m behind
+    p1 = p0 + [0.049, 0.0, 0.0]
+    lagging = p1 + [0.3, 0.0, 0.0]
+    v = gate.check(_fix(p1, t=1.08), lagging, pred_cov, make_scan(room, p1), np.array([0.064, 0.0, 0.0]), 1.08)
+    # far from the prediction, but where the previous fix and the wheels put it
+    assert v.take and v.d2 > 20 and v.d2_previous is not None and v.d2_previous < 1
+    gate.accepted()
+    # a 0.3 m step sideways over the next 6.4 cm is no slip
+    p2 = p1 + [0.064, 0.0, 0.0]
+    v = gate.check(_fix(p2 + [0.0, 0.3, 0.0], t=1.16), p2, pred_cov, make_scan(room, p2),
+                   np.array([0.128, 0.0, 0.0]), 1.16)
+    assert not v.take
+    assert gate.previous is None  # a held fix leaves no previous fix to follow
+
+
+def test_a_vague_fix_is_used_but_not_followed(room):
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    pred_cov = np.diag([0.004**2, 0.004**2, np.radians(0.2) ** 2])
+    p0 = np.array([4.0, 3.0, 0.0])
+    wide = np.diag([0.005**2, 0.14**2, np.radians(0.05) ** 2])  # a matcher unsure between two places
+    v = gate.check(_fix(p0 + [0.0, 0.3, 0.0], cov=wide), p0, pred_cov, make_scan(room, p0), np.zeros(3), 1.0)
+    assert v.take
+    gate.accepted()
+    assert gate.previous is None
+
+
+def _short_changed_world():
+    from fgloc.sim import load_scenario, run_scenario
+
+    sc = load_scenario(SCEN / "changed_world.yaml")
+    # along the north wall's new shelves only (the full route's failure, 24 s instead of 113 s)
+    sc["route"] = [[24.0, 17.0], [8.0, 17.0]]
+    sc["initial_yaw"] = float(np.pi)
+    return run_scenario(sc, seed=0)
+
+
+@pytest.fixture(scope="module")
+def shelves():
+    return _short_changed_world()
+
+
+def _localize(sim, backend, gate=True):
+    msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
+    loc = Localizer(sim.map, sim.laser_mount, backend, "native", initial_pose=sim.ground_truth.poses[0],
+                    config=load_config(overrides={"integrity": {"gate": gate}}))
+    est = Session(loc).run(msgs)
+    gt = sim.ground_truth.interpolate(est.stamps)
+    err = np.hypot(est.poses[:, 0] - gt[:, 0], est.poses[:, 1] - gt[:, 1])
+    step = np.hypot(*(np.diff(est.poses[:, :2], axis=0) - np.diff(gt[:, :2], axis=0)).T)
+    wrong = [f for f in loc.fixes if np.hypot(*(f.pose[:2] - sim.ground_truth.interpolate([f.stamp])[0, :2])) > 0.25]
+    return loc, err, step, wrong
+
+
+def test_changed_world_without_the_gate_follows_the_wrong_fixes(shelves):
+    """The failure the gate is for, reproduced: the shelves 0.3 m in front of the mapped wall give
+    dozens of consecutive fixes 0.33 m off, and the smoother follows them."""
+    loc, err, step, wrong = _localize(shelves, "smoother", gate=False)
+    assert len(wrong) >= 20                    # measured 77 consecutive
+    assert float(err.max()) > 0.25             # measured 0.327 m
+
+
+@pytest.mark.parametrize("backend", ["smoother", "ekf"])
+def test_changed_world_with_the_gate_stays_on_the_truth(shelves, backend):
+    loc, err, step, wrong = _localize(shelves, backend)
+    assert len(wrong) >= 20                    # the front-end is as wrong as before
+    assert loc.stats["held_jumps"] >= 20       # ... its jumps are held back
+    assert float(np.sqrt(np.mean(err**2))) <= 0.03  # measured 0.009 (smoother), 0.020 m (EKF)
+    assert float(step.max()) <= 0.1                 # measured 0.011, 0.022 m
+    counts = loc.monitor.counts()
+    assert counts["degraded"] + counts["suspect"] > 0   # dead reckoning while the map points elsewhere

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 PHASE_CLOCK: Callable[[], float] = time.perf_counter
 
 #: a file in an output folder that fgloc writes (others are not overwritten without --force)
-OUTPUT_FILES = ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
+OUTPUT_FILES = ("trajectory.tum", "trajectory_status.csv", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
 
 
 @dataclass
@@ -106,18 +106,28 @@ class RunResult:
     # finish (final smoothing), outputs (TUM, config, evaluation), total (the whole run_log call)
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)  # what the result may be wrong about, one line each
+    # the poses' statuses (fgloc.localization.monitor): counts of trajectory.tum's poses, the share suspect or
+    # lost, the run-level verdicts (kind, message, unusable)
+    status: dict[str, Any] = field(default_factory=dict)
 
     @property
     def lost_share(self) -> float:
         return self.lost_s / self.log_s if self.log_s > 0 else (1.0 if self.ended_lost else 0.0)
 
     def failure(self) -> str | None:
-        """One line when the result is not usable (fgloc run exits 3), else None: no pose at all,
-        or lost at the end, or lost longer than ``pipeline.max_lost_share`` of the run."""
+        """One line when the result is not usable (fgloc run exits 3), else None: no pose at all, a
+        verdict of the consistency monitor that makes it unusable (no scan matched the map, the map does
+        not fit the log, the fusion diverged), lost at the end, lost longer than
+        ``pipeline.max_lost_share`` of the run, or more than ``integrity.max_bad_share`` of the poses
+        suspect or lost."""
         if self.poses == 0:
             return "no pose was estimated"
+        for v in self.status.get("verdicts") or ():
+            if v["unusable"]:
+                return f"{v['message']}; pass --allow-lost to accept this"
+        bad, limit = float(self.status.get("bad_share") or 0.0), self.config.integrity.max_bad_share
         if self.mode != "map":
-            return None
+            return self._bad_poses(bad, limit)
         share = self.config.pipeline.max_lost_share
         if self.ended_lost:
             return (f"the localizer was lost at the end of the run (lost {self.lost_s:.1f} s of "
@@ -126,14 +136,22 @@ class RunResult:
             return (f"the localizer was lost {self.lost_s:.1f} s of {self.log_s:.1f} s "
                     f"({100 * self.lost_share:.0f} % > pipeline.max_lost_share {100 * share:.0f} %); "
                     f"pass --allow-lost to accept this")
-        return None
+        return self._bad_poses(bad, limit)
+
+    def _bad_poses(self, bad: float, limit: float) -> str | None:
+        if bad <= limit:
+            return None
+        c = self.status.get("counts") or {}
+        return (f"{100 * bad:.0f} % of the poses are suspect or lost ({c.get('suspect', 0)} suspect, "
+                f"{c.get('lost', 0)} lost of {self.poses}; integrity.max_bad_share {100 * limit:.0f} %); "
+                f"pass --allow-lost to accept this")
 
     def as_dict(self) -> dict[str, Any]:
         from fgloc.io.yamlio import yaml_ready
 
         d = {k: getattr(self, k) for k in ("mode", "frame", "backend", "frontend", "poses", "online_poses",
                                           "fixes", "wall_s", "log_s", "truncated", "written", "eval_error",
-                                          "lost_s", "ended_lost", "damaged_chunks", "damage", "timings")}
+                                          "lost_s", "ended_lost", "damaged_chunks", "damage", "timings", "status")}
         d["stats"] = yaml_ready(self.stats.to_dict())
         d["outdir"] = str(self.outdir)
         return d
@@ -436,6 +454,7 @@ def _localize(req: RunRequest, outdir: Path, session: Any, inputs: _Inputs, mirr
         # the inputs are copied by _copied (their own bytes); the recorder writes /fused_pose
         session.add_sink(_TimedSink(RecorderSink(writer, topics.fused, record_inputs=False, log_time_ns=clock.now),
                                     spent, "write"))
+        session.add_sink(_TimedSink(_StatusSink(writer, loc, clock.now), spent, "write"))  # /fgloc/pose/status
         if view.active:
             rec = view.recorder
             if rec is not None and hasattr(rec, "clock"):
@@ -485,6 +504,7 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
     written = []
     if len(final):
         written.append(write_tum(outdir / "trajectory.tum", final))
+        written.append(_write_status(outdir / "trajectory_status.csv", final, online, loc.monitor))
     if len(online):
         written.append(write_tum(outdir / "online.tum", online))
     if len(fixes):
@@ -507,11 +527,21 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
         written=[p.name for p in written] + ["run.mcap", "config.yaml"], config=config,
         log=inputs.log, lost_s=float(stats.lost_s), ended_lost=bool(stats.ended_lost),
         damaged_chunks=int(reader.damaged_chunks), damage=reader.damage(),
+        status=dict(loc.stats.get("status") or {}),
     )
     result.warnings = scale_warnings(result.stats, mount_assumed=(
         inputs.n_scan > 0 and mode == "map" and not config.sources.static_transforms
         and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
     return result
+
+
+def _write_status(path: Path, final: Any, online: Any, monitor: Any) -> Path:
+    """``trajectory_status.csv``: each pose of ``final`` with its status and online covariance
+    (:func:`fgloc.localization.monitor.status_rows`; the format is in the README, "Pose status")."""
+    from fgloc.localization.monitor import status_csv, status_rows
+
+    path.write_text(status_csv(status_rows(final, online, monitor)))
+    return path
 
 
 def _evaluate(result: RunResult, inputs: _Inputs, final: Any, online: Any) -> None:
@@ -674,6 +704,46 @@ class _ProgressSink:
             self.n = 0
 
 
+#: run.mcap's channel of each fused pose's status (JSON: stamp, status, why, frame_id)
+STATUS_TOPIC = "/fgloc/pose/status"
+STATUS_SCHEMA = {"type": "object", "title": "fgloc.PoseStatus",
+                 "properties": {"stamp": {"type": "number"}, "status": {"type": "string"}, "why": {"type": "string"},
+                                "frame_id": {"type": "string"}}}
+
+
+class _StatusSink:
+    """Writes the status of every fused pose (:mod:`fgloc.localization.monitor`) on :data:`STATUS_TOPIC`
+    beside ``/fused_pose``, at the log time of the input being processed."""
+
+    wants_fused = True
+    wants_messages = False
+
+    def __init__(self, writer: Any, loc: Any, log_time_ns: Callable[[], int | None]) -> None:
+        import json
+
+        self.loc = loc
+        self.log_time_ns = log_time_ns
+        self.dumps = json.dumps
+        self.write = writer.raw_writer(STATUS_TOPIC, "fgloc.PoseStatus", json.dumps(STATUS_SCHEMA).encode(),
+                                       schema_encoding="jsonschema", message_encoding="json")
+
+    def on_message(self, topic: str, msg: object) -> None:
+        pass
+
+    def on_scan(self, stamp: float, scan: Any, fix_or_reason: Any, fused: Any) -> None:
+        if fused is not None:
+            self.on_pose(stamp, fused)
+
+    def on_pose(self, stamp: float, fused: Any) -> None:
+        status, why = self.loc.monitor.current
+        lt = self.log_time_ns()
+        data = self.dumps({"stamp": float(fused.stamp), "status": status, "why": why, "frame_id": fused.frame_id})
+        self.write(data.encode(), int(lt) if lt is not None else max(int(float(fused.stamp) * 1e9), 0))
+
+    def close(self) -> None:
+        pass
+
+
 class _TimedSink:
     """A session sink whose time is added to ``spent[key]`` (RunResult.timings)."""
 
@@ -695,6 +765,16 @@ class _TimedSink:
         t0 = PHASE_CLOCK()
         try:
             self.sink.on_scan(stamp, scan, fix_or_reason, fused)
+        finally:
+            self.spent[self.key] += PHASE_CLOCK() - t0
+
+    def on_pose(self, stamp: float, fused: Any) -> None:
+        on_pose = getattr(self.sink, "on_pose", None)
+        if on_pose is None:
+            return
+        t0 = PHASE_CLOCK()
+        try:
+            on_pose(stamp, fused)
         finally:
             self.spent[self.key] += PHASE_CLOCK() - t0
 

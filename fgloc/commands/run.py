@@ -72,6 +72,13 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
     if r.mode == "map":
         say(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.lost_events} "
             f"time(s) after tracking){', ' + _styled('lost at the end', '1;31', tty) if r.ended_lost else ''}")
+    status = r.status or {}
+    counts = status.get("counts") or {}
+    if counts:  # every pose's status (fgloc.localization.monitor), and what made the run suspect
+        n = max(sum(counts.values()), 1)
+        say("  pose status: " + ", ".join(f"{k} {v} ({100 * v / n:.0f} %)" for k, v in counts.items()))
+    for v in status.get("verdicts") or ():
+        say(f"  {_styled('integrity:', '1;31' if v['unusable'] else '33', tty)} {v['message']}")
     from fgloc.localization.sources import summary_lines
 
     for line in summary_lines(st):  # the motion model and each input source's health
@@ -144,8 +151,9 @@ def register(app: typer.Typer) -> None:
         outdir: Path = typer.Option(..., "-o", "--output", help="output folder (never an input's folder "
                                     "file: run.mcap, config.yaml ... are refused if they are inputs)"),
         force: bool = typer.Option(False, "--force", help="overwrite output files that fgloc run did not write"),
-        allow_lost: bool = typer.Option(False, "--allow-lost", help="exit 0 even when the localizer was lost "
-                                        "at the end or longer than pipeline.max_lost_share"),
+        allow_lost: bool = typer.Option(False, "--allow-lost", help="exit 0 even when the result is unusable "
+                                        "(exit 3: lost at the end or longer than pipeline.max_lost_share, poses "
+                                        "suspect or lost, no fix, a diverging fusion)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="no progress bar"),
         view: str | None = typer.Option(None, "--view", help="[HOST:]PORT: serve a Foxglove WebSocket view "
                                         "(127.0.0.1 unless a host is given; layout: `fgloc view layout`)"),

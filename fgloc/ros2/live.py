@@ -41,7 +41,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     ``on_started()``: called once the localizer is built and the messages kept before it fused."""
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
-    from fgloc.live.app import LiveSession, trajectory_outputs
+    from fgloc.live.app import LIVE_TAIL_S, LiveSession, trajectory_outputs
     from fgloc.localization import Session, build_session
     from fgloc.maps import load_map
     from fgloc.ros2.node import Ros2Live
@@ -88,7 +88,8 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
 
     def make_live(session: Session) -> LiveSession:
         live = LiveSession(session, None, None, config=cfg, record=record, publish=publish or None,
-                           event_sink=event, record_force=force)
+                           event_sink=event, record_force=force,
+                           trajectory_window_s=None if out is not None else LIVE_TAIL_S)
         if view is not None:
             from fgloc.view import ViewHook
 

@@ -126,6 +126,12 @@ class _LiveTrack(BaseSink):
         r.last_fix = fused
         r.trajectory.append(float(fused.stamp), fused.pose)
 
+    def on_pose(self, stamp: float, fused: PoseFix) -> None:
+        """A dead-reckoned pose while the laser is silent: the live pose and trajectory go on."""
+        self.r.counters["poses_dead_reckoned"] += 1
+        self.r.last_fix = fused
+        self.r.trajectory.append(float(fused.stamp), fused.pose)
+
 
 class LiveRunner:
     """Glue between the sensor threads and a localization session (built by
@@ -167,6 +173,7 @@ class LiveRunner:
         self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)  # the percentiles' window
         self.trajectory = TrajectoryBuffer(trajectory_window_s)  # the live trajectory (-o)
         self.counters: dict[str, int] = {"scans_fused": 0, "scans_skipped_backlog": 0, "fixes": 0,
+                                         "poses_dead_reckoned": 0,  # while the laser is silent
                                          "record_errors": 0, "localizer_errors": 0,
                                          "queue_max": 0}  # the most messages seen waiting (a host too slow)
         self.sources: dict[str, Callable[[], dict[str, Any]]] = {}  # name -> counters getter
@@ -355,7 +362,7 @@ class LiveRunner:
         pose = "pose --"
         if self.last_fix is not None:
             x, y, yaw = self.last_fix.pose
-            pose = f"pose {x:7.2f} {y:7.2f} {np.degrees(yaw):6.1f}deg"
+            pose = f"pose {x:7.2f} {y:7.2f} {np.degrees(yaw):6.1f}deg {self.last_fix.status or '?'}"
         c = self.all_counters()
         ser = c.get("serial", {})
         las = c.get("laser", {})

@@ -799,9 +799,12 @@ class Localizer:
                 self._check_divergence(self._last_kf_t)
             if self._worst_divergence is not None:
                 _, d, dist, limit, t = self._worst_divergence
+                t0 = self.dead_reckoning.t0 if self.dead_reckoning is not None else None
+                into = t - (t0 if t0 is not None else t)
                 self.monitor.verdict(
-                    "diverging", f"the fusion diverged from odometry + IMU dead reckoning: {d:.1f} m apart at "
-                    f"t = {t:.1f} s after {dist:.0f} m driven (more than {limit:.1f} m, integrity.divergence_share); "
+                    "diverging", f"the fusion diverged from odometry + IMU dead reckoning: {d:.1f} m apart "
+                    f"{into:.1f} s into the run after {dist:.0f} m driven (more than {limit:.1f} m, "
+                    "integrity.divergence_share); "
                     "check the sources' configuration (each source's mount and components)", True)
             return
         used = int(self.stats.get("fixes_used", 0))

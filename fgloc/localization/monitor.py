@@ -182,6 +182,7 @@ class DeadReckoning:
 
     def __init__(self) -> None:
         self.t: float | None = None
+        self.t0: float | None = None  # the start's stamp
         self.wheels: np.ndarray | None = None
         self.compassed: np.ndarray | None = None
         self.distance_m = 0.0
@@ -192,7 +193,7 @@ class DeadReckoning:
 
     def start(self, t: float, pose: Any) -> None:
         p = np.asarray(pose, dtype=float).reshape(3)
-        self.t = float(t)
+        self.t = self.t0 = float(t)
         self.wheels = p.copy()
         self.compassed = p.copy()
         if self._compass is not None:

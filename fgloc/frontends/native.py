@@ -232,7 +232,7 @@ def lm_system(field, A, b, far, px, py, pose, c, loss, outlier, lx, ly, backcos,
             nrm = math.sqrt((gx * gx + gy * gy) * (bx * bx + by * by))
             front = not (nrm > 0.0 and dot > backcos * nrm)
         if not front:
-            r = far  # a back-facing point counts at field_max_dist, as before d37cb1c (real maps need it)
+            r = far  # a back-facing point counts at field_max_dist (real maps need it)
         if abs(r) > outlier:
             cost += rho_out
             continue

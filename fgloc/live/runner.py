@@ -378,7 +378,7 @@ class LiveRunner:
         from fgloc.localization.sources import status_line
 
         router = getattr(self.session, "sources", None)
-        health = f" | {status_line(router.health())}" if router is not None else ""  # per source (issue 17)
+        health = f" | {status_line(router.health())}" if router is not None else ""  # per source
         return (f"{' | '.join(parts)} | lat p50 {p50:4.1f} p99 {p99:4.1f} ms | {pose} | "
                 f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']} | {err}{health}")
 

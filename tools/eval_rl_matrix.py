@@ -381,6 +381,12 @@ def _err(c: Cell | None) -> str:
     return f"{c.error_m:.3f} {'pass' if c.passed else 'FAIL'}"
 
 
+def _diverged(c: Cell) -> float | None:
+    """s of the run the back-end reported its fused heading following none of its heading sources."""
+    v = getattr(c.stats, "backend", {}).get("heading_diverged_s") if c.stats else None
+    return None if v is None else float(v)
+
+
 def table(cells: list[Cell], markdown: bool = True) -> str:
     """The matrix, one row per (log, configuration), a column per back-end."""
     backends = list(dict.fromkeys(c.backend for c in cells))
@@ -388,12 +394,17 @@ def table(cells: list[Cell], markdown: bool = True) -> str:
     head = ["log", "configuration", "tolerance m", *[f"{b} m" for b in backends]]
     if has_gps:
         head += [f"{b}: GPS m" for b in backends]
+    div = [b for b in backends if any(c.backend == b and _diverged(c) is not None for c in cells)]
+    head += [f"{b}: heading diverged s" for b in div]
     rows = []
     for (log, var), by in paired(cells).items():
         any_cell = next(iter(by.values()))
         row = [log, var, f"{any_cell.tolerance_m:.3f}", *[_err(by.get(b)) for b in backends]]
         if has_gps:
             row += [("-" if by.get(b) is None or by[b].gps_m is None else f"{by[b].gps_m:.1f}") for b in backends]
+        for b in div:
+            d = _diverged(by[b]) if b in by else None
+            row.append("-" if d is None else f"{d:.0f}")
         rows.append(row)
     if markdown:
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * 2 + ["--:"] * (len(head) - 2)) + "|"]

@@ -99,7 +99,7 @@ class KeyframeGraph(FurtherSourceFactors):
             if ts_ and t - GYRO_LIVE_S <= ts_[-1] < t - 1e-9:
                 return False
         hts = self.heading_hist[0]
-        if not self.gyro and hts and t - GYRO_LIVE_S <= hts[-1] < t - 1e-9 and self._wheel_yaw_unfused():
+        if not self.gyro and hts and t - GYRO_LIVE_S <= hts[-1] < t - 1e-9 and self._heading_chord(self.kf_t[-1], t):
             return False   # the chord runs along the absolute heading: wait for its reading at t
         return True
 
@@ -113,7 +113,8 @@ class KeyframeGraph(FurtherSourceFactors):
         ts[k] = t
         d, c = self._integrate(t_prev, t)
         got = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
-        if got is None and self.cfg.gyro_chord and self._wheel_yaw_unfused():
+        heading_chord = got is None and self.cfg.gyro_chord and self._heading_chord(t_prev, t)
+        if heading_chord:
             got = self._chord_along_heading(t_prev, t)
         if got is None:
             pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
@@ -133,15 +134,25 @@ class KeyframeGraph(FurtherSourceFactors):
         # compass readings since the previous keyframe (late ones go to this keyframe too)
         readings = [r for r in self.compass_pending if r[0] <= t + 1e-9]
         self.compass_pending = [r for r in self.compass_pending if r[0] > t + 1e-9]
+        relative = self._relative_yaw_increments(t_prev, t, float(d[2]))
+        incs, absolute = self._heading_inputs
+        for name, (dy, v) in relative.items():
+            a0, v0 = incs.get(name, (0.0, 0.0))
+            incs[name] = (a0 + dy, v0 + v)
         m = self._compass_measurement(t, readings)
+        if m is not None and heading_chord and all(r[3] == self._heading_source for r in readings):
+            # the readings are not carried to t by the wheels' turn, which is worse known than the
+            # heading's own increments (and a skid steer's is several times too large): interpolated
+            m = self._heading_reading_at(t) or m
         if m is not None:
             sigma = m[1]
             if self.cfg.adapt_noise and readings:
                 sigma *= self.inputs.noise(f"{readings[0][3]}.yaw")[0]
             graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
-                                     self.cfg.compass_kernel, self.cfg.compass_kernel_k))
+                                     self.cfg.compass_kernel, self._compass_kernel_k(sigma, relative)))
             ts[self.cur_o] = t  # type: ignore[index]
             self.stats["compass_factors"] += 1
+            absolute[f"{readings[0][3]}.yaw" if readings else "compass"] = (m[0], sigma * sigma)
         self._add_relative_yaw_factors(k, t, pred, graph, vals, ts)
         if used:
             assert fix is not None
@@ -152,6 +163,7 @@ class KeyframeGraph(FurtherSourceFactors):
             yaw_fix = float(fix.pose[2])
             self.calib.add_fix(t - lat, yaw_fix)
             var_yaw = self._fix_cov_list(fix.cov)[8]
+            absolute["scan"] = (yaw_fix, var_yaw)
             self.inputs.heading("scan", t - lat, yaw_fix, var_yaw)
             self.inputs.reading("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
         self.kf_t.append(t)
@@ -170,6 +182,34 @@ class KeyframeGraph(FurtherSourceFactors):
             self.stats["keyframes"] += 1
             self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred, c))
 
+    def _relative_yaw_increments(self, t0: float, t1: float, d_odom: float) -> dict[str, tuple[float, float]]:
+        """Each relative yaw source's increment over ``(t0, t1]`` and its variance as its factor
+        weighs it: every gyro covering the interval (bias-corrected) and the odometry (``d_odom``,
+        times its yaw gain) unless its yaw rate is not fused."""
+        out: dict[str, tuple[float, float]] = {}
+        for name in self.gyro:
+            r = self._gyro_increment(name, t0, t1)
+            if r is not None:
+                k_g, rel = self.inputs.noise(name)
+                out[name] = (r[0], k_g * k_g * r[1] + (rel * r[0]) ** 2)
+        if not self._wheel_yaw_unfused() and math.isfinite(self._odom_factor_yaw_var):
+            out["odom"] = (float(d_odom) * float(self._gains[1]), self._odom_factor_yaw_var)
+        return out
+
+    def _compass_kernel_k(self, sigma: float, relative: dict[str, tuple[float, float]]) -> float:
+        """The compass factor's kernel scale (whitened units): the configured one on the
+        innovation, whose variance is the reading's ``sigma^2`` plus how well the other yaw sources
+        predict the heading change since the previous keyframe (the best of ``relative``'s
+        variances; without any, the odometry factor's).  Scaled on the reading's sigma alone,
+        a redescending kernel drops a good compass as soon as the heading is off by a few of its
+        sigmas, which a noisy relative source (a skid steer's wheels) does within a keyframe, and
+        the heading then follows that source."""
+        q = min((v for _, v in relative.values()), default=self._odom_factor_yaw_var)
+        k = float(self.cfg.compass_kernel_k)
+        if not (sigma > 0.0 and math.isfinite(q)):
+            return k
+        return k * math.sqrt(1.0 + q / (sigma * sigma))
+
     def _odometry_factor(self, ki: int, kj: int, d: FloatArray, c: FloatArray, t: float,
                          graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
                          bend: bool = True) -> gtsam.NonlinearFactor:
@@ -184,6 +224,7 @@ class KeyframeGraph(FurtherSourceFactors):
             a[2], a[5], a[8] = a[2] * k_yaw, a[5] * k_yaw, a[8] * k_yaw
             a[8] += (rel * float(d[2])) ** 2
         a[8] += self._timing_var(self.kf_t[-1], t)
+        self._odom_factor_yaw_var = a[8]
         c = np.array(a).reshape(3, 3)
         if not self.cfg.odom_gains:
             return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)

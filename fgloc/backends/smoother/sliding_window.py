@@ -127,7 +127,7 @@ class SlidingWindowSmoother(KeyframeGraph):
         h.accepted += 1
         self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
         self.compass_pending.append((float(t), float(yaw), float(var), source))
-        self._add_heading_reading(float(t), float(yaw), source)
+        self._add_heading_reading(float(t), float(yaw), float(var), source)
         self._process_pending(float(t))
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:

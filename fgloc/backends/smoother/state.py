@@ -17,6 +17,7 @@ from fgloc.backends.contract import SourceNoise
 from fgloc.backends.health import Arbiter, SourceHealth
 from fgloc.backends.inputs import InputBook
 from fgloc.backends.smoother.config import SmootherConfig
+from fgloc.backends.smoother.consistency import HeadingConsistency
 from fgloc.backends.smoother.keys import BALLAST
 from fgloc.types import PoseFix
 
@@ -50,9 +51,16 @@ class SmootherState(Backend):
         # sensor streams and what is known about each source (kept across re-initializations)
         self.gyro: dict[str, tuple[list[float], list[float], list[float]]] = {}
         # the first absolute heading source's readings (stamps, unwrapped yaw), the last few seconds:
-        # the chord's heading where no gyro covers an interval and the wheels' yaw rate is not fused
+        # the chord's heading where no gyro covers an interval (see Streams._heading_chord)
         self.heading_hist: tuple[list[float], list[float]] = ([], [])
         self._heading_source: str | None = None
+        self._heading_var = np.inf    # its last reading's variance (rad^2)
+        self._odom_factor_yaw_var = np.inf   # the last odometry factor's yaw variance (rad^2)
+        #: the fused heading against the heading sources it fuses (kept across re-initializations)
+        self.heading_check = HeadingConsistency()
+        # what the heading sources said since the last solved keyframe: relative sources' summed
+        # (increment, variance), absolute ones' latest (reading, variance)
+        self._heading_inputs: tuple[dict[str, tuple[float, float]], dict[str, tuple[float, float]]] = ({}, {})
         self._gyro_done: dict[str, float] = {}
         self.chains: dict[str, Chain] = {}
         # per-source health, noise, gyro biases (unless cfg.gyro_bias_in_graph) and latency pairs; the
@@ -114,6 +122,8 @@ class SmootherState(Backend):
         self._pred_cache: tuple | None = None
         self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
+        self.heading_check.restart()
+        self._heading_inputs = ({}, {})
         for ch in self.chains.values():  # calibration carries over a re-initialization as a prior
             if ch.key is not None and ch.estimate is not None:
                 ch.prior_mean = ch.estimate.copy()

@@ -187,7 +187,7 @@ class Streams(SmootherState):
             i += 1
         return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
 
-    def _add_heading_reading(self, t: float, yaw: float, source: str) -> None:
+    def _add_heading_reading(self, t: float, yaw: float, var: float, source: str) -> None:
         """Keep the first absolute heading source's readings (unwrapped) for :meth:`_chord_along_heading`."""
         if self._heading_source is None:
             self._heading_source = source
@@ -196,6 +196,7 @@ class Streams(SmootherState):
         ts, ys = self.heading_hist
         if ts and t <= ts[-1]:
             return
+        self._heading_var = float(var)
         ts.append(t)
         ys.append(yaw if not ys else ys[-1] + wrap_scalar(yaw - ys[-1]))
         if len(ts) > 4096 and self.kf_t:
@@ -209,11 +210,56 @@ class Streams(SmootherState):
         along the heading at its start, whatever the robot turned."""
         return bool(self.odo_c) and self.odo_c[-1][5] >= TWIST_VAR_MAX
 
+    def _odom_yaw_var(self, var: float, dyaw: float) -> float:
+        """The odometry factor's yaw variance (rad^2) for an increment ``dyaw`` whose integrated
+        variance is ``var``: scaled by the noise the wheels' yaw showed against the other yaw
+        sources (``k^2``), plus their per-turn noise."""
+        k_yaw, rel = self.inputs.noise("odom")
+        return var * k_yaw * k_yaw + (rel * dyaw) ** 2
+
+    def _heading_chord(self, t0: float, t1: float) -> bool:
+        """Without a gyro over ``(t0, t1]``, the chord runs along the absolute heading's readings
+        rather than the wheels' arc when their increment over the interval (two interpolated
+        readings: twice a reading's variance) is better known than the wheels' yaw increment (a
+        skid steer's wheels report several times the turn: their arc drives the path crabwise),
+        or the wheels' yaw rate is not fused at all."""
+        if not self.odo_c or not self.heading_hist[0]:
+            return False
+        if self._wheel_yaw_unfused():
+            return True
+        dt = t1 - t0
+        var_w = self._odom_yaw_var(self.odo_c[-1][5] * dt * dt, self.odo_u[-1][2] * dt)
+        return 2.0 * self._heading_var * self.inputs.noise(f"{self._heading_source}.yaw")[0] ** 2 < var_w
+
+    def _heading_at(self, t: float) -> float:
+        """The absolute heading's readings (unwrapped) linearly interpolated at ``t`` (held beyond them)."""
+        hts, hys = self.heading_hist
+        if len(hts) < 2:
+            return hys[-1]
+        i = min(max(bisect_right(hts, t), 1), len(hts) - 1)
+        ta, tb = hts[i - 1], hts[i]
+        f = min(max((t - ta) / (tb - ta), 0.0), 1.0) if tb > ta else 1.0
+        return hys[i - 1] + f * (hys[i] - hys[i - 1])
+
+    def _heading_reading_at(self, t: float) -> tuple[float, float] | None:
+        """The absolute heading at ``t`` interpolated between its readings either side (at most
+        0.25 s apart) and that value's sigma, or None when they do not bracket ``t``."""
+        hts, hys = self.heading_hist
+        if len(hts) < 2 or hts[0] > t or hts[-1] < t:
+            return None
+        i = min(max(bisect_right(hts, t), 1), len(hts) - 1)
+        ta, tb = hts[i - 1], hts[i]
+        if tb - ta > 0.25:
+            return None
+        f = (t - ta) / (tb - ta) if tb > ta else 1.0
+        return (wrap_scalar(hys[i - 1] + f * (hys[i] - hys[i - 1])),
+                math.sqrt(self._heading_var * (f * f + (1.0 - f) ** 2)))
+
     def _chord_along_heading(self, t0: float, t1: float
                              ) -> tuple[FloatArray, tuple[float, float, float]] | None:
         """:meth:`_chord_along_gyro`'s chord and covariance, the odometry's translation integrated
         along the absolute heading readings (a compass, an IMU's orientation: linearly interpolated)
-        where no gyro covers the interval and the wheels' yaw rate is not fused; None when the
+        where no gyro covers the interval (:meth:`_heading_chord`); None when the
         readings do not cover ``[t0, t1]`` or are further apart than 0.25 s."""
         hts, hys = self.heading_hist
         if not self.odo_t or not hts or hts[0] > t0 + 1e-9 or hts[-1] < t1 - 1e-9:
@@ -223,12 +269,7 @@ class Streams(SmootherState):
         if j1 > j0 and max(map(sub, hts[j0 + 1:j1 + 1], hts[j0:j1])) > 0.25:
             return None
 
-        def heading(t: float) -> float:
-            i = min(max(bisect_right(hts, t), 1), len(hts) - 1)
-            ta, tb = hts[i - 1], hts[i]
-            f = (t - ta) / (tb - ta) if tb > ta else 1.0
-            return hys[i - 1] + f * (hys[i] - hys[i - 1])
-
+        heading = self._heading_at
         qx, qy = float(self._q_slip[0]), float(self._q_slip[1])
         ts = self.odo_t
         n = len(ts)

@@ -145,6 +145,20 @@ class FixedLagWindow(Calibration):
             self._update_covariance()
         self.stats["keyframes"] += 1
         self._record_online(t, self.kf_pose[k], self._last_cov)
+        self._check_heading(t, float(self.kf_pose[k][2]))
+
+    def _check_heading(self, t: float, yaw: float) -> None:
+        """Hand the solved keyframe's heading and what its sources said to :attr:`heading_check`."""
+        incs, absolute = self._heading_inputs
+        if not incs and not absolute:
+            return
+        self.heading_check.add(t, yaw, incs, absolute)
+        self._heading_inputs = ({}, {})
+        hc = self.heading_check
+        self.stats["heading_diverged_s"] = round(hc.diverged_total_s(t), 3)
+        self.stats["heading_divergence_spans"] = hc.spans
+        if hc.worst is not None:
+            self.stats["heading_divergence_worst_deg"] = round(abs(hc.worst.off_deg), 2)
 
     def _capture_leaving(self, t_new: float) -> None:
         """Record the keyframes the next update will marginalize (their final smoothed value)."""

@@ -43,14 +43,11 @@ KNOWN: dict[tuple[str, str, str], str] = {
                                          "rates, which agree with the GPS course, and the IMU's orientation, which "
                                          "drifts 40 deg against it",
     ("noetic test1", "defaults", "smoother"): "41.7 m (tol 1.045; 36.1 m from the log's GPS, the EKF 71.0 m)",
-    ("noetic test1", "+ gyro", "smoother"): "3.87 m (tol 1.045): r_l's answer follows the IMU's orientation, the "
-                                            "gyro does not (68.3 m from the log's GPS, r_l's answer 71.9 m)",
+    ("noetic test1", "+ gyro", "smoother"): "3.84 m (tol 1.045): r_l's answer follows the IMU's orientation, the "
+                                            "gyro does not (68.4 m from the log's GPS, r_l's answer 71.9 m)",
     ("noetic test1", "+ gyro + wheel yaw", "ekf"): "3.227 m (tol 1.045)",
     ("noetic test1", "+ gyro + wheel yaw", "smoother"): "42.0 m (tol 1.045; 35.8 m from the GPS, the EKF 70.1 m)",
     ("noetic test2", "defaults", "ekf"): "0.225 m (tol 0.138)",
-    ("noetic test2", "- gyro", "smoother"): "10.76 m (tol 0.138): the wheels report 4-9x the turn with a claimed "
-                                            "5 % per-turn noise nothing resolves (two yaw sources), and the compass "
-                                            "factors' Cauchy kernel drops the compass",
     ("noetic test2", "2-D", "ekf"): "0.219 m (tol 0.138)",
     ("groovy test1", "r_l, mount in /tf_static", "smoother"): "31.5 m (tol 0.381): the mounts are under the "
                                                                "robot frame mustang_base, which fgloc does not take "
@@ -62,7 +59,7 @@ KNOWN: dict[tuple[str, str, str], str] = {
 }
 
 #: cells where the EKF is within tolerance and the smoother is not (the figures above)
-SMOOTHER_WORSE = {("noetic test1", "+ gyro"), ("noetic test2", "- gyro"), ("groovy test1", "r_l, mount in /tf_static")}
+SMOOTHER_WORSE = {("noetic test1", "+ gyro"), ("groovy test1", "r_l, mount in /tf_static")}
 
 
 def _folders() -> list[Path]:
@@ -137,5 +134,5 @@ def test_smoother_median_at_most_the_ekfs(matrix: dict, request: pytest.FixtureR
     tool = _load("eval_rl_matrix")
     v = tool.verdict(list(matrix.values()))
     assert v.cells >= 10
-    request.applymarker(pytest.mark.xfail(strict=True, reason="EKF 0.246 m, smoother 0.822 m over these 14 cells"))
+    request.applymarker(pytest.mark.xfail(strict=True, reason="EKF 0.246 m, smoother 0.442 m over these 14 cells"))
     assert v.median["smoother"] <= v.median["ekf"], v.lines()

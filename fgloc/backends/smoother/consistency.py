@@ -48,8 +48,10 @@ class HeadingConsistency:
     """The fused heading's divergence from its heading sources, keyframe by keyframe."""
 
     def __init__(self, windows_s: tuple[float, ...] = (20.0, 120.0), threshold: float = 4.0,
-                 floor_rad: float = math.radians(2.0)) -> None:
+                 floor_rad: float = math.radians(2.0), check_every_s: float = 0.5) -> None:
         self.windows_s = tuple(sorted(float(w) for w in windows_s))
+        self.check_every_s = float(check_every_s)   # the windows are compared this often (log time)
+        self._checked = -math.inf
         self.threshold = float(threshold)
         self.floor_rad = float(floor_rad)
         # per keyframe: stamps, unwrapped fused headings, {source: value} (the longest window's)
@@ -73,7 +75,8 @@ class HeadingConsistency:
         """A keyframe at ``t`` with the fused heading ``fused_yaw`` (rad), each relative source's
         ``(increment, variance)`` since the previous keyframe and each absolute source's
         ``(reading, variance)`` at ``t``; the worst over the windows ending here of the fused
-        heading's divergence from its nearest source (None while no source covers a window)."""
+        heading's divergence from its nearest source, every ``check_every_s`` (None in between
+        and while no source covers a window)."""
         t = float(t)
         if self._fused is None:
             self._fused = float(fused_yaw)
@@ -100,6 +103,9 @@ class HeadingConsistency:
             cut = bisect_right(self._t, horizon) - 1
             if cut > 0:
                 del self._t[:cut], self._f[:cut], self._v[:cut]
+        if t - self._checked < self.check_every_s:
+            return None
+        self._checked = t
         got: HeadingDivergence | None = None
         for w in self.windows_s:
             i = bisect_right(self._t, t - w) - 1
@@ -125,18 +131,20 @@ class HeadingConsistency:
     def _nearest(self, i: int, t: float, row: dict[str, _Value]) -> HeadingDivergence | None:
         """The source whose change since keyframe ``i`` the fused heading's is nearest (in its sigmas)."""
         t0, f0, row0 = self._t[i], self._f[i], self._v[i]
-        best: HeadingDivergence | None = None
+        df = (self._fused or 0.0) - f0
+        floor2 = self.floor_rad * self.floor_rad
+        best: tuple[float, str, float] | None = None
         for name, (y1, v1) in row.items():
             got = row0.get(name)
             if got is None or self._since.get(name, t) > t0:
                 continue
             y0, v0 = got
             var = (v1 - v0) if name in self._relative else (v1 + v0)
-            off = (self._fused - f0) - (y1 - y0) if self._fused is not None else 0.0
-            score = abs(off) / math.sqrt(max(var, 0.0) + self.floor_rad ** 2)
-            if best is None or score < best.score:
-                best = HeadingDivergence(t, t - t0, name, off, score)
-        return best
+            off = df - (y1 - y0)
+            score = abs(off) / math.sqrt(max(var, 0.0) + floor2)
+            if best is None or score < best[0]:
+                best = (score, name, off)
+        return None if best is None else HeadingDivergence(t, t - t0, best[1], best[2], best[0])
 
     def restart(self) -> None:
         """The estimate was re-initialized (a jump of its own): compare from here on, totals kept."""
@@ -149,6 +157,7 @@ class HeadingConsistency:
         self._cum.clear()
         self._since.clear()
         self._fused = None
+        self._checked = -math.inf
         self.latest = None
 
     def diverging(self) -> bool:

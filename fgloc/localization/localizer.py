@@ -65,6 +65,9 @@ MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the re
 #: the map lacks is dead-reckoned, not lost)
 MISMATCH_LOST_SHARE = 0.5
 MISMATCH_MATCHED_SHARE = 0.1
+#: a back-end's heading_diverged_s counter that grew within this long (log s): its heading diverges now
+HEADING_CHECK_S = 1.0
+HEADING_DIVERGED = "heading diverged: the fused heading follows none of its heading sources"
 
 
 def reason_kind(reason: str) -> str:
@@ -145,6 +148,8 @@ class Localizer:
         self._worst_divergence: tuple[float, float, float, float, float] | None = None  # ratio, m, driven, limit, t
         self._divergence_t = -math.inf
         self._ever_converged = False
+        self._heading_diverged_s = 0.0  # the back-end's heading_diverged_s counter when last seen growing
+        self._heading_diverged_t = -math.inf  # ... and the stamp then
         self.stats["held_jumps"] = 0
         self.stats["confirmed_jumps"] = 0
         #: called with the stamp of each pose added without a scan (a silent laser, a log without scans):
@@ -498,6 +503,8 @@ class Localizer:
             if self._divergence is not None:
                 d, dist, limit = self._divergence
                 return SUSPECT, f"{d:.1f} m from odometry + IMU dead reckoning after {dist:.0f} m driven"
+            if self._heading_diverging(t):
+                return SUSPECT, HEADING_DIVERGED
             return OK, ""
         silent = self._last_scan_t is not None and t - self._last_scan_t >= self.icfg.laser_silent_after_s
         if not self.backend.initialized:
@@ -509,12 +516,24 @@ class Localizer:
         since = t - (self._t_used if self._t_used is not None else t)
         if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
             return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
+        if self._heading_diverging(t):
+            return SUSPECT, HEADING_DIVERGED
         if silent:
             assert self._last_scan_t is not None
             return DEGRADED, f"dead reckoning: no scan for {t - self._last_scan_t:.1f} s"
         if since >= self.icfg.degraded_after_s:
             return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
         return OK, ""
+
+    def _heading_diverging(self, t: float) -> bool:
+        """The back-end says its fused heading follows none of its heading sources: the log time it
+        counts as diverging (its ``heading_diverged_s`` counter, a smoother's heading check) grew within
+        the last second."""
+        total = float(self.backend.stats.get("heading_diverged_s", 0.0) or 0.0)
+        if total > self._heading_diverged_s:
+            self._heading_diverged_s = total
+            self._heading_diverged_t = t
+        return t - self._heading_diverged_t <= HEADING_CHECK_S
 
     def guess(self, t: float) -> FloatArray:
         """The pose guess for the front-end at scan stamp ``t``: the back-end's prediction.
@@ -792,7 +811,18 @@ class Localizer:
 
     def _assess(self) -> None:
         """The run-level verdicts (monitor.py): no scan ever matched the map; in the odom frame, a
-        fused path that ends far from dead reckoning."""
+        fused path that ends far from dead reckoning; a back-end whose heading diverged from all its
+        heading sources for a while (said; its poses are suspect, counted towards
+        ``integrity.max_bad_share``)."""
+        bs = self.backend.stats
+        diverged_s = float(bs.get("heading_diverged_s", 0.0) or 0.0)
+        if diverged_s > 0:
+            worst = bs.get("heading_divergence_worst_deg")
+            self.monitor.verdict(
+                "heading_diverged", f"the {self.backend_name}'s heading followed none of its heading sources for "
+                f"{diverged_s:.1f} s in {int(bs.get('heading_divergence_spans', 1) or 1)} span(s)"
+                + (f" (worst {float(worst):.1f} deg off the nearest)" if worst is not None else "")
+                + "; its poses there are suspect", False)
         if self.odom_mode:
             self._divergence_t = -math.inf
             if self._last_kf_t > -math.inf:

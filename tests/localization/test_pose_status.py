@@ -176,3 +176,32 @@ def test_monitor_keeps_a_bounded_history_when_asked():
     for t in np.arange(0.0, 1000.0, 0.1):
         m.record(t, "ok")
     assert len(m.t) <= 201 and m.t[-1] == pytest.approx(999.9) and m.at([995.0])[0] == ["ok"]
+
+
+def test_a_back_end_heading_that_diverges_makes_its_poses_suspect_and_is_said():
+    """A back-end that counts log time its fused heading followed none of its heading sources (the
+    smoother's heading check, in its ``stats["heading_diverged_s"]``): the poses while the counter grows
+    are suspect, and the run says so in one line.  The counter is advanced here as the back-end does."""
+    from fgloc.sim import simulate_paper
+
+    sim = simulate_paper(seed=0, route=[[2.5, 3.0], [16.5, 3.0]])  # 20 s
+    msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
+    loc = Localizer(sim.map, sim.laser_mount, "ekf", "native", initial_pose=sim.ground_truth.poses[0],
+                    config=load_config())
+    session = Session(loc)
+    stamp = [float(getattr(m, "stamp", 0.0)) for _, m in msgs]
+    t0 = stamp[0]
+    for (topic, msg), t in zip(msgs, stamp, strict=True):
+        if 10.0 <= t - t0 < 14.0:  # diverging for 4 s
+            loc.backend.stats["heading_diverged_s"] = t - t0 - 10.0
+            loc.backend.stats["heading_divergence_spans"] = 1
+        session.feed(topic, msg)
+    est = session.finish()
+    status, why = loc.monitor.at(est.stamps)
+    rel = est.stamps - t0
+    bad = {s for s, r in zip(status, rel, strict=True) if 10.5 < r < 14.0}
+    assert bad == {"suspect"} and all("heading diverged" in w for w, r in zip(why, rel, strict=True) if 10.5 < r < 14.0)
+    assert {s for s, r in zip(status, rel, strict=True) if r < 9.5 or r > 15.5} == {"ok"}
+    (v,) = [v for v in loc.stats["status"]["verdicts"] if v["kind"] == "heading_diverged"]
+    assert v["message"].startswith("the ekf's heading followed none of its heading sources for 4.0 s")
+    assert not v["unusable"]

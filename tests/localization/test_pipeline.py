@@ -179,10 +179,21 @@ def test_bad_and_out_of_order_input_is_counted_not_raised(world):
 
 @pytest.fixture(scope="module")
 def world_log(world, tmp_path_factory):
+    m, gt, msgs = world
+    return _write_world_log(tmp_path_factory.mktemp("world"), m, gt, msgs)
+
+
+@pytest.fixture(scope="module")
+def world_log_4s(world, tmp_path_factory):
+    """The world's first 4 s (the lost runs search the whole map at every scan)."""
+    m, gt, msgs = world
+    return _write_world_log(tmp_path_factory.mktemp("world4s"), m, gt,
+                            [(t, msg) for t, msg in msgs if msg.stamp <= gt.stamps[0] + 4.0])  # type: ignore[attr-defined]
+
+
+def _write_world_log(d, m, gt, msgs):
     from fgloc.io.mcap_writer import LogWriter
 
-    m, gt, msgs = world
-    d = tmp_path_factory.mktemp("world")
     m.save(d / "map.yaml")
     with LogWriter(d / "log.mcap") as w:
         w.write("/tf_static", [MOUNT], stamp=0.0)
@@ -373,12 +384,12 @@ def _run(argv, capsys):
     return rc, cap.out, cap.err
 
 
-def test_run_ending_lost_exits_3_unless_allowed(world_log, tmp_path, capsys):
+def test_run_ending_lost_exits_3_unless_allowed(world_log_4s, tmp_path, capsys):
     """Issue 12 item 1: a run against the wrong map is lost at the end: exit 3 with one line."""
     d = np.zeros((300, 300), dtype=np.int16)  # an empty 30 m hall: no wall where the scans see one
     d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
     OccupancyMap(d, 0.1, origin=np.array([-8.0, -12.0, 0.0])).save(tmp_path / "wrong.yaml")
-    log = str(world_log / "log.mcap")
+    log = str(world_log_4s / "log.mcap")
     rc, out, err = _run(["run", log, "--map", str(tmp_path / "wrong.yaml"), "--initial-pose", "7.0", "1.8", "0.0",
                          "-o", str(tmp_path / "a"), "-q"], capsys)
     assert rc == 3, (out, err)

@@ -128,20 +128,18 @@ def register(app: typer.Typer) -> None:
 
             if serial or laser:
                 raise ConfigError("fgloc live: --ros2 takes the robot's sensors from DDS; leave out --serial / --laser")
-            from fgloc.app.startup import pause_gc, resume_gc, setup_done
+            import gc
 
-            pause_gc()  # until the localizer is built and the kept messages fused (fgloc.app.startup)
             # the fusion loop and the DDS receive thread hand the GIL over every 0.5 ms, not 5 ms: a scan's
             # pose waits less behind the other thread (this process is the command's alone)
             sys.setswitchinterval(ROS2_SWITCH_INTERVAL_S)
-            try:
-                rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend,
-                                initial_pose=pose_arg(initial_pose), record=record, publish=publish, duration=duration,
-                                config=config, out=out or out_old, out_smoothed=out_smoothed, quiet=quiet, view=view,
-                                domain=domain, interface=interface, scan_topic=scan_topic, force=force,
-                                on_started=setup_done)
-            finally:
-                resume_gc()
+            # once started, what is alive (the imports, the map, the localizer) is frozen: the collector's
+            # full passes skip it (no pause while waiting: the wait for a map has no bound)
+            rep = live_ros2(map_yaml=map_yaml, backend=backend, frontend=frontend,
+                            initial_pose=pose_arg(initial_pose), record=record, publish=publish, duration=duration,
+                            config=config, out=out or out_old, out_smoothed=out_smoothed, quiet=quiet, view=view,
+                            domain=domain, interface=interface, scan_topic=scan_topic, force=force,
+                            on_started=gc.freeze)
             print(dumps(rep, indent=1) if as_json else ros2_summary(rep))
             _recording_and_hurry(rep.get("record_error"), bool(rep.get("hurried")), out_smoothed)
             return

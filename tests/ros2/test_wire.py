@@ -250,7 +250,7 @@ def test_domain_and_interface_options(monkeypatch: pytest.MonkeyPatch) -> None:
         domain_from_env(233)
     # Fast DDS' (vendor 1.15) type information is ignored: its endpoints match fgloc's by type name, as
     # rmw_cyclonedds_cpp's (which send none) do; else Cyclone cannot resolve Fast DDS' type objects and never
-    # matches them (tools/interop_ros2.py against rclpy on rmw_fastrtps_cpp: 0 poses delivered before)
+    # matches them (tools/interop_ros2.py: a rclpy node on rmw_fastrtps_cpp)
     monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
     ignore = "<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation></Compatibility>"
     assert ignore in (cyclone_config(None) or "")

@@ -101,10 +101,12 @@ class _Online:
     def find_offset(self, stamps: list[float]) -> None:
         """The one offset that puts the most of ``stamps`` on this file's (tried: from the first stamp)."""
         first = min(stamps)
-        best = max((first - t for t in self.t[:100]),
-                   key=lambda o: sum(abs(self.t[min(int(np.searchsorted(self.t, s - o)), len(self.t) - 1)] - (s - o))
-                                     <= self.tol_s for s in stamps))
-        self.offset_s = float(best)
+
+        def matches(offset: float) -> int:
+            self.offset_s = offset
+            return sum(self.get(s) is not None for s in stamps)
+
+        self.offset_s = float(max((first - t for t in self.t[:100]), key=matches))
 
 
 def _odom_poses(d: Path) -> tuple[np.ndarray, np.ndarray]:

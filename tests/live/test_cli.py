@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import time
 
 import pytest
@@ -49,7 +50,8 @@ def test_summary_is_strict_json_with_an_absent_sensor(flag, capsys):
     what = "serial loop://: no frame received" if flag == "--serial" else \
         "laser 127.0.0.1:9: no scan received (never connected)"
     last = err.strip().splitlines()[-1]
-    assert last.startswith(f"fgloc live: error: {what} in 0.") and last.endswith(" s")
+    # the session's length: 0.5 s asked, more on a loaded host (1.1 s seen at load 13)
+    assert re.fullmatch(rf"fgloc live: error: {re.escape(what)} in \d+\.\d+ s", last), last
     report = _strict_json(out)
     assert report["poses"] == 0
     assert report["latency_ms"] == {"p50": None, "p99": None}

@@ -49,8 +49,13 @@ def _check_replay(emu: Stm32Emulator, got, robot):
     st = np.array([emu.clock.to_run(o.stamp) for o in odo])
     srcst = np.array([m.stamp for m in src])
     i = np.clip(np.searchsorted(srcst, st - 2e-3), 0, len(src) - 1)
-    # MCU clock (with its own offset and 40 ppm drift) mapped back to host time
-    assert np.percentile(np.abs(st - srcst[i]), 95) < 0.003
+    # MCU clock (with its own offset and 40 ppm drift) mapped back to host time, as well as the
+    # deliveries so far allow: a stamp can be no better than the fastest frame seen until then (a
+    # loaded host that starves the reader at the start delays them all: 12 ms seen at load 13)
+    arrival = np.array([a for k, _, a in got if k == "odom"])
+    delay_run = (arrival - np.asarray(emu.clock.to_host(srcst[i]))) * emu.speed  # host s -> run s
+    floor = np.maximum(np.minimum.accumulate(delay_run), 0.0)
+    assert np.percentile(np.abs(st - srcst[i]) - floor, 95) < 0.003
     tw = np.array([o.twist for o in odo])
     ref = np.array([src[j].twist for j in i]) * emu.speed  # replayed faster: host-time twist scales
     q = 2 * math.pi / robot.counts_per_rev * robot.wheel_radius_m * 50  # one count at 50 Hz, m/s

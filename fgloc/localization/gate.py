@@ -1,19 +1,22 @@
 """No jumps: a fix that moves the robot further than odometry and covariance allow is held back.
 
-A fix is taken when it agrees with what the odometry says since the last accepted fix, either way:
+A fix is taken when it agrees with what the odometry says since the last fix it passed, either way:
 
 * with the back-end's prediction at the scan stamp (the fused pose carried on by the odometry,
   with its covariance): ``d2 = e^T (P_pred + R_fix)^-1 e`` of the position within
   ``integrity.gate_chi2``; or
-* with the previous fix, when the back-end took it and it was sure of its position (its position
-  sigma, in every direction, within twice the prediction's and the allowance below for the motion
-  since the fix before), carried on by the odometry's motion since
-  (:meth:`Backend.motion_correction`: a gyro's turn where it covers it), with an allowance for an
+* with the previous fix, when the gate passed it (whether the back-end used it or its own tighter
+  gate held it) and it was sure of its position (its position sigma, in every direction, within
+  twice the prediction's and the allowance below for the motion since the fix before), carried on
+  by the odometry's motion since (:meth:`Backend.motion_correction`: a gyro's turn where it covers
+  it), with an allowance for an
   odometry that slips or scrubs beyond what it reports: ``integrity.odometry_slip`` times the
   distance and the turn it reported in between (the odometry motion model of AMCL and most particle
   filters).  A back-end whose online estimate lags the fixes (a smoother outvoted by odometry that
   slips 30 %) does not make the fixes that follow each other as the wheels roughly say look like
-  jumps.
+  jumps; nor does a back-end that rejects fixes (an EKF sure of a start it has not moved from) make
+  a run of fixes that agree with each other look like one: a gate that held them all would lose the
+  robot.
 
 A fix that agrees with neither is a jump the odometry does not explain.  It is taken only on
 evidence the matcher did not produce itself: the scan's agreement with the map
@@ -168,8 +171,8 @@ Motion = Callable[[float, float, FloatArray], FloatArray]
 class JumpGate:
     """Holds back fixes that jump further than odometry and covariance allow (module docstring).
 
-    The localizer calls :meth:`check` for every fix while tracking, :meth:`accepted` when the back-end
-    took the fix the gate passed, and :meth:`reset` when it (re)starts the pose or a fix was not used."""
+    The localizer calls :meth:`check` for every fix while tracking, :meth:`accepted` when it handed the
+    fix the gate passed to the back-end, and :meth:`reset` when it (re)starts the pose or a fix was not used."""
 
     def __init__(self, cfg: IntegrityConfig, occ_map: OccupancyMap, laser_mount: StaticTransform) -> None:
         self.cfg = cfg
@@ -187,7 +190,7 @@ class JumpGate:
         self._last_odom = None
 
     def accepted(self) -> None:
-        """The back-end took the fix :meth:`check` passed last."""
+        """The fix :meth:`check` passed last went to the back-end: the next one may follow it."""
         self.previous = self._pending
         self._pending = None
 

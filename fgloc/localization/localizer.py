@@ -387,8 +387,10 @@ class Localizer:
         if kf_fix is not None and not used:
             self.stats["rejected"] += 1
             self.last_reason = "fix rejected by the back-end"
-        if self.gate is not None and used:
-            self.gate.accepted()  # (a fix the gate held leaves no previous one to follow: gate.py)
+        if self.gate is not None and kf_fix is not None:
+            # the gate passed it: the fixes that follow it as the odometry says are no jumps, whether the
+            # back-end used it or its own tighter gate held it (a consistent run is let in; gate.py)
+            self.gate.accepted()
         if used:
             self._t_used = t
             self._converged = True

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections import OrderedDict
 from pathlib import Path
 
 import pytest
@@ -10,10 +11,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 #: pytest-xdist (pyproject's ``-n 2 --dist loadgroup``) sends a whole file to one worker, so its
-#: module fixtures are made once; the tests that keep real time (live replays through the emulators,
-#: DDS peers, the viewer's websocket) form one unit run one after another on one worker, and so do
-#: those that start Ray instances: neither kind ever runs beside another of its kind
-SERIAL_GROUPS = {"live": "realtime", "ros2": "realtime", "view": "realtime", "batch": "ray"}
+#: module fixtures are made once. The tests that keep real time (live replays through the emulators,
+#: DDS peers, the viewer's websocket) and those that start Ray instances form one unit, run one after
+#: another on one worker: never two of them at once, while the other worker runs the rest
+SERIAL_GROUPS = {"live": "realtime", "ros2": "realtime", "view": "realtime", "batch": "realtime"}
 
 
 def xdist_unit(nodeid: str) -> str:
@@ -28,8 +29,28 @@ try:
 except ImportError:  # pytest-xdist is in the test extra; without it the suite runs in one process
     LoadScopeScheduling = None
 
+#: the longest units (measured), handed out first so that no long one starts last
+LONG_UNITS = ("realtime", "tests/acceptance/test_rl_matrix.py", "tests/outputs/test_signals.py",
+              "tests/test_conformance.py", "tests/sim/test_fusion_acceptance.py", "tests/localization/test_pipeline.py",
+              "tests/config/test_robot_configs.py")
+
+
+class _LongestFirst(OrderedDict):
+    """xdist's queue of units: the :data:`LONG_UNITS` leave it first, the rest in order."""
+
+    def popitem(self, last: bool = True):
+        first = next((u for u in LONG_UNITS if u in self), None)
+        if last or first is None:
+            return super().popitem(last)
+        return first, self.pop(first)
+
+
 if LoadScopeScheduling is not None:
     class _UnitScheduling(LoadScopeScheduling):
+        def __init__(self, config, log=None) -> None:
+            super().__init__(config, log)
+            self.workqueue = _LongestFirst()
+
         def _split_scope(self, nodeid: str) -> str:
             return xdist_unit(nodeid)
 

@@ -45,8 +45,9 @@ from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
 from fgloc.localization.coverage import unmapped_share
 from fgloc.localization.gate import GateVerdict, JumpGate
-from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning
+from fgloc.localization.monitor import ConsistencyMonitor, DeadReckoning
 from fgloc.localization.odometry import OdometryTracker
+from fgloc.localization.recovery import EPS_COV, Recovery
 from fgloc.localization.relocalization import Relocalizer, close
 from fgloc.maps import OccupancyMap
 from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTransform, Trajectory
@@ -54,22 +55,11 @@ from fgloc.types import CompassHeading, LaserScan, Odometry, PoseFix, StaticTran
 if TYPE_CHECKING:
     from fgloc.config import FglocConfig
 
-EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
 COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset filters global candidates
 #: a scan whose beams, cast from the guess, mostly end in the map's unknown space (crossing no mapped
 #: wall) is one the map cannot judge: no fix there is not counted towards being lost (coverage.py)
 UNMAPPED_SHARE = 0.5
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
-#: the map does not fit the log: lost at least this share of the run, and fixes accepted on fewer than
-#: this share of the scans matched (a right map with a wrong start relocalizes and tracks; a building
-#: the map lacks is dead-reckoned, not lost)
-MISMATCH_LOST_SHARE = 0.5
-MISMATCH_MATCHED_SHARE = 0.1
-#: a back-end's heading_diverged_s counter that grew within this long (log s): its heading diverges now
-HEADING_CHECK_S = 1.0
-HEADING_DIVERGED = "heading diverged: the fused heading follows none of its heading sources"
-
-
 def reason_kind(reason: str) -> str:
     """The kind of a no-fix reason: details in parentheses dropped, numbers as N
     ("update thresholds not met (moved 0.064 m ...)" -> "update thresholds not met")."""
@@ -90,7 +80,7 @@ def group_reasons(counts: dict[str, int], max_kinds: int = MAX_REASON_KINDS) -> 
     return out
 
 
-class Localizer:
+class Localizer(Recovery):
     """Online localization from odometry, compass and scans (see the module docstring).
 
     ``config``: the :class:`~fgloc.config.FglocConfig` (``None``: the defaults; a mapping is
@@ -459,84 +449,6 @@ class Localizer:
         self.last_gate = verdict
         return verdict
 
-    def _first_convergence(self, t: float, pose: FloatArray) -> None:
-        """The map confirmed a pose for the first time at ``t``: if it is not where ``--initial-pose`` said
-        (beyond 3 sigma of its prior), that start did not fit the map, and every pose before is lost."""
-        p0 = self.initial_pose
-        if p0 is None:
-            return
-        d = float(np.hypot(pose[0] - p0[0], pose[1] - p0[1]))
-        a = abs(math.degrees(float(np.angle(np.exp(1j * (pose[2] - p0[2]))))))
-        if d <= 3 * self.pcfg.initial_sigma_xy_m and a <= 3 * self.pcfg.initial_sigma_yaw_deg:
-            return
-        self.monitor.amend(-math.inf, t, LOST, "lost: the initial pose does not fit the map")
-        n = sum(1 for x in self.monitor.t if x < t)
-        self.monitor.verdict(
-            "initial_pose", f"the initial pose ({p0[0]:.2f} m, {p0[1]:.2f} m, {math.degrees(p0[2]):.0f} deg) does "
-            f"not fit the map: the scans matched {d:.2f} m / {a:.0f} deg from it, at t = {t:.1f} s "
-            f"({n} pose(s) before are marked lost)", False)
-
-    def _check_divergence(self, t: float) -> None:
-        """Odom frame, at most once a second: how far the fused pose is from dead reckoning."""
-        dr = self.dead_reckoning
-        if dr is None or t - self._divergence_t < 1.0:
-            return
-        self._divergence_t = t
-        cur = self.backend.current(covariance=False)
-        d = None if cur is None else dr.divergence(cur[1])
-        if d is None:
-            return
-        limit = max(self.icfg.divergence_min_m, self.icfg.divergence_share * dr.distance_m)
-        self._divergence = (d, dr.distance_m, limit) if d > limit else None
-        if d > limit and (self._worst_divergence is None or d / limit > self._worst_divergence[0]):
-            self._worst_divergence = (d / limit, d, dr.distance_m, limit, t)
-
-    def _record_status(self, t: float) -> None:
-        """The status of the pose at scan stamp ``t`` (monitor.py)."""
-        status, why = self.pose_status(t)
-        self.monitor.record(t, status, why)
-
-    def pose_status(self, t: float) -> tuple[str, str]:
-        """``(status, why)`` of the pose now (``t``: the newest stamp), see :mod:`fgloc.localization.monitor`."""
-        if self.odom_mode:
-            if not self.backend.initialized:
-                return LOST, "no pose yet"
-            self._check_divergence(t)
-            if self._divergence is not None:
-                d, dist, limit = self._divergence
-                return SUSPECT, f"{d:.1f} m from odometry + IMU dead reckoning after {dist:.0f} m driven"
-            if self._heading_diverging(t):
-                return SUSPECT, HEADING_DIVERGED
-            return OK, ""
-        silent = self._last_scan_t is not None and t - self._last_scan_t >= self.icfg.laser_silent_after_s
-        if not self.backend.initialized:
-            return LOST, "no pose yet: searching the map"
-        if self._lost:
-            return LOST, "lost: searching the map"
-        if not self._converged:
-            return LOST, "not converged: the start pose is not confirmed by the map yet"
-        since = t - (self._t_used if self._t_used is not None else t)
-        if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
-            return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
-        if self._heading_diverging(t):
-            return SUSPECT, HEADING_DIVERGED
-        if silent:
-            assert self._last_scan_t is not None
-            return DEGRADED, f"dead reckoning: no scan for {t - self._last_scan_t:.1f} s"
-        if since >= self.icfg.degraded_after_s:
-            return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
-        return OK, ""
-
-    def _heading_diverging(self, t: float) -> bool:
-        """The back-end says its fused heading follows none of its heading sources: the log time it
-        counts as diverging (its ``heading_diverged_s`` counter, a smoother's heading check) grew within
-        the last second."""
-        total = float(self.backend.stats.get("heading_diverged_s", 0.0) or 0.0)
-        if total > self._heading_diverged_s:
-            self._heading_diverged_s = total
-            self._heading_diverged_t = t
-        return t - self._heading_diverged_t <= HEADING_CHECK_S
-
     def guess(self, t: float) -> FloatArray:
         """The pose guess for the front-end at scan stamp ``t``: the back-end's prediction.
 
@@ -563,199 +475,7 @@ class Localizer:
         self.stats["burst_guesses"] = self.stats.get("burst_guesses", 0) + 1
         return compose1(pose_a, d)
 
-    # ------------------------------------------------------------------ start-up / recovery
-    def reinitialize(self, pose: FloatArray, cov: FloatArray | None = None) -> None:
-        """Start again from ``pose`` (an operator's estimate in the map: RViz's 2D Pose Estimate on
-        /initialpose): the next scan is matched from it as from an initial pose, and the back-end is
-        restarted on that fix (on ``pose`` with ``cov``, default the initial-pose prior, when none)."""
-        if self.odom_mode:
-            return
-        self.initial_pose = np.asarray(pose, dtype=float).reshape(3)
-        self._reinit = self._initial_cov() if cov is None else np.asarray(cov, dtype=float).reshape(3, 3)
-        self._lost = True
-        self.stats["reinitializations"] = self.stats.get("reinitializations", 0) + 1
-
-    def replace_map(self, occ_map: OccupancyMap, frontend: Any = None) -> None:
-        """Localize on ``occ_map`` from the next scan on (a map server's new map): its front-end
-        (``frontend``, built by the caller off the fusion thread, else here) and the relocalizer on it.
-        The pose and the back-end go on; :meth:`reinitialize` starts again from a pose on the new map
-        (a particle filter front-end starts there too, or spreads its particles while lost)."""
-        if self.odom_mode:
-            raise ValueError("an odom-frame session has no map to replace")
-        if frontend is None:
-            from fgloc.frontends import make_frontend
-
-            frontend = make_frontend(self.frontend_name, occ_map, self.laser_mount, self.config)
-        self.map = occ_map
-        self.frontend = frontend
-        self.reloc = Relocalizer(self.pcfg, occ_map, self.laser_mount, frontend, self.backend, self.stats)
-        if self._lost and frontend.supports_global:
-            frontend.reset(None)
-        self.stats["map_changes"] = self.stats.get("map_changes", 0) + 1
-
-    def _initial_cov(self) -> FloatArray:
-        sxy = self.pcfg.initial_sigma_xy_m
-        syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)
-        return np.diag([sxy**2, sxy**2, syaw**2])
-
-    def _declare_lost(self, t: float) -> None:
-        self._lost = True
-        self._reacquiring = False
-        self._global_tries = 0
-        self.stats["lost_events"] += 1
-        if self._lost_since is None:
-            self._lost_since = self._t_bad_since if self._t_bad_since is not None else t
-
-    def _start(self, t: float, pose: FloatArray, cov: FloatArray, converged: bool = True) -> None:
-        """(Re)start the back-end at ``pose``; ``converged``: a fix (or a confirmed relocalization) put it
-        there, not a start pose the map has not confirmed."""
-        self._converged = converged
-        if converged:
-            self._t_used = t
-            if not self._ever_converged:
-                self._first_convergence(t, np.asarray(pose, dtype=float))
-            self._ever_converged = True
-        if self._lost_since is not None:
-            self._lost_total_s += max(0.0, t - self._lost_since)
-            # the poses since the localizer went wrong were not where they said
-            self.monitor.amend(self._lost_since, t, LOST, "lost: the pose was wrong until a relocalization")
-            self._lost_since = None
-        self._t_held_since = None
-        if self.gate is not None:
-            self.gate.reset()
-        self._t_bad_since = None
-        self._dead_reckoned_since = None
-        self._reacquiring = False
-        self._pose_confirmed = False
-        if self.backend.initialized:
-            self.backend.reset(t, pose, cov)
-        else:
-            self.backend.initialize(t, pose, cov)
-        self._lost = False
-        self._bad_streak = 0
-        if self.reloc is not None:
-            self.reloc.reset()
-        if self.frontend is not None and self.frontend.is_particle_filter:
-            self.frontend.reset(pose)
-
-    def _accept(self, fix: PoseFix) -> PoseFix:
-        self._keep_fix(fix)
-        self.stats["fixes"] += 1
-        self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
-        return fix
-
-    def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
-        fe = self.frontend
-        t = float(msg.stamp)
-        if self.initial_pose is not None and (not self.backend.initialized or self._reinit is not None):
-            reinit, self._reinit = self._reinit, None
-            res = fe.match(msg, self.initial_pose, odom_delta)
-            fix = res.to_fix(t, fe.name)
-            if fix is not None:
-                self._accept(fix)
-                self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)
-                return fix
-            self.last_reason = f"initial pose: {res.why}"
-            self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit, converged=False)
-            return None
-        self._global_tries += 1
-        if fe.supports_global:
-            guess = self.guess(t) if self.backend.initialized else np.zeros(3)
-            res = fe.match(msg, guess, odom_delta)
-            fix = res.to_fix(t, fe.name)
-            if fix is not None:
-                sxy = math.sqrt(max(fix.cov[0, 0], fix.cov[1, 1]))
-                syaw = math.sqrt(fix.cov[2, 2])
-                if sxy <= self.pcfg.global_max_sigma_xy_m and \
-                        syaw <= math.radians(self.pcfg.global_max_sigma_yaw_deg):
-                    self._accept(fix)
-                    self._start(t, fix.pose, fix.cov + EPS_COV)
-                    return fix
-                self.last_reason = "global localization: not converged yet"
-            else:
-                self.last_reason = f"global localization: {res.why}"
-            if self.backend.initialized:
-                self.backend.add_keyframe(t, None)
-            else:
-                # a pose anyway, as nav2's amcl publishes its cloud's mean from the first update on: the
-                # back-end starts there with the cloud's covariance; the localizer stays lost (global
-                # search goes on, the front-end keeps its cloud) until a converged fix
-                pose = fix.pose if fix is not None else res.info.get("estimate")
-                cov = fix.cov if fix is not None else res.info.get("estimate_cov")
-                if pose is not None and cov is not None and np.all(np.isfinite(pose)) and np.all(np.isfinite(cov)):
-                    self.backend.initialize(t, np.asarray(pose, dtype=float), np.asarray(cov, dtype=float) + EPS_COV)
-            return None
-        assert self.reloc is not None
-        gfix = self.reloc.search(msg)
-        if gfix is not None:
-            self._accept(gfix)
-            self._start(t, gfix.pose, gfix.cov + EPS_COV)
-            return gfix
-        self.last_reason = "global localization: no candidate good enough"
-        if self.backend.initialized:
-            self.backend.add_keyframe(t, None)
-        return None
-
-    # ------------------------------------------------------------------ odom-only mode
-    def _odom_mode_step(self, t: float, scan: bool) -> None:
-        if not self.backend.initialized:
-            # wait up to 0.5 s for a compass heading to align the odom frame with it
-            first = self.odom.first_t
-            if self._last_compass is None and (first is None or t - first < 0.5):
-                return
-            yaw = self._last_compass[1] if self._last_compass is not None else 0.0
-            self.backend.set_compass_offset(0.0)
-            self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
-            self._last_kf_t = t
-            if self.dead_reckoning is not None:
-                self.dead_reckoning.start(t, np.array([0.0, 0.0, yaw]))
-            self._record_status(t)
-            return
-        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= self.pcfg.odom_keyframe_interval_s):
-            self.backend.add_keyframe(t, None)
-            self._last_kf_t = t
-            if not scan:  # a wheels + IMU log: its poses told to the sinks too
-                self._pose_added(t)
-        else:
-            self._dead_reckon(t)
-
-    def _laser_silent(self, t: float) -> bool:
-        """No scan yet, or none for ``integrity.laser_silent_after_s``."""
-        last = self._last_scan_t
-        return last is None or t - last >= self.icfg.laser_silent_after_s
-
-    def _dead_reckon(self, t: float) -> None:
-        """Odometry at ``t``: while the laser is silent, a dead-reckoned pose every
-        ``integrity.dead_reckoning_period_s``: the back-end's prediction (its covariance grows with the
-        odometry's), in the online trajectory and told to the sinks; the back-end's graph is left as it is."""
-        if not self.backend.initialized or self._last_scan_t is None or not self._laser_silent(t):
-            return
-        if t - self._last_dr_t < self.icfg.dead_reckoning_period_s:
-            return
-        self.backend.record_prediction(t)
-        self._last_dr_t = t
-        self.stats["dead_reckoned_poses"] = self.stats.get("dead_reckoned_poses", 0) + 1
-        self._pose_added(t)
-
-    def _pose_added(self, t: float) -> None:
-        """A pose without a scan at ``t``: its status, and :attr:`pose_listener` (the session's sinks)."""
-        self._record_status(t)
-        if self.pose_listener is not None:
-            self.pose_listener(t)
-
     # ------------------------------------------------------------------ outputs
-    @property
-    def lost(self) -> bool:
-        """Searching globally: no pose yet, or no accepted fix for ``lost_after_s``."""
-        return self._lost
-
-    def lost_time_s(self) -> float:
-        """Seconds spent lost so far (up to the last scan when lost now)."""
-        total = self._lost_total_s
-        if self._lost_since is not None and self._last_scan_t is not None:
-            total += max(0.0, self._last_scan_t - self._lost_since)
-        return total
-
     def current(self, covariance: bool = True, at: float | None = None) -> PoseFix | None:
         """Latest fused pose and covariance, predicted to the newest odometry stamp, or to ``at`` (the
         scan just fused) when that is newer: with the odometry silent the pose of each scan is still
@@ -810,52 +530,6 @@ class Localizer:
         h = self.history_s
         if h is not None and fix.stamp - self.fixes[0].stamp > 2.0 * h:  # amortized: once twice the history
             self.fixes = [f for f in self.fixes if f.stamp >= fix.stamp - h]
-
-    def _assess(self) -> None:
-        """The run-level verdicts (monitor.py): no scan ever matched the map; in the odom frame, a
-        fused path that ends far from dead reckoning; a back-end whose heading diverged from all its
-        heading sources for a while (said; its poses are suspect, counted towards
-        ``integrity.max_bad_share``)."""
-        bs = self.backend.stats
-        diverged_s = float(bs.get("heading_diverged_s", 0.0) or 0.0)
-        if diverged_s > 0:
-            worst = bs.get("heading_divergence_worst_deg")
-            self.monitor.verdict(
-                "heading_diverged", f"the {self.backend_name}'s heading followed none of its heading sources for "
-                f"{diverged_s:.1f} s in {int(bs.get('heading_divergence_spans', 1) or 1)} span(s)"
-                + (f" (worst {float(worst):.1f} deg off the nearest)" if worst is not None else "")
-                + "; its poses there are suspect", False)
-        if self.odom_mode:
-            self._divergence_t = -math.inf
-            if self._last_kf_t > -math.inf:
-                self._check_divergence(self._last_kf_t)
-            if self._worst_divergence is not None:
-                _, d, dist, limit, t = self._worst_divergence
-                t0 = self.dead_reckoning.t0 if self.dead_reckoning is not None else None
-                into = t - (t0 if t0 is not None else t)
-                self.monitor.verdict(
-                    "diverging", f"the fusion diverged from odometry + IMU dead reckoning: {d:.1f} m apart "
-                    f"{into:.1f} s into the run after {dist:.0f} m driven (more than {limit:.1f} m, "
-                    "integrity.divergence_share); "
-                    "check the sources' configuration (each source's mount and components)", True)
-            return
-        used = int(self.stats.get("fixes_used", 0))
-        scans = int(self.stats["scans"])
-        if used == 0 and scans > 0:
-            found = f"0 of {self.stats['fixes']} fixes accepted" if self.stats["fixes"] else "no fix"
-            self.monitor.verdict(
-                "no_fix", f"no scan matched the map: {found} in {scans} scans, every pose is dead reckoning (does "
-                "this map fit this log? is the laser's mount right?)", True)
-            return
-        span = (self._last_scan_t - self._first_scan_t) if self._first_scan_t is not None and \
-            self._last_scan_t is not None else 0.0
-        lost_share = self.lost_time_s() / span if span > 0 else 0.0
-        matched = max(scans / self.pcfg.frontend_every, 1.0)
-        if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
-                f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "
-                f"{100 * lost_share:.0f} % of the run (is it the map of this building, its right version?)", True)
 
     def fixes_trajectory(self) -> Trajectory:
         """The front-end's fixes as a trajectory (map frame)."""

@@ -1,0 +1,182 @@
+"""Start-up and recovery of the :class:`~fgloc.localization.localizer.Localizer` (:class:`Recovery`,
+one of its bases): the start pose or the global search, (re)starting the back-end on a fix, being lost,
+an operator's new start pose, a new map.
+
+Core maths only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fgloc.backends.base import FloatArray
+from fgloc.localization.gate import JumpGate
+from fgloc.localization.monitor import LOST
+from fgloc.localization.relocalization import Relocalizer
+from fgloc.localization.status import PoseStatus
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, PoseFix, StaticTransform
+
+if TYPE_CHECKING:
+    from fgloc.config import FglocConfig
+
+EPS_COV = np.diag([1e-6, 1e-6, 1e-6])  # added to a fix's covariance when the back-end is (re)started on it
+
+
+class Recovery(PoseStatus):
+    """Start-up and recovery of :class:`~fgloc.localization.localizer.Localizer` (its ``__init__`` sets
+    the state below)."""
+
+    config: FglocConfig
+    map: OccupancyMap | None
+    laser_mount: StaticTransform
+    frontend: Any
+    frontend_name: str
+    reloc: Relocalizer | None
+    gate: JumpGate | None
+    guess: Callable[[float], FloatArray]
+    _keep_fix: Callable[[PoseFix], None]
+    _reinit: FloatArray | None
+    _global_tries: int
+    _bad_streak: int
+    _t_bad_since: float | None
+    _dead_reckoned_since: float | None
+    _reacquiring: bool
+    _pose_confirmed: bool
+    _ever_converged: bool
+
+    def reinitialize(self, pose: FloatArray, cov: FloatArray | None = None) -> None:
+        """Start again from ``pose`` (an operator's estimate in the map: RViz's 2D Pose Estimate on
+        /initialpose): the next scan is matched from it as from an initial pose, and the back-end is
+        restarted on that fix (on ``pose`` with ``cov``, default the initial-pose prior, when none)."""
+        if self.odom_mode:
+            return
+        self.initial_pose = np.asarray(pose, dtype=float).reshape(3)
+        self._reinit = self._initial_cov() if cov is None else np.asarray(cov, dtype=float).reshape(3, 3)
+        self._lost = True
+        self.stats["reinitializations"] = self.stats.get("reinitializations", 0) + 1
+
+    def replace_map(self, occ_map: OccupancyMap, frontend: Any = None) -> None:
+        """Localize on ``occ_map`` from the next scan on (a map server's new map): its front-end
+        (``frontend``, built by the caller off the fusion thread, else here) and the relocalizer on it.
+        The pose and the back-end go on; :meth:`reinitialize` starts again from a pose on the new map
+        (a particle filter front-end starts there too, or spreads its particles while lost)."""
+        if self.odom_mode:
+            raise ValueError("an odom-frame session has no map to replace")
+        if frontend is None:
+            from fgloc.frontends import make_frontend
+
+            frontend = make_frontend(self.frontend_name, occ_map, self.laser_mount, self.config)
+        self.map = occ_map
+        self.frontend = frontend
+        self.reloc = Relocalizer(self.pcfg, occ_map, self.laser_mount, frontend, self.backend, self.stats)
+        if self._lost and frontend.supports_global:
+            frontend.reset(None)
+        self.stats["map_changes"] = self.stats.get("map_changes", 0) + 1
+
+    def _initial_cov(self) -> FloatArray:
+        sxy = self.pcfg.initial_sigma_xy_m
+        syaw = math.radians(self.pcfg.initial_sigma_yaw_deg)
+        return np.diag([sxy**2, sxy**2, syaw**2])
+
+    def _declare_lost(self, t: float) -> None:
+        self._lost = True
+        self._reacquiring = False
+        self._global_tries = 0
+        self.stats["lost_events"] += 1
+        if self._lost_since is None:
+            self._lost_since = self._t_bad_since if self._t_bad_since is not None else t
+
+    def _start(self, t: float, pose: FloatArray, cov: FloatArray, converged: bool = True) -> None:
+        """(Re)start the back-end at ``pose``; ``converged``: a fix (or a confirmed relocalization) put it
+        there, not a start pose the map has not confirmed."""
+        self._converged = converged
+        if converged:
+            self._t_used = t
+            if not self._ever_converged:
+                self._first_convergence(t, np.asarray(pose, dtype=float))
+            self._ever_converged = True
+        if self._lost_since is not None:
+            self._lost_total_s += max(0.0, t - self._lost_since)
+            # the poses since the localizer went wrong were not where they said
+            self.monitor.amend(self._lost_since, t, LOST, "lost: the pose was wrong until a relocalization")
+            self._lost_since = None
+        self._t_held_since = None
+        if self.gate is not None:
+            self.gate.reset()
+        self._t_bad_since = None
+        self._dead_reckoned_since = None
+        self._reacquiring = False
+        self._pose_confirmed = False
+        if self.backend.initialized:
+            self.backend.reset(t, pose, cov)
+        else:
+            self.backend.initialize(t, pose, cov)
+        self._lost = False
+        self._bad_streak = 0
+        if self.reloc is not None:
+            self.reloc.reset()
+        if self.frontend is not None and self.frontend.is_particle_filter:
+            self.frontend.reset(pose)
+
+    def _accept(self, fix: PoseFix) -> PoseFix:
+        self._keep_fix(fix)
+        self.stats["fixes"] += 1
+        self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
+        return fix
+
+    def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
+        fe = self.frontend
+        t = float(msg.stamp)
+        if self.initial_pose is not None and (not self.backend.initialized or self._reinit is not None):
+            reinit, self._reinit = self._reinit, None
+            res = fe.match(msg, self.initial_pose, odom_delta)
+            fix = res.to_fix(t, fe.name)
+            if fix is not None:
+                self._accept(fix)
+                self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)
+                return fix
+            self.last_reason = f"initial pose: {res.why}"
+            self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit, converged=False)
+            return None
+        self._global_tries += 1
+        if fe.supports_global:
+            guess = self.guess(t) if self.backend.initialized else np.zeros(3)
+            res = fe.match(msg, guess, odom_delta)
+            fix = res.to_fix(t, fe.name)
+            if fix is not None:
+                sxy = math.sqrt(max(fix.cov[0, 0], fix.cov[1, 1]))
+                syaw = math.sqrt(fix.cov[2, 2])
+                if sxy <= self.pcfg.global_max_sigma_xy_m and \
+                        syaw <= math.radians(self.pcfg.global_max_sigma_yaw_deg):
+                    self._accept(fix)
+                    self._start(t, fix.pose, fix.cov + EPS_COV)
+                    return fix
+                self.last_reason = "global localization: not converged yet"
+            else:
+                self.last_reason = f"global localization: {res.why}"
+            if self.backend.initialized:
+                self.backend.add_keyframe(t, None)
+            else:
+                # a pose anyway, as nav2's amcl publishes its cloud's mean from the first update on: the
+                # back-end starts there with the cloud's covariance; the localizer stays lost (global
+                # search goes on, the front-end keeps its cloud) until a converged fix
+                pose = fix.pose if fix is not None else res.info.get("estimate")
+                cov = fix.cov if fix is not None else res.info.get("estimate_cov")
+                if pose is not None and cov is not None and np.all(np.isfinite(pose)) and np.all(np.isfinite(cov)):
+                    self.backend.initialize(t, np.asarray(pose, dtype=float), np.asarray(cov, dtype=float) + EPS_COV)
+            return None
+        assert self.reloc is not None
+        gfix = self.reloc.search(msg)
+        if gfix is not None:
+            self._accept(gfix)
+            self._start(t, gfix.pose, gfix.cov + EPS_COV)
+            return gfix
+        self.last_reason = "global localization: no candidate good enough"
+        if self.backend.initialized:
+            self.backend.add_keyframe(t, None)
+        return None

@@ -1,0 +1,247 @@
+"""The status of every pose, the run-level verdicts and the dead-reckoned poses of the
+:class:`~fgloc.localization.localizer.Localizer` (:class:`PoseStatus`, one of its bases): what
+:mod:`fgloc.localization.monitor` records and judges, read off the localizer's state.
+
+Core maths only: no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fgloc.backends.base import Backend, FloatArray
+from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning
+
+if TYPE_CHECKING:
+    from fgloc.localization.config import PipelineConfig
+    from fgloc.localization.monitor import IntegrityConfig
+    from fgloc.localization.odometry import OdometryTracker
+
+#: the map does not fit the log: lost at least this share of the run, and fixes accepted on fewer than
+#: this share of the scans matched (a right map with a wrong start relocalizes and tracks; a building
+#: the map lacks is dead-reckoned, not lost)
+MISMATCH_LOST_SHARE = 0.5
+MISMATCH_MATCHED_SHARE = 0.1
+#: a back-end's heading_diverged_s counter that grew within this long (log s): its heading diverges now
+HEADING_CHECK_S = 1.0
+HEADING_DIVERGED = "heading diverged: the fused heading follows none of its heading sources"
+
+
+class PoseStatus:
+    """The pose status, verdicts and dead reckoning of :class:`~fgloc.localization.localizer.Localizer`
+    (its ``__init__`` sets the state below)."""
+
+    backend: Backend
+    backend_name: str
+    stats: dict[str, Any]
+    pcfg: PipelineConfig
+    icfg: IntegrityConfig
+    monitor: ConsistencyMonitor
+    odom: OdometryTracker
+    odom_mode: bool
+    initial_pose: FloatArray | None
+    last_reason: str
+    pose_listener: Callable[[float], None] | None
+    dead_reckoning: DeadReckoning | None
+    _divergence: tuple[float, float, float] | None
+    _worst_divergence: tuple[float, float, float, float, float] | None
+    _divergence_t: float
+    _heading_diverged_s: float
+    _heading_diverged_t: float
+    _last_scan_t: float | None
+    _first_scan_t: float | None
+    _last_kf_t: float
+    _last_dr_t: float
+    _last_compass: tuple[float, float] | None
+    _t_used: float | None
+    _t_held_since: float | None
+    _converged: bool
+    _lost: bool
+    _lost_since: float | None
+    _lost_total_s: float
+
+    def _first_convergence(self, t: float, pose: FloatArray) -> None:
+        """The map confirmed a pose for the first time at ``t``: if it is not where ``--initial-pose`` said
+        (beyond 3 sigma of its prior), that start did not fit the map, and every pose before is lost."""
+        p0 = self.initial_pose
+        if p0 is None:
+            return
+        d = float(np.hypot(pose[0] - p0[0], pose[1] - p0[1]))
+        a = abs(math.degrees(float(np.angle(np.exp(1j * (pose[2] - p0[2]))))))
+        if d <= 3 * self.pcfg.initial_sigma_xy_m and a <= 3 * self.pcfg.initial_sigma_yaw_deg:
+            return
+        self.monitor.amend(-math.inf, t, LOST, "lost: the initial pose does not fit the map")
+        n = sum(1 for x in self.monitor.t if x < t)
+        self.monitor.verdict(
+            "initial_pose", f"the initial pose ({p0[0]:.2f} m, {p0[1]:.2f} m, {math.degrees(p0[2]):.0f} deg) does "
+            f"not fit the map: the scans matched {d:.2f} m / {a:.0f} deg from it, at t = {t:.1f} s "
+            f"({n} pose(s) before are marked lost)", False)
+
+    def _check_divergence(self, t: float) -> None:
+        """Odom frame, at most once a second: how far the fused pose is from dead reckoning."""
+        dr = self.dead_reckoning
+        if dr is None or t - self._divergence_t < 1.0:
+            return
+        self._divergence_t = t
+        cur = self.backend.current(covariance=False)
+        d = None if cur is None else dr.divergence(cur[1])
+        if d is None:
+            return
+        limit = max(self.icfg.divergence_min_m, self.icfg.divergence_share * dr.distance_m)
+        self._divergence = (d, dr.distance_m, limit) if d > limit else None
+        if d > limit and (self._worst_divergence is None or d / limit > self._worst_divergence[0]):
+            self._worst_divergence = (d / limit, d, dr.distance_m, limit, t)
+
+    def _record_status(self, t: float) -> None:
+        """The status of the pose at scan stamp ``t`` (monitor.py)."""
+        status, why = self.pose_status(t)
+        self.monitor.record(t, status, why)
+
+    def pose_status(self, t: float) -> tuple[str, str]:
+        """``(status, why)`` of the pose now (``t``: the newest stamp), see :mod:`fgloc.localization.monitor`."""
+        if self.odom_mode:
+            if not self.backend.initialized:
+                return LOST, "no pose yet"
+            self._check_divergence(t)
+            if self._divergence is not None:
+                d, dist, limit = self._divergence
+                return SUSPECT, f"{d:.1f} m from odometry + IMU dead reckoning after {dist:.0f} m driven"
+            if self._heading_diverging(t):
+                return SUSPECT, HEADING_DIVERGED
+            return OK, ""
+        silent = self._last_scan_t is not None and t - self._last_scan_t >= self.icfg.laser_silent_after_s
+        if not self.backend.initialized:
+            return LOST, "no pose yet: searching the map"
+        if self._lost:
+            return LOST, "lost: searching the map"
+        if not self._converged:
+            return LOST, "not converged: the start pose is not confirmed by the map yet"
+        since = t - (self._t_used if self._t_used is not None else t)
+        if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
+            return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
+        if self._heading_diverging(t):
+            return SUSPECT, HEADING_DIVERGED
+        if silent:
+            assert self._last_scan_t is not None
+            return DEGRADED, f"dead reckoning: no scan for {t - self._last_scan_t:.1f} s"
+        if since >= self.icfg.degraded_after_s:
+            return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
+        return OK, ""
+
+    def _heading_diverging(self, t: float) -> bool:
+        """The back-end says its fused heading follows none of its heading sources: the log time it
+        counts as diverging (its ``heading_diverged_s`` counter, a smoother's heading check) grew within
+        the last second."""
+        total = float(self.backend.stats.get("heading_diverged_s", 0.0) or 0.0)
+        if total > self._heading_diverged_s:
+            self._heading_diverged_s = total
+            self._heading_diverged_t = t
+        return t - self._heading_diverged_t <= HEADING_CHECK_S
+
+    def _odom_mode_step(self, t: float, scan: bool) -> None:
+        if not self.backend.initialized:
+            # wait up to 0.5 s for a compass heading to align the odom frame with it
+            first = self.odom.first_t
+            if self._last_compass is None and (first is None or t - first < 0.5):
+                return
+            yaw = self._last_compass[1] if self._last_compass is not None else 0.0
+            self.backend.set_compass_offset(0.0)
+            self.backend.initialize(t, np.array([0.0, 0.0, yaw]), np.diag([1e-6, 1e-6, 1e-6]))
+            self._last_kf_t = t
+            if self.dead_reckoning is not None:
+                self.dead_reckoning.start(t, np.array([0.0, 0.0, yaw]))
+            self._record_status(t)
+            return
+        if scan or (self.stats["scans"] == 0 and t - self._last_kf_t >= self.pcfg.odom_keyframe_interval_s):
+            self.backend.add_keyframe(t, None)
+            self._last_kf_t = t
+            if not scan:  # a wheels + IMU log: its poses told to the sinks too
+                self._pose_added(t)
+        else:
+            self._dead_reckon(t)
+
+    def _laser_silent(self, t: float) -> bool:
+        """No scan yet, or none for ``integrity.laser_silent_after_s``."""
+        last = self._last_scan_t
+        return last is None or t - last >= self.icfg.laser_silent_after_s
+
+    def _dead_reckon(self, t: float) -> None:
+        """Odometry at ``t``: while the laser is silent, a dead-reckoned pose every
+        ``integrity.dead_reckoning_period_s``: the back-end's prediction (its covariance grows with the
+        odometry's), in the online trajectory and told to the sinks; the back-end's graph is left as it is."""
+        if not self.backend.initialized or self._last_scan_t is None or not self._laser_silent(t):
+            return
+        if t - self._last_dr_t < self.icfg.dead_reckoning_period_s:
+            return
+        self.backend.record_prediction(t)
+        self._last_dr_t = t
+        self.stats["dead_reckoned_poses"] = self.stats.get("dead_reckoned_poses", 0) + 1
+        self._pose_added(t)
+
+    def _pose_added(self, t: float) -> None:
+        """A pose without a scan at ``t``: its status, and :attr:`pose_listener` (the session's sinks)."""
+        self._record_status(t)
+        if self.pose_listener is not None:
+            self.pose_listener(t)
+
+    @property
+    def lost(self) -> bool:
+        """Searching globally: no pose yet, or no accepted fix for ``lost_after_s``."""
+        return self._lost
+
+    def lost_time_s(self) -> float:
+        """Seconds spent lost so far (up to the last scan when lost now)."""
+        total = self._lost_total_s
+        if self._lost_since is not None and self._last_scan_t is not None:
+            total += max(0.0, self._last_scan_t - self._lost_since)
+        return total
+
+    def _assess(self) -> None:
+        """The run-level verdicts (monitor.py): no scan ever matched the map; in the odom frame, a
+        fused path that ends far from dead reckoning; a back-end whose heading diverged from all its
+        heading sources for a while (said; its poses are suspect, counted towards
+        ``integrity.max_bad_share``)."""
+        bs = self.backend.stats
+        diverged_s = float(bs.get("heading_diverged_s", 0.0) or 0.0)
+        if diverged_s > 0:
+            worst = bs.get("heading_divergence_worst_deg")
+            self.monitor.verdict(
+                "heading_diverged", f"the {self.backend_name}'s heading followed none of its heading sources for "
+                f"{diverged_s:.1f} s in {int(bs.get('heading_divergence_spans', 1) or 1)} span(s)"
+                + (f" (worst {float(worst):.1f} deg off the nearest)" if worst is not None else "")
+                + "; its poses there are suspect", False)
+        if self.odom_mode:
+            self._divergence_t = -math.inf
+            if self._last_kf_t > -math.inf:
+                self._check_divergence(self._last_kf_t)
+            if self._worst_divergence is not None:
+                _, d, dist, limit, t = self._worst_divergence
+                t0 = self.dead_reckoning.t0 if self.dead_reckoning is not None else None
+                into = t - (t0 if t0 is not None else t)
+                self.monitor.verdict(
+                    "diverging", f"the fusion diverged from odometry + IMU dead reckoning: {d:.1f} m apart "
+                    f"{into:.1f} s into the run after {dist:.0f} m driven (more than {limit:.1f} m, "
+                    "integrity.divergence_share); "
+                    "check the sources' configuration (each source's mount and components)", True)
+            return
+        used = int(self.stats.get("fixes_used", 0))
+        scans = int(self.stats["scans"])
+        if used == 0 and scans > 0:
+            found = f"0 of {self.stats['fixes']} fixes accepted" if self.stats["fixes"] else "no fix"
+            self.monitor.verdict(
+                "no_fix", f"no scan matched the map: {found} in {scans} scans, every pose is dead reckoning (does "
+                "this map fit this log? is the laser's mount right?)", True)
+            return
+        span = (self._last_scan_t - self._first_scan_t) if self._first_scan_t is not None and \
+            self._last_scan_t is not None else 0.0
+        lost_share = self.lost_time_s() / span if span > 0 else 0.0
+        matched = max(scans / self.pcfg.frontend_every, 1.0)
+        if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
+                f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "
+                f"{100 * lost_share:.0f} % of the run (is it the map of this building, its right version?)", True)

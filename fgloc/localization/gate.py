@@ -195,10 +195,14 @@ class JumpGate:
         self._pending = None
 
     def check(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
-              odom_pose: FloatArray, t: float, motion: Motion | None = None) -> GateVerdict:
+              odom_pose: FloatArray, t: float, motion: Motion | None = None,
+              motion_known: bool = True) -> GateVerdict:
         """Take or hold ``fix`` (stamp ``t``) against the back-end's prediction ``(pred, pred_cov)`` there
         and the previous fix; ``odom_pose``: the dead-reckoned odometry pose at ``t``;
-        ``motion(t0, t1, delta)``: the odometry's increment as the back-end believes it happened."""
+        ``motion(t0, t1, delta)``: the odometry's increment as the back-end believes it happened;
+        ``motion_known`` False: no odometry came yet (a scan-only robot), the prediction stands where
+        the last fix was while the robot moves, and a fix is held only when the map prefers the
+        prediction to it."""
 
         self._pending = None
         R = np.asarray(fix.cov, dtype=float)
@@ -242,6 +246,10 @@ class JumpGate:
         v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev)
         if not (math.isfinite(a_pred) and math.isfinite(a_fix)):
             v.take = True  # nothing to judge by: as without the gate
+        elif not motion_known and a_fix >= a_pred:
+            v.take = True
+            v.why = (f"no odometry: a move of {jump_m:.2f} m / {jump_deg:.1f} deg the map explains at least as well "
+                     f"(agreement {a_fix:.2f} at the fix, at most {a_pred:.2f} near the last pose)")
         elif a_pred <= a_fix * (1.0 - self.cfg.confirm_agreement):
             v.take = v.confirmed = True
             v.why = (f"a jump of {jump_m:.2f} m / {jump_deg:.1f} deg the map confirms (agreement {a_fix:.2f} at "

@@ -445,7 +445,8 @@ class Localizer(Recovery):
             self.backend.current(covariance=True)
             self._cov_t = t
         pred, pred_cov = self.backend.predict(t)
-        verdict = self.gate.check(fix, pred, pred_cov, msg, self.odom.pose_at(t), t, self.backend.motion_correction)
+        verdict = self.gate.check(fix, pred, pred_cov, msg, self.odom.pose_at(t), t, self.backend.motion_correction,
+                                  motion_known=self.stats["odometry"] > 0)
         self.last_gate = verdict
         return verdict
 

@@ -73,6 +73,23 @@ def test_gate_holds_a_jump_the_map_does_not_refute_and_takes_one_it_confirms(roo
     assert v.take and not v.confirmed and v.agree_pred is None
 
 
+def test_without_odometry_a_move_the_map_explains_as_well_is_taken(room):
+    # the map never confirms by the margin here: only the missing motion source decides
+    gate = JumpGate(IntegrityConfig(confirm_agreement=1.0), room, MOUNT)
+    truth = np.array([8.0, 5.0, 0.0])
+    scan = make_scan(room, truth)
+    pred_cov = np.diag([0.01**2, 0.01**2, np.radians(0.5) ** 2])
+    stale = truth + [0.0, 0.4, 0.0]  # no odometry: the prediction stayed where the robot was
+    v = gate.check(_fix(truth), stale, pred_cov, scan, np.zeros(3), 1.0)
+    assert not v.take and v.d2 > 20
+    v = gate.check(_fix(truth), stale, pred_cov, scan, np.zeros(3), 1.0, motion_known=False)
+    assert v.take and not v.confirmed and "no odometry" in v.why
+    assert v.agree_pred is not None and v.agree_fix is not None and v.agree_fix >= v.agree_pred
+    # a fix the map explains worse than the prediction is still held without odometry
+    v = gate.check(_fix(truth + [0.0, 0.3, 0.0]), truth, pred_cov, scan, np.zeros(3), 1.0, motion_known=False)
+    assert not v.take and "held back" in v.why
+
+
 def test_gate_follows_fixes_that_follow_each_other_as_a_slipping_odometry_says(room):
     """A back-end that lags its fixes (its prediction 0.3 m behind) does not make fixes that follow
     each other as the wheels roughly say (30 % slip) look like jumps; a 0.3 m step from the previous

@@ -111,7 +111,9 @@ def test_cli_sigint_closes_recording(tmp_path):
     cmd = [sys.executable, "-m", "fgloc.cli", "live", "--serial", pair.stm32.url, "--laser", pair.sick.address,
            "--backend", "ekf", "--record", str(rec), "--out", str(out), "--quiet", "--json"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    # SIGINT at its default in the child: a test run started as a background job inherits it ignored
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     pair.start()
     # stop once the CLI has been streaming for a while (its start-up may take seconds on a loaded machine)
     t0 = time.monotonic()

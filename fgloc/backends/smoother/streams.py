@@ -27,6 +27,27 @@ def all_finite(*arrays: FloatArray) -> bool:
     return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
 
 
+def chord_step(u: tuple[float, float, float], cv: tuple[float, float, float, float, float, float],
+               dt: float, w: float, qx: float, qy: float,
+               x: float, y: float, th: float, p00: float, p01: float, p11: float
+               ) -> tuple[float, float, float, float, float, float]:
+    """One odometry step of a chord: the twist ``u``'s (vx, vy) held for ``dt`` s while the chord
+    turns by ``w`` rad, added to the chord ``(x, y, th)`` in the frame at its start; the step's (vx, vy)
+    covariance (from ``cv``, the twist's upper6) * dt^2 plus the slip variances ``qx``, ``qy`` * dt,
+    turned into that frame and added to ``(p00, p01, p11)``."""
+    vx, vy = float(u[0]) * dt, float(u[1]) * dt
+    a, b = exp_coefficients(w)
+    dx, dy = a * vx - b * vy, b * vx + a * vy
+    c, s_ = math.cos(th), math.sin(th)
+    x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+    dt2 = dt * dt
+    s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
+    p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
+    p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
+    p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
+    return x, y, th, p00, p01, p11
+
+
 def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
                    weights: dict[int, float] | None = None) -> float | None:
     """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
@@ -170,19 +191,8 @@ class Streams(SmootherState):
                 if d is None:
                     return None
                 w = d - bias * (tn - t)
-                u = self.odo_u[j]
-                vx, vy = float(u[0]) * dt, float(u[1]) * dt
-                a, b = exp_coefficients(w)
-                dx, dy = a * vx - b * vy, b * vx + a * vy
-                c, s_ = math.cos(th), math.sin(th)
-                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
-                # the step's (vx, vy) covariance * dt^2 (+ slip), turned into the frame at t0
-                cv = self.odo_c[j]
-                dt2 = dt * dt
-                s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
-                p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
-                p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
-                p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
+                x, y, th, p00, p01, p11 = chord_step(self.odo_u[j], self.odo_c[j], dt, w, qx, qy,
+                                                     x, y, th, p00, p01, p11)
             t = tn
             i += 1
         return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
@@ -283,18 +293,8 @@ class Streams(SmootherState):
             dt = tn - t
             if dt > 0:
                 w = heading(tn) - h0 - th
-                u = self.odo_u[j]
-                vx, vy = float(u[0]) * dt, float(u[1]) * dt
-                a, b = exp_coefficients(w)
-                dx, dy = a * vx - b * vy, b * vx + a * vy
-                c, s_ = math.cos(th), math.sin(th)
-                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
-                cv = self.odo_c[j]
-                dt2 = dt * dt
-                s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
-                p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
-                p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
-                p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
+                x, y, th, p00, p01, p11 = chord_step(self.odo_u[j], self.odo_c[j], dt, w, qx, qy,
+                                                     x, y, th, p00, p01, p11)
             t = tn
             i += 1
         return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)

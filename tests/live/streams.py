@@ -38,18 +38,10 @@ def world(duration: float = 12.0, seed: int = 0, t0: float = 1000.0, laser: dict
     ``range_max_m``, ``noise_m`` (e.g. a TiM571's -135 / 0.3333 / 811 / 15 / 1/16200 / 25).
     """
     from fgloc.geometry import compose
-    from fgloc.maps import OccupancyMap
+    from fgloc.testing.soak import room_map
     from fgloc.types import StaticTransform, Trajectory
 
-    res = 0.05
-    data = np.full((220, 340), -1, dtype=np.int16)
-    data[10:210, 10:330] = 100
-    data[12:208, 12:328] = 0
-    data[12:120, 120:122] = 100  # inner wall
-    data[150:162, 60:84] = 100  # box
-    data[80:92, 200:212] = 100  # pillar
-    data[170:176, 240:290] = 100  # shelf
-    occ = OccupancyMap(data, res, origin=np.array([-1.0, -2.0, 0.0]))
+    occ = room_map()
     mount = StaticTransform("base_link", "laser", np.array([0.15, 0.0, 0.0]))
     rng = np.random.default_rng(seed)
     dt = 0.01

@@ -357,6 +357,15 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
                                       ("--odom-topic", odom_topic, ODOMETRY, bool(named["odom"])),
                                       ("--imu-topic", imu_topic, IMU, bool(named["imu"]))))
     if n_odom == 0 and n_imu == 0 and n_scan == 0:
+        # several topics of a type and none by its default name: which one is the robot's is the user's
+        # to say (no default picks one of two odometries); the line names the options that do
+        have = {opt: sorted(t for t, v in summ["topics"].items() if v["count"] and normalize_type(v["type"]) == typ)
+                for opt, typ in (("--scan-topic", LASER_SCAN), ("--odom-topic", ODOMETRY), ("--imu-topic", IMU))}
+        if any(have.values()):
+            raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; name "
+                           "the log's topics to use: " + ", ".join(f"{opt} {' | '.join(ts)}" for opt, ts in
+                                                                     have.items() if ts)
+                           + " (or list them in a config's sources.inputs: fgloc config init)")
         raise LogError(f"{log}: no {scan_topic}, {odom_topic} or {imu_topic} messages to localize with; its "
                        f"topics: {topics_line(summ)}")
     configured = [t for t in src if t not in (scan_topic, odom_topic, imu_topic) and reader.has(t)]

@@ -61,3 +61,26 @@ def test_static_transform_turns_the_imu_into_base_link(log_and_config: tuple[Pat
     assert [r.getMessage() for r in caplog.records if "no transform" in r.getMessage()] == [  # 'without' only
         "no transform base_link -> imu_link: the IMU is taken as mounted like base_link"], caplog.text
     assert yaml.safe_load((tmp_path / "with" / "config.yaml").read_text())["sources"]["static_transforms"] == tfs
+
+
+def test_no_default_topics_and_several_of_a_type_names_the_options(tmp_path: Path) -> None:
+    """A log with two odometries and two IMUs, none by the default names (r_l's groovy test1): no
+    config picks one; the error names the options and the topics to give them."""
+    from fgloc.errors import LogError
+
+    log = tmp_path / "two_of_each.mcap"
+    with LogWriter(log) as w:
+        for i in range(20):
+            t = 100.0 + 0.05 * i
+            for topic in ("/wheel_odometry", "/stereo/odometry"):
+                w.write(topic, Odometry(t, np.array([1.0, 0.0, 0.0]), np.diag([1e-3] * 3),
+                                        np.array([0.05 * i, 0.0, 0.0]), np.diag([1e-3] * 3)))
+            for topic in ("/xsens/imu_data", "/ref/imu_data"):
+                w.write(topic, CompassHeading(t, 0.0, 0.0, 1e-4, 1e-4, frame_id="imu_link"))
+    with pytest.raises(LogError) as e:
+        run_log(RunRequest(log=log, outdir=tmp_path / "out", force=True, view_channels=False))
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert "--odom-topic /stereo/odometry | /wheel_odometry" in msg, msg
+    assert "--imu-topic /ref/imu_data | /xsens/imu_data" in msg and "--scan-topic" not in msg, msg
+    assert not (tmp_path / "out").exists()

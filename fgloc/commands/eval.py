@@ -13,6 +13,7 @@ CARMEN log (its laser lines' poses): :mod:`fgloc.eval.trajectories`.
     fgloc eval --relations FILE TRAJ.tum                    # Kuemmerle et al. relations metric
     fgloc eval --reference REF.tum TRAJ.tum                 # relations built from a reference trajectory
     fgloc eval EST.tum GT.tum --t-offset -1000.0            # estimate stamps shifted before association
+    fgloc eval out/trajectory.tum GT.tum --nees             # + the NEES against out/trajectory_status.csv
 """
 
 from __future__ import annotations
@@ -110,6 +111,61 @@ def _metrics_table(results: dict[str, Any], ref_name: str, paper: bool):
         cells += [_fmt(getattr(m, key), fmt) for m in results.values()]
         end = i + 1 < len(rows) and rows[i + 1] is None
         table.add_row(*cells, end_section=end)
+    return table
+
+
+# (NeesMetrics key, label, what it is when the covariances are honest, format)
+_NEES_ROWS: list[tuple[str, str, str, str]] = [
+    ("n", "poses with a covariance", "", "d"),
+    ("n_without_cov", "poses without one", "", "d"),
+    ("nees_mean", "NEES mean", "3", ".2f"),
+    ("nees_median", "NEES median", "2.37", ".2f"),
+    ("inside_95", "share inside the 95 % bound (7.81)", "0.95", ".3f"),
+    ("nees_x", "x: mean e^2 / P_xx", "1", ".2f"),
+    ("nees_y", "y: mean e^2 / P_yy", "1", ".2f"),
+    ("nees_yaw", "yaw: mean e^2 / P_yawyaw", "1", ".2f"),
+    ("worst_share", "share of the sum in the worst 5 %", "0.17", ".2f"),
+    ("nees_trimmed", "NEES mean of the other 95 %", "2.63", ".2f"),
+    ("sigma_xy_med_m", "median sigma x/y (m)", "", ".4f"),
+    ("sigma_yaw_med_deg", "median sigma yaw (deg)", "", ".3f"),
+]
+
+
+def _nees_results(ests: dict[str, Any], read: list[Any], gt: Any, gt_label: str, cov: Path | None,
+                  max_gap: float) -> dict[str, Any]:
+    """Each estimate's :class:`~fgloc.eval.nees.NeesMetrics`: its poses' covariances from ``cov``, else
+    the ``trajectory_status.csv`` beside a TUM file, else the log topic's own."""
+    from fgloc.eval.metrics import AssociationError
+    from fgloc.eval.nees import evaluate_nees
+    from fgloc.eval.trajectories import STATUS_FILE, covariances_at, read_status_covariances
+
+    out = {}
+    for (lab, est), (tr, src) in zip(ests.items(), read, strict=True):
+        status = cov if cov is not None else src.path.parent / STATUS_FILE if src.kind == "tum" else None
+        if status is not None and (cov is not None or status.is_file()):
+            covs = covariances_at(tr, *read_status_covariances(status))
+        elif tr.covs is not None:
+            covs = tr.covs
+        else:
+            raise LogError(f"{src.label}: no per-pose covariance for --nees (a TUM file needs {STATUS_FILE} beside "
+                           "it or --cov FILE; a log topic its messages' covariance)")
+        try:
+            out[lab] = evaluate_nees(est, gt, covs, max_gap=max_gap)
+        except AssociationError as e:
+            raise LogError(f"{src.label} vs {gt_label}: {e}") from None
+    return out
+
+
+def _nees_table(results: dict[str, Any]):
+    from rich.table import Table
+
+    table = Table(title="NEES: the errors against each pose's covariance, e^T P^-1 e over (x, y, yaw)")
+    table.add_column("metric")
+    table.add_column("honest", justify="right")
+    for name in results:
+        table.add_column(name, justify="right", no_wrap=True)
+    for key, label, honest, fmt in _NEES_ROWS:
+        table.add_row(label, honest, *(_fmt(getattr(m, key), fmt) for m in results.values()))
     return table
 
 
@@ -219,8 +275,17 @@ def eval_cmd(
     force: Annotated[
         bool, typer.Option("--force", help="--plots: overwrite PNG files that fgloc did not write")
     ] = False,
+    nees: Annotated[
+        bool, typer.Option("--nees", help="Also the NEES of each estimate's poses against its per-pose covariance "
+                           "(trajectory_status.csv beside a TUM file, --cov, or a log topic's covariance)")
+    ] = False,
+    cov: Annotated[
+        Path | None, typer.Option("--cov", help="--nees: the estimate's per-pose covariances (a "
+                                  "trajectory_status.csv; default: the one beside a TUM estimate)")
+    ] = None,
 ) -> None:
-    """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE.
+    """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE; with
+    --nees, how honest their per-pose covariances are (NEES).
 
     The reference is interpolated at each estimated stamp (linear in position, shortest
     arc in yaw), only inside its time span and not across gaps longer than --max-gap.
@@ -242,6 +307,10 @@ def eval_cmd(
     from fgloc.types import Trajectory
 
     gt_path, est_paths = files[-1], files[:-1]
+    if nees and align:
+        raise ConfigError("fgloc eval: --nees weighs the errors in the estimate's own frame: not with --align")
+    if cov is not None and (not nees or len(est_paths) != 1):
+        raise ConfigError("fgloc eval: --cov goes with --nees and one estimate")
     gt, gt_src = read_trajectory(gt_path, topic)
     read = [read_trajectory(p, topic) for p in est_paths]
     labels = [f"{lab}:{r[1].topic}" if r[1].topic else lab for lab, r in zip(_labels([r[1].path for r in read]), read,
@@ -259,6 +328,7 @@ def eval_cmd(
             )
         except AssociationError as e:
             raise LogError(f"{p} vs {gt_src.label}: {e}") from None
+    nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap) if nees else {}
 
     written: list[Path] = []
     if plots is not None:
@@ -285,6 +355,9 @@ def eval_cmd(
         if written:
             for d in docs:
                 d["plots"] = [str(w) for w in written]
+        for d in docs:
+            if d["label"] in nees_results:
+                d["nees"] = nees_results[str(d["label"])].to_dict()
         print(json.dumps(out, indent=2))
         return
 
@@ -293,6 +366,8 @@ def eval_cmd(
     console = Console()
     console.print(_metrics_table(results, gt_src.path.name + ("" if gt_src.topic is None else f":{gt_src.topic}"),
                                  paper))
+    if nees_results:
+        console.print(_nees_table(nees_results))
     if written:
         console.print(f"plots: {len(written)} PNG files in {plots}")
 

@@ -5,6 +5,7 @@
 * :mod:`fgloc.eval.plots` -- PNG figures like the paper's figures 6-10 (:func:`plot_all`).
 * :mod:`fgloc.eval.paper` -- the paper's reported numbers and :func:`comparison_table`.
 * :mod:`fgloc.eval.relations` -- the relations metric (Kuemmerle et al. 2009).
+* :mod:`fgloc.eval.nees` -- :func:`~fgloc.eval.nees.evaluate_nees`: how honest per-pose covariances are.
 
 Only the metrics are imported here so that ``import fgloc.eval`` stays cheap (no matplotlib).
 """

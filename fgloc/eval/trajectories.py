@@ -134,6 +134,7 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
                        f"geometry_msgs/PoseWithCovarianceStamped (its pose topics: {listing})")
     stamps: list[float] = []
     poses: list[np.ndarray] = []
+    covs: list[np.ndarray] = []
     frames: set[str] = set()
     for _t, msg in src.messages([topic]):
         pose = getattr(msg, "pose", None)
@@ -144,8 +145,82 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
             continue
         stamps.append(float(msg.stamp))  # type: ignore[attr-defined]
         poses.append(p)
+        covs.append(_pose_cov(msg))
         frames.add(str(getattr(msg, "frame_id", "") or ""))
     if not stamps:
         raise LogError(f"{path}: {topic} has no finite poses")
     frame = next(iter(frames)) if len(frames) == 1 and "" not in frames else "map"
-    return Trajectory.from_unsorted(np.asarray(stamps), np.asarray(poses), frame), TrajectorySource(path, kind, topic)
+    return _sorted(np.asarray(stamps), np.asarray(poses), np.asarray(covs), frame), TrajectorySource(path, kind, topic)
+
+
+def _pose_cov(msg: object) -> np.ndarray:
+    """A pose message's 3x3 covariance over (x, y, yaw) (``PoseFix.cov``, ``Odometry.pose_cov``); NaN
+    when it carries none or an all-zero one (ROS's "unknown")."""
+    c = getattr(msg, "cov", None)
+    if c is None:
+        c = getattr(msg, "pose_cov", None)
+    if c is None:
+        return np.full((3, 3), np.nan)
+    a = np.asarray(c, dtype=float)
+    if a.size != 9 or not np.any(a):
+        return np.full((3, 3), np.nan)
+    return a.reshape(3, 3)
+
+
+def _sorted(stamps: np.ndarray, poses: np.ndarray, covs: np.ndarray, frame: str) -> Trajectory:
+    """As :meth:`Trajectory.from_unsorted` (sorted, the last of duplicate stamps kept), with the
+    per-pose covariances (``covs`` None when no pose has one)."""
+    order = np.argsort(stamps, kind="stable")
+    s = stamps[order]
+    keep = np.ones(len(s), dtype=bool)
+    keep[:-1] = np.diff(s) > 0
+    c = covs[order][keep]
+    return Trajectory(s[keep], poses[order][keep], frame, covs=c if np.any(np.isfinite(c)) else None)
+
+
+#: the per-pose status file ``fgloc run`` writes beside ``trajectory.tum``
+STATUS_FILE = "trajectory_status.csv"
+_COV_COLUMNS = ("cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw")
+
+
+def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(stamps_s, covs)`` of a ``trajectory_status.csv`` (its ``t`` and ``cov_*`` columns; a
+    covariance NaN where the file has none).  One-line :class:`LogError` for a file that is not one."""
+    import csv
+
+    from fgloc.errors import read_user_text
+
+    path = Path(path)
+    lines = [ln for ln in read_user_text(path, "status file").splitlines() if ln.strip() and not ln.startswith("#")]
+    rows = list(csv.reader(lines))
+    if not rows or "t" not in rows[0] or not set(_COV_COLUMNS) <= set(rows[0]):
+        raise LogError(f"{path}: not a pose status file (a column line with t and {', '.join(_COV_COLUMNS)})")
+    head = rows[0]
+    it, ic = head.index("t"), [head.index(c) for c in _COV_COLUMNS]
+    stamps, covs = [], []
+    for k, r in enumerate(rows[1:], start=2):
+        try:
+            t = float(r[it])
+            xx, xy, xa, yy, ya, aa = (float(r[i]) for i in ic)
+        except (ValueError, IndexError):
+            raise LogError(f"{path}: row {k}: not a status row (t and six covariance numbers)") from None
+        stamps.append(t)
+        covs.append([[xx, xy, xa], [xy, yy, ya], [xa, ya, aa]])
+    return np.asarray(stamps, dtype=float), np.asarray(covs, dtype=float).reshape(-1, 3, 3)
+
+
+def covariances_at(traj: Trajectory, stamps: np.ndarray, covs: np.ndarray, tol_s: float = 1e-6) -> np.ndarray:
+    """One covariance per pose of ``traj``: the one of ``(stamps, covs)`` at the pose's stamp (within
+    ``tol_s``), NaN where there is none."""
+    out = np.full((len(traj), 3, 3), np.nan)
+    st = np.asarray(stamps, dtype=float)
+    if not len(st) or not len(traj):
+        return out
+    order = np.argsort(st, kind="stable")
+    st, cv = st[order], np.asarray(covs, dtype=float)[order]
+    j = np.clip(np.searchsorted(st, traj.stamps), 0, len(st) - 1)
+    jm = np.clip(j - 1, 0, len(st) - 1)
+    j = np.where(np.abs(st[jm] - traj.stamps) < np.abs(st[j] - traj.stamps), jm, j)
+    hit = np.abs(st[j] - traj.stamps) <= tol_s
+    out[hit] = cv[j[hit]]
+    return out

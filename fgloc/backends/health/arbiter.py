@@ -200,6 +200,19 @@ class Arbiter:
             self._next_block += 1
             self._block(b0, b1, self._next_block - 1)
             done += 1
+            self._forget_before(self._t0 + self._next_block * self.block_s)
+
+    def _forget_before(self, t: float) -> None:
+        """Drop the readings no block from ``t`` on reads: each stream keeps its last reading at or
+        before ``t`` and everything after (an increment over ``(t0, t1]`` with ``t0 >= t`` reads the
+        reading at or before ``t0`` and the later ones), so the streams hold the few seconds since the
+        last processed block, whatever the session's length, and the increments are the same."""
+        for s in self.streams.values():
+            ts = s.t
+            while len(ts) > 1 and ts[1] <= t:
+                ts.popleft()
+                s.v.popleft()
+                s.var.popleft()
 
     def _block(self, t0: float, t1: float, index: int = 0) -> None:
         inc: dict[str, tuple[float, float]] = {}

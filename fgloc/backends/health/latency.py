@@ -62,9 +62,9 @@ class LatencyEstimator:
         self.refit_every = int(refit_every)
         self.refit_share = float(refit_share)
         self.max_rows = int(max_rows)
-        self.rows: deque[tuple[float, float, float, float, int]] = deque(maxlen=int(max_rows))
-        # the rows as an array, appended in place (the fit read them all through np.asarray, every
-        # refit: O(rows) Python objects converted again); its last len(rows) lines are the rows
+        # the rows (x, r, var, ref, kind) in an array, appended in place: its last ``_nrows`` lines
+        # are the newest ``max_rows`` pairs (40 B a row: the whole window is 0.8 MB, held twice at most)
+        self._nrows = 0
         self._buf = np.empty((64, 5))
         self._nbuf = 0
         self.n = 0
@@ -86,9 +86,9 @@ class LatencyEstimator:
             self.rejected += 1
             return
         row = (float(x), float(r), float(var), float(ref), int(kind))
-        self.rows.append(row)
+        self._nrows = min(self._nrows + 1, self.max_rows)
         if self._nbuf == len(self._buf):
-            keep = self._buf[self._nbuf - len(self.rows) + 1:self._nbuf]   # the rows still kept
+            keep = self._buf[self._nbuf - self._nrows + 1:self._nbuf]   # the rows still kept
             self._buf = np.empty((max(64, 2 * len(keep) + 2), 5))
             self._buf[:len(keep)] = keep
             self._nbuf = len(keep)
@@ -101,9 +101,9 @@ class LatencyEstimator:
         # every row (up to max_rows), so a fixed count would make its cost grow with the log (quadratic)
         if self.n - self._fit_n < self._refit_after:   # (the threshold is the fit's: one test per call)
             return self._fit[1], self._fit[2]  # type: ignore[index]
-        if not self.rows:
+        if not self._nrows:
             return 0.0, math.inf
-        a = self._buf[self._nbuf - len(self.rows):self._nbuf]
+        a = self._buf[self._nbuf - self._nrows:self._nbuf]
         A = np.zeros((len(a), 3))
         A[:, 0] = a[:, 0]
         kind = a[:, 4].astype(int)

@@ -7,11 +7,13 @@ memory (psutil) while the replay runs and prints
 * the latency from a scan's arrival (taken from DDS) to its map -> odom transform published, p50 / p99
   (``fgloc live``'s own measurement, over every scan fused live; the scans kept from before the start
   are not counted), and the scans fused / skipped as a backlog;
-* the resident memory: after the first minute of log, then every quarter of the run, and its slope
-  over the run after the first minute (MB per minute of log), which is ~0 when memory is flat.
+* the resident memory, sampled every ``--sample-s`` wall seconds: after the first ``--settle`` minutes
+  of log, then every quarter of the run, its growth from there to the end and the slope of a line fitted
+  after settling (MB per minute of log), which is ~0 when memory is flat; ``--png`` plots it;
+* the load average (1 min) at the start and at the end: the machine's share of the latency.
 
     python tools/bench_ros2.py                         # the paper run (110 s), rate 1
-    python tools/bench_ros2.py --loops 6 --rate 2      # 11 minutes of log, twice real time: memory
+    python tools/bench_ros2.py --loops 6 --rate 2 --png rss.png   # 11 minutes of log, twice real time: memory
     python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose   # any log (its map on /map)
     python tools/bench_ros2.py --log BAG --map MAP.yaml --no-initial-pose --compare RUN_DIR
 
@@ -82,6 +84,9 @@ def main() -> int:
                     "robot's drivers stamp them)")
     ap.add_argument("--config", type=Path, help="fgloc live's --config")
     ap.add_argument("--compare", type=Path, help="a fgloc run output folder of the same log: compare /amcl_pose")
+    ap.add_argument("--sample-s", type=float, default=10.0, help="wall seconds between RSS samples")
+    ap.add_argument("--settle", type=float, default=2.0, help="minutes of log before the memory is judged")
+    ap.add_argument("--png", type=Path, help="plot the live process's RSS over minutes of log into this PNG")
     a = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
     init = ["--initial-pose", "2.5", "3.0", "0.0"]
@@ -122,10 +127,13 @@ def main() -> int:
                                     *(["--now"] if a.now else [])),
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t_start = time.monotonic()
+    load0 = os.getloadavg()[0]
     samples: list[tuple[float, float]] = []  # wall s since the replay started, RSS MB
     while replay.poll() is None:
         samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
-        time.sleep(2.0)
+        t_next = t_start + len(samples) * a.sample_s
+        while replay.poll() is None and time.monotonic() < t_next:
+            time.sleep(0.2)
     rep_out = replay.stdout.read() if replay.stdout else ""
     time.sleep(3.0)  # the live node's backlog
     samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
@@ -133,6 +141,8 @@ def main() -> int:
     out, err = live.communicate(timeout=300)
     report = json.loads(out)
     print(rep_out.strip().splitlines()[0] if rep_out.strip() else "replay: no output")
+    print(f"load average (1 min, {os.cpu_count()} cores): {load0:.1f} at the start, "
+          f"{os.getloadavg()[0]:.1f} at the end")
     if a.receive_only:
         print(f"receive-only: {report['received']} messages decoded")
         report = {"ros2": {"problems": []}}
@@ -154,14 +164,32 @@ def main() -> int:
                   f"p99 {ready['p99']:.2f} ms")
     t = np.array([s[0] for s in samples]) * a.rate / 60.0  # minutes of log
     m = np.array([s[1] for s in samples])
-    after = t >= min(1.0, 0.25 * t[-1])
+    settle = min(a.settle, 0.25 * t[-1])
+    after = t >= settle
     if after.sum() >= 3:
         slope = float(np.polyfit(t[after], m[after], 1)[0])
         marks = [float(np.interp(q * t[-1], t, m)) for q in (0.25, 0.5, 0.75, 1.0)]
-        first = float(np.interp(min(1.0, 0.25 * t[-1]), t, m))
-        print(f"live RSS: {first:.0f} MB after {min(1.0, 0.25 * t[-1]):.1f} min of log; at 1/4, 1/2, 3/4, end of "
-              f"{t[-1]:.1f} min: " + ", ".join(f"{v:.0f}" for v in marks)
-              + f" MB; slope {slope:+.2f} MB per minute of log")
+        first = float(np.interp(settle, t, m))
+        print(f"live RSS: {first:.1f} MB after {settle:.1f} min of log; at 1/4, 1/2, 3/4, end of "
+              f"{t[-1]:.1f} min: " + ", ".join(f"{v:.1f}" for v in marks)
+              + f" MB; growth after settling {m[-1] - first:+.1f} MB (max {m[after].max() - first:+.1f}), "
+              f"slope {slope:+.3f} MB per minute of log ({len(samples)} samples every {a.sample_s:g} s)")
+        if a.png is not None:
+            import matplotlib
+
+            matplotlib.use("Agg")
+            import matplotlib.pyplot as plt
+
+            fig, ax = plt.subplots(figsize=(7, 3.5))
+            ax.plot(t, m, ".-", ms=3)
+            ax.axvline(settle, color="0.6", ls="--", lw=0.8)
+            ax.set_xlabel("minutes of log")
+            ax.set_ylabel("fgloc live --ros2 RSS (MB)")
+            ax.set_title(f"rate {a.rate:g}, slope after {settle:.1f} min: {slope:+.3f} MB/min", fontsize=9)
+            ax.grid(alpha=0.3)
+            fig.tight_layout()
+            fig.savefig(a.png, dpi=110)
+            print(f"plot: {a.png}")
     if a.compare is not None and sub is not None:
         from fgloc.io.tum import read_tum
 

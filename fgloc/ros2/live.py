@@ -41,7 +41,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     ``on_started()``: called once the localizer is built and the messages kept before it fused."""
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
-    from fgloc.live.app import LIVE_TAIL_S, LiveSession, trajectory_outputs
+    from fgloc.live.app import LIVE_HISTORY_S, LIVE_TAIL_S, LiveSession, trajectory_outputs
     from fgloc.localization import Session, build_session
     from fgloc.maps import load_map
     from fgloc.ros2.node import Ros2Live
@@ -84,7 +84,12 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     viewer: list[Any] = []
 
     def make_session(occ_map: Any, mount: Any) -> Session:
-        return build_session(occ_map, mount, backend=backend, frontend=frontend, initial_pose=init, config=cfg)
+        session = build_session(occ_map, mount, backend=backend, frontend=frontend, initial_pose=init, config=cfg)
+        # as `fgloc live`: the fixes and the back-end's trajectories are kept whole for --out-smoothed only,
+        # else their last minute (memory bounded over days; /amcl_pose needs only the newest online poses)
+        if out_smoothed is None:
+            session.loc.keep_history(LIVE_HISTORY_S)
+        return session
 
     def make_live(session: Session) -> LiveSession:
         live = LiveSession(session, None, None, config=cfg, record=record, publish=publish or None,

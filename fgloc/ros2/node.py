@@ -51,6 +51,7 @@ from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESS
 from fgloc.localization.session import BaseSink
 from fgloc.ros2 import codec, qos
 from fgloc.ros2.codec import DIAGNOSTIC_ARRAY, OCCUPANCY_GRID, Undecodable
+from fgloc.ros2.quantiles import LogHistogram
 from fgloc.ros2.transport import EndpointHealth, Transport
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 
@@ -58,7 +59,6 @@ SENSOR_TYPES = (LASER_SCAN, ODOMETRY, IMU)
 SOURCE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
 OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
 ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
-LATENCIES_KEPT = 100_000
 ARRIVALS_KEPT = 256  # messages per source whose arrival is kept (2.5 s of a 100 Hz IMU)
 SENSOR_DEPTH = 100  # samples a sensor subscription holds until the receive thread takes them
 
@@ -184,8 +184,8 @@ class Ros2Outputs(BaseSink):
         tr = live.transport
         self.pose_pub = tr.publisher(c.pose_topic, POSE_COV_STAMPED, qos.LATCHED_PUB)
         self.tf_pub = tr.publisher("/tf", TF_MESSAGE, qos.TF) if c.tf_broadcast else None
-        self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)
-        self.ready_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)
+        self.latencies_ms = LogHistogram()  # the whole run's, in constant memory
+        self.ready_ms = LogHistogram()
         self.published = 0
         self.no_odom = 0
         self.last_map_odom: np.ndarray | None = None
@@ -224,17 +224,14 @@ class Ros2Outputs(BaseSink):
                 if abs(st - t) < 1e-9:
                     if live:  # a scan kept from before the start is not live
                         now = time.time()
-                        self.latencies_ms.append((now - arrival) * 1e3)
+                        self.latencies_ms.add((now - arrival) * 1e3)
                         inputs_in = self.live.arrivals.all_in(t)
-                        self.ready_ms.append((now - max(arrival, inputs_in or arrival)) * 1e3)
+                        self.ready_ms.add((now - max(arrival, inputs_in or arrival)) * 1e3)
                     break
 
     def latency_percentiles(self, ready: bool = False) -> tuple[float, float]:
         lat = self.ready_ms if ready else self.latencies_ms
-        if not lat:
-            return float("nan"), float("nan")
-        a = np.fromiter(lat, dtype=float)
-        return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+        return lat.percentile(50), lat.percentile(99)
 
 
 @dataclass

@@ -25,17 +25,15 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 from xml.sax.saxutils import quoteattr
 
-import numpy as np
-
 from fgloc.errors import ConfigError
 from fgloc.ros2.names import dds_topic, dds_type, ros_topic, ros_type
 from fgloc.ros2.qos import RELIABLE, TRANSIENT_LOCAL, Profile, to_dds
+from fgloc.ros2.quantiles import LogHistogram
 
 #: DDS QoS policy ids (DDS 2.2.3; Cyclone's dds_qos_policy_id_t) as an incompatible-QoS status names them
 POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE", 5: "LATENCY_BUDGET",
@@ -45,7 +43,6 @@ POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE
                 17: "READER_DATA_LIFECYCLE", 18: "TOPIC_DATA", 19: "GROUP_DATA", 20: "TRANSPORT_PRIORITY",
                 21: "LIFESPAN", 22: "DURABILITY_SERVICE", 23: "PROPERTY", 24: "TYPE_CONSISTENCY_ENFORCEMENT",
                 25: "DATA_REPRESENTATION"}
-DELIVERIES_KEPT = 10_000  # per subscription: the newest samples' delivery delays
 MAX_DOMAIN_ID = 232  # ROS 2's largest domain id (RTPS port mapping with the default port parameters)
 INSTALL_HINT = 'the ROS 2 transport needs Eclipse Cyclone DDS: pip install "fgloc[ros2]"'
 
@@ -74,8 +71,8 @@ class EndpointHealth:
     other_type: dict[str, int] = field(default_factory=dict)
     last_arrival: float = float("nan")
     #: written (the sample's DDS source timestamp, the writer's clock) -> handed to the callback, ms: the
-    #: transport's own delay when both ends share a clock (the same machine)
-    delivery_ms: deque[float] = field(default_factory=lambda: deque(maxlen=DELIVERIES_KEPT))
+    #: transport's own delay when both ends share a clock (the same machine); the whole run's, in constant memory
+    delivery_ms: LogHistogram = field(default_factory=lambda: LogHistogram(lo=1e-4))
     last_error: str = ""
     _missing: int = 0  # peers lost and not back yet
 
@@ -109,10 +106,9 @@ class EndpointHealth:
                                           "sample_lost", "callback_errors", "other_generation")}
         d["qos"] = f"{self.qos.reliability}/{self.qos.durability}/{self.qos.depth}"
         d["other_type"] = {ros_type(k): v for k, v in self.other_type.items()}
-        if self.delivery_ms:
-            a = np.fromiter(self.delivery_ms, dtype=float)
-            d["delivery_ms"] = {"p50": round(float(np.percentile(a, 50)), 3),
-                                "p99": round(float(np.percentile(a, 99)), 3)}
+        if self.delivery_ms.count:
+            d["delivery_ms"] = {"p50": round(self.delivery_ms.percentile(50), 3),
+                                "p99": round(self.delivery_ms.percentile(99), 3)}
         return d
 
 
@@ -450,7 +446,7 @@ class CycloneTransport:
                 now = time.time()
                 for written, _, h, cb, data in batch:
                     h.last_arrival = now
-                    h.delivery_ms.append(now * 1e3 - written * 1e-6)
+                    h.delivery_ms.add(now * 1e3 - written * 1e-6)
                     h.messages += 1
                     try:
                         cb(data, now)

@@ -55,7 +55,9 @@ in bursts).
 Faults: wheel slip (the wheels turn ``fraction`` faster than the ground moves),
 compass disturbance (an added heading offset), laser blackout (no scans), kidnapping
 (a jump of the true pose that odometry does not see), unmapped moving obstacles
-(circles the laser sees but the map does not have).
+(circles the laser sees but the map does not have), odometry dropout (no ``/odom`` from
+``start`` for ``duration`` s, for good when ``duration`` is null: a dead wheel driver) and late
+odometry (every ``/odom`` message delivered ``delay_s`` after its stamp, the stamps true).
 """
 
 from __future__ import annotations
@@ -165,6 +167,8 @@ FAULT_KEYS: dict[str, Any] = {
     "wheel_slip": {"start": None, "duration": None, "fraction": None},
     "compass_disturbance": {"start": None, "duration": None, "offset_deg": None},
     "laser_blackout": {"start": None, "duration": None},
+    "odometry_dropout": {"start": None, "duration": None},
+    "odometry_late": {"delay_s": None},
     "moving_obstacles": [{"path": None, "speed_mps": None, "radius_m": None, "start": None}],
 }
 
@@ -423,6 +427,11 @@ def _odometry(sc: dict, plan: Plan, rng: np.random.Generator) -> list[tuple[str,
                          pose[1] + (tw[0] * np.sin(th) + tw[1] * np.cos(th)) * dtk,
                          float(wrap_angle(pose[2] + tw[2] * dtk))])
         out.append(("/odom", Odometry(float(t_odom[k]), tw, cov.copy(), pose.copy())))
+    drop = sc.get("faults", {}).get("odometry_dropout")
+    if drop:
+        t0 = float(drop["start"])
+        t1 = t0 + float(drop["duration"]) if drop.get("duration") is not None else np.inf
+        out = [(topic, m) for topic, m in out if not t0 <= m.stamp < t1]  # type: ignore[attr-defined]
     return out
 
 
@@ -598,7 +607,12 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
         tf.append(imu_mount)
         timed += _imu(sc, plan, offset, imu_mount, rngs[2])
     msgs: list[tuple[str, object]] = [("/tf_static", tf)]
-    msgs += _odometry(sc, plan, rngs[1])
+    odom = _odometry(sc, plan, rngs[1])
+    late = float((sc.get("faults", {}).get("odometry_late") or {}).get("delay_s") or 0.0)
+    if late > 0:
+        timed += [(float(m.stamp) + late, topic, m) for topic, m in odom]  # type: ignore[attr-defined]
+    else:
+        msgs += odom
     if sc.get("imu") is None:
         msgs += _compass(sc, plan, offset, rngs[2])
     msgs += _laser(sc, plan, world, rngs[3], progress)

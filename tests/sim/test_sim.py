@@ -264,3 +264,22 @@ def test_paper_yaml_is_simulate_paper():
 
     sc = load_scenario(SCEN / "paper.yaml")
     assert sc == DEFAULT_SCENARIO
+
+
+def test_odometry_dropout_and_late_delivery():
+    short = [[2.5, 3.0], [8.5, 3.0]]
+    quiet = {"enabled": False}  # no laser: the odometry alone
+    r = run_scenario({"route": short, "laser": quiet, "faults": {"odometry_dropout": {"start": 3.0, "duration": 2.0}}})
+    t = np.array([m.stamp for m in r.topic("/odom")])
+    assert not np.any((t >= 3.0) & (t < 5.0)) and np.any(t > 5.0) and np.any(t < 3.0)
+    r = run_scenario({"route": short, "laser": quiet, "faults": {"odometry_dropout": {"start": 3.0, "duration": None}}})
+    assert max(m.stamp for m in r.topic("/odom")) < 3.0  # stopped for good
+    r = run_scenario({"route": short, "faults": {"odometry_late": {"delay_s": 0.3}}})
+    newest = -np.inf
+    behind = []
+    for topic, m in r.messages:  # arrival order: at each scan the newest odometry stamp is 0.3 s behind it
+        if topic == "/odom":
+            newest = max(newest, m.stamp)
+        elif topic == "/scan" and m.stamp > 1.0:
+            behind.append(m.stamp - newest)
+    assert 0.28 < float(np.median(behind)) < 0.32

@@ -149,19 +149,26 @@ def main() -> int:
     else:
         r2 = report["ros2"]
         c = report["counters"]
-        lat = r2["scan_to_tf_ms"]
         print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
-              f"poses published {r2['published']}")
-        print(f"scan arrival -> map->odom published: p50 {lat['p50']:.2f} ms, p99 {lat['p99']:.2f} ms")
+              f"poses published {r2['published']}, map->odom {r2['tf_published']} "
+              f"({'at the match' if r2['tf_at_match'] else 'with the online pose'})")
+
+        def pp(d: dict) -> str:
+            return f"p50 {d['p50']:.2f} ms, p99 {d['p99']:.2f} ms"
+
+        print(f"scan arrival -> map->odom published: {pp(r2['scan_to_tf_ms'])}")
+        print(f"scan arrival -> /amcl_pose (the back-end's online pose) published: {pp(r2['scan_to_pose_ms'])}; "
+              f"from the odometry / IMU past the scan's stamp in: {pp(r2['inputs_in_to_pose_ms'])}")
+        tm = r2["tf_at_match_ms"]
+        if tm["handle"]["n"]:
+            print(f"map->odom at the match: arrival -> handling began {pp(tm['queue'])}; handling -> published "
+                  f"{pp(tm['handle'])}, of which the fusion thread's CPU {pp(tm['cpu'])}")
+            d = r2["tf_at_match_vs_online_mm"]
+            print(f"map->odom at the match vs from the online pose: p50 {d['p50']:.2f} mm, p99 {d['p99']:.2f} mm, "
+                  f"max {d['max']:.2f} mm over {d['n']} scans")
         scan = next((e for e in r2["endpoints"] if e["topic"] == "/scan" and e["direction"] == "sub"), {})
         if scan.get("delivery_ms"):
-            print(f"/scan written -> taken by fgloc's receive thread: p50 {scan['delivery_ms']['p50']:.2f} ms, "
-                  f"p99 {scan['delivery_ms']['p99']:.2f} ms")
-        ready = r2.get("inputs_in_to_tf_ms")
-        if ready:
-            print(f"the scan and the odometry / IMU past its stamp in -> map->odom published: "
-                  f"p50 {ready['p50']:.2f} ms, "
-                  f"p99 {ready['p99']:.2f} ms")
+            print(f"/scan written -> taken by fgloc's receive thread: {pp(scan['delivery_ms'])}")
     t = np.array([s[0] for s in samples]) * a.rate / 60.0  # minutes of log
     m = np.array([s[1] for s in samples])
     settle = min(a.settle, 0.25 * t[-1])

@@ -19,12 +19,12 @@ def summary_line(report: dict[str, Any]) -> str:
         return f"fgloc live: stopped while waiting for {report['waiting_for']}"
     c = report.get("counters") or {}
     lat = r.get("scan_to_tf_ms") or {}
-    ready = r.get("inputs_in_to_tf_ms") or {}
+    pose = r.get("scan_to_pose_ms") or {}
     nan = float("nan")
     line = (f"fgloc live: {report.get('duration_s', 0):.1f} s, {r.get('published', 0)} poses published, "
             f"{c.get('scans_fused', 0)} scans fused, {c.get('fixes', 0)} fixes, scan -> tf p50 "
-            f"{lat.get('p50', nan):.2f} ms p99 {lat.get('p99', nan):.2f} ms (from the odometry / IMU past the scan: "
-            f"p50 {ready.get('p50', nan):.2f} ms p99 {ready.get('p99', nan):.2f} ms)")
+            f"{lat.get('p50', nan):.2f} ms p99 {lat.get('p99', nan):.2f} ms, scan -> /amcl_pose "
+            f"p50 {pose.get('p50', nan):.2f} ms p99 {pose.get('p99', nan):.2f} ms")
     probs = r.get("problems") or []
     return line + ("; DDS: " + "; ".join(probs) if probs else "")
 

@@ -10,8 +10,9 @@ health, recording, UDP publisher and Foxglove view).  It publishes what nav2's A
 * ``/amcl_pose`` (``geometry_msgs/PoseWithCovarianceStamped``, reliable, transient local, depth 1)
   for each localized scan, stamped with the scan (as AMCL), in ``global_frame_id``: the back-end's
   online estimate there, published as soon as it has it (:class:`Ros2Outputs`);
-* ``map -> odom`` on ``/tf`` (tf2's broadcaster QoS), stamped ``transform_tolerance_s`` after
-  the pose it comes from (AMCL's post-dating, so that tf users may extrapolate that far);
+* ``map -> odom`` on ``/tf`` (tf2's broadcaster QoS), right after each scan's match (``tf_at_match``,
+  as AMCL after its update; else with the online estimate), stamped ``transform_tolerance_s`` after
+  the scan (AMCL's post-dating, so that tf users may extrapolate that far);
   ``odom -> base`` at the pose's stamp comes from the robot's ``/tf`` (nav2's way) or, when the
   robot does not publish it, from its odometry messages' poses;
 * ``/fgloc/status`` (``diagnostic_msgs/DiagnosticArray``, one status per input and output topic,
@@ -34,6 +35,7 @@ status line and on ``/fgloc/status``.
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
 import time
@@ -71,8 +73,8 @@ class OdomFrame:
         self.odom_frame = frame_name(odom_frame)
         self.from_tf = False
         self.base_frame = ""
-        self._t: deque[float] = deque(maxlen=ODOM_HISTORY)
-        self._p: deque[np.ndarray] = deque(maxlen=ODOM_HISTORY)
+        self._t: list[float] = []  # sorted; the newest ODOM_HISTORY to 2 ODOM_HISTORY kept (trimmed in one go)
+        self._p: list[np.ndarray] = []
         self._lock = threading.Lock()
 
     def _add(self, t: float, pose: np.ndarray) -> None:
@@ -81,6 +83,8 @@ class OdomFrame:
                 return  # out of order: the history stays sorted
             self._t.append(t)
             self._p.append(np.asarray(pose, dtype=float).copy())
+            if len(self._t) > 2 * ODOM_HISTORY:
+                del self._t[:-ODOM_HISTORY], self._p[:-ODOM_HISTORY]
 
     def add_tf(self, transforms: list[StaticTransform], stamps: list[float]) -> None:
         for tr, stamp in zip(transforms, stamps, strict=True):
@@ -115,8 +119,7 @@ class OdomFrame:
                     return self._p[-1].copy()
                 k = len(ts) - 1 if last else 1
             else:
-                arr = np.fromiter(ts, dtype=float, count=len(ts))
-                k = int(np.searchsorted(arr, t))
+                k = bisect.bisect_left(ts, t)
             t0, t1 = ts[k - 1], ts[k]
             p0, p1 = self._p[k - 1], self._p[k]
         a = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
@@ -162,18 +165,46 @@ def map_to_odom(map_base: np.ndarray, odom_base: np.ndarray) -> np.ndarray:
     return compose(map_base, inverse(odom_base))
 
 
+def pose_at_match(pred: np.ndarray, pred_cov: np.ndarray, fix: PoseFix | None) -> np.ndarray:
+    """The pose at a scan right after its match: the back-end's prediction there updated with the scan's
+    fix (one Kalman update, the fix's covariance as it is), or the prediction without a fix taken.  What
+    a filter (nav2's AMCL) publishes at once; a smoother's own estimate there comes once its keyframe is
+    made (the odometry / IMU past the scan), a few millimetres from this."""
+    pred = np.asarray(pred, dtype=float)
+    if fix is None or fix.cov is None:
+        return pred.copy()
+    p = np.asarray(pred_cov, dtype=float)
+    try:
+        k = p @ np.linalg.inv(p + np.asarray(fix.cov, dtype=float))
+    except np.linalg.LinAlgError:
+        return pred.copy()
+    d = np.asarray(fix.pose, dtype=float) - pred
+    d[2] = wrap_scalar(float(d[2]))
+    out = pred + k @ d
+    out[2] = wrap_scalar(float(out[2]))
+    return out
+
+
 class Ros2Outputs(BaseSink):
-    """Publishes /amcl_pose and map -> odom for each scan once the back-end knows the pose at its stamp
-    (its online estimate there: what ``fgloc run`` writes to online.tum), and measures scan arrival (DDS)
-    -> transform published.
+    """Publishes /amcl_pose and map -> odom for each scan, and measures scan arrival (DDS) -> published.
 
-    A smoother takes a scan's keyframe once the odometry reaches its stamp; a scan stamped after the
-    newest odometry is published when that odometry comes (AMCL, too, waits for ``odom -> base`` at the
-    scan's stamp).  :meth:`publish_new` is called after every message the session handles.
+    /amcl_pose carries the back-end's online estimate at the scan's stamp (what ``fgloc run`` writes to
+    online.tum), published as soon as the back-end has it: a smoother makes a scan's keyframe once the
+    odometry / IMU reach its stamp, so :meth:`publish_new` is called after every message the session
+    handles.  map -> odom goes out with it, or, with ``ros2.tf_at_match`` (the default), right after the
+    scan's match from :func:`pose_at_match` (as nav2's AMCL publishes it after its update), not waiting for
+    the odometry / IMU past the scan; either way once per scan (tf2 ignores a second transform stamped the
+    same).  ``odom -> base`` at the scan's stamp comes from the robot (interpolated, or extrapolated when
+    the scan is newer than its newest odometry, :class:`OdomFrame`).
 
-    Two latencies per scan fused live: from its arrival to its pose published (``latencies_ms``), and
-    from the moment the odometry / IMU past its stamp were in as well (``ready_ms``: fgloc's own share;
-    the rest is the wait for the robot's odometry, which AMCL has too)."""
+    Per scan fused live, the whole run's percentiles in constant memory (:class:`LogHistogram`):
+    ``tf_ms`` arrival -> map->odom published; ``pose_ms`` arrival -> /amcl_pose published; ``ready_ms``
+    from the moment the odometry / IMU past the scan's stamp were in as well -> /amcl_pose (fgloc's share
+    of it: the rest is the wait for the robot's sensors); for the transform at the match, ``queue_ms``
+    arrival -> the scan's handling began (the receive thread, the fusion loop's wake-up, the messages
+    before it), ``handle_ms`` that -> published, and ``cpu_ms`` the fusion thread's own CPU time in it
+    (the rest of ``handle_ms`` the thread waited for a core or the GIL: the machine's share);
+    ``match_vs_online_mm`` the transform at the match against the one from the online estimate."""
 
     wants_messages = False
     wants_fused = False
@@ -184,19 +215,63 @@ class Ros2Outputs(BaseSink):
         tr = live.transport
         self.pose_pub = tr.publisher(c.pose_topic, POSE_COV_STAMPED, qos.LATCHED_PUB)
         self.tf_pub = tr.publisher("/tf", TF_MESSAGE, qos.TF) if c.tf_broadcast else None
-        self.latencies_ms = LogHistogram()  # the whole run's, in constant memory
+        self.at_match = bool(c.tf_at_match) and self.tf_pub is not None
+        self.tf_ms = LogHistogram()
+        self.pose_ms = LogHistogram()
         self.ready_ms = LogHistogram()
+        self.queue_ms = LogHistogram()
+        self.handle_ms = LogHistogram()
+        self.cpu_ms = LogHistogram()
+        self.match_vs_online_mm = LogHistogram(lo=1e-4)
         self.published = 0
+        self.tf_published = 0
         self.no_odom = 0
         self.last_map_odom: np.ndarray | None = None
-        self._last_t = -math.inf
+        self._last_t = -math.inf  # the newest stamp /amcl_pose was published for
+        self._tf_last_t = -math.inf  # ... map -> odom
         self._arrivals: deque[tuple[float, float, bool]] = deque(maxlen=64)  # scan stamp, arrival, live
+        self._early: deque[tuple[float, np.ndarray]] = deque(maxlen=64)  # stamp, map -> base at the match
+        self.handling: tuple[float, float] | None = None  # wall (time.time), thread CPU s: the scan's handling began
 
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
         r = self.live.runner
         arrival = r.scan_arrival if r is not None else 0.0
-        self._arrivals.append((float(stamp), arrival, arrival > 0 and not self.live.flushing))
+        live = arrival > 0 and not self.live.flushing
+        t = float(stamp)
+        self._arrivals.append((t, arrival, live))
         self.publish_new()
+        loc = self.live.loc
+        if (not self.at_match or loc is None or loc.odom_mode or loc.lost or t <= self._tf_last_t
+                or not loc.backend.initialized):
+            return
+        fix = fix_or_reason if isinstance(fix_or_reason, PoseFix) and not loc.last_reason else None
+        pred, pred_cov = loc.backend.predict(t)
+        at = pose_at_match(pred, pred_cov, fix)
+        if self._publish_tf(t, at):
+            self._early.append((t, at))
+            if live:
+                now = time.time()
+                self.tf_ms.add((now - arrival) * 1e3)
+                if self.handling is not None:
+                    began, cpu0 = self.handling
+                    self.queue_ms.add((began - arrival) * 1e3)
+                    self.handle_ms.add((now - began) * 1e3)
+                    self.cpu_ms.add((time.thread_time() - cpu0) * 1e3)
+
+    def _publish_tf(self, t: float, map_base: np.ndarray) -> bool:
+        assert self.tf_pub is not None
+        odom = self.live.odom_frame.at(t)
+        if odom is None:
+            self.no_odom += 1
+            return False
+        mo = map_to_odom(map_base, odom)
+        self.last_map_odom = mo
+        c = self.live.cfg.ros2
+        tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
+        self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
+        self._tf_last_t = t
+        self.tf_published += 1
+        return True
 
     def publish_new(self) -> None:
         loc = self.live.loc
@@ -210,28 +285,40 @@ class Ros2Outputs(BaseSink):
             self._last_t = t
             at = np.asarray(pose_at, dtype=float)
             self.pose_pub.write(codec.encode(PoseFix(t, at, cov, 1.0, "fgloc", c.global_frame_id))[1])
-            if self.tf_pub is not None:
-                odom = self.live.odom_frame.at(t)
-                if odom is None:
-                    self.no_odom += 1
-                else:
-                    mo = map_to_odom(at, odom)
-                    self.last_map_odom = mo
-                    tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
-                    self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
+            tf_now = self.tf_pub is not None and t > self._tf_last_t and self._publish_tf(t, at)
             self.published += 1
+            for st, early in self._early:
+                if abs(st - t) < 1e-9:
+                    self.match_vs_online_mm.add(1e3 * math.hypot(early[0] - at[0], early[1] - at[1]))
+                    break
             for st, arrival, live in self._arrivals:
                 if abs(st - t) < 1e-9:
                     if live:  # a scan kept from before the start is not live
                         now = time.time()
-                        self.latencies_ms.add((now - arrival) * 1e3)
+                        ms = (now - arrival) * 1e3
+                        self.pose_ms.add(ms)
+                        if tf_now:
+                            self.tf_ms.add(ms)
                         inputs_in = self.live.arrivals.all_in(t)
                         self.ready_ms.add((now - max(arrival, inputs_in or arrival)) * 1e3)
                     break
 
     def latency_percentiles(self, ready: bool = False) -> tuple[float, float]:
-        lat = self.ready_ms if ready else self.latencies_ms
+        """p50, p99 of scan arrival -> map->odom published (``ready``: inputs in -> /amcl_pose), ms."""
+        lat = self.ready_ms if ready else self.tf_ms
         return lat.percentile(50), lat.percentile(99)
+
+    def report(self) -> dict[str, Any]:
+        def pct(h: LogHistogram, nd: int = 3) -> dict[str, float]:
+            return {"p50": round(h.percentile(50), nd), "p99": round(h.percentile(99), nd), "n": h.count}
+
+        return {"published": self.published, "tf_published": self.tf_published, "tf_at_match": self.at_match,
+                "scan_to_tf_ms": pct(self.tf_ms), "scan_to_pose_ms": pct(self.pose_ms),
+                "inputs_in_to_pose_ms": pct(self.ready_ms),
+                "tf_at_match_ms": {"queue": pct(self.queue_ms), "handle": pct(self.handle_ms),
+                                   "cpu": pct(self.cpu_ms)},
+                "tf_at_match_vs_online_mm": {**pct(self.match_vs_online_mm), "max": round(
+                    self.match_vs_online_mm.max, 3) if self.match_vs_online_mm.count else math.nan}}
 
 
 @dataclass
@@ -286,7 +373,7 @@ class Ros2Live:
         self.maps_ignored = 0  # maps after the first with first_map_only
         self.map_changes = 0  # new maps localized on
         self.map_errors = 0  # new maps no front-end could be built on
-        self._pending_map: tuple[Any, Any] | None = None  # a new map and its front-end, for the next scan
+        self._pending_map: tuple[Any, Any, float] | None = None  # a new map, its front-end, its arrival
         self.flushing = False  # fusing the messages kept from before the start
         self.initial_pose: PoseFix | None = None
         self._pending_pose: PoseFix | None = None  # an /initialpose to apply at the next scan
@@ -346,7 +433,7 @@ class Ros2Live:
             if self.mirrored:
                 msg = mirror_scan(msg)
         if inp.kind == "map":
-            self._map(msg)
+            self._map(msg, arrival)
             return
         if inp.kind == "initialpose":
             if isinstance(msg, PoseFix):
@@ -365,11 +452,12 @@ class Ros2Live:
             b.popleft()
             self.startup.dropped += 1
 
-    def _map(self, m: Any) -> None:
+    def _map(self, m: Any, arrival: float = 0.0) -> None:
         """A map on ``map_topic`` (DDS thread).  Before the start the newest is kept; after it a new map
         gets its front-end built on a thread of its own (seconds on a large map: the scans go on) and is
-        localized on from the next scan after that (:meth:`_apply_map`).  The same map again (a map
-        server republishing, a second one) changes nothing; with ``first_map_only`` only the first counts."""
+        localized on from the next scan that arrived after it (:meth:`_apply_map`: not one of a backlog).
+        The same map again (a map server republishing, a second one) changes nothing; with
+        ``first_map_only`` only the first counts."""
         c = self.cfg.ros2
         with self._lock:
             cur = self.occ_map
@@ -384,9 +472,9 @@ class Ros2Live:
         if cur is None:
             self.event(f"map from {c.map_topic}: {m.width} x {m.height} cells of {m.resolution:g} m")
         elif started:
-            self._build_frontend(m)
+            self._build_frontend(m, arrival)
 
-    def _build_frontend(self, m: Any) -> None:
+    def _build_frontend(self, m: Any, arrival: float = 0.0) -> None:
         loc = self.loc
 
         def build() -> None:
@@ -400,7 +488,7 @@ class Ros2Live:
                 return
             with self._lock:
                 if self.occ_map is m:  # not replaced meanwhile by a newer one
-                    self._pending_map = (m, fe)
+                    self._pending_map = (m, fe, arrival)
 
         threading.Thread(target=build, name="fgloc-map", daemon=True).start()
 
@@ -413,7 +501,7 @@ class Ros2Live:
             pending, self._pending_map = self._pending_map, None
         if pending is None:
             return
-        m, fe = pending
+        m, fe, _ = pending
         loc = self.loc
         loc.replace_map(m, fe)
         self.map_changes += 1
@@ -478,19 +566,21 @@ class Ros2Live:
                          if inp.kind == "scan" or inp.kind.startswith("source:")}
         self.outputs = Ros2Outputs(self)
         runner.session.sinks.insert(0, self.outputs)  # first: map -> odom goes out before the recording
+        outputs = self.outputs
         handlers = runner.session.handlers
         handlers["initialpose"] = self._on_initial_pose
         fuse_scan = handlers["scan"]
 
         def scan_then(msg: object) -> None:  # a new map, then a pending /initialpose, at the next scan
-            if self._pending_map is not None and isinstance(msg, LaserScan):
+            outputs.handling = (time.time(), time.thread_time())
+            pending = self._pending_map
+            if pending is not None and isinstance(msg, LaserScan) and runner.scan_arrival >= pending[2]:
                 self._apply_map(float(msg.stamp))
             if self._pending_pose is not None and isinstance(msg, LaserScan):
                 self._apply_initial_pose(float(msg.stamp))
             fuse_scan(msg)
 
         handlers["scan"] = scan_then
-        outputs = self.outputs
 
         def then_publish(handler: Callable[[object], None]) -> Callable[[object], None]:
             def handle(msg: object) -> None:  # a pose the back-end now knows is published at once
@@ -700,10 +790,7 @@ class Ros2Live:
                                "problems": self.problems(), "startup_dropped": self.startup.dropped,
                                "map_changes": self.map_changes}
         if self.outputs is not None:
-            p50, p99 = self.outputs.latency_percentiles()
-            r50, r99 = self.outputs.latency_percentiles(ready=True)
-            out.update(published=self.outputs.published, scan_to_tf_ms={"p50": p50, "p99": p99},
-                       inputs_in_to_tf_ms={"p50": r50, "p99": r99})
+            out.update(self.outputs.report())
         return out
 
     def close(self) -> Any:

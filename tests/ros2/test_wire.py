@@ -286,3 +286,19 @@ def test_odom_frame_interpolates_and_extrapolates_a_little() -> None:
 
     mb, ob = np.array([3.0, 1.0, 0.5]), np.array([0.4, -0.2, -0.3])
     np.testing.assert_allclose(compose(map_to_odom(mb, ob), ob), mb, atol=1e-12)
+
+
+def test_pose_at_match_weighs_the_fix_against_the_prediction() -> None:
+    from fgloc.ros2.node import pose_at_match
+    from fgloc.types import PoseFix
+
+    pred = np.array([1.0, 2.0, math.pi - 0.01])
+    p = np.diag([0.02**2, 0.02**2, 0.01**2])
+    fix = PoseFix(0.0, np.array([1.1, 2.0, -math.pi + 0.01]), np.diag([0.02**2, 0.06**2, 0.01**2]), 1.0, "native")
+    out = pose_at_match(pred, p, fix)
+    # equal variances in x and yaw: halfway (across +-pi); y: the fix 9x less sure, so 1/10 of the way
+    np.testing.assert_allclose(out[:2], [1.05, 2.0], atol=1e-12)
+    assert abs(abs(out[2]) - math.pi) < 1e-12
+    fix_y = PoseFix(0.0, np.array([1.0, 2.1, pred[2]]), fix.cov, 1.0, "native")
+    assert abs(pose_at_match(pred, p, fix_y)[1] - 2.01) < 1e-12
+    np.testing.assert_array_equal(pose_at_match(pred, p, None), pred)  # no fix taken: the prediction

@@ -373,7 +373,7 @@ class Ros2Live:
         self.maps_ignored = 0  # maps after the first with first_map_only
         self.map_changes = 0  # new maps localized on
         self.map_errors = 0  # new maps no front-end could be built on
-        self._pending_map: tuple[Any, Any, float] | None = None  # a new map, its front-end, its arrival
+        self._pending_map: tuple[Any, Any] | None = None  # a new map and its front-end, for the next scan
         self.flushing = False  # fusing the messages kept from before the start
         self.initial_pose: PoseFix | None = None
         self._pending_pose: PoseFix | None = None  # an /initialpose to apply at the next scan
@@ -433,7 +433,7 @@ class Ros2Live:
             if self.mirrored:
                 msg = mirror_scan(msg)
         if inp.kind == "map":
-            self._map(msg, arrival)
+            self._map(msg)
             return
         if inp.kind == "initialpose":
             if isinstance(msg, PoseFix):
@@ -452,12 +452,12 @@ class Ros2Live:
             b.popleft()
             self.startup.dropped += 1
 
-    def _map(self, m: Any, arrival: float = 0.0) -> None:
+    def _map(self, m: Any) -> None:
         """A map on ``map_topic`` (DDS thread).  Before the start the newest is kept; after it a new map
         gets its front-end built on a thread of its own (seconds on a large map: the scans go on) and is
-        localized on from the next scan that arrived after it (:meth:`_apply_map`: not one of a backlog).
-        The same map again (a map server republishing, a second one) changes nothing; with
-        ``first_map_only`` only the first counts."""
+        localized on from the next scan after that (:meth:`_apply_map`; as nav2's AMCL, whose map callback
+        replaces the map for the scans still queued).  The same map again (a map server republishing, a
+        second one) changes nothing; with ``first_map_only`` only the first counts."""
         c = self.cfg.ros2
         with self._lock:
             cur = self.occ_map
@@ -472,9 +472,9 @@ class Ros2Live:
         if cur is None:
             self.event(f"map from {c.map_topic}: {m.width} x {m.height} cells of {m.resolution:g} m")
         elif started:
-            self._build_frontend(m, arrival)
+            self._build_frontend(m)
 
-    def _build_frontend(self, m: Any, arrival: float = 0.0) -> None:
+    def _build_frontend(self, m: Any) -> None:
         loc = self.loc
 
         def build() -> None:
@@ -488,7 +488,7 @@ class Ros2Live:
                 return
             with self._lock:
                 if self.occ_map is m:  # not replaced meanwhile by a newer one
-                    self._pending_map = (m, fe, arrival)
+                    self._pending_map = (m, fe)
 
         threading.Thread(target=build, name="fgloc-map", daemon=True).start()
 
@@ -501,7 +501,7 @@ class Ros2Live:
             pending, self._pending_map = self._pending_map, None
         if pending is None:
             return
-        m, fe, _ = pending
+        m, fe = pending
         loc = self.loc
         loc.replace_map(m, fe)
         self.map_changes += 1
@@ -573,8 +573,7 @@ class Ros2Live:
 
         def scan_then(msg: object) -> None:  # a new map, then a pending /initialpose, at the next scan
             outputs.handling = (time.time(), time.thread_time())
-            pending = self._pending_map
-            if pending is not None and isinstance(msg, LaserScan) and runner.scan_arrival >= pending[2]:
+            if self._pending_map is not None and isinstance(msg, LaserScan):
                 self._apply_map(float(msg.stamp))
             if self._pending_pose is not None and isinstance(msg, LaserScan):
                 self._apply_initial_pose(float(msg.stamp))

@@ -15,6 +15,7 @@ refines them with its scan matcher and keeps the one that matches best.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -118,9 +119,8 @@ class GlobalSearch:
         cg = self.map.world_to_grid_continuous(self.candidates)
         scores = _score_all(self._lik, np.ascontiguousarray(cg[:, 0]), np.ascontiguousarray(cg[:, 1]),
                             np.ascontiguousarray(gpx), np.ascontiguousarray(gpy))
-        order = np.argsort(scores, axis=None)[::-1]
         out: list[tuple[FloatArray, float]] = []
-        for flat in order:
+        for flat in best_first(scores.ravel()):
             ci, yi = divmod(int(flat), self.n_yaw)
             pose = np.array([self.candidates[ci, 0], self.candidates[ci, 1], yaws[yi]])
             if all(np.hypot(*(pose[:2] - p[:2])) > 1.0 or abs(np.angle(np.exp(1j * (pose[2] - p[2])))) > 0.5
@@ -129,3 +129,29 @@ class GlobalSearch:
             if len(out) >= self.n_best:
                 break
         return out
+
+
+#: scores sorted per batch by :func:`best_first` (the suppression of near duplicates rarely needs more)
+FIRST_BATCH = 1024
+
+
+def best_first(scores: FloatArray) -> Iterator[int]:
+    """The indices of ``scores`` (1-D) from the highest score down, ties from the highest index down
+    (as a stable ascending sort read backwards), sorted lazily: a batch of the best
+    :data:`FIRST_BATCH` (every score tied with the batch's last included) at a time, each batch
+    found by a partial selection (``np.argpartition``, linear) and sorted alone, instead of a full
+    sort of every candidate pose's score when only the first few dozen are read."""
+    n = len(scores)
+    rest = np.arange(n)
+    batch = FIRST_BATCH
+    while len(rest):
+        vals = scores[rest]
+        if len(rest) > batch:
+            kth = float(vals[np.argpartition(vals, len(rest) - batch)[len(rest) - batch]])
+            top = vals >= kth
+            take, rest = rest[top], rest[~top]
+        else:
+            take, rest = rest, rest[:0]
+        # descending score, then descending index
+        yield from take[np.lexsort((-take, -scores[take]))].tolist()
+        batch *= 4

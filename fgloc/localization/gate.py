@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fgloc.geometry import between1, compose1, wrap_scalar
+from fgloc.geometry import between1, between_values, compose1, wrap_scalar
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
@@ -207,28 +207,40 @@ class JumpGate:
         self._pending = None
         R = np.asarray(fix.cov, dtype=float)
         P = np.asarray(pred_cov, dtype=float)
-        # a jump smaller than the map can tell apart (its cell or declared accuracy) is no jump
-        floor = np.diag([self.sigma_m**2, self.sigma_m**2, 0.0])
-        e, d2 = innovation(fix, pred, P + floor)
-        jump_m = float(math.hypot(float(e[0]), float(e[1])))
-        jump_deg = math.degrees(abs(float(e[2])))
+        # scalar maths on the position blocks (numpy's 2x2 solve and eigvalsh cost ~20 us a call each);
+        # a jump smaller than the map can tell apart (its cell or declared accuracy) is no jump: the
+        # floor diag(sigma_m^2, sigma_m^2, 0) on the covariances
+        s2 = self.sigma_m**2
+        (r00, r01), (r10, r11) = R[:2, :2].tolist()
+        (p00, p01), (p10, p11) = P[:2, :2].tolist()
+        fx, fy, fyaw = (float(v) for v in fix.pose)
+        e0, e1 = fx - float(pred[0]), fy - float(pred[1])
+        d2 = mahalanobis2_2x2(e0, e1, (p00 + s2) + r00, p01 + r01, p10 + r10, (p11 + s2) + r11)
+        jump_m = float(math.hypot(e0, e1))
+        jump_deg = math.degrees(abs(wrap_scalar(fyaw - float(pred[2]))))
         take = d2 <= self.cfg.gate_chi2
         d2_prev: float | None = None
+        slip = self.cfg.odometry_slip
         # what the odometry may have slipped since the last fix judged (for the fix's sureness, below)
         last = self._last_odom
-        allow = slip_allowance(None if last is None else between1(last, odom_pose), self.cfg.odometry_slip)
+        allow = 0.0 if last is None else (slip * math.hypot(*between_values(last, odom_pose)[:2])) ** 2
         self._last_odom = np.array(odom_pose, dtype=float)
         prev = self.previous
         if prev is not None:
             delta = between1(prev.odom, odom_pose)
             if motion is not None and t > prev.t:
                 delta = motion(prev.t, t, delta)
-            ec = np.asarray(fix.pose, dtype=float) - compose1(prev.pose, delta)
-            ec[2] = wrap_scalar(float(ec[2]))
-            d2_prev = _mahalanobis2(ec, R + prev.cov + floor + slip_allowance(delta, self.cfg.odometry_slip))
+            cx, cy, _ = compose1(prev.pose, delta).tolist()
+            (c00, c01), (c10, c11) = prev.cov[:2, :2].tolist()
+            sl = (slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2
+            d2_prev = mahalanobis2_2x2(fx - cx, fy - cy, ((r00 + c00) + s2) + sl, r01 + c01, r10 + c10,
+                                        ((r11 + c11) + s2) + sl)
             take = take or d2_prev <= self.cfg.gate_chi2
         if take:
-            if float(np.min(np.linalg.eigvalsh(SURE_SIGMAS**2 * (P + allow)[:2, :2] - R[:2, :2]))) >= 0.0:
+            # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
+            k2 = SURE_SIGMAS**2
+            m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
+            if m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
                 # to follow; after a vaguer one (a matcher unsure between two places) the next has none
                 self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
@@ -268,12 +280,19 @@ class JumpGate:
 
 def _mahalanobis2(e: FloatArray, S: FloatArray) -> float:
     """The squared Mahalanobis distance of the position part of ``e`` under the position block of ``S``."""
-    try:
-        d2 = float(e[:2] @ np.linalg.solve(S[:2, :2], e[:2]))
-    except np.linalg.LinAlgError:
+    return mahalanobis2_2x2(float(e[0]), float(e[1]), float(S[0, 0]), float(S[0, 1]), float(S[1, 0]),
+                             float(S[1, 1]))
+
+
+def mahalanobis2_2x2(e0: float, e1: float, s00: float, s01: float, s10: float, s11: float) -> float:
+    """``e^T S^-1 e`` for ``e = (e0, e1)``, ``S = [[s00, s01], [s10, s11]]``; inf when ``S`` is singular
+    or the result is not a finite non-negative number."""
+    det = s00 * s11 - s01 * s10
+    if det == 0.0 or not math.isfinite(det):
         return math.inf
+    d2 = (e0 * (s11 * e0 - s01 * e1) + e1 * (s00 * e1 - s10 * e0)) / det
     return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
 
 
-__all__ = ["GateVerdict", "JumpGate", "agreement_sigma", "agreements", "innovation", "neighbourhood",
-           "scan_agreement", "slip_allowance"]
+__all__ = ["GateVerdict", "JumpGate", "agreement_sigma", "agreements", "innovation", "mahalanobis2_2x2",
+           "neighbourhood", "scan_agreement", "slip_allowance"]

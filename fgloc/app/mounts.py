@@ -35,9 +35,9 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
                              xyzw: tuple[Any, ...] | None = None) -> list[dict[str, Any]]:
     """``sources.static_transforms`` entries of the two options' values (None: not given), checked:
     one-line :class:`ConfigError` naming the option for anything wrong (a non-finite number, a
-    quaternion that is not of unit length, a parent that is not on the robot, one child twice)."""
+    quaternion that is not of unit length, no parent, a child that is the robot or the parent, one child twice)."""
     from fgloc.frames.static import ROBOT_FRAMES, static_transform_entry
-    from fgloc.frames.tf import frame_name
+    from fgloc.frames.tf import frame_name, is_world_frame
 
     entries: list[tuple[str, dict[str, Any]]] = []
     if rpy is not None:
@@ -55,10 +55,10 @@ def static_transform_entries(rpy: tuple[Any, ...] | None = None,
         if not all(math.isfinite(v) for v in values):
             raise ConfigError(f"{option} {parent} {child}: every value must be a finite number, got "
                               f"{' '.join(f'{v:g}' for v in values)}")
-        if parent not in ROBOT_FRAMES:
+        if not parent or is_world_frame(parent):
             raise ConfigError(f"{option}: parent frame {parent!r}: fgloc takes mounts on the robot "
-                              f"({' or '.join(ROBOT_FRAMES)})")
-        if not child or child in ROBOT_FRAMES:
+                              f"({' or '.join(ROBOT_FRAMES)}, the config's sources.base_frame, or a frame on it)")
+        if not child or child in ROBOT_FRAMES or child == parent:
             raise ConfigError(f"{option}: child frame {child!r}: name the sensor's frame (the scans' frame_id)")
         if child in seen:
             raise ConfigError(f"{option}: child frame {child!r} given by both options")

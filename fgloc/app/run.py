@@ -619,7 +619,8 @@ def _laser_mount(reader: Any, n_scan: int, config: FglocConfig,
 
     if n_scan == 0:
         return StaticTransform("base_link", "laser", np.zeros(3)), False
-    mine = mount_of(reader.scan_frame(), parse_static_transforms(config.sources.static_transforms))
+    mine = mount_of(reader.scan_frame(), parse_static_transforms(config.sources.static_transforms),
+                    config.sources.base_frame)
     if mine is None:
         return reader.laser_mount(), False
     given = next((e for e in cli or () if str(e.get("child", "")).lstrip("/") == mine.child.lstrip("/")), None)

@@ -7,7 +7,9 @@
 * :mod:`fgloc.frames.static` - static transforms a user gives (``sources.static_transforms``,
   ``--static-transform``, a launch file's ``static_transform_publisher``): parsed and checked;
 * :mod:`fgloc.frames.mounts` - :class:`~fgloc.frames.mounts.MountTable`: the sensors' mounts a
-  session looks up (configured ones first, then the log's tf, chains composed);
+  session looks up: the transform chain from the robot's base frame (REP 105: ``sources.base_frame``,
+  else the odometry's ``child_frame_id``, else ``base_link`` / ``base_footprint``) to a sensor's
+  frame, through the configured links and the log's tf, either way round;
 * :mod:`fgloc.frames.imu` - a ``sensor_msgs/Imu`` through its mount into ``base_link`` (REP 145),
   the mount's rotation.
 

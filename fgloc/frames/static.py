@@ -12,8 +12,10 @@ config (``sources.static_transforms``) or the command line (``fgloc run --static
 
 ``rpy_deg`` is roll, pitch, yaw in degrees about the parent's fixed x, y, z axes (REP 103, as
 ``static_transform_publisher``'s ``yaw pitch roll``); ``xyzw`` a quaternion instead.  A
-configured transform wins over one of the same child frame in the log.  Only mounts on the robot
-(parent ``base_link`` or ``base_footprint``) are used.  Checks only: no I/O.
+configured transform wins over one of the same child frame in the log.  A transform may hang on any
+frame: the robot's base (``sources.base_frame``, else ``base_link`` / ``base_footprint``) or an
+intermediate one (``base_link -> plate``, ``plate -> imu_link``); the chain to the base is composed
+(:class:`fgloc.frames.mounts.MountTable`).  Checks only: no I/O.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import numpy as np
 
 from fgloc.config.schema import suggest
 from fgloc.errors import ConfigError
-from fgloc.frames.tf import BASE_FRAMES
+from fgloc.frames.tf import BASE_FRAMES, is_world_frame
 from fgloc.geometry import quaternion_matrix, rpy_quaternion
 from fgloc.types import Transform3D
 
@@ -71,9 +73,11 @@ def parse_static_transforms(entries: Iterable[Any] | None, source: str = "config
         parent, child = str(e.get("parent") or "").lstrip("/"), str(e.get("child") or "").lstrip("/")
         if not parent or not child:
             raise ConfigError(f"{where}: needs parent and child frame names")
-        if parent not in ROBOT_FRAMES:
-            raise ConfigError(f"{where}: parent {parent!r}: fgloc uses mounts on the robot "
-                              f"({' or '.join(ROBOT_FRAMES)})")
+        if parent == child:
+            raise ConfigError(f"{where}: parent and child are both {parent!r}")
+        if is_world_frame(parent):
+            raise ConfigError(f"{where}: parent {parent!r}: fgloc uses mounts on the robot (its base "
+                              f"{' or '.join(ROBOT_FRAMES)}, sources.base_frame, or a frame on it), not a world frame")
         if child in seen:
             raise ConfigError(f"{where}: child frame {child!r} given twice")
         seen.add(child)

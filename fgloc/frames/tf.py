@@ -18,6 +18,9 @@ from fgloc.geometry import compose, quaternion_matrix
 from fgloc.types import StaticTransform
 
 BASE_FRAMES = ("base_link", "base_footprint")  #: the robot's own frames (REP 105)
+#: frames that hold the robot's pose in the world (REP 105): a link from one of them to the base is
+#: the robot's motion, and nothing is mounted on them
+WORLD_FRAMES = ("odom", "map", "world", "earth", "utm")
 LEVEL_COS = 0.99  # a laser's z axis within ~8 deg of vertical (up, or down: upside down)
 MAX_CHAIN = 32
 
@@ -25,6 +28,11 @@ MAX_CHAIN = 32
 def frame_name(frame: str) -> str:
     """A tf frame as tf2 names it: without ROS 1's leading ``/`` (``/laser`` is ``laser``)."""
     return frame.lstrip("/")
+
+
+def is_world_frame(frame: str) -> bool:
+    """One of :data:`WORLD_FRAMES`, also under a tf prefix (``tb3_0/odom``)."""
+    return frame_name(frame).rsplit("/", 1)[-1] in WORLD_FRAMES
 
 
 def tf_edge(t: StaticTransform) -> tuple[str, str]:
@@ -74,10 +82,12 @@ class TfTree:
         return None
 
 
-def mount_of(frame: str, transforms: Iterable[StaticTransform]) -> StaticTransform | None:
-    """The robot (``BASE_FRAMES``) -> ``frame`` transform among ``transforms`` (a user's mounts), if any."""
-    f = frame_name(frame)
-    return next((t for t in transforms if frame_name(t.child) == f and frame_name(t.parent) in BASE_FRAMES), None)
+def mount_of(frame: str, transforms: Iterable[StaticTransform], base_frame: str = "") -> StaticTransform | None:
+    """The robot -> ``frame`` transform among ``transforms`` (a user's mounts), if any: through their
+    chain to the base (``base_frame``, else :data:`BASE_FRAMES`; :class:`fgloc.frames.mounts.MountTable`)."""
+    from fgloc.frames.mounts import MountTable
+
+    return MountTable(list(transforms), base_frame).mount(frame)
 
 
 #: who gives the mounts planar_mount checks, by default (its ConfigError names it)

@@ -59,7 +59,9 @@ def test_static_transform_turns_the_imu_into_base_link(log_and_config: tuple[Pat
     assert finals["without"][2] == pytest.approx(HEADING - math.pi / 2, abs=0.01)
     # no scans: no 'no transform base_link -> laser' warning; the IMU frame was given
     assert [r.getMessage() for r in caplog.records if "no transform" in r.getMessage()] == [  # 'without' only
-        "no transform base_link -> imu_link: the IMU is taken as mounted like base_link"], caplog.text
+        "no transform chain base_link -> imu_link (no transform names it); the IMU is used unmounted (as if its "
+        "axes were the base's): set sources.base_frame or give the mount (sources.static_transforms, "
+        "--static-transform)"], caplog.text
     assert yaml.safe_load((tmp_path / "with" / "config.yaml").read_text())["sources"]["static_transforms"] == tfs
 
 

@@ -132,8 +132,12 @@ def test_a_mount_logged_after_the_first_imu_messages_is_no_missing_transform(cap
         loc.finish()
         router.finish()
     assert [r.getMessage() for r in caplog.records if "no transform" in r.getMessage()] == [
-        "no transform base_link -> imu_link: the IMU is taken as mounted like base_link"]
-    assert loc.stats["sources"]["imu"].mount == "no transform: identity"
+        "no transform chain base_link -> imu_link (no transform names it); the IMU is used unmounted (as if its "
+        "axes were the base's): set sources.base_frame or give the mount (sources.static_transforms, "
+        "--static-transform)"]
+    imu = loc.stats["sources"]["imu"]
+    assert imu.mount == "no transform chain base_link -> imu_link (no transform names it): 150 messages used unmounted"
+    assert imu.unmounted == 150 and imu.to_dict()["unmounted"] == 150
     # a log shorter than the wait: warned at the end
     caplog.clear()
     loc, router = _router("ekf")

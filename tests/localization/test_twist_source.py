@@ -96,7 +96,9 @@ def test_a_twist_in_a_sensor_frame_is_turned_into_base_link(sim, tmp_path):
     # without the mount the sensor's axes are taken as the robot's: the robot drives sideways
     unmounted = run_log(RunRequest(log=tmp_path / "s.mcap", outdir=tmp_path / "u", backend="ekf",
                                    config=_config(tmp_path / "u.yaml", inputs), view_channels=False))
-    assert unmounted.stats.sources["twist0"].mount == "no transform: identity"
+    rep = unmounted.stats.sources["twist0"]
+    assert rep.mount == f"no transform chain base_link -> flow_link (no transform names it): {rep.unmounted} " \
+                        "messages used unmounted" and rep.unmounted == rep.accepted > 100, rep
     assert np.abs(read_tum(tmp_path / "u" / "trajectory.tum").poses[-1, :2] - a.poses[-1, :2]).max() > 1.0
 
 

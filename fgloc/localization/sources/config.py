@@ -30,6 +30,9 @@ class SourcesConfig:
     static_transforms: list[dict] = setting([], "mounts the log lacks: [{parent: base_link, child: imu_link, "
                                       "xyz: [x, y, z], rpy_deg: [roll, pitch, yaw] | xyzw: [qx, qy, qz, qw]}]; "
                                       "they win over the log's /tf_static (fgloc.frames.static)")
+    base_frame: str = setting("", "the robot's base frame (REP 105; robot_localization's base_link_frame): the "
+                              "sensors' mounts are the transforms from it; empty: the odometry's child_frame_id, "
+                              "else base_link / base_footprint")
 
 
 def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: str = "config") -> list[SourceSpec]:

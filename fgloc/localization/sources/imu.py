@@ -1,13 +1,17 @@
 """IMU sources (``sensor_msgs/Imu``, or the yaw-only :class:`~fgloc.types.CompassHeading`).
 
-An IMU is rotated into ``base_link`` through its mount (``/tf_static`` ``base_link ->
-header.frame_id``, or ``sources.static_transforms``: :class:`~fgloc.frames.mounts.MountTable`;
+An IMU is rotated into the robot's base frame through its mount (the transform chain from the base,
+``sources.base_frame`` or the odometry's ``child_frame_id`` or ``base_link``, to ``header.frame_id``
+in ``/tf_static``, ``/tf`` or ``sources.static_transforms``: :class:`~fgloc.frames.mounts.MountTable`;
 the maths in :mod:`fgloc.frames.imu`): any 3-D mount when the message is a whole
 :class:`~fgloc.types.Imu` (every log reader gives one) and the transform a
 :class:`~fgloc.types.Transform3D`; with a planar transform or a yaw-only reading (fgloc's serial
-link, the paper simulator), the yaw mount is undone.  A frame without a transform is identity,
-with one warning once :data:`~fgloc.frames.mounts.MOUNT_WAIT_S` of its stamps passed
-without one (a mount that arrives is applied from then on, and the summary says after how many).
+link, the paper simulator), the yaw mount is undone.  A frame that no chain connects to the base is used unmounted
+(identity: most IMUs without a published mount are mounted level and aligned, and a heading source
+is not dropped on a guess), counted, and said once per source: a warning once
+:data:`~fgloc.frames.mounts.MOUNT_WAIT_S` of its stamps passed without one, and the source's health
+line names the base, the frame and what its links reach (a mount that arrives is applied from then
+on, and the summary says after how many).
 
 The first IMU gives the heading (and its rate) to the localizer; a second one only its yaw rate
 (its heading is in another world frame).  ``use: [..., roll, pitch]``: its attitude levels the
@@ -63,7 +67,7 @@ class ImuHandler(SourceHandler):
         h = st.health
         if isinstance(msg, Imu):
             mount = mounts.mount(msg.frame_id)
-            if mount is None and msg.frame_id.lstrip("/") not in OWN_FRAMES:
+            if mount is None and msg.frame_id not in OWN_FRAMES and not mounts.is_base(msg.frame_id):
                 self.unmounted(msg.frame_id, float(msg.stamp))
             elif mount is not None:
                 self.mounted()

@@ -60,6 +60,10 @@ class OdometryHandler(SourceHandler):
                             and not spec.differential)
 
     def handle(self, msg: Any) -> None:
+        child = msg.child_frame_id
+        if child != self.state.extra.get("child_frame"):  # REP 105: the odometry moves the robot's base
+            self.state.extra["child_frame"] = child
+            self.ctx.mounts.add_odometry_frames(msg.frame_id, child)
         self.fuse(msg)
 
     def fuse(self, msg: Odometry) -> None:

@@ -53,6 +53,7 @@ class SourceReport:
     use: list[str] = field(default_factory=list)
     mount: str | None = None  # an IMU's mount when it was not the log's from the start
     mount_late: int = 0  # messages taken as identity before the mount arrived
+    unmounted: int = 0  # messages of a frame no transform chain connects to the base, used unmounted
     levelled: int = 0  # odometry messages levelled by the IMU's roll / pitch
     tilt_max_deg: float = 0.0
     tilt_implausible: int = 0  # odometry messages not levelled (tilt > 45 deg)
@@ -89,7 +90,7 @@ class SourceReport:
                 d[k] = v
         if self.topic is not None:
             d["use"] = list(self.use)
-        for k in ("mount_late", "levelled", "tilt_implausible", "from_poses", "silent"):
+        for k in ("mount_late", "unmounted", "levelled", "tilt_implausible", "from_poses", "silent"):
             if getattr(self, k):
                 d[k] = getattr(self, k)
         if self.levelled:
@@ -115,7 +116,10 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> Source
     r = SourceReport(hh.kind, hh.accepted, hh.gated, hh.skipped, dict(hh.skipped_reasons), topic=s.topic,
                      use=list(s.use))
     if st.extra.get("no_transform"):
-        r.mount = "no transform: identity"
+        k_un = int(st.extra["no_transform"])
+        frame = str(st.extra.get("no_transform_frame", ""))
+        r.mount = f"{h.ctx.mounts.unconnected(frame)}: {k_un} message{'s' if k_un != 1 else ''} used unmounted"
+        r.unmounted = k_un
     elif st.extra.get("mount_late"):
         k = int(st.extra["mount_late"])
         r.mount = f"from tf after {k} message{'s' if k != 1 else ''} (identity until then)"

@@ -40,11 +40,11 @@ class SourceRouter:
     """The handlers of ``specs`` (see the module docstring); ``static``: configured mounts."""
 
     def __init__(self, loc: Any, specs: list[SourceSpec], static: Sequence[StaticTransform] | None = None,
-                 localized: Callable[[LaserScan, PoseFix | None], None] | None = None) -> None:
+                 localized: Callable[[LaserScan, PoseFix | None], None] | None = None, base_frame: str = "") -> None:
         self.loc = loc
         self.specs = specs
         self.scan = ScanHandler(loc, localized)
-        self.ctx = SourceContext(loc, MountTable(static))
+        self.ctx = SourceContext(loc, MountTable(static, base_frame))
         self.configured_inputs = False  # the specs came from a config's sources.inputs (from_config)
         #: the log's topics and their message types (``{"/imu": "sensor_msgs/msg/Imu"}``), when the
         #: caller knows them: a silent source's warning names the log's topics of its type
@@ -66,7 +66,8 @@ class SourceRouter:
         cfg = getattr(getattr(loc, "config", None), "sources", None)
         specs = parse_sources(cfg, topics)
         static = cfg.get("static_transforms") if isinstance(cfg, dict) else getattr(cfg, "static_transforms", None)
-        router = cls(loc, specs, parse_static_transforms(static), localized)
+        base = cfg.get("base_frame") if isinstance(cfg, dict) else getattr(cfg, "base_frame", "")
+        router = cls(loc, specs, parse_static_transforms(static), localized, str(base or ""))
         inputs = cfg.get("inputs") if isinstance(cfg, dict) else getattr(cfg, "inputs", None)
         router.configured_inputs = bool(inputs)
         return router

@@ -33,10 +33,11 @@ class TwistHandler(OdometryHandler):
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
         cov = None if msg.twist_cov is None else np.asarray(msg.twist_cov, dtype=float).reshape(3, 3)
         frame = msg.frame_id.lstrip("/")
-        if frame not in OWN_FRAMES:
+        if frame not in OWN_FRAMES and not self.ctx.mounts.is_base(frame):
             mount = self.ctx.mounts.mount(frame)
             if mount is None:
                 self.state.extra["no_transform"] = self.state.extra.get("no_transform", 0) + 1
+                self.state.extra["no_transform_frame"] = frame
             else:
                 tw, cov = in_base(tw, cov, float(mount.pose[0]), float(mount.pose[1]), float(mount.pose[2]))
         self.fuse(Odometry(float(msg.stamp), tw, cov, None, None, "", "base_link"))

@@ -8,13 +8,14 @@ lack (r_l's own ``test1.bag``: the IMU mount).  :func:`read_launch` returns
 * ``{node name: parameters}``, the layout of a ROS 1 parameter YAML, for
   :func:`~fgloc.porting.from_robot_localization` / :func:`~fgloc.porting.from_nav2` (``--node``
   picks one when several match);
-* the robot mounts of the ``static_transform_publisher`` nodes (``tf`` / ``tf2_ros``) as
-  ``sources.static_transforms`` entries (:mod:`fgloc.frames.static`); a node's own name
-  for the robot frame (robot_localization's ``base_link_frame``, amcl's ``base_frame_id``, e.g.
-  ``mustang_base``) is a robot frame too, and its mounts are carried over as ``base_link``'s
-  (fgloc's name for the robot; a note says so);
-* notes: what could not be read (a ``<rosparam command="load" file=...>``, transforms between
-  other frames than the robot and a sensor).
+* the ``static_transform_publisher`` nodes' (``tf`` / ``tf2_ros``) transforms on the robot as
+  ``sources.static_transforms`` entries (:mod:`fgloc.frames.static`), each on the frame it is
+  published from: a mount on the robot's base (``base_link``, ``base_footprint`` or a node's own
+  name for it, robot_localization's ``base_link_frame`` / amcl's ``base_frame_id``, e.g.
+  ``mustang_base``, which the converter carries over as ``sources.base_frame``) or a link of a
+  chain to one (``base_link -> plate``);
+* notes: what could not be read (a ``<rosparam command="load" file=...>``, transforms from or to
+  a world frame such as ``odom -> wheel_odometry``).
 
 ``$(arg name)`` takes the ``<arg>``'s ``default`` / ``value``; other substitutions (``$(find
 pkg)``, ``$(env ...)``) are left as they are.  Nothing is executed.
@@ -32,6 +33,7 @@ import yaml
 
 from fgloc.errors import ConfigError
 from fgloc.frames.static import ROBOT_FRAMES, entry_of_publisher_args
+from fgloc.frames.tf import is_world_frame
 
 PUBLISHERS = ("static_transform_publisher",)
 
@@ -98,16 +100,14 @@ def read_launch(path: str | Path, text: str) -> tuple[dict[str, dict[str, Any]],
             entry = entry_of_publisher_args(shlex.split(sub(node.get("args", ""))))
             if entry is None:
                 notes.append(f"{name} ({typ}): arguments {node.get('args')!r} not read")
-            elif entry["parent"] in robot and entry["child"] not in robot:
-                if entry["parent"] not in ROBOT_FRAMES:
-                    notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']}: a mount on the robot "
-                                 f"(the filter's base frame {entry['parent']}), carried over as "
-                                 f"base_link -> {entry['child']}")
-                    entry["parent"] = "base_link"
-                tfs.append(entry)
-            else:
+            elif is_world_frame(entry["parent"]) or is_world_frame(entry["child"]):
                 notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']} is not a sensor mount on "
                              "the robot; not carried over")
+            else:  # a mount, or a link of a chain to one (base_footprint -> base_link, base_link -> plate)
+                if entry["parent"] not in robot and entry["child"] not in robot:
+                    notes.append(f"{name} ({typ}): {entry['parent']} -> {entry['child']}: carried over as a "
+                                 "link of a chain to the robot's base frame (unused if none reaches it)")
+                tfs.append(entry)
             continue
         params: dict[str, Any] = {}
         for p in node:

@@ -15,6 +15,8 @@ robot_localization                          fgloc
 ``poseN_rejection_threshold`` (Mahalanobis  ``gate`` (its square: fgloc gates on the squared
 distance)                                   distance)
 ``world_frame`` (map or odom)               a pose source's ``frame_id``
+``base_link_frame``                         ``sources.base_frame`` (the mounts are from it)
+``odom_frame`` (other than ``odom``)        ``ros2.odom_frame_id``
 ``process_noise_covariance`` (15 x 15,      ``ekf.q_xy`` (x, y), ``q_theta`` (yaw), ``q_v``
 per second, as r_l scales it by dt)         (vx, vy), ``q_w`` (vyaw)
 ``initial_estimate_covariance``             ``pipeline.initial_sigma_xy_m`` / ``_yaw_deg``
@@ -271,14 +273,14 @@ def from_robot_localization(data: Any, node: str | None = None, source: str = "r
         if sxy <= 1e-3 or syaw <= 1e-3:
             notes.append("initial_estimate_covariance: near-zero pose variances kept at fgloc's (an "
                          "--initial-pose prior needs some width)")
-    for k in ("map_frame", "odom_frame", "world_frame"):
+    for k in ("map_frame", "odom_frame", "world_frame", "base_link_frame"):
         used.add(k)
-    if "base_link_frame" in p:
-        used.add("base_link_frame")
-        if str(p["base_link_frame"]) not in ("base_link", "base_footprint"):
-            notes.append(f"base_link_frame: {p['base_link_frame']}: fgloc's robot frame is base_link / "
-                         "base_footprint (IMU mounts are looked up from those; a launch file's mounts on "
-                         f"{p['base_link_frame']} are carried over as base_link's)")
+    base = str(p.get("base_link_frame") or "").strip().lstrip("/")
+    if base:  # the robot's base frame, whatever its name: the sensors' mounts are from it (REP 105)
+        out.setdefault("sources", {})["base_frame"] = base
+    odom_frame = str(p.get("odom_frame") or "odom").strip().lstrip("/")
+    if odom_frame != "odom":  # the odom -> base transform a ROS 2 peer reads
+        out["ros2"] = {"odom_frame_id": odom_frame}
     if pipeline:
         out["pipeline"] = pipeline
     if ekf:

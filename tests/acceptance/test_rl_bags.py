@@ -105,8 +105,8 @@ def test_converted_launch_file_carries_the_imu_mount(converted: dict[str, Any]) 
 
 def test_groovy_test1_launch_file_converts_with_its_mounts_on_mustang_base(converted: dict[str, Any]) -> None:
     """groovy's test_bag1: 12-value vectors, odom0 a differential x, y pose source, odom1 a twist,
-    two differential IMUs; base_link_frame mustang_base, whose mounts (the xsens rolled 180 deg:
-    'non-right-handed frames') carry over as base_link's."""
+    two differential IMUs; base_link_frame mustang_base (sources.base_frame), whose mounts (the xsens
+    rolled 180 deg: 'non-right-handed frames') carry over on it."""
     import yaml
 
     if "groovy/test1.bag" not in converted:
@@ -116,7 +116,8 @@ def test_groovy_test1_launch_file_converts_with_its_mounts_on_mustang_base(conve
     assert got == {"odom0": (["x", "y"], True), "odom1": (["vx", "vy", "vyaw"], False),
                    "imu0": (["yaw", "vyaw", "roll", "pitch"], True), "imu1": (["yaw", "roll", "pitch"], True)}
     tfs = {t["child"]: t for t in cfg["sources"]["static_transforms"]}
-    assert set(tfs) == {"xsens_sensor", "ref_imu"} and {t["parent"] for t in tfs.values()} == {"base_link"}
+    assert set(tfs) == {"xsens_sensor", "ref_imu"} and {t["parent"] for t in tfs.values()} == {"mustang_base"}
+    assert cfg["sources"]["base_frame"] == "mustang_base"
     assert tfs["xsens_sensor"]["rpy_deg"] == pytest.approx([180.0, 0.0, 0.0])
 
 

@@ -137,9 +137,10 @@ def test_no_source_of_motion_is_a_one_line_error(tmp_path: Path, capsys: pytest.
     assert not (tmp_path / "out.yaml").exists()
 
 
-def test_mounts_on_the_filters_own_base_frame_carry_over_as_base_links(tmp_path: Path) -> None:
+def test_mounts_on_the_filters_own_base_frame_carry_over_with_it(tmp_path: Path) -> None:
     """r_l's groovy test_bag1 launch: base_link_frame mustang_base, the IMU mounts published from
-    it (one rolled 180 deg): carried over as base_link's, with a note; odom -> x is still no mount."""
+    it (one rolled 180 deg): carried over on mustang_base, which is the config's sources.base_frame;
+    odom -> x is still no mount."""
     p = tmp_path / "mustang.test"
     p.write_text("""<launch>
   <node pkg="tf" type="static_transform_publisher" name="w" args="0 0 0 0 0 0 odom wheel_odometry 20" />
@@ -154,8 +155,8 @@ def test_mounts_on_the_filters_own_base_frame_carry_over_as_base_links(tmp_path:
 """)
     cfg, notes, _ = convert_file("rl", p)
     (tf,) = cfg["sources"]["static_transforms"]
-    assert (tf["parent"], tf["child"]) == ("base_link", "xsens")
+    assert (tf["parent"], tf["child"]) == ("mustang_base", "xsens") and cfg["sources"]["base_frame"] == "mustang_base"
     np.testing.assert_allclose(tf["rpy_deg"], [180.0, 0.0, 0.0])
-    assert any("mustang_base -> xsens: a mount on the robot" in n for n in notes)
+    assert not any("xsens" in n for n in notes), notes
     assert any("odom -> wheel_odometry is not a sensor mount" in n for n in notes)
     assert cfg["sources"]["inputs"]["imu0"]["use"] == ["yaw", "vyaw"]  # 12-element (groovy) vector

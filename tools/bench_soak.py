@@ -18,6 +18,15 @@ SICK emulator (CoLa-A over real TCP) at ``--speed`` times real time, into ``fglo
     python tools/bench_soak.py                                    # 60 min of log at 4x (15 min), smoother
     python tools/bench_soak.py --minutes 60 --speed 4 --record --png soak.png
     python tools/bench_soak.py --minutes 10 --speed 2 -o          # -o keeps every pose (32 B each)
+    python tools/bench_soak.py --minutes 60 --in-process --record  # no devices: as fast as it goes
+
+``--in-process``: the same messages, map, config and session as ``fgloc live`` builds (its history and
+trajectory windows, ``--record`` into an MCAP), pushed through the live runner's own ingest in this
+process as fast as the localizer goes (:func:`fgloc.testing.soak.feed_live`): every buffer of the
+localizer, back-end, health estimators, live trajectory and recording, without the devices' threads and
+the queue between them and the runner (whose length is the host's speed, not the session's).  On a busy
+host the device soak's queue grows while `fgloc live` waits for the CPU; this mode's memory is the
+session's own.
 """
 
 from __future__ import annotations
@@ -30,6 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import psutil
@@ -48,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-o", "--output", action="store_true", help="fgloc live -o (keeps the whole trajectory)")
     ap.add_argument("--sample-s", type=float, default=2.0, help="wall seconds between RSS samples")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--in-process", action="store_true",
+                    help="no devices: the live runner's ingest in this process, as fast as it goes")
     ap.add_argument("--png", type=Path, help="plot RSS over minutes of log into this PNG")
     ap.add_argument("--csv", type=Path, help="write the samples (log min, wall s, RSS MB) here")
     a = ap.parse_args(argv)
@@ -62,9 +74,12 @@ def main(argv: list[str] | None = None) -> int:
 
     world = lap_world(seed=a.seed)
     duration_s = a.minutes * 60.0
-    msgs = list(world.messages(duration_s))  # the lap's scans share their range arrays: an hour costs little
     rp = RobotParams.from_dict({"drive": "mecanum"})
     tmp = Path(tempfile.mkdtemp(prefix="fgloc-soak-"))
+    if a.in_process:
+        samples, report, n_scans = _in_process(a, world, rp, tmp)
+        return _report(a, samples, report, n_scans, tmp)
+    msgs = list(world.messages(duration_s))  # the lap's scans share their range arrays: an hour costs little
     map_yaml = world.map.save(tmp / "map.yaml")
     cfg = tmp / "robot.yaml"
     cfg.write_text(yaml.safe_dump(live_config_overrides(msgs, rp, world.mount)))
@@ -104,19 +119,65 @@ def main(argv: list[str] | None = None) -> int:
     if proc.returncode not in (0, 130):
         print(f"fgloc live exited {proc.returncode}:\n{err[-3000:]}", file=sys.stderr)
         return 1
-    report = json.loads(out)
+    return _report(a, samples, json.loads(out), n_scans, tmp)
+
+
+def _in_process(a: argparse.Namespace, world: Any, rp: Any,
+                tmp: Path) -> tuple[list[tuple[float, float, float]], dict[str, Any], int]:
+    """``fgloc live``'s session and runner without devices, the lap world through its ingest; RSS
+    sampled every 10 s of log."""
+    from tqdm import tqdm
+
+    from fgloc.config import parse_config
+    from fgloc.live.app import LIVE_HISTORY_S, LIVE_TAIL_S, LiveSession
+    from fgloc.localization import build_session
+    from fgloc.testing.harness import live_config_overrides
+    from fgloc.testing.soak import feed_live
+
+    duration_s = a.minutes * 60.0
+    cfg = parse_config(live_config_overrides(list(world.messages(world.lap_s)), rp, world.mount))
+    session = build_session(world.map, world.mount, backend=a.backend, frontend=a.frontend,
+                            initial_pose=world.pose(0.0), config=cfg)
+    session.loc.keep_history(LIVE_HISTORY_S)   # as fgloc live without --out-smoothed
+    live = LiveSession(session, None, None, config=cfg, record=tmp / "live.mcap" if a.record else None,
+                       trajectory_window_s=None if a.output else LIVE_TAIL_S)
+    live.start()
+    ps = psutil.Process()
+    samples: list[tuple[float, float, float]] = []
+    start = time.time()
+    with tqdm(total=round(a.minutes, 1), desc="in process", unit="log min") as bar:
+        def sample(t: float) -> None:
+            samples.append((t / 60.0, time.time() - start, ps.memory_info().rss / 2**20))
+            bar.n = round(min(samples[-1][0], a.minutes), 1)
+            bar.set_postfix_str(f"RSS {samples[-1][2]:.0f} MB")
+
+        feed_live(live.runner, world.messages(duration_s), every_s=10.0, on_progress=sample)
+        sample(duration_s)
+    summary = live.close()
+    n_scans = int(summary.counters.get("scans_fused", 0)) + int(summary.counters.get("scans_skipped_backlog", 0))
+    report = {"counters": summary.counters,
+              "latency_ms": {"p50": summary.latency_p50_ms, "p99": summary.latency_p99_ms}}
+    return samples, report, n_scans
+
+
+def _report(a: argparse.Namespace, samples: list[tuple[float, float, float]], report: dict[str, Any],
+            n_scans: int, tmp: Path) -> int:
     c = report.get("counters", {})
     s = np.array(samples)
     if a.csv:
         np.savetxt(a.csv, s, delimiter=",", header="log_min,wall_s,rss_mb", fmt="%.3f")
     settled = s[s[:, 0] >= a.settle]
+    how = "in process, as fast as it goes" if a.in_process else f"at {a.speed:g}x over real TCP"
     print(f"\nfgloc live --backend {a.backend} --frontend {a.frontend}{' --record' if a.record else ''}"
-          f"{' -o' if a.output else ''}: {a.minutes:g} min of log at {a.speed:g}x over real TCP "
-          f"({len(s)} samples)")
-    print(f"scans sent {n_scans}, read {c.get('laser', {}).get('scans', 0)}, fused {c.get('scans_fused', 0)}, "
-          f"skipped as a backlog {c.get('scans_skipped_backlog', 0)}; fixes {c.get('fixes', 0)}; "
-          f"latency p50 {report['latency_ms']['p50']:.1f} ms p99 {report['latency_ms']['p99']:.1f} ms; "
-          f"at most {c.get('queue_max', 0)} messages queued")
+          f"{' -o' if a.output else ''}: {a.minutes:g} min of log {how} ({len(s)} samples, "
+          f"{s[-1, 1] / 60.0:.1f} min wall)")
+    if a.in_process:  # (no arrival times: no latency)
+        print(f"scans {n_scans}, fused {c.get('scans_fused', 0)}; fixes {c.get('fixes', 0)}")
+    else:
+        print(f"scans sent {n_scans}, read {c.get('laser', {}).get('scans', 0)}, fused {c.get('scans_fused', 0)}, "
+              f"skipped as a backlog {c.get('scans_skipped_backlog', 0)}; fixes {c.get('fixes', 0)}; "
+              f"latency p50 {report['latency_ms']['p50']:.1f} ms p99 {report['latency_ms']['p99']:.1f} ms; "
+              f"at most {c.get('queue_max', 0)} messages queued")
     if c.get("queue_max", 0) > 500:  # 2 s of input at 4x
         print("  fgloc live fell behind the replay (its queue holds messages): try a lower --speed")
     if len(settled) < 3:
@@ -145,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
         ax.axhspan(base, base + 20.0, color="tab:green", alpha=0.1, label="settled RSS + 20 MB")
         ax.set_xlabel("minutes of log")
         ax.set_ylabel("fgloc live RSS (MB)")
-        ax.set_title(f"fgloc live, {a.backend}, {a.speed:g}x over TCP: {slope_h:+.1f} MB per hour of log")
+        how = "in process" if a.in_process else f"{a.speed:g}x over TCP"
+        ax.set_title(f"fgloc live, {a.backend}, {how}: {slope_h:+.1f} MB per hour of log")
         ax.legend(loc="lower right")
         fig.tight_layout()
         fig.savefig(a.png, dpi=110)

@@ -94,7 +94,10 @@ def main(argv: list[str] | None = None) -> int:
         cmd += ["--record", str(tmp / "live.mcap")]
     if a.output:
         cmd += ["-o", str(tmp / "live.tum")]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # its output into files: a pipe read only at the end fills (64 KB of event lines on a busy host) and
+    # blocks fgloc live in its next write
+    out_f, err_f = (tmp / "live.json").open("w+"), (tmp / "live.err").open("w+")
+    proc = subprocess.Popen(cmd, stdout=out_f, stderr=err_f, text=True)
     ps = psutil.Process(proc.pid)
     pair.start()
     samples: list[tuple[float, float, float]] = []  # (log min, wall s since the replay started, RSS MB)
@@ -114,11 +117,17 @@ def main(argv: list[str] | None = None) -> int:
     if proc.poll() is None:
         samples.append(((time.time() - start) * a.speed / 60.0, time.time() - start, ps.memory_info().rss / 2**20))
         proc.send_signal(signal.SIGTERM)  # SIGINT: a shell's background job ignores it
-    out, err = proc.communicate(timeout=600)
+    cpu_s = sum(ps.cpu_times()[:2])
+    proc.wait(timeout=600)
     pair.stop()
+    out_f.seek(0)
+    err_f.seek(0)
+    out, err = out_f.read(), err_f.read()
     if proc.returncode not in (0, 130):
         print(f"fgloc live exited {proc.returncode}:\n{err[-3000:]}", file=sys.stderr)
         return 1
+    print(f"fgloc live used {cpu_s:.0f} CPU s in {samples[-1][1]:.0f} s of replay "
+          f"({100 * cpu_s / max(samples[-1][1], 1e-9):.0f} % of a core)")
     return _report(a, samples, json.loads(out), n_scans, tmp)
 
 

@@ -149,9 +149,9 @@ def main() -> int:
     else:
         r2 = report["ros2"]
         c = report["counters"]
+        how = f"at the match, {r2['tf_refined']} refined" if r2["tf_at_match"] else "with the online pose"
         print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
-              f"poses published {r2['published']}, map->odom {r2['tf_published']} "
-              f"({'at the match' if r2['tf_at_match'] else 'with the online pose'})")
+              f"poses published {r2['published']}, map->odom {r2['tf_published']} ({how})")
 
         def pp(d: dict) -> str:
             return f"p50 {d['p50']:.2f} ms, p99 {d['p99']:.2f} ms"

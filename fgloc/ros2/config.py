@@ -42,9 +42,10 @@ class Ros2Config:
     transform_tolerance_s: float = setting(1.0, "map -> odom is stamped this far after its scan (nav2 AMCL's "
                                            "transform_tolerance)", min=0)
     tf_at_match: bool = setting(True, "publish map -> odom right after each scan's match (the prediction updated "
-                                "with its fix, as nav2's AMCL after its update), not once the back-end's estimate "
-                                "there is made (a smoother waits for the odometry / IMU past the scan); /amcl_pose "
-                                "carries that estimate either way")
+                                "with its fix, as nav2's AMCL after its update), then again from the back-end's "
+                                "estimate there once it is made (a smoother waits for the odometry / IMU past the "
+                                "scan), stamped 1 us later; false: only the latter. /amcl_pose carries that "
+                                "estimate either way")
     status_period_s: float = setting(1.0, "period of /fgloc/status", gt=0)
     sensor_reliability: str = setting("best_effort", "QoS of the scan / odometry / IMU subscriptions: "
                                       "best_effort (ROS 2's sensor data QoS: matches every publisher) or reliable",

@@ -60,6 +60,9 @@ from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 SENSOR_TYPES = (LASER_SCAN, ODOMETRY, IMU)
 SOURCE_TYPES = {"odometry": ODOMETRY, "imu": IMU, "pose": POSE_COV_STAMPED}
 OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
+#: a transform at the match is followed, once the back-end's estimate at the scan is made, by that one stamped
+#: this much later: tf2 drops a second transform with the same stamp, and a lookup of the latest gets this one
+REFINED_AFTER_S = 1e-6
 ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
 ARRIVALS_KEPT = 256  # messages per source whose arrival is kept (2.5 s of a 100 Hz IMU)
 SENSOR_DEPTH = 100  # samples a sensor subscription holds until the receive thread takes them
@@ -193,8 +196,9 @@ class Ros2Outputs(BaseSink):
     odometry / IMU reach its stamp, so :meth:`publish_new` is called after every message the session
     handles.  map -> odom goes out with it, or, with ``ros2.tf_at_match`` (the default), right after the
     scan's match from :func:`pose_at_match` (as nav2's AMCL publishes it after its update), not waiting for
-    the odometry / IMU past the scan; either way once per scan (tf2 ignores a second transform stamped the
-    same).  ``odom -> base`` at the scan's stamp comes from the robot (interpolated, or extrapolated when
+    the odometry / IMU past the scan, and again from the online estimate once the back-end has it, stamped
+    :data:`REFINED_AFTER_S` later (tf2 drops a second transform with the same stamp).  ``odom -> base`` at
+    the scan's stamp comes from the robot (interpolated, or extrapolated when
     the scan is newer than its newest odometry, :class:`OdomFrame`).
 
     Per scan fused live, the whole run's percentiles in constant memory (:class:`LogHistogram`):
@@ -225,6 +229,7 @@ class Ros2Outputs(BaseSink):
         self.match_vs_online_mm = LogHistogram(lo=1e-4)
         self.published = 0
         self.tf_published = 0
+        self.tf_refined = 0
         self.no_odom = 0
         self.last_map_odom: np.ndarray | None = None
         self._last_t = -math.inf  # the newest stamp /amcl_pose was published for
@@ -258,7 +263,7 @@ class Ros2Outputs(BaseSink):
                     self.handle_ms.add((now - began) * 1e3)
                     self.cpu_ms.add((time.thread_time() - cpu0) * 1e3)
 
-    def _publish_tf(self, t: float, map_base: np.ndarray) -> bool:
+    def _publish_tf(self, t: float, map_base: np.ndarray, after_s: float = 0.0) -> bool:
         assert self.tf_pub is not None
         odom = self.live.odom_frame.at(t)
         if odom is None:
@@ -268,7 +273,7 @@ class Ros2Outputs(BaseSink):
         self.last_map_odom = mo
         c = self.live.cfg.ros2
         tf = StaticTransform(c.global_frame_id, c.odom_frame_id, mo)
-        self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s)[1])
+        self.tf_pub.write(codec.encode([tf], t + c.transform_tolerance_s + after_s)[1])
         self._tf_last_t = t
         self.tf_published += 1
         return True
@@ -290,6 +295,8 @@ class Ros2Outputs(BaseSink):
             for st, early in self._early:
                 if abs(st - t) < 1e-9:
                     self.match_vs_online_mm.add(1e3 * math.hypot(early[0] - at[0], early[1] - at[1]))
+                    if self.tf_pub is not None and t == self._tf_last_t and self._publish_tf(t, at, REFINED_AFTER_S):
+                        self.tf_refined += 1
                     break
             for st, arrival, live in self._arrivals:
                 if abs(st - t) < 1e-9:
@@ -312,7 +319,8 @@ class Ros2Outputs(BaseSink):
         def pct(h: LogHistogram, nd: int = 3) -> dict[str, float]:
             return {"p50": round(h.percentile(50), nd), "p99": round(h.percentile(99), nd), "n": h.count}
 
-        return {"published": self.published, "tf_published": self.tf_published, "tf_at_match": self.at_match,
+        return {"published": self.published, "tf_published": self.tf_published, "tf_refined": self.tf_refined,
+                "tf_at_match": self.at_match,
                 "scan_to_tf_ms": pct(self.tf_ms), "scan_to_pose_ms": pct(self.pose_ms),
                 "inputs_in_to_pose_ms": pct(self.ready_ms),
                 "tf_at_match_ms": {"queue": pct(self.queue_ms), "handle": pct(self.handle_ms),

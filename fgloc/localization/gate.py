@@ -18,6 +18,15 @@ A fix is taken when it agrees with what the odometry says since the last fix it 
   a run of fixes that agree with each other look like one: a gate that held them all would lose the
   robot.
 
+The odometry's motion counts only where its stamps (not their arrival) cover the time since the
+previous fix (:class:`OdometryCoverage`, no gap over ``integrity.odometry_gap_s``).  Odometry that
+arrives late (its newest stamp behind the scan's), stops (a dead wheel driver) or is absent for a
+stretch leaves the odometry pose extrapolated or frozen there: a wrong fix must not pass as explained
+by a motion nobody measured, nor a right one be held because the frozen odometry says the robot
+stood still.  Then the fix follows the previous one as the fixes used over the last quarter second moved
+(their own velocity, :meth:`JumpGate.fix_velocity`), with the same slip allowance; the prediction and
+the map's confirmation judge it as always.
+
 A fix that agrees with neither is a jump the odometry does not explain.  It is taken only on
 evidence the matcher did not produce itself: the scan's agreement with the map
 (:func:`scan_agreement`, the mean Gaussian likelihood of its beam endpoints on the map's distance
@@ -48,6 +57,7 @@ Core maths only: no I/O.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -70,6 +80,10 @@ NEIGHBOURHOOD_SIGMAS = 3.0
 #: a fix whose position sigma is within this many of the prediction's (and the slip allowance) is sure
 #: enough for the next fix to follow it
 SURE_SIGMAS = 2.0
+#: the fixes' own motion (JumpGate.fix_velocity) over the fixes used in the last this many seconds ...
+VELOCITY_SPAN_S = 0.25
+#: ... when they span at least this long
+VELOCITY_MIN_SPAN_S = 0.1
 
 
 def scan_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: FloatArray,
@@ -153,6 +167,7 @@ class GateVerdict:
     why: str = ""
     confirmed: bool = False        # taken beyond the gate because the map confirmed it
     d2_previous: float | None = None  # ... from the previous fix carried by the odometry (None: no previous)
+    covered: bool = True           # the odometry's stamps covered the time since the previous fix
 
 
 @dataclass
@@ -166,6 +181,48 @@ class _Previous:
 
 
 Motion = Callable[[float, float, FloatArray], FloatArray]
+
+
+class OdometryCoverage:
+    """Which spans of log time the odometry's stamps cover (not their arrival): consecutive stamps at
+    most ``max_gap_s`` apart.  The motion between two fixes is known only where the odometry covers
+    the whole span between them: odometry that arrives late (its newest stamp behind the scan's),
+    stopped (a dead wheel driver) or was absent for a stretch leaves the motion there unknown."""
+
+    MAX_GAPS = 256  # the long gaps remembered (the oldest forgotten first)
+
+    def __init__(self, max_gap_s: float) -> None:
+        self.max_gap_s = float(max_gap_s)
+        self.first: float | None = None
+        self.last: float | None = None
+        self._gaps: list[tuple[float, float]] = []  # (last stamp before, first stamp after) a gap > max_gap_s
+
+    def add(self, t: float) -> None:
+        """An odometry message stamped ``t`` (stamps of one stream only grow)."""
+        t = float(t)
+        if self.first is None:
+            self.first = t
+        elif self.last is not None and t - self.last > self.max_gap_s:
+            self._gaps.append((self.last, t))
+            if len(self._gaps) > self.MAX_GAPS:
+                del self._gaps[0]
+        self.last = t if self.last is None else max(self.last, t)
+
+    def covers(self, t0: float, t1: float) -> bool:
+        """Whether the stamps cover ``[t0, t1]``: one within ``max_gap_s`` of each end and no longer
+        stretch without one between."""
+        g = self.max_gap_s
+        if self.first is None or self.last is None or self.first > t0 + g or self.last < t1 - g:
+            return False
+        return not any(min(b, t1) - max(a, t0) > g for a, b in self._gaps)
+
+    def uncovered_s(self, t0: float, t1: float) -> float:
+        """How long of ``[t0, t1]`` the stamps leave uncovered (the gaps, before the first and after the last)."""
+        if self.first is None or self.last is None:
+            return max(0.0, t1 - t0)
+        out = max(0.0, min(t1, self.first) - t0) + max(0.0, t1 - max(t0, self.last))
+        out += sum(max(0.0, min(b, t1) - max(a, t0)) for a, b in self._gaps)
+        return out
 
 
 class JumpGate:
@@ -182,29 +239,52 @@ class JumpGate:
         self.previous: _Previous | None = None
         self._pending: _Previous | None = None  # what the fix just passed becomes when the back-end takes it
         self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
+        self._taken: tuple[float, FloatArray] | None = None  # the fix just passed (stamp, pose)
+        self._recent: deque[tuple[float, FloatArray]] = deque()  # fixes passed and used over VELOCITY_SPAN_S
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
         self.previous = None
         self._pending = None
         self._last_odom = None
+        self._taken = None
+        self._recent.clear()
 
     def accepted(self) -> None:
         """The fix :meth:`check` passed last went to the back-end: the next one may follow it."""
         self.previous = self._pending
         self._pending = None
+        if self._taken is not None:
+            self._recent.append(self._taken)
+            while len(self._recent) > 2 and self._taken[0] - self._recent[1][0] >= VELOCITY_SPAN_S:
+                self._recent.popleft()
+            self._taken = None
+
+    def fix_velocity(self) -> FloatArray | None:
+        """The motion per second the fixes used last showed (``[vx, vy, w]`` in the older one's frame, over
+        at least :data:`VELOCITY_MIN_SPAN_S`), None when they span less."""
+        if len(self._recent) < 2:
+            return None
+        (t0, p0), (t1, p1) = self._recent[0], self._recent[-1]
+        if t1 - t0 < VELOCITY_MIN_SPAN_S:
+            return None
+        return np.asarray(between1(p0, p1), dtype=float) / (t1 - t0)
 
     def check(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
               odom_pose: FloatArray, t: float, motion: Motion | None = None,
-              motion_known: bool = True) -> GateVerdict:
+              motion_known: bool = True, motion_covered: bool = True) -> GateVerdict:
         """Take or hold ``fix`` (stamp ``t``) against the back-end's prediction ``(pred, pred_cov)`` there
         and the previous fix; ``odom_pose``: the dead-reckoned odometry pose at ``t``;
         ``motion(t0, t1, delta)``: the odometry's increment as the back-end believes it happened;
         ``motion_known`` False: no odometry came yet (a scan-only robot), the prediction stands where
         the last fix was while the robot moves, and a fix is held only when the map prefers the
-        prediction to it."""
+        prediction to it.  ``motion_covered`` False: the odometry's stamps do not cover the time since
+        the previous fix (odometry late, stopped or absent for a while: :class:`OdometryCoverage`), so
+        the fix follows the previous one as the fixes used last moved (:meth:`fix_velocity`), not as
+        the odometry's extrapolated or frozen pose says."""
 
         self._pending = None
+        self._taken = None
         R = np.asarray(fix.cov, dtype=float)
         P = np.asarray(pred_cov, dtype=float)
         # scalar maths on the position blocks (numpy's 2x2 solve and eigvalsh cost ~20 us a call each);
@@ -226,10 +306,14 @@ class JumpGate:
         allow = 0.0 if last is None else (slip * math.hypot(*between_values(last, odom_pose)[:2])) ** 2
         self._last_odom = np.array(odom_pose, dtype=float)
         prev = self.previous
-        if prev is not None:
-            delta = between1(prev.odom, odom_pose)
-            if motion is not None and t > prev.t:
-                delta = motion(prev.t, t, delta)
+        vel = None if motion_known and motion_covered else self.fix_velocity()
+        if prev is not None and (vel is not None or (motion_known and motion_covered)):
+            if vel is not None:  # the odometry does not cover the time since: the fixes' own motion
+                delta = vel * max(0.0, t - prev.t)
+            else:
+                delta = between1(prev.odom, odom_pose)
+                if motion is not None and t > prev.t:
+                    delta = motion(prev.t, t, delta)
             cx, cy, _ = compose1(prev.pose, delta).tolist()
             (c00, c01), (c10, c11) = prev.cov[:2, :2].tolist()
             sl = (slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2
@@ -237,6 +321,7 @@ class JumpGate:
                                         ((r11 + c11) + s2) + sl)
             take = take or d2_prev <= self.cfg.gate_chi2
         if take:
+            self._taken = (float(t), np.array(fix.pose, dtype=float))
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
             k2 = SURE_SIGMAS**2
             m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
@@ -245,7 +330,7 @@ class JumpGate:
                 # to follow; after a vaguer one (a matcher unsure between two places) the next has none
                 self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
                                           float(t))
-            return GateVerdict(True, d2, jump_m, jump_deg, d2_previous=d2_prev)
+            return GateVerdict(True, d2, jump_m, jump_deg, d2_previous=d2_prev, covered=motion_covered)
         pts = scan.points()
         # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
         # the heading that moves the scan's median return by it
@@ -255,7 +340,7 @@ class JumpGate:
         a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
                        self.sigma_m, pts)
         a_pred, a_fix = float(np.max(a[:-1])), float(a[-1])
-        v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev)
+        v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev, covered=motion_covered)
         if not (math.isfinite(a_pred) and math.isfinite(a_fix)):
             v.take = True  # nothing to judge by: as without the gate
         elif not motion_known and a_fix >= a_pred:
@@ -271,6 +356,7 @@ class JumpGate:
                      f"(d2 {d2:.0f}) that the map does not confirm (agreement {a_fix:.2f} at the fix, "
                      f"{a_pred:.2f} near the prediction)")
         if v.take:
+            self._taken = (float(t), np.array(fix.pose, dtype=float))
             self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
                                       float(t))
         else:
@@ -294,5 +380,5 @@ def mahalanobis2_2x2(e0: float, e1: float, s00: float, s01: float, s10: float, s
     return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
 
 
-__all__ = ["GateVerdict", "JumpGate", "agreement_sigma", "agreements", "innovation", "mahalanobis2_2x2",
-           "neighbourhood", "scan_agreement", "slip_allowance"]
+__all__ = ["GateVerdict", "JumpGate", "OdometryCoverage", "agreement_sigma", "agreements", "innovation",
+           "mahalanobis2_2x2", "neighbourhood", "scan_agreement", "slip_allowance"]

@@ -44,7 +44,7 @@ from fgloc.geometry import between1, compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
 from fgloc.localization.coverage import unmapped_share
-from fgloc.localization.gate import GateVerdict, JumpGate
+from fgloc.localization.gate import GateVerdict, JumpGate, OdometryCoverage
 from fgloc.localization.monitor import ConsistencyMonitor, DeadReckoning
 from fgloc.localization.odometry import OdometryTracker
 from fgloc.localization.recovery import EPS_COV, Recovery
@@ -127,6 +127,7 @@ class Localizer(Recovery):
         self.icfg = config.integrity
         self.monitor = ConsistencyMonitor(self.icfg)
         self.gate = JumpGate(self.icfg, occ_map, laser_mount) if occ_map is not None and self.icfg.gate else None
+        self.odometry_coverage = OdometryCoverage(self.icfg.odometry_gap_s)  # the odometry's stamps, for the gate
         self.last_gate: GateVerdict | None = None  # the gate's verdict on the last scan's fix (None: not judged)
         self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
         self._t_used: float | None = None  # stamp of the last fix the back-end accepted
@@ -200,6 +201,7 @@ class Localizer(Recovery):
         if self.clock is not None:
             t = self.clock.stamp(t_raw)
         self.stats["odometry"] += 1
+        self.odometry_coverage.add(t)
         if self.odom.t is not None and t <= self.odom.t:
             # at or before the scan stamp the odometry was carried to after a burst (carry_to): the
             # back-end has integrated past it; the next message's increment starts there and covers it
@@ -445,8 +447,12 @@ class Localizer(Recovery):
             self.backend.current(covariance=True)
             self._cov_t = t
         pred, pred_cov = self.backend.predict(t)
+        # the motion since the last accepted fix is known where the odometry's stamps cover it (gate.py)
+        prev = self.gate.previous
+        t_from = prev.t if prev is not None else self._t_used if self._t_used is not None else t
         verdict = self.gate.check(fix, pred, pred_cov, msg, self.odom.pose_at(t), t, self.backend.motion_correction,
-                                  motion_known=self.stats["odometry"] > 0)
+                                  motion_known=self.stats["odometry"] > 0,
+                                  motion_covered=self.odometry_coverage.covers(min(t_from, t), t))
         self.last_gate = verdict
         return verdict
 

@@ -60,6 +60,9 @@ class IntegrityConfig:
                                        "prediction is this fraction below its agreement at the fix", min=0, max=1)
     agreement_sigma_m: float | None = setting(None, "distance scale of the scan's agreement with the map (null: "
                                               "the map's cell or its declared accuracy, whichever is larger)", gt=0)
+    odometry_gap_s: float = setting(0.25, "the jump gate knows the motion since the last accepted fix only where the "
+                                    "odometry's stamps cover it, none more than this apart nor this far from its ends "
+                                    "(s; odometry late, stopped or absent: the map decides)", gt=0)
     degraded_after_s: float = setting(1.0, "no accepted fix for this long: degraded (dead reckoning)", gt=0)
     suspect_after_s: float = setting(3.0, "fixes held back or rejected for this long: suspect (the map keeps "
                                      "pointing elsewhere)", gt=0)

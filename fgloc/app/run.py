@@ -527,7 +527,8 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
         "topics": {"scan": topics.scan, "odom": topics.odom, "imu": topics.imu},
     }
     write_yaml(outdir / "config.yaml", effective)
-    sim_s = float(final.duration) if len(final) else float(inputs.summary.get("duration") or 0.0)
+    # the log's span, not only the poses': a run lost most of the log has poses over a fraction of it
+    sim_s = max(float(final.duration) if len(final) else 0.0, float(inputs.summary.get("duration") or 0.0))
     stats = RunStats.of(loc.stats)
     result = RunResult(
         mode=mode, frame=mode, backend=req.backend, frontend=loc.frontend_name, poses=len(final),

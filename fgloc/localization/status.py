@@ -241,6 +241,8 @@ class PoseStatus:
         lost_share = self.lost_time_s() / span if span > 0 else 0.0
         matched = max(scans / self.pcfg.frontend_every, 1.0)
         if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
+            # the fixes it did accept were places in another building: no pose of the run is known
+            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
             self.monitor.verdict(
                 "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
                 f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "

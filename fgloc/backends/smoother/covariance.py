@@ -70,3 +70,21 @@ def bounded_covariance(c: FloatArray, var_max: float | FloatArray) -> FloatArray
         return c
     f = np.sqrt(np.minimum(1.0, np.asarray(var_max, dtype=float) / np.maximum(d, 1e-300)))
     return np.asarray(c, dtype=float) * np.outer(f, f)
+
+
+def covariance_bound(p: FloatArray, q: FloatArray) -> FloatArray:
+    """A covariance at least as large as both ``p`` and ``q`` in every direction (``x^T B x >= max(x^T p x,
+    x^T q x)``): ``q`` whitened by ``p``'s Cholesky factor, its eigenvalues raised to at least 1, coloured
+    back.  ``p`` itself when it already holds ``q``; ``q`` when ``p`` is not positive definite."""
+    a = np.asarray(p, dtype=float).reshape(3, 3)
+    b = np.asarray(q, dtype=float).reshape(3, 3)
+    try:
+        L = np.linalg.cholesky(0.5 * (a + a.T))
+    except np.linalg.LinAlgError:
+        return b.copy()
+    Li = np.linalg.inv(L)
+    w, v = np.linalg.eigh(Li @ (0.5 * (b + b.T)) @ Li.T)
+    if w[-1] <= 1.0:
+        return a
+    M = L @ v
+    return (M * np.maximum(w, 1.0)) @ M.T

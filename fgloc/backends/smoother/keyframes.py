@@ -4,6 +4,7 @@ factors, the gyro's yaw-increment factors, and a late scan's keyframe between it
 from __future__ import annotations
 
 import math
+from bisect import bisect_left, bisect_right
 from collections import deque
 
 import gtsam
@@ -19,7 +20,8 @@ from fgloc.backends.factors import (
     yaw_increment_factor,
 )
 from fgloc.backends.health import ANGLE_ABSOLUTE
-from fgloc.backends.smoother.covariance import carried_covariance
+from fgloc.backends.integration import integrate_twist_lists
+from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.backends.smoother.streams import all_finite
 from fgloc.geometry import compose1, wrap_scalar
@@ -157,6 +159,7 @@ class KeyframeGraph(FurtherSourceFactors):
         if used:
             assert fix is not None
             graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
+            self._fix_floor = (t, np.asarray(fix.pose, dtype=float), self._fix_cov(fix.cov))
             self.stats["fixes_used"] += 1
             self.inputs.source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
@@ -181,6 +184,31 @@ class KeyframeGraph(FurtherSourceFactors):
         else:  # online estimate until the next solver update: the odometry prediction
             self.stats["keyframes"] += 1
             self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred, c))
+
+    def _record_online(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
+        """The online pose with its output covariance: the marginal (or the prediction's), but never
+        below the last fix the graph took carried along the odometry since (:func:`covariance_bound`).
+        The graph weighs successive fixes as independent; their errors are not (the same map, the same
+        matcher, the same place scan after scan), so averaging many of them does not make the pose
+        better known than one of them says."""
+        fl = self._fix_floor
+        if fl is not None and t >= fl[0]:
+            c = self._floor_increment_cov(fl[0], t) if t > fl[0] else np.zeros((3, 3))
+            cov = covariance_bound(cov, carried_covariance(fl[2], fl[1], pose, c))
+        super()._record_online(t, pose, cov)
+
+    def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
+        """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from
+        its own mark (the fix's stamp stays, the end grows): the predictions' marks stay theirs."""
+        if not self.odo_t:
+            return self._integrate(t0, t1)[1]
+        mark = self._floor_mark
+        if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:
+            mark.clear()
+            self._floor_mark_t0 = t0
+        i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
+        i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
+        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)[1]
 
     def _relative_yaw_increments(self, t0: float, t1: float, d_odom: float) -> dict[str, tuple[float, float]]:
         """Each relative yaw source's increment over ``(t0, t1]`` and its variance as its factor

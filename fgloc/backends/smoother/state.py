@@ -118,6 +118,11 @@ class SmootherState(Backend):
         self.t0: float | None = None
         self._rejects = 0
         self._last_cov = np.eye(3) * 1e-2
+        #: the last fix the graph took: (stamp, pose, covariance with its floors), the floor of the output's
+        #: covariance (see KeyframeGraph._record_online)
+        self._fix_floor: tuple[float, FloatArray, FloatArray] | None = None
+        self._floor_mark: list[float] = []   # its odometry integration's resumption mark
+        self._floor_mark_t0 = -np.inf
         self._cov_stale: int | None = None
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []

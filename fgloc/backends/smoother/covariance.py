@@ -72,12 +72,29 @@ def bounded_covariance(c: FloatArray, var_max: float | FloatArray) -> FloatArray
     return np.asarray(c, dtype=float) * np.outer(f, f)
 
 
+def _psd3(m: list[float]) -> bool:
+    """Whether the symmetric 3x3 matrix ``m`` (9 floats, row by row) is positive semi-definite: every
+    principal minor >= 0 (scalar maths)."""
+    a, b, c, d, e, f = m[0], m[1], m[2], m[4], m[5], m[8]
+    if a < 0.0 or d < 0.0 or f < 0.0:
+        return False
+    if a * d - b * b < 0.0 or a * f - c * c < 0.0 or d * f - e * e < 0.0:
+        return False
+    return a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c) >= 0.0
+
+
 def covariance_bound(p: FloatArray, q: FloatArray) -> FloatArray:
     """A covariance at least as large as both ``p`` and ``q`` in every direction (``x^T B x >= max(x^T p x,
-    x^T q x)``): ``q`` whitened by ``p``'s Cholesky factor, its eigenvalues raised to at least 1, coloured
-    back.  ``p`` itself when it already holds ``q``; ``q`` when ``p`` is not positive definite."""
+    x^T q x)``): the larger one when one holds the other (checked in scalars: the common case), else
+    ``q`` whitened by ``p``'s Cholesky factor, its eigenvalues raised to at least 1, coloured back;
+    ``q`` when ``p`` is not positive definite."""
     a = np.asarray(p, dtype=float).reshape(3, 3)
     b = np.asarray(q, dtype=float).reshape(3, 3)
+    pa, pb = a.reshape(9).tolist(), b.reshape(9).tolist()
+    if _psd3([x - y for x, y in zip(pa, pb, strict=True)]):
+        return a
+    if _psd3([y - x for x, y in zip(pa, pb, strict=True)]):
+        return b
     try:
         L = np.linalg.cholesky(0.5 * (a + a.T))
     except np.linalg.LinAlgError:

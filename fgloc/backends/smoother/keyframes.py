@@ -193,8 +193,8 @@ class KeyframeGraph(FurtherSourceFactors):
         better known than one of them says."""
         fl = self._fix_floor
         if fl is not None and t >= fl[0]:
-            c = self._floor_increment_cov(fl[0], t) if t > fl[0] else np.zeros((3, 3))
-            cov = covariance_bound(cov, carried_covariance(fl[2], fl[1], pose, c))
+            floor = fl[2] if t == fl[0] else carried_covariance(fl[2], fl[1], pose, self._floor_increment_cov(fl[0], t))
+            cov = covariance_bound(cov, floor)
         super()._record_online(t, pose, cov)
 
     def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:

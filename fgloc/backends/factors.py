@@ -117,6 +117,15 @@ def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: floa
     return gtsam.BetweenFactorPose2(int(offset_key), int(pose_key), gtsam.Pose2(0.0, 0.0, float(z_compass)), noise)
 
 
+def heading_factor(pose_key: int, z_yaw: float, sigma: float, kernel: str = "huber",
+                   k: float = 1.345) -> gtsam.PriorFactorPose2:
+    """A heading in the map frame on a ``Pose2`` keyframe, error ``wrap(theta - z)`` (a compass
+    whose offset to the map is known): a C++ ``PriorFactorPose2`` on ``(0, 0, z)`` whose translation
+    rows have infinite sigmas (the rotation row of its error is the heading difference alone)."""
+    noise = robust(gtsam.noiseModel.Diagonal.Sigmas(np.array([np.inf, np.inf, float(sigma)])), kernel, k)
+    return gtsam.PriorFactorPose2(int(pose_key), gtsam.Pose2(0.0, 0.0, float(z_yaw)), noise)
+
+
 def relative_yaw_error(theta: float, offset: float, z: float) -> float:
     """Residual ``wrap(theta + offset - z)`` (radians) of :func:`relative_yaw_factor`."""
     return wrap_scalar(theta + offset - z)

@@ -27,6 +27,15 @@ class Calibration(Streams):
 
     def set_compass_offset(self, offset: float) -> None:
         self.calib.offset = float(offset)
+        self.offset_declared = True
+
+    def _offset_held(self) -> bool:
+        """The compass-to-map offset is the declared one (:meth:`set_compass_offset`: the frame is
+        the compass's, as in odometry-frame runs) and nothing but the compass observes it (no fix
+        yet): the compass factors measure the heading itself, as the EKF's compass updates do.
+        Estimated instead, the offset would be fitted to the first keyframes' prior (one compass
+        reading) and to the relative sources' integral from there."""
+        return self.offset_declared and self.stats["fixes_used"] == 0
 
     def _chain(self, name: str, char: str, mean: list[float], sigma: list[float], rw: list[float]) -> Chain:
         ch = self.chains.get(name)
@@ -102,6 +111,20 @@ class Calibration(Streams):
         vals.insert(o, offset_pose(guess))
         ts[o] = float(t)
         self.cur_o, self.cur_o_t = o, float(t)
+
+    def _next_offset(self, t: float, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
+                     ts: dict) -> None:
+        """The compass-to-map offset for the keyframe at ``t``: a new variable, a random walk from
+        the previous one, once a fix (a scan-to-map or pose source's, in the map frame) observes
+        the offset; before, the same variable, kept in the window.  Observed by the compass and the
+        relative yaw sources alone, a walking offset lets the gyro's (or the wheels') integrated
+        heading pull the heading away from the compass over long horizons by as much as the walk
+        allows, although nothing but that integral says the compass drifted."""
+        if self.stats["fixes_used"] > 0 or self.cur_o is None:
+            self._new_offset(t, graph, vals, ts)
+            return
+        ts[self.cur_o] = float(t)
+        self.cur_o_t = float(t)
 
     def _offset_guess(self) -> float:
         if self.calib.offset is not None:

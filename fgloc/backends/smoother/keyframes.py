@@ -16,6 +16,7 @@ from fgloc.backends.factors import (
     compass_factor,
     fix_factor,
     gyro_factor,
+    heading_factor,
     scaled_between_factor,
     yaw_increment_factor,
 )
@@ -132,7 +133,7 @@ class KeyframeGraph(FurtherSourceFactors):
         # initial value: the odometry prediction, so robust weights start from a consistent point
         vals.insert(k, gtsam.Pose2(*pred))
         if t - self.cur_o_t >= self.cfg.offset_interval_s:
-            self._new_offset(t, graph, vals, ts)
+            self._next_offset(t, graph, vals, ts)
         # compass readings since the previous keyframe (late ones go to this keyframe too)
         readings = [r for r in self.compass_pending if r[0] <= t + 1e-9]
         self.compass_pending = [r for r in self.compass_pending if r[0] > t + 1e-9]
@@ -150,9 +151,18 @@ class KeyframeGraph(FurtherSourceFactors):
             sigma = m[1]
             if self.cfg.adapt_noise and readings:
                 sigma *= self.inputs.noise(f"{readings[0][3]}.yaw")[0]
-            graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
-                                     self.cfg.compass_kernel, self._compass_kernel_k(sigma, relative)))
-            ts[self.cur_o] = t  # type: ignore[index]
+            kernel_k = self._compass_kernel_k(sigma, relative)
+            if self._offset_held():
+                # the frame's only absolute heading: a redescending kernel would drop it for good once
+                # the relative sources' integral had carried the heading a few sigmas away (nothing
+                # else could bring it back); Huber bounds each reading's pull and never drops it
+                kernel = "huber" if self.cfg.compass_kernel == "cauchy" else self.cfg.compass_kernel
+                graph.add(heading_factor(k, wrap_scalar(m[0] - float(self.calib.offset or 0.0)), sigma,
+                                         kernel, kernel_k))
+            else:
+                graph.add(compass_factor(k, self.cur_o, m[0], sigma,  # type: ignore[arg-type]
+                                         self.cfg.compass_kernel, kernel_k))
+                ts[self.cur_o] = t  # type: ignore[index]
             self.stats["compass_factors"] += 1
             absolute[f"{readings[0][3]}.yaw" if readings else "compass"] = (m[0], sigma * sigma)
         self._add_relative_yaw_factors(k, t, pred, graph, vals, ts)

@@ -54,6 +54,8 @@ class SmootherState(Backend):
         # the chord's heading where no gyro covers an interval (see Streams._heading_chord)
         self.heading_hist: tuple[list[float], list[float]] = ([], [])
         self._heading_source: str | None = None
+        #: the compass-to-map offset was declared (set_compass_offset), not calibrated from fixes
+        self.offset_declared = False
         self._heading_var = np.inf    # its last reading's variance (rad^2)
         self._odom_factor_yaw_var = np.inf   # the last odometry factor's yaw variance (rad^2)
         #: the fused heading against the heading sources it fuses (kept across re-initializations)

@@ -173,6 +173,12 @@ class Backend(ABC):
     def finish(self) -> Trajectory:
         """The final trajectory at keyframe times (smoothed for the smoothers)."""
 
+    def output_covariance(self, t: float, pose: FloatArray, cov: FloatArray) -> FloatArray:
+        """The covariance to report with ``pose`` at ``t`` (the fused pose, the online trajectory), given
+        the estimator's own ``cov``: a back-end whose internal covariance is knowingly too small says so
+        here (the smoother: never below the last fix it took).  Default: ``cov``."""
+        return cov
+
     def record_prediction(self, t: float) -> None:
         """Add the odometry prediction at ``t`` to the online trajectory (a scan without keyframe)."""
         if self.initialized:

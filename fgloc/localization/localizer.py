@@ -498,6 +498,7 @@ class Localizer(Recovery):
         if newest > t:
             pose, cov = self.backend.predict(newest)
             t = newest
+        cov = self.backend.output_covariance(t, pose, cov)
         return PoseFix(t, pose, cov, source=self.backend_name, frame_id="odom" if self.odom_mode else "map",
                        status=self.monitor.current[0])
 

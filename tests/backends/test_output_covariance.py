@@ -31,19 +31,47 @@ def test_covariance_bound_holds_both_and_keeps_what_already_holds():
     assert np.allclose(covariance_bound(np.zeros((3, 3)), p), p)  # not positive definite: the other
 
 
+class _Fused:
+    """The fused poses the session publishes (/fused_pose), with their covariances."""
+
+    wants_fused = True
+    wants_messages = False
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.cov: list[np.ndarray] = []
+
+    def on_message(self, topic, msg) -> None:
+        pass
+
+    def on_scan(self, stamp, scan, fix_or_reason, fused) -> None:
+        if fused is not None:
+            self.t.append(float(fused.stamp))
+            self.cov.append(np.asarray(fused.cov, dtype=float))
+
+    def on_pose(self, stamp, fused) -> None:
+        self.on_scan(stamp, None, "", fused)
+
+    def close(self) -> None:
+        pass
+
+
 @pytest.fixture(scope="module")
 def short_blackout():
-    from fgloc.bench.common import localize_sim
+    from fgloc.localization import build_session
     from fgloc.sim import run_scenario
 
     sim = run_scenario({"route": ROUTE, "faults": {"laser_blackout": {"start": BLACKOUT[0],
                                                                         "duration": BLACKOUT[1]}}}, seed=0)
-    final, online, loc, _ = localize_sim(sim, "smoother", "native")
-    return sim, online, loc
+    sink = _Fused()
+    session = build_session(sim.map, sim.laser_mount, backend="smoother", initial_pose=sim.ground_truth.poses[0],
+                            sinks=[sink])
+    session.run(sim.messages)
+    return sim, session.loc.online_trajectory(), session.loc, sink
 
 
 def test_smoother_covariance_grows_while_dead_reckoning(short_blackout):
-    _sim, online, _loc = short_blackout
+    _sim, online, _loc, _sink = short_blackout
     t0, t1 = BLACKOUT[0], BLACKOUT[0] + BLACKOUT[1]
     t = online.stamps
     var_xy = online.covs[:, 0, 0] + online.covs[:, 1, 1]
@@ -62,7 +90,7 @@ def test_smoother_output_covariance_holds_its_fixes(short_blackout):
     """While it tracks, each online pose's covariance is at least what one fix says (the fixes' floors:
     ``smoother.fix_min_sigma_xy`` / ``fix_min_sigma_theta``); the marginal alone was below them
     (1.8 mm / 0.01 deg against 3 mm / 0.1 deg on the paper run)."""
-    _sim, online, loc = short_blackout
+    _sim, online, loc, sink = short_blackout
     cfg = loc.backend.cfg
     t = online.stamps
     tracking = (t > 0.5) & ((t < BLACKOUT[0]) | (t > BLACKOUT[0] + BLACKOUT[1] + 0.5))
@@ -71,3 +99,9 @@ def test_smoother_output_covariance_holds_its_fixes(short_blackout):
     assert np.all(c[:, 0, 0] >= 0.999 * cfg.fix_min_sigma_xy**2)
     assert np.all(c[:, 1, 1] >= 0.999 * cfg.fix_min_sigma_xy**2)
     assert np.all(c[:, 2, 2] >= 0.999 * cfg.fix_min_sigma_theta**2)
+    # the published pose too
+    ft = np.array(sink.t)
+    fc = np.array(sink.cov)[(ft > 0.5) & ((ft < BLACKOUT[0]) | (ft > BLACKOUT[0] + BLACKOUT[1] + 0.5))]
+    assert len(fc) > 50
+    assert np.all(fc[:, 0, 0] >= 0.999 * cfg.fix_min_sigma_xy**2) and np.all(fc[:, 2, 2] >= 0.999 *
+                                                                                cfg.fix_min_sigma_theta**2)

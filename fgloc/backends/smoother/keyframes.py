@@ -201,11 +201,16 @@ class KeyframeGraph(FurtherSourceFactors):
         The graph weighs successive fixes as independent; their errors are not (the same map, the same
         matcher, the same place scan after scan), so averaging many of them does not make the pose
         better known than one of them says."""
+        super()._record_online(t, pose, self.output_covariance(t, pose, cov))
+
+    def output_covariance(self, t: float, pose: FloatArray, cov: FloatArray) -> FloatArray:
+        """``cov`` bounded below by the last fix the graph took, carried along the odometry since (see
+        :meth:`_record_online`)."""
         fl = self._fix_floor
-        if fl is not None and t >= fl[0]:
-            floor = fl[2] if t == fl[0] else carried_covariance(fl[2], fl[1], pose, self._floor_increment_cov(fl[0], t))
-            cov = covariance_bound(cov, floor)
-        super()._record_online(t, pose, cov)
+        if fl is None or t < fl[0]:
+            return cov
+        floor = fl[2] if t == fl[0] else carried_covariance(fl[2], fl[1], pose, self._floor_increment_cov(fl[0], t))
+        return covariance_bound(cov, floor)
 
     def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
         """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from

@@ -197,7 +197,11 @@ class Backend(ABC):
         return delta
 
     def reset(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
-        """Re-initialize after a relocalization (kidnapping); default: initialize again."""
+        """Re-initialize after a relocalization (kidnapping); default: initialize again.  The online pose
+        already recorded at ``t`` (the keyframe of the scan that relocalized) is the one before: replaced."""
+        if self._online_t and self._online_t[-1] >= t:
+            k = bisect_left(self._online_t, t)
+            del self._online_t[k:], self._online_p[k:], self._online_c[k:]
         self.initialize(t, pose, cov)
 
     def online_trajectory(self) -> Trajectory:

@@ -66,9 +66,15 @@ class PoseStatus:
 
     def _first_convergence(self, t: float, pose: FloatArray) -> None:
         """The map confirmed a pose for the first time at ``t``: if it is not where ``--initial-pose`` said
-        (beyond 3 sigma of its prior), that start did not fit the map, and every pose before is lost."""
+        (beyond 3 sigma of its prior), that start did not fit the map, and every pose before is lost;
+        without one, the poses a global search published before it converged are lost (said when any)."""
         p0 = self.initial_pose
         if p0 is None:
+            n = sum(1 for x in self.monitor.t if x < t)
+            if n:  # a global search whose pose was published before it converged (AMCL's cloud mean)
+                self.monitor.amend(-math.inf, t, LOST, "lost: global localization had not converged")
+                self.monitor.verdict("global_start", f"global localization converged at t = {t:.1f} s ({n} pose(s) "
+                                     "before are marked lost)", False)
             return
         d = float(np.hypot(pose[0] - p0[0], pose[1] - p0[1]))
         a = abs(math.degrees(float(np.angle(np.exp(1j * (pose[2] - p0[2]))))))

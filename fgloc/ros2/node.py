@@ -780,8 +780,12 @@ class Ros2Live:
                         scans_skipped_backlog=str(r.counters["scans_skipped_backlog"]),
                         localizer_errors=str(r.counters["localizer_errors"]))
             if self.outputs is not None:
-                p50, p99 = self.outputs.latency_percentiles()
-                vals.update(scan_to_tf_p50_ms=f"{p50:.2f}", scan_to_tf_p99_ms=f"{p99:.2f}")
+                o = self.outputs
+                p50, p99 = o.latency_percentiles()
+                vals.update(scan_to_tf_p50_ms=f"{p50:.2f}", scan_to_tf_p99_ms=f"{p99:.2f}",
+                            poses_published=str(o.published))
+                if o.published:
+                    vals["pose_published_stamp"] = f"{o._last_t:.6f}"
             router = getattr(r.session, "sources", None)
             if router is not None:
                 from fgloc.localization.sources import status_line

@@ -28,7 +28,8 @@ def dds_domain() -> int:
     return domain_for(next(_NEXT))
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 10.0, step: float = 0.02) -> bool:
+def wait_for(cond: Callable[[], bool], timeout: float = 60.0, step: float = 0.02) -> bool:
+    """Poll ``cond`` until it holds; ``timeout`` bounds a hung peer only (a loaded machine is slower, not wrong)."""
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         if cond():

@@ -112,7 +112,9 @@ READER = textwrap.dedent("""
     tr.start()
     print("ready", flush=True)
     line = sys.stdin.readline()
-    time.sleep(1.0)
+    t_end = time.monotonic() + 60.0
+    while not got and time.monotonic() < t_end:  # continued: the newest samples come (a loaded host: later)
+        time.sleep(0.02)
     print(len(got), flush=True)
 """)
 

@@ -23,6 +23,15 @@ topics, no localizer): its memory is the DDS layer's own.
 
 ``--compare RUN_DIR`` (a ``fgloc run`` of the same log, with the same map and start): /amcl_pose is also
 read here and compared with RUN_DIR/online.tum at the same stamps (max, median, p99 of the distance).
+
+``--probe``: where the memory is, sampled inside the live process (:class:`MemProbe`) beside its RSS: glibc
+malloc's bytes in use and free inside its arenas (``mallinfo2``), its arenas (``malloc_info``), Python's
+small-object blocks, with ``--tracemalloc`` the bytes Python's allocators (numpy's buffers included) hold;
+each one's growth after settling, so a rise is found in the allocator, in Python, or in neither (outside
+malloc).  ``--trim-s S`` calls ``malloc_trim(0)`` every S seconds there (a diagnostic: does the RSS come back?);
+``MALLOC_ARENA_MAX=2`` in the environment limits glibc's arenas in both processes.
+``--no-dds``: the replay and ``fgloc live --ros2``'s node in this one process, the replay's samples handed to
+the node's subscriptions directly (:class:`LoopTransport`, no DDS): the node's memory without Cyclone DDS.
 """
 
 from __future__ import annotations
@@ -36,9 +45,229 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import psutil
+
+
+class MemProbe:
+    """Memory as a process sees it, sampled every ``every_s`` by a thread of its own into ``path`` (one
+    JSON line each): RSS (/proc), glibc malloc (``mallinfo2``: bytes in use, free inside the arenas, in
+    mmapped chunks; ``malloc_info``: the arenas), Python's small-object blocks, tracked objects, and with
+    ``trace`` the bytes tracemalloc sees (Python's allocators and numpy's buffers).  ``trim_s`` > 0:
+    ``malloc_trim(0)`` after each sample at least that far apart (a diagnostic)."""
+
+    FIELDS = ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+              "keepcost")
+
+    def __init__(self, path: str, every_s: float = 10.0, trace: bool = False, trim_s: float = 0.0) -> None:
+        import ctypes
+
+        class Mallinfo2(ctypes.Structure):
+            _fields_ = [(n, ctypes.c_size_t) for n in self.FIELDS]
+
+        self.libc = ctypes.CDLL("libc.so.6")
+        self.libc.mallinfo2.restype = Mallinfo2
+        self.libc.open_memstream.restype = ctypes.c_void_p
+        self.libc.open_memstream.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        self.libc.malloc_info.argtypes = [ctypes.c_int, ctypes.c_void_p]
+        self.libc.fclose.argtypes = [ctypes.c_void_p]
+        self.libc.free.argtypes = [ctypes.c_void_p]
+        self.path, self.every_s, self.trace, self.trim_s = path, every_s, trace, trim_s
+        self.trimmed = 0
+        # the cyclic collector's passes: count, total and longest pause per generation; pauses over 2 ms
+        self.gc_n, self.gc_ms, self.gc_max = [0, 0, 0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        self.gc_long: list[tuple[float, int, float, int]] = []  # (time.time(), generation, ms, collected)
+        self._gc_t0 = 0.0
+
+        def on_gc(phase: str, info: dict) -> None:
+            if phase == "start":
+                self._gc_t0 = time.perf_counter()
+                return
+            ms = (time.perf_counter() - self._gc_t0) * 1e3
+            g = int(info["generation"])
+            self.gc_n[g] += 1
+            self.gc_ms[g] += ms
+            self.gc_max[g] = max(self.gc_max[g], ms)
+            if ms > 2.0 and len(self.gc_long) < 5000:
+                self.gc_long.append((time.time(), g, round(ms, 2), int(info.get("collected", 0))))
+
+        import gc
+
+        gc.callbacks.append(on_gc)
+        if trace:
+            import tracemalloc
+
+            tracemalloc.start(1)
+
+    def arenas(self) -> int:
+        import ctypes
+
+        buf, size = ctypes.c_void_p(), ctypes.c_size_t()
+        fp = self.libc.open_memstream(ctypes.byref(buf), ctypes.byref(size))
+        self.libc.malloc_info(0, fp)
+        self.libc.fclose(fp)
+        text = ctypes.string_at(buf.value, size.value).decode() if buf.value else ""
+        self.libc.free(buf)
+        return text.count("<heap nr=")
+
+    def sample(self, t0: float) -> dict:
+        import gc
+        import threading
+
+        mi = self.libc.mallinfo2()
+        with open("/proc/self/statm") as f:
+            rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+        row = {"t": time.monotonic() - t0, "wall": time.time(), "rss": rss, "malloc_used": mi.uordblks,
+               "malloc_free": mi.fordblks,
+               "malloc_mmap": mi.hblkhd, "malloc_arena": mi.arena, "arenas": self.arenas(),
+               "py_blocks": sys.getallocatedblocks(), "objects": len(gc.get_objects()),
+               "threads": threading.active_count(), "trimmed": self.trimmed, "gc_n": list(self.gc_n),
+               "gc_ms": [round(v, 2) for v in self.gc_ms], "gc_max_ms": [round(v, 2) for v in self.gc_max],
+               "gc_long": self.gc_long[-200:], "gc_threshold": gc.get_threshold(), "frozen": gc.get_freeze_count()}
+        if self.trace:
+            import tracemalloc
+
+            row["traced"] = tracemalloc.get_traced_memory()[0]
+        return row
+
+    def start(self) -> None:
+        import threading
+
+        def run() -> None:
+            t0 = time.monotonic()
+            last_trim = t0
+            with open(self.path, "w") as f:
+                while True:
+                    f.write(json.dumps(self.sample(t0)) + "\n")
+                    f.flush()
+                    if self.trim_s > 0 and time.monotonic() - last_trim >= self.trim_s:
+                        self.libc.malloc_trim(0)
+                        self.trimmed += 1
+                        last_trim = time.monotonic()
+                    time.sleep(self.every_s)
+
+        threading.Thread(target=run, name="memprobe", daemon=True).start()
+
+
+class LoopTransport:
+    """:class:`fgloc.ros2.transport.Transport` without DDS, for ``--no-dds``: a write hands the bytes to this
+    process's subscriptions of its topic at once, in the writer's thread (as the receive thread would); a
+    transient-local writer's last sample goes to a subscription made later (as DDS's durability)."""
+
+    domain_id = 0
+
+    def __init__(self) -> None:
+        self._subs: dict[str, list[tuple[Any, Any]]] = {}
+        self._pubs: dict[str, list[Any]] = {}
+        self._health: list[Any] = []
+        self._latched: dict[str, bytes] = {}
+        self._late: list[tuple[str, Any, Any]] = []  # transient-local subscriptions: the last sample at start()
+
+    def publisher(self, topic: str, type_name: str, qos: Any) -> Any:
+        from fgloc.ros2.transport import EndpointHealth
+
+        h = EndpointHealth(topic, type_name, "pub", qos)
+        subs = self._subs.setdefault(topic, [])
+        h.matched = len(subs)
+        self._pubs.setdefault(topic, []).append(h)
+        self._health.append(h)
+        latched = self._latched if qos.durability == "transient_local" else None
+
+        class Writer:
+            health = h
+
+            def write(self, data: bytes) -> bool:
+                now = time.time()
+                for sh, cb in subs:
+                    sh.messages += 1
+                    sh.last_arrival = now
+                    try:
+                        cb(data, now)
+                    except Exception as e:  # noqa: BLE001 - counted as the DDS transport does
+                        sh.callback_errors += 1
+                        sh.last_error = f"{type(e).__name__}: {e}"
+                h.messages += 1
+                if latched is not None:
+                    latched[topic] = data
+                return True
+
+        return Writer()
+
+    def subscribe(self, topic: str, type_name: str, qos: Any, callback: Any) -> Any:
+        from fgloc.ros2.transport import EndpointHealth
+
+        h = EndpointHealth(topic, type_name, "sub", qos)
+        self._subs.setdefault(topic, []).append((h, callback))
+        for p in self._pubs.get(topic, []):
+            p.matched += 1
+        self._health.append(h)
+        if qos.durability == "transient_local":
+            self._late.append((topic, h, callback))
+        return h
+
+    def start(self) -> None:
+        for topic, h, cb in self._late:
+            if topic in self._latched:
+                h.messages += 1
+                cb(self._latched[topic], time.time())
+
+    def health(self) -> list[Any]:
+        return list(self._health)
+
+    def remote_endpoints(self, topic: str, kind: str = "sub") -> int:
+        return len(self._subs.get(topic, [])) if kind == "sub" else len(self._pubs.get(topic, []))
+
+    def close(self) -> None:
+        pass
+
+
+def in_process(a: argparse.Namespace, log: Path, map_yaml: Path | None, init: list[str],
+               probe_path: Path | None) -> tuple[dict, float]:
+    """``--no-dds``: the replay in a thread and ``fgloc live --ros2``'s node in this thread, over a
+    :class:`LoopTransport`; returns the node's report and the replay's start (time.time())."""
+    import gc
+    import threading
+
+    from fgloc.maps import load_map
+    from fgloc.ros2.live import live_ros2
+    from fgloc.ros2.replay import replay
+
+    if probe_path is not None:
+        MemProbe(str(probe_path), a.sample_s, a.tracemalloc, a.trim_s).start()
+    tr = LoopTransport()
+    stop = threading.Event()
+    started = [0.0]
+    occ = load_map(map_yaml) if map_yaml is not None else None
+
+    def play() -> None:
+        started[0] = time.time()
+        replay(log, tr, rate=a.rate, occ_map=occ, wait_for_subscribers_s=60.0, now=a.now)
+        time.sleep(3.0)  # the node's backlog
+        stop.set()
+
+    threading.Thread(target=play, name="replay", daemon=True).start()
+    sys.setswitchinterval(0.0005)  # as fgloc live --ros2
+    pose = tuple(float(v) for v in init[1:]) if init else None
+    rep = live_ros2(map_yaml=None, backend="smoother", frontend="native", initial_pose=pose,  # type: ignore[arg-type]
+                    record=None, publish=None, duration=None, config=a.config, out=None, out_smoothed=None,
+                    quiet=True, view=None, domain=None, interface=None, scan_topic=None, on_started=gc.freeze,
+                    transport=tr, stop=stop)
+    return rep, started[0]
+
+
+#: ``fgloc live`` with a :class:`MemProbe` in its process: argv = probe file, every_s, trace 0/1, trim_s, fgloc's args
+PROBED = """
+import signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
+sys.path.insert(0, %r)
+from bench_ros2 import MemProbe
+MemProbe(sys.argv[1], float(sys.argv[2]), sys.argv[3] == "1", float(sys.argv[4])).start()
+from fgloc.cli import main
+sys.argv = ["fgloc", *sys.argv[5:]]
+main()
+"""
 
 
 def fgloc(*args: str) -> list[str]:
@@ -70,6 +299,42 @@ os._exit(0)  # without the interpreter's teardown under Cyclone's threads (as th
 """
 
 
+def print_probe(probe: list[dict], t_wall0: float, rate: float, settle_min: float, trim_s: float) -> None:
+    """Each quantity the probe sampled: after settling, at the end, growth and slope per minute of log."""
+    t = np.array([(r["wall"] - t_wall0) * rate / 60.0 for r in probe])
+    after = t >= settle_min
+    if after.sum() < 3:
+        return
+    rows = [("rss", "RSS", 2**20, "MB"), ("malloc_used", "malloc: in use", 2**20, "MB"),
+            ("malloc_free", "malloc: free in its arenas", 2**20, "MB"),
+            ("malloc_mmap", "malloc: mmapped chunks", 2**20, "MB"),
+            ("malloc_arena", "malloc: arenas' size", 2**20, "MB"), ("traced", "tracemalloc", 2**20, "MB"),
+            ("py_blocks", "Python blocks", 1e3, "k"), ("objects", "gc-tracked objects", 1e3, "k"),
+            ("arenas", "malloc arenas", 1, ""), ("threads", "threads", 1, "")]
+    print(f"in the live process, after {settle_min:.1f} min of log -> end ({after.sum()} samples"
+          + (f", malloc_trim(0) every {trim_s:g} s" if trim_s > 0 else "") + "):")
+    for key, name, unit, u in rows:
+        if key not in probe[0]:
+            continue
+        v = np.array([float(r[key]) for r in probe]) / unit
+        first = float(np.interp(settle_min, t, v))
+        slope = float(np.polyfit(t[after], v[after], 1)[0])
+        print(f"  {name:28s} {first:9.2f} -> {v[-1]:9.2f} {u:2s} ({v[-1] - first:+.2f}; slope {slope:+.3f} {u} "
+              "per minute of log)")
+    last = probe[-1]
+    if "gc_n" in last:
+        print(f"  cyclic GC (threshold {last['gc_threshold']}, {last['frozen']} objects frozen): passes per generation "
+              f"{last['gc_n']}, total {last['gc_ms']} ms, longest {last['gc_max_ms']} ms")
+        long = [tuple(x) for r in probe for x in r["gc_long"]]
+        long = sorted(set(long))
+        after_start = [x for x in long if x[0] >= t_wall0]
+        if after_start:
+            ms = np.array([x[2] for x in after_start])
+            print(f"  GC pauses over 2 ms during the replay: {len(ms)} (generations "
+                  f"{[sum(1 for x in after_start if x[1] == g) for g in range(3)]}), p50 {np.median(ms):.1f} ms, "
+                  f"max {ms.max():.1f} ms")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--log", type=Path, help="a log (default: fgloc simulate paper, --loops times round)")
@@ -87,7 +352,13 @@ def main() -> int:
     ap.add_argument("--sample-s", type=float, default=10.0, help="wall seconds between RSS samples")
     ap.add_argument("--settle", type=float, default=2.0, help="minutes of log before the memory is judged")
     ap.add_argument("--png", type=Path, help="plot the live process's RSS over minutes of log into this PNG")
+    ap.add_argument("--probe", action="store_true", help="sample malloc / Python memory inside the live process")
+    ap.add_argument("--tracemalloc", action="store_true", help="--probe: tracemalloc on in the live process")
+    ap.add_argument("--trim-s", type=float, default=0.0, help="--probe: malloc_trim(0) every this many seconds")
+    ap.add_argument("--no-dds", action="store_true", help="replay and node in this process, no DDS (implies --probe)")
     a = ap.parse_args()
+    if a.no_dds:
+        a.probe = True
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
     init = ["--initial-pose", "2.5", "3.0", "0.0"]
     if a.log is None:
@@ -117,29 +388,45 @@ def main() -> int:
         sub.subscribe("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", qos.LATCHED_PUB.with_depth(5000),
                       on_pose)
         sub.start()
-    cmd = [sys.executable, "-c", RECEIVER, str(a.domain)] if a.receive_only else \
-        fgloc("live", "--ros2", *common, "--quiet", "--json", *init,
-              *(["--config", str(a.config)] if a.config else []))
-    live = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    proc = psutil.Process(live.pid)
-    replay = subprocess.Popen(fgloc("replay", str(log), "--ros2", *common, "--rate", str(a.rate), "--wait", "60",
-                                    "--quiet", *(["--map", str(map_yaml)] if map_yaml else []),
-                                    *(["--now"] if a.now else [])),
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t_start = time.monotonic()
-    load0 = os.getloadavg()[0]
+    probe_path = tmp / "probe.jsonl" if a.probe else None
+    rep_out = ""
     samples: list[tuple[float, float]] = []  # wall s since the replay started, RSS MB
-    while replay.poll() is None:
+    load0 = os.getloadavg()[0]
+    if a.no_dds:
+        report, t_wall0 = in_process(a, log, map_yaml, init, probe_path)
+        report = json.loads(json.dumps(report, default=str))
+    else:
+        cmd = [sys.executable, "-c", RECEIVER, str(a.domain)] if a.receive_only else \
+            fgloc("live", "--ros2", *common, "--quiet", "--json", *init,
+                  *(["--config", str(a.config)] if a.config else []))
+        if a.probe and not a.receive_only:
+            cmd = [sys.executable, "-c", PROBED % str(Path(__file__).resolve().parent), str(probe_path),
+                   str(a.sample_s), "1" if a.tracemalloc else "0", str(a.trim_s), *cmd[3:]]
+        live = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        proc = psutil.Process(live.pid)
+        replay = subprocess.Popen(fgloc("replay", str(log), "--ros2", *common, "--rate", str(a.rate), "--wait", "60",
+                                        "--quiet", *(["--map", str(map_yaml)] if map_yaml else []),
+                                        *(["--now"] if a.now else [])),
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        t_start = time.monotonic()
+        t_wall0 = time.time()
+        while replay.poll() is None:
+            samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
+            t_next = t_start + len(samples) * a.sample_s
+            while replay.poll() is None and time.monotonic() < t_next:
+                time.sleep(0.2)
+        rep_out = replay.stdout.read() if replay.stdout else ""
+        time.sleep(3.0)  # the live node's backlog
         samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
-        t_next = t_start + len(samples) * a.sample_s
-        while replay.poll() is None and time.monotonic() < t_next:
-            time.sleep(0.2)
-    rep_out = replay.stdout.read() if replay.stdout else ""
-    time.sleep(3.0)  # the live node's backlog
-    samples.append((time.monotonic() - t_start, proc.memory_info().rss / 2**20))
-    live.send_signal(signal.SIGTERM)  # as SIGINT (Ctrl-C); SIGINT stays ignored in a background shell
-    out, err = live.communicate(timeout=300)
-    report = json.loads(out)
+        live.send_signal(signal.SIGTERM)  # as SIGINT (Ctrl-C); SIGINT stays ignored in a background shell
+        out, err = live.communicate(timeout=300)
+        if live.returncode not in (0, 130):
+            print(f"fgloc live exited {live.returncode}:\n{err[-3000:]}", file=sys.stderr)
+            return 1
+        report = json.loads(out)
+    probe = [json.loads(line) for line in probe_path.read_text().splitlines()] if probe_path else []
+    if a.no_dds:  # the probe's RSS, from the replay's start
+        samples = [(r["wall"] - t_wall0, r["rss"] / 2**20) for r in probe if r["wall"] >= t_wall0]
     print(rep_out.strip().splitlines()[0] if rep_out.strip() else "replay: no output")
     print(f"load average (1 min, {os.cpu_count()} cores): {load0:.1f} at the start, "
           f"{os.getloadavg()[0]:.1f} at the end")
@@ -197,6 +484,8 @@ def main() -> int:
             fig.tight_layout()
             fig.savefig(a.png, dpi=110)
             print(f"plot: {a.png}")
+    if len(probe) >= 3:
+        print_probe(probe, t_wall0, a.rate, settle if len(samples) else a.settle, a.trim_s)
     if a.compare is not None and sub is not None:
         from fgloc.io.tum import read_tum
 

@@ -34,11 +34,14 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
               record: Path | None, publish: list[str] | None, duration: float | None, config: Path | None,
               out: Path | None, out_smoothed: Path | None, quiet: bool, view: str | None,
               domain: int | None, interface: str | None, scan_topic: str | None, force: bool = False,
-              on_started: Callable[[], None] | None = None) -> dict[str, Any]:
+              on_started: Callable[[], None] | None = None, transport: Any = None,
+              stop: threading.Event | None = None) -> dict[str, Any]:
     """Run until Ctrl-C (or ``duration``); print the status line on stderr; return the summary.
     The output files are checked before anything starts (never over an existing file without
     ``force``, :mod:`fgloc.io.outputs`); a second Ctrl-C skips only the final smoothing.
-    ``on_started()``: called once the localizer is built and the messages kept before it fused."""
+    ``on_started()``: called once the localizer is built and the messages kept before it fused;
+    ``transport``: a :class:`fgloc.ros2.transport.Transport` of the caller's (default: Cyclone DDS on
+    ``ros2.domain_id``); ``stop``: set by the caller to end the run as a signal would."""
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
     from fgloc.live.app import LIVE_HISTORY_S, LIVE_TAIL_S, LiveSession, trajectory_outputs
@@ -107,14 +110,15 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
         return live
 
     c = cfg.ros2
-    transport = CycloneTransport(c.domain_id, c.interface, node_name=c.node_name, namespace=c.node_namespace,
-                                 distro=c.ros_distro)
+    if transport is None:
+        transport = CycloneTransport(c.domain_id, c.interface, node_name=c.node_name, namespace=c.node_namespace,
+                                     distro=c.ros_distro)
     try:
         node = Ros2Live(cfg, transport, make_session, make_live, occ_map=occ, event=event, on_started=on_started)
     except BaseException:
         transport.close()
         raise
-    stop = threading.Event()
+    stop = threading.Event() if stop is None else stop
 
     def hurry() -> None:  # a second Ctrl-C: close without the final smoothing (fgloc.io.stop)
         if node.session is not None:

@@ -309,25 +309,52 @@ class Streams(SmootherState):
             r = self._gyro_increment(name, a, b, want_var=False)
             if r is not None:
                 return r[0] if t1 > t0 else -r[0]
-        if not self.odo_t:
+        th = self._wheel_turn(a, b)
+        return th if t1 > t0 else -th
+
+    def _gyro_turn(self, name: str, t0: float, t1: float) -> float | None:
+        """The gyro ``name``'s bias-free turn over ``(t0, t1]`` up to its last reading, the wheels' (times
+        their yaw-rate gain) for the rest (a prediction to the newest odometry stamp is usually past the
+        gyro's last reading; a gyro that stopped); None when its readings do not reach back to ``t0`` or
+        leave a gap."""
+        got = self.gyro.get(name)
+        if got is None:
+            return None
+        ts = got[0]
+        if not ts or ts[0] > t0 + 1e-9:
+            return None
+        last = ts[-1]
+        if last >= t1 - 1e-9:
+            r = self._gyro_increment(name, t0, t1, want_var=False)
+            return None if r is None else r[0]
+        turn = 0.0
+        if last > t0:
+            r = self._gyro_increment(name, t0, last, want_var=False)
+            if r is None:
+                return None
+            turn = r[0]
+        return turn + self._wheel_turn(max(last, t0), t1)
+
+    def _wheel_turn(self, a: float, b: float) -> float:
+        """The odometry's heading change over ``(a, b]`` times its yaw-rate gain (``a <= b``)."""
+        if not self.odo_t or b <= a:
             return 0.0
         i0 = max(bisect_right(self.odo_t, a) - 1, 0)
         i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
         th = integrate_heading(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]), a, b)
-        th *= float(self._gains[1])
-        return th if t1 > t0 else -th
+        return th * float(self._gains[1])
 
     def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
-        """An odometry increment with the current gains (and the gyro's rotation when it covers it)."""
+        """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`)."""
         if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8:
             return d
         for name in self.gyro:  # the first gyro that covers the interval turns it
-            r = self._gyro_increment(name, t0, t1, want_var=False)
+            r = self._gyro_turn(name, t0, t1)
             if r is not None and abs(d[2]) > 1e-9:
-                return scaled_delta(d, (float(self._gains[0]), r[0] / d[2]), jacobian=False)[0]
+                return scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
             if r is not None:
                 out = scaled_delta(d, self._gains, jacobian=False)[0]
-                out[2] = r[0]
+                out[2] = r
                 return out
         return scaled_delta(d, self._gains, jacobian=False)[0]
 

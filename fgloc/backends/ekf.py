@@ -154,6 +154,10 @@ class EKFConfig:
                                     "a magnetometer drifts ~1-10 deg/h)", min=0)
     latency: bool = setting(True, "estimate the scan stamps' latency from how the fixes lag the gyro / odometry")
     latency_s: float | None = setting(None, "a known scan latency (s): overrides the estimate")
+    history_s: float = setting(1.0, "s: a measurement stamped up to this long before the filter time (odometry "
+                               "delivered late, IMU bursts, a late scan) is applied at its stamp and the later ones "
+                               "again after it (robot_localization's smooth_lagged_data); older ones, or 0, are "
+                               "applied at the filter time", min=0)
     odom_held_back: bool = setting(True, "an odometry twist is the mean since the previous message (held backwards, "
                                    "as the smoother integrates it): it measures the velocity at the start of that "
                                    "interval; false: the velocity at its stamp (the paper's)")
@@ -445,8 +449,9 @@ class EKF:
         return self.update_h(np.array([rate]), H @ self.x, H, np.array([[var]]), gate, "gyro")
 
     def update_compass(self, t: float, theta_map: float | None, var_theta: float,
-                       rate: float | None = None, var_rate: float = 0.0) -> bool:
-        """Compass ``[theta, w]`` (heading already in the map frame); either part may be None."""
+                       rate: float | None = None, var_rate: float = 0.0, gated: bool = True) -> bool:
+        """Compass ``[theta, w]`` (heading already in the map frame); either part may be None.
+        ``gated`` False: no gate (a reading re-applied as it was decided on arrival)."""
         w_idx = self.w_index
         z: list[float] = []
         rows: list[int] = []
@@ -461,7 +466,7 @@ class EKF:
             var.append(var_rate)
         if not rows:
             return False
-        gate = self.config.gate_compass
+        gate = self.config.gate_compass if gated else None
         if gate is not None and len(rows) == 2:
             gate = CHI2_999[2]
         return self.update(t, np.array(z), rows, np.diag(var), gate, "compass")

@@ -44,6 +44,7 @@ from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import Capability, SourceNoise
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
+from fgloc.backends.ekf_history import InOrder
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
     INSTANT_RATE,
@@ -96,6 +97,8 @@ class EKFBackend(Backend):
         self.ekf = EKF(c)
         self.ekf.x = np.zeros(self.ekf.n)
         self.ekf.P = np.eye(self.ekf.n)
+        # measurements in stamp order: a late one put in its place (ekf_history.py)
+        self.order = InOrder(self.ekf, c.history_s)
         self.compass_sigma = c.compass_sigma
         self.compass_rate_sigma = c.compass_rate_sigma
         self.use_compass_yaw = c.use_compass_yaw
@@ -148,6 +151,7 @@ class EKFBackend(Backend):
 
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
         self.ekf.initialize(t, pose, cov)
+        self.order.clear()
         self._consecutive_rejects = 0
         self._record_online(t, self.ekf.pose(), self.ekf.pose_cov())
 
@@ -208,8 +212,6 @@ class EKFBackend(Backend):
                                  None if self._has_gyro() else float(tw[2]) * gain)
         if not self.initialized:
             return
-        if t < (self.ekf.t or -np.inf):
-            self.stats["late"] += 1
         k, rel = self.inputs.noise("odom")
         if k != 1.0 or rel > 0.0:
             cov[2, :] *= k
@@ -238,8 +240,16 @@ class EKFBackend(Backend):
             si = self.ekf.add_state(YAW_SCALE_STATE, 0.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q,
                                     bounds=(math.log(SCALE_MIN), math.log(SCALE_MAX)))
         h.accepted += 1
-        self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si, held_from=held_from,
-                                keep_w_noise=self._has_gyro(), sole=sole)
+        keep_w = self._has_gyro()
+
+        def encoder() -> bool:
+            return self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si, held_from=held_from,
+                                           keep_w_noise=keep_w, sole=sole)
+
+        def again(_: bool) -> None:
+            encoder()
+
+        self.order.apply(t, encoder, again)
         self.inputs.latency.evaluate(self.motion)
 
     def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
@@ -262,8 +272,6 @@ class EKFBackend(Backend):
             self.inputs.reading(source, RATE, 0.05, t, float(tw[2]), float(cov[2, 2]))
         if not self.initialized:
             return
-        if t < (self.ekf.t or -math.inf):
-            self.stats["late"] += 1
         c = cov[np.ix_(comps, comps)].copy()
         if 2 in comps:
             k, rel = self.inputs.noise(source)
@@ -272,7 +280,15 @@ class EKFBackend(Backend):
             c[:, j] *= k
             c[j, j] += (rel * float(tw[2])) ** 2
         rows = [((OVX, OVY, OW) if self.ekf.omni else (V, -1, W))[i] for i in comps]
-        if self.ekf.update(t, tw[comps], rows, c, CHI2_999[len(comps)], source):
+        z = tw[comps]
+
+        def again(ok: bool) -> None:
+            if ok:
+                self.ekf.update(t, z, rows, c, None, source)
+            else:
+                self.ekf.predict(t)
+
+        if self.order.apply(t, lambda: self.ekf.update(t, z, rows, c, CHI2_999[len(comps)], source), again):
             h.accepted += 1
         else:
             h.gated += 1
@@ -298,29 +314,54 @@ class EKFBackend(Backend):
         if not self.initialized:
             return
         th = self.calib.to_map(yaw) if (yaw is not None and self.use_compass_yaw) else None
+        if th is None and rate is None:
+            return
         vy = self.inputs.variance(yaw_var, self.compass_sigma)
         vr = self.inputs.variance(rate_var, self.compass_rate_sigma)
-        if th is not None:
-            vy *= self.inputs.noise(f"{source}.yaw")[0] ** 2
-            h = self.inputs.source(f"{source}.yaw", "heading")
-            if self.ekf.update_compass(t, th, vy, rate, vr):
-                h.accepted += 1
-                self._compass_gated_run = 0
-                return
-            h.gated += 1
-            self._compass_gated_run += 1
-            k_y, _ = self.inputs.noise(f"{source}.yaw")
-            if self._compass_gated_run >= self.cfg.compass_recover_after and k_y < 3.0:
-                # gated for a while although it agrees with the other sources: the filter's heading
-                # drifted (e.g. on a wheel yaw that lies), not the compass; re-open the heading
-                innov = wrap_scalar(th - float(self.ekf.x[TH]))
-                self.ekf.P[TH, TH] = max(self.ekf.P[TH, TH], innov * innov + vy)
-                self.ekf.update_compass(t, th, vy, None, vr)
-                self.stats["compass_recoveries"] = self.stats.get("compass_recoveries", 0) + 1
-                self._compass_gated_run = 0
-                return
-        if rate is not None:
-            self.ekf.update_compass(t, None, vy, rate, vr)
+        vth = vy * self.inputs.noise(f"{source}.yaw")[0] ** 2 if th is not None else vy
+
+        def first() -> str:
+            """What was applied: ``both``, ``reopened`` (+ ``-gated``), ``rate`` or ``none``."""
+            if th is not None:
+                h = self.inputs.source(f"{source}.yaw", "heading")
+                if self.ekf.update_compass(t, th, vth, rate, vr):
+                    h.accepted += 1
+                    self._compass_gated_run = 0
+                    return "both"
+                h.gated += 1
+                self._compass_gated_run += 1
+                k_y, _ = self.inputs.noise(f"{source}.yaw")
+                if self._compass_gated_run >= self.cfg.compass_recover_after and k_y < 3.0:
+                    # gated for a while although it agrees with the other sources: the filter's heading
+                    # drifted (e.g. on a wheel yaw that lies), not the compass; re-open the heading
+                    self._reopen_heading(th, vth)
+                    ok = self.ekf.update_compass(t, th, vth, None, vr)
+                    self.stats["compass_recoveries"] = self.stats.get("compass_recoveries", 0) + 1
+                    self._compass_gated_run = 0
+                    return "reopened" if ok else "reopened-gated"
+            if rate is not None:
+                return "rate" if self.ekf.update_compass(t, None, vy, rate, vr) else "none"
+            return "none"
+
+        def again(how: str) -> None:
+            if how == "both":
+                self.ekf.update_compass(t, th, vth, rate, vr, gated=False)
+            elif how.startswith("reopened") and th is not None:
+                self.ekf.predict(t)
+                self._reopen_heading(th, vth)
+                if how == "reopened":
+                    self.ekf.update_compass(t, th, vth, None, vr, gated=False)
+            elif how == "rate":
+                self.ekf.update_compass(t, None, vy, rate, vr, gated=False)
+            else:
+                self.ekf.predict(t)
+
+        self.order.apply(t, first, again)
+
+    def _reopen_heading(self, th: float, var: float) -> None:
+        """The heading's variance at least the innovation of ``th`` (map frame) squared plus ``var``."""
+        innov = wrap_scalar(th - float(self.ekf.x[TH]))
+        self.ekf.P[TH, TH] = max(self.ekf.P[TH, TH], innov * innov + var)
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
         """A yaw rate (rad/s, base_link z) measuring ``w + bias`` (a bias state per gyro)."""
@@ -340,23 +381,42 @@ class EKFBackend(Backend):
             return
         k, rel = self.inputs.noise(name)
         var = k * k * var + (rel * rate) ** 2 + gb.sigma() ** 2
-        if self.ekf.update_gyro(t, float(rate) - b, var, None, CHI2_999[1] * 4):
-            h.accepted += 1
-            self._gyro_gated_run = 0
-        else:
+        z = float(rate) - b
+
+        def first() -> str:
+            """What was applied: ``used``, ``reopened`` or ``gated``."""
+            if self.ekf.update_gyro(t, z, var, None, CHI2_999[1] * 4):
+                h.accepted += 1
+                self._gyro_gated_run = 0
+                return "used"
             h.gated += 1
             self._gyro_gated_run += 1
             k_g, _ = self.inputs.noise(name)
             if self._gyro_gated_run >= GYRO_RECOVER_AFTER and k_g < 3.0:
                 # gated again and again while it agrees with the other yaw sources: the filter's
                 # yaw rate is what is off (a slow process noise, a lying wheel), not the gyro
-                wi = self.ekf.w_index
-                innov = float(rate) - b - float(self.ekf.x[wi])
-                self.ekf.P[wi, wi] = max(self.ekf.P[wi, wi], innov * innov)
-                self.ekf.update_gyro(t, float(rate) - b, var, None, None)
+                self._reopen_rate(z)
+                self.ekf.update_gyro(t, z, var, None, None)
                 self.stats["gyro_recoveries"] = self.stats.get("gyro_recoveries", 0) + 1
                 self._gyro_gated_run = 0
+                return "reopened"
+            return "gated"
+
+        def again(how: str) -> None:
+            self.ekf.predict(t)
+            if how == "reopened":
+                self._reopen_rate(z)
+            if how != "gated":
+                self.ekf.update_gyro(t, z, var, None, None)
+
+        self.order.apply(t, first, again)
         self.inputs.latency.evaluate(self.motion)
+
+    def _reopen_rate(self, rate: float) -> None:
+        """The yaw rate's variance at least the innovation of ``rate`` (bias removed) squared."""
+        wi = self.ekf.w_index
+        innov = rate - float(self.ekf.x[wi])
+        self.ekf.P[wi, wi] = max(self.ekf.P[wi, wi], innov * innov)
 
     def add_relative_yaw(self, t: float, yaw: float, var: float, source: str = "imu") -> None:
         """An orientation whose increments are used, not its frame (robot_localization's
@@ -380,14 +440,9 @@ class EKFBackend(Backend):
         self.inputs.heading(name, t, float(yaw), v)
         if not self.initialized:
             return
-        if t < (self.ekf.t or -math.inf):
-            self.stats["late"] += 1
-        self.ekf.predict(t)
         key = f"yaw_offset:{source}"
-        i = self.ekf.aug.get(key)
-        if i is None or self._rel_gated.get(source, 0) >= self.cfg.compass_recover_after:
-            if i is not None:
-                self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
+
+        def anchor() -> None:
             i = self.ekf.add_state(key, 0.0, 1.0, self.cfg.relative_yaw_q)
             # c = z - theta: correlated with the heading (and through it with the rest)
             P = self.ekf.P
@@ -395,21 +450,45 @@ class EKFBackend(Backend):
             P[:, i] = -P[:, TH]
             P[i, i] = P[TH, TH] + v
             self.ekf.x[i] = wrap_scalar(float(yaw) - float(self.ekf.x[TH]))
-            self._rel_gated[source] = 0
-            h.accepted += 1
-            return
-        H = np.zeros((1, self.ekf.n))
-        H[0, TH] = 1.0
-        H[0, i] = 1.0
-        hx = np.array([float(self.ekf.x[TH]) + float(self.ekf.x[i])])
-        if self.ekf.update_h(np.array([float(yaw)]), hx, H, np.array([[v]]), self.cfg.gate_compass, "relative_yaw",
-                             (0,)):
-            self.ekf.x[i] = wrap_scalar(float(self.ekf.x[i]))
-            h.accepted += 1
-            self._rel_gated[source] = 0
-        else:
+
+        def update(gate: float | None) -> bool:
+            i = self.ekf.aug[key]
+            H = np.zeros((1, self.ekf.n))
+            H[0, TH] = 1.0
+            H[0, i] = 1.0
+            hx = np.array([float(self.ekf.x[TH]) + float(self.ekf.x[i])])
+            if self.ekf.update_h(np.array([float(yaw)]), hx, H, np.array([[v]]), gate, "relative_yaw", (0,)):
+                self.ekf.x[i] = wrap_scalar(float(self.ekf.x[i]))
+                return True
+            return False
+
+        def first() -> str:
+            """What was applied: ``anchored``, ``used`` or ``gated``."""
+            self.ekf.predict(t)
+            i = self.ekf.aug.get(key)
+            if i is None or self._rel_gated.get(source, 0) >= self.cfg.compass_recover_after:
+                if i is not None:
+                    self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
+                anchor()
+                self._rel_gated[source] = 0
+                h.accepted += 1
+                return "anchored"
+            if update(self.cfg.gate_compass):
+                h.accepted += 1
+                self._rel_gated[source] = 0
+                return "used"
             h.gated += 1
             self._rel_gated[source] = self._rel_gated.get(source, 0) + 1
+            return "gated"
+
+        def again(how: str) -> None:
+            self.ekf.predict(t)
+            if how == "anchored":
+                anchor()
+            elif how == "used":
+                update(None)
+
+        self.order.apply(t, first, again)
 
     def add_keyframe(self, t: float, fix: PoseFix | None) -> bool:
         if not self.initialized:
@@ -425,16 +504,26 @@ class EKFBackend(Backend):
                                 float(cov[2, 2]))
             t_meas = t - self.latency_estimate()  # a late-stamped scan shows the pose this long before
             heading = (t_meas, float(pose[2]), max(float(cov[2, 2]), self.cfg.map_min_sigma_theta**2))
-            if self.ekf.t is not None and t_meas < self.ekf.t:
-                # a late fix (the scan arrived after newer odometry, or was stamped late): carried
-                # forward to the filter time by the filter's own velocities, with their motion noise
+            if self.ekf.t is not None and t_meas < self.ekf.t and not self.order.in_history(t_meas):
+                # a late fix older than the history: carried forward to the filter time by the
+                # filter's own velocities, with their motion noise
                 dt = self.ekf.t - t_meas
                 s = self.ekf.x.copy()
                 s[:3] = pose
                 pose = motion_model(s, dt, self.ekf.omni)[:3]
                 cov = cov + self.ekf.process_noise(dt)[:3, :3]
                 t_meas = self.ekf.t
-            used = self.ekf.update_map(t_meas, pose, cov, gate=not force)
+            # (within the history a late fix is applied at its stamp, the later measurements after it)
+            z, R, tm = pose, cov, t_meas
+
+            def again(ok: bool) -> None:
+                if ok:
+                    self.ekf.update_map(tm, z, R, gate=False)
+                else:
+                    self.ekf.predict(tm)
+
+            rec = max(self.ekf.t or tm, tm)
+            used = self.order.apply(tm, lambda: self.ekf.update_map(tm, z, R, gate=not force), again, record=rec)
             h = self.inputs.source("scan", "pose")
             if used:
                 h.accepted += 1
@@ -446,8 +535,8 @@ class EKFBackend(Backend):
                 h.gated += 1
                 self._consecutive_rejects += 1
                 self.stats["fixes_rejected"] += 1
-        else:
-            self.ekf.predict(t)
+        elif self.ekf.t is None or t > self.ekf.t:
+            self.order.apply(t, lambda: self.ekf.predict(t), lambda _: self.ekf.predict(t), record=t)
         self.stats["keyframes"] += 1
         self._record_online(self.ekf.t or t, self.ekf.pose(), self.ekf.pose_cov())
         return used
@@ -462,6 +551,11 @@ class EKFBackend(Backend):
         return float(self.ekf.t or 0.0), self.ekf.pose(), self.ekf.pose_cov()
 
     def finish(self) -> Trajectory:
+        """The pose after each scan's fix, revised where a measurement stamped before it came after it."""
         self.stats["gated"] = dict(self.ekf.stats["gated"])
         self.stats["omni"] = bool(self.ekf.omni)
-        return self.online_trajectory()
+        for k in ("reordered", "late"):
+            self.stats[k] = self.stats.get(k, 0) + self.order.stats[k]
+        tr = self.online_trajectory()
+        self.order.revise(tr.stamps, tr.poses, tr.covs)
+        return tr

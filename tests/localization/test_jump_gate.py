@@ -190,3 +190,29 @@ def test_changed_world_with_the_gate_stays_on_the_truth(shelves, backend):
     assert float(step.max()) <= 0.1                 # measured 0.011, 0.022 m
     counts = loc.monitor.counts()
     assert counts["degraded"] + counts["suspect"] > 0   # dead reckoning while the map points elsewhere
+
+
+@pytest.fixture(scope="module")
+def shelves_late():
+    """The shelves with the odometry delivered 0.3 s after its stamps (seed 1: the first wrong fix is
+    vague, 0.06 m sigma, 0.33 m off)."""
+    from fgloc.sim import load_scenario, run_scenario
+
+    sc = load_scenario(SCEN / "changed_world.yaml")
+    sc["route"] = [[24.0, 17.0], [8.0, 17.0]]
+    sc["initial_yaw"] = float(np.pi)
+    sc["faults"] = {**(sc.get("faults") or {}), "odometry_late": {"delay_s": 0.3}}
+    return run_scenario(sc, seed=1)
+
+
+@pytest.mark.parametrize("backend", ["smoother", "ekf"])
+def test_late_odometry_changed_world_stays_on_the_truth(shelves_late, backend):
+    """A wrong fix that follows the previous fix within its covariances while the back-end's prediction
+    (which agrees with that previous fix) puts it 4 sigma away is a jump: it does not start a run of
+    wrong fixes the back-end is then made to take (the EKF after its rejections in a row)."""
+    loc, err, step, wrong = _localize(shelves_late, backend)
+    assert len(wrong) >= 20 and loc.stats["held_jumps"] >= 20
+    assert float(np.sqrt(np.mean(err**2))) <= 0.03  # measured 0.006 (smoother), 0.020 m (EKF); 0.24 both before
+    assert float(err.max()) <= 0.1                   # measured 0.014, 0.069 m; 0.33, 0.37 m before
+    assert float(step.max()) <= 0.1                  # measured 0.011, 0.023 m
+    assert loc.backend.stats["fixes_rejected"] <= 10  # measured 0 (both); the EKF 20 before

@@ -8,9 +8,10 @@ A particle filter over ``base_link`` poses ``[x_m, y_m, yaw_rad]`` in ``map``:
   ``alpha4`` (trans from rot), ``alpha5`` (strafe from trans, omni only);
 * **sensor model**: likelihood field.  Beam endpoints (evenly subsampled to at most
   ``laser_max_beams`` valid beams, de-skewed by the shared preprocessor) are projected
-  per particle; ``z`` = distance to the nearest wall *surface* (the map's distance field to
-  occupied cell centres minus half a cell, bilinear, clipped to
-  ``laser_likelihood_max_dist``; endpoints off the grid get the maximum);
+  per particle; ``z`` = distance to the nearest wall *surface* (``|f|``, ``f`` the bilinear
+  signed field of :func:`wall_surface_field`: zero on the wall cells' faces, or
+  ``surface_depth_cells`` behind them; clipped to ``laser_likelihood_max_dist``; endpoints off
+  the grid get the maximum);
   ``pz = z_hit exp(-z^2 / 2 sigma_hit^2) + z_rand / range_max``.  ``laser_model_type``
   ``likelihood_field`` combines beams as nav2 does, ``w = 1 + sum pz^3``;
   ``likelihood_field_prob`` multiplies them, ``w = prod pz`` (log space), tempered by
@@ -93,7 +94,7 @@ def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, table, i
         sr = s * inv_res
         acc = 0.0
         for j in range(m):
-            z = bilinear(field, gx0 + cr * bx[j] - sr * by[j], gy0 + sr * bx[j] + cr * by[j], zmax)
+            z = abs(bilinear(field, gx0 + cr * bx[j] - sr * by[j], gy0 + sr * bx[j] + cr * by[j], zmax))
             t = z * inv_step
             k = int(t)
             if k > last:
@@ -282,6 +283,8 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
             qx = pose[0] + c * bx[j] - s * by[j]
             qy = pose[1] + s * bx[j] + c * by[j]
             z, du, dv = bilinear_grad(field, (qx - ox) * inv_res - 0.5, (qy - oy) * inv_res - 0.5, zmax)
+            if z < 0.0:  # inside an obstacle: the distance is |field|, its gradient points out
+                z, du, dv = -z, -du, -dv
             if not (z < zmax):
                 continue
             e = math.exp(-0.5 * z * z * inv_s2)
@@ -378,6 +381,30 @@ def systematic_resample(weights: FloatArray, n: int, rng: np.random.Generator) -
     return np.minimum(np.searchsorted(c, u, side="right"), len(weights) - 1).astype(np.int64)
 
 
+def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: float, depth_m: float = 0.0
+                       ) -> FloatArray:
+    """Signed distance (m) from each cell centre to the wall surface: positive in free space, negative
+    inside walls, clipped to ``[-max_dist, max_dist]``.
+
+    Outside: the distance to the nearest wall cell centre minus half a cell; inside: minus the distance to
+    the nearest non-wall cell centre less half a cell.  Bilinear interpolation between a wall cell and its
+    free neighbour then crosses zero on the face between them (an unsigned field clipped at zero would put
+    the minimum on the wall cell's centre, half a cell deep, and leave the inside of thick walls flat: beam
+    endpoints pulled into the walls, the pose towards the walls the laser sees).  ``depth_m`` moves the
+    surface that far into the walls (half a cell: through the boundary cells' centres).
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    w = np.asarray(walls, dtype=bool)
+    if not w.any():
+        return np.full(w.shape, float(max_dist))
+    half = 0.5 * resolution
+    outside = distance_transform_edt(~w) * resolution - half
+    inside = distance_transform_edt(w) * resolution - half if not w.all() else np.full(w.shape, float(max_dist))
+    d = np.where(w, -inside, outside) + float(depth_m)
+    return np.ascontiguousarray(np.clip(d, -max_dist, max_dist))
+
+
 def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weighted mean (circular for yaw) and 3x3 covariance of particles ``(N, 3)``."""
     w = w / w.sum()
@@ -413,6 +440,9 @@ class AMCLConfig:
     laser_likelihood_max_dist: float = setting(2.0, "m, distance-field clip; endpoints off the grid get this", gt=0)
     laser_max_range: float = setting(-1.0, "m; <= 0: the scan's range_max (for z_rand)")
     beam_correlation: float = setting(8.0, "likelihood_field_prob: log-likelihood divided by this", gt=0)
+    surface_depth_cells: float = setting(0.5, "where the wall surface lies behind the wall cells' faces, in cells "
+                                         "(0: on the faces, a map rasterized from the walls; 0.5: through the "
+                                         "boundary cells' centres)", min=0, max=1)
     field_walls: str = setting("occupied", "cells the likelihood field measures distance to (occupied+unknown_edge: "
                                "maps storing walls as grey pixels)", choices=("occupied", "occupied+unknown_edge"))
     min_particles: int = setting(500, "KLD sampling lower bound", min=1)
@@ -505,18 +535,16 @@ class AMCL:
         self.pre = ScanPreprocessor(
             laser_mount, PreprocessOptions(max_beams=self.laser_max_beams, deskew=bool(conf.deskew),
                                            min_valid_beams=int(conf.min_valid_beams)))
-        # likelihood field: distance to the wall surface (half a cell short of the occupied centre)
         if conf.field_walls == "occupied":
-            df = np.asarray(occ_map.distance_field, dtype=float)
+            walls = np.asarray(occ_map.occupied, dtype=bool)
         elif conf.field_walls == "occupied+unknown_edge":
-            from scipy.ndimage import binary_dilation, distance_transform_edt
+            from scipy.ndimage import binary_dilation
 
             walls = occ_map.occupied | (occ_map.unknown & binary_dilation(occ_map.free, np.ones((3, 3), bool)))
-            df = distance_transform_edt(~walls) * occ_map.resolution if walls.any() else \
-                np.full(walls.shape, np.inf)
         else:
             raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {conf.field_walls!r}")
-        self._field = np.ascontiguousarray(np.clip(df - 0.5 * occ_map.resolution, 0.0, self.max_dist))
+        self._field = wall_surface_field(walls, occ_map.resolution, self.max_dist,
+                                         float(conf.surface_depth_cells) * occ_map.resolution)
         self._free = occ_map.free_cell_centers()
         self._table_key: tuple[int, float, float] | None = None
         self._last_refine: tuple[Any, ...] | None = None
@@ -533,6 +561,9 @@ class AMCL:
         self._force_update = True
         self._n_updates = 0
         self.last_kld_k = 0
+        # after the global phase: the last unconfirmed fix (pose, covariance), or None once confirmed
+        self._settling: tuple[FloatArray, FloatArray] | None = None
+        self._settle = False
 
     # ------------------------------------------------------------------ config
     @classmethod
@@ -551,6 +582,7 @@ class AMCL:
         self._acc = np.zeros(3)
         self._force_update = True
         self._n_updates = 0
+        self._settling, self._settle = None, False
         if pose is None:
             self.particles = self._random_free(self.global_particles)
             self._global = True
@@ -632,6 +664,7 @@ class AMCL:
             if need <= self.max_particles and self._cluster(self.particles, self.weights)[1] \
                     >= self.converged_cluster_weight:
                 self._global = False
+                self._settle = True
 
     # ------------------------------------------------------------------ front-end API
     def match(self, scan: LaserScan, guess: np.ndarray, odom_delta: np.ndarray | None = None) -> MatchResult:
@@ -667,6 +700,7 @@ class AMCL:
             mask, share = self._cluster(self.particles, self.weights)
             mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
             return self._result(compose1(mean, self._acc), cov, share, len(pts), updated=False)
+        moved = self._acc
         if np.any(self._acc != 0):
             self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
                                            self.rng)
@@ -694,13 +728,49 @@ class AMCL:
         # the estimate: the heaviest connected cluster of the weighted cloud (nav2 publishes the same)
         mask, share = self._cluster(self.particles, self.weights)
         mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
-        refined = False
-        if self.estimate == "refined" and not self._global:
-            mean, refined = self._refine(mean, cov, pts, float(scan.range_max))
+        was_global = self._global
         self._n_updates += 1
         if self._n_updates % self.resample_interval == 0:
             self._resample()
-        return self._result(mean, cov, share, len(pts), updated=True, refined=refined)
+        refined = False
+        if self.estimate == "refined" and not self._global:
+            # also on the update that ended the global phase: its cluster was weighed with global_sigma_hit
+            if was_global:
+                mask, share = self._cluster(self.particles, self.weights)
+                mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+            mean, refined = self._refine(mean, cov, pts, float(scan.range_max))
+        res = self._result(mean, cov, share, len(pts), updated=True, refined=refined)
+        if self._settle and res.ok:
+            return self._confirmed(res, moved)
+        return res
+
+    def _confirmed(self, res: MatchResult, moved: FloatArray) -> MatchResult:
+        """After the global phase the cloud can still hold two nearby modes in one connected cluster (KLD bins
+        apart): a fix is given once two consecutive ones (refined, with ``estimate: refined``) agree as the
+        odometry says (chi-square, 3 dof, 99.7 %, over both fixes' covariances and the motion model's noise for
+        the motion between them)."""
+        assert res.pose is not None and res.cov is not None
+        if self.estimate == "refined" and not res.info.get("refined"):  # the cloud's mean: too wide to confirm by
+            self._settling = None
+            return no_fix("not converged (after global localization: the scan fit was not kept)",
+                          n_inliers=res.n_inliers, **res.info)
+        prev, self._settling = self._settling, (np.array(res.pose, dtype=float), np.array(res.cov, dtype=float))
+        if prev is None:
+            return no_fix("not converged (the first fix after global localization, to be confirmed by the next)",
+                          n_inliers=res.n_inliers, **res.info)
+        a1, a2, a3, a4, _a5 = (float(a) for a in self.alphas)
+        trans, rot = math.hypot(float(moved[0]), float(moved[1])), abs(float(wrap_angle(moved[2])))
+        var_xy, var_yaw = a3 * trans**2 + a4 * rot**2, a1 * rot**2 + a2 * trans**2
+        d = res.pose - compose1(prev[0], moved)
+        d[2] = wrap_angle(d[2])
+        s = prev[1] + res.cov + np.diag([var_xy, var_xy, var_yaw]) + 1e-12 * np.eye(3)
+        m2 = float(d @ np.linalg.solve(s, d))
+        if not m2 <= 14.16:
+            return no_fix(f"not converged (consecutive fixes after global localization disagree by "
+                          f"{math.hypot(d[0], d[1]):.2f} m, {math.degrees(abs(d[2])):.1f} deg)",
+                          n_inliers=res.n_inliers, **res.info)
+        self._settling, self._settle = None, False
+        return res
 
     def _cluster(self, particles: FloatArray, weights: FloatArray) -> tuple[NDArray[np.bool_], float]:
         """The particles of the heaviest connected cluster of KLD bins and its share of the weight."""

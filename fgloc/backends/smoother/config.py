@@ -67,6 +67,10 @@ class SmootherConfig:
     odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1 (a skid steer "
                                           "reports 1.4-7 times the turn)", gt=0)
     odom_scale_rw: float = setting(0.003, "random walk of the scales (per sqrt(s))", gt=0)
+    unmeasured_accel_q: float = setting(
+        0.5, "where the odometry's stamps do not reach (it stopped or dropped a stretch): how fast the speed "
+        "may change ((m/s)^2/s; the EKF's q_v); the graph's own recent motion is carried on there", gt=0)
+    unmeasured_turn_q: float = setting(1.0, "... and the turn rate ((rad/s)^2/s; the EKF's q_w)", gt=0)
     slow_odom_timing: bool = setting(
         False, "an odometry slower than ~17 Hz carries its timing in the keyframe factor's yaw, (period * w)^2 "
         "at each end: better heading in turns on a fully mapped route (CARMEN fr079 / intel), but off by "

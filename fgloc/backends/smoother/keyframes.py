@@ -114,9 +114,11 @@ class KeyframeGraph(FurtherSourceFactors):
             self._acc = (gtsam.NonlinearFactorGraph(), gtsam.Values(), {}, [], [])
         graph, vals, ts, pairs, keys = self._acc
         ts[k] = t
-        d, c = self._integrate(t_prev, t)
-        got = self._chord_along_gyro(t_prev, t) if self.cfg.gyro_chord else None
-        heading_chord = got is None and self.cfg.gyro_chord and self._heading_chord(t_prev, t)
+        d, c = self._motion(t_prev, t)
+        # (a chord holds the odometry's last twist: not where the odometry stopped)
+        use_chord = self.cfg.gyro_chord and self._unmeasured_tail(t_prev, t) <= 0.0
+        got = self._chord_along_gyro(t_prev, t) if use_chord else None
+        heading_chord = got is None and use_chord and self._heading_chord(t_prev, t)
         if heading_chord:
             got = self._chord_along_heading(t_prev, t)
         if got is None:
@@ -215,8 +217,8 @@ class KeyframeGraph(FurtherSourceFactors):
     def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
         """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from
         its own mark (the fix's stamp stays, the end grows): the predictions' marks stay theirs."""
-        if not self.odo_t:
-            return self._integrate(t0, t1)[1]
+        if not self.odo_t or self._unmeasured_tail(t0, t1) > 0.0 or self._gap_s(t0, t1) > 0.0:
+            return self._motion(t0, t1)[1]
         mark = self._floor_mark
         if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:
             mark.clear()

@@ -99,6 +99,13 @@ class SlidingWindowSmoother(KeyframeGraph):
         self.inputs.standstill(t, still)
         self.odo_t.append(t)
         self.odo_u.append((u0, u1, u2))
+        sp = math.hypot(u0, u1)
+        if sp > self._odo_speed_max:
+            self._odo_speed_max = sp
+        if abs(u2) > self._odo_rate_max and cl[8] <= TWIST_VAR_MAX:
+            self._odo_rate_max = abs(u2)
+        if abs(u1) > self._odo_lateral_max and cl[4] <= TWIST_VAR_MAX:
+            self._odo_lateral_max = abs(u1)
         if cl[0] <= TWIST_VAR_MAX and cl[4] <= TWIST_VAR_MAX and cl[8] <= TWIST_VAR_MAX:
             self.odo_c.append((cl[0], cl[1], cl[2], cl[4], cl[5], cl[8]))   # upper6(c): bounded_covariance leaves it
         else:
@@ -235,7 +242,7 @@ class SlidingWindowSmoother(KeyframeGraph):
         key = (k, float(t), len(self.odo_t))
         if self._pred_cache is not None and self._pred_cache[0] == key:
             return self._pred_cache[1], self._pred_cache[2]
-        d, c = self._integrate(self.kf_t[-1], t)
+        d, c = self._motion(self.kf_t[-1], t)
         d = self._corrected(d, self.kf_t[-1], t)
         p0 = self.kf_pose[k]
         pose = compose1(p0, d)

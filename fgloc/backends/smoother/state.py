@@ -71,6 +71,10 @@ class SmootherState(Backend):
                                 self.cfg.latency_s)
         self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
         self._gains = np.ones(2)
+        # the fastest speed (m/s) and turn rate (rad/s) the odometry has reported (kept across restarts)
+        self._odo_speed_max = 0.0
+        self._odo_rate_max = 0.0
+        self._odo_lateral_max = 0.0
         self._turned = 0.0
         #: the odometry's stamps cannot be placed against the scans' (set by the localizer: a slow
         #: odometry written in bursts, which its OdometryClock cannot shift): its timing variance is

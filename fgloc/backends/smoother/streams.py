@@ -16,10 +16,19 @@ from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
 from fgloc.backends.integration import integrate_heading, integrate_twist_lists
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
-from fgloc.geometry import exp_coefficients, wrap_scalar
+from fgloc.geometry import adjoint, between1, compose1, exp_coefficients, inverse1, wrap_scalar
+from fgloc.geometry import exp as se2_exp
+from fgloc.geometry import log as se2_log
 
 #: the odometry's mean message period for :meth:`SlidingWindowSmoother._timing_var` is taken over this many
 TIMING_MESSAGES = 200
+
+#: s, an odometry step longer than this (and than :data:`ODOM_GAP_PERIODS` of its median period) leaves
+#: the motion beyond it unmeasured (a dead wheel driver, a dropped stretch; as ``integrity.odometry_gap_s``)
+ODOM_GAP_S = 0.25
+ODOM_GAP_PERIODS = 3.0
+#: m/s, an odometry that has reported sideways speeds above this drives an omni base (the EKF's omni_vy_mps)
+LATERAL_SPEED = 0.05
 
 
 def all_finite(*arrays: FloatArray) -> bool:
@@ -151,6 +160,99 @@ class Streams(SmootherState):
                 del self._int_marks[next(iter(self._int_marks))]
             mark = self._int_marks[t0] = []
         return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
+
+    def _odom_gap_s(self) -> float:
+        """The longest step a running odometry leaves between two stamps (inf with fewer than 3)."""
+        return max(ODOM_GAP_S, ODOM_GAP_PERIODS * self._period_of(self.odo_t))
+
+    def _unmeasured_tail(self, t0: float, t1: float) -> float:
+        """How long the end of ``(t0, t1]`` lies beyond the odometry's newest stamp by more than a
+        running odometry's gap (:meth:`_odom_gap_s`): 0 while it runs, the time since it stopped."""
+        if not self.odo_t:
+            return 0.0
+        end = self.odo_t[-1] + self._odom_gap_s()
+        return t1 - max(t0, end) if end < t1 else 0.0
+
+    def _gap_s(self, t0: float, t1: float) -> float:
+        """How long of ``(t0, t1]`` falls into steps between two odometry stamps beyond a running
+        odometry's gap (:meth:`_odom_gap_s`): a stretch it dropped, its first twist after held over it."""
+        ts = self.odo_t
+        tol = self._odom_gap_s()
+        if len(ts) < 2 or not math.isfinite(tol):
+            return 0.0
+        out = 0.0
+        i = max(bisect_right(ts, t0) - 1, 0)
+        hi = min(bisect_left(ts, t1), len(ts) - 1)
+        while i < hi:
+            a, b = max(ts[i] + tol, t0), min(ts[i + 1], t1)
+            if b > a:
+                out += b - a
+            i += 1
+        return out
+
+    def _graph_twist(self, t: float) -> tuple[FloatArray, FloatArray] | None:
+        """The body twist ``[vx, vy, w]`` the graph's keyframes moved with up to ``t`` (the newest one
+        at or before ``t`` against the newest at least :data:`ODOM_GAP_S` before it) and its variances:
+        the last fix's over that time (both ends), plus a random walk since that fix
+        (``unmeasured_accel_q``, ``unmeasured_turn_q``); sideways only where the odometry has reported
+        sideways motion (an omni base; a wheeled one's sideways speed stays the odometry's).  None
+        without two such keyframes or a fix."""
+        j = bisect_right(self.kf_t, t) - 1
+        i = bisect_right(self.kf_t, self.kf_t[j] - ODOM_GAP_S) - 1 if j >= 0 else -1
+        pa = self.kf_pose.get(self.kf_key[i]) if i >= 0 else None
+        pb = self.kf_pose.get(self.kf_key[j]) if j >= 0 else None
+        fl = self._fix_floor
+        if pa is None or pb is None or i == j or fl is None:
+            return None
+        dt = self.kf_t[j] - self.kf_t[i]
+        since = max(0.0, t - fl[0])
+        fc = fl[2]
+        var_v = 2.0 * 0.5 * float(fc[0, 0] + fc[1, 1]) / (dt * dt) + self.cfg.unmeasured_accel_q * since
+        var_w = 2.0 * float(fc[2, 2]) / (dt * dt) + self.cfg.unmeasured_turn_q * since
+        tw = se2_log(between1(pa, pb)) / dt
+        if self._odo_lateral_max > LATERAL_SPEED:
+            var_vy = var_v
+        else:
+            tw[1] = 0.0
+            var_vy = float(self.odo_c[-1][3])
+        return tw, np.array([var_v, var_vy, var_w])
+
+    def _motion(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
+        """The motion over ``(t0, t1]`` as far as the odometry measures it (:meth:`_integrate`), with
+        what it does not: beyond its newest stamp (a dead wheel driver), the graph's own recent motion
+        (:meth:`_graph_twist`) carried on, with that twist's variance over the time plus a random walk
+        of the velocity over it; over a stretch it dropped, the first twist after it with its variance
+        up to the fastest the odometry has shown.  Integrated as measured, a stopped odometry's last
+        twist with its small covariance outweighs the fixes and drags the path on."""
+        tail = self._unmeasured_tail(t0, t1)
+        gap = self._gap_s(t0, t1 - tail)
+        if tail <= 0.0 and gap <= 0.0:
+            return self._integrate(t0, t1)
+        qv, qw = self.cfg.unmeasured_accel_q, self.cfg.unmeasured_turn_q
+        d, c = self._integrate(t0, t1 - tail)
+        c = c.copy()
+        if gap > 0.0:
+            sv = max(self._odo_speed_max, self.cfg.encoder_sigmas[0]) ** 2
+            c[0, 0] += sv * gap * gap + qv * gap ** 3 / 3.0
+            c[2, 2] += max(self._odo_rate_max, self.cfg.encoder_sigmas[2]) ** 2 * gap * gap + qw * gap ** 3 / 3.0
+        if tail > 0.0:
+            got = self._graph_twist(t0)
+            if got is None:   # no motion of the graph's to carry on: the last twist held
+                tw = np.asarray(self.odo_u[-1], dtype=float)
+                var = np.array([max(self._odo_speed_max, self.cfg.encoder_sigmas[0]) ** 2,
+                                float(self.odo_c[-1][3]), max(self._odo_rate_max, self.cfg.encoder_sigmas[2]) ** 2])
+            else:
+                tw, var = got
+            step = se2_exp(tw * tail)
+            # the covered part's covariance carried through the step (the increment's covariance is
+            # in the frame at its end, as integrate_twist_lists'), plus the step's own
+            A = adjoint(inverse1(step))
+            c = A @ c @ A.T
+            c[0, 0] += var[0] * tail * tail + qv * tail ** 3 / 3.0
+            c[1, 1] += var[1] * tail * tail + (qv * tail ** 3 / 3.0 if self._odo_lateral_max > LATERAL_SPEED else 0.0)
+            c[2, 2] += var[2] * tail * tail + qw * tail ** 3 / 3.0
+            d = compose1(d, step)
+        return d, c
 
     def _chord_along_gyro(self, t0: float, t1: float
                           ) -> tuple[FloatArray, tuple[float, float, float]] | None:

@@ -32,6 +32,12 @@ def register(app: typer.Typer) -> None:
                              ] = None,
         wait: Annotated[float, typer.Option("--wait", help="wait up to S seconds for subscribers to match "
                                             "before the first message", min=0.0)] = 0.0,
+        start_offset: Annotated[float, typer.Option("--start-offset", help="start S seconds into the log "
+                                                    "(ros2 bag play's --start-offset; its static transforms before "
+                                                    "are published still)", min=0.0)] = 0.0,
+        duration: Annotated[float | None, typer.Option("--duration", help="publish S seconds of log from "
+                                                       "there, then end (ros2 bag play's --playback-duration)",
+                                                       min=0.0)] = None,
         quiet: Annotated[bool, typer.Option("--quiet", help="no progress bar")] = False,
     ) -> None:
         """Publish a log on DDS with ROS 2's names, types and QoS (a ROS-free `ros2 bag play`)."""
@@ -61,7 +67,8 @@ def register(app: typer.Typer) -> None:
         try:
             with stopping.cooperative(on_stop=stop.set):
                 stats = replay(log, transport, rate=rate, clock=clock, clock_hz=clock_hz, occ_map=occ,
-                               stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait, now=now)
+                               stop=stop.is_set, progress=progress, wait_for_subscribers_s=wait, now=now,
+                               start_offset_s=start_offset, duration_s=duration)
         finally:
             transport.close()
         parts = ", ".join(f"{t} {n}" for t, n in sorted(stats.published.items()))

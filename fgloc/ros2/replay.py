@@ -13,6 +13,9 @@ gets the laser mount the log reader finds (``fgloc run``'s) published there.  Wi
 ``now``: every header stamp moved onto the wall clock (the first message's log time is the moment it
 is published, later ones at the replay's rate), as a robot's drivers stamp them: for nodes on the
 system clock (tf2 drops transforms older than its buffer) and to measure latencies as on a robot.
+``start_offset_s`` / ``duration_s``: only that window of the log, from its first message (``ros2 bag
+play``'s ``--start-offset`` / ``--playback-duration``); the static transforms before it are published
+still (merged, as they would stand then), the pace anchored at the window's first message.
 
 Topics of other types are not published (named in :attr:`ReplayStats.skipped`).
 """
@@ -58,7 +61,8 @@ def _wall_clock(log0_ns: int, wall0_ns: int, scale: float) -> Callable[[int], in
 def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool = False, clock_hz: float = 40.0,
            occ_map: Any = None, map_topic: str = "/map", map_frame: str = "map",
            stop: Callable[[], bool] | None = None, progress: Callable[[int], Any] | None = None,
-           wait_for_subscribers_s: float = 0.0, now: bool = False) -> ReplayStats:
+           wait_for_subscribers_s: float = 0.0, now: bool = False, start_offset_s: float = 0.0,
+           duration_s: float | None = None) -> ReplayStats:
     """Publish ``log`` (see the module docstring); returns what was published.  ``progress(total)``
     makes a progress bar (``update(n)``); ``wait_for_subscribers_s``: wait up to this long, before the
     first message, for subscribers (a node started before the replay): until every topic that discovery
@@ -111,10 +115,23 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
     pending = 0
     scale = 1.0 / rate if rate > 0 else 1.0
     to_wall: Callable[[int], int] = lambda t_ns: t_ns  # noqa: E731
+    first_ns: int | None = None
+    begin_ns = end_ns = 0
     try:
         for rec in reader.records(set(topics)):
             if stop is not None and stop():
                 break
+            if first_ns is None:
+                first_ns = rec.log_time_ns
+                begin_ns = first_ns + round(start_offset_s * 1e9)
+                end_ns = begin_ns + round(duration_s * 1e9) if duration_s is not None else 0
+            if duration_s is not None and rec.log_time_ns > end_ns:
+                break
+            if rec.log_time_ns < begin_ns:
+                if rec.topic == TF_STATIC:
+                    tfs = codec.decode_tf(rec.data)[0] if rec.data is not None else list(rec.msg)  # type: ignore[call-overload]
+                    _merge_static(merged, tfs)
+                continue
             t_log = rec.log_time_ns * 1e-9
             if t0_log is None:  # the log's pace (and --now's stamps) from the first message on
                 t0_log, t0_wall = t_log, time.monotonic()
@@ -122,6 +139,10 @@ def replay(log: str | Path, transport: Transport, rate: float = 1.0, clock: bool
                     to_wall = _wall_clock(rec.log_time_ns, time.time_ns(), scale)
                     if mount_pub is not None:
                         mount_pub.write(codec.encode([reader.laser_mount()], time.time())[1])
+                if merged and static_pub is not None and rec.topic != TF_STATIC:  # those before the window
+                    at = to_wall(rec.log_time_ns) * 1e-9 if now else t_log
+                    if static_pub.write(codec.encode(list(merged.values()), at)[1]):
+                        stats.published[TF_STATIC] = stats.published.get(TF_STATIC, 0) + 1
             if rate > 0:
                 due = t0_wall + (t_log - t0_log) / rate
                 wait = due - time.monotonic()

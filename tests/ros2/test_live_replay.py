@@ -14,6 +14,7 @@ import math
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -213,17 +214,17 @@ def test_initialpose_relocalizes_after_a_kidnap_a_new_map_is_used_and_faults_are
     publishers (the replay and the peer: the same map twice is one map); later the peer publishes a new
     map, the same hall 10 cm further in y: from then on the poses are on it.  Meanwhile a publisher of
     another type on /imu and undecodable bytes on /scan are counted and named, and localization goes on."""
-    from fgloc.io import open_log
     from fgloc.io.tum import read_tum
     from fgloc.maps import load_map
     from fgloc.ros2 import qos
+    from fgloc.ros2.replay import replay
     from fgloc.ros2.transport import CycloneTransport
 
     from .independent import Peer
 
     d = _simulate(tmp_path / "kid", [[2.5, 3.0], [14.5, 3.0]], faults={"kidnap": {"time": 4.0, "skip_s": 5.0}})
     cfg = tmp_path / "noreloc.yaml"
-    cfg.write_text("pipeline: {relocalize_after: 100000, lost_after_s: 1000.0}\n")
+    cfg.write_text("pipeline: {relocalize_after: 100000, lost_after_s: 1000.0}\nros2: {status_period_s: 0.25}\n")
     gt = read_tum(d / "ground_truth.tum")
     occ = load_map(d / "map.yaml")
     shift_y = 0.1  # the new map: two cells further in y
@@ -256,30 +257,45 @@ def test_initialpose_relocalizes_after_a_kidnap_a_new_map_is_used_and_faults_are
             return any(v.key == "undecodable" and v.value != "0" for a in peer.status[-1:] for st in a.status
                        if st.name == "fgloc: sub /scan" for v in st.values)
 
-        # the replay starts (it waits for fgloc's subscriptions) while the bad scans are sent
-        proc = subprocess.Popen(_fgloc("replay", str(d / "log.mcap"), "--ros2", "--domain", str(dds_domain),
-                                       "--interface", LOOPBACK, "--wait", "60", "--quiet", "--map",
-                                       str(d / "map.yaml")),
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert wait_for(counted, 120.0, step=0.3)
-        # after the kidnap: wait for poses past t = 6 s, then tell fgloc where the robot is
-        assert wait_for(lambda: any(p[0] > 6.0 for p in peer.poses), 180.0), "no pose after the kidnap"
+        # the log in three parts, each published once fgloc is done with the one before (a loaded machine
+        # makes fgloc lag a replay at 1x: /initialpose or a new map queued behind the rest of the log would
+        # find no scan after them): to t_a (the kidnap felt), to t_b (relocalized), then the rest
+        t_a, t_b = 6.5, 9.8
+        scans = [0]
+
+        def play(offset_s: float = 0.0, duration_s: float | None = None, **kw: object) -> None:
+            # in this process (fgloc's replay on a participant of its own; fgloc live is the other process),
+            # then wait until fgloc is done with it
+            tr = CycloneTransport(dds_domain, LOOPBACK, node_name="replay")
+            try:
+                stats = replay(d / "log.mcap", tr, wait_for_subscribers_s=60.0, start_offset_s=offset_s,
+                               duration_s=duration_s, **kw)  # type: ignore[arg-type]
+            finally:
+                tr.close()
+            scans[0] += stats.published.get("/scan", 0)
+            _settle(peer, scans[0])
+
+        # the first part starts (it waits for fgloc's subscriptions) while the bad scans are sent
+        injector = threading.Thread(target=lambda: wait_for(counted, 120.0, step=0.3), daemon=True)
+        injector.start()
+        play(0.0, t_a, occ_map=occ)
+        injector.join()
+        assert counted()
+        # after the kidnap: poses past t = 6 s; tell fgloc where the robot is
+        assert any(p[0] > 6.0 for p in peer.poses), "no pose after the kidnap"
         assert wait_for(peer.initial_pose_matched, 60.0)
         t_now = max(p[0] for p in peer.poses)
-        t_ip = t_now + 0.3
+        t_ip = t_a + 0.3
         x, y, th = (float(np.interp(t_ip, gt.stamps, gt.poses[:, k])) for k in range(3))
         peer.initial_pose(t_ip, x, y, th)
-
-        def relocalized() -> bool:  # applied at the first scan that came after it: later when fgloc lags
-            return sum(p[0] > t_ip and math.hypot(p[1] - np.interp(p[0], gt.stamps, gt.poses[:, 0]),
-                                                  p[2] - np.interp(p[0], gt.stamps, gt.poses[:, 1])) < 0.05
-                       for p in list(peer.poses)) >= 12
-
-        assert wait_for(relocalized, 120.0)
+        play(t_a, t_b - t_a)
+        good_poses = sum(p[0] > t_ip and math.hypot(p[1] - np.interp(p[0], gt.stamps, gt.poses[:, 0]),
+                                                    p[2] - np.interp(p[0], gt.stamps, gt.poses[:, 1])) < 0.05
+                         for p in list(peer.poses))
+        assert good_poses >= 12, good_poses
         t_map = max(p[0] for p in peer.poses)
         publish_map(shift_y)
-        proc.communicate(timeout=300)
-        _settle(peer, open_log(d / "log.mcap").summary()["topics"]["/scan"]["count"])
+        play(t_b)
     finally:
         code, report, err = _stop(live)
         peer.close()

@@ -450,6 +450,25 @@ def main() -> int:
         if tm["handle"]["n"]:
             print(f"map->odom at the match: arrival -> handling began {pp(tm['queue'])}; handling -> published "
                   f"{pp(tm['handle'])}, of which the fusion thread's CPU {pp(tm['cpu'])}")
+            slow = r2.get("tf_at_match_slowest") or []
+            n1 = min(len(slow), max(1, round(0.01 * r2["scan_to_tf_ms"]["n"])))
+            if n1 and "process_cpu_ms" in slow[0]:
+                top = slow[:n1]
+
+                def mean(k: str) -> float:
+                    return float(np.mean([x.get(k, np.nan) for x in top]))
+
+                idle = float(np.mean([max(0.0, x["tf_ms"] - x.get("process_cpu_ms", 0.0)) for x in top]))
+                print(f"the slowest 1 % ({n1} scans, {mean('tf_ms'):.1f} ms on average, at "
+                      f"{min(x['since_start_s'] for x in top):.0f}-{max(x['since_start_s'] for x in top):.0f} s "
+                      f"after the start): queue {mean('queue_ms'):.1f} + handling {mean('handle_ms'):.1f} ms; "
+                      f"the fusion thread's CPU {mean('cpu_ms'):.1f} ms, the process's CPU (every thread) "
+                      f"{mean('process_cpu_ms'):.1f} ms of which GC {mean('gc_ms'):.1f} ms; no thread of fgloc "
+                      f"running {idle:.1f} ms")
+            g = r2.get("gc")
+            if g:
+                print(f"cyclic GC in the node (whole run): passes {g['passes']}, {g['total_ms']} ms, longest "
+                      f"{g['longest_ms']} ms")
             d = r2["tf_at_match_vs_online_mm"]
             print(f"map->odom at the match vs from the online pose: p50 {d['p50']:.2f} mm, p99 {d['p99']:.2f} mm, "
                   f"max {d['max']:.2f} mm over {d['n']} scans")

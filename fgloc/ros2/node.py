@@ -36,6 +36,7 @@ status line and on ``/fgloc/status``.
 from __future__ import annotations
 
 import bisect
+import heapq
 import math
 import threading
 import time
@@ -65,7 +66,40 @@ OK, WARN, ERROR, STALE = 0, 1, 2, 3  # diagnostic_msgs/DiagnosticStatus levels
 REFINED_AFTER_S = 1e-6
 ODOM_HISTORY = 4000  # odom -> base poses kept (80 s of a 50 Hz odometry)
 ARRIVALS_KEPT = 256  # messages per source whose arrival is kept (2.5 s of a 100 Hz IMU)
+SLOWEST_KEPT = 64  # the slowest scans whose latency is reported part by part
 SENSOR_DEPTH = 100  # samples a sensor subscription holds until the receive thread takes them
+
+
+class GcClock:
+    """The time this process's cyclic garbage collector has run (every pass, by a ``gc.callbacks`` hook
+    installed once): a scan's share of it between two moments is :meth:`total_s`'s difference."""
+
+    _installed: GcClock | None = None
+
+    def __init__(self) -> None:
+        self.total_s = 0.0
+        self.passes = [0, 0, 0]
+        self.longest_ms = [0.0, 0.0, 0.0]
+        self._t0 = 0.0
+
+    def _hook(self, phase: str, info: dict[str, Any]) -> None:
+        if phase == "start":
+            self._t0 = time.perf_counter()
+            return
+        dt = time.perf_counter() - self._t0
+        self.total_s += dt
+        g = int(info.get("generation", 0))
+        self.passes[g] += 1
+        self.longest_ms[g] = max(self.longest_ms[g], dt * 1e3)
+
+    @classmethod
+    def get(cls) -> GcClock:
+        if cls._installed is None:
+            import gc
+
+            cls._installed = cls()
+            gc.callbacks.append(cls._installed._hook)
+        return cls._installed
 
 
 class OdomFrame:
@@ -227,6 +261,9 @@ class Ros2Outputs(BaseSink):
         self.handle_ms = LogHistogram()
         self.cpu_ms = LogHistogram()
         self.match_vs_online_mm = LogHistogram(lo=1e-4)
+        #: the slowest scans' map->odom at the match (a min-heap of SLOWEST_KEPT): what their time was made of
+        self.slowest: list[tuple[float, int, dict[str, float]]] = []
+        self._n_live = 0
         self.published = 0
         self.tf_published = 0
         self.tf_refined = 0
@@ -256,12 +293,35 @@ class Ros2Outputs(BaseSink):
             self._early.append((t, at))
             if live:
                 now = time.time()
-                self.tf_ms.add((now - arrival) * 1e3)
+                ms = (now - arrival) * 1e3
+                self.tf_ms.add(ms)
                 if self.handling is not None:
                     began, cpu0 = self.handling
-                    self.queue_ms.add((began - arrival) * 1e3)
-                    self.handle_ms.add((now - began) * 1e3)
-                    self.cpu_ms.add((time.thread_time() - cpu0) * 1e3)
+                    parts = {"queue_ms": (began - arrival) * 1e3, "handle_ms": (now - began) * 1e3,
+                             "cpu_ms": (time.thread_time() - cpu0) * 1e3}
+                    self.queue_ms.add(parts["queue_ms"])
+                    self.handle_ms.add(parts["handle_ms"])
+                    self.cpu_ms.add(parts["cpu_ms"])
+                    self._keep_slow(ms, arrival, parts)
+
+    def _keep_slow(self, ms: float, arrival: float, parts: dict[str, float]) -> None:
+        """Keep the scan among the :data:`SLOWEST_KEPT` slowest, with its process CPU and GC time since its
+        arrival (the rest of its wall time no thread of this process ran: the machine's)."""
+        self._n_live += 1
+        if len(self.slowest) >= SLOWEST_KEPT and ms <= self.slowest[0][0]:
+            return
+        clocks = self.live.scan_clocks.get(arrival)
+        if clocks is not None:
+            cpu0, gc0 = clocks
+            parts["process_cpu_ms"] = (time.process_time() - cpu0) * 1e3
+            parts["gc_ms"] = (GcClock.get().total_s - gc0) * 1e3
+        parts["since_start_s"] = arrival - self.live.started_at
+        parts["tf_ms"] = ms
+        item = (ms, self._n_live, parts)
+        if len(self.slowest) < SLOWEST_KEPT:
+            heapq.heappush(self.slowest, item)
+        else:
+            heapq.heapreplace(self.slowest, item)
 
     def _publish_tf(self, t: float, map_base: np.ndarray, after_s: float = 0.0) -> bool:
         assert self.tf_pub is not None
@@ -325,6 +385,10 @@ class Ros2Outputs(BaseSink):
                 "inputs_in_to_pose_ms": pct(self.ready_ms),
                 "tf_at_match_ms": {"queue": pct(self.queue_ms), "handle": pct(self.handle_ms),
                                    "cpu": pct(self.cpu_ms)},
+                "tf_at_match_slowest": [{k: round(v, 3) for k, v in parts.items()}
+                                        for _, _, parts in sorted(self.slowest, reverse=True)],
+                "gc": {"passes": GcClock.get().passes, "total_ms": round(GcClock.get().total_s * 1e3, 1),
+                       "longest_ms": [round(v, 2) for v in GcClock.get().longest_ms]},
                 "tf_at_match_vs_online_mm": {**pct(self.match_vs_online_mm), "max": round(
                     self.match_vs_online_mm.max, 3) if self.match_vs_online_mm.count else math.nan}}
 
@@ -370,6 +434,10 @@ class Ros2Live:
         self.on_started = on_started
         self.odom_frame = OdomFrame(cfg.ros2.odom_frame_id)
         self.arrivals = Arrivals()
+        #: each recent scan's arrival -> (process CPU s, GC s) then (its slowest-scan breakdown)
+        self.scan_clocks: dict[float, tuple[float, float]] = {}
+        self._gc = GcClock.get()
+        self.started_at = time.time()
         self.tf = TfTree()
         self.session: Any = None  # LiveSession once started
         self.runner: Any = None
@@ -434,6 +502,11 @@ class Ros2Live:
             if isinstance(msg, Odometry):
                 self.odom_frame.add_odometry(msg)
         elif inp.kind == "scan" and isinstance(msg, LaserScan):
+            clocks = self.scan_clocks
+            clocks[arrival] = (time.process_time(), self._gc.total_s)
+            if len(clocks) > 2 * ARRIVALS_KEPT:  # the oldest half dropped (insertion order)
+                for k in list(clocks)[:ARRIVALS_KEPT]:
+                    del clocks[k]
             if self.startup.scan_frame is None:
                 self.startup.scan_frame = msg.frame_id
                 self.startup.first_scan = msg
@@ -625,6 +698,7 @@ class Ros2Live:
         finally:
             self.flushing = False
         self.startup.waiting_for = ""
+        self.started_at = time.time()
         self.event(f"localizing: laser mount {mount.parent} -> {mount.child} "
                    f"({mount.pose[0]:.3f}, {mount.pose[1]:.3f}, {math.degrees(mount.pose[2]):.1f} deg)"
                    + (", upside down" if mirrored else "") + f"; {kept} messages kept from before the start fused")

@@ -444,6 +444,9 @@ def main() -> int:
             return f"p50 {d['p50']:.2f} ms, p99 {d['p99']:.2f} ms"
 
         print(f"scan arrival -> map->odom published: {pp(r2['scan_to_tf_ms'])}")
+        if r2.get("scan_to_fused_ms", {}).get("n"):
+            print(f"  side by side, the same scans: map->odom out before the session's fused pose (now) "
+                  f"{pp(r2['scan_to_tf_ms'])} | after it (before: the fused pose first) {pp(r2['scan_to_fused_ms'])}")
         print(f"scan arrival -> /amcl_pose (the back-end's online pose) published: {pp(r2['scan_to_pose_ms'])}; "
               f"from the odometry / IMU past the scan's stamp in: {pp(r2['inputs_in_to_pose_ms'])}")
         tm = r2["tf_at_match_ms"]

@@ -31,7 +31,9 @@ The sink protocol (:class:`Sink`; subclass :class:`BaseSink` and override what y
 
 A sink must not raise; if one does, the session counts it in ``sink_errors`` and goes on.
 A sink whose ``wants_fused`` is False (a progress bar) does not make the session compute the
-fused pose; when no sink wants it, ``on_scan`` gets ``fused=None``.  A sink whose
+fused pose, and those before the first sink that wants it are told before it is computed, with
+``fused=None`` (a ROS 2 transform out before the marginal covariance); when no sink wants it,
+``on_scan`` gets ``fused=None``.  A sink whose
 ``wants_messages`` is False (a recorder of the outputs only) is not called for each input
 message.  Both are read when the sink is added (the session keeps the lists).
 
@@ -213,14 +215,21 @@ class Session:
             return  # nobody asks for the fused pose (its covariance is not free for a smoother)
         if self._known != self.sinks:
             self._refresh()
-        fused = self._fused(float(msg.stamp)) if self._wants_fused else None
-        self.last_fused = fused
         what: PoseFix | str = fix if fix is not None else (self.loc.last_reason or "no fix")
-        for s in self.sinks:
+        k = 0  # the sinks before the first that wants the fused pose are told before it is computed
+        while self._wants_fused and k < len(self.sinks) and not getattr(self.sinks[k], "wants_fused", True):
+            k += 1
+        fused = None
+        for i, s in enumerate(self.sinks):
+            if i == k and self._wants_fused:
+                fused = self._fused(float(msg.stamp))
+                self.last_fused = fused
             try:
                 s.on_scan(float(msg.stamp), msg, what, fused)
             except Exception:  # noqa: BLE001
                 self.sink_errors += 1
+        if not self._wants_fused:
+            self.last_fused = None
 
 
     def _pose_added(self, stamp: float) -> None:

@@ -211,8 +211,15 @@ class KeyframeGraph(FurtherSourceFactors):
         fl = self._fix_floor
         if fl is None or t < fl[0]:
             return cov
+        # the same prediction asked again (the online pose, then the fused pose of the same scan: the
+        # prediction cache hands out the same arrays) under the same floor: the same answer
+        memo = self._output_cov_memo
+        if memo is not None and memo[0] == t and memo[1] is pose and memo[2] is cov and memo[3] is fl:
+            return memo[4]
         floor = fl[2] if t == fl[0] else carried_covariance(fl[2], fl[1], pose, self._floor_increment_cov(fl[0], t))
-        return covariance_bound(cov, floor)
+        out = covariance_bound(cov, floor)
+        self._output_cov_memo = (t, pose, cov, fl, out)
+        return out
 
     def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
         """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from

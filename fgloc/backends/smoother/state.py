@@ -129,6 +129,7 @@ class SmootherState(Backend):
         self._fix_floor: tuple[float, FloatArray, FloatArray] | None = None
         self._floor_mark: list[float] = []   # its odometry integration's resumption mark
         self._floor_mark_t0 = -np.inf
+        self._output_cov_memo: tuple[float, FloatArray, FloatArray, tuple, FloatArray] | None = None
         self._cov_stale: int | None = None
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []

@@ -319,12 +319,12 @@ class JumpGate:
             sl = (slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2
             d2_prev = mahalanobis2_2x2(fx - cx, fy - cy, ((r00 + c00) + s2) + sl, r01 + c01, r10 + c10,
                                         ((r11 + c11) + s2) + sl)
-            # the previous fix decides only where the back-end does not follow it: a prediction that
-            # agrees with the previous fix carried on (the same motion: no slip between them) already
-            # holds it, with everything else the back-end knows
+            # the previous fix decides only where the back-end left it, not the fix: when the prediction
+            # agrees with the previous fix carried on (the same motion: no slip between them) better than
+            # the fix does, the prediction already holds that fix, with everything else the back-end knows
             d2_lag = mahalanobis2_2x2(cx - float(pred[0]), cy - float(pred[1]), (p00 + c00) + s2, p01 + c01,
                                       p10 + c10, (p11 + c11) + s2)
-            take = take or (d2_prev <= self.cfg.gate_chi2 and d2_lag > self.cfg.gate_chi2)
+            take = take or (d2_prev <= self.cfg.gate_chi2 and d2_prev < d2_lag)
         if take:
             self._taken = (float(t), np.array(fix.pose, dtype=float))
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)

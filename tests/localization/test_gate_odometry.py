@@ -88,8 +88,9 @@ def test_stopped_odometry_the_fixes_motion_carries_the_previous_fix(room):
 def test_late_odometry_does_not_explain_a_wrong_fix(room):
     """The odometry arrives 0.3 s late, carried on at its last speed while the robot has stopped: a fix
     0.24 m ahead (where the extrapolated odometry says) is not taken as explained by motion.  Taken as
-    covering, the odometry would explain it from the previous fix; that counts only where the back-end
-    does not follow the previous fix, and here its prediction (the robot still) does."""
+    covering, the odometry would explain it from the previous fix; that counts only where the back-end's
+    prediction left the previous fix further than the fix did, and here the prediction (the robot still)
+    is the nearer."""
     stop = 1.0
     still = _truth(stop)
     wrong = still + np.array([0.0, 0.24, 0.0])

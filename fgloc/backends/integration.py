@@ -118,17 +118,20 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
     return np.array([x, y, wrap_scalar(th)]), cov
 
 
-def integrate_heading(stamps: FloatArray, twists: FloatArray, t0: float, t1: float) -> float:
-    """Heading change (rad, unwrapped) from ``t0`` to ``t1``, same hold as :func:`integrate_twist`."""
-    if t1 <= t0 or len(stamps) == 0:
+def integrate_heading(ts: Sequence[float], us: Sequence[Sequence[float]], lo: int, hi: int, t0: float,
+                      t1: float) -> float:
+    """Heading change (rad, unwrapped) from ``t0`` to ``t1`` over the samples ``lo:hi`` of plain lists
+    (stamps, ``(vx, vy, w)`` twists), the same hold as :func:`integrate_twist` (scalar maths: the
+    smoother's predictions ask for it several times per keyframe)."""
+    if t1 <= t0 or hi <= lo:
         return 0.0
-    i = int(np.searchsorted(stamps, t0, side="right"))
-    n = len(stamps)
+    i = bisect_right(ts, t0, lo, hi)
+    last = hi - 1
     t, th = t0, 0.0
     while t < t1 - 1e-12:
-        j = min(i, n - 1)
-        t_next = min(float(stamps[i]), t1) if i < n else t1
-        th += float(twists[j][2]) * (t_next - t)
+        j = i if i < last else last
+        t_next = (ts[i] if ts[i] < t1 else t1) if i < hi else t1
+        th += float(us[j][2]) * (t_next - t)
         t = t_next
         i += 1
     return th

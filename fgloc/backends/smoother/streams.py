@@ -443,7 +443,7 @@ class Streams(SmootherState):
             return 0.0
         i0 = max(bisect_right(self.odo_t, a) - 1, 0)
         i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
-        th = integrate_heading(np.asarray(self.odo_t[i0:i1]), np.asarray(self.odo_u[i0:i1]), a, b)
+        th = integrate_heading(self.odo_t, self.odo_u, i0, i1, a, b)
         return th * float(self._gains[1])
 
     def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:

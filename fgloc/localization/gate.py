@@ -336,15 +336,7 @@ class JumpGate:
                 self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
                                           float(t))
             return GateVerdict(True, d2, jump_m, jump_deg, d2_previous=d2_prev, covered=motion_covered)
-        pts = scan.points()
-        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
-        # the heading that moves the scan's median return by it
-        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
-        near = neighbourhood(pred, P, NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
-                             self.sigma_m / max(r_med, self.sigma_m) / 2)
-        a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
-                       self.sigma_m, pts)
-        a_pred, a_fix = float(np.max(a[:-1])), float(a[-1])
+        a_pred, a_fix = self.agreement(fix, pred, P, scan)
         v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev, covered=motion_covered)
         if not (math.isfinite(a_pred) and math.isfinite(a_fix)):
             v.take = True  # nothing to judge by: as without the gate
@@ -352,7 +344,7 @@ class JumpGate:
             v.take = True
             v.why = (f"no odometry: a move of {jump_m:.2f} m / {jump_deg:.1f} deg the map explains at least as well "
                      f"(agreement {a_fix:.2f} at the fix, at most {a_pred:.2f} near the last pose)")
-        elif a_pred <= a_fix * (1.0 - self.cfg.confirm_agreement):
+        elif self.map_confirms(a_pred, a_fix):
             v.take = v.confirmed = True
             v.why = (f"a jump of {jump_m:.2f} m / {jump_deg:.1f} deg the map confirms (agreement {a_fix:.2f} at "
                      f"the fix, at most {a_pred:.2f} near the odometry's prediction)")
@@ -367,6 +359,25 @@ class JumpGate:
         else:
             self.previous = None
         return v
+
+
+    def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> tuple[float, float]:
+        """``(near the prediction, at the fix)``: the best :func:`scan_agreement` within
+        :data:`NEIGHBOURHOOD_SIGMAS` of the prediction's covariance, and the agreement at the fix."""
+        pts = scan.points()
+        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
+        # the heading that moves the scan's median return by it
+        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
+        near = neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
+                             self.sigma_m / max(r_med, self.sigma_m) / 2)
+        a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
+                       self.sigma_m, pts)
+        return float(np.max(a[:-1])), float(a[-1])
+
+    def map_confirms(self, a_pred: float, a_fix: float) -> bool:
+        """Whether the map explains the scan clearly better at the fix than anywhere near the prediction
+        (``integrity.confirm_agreement``): evidence the matcher did not produce itself."""
+        return bool(a_pred <= a_fix * (1.0 - self.cfg.confirm_agreement))
 
 
 def _mahalanobis2(e: FloatArray, S: FloatArray) -> float:

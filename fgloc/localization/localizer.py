@@ -129,6 +129,7 @@ class Localizer(Recovery):
         self.gate = JumpGate(self.icfg, occ_map, laser_mount) if occ_map is not None and self.icfg.gate else None
         self.odometry_coverage = OdometryCoverage(self.icfg.odometry_gap_s)  # the odometry's stamps, for the gate
         self.last_gate: GateVerdict | None = None  # the gate's verdict on the last scan's fix (None: not judged)
+        self._gate_prediction: tuple[FloatArray, FloatArray] | None = None  # the prediction it judged against
         self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
         self._t_used: float | None = None  # stamp of the last fix the back-end accepted
         self._t_held_since: float | None = None  # first fix of the current run of held / rejected ones
@@ -383,6 +384,16 @@ class Localizer(Recovery):
             # the gate passed it: the fixes that follow it as the odometry says are no jumps, whether the
             # back-end used it or its own tighter gate held it (a consistent run is let in; gate.py)
             self.gate.accepted()
+        if kf_fix is not None and not used and self._map_confirms_rejected(kf_fix, msg):
+            # a jump the map confirms (gate.py) is no outlier for the back-end's own gate to veto: a filter
+            # sure of a wrong place (started on a particle cloud that converged there) rejects every right
+            # fix after it.  The back-end starts again at the fix, the poses since it last took one were wrong
+            self.stats["confirmed_restarts"] = self.stats.get("confirmed_restarts", 0) + 1
+            self.stats["relocalizations"] += 1
+            if self._lost_since is None and self._t_used is not None:
+                self._lost_since = self._t_used
+            self._start(t, kf_fix.pose, kf_fix.cov + EPS_COV)
+            used = True
         if used:
             self._t_used = t
             self._converged = True
@@ -438,6 +449,20 @@ class Localizer(Recovery):
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
 
+    def _map_confirms_rejected(self, fix: PoseFix, msg: LaserScan) -> bool:
+        """A fix the gate passed and the back-end rejected: whether the map confirms it over the back-end's
+        pose (the gate's verdict when it judged so; for a fix it took as following the previous fix, from
+        beyond its prediction, judged now)."""
+        v, pred = self.last_gate, self._gate_prediction
+        if self.gate is None or v is None:
+            return False
+        if v.confirmed:
+            return True
+        if v.d2 <= self.icfg.gate_chi2 or pred is None:
+            return False
+        a_pred, a_fix = self.gate.agreement(fix, pred[0], pred[1], msg)
+        return math.isfinite(a_pred) and math.isfinite(a_fix) and self.gate.map_confirms(a_pred, a_fix)
+
     def _gate(self, t: float, fix: PoseFix, msg: LaserScan) -> GateVerdict:
         """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py)."""
         assert self.gate is not None
@@ -447,6 +472,7 @@ class Localizer(Recovery):
             self.backend.current(covariance=True)
             self._cov_t = t
         pred, pred_cov = self.backend.predict(t)
+        self._gate_prediction = (pred, pred_cov)
         # the motion since the last accepted fix is known where the odometry's stamps cover it (gate.py)
         prev = self.gate.previous
         t_from = prev.t if prev is not None else self._t_used if self._t_used is not None else t

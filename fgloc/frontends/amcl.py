@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,11 +73,11 @@ FloatArray = NDArray[np.float64]
 
 # ------------------------------------------------------------------ compiled kernels
 @njit(cache=True, fastmath=True)
-def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, table, inv_step):  # pragma: no cover
+def _weights_kernel(px, py, pyaw, bx, by, field, depth, ox, oy, inv_res, zmax, table, inv_step):  # pragma: no cover
     """Per-particle sum over beams of ``table(z)``, ``z`` the field at the beam endpoint.
 
-    ``field`` holds the surface distance at cell centres (bilinear); endpoints off the
-    grid get ``zmax``.  ``table``: the per-beam term of the sensor model sampled every
+    ``field + depth`` is the signed surface distance at cell centres (bilinear), ``z`` its absolute
+    value; endpoints off the grid get ``zmax``.  ``table``: the per-beam term of the sensor model sampled every
     ``1 / inv_step`` metres of ``z`` (see :func:`beam_term_table`), linearly interpolated.
     """
     n = px.shape[0]
@@ -94,7 +94,8 @@ def _weights_kernel(px, py, pyaw, bx, by, field, ox, oy, inv_res, zmax, table, i
         sr = s * inv_res
         acc = 0.0
         for j in range(m):
-            z = abs(bilinear(field, gx0 + cr * bx[j] - sr * by[j], gy0 + sr * bx[j] + cr * by[j], zmax))
+            z = abs(bilinear(field, gx0 + cr * bx[j] - sr * by[j], gy0 + sr * bx[j] + cr * by[j], zmax - depth)
+                    + depth)
             t = z * inv_step
             k = int(t)
             if k > last:
@@ -249,15 +250,16 @@ def bin_clusters(keys, weights, n_yaw):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mult, sigma, model,
+def _refine_kernel(field, depth, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mult, sigma, model,
                    max_iter):  # pragma: no cover - compiled
     """Maximise the sensor model's score of one scan over the pose, from ``pose0``.
 
     Score: ``sum pz^3`` (model 0, nav2 likelihood_field) or ``sum log pz`` (model 1), ``z``
-    the bilinear field at each endpoint.  Iteratively reweighted Gauss-Newton (the score is
-    a sum of ``-rho(z)`` with IRLS weight ``rho'(z) / z``; endpoints off the grid or at the
-    field's clip distance carry no gradient).  Returns ``(pose, H)``, ``H`` the final
-    weighted normal matrix (0 rows when no beam contributed), ``sum w z^2`` and ``sum w``.
+    ``|field + depth|`` (bilinear) at each endpoint.  Iteratively reweighted Gauss-Newton (the
+    score is a sum of ``-rho(z)`` with IRLS weight ``rho'(z) / z``; endpoints off the grid or at
+    the field's clip distance carry no gradient).  Returns ``(pose, H, sum w z^2, sum w, runs,
+    sum w f)``: ``H`` the final weighted normal matrix (0 rows when no beam contributed), ``f``
+    the signed ``field + depth`` (negative: the endpoint behind the modelled surface).
     """
     pose = pose0.copy()
     H = np.zeros((3, 3))
@@ -265,10 +267,12 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
     inv_s2 = 1.0 / (sigma * sigma)
     wr2 = 0.0
     sw = 0.0
+    swf = 0.0
     n_runs = 0
     for _it in range(max_iter):
         wr2 = 0.0
         sw = 0.0
+        swf = 0.0
         n_runs = 0
         run_len = 0.0
         lastx = 1e300
@@ -282,8 +286,10 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
         for j in range(bx.shape[0]):
             qx = pose[0] + c * bx[j] - s * by[j]
             qy = pose[1] + s * bx[j] + c * by[j]
-            z, du, dv = bilinear_grad(field, (qx - ox) * inv_res - 0.5, (qy - oy) * inv_res - 0.5, zmax)
-            if z < 0.0:  # inside an obstacle: the distance is |field|, its gradient points out
+            z, du, dv = bilinear_grad(field, (qx - ox) * inv_res - 0.5, (qy - oy) * inv_res - 0.5, zmax - depth)
+            z += depth
+            f = z
+            if z < 0.0:  # behind the surface: the distance is |field + depth|, its gradient points out
                 z, du, dv = -z, -du, -dv
             if not (z < zmax):
                 continue
@@ -301,6 +307,7 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
             g[2] += w * j2 * z
             wr2 += w * z * z
             sw += w
+            swf += w * f
             # runs of neighbouring endpoints (one wall stretch <= RUN_LENGTH_M): their map errors are shared
             new_run, run_len = run_step(bx[j], by[j], lastx, lasty, run_len)
             n_runs += new_run
@@ -317,7 +324,7 @@ def _refine_kernel(field, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_rand_mu
         pose += d
         if abs(d[0]) + abs(d[1]) + abs(d[2]) < 1e-6:
             break
-    return pose, H, wr2, sw, n_runs
+    return pose, H, wr2, sw, n_runs, swf
 
 
 # ------------------------------------------------------------------ motion models
@@ -440,9 +447,11 @@ class AMCLConfig:
     laser_likelihood_max_dist: float = setting(2.0, "m, distance-field clip; endpoints off the grid get this", gt=0)
     laser_max_range: float = setting(-1.0, "m; <= 0: the scan's range_max (for z_rand)")
     beam_correlation: float = setting(8.0, "likelihood_field_prob: log-likelihood divided by this", gt=0)
-    surface_depth_cells: float = setting(0.5, "where the wall surface lies behind the wall cells' faces, in cells "
-                                         "(0: on the faces, a map rasterized from the walls; 0.5: through the "
-                                         "boundary cells' centres)", min=0, max=1)
+    surface_depth_cells: float | Literal["auto"] = setting(
+        "auto", "where the wall surface lies behind the wall cells' faces, in cells: 0 = on the faces (scans ray "
+        "cast on the grid), 0.5 = through the boundary cells' centres (SLAM maps, rasterized worlds); auto = start "
+        "at 0.5 and learn it from the refined fixes' signed residuals")
+    depth_window: int = setting(100, "auto surface depth: running mean over this many refined fixes", min=1)
     field_walls: str = setting("occupied", "cells the likelihood field measures distance to (occupied+unknown_edge: "
                                "maps storing walls as grey pixels)", choices=("occupied", "occupied+unknown_edge"))
     min_particles: int = setting(500, "KLD sampling lower bound", min=1)
@@ -543,8 +552,17 @@ class AMCL:
             walls = occ_map.occupied | (occ_map.unknown & binary_dilation(occ_map.free, np.ones((3, 3), bool)))
         else:
             raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {conf.field_walls!r}")
-        self._field = wall_surface_field(walls, occ_map.resolution, self.max_dist,
-                                         float(conf.surface_depth_cells) * occ_map.resolution)
+        self._field = wall_surface_field(walls, occ_map.resolution, self.max_dist)
+        self.auto_depth = isinstance(conf.surface_depth_cells, str)
+        if self.auto_depth and conf.surface_depth_cells != "auto":
+            raise ConfigError(f"amcl: surface_depth_cells must be a number of cells or auto, got "
+                              f"{conf.surface_depth_cells!r}")
+        #: m: the wall surface behind the wall cells' faces (learnt from the fixes in auto mode; a map
+        #: property, kept across reset())
+        self.depth_m = 0.5 * occ_map.resolution if self.auto_depth else \
+            float(conf.surface_depth_cells) * occ_map.resolution  # type: ignore[arg-type]
+        self.depth_window = int(conf.depth_window)
+        self._depth_updates = 0
         self._free = occ_map.free_cell_centers()
         self._table_key: tuple[int, float, float] | None = None
         self._last_refine: tuple[Any, ...] | None = None
@@ -627,7 +645,7 @@ class AMCL:
             self._table_key = key
         acc = _weights_kernel(
             np.ascontiguousarray(px), np.ascontiguousarray(py), np.ascontiguousarray(pyaw),
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), self._field,
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), self._field, self.depth_m,
             ox, oy, 1.0 / self.map.resolution, self.max_dist, self._table, self._table_inv_step)
         # nav2 likelihood_field: w = 1 + sum pz^3; likelihood_field_prob: tempered sum of log pz
         return acc + 1.0 if model == 0 else acc / self.beam_correlation
@@ -792,7 +810,8 @@ class AMCL:
         dx, dy = mean[0] - o[0], mean[1] - o[1]
         start = np.array([c * dx + s * dy, -s * dx + c * dy, mean[2] - o[2]])  # grid-aligned frame
         model = 0 if self.laser_model_type == "likelihood_field" else 1
-        p, H, wr2, sw, n_runs = _refine_kernel(self._field, 0.0, 0.0, 1.0 / self.map.resolution, self.max_dist,
+        p, H, wr2, sw, n_runs, swf = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution,
+                              self.max_dist,
                               np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), start,
                               self.z_hit, z_rand_mult, self.sigma_hit, model, 20)
         out = np.array([o[0] + c * p[0] - s * p[1], o[1] + s * p[0] + c * p[1], wrap_angle(p[2] + o[2])])
@@ -820,6 +839,13 @@ class AMCL:
         if not (np.all(np.isfinite(cov_r)) and np.all(np.linalg.eigvalsh(0.5 * (cov_r + cov_r.T)) > 0)):
             return mean, False
         self._refined_cov = 0.5 * (cov_r + cov_r.T)
+        if self.auto_depth:
+            # the weighted mean signed residual says how far behind the modelled surface the beams end:
+            # a running mean over the refined fixes (a property of the map)
+            self._depth_updates += 1
+            est = self.depth_m - swf / sw
+            self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
+            self.depth_m = min(max(self.depth_m, 0.0), float(self.map.resolution))
         return out, True
 
     def _result(self, mean: FloatArray, cov: FloatArray, share: float, n_pts: int, updated: bool,

@@ -319,3 +319,21 @@ def test_refined_fix_is_where_the_beams_end():
         err[depth_cells] = (float(np.hypot(*(fix[:2] - pose[:2]))), abs(float(wrap_angle(fix[2] - pose[2]))))
     assert err[0.0][0] < 0.001 and err[0.0][1] < 0.001, err
     assert err[0.5][0] > 0.005, err
+
+
+def test_auto_surface_depth_learns_where_the_beams_end():
+    """Scans ray-cast on the grid end on the wall cells' faces: from half a cell, the learnt surface depth
+    goes to the faces and the refined fix onto the pose."""
+    m = _box_map()
+    a = AMCL(m, None, laser_max_beams=541)
+    assert a.auto_depth and a.depth_m == pytest.approx(0.025)
+    rng = np.random.default_rng(0)
+    n_refined = 0
+    for _ in range(60):
+        pose = np.array([rng.uniform(1.5, 2.5), rng.uniform(1.0, 4.0), rng.uniform(-np.pi, np.pi)])
+        scan = _scan(m.raycast(pose[:2], -2.35 + 4.7 / 540 * np.arange(541) + pose[2], 30.0))
+        pts, _ = a.pre(scan)
+        fix, refined = a._refine(pose + np.array([0.02, -0.02, 0.01]), np.diag([1e-3, 1e-3, 1e-3]), pts, 30.0)
+        n_refined += refined
+    assert n_refined >= 55 and a.depth_m < 0.003, (n_refined, a.depth_m)  # measured 59, 0.0004 m
+    assert np.hypot(*(fix[:2] - pose[:2])) < 0.002

@@ -24,6 +24,7 @@ import logging
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from operator import sub
 from pathlib import Path
 from typing import ClassVar, NamedTuple
 
@@ -55,7 +56,10 @@ def stamp_spacing(stamps: Iterable[float]) -> tuple[float, float] | None:
             kept.append(t)
     if len(kept) < max(SPACING_MIN_STAMPS, 2):
         return None
-    return float(np.median(np.diff(np.asarray(kept)))), (kept[-1] - kept[0]) / (len(kept) - 1)
+    d = sorted(map(sub, kept[1:], kept[:-1]))  # np.median(np.diff(kept))'s, without numpy's overhead
+    m = len(d) // 2
+    median = d[m] if len(d) % 2 else (d[m - 1] + d[m]) / 2.0
+    return float(median), (kept[-1] - kept[0]) / (len(kept) - 1)
 
 
 MAX_TF_MESSAGES = 2000  # /tf messages looked through for the laser mount

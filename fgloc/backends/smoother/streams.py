@@ -23,10 +23,13 @@ from fgloc.geometry import log as se2_log
 #: the odometry's mean message period for :meth:`SlidingWindowSmoother._timing_var` is taken over this many
 TIMING_MESSAGES = 200
 
-#: s, an odometry step longer than this (and than :data:`ODOM_GAP_PERIODS` of its median period) leaves
-#: the motion beyond it unmeasured (a dead wheel driver, a dropped stretch; as ``integrity.odometry_gap_s``)
+#: s, an odometry step longer than this and than :data:`ODOM_GAP_STEPS` times the longest of its last
+#: :data:`ODOM_GAP_WINDOW` steps leaves the motion beyond it unmeasured (a dead wheel driver, a dropped
+#: stretch; as ``integrity.odometry_gap_s``); a slow or bursty odometry's own rhythm (CARMEN logs: four
+#: poses within milliseconds, then nothing for 0.4 s) is no gap
 ODOM_GAP_S = 0.25
-ODOM_GAP_PERIODS = 3.0
+ODOM_GAP_STEPS = 2.0
+ODOM_GAP_WINDOW = 50
 #: m/s, an odometry that has reported sideways speeds above this drives an omni base (the EKF's omni_vy_mps)
 LATERAL_SPEED = 0.05
 
@@ -162,8 +165,18 @@ class Streams(SmootherState):
         return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
 
     def _odom_gap_s(self) -> float:
-        """The longest step a running odometry leaves between two stamps (inf with fewer than 3)."""
-        return max(ODOM_GAP_S, ODOM_GAP_PERIODS * self._period_of(self.odo_t))
+        """The longest step a running odometry leaves between two stamps (inf with fewer than 3),
+        remembered until a message comes."""
+        ts = self.odo_t
+        key = (len(ts), ts[-1] if ts else None)
+        if self._gap_memo[0] != key:
+            if len(ts) < 3:
+                tol = math.inf
+            else:
+                last = ts[-ODOM_GAP_WINDOW - 1:]
+                tol = max(ODOM_GAP_S, ODOM_GAP_STEPS * max(map(sub, last[1:], last[:-1])))
+            self._gap_memo = (key, tol)
+        return self._gap_memo[1]
 
     def _unmeasured_tail(self, t0: float, t1: float) -> float:
         """How long the end of ``(t0, t1]`` lies beyond the odometry's newest stamp by more than a

@@ -104,3 +104,20 @@ def stopped_prediction():
             sm.add_keyframe(float(t) + 0.011, PoseFix(float(t) + 0.011, np.array([0.8 * t + 0.0088, 0.0, 0.0]),
                                                       np.diag([0.005**2, 0.005**2, 1e-4])))
     return sm.predict(5.0)
+
+
+def test_a_bursty_odometry_is_not_taken_for_a_stopped_one():
+    # a CARMEN logger's odometry: four poses within 3 ms, then nothing for 0.4 s (its own rhythm, no
+    # gap): 0.35 s after a burst the prediction's along-track variance is the odometry's, not a
+    # stopped odometry's
+    sm = SlidingWindowSmoother()
+    sm.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    bursts = np.arange(1, 51) * 0.4
+    for tb in bursts:
+        for k in range(4):
+            sm.add_odometry(float(tb + 0.001 * k), np.array([0.5, 0.0, 0.0]), ODOM_COV)
+        t = float(tb) + 0.2
+        sm.add_keyframe(t, PoseFix(t, np.array([0.5 * t, 0.0, 0.0]), np.diag([0.005**2, 0.005**2, 1e-4])))
+    _, cov = sm.predict(float(bursts[-1]) + 0.35)
+    _, cov_stopped = stopped_prediction()
+    assert cov[0, 0] < 0.01 * cov_stopped[0, 0]

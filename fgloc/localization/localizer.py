@@ -133,6 +133,7 @@ class Localizer(Recovery):
         self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
         self._t_used: float | None = None  # stamp of the last fix the back-end accepted
         self._t_held_since: float | None = None  # first fix of the current run of held / rejected ones
+        self._rejected_run = 0  # fixes the gate passed and the back-end rejected since it last took one
         self._converged = False  # the pose was started from a fix, or a fix was accepted since
         # odom frame: the fused path against odometry + IMU dead reckoning (a diverging configuration)
         self.dead_reckoning = DeadReckoning() if self.odom_mode else None
@@ -394,6 +395,10 @@ class Localizer(Recovery):
                 self._lost_since = self._t_used
             self._start(t, kf_fix.pose, kf_fix.cov + EPS_COV)
             used = True
+        if used:
+            self._rejected_run = 0
+        elif kf_fix is not None:
+            self._rejected_run += 1
         if used:
             self._t_used = t
             self._converged = True

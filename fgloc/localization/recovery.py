@@ -106,6 +106,7 @@ class Recovery(PoseStatus):
             self.monitor.amend(self._lost_since, t, LOST, "lost: the pose was wrong until a relocalization")
             self._lost_since = None
         self._t_held_since = None
+        self._rejected_run = 0
         if self.gate is not None:
             self.gate.reset()
         self._t_bad_since = None

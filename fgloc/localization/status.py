@@ -59,6 +59,7 @@ class PoseStatus:
     _last_compass: tuple[float, float] | None
     _t_used: float | None
     _t_held_since: float | None
+    _rejected_run: int  # fixes the gate passed and the back-end rejected since it last took one
     _converged: bool
     _lost: bool
     _lost_since: float | None
@@ -134,6 +135,11 @@ class PoseStatus:
         if silent:
             assert self._last_scan_t is not None
             return DEGRADED, f"dead reckoning: no scan for {t - self._last_scan_t:.1f} s"
+        if self._rejected_run:
+            # the map gave a fix the jump gate found no jump, the back-end does not follow it: the pose is
+            # its dead reckoning, and the map disagrees with it
+            return DEGRADED, (f"dead reckoning for {since:.1f} s: the back-end rejected the map's last "
+                              f"{self._rejected_run} fix(es)")
         if since >= self.icfg.degraded_after_s:
             return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
         return OK, ""

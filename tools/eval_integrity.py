@@ -1,0 +1,83 @@
+"""Silent wrong answers: each simulated failure class localized by each back-end and front-end, its
+poses' errors against their statuses; one table.
+
+    python tools/eval_integrity.py [--scenarios wheel_slip compass_disturbance changed_world blackout kidnap]
+        [--seeds 0] [--backends smoother ekf] [--frontends native amcl] [--global] [--off-m 0.25]
+
+Each run is the shipped scenario (fgloc/config/scenarios/) localized from its true start pose (``--global``:
+without one) as ``fgloc run`` does (a ``Localizer`` in a ``Session``; ``changed_world`` on the old map).
+Per run: position RMSE and max error of the final trajectory, the largest pose step (the change of the
+error between consecutive poses), the poses by status, the largest error of an ``ok`` pose and how many
+``ok`` poses are more than ``--off-m`` off (a silent wrong answer: each must be accurate or marked
+non-ok), and whether ``fgloc run`` would exit 3 (a finding that makes the run unusable, or more than
+``integrity.max_bad_share`` of the poses suspect or lost).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+from tqdm import tqdm
+
+SCENARIOS = ["wheel_slip", "compass_disturbance", "changed_world", "blackout", "kidnap"]
+
+
+def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float) -> dict:
+    from fgloc.config import load_config
+    from fgloc.localization import Localizer, Session
+
+    cfg = load_config()
+    msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
+    loc = Localizer(sim.map, sim.laser_mount, backend, frontend,
+                    initial_pose=None if global_start else sim.ground_truth.poses[0], config=cfg)
+    t0 = time.perf_counter()
+    est = Session(loc).run(msgs)
+    wall = time.perf_counter() - t0
+    gt = sim.ground_truth.interpolate(est.stamps)
+    err = np.hypot(*(est.poses[:, :2] - gt[:, :2]).T)
+    step = np.hypot(*(np.diff(est.poses[:, :2], axis=0) - np.diff(gt[:, :2], axis=0)).T)
+    status, _ = loc.monitor.at(est.stamps)
+    ok = np.array([s == "ok" for s in status], dtype=bool)
+    summary = loc.stats["status"]
+    unusable = any(v["unusable"] for v in summary["verdicts"])
+    return {"rmse": float(np.sqrt(np.mean(err**2))), "max": float(err.max()),
+            "step": float(step.max()) if len(step) else 0.0, "counts": loc.monitor.counts(est.stamps),
+            "ok_max": float(err[ok].max()) if ok.any() else float("nan"), "ok_off": int(np.sum(err[ok] > off_m)),
+            "exit3": unusable or summary["bad_share"] > cfg.integrity.max_bad_share, "wall": wall}
+
+
+def main() -> None:
+    from fgloc.config import scenario_path
+    from fgloc.sim import load_scenario, run_scenario
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="+", default=SCENARIOS)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--backends", nargs="+", default=["smoother", "ekf"])
+    ap.add_argument("--frontends", nargs="+", default=["native", "amcl"])
+    ap.add_argument("--global", dest="global_start", action="store_true", help="no initial pose")
+    ap.add_argument("--off-m", type=float, default=0.25, help="an ok pose further off than this is a silent error")
+    args = ap.parse_args()
+    runs = [(s, seed, b, f) for s in args.scenarios for seed in args.seeds for b in args.backends
+            for f in args.frontends]
+    print(f"| scenario | seed | back-end | front-end | RMSE m | max m | largest step m | poses ok / degraded / "
+          f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | exit 3 |")
+    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|---|")
+    sims: dict[tuple[str, int], object] = {}
+    for name, seed, backend, frontend in tqdm(runs, file=sys.stderr, desc="runs"):
+        if (name, seed) not in sims:
+            sims.clear()
+            sims[(name, seed)] = run_scenario(load_scenario(scenario_path(name)), seed=seed)
+        r = localize(sims[(name, seed)], backend, frontend, args.global_start, args.off_m)
+        c = r["counts"]
+        tqdm.write(f"| {name} | {seed} | {backend} | {frontend} | {r['rmse']:.4f} | {r['max']:.3f} | {r['step']:.3f} | "
+                   f"{c['ok']} / {c['degraded']} / {c['suspect']} / {c['lost']} | {r['ok_max']:.3f} | {r['ok_off']} | "
+                   f"{'yes' if r['exit3'] else 'no'} |", file=sys.stdout)
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()

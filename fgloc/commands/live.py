@@ -55,6 +55,9 @@ def summary_line(report: dict) -> str:
     if las is not None:
         parts.append(f"laser {las.get('scans', 0)} scans (malformed {las.get('malformed', 0)}, connects "
                      f"{las.get('connects', 0)})")
+    if c.get("queue_dropped"):  # a host too slow for its input: the oldest messages went
+        by_kind = ", ".join(f"{k} {v}" for k, v in sorted((c.get("queue_dropped_by_kind") or {}).items()))
+        parts.append(f"input queue full: {c['queue_dropped']} oldest messages dropped ({by_kind})")
     return "fgloc live: " + "; ".join(parts)
 
 

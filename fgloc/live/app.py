@@ -115,6 +115,7 @@ class LiveSession:
             session, recorder=self.recorder, publisher=self.publisher, status_sink=status_sink,
             event_sink=ev, laser_mount=self.laser_mount,
             silence_s=cfg.health.silence_s, trajectory_window_s=trajectory_window_s,
+            queue_max_msgs=cfg.health.queue_max_msgs,
         )
         ts, cs, gs = sc.twist_std, sc.compass_std_deg, sc.gyro_std_dps
         conv = FrameConverter(

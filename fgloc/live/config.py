@@ -59,6 +59,10 @@ class HealthConfig:
 
     silence_s: float = setting(0.4, "a sensor with no message this long is reported silent (checked every "
                                "~20 ms)", gt=0)
+    queue_max_msgs: int = setting(
+        4000, "messages from the sensors waiting for the fusion loop at most (~40 s of a robot's 95 a second); "
+        "when it is full the oldest is dropped, counted (queue_dropped) and reported: a host too slow for its "
+        "input keeps bounded memory and fuses what is recent", min=1)
 
 
 @dataclass

@@ -15,6 +15,7 @@ read) to the moment the fused pose is available after ``Localizer.on_scan``.
 from __future__ import annotations
 
 import heapq
+import math
 import queue
 import struct
 import threading
@@ -155,6 +156,7 @@ class LiveRunner:
         reorder_s: float = 0.15,
         sinks: list[Any] | None = None,
         trajectory_window_s: float | None = None,
+        queue_max_msgs: int | None = None,
     ) -> None:
         self.loc = session.loc
         self.recorder = recorder
@@ -167,7 +169,16 @@ class LiveRunner:
         self.laser_mount = laser_mount
         self.silence_s = silence_s
         self.status_period_s = status_period_s
-        self.q: queue.Queue[tuple[str, Any, float]] = queue.Queue()
+        if queue_max_msgs is None:
+            from fgloc.live.config import HealthConfig
+
+            queue_max_msgs = HealthConfig().queue_max_msgs
+        # bounded: a host too slow for its input drops the oldest message (counted) rather than
+        # holding ever more of them
+        self.q: queue.Queue[tuple[str, Any, float]] = queue.Queue(maxsize=max(int(queue_max_msgs), 1))
+        self.dropped: dict[str, int] = {}  # kind -> messages dropped from the full queue
+        self._dropped_told = 0  # the drops the last event line told of
+        self._drop_event_t = -math.inf  # when it was said (time.monotonic())
         self.health = {s: SensorHealth(s) for s in sensors}
         self.events: deque[HealthEvent] = deque(maxlen=EVENTS_KEPT)
         self.latencies_ms: deque[float] = deque(maxlen=LATENCIES_KEPT)  # the percentiles' window
@@ -175,7 +186,8 @@ class LiveRunner:
         self.counters: dict[str, int] = {"scans_fused": 0, "scans_skipped_backlog": 0, "fixes": 0,
                                          "poses_dead_reckoned": 0,  # while the laser is silent
                                          "record_errors": 0, "localizer_errors": 0,
-                                         "queue_max": 0}  # the most messages seen waiting (a host too slow)
+                                         "queue_max": 0,  # the most messages seen waiting (a host too slow)
+                                         "queue_dropped": 0}  # the oldest dropped from the full queue
         self.sources: dict[str, Callable[[], dict[str, Any]]] = {}  # name -> counters getter
         self._pending_scans = 0
         self._lock = threading.Lock()
@@ -203,11 +215,25 @@ class LiveRunner:
 
     # ---------------------------------------------------------------- producer side
     def push(self, kind: str, msg: Any, arrival: float) -> None:
-        """Thread-safe: called by the sensor threads."""
-        if kind == "scan":
-            with self._lock:
+        """Thread-safe: called by the sensor threads.  Never blocks: when the queue is full its
+        oldest message is dropped and counted (``queue_dropped``, by kind in :attr:`dropped`)."""
+        with self._lock:
+            if kind == "scan":
                 self._pending_scans += 1
-        self.q.put((kind, msg, arrival))
+            while True:
+                try:
+                    self.q.put_nowait((kind, msg, arrival))
+                    return
+                except queue.Full:
+                    pass
+                try:
+                    old_kind, _, _ = self.q.get_nowait()
+                except queue.Empty:  # the fusion loop took one meanwhile
+                    continue
+                if old_kind == "scan":
+                    self._pending_scans -= 1
+                self.counters["queue_dropped"] += 1
+                self.dropped[old_kind] = self.dropped.get(old_kind, 0) + 1
 
     # ---------------------------------------------------------------- consumer side
     def _record(self, topic: str, msg: Any, stamp: float) -> None:
@@ -335,6 +361,7 @@ class LiveRunner:
 
     def all_counters(self) -> dict[str, Any]:
         out: dict[str, Any] = dict(self.counters)
+        out["queue_dropped_by_kind"] = dict(self.dropped)
         for name, get in self.sources.items():
             try:
                 out[name] = get()
@@ -379,14 +406,27 @@ class LiveRunner:
 
         router = getattr(self.session, "sources", None)
         health = f" | {status_line(router.health())}" if router is not None else ""  # per source
+        n_drop = self.counters["queue_dropped"]
+        dropped = f" QUEUE FULL dropped {n_drop}" if n_drop else ""  # a host too slow for its input
         return (f"{' | '.join(parts)} | lat p50 {p50:4.1f} p99 {p99:4.1f} ms | {pose} | "
-                f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']} | {err}{health}")
+                f"fixes {self.counters['fixes']} skip {self.counters['scans_skipped_backlog']}{dropped} | "
+                f"{err}{health}")
+
+    def _tell_drops(self, now: float) -> None:
+        """An event line when the full queue dropped messages (at most one every 10 s)."""
+        n = self.counters["queue_dropped"]
+        if n > self._dropped_told and now - self._drop_event_t >= 10.0:
+            by_kind = ", ".join(f"{k} {v}" for k, v in sorted(self.dropped.items()))
+            self.event_sink(f"input queue full ({self.q.maxsize} messages): {n - self._dropped_told} oldest "
+                            f"dropped ({n} in all: {by_kind}); the host is too slow for the input")
+            self._dropped_told, self._drop_event_t = n, now
 
     def step(self, timeout: float = 0.02) -> bool:
         """Process queued messages (up to ~50 ms worth); returns False if nothing came."""
         got = False
         t_end = time.monotonic() + 0.05
         self.counters["queue_max"] = max(self.counters["queue_max"], self.q.qsize())
+        self._tell_drops(time.monotonic())
         while True:
             try:
                 kind, msg, arrival = self.q.get(timeout=timeout if not got else 0.0)

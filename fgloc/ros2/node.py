@@ -52,9 +52,9 @@ from fgloc.geometry import compose, inverse, wrap_scalar
 from fgloc.io.ros import mirror_scan
 from fgloc.io.topics import IMU, LASER_SCAN, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE
 from fgloc.localization.session import BaseSink
+from fgloc.quantiles import LogHistogram
 from fgloc.ros2 import codec, qos
 from fgloc.ros2.codec import DIAGNOSTIC_ARRAY, OCCUPANCY_GRID, Undecodable
-from fgloc.ros2.quantiles import LogHistogram
 from fgloc.ros2.transport import EndpointHealth, Transport
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 

@@ -31,9 +31,9 @@ from typing import Any, Protocol
 from xml.sax.saxutils import quoteattr
 
 from fgloc.errors import ConfigError
+from fgloc.quantiles import LogHistogram
 from fgloc.ros2.names import dds_topic, dds_type, ros_topic, ros_type
 from fgloc.ros2.qos import RELIABLE, TRANSIENT_LOCAL, Profile, to_dds
-from fgloc.ros2.quantiles import LogHistogram
 
 #: DDS QoS policy ids (DDS 2.2.3; Cyclone's dds_qos_policy_id_t) as an incompatible-QoS status names them
 POLICY_NAMES = {1: "USER_DATA", 2: "DURABILITY", 3: "PRESENTATION", 4: "DEADLINE", 5: "LATENCY_BUDGET",

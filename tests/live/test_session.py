@@ -91,11 +91,11 @@ def test_silence_reported_and_recovered_record_and_publish(tmp_path):
     assert n["/odom"] == r.health["odom"].count and n["/imu"] == r.health["imu"].count
     assert n["/scan"] == r.health["scan"].count
     # one fused pose per fused scan, and one every 0.1 s of dead reckoning while the laser was silent
-    assert n["/fused_pose"] == len(r.latencies_ms) + r.counters["poses_dead_reckoned"] > 0
+    assert n["/fused_pose"] == r.latency_hist.count + r.counters["poses_dead_reckoned"] > 0
 
     poses = [m for m in _drain(udp) if m["type"] == "pose"]
     status = [m for m in _drain(udp) if m["type"] == "status"]
-    assert len(poses) == len(r.latencies_ms) + r.counters["poses_dead_reckoned"]
+    assert len(poses) == r.latency_hist.count + r.counters["poses_dead_reckoned"]
     assert {p["status"] for p in poses} <= {"ok", "degraded", "suspect", "lost"}
     assert {"x", "y", "yaw", "cov", "stamp", "seq"} <= set(poses[0]) and len(poses[0]["cov"]) == 9
     assert [p["seq"] for p in poses] == list(range(1, len(poses) + 1))

@@ -1,4 +1,4 @@
-"""The run-long latency percentiles of the --ros2 path: constant memory, within half a bin of numpy's."""
+"""Run-long percentiles in constant memory (fgloc live's and --ros2's latencies): within half a bin of numpy's."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from fgloc.ros2.quantiles import LogHistogram
+from fgloc.quantiles import LogHistogram
 
 
 def test_percentiles_within_half_a_bin_of_the_samples() -> None:

@@ -34,6 +34,10 @@ from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
 SENSORS = ("odom", "imu", "scan")
 LATENCIES_KEPT = 5_000  # the newest scans' latencies, one by one (200 s at 25 Hz; the status line's window)
 EVENTS_KEPT = 1_000      # health events kept (the newest)
+#: how often the fusion loop hands the C allocator's free memory back to the system (glibc's malloc_trim):
+#: the sensor threads allocate each message in their own malloc arenas and the loop frees it in its own,
+#: which leaves freed but unreturned pages growing for the first tens of minutes
+TRIM_PERIOD_S = 60.0
 #: what happened to the session (a sensor silent or back, a connection lost, a device clock's step),
 #: recorded as ``std_msgs/msg/String`` beside the inputs, at the host time it was reported
 EVENTS_TOPIC = "/fgloc/events"
@@ -57,6 +61,28 @@ class SensorHealth:
     def rate_hz(self, now: float, window: float = 2.0) -> float:
         n = sum(1 for t in self.arrivals if now - t <= window)
         return n / window
+
+
+_LIBC: Any = None
+
+
+def malloc_trim() -> bool:
+    """Return the C heap's free pages to the system (glibc ``malloc_trim(0)``, every arena); False
+    where there is no glibc."""
+    global _LIBC
+    if _LIBC is None:
+        import ctypes
+        import ctypes.util
+
+        try:
+            lib = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            _LIBC = lib if hasattr(lib, "malloc_trim") else False
+        except OSError:
+            _LIBC = False
+    if not _LIBC:
+        return False
+    _LIBC.malloc_trim(0)
+    return True
 
 
 class TrajectoryBuffer:
@@ -194,6 +220,7 @@ class LiveRunner:
         self._lock = threading.Lock()
         self.stop_event = threading.Event()
         self._last_status = 0.0
+        self._last_trim = time.monotonic()
         self._last_pub_status = 0.0
         self._recorded_tf = False
         self.last_fix: PoseFix | None = None
@@ -450,6 +477,10 @@ class LiveRunner:
         self.flush_reorder()
         self.check_health()
         now = time.monotonic()
+        if now - self._last_trim >= TRIM_PERIOD_S:
+            self._last_trim = now
+            if malloc_trim():
+                self.counters["malloc_trims"] = self.counters.get("malloc_trims", 0) + 1
         if self.status_sink is not None and now - self._last_status >= self.status_period_s:
             self._last_status = now
             self.status_sink(self.status_line())

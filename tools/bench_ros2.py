@@ -96,7 +96,10 @@ class MemProbe:
         import gc
 
         gc.callbacks.append(on_gc)
-        if trace:
+        self.trace_after_s = float(os.environ.get("FGLOC_PROBE_TRACE_AFTER_S", "0"))
+        self.snap_every_s = float(os.environ.get("FGLOC_PROBE_SNAP_S", "0"))
+        self._snap0: Any = None
+        if trace and self.trace_after_s <= 0:
             import tracemalloc
 
             tracemalloc.start(1)
@@ -129,7 +132,17 @@ class MemProbe:
         if self.trace:
             import tracemalloc
 
-            row["traced"] = tracemalloc.get_traced_memory()[0]
+            if not tracemalloc.is_tracing() and row["t"] >= self.trace_after_s:
+                tracemalloc.start(1)  # from here on: what is traced is what was allocated since and lives
+            row["traced"] = tracemalloc.get_traced_memory()[0] if tracemalloc.is_tracing() else 0
+            if tracemalloc.is_tracing() and self.snap_every_s > 0 and row["t"] >= getattr(self, "_next_snap", 0.0):
+                self._next_snap = row["t"] + self.snap_every_s
+                snap = tracemalloc.take_snapshot().filter_traces([tracemalloc.Filter(False, tracemalloc.__file__)])
+                if self._snap0 is None:
+                    self._snap0 = snap
+                else:  # the lines whose live memory grew most since the first snapshot
+                    row["grew"] = [(str(d.traceback[0]), d.size_diff, d.count_diff)
+                                   for d in snap.compare_to(self._snap0, "lineno")[:15]]
         return row
 
     def start(self) -> None:
@@ -322,6 +335,13 @@ def print_probe(probe: list[dict], t_wall0: float, rate: float, settle_min: floa
         print(f"  {name:28s} {first:9.2f} -> {v[-1]:9.2f} {u:2s} ({v[-1] - first:+.2f}; slope {slope:+.3f} {u} "
               "per minute of log)")
     last = probe[-1]
+    grew = [r for r in probe if r.get("grew")]
+    if grew:
+        r = grew[-1]
+        print(f"  tracemalloc: the lines whose live memory grew most from the first snapshot to "
+              f"{(r['wall'] - t_wall0) * rate / 60.0:.1f} min of log:")
+        for where, size, count in r["grew"][:12]:
+            print(f"    {size / 1e3:+9.1f} kB {count:+7d} blocks  {where}")
     if "gc_n" in last:
         print(f"  cyclic GC (threshold {last['gc_threshold']}, {last['frozen']} objects frozen): passes per generation "
               f"{last['gc_n']}, total {last['gc_ms']} ms, longest {last['gc_max_ms']} ms")
@@ -355,10 +375,16 @@ def main() -> int:
     ap.add_argument("--probe", action="store_true", help="sample malloc / Python memory inside the live process")
     ap.add_argument("--tracemalloc", action="store_true", help="--probe: tracemalloc on in the live process")
     ap.add_argument("--trim-s", type=float, default=0.0, help="--probe: malloc_trim(0) every this many seconds")
+    ap.add_argument("--trace-after-s", type=float, default=0.0, help="--tracemalloc: start tracing this many "
+                    "seconds into the live process (then what is traced is what was allocated since and lives)")
+    ap.add_argument("--snap-s", type=float, default=0.0, help="--tracemalloc: a snapshot this often; the lines "
+                    "whose memory grew most since the first are printed")
     ap.add_argument("--no-dds", action="store_true", help="replay and node in this process, no DDS (implies --probe)")
     a = ap.parse_args()
     if a.no_dds:
         a.probe = True
+    os.environ["FGLOC_PROBE_TRACE_AFTER_S"] = str(a.trace_after_s)  # read by MemProbe in the live process
+    os.environ["FGLOC_PROBE_SNAP_S"] = str(a.snap_s)
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
     init = ["--initial-pose", "2.5", "3.0", "0.0"]
     if a.log is None:

@@ -40,6 +40,7 @@ def wrong_runs(loc, gt, off_m: float = 0.25) -> tuple[int, int]:
 
 def localize(sim, backend: str, gate: bool) -> dict:
     from fgloc.config import load_config
+    from fgloc.eval.metrics import position_errors_and_steps
     from fgloc.localization import Localizer, Session
 
     msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
@@ -48,9 +49,7 @@ def localize(sim, backend: str, gate: bool) -> dict:
     t0 = time.perf_counter()
     est = Session(loc).run(msgs)
     wall = time.perf_counter() - t0
-    gt = sim.ground_truth.interpolate(est.stamps)
-    err = np.hypot(*(est.poses[:, :2] - gt[:, :2]).T)
-    step = np.hypot(*(np.diff(est.poses[:, :2], axis=0) - np.diff(gt[:, :2], axis=0)).T)
+    err, step = position_errors_and_steps(est, sim.ground_truth)
     n_wrong, longest = wrong_runs(loc, sim.ground_truth)
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max": float(err.max()), "step": float(step.max()),
             "wrong": n_wrong, "longest": longest, "held": int(loc.stats.get("held_jumps", 0)),

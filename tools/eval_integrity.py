@@ -27,6 +27,7 @@ SCENARIOS = ["wheel_slip", "compass_disturbance", "changed_world", "blackout", "
 
 def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float) -> dict:
     from fgloc.config import load_config
+    from fgloc.eval.metrics import position_errors_and_steps
     from fgloc.localization import Localizer, Session
 
     cfg = load_config()
@@ -36,9 +37,7 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float)
     t0 = time.perf_counter()
     est = Session(loc).run(msgs)
     wall = time.perf_counter() - t0
-    gt = sim.ground_truth.interpolate(est.stamps)
-    err = np.hypot(*(est.poses[:, :2] - gt[:, :2]).T)
-    step = np.hypot(*(np.diff(est.poses[:, :2], axis=0) - np.diff(gt[:, :2], axis=0)).T)
+    err, step = position_errors_and_steps(est, sim.ground_truth)
     status, _ = loc.monitor.at(est.stamps)
     ok = np.array([s == "ok" for s in status], dtype=bool)
     summary = loc.stats["status"]

@@ -419,6 +419,16 @@ def evaluate(
 
 
 # --------------------------------------------------------------------------- coverage split
+def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArray, FloatArray]:
+    """Per estimated pose, its position error (m) against ``gt`` interpolated at its stamp, and per
+    consecutive pair, how far the estimate's step differs from the reference's (m): a jump shows as
+    a large step error.  ``gt`` must span ``est``'s stamps."""
+    ref = gt.interpolate(est.stamps)
+    err = np.hypot(*(est.poses[:, :2] - ref[:, :2]).T)
+    step = np.hypot(*(np.diff(est.poses[:, :2], axis=0) - np.diff(ref[:, :2], axis=0)).T)
+    return err, step
+
+
 def within_radius(points_xy: FloatArray, anchors_xy: FloatArray, radius_m: float) -> NDArray[np.bool_]:
     """For each of ``points_xy`` (N x 2, m), whether an anchor of ``anchors_xy`` (M x 2, m) lies within
     ``radius_m``: e.g. a reference pose "mapped" when a keyframe the map was built from is that close.

@@ -15,6 +15,7 @@ from fgloc.eval.metrics import (
     error_series,
     evaluate,
     pairs_by_distance,
+    position_errors_and_steps,
 )
 from fgloc.geometry import compose
 from fgloc.types import Trajectory
@@ -210,3 +211,15 @@ def test_keys_are_documented_fields():
               "along_rms_m", "cross_rms_m", "position_p95_m", "heading_p95_deg", "ape_rmse_m",
               "ape_median_m", "rpe_dist_trans_rmse_m", "rpe_time_rot_rmse_deg", "n", "duration_s"):
         assert k in Metrics.keys()
+
+
+def test_position_errors_and_steps_show_a_jump_as_one_step():
+    t = np.arange(0.0, 2.01, 0.1)
+    gt = Trajectory(t, np.column_stack([t, 0 * t, 0 * t]))   # 1 m/s along x
+    p = gt.poses.copy()
+    p[10:, 1] += 0.3                                        # a 0.3 m jump sideways at t = 1 s
+    err, step = position_errors_and_steps(Trajectory(t, p), gt)
+    assert err.shape == (21,) and step.shape == (20,)
+    assert np.allclose(err[:10], 0.0) and np.allclose(err[10:], 0.3)
+    assert step.argmax() == 9 and step[9] == pytest.approx(0.3)
+    assert np.allclose(np.delete(step, 9), 0.0)

@@ -38,6 +38,9 @@ def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray, min_sig
 
 _FLOORS: dict[float, FloatArray] = {}
 _KERNELS: dict[tuple[str, float], gtsam.noiseModel.mEstimator.Base] = {}
+#: kernels kept at most: the configured scales are the first asked for and stay; a scale computed per
+#: factor (the compass's, from its innovation variance) is made for that factor only
+KERNELS_KEPT = 32
 
 
 def _floor(min_sigma: float) -> FloatArray:
@@ -51,13 +54,15 @@ def _floor(min_sigma: float) -> FloatArray:
 
 def robust(base: gtsam.noiseModel.Base, kernel: str, k: float) -> gtsam.noiseModel.Base:
     """``base`` behind a Huber / Cauchy kernel of scale ``k`` (``none``: as it is); the kernel
-    objects (stateless) are made once per scale and shared."""
+    objects (stateless) are shared per scale, the first :data:`KERNELS_KEPT` scales kept."""
     if kernel not in ("huber", "cauchy"):
         return base
     m = _KERNELS.get((kernel, k))
     if m is None:
         est = gtsam.noiseModel.mEstimator.Huber if kernel == "huber" else gtsam.noiseModel.mEstimator.Cauchy
-        m = _KERNELS[(kernel, k)] = est.Create(k)
+        m = est.Create(k)
+        if len(_KERNELS) < KERNELS_KEPT:
+            _KERNELS[(kernel, k)] = m
     return gtsam.noiseModel.Robust.Create(m, base)
 
 

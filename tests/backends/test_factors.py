@@ -110,3 +110,17 @@ def test_twist_covariance_matches_monte_carlo():
     corr = emp[1, 2] / np.sqrt(emp[1, 1] * emp[2, 2])
     corr_pred = c[1, 2] / np.sqrt(c[1, 1] * c[2, 2])
     assert abs(corr - corr_pred) < 0.08
+
+
+def test_kernel_cache_bounded_when_the_scale_varies_per_factor():
+    """A per-factor scale (the compass's) must not grow the shared kernel cache without bound, and a
+    scale past the cache still gets its own kernel."""
+    from fgloc.backends import factors as fx
+
+    base = gtsam.noiseModel.Isotropic.Sigma(3, 0.1)
+    for i in range(500):
+        fx.robust(base, "cauchy", 1.0 + i * 1e-3)
+    assert len(fx._KERNELS) <= fx.KERNELS_KEPT
+    m = fx.robust(base, "huber", 2.5).robust()      # past the cache: made for this factor
+    assert m.weight(1.0) == pytest.approx(1.0)
+    assert m.weight(5.0) == pytest.approx(2.5 / 5.0)

@@ -52,6 +52,11 @@ def _floor(min_sigma: float) -> FloatArray:
     return f
 
 
+def kernels_cached() -> int:
+    """How many robust kernels :func:`robust` keeps (at most :data:`KERNELS_KEPT`)."""
+    return len(_KERNELS)
+
+
 def robust(base: gtsam.noiseModel.Base, kernel: str, k: float) -> gtsam.noiseModel.Base:
     """``base`` behind a Huber / Cauchy kernel of scale ``k`` (``none``: as it is); the kernel
     objects (stateless) are shared per scale, the first :data:`KERNELS_KEPT` scales kept."""

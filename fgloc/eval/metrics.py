@@ -418,7 +418,6 @@ def evaluate(
     )
 
 
-# --------------------------------------------------------------------------- coverage split
 def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArray, FloatArray]:
     """Per estimated pose, its position error (m) against ``gt`` interpolated at its stamp, and per
     consecutive pair, how far the estimate's step differs from the reference's (m): a jump shows as
@@ -429,6 +428,7 @@ def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArr
     return err, step
 
 
+# --------------------------------------------------------------------------- coverage split
 def within_radius(points_xy: FloatArray, anchors_xy: FloatArray, radius_m: float) -> NDArray[np.bool_]:
     """For each of ``points_xy`` (N x 2, m), whether an anchor of ``anchors_xy`` (M x 2, m) lies within
     ``radius_m``: e.g. a reference pose "mapped" when a keyframe the map was built from is that close.

@@ -319,3 +319,19 @@ def test_the_front_ends_import_no_config_but_its_schema():
         if bad:
             found[name] = bad
     assert not found, found
+
+
+#: The back-end contract's size rule: no module of the fusion's two rooms outgrows what a newcomer
+#: can read in one sitting.
+MAX_MODULE_LINES = 600
+
+
+@pytest.mark.parametrize("room", ["backends", "localization"])
+def test_no_module_in_the_fusion_rooms_is_over_600_lines(room):
+    sizes = {
+        str(p.relative_to(PACKAGE.parent)): len(p.read_text().splitlines())
+        for p in sorted((PACKAGE / room).rglob("*.py"))
+    }
+    assert len(sizes) > 10, sizes
+    too_long = {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES}
+    assert not too_long, f"split by responsibility: {too_long}"

@@ -58,22 +58,7 @@ class MemProbe:
     ``trace`` the bytes tracemalloc sees (Python's allocators and numpy's buffers).  ``trim_s`` > 0:
     ``malloc_trim(0)`` after each sample at least that far apart (a diagnostic)."""
 
-    FIELDS = ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
-              "keepcost")
-
     def __init__(self, path: str, every_s: float = 10.0, trace: bool = False, trim_s: float = 0.0) -> None:
-        import ctypes
-
-        class Mallinfo2(ctypes.Structure):
-            _fields_ = [(n, ctypes.c_size_t) for n in self.FIELDS]
-
-        self.libc = ctypes.CDLL("libc.so.6")
-        self.libc.mallinfo2.restype = Mallinfo2
-        self.libc.open_memstream.restype = ctypes.c_void_p
-        self.libc.open_memstream.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-        self.libc.malloc_info.argtypes = [ctypes.c_int, ctypes.c_void_p]
-        self.libc.fclose.argtypes = [ctypes.c_void_p]
-        self.libc.free.argtypes = [ctypes.c_void_p]
         self.path, self.every_s, self.trace, self.trim_s = path, every_s, trace, trim_s
         self.trimmed = 0
         # the cyclic collector's passes: count, total and longest pause per generation; pauses over 2 ms
@@ -104,27 +89,19 @@ class MemProbe:
 
             tracemalloc.start(1)
 
-    def arenas(self) -> int:
-        import ctypes
-
-        buf, size = ctypes.c_void_p(), ctypes.c_size_t()
-        fp = self.libc.open_memstream(ctypes.byref(buf), ctypes.byref(size))
-        self.libc.malloc_info(0, fp)
-        self.libc.fclose(fp)
-        text = ctypes.string_at(buf.value, size.value).decode() if buf.value else ""
-        self.libc.free(buf)
-        return text.count("<heap nr=")
-
     def sample(self, t0: float) -> dict:
         import gc
         import threading
 
-        mi = self.libc.mallinfo2()
+        from fgloc import memory
+
+        mi = memory.mallinfo()
         with open("/proc/self/statm") as f:
             rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-        row = {"t": time.monotonic() - t0, "wall": time.time(), "rss": rss, "malloc_used": mi.uordblks,
-               "malloc_free": mi.fordblks,
-               "malloc_mmap": mi.hblkhd, "malloc_arena": mi.arena, "arenas": self.arenas(),
+        row = {"t": time.monotonic() - t0, "wall": time.time(), "rss": rss,
+               "malloc_used": mi.in_use_b if mi else 0, "malloc_free": mi.free_b if mi else 0,
+               "malloc_mmap": mi.mmapped_b if mi else 0, "malloc_arena": mi.arena_b if mi else 0,
+               "arenas": memory.arenas() or 0,
                "py_blocks": sys.getallocatedblocks(), "objects": len(gc.get_objects()),
                "threads": threading.active_count(), "trimmed": self.trimmed, "gc_n": list(self.gc_n),
                "gc_ms": [round(v, 2) for v in self.gc_ms], "gc_max_ms": [round(v, 2) for v in self.gc_max],
@@ -156,7 +133,9 @@ class MemProbe:
                     f.write(json.dumps(self.sample(t0)) + "\n")
                     f.flush()
                     if self.trim_s > 0 and time.monotonic() - last_trim >= self.trim_s:
-                        self.libc.malloc_trim(0)
+                        from fgloc import memory
+
+                        memory.trim()
                         self.trimmed += 1
                         last_trim = time.monotonic()
                     time.sleep(self.every_s)

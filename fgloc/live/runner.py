@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from fgloc import memory
 from fgloc.localization.session import BaseSink, RecorderSink, Session, UdpSink
 from fgloc.quantiles import LogHistogram
 from fgloc.types import LaserScan, PoseFix, StaticTransform, Trajectory
@@ -61,28 +62,6 @@ class SensorHealth:
     def rate_hz(self, now: float, window: float = 2.0) -> float:
         n = sum(1 for t in self.arrivals if now - t <= window)
         return n / window
-
-
-_LIBC: Any = None
-
-
-def malloc_trim() -> bool:
-    """Return the C heap's free pages to the system (glibc ``malloc_trim(0)``, every arena); False
-    where there is no glibc."""
-    global _LIBC
-    if _LIBC is None:
-        import ctypes
-        import ctypes.util
-
-        try:
-            lib = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-            _LIBC = lib if hasattr(lib, "malloc_trim") else False
-        except OSError:
-            _LIBC = False
-    if not _LIBC:
-        return False
-    _LIBC.malloc_trim(0)
-    return True
 
 
 class TrajectoryBuffer:
@@ -479,7 +458,7 @@ class LiveRunner:
         now = time.monotonic()
         if now - self._last_trim >= TRIM_PERIOD_S:
             self._last_trim = now
-            if malloc_trim():
+            if memory.trim():
                 self.counters["malloc_trims"] = self.counters.get("malloc_trims", 0) + 1
         if self.status_sink is not None and now - self._last_status >= self.status_period_s:
             self._last_status = now

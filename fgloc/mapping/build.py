@@ -122,14 +122,12 @@ def loop_infos(slam: SlamResult) -> list[LoopInfo]:
 def _release_memory() -> None:
     """Hand freed memory back to the OS between stages (glibc keeps freed heap otherwise, and the
     peak RSS of a long log would be the sum of its stages)."""
-    import ctypes
     import gc
 
+    from fgloc import memory
+
     gc.collect()
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: nothing to do
-        pass
+    memory.trim()
 
 
 def _fixed_mmap_threshold(nbytes: int = 8 << 20) -> None:
@@ -138,12 +136,9 @@ def _fixed_mmap_threshold(nbytes: int = 8 << 20) -> None:
     much lower: the loop and tracking fields (1-2 MB, allocated thousands of times) then come from
     fresh mmaps each time and their page faults cost system time (ACES: 1.5 s at 1 MB, 1.1 s at
     8 MB, 0.7 s at 32 MB); not higher: fr-clinic's peak RSS 460 MB at 8 MB, 489 MB at 32 MB."""
-    import ctypes
+    from fgloc import memory
 
-    try:
-        ctypes.CDLL("libc.so.6").mallopt(-3, int(nbytes))  # M_MMAP_THRESHOLD
-    except (OSError, AttributeError):
-        pass
+    memory.set_mmap_threshold(nbytes)
 
 
 def _progress(factory: ProgressFactory | None, n: int, what: str) -> Callable[[int], None] | None:

@@ -13,7 +13,7 @@ is honest.  ``--frontends native`` gives the same for fgloc's own matcher.
 
 Usage::
 
-    python tools/eval_amcl_ratio.py [--scenes paper willow obstacles] [--seeds 3] [--config C.yaml]
+    python tools/eval_amcl_ratio.py [--scenes paper willow obstacles] [--seeds 3] [--config C.yaml] [--batch]
 """
 
 from __future__ import annotations
@@ -57,9 +57,9 @@ def output_nees(online: Any, gt: Any) -> dict[str, float]:
     return nees_summary(e, np.asarray(online.covs, dtype=float)[inside])
 
 
-def one(scene: str, seed: int, config: Any, frontend: str) -> dict[str, Any]:
-    """RMSEs of EKF and smoother (fixed-lag and online) with ``frontend`` on one simulated run, and
-    each back-end's output NEES."""
+def one(scene: str, seed: int, config: Any, frontend: str, batch: bool = False) -> dict[str, Any]:
+    """RMSEs of EKF and smoother (fixed-lag and online; ``batch``: the batch smoother too) with
+    ``frontend`` on one simulated run, and each back-end's output NEES."""
     from fgloc.bench.common import localize_sim
     from fgloc.eval.metrics import evaluate
 
@@ -73,6 +73,10 @@ def one(scene: str, seed: int, config: Any, frontend: str) -> dict[str, Any]:
             m = evaluate(tr, sim.ground_truth)
             out[f"{be} {which}"] = (m.position_rmse_m, m.heading_rmse_deg, wall)
         out[f"{be} nees"] = output_nees(online, sim.ground_truth)
+    if batch:
+        final, _online, _loc, wall = localize_sim(sim, "batch", frontend, config)
+        m = evaluate(final, sim.ground_truth)
+        out["batch final"] = (m.position_rmse_m, m.heading_rmse_deg, wall)
     return out
 
 
@@ -82,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--config", type=Path, default=None, help="YAML overlaid on the defaults")
     ap.add_argument("--frontends", nargs="+", default=["amcl"], choices=["amcl", "native"])
+    ap.add_argument("--batch", action="store_true", help="also the batch smoother (whole-run smoothing)")
     a = ap.parse_args(argv)
     from tqdm import tqdm
 
@@ -93,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     tasks = [(f, s, k) for f in a.frontends for s in a.scenes for k in range(a.seeds)]
     rows = []
     for fe, scene, seed in tqdm(tasks, desc="runs", file=sys.stderr):
-        rows.append((fe, scene, seed, one(scene, seed, cfg, fe)))
+        rows.append((fe, scene, seed, one(scene, seed, cfg, fe, a.batch)))
     for fe in a.frontends:
         table(fe, [(scene, seed, r) for f, scene, seed, r in rows if f == fe])
     print(f"\n{len(rows)} runs in {time.perf_counter() - t0:.0f} s")
@@ -103,10 +108,14 @@ def main(argv: list[str] | None = None) -> int:
 def table(fe: str, rows: list[tuple[str, int, dict[str, Any]]]) -> None:
     """One front-end's table: RMSEs, ratios, output NEES."""
     print(f"\nfront-end {fe}:\n")
+    batch = all("batch final" in r for _, _, r in rows)
     print("| scene | seed | EKF pos m | smoother pos m | ratio | EKF hdg deg | smoother hdg deg | ratio | "
-          "smoother online pos / hdg ratio | output NEES EKF (x / y / yaw) | smoother |")
-    print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|")
+          "smoother online pos / hdg ratio | " + ("batch pos m / hdg deg, pos / hdg ratio | " if batch else "")
+          + "output NEES EKF (x / y / yaw) | smoother |")
+    print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|" + ("--:|" if batch else ""))
     ratios: dict[str, list[float]] = {"pos": [], "hdg": [], "pos_online": [], "hdg_online": []}
+    if batch:
+        ratios.update({"pos_batch": [], "hdg_batch": []})
     nees: dict[str, list[float]] = {"ekf": [], "smoother": []}
     for scene, seed, r in rows:
         ep, eh, _ = r["ekf final"]
@@ -117,6 +126,12 @@ def table(fe: str, rows: list[tuple[str, int, dict[str, Any]]]) -> None:
         ratios["pos_online"].append(op / ep)
         ratios["hdg_online"].append(oh / eh)
         cells = []
+        bcell = ""
+        if batch:
+            bp, bh, _ = r["batch final"]
+            ratios["pos_batch"].append(bp / ep)
+            ratios["hdg_batch"].append(bh / eh)
+            bcell = f"{bp:.4f} / {bh:.3f}, {bp / ep:.2f} / {bh / eh:.2f} | "
         for be in ("ekf", "smoother"):
             n = r[f"{be} nees"]
             if n.get("n"):
@@ -125,7 +140,7 @@ def table(fe: str, rows: list[tuple[str, int, dict[str, Any]]]) -> None:
             else:
                 cells.append("-")
         print(f"| {scene} | {seed} | {ep:.4f} | {sp:.4f} | {sp / ep:.2f} | {eh:.3f} | {sh:.3f} | {sh / eh:.2f} | "
-              f"{op / ep:.2f} / {oh / eh:.2f} | {cells[0]} | {cells[1]} |")
+              f"{op / ep:.2f} / {oh / eh:.2f} | {bcell}{cells[0]} | {cells[1]} |")
     print()
     for k, v in ratios.items():
         print(f"{fe}: smoother / EKF {k}: median {statistics.median(v):.2f}, max {max(v):.2f} over {len(v)} runs")

@@ -137,7 +137,7 @@ def test_source_config_errors_are_one_line_naming_the_key():
         parse_sources({"odom0": {"type": "odometry", "covariance": "fixed", "sigmas": [0.1]}})
     default = parse_sources(None, {"odom": "/wheel_odom"})
     assert [(s.name, s.topic, s.use) for s in default] == [("odom", "/wheel_odom", ("vx", "vy", "vyaw")),
-                                                            ("imu", "/imu", ("yaw", "vyaw"))]
+                                                            ("imu", "/imu", ("yaw", "vyaw", "roll", "pitch"))]
 
 
 def test_default_layout_reproduces_direct_feeding_exactly():

@@ -2,7 +2,8 @@
 
 The ``sources:`` config section lists input sources by name (``inputs:``); empty, the
 default layout is used: ``odom`` (``nav_msgs/Odometry`` on ``/odom``: vx, vy, vyaw) and
-``imu`` (``sensor_msgs/Imu`` on ``/imu``: yaw, vyaw), the paper robot's layout.  Each source::
+``imu`` (``sensor_msgs/Imu`` on ``/imu``: yaw, vyaw, and roll, pitch to level the odometry where
+its orientation carries them: ``sources.level_by_imu``), the paper robot's layout.  Each source::
 
     inputs:
       wheels:   {type: odometry, topic: /husky_velocity_controller/odom, use: [vx, vyaw]}
@@ -14,7 +15,9 @@ default layout is used: ``odom`` (``nav_msgs/Odometry`` on ``/odom``: vx, vy, vy
 reduced to the planar six); an IMU may add ``roll, pitch``: its attitude then levels the
 odometry (the body velocity projected onto the ground plane, as robot_localization does in
 3-D: a robot climbing a 10 deg slope drives 1.5 % less in the plane than its wheels say) and
-its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``.
+its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``.  A tilt
+beyond 30 deg (no ground robot's: a wrong mount) or a roll / pitch variance that says "not
+estimated" (beyond that bound's square) is not used, and counted.
 ``differential``: use the increments of the source's poses
 (odometry: as a twist; an IMU's orientation: as a yaw rate).  ``covariance``: ``message``
 (as the message says), ``fixed`` (``sigmas``, one per used component), ``scaled`` (the

@@ -14,7 +14,7 @@ from typing import Any
 from fgloc.config.schema import setting, unknown_key_error
 from fgloc.errors import ConfigError
 from fgloc.localization.sources import imu, odometry, pose, twist
-from fgloc.localization.sources.spec import POLICIES, SourceSpec, SourceType, fused_components
+from fgloc.localization.sources.spec import POLICIES, TILT, SourceSpec, SourceType, fused_components
 
 #: the source types by name (``sources.inputs.NAME.type``), in the order the errors list them
 SOURCE_TYPES: dict[str, SourceType] = {t.name: t for t in (odometry.SOURCE, imu.SOURCE, pose.SOURCE, twist.SOURCE)}
@@ -33,21 +33,27 @@ class SourcesConfig:
     base_frame: str = setting("", "the robot's base frame (REP 105; robot_localization's base_link_frame): the "
                               "sensors' mounts are the transforms from it; empty: the odometry's child_frame_id, "
                               "else base_link / base_footprint")
+    level_by_imu: bool = setting(True, "the default layout (no inputs): the IMU's roll / pitch project the odometry's "
+                                 "travel onto the horizontal plane (a ramp: v cos(pitch)) where its orientation "
+                                 "carries them (a roll / pitch variance, if given, below the tilt bound's square) and "
+                                 "the tilt is one a ground robot drives on (<= 30 deg); with inputs listed, an IMU's "
+                                 "use: [..., roll, pitch] says it")
 
 
 def parse_sources(cfg: SourcesConfig | dict | None, topics: Any = None, source: str = "config") -> list[SourceSpec]:
     """The sources of a ``sources:`` section (the default layout when it lists none); one-line
     :class:`ConfigError` naming the key for anything wrong.  ``topics`` renames the default
-    layout's topics (``--odom-topic`` / ``--imu-topic``)."""
+    layout's topics (``--odom-topic`` / ``--imu-topic``).  A dict is the section's ``inputs``."""
     inputs = (cfg.inputs if isinstance(cfg, SourcesConfig) else dict(cfg or {})) or {}
     if not inputs:
+        level = cfg.level_by_imu if isinstance(cfg, SourcesConfig) else SourcesConfig.level_by_imu
         names = {"odom": "/odom", "imu": "/imu"}
         if isinstance(topics, dict):
             names.update({k: str(v) for k, v in topics.items() if k in names and v})
         elif topics is not None:
             names.update({k: str(getattr(topics, k)) for k in names if getattr(topics, k, None)})
         return [SourceSpec("odom", "odometry", names["odom"], SOURCE_TYPES["odometry"].default_use),
-                SourceSpec("imu", "imu", names["imu"], SOURCE_TYPES["imu"].default_use)]
+                SourceSpec("imu", "imu", names["imu"], SOURCE_TYPES["imu"].default_use + (TILT if level else ()))]
     out: list[SourceSpec] = []
     seen_topics: dict[str, str] = {}
     for name, d in inputs.items():

@@ -29,8 +29,9 @@ if TYPE_CHECKING:
 
 #: an attitude older than this (s) does not level an odometry message
 MAX_TILT_AGE_S = 0.5
-#: a base tilted more than this (rad) is no ground robot on a slope but a wrong mount: not levelled
-MAX_TILT_RAD = math.radians(45.0)
+#: a base tilted more than this (rad) is no ground robot on a slope (the steepest ramps and loading
+#: docks are under 20 deg) but a wrong mount or a bad reading: not levelled, counted
+MAX_TILT_RAD = math.radians(30.0)
 
 
 def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt: float) -> np.ndarray:
@@ -157,13 +158,15 @@ class OdometryHandler(SourceHandler):
         if tilt is None or abs(t - tilt[0]) > MAX_TILT_AGE_S:
             return tw, cov
         _, r, p = tilt
-        if abs(r) > MAX_TILT_RAD or abs(p) > MAX_TILT_RAD:
+        if not (abs(r) <= MAX_TILT_RAD and abs(p) <= MAX_TILT_RAD):  # NaN too
             st.extra["tilt_implausible"] = st.extra.get("tilt_implausible", 0) + 1
+            return tw, cov
+        st.extra["levelled"] = st.extra.get("levelled", 0) + 1
+        st.extra["tilt_max_rad"] = max(st.extra.get("tilt_max_rad", 0.0), abs(r), abs(p))
+        if r == 0.0 and p == 0.0:  # level (a flat IMU's exact zeros): the projection is the identity
             return tw, cov
         cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)
         J = np.array([[cp, sr * sp, 0.0], [0.0, cr, 0.0], [0.0, 0.0, 1.0]])
-        st.extra["levelled"] = st.extra.get("levelled", 0) + 1
-        st.extra["tilt_max_rad"] = max(st.extra.get("tilt_max_rad", 0.0), abs(r), abs(p))
         return J @ np.asarray(tw, dtype=float), J @ np.asarray(cov, dtype=float) @ J.T
 
 

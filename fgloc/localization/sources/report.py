@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from fgloc.backends.contract import Capability
 from fgloc.localization.sources.handler import SourceHandler
+from fgloc.localization.sources.odometry import MAX_TILT_RAD
 
 if TYPE_CHECKING:
     from fgloc.localization.stats import RunStats
@@ -56,7 +57,8 @@ class SourceReport:
     unmounted: int = 0  # messages of a frame no transform chain connects to the base, used unmounted
     levelled: int = 0  # odometry messages levelled by the IMU's roll / pitch
     tilt_max_deg: float = 0.0
-    tilt_implausible: int = 0  # odometry messages not levelled (tilt > 45 deg)
+    tilt_implausible: int = 0  # odometry messages not levelled (tilt beyond MAX_TILT_RAD, or NaN)
+    tilt_unusable: int = 0  # IMU readings whose roll / pitch variance says they are not estimated
     #: the back-end's gated measurements by stream: ``backend`` (the source's own), ``yaw``, ``gyro``
     stream_gated: dict[str, int] = field(default_factory=dict)
     noise: dict[str, StreamNoise] = field(default_factory=dict)  # by :data:`STREAM_KEYS`
@@ -90,7 +92,8 @@ class SourceReport:
                 d[k] = v
         if self.topic is not None:
             d["use"] = list(self.use)
-        for k in ("mount_late", "unmounted", "levelled", "tilt_implausible", "from_poses", "silent"):
+        for k in ("mount_late", "unmounted", "levelled", "tilt_implausible", "tilt_unusable", "from_poses",
+                  "silent"):
             if getattr(self, k):
                 d[k] = getattr(self, k)
         if self.levelled:
@@ -129,6 +132,8 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> Source
         r.tilt_max_deg = round(math.degrees(st.extra.get("tilt_max_rad", 0.0)), 2)
     if st.extra.get("tilt_implausible"):
         r.tilt_implausible = int(st.extra["tilt_implausible"])
+    if st.extra.get("tilt_unusable"):
+        r.tilt_unusable = int(st.extra["tilt_unusable"])
     bhs = be.source_health()
     for n in h.backend_streams():
         bh = bhs.get(n)
@@ -218,11 +223,14 @@ def summary_lines(stats: RunStats) -> list[str]:
                 est.append(f"{what} error {100 * sn.per_turn:.0f} % of the turn")
         if d.mount:
             est.append(f"mount: {d.mount}")
-        if d.levelled:
+        if d.levelled and d.tilt_max_deg > 0.0:  # (on level ground: nothing to say)
             est.append(f"levelled by the IMU's roll / pitch ({d.levelled} messages, tilt up to "
                        f"{d.tilt_max_deg:.1f} deg)")
         if d.tilt_implausible:
-            est.append(f"{d.tilt_implausible} not levelled (tilt > 45 deg: check the IMU mount)")
+            est.append(f"{d.tilt_implausible} not levelled (tilt > {math.degrees(MAX_TILT_RAD):.0f} deg or NaN: "
+                       "check the IMU mount)")
+        if d.tilt_unusable:
+            est.append(f"roll / pitch of {d.tilt_unusable} readings not used (variance says not estimated)")
         out.append(f"{head}: {', '.join(parts)}" + (f"; {'; '.join(est)}" if est else ""))
     clock = stats.odom_clock or {}
     if clock.get("slow"):  # a slow odometry's clock against the scans' (localization/clock.py)

@@ -575,6 +575,47 @@ def _stat(values: list[float], fmt: str) -> str:
     return f"{format(med, fmt)} [{format(min(vals), fmt)}-{format(max(vals), fmt)}]"
 
 
+def no_worse(after: list[float], before: list[float], higher_is_better: bool = True) -> tuple[float, str]:
+    """The ratio of the medians (after / before; for a time, ``higher_is_better`` False, the time's
+    ratio) and the verdict: "yes" when after's median is at least as good, "within the ranges" when
+    it is not but the two ranges overlap (the load's drift is as large), else "no"."""
+    a, b = statistics.median(after), statistics.median(before)
+    ratio = a / b
+    if (ratio >= 1.0) if higher_is_better else (ratio <= 1.0):
+        return ratio, "yes"
+    overlap = max(after) >= min(before) if higher_is_better else min(after) <= max(before)
+    return ratio, "within the ranges" if overlap else "no"
+
+
+def comparison_lines(rep: SpeedReport) -> list[str]:
+    """After against before, row by row (each row timed on both trees, interleaved): CPU x real time
+    medians [min-max], their ratio (> 1: after is faster) and whether after is no worse; start-up
+    in CPU seconds (the ratio is after's time over before's)."""
+    lines = ["| log | what | after (CPU x real time) | before | after / before | no worse? |",
+             "|---|---|--:|--:|--:|--|"]
+    by_key = {(r.log, r.what): r for r in rep.rows}
+    for r in rep.rows:
+        twin = by_key.get((r.log, f"{r.what} (before)"))
+        if twin is None:
+            continue
+        a = [r.duration_s / s.cpu_s for s in r.samples if s.cpu_s and not s.note.startswith("exit")]
+        b = [twin.duration_s / s.cpu_s for s in twin.samples if s.cpu_s and not s.note.startswith("exit")]
+        if not a or not b:
+            continue
+        ratio, verdict = no_worse(a, b)
+        lines.append(f"| {r.log} ({r.duration_s:.0f} s) | {r.what} | {_stat(a, '.1f')} | {_stat(b, '.1f')} | "
+                     f"{ratio:.2f} | {verdict} |")
+    for what, ss in rep.startup.items():
+        a = [s.cpu_s for s in ss if s.cpu_s is not None]
+        b = [s.cpu_s for s in rep.startup_before.get(what, []) if s.cpu_s is not None]
+        if not a or not b:
+            continue
+        ratio, verdict = no_worse(a, b, higher_is_better=False)
+        lines.append(f"| start-up | {what} (s of CPU) | {_stat(a, '.2f')} | {_stat(b, '.2f')} | "
+                     f"{ratio:.2f}x the time | {verdict} |")
+    return lines
+
+
 def report_lines(rep: SpeedReport) -> list[str]:
     """The report as Markdown lines (pasteable into the README)."""
     lines = ["| log | what | x real time (wall) | x real time (CPU) | ms per scan (wall) | ms per scan (CPU) "
@@ -608,6 +649,9 @@ def report_lines(rep: SpeedReport) -> list[str]:
             lines.append(f"| {what}{label} | {_stat([s.wall_s for s in ss], '.2f')} | "
                          f"{_stat([s.cpu_s for s in ss if s.cpu_s is not None], '.2f')} | "
                          f"{_stat([s.rss_mb for s in ss if s.rss_mb is not None], '.0f')} |")
+    if rep.before is not None:
+        lines.append("")
+        lines += comparison_lines(rep)
     loads = ", ".join(f"{a:.1f}" for a, _, _ in rep.load)
     lines.append("")
     lines.append(f"{rep.repeats} repeat(s), medians [min-max]; load average (1 min) before / after each repeat: "

@@ -75,6 +75,10 @@ class SmootherConfig:
         False, "an odometry slower than ~17 Hz carries its timing in the keyframe factor's yaw, (period * w)^2 "
         "at each end: better heading in turns on a fully mapped route (CARMEN fr079 / intel), but off by "
         "default: through unmapped space it let the dead-reckoned heading drift further (mit-csail)")
+    odom_timing_jitter: bool = setting(
+        True, "the output covariance (its bound by the last fix, carried along the odometry) covers a slow "
+        "odometry's timing: its pose at each end known to within its period, (period^2 / 12) * w^2 yaw variance "
+        "at each end (the estimate is unchanged)")
     odom_clock: bool = setting(True, "a slow odometry's clock offset against the scans (a driver's latency) "
                                "estimated from the fixes' yaw increments and applied to its stamps once confident "
                                "(fgloc/localization/clock.py; the localizer applies it for the smoothers, not the "

@@ -44,6 +44,16 @@ def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArra
     return np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
 
 
+def timing_covariance(var_s2: float, twist: FloatArray, yaw: float) -> FloatArray:
+    """The covariance of a pose read ``dt`` off in time (``dt`` of variance ``var_s2``) while the robot
+    moves with body ``twist`` ``(vx, vy, w)``: ``var_s2 * u u^T``, ``u`` the twist with its translation
+    rotated by ``yaw`` into the frame the covariance is in."""
+    vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
+    cs, sn = math.cos(yaw), math.sin(yaw)
+    u = np.array([cs * vx - sn * vy, sn * vx + cs * vy, w])
+    return var_s2 * np.outer(u, u)
+
+
 def prior_covariance(cov: FloatArray | None, var_max: FloatArray | None = None) -> FloatArray:
     """A prior covariance GTSAM can use: symmetric, finite, positive semi-definite (when it is not,
     its eigenvalues are raised to 1e-6 of the largest), each variance at most ``var_max``; the

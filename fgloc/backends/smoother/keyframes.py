@@ -22,7 +22,7 @@ from fgloc.backends.factors import (
 )
 from fgloc.backends.health import ANGLE_ABSOLUTE
 from fgloc.backends.integration import integrate_twist_lists
-from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound
+from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound, timing_covariance
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.backends.smoother.streams import all_finite
 from fgloc.geometry import compose1, wrap_scalar
@@ -216,8 +216,21 @@ class KeyframeGraph(FurtherSourceFactors):
         memo = self._output_cov_memo
         if memo is not None and memo[0] == t and memo[1] is pose and memo[2] is cov and memo[3] is fl:
             return memo[4]
-        floor = fl[2] if t == fl[0] else carried_covariance(fl[2], fl[1], pose, self._floor_increment_cov(fl[0], t))
-        out = covariance_bound(cov, floor)
+        s2 = self._timing_s2() if self.cfg.odom_timing_jitter else 0.0
+        own = cov
+        if s2 > 0.0:
+            u1 = self._twist_at(t)
+            own = cov + timing_covariance(s2, u1, float(pose[2]))
+        if t == fl[0]:
+            floor = fl[2]
+        else:
+            inc = self._floor_increment_cov(fl[0], t)
+            if s2 > 0.0:
+                # the timing at each end of the increment (frame of the fix's pose)
+                rel = float(pose[2]) - float(fl[1][2])
+                inc = inc + timing_covariance(s2, self._twist_at(fl[0]), 0.0) + timing_covariance(s2, u1, rel)
+            floor = carried_covariance(fl[2], fl[1], pose, inc)
+        out = covariance_bound(own, floor)
         self._output_cov_memo = (t, pose, cov, fl, out)
         return out
 

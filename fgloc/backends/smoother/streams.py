@@ -508,6 +508,22 @@ class Streams(SmootherState):
         wa, wb = self._yaw_rate_at(t0), self._yaw_rate_at(t1)
         return per * per * (wa * wa + wb * wb)
 
+    def _timing_s2(self) -> float:
+        """Variance (s^2) of where in time a slow odometry places its pose at a stamp: within its period
+        (mean over its last ``TIMING_MESSAGES`` messages, above :data:`MAX_REF_PERIOD_S`), uniform in it
+        (``period^2 / 12``; the whole period squared where its timing is unknown); 0 for a faster one.
+        Times the yaw rate squared, the yaw variance of its pose at that stamp: what the output
+        covariance adds (``smoother.odom_timing_jitter``) at the pose's end and at the fix's it is
+        carried from.  The errors of consecutive increments cancel (they share an end), so an
+        increment carried over many keyframes has the same term, not their sum."""
+        n = min(len(self.odo_t), TIMING_MESSAGES)
+        if n < 3:
+            return 0.0
+        per = (self.odo_t[-1] - self.odo_t[-n]) / (n - 1)
+        if not per > MAX_REF_PERIOD_S:
+            return 0.0
+        return per * per if (self.cfg.slow_odom_timing or self.odom_timing_unknown) else per * per / 12.0
+
     def _yaw_rate_at(self, t: float) -> float:
         """:meth:`_twist_at`'s yaw rate alone (no array made)."""
         if not self.odo_t:

@@ -27,6 +27,9 @@ from fgloc.types import LaserScan, StaticTransform
 
 #: the beams are marched in steps of this many cells (a crossed wall is at least one cell thick)
 MARCH_STEP_CELLS = 0.5
+#: a scan whose beams, cast from the pose, mostly end in the map's unknown space (crossing no mapped wall) is
+#: one the map cannot judge
+UNMAPPED_SHARE = 0.5
 
 
 def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan,
@@ -70,4 +73,4 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     return float(np.count_nonzero(clear)) / n
 
 
-__all__ = ["MARCH_STEP_CELLS", "unmapped_share"]
+__all__ = ["MARCH_STEP_CELLS", "UNMAPPED_SHARE", "unmapped_share"]

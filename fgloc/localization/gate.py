@@ -241,6 +241,7 @@ class JumpGate:
         self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
         self._taken: tuple[float, FloatArray] | None = None  # the fix just passed (stamp, pose)
         self._recent: deque[tuple[float, FloatArray]] = deque()  # fixes passed and used over VELOCITY_SPAN_S
+        self._held: tuple[_Previous, int, float] | None = None  # the last held fix, the run's length and start
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
@@ -249,6 +250,7 @@ class JumpGate:
         self._last_odom = None
         self._taken = None
         self._recent.clear()
+        self._held = None
 
     def accepted(self) -> None:
         """The fix :meth:`check` passed last went to the back-end: the next one may follow it."""
@@ -326,6 +328,7 @@ class JumpGate:
                                       p10 + c10, (p11 + c11) + s2)
             take = take or (d2_prev <= self.cfg.gate_chi2 and d2_prev < d2_lag)
         if take:
+            self._held = None
             self._taken = (float(t), np.array(fix.pose, dtype=float))
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
             k2 = SURE_SIGMAS**2
@@ -353,12 +356,43 @@ class JumpGate:
                      f"(d2 {d2:.0f}) that the map does not confirm (agreement {a_fix:.2f} at the fix, "
                      f"{a_pred:.2f} near the prediction)")
         if v.take:
+            self._held = None
             self._taken = (float(t), np.array(fix.pose, dtype=float))
             self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
                                       float(t))
         else:
             self.previous = None
+            self._held_follows(fix, odom_pose, t, motion, motion_known and motion_covered)
         return v
+
+    def _held_follows(self, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
+                      covered: bool) -> None:
+        """A fix :meth:`check` held: whether it follows the last held one as the odometry says (that one
+        carried on by it, the slip allowance and the map's resolution as in the previous-fix test), which
+        lengthens the run of held fixes (:attr:`held_run`), else it starts one."""
+        R = np.asarray(fix.cov, dtype=float)
+        cur = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float), float(t))
+        run = self._held
+        if run is not None and covered and t > run[0].t:
+            prev = run[0]
+            delta = between1(prev.odom, odom_pose)
+            if motion is not None:
+                delta = motion(prev.t, t, delta)
+            cx, cy, _ = compose1(prev.pose, delta).tolist()
+            sl = (self.cfg.odometry_slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2 + self.sigma_m**2
+            S = R[:2, :2] + prev.cov[:2, :2]
+            d2 = mahalanobis2_2x2(float(fix.pose[0]) - cx, float(fix.pose[1]) - cy, float(S[0, 0]) + sl,
+                                  float(S[0, 1]), float(S[1, 0]), float(S[1, 1]) + sl)
+            if d2 <= self.cfg.gate_chi2:
+                self._held = (cur, run[1] + 1, run[2])
+                return
+        self._held = (cur, 1, float(t))
+
+    @property
+    def held_run(self) -> tuple[int, float]:
+        """``(fixes, first stamp)`` of the current run of held fixes that follow each other as the odometry
+        says (``(0, nan)``: none; a fix taken ends it)."""
+        return (0, math.nan) if self._held is None else (self._held[1], self._held[2])
 
 
     def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> tuple[float, float]:

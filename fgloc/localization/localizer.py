@@ -43,9 +43,9 @@ from fgloc.backends.base import Backend, Capability, FloatArray
 from fgloc.geometry import between1, compose1
 from fgloc.geometry import exp as se2_exp
 from fgloc.localization.clock import OdometryClock
-from fgloc.localization.coverage import unmapped_share
-from fgloc.localization.gate import GateVerdict, JumpGate, OdometryCoverage
-from fgloc.localization.monitor import ConsistencyMonitor, DeadReckoning
+from fgloc.localization.coverage import UNMAPPED_SHARE, unmapped_share
+from fgloc.localization.gate import GateVerdict, JumpGate, OdometryCoverage, agreement_sigma
+from fgloc.localization.monitor import ConsistencyMonitor, DeadReckoning, MapAgreement
 from fgloc.localization.odometry import OdometryTracker
 from fgloc.localization.recovery import EPS_COV, Recovery
 from fgloc.localization.relocalization import Relocalizer, close
@@ -56,9 +56,9 @@ if TYPE_CHECKING:
     from fgloc.config import FglocConfig
 
 COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset filters global candidates
-#: a scan whose beams, cast from the guess, mostly end in the map's unknown space (crossing no mapped
-#: wall) is one the map cannot judge: no fix there is not counted towards being lost (coverage.py)
-UNMAPPED_SHARE = 0.5
+#: the scan-agreement monitor's distance scale, in the jump gate's (the map's cell): it asks whether the pose is
+#: wrong, not a few centimetres or a tenth of a degree off (a far wall's endpoints move with the heading)
+AGREEMENT_MONITOR_SCALE = 2.0
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
 def reason_kind(reason: str) -> str:
     """The kind of a no-fix reason: details in parentheses dropped, numbers as N
@@ -128,6 +128,10 @@ class Localizer(Recovery):
         self.monitor = ConsistencyMonitor(self.icfg)
         self.gate = JumpGate(self.icfg, occ_map, laser_mount) if occ_map is not None and self.icfg.gate else None
         self.odometry_coverage = OdometryCoverage(self.icfg.odometry_gap_s)  # the odometry's stamps, for the gate
+        # the scan's agreement with the map at the fused pose, against this run's own good level (monitor.py)
+        self.agreement = None if occ_map is None else MapAgreement(
+            self.icfg, occ_map, laser_mount,
+            AGREEMENT_MONITOR_SCALE * agreement_sigma(occ_map, self.icfg.agreement_sigma_m))
         self.last_gate: GateVerdict | None = None  # the gate's verdict on the last scan's fix (None: not judged)
         self._gate_prediction: tuple[FloatArray, FloatArray] | None = None  # the prediction it judged against
         self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
@@ -168,6 +172,7 @@ class Localizer(Recovery):
         # a fix accepted since the pose was last (re)started: only a pose the map has confirmed may
         # dead-reckon through space the map does not have (a wrong map or initial pose is lost)
         self._pose_confirmed = False
+        self._t_started: float | None = None  # when the pose was last (re)started
         self._last_scan_t: float | None = None
         self._first_scan_t: float | None = None
         self.stats["lost_events"] = 0
@@ -372,6 +377,17 @@ class Localizer(Recovery):
                 held = True
                 self.stats["held_jumps"] += 1
                 self.last_reason = verdict.why
+                if self._held_run_confirms(t):
+                    # a pose no fix has confirmed since it was (re)started (a particle cloud that converged on
+                    # the wrong mode) holds every right fix after it: a run of them that follow each other as
+                    # the odometry says, as long as a relocalization is confirmed, says the start was wrong
+                    self.stats["held_run_restarts"] = self.stats.get("held_run_restarts", 0) + 1
+                    self.stats["relocalizations"] += 1
+                    if self._lost_since is None:
+                        self._lost_since = self._t_started
+                    self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
+                    self._start(t, fix.pose, fix.cov + EPS_COV)
+                    return fix
             elif verdict.confirmed:
                 self.stats["confirmed_jumps"] += 1
         kf_fix = None if held else fix
@@ -435,6 +451,9 @@ class Localizer(Recovery):
             self._bad_streak += 1
             if self._t_bad_since is None:
                 self._t_bad_since = t
+        if self._agreement_check(t, msg) >= self.icfg.agreement_lost_s and \
+                self._agreement_lost(t, msg, res, odom_delta):
+            return fix
         if self._bad_streak >= self.pcfg.relocalize_after:
             if fe.supports_global:
                 self._declare_lost(t)
@@ -453,20 +472,6 @@ class Localizer(Recovery):
                         self._lost_since = self._t_bad_since
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
-
-    def _map_confirms_rejected(self, fix: PoseFix, msg: LaserScan) -> bool:
-        """A fix the gate passed and the back-end rejected: whether the map confirms it over the back-end's
-        pose (the gate's verdict when it judged so; for a fix it took as following the previous fix, from
-        beyond its prediction, judged now)."""
-        v, pred = self.last_gate, self._gate_prediction
-        if self.gate is None or v is None:
-            return False
-        if v.confirmed:
-            return True
-        if v.d2 <= self.icfg.gate_chi2 or pred is None:
-            return False
-        a_pred, a_fix = self.gate.agreement(fix, pred[0], pred[1], msg)
-        return math.isfinite(a_pred) and math.isfinite(a_fix) and self.gate.map_confirms(a_pred, a_fix)
 
     def _gate(self, t: float, fix: PoseFix, msg: LaserScan) -> GateVerdict:
         """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py)."""

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 
 from fgloc.config.schema import setting
+from fgloc.localization.coverage import UNMAPPED_SHARE, unmapped_share
+from fgloc.localization.gate import OFF_GRID_M
 
 OK = "ok"
 DEGRADED = "degraded"
@@ -72,6 +74,12 @@ class IntegrityConfig:
     divergence_share: float = setting(0.05, "odom frame (no map): the fused path more than this share of the distance "
                                       "driven from odometry + IMU dead reckoning is suspect ...", gt=0)
     divergence_min_m: float = setting(5.0, "... and more than this (m); at the end of the run: unusable", gt=0)
+    agreement_period_s: float = setting(0.25, "the scan's agreement with the map at the fused pose is measured this "
+                                        "often (log time; MapAgreement)", gt=0)
+    agreement_low: float = setting(0.5, "... low below this fraction of what the run's own good stretch showed (the "
+                                   "lower quartile of its measurements while the poses were ok)", gt=0, max=1)
+    agreement_suspect_s: float = setting(0.5, "... low for this long: suspect", gt=0)
+    agreement_lost_s: float = setting(1.5, "... low for this long: lost, and the localizer searches again", gt=0)
     max_bad_share: float = setting(0.2, "fgloc run exits 3 when more than this share of the poses is suspect or "
                                    "lost (--allow-lost: exit 0)", min=0, max=1)
 
@@ -241,6 +249,140 @@ class DeadReckoning:
         return math.hypot(float(p[0] - q[0]), float(p[1] - q[1]))
 
 
+class MapAgreement:
+    """How well the scans agree with the map at the fused pose, against what this run showed while it was
+    right: a front-end sure of a wrong place (a particle filter that tracked on after a kidnapping, fixes
+    that follow each other onto furniture the map lacks) keeps giving fixes the jump gate cannot fault,
+    but the scan no longer lies on the map's walls where the fusion puts it.
+
+    Every ``integrity.agreement_period_s`` (log time) :meth:`check` measures the mean over at most
+    :data:`MAX_BEAMS` of the scan's beams (evenly spread) of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance
+    from the beam's endpoint to the nearest mapped wall (the map's distance field at the endpoint's cell;
+    :func:`fgloc.localization.gate.scan_agreement` interpolates it; off the grid: :data:`OFF_GRID_M`).  A low
+    one where most beams end in space the map does not have without crossing a mapped wall
+    (:func:`fgloc.localization.coverage.unmapped_share`, cast only then) is no measurement.
+    The expectation is learnt from the run itself: the lower quartile of the last :data:`SAMPLES`
+    measurements the localizer called good (poses ``ok``, not low), so the furniture, people and doors it
+    passed while right are in it.  A measurement below ``integrity.agreement_low`` of it is low;
+    :meth:`low_for` is how long the measurements have been low without a break.  Nothing is judged before
+    :data:`MIN_SAMPLES` good
+    measurements (a building of any clutter, a map of any quality: the level is this run's)."""
+
+    MAX_BEAMS = 64
+    MIN_BEAMS = 10  # fewer valid beams than this (a blocked laser): no measurement
+    SAMPLES = 256  # the good measurements remembered (a minute at the default period)
+    MIN_SAMPLES = 8
+    QUANTILE = 0.25  # the expectation: this quantile of them (the clutter, the doors, the people it passed)
+    REFRESH = 8  # ... recomputed every this many new ones
+
+    def __init__(self, cfg: IntegrityConfig, occ_map: Any, laser_mount: Any, sigma_m: float) -> None:
+        self.cfg = cfg
+        self.map = occ_map
+        self.laser_mount = laser_mount
+        self.mount = np.asarray(laser_mount.pose, dtype=float).reshape(3)
+        self.sigma_m = float(sigma_m)
+        self._good: deque[float] = deque(maxlen=self.SAMPLES)
+        self._expected: float | None = None
+        self._added = 0  # good measurements so far
+        self._t = -math.inf  # stamp of the last measurement
+        self.low_since: float | None = None
+        #: when the pose may have gone wrong: the last measurement before the low stretch that was not low
+        self.wrong_since: float | None = None
+        self._t_fit: float | None = None  # the last measurement that was not low
+        self.last: float | None = None  # the last measurement
+        self.checks = 0
+        self.low_checks = 0
+        self.unmapped_checks = 0  # low measurements the map could not judge
+        self._beams: tuple[tuple[int, float, float], Any, Any, Any] | None = None  # (n, min, inc), idx, cos, sin
+        self._field: Any = None  # the map's distance field (m), fetched at the first measurement
+
+    def due(self, t: float) -> bool:
+        return t - self._t >= self.cfg.agreement_period_s or t < self._t
+
+    def expected(self) -> float | None:
+        """The run's good level (None until :data:`MIN_SAMPLES` good measurements)."""
+        return self._expected
+
+    def measure(self, scan: Any, pose: Any) -> float:
+        """The agreement of ``scan`` with the map at ``base_link`` pose ``pose`` (NaN: too few valid beams)."""
+        r_all = scan.ranges
+        n = len(r_all)
+        key = (n, float(scan.angle_min), float(scan.angle_increment))
+        if self._beams is None or self._beams[0] != key:
+            idx = np.arange(0, n, max(1, -(-n // self.MAX_BEAMS)))
+            a = key[1] + key[2] * idx
+            self._beams = (key, idx, np.cos(a), np.sin(a))
+        _, idx, ca, sa = self._beams
+        r = np.asarray(r_all, dtype=float)[idx]
+        # valid: inside [range_min, range_max] (NaN and inf compare false)
+        ok = (r >= max(float(scan.range_min), 1e-9)) & (r <= float(scan.range_max))
+        n_ok = int(np.count_nonzero(ok))
+        if n_ok < self.MIN_BEAMS:
+            return math.nan
+        r = np.where(ok, r, 0.0)
+        m = self.map
+        if self._field is None:
+            self._field = np.asarray(m.distance_field, dtype=float)
+        df = self._field
+        h, w = df.shape
+        x, y, yaw = (float(v) for v in np.asarray(pose, dtype=float).reshape(3))
+        mx, my, myaw = self.mount
+        cb, sb = math.cos(yaw), math.sin(yaw)
+        # the laser in the grid's frame (cells as units): the map's origin may be rotated
+        ox, oy, oyaw = (float(v) for v in m.origin[:3])
+        dx, dy = x + cb * mx - sb * my - ox, y + sb * mx + cb * my - oy
+        co, so, inv = math.cos(oyaw), math.sin(oyaw), 1.0 / float(m.resolution)
+        gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
+        th = yaw + myaw - oyaw
+        c, s = math.cos(th) * inv, math.sin(th) * inv
+        cols = np.floor(gx + r * (c * ca - s * sa)).astype(np.intp)
+        rows = np.floor(gy + r * (s * ca + c * sa)).astype(np.intp)
+        inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+        d = np.where(inside, df[np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)], OFF_GRID_M)
+        return float(np.dot(np.exp(d * d * (-0.5 / self.sigma_m**2)), ok)) / n_ok
+
+    def check(self, t: float, scan: Any, pose: Any, good: bool) -> float | None:
+        """Measure at ``pose`` when due; ``good``: the localizer finds the pose ok otherwise (the measurement
+        may then teach the expectation, unless it is low).  The measurement, None when not due or none."""
+        if not self.due(t):
+            return None
+        self._t = t
+        a = self.measure(scan, pose)
+        if not math.isfinite(a):
+            return None
+        self.last = a
+        self.checks += 1
+        exp_ = self._expected
+        if exp_ is not None and a < self.cfg.agreement_low * exp_:
+            if unmapped_share(self.map, self.laser_mount, scan, pose) > UNMAPPED_SHARE:
+                # most beams end in space the map does not have, crossing no mapped wall: the map cannot judge
+                # the pose there (a wing it lacks; dead reckoning, not wrong)
+                self.unmapped_checks += 1
+                return None
+            self.low_checks += 1
+            if self.low_since is None:
+                self.low_since = t
+                self.wrong_since = self._t_fit if self._t_fit is not None else t
+            return a
+        self.low_since = None
+        self._t_fit = t
+        if good:
+            self._good.append(a)
+            n = len(self._good)
+            self._added += 1
+            if n >= self.MIN_SAMPLES and (self._expected is None or self._added % self.REFRESH == 0):
+                self._expected = float(np.quantile(np.fromiter(self._good, float, n), self.QUANTILE))
+        return a
+
+    def low_for(self, t: float) -> float:
+        """How long (s) the measurements have been low up to ``t`` (0: the last was not)."""
+        return 0.0 if self.low_since is None else max(0.0, t - self.low_since)
+
+    def reset(self) -> None:
+        """The pose was started anew: the low stretch ends (the expectation stays: the same map and laser)."""
+        self.low_since = self.wrong_since = self._t_fit = None
+
+
 #: the status file beside ``trajectory.tum`` (``trajectory_status.csv``): its first line
 STATUS_HEADER = ("# fgloc pose status: one row per pose of trajectory.tum (same stamps, s); x y in m, yaw in rad; "
                  "cov_*: the pose's covariance as known online, at the nearest online pose (m^2, m rad, rad^2); "
@@ -286,4 +428,4 @@ def status_csv(rows: list[list[Any]]) -> str:
 
 
 __all__ = ["DEGRADED", "LOST", "OK", "STATUSES", "STATUS_COLUMNS", "STATUS_HEADER", "SUSPECT", "ConsistencyMonitor",
-           "DeadReckoning", "IntegrityConfig", "Verdict", "status_csv", "status_rows"]
+           "DeadReckoning", "IntegrityConfig", "MapAgreement", "Verdict", "status_csv", "status_rows"]

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.localization.gate import JumpGate
-from fgloc.localization.monitor import LOST
+from fgloc.localization.gate import GateVerdict, JumpGate
+from fgloc.localization.monitor import LOST, MapAgreement
 from fgloc.localization.relocalization import Relocalizer
 from fgloc.localization.status import PoseStatus
 from fgloc.maps import OccupancyMap
@@ -38,6 +38,9 @@ class Recovery(PoseStatus):
     frontend_name: str
     reloc: Relocalizer | None
     gate: JumpGate | None
+    agreement: MapAgreement | None
+    last_gate: GateVerdict | None
+    _gate_prediction: tuple[FloatArray, FloatArray] | None
     guess: Callable[[float], FloatArray]
     _keep_fix: Callable[[PoseFix], None]
     _reinit: FloatArray | None
@@ -47,6 +50,7 @@ class Recovery(PoseStatus):
     _dead_reckoned_since: float | None
     _reacquiring: bool
     _pose_confirmed: bool
+    _t_started: float | None
     _ever_converged: bool
 
     def reinitialize(self, pose: FloatArray, cov: FloatArray | None = None) -> None:
@@ -85,6 +89,8 @@ class Recovery(PoseStatus):
 
     def _declare_lost(self, t: float) -> None:
         self._lost = True
+        if self.agreement is not None:
+            self.agreement.reset()
         self._reacquiring = False
         self._global_tries = 0
         self.stats["lost_events"] += 1
@@ -95,6 +101,7 @@ class Recovery(PoseStatus):
         """(Re)start the back-end at ``pose``; ``converged``: a fix (or a confirmed relocalization) put it
         there, not a start pose the map has not confirmed."""
         self._converged = converged
+        self._t_started = t
         if converged:
             self._t_used = t
             if not self._ever_converged:
@@ -109,6 +116,8 @@ class Recovery(PoseStatus):
         self._rejected_run = 0
         if self.gate is not None:
             self.gate.reset()
+        if self.agreement is not None:
+            self.agreement.reset()
         self._t_bad_since = None
         self._dead_reckoned_since = None
         self._reacquiring = False
@@ -123,6 +132,69 @@ class Recovery(PoseStatus):
             self.reloc.reset()
         if self.frontend is not None and self.frontend.is_particle_filter:
             self.frontend.reset(pose)
+
+    def _agreement_lost(self, t: float, msg: LaserScan, res: Any, odom_delta: FloatArray | None) -> bool:
+        """The scan has not fit the map at the fused pose for ``integrity.agreement_lost_s``: the front-end tracks
+        a wrong place its fixes cannot tell (a particle filter after a kidnapping), the poses since the last
+        measurement that fit were wrong.  A front-end with a global mode searches globally; for the others the
+        relocalizer looks for a confirmed better place (``res``, ``odom_delta``: the scan's match and motion).
+        Whether the pose was started anew (or the search begun)."""
+        assert self.agreement is not None and self.reloc is not None
+        self.stats["agreement_lost"] = self.stats.get("agreement_lost", 0) + 1
+        since = self.agreement.wrong_since
+        if self.frontend.supports_global:
+            if self._lost_since is None:
+                self._lost_since = since
+            self._declare_lost(t)
+            self.stats["relocalizations"] += 1
+            self.frontend.reset(None)
+            return True
+        found = self.reloc.check(msg, res, odom_delta)
+        if found is None:
+            return False
+        self.stats["relocalizations"] += 1
+        if self._lost_since is None:
+            self._lost_since = since
+        self._start(t, found.pose, found.cov + EPS_COV)
+        return True
+
+    def _held_run_confirms(self, t: float) -> bool:
+        """The pose has not been confirmed by a fix since it was (re)started, and the gate has held more than
+        ``relocalize_confirm`` fixes in a row that follow each other as the odometry says, spanning at least
+        ``relocalize_confirm_s`` (what a relocalization candidate needs to be taken)."""
+        if self._pose_confirmed or self.gate is None:
+            return False
+        n, t0 = self.gate.held_run
+        return n > self.pcfg.relocalize_confirm and t - t0 >= self.pcfg.relocalize_confirm_s
+
+    def _agreement_check(self, t: float, msg: LaserScan) -> float:
+        """The scan's agreement with the map at the fused pose, when due (monitor.py's :class:`MapAgreement`):
+        how long (s) it has been low."""
+        ag = self.agreement
+        if ag is None or self._lost or not self._converged or not self.backend.initialized:
+            return 0.0
+        if not ag.due(t):
+            return ag.low_for(t)
+        cur = self.backend.current(covariance=False)
+        pose = cur[1] if cur is not None and float(cur[0]) >= t else self.backend.predict(t)[0]
+        good = (self._rejected_run == 0 and self._t_held_since is None and self._t_used is not None
+                and t - self._t_used < self.icfg.degraded_after_s)
+        ag.check(t, msg, pose, good)
+        return ag.low_for(t)
+
+    def _map_confirms_rejected(self, fix: PoseFix, msg: LaserScan) -> bool:
+        """A fix the gate passed and the back-end rejected: whether the map confirms it over the back-end's
+        pose (the gate's verdict when it judged so; for a fix it took as following the previous fix, from
+        beyond its prediction, judged now)."""
+        v, pred = self.last_gate, self._gate_prediction
+        if self.gate is None or v is None:
+            return False
+        if v.confirmed:
+            return True
+        if v.d2 <= self.icfg.gate_chi2 or pred is None:
+            return False
+        a_pred, a_fix = self.gate.agreement(fix, pred[0], pred[1], msg)
+        return math.isfinite(a_pred) and math.isfinite(a_fix) and self.gate.map_confirms(a_pred, a_fix)
 
     def _accept(self, fix: PoseFix) -> PoseFix:
         self._keep_fix(fix)

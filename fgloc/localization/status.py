@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning
+from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning, MapAgreement
 
 if TYPE_CHECKING:
     from fgloc.localization.config import PipelineConfig
@@ -47,6 +47,7 @@ class PoseStatus:
     last_reason: str
     pose_listener: Callable[[float], None] | None
     dead_reckoning: DeadReckoning | None
+    agreement: MapAgreement | None
     _divergence: tuple[float, float, float] | None
     _worst_divergence: tuple[float, float, float, float, float] | None
     _divergence_t: float
@@ -128,6 +129,10 @@ class PoseStatus:
         if not self._converged:
             return LOST, "not converged: the start pose is not confirmed by the map yet"
         since = t - (self._t_used if self._t_used is not None else t)
+        ag = self.agreement
+        if ag is not None and ag.low_for(t) >= self.icfg.agreement_suspect_s:
+            return SUSPECT, (f"the scan has not fit the map at this pose for {ag.low_for(t):.1f} s (agreement "
+                             f"{ag.last or 0.0:.2f}, {ag.expected() or 0.0:.2f} while it was right)")
         if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
             return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
         if self._heading_diverging(t):

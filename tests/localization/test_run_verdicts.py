@@ -42,12 +42,16 @@ def test_a_wrong_initial_pose_is_said_and_its_poses_are_marked_lost(leg, backend
     assert float(err[status == "ok"].max()) < 0.05
 
 
-def test_global_localization_marks_the_poses_before_it_converged(leg):
+@pytest.mark.parametrize("amcl_seed", [0, 3])
+def test_global_localization_marks_the_poses_before_it_converged(leg, amcl_seed):
     """Without --initial-pose AMCL publishes its cloud's mean before it converges: those poses are lost and
-    the summary says how many."""
+    the summary says how many.  With AMCL's seed 3 two fixes agreed on a place 0.6 m off, the smoother started
+    there and the jump gate held the ~70 right fixes after it for 12 s, the poses ok 0.63 m off: a run of held
+    fixes that follow each other now restarts a pose no fix has confirmed."""
     sim = leg
     msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth" and getattr(m, "stamp", 0.0) < 14.0]
-    loc = Localizer(sim.map, sim.laser_mount, "smoother", "amcl", config=load_config())
+    loc = Localizer(sim.map, sim.laser_mount, "smoother", "amcl",
+                    config={"frontends": {"amcl": {"seed": amcl_seed}}})
     est = Session(loc).run(msgs)
     (v,) = [v for v in loc.stats["status"]["verdicts"] if v["kind"] == "global_start"]
     assert v["message"].startswith("global localization converged at t = ") and not v["unusable"]
@@ -55,7 +59,7 @@ def test_global_localization_marks_the_poses_before_it_converged(leg):
     status = np.array(loc.monitor.at(est.stamps)[0])
     err = np.hypot(*(est.poses[:, :2] - sim.ground_truth.interpolate(est.stamps)[:, :2]).T)
     assert n >= 5 and (status == "lost").sum() >= n        # measured 41
-    assert float(err[status == "ok"].max()) < 0.1         # measured 0.04 m
+    assert float(err[status == "ok"].max()) < 0.1         # measured 0.017 / 0.018 m (seed 3: 0.63 before)
 
 
 IMU_MOUNT = {"parent": "base_link", "child": "imu_link", "xyz": [0.0, 0.0, 0.0]}

@@ -289,6 +289,7 @@ class MapAgreement:
         #: when the pose may have gone wrong: the last measurement before the low stretch that was not low
         self.wrong_since: float | None = None
         self._t_fit: float | None = None  # the last measurement that was not low
+        self.after_start = False  # the pose was started anew and not measured since (restarted())
         self.last: float | None = None  # the last measurement
         self.checks = 0
         self.low_checks = 0
@@ -352,6 +353,7 @@ class MapAgreement:
             return None
         self.last = a
         self.checks += 1
+        self.after_start = False
         exp_ = self._expected
         if exp_ is not None and a < self.cfg.agreement_low * exp_:
             if unmapped_share(self.map, self.laser_mount, scan, pose) > UNMAPPED_SHARE:
@@ -379,8 +381,16 @@ class MapAgreement:
         return 0.0 if self.low_since is None else max(0.0, t - self.low_since)
 
     def reset(self) -> None:
-        """The pose was started anew: the low stretch ends (the expectation stays: the same map and laser)."""
+        """The localizer searches anew: the low stretch ends (the expectation stays: the same map and laser)."""
         self.low_since = self.wrong_since = self._t_fit = None
+        self.after_start = False
+
+    def restarted(self) -> None:
+        """The pose was started anew on a fix (a relocalization, a restart the map confirmed over the
+        prediction): the next scan is measured, and until then a low stretch goes on (a restart on another
+        wrong place keeps its poses suspect; a right one ends it at that measurement)."""
+        self._t = -math.inf
+        self.after_start = True
 
 
 #: the status file beside ``trajectory.tum`` (``trajectory_status.csv``): its first line

@@ -117,7 +117,7 @@ class Recovery(PoseStatus):
         if self.gate is not None:
             self.gate.reset()
         if self.agreement is not None:
-            self.agreement.reset()
+            self.agreement.restarted()
         self._t_bad_since = None
         self._dead_reckoned_since = None
         self._reacquiring = False
@@ -174,13 +174,13 @@ class Recovery(PoseStatus):
         if ag is None or self._lost or not self._converged or not self.backend.initialized:
             return 0.0
         if not ag.due(t):
-            return ag.low_for(t)
+            return 0.0 if ag.after_start else ag.low_for(t)
         cur = self.backend.current(covariance=False)
         pose = cur[1] if cur is not None and float(cur[0]) >= t else self.backend.predict(t)[0]
         good = (self._rejected_run == 0 and self._t_held_since is None and self._t_used is not None
                 and t - self._t_used < self.icfg.degraded_after_s)
         ag.check(t, msg, pose, good)
-        return ag.low_for(t)
+        return 0.0 if ag.after_start else ag.low_for(t)
 
     def _map_confirms_rejected(self, fix: PoseFix, msg: LaserScan) -> bool:
         """A fix the gate passed and the back-end rejected: whether the map confirms it over the back-end's

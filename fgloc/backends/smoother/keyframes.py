@@ -226,9 +226,15 @@ class KeyframeGraph(FurtherSourceFactors):
         else:
             inc = self._floor_increment_cov(fl[0], t)
             if s2 > 0.0:
-                # the timing at each end of the increment (frame of the fix's pose)
-                rel = float(pose[2]) - float(fl[1][2])
-                inc = inc + timing_covariance(s2, self._twist_at(fl[0]), 0.0) + timing_covariance(s2, u1, rel)
+                # the timing at each end of the increment (frame of the fix's pose); the start's turn
+                # w0 dt turns the whole increment: its end moves by w0 dt across the chord
+                y0 = float(fl[1][2])
+                c0, s0 = math.cos(y0), math.sin(y0)
+                ex, ey = float(pose[0]) - float(fl[1][0]), float(pose[1]) - float(fl[1][1])
+                cx, cy = c0 * ex + s0 * ey, -s0 * ex + c0 * ey
+                u0 = self._twist_at(fl[0])
+                u0 = np.array([float(u0[0]) - float(u0[2]) * cy, float(u0[1]) + float(u0[2]) * cx, float(u0[2])])
+                inc = inc + timing_covariance(s2, u0, 0.0) + timing_covariance(s2, u1, float(pose[2]) - y0)
             floor = carried_covariance(fl[2], fl[1], pose, inc)
         out = covariance_bound(own, floor)
         self._output_cov_memo = (t, pose, cov, fl, out)

@@ -82,10 +82,9 @@ def bounded_covariance(c: FloatArray, var_max: float | FloatArray) -> FloatArray
     return np.asarray(c, dtype=float) * np.outer(f, f)
 
 
-def _psd3(m: list[float]) -> bool:
-    """Whether the symmetric 3x3 matrix ``m`` (9 floats, row by row) is positive semi-definite: every
-    principal minor >= 0 (scalar maths)."""
-    a, b, c, d, e, f = m[0], m[1], m[2], m[4], m[5], m[8]
+def _psd3_upper(a: float, b: float, c: float, d: float, e: float, f: float) -> bool:
+    """Whether the symmetric 3x3 matrix of upper triangle ``[[a, b, c], [., d, e], [., ., f]]`` is
+    positive semi-definite: every principal minor >= 0 (scalar maths)."""
     if a < 0.0 or d < 0.0 or f < 0.0:
         return False
     if a * d - b * b < 0.0 or a * f - c * c < 0.0 or d * f - e * e < 0.0:
@@ -100,10 +99,11 @@ def covariance_bound(p: FloatArray, q: FloatArray) -> FloatArray:
     ``q`` when ``p`` is not positive definite."""
     a = np.asarray(p, dtype=float).reshape(3, 3)
     b = np.asarray(q, dtype=float).reshape(3, 3)
-    pa, pb = a.reshape(9).tolist(), b.reshape(9).tolist()
-    if _psd3([x - y for x, y in zip(pa, pb, strict=True)]):
+    a0, a1, a2, _, a4, a5, _, _, a8 = a.ravel().tolist()
+    b0, b1, b2, _, b4, b5, _, _, b8 = b.ravel().tolist()
+    if _psd3_upper(a0 - b0, a1 - b1, a2 - b2, a4 - b4, a5 - b5, a8 - b8):
         return a
-    if _psd3([y - x for x, y in zip(pa, pb, strict=True)]):
+    if _psd3_upper(b0 - a0, b1 - a1, b2 - a2, b4 - a4, b5 - a5, b8 - a8):
         return b
     try:
         L = np.linalg.cholesky(0.5 * (a + a.T))

@@ -243,7 +243,8 @@ class KeyframeGraph(FurtherSourceFactors):
     def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
         """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from
         its own mark (the fix's stamp stays, the end grows): the predictions' marks stay theirs."""
-        if not self.odo_t or self._unmeasured_tail(t0, t1) > 0.0 or self._gap_s(t0, t1) > 0.0:
+        tol = self._odom_gap_s()
+        if not self.odo_t or self._unmeasured_tail(t0, t1, tol) > 0.0 or self._gap_s(t0, t1, tol) > 0.0:
             return self._motion(t0, t1)[1]
         mark = self._floor_mark
         if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:

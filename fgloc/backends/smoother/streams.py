@@ -122,9 +122,12 @@ class Streams(SmootherState):
         ts, rs, vs = got
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
+        if not want_var:
+            d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap)
+            return None if d is None else (d - self.gyro_bias_of(name) * (t1 - t0), 0.0)
         n = len(ts)
         w: dict[int, float] = {}
-        d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap, w if want_var else None)
+        d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap, w)
         if d is None:
             return None
         var = 0.0
@@ -178,19 +181,22 @@ class Streams(SmootherState):
             self._gap_memo = (key, tol)
         return self._gap_memo[1]
 
-    def _unmeasured_tail(self, t0: float, t1: float) -> float:
+    def _unmeasured_tail(self, t0: float, t1: float, tol: float | None = None) -> float:
         """How long the end of ``(t0, t1]`` lies beyond the odometry's newest stamp by more than a
-        running odometry's gap (:meth:`_odom_gap_s`): 0 while it runs, the time since it stopped."""
+        running odometry's gap (``tol``, default :meth:`_odom_gap_s`): 0 while it runs, the time since
+        it stopped."""
         if not self.odo_t:
             return 0.0
-        end = self.odo_t[-1] + self._odom_gap_s()
+        end = self.odo_t[-1] + (self._odom_gap_s() if tol is None else tol)
         return t1 - max(t0, end) if end < t1 else 0.0
 
-    def _gap_s(self, t0: float, t1: float) -> float:
+    def _gap_s(self, t0: float, t1: float, tol: float | None = None) -> float:
         """How long of ``(t0, t1]`` falls into steps between two odometry stamps beyond a running
-        odometry's gap (:meth:`_odom_gap_s`): a stretch it dropped, its first twist after held over it."""
+        odometry's gap (``tol``, default :meth:`_odom_gap_s`): a stretch it dropped, its first twist
+        after held over it."""
         ts = self.odo_t
-        tol = self._odom_gap_s()
+        if tol is None:
+            tol = self._odom_gap_s()
         if len(ts) < 2 or not math.isfinite(tol):
             return 0.0
         out = 0.0
@@ -237,8 +243,9 @@ class Streams(SmootherState):
         of the velocity over it; over a stretch it dropped, the first twist after it with its variance
         up to the fastest the odometry has shown.  Integrated as measured, a stopped odometry's last
         twist with its small covariance outweighs the fixes and drags the path on."""
-        tail = self._unmeasured_tail(t0, t1)
-        gap = self._gap_s(t0, t1 - tail)
+        tol = self._odom_gap_s()
+        tail = self._unmeasured_tail(t0, t1, tol)
+        gap = self._gap_s(t0, t1 - tail, tol)
         if tail <= 0.0 and gap <= 0.0:
             return self._integrate(t0, t1)
         qv, qw = self.cfg.unmeasured_accel_q, self.cfg.unmeasured_turn_q

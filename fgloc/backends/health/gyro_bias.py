@@ -3,12 +3,64 @@
 from __future__ import annotations
 
 import math
-from collections import deque
+from array import array
+from bisect import bisect_right
 
-from fgloc.backends.health.latency import bracket
 from fgloc.geometry import wrap_scalar
 
 MAX_GYRO_GAP_S = 0.5  # a longer gap between gyro readings breaks the integral
+
+
+class GyroSeries:
+    """The newest ``n`` gyro readings ``(t, G, rate, var)`` with increasing ``t``, as a ``deque(maxlen=n)`` of
+    them reads (``s[i]``, ``s[-1]``, ``len``), in float64 columns (``array('d')``) allocated and written once at
+    construction: 32 bytes a reading whatever the log's length, where tuples of floats took ~180 and grew as
+    the series filled.  The columns hold ``2 n`` rows; the live ones are ``[a, b)``, and when ``b`` reaches
+    the end the newest move to the front (one copy every ``n`` readings)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = max(int(n), 1)
+        empty = array("d", [math.nan]) * (2 * self.n)
+        self._t, self._g, self._r, self._v = empty, array("d", empty), array("d", empty), array("d", empty)
+        self._a = self._b = 0
+        self.last: tuple[float, float, float, float] | None = None  # the newest reading (None: empty)
+
+    def __len__(self) -> int:
+        return self._b - self._a
+
+    def __getitem__(self, i: int) -> tuple[float, float, float, float]:
+        k = (self._b + i) if i < 0 else (self._a + i)
+        if not self._a <= k < self._b:
+            raise IndexError(i)
+        if k == self._b - 1:
+            return self.last  # type: ignore[return-value]
+        return self._t[k], self._g[k], self._r[k], self._v[k]
+
+    def first_t(self) -> float:
+        """The oldest reading's time (the series must not be empty)."""
+        return self._t[self._a]
+
+    def append(self, row: tuple[float, float, float, float]) -> None:
+        """A reading of four floats, newer than the last."""
+        k = self._b
+        if k == 2 * self.n:
+            keep = self.n - 1
+            for col in (self._t, self._g, self._r, self._v):
+                col[:keep] = col[k - keep:k]
+            self._a, k = 0, keep
+        self._t[k], self._g[k], self._r[k], self._v[k] = self.last = row
+        self._b = k + 1
+        if self._b - self._a > self.n:
+            self._a += 1
+
+    def bracket(self, t: float) -> tuple[int, int]:
+        """The indices ``lo, hi`` of the readings around ``t`` (as :func:`fgloc.backends.health.latency.bracket`:
+        ``self[lo][0] <= t``, ``hi = lo + 1``; ``0, 0`` for one reading)."""
+        n = self._b - self._a
+        if n < 2:
+            return 0, 0
+        lo = max(min(bisect_right(self._t, t, self._a, self._b) - 1 - self._a, n - 2), 0)
+        return lo, lo + 1
 
 
 class GyroBias:
@@ -59,7 +111,7 @@ class GyroBias:
         self._last: dict[str, float] = {}
         self._bad_since: dict[str, float] = {}
         # the gyro's raw integral (trapezoid over readings): (t, G, rate, var)
-        self.series: deque[tuple[float, float, float, float]] = deque(maxlen=int(history))
+        self.series = GyroSeries(history)
         self._pending: list[tuple[float, str, float, float]] = []
         self._reanchor: set[str] = set()
         # per heading source: [EW mean of yn^2, EW mean of n * mean(yn)^2 over a window, the window's sum
@@ -76,11 +128,12 @@ class GyroBias:
         """A raw gyro reading (rad/s about base_link z) and its variance."""
         if not (math.isfinite(t) and math.isfinite(rate)):
             return
-        if self.series and t <= self.series[-1][0]:
+        last = self.series.last
+        if last is not None and t <= last[0]:
             return
         g = 0.0
-        if self.series:
-            t0, g0, r0, _ = self.series[-1]
+        if last is not None:
+            t0, g0, r0, _ = last
             if t - t0 <= MAX_GYRO_GAP_S:
                 g = g0 + 0.5 * (r0 + rate) * (t - t0)
             else:  # a gap: the integral does not bridge it, every heading source starts again
@@ -124,9 +177,9 @@ class GyroBias:
     # ------------------------------------------------------------------ filter
     def _integral_at(self, t: float) -> tuple[float, float] | None:
         s = self.series
-        if not s or t < s[0][0] or t > s[-1][0]:
+        if not s or t < s.first_t() or t > s[-1][0]:
             return None
-        lo, hi = bracket(s, t)
+        lo, hi = s.bracket(t)
         a, b = s[lo], s[hi]
         if b[0] - a[0] > MAX_GYRO_GAP_S:
             return None
@@ -159,7 +212,8 @@ class GyroBias:
             FP = [p0] + [[a - dt * b for a, b in zip(row, p0, strict=True)] for row in self.P[1:]]
             P = [[r[0]] + [a - dt * r[0] for a in r[1:]] for r in FP]
         P[0][0] += self.rw**2 * dt
-        arw = self.series[-1][3] * (self.series[-1][0] - self.series[-2][0]) if len(self.series) > 1 else 0.0
+        s = self.series
+        arw = s.last[3] * (s.last[0] - s[-2][0]) if s.last is not None and len(s) > 1 else 0.0
         q = (self.offset_q + arw) * dt
         for i in range(1, len(x)):
             P[i][i] += q
@@ -201,9 +255,10 @@ class GyroBias:
         return True
 
     def _process(self) -> None:
-        if not self._pending or not self.series:
+        last = self.series.last
+        if not self._pending or last is None:
             return
-        covered = self.series[-1][0]
+        covered = last[0]
         pend = self._pending
         if len(pend) == 1:  # the usual case: one reading waiting (the same as the general case's lists)
             if pend[0][0] > covered:

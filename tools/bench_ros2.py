@@ -10,6 +10,8 @@ memory (psutil) while the replay runs and prints
 * the resident memory, sampled every ``--sample-s`` wall seconds: after the first ``--settle`` minutes
   of log, then every quarter of the run, its growth from there to the end and the slope of a line fitted
   after settling (MB per minute of log), which is ~0 when memory is flat; ``--png`` plots it;
+* over the last ``--last`` minutes of log, the RSS's fitted slope and its 95 % interval: memory is called
+  flat when 0 is within it;
 * the load average (1 min) at the start and at the end: the machine's share of the latency.
 
     python tools/bench_ros2.py                         # the paper run (110 s), rate 1
@@ -291,6 +293,15 @@ os._exit(0)  # without the interpreter's teardown under Cyclone's threads (as th
 """
 
 
+def slope_interval(t: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """The least-squares slope of ``v`` over ``t`` and the half-width of its 95 % interval (two standard
+    errors of the fit; samples 10 s apart are not independent, so the interval is a lower bound on the noise)."""
+    c, cov = np.polyfit(t, v, 1, cov="unscaled")
+    resid = v - np.polyval(c, t)
+    s2 = float(resid @ resid) / max(len(t) - 2, 1)
+    return float(c[0]), 2.0 * float(np.sqrt(cov[0, 0] * s2))
+
+
 def print_probe(probe: list[dict], t_wall0: float, rate: float, settle_min: float, trim_s: float) -> None:
     """Each quantity the probe sampled: after settling, at the end, growth and slope per minute of log."""
     t = np.array([(r["wall"] - t_wall0) * rate / 60.0 for r in probe])
@@ -350,6 +361,8 @@ def main() -> int:
     ap.add_argument("--compare", type=Path, help="a fgloc run output folder of the same log: compare /amcl_pose")
     ap.add_argument("--sample-s", type=float, default=10.0, help="wall seconds between RSS samples")
     ap.add_argument("--settle", type=float, default=2.0, help="minutes of log before the memory is judged")
+    ap.add_argument("--last", type=float, default=5.0, help="minutes of log at the end whose RSS slope is judged "
+                    "against zero (flat: 0 within the slope's 95 %% interval)")
     ap.add_argument("--png", type=Path, help="plot the live process's RSS over minutes of log into this PNG")
     ap.add_argument("--probe", action="store_true", help="sample malloc / Python memory inside the live process")
     ap.add_argument("--tracemalloc", action="store_true", help="--probe: tracemalloc on in the live process")
@@ -495,18 +508,38 @@ def main() -> int:
               f"{t[-1]:.1f} min: " + ", ".join(f"{v:.1f}" for v in marks)
               + f" MB; growth after settling {m[-1] - first:+.1f} MB (max {m[after].max() - first:+.1f}), "
               f"slope {slope:+.3f} MB per minute of log ({len(samples)} samples every {a.sample_s:g} s)")
+        last = t >= t[-1] - a.last
+        fit = slope_interval(t[last], m[last]) if last.sum() >= 4 else None
+        if fit is not None:
+            b, half = fit
+            verdict = "flat: 0 within the interval" if abs(b) <= half else "not flat: 0 outside the interval"
+            print(f"live RSS over the last {a.last:g} min of log ({last.sum()} samples): slope {b:+.3f} +- "
+                  f"{half:.3f} MB per minute of log (95 %, two standard errors of the fit): {verdict}; "
+                  f"{m[last][-1] - float(np.interp(t[-1] - a.last, t, m)):+.2f} MB over them")
         if a.png is not None:
             import matplotlib
 
             matplotlib.use("Agg")
             import matplotlib.pyplot as plt
 
-            fig, ax = plt.subplots(figsize=(7, 3.5))
-            ax.plot(t, m, ".-", ms=3)
-            ax.axvline(settle, color="0.6", ls="--", lw=0.8)
+            fig, (ax0, ax) = plt.subplots(2, 1, figsize=(7, 5.5), height_ratios=(1, 1.4))
+            ax0.plot(t, m, ".-", ms=3)
+            ax0.axvline(settle, color="0.6", ls="--", lw=0.8)
+            ax0.set_ylabel("RSS (MB)")
+            ax0.set_title(f"fgloc live --ros2, rate {a.rate:g}: RSS over the replay; below, after "
+                          f"{settle:.1f} min of log", fontsize=9)
+            ax0.grid(alpha=0.3)
+            ax.plot(t[after], m[after], ".-", ms=3)
             ax.set_xlabel("minutes of log")
-            ax.set_ylabel("fgloc live --ros2 RSS (MB)")
-            ax.set_title(f"rate {a.rate:g}, slope after {settle:.1f} min: {slope:+.3f} MB/min", fontsize=9)
+            ax.set_ylabel("RSS (MB)")
+            title = f"slope after {settle:.1f} min: {slope:+.3f} MB/min"
+            if fit is not None:
+                tl = t[last]
+                c = np.polyfit(tl, m[last], 1)
+                ax.plot(tl, np.polyval(c, tl), "r-", lw=1.5, label=f"last {a.last:g} min: {fit[0]:+.3f} +- "
+                        f"{fit[1]:.3f} MB/min")
+                ax.legend(fontsize=8, loc="lower right")
+            ax.set_title(title, fontsize=9)
             ax.grid(alpha=0.3)
             fig.tight_layout()
             fig.savefig(a.png, dpi=110)

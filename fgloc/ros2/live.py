@@ -44,7 +44,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     ``ros2.domain_id``); ``stop``: set by the caller to end the run as a signal would."""
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
-    from fgloc.live.app import LIVE_HISTORY_S, LIVE_TAIL_S, LiveSession, trajectory_outputs
+    from fgloc.live.app import LIVE_HISTORY_S, LiveSession, trajectory_outputs
     from fgloc.localization import Session, build_session
     from fgloc.maps import load_map
     from fgloc.ros2.node import Ros2Live
@@ -95,9 +95,10 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
         return session
 
     def make_live(session: Session) -> LiveSession:
+        # the live trajectory whole for -o, else its last minute: nothing here reads it without -o
         live = LiveSession(session, None, None, config=cfg, record=record, publish=publish or None,
                            event_sink=event, record_force=force,
-                           trajectory_window_s=None if out is not None else LIVE_TAIL_S)
+                           trajectory_window_s=None if out is not None else LIVE_HISTORY_S)
         if view is not None:
             from fgloc.view import ViewHook
 

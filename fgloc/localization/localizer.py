@@ -424,7 +424,8 @@ class Localizer(Recovery):
             if self.last_gate is not None:
                 self.monitor.add_nis(self.last_gate.d2)
         elif fix is None:
-            self._t_held_since = None
+            if not fe.is_particle_filter:  # a particle filter's scan without an update is no evidence either way
+                self._t_held_since = None
         elif self._t_held_since is None:
             self._t_held_since = t  # the map points elsewhere than the back-end goes
         # a scan with too few returns (blackout, blocked laser) says nothing about being lost;

@@ -246,6 +246,9 @@ class KeyframeGraph(FurtherSourceFactors):
         tol = self._odom_gap_s()
         if not self.odo_t or self._unmeasured_tail(t0, t1, tol) > 0.0 or self._gap_s(t0, t1, tol) > 0.0:
             return self._motion(t0, t1)[1]
+        memo = self._integrate_memo   # the prediction's integral from the same keyframe: the same numbers
+        if memo is not None and memo[0] == (t0, t1, len(self.odo_t), self.odo_t[0], self.odo_t[-1]):
+            return memo[1][1]
         mark = self._floor_mark
         if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:
             mark.clear()

@@ -88,7 +88,7 @@ class IntegrityConfig:
 class Verdict:
     """A run-level finding: a one-line message, and whether it makes the run unusable."""
 
-    kind: str        # no_fix, map_mismatch, initial_pose, global_start, diverging, heading_diverged
+    kind: str        # no_fix, map_mismatch, initial_pose, global_start, diverging, heading_diverged, agreement
     message: str
     unusable: bool
 

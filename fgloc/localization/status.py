@@ -218,7 +218,8 @@ class PoseStatus:
         return total
 
     def _assess(self) -> None:
-        """The run-level verdicts (monitor.py): no scan ever matched the map; in the odom frame, a
+        """The run-level verdicts (monitor.py): the scan stopped fitting the map at the fused pose (the
+        localizer searched again; said); no scan ever matched the map; in the odom frame, a
         fused path that ends far from dead reckoning; a back-end whose heading diverged from all its
         heading sources for a while (said; its poses are suspect, counted towards
         ``integrity.max_bad_share``)."""
@@ -231,6 +232,12 @@ class PoseStatus:
                 f"{diverged_s:.1f} s in {int(bs.get('heading_divergence_spans', 1) or 1)} span(s)"
                 + (f" (worst {float(worst):.1f} deg off the nearest)" if worst is not None else "")
                 + "; its poses there are suspect", False)
+        n_lost = int(self.stats.get("agreement_lost", 0) or 0)
+        if n_lost:
+            self.monitor.verdict(
+                "agreement", f"the scan stopped fitting the map at the fused pose {n_lost} time(s) for "
+                f"{self.icfg.agreement_lost_s:.1f} s (a front-end tracking a wrong place; integrity.agreement_low): "
+                "the localizer searched again, the poses since it last fit are lost", False)
         if self.odom_mode:
             self._divergence_t = -math.inf
             if self._last_kf_t > -math.inf:

@@ -89,6 +89,8 @@ def test_amcl_and_the_smoother_recover_from_a_kidnapping(kidnapped):
     status = np.array(loc.monitor.at(est.stamps)[0])
     err = np.hypot(*(est.poses[:, :2] - sim.ground_truth.interpolate(est.stamps)[:, :2]).T)
     assert loc.stats["agreement_lost"] >= 1
+    (v,) = [v for v in loc.stats["status"]["verdicts"] if v["kind"] == "agreement"]
+    assert v["message"].startswith("the scan stopped fitting the map at the fused pose") and not v["unusable"]
     assert float(err[status == "ok"].max()) < 0.1  # measured 0.010 m
     assert (status[err > 1.0] != "ok").all() and (status == "lost").sum() >= 10  # measured 36 lost
     on = loc.online_trajectory()

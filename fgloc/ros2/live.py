@@ -11,6 +11,9 @@ from typing import Any
 
 import numpy as np
 
+#: glibc's own initial mmap threshold, kept fixed (see :func:`live_ros2`)
+LIVE_MMAP_THRESHOLD_B = 128 * 1024
+
 
 def summary_line(report: dict[str, Any]) -> str:
     """The session in one line (``--json`` prints the whole report)."""
@@ -42,6 +45,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     ``on_started()``: called once the localizer is built and the messages kept before it fused;
     ``transport``: a :class:`fgloc.ros2.transport.Transport` of the caller's (default: Cyclone DDS on
     ``ros2.domain_id``); ``stop``: set by the caller to end the run as a signal would."""
+    from fgloc import memory
     from fgloc.backends import Capability, check_backend
     from fgloc.config import load_config, parse_config
     from fgloc.live.app import LIVE_HISTORY_S, LiveSession, trajectory_outputs
@@ -62,6 +66,10 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
             if v is not None}
     if over:
         cfg = parse_config({"ros2": over}, source="command line", base=cfg)
+    # blocks of 128 kB and more from mmap for the whole run: glibc's dynamic threshold (raised to each
+    # freed mmapped block's size) moved the large transient buffers into the heap, which then grew
+    # around the long-lived blocks between them (free space in its arenas rising for as long as it ran)
+    memory.set_mmap_threshold(LIVE_MMAP_THRESHOLD_B)
     occ = load_map(map_yaml) if map_yaml is not None else None
     init = None if initial_pose is None else np.array(initial_pose, dtype=float)
     tty = sys.stderr.isatty()

@@ -28,12 +28,18 @@ from fgloc.geometry import wrap_scalar
 FloatArray = NDArray[np.float64]
 
 
+def pose2(v: FloatArray) -> gtsam.Pose2:
+    """``gtsam.Pose2`` of ``[x, y, yaw]`` from Python floats (numpy scalars cost pybind11's overload
+    resolution ~2 us more per pose, several per keyframe)."""
+    return gtsam.Pose2(float(v[0]), float(v[1]), float(v[2]))
+
+
 def between_factor(k0: int, k1: int, delta: FloatArray, cov: FloatArray, min_sigma: float = 1e-4,
                    kernel: str = "none", k: float = 1.345) -> gtsam.BetweenFactorPose2:
     """Integrated-twist factor (C++ ``BetweenFactorPose2``), optionally robust (wheel slip)."""
     c = np.asarray(cov, dtype=float) + _floor(min_sigma)
     noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
-    return gtsam.BetweenFactorPose2(k0, k1, gtsam.Pose2(*delta), noise)
+    return gtsam.BetweenFactorPose2(k0, k1, pose2(delta), noise)
 
 
 _FLOORS: dict[float, FloatArray] = {}
@@ -97,7 +103,7 @@ def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "h
                k: float = 1.345) -> gtsam.PriorFactorPose2:
     """Scan-to-map fix as a robust ``PriorFactorPose2``."""
     base = gtsam.noiseModel.Gaussian.Covariance(body_covariance(pose, cov_map))
-    return gtsam.PriorFactorPose2(key, gtsam.Pose2(*pose), robust(base, kernel, k))
+    return gtsam.PriorFactorPose2(key, pose2(pose), robust(base, kernel, k))
 
 
 def offset_pose(offset: float) -> gtsam.Pose2:

@@ -17,6 +17,7 @@ from fgloc.backends.factors import (
     fix_factor,
     gyro_factor,
     heading_factor,
+    pose2,
     scaled_between_factor,
     yaw_increment_factor,
 )
@@ -133,7 +134,7 @@ class KeyframeGraph(FurtherSourceFactors):
         graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=got is None))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point
-        vals.insert(k, gtsam.Pose2(*pred))
+        vals.insert(k, pose2(pred))
         if t - self.cur_o_t >= self.cfg.offset_interval_s:
             self._next_offset(t, graph, vals, ts)
         # compass readings since the previous keyframe (late ones go to this keyframe too)

@@ -354,3 +354,19 @@ def test_a_pose_sources_gate_judges_against_a_fresh_marginal():
     router.on_message(mocap, PoseFix(3.1, np.array([0.3, 0.0, 0.0]), np.eye(3), frame_id="map"))
     h = router.health()["mocap"]
     assert h.accepted == 30 and h.gated == 1
+
+
+@pytest.mark.parametrize("specs", [None, {"odom0": {"type": "odometry", "use": ["vx", "vy", "vyaw"]}}])
+def test_each_unusable_twist_variance_gets_its_own_default(specs):
+    """An AR.Drone's odometry: vx / vy variance 0.09, its placeholder yaw rate's 0: the back-end is
+    handed 0.09 for vx / vy and the default (0.02 rad/s)^2 for the yaw rate; a driver's 1e6 "not
+    estimated" is replaced the same way, its correlations dropped."""
+    loc, router = _router(specs)
+    spec = router.specs[0]
+    drone = np.diag([0.09, 0.09, 0.0])
+    router.on_message(spec, Odometry(1.0, np.array([0.4, 0.1, 0.0]), drone, None, None))
+    placeholder = np.array([[0.09, 0.0, 0.5], [0.0, 1e6, 0.0], [0.5, 0.0, 0.04]])
+    router.on_message(spec, Odometry(1.1, np.array([0.4, 0.1, 0.0]), placeholder, None, None))
+    a, b = loc.odometry
+    np.testing.assert_allclose(a.twist_cov, np.diag([0.09, 0.09, 0.02**2]), rtol=1e-12)
+    np.testing.assert_allclose(b.twist_cov, [[0.09, 0.0, 0.5], [0.0, 0.01**2, 0.0], [0.5, 0.0, 0.04]], rtol=1e-12)

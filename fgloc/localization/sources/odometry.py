@@ -32,6 +32,28 @@ MAX_TILT_AGE_S = 0.5
 #: a base tilted more than this (rad) is no ground robot on a slope (the steepest ramps and loading
 #: docks are under 20 deg) but a wrong mount or a bad reading: not levelled, counted
 MAX_TILT_RAD = math.radians(30.0)
+#: a twist variance this large ((m/s)^2 or (rad/s)^2) is a driver's "not estimated" placeholder
+#: (1e6, 99999), no noise a wheel, visual or flow odometry has: that component gets the default
+NOT_ESTIMATED_VAR = 1e3
+
+
+def usable_twist_cov(cov: np.ndarray | None, default_sigmas: tuple[float, float, float] | list[float]
+                     ) -> np.ndarray:
+    """A twist covariance (3x3) with each unusable diagonal entry (0, negative, NaN, at least
+    :data:`NOT_ESTIMATED_VAR`) replaced by its own default ``sigma^2`` and that row / column's
+    correlations dropped; the usable entries are kept as the message gives them (``cov`` itself
+    when all three are usable; the defaults' diagonal without a covariance)."""
+    if cov is None:
+        return np.diag(np.square(default_sigmas))
+    bad = [i for i in range(3) if not 0.0 < float(cov[i, i]) < NOT_ESTIMATED_VAR]  # NaN too
+    if not bad:
+        return cov
+    out = np.array(cov, dtype=float).reshape(3, 3)
+    for i in bad:
+        out[i, :] = 0.0
+        out[:, i] = 0.0
+        out[i, i] = float(default_sigmas[i]) ** 2
+    return out
 
 
 def differential_cov(cov: np.ndarray, prev_cov: np.ndarray, prev_yaw: float, dt: float) -> np.ndarray:
@@ -128,8 +150,9 @@ class OdometryHandler(SourceHandler):
         else:
             comps = ("vx", "vy", "vyaw")
         default = list(be.encoder_sigmas)
-        if cov is None or not (cov[0, 0] > 0 and cov[1, 1] > 0 and cov[2, 2] > 0):
-            cov = np.diag(np.square(default))
+        # each component on its own: a usable variance kept, an unusable one (an AR.Drone's yaw rate
+        # 0 with variance 0 beside vx / vy 0.09) its own default
+        cov = usable_twist_cov(cov, default)
         if whole_twist:
             out = cov  # all three velocities as the message says: its whole covariance, correlations kept
         else:

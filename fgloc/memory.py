@@ -16,7 +16,8 @@ import ctypes.util
 from dataclasses import dataclass
 from typing import Any
 
-M_MMAP_THRESHOLD = -3  # mallopt's parameter (malloc.h)
+M_TRIM_THRESHOLD = -1  # mallopt's parameters (malloc.h)
+M_MMAP_THRESHOLD = -3
 
 _MALLINFO2_FIELDS = ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
                      "keepcost")
@@ -83,6 +84,15 @@ def set_mmap_threshold(nbytes: int) -> bool:
     if not lib or not hasattr(lib, "mallopt"):
         return False
     return bool(lib.mallopt(M_MMAP_THRESHOLD, int(nbytes)))
+
+
+def set_trim_threshold(nbytes: int) -> bool:
+    """Free space of ``nbytes`` and more at the top of the heap goes back to the system at once
+    (``mallopt(M_TRIM_THRESHOLD)``; glibc raises it with its dynamic mmap threshold); False without glibc."""
+    lib = _libc()
+    if not lib or not hasattr(lib, "mallopt"):
+        return False
+    return bool(lib.mallopt(M_TRIM_THRESHOLD, int(nbytes)))
 
 
 def mallinfo() -> Mallinfo | None:

@@ -47,3 +47,4 @@ def test_the_mmap_threshold_moves_blocks_between_heap_and_mmap():
         del b
     finally:
         memory.set_mmap_threshold(128 << 10)  # glibc's default (the dynamic threshold stays off in this process)
+        assert memory.set_trim_threshold(128 << 10)

@@ -70,6 +70,7 @@ def live_ros2(*, map_yaml: Path | None, backend: str, frontend: str,
     # freed mmapped block's size) moved the large transient buffers into the heap, which then grew
     # around the long-lived blocks between them (free space in its arenas rising for as long as it ran)
     memory.set_mmap_threshold(LIVE_MMAP_THRESHOLD_B)
+    memory.set_trim_threshold(LIVE_MMAP_THRESHOLD_B)  # glibc's default, which the dynamic threshold had raised
     occ = load_map(map_yaml) if map_yaml is not None else None
     init = None if initial_pose is None else np.array(initial_pose, dtype=float)
     tty = sys.stderr.isatty()

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from fgloc import memory
@@ -28,23 +31,29 @@ def test_mallinfo_sees_an_allocation_and_trim_returns_it():
     assert n is not None and n >= 1
 
 
+#: run in a fresh interpreter: in a long-lived test worker glibc serves a 2 MB request from the
+#: heap's free chunks whatever the threshold (it only mmaps what the heap cannot give), and the
+#: thresholds set here are the process's for good
+_THRESHOLD_PROBE = """
+from fgloc import memory
+assert memory.set_mmap_threshold(1 << 20)
+m0 = memory.mallinfo()
+a = bytearray(2 << 20)
+m1 = memory.mallinfo()
+del a
+assert memory.set_mmap_threshold(32 << 20)
+m2 = memory.mallinfo()
+b = bytearray(2 << 20)
+m3 = memory.mallinfo()
+print(m1.mmapped_b - m0.mmapped_b, m3.mmapped_b - m2.mmapped_b, m3.in_use_b - m2.in_use_b)
+"""
+
+
 def test_the_mmap_threshold_moves_blocks_between_heap_and_mmap():
     if memory.mallinfo() is None:
         pytest.skip("glibc older than 2.33 (no mallinfo2)")
-    try:
-        assert memory.set_mmap_threshold(1 << 20)
-        m0 = memory.mallinfo()
-        a = bytearray(2 << 20)  # over the threshold: mmapped
-        m1 = memory.mallinfo()
-        assert m0 is not None and m1 is not None and m1.mmapped_b - m0.mmapped_b >= 2 << 20
-        del a
-        assert memory.set_mmap_threshold(32 << 20)
-        m2 = memory.mallinfo()
-        b = bytearray(2 << 20)  # under it now: from the heap
-        m3 = memory.mallinfo()
-        assert m2 is not None and m3 is not None and m3.mmapped_b - m2.mmapped_b < 1 << 20
-        assert m3.in_use_b - m2.in_use_b >= 2 << 20
-        del b
-    finally:
-        memory.set_mmap_threshold(128 << 10)  # glibc's default (the dynamic threshold stays off in this process)
-        assert memory.set_trim_threshold(128 << 10)
+    out = subprocess.run([sys.executable, "-c", _THRESHOLD_PROBE], capture_output=True, text=True,
+                         timeout=60, check=True).stdout
+    mmapped_over, mmapped_under, heap_under = (int(v) for v in out.split())
+    assert mmapped_over >= 2 << 20  # over the threshold: a mapping of its own
+    assert mmapped_under < 1 << 20 and heap_under >= 2 << 20  # under it now: from the heap

@@ -351,7 +351,7 @@ def main() -> int:
     ap.add_argument("--map", type=Path, help="its map, published by the replay on /map")
     ap.add_argument("--loops", type=int, default=1, help="simulated runs: times round the paper's rectangle")
     ap.add_argument("--rate", type=float, default=1.0, help="replay rate (x real time)")
-    ap.add_argument("--domain", type=int, default=1 + os.getpid() % 200)
+    ap.add_argument("--domain", type=int, default=1 + os.getpid() % 100)
     ap.add_argument("--no-initial-pose", action="store_true", help="global localization at the start")
     ap.add_argument("--out", type=Path, help="write the samples and the report (JSON) here")
     ap.add_argument("--receive-only", action="store_true", help="fgloc's DDS receive path alone, no localizer")

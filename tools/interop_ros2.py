@@ -107,7 +107,7 @@ def main() -> int:
     ap.add_argument("--log", type=Path, help="a log (default: the paper hall simulated, 5 m)")
     ap.add_argument("--map", type=Path, help="its map (published by the ROS 2 node)")
     ap.add_argument("--initial-pose", nargs=3, type=float, default=(2.5, 3.0, 0.0))
-    ap.add_argument("--domain", type=int, default=1 + os.getpid() % 200)
+    ap.add_argument("--domain", type=int, default=1 + os.getpid() % 100)
     a = ap.parse_args()
     from fgloc.maps import load_map
 

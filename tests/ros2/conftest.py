@@ -14,9 +14,19 @@ pytest.importorskip("cyclonedds")
 LOOPBACK = "lo"
 
 
+#: ROS 2's advice: domains 0-101 keep every RTPS port (7400 + 250 d + ...) below Linux's ephemeral
+#: range (32768-60999), where any other socket of the machine may already hold it
+MAX_DOMAIN = 101
+
+
 def domain_for(offset: int = 0) -> int:
-    """A DDS domain unlikely to be shared with another test process on this machine (0..232)."""
-    return 1 + (os.getpid() * 7 + offset) % 200
+    """A DDS domain unlikely to be shared with another test process on this machine (1..100): each
+    pytest-xdist worker draws from its own half, a process outside xdist from its pid."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    if worker.startswith("gw") and worker[2:].isdigit():
+        half = int(worker[2:]) % 2
+        return 1 + half * 50 + (os.getpid() * 7 + offset) % 50
+    return 1 + (os.getpid() * 7 + offset) % (MAX_DOMAIN - 1)
 
 
 _NEXT = itertools.count(1)

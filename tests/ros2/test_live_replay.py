@@ -196,7 +196,9 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     assert r2["tf_at_match"] and r2["tf_published"] >= 0.95 * len(poses) and r2["tf_refined"] > 0
     tf, pose, own = r2["scan_to_tf_ms"], r2["scan_to_pose_ms"], r2["inputs_in_to_pose_ms"]
     if pose["n"]:  # none when the node started after the whole log came (a loaded machine): all fused at once
-        assert 0.0 <= tf["p50"] <= pose["p50"] and 0.0 <= own["p50"] <= pose["p50"] and own["p99"] <= pose["p99"]
+        # per scan, the inputs' wait is part of the pose's: its quantiles are at most the pose's; the transform's
+        # population (every matched scan) is not the poses', so their medians are not ordered
+        assert 0.0 <= tf["p50"] and 0.0 <= own["p50"] <= pose["p50"] and own["p99"] <= pose["p99"]
     assert 0 < r2["tf_at_match_vs_online_mm"]["n"] and r2["tf_at_match_vs_online_mm"]["max"] <= 1e3 * TOL_M
     # /fgloc/status: a DiagnosticArray naming each topic and the pose
     assert peer.status, "no /fgloc/status"

@@ -96,17 +96,17 @@ class ImuHandler(SourceHandler):
             for p in problems:
                 self.skip(p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
-            if spec.uses("roll") and base.roll_pitch_rad is not None and not tilt_estimated(
-                    msg.orientation_cov, mounts.rotation_values(mount)):
-                st.extra["tilt_unusable"] = st.extra.get("tilt_unusable", 0) + 1
-            elif spec.uses("roll") and base.roll_pitch_rad is not None:
-                if ctx.tilt_source in (None, spec.name):  # the first levelling IMU levels
-                    ctx.tilt_source = spec.name
-                    ctx.tilt = (float(msg.stamp), *base.roll_pitch_rad)
-                # the heading's rate on a slope; a tilt no ground robot drives on (an upside-down or
-                # left-handed mount, as _levelled refuses it) keeps the base's own z rate
-                if base.heading_rate_radps is not None and max(map(abs, base.roll_pitch_rad)) <= MAX_TILT_RAD:
-                    rate = base.heading_rate_radps
+            if spec.uses("roll") and base.roll_pitch_rad is not None:
+                if not tilt_estimated(msg.orientation_cov, mounts.rotation_values(mount)):
+                    st.extra["tilt_unusable"] = st.extra.get("tilt_unusable", 0) + 1
+                else:
+                    if ctx.tilt_source in (None, spec.name):  # the first levelling IMU levels
+                        ctx.tilt_source = spec.name
+                        ctx.tilt = (float(msg.stamp), *base.roll_pitch_rad)
+                    # the heading's rate on a slope; a tilt no ground robot drives on (an upside-down or
+                    # left-handed mount, as _levelled refuses it) keeps the base's own z rate
+                    if base.heading_rate_radps is not None and max(map(abs, base.roll_pitch_rad)) <= MAX_TILT_RAD:
+                        rate = base.heading_rate_radps
         else:
             yaw, rate = msg.yaw_rad, msg.yaw_rate_radps
             yaw_var, rate_var = float(msg.yaw_var), float(msg.yaw_rate_var)

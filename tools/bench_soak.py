@@ -138,7 +138,7 @@ def _in_process(a: argparse.Namespace, world: Any, rp: Any,
     from tqdm import tqdm
 
     from fgloc.config import parse_config
-    from fgloc.live.app import LIVE_HISTORY_S, LIVE_TAIL_S, LiveSession
+    from fgloc.live.app import LIVE_HISTORY_S, LiveSession
     from fgloc.localization import build_session
     from fgloc.testing.harness import live_config_overrides
     from fgloc.testing.soak import feed_live
@@ -149,7 +149,7 @@ def _in_process(a: argparse.Namespace, world: Any, rp: Any,
                             initial_pose=world.pose(0.0), config=cfg)
     session.loc.keep_history(LIVE_HISTORY_S)   # as fgloc live without --out-smoothed
     live = LiveSession(session, None, None, config=cfg, record=tmp / "live.mcap" if a.record else None,
-                       trajectory_window_s=None if a.output else LIVE_TAIL_S)
+                       trajectory_window_s=None if a.output else LIVE_HISTORY_S)
     live.start()
     ps = psutil.Process()
     samples: list[tuple[float, float, float]] = []

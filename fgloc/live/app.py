@@ -32,8 +32,9 @@ if TYPE_CHECKING:
     from fgloc.localization import Session
 
 EVENTS_KEPT = 1_000  # a live session's event lines kept (the newest)
-LIVE_TAIL_S = 600.0  # without -o, the live trajectory's last this many seconds are kept
-LIVE_HISTORY_S = 60.0  # without --out-smoothed, the localizer's fixes and trajectories kept this far back
+#: kept this far back: without -o the live trajectory, without --out-smoothed the localizer's fixes and trajectories
+#: (``fgloc live`` and ``fgloc live --ros2``: what an output writes is kept whole; nothing else reads further back)
+LIVE_HISTORY_S = 60.0
 
 
 def parse_host_port(s: str) -> tuple[str, int]:
@@ -309,12 +310,12 @@ def live_session(req: LiveRequest, status_sink: Callable[[str], None] | None = N
     mount = StaticTransform("base_link", "laser", np.asarray(cfg.laser.mount, dtype=float))
     session = build_session(occ, mount, backend=backend, frontend=req.frontend, initial_pose=init, config=cfg)
     # the live trajectory is kept whole for -o only, the fixes and the back-end's trajectories for
-    # --out-smoothed only; else their last minutes (memory bounded over days)
+    # --out-smoothed only; else their last minute (memory bounded over days)
     if req.out_smoothed is None:
         session.loc.keep_history(LIVE_HISTORY_S)
     return LiveSession(session, req.serial, req.laser, config=cfg, record=req.record, publish=req.publish or None,
                        status_sink=status_sink, event_sink=event_sink, record_force=req.force,
-                       trajectory_window_s=None if req.out is not None else LIVE_TAIL_S)
+                       trajectory_window_s=None if req.out is not None else LIVE_HISTORY_S)
 
 
 def trajectory_outputs(out: Path | None, out_smoothed: Path | None, force: bool) -> dict[str, OutputFile]:

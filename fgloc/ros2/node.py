@@ -277,6 +277,10 @@ class Ros2Outputs(BaseSink):
         self._tf_last_t = -math.inf  # ... map -> odom
         self._arrivals: deque[tuple[float, float, bool]] = deque(maxlen=64)  # scan stamp, arrival, live
         self._early: deque[tuple[float, np.ndarray]] = deque(maxlen=64)  # stamp, map -> base at the match
+        #: per live scan given a pose: a map -> odom at its stamp written before the pose (``tf_first``) or not
+        #: (``no_tf``: no odometry at its stamp, or lost); ``tf_after``: transforms at the match written for a
+        #: stamp whose pose was already out
+        self.order = {"tf_first": 0, "no_tf": 0, "tf_after": 0}
         self.handling: tuple[float, float] | None = None  # wall (time.time), thread CPU s: the scan's handling began
 
     def on_scan(self, stamp: float, scan: LaserScan, fix_or_reason: PoseFix | str, fused: PoseFix | None) -> None:
@@ -295,6 +299,8 @@ class Ros2Outputs(BaseSink):
         at = pose_at_match(pred, pred_cov, fix)
         if self._publish_tf(t, at):
             self._early.append((t, at))
+            if t <= self._last_t:
+                self.order["tf_after"] += 1
             if live:
                 now = time.time()
                 ms = (now - arrival) * 1e3
@@ -360,8 +366,10 @@ class Ros2Outputs(BaseSink):
         for t, pose_at, cov in new:
             self._last_t = t
             at = np.asarray(pose_at, dtype=float)
-            self.pose_pub.write(codec.encode(PoseFix(t, at, cov, 1.0, "fgloc", c.global_frame_id))[1])
+            # map -> odom before the pose (as at the match): a consumer of the pose finds the transform there
             tf_now = self.tf_pub is not None and t > self._tf_last_t and self._publish_tf(t, at)
+            tf_before = tf_now or any(abs(st - t) < 1e-9 for st, _ in self._early)  # one at its stamp is out
+            self.pose_pub.write(codec.encode(PoseFix(t, at, cov, 1.0, "fgloc", c.global_frame_id))[1])
             self.published += 1
             for st, early in self._early:
                 if abs(st - t) < 1e-9:
@@ -372,6 +380,7 @@ class Ros2Outputs(BaseSink):
             for st, arrival, live in self._arrivals:
                 if abs(st - t) < 1e-9:
                     if live:  # a scan kept from before the start is not live
+                        self.order["tf_first" if tf_before else "no_tf"] += 1
                         now = time.time()
                         ms = (now - arrival) * 1e3
                         self.pose_ms.add(ms)
@@ -394,7 +403,7 @@ class Ros2Outputs(BaseSink):
                 "tf_at_match": self.at_match,
                 "scan_to_tf_ms": pct(self.tf_ms), "scan_to_pose_ms": pct(self.pose_ms),
                 "scan_to_fused_ms": pct(self.fused_ms),
-                "inputs_in_to_pose_ms": pct(self.ready_ms),
+                "inputs_in_to_pose_ms": pct(self.ready_ms), "tf_before_pose": dict(self.order),
                 "tf_at_match_ms": {"queue": pct(self.queue_ms), "handle": pct(self.handle_ms),
                                    "cpu": pct(self.cpu_ms)},
                 "tf_at_match_slowest": [{k: round(v, 3) for k, v in parts.items()}

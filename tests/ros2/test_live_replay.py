@@ -191,13 +191,16 @@ def test_live_over_dds_matches_fgloc_run(short_log: Path, dds_domain: int, tmp_p
     assert scan_ep["undecodable"] == 0 and scan_ep["qos"] == "best_effort/volatile/100"
     assert scan_ep["delivery_ms"]["p50"] >= 0.0  # written (the sample's source timestamp) -> received
     # map -> odom went out at each scan's match, before /amcl_pose (which waits for the odometry / IMU past
-    # the scan for the smoother's keyframe); the latencies from the scan, and from those inputs in
+    # the scan for the smoother's keyframe): per scan, its transform before its pose; the latencies from the
+    # scan, and from those inputs in
     r2 = report["ros2"]
     assert r2["tf_at_match"] and r2["tf_published"] >= 0.95 * len(poses) and r2["tf_refined"] > 0
     tf, pose, own = r2["scan_to_tf_ms"], r2["scan_to_pose_ms"], r2["inputs_in_to_pose_ms"]
+    order = r2["tf_before_pose"]
+    assert order["tf_first"] + order["no_tf"] == pose["n"] and order["tf_after"] == 0, order
+    assert order["no_tf"] <= 0.01 * pose["n"], order
     if pose["n"]:  # none when the node started after the whole log came (a loaded machine): all fused at once
-        # per scan, the inputs' wait is part of the pose's: its quantiles are at most the pose's; the transform's
-        # population (every matched scan) is not the poses', so their medians are not ordered
+        # per scan, the inputs' wait is part of the pose's: its quantiles are at most the pose's
         assert 0.0 <= tf["p50"] and 0.0 <= own["p50"] <= pose["p50"] and own["p99"] <= pose["p99"]
     assert 0 < r2["tf_at_match_vs_online_mm"]["n"] and r2["tf_at_match_vs_online_mm"]["max"] <= 1e3 * TOL_M
     # /fgloc/status: a DiagnosticArray naming each topic and the pose

@@ -53,6 +53,25 @@ import numpy as np
 import psutil
 
 
+def mappings() -> dict[str, list]:
+    """The process's memory mappings now (``/proc/self/smaps``): start address (hex) -> [size kB, Rss kB,
+    Anonymous kB, permissions, name ("" for an anonymous mapping)]."""
+    out: dict[str, list] = {}
+    cur: list | None = None
+    with open("/proc/self/smaps") as f:
+        for line in f:
+            head = line.split(None, 5)
+            if "-" in head[0] and len(head) >= 5 and not head[0].endswith(":"):
+                start, end = (int(x, 16) for x in head[0].split("-"))
+                cur = [(end - start) // 1024, 0, 0, head[1], head[5].strip() if len(head) > 5 else ""]
+                out[head[0].split("-")[0]] = cur
+            elif cur is not None and head[0] == "Rss:":
+                cur[1] = int(head[1])
+            elif cur is not None and head[0] == "Anonymous:":
+                cur[2] = int(head[1])
+    return out
+
+
 class MemProbe:
     """Memory as a process sees it, sampled every ``every_s`` by a thread of its own into ``path`` (one
     JSON line each): RSS (/proc), glibc malloc (``mallinfo2``: bytes in use, free inside the arenas, in
@@ -83,6 +102,8 @@ class MemProbe:
         import gc
 
         gc.callbacks.append(on_gc)
+        self.maps_s = float(os.environ.get("FGLOC_PROBE_MAPS_S", "0"))
+        self._next_maps = 0.0
         self.trace_after_s = float(os.environ.get("FGLOC_PROBE_TRACE_AFTER_S", "0"))
         self.snap_every_s = float(os.environ.get("FGLOC_PROBE_SNAP_S", "0"))
         self._snap0: Any = None
@@ -108,6 +129,13 @@ class MemProbe:
                "threads": threading.active_count(), "trimmed": self.trimmed, "gc_n": list(self.gc_n),
                "gc_ms": [round(v, 2) for v in self.gc_ms], "gc_max_ms": [round(v, 2) for v in self.gc_max],
                "gc_long": self.gc_long[-200:], "gc_threshold": gc.get_threshold(), "frozen": gc.get_freeze_count()}
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(("RssAnon:", "RssFile:", "RssShmem:")):
+                    row[line.split(":")[0].lower()] = int(line.split()[1]) * 1024
+        if self.maps_s > 0 and row["t"] >= self._next_maps:
+            self._next_maps = row["t"] + self.maps_s
+            row["maps"] = mappings()
         if self.trace:
             import tracemalloc
 
@@ -311,7 +339,8 @@ def print_probe(probe: list[dict], t_wall0: float, rate: float, settle_min: floa
     rows = [("rss", "RSS", 2**20, "MB"), ("malloc_used", "malloc: in use", 2**20, "MB"),
             ("malloc_free", "malloc: free in its arenas", 2**20, "MB"),
             ("malloc_mmap", "malloc: mmapped chunks", 2**20, "MB"),
-            ("malloc_arena", "malloc: arenas' size", 2**20, "MB"), ("traced", "tracemalloc", 2**20, "MB"),
+            ("malloc_arena", "malloc: arenas' size", 2**20, "MB"), ("rssanon", "RSS: anonymous", 2**20, "MB"),
+            ("rssfile", "RSS: files", 2**20, "MB"), ("traced", "tracemalloc", 2**20, "MB"),
             ("py_blocks", "Python blocks", 1e3, "k"), ("objects", "gc-tracked objects", 1e3, "k"),
             ("arenas", "malloc arenas", 1, ""), ("threads", "threads", 1, "")]
     print(f"in the live process, after {settle_min:.1f} min of log -> end ({after.sum()} samples"
@@ -325,6 +354,28 @@ def print_probe(probe: list[dict], t_wall0: float, rate: float, settle_min: floa
         print(f"  {name:28s} {first:9.2f} -> {v[-1]:9.2f} {u:2s} ({v[-1] - first:+.2f}; slope {slope:+.3f} {u} "
               "per minute of log)")
     last = probe[-1]
+    snaps = [(float((r["wall"] - t_wall0) * rate / 60.0), r["maps"]) for r in probe if r.get("maps")]
+    snaps_after = [s for s in snaps if s[0] >= settle_min]
+    if len(snaps_after) >= 2:
+        (t_a, a), (t_b, b) = snaps_after[0], snaps_after[-1]
+
+        def kind(m: list) -> str:
+            return m[4] or f"anonymous {m[3]}"
+
+        d = sorted(((b[k][1] - (a[k][1] if k in a else 0), k) for k in b), reverse=True)
+        gone = sum(a[k][1] for k in a if k not in b)
+        print(f"  mappings whose RSS grew most from {t_a:.1f} to {t_b:.1f} min of log ({len(a)} -> {len(b)} "
+              f"mappings; {gone / 1024:.2f} MB in those unmapped):")
+        for dk, k in d[:12]:
+            m = b[k]
+            print(f"    {dk / 1024:+7.2f} MB  {k} {m[0] / 1024:8.1f} MB mapped, Rss {m[1] / 1024:6.2f} MB  {kind(m)}")
+        by: dict[str, float] = {}
+        for k in set(a) | set(b):
+            m = b.get(k) or a[k]
+            name = "[heap]" if m[4] == "[heap]" else ("a file" if m[4].startswith("/") else kind(m))
+            by[name] = by.get(name, 0.0) + (b[k][1] if k in b else 0) - (a[k][1] if k in a else 0)
+        kinds = sorted(by.items(), key=lambda x: -abs(x[1]))
+        print("    by kind: " + ", ".join(f"{n} {v / 1024:+.2f} MB" for n, v in kinds))
     grew = [r for r in probe if r.get("grew")]
     if grew:
         r = grew[-1]
@@ -371,12 +422,15 @@ def main() -> int:
                     "seconds into the live process (then what is traced is what was allocated since and lives)")
     ap.add_argument("--snap-s", type=float, default=0.0, help="--tracemalloc: a snapshot this often; the lines "
                     "whose memory grew most since the first are printed")
+    ap.add_argument("--maps-s", type=float, default=0.0, help="--probe: the live process's memory mappings "
+                    "(/proc/self/smaps) this often; the ones whose RSS grew most after settling are printed")
     ap.add_argument("--no-dds", action="store_true", help="replay and node in this process, no DDS (implies --probe)")
     a = ap.parse_args()
     if a.no_dds:
         a.probe = True
     os.environ["FGLOC_PROBE_TRACE_AFTER_S"] = str(a.trace_after_s)  # read by MemProbe in the live process
     os.environ["FGLOC_PROBE_SNAP_S"] = str(a.snap_s)
+    os.environ["FGLOC_PROBE_MAPS_S"] = str(a.maps_s)
     tmp = Path(tempfile.mkdtemp(prefix="bench_ros2_"))
     init = ["--initial-pose", "2.5", "3.0", "0.0"]
     if a.log is None:

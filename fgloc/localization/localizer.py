@@ -135,6 +135,8 @@ class Localizer(Recovery):
         self.last_gate: GateVerdict | None = None  # the gate's verdict on the last scan's fix (None: not judged)
         self._gate_prediction: tuple[FloatArray, FloatArray] | None = None  # the prediction it judged against
         self._cov_t = -math.inf  # stamp of the last back-end covariance the gate asked for
+        self._guess_prediction: tuple[float, tuple[FloatArray, FloatArray]] | None = None  # guess(): (t, predict(t))
+        self._timing_unknown: bool | None = None  # what the back-end was last told of the odometry's timing
         self._t_used: float | None = None  # stamp of the last fix the back-end accepted
         self._t_held_since: float | None = None  # first fix of the current run of held / rejected ones
         self._rejected_run = 0  # fixes the gate passed and the back-end rejected since it last took one
@@ -226,7 +228,10 @@ class Localizer(Recovery):
         if self.clock is not None:
             self.clock.add_odometry(t_raw, float(self.odom.pose[2]))
             # stamps in bursts: no offset places them, the back-end carries their timing variance
-            self.backend.set_odometry_timing_unknown(self.clock.slow and not self.clock.regular)
+            unknown = self.clock.slow and not self.clock.regular
+            if unknown != self._timing_unknown:
+                self._timing_unknown = unknown
+                self.backend.set_odometry_timing_unknown(unknown)
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
@@ -372,7 +377,7 @@ class Localizer(Recovery):
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         held = False
         if fix is not None and self.gate is not None:
-            verdict = self._gate(t, fix, msg)
+            verdict = self._gate(t, fix, msg, None if fe.is_particle_filter else odom_now)
             if not verdict.take:
                 held = True
                 self.stats["held_jumps"] += 1
@@ -474,20 +479,26 @@ class Localizer(Recovery):
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
 
-    def _gate(self, t: float, fix: PoseFix, msg: LaserScan) -> GateVerdict:
-        """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py)."""
+    def _gate(self, t: float, fix: PoseFix, msg: LaserScan, odom_pose: FloatArray | None = None) -> GateVerdict:
+        """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py); ``odom_pose``: the odometry's pose
+        at ``t`` when the caller has it."""
         assert self.gate is not None
+        guessed, self._guess_prediction = self._guess_prediction, None
         if t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t:
             # a smoother's marginal is computed on demand: without one the gate would judge against the
             # start prior the whole run
             self.backend.current(covariance=True)
             self._cov_t = t
-        pred, pred_cov = self.backend.predict(t)
+            guessed = None  # the prediction's covariance starts from the new marginal
+        # the guess's prediction when it was the back-end's at this stamp (nothing was fed in since)
+        pred, pred_cov = guessed[1] if guessed is not None and guessed[0] == t else self.backend.predict(t)
         self._gate_prediction = (pred, pred_cov)
         # the motion since the last accepted fix is known where the odometry's stamps cover it (gate.py)
         prev = self.gate.previous
         t_from = prev.t if prev is not None else self._t_used if self._t_used is not None else t
-        verdict = self.gate.check(fix, pred, pred_cov, msg, self.odom.pose_at(t), t, self.backend.motion_correction,
+        if odom_pose is None:
+            odom_pose = self.odom.pose_at(t)
+        verdict = self.gate.check(fix, pred, pred_cov, msg, odom_pose, t, self.backend.motion_correction,
                                   motion_known=self.stats["odometry"] > 0,
                                   motion_covered=self.odometry_coverage.covers(min(t_from, t), t))
         self.last_gate = verdict
@@ -504,12 +515,17 @@ class Localizer(Recovery):
         (:meth:`OdometryTracker.extrapolation_twist`, as the back-end believes it moved:
         :meth:`Backend.motion_correction`) over at most ``odom_extrapolate_max_s`` (as the odom pose)."""
         odom_t = self.odom.t
+        self._guess_prediction = None
         if not self.odom.burst or odom_t is None or t <= odom_t:
-            return self.backend.predict(t)[0]
+            pred = self.backend.predict(t)
+            self._guess_prediction = (t, pred)
+            return pred[0]
         cur = self.backend.current(covariance=False)
         t_a = odom_t if cur is None else max(odom_t, float(cur[0]))
         if t <= t_a:
-            return self.backend.predict(t)[0]
+            pred = self.backend.predict(t)
+            self._guess_prediction = (t, pred)
+            return pred[0]
         pose_a, _ = self.backend.predict(t_a)
         dt = min(t - t_a, self.pcfg.odom_extrapolate_max_s)
         if not dt > 0:

@@ -68,6 +68,8 @@ from fgloc.types import LaserScan, StaticTransform
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
 
 FloatArray = NDArray[np.float64]
+#: EM rounds of the refinement with the measured sigma (``refine_scale: measured``)
+REFINE_SCALE_ROUNDS = 2
 
 
 
@@ -477,6 +479,10 @@ class AMCLConfig:
         "refined", "the fix: mean = weighted mean of the heaviest cluster (nav2); refined = that mean moved to "
         "the maximum of the configured sensor model on this scan (kept within 3 sigma of the cluster)",
         choices=("mean", "refined"))
+    refine_scale: str = setting(
+        "sigma_hit", "the refinement's sensor-model sigma: sigma_hit (the filter's) or measured = then refitted with "
+        "the sigma this scan's inlier residuals show (maximum likelihood, at least the map raster's res/sqrt(12)): "
+        "beams on furniture moved since mapping stop pulling the fix", choices=("sigma_hit", "measured"))
     fix_without_update: bool = setting(False, "thresholds not met -> no fix (true: the propagated estimate)")
     cov_scale: float = setting(0.25, "output cov = cov_scale * cluster cov + diag(cov_floor)", gt=0)
     cov_floor: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m^2, m^2, rad^2 added", min=0)
@@ -539,6 +545,7 @@ class AMCL:
         self._n_yaw_bins = max(int(math.ceil(2.0 * math.pi / self.kld_bin[2] - 1e-9)), 1)
         self.fix_without_update = bool(conf.fix_without_update)
         self.cov_scale = float(conf.cov_scale)
+        self.refine_scale = str(conf.refine_scale)
         self.cov_floor = np.diag(np.asarray(conf.cov_floor, dtype=float).reshape(3))
         self.rng = np.random.default_rng(conf.seed)
         self.pre = ScanPreprocessor(
@@ -810,10 +817,13 @@ class AMCL:
         dx, dy = mean[0] - o[0], mean[1] - o[1]
         start = np.array([c * dx + s * dy, -s * dx + c * dy, mean[2] - o[2]])  # grid-aligned frame
         model = 0 if self.laser_model_type == "likelihood_field" else 1
+        bx, by = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
         p, H, wr2, sw, n_runs, swf = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution,
-                              self.max_dist,
-                              np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), start,
-                              self.z_hit, z_rand_mult, self.sigma_hit, model, 20)
+                                                    self.max_dist, bx, by, start, self.z_hit, z_rand_mult,
+                                                    self.sigma_hit, model, 20)
+        if self.refine_scale == "measured":
+            p, H, wr2, sw, n_runs, swf = self._refit_measured(bx, by, z_rand_mult, model,
+                                                              (p, H, wr2, sw, n_runs, swf))
         out = np.array([o[0] + c * p[0] - s * p[1], o[1] + s * p[0] + c * p[1], wrap_angle(p[2] + o[2])])
         d = out - mean
         d[2] = wrap_angle(d[2])
@@ -847,6 +857,24 @@ class AMCL:
             self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
             self.depth_m = min(max(self.depth_m, 0.0), float(self.map.resolution))
         return out, True
+
+    def _refit_measured(self, bx: FloatArray, by: FloatArray, z_rand_mult: float, model: int, fit: tuple
+                        ) -> tuple:
+        """The scan fit ``fit`` (with ``sigma_hit``) refitted by EM on the mixture's sigma: the inliers'
+        weighted residual spread (at least the map raster's ``res / sqrt(12)``), then the pose again with
+        it."""
+        floor = self.map.resolution / math.sqrt(12.0)
+        out = fit
+        for _ in range(REFINE_SCALE_ROUNDS):
+            p, _H, wr2, sw, _n, _f = out
+            if not (sw > 3.0 and np.isfinite(wr2)):
+                break
+            sigma = max(math.sqrt(wr2 / sw), floor)
+            if sigma >= self.sigma_hit:
+                break
+            out = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution, self.max_dist,
+                                 bx, by, p, self.z_hit, z_rand_mult, sigma, model, 20)
+        return out
 
     def _result(self, mean: FloatArray, cov: FloatArray, share: float, n_pts: int, updated: bool,
                 refined: bool = False) -> MatchResult:

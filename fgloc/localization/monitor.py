@@ -7,7 +7,9 @@
   silent, space the map does not have, scans that match nothing, fixes held back by the jump gate
   of :mod:`fgloc.localization.gate`); the covariance grows with the odometry;
 * ``suspect`` - something contradicts the pose: the map keeps pointing elsewhere (fixes held back
-  or rejected for longer than ``integrity.suspect_after_s``), or, in an ``odom``-frame run, the
+  or rejected for longer than ``integrity.suspect_after_s``), the fused pose is further from the last
+  fix the back-end took than the odometry drove since (:mod:`fgloc.localization.divergence`: a back-end
+  that diverged), or, in an ``odom``-frame run, the
   fused path left odometry + IMU dead reckoning (:class:`DeadReckoning`) further than a drifting
   odometry explains (``integrity.divergence_share`` of the distance driven);
 * ``lost`` - the localizer does not know where the robot is in the map: no pose yet, a start pose
@@ -88,7 +90,7 @@ class IntegrityConfig:
 class Verdict:
     """A run-level finding: a one-line message, and whether it makes the run unusable."""
 
-    kind: str        # no_fix, map_mismatch, initial_pose, global_start, diverging, heading_diverged, agreement
+    kind: str  # no_fix, map_mismatch, initial_pose, global_start, diverging, heading_diverged, agreement, path_diverged
     message: str
     unusable: bool
 

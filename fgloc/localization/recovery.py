@@ -50,7 +50,6 @@ class Recovery(PoseStatus):
     _dead_reckoned_since: float | None
     _reacquiring: bool
     _pose_confirmed: bool
-    _t_started: float | None
     _ever_converged: bool
 
     def reinitialize(self, pose: FloatArray, cov: FloatArray | None = None) -> None:

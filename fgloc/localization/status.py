@@ -14,12 +14,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray
+from fgloc.localization.divergence import PathDivergence
+from fgloc.localization.gate import agreement_sigma
 from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning, MapAgreement
 
 if TYPE_CHECKING:
     from fgloc.localization.config import PipelineConfig
     from fgloc.localization.monitor import IntegrityConfig
     from fgloc.localization.odometry import OdometryTracker
+    from fgloc.maps import OccupancyMap
 
 #: the map does not fit the log: lost at least this share of the run, and fixes accepted on fewer than
 #: this share of the scans matched (a right map with a wrong start relocalizes and tracks; a building
@@ -48,6 +51,9 @@ class PoseStatus:
     pose_listener: Callable[[float], None] | None
     dead_reckoning: DeadReckoning | None
     agreement: MapAgreement | None
+    map: OccupancyMap | None
+    #: the fused path against the odometry's since the last fix taken (divergence.py; made at the first pose)
+    path_divergence: PathDivergence | None = None
     _divergence: tuple[float, float, float] | None
     _worst_divergence: tuple[float, float, float, float, float] | None
     _divergence_t: float
@@ -59,6 +65,7 @@ class PoseStatus:
     _last_dr_t: float
     _last_compass: tuple[float, float] | None
     _t_used: float | None
+    _t_started: float | None
     _t_held_since: float | None
     _rejected_run: int  # fixes the gate passed and the back-end rejected since it last took one
     _converged: bool
@@ -129,6 +136,11 @@ class PoseStatus:
         if not self._converged:
             return LOST, "not converged: the start pose is not confirmed by the map yet"
         since = t - (self._t_used if self._t_used is not None else t)
+        div = self._path_diverged(t)
+        if div is not None:
+            d, path, s = div
+            return SUSPECT, (f"the fused pose left the odometry's path: {d:.2f} m from where it took the last fix "
+                             f"{s:.1f} s ago, the odometry drove {path:.2f} m")
         ag = self.agreement
         if ag is not None and ag.low_for(t) >= self.icfg.agreement_suspect_s:
             return SUSPECT, (f"the scan has not fit the map at this pose for {ag.low_for(t):.1f} s (agreement "
@@ -148,6 +160,21 @@ class PoseStatus:
         if since >= self.icfg.degraded_after_s:
             return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
         return OK, ""
+
+    def _path_diverged(self, t: float) -> tuple[float, float, float] | None:
+        """The fused pose at ``t`` further from the last fix the back-end took than the odometry drove since
+        (divergence.py); ``(m from it, m driven, s since)`` until the back-end takes a fix or restarts."""
+        if self.stats["odometry"] == 0 or self.map is None:
+            return None
+        pd = self.path_divergence
+        if pd is None:
+            pd = self.path_divergence = PathDivergence(
+                self.icfg.odometry_slip, agreement_sigma(self.map, self.icfg.agreement_sigma_m), self.icfg.gate_chi2)
+        online = self.backend.online_after(t - 1e-3)  # the pose just recorded at t (stamps near 1e9 s: no 1e-9)
+        if not online or online[-1][0] < t - 1e-6:
+            return None
+        _, pose, cov = online[-1]
+        return pd.step((self._t_used, self._t_started), t, pose, cov, self.odom.pose)
 
     def _heading_diverging(self, t: float) -> bool:
         """The back-end says its fused heading follows none of its heading sources: the log time it
@@ -232,6 +259,13 @@ class PoseStatus:
                 f"{diverged_s:.1f} s in {int(bs.get('heading_divergence_spans', 1) or 1)} span(s)"
                 + (f" (worst {float(worst):.1f} deg off the nearest)" if worst is not None else "")
                 + "; its poses there are suspect", False)
+        pd = self.path_divergence
+        if pd is not None and pd.events and pd.worst is not None:
+            d, path, s = pd.worst
+            self.monitor.verdict(
+                "path_diverged", f"the fused pose left the odometry's path {pd.events} time(s) (worst: {d:.1f} m from "
+                f"where the {self.backend_name} took its last fix {s:.1f} s before, the odometry drove {path:.1f} m): "
+                "the back-end diverged, its poses until the next fix it took are suspect", False)
         n_lost = int(self.stats.get("agreement_lost", 0) or 0)
         if n_lost:
             self.monitor.verdict(

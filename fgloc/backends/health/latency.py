@@ -6,7 +6,7 @@ helpers it uses (:func:`median_period`, :func:`bracket`, :func:`fix_speed`)."""
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections import deque
 from operator import itemgetter, sub
 from typing import Any, Protocol
@@ -224,6 +224,7 @@ class ScanLatency:
         self.latency_s = latency_s
         self.est = LatencyEstimator()
         self.recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
+        self._fixes_in_order = True   # every recent fix later than the one before it (bisection finds them)
         self.pairs: list[FixPair] = []
         self._long_pair_t = -math.inf
 
@@ -259,7 +260,24 @@ class ScanLatency:
                 f = old[0]
                 self.pairs.append((f[0], t, f[1], pose, f[2], cov))
                 self._long_pair_t = t
+        if recent and not t >= recent[-1][0]:
+            self._fixes_in_order = False
         recent.append((t, pose, cov))
+
+    def _fix_speed(self, t: float, half_s: float = 0.2) -> float | None:
+        """:func:`fix_speed` of the recent fixes: the two it reads found by bisection while they are in
+        time order (the last at or before ``t - half_s``, the first at or after ``t + half_s``)."""
+        fixes = self.recent_fixes
+        if not self._fixes_in_order:
+            return fix_speed(fixes, t, half_s)
+        i = bisect_right(fixes, t - half_s, key=_time) - 1
+        j = bisect_left(fixes, t + half_s, key=_time)
+        if i < 0 or j >= len(fixes):
+            return None
+        before, after = fixes[i], fixes[j]
+        if after[0] - before[0] > 4 * half_s:
+            return None
+        return float(np.hypot(after[1][0] - before[1][0], after[1][1] - before[1][1])) / (after[0] - before[0])
 
     def evaluate(self, ref: LatencyReference) -> None:
         """The pairs the reference now covers into the estimator: a yaw pair (the fixes' yaw change
@@ -297,7 +315,7 @@ class ScanLatency:
             dist_ref, var = dist
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + var
-            va, vb = fix_speed(self.recent_fixes, ta), fix_speed(self.recent_fixes, tb)
+            va, vb = self._fix_speed(ta), self._fix_speed(tb)
             if va is not None and vb is not None:
                 self.est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
         self.pairs = keep

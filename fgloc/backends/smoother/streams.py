@@ -70,7 +70,8 @@ def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int
     n = len(ts)
     while i < n - 1 and ts[i] < t1:
         ta, tb = ts[i], ts[i + 1]
-        a, b = max(ta, t0), min(tb, t1)
+        a = t0 if t0 > ta else ta   # max(ta, t0), min(tb, t1) without the builtins' calls
+        b = t1 if t1 < tb else tb
         if b > a:
             h = tb - ta
             if h > max_gap:
@@ -180,15 +181,27 @@ class Streams(SmootherState):
         """The longest step a running odometry leaves between two stamps (inf with fewer than 3),
         remembered until a message comes."""
         ts = self.odo_t
-        key = (len(ts), ts[-1] if ts else None)
-        if self._gap_memo[0] != key:
-            if len(ts) < 3:
-                tol = math.inf
+        n = len(ts)
+        key = (n, ts[-1] if ts else None)
+        memo = self._gap_memo
+        if memo[0] != key:
+            if n < 3:
+                tol, top = math.inf, math.nan
             else:
-                last = ts[-ODOM_GAP_WINDOW - 1:]
-                tol = max(ODOM_GAP_S, ODOM_GAP_STEPS * max(map(sub, last[1:], last[:-1])))
-            self._gap_memo = (key, tol)
-        return self._gap_memo[1]
+                # one stamp appended to a full window: its longest step, unless the step leaving it was
+                # that longest one (then searched again)
+                top = memo[2]
+                if memo[0] == (n - 1, ts[-2]) and n > ODOM_GAP_WINDOW + 1 \
+                        and ts[-ODOM_GAP_WINDOW - 1] - ts[-ODOM_GAP_WINDOW - 2] < top:
+                    step = ts[-1] - ts[-2]
+                    if step > top:
+                        top = step
+                else:
+                    last = ts[-ODOM_GAP_WINDOW - 1:]
+                    top = max(map(sub, last[1:], last[:-1]))
+                tol = max(ODOM_GAP_S, ODOM_GAP_STEPS * top)
+            self._gap_memo = memo = (key, tol, top)
+        return memo[1]
 
     def _unmeasured_tail(self, t0: float, t1: float, tol: float | None = None) -> float:
         """How long the end of ``(t0, t1]`` lies beyond the odometry's newest stamp by more than a
@@ -212,7 +225,11 @@ class Streams(SmootherState):
         i = max(bisect_right(ts, t0) - 1, 0)
         hi = min(bisect_left(ts, t1), len(ts) - 1)
         while i < hi:
-            a, b = max(ts[i] + tol, t0), min(ts[i + 1], t1)
+            a, b = ts[i] + tol, ts[i + 1]   # max(a, t0), min(b, t1) without the builtins' calls
+            if t0 > a:
+                a = t0
+            if t1 < b:
+                b = t1
             if b > a:
                 out += b - a
             i += 1

@@ -68,8 +68,8 @@ from fgloc.types import LaserScan, StaticTransform
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
 
 FloatArray = NDArray[np.float64]
-#: EM rounds of the refinement with the measured sigma (``refine_scale: measured``)
-REFINE_SCALE_ROUNDS = 2
+#: EM rounds of the refinement with the measured sigma at most (``refine_scale: measured``)
+REFINE_SCALE_ROUNDS = 6
 
 
 
@@ -481,8 +481,9 @@ class AMCLConfig:
         choices=("mean", "refined"))
     refine_scale: str = setting(
         "sigma_hit", "the refinement's sensor-model sigma: sigma_hit (the filter's) or measured = then refitted with "
-        "the sigma this scan's inlier residuals show (maximum likelihood, at least the map raster's res/sqrt(12)): "
-        "beams on furniture moved since mapping stop pulling the fix", choices=("sigma_hit", "measured"))
+        "the sigma this scan's inlier residuals show (maximum likelihood, at least the map raster's res/sqrt(12); "
+        "likelihood_field_prob only): beams on furniture moved since mapping stop pulling the fix",
+        choices=("sigma_hit", "measured"))
     fix_without_update: bool = setting(False, "thresholds not met -> no fix (true: the propagated estimate)")
     cov_scale: float = setting(0.25, "output cov = cov_scale * cluster cov + diag(cov_floor)", gt=0)
     cov_floor: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m^2, m^2, rad^2 added", min=0)
@@ -821,7 +822,7 @@ class AMCL:
         p, H, wr2, sw, n_runs, swf = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution,
                                                     self.max_dist, bx, by, start, self.z_hit, z_rand_mult,
                                                     self.sigma_hit, model, 20)
-        if self.refine_scale == "measured":
+        if self.refine_scale == "measured" and model == 1:  # EM needs the likelihood (prod pz) model
             p, H, wr2, sw, n_runs, swf = self._refit_measured(bx, by, z_rand_mult, model,
                                                               (p, H, wr2, sw, n_runs, swf))
         out = np.array([o[0] + c * p[0] - s * p[1], o[1] + s * p[0] + c * p[1], wrap_angle(p[2] + o[2])])
@@ -861,17 +862,20 @@ class AMCL:
     def _refit_measured(self, bx: FloatArray, by: FloatArray, z_rand_mult: float, model: int, fit: tuple
                         ) -> tuple:
         """The scan fit ``fit`` (with ``sigma_hit``) refitted by EM on the mixture's sigma: the inliers'
-        weighted residual spread (at least the map raster's ``res / sqrt(12)``), then the pose again with
-        it."""
+        weighted residual spread (at least the map raster's ``res / sqrt(12)``), approached by halving
+        the sigma at most per round (annealed: a wide ``sigma_hit`` leaves the pose centimetres off, where
+        the measured sigma alone would keep the wrong beams), then the pose again with it."""
         floor = self.map.resolution / math.sqrt(12.0)
         out = fit
+        prev = self.sigma_hit
         for _ in range(REFINE_SCALE_ROUNDS):
             p, _H, wr2, sw, _n, _f = out
             if not (sw > 3.0 and np.isfinite(wr2)):
                 break
-            sigma = max(math.sqrt(wr2 / sw), floor)
-            if sigma >= self.sigma_hit:
+            sigma = max(math.sqrt(wr2 / sw), floor, 0.5 * prev)
+            if sigma >= prev:
                 break
+            prev = sigma
             out = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution, self.max_dist,
                                  bx, by, p, self.z_hit, z_rand_mult, sigma, model, 20)
         return out

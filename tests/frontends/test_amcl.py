@@ -353,7 +353,7 @@ def test_measured_refine_scale_ignores_moved_furniture():
     surface and still pull a fit with sigma_hit; refitted with the sigma the scan's inliers show, the
     fix lands on the pose (the walls decide)."""
     m, world = _box_moved(0), _box_moved(3)
-    for pose in (np.array([2.02, 3.31, -0.3]), np.array([1.5, 1.8, 0.1])):
+    for pose in (np.array([2.02, 3.31, -0.3]), np.array([1.5, 1.8, 0.1]), np.array([4.6, 1.2, 2.8])):
         scan = _scan(world.raycast(pose[:2], -2.35 + 4.7 / 540 * np.arange(541) + pose[2], 30.0))
         err = {}
         for scale in ("sigma_hit", "measured"):
@@ -362,4 +362,18 @@ def test_measured_refine_scale_ignores_moved_furniture():
             fix, refined = a._refine(pose + np.array([0.02, -0.02, 0.01]), np.diag([1e-3, 1e-3, 1e-3]), pts, 30.0)
             assert refined
             err[scale] = float(np.hypot(*(fix[:2] - pose[:2])))
-        assert err["measured"] < 0.001 and err["sigma_hit"] > 0.005, err  # measured 0.2 / 0.05 mm against 6.9 / 72 mm
+        assert err["measured"] < 0.001 and err["sigma_hit"] > 0.005, err  # 0.2 / 0.05 / 0.2 mm against 7 / 72 / 87 mm
+
+
+def test_measured_refine_scale_keeps_nav2_model_as_is():
+    """nav2's likelihood_field (sum pz^3) is no likelihood: no EM on its sigma, the fit is sigma_hit's."""
+    m, world = _box_moved(0), _box_moved(3)
+    pose = np.array([1.5, 1.8, 0.1])
+    scan = _scan(world.raycast(pose[:2], -2.35 + 4.7 / 540 * np.arange(541) + pose[2], 30.0))
+    fixes = []
+    for scale in ("sigma_hit", "measured"):
+        a = AMCL(m, None, surface_depth_cells=0.0, laser_max_beams=541, refine_scale=scale,
+                 laser_model_type="likelihood_field")
+        pts, _ = a.pre(scan)
+        fixes.append(a._refine(pose + np.array([0.02, -0.02, 0.01]), np.diag([1e-3, 1e-3, 1e-3]), pts, 30.0)[0])
+    assert np.array_equal(fixes[0], fixes[1])

@@ -512,6 +512,11 @@ def main() -> int:
         print(f"scans fused {c['scans_fused']}, skipped as a backlog {c['scans_skipped_backlog']}, fixes {c['fixes']}, "
               f"poses published {r2['published']}, map->odom {r2['tf_published']} ({how})")
 
+        if c.get("malloc_trims"):
+            print(f"malloc_trim(0) in the fusion loop: {c['malloc_trims']} calls, mean "
+                  f"{c['malloc_trim_us'] / c['malloc_trims'] / 1e3:.2f} ms, longest "
+                  f"{c['malloc_trim_us_max'] / 1e3:.2f} ms")
+
         def pp(d: dict) -> str:
             return f"p50 {d['p50']:.2f} ms, p99 {d['p99']:.2f} ms"
 

@@ -458,8 +458,12 @@ class LiveRunner:
         now = time.monotonic()
         if now - self._last_trim >= TRIM_PERIOD_S:
             self._last_trim = now
-            if memory.trim():
-                self.counters["malloc_trims"] = self.counters.get("malloc_trims", 0) + 1
+            if memory.trim():  # its cost in the fusion loop: total and longest (us)
+                us = int((time.monotonic() - now) * 1e6)
+                c = self.counters
+                c["malloc_trims"] = c.get("malloc_trims", 0) + 1
+                c["malloc_trim_us"] = c.get("malloc_trim_us", 0) + us
+                c["malloc_trim_us_max"] = max(c.get("malloc_trim_us_max", 0), us)
         if self.status_sink is not None and now - self._last_status >= self.status_period_s:
             self._last_status = now
             self.status_sink(self.status_line())

@@ -104,3 +104,31 @@ def test_the_fusion_loop_returns_the_c_heaps_free_pages(monkeypatch):
         r.step(timeout=0.0)
     assert r.counters.get("malloc_trims", 0) == (3 if memory.available() else 0)  # 3 with glibc
     assert r.counters["scans_fused"] == 0 and r.counters["queue_dropped"] == 0
+
+
+def test_the_scan_latency_window_is_held_from_the_first_pair():
+    """The latency estimator's pairs (its newest max_rows) take their memory at the first pair and never more:
+    a live session's memory does not grow while the window fills; the estimate is the newest rows' fit."""
+    import tracemalloc
+
+    from fgloc.backends.health import LatencyEstimator
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=7000)
+    r = -0.04 * x + rng.normal(scale=0.01, size=x.size)
+    ref = rng.normal(size=x.size)
+    tracemalloc.start()
+    try:
+        est = LatencyEstimator(max_rows=2000, refit_every=1, refit_share=0.0)
+        est.add(x[0], r[0], 1e-4, ref[0], 0)
+        first = tracemalloc.get_traced_memory()[0]
+        for k in range(1, x.size):
+            est.add(x[k], r[k], 1e-4, ref[k], k % 2)
+        grown = tracemalloc.get_traced_memory()[0] - first
+    finally:
+        tracemalloc.stop()
+    assert first >= 2 * 2000 * 5 * 8 and grown < 4096, (first, grown)
+    newest = LatencyEstimator(max_rows=2000, refit_every=1, refit_share=0.0)
+    for k in range(x.size - 2000, x.size):
+        newest.add(x[k], r[k], 1e-4, ref[k], k % 2)
+    assert est.estimate() == newest.estimate() and abs(est.estimate()[0] + 0.04) < 0.005

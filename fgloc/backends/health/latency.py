@@ -63,9 +63,11 @@ class LatencyEstimator:
         self.refit_share = float(refit_share)
         self.max_rows = int(max_rows)
         # the rows (x, r, var, ref, kind) in an array, appended in place: its last ``_nrows`` lines
-        # are the newest ``max_rows`` pairs (40 B a row: the whole window is 0.8 MB, held twice at most)
+        # are the newest ``max_rows`` pairs (40 B a row: the window is 0.8 MB); twice the window, allocated
+        # and written at the first pair (resident from then on: a live session's memory does not grow as it
+        # fills), compacted in place
         self._nrows = 0
-        self._buf = np.empty((64, 5))
+        self._buf = np.empty((0, 5))
         self._nbuf = 0
         self.n = 0
         self.rejected = 0
@@ -87,11 +89,12 @@ class LatencyEstimator:
             return
         row = (float(x), float(r), float(var), float(ref), int(kind))
         self._nrows = min(self._nrows + 1, self.max_rows)
-        if self._nbuf == len(self._buf):
-            keep = self._buf[self._nbuf - self._nrows + 1:self._nbuf]   # the rows still kept
-            self._buf = np.empty((max(64, 2 * len(keep) + 2), 5))
-            self._buf[:len(keep)] = keep
-            self._nbuf = len(keep)
+        if not len(self._buf):
+            self._buf = np.full((2 * self.max_rows + 2, 5), 0.0)
+        elif self._nbuf == len(self._buf):  # the rows still kept to the front (they do not overlap there)
+            k = self._nrows - 1
+            self._buf[:k] = self._buf[self._nbuf - k:self._nbuf]
+            self._nbuf = k
         self._buf[self._nbuf] = row
         self._nbuf += 1
         self.n += 1

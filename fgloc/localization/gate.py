@@ -242,6 +242,8 @@ class JumpGate:
         self._taken: tuple[float, FloatArray] | None = None  # the fix just passed (stamp, pose)
         self._recent: deque[tuple[float, FloatArray]] = deque()  # fixes passed and used over VELOCITY_SPAN_S
         self._held: tuple[_Previous, int, float] | None = None  # the last held fix, the run's length and start
+        #: ``(t0, t1, delta bytes, corrected)``: the caller's ``motion(t0, t1, delta)`` for the scan being judged
+        self.known_motion: tuple[float, float, bytes, FloatArray] | None = None
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
@@ -315,7 +317,7 @@ class JumpGate:
             else:
                 delta = between1(prev.odom, odom_pose)
                 if motion is not None and t > prev.t:
-                    delta = motion(prev.t, t, delta)
+                    delta = self._motion(motion, prev.t, t, delta)
             cx, cy, _ = compose1(prev.pose, delta).tolist()
             (c00, c01), (c10, c11) = prev.cov[:2, :2].tolist()
             sl = (slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2
@@ -377,7 +379,7 @@ class JumpGate:
             prev = run[0]
             delta = between1(prev.odom, odom_pose)
             if motion is not None:
-                delta = motion(prev.t, t, delta)
+                delta = self._motion(motion, prev.t, t, delta)
             cx, cy, _ = compose1(prev.pose, delta).tolist()
             sl = (self.cfg.odometry_slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2 + self.sigma_m**2
             S = R[:2, :2] + prev.cov[:2, :2]
@@ -387,6 +389,13 @@ class JumpGate:
                 self._held = (cur, run[1] + 1, run[2])
                 return
         self._held = (cur, 1, float(t))
+
+    def _motion(self, motion: Motion, t0: float, t1: float, delta: FloatArray) -> FloatArray:
+        """``motion(t0, t1, delta)``; :attr:`known_motion`'s answer when it is for the same."""
+        k = self.known_motion
+        if k is not None and k[0] == t0 and k[1] == t1 and k[2] == delta.tobytes():
+            return k[3].copy()
+        return motion(t0, t1, delta)
 
     @property
     def held_run(self) -> tuple[int, float]:

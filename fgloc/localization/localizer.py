@@ -320,7 +320,10 @@ class Localizer(Recovery):
             odom_delta = between1(self._odom_at_last_scan, odom_now)
             if not fe.is_particle_filter and self._last_matched_t is not None:
                 # as the back-end believes it moved (the odometry's scales, a gyro's rotation)
-                odom_delta = self.backend.motion_correction(self._last_matched_t, t, odom_delta)
+                corrected = self.backend.motion_correction(self._last_matched_t, t, odom_delta)
+                if self.gate is not None:  # the gate asks for it again when its previous fix is the last scan's
+                    self.gate.known_motion = (self._last_matched_t, t, odom_delta.tobytes(), np.array(corrected, float))
+                odom_delta = corrected
         self._odom_at_last_scan = np.array(odom_now, dtype=float)
         self._last_matched_t = t
         if not matching:
@@ -480,8 +483,7 @@ class Localizer(Recovery):
         return fix
 
     def _gate(self, t: float, fix: PoseFix, msg: LaserScan, odom_pose: FloatArray | None = None) -> GateVerdict:
-        """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py); ``odom_pose``: the odometry's pose
-        at ``t`` when the caller has it."""
+        """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py); ``odom_pose``: the odometry's there."""
         assert self.gate is not None
         guessed, self._guess_prediction = self._guess_prediction, None
         if t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t:
@@ -517,15 +519,13 @@ class Localizer(Recovery):
         odom_t = self.odom.t
         self._guess_prediction = None
         if not self.odom.burst or odom_t is None or t <= odom_t:
-            pred = self.backend.predict(t)
-            self._guess_prediction = (t, pred)
-            return pred[0]
+            self._guess_prediction = (t, self.backend.predict(t))
+            return self._guess_prediction[1][0]
         cur = self.backend.current(covariance=False)
         t_a = odom_t if cur is None else max(odom_t, float(cur[0]))
         if t <= t_a:
-            pred = self.backend.predict(t)
-            self._guess_prediction = (t, pred)
-            return pred[0]
+            self._guess_prediction = (t, self.backend.predict(t))
+            return self._guess_prediction[1][0]
         pose_a, _ = self.backend.predict(t_a)
         dt = min(t - t_a, self.pcfg.odom_extrapolate_max_s)
         if not dt > 0:

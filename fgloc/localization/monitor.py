@@ -37,7 +37,7 @@ import numpy as np
 
 from fgloc.config.schema import setting
 from fgloc.localization.coverage import UNMAPPED_SHARE, unmapped_share
-from fgloc.localization.gate import OFF_GRID_M
+from fgloc.localization.gate import scan_agreement
 
 OK = "ok"
 DEGRADED = "degraded"
@@ -259,8 +259,8 @@ class MapAgreement:
 
     Every ``integrity.agreement_period_s`` (log time) :meth:`check` measures the mean over at most
     :data:`MAX_BEAMS` of the scan's beams (evenly spread) of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance
-    from the beam's endpoint to the nearest mapped wall (the map's distance field at the endpoint's cell;
-    :func:`fgloc.localization.gate.scan_agreement` interpolates it; off the grid: :data:`OFF_GRID_M`).  A low
+    from the beam's endpoint to the nearest mapped wall (:func:`fgloc.localization.gate.scan_agreement`
+    with the map's distance field at the endpoint's cell, where the jump gate interpolates it).  A low
     one where most beams end in space the map does not have without crossing a mapped wall
     (:func:`fgloc.localization.coverage.unmapped_share`, cast only then) is no measurement.
     The expectation is learnt from the run itself: the lower quartile of the last :data:`SAMPLES`
@@ -281,7 +281,6 @@ class MapAgreement:
         self.cfg = cfg
         self.map = occ_map
         self.laser_mount = laser_mount
-        self.mount = np.asarray(laser_mount.pose, dtype=float).reshape(3)
         self.sigma_m = float(sigma_m)
         self._good: deque[float] = deque(maxlen=self.SAMPLES)
         self._expected: float | None = None
@@ -296,8 +295,6 @@ class MapAgreement:
         self.checks = 0
         self.low_checks = 0
         self.unmapped_checks = 0  # low measurements the map could not judge
-        self._beams: tuple[tuple[int, float, float], Any, Any, Any] | None = None  # (n, min, inc), idx, cos, sin
-        self._field: Any = None  # the map's distance field (m), fetched at the first measurement
 
     def due(self, t: float) -> bool:
         return t - self._t >= self.cfg.agreement_period_s or t < self._t
@@ -307,44 +304,11 @@ class MapAgreement:
         return self._expected
 
     def measure(self, scan: Any, pose: Any) -> float:
-        """The agreement of ``scan`` with the map at ``base_link`` pose ``pose`` (NaN: too few valid beams)."""
-        r_all = scan.ranges
-        n = len(r_all)
-        key = (n, float(scan.angle_min), float(scan.angle_increment))
-        if self._beams is None or self._beams[0] != key:
-            idx = np.arange(0, n, max(1, -(-n // self.MAX_BEAMS)))
-            a = key[1] + key[2] * idx
-            self._beams = (key, idx, np.cos(a), np.sin(a))
-        _, idx, ca, sa = self._beams
-        r = np.asarray(r_all, dtype=float)[idx]
-        # valid: inside [range_min, range_max] (NaN and inf compare false)
-        ok = (r >= max(float(scan.range_min), 1e-9)) & (r <= float(scan.range_max))
-        n_ok = int(np.count_nonzero(ok))
-        if n_ok < self.MIN_BEAMS:
-            return math.nan
-        r = np.where(ok, r, 0.0)
-        m = self.map
-        if self._field is None:
-            self._field = np.ascontiguousarray(m.distance_field, dtype=float)
-        df = self._field
-        h, w = df.shape
-        x, y, yaw = np.asarray(pose, dtype=float).reshape(3).tolist()
-        mx, my, myaw = self.mount
-        cb, sb = math.cos(yaw), math.sin(yaw)
-        # the laser in the grid's frame (cells as units): the map's origin may be rotated
-        ox, oy, oyaw = (float(v) for v in m.origin[:3])
-        dx, dy = x + cb * mx - sb * my - ox, y + sb * mx + cb * my - oy
-        co, so, inv = math.cos(oyaw), math.sin(oyaw), 1.0 / float(m.resolution)
-        gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
-        th = yaw + myaw - oyaw
-        c, s = math.cos(th) * inv, math.sin(th) * inv
-        cols = np.floor(gx + r * (c * ca - s * sa)).astype(np.intp)
-        rows = np.floor(gy + r * (s * ca + c * sa)).astype(np.intp)
-        # inside the grid: 0 <= col < w and 0 <= row < h (a negative index is a huge one unsigned); the cells
-        # looked up in the flat field (numpy's clip costs more than the rest of the measurement)
-        inside = (cols.view(np.uintp) < w) & (rows.view(np.uintp) < h)
-        d = np.where(inside, df.ravel().take(np.where(inside, rows * w + cols, 0)), OFF_GRID_M)
-        return float(np.dot(np.exp(d * d * (-0.5 / self.sigma_m**2)), ok)) / n_ok
+        """The agreement of ``scan`` with the map at ``base_link`` pose ``pose`` (NaN: too few valid beams):
+        :func:`fgloc.localization.gate.scan_agreement` over at most :data:`MAX_BEAMS` beams, the distance
+        field looked up at each endpoint's cell."""
+        return scan_agreement(self.map, self.laser_mount, scan, pose, self.sigma_m, max_beams=self.MAX_BEAMS,
+                              nearest=True, min_beams=self.MIN_BEAMS)
 
     def check(self, t: float, scan: Any, pose: Any, good: bool) -> float | None:
         """Measure at ``pose`` when due; ``good``: the localizer finds the pose ok otherwise (the measurement

@@ -17,6 +17,7 @@ localizing, writing, the view's channels).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -735,6 +736,7 @@ class _StatusSink:
         self.loc = loc
         self.log_time_ns = log_time_ns
         self.dumps = json.dumps
+        self._tail: tuple[tuple[Any, Any, Any], str] | None = None  # (status, why, frame_id): the JSON after the stamp
         self.write = writer.raw_writer(STATUS_TOPIC, "fgloc.PoseStatus", json.dumps(STATUS_SCHEMA).encode(),
                                        schema_encoding="jsonschema", message_encoding="json")
 
@@ -748,7 +750,11 @@ class _StatusSink:
     def on_pose(self, stamp: float, fused: Any) -> None:
         status, why = self.loc.monitor.current
         lt = self.log_time_ns()
-        data = self.dumps({"stamp": float(fused.stamp), "status": status, "why": why, "frame_id": fused.frame_id})
+        # json.dumps of {"stamp", "status", "why", "frame_id"}: the fields after the stamp encoded once per status
+        key, stamp = (status, why, fused.frame_id), float(fused.stamp)
+        if self._tail is None or self._tail[0] != key:
+            self._tail = (key, ", " + self.dumps({"status": status, "why": why, "frame_id": fused.frame_id})[1:])
+        data = '{"stamp": ' + (repr(stamp) if math.isfinite(stamp) else self.dumps(stamp)) + self._tail[1]
         self.write(data.encode(), int(lt) if lt is not None else max(int(float(fused.stamp) * 1e9), 0))
 
     def close(self) -> None:

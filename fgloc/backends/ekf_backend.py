@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -75,6 +75,14 @@ BURST_WINDOW = 16
 #: GAP_MIN_S) is a gap: its twist is taken as the mean over it even beside a gyro
 GAP_FACTOR = 3.0
 GAP_MIN_S = 0.2
+
+
+def _median(values: Iterable[float]) -> float:
+    """``np.median`` of a few floats (the middle one, or the mean of the two middle ones), without
+    numpy's per-call overhead (every odometry message)."""
+    d = sorted(values)
+    m = len(d) // 2
+    return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
 
 
 class EKFBackend(Backend):
@@ -222,7 +230,7 @@ class EKFBackend(Backend):
         if self._last_odom_t is not None and t > self._last_odom_t:
             step = t - self._last_odom_t
             self._turned += abs(float(tw[2])) * step
-            typical = float(np.median(self._odom_steps)) if self._odom_steps else math.inf
+            typical = _median(self._odom_steps) if self._odom_steps else math.inf
             self._odom_steps.append(step)
             # the interval's mean velocity: for the odometry alone (nothing else measures the velocity
             # it crosses the interval with), or across a gap while other sensors carry the filter (at

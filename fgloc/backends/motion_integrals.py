@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import islice
 
 from fgloc.backends.health.latency import bracket, median_period
 
@@ -24,6 +25,14 @@ def series_at(m: Series, t: float, held: bool = False) -> tuple[float, float] | 
     f = (t - a[0]) / (b[0] - a[0]) if b[0] > a[0] else 1.0
     rate = float(b[2]) if held else float(a[2] + f * (b[2] - a[2]))
     return float(a[1] + f * (b[1] - a[1])), rate
+
+
+def _last_stamps(m: Series, n: int = 50) -> list[float]:
+    """The stamps of the last ``n`` samples, oldest first (read from the deque's end: not a copy of
+    its thousands of samples)."""
+    out = [x[0] for x in islice(reversed(m), n)]
+    out.reverse()
+    return out
 
 
 class MotionIntegrals:
@@ -70,8 +79,7 @@ class MotionIntegrals:
         return min(self.yaw[-1][0], self.dist[-1][0])
 
     def reference_periods(self) -> tuple[float, float]:
-        return (median_period([x[0] for x in list(self.dist)[-50:]]),
-                median_period([x[0] for x in list(self.yaw)[-50:]]))
+        return median_period(_last_stamps(self.dist)), median_period(_last_stamps(self.yaw))
 
     def _at(self, ta: float, tb: float) -> tuple[tuple[float, float], ...] | None:
         ya, yb = series_at(self.yaw, ta), series_at(self.yaw, tb)

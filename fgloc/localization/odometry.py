@@ -272,6 +272,12 @@ class OdometryTracker:
         if mode != "always" and self._agrees(t, delta, exp_values(tw, dt), unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
+            if self._moved:
+                # poses that move and agree: the twist is as good as derived from them (a reader
+                # that differences burst-stamped poses), so the burst guard of
+                # velocity_measurement applies to it too
+                self._derived = True
+                self._short_flags.append(dt < self._baseline())
             return tw, cov
         u = se2_log(np.array(delta)) / dt
         self.from_poses += 1

@@ -136,7 +136,6 @@ class SmootherState(Backend):
         self._init_yaw = 0.0
         self.pending_kf: list[tuple[float, PoseFix | None]] = []
         self._pred_cache: tuple | None = None
-        self._correction_memo: tuple[tuple, FloatArray] | None = None   # motion_correction's last answer
         self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
         self._integrate_memo: tuple[tuple, tuple[FloatArray, FloatArray]] | None = None   # its last answer
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2

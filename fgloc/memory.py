@@ -77,22 +77,24 @@ def trim() -> bool:
     return True
 
 
-def set_mmap_threshold(nbytes: int) -> bool:
-    """Blocks of ``nbytes`` and more from mmap from now on (``mallopt(M_MMAP_THRESHOLD)``; it also stops
-    glibc's dynamic threshold); False without glibc or if glibc refused the value."""
+def _mallopt(param: int, value: int) -> bool:
+    """``mallopt(param, value)``: False without glibc or if glibc refused the value."""
     lib = _libc()
     if not lib or not hasattr(lib, "mallopt"):
         return False
-    return bool(lib.mallopt(M_MMAP_THRESHOLD, int(nbytes)))
+    return bool(lib.mallopt(param, int(value)))
+
+
+def set_mmap_threshold(nbytes: int) -> bool:
+    """Blocks of ``nbytes`` and more from mmap from now on (``mallopt(M_MMAP_THRESHOLD)``; it also stops
+    glibc's dynamic threshold); False without glibc or if glibc refused the value."""
+    return _mallopt(M_MMAP_THRESHOLD, nbytes)
 
 
 def set_trim_threshold(nbytes: int) -> bool:
     """Free space of ``nbytes`` and more at the top of the heap goes back to the system at once
     (``mallopt(M_TRIM_THRESHOLD)``; glibc raises it with its dynamic mmap threshold); False without glibc."""
-    lib = _libc()
-    if not lib or not hasattr(lib, "mallopt"):
-        return False
-    return bool(lib.mallopt(M_TRIM_THRESHOLD, int(nbytes)))
+    return _mallopt(M_TRIM_THRESHOLD, nbytes)
 
 
 def mallinfo() -> Mallinfo | None:

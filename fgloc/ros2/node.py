@@ -368,15 +368,14 @@ class Ros2Outputs(BaseSink):
             at = np.asarray(pose_at, dtype=float)
             # map -> odom before the pose (as at the match): a consumer of the pose finds the transform there
             tf_now = self.tf_pub is not None and t > self._tf_last_t and self._publish_tf(t, at)
-            tf_before = tf_now or any(abs(st - t) < 1e-9 for st, _ in self._early)  # one at its stamp is out
+            early = next((e for st, e in self._early if abs(st - t) < 1e-9), None)  # the one out at its match
+            tf_before = tf_now or early is not None
             self.pose_pub.write(codec.encode(PoseFix(t, at, cov, 1.0, "fgloc", c.global_frame_id))[1])
             self.published += 1
-            for st, early in self._early:
-                if abs(st - t) < 1e-9:
-                    self.match_vs_online_mm.add(1e3 * math.hypot(early[0] - at[0], early[1] - at[1]))
-                    if self.tf_pub is not None and t == self._tf_last_t and self._publish_tf(t, at, REFINED_AFTER_S):
-                        self.tf_refined += 1
-                    break
+            if early is not None:
+                self.match_vs_online_mm.add(1e3 * math.hypot(early[0] - at[0], early[1] - at[1]))
+                if self.tf_pub is not None and t == self._tf_last_t and self._publish_tf(t, at, REFINED_AFTER_S):
+                    self.tf_refined += 1
             for st, arrival, live in self._arrivals:
                 if abs(st - t) < 1e-9:
                     if live:  # a scan kept from before the start is not live

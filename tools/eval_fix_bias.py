@@ -72,15 +72,13 @@ def odometry_vs_slam(msgs, ref, t0: float, t1: float) -> str:
 
 def split(fixes: np.ndarray, ref) -> list[str]:
     """The fixes' error against SLAM in the robot's frame: means, per speed bin, time constants, best shift."""
+    from fgloc.eval.metrics import track_errors
     from fgloc.geometry import wrap_angle
 
     t, pose = fixes[:, 0], fixes[:, 1:4]
     g = ref.interpolate(t)
-    e = pose - g
-    e[:, 2] = wrap_angle(e[:, 2])
+    along, cross, e = track_errors(pose, g)
     c, s = np.cos(g[:, 2]), np.sin(g[:, 2])
-    along = c * e[:, 0] + s * e[:, 1]
-    cross = -s * e[:, 0] + c * e[:, 1]
     good = np.hypot(e[:, 0], e[:, 1]) < GOOD_M
     dt = 0.05
     g2, g1 = ref.interpolate(t + dt), ref.interpolate(t - dt)

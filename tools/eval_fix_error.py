@@ -88,6 +88,7 @@ def info_weighted_rmse(t: np.ndarray, e: np.ndarray, cov: np.ndarray, width_s: f
 
 def decompose(sim: Any, loc: Any, final: Any) -> dict[str, Any]:
     """Per-fix error parts and their statistics for one run (see the module's doc)."""
+    from fgloc.eval.metrics import track_errors
     from fgloc.geometry import wrap_angle
 
     gt = sim.ground_truth
@@ -96,11 +97,7 @@ def decompose(sim: Any, loc: Any, final: Any) -> dict[str, Any]:
     p = np.array([np.asarray(f.pose, dtype=float) for f in fx])
     cov = np.array([np.asarray(f.cov, dtype=float) for f in fx])
     g = gt.interpolate(t)
-    e = p - g
-    e[:, 2] = wrap_angle(e[:, 2])
-    c, s = np.cos(g[:, 2]), np.sin(g[:, 2])
-    along = c * e[:, 0] + s * e[:, 1]
-    cross = -s * e[:, 0] + c * e[:, 1]
+    along, cross, e = track_errors(p, g)
     dt = 0.05
     ga, gb = gt.interpolate(t - dt), gt.interpolate(t + dt)
     speed = np.hypot(gb[:, 0] - ga[:, 0], gb[:, 1] - ga[:, 1]) / (2 * dt)

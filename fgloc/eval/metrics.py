@@ -428,6 +428,18 @@ def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArr
     return err, step
 
 
+
+def track_errors(poses: FloatArray, reference: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(along_m, cross_m, err)``: each of ``poses`` (N x 3) minus ``reference`` (N x 3, same stamps) in
+    the reference robot's frame: along its heading (ahead +) and across it (left +), and the raw
+    difference ``err`` (N x 3, the heading wrapped to [-pi, pi))."""
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    g = np.asarray(reference, dtype=float).reshape(-1, 3)
+    e = p - g
+    e[:, 2] = wrap_angle(e[:, 2])
+    c, s = np.cos(g[:, 2]), np.sin(g[:, 2])
+    return c * e[:, 0] + s * e[:, 1], -s * e[:, 0] + c * e[:, 1], e
+
 # --------------------------------------------------------------------------- coverage split
 def within_radius(points_xy: FloatArray, anchors_xy: FloatArray, radius_m: float) -> NDArray[np.bool_]:
     """For each of ``points_xy`` (N x 2, m), whether an anchor of ``anchors_xy`` (M x 2, m) lies within

@@ -16,6 +16,7 @@ from fgloc.eval.metrics import (
     evaluate,
     pairs_by_distance,
     position_errors_and_steps,
+    track_errors,
 )
 from fgloc.geometry import compose
 from fgloc.types import Trajectory
@@ -223,3 +224,13 @@ def test_position_errors_and_steps_show_a_jump_as_one_step():
     assert np.allclose(err[:10], 0.0) and np.allclose(err[10:], 0.3)
     assert step.argmax() == 9 and step[9] == pytest.approx(0.3)
     assert np.allclose(np.delete(step, 9), 0.0)
+
+
+def test_track_errors_split_along_and_across_the_reference_heading():
+    # a robot heading north (+y): 3 cm ahead is +y, 2 cm to its left is -x; heading error wrapped
+    ref = np.array([[1.0, 2.0, math.pi / 2], [0.0, 0.0, 0.0]])
+    poses = np.array([[1.0 - 0.02, 2.0 + 0.03, math.pi / 2 + 0.01], [-0.01, 0.0, 2 * math.pi - 0.02]])
+    along, cross, e = track_errors(poses, ref)
+    np.testing.assert_allclose(along, [0.03, -0.01], atol=1e-12)
+    np.testing.assert_allclose(cross, [0.02, 0.0], atol=1e-12)
+    np.testing.assert_allclose(e[:, 2], [0.01, -0.02], atol=1e-12)

@@ -3,6 +3,7 @@ poses' errors against their statuses; one table.
 
     python tools/eval_integrity.py [--scenarios wheel_slip compass_disturbance changed_world blackout kidnap]
         [--seeds 0] [--backends smoother ekf] [--frontends native amcl] [--global] [--off-m 0.25]
+        [--config FILE]
 
 Each run is the shipped scenario (fgloc/config/scenarios/) localized from its true start pose (``--global``:
 without one) as ``fgloc run`` does (a ``Localizer`` in a ``Session``; ``changed_world`` on the old map).
@@ -25,12 +26,12 @@ from tqdm import tqdm
 SCENARIOS = ["wheel_slip", "compass_disturbance", "changed_world", "blackout", "kidnap"]
 
 
-def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float) -> dict:
+def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float, config: str | None = None) -> dict:
     from fgloc.config import load_config
     from fgloc.eval.metrics import position_errors_and_steps
     from fgloc.localization import Localizer, Session
 
-    cfg = load_config()
+    cfg = load_config(config)
     msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
     loc = Localizer(sim.map, sim.laser_mount, backend, frontend,
                     initial_pose=None if global_start else sim.ground_truth.poses[0], config=cfg)
@@ -59,6 +60,7 @@ def main() -> None:
     ap.add_argument("--frontends", nargs="+", default=["native", "amcl"])
     ap.add_argument("--global", dest="global_start", action="store_true", help="no initial pose")
     ap.add_argument("--off-m", type=float, default=0.25, help="an ok pose further off than this is a silent error")
+    ap.add_argument("--config", help="a configuration file over the defaults (as fgloc run --config)")
     args = ap.parse_args()
     runs = [(s, seed, b, f) for s in args.scenarios for seed in args.seeds for b in args.backends
             for f in args.frontends]
@@ -70,7 +72,7 @@ def main() -> None:
         if (name, seed) not in sims:
             sims.clear()
             sims[(name, seed)] = run_scenario(load_scenario(scenario_path(name)), seed=seed)
-        r = localize(sims[(name, seed)], backend, frontend, args.global_start, args.off_m)
+        r = localize(sims[(name, seed)], backend, frontend, args.global_start, args.off_m, args.config)
         c = r["counts"]
         tqdm.write(f"| {name} | {seed} | {backend} | {frontend} | {r['rmse']:.4f} | {r['max']:.3f} | {r['step']:.3f} | "
                    f"{c['ok']} / {c['degraded']} / {c['suspect']} / {c['lost']} | {r['ok_max']:.3f} | {r['ok_off']} | "

@@ -89,42 +89,32 @@ VELOCITY_MIN_SPAN_S = 0.1
 
 def scan_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: FloatArray,
                    sigma_m: float, points: FloatArray | None = None, max_beams: int | None = None,
-                   nearest: bool = False, min_beams: int = 1) -> float:
+                   min_beams: int = 1) -> float:
     """How well ``scan`` agrees with the map at ``base_link`` pose ``pose``: the mean over its valid
     beams of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance from the beam's endpoint to the nearest
     occupied cell (bilinear on the map's distance field).  1: every endpoint on a mapped wall; 0: none
     near one.  NaN for a scan with fewer than ``min_beams`` valid beams.  ``points``: the scan's
     endpoints in the laser frame when the caller has them (``scan.points()``).
 
-    ``max_beams``, ``nearest`` (what a monitor measuring every few scans needs, at a quarter of the
-    cost): at most ``max_beams`` beams, evenly spread (every ``ceil(n / max_beams)``-th, the valid ones
-    of those), and the field at each endpoint's cell, not interpolated (a pose wrong by more than a cell,
-    not a fix a few centimetres off); ``points`` is then not used."""
-    if nearest:  # one pose: no arrays of poses
-        beams = _sampled_beams(scan, len(scan.ranges) if max_beams is None else int(max_beams))
+    ``max_beams`` (what a monitor measuring every few scans needs, at a quarter of the cost): at most
+    that many beams, evenly spread (every ``ceil(n / max_beams)``-th, the valid ones of those), and the
+    field at each endpoint's cell, not interpolated (a pose wrong by more than a cell, not a fix a few
+    centimetres off); ``points`` is then not used."""
+    if max_beams is not None:  # one pose: no arrays of poses
+        beams = _sampled_beams(scan, int(max_beams))
         if beams[4] < min_beams:
             return math.nan
         return _nearest_agreement(occ_map, laser_mount, beams, np.asarray(pose, dtype=float).reshape(3).tolist(),
                                   sigma_m)
     return float(agreements(occ_map, laser_mount, scan, np.asarray(pose, dtype=float).reshape(1, 3), sigma_m,
-                            points, max_beams, nearest, min_beams)[0])
+                            points, min_beams)[0])
 
 
 def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, poses: FloatArray,
-               sigma_m: float, points: FloatArray | None = None, max_beams: int | None = None,
-               nearest: bool = False, min_beams: int = 1) -> FloatArray:
-    """:func:`scan_agreement` at each of ``poses`` ``(K, 3)``."""
+               sigma_m: float, points: FloatArray | None = None, min_beams: int = 1) -> FloatArray:
+    """:func:`scan_agreement` at each of ``poses`` ``(K, 3)`` (every valid beam, bilinear)."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    if nearest or max_beams is not None:
-        beams = _sampled_beams(scan, len(scan.ranges) if max_beams is None else int(max_beams))
-        if beams[4] < min_beams:
-            return np.full(len(poses), np.nan)
-        if nearest:
-            return np.array([_nearest_agreement(occ_map, laser_mount, beams, p, sigma_m) for p in poses.tolist()])
-        r, ca, sa, ok, _ = beams
-        pts = np.column_stack([r[ok] * ca[ok], r[ok] * sa[ok]])
-    else:
-        pts = scan.points() if points is None else points
+    pts = scan.points() if points is None else points
     if len(pts) < max(min_beams, 1):
         return np.full(len(poses), np.nan)
     m = np.asarray(laser_mount.pose, dtype=float)

@@ -308,7 +308,7 @@ class MapAgreement:
         :func:`fgloc.localization.gate.scan_agreement` over at most :data:`MAX_BEAMS` beams, the distance
         field looked up at each endpoint's cell."""
         return scan_agreement(self.map, self.laser_mount, scan, pose, self.sigma_m, max_beams=self.MAX_BEAMS,
-                              nearest=True, min_beams=self.MIN_BEAMS)
+                              min_beams=self.MIN_BEAMS)
 
     def check(self, t: float, scan: Any, pose: Any, good: bool) -> float | None:
         """Measure at ``pose`` when due; ``good``: the localizer finds the pose ok otherwise (the measurement

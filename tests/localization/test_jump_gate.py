@@ -4,6 +4,7 @@ confirms it; a run of consistent wrong fixes in a changed world does not pull ei
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
@@ -56,14 +57,19 @@ def test_the_monitors_cheaper_agreement_tells_the_same(room):
     truth = np.array([8.0, 5.0, 0.3])
     scan = make_scan(room, truth)
     fine = scan_agreement(room, MOUNT, scan, truth, 0.1)
-    cheap = scan_agreement(room, MOUNT, scan, truth, 0.1, max_beams=64, nearest=True)
+    cheap = scan_agreement(room, MOUNT, scan, truth, 0.1, max_beams=64)
     assert cheap == pytest.approx(fine, abs=0.1)  # measured 0.93 / 0.97
     for off in ([0.5, 0.5, 0], [0, 0.5, 0], [0, 0, np.radians(10)], [500.0, 0, 0]):  # measured 0.02, 0.23, 0.22, 0
         wrong = truth + np.array(off)
-        assert scan_agreement(room, MOUNT, scan, wrong, 0.1, max_beams=64, nearest=True) < 0.5 * cheap
-    many = agreements(room, MOUNT, scan, np.vstack([truth, truth + [0, 0.5, 0]]), 0.1, max_beams=64, nearest=True)
-    assert many[0] == cheap and many[1] < 0.5 * cheap
-    assert np.isnan(scan_agreement(room, MOUNT, scan, truth, 0.1, max_beams=5, nearest=True, min_beams=10))
+        assert scan_agreement(room, MOUNT, scan, wrong, 0.1, max_beams=64) < 0.5 * cheap
+    # every ceil(n / 64)-th beam: the others' ranges (here NaN) play no part
+    n = len(scan.ranges)
+    step = -(-n // 64)
+    assert step > 1
+    ranges = np.asarray(scan.ranges, dtype=float).copy()
+    ranges[np.arange(n) % step != 0] = np.nan
+    assert scan_agreement(room, MOUNT, replace(scan, ranges=ranges), truth, 0.1, max_beams=64) == cheap
+    assert np.isnan(scan_agreement(room, MOUNT, scan, truth, 0.1, max_beams=5, min_beams=10))
 
 
 def test_neighbourhood_spans_three_sigma_and_its_floors():

@@ -51,3 +51,30 @@ def test_surface_field_unchanged_on_a_room_with_a_pillar() -> None:
     m = OccupancyMap(data, 0.05)
     for k, max_d, depth in ((2, 1.0, 0.0), (1, 0.4, 0.025), (3, 0.3, 0.01)):
         assert np.array_equal(surface_distance_field(m, k, max_d, depth), _scipy_field(m, k, max_d, depth))
+
+
+def test_matcher_gives_the_map_its_distance_field() -> None:
+    """The matcher's coarse field comes from the map's distance field, which it computes (exactly
+    scipy's) when the map has none yet, and reuses when it has: the scan agreement and the global
+    search then read it without a second transform."""
+    from fgloc.frontends.native import NativeMatcher, map_distance_field
+
+    data = np.zeros((60, 80), dtype=np.int16)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    data[20:26, 30:41] = 100
+    m = OccupancyMap(data, 0.05)
+    assert "distance_field" not in vars(m)
+    matcher = NativeMatcher(m)
+    assert "distance_field" in vars(m)
+    expected = distance_transform_edt(~m.occupied) * 0.05
+    assert np.array_equal(m.distance_field, expected)
+    assert map_distance_field(m) is m.distance_field
+    # a map whose field was already made (by its own property) keeps it, and the matcher's coarse
+    # field is the same either way
+    m2 = OccupancyMap(data, 0.05)
+    own = m2.distance_field
+    matcher2 = NativeMatcher(m2)
+    assert m2.distance_field is own
+    assert np.array_equal(matcher2.lik, matcher.lik) and np.array_equal(matcher2.field, matcher.field)
+    empty = OccupancyMap(np.zeros((10, 10), dtype=np.int16), 0.1)
+    assert np.all(np.isinf(map_distance_field(empty)))

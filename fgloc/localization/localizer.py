@@ -200,9 +200,14 @@ class Localizer(Recovery):
 
     # ------------------------------------------------------------------ inputs
     def on_odometry(self, msg: Odometry) -> None:
-        t = t_raw = float(msg.stamp)
-        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
-        if tw.shape != (3,) or not math.isfinite(float(tw[0]) + float(tw[1]) + float(tw[2])):
+        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        self.odometry_values(float(msg.stamp), np.asarray(msg.twist, dtype=float).reshape(-1), msg.twist_cov, pose)
+
+    def odometry_values(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
+                        cov_finite: bool | None = None) -> None:
+        """:meth:`on_odometry` on a message's values (``cov_finite``: whether ``cov`` is all finite, if known)."""
+        t_raw = t
+        if tw.shape != (3,) or not math.isfinite(sum(tw.tolist())):
             self._skip("odometry: non-finite twist")
             return
         if not self._monotonic("odometry", t):
@@ -212,17 +217,13 @@ class Localizer(Recovery):
         self.stats["odometry"] += 1
         self.odometry_coverage.add(t)
         if self.odom.t is not None and t <= self.odom.t:
-            # at or before the scan stamp the odometry was carried to after a burst (carry_to): the
-            # back-end has integrated past it; the next message's increment starts there and covers it
+            # at or before the stamp carried to after a burst (carry_to): the next increment covers it
             self.stats["odometry_folded"] = self.stats.get("odometry_folded", 0) + 1
             return
-        # finiteness by the sum of the values (one scalar test, as for the twist: at the odometry's rate)
-        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
-        if pose is not None and (pose.shape != (3,) or not math.isfinite(float(pose[0]) + float(pose[1])
-                                                                         + float(pose[2]))):
-            pose = None
-        cov = msg.twist_cov
-        if cov is not None and not math.isfinite(float(np.asarray(cov, dtype=float).sum())):
+        if pose is not None and (pose.shape != (3,) or not math.isfinite(sum(pose.tolist()))):
+            pose = None  # finiteness by the sum of the values (one scalar test, as for the twist)
+        if cov is not None and not (math.isfinite(float(np.asarray(cov, dtype=float).sum())) if cov_finite is None
+                                    else cov_finite):
             cov = None
         tw, cov = self.odom.step(t, tw, cov, pose)
         if self.clock is not None:
@@ -236,8 +237,7 @@ class Localizer(Recovery):
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
         if Capability.MEASURES_VELOCITY in self.backend.capabilities:
-            # a filter whose velocity state the twist measures (the EKF) gets a velocity from a bursty
-            # source's poses; a smoother integrates the increments (exact at every pose stamp)
+            # the EKF's velocity state: a bursty source's velocity (a smoother integrates its increments)
             vm = self.odom.velocity_measurement()
             if vm is None:  # the first burst of a stream: no velocity known, none measured
                 self.stats["odometry_burst_skipped"] = self.stats.get("odometry_burst_skipped", 0) + 1
@@ -250,8 +250,8 @@ class Localizer(Recovery):
             self.dead_reckoning.odometry(t, tw)
         if self.odom_mode:
             self._odom_mode_step(t, scan=False)
-        else:
-            self._dead_reckon(t)
+        elif self._last_scan_t is not None and t - self._last_scan_t >= self.icfg.laser_silent_after_s:
+            self._dead_reckon(t)  # the laser silent: a dead-reckoned pose when due
 
     def on_compass(self, msg: CompassHeading) -> None:
         t = float(msg.stamp)

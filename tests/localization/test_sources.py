@@ -54,6 +54,9 @@ class _Loc:
     def on_odometry(self, m):
         self.odometry.append(m)
 
+    def odometry_values(self, t, tw, cov, pose, cov_finite=None):
+        self.odometry.append(Odometry(t, tw, cov, pose))
+
 
 def _mount(rpy_deg):
     r = Rotation.from_euler("xyz", np.deg2rad(rpy_deg))

@@ -30,9 +30,13 @@ def cov_bad(c: Any) -> bool:
     if c is None:
         return False
     a = c if isinstance(c, np.ndarray) else np.asarray(c, dtype=float)
-    d = a.ravel().tolist()
+    return values_bad(a.ravel().tolist())
+
+
+def values_bad(d: list[float]) -> bool:
+    """:func:`cov_bad` of a covariance's entries as floats (9, row by row, or its diagonal)."""
     if len(d) == 9:
-        d = d[::4]
+        return not (0.0 <= d[0] < math.inf and 0.0 <= d[4] < math.inf and 0.0 <= d[8] < math.inf)  # NaN too
     return not all(math.isfinite(v) and v >= 0 for v in d)
 
 

@@ -20,7 +20,7 @@ from fgloc.backends.contract import Capability
 from fgloc.geometry import between, rotate_covariance
 from fgloc.geometry import log as se2_log
 from fgloc.io.topics import ODOMETRY
-from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad
+from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad, values_bad
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, SourceSpec, SourceType
 from fgloc.types import Odometry
 
@@ -37,17 +37,19 @@ MAX_TILT_RAD = math.radians(30.0)
 NOT_ESTIMATED_VAR = 1e3
 
 
-def usable_twist_cov(cov: np.ndarray | None, default_sigmas: tuple[float, float, float] | list[float]
-                     ) -> np.ndarray:
+def usable_twist_cov(cov: np.ndarray | None, default_sigmas: tuple[float, float, float] | list[float],
+                     diag: tuple[float, float, float] | None = None) -> np.ndarray:
     """A twist covariance (3x3) with each unusable diagonal entry (0, negative, NaN, at least
     :data:`NOT_ESTIMATED_VAR`) replaced by its own default ``sigma^2`` and that row / column's
     correlations dropped; the usable entries are kept as the message gives them (``cov`` itself
-    when all three are usable; the defaults' diagonal without a covariance)."""
+    when all three are usable; the defaults' diagonal without a covariance).  ``diag``: ``cov``'s
+    diagonal as floats when the caller has it."""
     if cov is None:
         return np.diag(np.square(default_sigmas))
-    bad = [i for i in range(3) if not 0.0 < float(cov[i, i]) < NOT_ESTIMATED_VAR]  # NaN too
-    if not bad:
+    d0, d1, d2 = diag if diag is not None else (float(cov[0, 0]), float(cov[1, 1]), float(cov[2, 2]))
+    if 0.0 < d0 < NOT_ESTIMATED_VAR and 0.0 < d1 < NOT_ESTIMATED_VAR and 0.0 < d2 < NOT_ESTIMATED_VAR:
         return cov
+    bad = [i for i, v in enumerate((d0, d1, d2)) if not 0.0 < v < NOT_ESTIMATED_VAR]  # NaN too
     out = np.array(cov, dtype=float).reshape(3, 3)
     for i in bad:
         out[i, :] = 0.0
@@ -102,12 +104,16 @@ class OdometryHandler(SourceHandler):
             self.skip("a second odometry source (this back-end integrates one twist source; the EKF fuses "
                        "its velocities)")
             return
-        if cov_bad(msg.twist_cov) or (spec.differential and cov_bad(msg.pose_cov)):
+        # the twist's covariance copied once; its entries as floats serve every check below
+        tc = msg.twist_cov
+        cov_copy = None if tc is None else np.array(tc, dtype=float)
+        cl = None if cov_copy is None else cov_copy.ravel().tolist()
+        if (cl is not None and values_bad(cl)) or (spec.differential and cov_bad(msg.pose_cov)):
             self.skip("covariance with a NaN or negative diagonal")
             return
         tw = np.asarray(msg.twist, dtype=float).reshape(-1)
-        cov = None if msg.twist_cov is None else np.array(msg.twist_cov, dtype=float).reshape(3, 3)
-        tw_msg, cov_msg = tw.copy(), cov
+        cov = None if cov_copy is None else cov_copy.reshape(3, 3)
+        tw_msg, cov_msg = tw, cov  # (read, never written)
         if tw.shape == (3,):
             vy = abs(float(tw[1]))
             if vy > st.vy_max:  # (a NaN never is)
@@ -149,10 +155,11 @@ class OdometryHandler(SourceHandler):
                     cov[i, i] = float(cov_msg[i, i]) if ok and cov_msg is not None else float(dflt[i])
         else:
             comps = ("vx", "vy", "vyaw")
-        default = list(be.encoder_sigmas)
+        default = be.encoder_sigmas
         # each component on its own: a usable variance kept, an unusable one (an AR.Drone's yaw rate
         # 0 with variance 0 beside vx / vy 0.09) its own default
-        cov = usable_twist_cov(cov, default)
+        message_cov = cov is not None and cov is cov_msg
+        cov = usable_twist_cov(cov, default, (cl[0], cl[4], cl[8]) if message_cov and cl is not None else None)
         if whole_twist:
             out = cov  # all three velocities as the message says: its whole covariance, correlations kept
         else:
@@ -170,9 +177,10 @@ class OdometryHandler(SourceHandler):
             h.accepted += 1
             return
         h.accepted += 1
-        m = Odometry(float(msg.stamp), tw, out, None if spec.differential else msg.pose, None,
-                     msg.frame_id, msg.child_frame_id)
-        self.loc.on_odometry(m)
+        # the localizer's checks on the values at hand: the covariance's finiteness from its entries when
+        # it is the message's as copied above
+        out_ok = math.isfinite(sum(cl)) if message_cov and out is cov and cl is not None else None
+        self.loc.odometry_values(float(msg.stamp), tw, out, None if spec.differential else pose, out_ok)
 
     def levelled(self, t: float, tw: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The body twist projected onto the ground plane through the levelling IMU's latest

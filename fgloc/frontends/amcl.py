@@ -66,6 +66,7 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
+from .native import edt_squared, map_distance_field
 
 FloatArray = NDArray[np.float64]
 #: EM rounds of the refinement with the measured sigma at most (``refine_scale: measured``)
@@ -390,8 +391,8 @@ def systematic_resample(weights: FloatArray, n: int, rng: np.random.Generator) -
     return np.minimum(np.searchsorted(c, u, side="right"), len(weights) - 1).astype(np.int64)
 
 
-def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: float, depth_m: float = 0.0
-                       ) -> FloatArray:
+def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: float, depth_m: float = 0.0,
+                       distance: FloatArray | None = None) -> FloatArray:
     """Signed distance (m) from each cell centre to the wall surface: positive in free space, negative
     inside walls, clipped to ``[-max_dist, max_dist]``.
 
@@ -400,18 +401,27 @@ def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: fl
     free neighbour then crosses zero on the face between them (an unsigned field clipped at zero would put
     the minimum on the wall cell's centre, half a cell deep, and leave the inside of thick walls flat: beam
     endpoints pulled into the walls, the pose towards the walls the laser sees).  ``depth_m`` moves the
-    surface that far into the walls (half a cell: through the boundary cells' centres).
+    surface that far into the walls (half a cell: through the boundary cells' centres).  ``distance``: the
+    distance (m) from each cell centre to the nearest wall cell centre when the caller has it (the map's
+    distance field, when the walls are its occupied cells).  The distances are the native matcher's exact
+    transform (:func:`fgloc.frontends.native.edt_squared`: scipy's ``distance_transform_edt`` bit for bit).
     """
-    from scipy.ndimage import distance_transform_edt
-
     w = np.asarray(walls, dtype=bool)
     if not w.any():
         return np.full(w.shape, float(max_dist))
     half = 0.5 * resolution
-    outside = distance_transform_edt(~w) * resolution - half
-    inside = distance_transform_edt(w) * resolution - half if not w.all() else np.full(w.shape, float(max_dist))
+    outside = (_distance_m(w, resolution) if distance is None else distance) - half
+    inside = _distance_m(~w, resolution) - half if not w.all() else np.full(w.shape, float(max_dist))
     d = np.where(w, -inside, outside) + float(depth_m)
     return np.ascontiguousarray(np.clip(d, -max_dist, max_dist))
+
+
+def _distance_m(feature: NDArray[np.bool_], resolution: float) -> FloatArray:
+    """Distance (m) from each cell centre to the nearest ``feature`` cell centre (at least one)."""
+    d = edt_squared(feature)
+    np.sqrt(d, out=d)
+    d *= resolution
+    return d  # type: ignore[no-any-return]
 
 
 def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -560,7 +570,8 @@ class AMCL:
             walls = occ_map.occupied | (occ_map.unknown & binary_dilation(occ_map.free, np.ones((3, 3), bool)))
         else:
             raise ConfigError(f"amcl: field_walls must be occupied or occupied+unknown_edge, got {conf.field_walls!r}")
-        self._field = wall_surface_field(walls, occ_map.resolution, self.max_dist)
+        self._field = wall_surface_field(walls, occ_map.resolution, self.max_dist, distance=(
+            map_distance_field(occ_map) if conf.field_walls == "occupied" else None))
         self.auto_depth = isinstance(conf.surface_depth_cells, str)
         if self.auto_depth and conf.surface_depth_cells != "auto":
             raise ConfigError(f"amcl: surface_depth_cells must be a number of cells or auto, got "

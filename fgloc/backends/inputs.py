@@ -13,12 +13,23 @@ the absolute headings and standstill
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from fgloc.backends.contract import FloatArray, SourceNoise
 from fgloc.backends.health import Arbiter, GyroBias, SourceHealth
 from fgloc.backends.health.latency import ScanLatency
+
+
+def _no_reading(name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
+    """:attr:`InputBook.reading` where noise is not adapted."""
+
+
+def _claimed_noise(name: str) -> tuple[float, float]:
+    """:attr:`InputBook.noise` where noise is not adapted: as claimed."""
+    return 1.0, 0.0
+
 
 _DEFAULT_COV: dict[tuple[float, float, float], list[float]] = {}
 
@@ -58,6 +69,13 @@ class InputBook:
         self.health: dict[str, SourceHealth] = {}
         self.gyro_bias: dict[str, GyroBias] = {}   # per gyro stream estimated beside the estimator
         self.latency = ScanLatency(latency, latency_s)
+        #: ``reading(name, kind, rel_prior, t, value, var)``: one reading of stream ``name`` for the arbiter
+        #: (registered at its first), when noise is adapted; else nothing (one call per reading)
+        self.reading: Callable[[str, str, float, float, float, float], None] = (
+            arbiter.add_reading if self.adapt_noise else _no_reading)
+        #: ``noise(name)``: ``(k, c)``, stream ``name``'s claimed variance times ``k^2`` plus ``(c * increment)^2``
+        #: (the arbiter's :meth:`~fgloc.backends.health.Arbiter.noise` when noise is adapted, else ``(1, 0)``)
+        self.noise: Callable[[str], tuple[float, float]] = arbiter.noise if self.adapt_noise else _claimed_noise
 
     # ------------------------------------------------------------------ health, checks
     def source(self, name: str, kind: str) -> SourceHealth:
@@ -81,15 +99,6 @@ class InputBook:
         return var if math.isfinite(var) and var > 0 else default_sigma**2
 
     # ------------------------------------------------------------------ noise arbitration
-    def reading(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
-        """One reading of stream ``name`` for the arbiter (registered at its first), when noise is adapted."""
-        if self.adapt_noise:
-            self.arb.add_reading(name, kind, rel_prior, t, value, var)
-
-    def noise(self, name: str) -> tuple[float, float]:
-        """``(k, c)``: stream ``name``'s claimed variance times ``k^2`` plus ``(c * increment)^2``."""
-        return self.arb.noise(name) if self.adapt_noise else (1.0, 0.0)
-
     def source_noise(self, name: str) -> SourceNoise | None:
         """What :meth:`fgloc.backends.contract.Backend.source_noise` reports."""
         if name not in self.arb.streams:

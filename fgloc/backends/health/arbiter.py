@@ -12,14 +12,19 @@ from fgloc.backends.health.cornered_hat import cornered_hat
 from fgloc.geometry import wrap_scalar
 
 RATE, INSTANT_RATE, ABSOLUTE, ANGLE_ABSOLUTE = "rate", "instant_rate", "absolute", "angle"
+#: readings held unchecked at most (then taken into their streams at once, as at an update)
+INBOX_MAX = 1024
 
 
 @dataclass
 class _Stream:
+    """One source's readings (stamps, values, variances: plain lists, the newest ``Arbiter.history`` at
+    most) and what the arbiter knows of it."""
+
     kind: str
-    t: deque = field(default_factory=lambda: deque(maxlen=4000))
-    v: deque = field(default_factory=lambda: deque(maxlen=4000))
-    var: deque = field(default_factory=lambda: deque(maxlen=4000))
+    t: list[float] = field(default_factory=list)
+    v: list[float] = field(default_factory=list)
+    var: list[float] = field(default_factory=list)
     gain: float = 1.0
     gain_ref: float = 1.0          # the gain when the motion statistics last restarted
     bias: float = 0.0
@@ -52,6 +57,11 @@ class Arbiter:
         self.solve_every = max(1, int(round(1.0 / self.block_s)))  # re-solve the hat once a second
         self.history = int(history)
         self.streams: dict[str, _Stream] = {}
+        # readings as they came, (stream, t, value, var), not yet checked into their streams: taken in one
+        # pass where the streams are read (:meth:`_take_inbox`)
+        self._inbox: list[tuple[_Stream, float, float, float]] = []
+        # :meth:`noise`'s answers since the statistics it reads last changed (a new stream, a processed block)
+        self._noise_memo: dict[str, tuple[float, float]] = {}
         self._t0: float | None = None
         self._next_block = 0
         # pair statistics: EW means and counts
@@ -76,26 +86,50 @@ class Arbiter:
     # ------------------------------------------------------------------ inputs
     def add_source(self, name: str, kind: str, rel_prior: float = 0.02) -> None:
         if name not in self.streams:
-            self.streams[name] = _Stream(kind, deque(maxlen=self.history), deque(maxlen=self.history),
-                                         deque(maxlen=self.history), rel_prior=float(rel_prior))
+            self._noise_memo.clear()
+            self.streams[name] = _Stream(kind, rel_prior=float(rel_prior))
 
     def add_reading(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
         """A sample of source ``name``, registered (:meth:`add_source`) at its first one."""
-        self.add_source(name, kind, rel_prior)
-        self.add(name, t, value, var)
+        s = self.streams.get(name)
+        if s is None:
+            self.add_source(name, kind, rel_prior)
+            s = self.streams[name]
+        inbox = self._inbox
+        inbox.append((s, t, value, var))
+        if len(inbox) >= INBOX_MAX:
+            self._take_inbox()
 
     def add(self, name: str, t: float, value: float, var: float) -> None:
         """A sample: a rate (rate sources) or an absolute value (absolute / angle sources)."""
         s = self.streams.get(name)
-        if s is None or not (math.isfinite(t) and math.isfinite(value)):
+        if s is None:
             return
-        if s.t and t <= s.t[-1]:
-            return
-        if self._t0 is None:
-            self._t0 = float(t)
-        s.t.append(float(t))
-        s.v.append(float(value))
-        s.var.append(float(var) if math.isfinite(var) and var > 0 else 0.0)
+        self._inbox.append((s, t, value, var))
+        if len(self._inbox) >= INBOX_MAX:
+            self._take_inbox()
+
+    def _take_inbox(self) -> None:
+        """The readings received since the last call into their streams, in the order they came: a
+        reading that is not finite, or not later than its stream's last, is dropped; each stream keeps
+        its newest ``history`` readings."""
+        inbox = self._inbox
+        self._inbox = []
+        isfinite = math.isfinite
+        for s, t, value, var in inbox:
+            if not (isfinite(t) and isfinite(value)):
+                continue
+            if s.t and t <= s.t[-1]:
+                continue
+            if self._t0 is None:
+                self._t0 = float(t)
+            s.t.append(float(t))
+            s.v.append(float(value))
+            s.var.append(float(var) if isfinite(var) and var > 0 else 0.0)
+        for s in self.streams.values():
+            extra = len(s.t) - self.history
+            if extra > 0:
+                del s.t[:extra], s.v[:extra], s.var[:extra]
 
     def set_correction(self, name: str, gain: float = 1.0, bias: float = 0.0) -> None:
         """A rate source's current calibration: ``true = gain * (reported - bias)``."""
@@ -112,6 +146,8 @@ class Arbiter:
     # ------------------------------------------------------------------ increments
     def increment(self, name: str, t0: float, t1: float) -> tuple[float, float] | None:
         """A source's (corrected) increment over ``(t0, t1]`` and its claimed variance, or None."""
+        if self._inbox:
+            self._take_inbox()
         s = self.streams.get(name)
         if s is None or not s.t:
             return None
@@ -162,14 +198,14 @@ class Arbiter:
                 i += 1
             var += w_prev * w_prev * s.var[i]
             return s.gain * d, s.gain * s.gain * var
-        a = self._value_at(s, t0)
-        b = self._value_at(s, t1)
-        if a is None or b is None:
+        at0 = self._value_at(s, t0)
+        at1 = self._value_at(s, t1)
+        if at0 is None or at1 is None:
             return None
-        d = b[0] - a[0]
+        d = at1[0] - at0[0]
         if s.kind == ANGLE_ABSOLUTE:
             d = wrap_scalar(d)
-        return d, a[1] + b[1]
+        return d, at0[1] + at1[1]
 
     def _value_at(self, s: _Stream, t: float) -> tuple[float, float] | None:
         ts = s.t
@@ -189,6 +225,8 @@ class Arbiter:
     # ------------------------------------------------------------------ blocks
     def update(self, now: float) -> int:
         """Process the blocks complete by ``now`` (every source has had time to arrive); returns how many."""
+        if self._inbox:
+            self._take_inbox()
         if self._t0 is None:
             return 0
         done = 0
@@ -198,6 +236,7 @@ class Arbiter:
             if now < b1 + self.settle_s:
                 return done
             self._next_block += 1
+            self._noise_memo.clear()
             self._block(b0, b1, self._next_block - 1)
             done += 1
             self._forget_before(self._t0 + self._next_block * self.block_s)
@@ -208,11 +247,9 @@ class Arbiter:
         reading at or before ``t0`` and the later ones), so the streams hold the few seconds since the
         last processed block, whatever the session's length, and the increments are the same."""
         for s in self.streams.values():
-            ts = s.t
-            while len(ts) > 1 and ts[1] <= t:
-                ts.popleft()
-                s.v.popleft()
-                s.var.popleft()
+            k = bisect_right(s.t, t) - 1   # the readings before the last one at or before t
+            if k > 0:
+                del s.t[:k], s.v[:k], s.var[:k]
 
     def _block(self, t0: float, t1: float, index: int = 0) -> None:
         inc: dict[str, tuple[float, float]] = {}
@@ -313,6 +350,12 @@ class Arbiter:
     # ------------------------------------------------------------------ outputs
     def noise(self, name: str) -> tuple[float, float]:
         """``(k, c)`` of a source: its claimed variance times ``k^2`` plus ``(c * increment)^2``."""
+        got = self._noise_memo.get(name)
+        if got is None:
+            got = self._noise_memo[name] = self._noise(name)
+        return got
+
+    def _noise(self, name: str) -> tuple[float, float]:
         s = self.streams.get(name)
         if s is None:
             return 1.0, 0.0

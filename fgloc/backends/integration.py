@@ -4,7 +4,9 @@
 covariance propagated in GTSAM's right-perturbation (body) tangent space; works for differential
 drive (``vy`` measured as 0 with a small variance: the non-holonomic constraint) and mecanum alike.
 :func:`integrate_twist_lists` is the same on plain lists, resumable (the smoother's hot path);
-:func:`integrate_heading` the heading change alone.  Core maths only.
+:func:`integrate_heading` the heading change alone; :func:`rate_integral` a gyro's rate readings integrated
+between two stamps, :func:`chord_step` one odometry step of a chord turned by another source's rotation.
+Core maths only.
 """
 
 from __future__ import annotations
@@ -135,6 +137,55 @@ def integrate_heading(ts: Sequence[float], us: Sequence[Sequence[float]], lo: in
         t = t_next
         i += 1
     return th
+
+
+def chord_step(u: tuple[float, float, float], cv: tuple[float, float, float, float, float, float],
+               dt: float, w: float, qx: float, qy: float,
+               x: float, y: float, th: float, p00: float, p01: float, p11: float
+               ) -> tuple[float, float, float, float, float, float]:
+    """One odometry step of a chord: the twist ``u``'s (vx, vy) held for ``dt`` s while the chord
+    turns by ``w`` rad, added to the chord ``(x, y, th)`` in the frame at its start; the step's (vx, vy)
+    covariance (from ``cv``, the twist's upper6) * dt^2 plus the slip variances ``qx``, ``qy`` * dt,
+    turned into that frame and added to ``(p00, p01, p11)``."""
+    vx, vy = float(u[0]) * dt, float(u[1]) * dt
+    a, b = exp_coefficients(w)
+    dx, dy = a * vx - b * vy, b * vx + a * vy
+    c, s_ = math.cos(th), math.sin(th)
+    x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+    dt2 = dt * dt
+    s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
+    p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
+    p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
+    p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
+    return x, y, th, p00, p01, p11
+
+
+def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
+                   weights: dict[int, float] | None = None) -> float | None:
+    """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
+    interpolated between them, from reading ``i`` on (the one at or before ``t0``); None where two
+    readings the interval needs are more than ``max_gap`` apart.  ``weights``: each reading's
+    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`)."""
+    d = 0.0
+    n = len(ts)
+    while i < n - 1 and ts[i] < t1:
+        ta, tb = ts[i], ts[i + 1]
+        a = t0 if t0 > ta else ta   # max(ta, t0), min(tb, t1) without the builtins' calls
+        b = t1 if t1 < tb else tb
+        if b > a:
+            h = tb - ta
+            if h > max_gap:
+                return None
+            fa, fb = (a - ta) / h, (b - ta) / h
+            # weights of reading i and i+1 in the integral over [a, b]
+            wi = (b - a) * (1.0 - 0.5 * (fa + fb))
+            wj = (b - a) * 0.5 * (fa + fb)
+            d += wi * rs[i] + wj * rs[i + 1]
+            if weights is not None:
+                weights[i] = weights.get(i, 0.0) + wi
+                weights[i + 1] = weights.get(i + 1, 0.0) + wj
+        i += 1
+    return d
 
 
 # ---------------------------------------------------------------------- factors

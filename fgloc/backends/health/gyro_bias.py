@@ -53,6 +53,34 @@ class GyroSeries:
         if self._b - self._a > self.n:
             self._a += 1
 
+    def integral_at(self, t: float) -> tuple[float, float] | None:
+        """``(G, var)``: the raw integral at ``t`` (the trapezoid, the rate linear between the readings
+        around ``t``) and the variance the reading before ``t`` gives it over their gap; None outside the
+        readings or across a gap over :data:`MAX_GYRO_GAP_S`.  (Read from the columns: one call.)"""
+        a0, b0 = self._a, self._b
+        n = b0 - a0
+        if not n:
+            return None
+        T = self._t
+        if t < T[a0] or t > T[b0 - 1]:
+            return None
+        if n < 2:
+            ka = kb = a0
+        else:
+            lo = bisect_right(T, t, a0, b0) - 1 - a0
+            lo = max(min(lo, n - 2), 0)
+            ka, kb = a0 + lo, a0 + lo + 1
+        ta, tb = T[ka], T[kb]
+        if tb - ta > MAX_GYRO_GAP_S:
+            return None
+        h = tb - ta
+        ga, ra, va = self._g[ka], self._r[ka], self._v[ka]
+        if h <= 0:
+            return ga, va
+        f = (t - ta) / h
+        rate = ra + f * (self._r[kb] - ra)
+        return ga + 0.5 * (ra + rate) * (t - ta), va * h
+
     def bracket(self, t: float) -> tuple[int, int]:
         """The indices ``lo, hi`` of the readings around ``t`` (as :func:`fgloc.backends.health.latency.bracket`:
         ``self[lo][0] <= t``, ``hi = lo + 1``; ``0, 0`` for one reading)."""
@@ -175,21 +203,6 @@ class GyroBias:
         return math.sqrt(max(self.P[0][0], 0.0))
 
     # ------------------------------------------------------------------ filter
-    def _integral_at(self, t: float) -> tuple[float, float] | None:
-        s = self.series
-        if not s or t < s.first_t() or t > s[-1][0]:
-            return None
-        lo, hi = s.bracket(t)
-        a, b = s[lo], s[hi]
-        if b[0] - a[0] > MAX_GYRO_GAP_S:
-            return None
-        h = b[0] - a[0]
-        if h <= 0:
-            return a[1], a[3]
-        f = (t - a[0]) / h
-        rate = a[2] + f * (b[2] - a[2])
-        return a[1] + 0.5 * (a[2] + rate) * (t - a[0]), a[3] * h
-
     def _predict(self, t: float) -> None:
         if self.t is None:
             self.t = t
@@ -269,8 +282,9 @@ class GyroBias:
             if not ready:
                 return
             self._pending = [p for p in pend if p[0] > covered]
+        integral_at = self.series.integral_at
         for t, source, yaw, var in ready:
-            g = self._integral_at(t)
+            g = integral_at(t)
             if g is None:
                 continue
             z = yaw - g[0]

@@ -112,7 +112,8 @@ class SlidingWindowSmoother(KeyframeGraph):
             self.odo_c.append(upper6(bounded_covariance(np.array(cl).reshape(3, 3), TWIST_VAR_MAX)))
         if cl[8] <= TWIST_VAR_MAX:  # a yaw rate the source does not fuse is no yaw source to weigh
             self.inputs.reading("odom", RATE, 0.05, t, u2, cl[8])
-        self._process_pending(t)
+        if self.pending_kf:
+            self._process_pending(t)
         # keep a bounded history: the window plus a margin
         if len(self.odo_t) > 4096 and self.kf_t:
             horizon = self.kf_t[-1] - self.cfg.lag_s - 1.0
@@ -135,7 +136,8 @@ class SlidingWindowSmoother(KeyframeGraph):
         self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
         self.compass_pending.append((float(t), float(yaw), float(var), source))
         self._add_heading_reading(float(t), float(yaw), float(var), source)
-        self._process_pending(float(t))
+        if self.pending_kf:
+            self._process_pending(float(t))
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
         """A yaw rate (rad/s, base_link z) from a gyro: integrated between keyframes, bias estimated."""
@@ -190,7 +192,8 @@ class SlidingWindowSmoother(KeyframeGraph):
         if not self.initialized:
             return
         self.rel_pending.append((float(t), float(yaw), float(v), source))
-        self._process_pending(float(t))
+        if self.pending_kf:
+            self._process_pending(float(t))
 
     def add_velocity(self, t: float, twist: FloatArray, twist_cov: FloatArray, used: tuple[bool, bool, bool],
                      source: str) -> None:

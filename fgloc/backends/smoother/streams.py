@@ -13,7 +13,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import scaled_delta
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
-from fgloc.backends.integration import integrate_heading, integrate_twist_lists
+from fgloc.backends.integration import chord_step, integrate_heading, integrate_twist_lists, rate_integral
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import adjoint, between1, compose1, exp_coefficients, inverse1, wrap_scalar
@@ -37,55 +37,6 @@ LATERAL_SPEED = 0.05
 def all_finite(*arrays: FloatArray) -> bool:
     """Every entry of the (small) arrays finite (scalar checks: np.all(np.isfinite(...)) costs ~4 us each)."""
     return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
-
-
-def chord_step(u: tuple[float, float, float], cv: tuple[float, float, float, float, float, float],
-               dt: float, w: float, qx: float, qy: float,
-               x: float, y: float, th: float, p00: float, p01: float, p11: float
-               ) -> tuple[float, float, float, float, float, float]:
-    """One odometry step of a chord: the twist ``u``'s (vx, vy) held for ``dt`` s while the chord
-    turns by ``w`` rad, added to the chord ``(x, y, th)`` in the frame at its start; the step's (vx, vy)
-    covariance (from ``cv``, the twist's upper6) * dt^2 plus the slip variances ``qx``, ``qy`` * dt,
-    turned into that frame and added to ``(p00, p01, p11)``."""
-    vx, vy = float(u[0]) * dt, float(u[1]) * dt
-    a, b = exp_coefficients(w)
-    dx, dy = a * vx - b * vy, b * vx + a * vy
-    c, s_ = math.cos(th), math.sin(th)
-    x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
-    dt2 = dt * dt
-    s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
-    p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
-    p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
-    p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
-    return x, y, th, p00, p01, p11
-
-
-def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
-                   weights: dict[int, float] | None = None) -> float | None:
-    """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
-    interpolated between them, from reading ``i`` on (the one at or before ``t0``); None where two
-    readings the interval needs are more than ``max_gap`` apart.  ``weights``: each reading's
-    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`)."""
-    d = 0.0
-    n = len(ts)
-    while i < n - 1 and ts[i] < t1:
-        ta, tb = ts[i], ts[i + 1]
-        a = t0 if t0 > ta else ta   # max(ta, t0), min(tb, t1) without the builtins' calls
-        b = t1 if t1 < tb else tb
-        if b > a:
-            h = tb - ta
-            if h > max_gap:
-                return None
-            fa, fb = (a - ta) / h, (b - ta) / h
-            # weights of reading i and i+1 in the integral over [a, b]
-            wi = (b - a) * (1.0 - 0.5 * (fa + fb))
-            wj = (b - a) * 0.5 * (fa + fb)
-            d += wi * rs[i] + wj * rs[i + 1]
-            if weights is not None:
-                weights[i] = weights.get(i, 0.0) + wi
-                weights[i + 1] = weights.get(i + 1, 0.0) + wj
-        i += 1
-    return d
 
 
 class Streams(SmootherState):
@@ -324,23 +275,46 @@ class Streams(SmootherState):
         n = len(ts)
         i = bisect_right(ts, t0)
         g = max(bisect_right(gts, t0) - 1, 0)   # the gyro reading at or before the step's start
+        us, cvs = self.odo_u, self.odo_c
+        cos, sin = math.cos, math.sin
         t, x, y, th = t0, 0.0, 0.0, 0.0
         p00 = p01 = p11 = 0.0
+        # one pass: per odometry step its gyro integral (rate_integral's sum, the gyro index carried from
+        # step to step instead of searched) and its chord step (chord_step's), the same operations inline
         while t < t1 - 1e-12:
-            j = min(i, n - 1)
-            tn = min(ts[i], t1) if i < n else t1
+            j = i if i < n - 1 else n - 1
+            tn = (ts[i] if ts[i] < t1 else t1) if i < n else t1
             dt = tn - t
             if dt > 0:
-                # _gyro_increment(name, t, tn, want_var=False) for this step, the gyro index carried
-                # from step to step instead of searched
                 while g + 1 < ng and gts[g + 1] <= t:
                     g += 1
-                d = rate_integral(gts, grs, t, tn, g, max_gap)
-                if d is None:
-                    return None
+                d = 0.0
+                k = g
+                while k < ng - 1 and gts[k] < tn:
+                    ta, tb = gts[k], gts[k + 1]
+                    a = t if t > ta else ta
+                    b = tn if tn < tb else tb
+                    if b > a:
+                        h = tb - ta
+                        if h > max_gap:
+                            return None
+                        fa, fb = (a - ta) / h, (b - ta) / h
+                        wi = (b - a) * (1.0 - 0.5 * (fa + fb))
+                        wj = (b - a) * 0.5 * (fa + fb)
+                        d += wi * grs[k] + wj * grs[k + 1]
+                    k += 1
                 w = d - bias * (tn - t)
-                x, y, th, p00, p01, p11 = chord_step(self.odo_u[j], self.odo_c[j], dt, w, qx, qy,
-                                                     x, y, th, p00, p01, p11)
+                u, cv = us[j], cvs[j]
+                vx, vy = float(u[0]) * dt, float(u[1]) * dt
+                ea, eb = exp_coefficients(w)
+                dx, dy = ea * vx - eb * vy, eb * vx + ea * vy
+                c, s_ = cos(th), sin(th)
+                x, y, th = x + c * dx - s_ * dy, y + s_ * dx + c * dy, th + w
+                dt2 = dt * dt
+                s00, s01, s11 = cv[0] * dt2 + qx * dt, cv[1] * dt2, cv[3] * dt2 + qy * dt
+                p00 += c * c * s00 - 2.0 * c * s_ * s01 + s_ * s_ * s11
+                p01 += c * s_ * (s00 - s11) + (c * c - s_ * s_) * s01
+                p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
             t = tn
             i += 1
         return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
@@ -582,6 +556,6 @@ class Streams(SmootherState):
         """The estimated bias (rad/s) of the gyro stream ``name`` (``SOURCE.gyro``)."""
         gb = self.inputs.gyro_bias.get(name)
         if gb is not None:
-            return gb.value()
+            return gb.x[0]   # its value() (read several times per keyframe and prediction)
         ch = self.chains.get(f"gyro_bias:{name}")
         return float(ch.estimate[0]) if ch is not None and ch.estimate is not None else 0.0

@@ -311,9 +311,8 @@ class Localizer(Recovery):
                 self.backend.record_prediction(t)
                 self.last_reason = "not matched (frontend_every)"
                 return None
-        # odometry motion since the previous front-end call (for its de-skew / motion model):
-        # a particle filter keeps the odometry as it came (its motion model and update
-        # thresholds were tuned on that); the others get it carried to the scan stamp
+        # odometry motion since the previous front-end call (for its de-skew / motion model): a particle filter
+        # keeps it as it came (its motion model and thresholds were tuned on that), the others at the scan stamp
         odom_now = self.odom.pose if fe.is_particle_filter else self.odom.pose_at(t)
         odom_delta = None
         if self._odom_at_last_scan is not None:
@@ -436,11 +435,9 @@ class Localizer(Recovery):
                 self._t_held_since = None
         elif self._t_held_since is None:
             self._t_held_since = t  # the map points elsewhere than the back-end goes
-        # a scan with too few returns (blackout, blocked laser) says nothing about being lost;
-        # neither does a particle filter skipping an update (its motion thresholds) or
-        # converging again after its own recovery: it counts only when the back-end rejects its fix
-        # nor does a fix the jump gate held back: the map explains the scan about as well at the
-        # odometry's pose (gate.py)
+        # a scan with too few returns (blackout, blocked laser) says nothing about being lost; neither does a
+        # particle filter skipping an update (its motion thresholds) or converging again after its own recovery
+        # (it counts only when the back-end rejects its fix), nor a fix the jump gate held back (gate.py)
         if held:
             informative = False
         elif fe.is_particle_filter:
@@ -487,11 +484,14 @@ class Localizer(Recovery):
         assert self.gate is not None
         guessed, self._guess_prediction = self._guess_prediction, None
         if t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t:
-            # a smoother's marginal is computed on demand: without one the gate would judge against the
-            # start prior the whole run
-            self.backend.current(covariance=True)
+            # a smoother's marginal on demand (else the gate judges against the start prior the whole run): a new
+            # one starts the prediction's covariance (a filter's is its state: the guess's prediction stands)
+            was = self.backend.current(covariance=False) if guessed is not None else None
+            now = self.backend.current(covariance=True)
             self._cov_t = t
-            guessed = None  # the prediction's covariance starts from the new marginal
+            if was is None or now is None or was[0] != now[0] or not (np.array_equal(was[1], now[1])
+                                                                       and np.array_equal(was[2], now[2])):
+                guessed = None
         # the guess's prediction when it was the back-end's at this stamp (nothing was fed in since)
         pred, pred_cov = guessed[1] if guessed is not None and guessed[0] == t else self.backend.predict(t)
         self._gate_prediction = (pred, pred_cov)

@@ -34,6 +34,20 @@ from fgloc.types import PoseFix
 GYRO_LIVE_S = 0.25
 
 
+def mahalanobis2_3x3(e0: float, e1: float, e2: float, s: list[float]) -> float:
+    """``e^T S^-1 e`` for the 3x3 matrix ``S`` (its 9 entries row by row) by its adjugate, in scalars (a
+    gate per keyframe: ``np.linalg.solve`` costs ~10 us of overhead); inf when ``S`` is singular."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = s
+    c00, c01, c02 = a4 * a8 - a5 * a7, a2 * a7 - a1 * a8, a1 * a5 - a2 * a4
+    c10, c11, c12 = a5 * a6 - a3 * a8, a0 * a8 - a2 * a6, a2 * a3 - a0 * a5
+    c20, c21, c22 = a3 * a7 - a4 * a6, a1 * a6 - a0 * a7, a0 * a4 - a1 * a3
+    det = a0 * c00 + a1 * c10 + a2 * c20
+    if det == 0.0 or not math.isfinite(det):
+        return math.inf
+    return (e0 * (c00 * e0 + c01 * e1 + c02 * e2) + e1 * (c10 * e0 + c11 * e1 + c12 * e2)
+            + e2 * (c20 * e0 + c21 * e1 + c22 * e2)) / det
+
+
 class KeyframeGraph(FurtherSourceFactors):
     """The factors of each keyframe."""
 
@@ -332,12 +346,9 @@ class KeyframeGraph(FurtherSourceFactors):
             return False
         if self.cfg.fix_gate is None:
             return True
-        S = pred_cov + fix.cov
-        try:
-            d2 = float(e @ np.linalg.solve(S, e))
-        except np.linalg.LinAlgError:
-            return False
-        return bool(np.isfinite(d2) and d2 <= self.cfg.fix_gate)
+        S = np.asarray(pred_cov, dtype=float) + np.asarray(fix.cov, dtype=float)
+        d2 = mahalanobis2_3x3(float(e[0]), float(e[1]), float(e[2]), S.reshape(9).tolist())
+        return math.isfinite(d2) and d2 <= self.cfg.fix_gate
 
     def _fix_weighted_cov(self, cov: FloatArray) -> FloatArray:
         """A fix's covariance as its factor uses it: floored (:meth:`_fix_cov`), its heading

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Where the front-ends' fixes sit against SLAM along and across the track, Radish segments.
 
-    python tools/eval_fix_bias.py [--logs fr079 aces] [--frontends amcl native] [--backend smoother]
-                                  [--scans 800] [--cache DIR] [--odom-shift-s S] [--odom-scale K]
+    python tools/eval_fix_bias.py [--logs fr079 aces] [--frontends amcl native] [--backends smoother]
+                                  [--scans 800] [--cache DIR] [--config FILE] [--odom-shift-s S] [--odom-scale K]
 
 The segments and maps of ``tools/eval_frontends_real.py`` / ``tools/eval_nees.py`` (SLAM cached under
 ``--cache``, map undeclared).  For each log and front-end it localizes the segment from the SLAM
@@ -11,7 +11,8 @@ into the robot's frame (SLAM's heading): along-track (ahead +) and cross-track (
 and RMS, the mean per speed bin (SLAM's speed at the fix: a timing error grows with the speed, a
 map / sensor model offset does not), the least-squares time constant of the along-track error
 against the speed and of the yaw error against the yaw rate, and the time shift ``d`` of the
-reference (SLAM at ``t + d``) that minimizes the fixes' position RMSE.
+reference (SLAM at ``t + d``) that minimizes the fixes' position RMSE; and the back-end's output
+(``trajectory.tum``'s poses) against SLAM: position / heading RMSE, the largest error, the poses by status.
 
 Per log it also gives the odometry against SLAM over the segment: the path length ratio and the
 clock offset at which the odometry's speed profile (0.5 s mean) best meets SLAM's.
@@ -116,7 +117,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--logs", nargs="+", default=["fr079", "aces"])
     ap.add_argument("--frontends", nargs="+", default=["amcl", "native"])
-    ap.add_argument("--backend", default="smoother")
+    ap.add_argument("--backends", nargs="+", default=["smoother"])
+    ap.add_argument("--config", help="a configuration file over the defaults (as fgloc run --config)")
     ap.add_argument("--scans", type=int, default=800)
     ap.add_argument("--cache", type=Path, default=Path("eval_frontends_real"))
     ap.add_argument("--odom-shift-s", type=float, default=0.0, help="diagnostic: odometry stamps shifted by S s")
@@ -125,6 +127,8 @@ def main() -> int:
 
     import eval_frontends_real as efr  # type: ignore[import-not-found]
 
+    from fgloc.config import load_config
+    from fgloc.eval.metrics import track_errors
     from fgloc.io import open_log
     from fgloc.localization import Localizer, Session
     from fgloc.mapping.source import open_log_scan_stamps
@@ -159,13 +163,21 @@ def main() -> int:
                            for tp, m in msgs), key=lambda r: r[1].stamp)
         p0 = ref.interpolate(np.array([t0]))[0]
         for fe in args.frontends:
-            loc = Localizer(occ, mount, args.backend, fe, initial_pose=p0)
-            tw = time.perf_counter()
-            Session(loc).run(msgs)
-            fx = np.array([(f.stamp, *f.pose) for f in loc.fixes if f.source == fe]).reshape(-1, 4)
-            print(f"{name} {fe} / {args.backend} ({time.perf_counter() - tw:.0f} s):", flush=True)
-            for line in split(fx, ref) if len(fx) else ["no fixes"]:
-                print("  " + line, flush=True)
+            for backend in args.backends:
+                loc = Localizer(occ, mount, backend, fe, initial_pose=p0, config=load_config(args.config))
+                tw = time.perf_counter()
+                est = Session(loc).run(msgs)
+                fx = np.array([(f.stamp, *f.pose) for f in loc.fixes if f.source == fe]).reshape(-1, 4)
+                print(f"{name} {fe} / {backend} ({time.perf_counter() - tw:.0f} s):", flush=True)
+                for line in split(fx, ref) if len(fx) else ["no fixes"]:
+                    print("  " + line, flush=True)
+                inside = (est.stamps >= ref.stamps[0]) & (est.stamps <= ref.stamps[-1])
+                along, cross, e = track_errors(est.poses[inside], ref.interpolate(est.stamps[inside]))
+                pos = np.hypot(along, cross)
+                c = loc.monitor.counts(est.stamps)
+                print(f"  output: position RMSE {np.sqrt(np.mean(pos**2)):.4f} m, heading RMSE "
+                      f"{np.degrees(np.sqrt(np.mean(e[:, 2] ** 2))):.3f} deg, max {pos.max():.3f} m; poses ok "
+                      f"{c['ok']} / degraded {c['degraded']} / suspect {c['suspect']} / lost {c['lost']}", flush=True)
     return 0
 
 

@@ -10,8 +10,9 @@ without one) as ``fgloc run`` does (a ``Localizer`` in a ``Session``; ``changed_
 Per run: position RMSE and max error of the final trajectory, the largest pose step (the change of the
 error between consecutive poses), the poses by status, the largest error of an ``ok`` pose and how many
 ``ok`` poses are more than ``--off-m`` off (a silent wrong answer: each must be accurate or marked
-non-ok), and whether ``fgloc run`` would exit 3 (a finding that makes the run unusable, or more than
-``integrity.max_bad_share`` of the poses suspect or lost).
+non-ok), whether ``fgloc run`` would exit 3 (a finding that makes the run unusable, or more than
+``integrity.max_bad_share`` of the poses suspect or lost), and after a teleport (kidnap) how long until the
+online pose stays within 0.2 m (``fgloc.bench.kidnap_recovery``).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ SCENARIOS = ["wheel_slip", "compass_disturbance", "changed_world", "blackout", "
 
 
 def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float, config: str | None = None) -> dict:
+    from fgloc.bench import kidnap_recovery
     from fgloc.config import load_config
     from fgloc.eval.metrics import position_errors_and_steps
     from fgloc.localization import Localizer, Session
@@ -43,10 +45,12 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float,
     ok = np.array([s == "ok" for s in status], dtype=bool)
     summary = loc.stats["status"]
     unusable = any(v["unusable"] for v in summary["verdicts"])
+    recovery = kidnap_recovery(sim, loc.online_trajectory()).get("recovery_s")
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max": float(err.max()),
             "step": float(step.max()) if len(step) else 0.0, "counts": loc.monitor.counts(est.stamps),
             "ok_max": float(err[ok].max()) if ok.any() else float("nan"), "ok_off": int(np.sum(err[ok] > off_m)),
-            "exit3": unusable or summary["bad_share"] > cfg.integrity.max_bad_share, "wall": wall}
+            "exit3": unusable or summary["bad_share"] > cfg.integrity.max_bad_share, "wall": wall,
+            "recovery_s": recovery}
 
 
 def main() -> None:
@@ -65,8 +69,8 @@ def main() -> None:
     runs = [(s, seed, b, f) for s in args.scenarios for seed in args.seeds for b in args.backends
             for f in args.frontends]
     print(f"| scenario | seed | back-end | front-end | RMSE m | max m | largest step m | poses ok / degraded / "
-          f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | exit 3 |")
-    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|---|")
+          f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | exit 3 | kidnap recovered s |")
+    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|---|--:|")
     sims: dict[tuple[str, int], object] = {}
     for name, seed, backend, frontend in tqdm(runs, file=sys.stderr, desc="runs"):
         if (name, seed) not in sims:
@@ -74,9 +78,10 @@ def main() -> None:
             sims[(name, seed)] = run_scenario(load_scenario(scenario_path(name)), seed=seed)
         r = localize(sims[(name, seed)], backend, frontend, args.global_start, args.off_m, args.config)
         c = r["counts"]
+        rec = "-" if r["recovery_s"] is None else f"{r['recovery_s']:.2f}"
         tqdm.write(f"| {name} | {seed} | {backend} | {frontend} | {r['rmse']:.4f} | {r['max']:.3f} | {r['step']:.3f} | "
                    f"{c['ok']} / {c['degraded']} / {c['suspect']} / {c['lost']} | {r['ok_max']:.3f} | {r['ok_off']} | "
-                   f"{'yes' if r['exit3'] else 'no'} |", file=sys.stdout)
+                   f"{'yes' if r['exit3'] else 'no'} | {rec} |", file=sys.stdout)
         sys.stdout.flush()
 
 

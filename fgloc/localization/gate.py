@@ -5,18 +5,17 @@ A fix is taken when it agrees with what the odometry says since the last fix it 
 * with the back-end's prediction at the scan stamp (the fused pose carried on by the odometry,
   with its covariance): ``d2 = e^T (P_pred + R_fix)^-1 e`` of the position within
   ``integrity.gate_chi2``; or
-* with the previous fix, when the gate passed it (whether the back-end used it or its own tighter
-  gate held it) and it was sure of its position (its position sigma, in every direction, within
-  twice the prediction's and the allowance below for the motion since the fix before), carried on
-  by the odometry's motion since (:meth:`Backend.motion_correction`: a gyro's turn where it covers
-  it), with an allowance for an
-  odometry that slips or scrubs beyond what it reports: ``integrity.odometry_slip`` times the
-  distance and the turn it reported in between (the odometry motion model of AMCL and most particle
-  filters).  A back-end whose online estimate lags the fixes (a smoother outvoted by odometry that
-  slips 30 %) does not make the fixes that follow each other as the wheels roughly say look like
-  jumps; nor does a back-end that rejects fixes (an EKF sure of a start it has not moved from) make
-  a run of fixes that agree with each other look like one: a gate that held them all would lose the
-  robot.
+* with the previous fix, when the gate passed it (and the back-end used it, or its own tighter gate held
+  it before any fix had confirmed the back-end's pose) and it was sure of its position (its position
+  sigma, in every direction, within twice the prediction's and the allowance below for the motion since
+  the fix before), carried on by the odometry's motion since (:meth:`Backend.motion_correction`: a
+  gyro's turn where it covers it), with an allowance for an odometry that slips or scrubs beyond what it
+  reports: ``integrity.odometry_slip`` times the distance and the turn it reported in between (the
+  odometry motion model of AMCL and most particle filters).  A back-end whose online estimate lags the
+  fixes (a smoother outvoted by odometry that slips 30 %) does not make the fixes that follow each other
+  as the wheels roughly say look like jumps; nor does a back-end that rejects fixes (an EKF sure of a
+  start it has not moved from) make a run of fixes that agree with each other look like one: a gate that
+  held them all would lose the robot.
 
 The odometry's motion counts only where its stamps (not their arrival) cover the time since the
 previous fix (:class:`OdometryCoverage`, no gap over ``integrity.odometry_gap_s``).  Odometry that
@@ -42,6 +41,18 @@ place scan after scan; the first of them jumps 0.3 m from the fix before it whil
 6 cm, and each following one is 0.3 m from the prediction, which the held fixes do not move, while
 the map explains the scan about as well near the prediction as at the fix.  A kidnapping beyond the
 front-end's window leaves no fix to judge (the relocalizer handles it).
+
+A run of held fixes stays one jump while it lasts.  A fix that follows the last held one as the odometry
+says is judged with the prediction's covariance from when the run's first fix was held: the fixes kept to
+the odometry since, so what the prediction's covariance grew by dead reckoning meanwhile is no evidence
+for them (else a run 0.2 m off passes after a few seconds, once the covariance has grown by a centimetre).
+And a fix the gate passed that a back-end whose pose fixes had confirmed rejects (its own, tighter gate:
+the EKF's has no map-resolution floor) is held with the run it followed unless the map explains the scan
+better at the fix than anywhere near the prediction (:meth:`JumpGate.rejected`); the fixes after it do
+not follow it in (else each of them is rejected in turn, and a particle filter front-end whose fixes the
+back-end keeps rejecting is searched for globally, which in a building that looks alike in several places
+can end in the wrong one).  Where the map sides with the fix, the back-end may be the one that drifted
+(wheels slipping under an EKF sure of them): the fixes follow it as before.
 
 Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of
 :func:`scan_agreement`) to the covariances: a jump smaller than the map can tell apart is no jump
@@ -242,6 +253,17 @@ class _Previous:
     t: float
 
 
+@dataclass
+class _HeldRun:
+    """A run of held fixes that follow each other as the odometry says: the last one, how many, the first's
+    stamp and the prediction's position covariance when the first was judged."""
+
+    last: _Previous
+    n: int
+    t0: float
+    pred_pos_cov: FloatArray
+
+
 Motion = Callable[[float, float, FloatArray], FloatArray]
 
 
@@ -303,7 +325,10 @@ class JumpGate:
         self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
         self._taken: tuple[float, FloatArray] | None = None  # the fix just passed (stamp, pose)
         self._recent: deque[tuple[float, FloatArray]] = deque()  # fixes passed and used over VELOCITY_SPAN_S
-        self._held: tuple[_Previous, int, float] | None = None  # the last held fix, the run's length and start
+        self._held: _HeldRun | None = None  # the current run of held fixes
+        #: the fix passed last, its motion, coverage, the prediction and its covariance, and the run of held
+        #: fixes it followed (for rejected())
+        self._judged: tuple[_Previous, Motion | None, bool, FloatArray, FloatArray, _HeldRun | None] | None = None
         #: ``(t0, t1, delta bytes, corrected)``: the caller's ``motion(t0, t1, delta)`` for the scan being judged
         self.known_motion: tuple[float, float, bytes, FloatArray] | None = None
 
@@ -315,11 +340,45 @@ class JumpGate:
         self._taken = None
         self._recent.clear()
         self._held = None
+        self._judged = None
+
+    def settled(self, used: bool, pose_confirmed: bool, scan: LaserScan) -> None:
+        """What the back-end did with the fix :meth:`check` passed last (``scan``'s): :meth:`accepted` when it
+        used it or no fix had confirmed its pose yet (an EKF sure of a start it has not moved from rejects
+        right fixes), else :meth:`rejected`."""
+        if used or not pose_confirmed:
+            self.accepted()
+        else:
+            self.rejected(scan)
+
+    def rejected(self, scan: LaserScan) -> bool:
+        """The back-end, confirmed by the fixes it took before, rejected the fix :meth:`check` passed last
+        (``scan``'s).  Unless the map explains the scan better at the fix than anywhere near the prediction
+        (then the back-end may be the one that drifted: as :meth:`accepted`), the fix counts as held: the next
+        fix has none to follow, and one that follows it as the odometry says continues the run of held fixes
+        it followed, judged as that run's first fix was.  Whether it was held."""
+        judged = self._judged
+        if judged is None:
+            self.accepted()
+            return False
+        cur, motion, covered, pred, pred_cov, run = judged
+        fix = PoseFix(cur.t, cur.pose, cur.cov)
+        a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan)
+        if math.isfinite(a_pred) and math.isfinite(a_fix) and a_fix > a_pred:
+            self.accepted()
+            return False
+        self._judged = None
+        self._pending = None
+        self._taken = None
+        self.previous = None
+        self._held = self._held_follows(fix, cur.odom, cur.t, motion, covered, pred_cov[:2, :2].copy(), run)
+        return True
 
     def accepted(self) -> None:
         """The fix :meth:`check` passed last went to the back-end: the next one may follow it."""
         self.previous = self._pending
         self._pending = None
+        self._judged = None
         if self._taken is not None:
             self._recent.append(self._taken)
             while len(self._recent) > 2 and self._taken[0] - self._recent[1][0] >= VELOCITY_SPAN_S:
@@ -351,14 +410,22 @@ class JumpGate:
 
         self._pending = None
         self._taken = None
+        self._judged = None
         R = np.asarray(fix.cov, dtype=float)
         P = np.asarray(pred_cov, dtype=float)
+        covered = motion_known and motion_covered
+        # a fix that follows the run of held fixes as the odometry says is the same jump as the run's first:
+        # the fixes kept to the odometry since, so the prediction's covariance grown by dead reckoning is no
+        # evidence for them; it is judged with the prediction's covariance at the run's start
+        run = self._held
+        follows_run = run is not None and self._follows(run.last, fix, odom_pose, t, motion, covered)
+        P_pos = run.pred_pos_cov if follows_run and run is not None else P[:2, :2]
         # scalar maths on the position blocks (numpy's 2x2 solve and eigvalsh cost ~20 us a call each);
         # a jump smaller than the map can tell apart (its cell or declared accuracy) is no jump: the
         # floor diag(sigma_m^2, sigma_m^2, 0) on the covariances
         s2 = self.sigma_m**2
         (r00, r01), (r10, r11) = R[:2, :2].tolist()
-        (p00, p01), (p10, p11) = P[:2, :2].tolist()
+        (p00, p01), (p10, p11) = P_pos.tolist()
         fx, fy, fyaw = (float(v) for v in fix.pose)
         e0, e1 = fx - float(pred[0]), fy - float(pred[1])
         d2 = mahalanobis2_2x2(e0, e1, (p00 + s2) + r00, p01 + r01, p10 + r10, (p11 + s2) + r11)
@@ -372,8 +439,8 @@ class JumpGate:
         allow = 0.0 if last is None else (slip * math.hypot(*between_values(last, odom_pose)[:2])) ** 2
         self._last_odom = np.array(odom_pose, dtype=float)
         prev = self.previous
-        vel = None if motion_known and motion_covered else self.fix_velocity()
-        if prev is not None and (vel is not None or (motion_known and motion_covered)):
+        vel = None if covered else self.fix_velocity()
+        if prev is not None and (vel is not None or covered):
             if vel is not None:  # the odometry does not cover the time since: the fixes' own motion
                 delta = vel * max(0.0, t - prev.t)
             else:
@@ -397,11 +464,12 @@ class JumpGate:
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
             k2 = SURE_SIGMAS**2
             m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
+            cur = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float), float(t))
+            self._judged = (cur, motion, covered, np.array(pred, dtype=float), P.copy(), run if follows_run else None)
             if m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
                 # to follow; after a vaguer one (a matcher unsure between two places) the next has none
-                self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
-                                          float(t))
+                self._pending = cur
             return GateVerdict(True, d2, jump_m, jump_deg, d2_previous=d2_prev, covered=motion_covered)
         a_pred, a_fix = self.agreement(fix, pred, P, scan)
         v = GateVerdict(False, d2, jump_m, jump_deg, a_pred, a_fix, d2_previous=d2_prev, covered=motion_covered)
@@ -424,33 +492,43 @@ class JumpGate:
             self._taken = (float(t), np.array(fix.pose, dtype=float))
             self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
                                       float(t))
+            self._judged = (self._pending, motion, covered, np.array(pred, dtype=float), P.copy(),
+                            run if follows_run else None)
         else:
             self.previous = None
-            self._held_follows(fix, odom_pose, t, motion, motion_known and motion_covered)
+            self._held = self._held_follows(fix, odom_pose, t, motion, covered, P[:2, :2].copy(), run,
+                                            follows_run)
         return v
 
-    def _held_follows(self, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
-                      covered: bool) -> None:
-        """A fix :meth:`check` held: whether it follows the last held one as the odometry says (that one
-        carried on by it, the slip allowance and the map's resolution as in the previous-fix test), which
-        lengthens the run of held fixes (:attr:`held_run`), else it starts one."""
-        R = np.asarray(fix.cov, dtype=float)
-        cur = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float), float(t))
-        run = self._held
-        if run is not None and covered and t > run[0].t:
-            prev = run[0]
-            delta = between1(prev.odom, odom_pose)
-            if motion is not None:
-                delta = self._motion(motion, prev.t, t, delta)
-            cx, cy, _ = compose1(prev.pose, delta).tolist()
-            sl = (self.cfg.odometry_slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2 + self.sigma_m**2
-            S = R[:2, :2] + prev.cov[:2, :2]
-            d2 = mahalanobis2_2x2(float(fix.pose[0]) - cx, float(fix.pose[1]) - cy, float(S[0, 0]) + sl,
-                                  float(S[0, 1]), float(S[1, 0]), float(S[1, 1]) + sl)
-            if d2 <= self.cfg.gate_chi2:
-                self._held = (cur, run[1] + 1, run[2])
-                return
-        self._held = (cur, 1, float(t))
+    def _follows(self, prev: _Previous, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
+                 covered: bool) -> bool:
+        """Whether ``fix`` follows ``prev`` as the odometry says (``prev`` carried on by it, the slip allowance
+        and the map's resolution as in the previous-fix test)."""
+        if not covered or not t > prev.t:
+            return False
+        delta = between1(prev.odom, odom_pose)
+        if motion is not None:
+            delta = self._motion(motion, prev.t, t, delta)
+        cx, cy, _ = compose1(prev.pose, delta).tolist()
+        sl = (self.cfg.odometry_slip * math.hypot(float(delta[0]), float(delta[1]))) ** 2 + self.sigma_m**2
+        S = np.asarray(fix.cov, dtype=float)[:2, :2] + prev.cov[:2, :2]
+        d2 = mahalanobis2_2x2(float(fix.pose[0]) - cx, float(fix.pose[1]) - cy, float(S[0, 0]) + sl,
+                              float(S[0, 1]), float(S[1, 0]), float(S[1, 1]) + sl)
+        return d2 <= self.cfg.gate_chi2
+
+    def _held_follows(self, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None, covered: bool,
+                      pred_pos_cov: FloatArray, run: _HeldRun | None, follows: bool | None = None) -> _HeldRun:
+        """The run of held fixes (:attr:`held_run`) after ``fix`` was held: lengthened when it follows the last
+        held one as the odometry says (:meth:`_follows`; ``follows`` when already known), else a new one
+        starting at it with the prediction's position covariance ``pred_pos_cov``."""
+        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float),
+                        np.array(odom_pose, dtype=float), float(t))
+        if run is not None:
+            if follows is None:
+                follows = self._follows(run.last, fix, odom_pose, t, motion, covered)
+            if follows:
+                return _HeldRun(cur, run.n + 1, run.t0, run.pred_pos_cov)
+        return _HeldRun(cur, 1, float(t), pred_pos_cov)
 
     def _motion(self, motion: Motion, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """``motion(t0, t1, delta)``; :attr:`known_motion`'s answer when it is for the same."""
@@ -463,7 +541,7 @@ class JumpGate:
     def held_run(self) -> tuple[int, float]:
         """``(fixes, first stamp)`` of the current run of held fixes that follow each other as the odometry
         says (``(0, nan)``: none; a fix taken ends it)."""
-        return (0, math.nan) if self._held is None else (self._held[1], self._held[2])
+        return (0, math.nan) if self._held is None else (self._held.n, self._held.t0)
 
 
     def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> tuple[float, float]:

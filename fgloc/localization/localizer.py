@@ -406,8 +406,8 @@ class Localizer(Recovery):
             self.last_reason = "fix rejected by the back-end"
         if self.gate is not None and kf_fix is not None:
             # the gate passed it: the fixes that follow it as the odometry says are no jumps, whether the
-            # back-end used it or its own tighter gate held it (a consistent run is let in; gate.py)
-            self.gate.accepted()
+            # back-end used it or its own tighter gate held it, within limits (JumpGate.settled; gate.py)
+            self.gate.settled(used, self._pose_confirmed, msg)
         if kf_fix is not None and not used and self._map_confirms_rejected(kf_fix, msg):
             # a jump the map confirms (gate.py) is no outlier for the back-end's own gate to veto: a filter
             # sure of a wrong place (started on a particle cloud that converged there) rejects every right

@@ -238,3 +238,72 @@ def test_late_odometry_changed_world_stays_on_the_truth(shelves_late, backend):
     assert float(err.max()) <= 0.1                   # measured 0.014, 0.069 m; 0.33, 0.37 m before
     assert float(step.max()) <= 0.1                  # measured 0.011, 0.023 m
     assert loc.backend.stats["fixes_rejected"] <= 10  # measured 0 (both); the EKF 20 before
+
+
+def test_a_run_of_held_fixes_stays_held_while_the_prediction_grows_vaguer(room):
+    """Fixes that keep a wrong place as the odometry says are the jump the run's first one was: the
+    prediction's covariance grown by dead reckoning since does not let them in (it would: 13.7 < 13.8)."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    truth = np.array([8.0, 5.0, 0.0])
+    scan = make_scan(room, truth)
+    gate.check(_fix(truth), truth, np.diag([0.004**2, 0.004**2, 1e-6]), scan, np.zeros(3), 1.0)
+    gate.accepted()
+    wrong = truth + [0.0, 0.2, 0.0]
+    for k, sigma in enumerate(np.linspace(0.004, 0.02, 8)):  # the prediction dead-reckons, 4 -> 20 mm
+        pred_cov = np.diag([sigma**2, sigma**2, 1e-6])
+        v = gate.check(_fix(wrong, t=1.1 + 0.1 * k), truth, pred_cov, scan, np.zeros(3), 1.1 + 0.1 * k)
+        assert not v.take, k
+    assert v.d2 > gate.cfg.gate_chi2  # judged with the run's first covariance: measured 15.8
+    assert gate.held_run[0] == 8
+    fresh = JumpGate(IntegrityConfig(), room, MOUNT)  # the same fix alone, against the grown covariance
+    assert fresh.check(_fix(wrong), truth, pred_cov, scan, np.zeros(3), 1.0).take
+    # the right place again: taken, the run ends
+    v = gate.check(_fix(truth, t=2.0), truth, pred_cov, scan, np.zeros(3), 2.0)
+    assert v.take and gate.held_run[0] == 0
+
+
+def test_a_fix_the_back_end_rejected_does_not_end_the_run_it_followed(room):
+    """A run of held fixes 0.2 m off; one of them, vaguer, passes the gate and a back-end whose pose fixes
+    confirmed rejects it: it is held with the run, and the tight ones after it are judged as the run's first
+    was (alone, against the grown prediction, they would pass: d2 13.75 < 13.82)."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    truth = np.array([8.0, 5.0, 0.0])
+    scan = make_scan(room, truth)
+    small, grown = np.diag([0.004**2, 0.004**2, 1e-6]), np.diag([0.02**2, 0.02**2, 1e-6])
+    gate.check(_fix(truth), truth, small, scan, np.zeros(3), 1.0)
+    gate.accepted()
+    wrong = truth + [0.0, 0.2, 0.0]
+    assert not gate.check(_fix(wrong, t=1.1), truth, small, scan, np.zeros(3), 1.1).take
+    vague = np.diag([0.02**2, 0.02**2, 1e-6])
+    assert gate.check(_fix(wrong, cov=vague, t=1.2), truth, grown, scan, np.zeros(3), 1.2).take
+    assert gate.rejected(scan)  # the map explains the scan better near the prediction than at the fix
+    assert gate.previous is None and gate.held_run[0] == 2
+    for k in range(5):
+        t = 1.3 + 0.1 * k
+        v = gate.check(_fix(wrong, t=t), truth, grown, scan, np.zeros(3), t)
+        assert not v.take and "held back" in v.why
+    assert gate.held_run == (7, 1.1)
+    fresh = JumpGate(IntegrityConfig(), room, MOUNT)
+    assert fresh.check(_fix(wrong), truth, grown, scan, np.zeros(3), 1.0).take
+    assert gate.check(_fix(truth, t=2.0), truth, grown, scan, np.zeros(3), 2.0).take
+
+
+def test_a_rejected_fix_the_map_sides_with_is_followed(room):
+    """The back-end drifted (wheels slipping) and rejects a right fix: the map explains the scan better at the
+    fix than near the prediction, so the fixes after it follow it as before (the back-end's forced fix or
+    the relocalizer bring it back)."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    pred_cov = np.diag([0.004**2, 0.004**2, 1e-6])
+    step = np.array([0.1, 0.0, 0.0])  # the robot drives along x, the odometry says so
+    drift = np.array([0.0, 0.2, 0.0])  # the back-end's prediction 0.2 m off to the side
+    truth = [np.array([6.0, 5.0, 0.0]) + k * step for k in range(3)]
+    gate.check(_fix(truth[0] + drift), truth[0] + drift, pred_cov, make_scan(room, truth[0]), np.zeros(3), 1.0)
+    gate.accepted()
+    vague = np.diag([0.03**2, 0.03**2, 1e-6])
+    assert gate.check(_fix(truth[1], cov=vague, t=1.1), truth[1] + drift, pred_cov, make_scan(room, truth[1]),
+                      step, 1.1).take
+    assert not gate.rejected(make_scan(room, truth[1]))
+    assert gate.previous is not None and gate.held_run[0] == 0
+    # the next fix is a jump from the prediction (d2 15.8) but follows the rejected one
+    v = gate.check(_fix(truth[2], t=1.2), truth[2] + drift, pred_cov, make_scan(room, truth[2]), 2 * step, 1.2)
+    assert v.take and v.d2 > gate.cfg.gate_chi2 and v.d2_previous is not None and v.d2_previous < 1

@@ -484,7 +484,7 @@ def _localize(req: RunRequest, outdir: Path, session: Any, inputs: _Inputs, mirr
             messages = _copied(reader.records(want), writer, clock, spent)
             if mirror_scans:
                 messages = _mirrored_scans(messages, topics.scan, loc.laser_mount.child.lstrip("/"))
-            for topic, msg in paced(messages, realtime):
+            for topic, msg in (messages if realtime is None else paced(messages, realtime)):
                 feed(topic, msg)
             checkpoint()
             t_fin = PHASE_CLOCK()

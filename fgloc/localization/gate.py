@@ -298,7 +298,7 @@ class OdometryCoverage:
         g = self.max_gap_s
         if self.first is None or self.last is None or self.first > t0 + g or self.last < t1 - g:
             return False
-        return not any(min(b, t1) - max(a, t0) > g for a, b in self._gaps)
+        return not self._gaps or not any(min(b, t1) - max(a, t0) > g for a, b in self._gaps)
 
     def uncovered_s(self, t0: float, t1: float) -> float:
         """How long of ``[t0, t1]`` the stamps leave uncovered (the gaps, before the first and after the last)."""

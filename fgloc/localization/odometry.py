@@ -77,6 +77,8 @@ class OdometryTracker:
         self.short_increments = 0          # pose increments over less than the baseline (bursty stamps)
         self.carried = 0                   # twists handed on to a scan stamp after a burst (carry_to)
         self._last_out: tuple[FloatArray, FloatArray | None] = (np.zeros(3), None)  # the last step's result
+        #: ``(twist, dt, exp_values(twist, dt))`` of the message being taken, when _twist computed it
+        self._increment: tuple[FloatArray, float, tuple[float, float, float]] | None = None
 
     def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
              ) -> tuple[FloatArray, FloatArray | None]:
@@ -96,7 +98,11 @@ class OdometryTracker:
             unused = self._unused(cov)  # a pose-derived twist's covariance keeps the unused ones
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
         if self.t is not None:
-            self.pose = _carried(self.pose, tw, t - self.t)
+            inc, self._increment = self._increment, None
+            dt = t - self.t
+            reuse = inc is not None and inc[0] is tw and inc[1] == dt
+            self.pose = compose1(self.pose, inc[2]) if reuse and inc is not None else _carried(  # type: ignore[arg-type]
+                self.pose, tw, dt)
         self.t = t
         self.twist = tw
         self._recent.append((t, self.pose))
@@ -251,6 +257,7 @@ class OdometryTracker:
         """
         prev = self._prev_pose
         self._prev_pose = None if pose is None else (t, pose)
+        self._increment = None
         self._short = False
         self._derived = False
         mode = self.cfg.pose_deltas
@@ -269,7 +276,9 @@ class OdometryTracker:
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
         delta = between_values(prev[1], pose)
-        if mode != "always" and self._agrees(t, delta, exp_values(tw, dt), unused):
+        d_tw = exp_values(tw, dt)
+        self._increment = (tw, dt, d_tw)  # step() carries the odom pose by the same increment
+        if mode != "always" and self._agrees(t, delta, d_tw, unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             if self._moved:

@@ -164,7 +164,8 @@ class Session:
     # ------------------------------------------------------------------ input
     def feed(self, topic: str, msg: object) -> None:
         """One input message by topic: shown to the sinks, then routed (unrouted topics: sinks only)."""
-        self.observe(topic, msg)
+        if self._observers or self._known != self.sinks:
+            self.observe(topic, msg)
         kind = self.routes.table.get(topic)
         if kind is not None:
             h = self.handlers.get(kind)

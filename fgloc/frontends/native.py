@@ -660,12 +660,64 @@ def edt_squared(feature):  # pragma: no cover - compiled
     return g
 
 
-def _cells_to_m(d2: FloatArray, cell_m: float) -> FloatArray:
-    """``sqrt(d2) * cell_m - cell_m / 2`` in place (no temporary grids)."""
-    np.sqrt(d2, out=d2)
-    d2 *= cell_m
-    d2 -= 0.5 * cell_m
-    return d2
+@njit(cache=True)
+def _signed_field(occ, dist_m, out, cell_m, depth_m, max_m):  # pragma: no cover - compiled
+    """:func:`surface_distance_field`'s last steps in one pass, into ``out`` (may be ``dist_m``):
+    ``dist_m - cell_m / 2`` off the obstacles (``dist_m``: the distance to the nearest occupied cell
+    centre), minus the distance to the nearest free cell less half a cell on them, plus ``depth_m``,
+    clipped to ``[-max_m, max_m]``; each operation rounded as numpy's array code rounds it.  At least
+    one cell must be free.
+
+    A wall cell's squared distance to the nearest free cell (exact integers, :func:`edt_squared` of the
+    free cells) is the smallest ``(i - q)^2 + g[q]`` over the rows ``q`` of its column, ``g`` the squared
+    distance along row ``q`` to its nearest free cell (0 on a free cell): taken outwards from its own row
+    until ``(i - q)^2`` reaches the best so far.  A wall is a few cells thick: a few rows per wall cell,
+    and nothing to do for the free cells, most of a map (the transform of the free cells visits each
+    cell several times)."""
+    h, w = occ.shape
+    half = 0.5 * cell_m
+    none = float(h + w) ** 2 + 1.0  # no free cell in the row (more than any distance)
+    g = np.empty((h, w))
+    for i in range(h):
+        last = -1
+        for j in range(w):
+            if not occ[i, j]:
+                last = j
+                g[i, j] = 0.0
+            else:
+                g[i, j] = float(j - last) if last >= 0 else -1.0
+        last = -1
+        for j in range(w - 1, -1, -1):
+            if not occ[i, j]:
+                last = j
+            elif last >= 0 and (g[i, j] < 0.0 or last - j < g[i, j]):
+                g[i, j] = float(last - j)
+            if occ[i, j]:
+                g[i, j] = g[i, j] * g[i, j] if g[i, j] >= 0.0 else none
+    for i in range(h):
+        for j in range(w):
+            if not occ[i, j]:
+                v = (dist_m[i, j] - half) + depth_m
+            else:
+                best = g[i, j]
+                t = 1
+                while float(t * t) < best and (i - t >= 0 or i + t < h):
+                    tt = float(t * t)
+                    if i - t >= 0:
+                        c = tt + g[i - t, j]
+                        if c < best:
+                            best = c
+                    if i + t < h:
+                        c = tt + g[i + t, j]
+                        if c < best:
+                            best = c
+                    t += 1
+                v = -(math.sqrt(best) * cell_m - half) + depth_m
+            if v < -max_m:
+                v = -max_m
+            elif v > max_m:
+                v = max_m
+            out[i, j] = v
 
 
 # ----------------------------------------------------------------- the matcher
@@ -709,16 +761,18 @@ def surface_distance_field(
     fine = occ_map.resolution / k
     if not occ.any():
         return np.full(occ.shape, float(max_dist_m))
-    if k == 1:  # the map's own distance field (made here if it has none): the same values
-        outside = map_distance_field(occ_map) - 0.5 * fine
-    else:
-        outside = _cells_to_m(edt_squared(occ), fine)
     if occ.all():
-        inside = np.full(occ.shape, float(max_dist_m))
+        return np.clip(np.full(occ.shape, -float(max_dist_m)) + float(surface_depth_m), -max_dist_m, max_dist_m)
+    if k == 1:  # the map's own distance field (made here if it has none): the same values
+        dist = map_distance_field(occ_map)
+        out = np.empty(occ.shape)
     else:
-        inside = _cells_to_m(edt_squared(~occ), fine)
-    d = np.where(occ, -inside, outside) + float(surface_depth_m)
-    return np.clip(d, -max_dist_m, max_dist_m)
+        dist = edt_squared(occ)
+        np.sqrt(dist, out=dist)
+        dist *= fine
+        out = dist
+    _signed_field(occ, dist, out, fine, float(surface_depth_m), float(max_dist_m))
+    return out
 
 
 @dataclass(frozen=True)

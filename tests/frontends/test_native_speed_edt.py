@@ -53,6 +53,26 @@ def test_surface_field_unchanged_on_a_room_with_a_pillar() -> None:
         assert np.array_equal(surface_distance_field(m, k, max_d, depth), _scipy_field(m, k, max_d, depth))
 
 
+def test_surface_field_equals_scipy_on_random_maps() -> None:
+    """Walls of every thickness (sparse cells to nearly solid, whole rows and columns of wall, map edges):
+    the inside distances found row by row are the exact transform's."""
+    rng = np.random.default_rng(11)
+    for density in (0.01, 0.2, 0.6, 0.97):
+        for _ in range(6):
+            h, w = (int(v) for v in rng.integers(1, 45, 2))
+            w = max(w, 2)
+            data = np.where(rng.random((h, w)) < density, 100, 0).astype(np.int16)
+            if rng.random() < 0.5 and h > 2:
+                data[rng.integers(h), :] = 100
+            data.reshape(-1)[rng.permutation(h * w)[:2]] = (0, 100)  # a free and a wall cell
+            m = OccupancyMap(data, 0.05)
+            for k, max_d, depth in ((1, 0.4, 0.025), (2, 1.0, 0.0), (3, 0.2, -0.01)):
+                got = surface_distance_field(m, k, max_d, depth)
+                assert np.array_equal(got, _scipy_field(m, k, max_d, depth))
+    solid = OccupancyMap(np.full((6, 7), 100, dtype=np.int16), 0.05)  # no free cell: as deep as the clip
+    assert np.array_equal(surface_distance_field(solid, 2, 0.3, 0.01), np.full((12, 14), -0.3 + 0.01))
+
+
 def test_matcher_gives_the_map_its_distance_field() -> None:
     """The matcher's coarse field comes from the map's distance field, which it computes (exactly
     scipy's) when the map has none yet, and reuses when it has: the scan agreement and the global

@@ -44,8 +44,9 @@ class PathDivergence:
         self.s2 = float(sigma_m) ** 2
         self.chi2 = float(chi2)
         self._epoch: object = None  # what the anchor belongs to (the last fix taken, the last restart)
-        self._anchor: tuple[float, FloatArray, FloatArray] | None = None  # (t, pose, cov) then
-        self._odom: FloatArray | None = None  # the odometry pose at the last step
+        #: (t, x, y, cov xx, xy, yy) then, as floats (the anchor moves with every fix the back-end takes)
+        self._anchor: tuple[float, float, float, float, float, float] | None = None
+        self._odom: list[float] | None = None  # the odometry pose's x, y at the last step
         self.path_m = 0.0  # the odometry's path length since the anchor
         self.diverged: tuple[float, float, float] | None = None  # (D m, L m, s since the anchor) once diverged
         self.events = 0  # divergences found (each lasting until the next anchor)
@@ -57,18 +58,19 @@ class PathDivergence:
         ``t`` is then the new anchor).  ``(D, L, s)`` while the fused path has diverged, else None."""
         if epoch != self._epoch or self._anchor is None or self._odom is None:
             self._epoch = epoch
-            self._anchor = (float(t), np.array(pose[:2], dtype=float), np.array(cov[:2, :2], dtype=float))
-            self._odom = np.array(odom_pose[:2], dtype=float)
+            self._anchor = (float(t), float(pose[0]), float(pose[1]), float(cov[0, 0]), float(cov[0, 1]),
+                            float(cov[1, 1]))
+            self._odom = [float(odom_pose[0]), float(odom_pose[1])]
             self.path_m = 0.0
             self.diverged = None
             return None
         ox, oy = float(odom_pose[0]), float(odom_pose[1])
-        self.path_m += math.hypot(ox - float(self._odom[0]), oy - float(self._odom[1]))
+        self.path_m += math.hypot(ox - self._odom[0], oy - self._odom[1])
         self._odom[0], self._odom[1] = ox, oy
         if self.diverged is not None:
             return self.diverged
-        ta, pa, ca = self._anchor
-        ex, ey = float(pose[0]) - float(pa[0]), float(pose[1]) - float(pa[1])
+        ta, pax, pay, a00, a01, a11 = self._anchor
+        ex, ey = float(pose[0]) - pax, float(pose[1]) - pay
         d = math.hypot(ex, ey)
         e = d - self.path_m
         if not e > 0.0:
@@ -76,8 +78,8 @@ class PathDivergence:
         ux, uy = ex / d, ey / d
         c = np.asarray(cov, dtype=float)
         var = (self.slip * self.path_m) ** 2 + self.s2
-        for m in (ca, c):
-            var += ux * ux * float(m[0, 0]) + 2.0 * ux * uy * float(m[0, 1]) + uy * uy * float(m[1, 1])
+        var += ux * ux * a00 + 2.0 * ux * uy * a01 + uy * uy * a11
+        var += ux * ux * float(c[0, 0]) + 2.0 * ux * uy * float(c[0, 1]) + uy * uy * float(c[1, 1])
         if not math.isfinite(var) or e * e <= self.chi2 * var:
             return None
         self.diverged = (d, self.path_m, float(t) - ta)

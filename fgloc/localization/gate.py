@@ -172,10 +172,10 @@ def _nearest_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform,
     df = occ_map.distance_field
     h, w = df.shape
     x, y, yaw = pose
-    mx, my, myaw = (float(v) for v in laser_mount.pose)
+    mx, my, myaw = np.asarray(laser_mount.pose, dtype=float).reshape(3).tolist()
     cb, sb = math.cos(yaw), math.sin(yaw)
     # the laser in the grid's frame (cells as units): the map's origin may be rotated
-    ox, oy, oyaw = (float(v) for v in occ_map.origin[:3])
+    ox, oy, oyaw = np.asarray(occ_map.origin[:3], dtype=float).reshape(3).tolist()
     dx, dy = x + cb * mx - sb * my - ox, y + sb * mx + cb * my - oy
     co, so, inv = math.cos(oyaw), math.sin(oyaw), 1.0 / float(occ_map.resolution)
     gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
@@ -426,7 +426,7 @@ class JumpGate:
         s2 = self.sigma_m**2
         (r00, r01), (r10, r11) = R[:2, :2].tolist()
         (p00, p01), (p10, p11) = P_pos.tolist()
-        fx, fy, fyaw = (float(v) for v in fix.pose)
+        fx, fy, fyaw = np.asarray(fix.pose, dtype=float).reshape(3).tolist()
         e0, e1 = fx - float(pred[0]), fy - float(pred[1])
         d2 = mahalanobis2_2x2(e0, e1, (p00 + s2) + r00, p01 + r01, p10 + r10, (p11 + s2) + r11)
         jump_m = float(math.hypot(e0, e1))

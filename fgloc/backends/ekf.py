@@ -58,6 +58,9 @@ MAX_PREDICT_STEP_S = 0.1
 #: the variance a held-back odometry interval's velocity starts from when the odometry is its only
 #: source ((m/s)^2, (rad/s)^2): uninformative, so that the interval moves by the twist's increment
 VELOCITY_FREE_VAR = 100.0
+#: the odometry's yaw-rate scale is updated only by a reported and a predicted yaw rate both this many
+#: of the twist's yaw-rate sigmas away from zero (and of one sign): within, the rate is the noise's
+SCALE_EVIDENCE_SIGMAS = 3.0
 
 
 def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray:
@@ -339,8 +342,9 @@ class EKF:
                              [i for i, r in enumerate(rows) if r == TH])
 
     def update_h(self, z: FloatArray, hx: FloatArray, H: FloatArray, R: FloatArray, gate: float | None,
-                 sensor: str, wrap_rows: list[int] | tuple[int, ...] = ()) -> bool:
-        """Update at the filter time with a linearized measurement ``z ~ h(x)``, Jacobian ``H``."""
+                 sensor: str, wrap_rows: list[int] | tuple[int, ...] = (), frozen: tuple[int, ...] = ()) -> bool:
+        """Update at the filter time with a linearized measurement ``z ~ h(x)``, Jacobian ``H``; the
+        states in ``frozen`` enter the innovation's covariance but are not updated."""
         y = np.asarray(z, dtype=float) - np.asarray(hx, dtype=float)
         for i in wrap_rows:
             y[i] = wrap_angle(y[i])
@@ -359,12 +363,19 @@ class EKF:
                 self.stats["gated"][sensor] = self.stats["gated"].get(sensor, 0) + 1
                 return False
         K = self.P @ H.T @ (np.array([[1.0 / s]]) if scalar else np.linalg.inv(S))
+        if frozen:
+            # the states in ``frozen`` are considered, not estimated (Schmidt): no gain, and the
+            # covariance of that suboptimal gain, P - K H P - P H^T K^T + K S K^T
+            K[list(frozen), :] = 0.0
+            PHt = self.P @ H.T
+            self.P = self.P - K @ PHt.T - PHt @ K.T + K @ S @ K.T
         self.x = self.x + K @ y
         self.x[TH] = wrap_angle(self.x[TH])
         for name, (lo, hi) in self.bounds.items():
             i = self.aug[name]
             self.x[i] = min(max(float(self.x[i]), lo), hi)
-        self.P = self.P - K @ H @ self.P
+        if not frozen:
+            self.P = self.P - K @ H @ self.P
         self.P = 0.5 * (self.P + self.P.T)
         self.stats["updates"] += 1
         return True
@@ -381,7 +392,7 @@ class EKF:
 
     def update_encoder(self, t: float, twist: FloatArray, twist_cov: FloatArray,
                        yaw_log_scale_index: int | None = None, held_from: float | None = None,
-                       keep_w_noise: bool = False, sole: bool = False) -> bool:
+                       keep_w_noise: bool = False, sole: bool = False, scale_min_rate: float = 0.0) -> bool:
         """Encoder body twist ``[vx, vy, wz]`` with 3x3 covariance; the unicycle uses ``[vx, wz]``.
 
         With ``yaw_log_scale_index`` (the state ``l = ln s_w``) the reported yaw rate is
@@ -398,12 +409,13 @@ class EKF:
         over the interval (a gyro measures it within).  ``sole``: the odometry is the only source of
         the velocities it measures, whose interval velocity it then is, not a random walk's step from
         the last (the filter's smoothing would keep only part of each step of a quantized yaw, whose
-        pose-increment rates are exact only integrated whole)."""
+        pose-increment rates are exact only integrated whole).  ``scale_min_rate`` (rad/s): the yaw
+        rate the scale needs, at least (besides :data:`SCALE_EVIDENCE_SIGMAS` of the twist's yaw sigma)."""
         tw = np.asarray(twist, dtype=float)
         cov = np.asarray(twist_cov, dtype=float)
         assert self.t is not None, "EKF not initialized"
         if held_from is None or not self.t < float(t):
-            return self._encoder_at(float(t), tw, cov, yaw_log_scale_index)
+            return self._encoder_at(float(t), tw, cov, yaw_log_scale_index, scale_min_rate)
         # the interval's velocity is a new one: the random walk over the interval added at its start,
         # and no tie to the pose already travelled (spread over the interval, or correlated with the
         # pose, a precise twist after a gap would move the pose travelled before it); a block of a
@@ -418,7 +430,7 @@ class EKF:
         for i in quiet:
             self.P[i, i] += VELOCITY_FREE_VAR if sole else q[i]
         before = self.x.copy()
-        ok = self._encoder_at(t_meas, tw, cov, yaw_log_scale_index)
+        ok = self._encoder_at(t_meas, tw, cov, yaw_log_scale_index, scale_min_rate)
         missed = t_meas - float(held_from)
         if ok and missed > 0.0:
             self._shift_position(before, missed)
@@ -436,7 +448,8 @@ class EKF:
         self.x[X] += (dvx * c - dvy * sn) * dt
         self.x[Y] += (dvx * sn + dvy * c) * dt
 
-    def _encoder_at(self, t: float, tw: FloatArray, cov: FloatArray, yaw_log_scale_index: int | None) -> bool:
+    def _encoder_at(self, t: float, tw: FloatArray, cov: FloatArray, yaw_log_scale_index: int | None,
+                    scale_min_rate: float = 0.0) -> bool:
         if yaw_log_scale_index is None:
             if self.omni:
                 return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
@@ -451,9 +464,19 @@ class EKF:
         sw = math.exp(float(self.x[yaw_log_scale_index]))
         w = float(self.x[self.w_index])
         H[-1, self.w_index] = sw
-        H[-1, yaw_log_scale_index] = sw * w
         hx[-1] = sw * w
-        return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder")
+        # a yaw rate within its noise of zero says nothing of the scale: the filter's w, pulled by the
+        # last twists, correlates with this one's noise (every change of sign would shrink the scale,
+        # directly or through the scale's correlation with w that the update would leave); then the
+        # scale is neither updated nor tied to w by it
+        z_w = float(tw[comp[-1]])
+        floor = max(scale_min_rate, SCALE_EVIDENCE_SIGMAS * math.sqrt(max(float(cov[2, 2]), 0.0)))
+        frozen: tuple[int, ...] = (yaw_log_scale_index,)
+        if z_w * w > 0.0 and min(abs(z_w), abs(sw * w)) > floor:
+            H[-1, yaw_log_scale_index] = sw * w
+            frozen = ()
+        return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder",
+                             frozen=frozen)
 
     def update_gyro(self, t: float, rate: float, var: float, bias_index: int | None, gate: float | None) -> bool:
         """A gyro's yaw rate: ``z = w + b`` with ``b`` the bias state at ``bias_index`` (None: ``z = w``,

@@ -43,7 +43,19 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import Capability, SourceNoise
-from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, TH, EKFConfig, V, W, motion_model
+from fgloc.backends.ekf import (
+    CHI2_999,
+    EKF,
+    OVX,
+    OVY,
+    OW,
+    SCALE_EVIDENCE_SIGMAS,
+    TH,
+    EKFConfig,
+    V,
+    W,
+    motion_model,
+)
 from fgloc.backends.ekf_history import InOrder
 from fgloc.backends.health import (
     ANGLE_ABSOLUTE,
@@ -220,6 +232,9 @@ class EKFBackend(Backend):
                                  None if self._has_gyro() else float(tw[2]) * gain)
         if not self.initialized:
             return
+        # the scale's evidence floor from the twist's own yaw noise (the arbiter's weight may shrink
+        # it below the flicker of a yaw rate differenced from ticks)
+        scale_min_rate = SCALE_EVIDENCE_SIGMAS * math.sqrt(max(float(cov[2, 2]), 0.0))
         k, rel = self.inputs.noise("odom")
         if k != 1.0 or rel > 0.0:
             cov[2, :] *= k
@@ -252,7 +267,7 @@ class EKFBackend(Backend):
 
         def encoder() -> bool:
             return self.ekf.update_encoder(t, tw, cov, yaw_log_scale_index=si, held_from=held_from,
-                                           keep_w_noise=keep_w, sole=sole)
+                                           keep_w_noise=keep_w, sole=sole, scale_min_rate=scale_min_rate)
 
         def again(_: bool) -> None:
             encoder()

@@ -66,7 +66,7 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
-from .native import edt_squared, map_distance_field
+from .native import distance_m, map_distance_field
 
 FloatArray = NDArray[np.float64]
 #: EM rounds of the refinement with the measured sigma at most (``refine_scale: measured``)
@@ -404,24 +404,16 @@ def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: fl
     surface that far into the walls (half a cell: through the boundary cells' centres).  ``distance``: the
     distance (m) from each cell centre to the nearest wall cell centre when the caller has it (the map's
     distance field, when the walls are its occupied cells).  The distances are the native matcher's exact
-    transform (:func:`fgloc.frontends.native.edt_squared`: scipy's ``distance_transform_edt`` bit for bit).
+    transform (:func:`fgloc.frontends.native.distance_m`: scipy's ``distance_transform_edt`` bit for bit).
     """
     w = np.asarray(walls, dtype=bool)
     if not w.any():
         return np.full(w.shape, float(max_dist))
     half = 0.5 * resolution
-    outside = (_distance_m(w, resolution) if distance is None else distance) - half
-    inside = _distance_m(~w, resolution) - half if not w.all() else np.full(w.shape, float(max_dist))
+    outside = (distance_m(w, resolution) if distance is None else distance) - half
+    inside = distance_m(~w, resolution) - half if not w.all() else np.full(w.shape, float(max_dist))
     d = np.where(w, -inside, outside) + float(depth_m)
     return np.ascontiguousarray(np.clip(d, -max_dist, max_dist))
-
-
-def _distance_m(feature: NDArray[np.bool_], resolution: float) -> FloatArray:
-    """Distance (m) from each cell centre to the nearest ``feature`` cell centre (at least one)."""
-    d = edt_squared(feature)
-    np.sqrt(d, out=d)
-    d *= resolution
-    return d  # type: ignore[no-any-return]
 
 
 def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:

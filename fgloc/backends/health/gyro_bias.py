@@ -56,20 +56,15 @@ class GyroSeries:
     def integral_at(self, t: float) -> tuple[float, float] | None:
         """``(G, var)``: the raw integral at ``t`` (the trapezoid, the rate linear between the readings
         around ``t``) and the variance the reading before ``t`` gives it over their gap; None outside the
-        readings or across a gap over :data:`MAX_GYRO_GAP_S`.  (Read from the columns: one call.)"""
+        readings or across a gap over :data:`MAX_GYRO_GAP_S`.  (Read from the columns.)"""
         a0, b0 = self._a, self._b
-        n = b0 - a0
-        if not n:
+        if b0 == a0:
             return None
         T = self._t
         if t < T[a0] or t > T[b0 - 1]:
             return None
-        if n < 2:
-            ka = kb = a0
-        else:
-            lo = bisect_right(T, t, a0, b0) - 1 - a0
-            lo = max(min(lo, n - 2), 0)
-            ka, kb = a0 + lo, a0 + lo + 1
+        lo, hi = self.bracket(t)
+        ka, kb = a0 + lo, a0 + hi
         ta, tb = T[ka], T[kb]
         if tb - ta > MAX_GYRO_GAP_S:
             return None

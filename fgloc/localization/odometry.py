@@ -100,9 +100,10 @@ class OdometryTracker:
         if self.t is not None:
             inc, self._increment = self._increment, None
             dt = t - self.t
-            reuse = inc is not None and inc[0] is tw and inc[1] == dt
-            self.pose = compose1(self.pose, inc[2]) if reuse and inc is not None else _carried(  # type: ignore[arg-type]
-                self.pose, tw, dt)
+            if inc is not None and inc[0] is tw and inc[1] == dt:  # _twist's increment of this message
+                self.pose = compose1(self.pose, inc[2])  # type: ignore[arg-type]  # (floats: indexed)
+            else:
+                self.pose = _carried(self.pose, tw, dt)
         self.t = t
         self.twist = tw
         self._recent.append((t, self.pose))

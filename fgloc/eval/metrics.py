@@ -428,7 +428,6 @@ def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArr
     return err, step
 
 
-
 def track_errors(poses: FloatArray, reference: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``(along_m, cross_m, err)``: each of ``poses`` (N x 3) minus ``reference`` (N x 3, same stamps) in
     the reference robot's frame: along its heading (ahead +) and across it (left +), and the raw

@@ -107,12 +107,14 @@ def rho_weight(r, c, loss, outlier):  # pragma: no cover - compiled
     if a > outlier:
         if loss == 0:
             return c * (outlier - 0.5 * c), 0.0
-        return 0.5 * c * c * math.log(1.0 + (outlier / c) ** 2), 0.0
+        u = outlier / c
+        return 0.5 * c * c * math.log(1.0 + u * u), 0.0
     if loss == 0:
         if a <= c:
             return 0.5 * r * r, 1.0
         return c * (a - 0.5 * c), c / a
-    q = (r / c) ** 2
+    u = r / c
+    q = u * u
     return 0.5 * c * c * math.log(1.0 + q), 1.0 / (1.0 + q)
 
 
@@ -609,7 +611,7 @@ def edt_squared(feature):  # pragma: no cover - compiled
     envelope of the parabolas ``(i - q)^2 + f(q)``).  The matcher builds two such fields per map
     at start-up."""
     h, w = feature.shape
-    none = float(h + w) ** 2 + 1.0  # no True cell in the row (larger than any distance)
+    none = float(h + w) * float(h + w) + 1.0  # no True cell in the row (larger than any distance)
     g = np.empty((h, w))
     for i in range(h):
         last = -1
@@ -676,7 +678,7 @@ def _signed_field(occ, dist_m, out, cell_m, depth_m, max_m):  # pragma: no cover
     cell several times)."""
     h, w = occ.shape
     half = 0.5 * cell_m
-    none = float(h + w) ** 2 + 1.0  # no free cell in the row (more than any distance)
+    none = float(h + w) * float(h + w) + 1.0  # no free cell in the row (more than any distance)
     g = np.empty((h, w))
     for i in range(h):
         last = -1

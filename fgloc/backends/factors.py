@@ -261,32 +261,44 @@ def _log_against_m(rx: float, ry: float, rth: float, m: tuple[float, float, floa
 
 
 def scaled_between_error(xi: gtsam.Pose2, xj: gtsam.Pose2, scales: FloatArray | tuple[float, float],
-                         measured: FloatArray,
-                         want_jacobians: bool = True, bend: bool = True) -> tuple[FloatArray, list[FloatArray]]:
+                         measured: FloatArray, want_jacobians: bool = True, bend: bool = True,
+                         drift: FloatArray | tuple[float, float] | None = None) -> tuple[FloatArray, list[FloatArray]]:
     """Error of :func:`scaled_between_factor`: ``Log(m^-1 rep(xi^-1 xj, s))`` (the noise is on
     what the odometry reports, so a scale never buys a smaller residual by shrinking the motion)
     and its Jacobians (right perturbations of ``xi``, ``xj``; the scales as a plain vector).
     ``bend=False``: the reported translation was integrated along the true heading (a gyro's),
     so the yaw-rate scale does not bend its chord: ``rep = [s_v x, s_v y, s_w yaw]``.  Scalar
-    maths (called at every relinearization: the numpy / GTSAM-call version cost ~45 us)."""
+    maths (called at every relinearization: the numpy / GTSAM-call version cost ~45 us).
+    ``drift = (l_y, l_yaw)``: the odometry also reports ``l_y`` m sideways and ``l_yaw`` rad of turn per
+    metre driven forward (:func:`_scaled_between`); its Jacobian is the list's fourth entry (3x2)."""
     h = xi.between(xj)
+    dr = None if drift is None else (float(drift[0]), float(drift[1]))
     e0, e1, e2, jac = _scaled_between(h.x(), h.y(), h.theta(), float(scales[0]), float(scales[1]),
-                                      _measured(measured), want_jacobians, bend)
+                                      _measured(measured), want_jacobians, bend, dr)
     if jac is None:
         return np.array([e0, e1, e2]), []
-    hi, hj, hv, hw = jac
-    return (np.array([e0, e1, e2]), [np.array(hi).reshape(3, 3), np.array(hj).reshape(3, 3),
-                                     np.array([hv, hw]).T.reshape(3, 2)])
+    hi, hj, hv, hw = jac[:4]
+    out = [np.array(hi).reshape(3, 3), np.array(hj).reshape(3, 3), np.array([hv, hw]).T.reshape(3, 2)]
+    if dr is not None:
+        out.append(np.array(jac[4]).reshape(3, 2))
+    return np.array([e0, e1, e2]), out
 
 
 def _scaled_between(cx: float, cy: float, cth: float, sv: float, sw: float,
-                    m: tuple[float, float, float, float, float], want_jacobians: bool, bend: bool
-                    ) -> tuple[float, float, float, tuple | None]:
+                    m: tuple[float, float, float, float, float], want_jacobians: bool, bend: bool,
+                    drift: tuple[float, float] | None = None) -> tuple[float, float, float, tuple | None]:
     """:func:`scaled_between_error` on ``c = xi^-1 xj = (cx, cy, cth)``, a :func:`_measured`
     measurement ``m``, in floats: the error's three entries and (``want_jacobians``) the
-    Jacobians as flat row-major tuples ``(Hi 3x3, Hj 3x3, Hs_v 3x1, Hs_w 3x1)``, or None.
-    Unrolled scalar maths without temporary arrays (the factor's Python callback runs at every
-    linearization)."""
+    Jacobians as flat row-major tuples ``(Hi 3x3, Hj 3x3, Hs_v 3x1, Hs_w 3x1)`` (with ``drift``, and
+    ``Hd 3x2`` after them), or None.  ``drift = (l_y, l_yaw)``: the increment the scales apply to is
+    ``c`` with ``l_y cx`` added to its sideways part and ``l_yaw cx`` to its turn (a mecanum base's
+    unequal wheel radii, a differential drive's unequal wheels: a sideways creep and a turn that
+    follow the forward distance).  Unrolled scalar maths without temporary arrays (the factor's
+    Python callback runs at every linearization)."""
+    c_x, c_y, c_th = cx, cy, cth
+    if drift is not None:
+        cy, cth = cy + drift[0] * cx, cth + drift[1] * cx
+    u_th = cth
     if not bend:
         rth = sw * cth
         rx, ry = sv * cx, sv * cy
@@ -323,6 +335,15 @@ def _scaled_between(cx: float, cy: float, cth: float, sv: float, sw: float,
     a00, a01, a02 = l00 * c00 + l01 * c10, l00 * c01 + l01 * c11, l00 * c02 + l01 * c12 + l02 * sw
     a10, a11, a12 = l10 * c00 + l11 * c10, l10 * c01 + l11 * c11, l10 * c02 + l11 * c12 + l12 * sw
     a20 = a21 = 0.0
+    hd = None
+    if drift is not None:
+        # the drifted increment's derivative: d E / d c = A D, D = [[1, 0, 0], [l_y, 1, 0], [l_yaw, 0, 1]]
+        # (A's last row [0, 0, sw]); d E / d (l_y, l_yaw) = A's second and third columns times c_x
+        hd = (a01 * c_x, a02 * c_x, a11 * c_x, a12 * c_x, 0.0, sw * c_x)
+        a00 += drift[0] * a01 + drift[1] * a02
+        a10 += drift[0] * a11 + drift[1] * a12
+        a20 = drift[1] * sw
+        cx, cy, cth = c_x, c_y, c_th
     # d c / d xj = [[ch, -sh, 0], [sh, ch, 0], [0, 0, 1]], d c / d xi = [[-1, 0, cy], [0, -1, -cx], [0, 0, -1]]
     ch, sh = math.cos(cth), math.sin(cth)
     hj = (a00 * ch + a01 * sh, -a00 * sh + a01 * ch, a02,
@@ -332,38 +353,49 @@ def _scaled_between(cx: float, cy: float, cth: float, sv: float, sw: float,
           -a10, -a11, a10 * cy - a11 * cx - a12,
           -a20, -a21, a20 * cy - a21 * cx - sw)
     hv = (l00 * s00 + l01 * s10, l10 * s00 + l11 * s10, 0.0)
-    hw = (l00 * s01 + l01 * s11 + l02 * cth, l10 * s01 + l11 * s11 + l12 * cth, cth)
+    hw = (l00 * s01 + l01 * s11 + l02 * u_th, l10 * s01 + l11 * s11 + l12 * u_th, u_th)
+    if hd is not None:
+        return v1, v2, v3, (hi, hj, hv, hw, hd)
     return v1, v2, v3, (hi, hj, hv, hw)
 
 
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
                           cov: FloatArray, fixed_scales: tuple[float, float] = (1.0, 1.0), min_sigma: float = 1e-4,
-                          kernel: str = "none", k: float = 1.345, bend: bool = True) -> gtsam.NonlinearFactor:
+                          kernel: str = "none", k: float = 1.345, bend: bool = True,
+                          kd: int | None = None, lateral: bool = True) -> gtsam.NonlinearFactor:
     """Integrated-odometry factor between ``x_i`` and ``x_j`` whose speed scale ``s_v`` and yaw-rate
     scale ``s_w`` (reported / true, each a ``Vector1`` variable, or None: held at ``fixed_scales``)
     are estimated: the odometry's calibration.  ``delta`` / ``cov`` are the reported increment
     and its covariance.  Without a scale variable this is a plain ``BetweenFactorPose2`` on the
     corrected increment.  ``bend=False``: ``delta``'s translation was integrated along a gyro's
-    heading (the yaw-rate scale applies to its yaw only)."""
+    heading (the yaw-rate scale applies to its yaw only).  ``kd``: the odometry's drift per metre
+    driven forward (a ``Vector2`` ``(l_y, l_yaw)``, :func:`_scaled_between`) estimated too;
+    ``lateral=False``: its sideways part is held at 0 here (an odometry that reports no sideways motion
+    cannot creep sideways per metre: the variable's prior alone holds that part)."""
     d = np.asarray(delta, dtype=float).copy()
     c = np.asarray(cov, dtype=float) + _floor(min_sigma)
-    if ks_v is None and ks_w is None and fixed_scales == (1.0, 1.0):
+    if ks_v is None and ks_w is None and kd is None and fixed_scales == (1.0, 1.0):
         return between_factor(ki, kj, d, cov, min_sigma, kernel, k)
     noise = robust(gtsam.noiseModel.Gaussian.Covariance(c), kernel, k)
-    keys = [ki, kj] + [kk for kk in (ks_v, ks_w) if kk is not None]
+    keys = [ki, kj] + [kk for kk in (ks_v, ks_w, kd) if kk is not None]
     sv0, sw0 = float(fixed_scales[0]), float(fixed_scales[1])
     kv = int(ks_v) if ks_v is not None else None
     kw = int(ks_w) if ks_w is not None else None
+    kdr = int(kd) if kd is not None else None
     k0, k1 = int(ki), int(kj)
     m = _measured(d)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
         sv = float(values.atVector(kv)[0]) if kv is not None else sv0
         sw = float(values.atVector(kw)[0]) if kw is not None else sw0
+        dr = None
+        if kdr is not None:
+            vd = values.atVector(kdr)
+            dr = (float(vd[0]) if lateral else 0.0, float(vd[1]))
         h = values.atPose2(k0).between(values.atPose2(k1))
-        e0, e1, e2, jac = _scaled_between(h.x(), h.y(), h.theta(), sv, sw, m, H is not None, bend)
+        e0, e1, e2, jac = _scaled_between(h.x(), h.y(), h.theta(), sv, sw, m, H is not None, bend, dr)
         if H is not None and jac is not None:
-            hi, hj, hv, hw = jac
+            hi, hj, hv, hw = jac[:4]
             H[0] = np.array(hi).reshape(3, 3)
             H[1] = np.array(hj).reshape(3, 3)
             n = 2
@@ -372,6 +404,12 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
                 n += 1
             if kw is not None:
                 H[n] = np.array(hw).reshape(3, 1)
+                n += 1
+            if kdr is not None:
+                hd = np.array(jac[4]).reshape(3, 2)
+                if not lateral:
+                    hd[:, 0] = 0.0
+                H[n] = hd
         return np.array([e0, e1, e2])
 
     return gtsam.CustomFactor(noise, keys, error)

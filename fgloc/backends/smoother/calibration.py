@@ -79,12 +79,22 @@ class Calibration(Streams):
                 if math.isfinite(sc) and sc > 0.05:
                     self._gains[0 if name == "odom_speed_scale" else 1] = 1.0 / sc
                     self.inputs.arb.set_correction("odom", gain=float(self._gains[1]))
+            elif name == "odom_drift":
+                if bool(np.all(np.isfinite(ch.estimate))):
+                    # the sideways part only for an odometry that reports sideways motion (see _odometry_factor)
+                    lat = self._reports_sideways()
+                    self._drift = (float(ch.estimate[0]) if lat else 0.0, float(ch.estimate[1]))
             elif name.startswith("gyro_bias:"):
                 self.inputs.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""
         return self._gains.copy()
+
+    def odom_drift(self) -> FloatArray:
+        """The odometry's estimated ``[sideways m, turn rad]`` per metre driven forward (what it reports
+        beyond the truth; 0 before it is estimated, see ``smoother.odom_drift``)."""
+        return np.array(self._drift, dtype=float)
 
     def odom_scales(self) -> FloatArray:
         """The odometry's estimated ``[speed, yaw-rate]`` scales (reported / true)."""

@@ -67,6 +67,14 @@ class SmootherConfig:
     odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale around 1 (a skid steer "
                                           "reports 1.4-7 times the turn)", gt=0)
     odom_scale_rw: float = setting(0.003, "random walk of the scales (per sqrt(s))", gt=0)
+    odom_drift: bool = setting(False, "with odom_gains: estimate the odometry's sideways creep and turn per metre "
+                               "driven forward (a mecanum base's or a differential drive's unequal wheel radii) as "
+                               "a calibration variable, observed by the fixes (the sideways part only for an "
+                               "odometry that reports sideways speed)")
+    odom_drift_prior: tuple[float, float] = setting(
+        (0.01, 0.01), "prior sigmas around 0 of the drift [m sideways per m, rad of turn per m] (a 1 % wheel "
+        "radius difference on a 0.5 m track turns 0.02 rad per m)", gt=0)
+    odom_drift_rw: tuple[float, float] = setting((1e-4, 1e-4), "random walk of the drift (per sqrt(s))", gt=0)
     unmeasured_accel_q: float = setting(
         0.5, "where the odometry's stamps do not reach (it stopped or dropped a stretch): how fast the speed "
         "may change ((m/s)^2/s; the EKF's q_v); the graph's own recent motion is carried on there", gt=0)

@@ -140,7 +140,8 @@ class KeyframeGraph(FurtherSourceFactors):
             pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
         else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
             chord, (p00, p01, p11) = got
-            pred = compose1(self.kf_pose[k_prev], np.array([chord[0] * self._gains[0], chord[1] * self._gains[0],
+            gv = float(self._gains[0])
+            pred = compose1(self.kf_pose[k_prev], np.array([chord[0] * gv, (chord[1] - self._drift[0] * chord[0]) * gv,
                                                             chord[2]]))
             d = np.array([chord[0], chord[1], d[2]])
             # its translation's covariance is the chord's, uncorrelated with the wheels' yaw
@@ -333,9 +334,17 @@ class KeyframeGraph(FurtherSourceFactors):
             # barely observable scale adds noise)
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
             ks_w = self._chain_key(ch, t, graph, vals, ts)
+        kd = None
+        if self.cfg.odom_drift and (self.stats["fixes_used"] > 0 or "odom_drift" in self.chains):
+            # the sideways creep and turn per metre forward: observed by the fixes' positions (a scan
+            # latency moves them along the track, not across it: not waited for, unlike the speed scale)
+            ch = self._chain("odom_drift", "d", [0.0, 0.0], list(self.cfg.odom_drift_prior),
+                             list(self.cfg.odom_drift_rw))
+            kd = self._chain_key(ch, t, graph, vals, ts)
         fixed = (1.0 / float(self._gains[0]), 1.0 / float(self._gains[1]))
         return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
-                                     k=self.cfg.odom_kernel_k, bend=bend)
+                                     k=self.cfg.odom_kernel_k, bend=bend, kd=kd,
+                                     lateral=self._reports_sideways())
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
         e = fix.pose - pred

@@ -72,6 +72,7 @@ class SmootherState(Backend):
                                 self.cfg.latency_s)
         self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
         self._gains = np.ones(2)
+        self._drift = (0.0, 0.0)   # the odometry's sideways creep and turn per metre forward (KeyframeGraph)
         # the fastest speed (m/s) and turn rate (rad/s) the odometry has reported (kept across restarts)
         self._odo_speed_max = 0.0
         self._odo_rate_max = 0.0
@@ -98,7 +99,7 @@ class SmootherState(Backend):
         th = float(self.cfg.relinearize_threshold)
         tm = gtsam.ISAM2ThresholdMap()
         for sym, v in (("x", [th] * 3), ("o", [th] * 3), ("b", [th * 1e-2]), ("g", [th * 0.1]), ("k", [th * 0.1]),
-                       ("l", [th * 1e-2]), ("r", [th]),
+                       ("l", [th * 1e-2]), ("r", [th]), ("d", [th * 1e-2, th * 1e-2]),
                        ("a", [th * 0.1, th * 0.1]), (BALLAST, [th])):
             tm.insert((sym, np.asarray(v, dtype=float)))
         p.setRelinearizeThreshold(tm)

@@ -32,6 +32,9 @@ ODOM_GAP_STEPS = 2.0
 ODOM_GAP_WINDOW = 50
 #: m/s, an odometry that has reported sideways speeds above this drives an omni base (the EKF's omni_vy_mps)
 LATERAL_SPEED = 0.05
+#: m/s, an odometry that has reported a sideways speed above this (with a usable variance) has a sideways
+#: axis (a mecanum / omni base): its drift per metre forward is estimated sideways too
+SIDEWAYS_REPORTED_MPS = 1e-4
 
 
 def all_finite(*arrays: FloatArray) -> bool:
@@ -466,19 +469,35 @@ class Streams(SmootherState):
         th = integrate_heading(self.odo_t, self.odo_u, i0, i1, a, b)
         return th * float(self._gains[1])
 
+    def _reports_sideways(self) -> bool:
+        """Whether the odometry has a sideways axis: a differential drive's reports no sideways speed and
+        cannot creep sideways per metre (its drift's sideways part stays at 0)."""
+        return self._odo_lateral_max > SIDEWAYS_REPORTED_MPS
+
     def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
-        """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`)."""
-        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8:
+        """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`),
+        less the drift per metre forward (``self._drift``: the sideways creep, and the turn where no gyro
+        gives it)."""
+        ly, lw = self._drift
+        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8 \
+                and ly == 0.0 and lw == 0.0:
             return d
         for name in self.gyro:  # the first gyro that covers the interval turns it
             r = self._gyro_turn(name, t0, t1)
             if r is not None and abs(d[2]) > 1e-9:
-                return scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
+                out = scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
+                out[1] -= ly * out[0]
+                return out
             if r is not None:
                 out = scaled_delta(d, self._gains, jacobian=False)[0]
+                out[1] -= ly * out[0]
                 out[2] = r
                 return out
-        return scaled_delta(d, self._gains, jacobian=False)[0]
+        out = scaled_delta(d, self._gains, jacobian=False)[0]
+        if ly != 0.0 or lw != 0.0:
+            out[1] -= ly * out[0]
+            out[2] -= lw * out[0]
+        return out
 
     def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float, str]]
                              ) -> tuple[float, float] | None:

@@ -60,6 +60,10 @@ class Capability(Enum):
     GYRO_BIAS = "gyro_bias"
     #: :meth:`Backend.latency_estimate`, :meth:`Backend.latency_fit`: the scans' latency is estimated
     LATENCY = "latency"
+    #: the covariance is the state's own (a filter): :meth:`Backend.current` with ``covariance=True``
+    #: computes nothing new, so a prediction made before it stands (a smoother's marginal is computed
+    #: there, on demand, and starts its predictions' covariance)
+    STATE_COVARIANCE = "state_covariance"
     #: memory and time per input stay bounded however long it runs: ``fgloc live`` takes it (a batch
     #: optimization over the whole run does not)
     LIVE = "live"

@@ -103,7 +103,7 @@ class EKFBackend(Backend):
     #: the odometry twist measures the filter's velocity state (its pose integrates that state)
     capabilities = frozenset({Capability.MEASURES_VELOCITY, Capability.GYRO, Capability.VELOCITY,
                               Capability.RELATIVE_YAW, Capability.ODOM_SCALES, Capability.GYRO_BIAS,
-                              Capability.LATENCY, Capability.LIVE})
+                              Capability.LATENCY, Capability.LIVE, Capability.STATE_COVARIANCE})
 
     @classmethod
     def from_config(cls, config: Any = None) -> EKFBackend:

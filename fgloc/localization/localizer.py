@@ -483,15 +483,13 @@ class Localizer(Recovery):
         """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py); ``odom_pose``: the odometry's there."""
         assert self.gate is not None
         guessed, self._guess_prediction = self._guess_prediction, None
-        if t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t:
-            # a smoother's marginal on demand (else the gate judges against the start prior the whole run): a new
-            # one starts the prediction's covariance (a filter's is its state: the guess's prediction stands)
-            was = self.backend.current(covariance=False) if guessed is not None else None
-            now = self.backend.current(covariance=True)
+        if (t - self._cov_t >= self.icfg.covariance_period_s or t < self._cov_t) and \
+                Capability.STATE_COVARIANCE not in self.backend.capabilities:
+            # a smoother's marginal on demand (else the gate judges against the start prior the whole run): it
+            # starts the prediction's covariance (a filter's is its state: the guess's prediction stands)
+            self.backend.current(covariance=True)
             self._cov_t = t
-            if was is None or now is None or was[0] != now[0] or not (np.array_equal(was[1], now[1])
-                                                                       and np.array_equal(was[2], now[2])):
-                guessed = None
+            guessed = None
         # the guess's prediction when it was the back-end's at this stamp (nothing was fed in since)
         pred, pred_cov = guessed[1] if guessed is not None and guessed[0] == t else self.backend.predict(t)
         self._gate_prediction = (pred, pred_cov)

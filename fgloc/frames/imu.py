@@ -114,16 +114,18 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
     entries row by row as a list of floats (a caller that keeps them: no conversion per message)."""
     problems: list[str] = []
     yaw: float | None = None
-    yaw_var = float("nan")
+    yaw_var = math.nan
     tilt: tuple[float, float] | None = None
     b = R_bi if isinstance(R_bi, list) else np.asarray(R_bi, dtype=float).ravel().tolist()   # R_bi row-major
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
+    planar = b2 == 0.0 and b5 == 0.0 and b6 == 0.0 and b7 == 0.0 and b8 == 1.0  # a yaw-only mount (or none)
     q = msg.orientation_xyzw
     if q is not None:
-        qa = _unit_floats(q, 4)
+        qa = q.ravel().tolist() if isinstance(q, np.ndarray) and q.size == 4 else _unit_floats(q, 4)
         n = math.sqrt(qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]) if qa is not None \
-            else float("nan")
+            else math.nan
         oc = _cov_values(msg.orientation_cov)
-        why = _cov_ok(oc)
+        why = None if oc is None else _cov_ok(oc)
         if not math.isfinite(n) or n < 1e-9:
             problems.append("imu: orientation quaternion all zeros / not finite")
         elif abs(n - 1.0) > QUATERNION_NORM_TOLERANCE:
@@ -132,41 +134,52 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
             problems.append(f"imu: orientation {why}")
         else:
             assert qa is not None
-            w00, w01, w02, w10, w11, w12, w20, w21, w22 = quaternion_matrix(*(v / n for v in qa))
-            # R_wb = R_wi @ R_bi^T: the first column and the last row
-            r00 = w00 * b[0] + w01 * b[1] + w02 * b[2]
-            r10 = w10 * b[0] + w11 * b[1] + w12 * b[2]
-            r20 = w20 * b[0] + w21 * b[1] + w22 * b[2]
-            r21 = w20 * b[3] + w21 * b[4] + w22 * b[5]
-            r22 = w20 * b[6] + w21 * b[7] + w22 * b[8]
+            w00, w01, w02, w10, w11, w12, w20, w21, w22 = quaternion_matrix(qa[0] / n, qa[1] / n, qa[2] / n,
+                                                                            qa[3] / n)
+            # R_wb = R_wi @ R_bi^T: the first column and the last row (a planar mount's zeros left out, but in
+            # r20, whose zero's sign the pitch keeps)
+            if planar:
+                r00, r10, r20 = w00 * b0 + w01 * b1, w10 * b0 + w11 * b1, w20 * b0 + w21 * b1 + w22 * b2
+                r21, r22 = w20 * b3 + w21 * b4, w22
+            else:
+                r00 = w00 * b0 + w01 * b1 + w02 * b2
+                r10 = w10 * b0 + w11 * b1 + w12 * b2
+                r20 = w20 * b0 + w21 * b1 + w22 * b2
+                r21 = w20 * b3 + w21 * b4 + w22 * b5
+                r22 = w20 * b6 + w21 * b7 + w22 * b8
             yaw = math.atan2(r10, r00)
             tilt = (math.atan2(r21, r22), math.asin(max(-1.0, min(1.0, -r20))))
             if oc is not None:
-                yaw_var = _zz((b[6], b[7], b[8]), oc)
+                yaw_var = _zz((b6, b7, b8), oc)
                 if not yaw_var > 0:
-                    yaw_var = float("nan")
+                    yaw_var = math.nan
     rate: float | None = None
-    rate_var = float("nan")
+    rate_var = math.nan
     heading_rate: float | None = None
     w = msg.angular_velocity_radps
     if w is not None:
-        wa = _unit_floats(w, 3)
+        wa = w.ravel().tolist() if isinstance(w, np.ndarray) and w.size == 3 else _unit_floats(w, 3)
         wc = _cov_values(msg.angular_velocity_cov)
-        why = _cov_ok(wc)
+        why = None if wc is None else _cov_ok(wc)
         if wa is None or not (math.isfinite(wa[0]) and math.isfinite(wa[1]) and math.isfinite(wa[2])):
             problems.append("imu: angular velocity not finite")
         elif why is not None:
             problems.append(f"imu: angular velocity {why}")
         else:
-            wb1 = b[3] * wa[0] + b[4] * wa[1] + b[5] * wa[2]
-            wb2 = b[6] * wa[0] + b[7] * wa[1] + b[8] * wa[2]
+            if planar:
+                wb1, wb2 = b3 * wa[0] + b4 * wa[1], wa[2]
+            else:
+                wb1 = b3 * wa[0] + b4 * wa[1] + b5 * wa[2]
+                wb2 = b6 * wa[0] + b7 * wa[1] + b8 * wa[2]
             rate = wb2
-            if tilt is not None and math.cos(tilt[1]) > 0.1:
-                heading_rate = (math.sin(tilt[0]) * wb1 + math.cos(tilt[0]) * wb2) / math.cos(tilt[1])
+            if tilt is not None:
+                cp = math.cos(tilt[1])
+                if cp > 0.1:
+                    heading_rate = (math.sin(tilt[0]) * wb1 + math.cos(tilt[0]) * wb2) / cp
             if wc is not None:
-                rate_var = _zz((b[6], b[7], b[8]), wc)
+                rate_var = _zz((b6, b7, b8), wc)
                 if not rate_var > 0:
-                    rate_var = float("nan")
+                    rate_var = math.nan
     return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate), problems
 
 

@@ -149,8 +149,7 @@ class Localizer(Recovery):
         self._ever_converged = False
         self._heading_diverged_s = 0.0  # the back-end's heading_diverged_s counter when last seen growing
         self._heading_diverged_t = -math.inf  # ... and the stamp then
-        self.stats["held_jumps"] = 0
-        self.stats["confirmed_jumps"] = 0
+        self.stats["held_jumps"] = self.stats["confirmed_jumps"] = 0
         #: called with the stamp of each pose added without a scan (a silent laser, a log without scans):
         #: the session tells its sinks (Session sets it)
         self.pose_listener: Callable[[float], None] | None = None
@@ -254,9 +253,12 @@ class Localizer(Recovery):
             self._dead_reckon(t)  # the laser silent: a dead-reckoned pose when due
 
     def on_compass(self, msg: CompassHeading) -> None:
-        t = float(msg.stamp)
-        yaw = msg.yaw_rad if msg.yaw_rad is not None and math.isfinite(msg.yaw_rad) else None
-        rate = msg.yaw_rate_radps if msg.yaw_rate_radps is not None and math.isfinite(msg.yaw_rate_radps) else None
+        self.compass_values(float(msg.stamp), msg.yaw_rad, msg.yaw_var, msg.yaw_rate_radps, msg.yaw_rate_var)
+
+    def compass_values(self, t: float, yaw: float | None, yaw_var: float, rate: float | None, rate_var: float) -> None:
+        """:meth:`on_compass` on a reading's values (yaw and rate None when not given)."""
+        yaw = yaw if yaw is not None and math.isfinite(yaw) else None
+        rate = rate if rate is not None and math.isfinite(rate) else None
         if yaw is None and rate is None:
             self._skip("compass: no finite heading or rate")
             return
@@ -269,7 +271,7 @@ class Localizer(Recovery):
                 self.dead_reckoning.compass(t, float(yaw))
             if self.reloc is not None:
                 self.reloc.last_compass = self._last_compass
-        self.backend.add_compass(t, yaw, float(msg.yaw_var), rate, float(msg.yaw_rate_var))
+        self.backend.add_compass(t, yaw, float(yaw_var), rate, float(rate_var))
 
     def on_scan(self, msg: LaserScan) -> PoseFix | None:
         """Track one scan; the front-end's fix, or None (:attr:`last_reason` says why)."""

@@ -15,7 +15,7 @@ from fgloc.backends.contract import Capability
 from fgloc.backends.ekf_backend import EKFBackend
 from fgloc.localization import Localizer
 from fgloc.localization.sources import SourceRouter, parse_sources
-from fgloc.types import Imu, StaticTransform, Transform3D
+from fgloc.types import CompassHeading, Imu, StaticTransform, Transform3D
 
 
 def _run(msgs) -> tuple[np.ndarray, Localizer]:
@@ -92,6 +92,9 @@ class _Loc:
 
     def on_compass(self, m):
         self.compass.append(m)
+
+    def compass_values(self, t, yaw, yaw_var, rate, rate_var):
+        self.compass.append(CompassHeading(t, yaw, rate, yaw_var, rate_var))
 
 
 def test_the_router_hands_a_differential_orientation_as_a_heading_through_its_mount():

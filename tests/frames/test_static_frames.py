@@ -71,6 +71,9 @@ class _Loc:
     def on_compass(self, m: CompassHeading) -> None:
         self.compass.append(m)
 
+    def compass_values(self, t: float, yaw: float | None, yaw_var: float, rate: float | None, rate_var: float) -> None:
+        self.compass.append(CompassHeading(t, yaw, rate, yaw_var, rate_var))
+
 
 def test_configured_mount_rotates_the_imu_and_wins_over_the_log() -> None:
     """A yaw-only reading of the Husky's IMU: its yaw minus the mount's (-90 deg); a log transform

@@ -51,6 +51,9 @@ class _Loc:
     def on_compass(self, m):
         self.compass.append(m)
 
+    def compass_values(self, t, yaw, yaw_var, rate, rate_var):
+        self.compass.append(CompassHeading(t, yaw, rate, yaw_var, rate_var))
+
     def on_odometry(self, m):
         self.odometry.append(m)
 

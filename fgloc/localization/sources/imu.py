@@ -35,7 +35,7 @@ from fgloc.frames.imu import imu_in_base
 from fgloc.frames.mounts import MOUNT_WAIT_S, OWN_FRAMES
 from fgloc.geometry import wrap_angle, wrap_scalar
 from fgloc.io.topics import IMU
-from fgloc.localization.sources.handler import SourceHandler
+from fgloc.localization.sources.handler import SourceContext, SourceHandler
 from fgloc.localization.sources.odometry import MAX_TILT_RAD
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, TILT, SourceSpec, SourceType
 from fgloc.types import CompassHeading, Imu
@@ -83,6 +83,12 @@ class ImuHandler(SourceHandler):
     accepts = (Imu, CompassHeading)
     group = "heading"  # the first IMU gives the heading; a second one its yaw rate
 
+    def __init__(self, spec: SourceSpec, ctx: SourceContext, fused: bool = True, second: bool = False) -> None:
+        super().__init__(spec, ctx, fused, second)
+        # what the source uses, asked once (every message reads them)
+        self.uses_yaw, self.uses_vyaw, self.uses_roll = spec.uses("yaw"), spec.uses("vyaw"), spec.uses("roll")
+        self.whole = (self.uses_yaw or self.uses_roll) and self.uses_vyaw  # needed() keeps the message as it is
+
     def handle(self, msg: Imu | CompassHeading) -> None:
         spec, st, ctx, mounts = self.spec, self.state, self.ctx, self.ctx.mounts
         h = st.health
@@ -92,12 +98,13 @@ class ImuHandler(SourceHandler):
                 self.unmounted(msg.frame_id, float(msg.stamp))
             elif mount is not None:
                 self.mounted()
-            base, problems = imu_in_base(needed(spec, msg), mounts.rotation_values(mount))
+            Rv = mounts.rotation_values(mount)
+            base, problems = imu_in_base(msg if self.whole else needed(spec, msg), Rv)
             for p in problems:
                 self.skip(p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
-            if spec.uses("roll") and base.roll_pitch_rad is not None:
-                if not tilt_estimated(msg.orientation_cov, mounts.rotation_values(mount)):
+            if self.uses_roll and base.roll_pitch_rad is not None:
+                if not tilt_estimated(msg.orientation_cov, Rv):
                     st.extra["tilt_unusable"] = st.extra.get("tilt_unusable", 0) + 1
                 else:
                     if ctx.tilt_source in (None, spec.name):  # the first levelling IMU levels
@@ -133,7 +140,7 @@ class ImuHandler(SourceHandler):
                         rate = rate * float(np.sign(R[2, 2]))
         t = float(msg.stamp)
         be = self.loc.backend
-        if spec.differential and yaw is not None and spec.uses("yaw") and not spec.uses("vyaw") \
+        if spec.differential and yaw is not None and self.uses_yaw and not self.uses_vyaw \
                 and Capability.RELATIVE_YAW in be.capabilities:
             # orientation increments as a heading with the source's own offset (a back-end that
             # takes them: the EKF), not as a rate d_yaw / d_t, which stamp jitter turns into spikes
@@ -153,16 +160,16 @@ class ImuHandler(SourceHandler):
                 return
             prev, st.prev_yaw = st.prev_yaw, (t, yaw)
             prev_var, st.extra["prev_yaw_var"] = st.extra.get("prev_yaw_var", var), var
-            if prev is not None and t > prev[0] and spec.uses("yaw"):
+            if prev is not None and t > prev[0] and self.uses_yaw:
                 d_rate = wrap_scalar(yaw - prev[1]) / (t - prev[0])
-                if rate is None or not spec.uses("vyaw"):  # r_l's variance (differential_cov)
+                if rate is None or not self.uses_vyaw:  # r_l's variance (differential_cov)
                     rate, rate_var = d_rate, (var + prev_var) * (t - prev[0])
             yaw = None
-        if yaw is not None and spec.uses("yaw"):
+        if yaw is not None and self.uses_yaw:
             yaw_var = spec.variance("yaw", yaw_var)
         else:
             yaw = None
-        if rate is not None and spec.uses("vyaw"):
+        if rate is not None and self.uses_vyaw:
             rate_var = spec.variance("vyaw", rate_var)
         elif not (spec.differential and rate is not None):
             rate = None
@@ -179,8 +186,8 @@ class ImuHandler(SourceHandler):
             h.accepted += 1
             return
         h.accepted += 1
-        self.loc.on_compass(CompassHeading(t, yaw, rate, yaw_var if yaw is not None else float("nan"),
-                                           rate_var if rate is not None else float("nan"), frame_id="base_link"))
+        self.loc.compass_values(t, yaw, yaw_var if yaw is not None else math.nan, rate,
+                                rate_var if rate is not None else math.nan)
 
     def unmounted(self, frame: str, t: float) -> None:
         """An IMU message of ``frame`` without a mount (yet): taken as identity, counted; warned about

@@ -8,6 +8,9 @@ the channels land in ``run.mcap`` beside the ROS topics) or :class:`McapFile` (a
 its own).  Opened in Foxglove with the layout in
 ``docs/foxglove/``, a recording shows the same picture as the live view.
 
+The scan is written as bytes by :mod:`fgloc.view.wire` (the same bytes the SDK's
+``foxglove.LaserScan`` encodes to, its ranges packed from the array, not one float at a time).
+
 Particles are recorded at most every ``particles_period_s`` of log time (the live view
 gets every scan's): a particle cloud per scan would dominate the file.  The other heavy
 channels can be bounded the same way (``fgloc run`` does; the defaults here record all):
@@ -67,10 +70,14 @@ class McapViewRecorder:
     def __init__(self, writer: RawMcapWriter, particles_period_s: float = 0.5, max_particles: int = 500,
                  scan_period_s: float = 0.0, covariance_period_s: float = 0.0,
                  covariance_change: float = 1.0, predicted_period_s: float = 0.0) -> None:
-        from fgloc.view import encode, server
+        from foxglove import messages
+
+        from fgloc.view import encode, server, wire
 
         server.require_foxglove()
         self._enc = encode
+        self._wire = wire
+        self._fm = messages
         self.writer = writer
         self.particles_period_s = float(particles_period_s)
         self.max_particles = int(max_particles)
@@ -148,15 +155,26 @@ class McapViewRecorder:
         if self._pending_map is not None:
             self._flush_map(log_time_ns)
         try:
-            cls = type(msg)
-            hit = self._proto.get(topic)  # (message class, write) of the topic's last message
-            if hit is None or hit[0] is not cls:
-                name, encoding, data = self._schema(cls)
-                hit = self._proto[topic] = (cls, self._sink(topic, name, data, encoding, "protobuf"))
-            hit[1](msg.encode(), log_time_ns)
-            self.count += 1
+            self._put(topic, type(msg), msg.encode(), log_time_ns)
         except (TypeError, ValueError, OverflowError):
             self.errors += 1
+
+    def _write_wire_ns(self, topic: str, cls: type, data: bytes, log_time_ns: int) -> None:
+        """A message of Foxglove class ``cls`` already encoded (:mod:`fgloc.view.wire`)."""
+        if self._pending_map is not None:
+            self._flush_map(log_time_ns)
+        try:
+            self._put(topic, cls, data, log_time_ns)
+        except (TypeError, ValueError, OverflowError):
+            self.errors += 1
+
+    def _put(self, topic: str, cls: type, data: bytes, log_time_ns: int) -> None:
+        hit = self._proto.get(topic)  # (message class, write) of the topic's last message
+        if hit is None or hit[0] is not cls:
+            name, encoding, schema = self._schema(cls)
+            hit = self._proto[topic] = (cls, self._sink(topic, name, schema, encoding, "protobuf"))
+        hit[1](data, log_time_ns)
+        self.count += 1
 
     def _write_json(self, topic: str, obj: dict[str, Any], stamp: float) -> None:
         self._write_json_ns(topic, obj, self._ns(stamp))
@@ -192,7 +210,7 @@ class McapViewRecorder:
         ns = self._ns(stamp)  # every message of the scan at the same log time
         if self._due(self._last_scan, stamp, self.scan_period_s):
             self._last_scan = stamp
-            self._write_ns(ch.SCAN, enc.scan_message(view.scan), ns)
+            self._write_wire_ns(ch.SCAN, self._fm.LaserScan, self._wire.laser_scan(view.scan), ns)
         if view.status == PREDICTED and not self._due(self._last_pose, stamp, self.predicted_period_s):
             return
         self._last_pose = stamp

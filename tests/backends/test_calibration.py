@@ -148,6 +148,25 @@ def test_latency_estimator_recovers_a_known_lag():
     assert none.value() == 0.0  # not significant: no correction
 
 
+def test_latency_estimator_fits_its_newest_rows_as_its_buffer_grows_and_wraps():
+    """A window of 64 rows fed 1000 pairs (its buffer grown, then its kept rows moved to the front many
+    times) fits exactly what a fresh estimator fits on the last 64 pairs alone; the lag changes halfway,
+    so rows from before the window would show."""
+    rng = np.random.default_rng(7)
+    rows = []
+    for i in range(1000):
+        x = rng.normal(0, 0.3)
+        rows.append((x, (0.02 if i < 500 else 0.06) * x + rng.normal(0, 5e-4)))
+    small = LatencyEstimator(max_rows=64)
+    for x, r in rows:
+        small.add(x, r, (5e-4) ** 2)
+    fresh = LatencyEstimator()
+    for x, r in rows[-64:]:
+        fresh.add(x, r, (5e-4) ** 2)
+    assert small.n == 1000 and small.estimate() == fresh.estimate()
+    assert small.estimate()[0] == pytest.approx(0.06, abs=0.002)
+
+
 def test_latency_estimator_refits_a_share_of_its_rows():
     """A long run asked every pair: the fit is redone after 25 new pairs or 2.5 % of the rows fitted,
     whichever is more (a refit reads every row: a fixed count made their cost quadratic in the log),

@@ -91,17 +91,13 @@ class Arbiter:
 
     def add_reading(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
         """A sample of source ``name``, registered (:meth:`add_source`) at its first one."""
-        s = self.streams.get(name)
-        if s is None:
+        if name not in self.streams:
             self.add_source(name, kind, rel_prior)
-            s = self.streams[name]
-        inbox = self._inbox
-        inbox.append((s, t, value, var))
-        if len(inbox) >= INBOX_MAX:
-            self._take_inbox()
+        self.add(name, t, value, var)
 
     def add(self, name: str, t: float, value: float, var: float) -> None:
-        """A sample: a rate (rate sources) or an absolute value (absolute / angle sources)."""
+        """A sample of a registered source: a rate (rate sources) or an absolute value (absolute /
+        angle sources); held in the inbox until the streams are read."""
         s = self.streams.get(name)
         if s is None:
             return

@@ -566,6 +566,62 @@ def heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no cov
 
 
 @njit(cache=True, fastmath=True)
+def _wrap(a):  # pragma: no cover - compiled
+    """:func:`fgloc.geometry.wrap_scalar`, compiled."""
+    w = np.fmod(a + math.pi, 2.0 * math.pi)
+    if w < 0:
+        w += 2.0 * math.pi
+    return w - math.pi
+
+
+@njit(cache=True, fastmath=True)
+def _track(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, tol, lx, ly, backcos, off,  # noqa: E501
+           lik, Ac, bc, hstride, hwin, hstep, max_jump_m, max_jump, inlier, unk):  # pragma: no cover - compiled
+    """A tracked scan in one call: :func:`_refine` from ``guess``, the heading check, :func:`_stats` at
+    the pose kept.  Returns the pose, its robust cost and :func:`_stats`' tuple.
+
+    The heading check (``hwin > 0``): a refinement that kept a wrong heading (a guess several degrees
+    off: a burst of scan stamps the odometry cannot place) is a local minimum the likelihood field
+    shows: the score profile over heading at the refined position (``+-hwin`` in ``hstep``, every
+    ``hstride``-th point) peaking elsewhere than at the refined heading.  Then the refinement is run
+    from that peak too, and the lower robust cost wins (within ``max_jump_m`` / ``max_jump`` rad of
+    ``guess``)."""
+    pose, _, cost = _refine(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, tol, lx, ly,
+                            backcos, off)
+    if hwin > 0.0:
+        best, score, here = heading_probe(lik, Ac, bc, px, py, hstride, pose, hwin, hstep)
+        if not abs(_wrap(best[2] - pose[2])) < 1.5 * hstep and score > here:
+            pose2, _, cost2 = _refine(field, A, b, far, px, py, best, scales, outliers, loss, max_iter, tol, lx,
+                                      ly, backcos, off)
+            if (cost2 < cost and math.hypot(pose2[0] - guess[0], pose2[1] - guess[1]) <= max_jump_m
+                    and abs(_wrap(pose2[2] - guess[2])) <= max_jump):
+                pose = pose2
+                cost = cost2
+    m = scales.shape[0] - 1
+    H, wr2, sw, n_in, n_used, sr, n_runs, n_unk = _stats(field, A, b, far, px, py, pose, scales[m], loss,
+                                                         outliers[m], inlier, lx, ly, backcos, off, unk, Ac, bc)
+    return pose, cost, H, wr2, sw, n_in, n_used, sr, n_runs, n_unk
+
+
+@njit(cache=True, fastmath=True)
+def _alias_refines(lik, Ac, bc, stride, pose, c00, c01, c11, step, n, ratio, field, A, b, far, px, py,  # noqa: E501
+                   scales, outliers, loss, max_iter, tol, lx, ly, backcos, off):  # pragma: no cover - compiled
+    """:func:`_alias_starts` and :func:`_refine` from each: ``(m, 3)`` poses and their ``m`` costs."""
+    starts = _alias_starts(lik, Ac, bc, px, py, stride, pose, c00, c01, c11, step, n, ratio)
+    m = starts.shape[0]
+    poses = np.empty((m, 3))
+    costs = np.empty(m)
+    for j in range(m):
+        p, _, c = _refine(field, A, b, far, px, py, starts[j], scales, outliers, loss, max_iter, tol, lx, ly,
+                          backcos, off)
+        poses[j, 0] = p[0]
+        poses[j, 1] = p[1]
+        poses[j, 2] = p[2]
+        costs[j] = c
+    return poses, costs
+
+
+@njit(cache=True, fastmath=True)
 def _conditioning(H, px, py):  # pragma: no cover - compiled
     """Smallest and largest eigenvalue of ``S H S`` (yaw scaled by the RMS point range, metres per
     radian) and ``H^-1`` (NaN when singular)."""
@@ -945,32 +1001,14 @@ class NativeMatcher(FrontendBase):
         0.2-0.9 m off that weighed in: 10 from the first stage, 11 from the second), in 27 passes
         over the points instead of 37."""
         stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
-        starts = _alias_starts(self.lik, self.Ac, self.bc, px, py, stride, pose, float(cov[0, 0]),
-                               float(cov[0, 1]), float(cov[1, 1]), ALIAS_STEP_M,
-                               int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO)
         first = 1 if len(self.scales) > 1 else 0
-        return [self._refine_from(px, py, st, first) for st in starts]
-
-    def _heading_check(self, px: FloatArray, py: FloatArray, pose: FloatArray, cost: float, guess: FloatArray
-                       ) -> tuple[FloatArray, float]:
-        """A refinement that kept a wrong heading (a guess several degrees off: a burst of scan stamps
-        the odometry cannot place) is a local minimum the likelihood field shows: the score profile over
-        heading at the refined position (``+-heading_check_deg``, steps of ``search_ang_step_deg / 4``)
-        peaking elsewhere than at the refined heading.  Then the refinement is run from that peak too,
-        and the lower robust cost wins (within the jump limits)."""
-        if self.heading_window <= 0:
-            return pose, cost
-        stride = max(1, int(math.ceil(2 * len(px) / max(self.search_max_points, 1))))
-        best, score, here = heading_probe(self.lik, self.Ac, self.bc, px, py, stride, pose, self.heading_window,
-                                           self.heading_step)
-        if abs(wrap_scalar(best[2] - pose[YAW])) < 1.5 * self.heading_step:
-            return pose, cost
-        if not score > here:
-            return pose, cost
-        pose2, cost2 = self._refine_from(px, py, best)
-        if cost2 < cost and self.accept.within_jump(pose2, guess):
-            return pose2, cost2
-        return pose, cost
+        poses, costs = _alias_refines(
+            self.lik, self.Ac, self.bc, stride, pose, float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1]),
+            ALIAS_STEP_M, int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO, self.field, self.A, self.b,
+            self.far, px, py, self.scales[first:], self.outliers[first:], self.loss, self.max_iterations,
+            self.tolerance, *self._lb, self.depth_m,
+        )
+        return [(poses[j], float(costs[j])) for j in range(len(costs))]
 
     def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
         t0 = time.perf_counter()
@@ -984,9 +1022,14 @@ class NativeMatcher(FrontendBase):
         need_search = self.search == "always"
         refined: list[tuple[FloatArray, float]] = []  # refined poses within the jump limit, with costs
         if self.search != "always":
-            pose, cost = self._refine_from(px, py, guess)
-            pose, cost = self._heading_check(px, py, pose, cost, guess)
-            stats = self._stats_at(px, py, pose)
+            hstride = max(1, int(math.ceil(2 * n / max(self.search_max_points, 1))))
+            pose, cost, *track_stats = _track(
+                self.field, self.A, self.b, self.far, px, py, np.asarray(guess, dtype=float), self.scales,
+                self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m, self.lik,
+                self.Ac, self.bc, hstride, self.heading_window, self.heading_step, self.accept.max_jump_m,
+                self.accept.max_jump, self.accept.inlier_dist, self.cells,
+            )
+            stats = tuple(track_stats)
             jump_ok = self.accept.within_jump(pose, guess)
             if jump_ok:
                 refined.append((pose, cost))
@@ -1091,6 +1134,8 @@ def warmup() -> None:
     ang = np.linspace(-np.pi, np.pi, 200, endpoint=False)
     r = m.raycast(np.array([2.0, 2.0]), ang, 10.0)
     scan = LaserScan(0.0, -np.pi, 2 * np.pi / 200, 0.05, 10.0, r.astype(np.float32))
+    matcher.match(scan, np.array([2.0, 2.0, 0.0]))
+    matcher.search = "auto"
     matcher.match(scan, np.array([2.0, 2.0, 0.0]))
 
 

@@ -60,11 +60,13 @@ class Publisher:
     def __init__(self, host: str, port: int, name: str = "fgloc", backlog: int = 256) -> None:
         import foxglove
         from foxglove import channels as fch
+        from foxglove import messages as fm
         from foxglove.websocket import Capability, ServerListener
 
-        from fgloc.view import encode
+        from fgloc.view import encode, wire
 
         self.enc = encode
+        self.wire = wire
         self.stats: dict[str, int] = {"published": 0, "encode_errors": 0, "map_sent": 0, "client_outbox_full": 0,
                                       "clients_connected": 0, "clients_disconnected": 0, "client_errors": 0,
                                       "subscriptions": 0, "stop_timed_out": 0}
@@ -77,7 +79,9 @@ class Publisher:
         self.last_ns = 0
         c = self.ctx = foxglove.Context()
         self.ch_map = fch.GridChannel(ch.MAP, context=c)
-        self.ch_scan = fch.LaserScanChannel(ch.SCAN, context=c)
+        # the scan's protobuf bytes written from the array (fgloc.view.wire), the SDK's schema
+        self.ch_scan = foxglove.Channel(ch.SCAN, schema=fm.LaserScan.get_schema(), message_encoding="protobuf",
+                                        context=c)
         self.ch_tf = fch.FrameTransformsChannel(ch.TF, context=c)
         self.ch_pose = fch.PoseInFrameChannel(ch.POSE, context=c)
         self.ch_cov = fch.SceneUpdateChannel(ch.POSE_COVARIANCE, context=c)
@@ -134,7 +138,7 @@ class Publisher:
             v: ScanView = item[1]
             t = self._time(v.stamp)
             if self.ch_scan.has_sinks():
-                self.ch_scan.log(enc.scan_message(v.scan), log_time=t)
+                self.ch_scan.log(self.wire.laser_scan(v.scan), log_time=t)
             if v.transforms and self.ch_tf.has_sinks():
                 st = v.fused.stamp if v.fused is not None else v.stamp
                 self.ch_tf.log(enc.transforms_message(v.transforms, st), log_time=t)

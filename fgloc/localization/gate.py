@@ -437,7 +437,7 @@ class JumpGate:
         # what the odometry may have slipped since the last fix judged (for the fix's sureness, below)
         last = self._last_odom
         allow = 0.0 if last is None else (slip * math.hypot(*between_values(last, odom_pose)[:2])) ** 2
-        self._last_odom = np.array(odom_pose, dtype=float)
+        odom_c = self._last_odom = np.array(odom_pose, dtype=float)  # (copies read, never written: shared below)
         prev = self.previous
         vel = None if covered else self.fix_velocity()
         if prev is not None and (vel is not None or covered):
@@ -460,11 +460,12 @@ class JumpGate:
             take = take or (d2_prev <= self.cfg.gate_chi2 and d2_prev < d2_lag)
         if take:
             self._held = None
-            self._taken = (float(t), np.array(fix.pose, dtype=float))
+            pose_c = np.array(fix.pose, dtype=float)
+            self._taken = (float(t), pose_c)
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
             k2 = SURE_SIGMAS**2
             m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
-            cur = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float), float(t))
+            cur = _Previous(pose_c, R.copy(), odom_c, float(t))
             self._judged = (cur, motion, covered, np.array(pred, dtype=float), P.copy(), run if follows_run else None)
             if m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
@@ -489,9 +490,9 @@ class JumpGate:
                      f"{a_pred:.2f} near the prediction)")
         if v.take:
             self._held = None
-            self._taken = (float(t), np.array(fix.pose, dtype=float))
-            self._pending = _Previous(np.array(fix.pose, dtype=float), R.copy(), np.array(odom_pose, dtype=float),
-                                      float(t))
+            pose_c = np.array(fix.pose, dtype=float)
+            self._taken = (float(t), pose_c)
+            self._pending = _Previous(pose_c, R.copy(), odom_c, float(t))
             self._judged = (self._pending, motion, covered, np.array(pred, dtype=float), P.copy(),
                             run if follows_run else None)
         else:

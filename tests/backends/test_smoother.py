@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 from conftest import errors, feed, make_synth
 
@@ -211,3 +212,34 @@ def test_non_finite_inputs_are_counted_not_solved():
     assert sm.source_health()["scan"].skipped_reasons == {"fix not finite": 1}
     assert sm.stats.get("solver_failures", 0) == 0
     assert abs(tr.poses[-1][0] - 1.0) < 0.01
+
+
+
+def test_keyframes_leave_the_window_in_groups():
+    """With ``marginalize_every_s`` the window's stamps are multiples of it (the keyframes leave in
+    groups, each lag_s to lag_s + 0.5 s old) and the trajectory is the one marginalizing each keyframe
+    as it leaves, to well under the run's own error."""
+    s = make_synth(duration=6.0, noise=True, seed=1)
+    spans = []
+
+    class Watch(SlidingWindowSmoother):
+        def add_keyframe(self, t, fix):
+            out = super().add_keyframe(t, fix)
+            when = dict(zip(self.kf_key, self.kf_t, strict=True))
+            stamps = dict(self.isam.timestamps().items())
+            kept = [when[k] for k in stamps if gtsam.Symbol(k).chr() == ord("x") and k in when]
+            # the newest keyframe solved, the oldest iSAM2 keeps, the window's newest and oldest stamps
+            spans.append((self.kf_t[-1], min(kept), max(stamps.values()), min(stamps.values())))
+            return out
+
+    tr_g = feed(Watch(SmootherConfig(marginalize_every_s=0.5)), s)
+    tr_e = feed(SlidingWindowSmoother(SmootherConfig(marginalize_every_s=0.0)), s)
+    assert len(tr_g) == len(tr_e) == len(s.t_scan)
+    late = [sp for sp in spans if sp[0] > 3.0]
+    assert all(abs(v / 0.5 - round(v / 0.5)) < 1e-9 for sp in late for v in sp[2:])
+    # the newest stamp is the newest keyframe's rounded up; a keyframe leaves lag_s to lag_s + 0.5 s old
+    assert all(t <= hi < t + 0.5 + 1e-9 and 2.0 - 0.05 < t - oldest <= 2.5 + 1e-9 for t, oldest, hi, _ in late)
+    assert max(t - oldest for t, oldest, _, _ in late) > 2.4
+    d = np.linalg.norm(tr_g.poses[:, :2] - tr_e.poses[:, :2], axis=1)
+    e_g, e_e = errors(tr_g, s)[0], errors(tr_e, s)[0]
+    assert float(np.max(d)) < 0.2 * e_e and abs(e_g - e_e) < 0.05 * e_e

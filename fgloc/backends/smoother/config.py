@@ -41,6 +41,9 @@ class SmootherConfig:
                                   "localizer relocalizes first: pipeline.relocalize_after)", min=1)
     relinearize_threshold: float = setting(0.01, "iSAM2 relinearization threshold", gt=0)
     relinearize_skip: int = setting(1, "iSAM2 relinearize every n-th update", min=1)
+    marginalize_every_s: float = setting(0.5, "keyframes leave the window in groups this far apart (s; each "
+                                         "group costs one re-elimination of the window, every update did with "
+                                         "0): each stays lag_s to lag_s + this", min=0)
     online_covariance: bool = setting(False, "marginal covariance at every keyframe; false: only when asked "
                                       "(each /fused_pose)")
     update_every: int = setting(1, "keyframes per iSAM2 update (2 halves solver time; the keyframe in between "

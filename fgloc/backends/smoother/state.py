@@ -104,6 +104,12 @@ class SmootherState(Backend):
             tm.insert((sym, np.asarray(v, dtype=float)))
         p.setRelinearizeThreshold(tm)
         p.relinearizeSkip = self.cfg.relinearize_skip
+        # every update solves the whole window (back-substitution without the wildfire's 1e-3 cut-off):
+        # the variables an update does not re-eliminate (marginalize_every_s) are solved as exactly as
+        # those it does
+        gn = gtsam.ISAM2GaussNewtonParams()
+        gn.setWildfireThreshold(0.0)
+        p.setOptimizationParams(gn)
         # new factors go into the slots the marginalized ones left: iSAM2's graph stays the window's
         # size over a session of any length, not a slot per factor ever added (~64 a second at 25 Hz)
         p.findUnusedFactorSlots = True

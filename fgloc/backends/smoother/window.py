@@ -34,8 +34,9 @@ class FixedLagWindow(Calibration):
     def _update(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
                 remove: list[int] | None = None) -> list[int]:
         tsm = gtsam.FixedLagSmootherKeyTimestampMap()
+        stamp = self._window_stamp
         for k, t in ts.items():
-            tsm.insert((k, t))
+            tsm.insert((k, stamp(t)))
         if ts:
             self._capture_leaving(max(ts.values()))
             self._t_latest = max(self._t_latest, max(ts.values()))
@@ -44,6 +45,16 @@ class FixedLagWindow(Calibration):
         graph, vals = self._with_ballast(graph, vals, tsm)
         self.isam.update(graph, vals, tsm, remove or [])
         return list(self.isam.getISAM2Result().getNewFactorsIndices())[:n]
+
+    def _window_stamp(self, t: float) -> float:
+        """The stamp iSAM2's window keeps a variable of time ``t`` by: ``t`` rounded up to a multiple of
+        ``marginalize_every_s``, so that the variables leave the window in groups, one update in
+        that many seconds (an update that marginalizes re-eliminates the window from its oldest
+        variables to the root; the others only the newest cliques).  Rounded up, and the window's
+        clock with them, a variable leaves no earlier than ``lag_s`` after its time (its smoothed
+        value is taken then, :meth:`_capture_leaving`) and at most ``marginalize_every_s`` later."""
+        q = self.cfg.marginalize_every_s
+        return math.ceil(t / q) * q if q > 0.0 else t
 
     def _stamp_chains(self, ts: dict, tsm: gtsam.FixedLagSmootherKeyTimestampMap) -> None:
         """Keep each calibration chain's current variable in the window while its factors pause
@@ -59,7 +70,7 @@ class FixedLagWindow(Calibration):
             if ch.key in ts:
                 ch.stamped = max(ch.stamped, float(ts[ch.key]))
             elif t - ch.stamped > 0.5 * self.cfg.lag_s:
-                tsm.insert((ch.key, t))
+                tsm.insert((ch.key, self._window_stamp(t)))
                 ch.stamped = t
 
     def _with_ballast(self, graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values,
@@ -71,7 +82,7 @@ class FixedLagWindow(Calibration):
         iSAM2 re-eliminates in batch, relinearizing every factor of the window, whenever the
         variables an update affects reach 65 % of all it holds (GTSAM's fixed ``batchThreshold``).
         The fixed-lag marginalization marks the path from the oldest keyframe to the root at
-        every update, so on a small window many updates go batch, relinearizing factors whose
+        every update that marginalizes, so on a small window those updates would go batch, relinearizing factors whose
         variables have not moved, which give the cached linear factors again (a factor's
         linearization depends on its variables' linearization points only).  With at least 0.6
         inert variables per live one the affected share stays below 0.65: the same linear
@@ -93,8 +104,9 @@ class FixedLagWindow(Calibration):
             # stamped anew every half lag (new ones at once): they stay in the window, never among the
             # keys the update marginalizes, and every key keeps its ordering group (GTSAM puts every
             # stamped key in group 1 whatever its stamp), so the same update as stamping them every time
+            tb = self._window_stamp(t)
             for k in self._ballast:
-                tsm.insert((k, t))
+                tsm.insert((k, tb))
             self._ballast_t, self._ballast_n = t, len(self._ballast)
         return graph, vals
 

@@ -578,7 +578,8 @@ def _wrap(a):  # pragma: no cover - compiled
 def _track(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, tol, lx, ly, backcos, off,  # noqa: E501
            lik, Ac, bc, hstride, hwin, hstep, max_jump_m, max_jump, inlier, unk):  # pragma: no cover - compiled
     """A tracked scan in one call: :func:`_refine` from ``guess``, the heading check, :func:`_stats` at
-    the pose kept.  Returns the pose, its robust cost and :func:`_stats`' tuple.
+    the pose kept and its :func:`_conditioning`.  Returns the pose, its robust cost, :func:`_stats`' tuple
+    and :func:`_conditioning`'s.
 
     The heading check (``hwin > 0``): a refinement that kept a wrong heading (a guess several degrees
     off: a burst of scan stamps the odometry cannot place) is a local minimum the likelihood field
@@ -600,7 +601,8 @@ def _track(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, to
     m = scales.shape[0] - 1
     H, wr2, sw, n_in, n_used, sr, n_runs, n_unk = _stats(field, A, b, far, px, py, pose, scales[m], loss,
                                                          outliers[m], inlier, lx, ly, backcos, off, unk, Ac, bc)
-    return pose, cost, H, wr2, sw, n_in, n_used, sr, n_runs, n_unk
+    ev0, ev2, Hinv = _conditioning(H, px, py)
+    return pose, cost, (H, wr2, sw, n_in, n_used, sr, n_runs, n_unk), (ev0, ev2, Hinv)
 
 
 @njit(cache=True, fastmath=True)
@@ -1019,22 +1021,22 @@ class NativeMatcher(FrontendBase):
         best: FloatArray | None = None
         best_cost = np.inf
         best_stats: tuple[Any, ...] | None = None  # _stats at ``best`` when already computed
+        best_cond: tuple[Any, ...] | None = None  # and its _conditioning
         need_search = self.search == "always"
         refined: list[tuple[FloatArray, float]] = []  # refined poses within the jump limit, with costs
         if self.search != "always":
             hstride = max(1, int(math.ceil(2 * n / max(self.search_max_points, 1))))
-            pose, cost, *track_stats = _track(
+            pose, cost, stats, cond = _track(
                 self.field, self.A, self.b, self.far, px, py, np.asarray(guess, dtype=float), self.scales,
                 self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m, self.lik,
                 self.Ac, self.bc, hstride, self.heading_window, self.heading_step, self.accept.max_jump_m,
                 self.accept.max_jump, self.accept.inlier_dist, self.cells,
             )
-            stats = tuple(track_stats)
             jump_ok = self.accept.within_jump(pose, guess)
             if jump_ok:
                 refined.append((pose, cost))
             if jump_ok or self.search == "never":
-                best, best_cost, best_stats = pose, cost, stats
+                best, best_cost, best_stats, best_cond = pose, cost, stats, cond
             need_search = self.search == "auto" and not (jump_ok and stats[3] / n >= self.search_trigger)
         if need_search:
             searched = True
@@ -1051,7 +1053,7 @@ class NativeMatcher(FrontendBase):
                 if self.accept.within_jump(pose, guess):
                     refined.append((pose, cost))
                     if cost < best_cost:
-                        best, best_cost, best_stats = pose, cost, None
+                        best, best_cost, best_stats, best_cond = pose, cost, None, None
         if best is None:
             return no_fix(
                 f"native: no pose within {self.accept.max_jump_m:.2f} m / {math.degrees(self.accept.max_jump):.0f} deg "
@@ -1077,7 +1079,7 @@ class NativeMatcher(FrontendBase):
         if rejected is not None:
             return rejected
         # degeneracy: eigenvalues of H with yaw scaled by a typical range (metres per radian)
-        ev0, ev2, Hinv = _conditioning(H, px, py)
+        ev0, ev2, Hinv = _conditioning(H, px, py) if best_cond is None else best_cond
         if not (math.isfinite(ev0) and math.isfinite(ev2) and ev0 > self.accept.min_eigen_ratio * ev2 and ev2 > 0):
             return no_fix(
                 f"native: degenerate geometry (Hessian eigenvalue ratio {ev0 / max(ev2, 1e-300):.1e})",

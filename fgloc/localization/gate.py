@@ -54,6 +54,17 @@ back-end keeps rejecting is searched for globally, which in a building that look
 can end in the wrong one).  Where the map sides with the fix, the back-end may be the one that drifted
 (wheels slipping under an EKF sure of them): the fixes follow it as before.
 
+Nor does a creep: fixes that move a few centimetres a scan off the odometry's path, each following the
+last within the slip allowance, and a back-end that follows them (a smoother whose own gate takes what
+this one passes), so that neither the prediction nor the previous fix ever objects.  Every fix is also
+measured against an anchor, a fix the map sided with, carried on by the odometry since: one further from
+it than the two fixes' covariances and half the map's distance scale allow (the finest the scan's
+agreement tells apart) is taken only where the map explains the scan better at the fix than anywhere
+near the anchor carried on (within the slip allowance: an odometry that slipped leaves that pose where
+the map explains the scan worse than at a right fix, and the anchor moves to the fix).  Otherwise it is
+held as a jump.  At most once a second the map judges a fix that did not depart as well, and the anchor
+moves to it when the map sides with it, so the odometry's drift since the anchor stays small.
+
 Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of
 :func:`scan_agreement`) to the covariances: a jump smaller than the map can tell apart is no jump
 (an odometry whose stamps come in bursts, as in the Radish logs, is often a few centimetres off
@@ -71,12 +82,12 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fgloc.geometry import between1, between_values, compose1, wrap_scalar
+from fgloc.localization.agreement import agreement_sigma, agreements, neighbourhood, scan_agreement
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
@@ -85,8 +96,6 @@ if TYPE_CHECKING:
 
 FloatArray = np.ndarray
 
-#: beams whose endpoint the map's distance field does not cover (off the grid) count as this far (m)
-OFF_GRID_M = 10.0
 #: the prediction's agreement is the best within this many sigmas of its covariance (neighbourhood())
 NEIGHBOURHOOD_SIGMAS = 3.0
 #: a fix whose position sigma is within this many of the prediction's (and the slip allowance) is sure
@@ -96,118 +105,8 @@ SURE_SIGMAS = 2.0
 VELOCITY_SPAN_S = 0.25
 #: ... when they span at least this long
 VELOCITY_MIN_SPAN_S = 0.1
-
-
-def scan_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: FloatArray,
-                   sigma_m: float, points: FloatArray | None = None, max_beams: int | None = None,
-                   min_beams: int = 1) -> float:
-    """How well ``scan`` agrees with the map at ``base_link`` pose ``pose``: the mean over its valid
-    beams of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance from the beam's endpoint to the nearest
-    occupied cell (bilinear on the map's distance field).  1: every endpoint on a mapped wall; 0: none
-    near one.  NaN for a scan with fewer than ``min_beams`` valid beams.  ``points``: the scan's
-    endpoints in the laser frame when the caller has them (``scan.points()``).
-
-    ``max_beams`` (what a monitor measuring every few scans needs, at a quarter of the cost): at most
-    that many beams, evenly spread (every ``ceil(n / max_beams)``-th, the valid ones of those), and the
-    field at each endpoint's cell, not interpolated (a pose wrong by more than a cell, not a fix a few
-    centimetres off); ``points`` is then not used."""
-    if max_beams is not None:  # one pose: no arrays of poses
-        beams = _sampled_beams(scan, int(max_beams))
-        if beams[4] < min_beams:
-            return math.nan
-        return _nearest_agreement(occ_map, laser_mount, beams, np.asarray(pose, dtype=float).reshape(3).tolist(),
-                                  sigma_m)
-    return float(agreements(occ_map, laser_mount, scan, np.asarray(pose, dtype=float).reshape(1, 3), sigma_m,
-                            points, min_beams)[0])
-
-
-def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, poses: FloatArray,
-               sigma_m: float, points: FloatArray | None = None, min_beams: int = 1) -> FloatArray:
-    """:func:`scan_agreement` at each of ``poses`` ``(K, 3)`` (every valid beam, bilinear)."""
-    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    pts = scan.points() if points is None else points
-    if len(pts) < max(min_beams, 1):
-        return np.full(len(poses), np.nan)
-    m = np.asarray(laser_mount.pose, dtype=float)
-    cb, sb = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    ox = poses[:, 0] + cb * m[0] - sb * m[1]  # the laser in the map frame, per pose
-    oy = poses[:, 1] + sb * m[0] + cb * m[1]
-    yaw = poses[:, 2] + m[2]
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    qx = ox[:, None] + c * pts[None, :, 0] - s * pts[None, :, 1]
-    qy = oy[:, None] + s * pts[None, :, 0] + c * pts[None, :, 1]
-    d = occ_map.distance_at(np.column_stack([qx.ravel(), qy.ravel()]), outside=OFF_GRID_M)
-    d = np.where(np.isfinite(d), d, OFF_GRID_M).reshape(len(poses), len(pts))
-    return np.asarray(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2), axis=1), dtype=float)
-
-
-@lru_cache(maxsize=16)
-def _beam_directions(n: int, angle_min: float, angle_increment: float, step: int) -> tuple[FloatArray, ...]:
-    """The indices, cosines and sines of every ``step``-th of ``n`` beams (read-only)."""
-    idx = np.arange(0, n, step)
-    a = angle_min + angle_increment * idx
-    out = (idx, np.cos(a), np.sin(a))
-    for v in out:
-        v.flags.writeable = False
-    return out
-
-
-def _sampled_beams(scan: LaserScan, max_beams: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int]:
-    """``(r, cos, sin, valid, n_valid)`` of every ``ceil(n / max_beams)``-th beam of ``scan``: its range (0
-    where the beam is not valid: outside ``[range_min, range_max]``, NaN), direction, validity, and how
-    many are valid."""
-    n = len(scan.ranges)
-    idx, ca, sa = _beam_directions(n, scan.angle_min, scan.angle_increment, max(1, -(-n // max(max_beams, 1))))
-    r = np.asarray(scan.ranges, dtype=float)[idx]
-    ok = (r >= max(float(scan.range_min), 1e-9)) & (r <= float(scan.range_max))  # NaN (and inf) compare false
-    return np.where(ok, r, 0.0), ca, sa, ok, int(np.count_nonzero(ok))
-
-
-def _nearest_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform,
-                       beams: tuple[FloatArray, FloatArray, FloatArray, FloatArray, int], pose: list[float],
-                       sigma_m: float) -> float:
-    """:func:`scan_agreement` of the valid ones of ``beams`` (:func:`_sampled_beams`) at ``pose``, the
-    distance field at each endpoint's cell (scalar maths for the pose: one pose costs ~15 array ops)."""
-    r, ca, sa, ok, n_ok = beams
-    df = occ_map.distance_field
-    h, w = df.shape
-    x, y, yaw = pose
-    mx, my, myaw = np.asarray(laser_mount.pose, dtype=float).reshape(3).tolist()
-    cb, sb = math.cos(yaw), math.sin(yaw)
-    # the laser in the grid's frame (cells as units): the map's origin may be rotated
-    ox, oy, oyaw = np.asarray(occ_map.origin[:3], dtype=float).reshape(3).tolist()
-    dx, dy = x + cb * mx - sb * my - ox, y + sb * mx + cb * my - oy
-    co, so, inv = math.cos(oyaw), math.sin(oyaw), 1.0 / float(occ_map.resolution)
-    gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
-    th = yaw + myaw - oyaw
-    c, s = math.cos(th) * inv, math.sin(th) * inv
-    cols = np.floor(gx + r * (c * ca - s * sa)).astype(np.intp)
-    rows = np.floor(gy + r * (s * ca + c * sa)).astype(np.intp)
-    # inside the grid: 0 <= col < w and 0 <= row < h (a negative index is a huge one unsigned); the cells
-    # looked up in the flat field (numpy's clip costs more than the rest of the measurement)
-    inside = (cols.view(np.uintp) < w) & (rows.view(np.uintp) < h)
-    d = np.where(inside, df.ravel().take(np.where(inside, rows * w + cols, 0)), OFF_GRID_M)
-    return float(np.dot(np.exp(d * d * (-0.5 / sigma_m**2)), ok)) / n_ok
-
-
-def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, floor_rad: float) -> FloatArray:
-    """Poses around ``pose`` as far as ``cov`` allows: ``0, +-k sigma`` in x and y and ``0, +-k sigma / 2,
-    +-k sigma`` in heading (each sigma at least its floor), ``(45, 3)``."""
-    sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
-    sx, sy, sth = max(k * float(sd[0]), floor_m), max(k * float(sd[1]), floor_m), max(k * float(sd[2]), floor_rad)
-    gx, gy, gth = np.meshgrid([-sx, 0.0, sx], [-sy, 0.0, sy], [-sth, -sth / 2, 0.0, sth / 2, sth], indexing="ij")
-    out = np.column_stack([gx.ravel(), gy.ravel(), gth.ravel()]) + np.asarray(pose, dtype=float).reshape(1, 3)
-    return np.asarray(out, dtype=float)
-
-
-def agreement_sigma(occ_map: OccupancyMap, configured_m: float | None) -> float:
-    """The distance scale of :func:`scan_agreement`: the configured one, else the map's cell (a wall
-    known to its cell) or its declared accuracy, whichever is larger."""
-    if configured_m is not None:
-        return float(configured_m)
-    acc = getattr(occ_map, "accuracy_m", None)
-    acc = float(acc) if acc is not None and math.isfinite(float(acc)) else 0.0
-    return max(float(occ_map.resolution), acc)
+#: the anchor of the fixes' departure from the odometry moves to a fix the map sides with at most this often
+ANCHOR_REFRESH_S = 1.0
 
 
 def innovation(fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> tuple[FloatArray, float]:
@@ -331,6 +230,9 @@ class JumpGate:
         self._judged: tuple[_Previous, Motion | None, bool, FloatArray, FloatArray, _HeldRun | None] | None = None
         #: ``(t0, t1, delta bytes, corrected)``: the caller's ``motion(t0, t1, delta)`` for the scan being judged
         self.known_motion: tuple[float, float, bytes, FloatArray] | None = None
+        self._anchor: _Previous | None = None  # the fix the fixes' departure from the odometry is measured from
+        self._anchor_next: _Previous | None = None  # ... what it becomes when the fix just passed is used
+        self._anchor_checked = -math.inf  # when the map last judged a fix against it
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
@@ -341,6 +243,9 @@ class JumpGate:
         self._recent.clear()
         self._held = None
         self._judged = None
+        self._anchor = None
+        self._anchor_next = None
+        self._anchor_checked = -math.inf
 
     def settled(self, used: bool, pose_confirmed: bool, scan: LaserScan) -> None:
         """What the back-end did with the fix :meth:`check` passed last (``scan``'s): :meth:`accepted` when it
@@ -370,6 +275,7 @@ class JumpGate:
         self._judged = None
         self._pending = None
         self._taken = None
+        self._anchor_next = None
         self.previous = None
         self._held = self._held_follows(fix, cur.odom, cur.t, motion, covered, pred_cov[:2, :2].copy(), run)
         return True
@@ -379,6 +285,9 @@ class JumpGate:
         self.previous = self._pending
         self._pending = None
         self._judged = None
+        if self._anchor_next is not None:
+            self._anchor = self._anchor_next
+            self._anchor_next = None
         if self._taken is not None:
             self._recent.append(self._taken)
             while len(self._recent) > 2 and self._taken[0] - self._recent[1][0] >= VELOCITY_SPAN_S:
@@ -411,6 +320,7 @@ class JumpGate:
         self._pending = None
         self._taken = None
         self._judged = None
+        self._anchor_next = None
         R = np.asarray(fix.cov, dtype=float)
         P = np.asarray(pred_cov, dtype=float)
         covered = motion_known and motion_covered
@@ -458,6 +368,14 @@ class JumpGate:
             d2_lag = mahalanobis2_2x2(cx - float(pred[0]), cy - float(pred[1]), (p00 + c00) + s2, p01 + c01,
                                       p10 + c10, (p11 + c11) + s2)
             take = take or (d2_prev <= self.cfg.gate_chi2 and d2_prev < d2_lag)
+        if take and motion_known:
+            departed = self._departure(fix, odom_pose, t, motion, covered, scan)
+            if departed is not None:
+                self.previous = None
+                self._held = self._held_follows(fix, odom_pose, t, motion, covered, P[:2, :2].copy(), run,
+                                                follows_run)
+                return GateVerdict(False, d2, jump_m, jump_deg, departed[0], departed[1], why=departed[2],
+                                   d2_previous=d2_prev, covered=motion_covered)
         if take:
             self._held = None
             pose_c = np.array(fix.pose, dtype=float)
@@ -493,6 +411,8 @@ class JumpGate:
             pose_c = np.array(fix.pose, dtype=float)
             self._taken = (float(t), pose_c)
             self._pending = _Previous(pose_c, R.copy(), odom_c, float(t))
+            if motion_known:
+                self._anchor_next = self._pending
             self._judged = (self._pending, motion, covered, np.array(pred, dtype=float), P.copy(),
                             run if follows_run else None)
         else:
@@ -500,6 +420,49 @@ class JumpGate:
             self._held = self._held_follows(fix, odom_pose, t, motion, covered, P[:2, :2].copy(), run,
                                             follows_run)
         return v
+
+    def _departure(self, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None, covered: bool,
+                   scan: LaserScan) -> tuple[float, float, str] | None:
+        """Whether the fixes departed from the odometry's motion since the anchor (the last fix the odometry
+        could not explain that the map sided with, or the first): ``fix`` further from the anchor carried
+        on by the odometry than their covariances and the map's resolution allow, while the map explains the
+        scan at least as well near that pose (within the slip allowance) as at the fix.  Then ``(agreement
+        near the anchor carried on, at the fix, why)``: the fix is held.  None: it may be taken (the anchor
+        becomes the fix where the map sided with it, or where no odometry covers the time since)."""
+        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float),
+                        np.array(odom_pose, dtype=float), float(t))
+        anchor = self._anchor
+        if anchor is None or not covered or not t > anchor.t:
+            self._anchor_next = cur
+            return None
+        delta = between1(anchor.odom, odom_pose)
+        if motion is not None:
+            delta = self._motion(motion, anchor.t, t, delta)
+        carried = compose1(anchor.pose, delta)
+        s2 = self.sigma_m**2
+        S = cur.cov[:2, :2] + anchor.cov[:2, :2]
+        ex, ey = float(fix.pose[0]) - float(carried[0]), float(fix.pose[1]) - float(carried[1])
+        # beyond what the map's agreement tells apart (half its distance scale, as agreement()'s neighbourhood):
+        # the map, not the floor, judges a departure
+        q = s2 / 4.0
+        d2 = mahalanobis2_2x2(ex, ey, float(S[0, 0]) + q, float(S[0, 1]), float(S[1, 0]), float(S[1, 1]) + q)
+        departed = d2 > self.cfg.gate_chi2
+        if not departed and t - max(anchor.t, self._anchor_checked) < ANCHOR_REFRESH_S:
+            return None
+        self._anchor_checked = float(t)
+        # the pose the odometry says, within what it may have slipped since the anchor
+        near_cov = anchor.cov + slip_allowance(delta, self.cfg.odometry_slip)
+        a_odo, a_fix = self.agreement(PoseFix(cur.t, cur.pose, cur.cov), carried, near_cov, scan)
+        if not (math.isfinite(a_odo) and math.isfinite(a_fix)) or a_fix > a_odo:
+            self._anchor_next = cur
+            return None
+        if not departed:
+            return None
+        dist = math.hypot(float(delta[0]), float(delta[1]))
+        why = (f"held back: the fixes left the odometry's path by {math.hypot(ex, ey):.2f} m over {dist:.1f} m "
+               f"driven since {t - anchor.t:.1f} s (d2 {d2:.0f}), and the map does not side with them "
+               f"(agreement {a_fix:.2f} at the fix, {a_odo:.2f} near the odometry's)")
+        return a_odo, a_fix, why
 
     def _follows(self, prev: _Previous, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
                  covered: bool) -> bool:

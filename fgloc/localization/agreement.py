@@ -1,0 +1,135 @@
+"""How well a scan agrees with the map at a pose: the mean Gaussian likelihood of its beam endpoints on the
+map's distance field (:func:`scan_agreement`), at many poses (:func:`agreements`), the poses around a
+prediction as far as its covariance allows (:func:`neighbourhood`), and the distance scale
+(:func:`agreement_sigma`).  The jump gate (:mod:`fgloc.localization.gate`) and the consistency monitor judge
+by it.  Core maths only: no I/O."""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from fgloc.maps import OccupancyMap
+from fgloc.types import LaserScan, StaticTransform
+
+FloatArray = np.ndarray
+
+#: beams whose endpoint the map's distance field does not cover (off the grid) count as this far (m)
+OFF_GRID_M = 10.0
+
+
+def scan_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: FloatArray,
+                   sigma_m: float, points: FloatArray | None = None, max_beams: int | None = None,
+                   min_beams: int = 1) -> float:
+    """How well ``scan`` agrees with the map at ``base_link`` pose ``pose``: the mean over its valid
+    beams of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance from the beam's endpoint to the nearest
+    occupied cell (bilinear on the map's distance field).  1: every endpoint on a mapped wall; 0: none
+    near one.  NaN for a scan with fewer than ``min_beams`` valid beams.  ``points``: the scan's
+    endpoints in the laser frame when the caller has them (``scan.points()``).
+
+    ``max_beams`` (what a monitor measuring every few scans needs, at a quarter of the cost): at most
+    that many beams, evenly spread (every ``ceil(n / max_beams)``-th, the valid ones of those), and the
+    field at each endpoint's cell, not interpolated (a pose wrong by more than a cell, not a fix a few
+    centimetres off); ``points`` is then not used."""
+    if max_beams is not None:  # one pose: no arrays of poses
+        beams = _sampled_beams(scan, int(max_beams))
+        if beams[4] < min_beams:
+            return math.nan
+        return _nearest_agreement(occ_map, laser_mount, beams, np.asarray(pose, dtype=float).reshape(3).tolist(),
+                                  sigma_m)
+    return float(agreements(occ_map, laser_mount, scan, np.asarray(pose, dtype=float).reshape(1, 3), sigma_m,
+                            points, min_beams)[0])
+
+
+def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, poses: FloatArray,
+               sigma_m: float, points: FloatArray | None = None, min_beams: int = 1) -> FloatArray:
+    """:func:`scan_agreement` at each of ``poses`` ``(K, 3)`` (every valid beam, bilinear)."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    pts = scan.points() if points is None else points
+    if len(pts) < max(min_beams, 1):
+        return np.full(len(poses), np.nan)
+    m = np.asarray(laser_mount.pose, dtype=float)
+    cb, sb = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    ox = poses[:, 0] + cb * m[0] - sb * m[1]  # the laser in the map frame, per pose
+    oy = poses[:, 1] + sb * m[0] + cb * m[1]
+    yaw = poses[:, 2] + m[2]
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    qx = ox[:, None] + c * pts[None, :, 0] - s * pts[None, :, 1]
+    qy = oy[:, None] + s * pts[None, :, 0] + c * pts[None, :, 1]
+    d = occ_map.distance_at(np.column_stack([qx.ravel(), qy.ravel()]), outside=OFF_GRID_M)
+    d = np.where(np.isfinite(d), d, OFF_GRID_M).reshape(len(poses), len(pts))
+    return np.asarray(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2), axis=1), dtype=float)
+
+
+@lru_cache(maxsize=16)
+def _beam_directions(n: int, angle_min: float, angle_increment: float, step: int) -> tuple[FloatArray, ...]:
+    """The indices, cosines and sines of every ``step``-th of ``n`` beams (read-only)."""
+    idx = np.arange(0, n, step)
+    a = angle_min + angle_increment * idx
+    out = (idx, np.cos(a), np.sin(a))
+    for v in out:
+        v.flags.writeable = False
+    return out
+
+
+def _sampled_beams(scan: LaserScan, max_beams: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int]:
+    """``(r, cos, sin, valid, n_valid)`` of every ``ceil(n / max_beams)``-th beam of ``scan``: its range (0
+    where the beam is not valid: outside ``[range_min, range_max]``, NaN), direction, validity, and how
+    many are valid."""
+    n = len(scan.ranges)
+    idx, ca, sa = _beam_directions(n, scan.angle_min, scan.angle_increment, max(1, -(-n // max(max_beams, 1))))
+    r = np.asarray(scan.ranges, dtype=float)[idx]
+    ok = (r >= max(float(scan.range_min), 1e-9)) & (r <= float(scan.range_max))  # NaN (and inf) compare false
+    return np.where(ok, r, 0.0), ca, sa, ok, int(np.count_nonzero(ok))
+
+
+def _nearest_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform,
+                       beams: tuple[FloatArray, FloatArray, FloatArray, FloatArray, int], pose: list[float],
+                       sigma_m: float) -> float:
+    """:func:`scan_agreement` of the valid ones of ``beams`` (:func:`_sampled_beams`) at ``pose``, the
+    distance field at each endpoint's cell (scalar maths for the pose: one pose costs ~15 array ops)."""
+    r, ca, sa, ok, n_ok = beams
+    df = occ_map.distance_field
+    h, w = df.shape
+    x, y, yaw = pose
+    mx, my, myaw = np.asarray(laser_mount.pose, dtype=float).reshape(3).tolist()
+    cb, sb = math.cos(yaw), math.sin(yaw)
+    # the laser in the grid's frame (cells as units): the map's origin may be rotated
+    ox, oy, oyaw = np.asarray(occ_map.origin[:3], dtype=float).reshape(3).tolist()
+    dx, dy = x + cb * mx - sb * my - ox, y + sb * mx + cb * my - oy
+    co, so, inv = math.cos(oyaw), math.sin(oyaw), 1.0 / float(occ_map.resolution)
+    gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
+    th = yaw + myaw - oyaw
+    c, s = math.cos(th) * inv, math.sin(th) * inv
+    cols = np.floor(gx + r * (c * ca - s * sa)).astype(np.intp)
+    rows = np.floor(gy + r * (s * ca + c * sa)).astype(np.intp)
+    # inside the grid: 0 <= col < w and 0 <= row < h (a negative index is a huge one unsigned); the cells
+    # looked up in the flat field (numpy's clip costs more than the rest of the measurement)
+    inside = (cols.view(np.uintp) < w) & (rows.view(np.uintp) < h)
+    d = np.where(inside, df.ravel().take(np.where(inside, rows * w + cols, 0)), OFF_GRID_M)
+    return float(np.dot(np.exp(d * d * (-0.5 / sigma_m**2)), ok)) / n_ok
+
+
+def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, floor_rad: float) -> FloatArray:
+    """Poses around ``pose`` as far as ``cov`` allows: ``0, +-k sigma`` in x and y and ``0, +-k sigma / 2,
+    +-k sigma`` in heading (each sigma at least its floor), ``(45, 3)``."""
+    sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
+    sx, sy, sth = max(k * float(sd[0]), floor_m), max(k * float(sd[1]), floor_m), max(k * float(sd[2]), floor_rad)
+    gx, gy, gth = np.meshgrid([-sx, 0.0, sx], [-sy, 0.0, sy], [-sth, -sth / 2, 0.0, sth / 2, sth], indexing="ij")
+    out = np.column_stack([gx.ravel(), gy.ravel(), gth.ravel()]) + np.asarray(pose, dtype=float).reshape(1, 3)
+    return np.asarray(out, dtype=float)
+
+
+def agreement_sigma(occ_map: OccupancyMap, configured_m: float | None) -> float:
+    """The distance scale of :func:`scan_agreement`: the configured one, else the map's cell (a wall
+    known to its cell) or its declared accuracy, whichever is larger."""
+    if configured_m is not None:
+        return float(configured_m)
+    acc = getattr(occ_map, "accuracy_m", None)
+    acc = float(acc) if acc is not None and math.isfinite(float(acc)) else 0.0
+    return max(float(occ_map.resolution), acc)
+
+
+__all__ = ["OFF_GRID_M", "agreement_sigma", "agreements", "neighbourhood", "scan_agreement"]

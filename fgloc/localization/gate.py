@@ -138,7 +138,8 @@ class GateVerdict:
     agree_fix: float | None = None   # ... and at the fix
     why: str = ""
     confirmed: bool = False        # taken beyond the gate because the map confirmed it
-    d2_previous: float | None = None  # ... from the previous fix carried by the odometry (None: no previous)
+    d2_previous: float | None = None  # ... from the previous fix carried by the odometry (None: no previous, or
+    #                                   the prediction took the fix)
     covered: bool = True           # the odometry's stamps covered the time since the previous fix
 
 
@@ -349,8 +350,9 @@ class JumpGate:
         allow = 0.0 if last is None else (slip * math.hypot(*between_values(last, odom_pose)[:2])) ** 2
         odom_c = self._last_odom = np.array(odom_pose, dtype=float)  # (copies read, never written: shared below)
         prev = self.previous
-        vel = None if covered else self.fix_velocity()
-        if prev is not None and (vel is not None or covered):
+        # the previous fix is asked only when the prediction does not take the fix (it can only add a take)
+        vel = None if covered or take else self.fix_velocity()
+        if not take and prev is not None and (vel is not None or covered):
             if vel is not None:  # the odometry does not cover the time since: the fixes' own motion
                 delta = vel * max(0.0, t - prev.t)
             else:

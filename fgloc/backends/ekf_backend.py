@@ -244,7 +244,9 @@ class EKFBackend(Backend):
         sole = self._odometry_sole()
         if self._last_odom_t is not None and t > self._last_odom_t:
             step = t - self._last_odom_t
-            self._turned += abs(float(tw[2])) * step
+            w_abs = abs(float(tw[2]))
+            if w_abs > scale_min_rate:   # a turn, not a yaw rate differenced from ticks flickering about zero
+                self._turned += w_abs * step
             typical = _median(self._odom_steps) if self._odom_steps else math.inf
             self._odom_steps.append(step)
             # the interval's mean velocity: for the odometry alone (nothing else measures the velocity

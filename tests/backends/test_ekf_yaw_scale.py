@@ -58,3 +58,32 @@ def test_flickering_wheel_yaw_keeps_the_scale_and_the_turn_in_place_keeps_the_he
         assert 0.8 < scale < 1.25, (seed, scale)
         assert worst_deg < 1.5, (seed, worst_deg, sigma_deg)
 
+
+
+def test_flicker_alone_is_no_turn_for_the_scale_state():
+    """Driving straight, the wheels' yaw rate flickering by a tick (0.03 rad/s, under 3 sigmas of its
+    claimed noise) for 40 s adds no yaw-rate scale state (summed whole, the flicker passed the 0.3 rad
+    of turning the state waits for); a turn of 0.5 rad/s for 1 s then adds it."""
+    from fgloc.backends.ekf_backend import YAW_SCALE_STATE
+
+    rng = np.random.default_rng(3)
+    be = EKFBackend()
+    be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    dt, odom_cov = 0.02, np.diag([1e-4, 1e-4, 9e-4])
+    yaw_wheels, last_count, flicker = 0.0, 0, 0.0
+    states = []
+    for k in range(1, int(41.0 / dt) + 1):
+        t = k * dt
+        w = 0.5 if t > 40.0 else 0.0
+        yaw_wheels += w * dt
+        count = round((yaw_wheels + rng.normal(0.0, 0.5 * TICK_RAD)) / TICK_RAD)
+        w_wheels, last_count = (count - last_count) * TICK_RAD / dt, count
+        if t <= 40.0:
+            flicker += abs(w_wheels) * dt
+        be.add_odometry(t, np.array([0.5, 0.0, w_wheels]), odom_cov)
+        if k % 5 == 2:
+            be.add_compass(t, None, 0.0, w + rng.normal(0.0, 0.005), 2.5e-5)
+        if abs(t - 40.0) < 1e-9 or k == int(41.0 / dt):
+            states.append(YAW_SCALE_STATE in be.ekf.aug)
+    assert flicker > 0.3
+    assert states == [False, True]

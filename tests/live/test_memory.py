@@ -127,7 +127,7 @@ def test_the_scan_latency_window_is_held_from_the_first_pair():
         grown = tracemalloc.get_traced_memory()[0] - first
     finally:
         tracemalloc.stop()
-    assert first >= 2 * 2000 * 5 * 8 and grown < 4096, (first, grown)
+    assert first >= 2000 * 5 * 8 and grown < 4096, (first, grown)  # the window's 2000 rows of 5 floats
     newest = LatencyEstimator(max_rows=2000, refit_every=1, refit_share=0.0)
     for k in range(x.size - 2000, x.size):
         newest.add(x[k], r[k], 1e-4, ref[k], k % 2)

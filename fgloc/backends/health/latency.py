@@ -30,8 +30,6 @@ LONG_PAIR_S = (0.8, 1.2)
 #: s: a pair is evaluated once its later fix is this much older than the newest fix (the fixes'
 #: own speed around it is known)
 SETTLE_S = 0.25
-#: rows a latency estimator's buffer starts with (it doubles as the pairs come)
-FIRST_ROWS = 256
 #: s: distance pairs only this long or longer: a consecutive pair's few cm cannot tell a lag from slip
 MIN_DISTANCE_PAIR_S = 0.5
 
@@ -65,9 +63,10 @@ class LatencyEstimator:
         self.refit_share = float(refit_share)
         self.max_rows = int(max_rows)
         # the rows (x, r, var, ref, kind) in an array, appended in place: its last ``_nrows`` lines
-        # are the newest ``max_rows`` pairs (40 B a row); it grows with the pairs (doubling from
-        # :data:`FIRST_ROWS`) up to the window plus an eighth (0.9 MB for 20000 rows), then the rows
-        # kept are moved to its front once it is full (every ``max_rows / 8`` pairs)
+        # are the newest ``max_rows`` pairs (40 B a row); the window plus an eighth (0.9 MB for 20000
+        # rows), allocated and written at the first pair (resident from then on: a live session's memory
+        # does not grow as it fills); the rows kept are moved to its front once it is full (every
+        # ``max_rows / 8`` pairs)
         self._nrows = 0
         self._buf = np.empty((0, 5))
         self._nbuf = 0
@@ -91,16 +90,12 @@ class LatencyEstimator:
             return
         row = (float(x), float(r), float(var), float(ref), int(kind))
         self._nrows = min(self._nrows + 1, self.max_rows)
-        if self._nbuf == len(self._buf):
-            cap = self.max_rows + max(self.max_rows // 8, 1)
-            if len(self._buf) < cap:   # grown: the rows copied over
-                buf = np.zeros((min(max(2 * len(self._buf), FIRST_ROWS), cap), 5))
-                buf[:self._nbuf] = self._buf[:self._nbuf]
-                self._buf = buf
-            else:   # full: the rows still kept to the front
-                k = self._nrows - 1
-                self._buf[:k] = self._buf[self._nbuf - k:self._nbuf].copy()
-                self._nbuf = k
+        if not len(self._buf):
+            self._buf = np.full((self.max_rows + max(self.max_rows // 8, 1), 5), 0.0)
+        elif self._nbuf == len(self._buf):   # full: the rows still kept to the front
+            k = self._nrows - 1
+            self._buf[:k] = self._buf[self._nbuf - k:self._nbuf].copy()
+            self._nbuf = k
         self._buf[self._nbuf] = row
         self._nbuf += 1
         self.n += 1

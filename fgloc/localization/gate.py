@@ -371,7 +371,7 @@ class JumpGate:
                                       p10 + c10, (p11 + c11) + s2)
             take = take or (d2_prev <= self.cfg.gate_chi2 and d2_prev < d2_lag)
         if take and motion_known:
-            departed = self._departure(fix, odom_pose, t, motion, covered, scan)
+            departed = self._departure(fix, odom_c, t, motion, covered, scan)
             if departed is not None:
                 self.previous = None
                 self._held = self._held_follows(fix, odom_pose, t, motion, covered, P[:2, :2].copy(), run,
@@ -430,9 +430,9 @@ class JumpGate:
         on by the odometry than their covariances and the map's resolution allow, while the map explains the
         scan at least as well near that pose (within the slip allowance) as at the fix.  Then ``(agreement
         near the anchor carried on, at the fix, why)``: the fix is held.  None: it may be taken (the anchor
-        becomes the fix where the map sided with it, or where no odometry covers the time since)."""
-        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float),
-                        np.array(odom_pose, dtype=float), float(t))
+        becomes the fix where the map sided with it, or where no odometry covers the time since).
+        ``odom_pose``: :meth:`check`'s copy of the odometry pose (read, never written: the anchor keeps it)."""
+        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float), odom_pose, float(t))
         anchor = self._anchor
         if anchor is None or not covered or not t > anchor.t:
             self._anchor_next = cur
@@ -454,7 +454,7 @@ class JumpGate:
         self._anchor_checked = float(t)
         # the pose the odometry says, within what it may have slipped since the anchor
         near_cov = anchor.cov + slip_allowance(delta, self.cfg.odometry_slip)
-        a_odo, a_fix = self.agreement(PoseFix(cur.t, cur.pose, cur.cov), carried, near_cov, scan)
+        a_odo, a_fix = self.agreement(fix, carried, near_cov, scan)
         if not (math.isfinite(a_odo) and math.isfinite(a_fix)) or a_fix > a_odo:
             self._anchor_next = cur
             return None

@@ -121,7 +121,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
     planar = b2 == 0.0 and b5 == 0.0 and b6 == 0.0 and b7 == 0.0 and b8 == 1.0  # a yaw-only mount (or none)
     q = msg.orientation_xyzw
     if q is not None:
-        qa = q.ravel().tolist() if isinstance(q, np.ndarray) and q.size == 4 else _unit_floats(q, 4)
+        qa = _unit_floats(q, 4)
         n = math.sqrt(qa[0] * qa[0] + qa[1] * qa[1] + qa[2] * qa[2] + qa[3] * qa[3]) if qa is not None \
             else math.nan
         oc = _cov_values(msg.orientation_cov)
@@ -158,7 +158,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
     heading_rate: float | None = None
     w = msg.angular_velocity_radps
     if w is not None:
-        wa = w.ravel().tolist() if isinstance(w, np.ndarray) and w.size == 3 else _unit_floats(w, 3)
+        wa = _unit_floats(w, 3)
         wc = _cov_values(msg.angular_velocity_cov)
         why = None if wc is None else _cov_ok(wc)
         if wa is None or not (math.isfinite(wa[0]) and math.isfinite(wa[1]) and math.isfinite(wa[2])):

@@ -12,7 +12,10 @@ import gc
 import importlib
 import inspect
 import logging
+import re
 import sys
+import typing
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -47,6 +50,90 @@ def registered(modules: tuple[str, ...] | list[str]) -> typer.Typer:
     return sub
 
 
+#: a number as a command line writes one, which ``float()`` / ``int()`` read exactly as typer's coercion does
+_FLOAT = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?")
+_INT = re.compile(r"-?(?:0|[1-9]\d{0,17})")
+
+
+class _Declined(ValueError):
+    """A value :class:`PlainCoercion` leaves to typer's own coercion."""
+
+
+class PlainCoercion:
+    """A typer parameter's coercion of the plain values a command line gives (a string, a path, a number
+    written as such, a tuple of them, a value through the option's ``parser``) without typer's pydantic
+    TypeAdapters: importing pydantic and building an adapter per option cost every ``fgloc run`` ~0.1 s
+    of CPU.  Anything else (a choice, a range, a bool given as text, a value that fails) goes to typer's
+    own coercion, which gives the value or the error message; the values taken here are the ones it gives
+    (tests/test_cli_coercion.py compares them)."""
+
+    def __init__(self, descriptor: Any, build: Any) -> None:
+        self.descriptor = descriptor
+        self._build = build  # typer's coercion of this parameter, built when a value is declined
+        self._typer: Any = None
+
+    def coerce(self, value: Any, param: Any, ctx: Any) -> Any:
+        multi = param.multiple or param.nargs == -1
+        if value is None and not multi:
+            return None
+        if not multi:
+            try:
+                return self.plain(value, param, ctx)
+            except Exception:  # noqa: BLE001  typer's coercion gives the value, or the error, its way
+                pass
+        if self._typer is None:
+            self._typer = self._build(self.descriptor)
+        return self._typer.coerce(value, param=param, ctx=ctx)
+
+    def plain(self, value: Any, param: Any = None, ctx: Any = None) -> Any:
+        """The value as typer's coercion gives it; :class:`_Declined` (or the parser's error) otherwise."""
+        d = self.descriptor
+        args = typing.get_args(d.annotation)
+        if typing.get_origin(d.annotation) is tuple and args and Ellipsis not in args:
+            if not isinstance(value, tuple) or len(value) != len(args):
+                raise _Declined(value)
+            return tuple(self._leaf(a, v, param, ctx) for a, v in zip(args, value, strict=True))
+        return self._leaf(d.annotation, value, param, ctx)
+
+    def _leaf(self, annotation: Any, value: Any, param: Any, ctx: Any) -> Any:
+        info = self.descriptor.parameter_info
+        if not isinstance(value, str):
+            raise _Declined(value)
+        if info.parser is not None:
+            return info.parser(value)
+        if annotation is str:
+            return value
+        ranged = info.min is not None or info.max is not None
+        if annotation is float and not ranged and _FLOAT.fullmatch(value):
+            return float(value)
+        if annotation is int and not ranged and _INT.fullmatch(value):
+            return int(value)
+        if isinstance(annotation, type) and issubclass(annotation, Path) and info.path_type is None and value \
+                and "\0" not in value:
+            from typer._param_types import coerce_cli_path
+
+            return coerce_cli_path(annotation(value), info, path_type=annotation, param=param, ctx=ctx)
+        raise _Declined(value)
+
+
+def plain_coercion(cmd: Any, ctx: Any = None) -> Any:
+    """``cmd`` (and its subcommands) with :class:`PlainCoercion` on each parameter typer coerces through
+    pydantic (typer 0.29's lazy per-parameter coercion; an older typer has none: ``cmd`` as it is); with
+    ``ctx``, its help option too."""
+    try:
+        from typer._coercion import build_runtime_param
+    except ImportError:
+        return cmd
+    for p in cmd.params if ctx is None else cmd.get_params(ctx):
+        desc = vars(p).get("type_descriptor")
+        if desc is not None and "_runtime_param" in vars(p) and p._runtime_param is None and \
+                desc.file_annotation is None and not desc.is_choice:
+            p._runtime_param = PlainCoercion(desc, build_runtime_param)
+    for sub in (vars(cmd).get("commands") or {}).values():
+        plain_coercion(sub, ctx)
+    return cmd
+
+
 class LazyCommands(typer.core.TyperGroup):
     """The root command: each of :data:`COMMANDS` is built when it is asked for (run, or its own help)."""
 
@@ -56,8 +143,12 @@ class LazyCommands(typer.core.TyperGroup):
     def get_command(self, ctx: Any, cmd_name: str) -> Any:
         if cmd_name not in self.commands and cmd_name in COMMANDS:
             for name, cmd in typer.main.get_group(registered(COMMANDS[cmd_name])).commands.items():
-                self.commands.setdefault(name, cmd)
+                self.commands.setdefault(name, plain_coercion(cmd, ctx))
         return self.commands.get(cmd_name)
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        plain_coercion(self, ctx)  # the root's own options (--version, --help)
+        return super().parse_args(ctx, args)
 
     def resolve_command(self, ctx: Any, args: list[str]) -> Any:
         if args and args[0] not in self.commands and args[0] not in COMMANDS:

@@ -36,8 +36,9 @@ def test_cli_import_pulls_in_no_heavy_library() -> None:
 # the fixed layouts of fgloc.io.fastcdr, the ground truth included)
 # the live localizer (its config sections live in fgloc.live.config: composing the config imported
 # the serial link, its protocol and threads, 0.012 s of CPU), the mcap package's record classes (the
-# summary's chunk indexes and statistics are read with struct: 0.005 s)
-NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm", "rich", "mcap_ros2", "fgloc.live.app",
+# summary's chunk indexes and statistics are read with struct: 0.005 s), pydantic (typer's option coercion:
+# fgloc.cli.PlainCoercion parses a command line's plain values)
+NOT_FOR_RUN = ("matplotlib", "open3d", "kiss_icp", "ray", "tqdm", "rich", "mcap_ros2", "fgloc.live.app", "pydantic",
                "fgloc.live.serial_link", "mcap.records")
 
 

@@ -114,7 +114,7 @@ def _nearest_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform,
 
 def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, floor_rad: float) -> FloatArray:
     """Poses around ``pose`` as far as ``cov`` allows: ``0, +-k sigma`` in x and y and ``0, +-k sigma / 2,
-    +-k sigma`` in heading (each sigma at least its floor), ``(45, 3)``."""
+    +-k sigma`` in heading (each sigma at least its floor), ``(45, 3)``; ``pose`` itself the middle one."""
     sd = np.sqrt(np.maximum(np.diag(np.asarray(cov, dtype=float)), 0.0))
     sx, sy, sth = max(k * float(sd[0]), floor_m), max(k * float(sd[1]), floor_m), max(k * float(sd[2]), floor_rad)
     gx, gy, gth = np.meshgrid([-sx, 0.0, sx], [-sy, 0.0, sy], [-sth, -sth / 2, 0.0, sth / 2, sth], indexing="ij")

@@ -454,11 +454,13 @@ class JumpGate:
         self._anchor_checked = float(t)
         # the pose the odometry says, within what it may have slipped since the anchor
         near_cov = anchor.cov + slip_allowance(delta, self.cfg.odometry_slip)
+        if not departed:
+            if self.map_prefers_fix(fix, carried, near_cov, scan):
+                self._anchor_next = cur
+            return None
         a_odo, a_fix = self.agreement(fix, carried, near_cov, scan)
         if not (math.isfinite(a_odo) and math.isfinite(a_fix)) or a_fix > a_odo:
             self._anchor_next = cur
-            return None
-        if not departed:
             return None
         dist = math.hypot(float(delta[0]), float(delta[1]))
         why = (f"held back: the fixes left the odometry's path by {math.hypot(ex, ey):.2f} m over {dist:.1f} m "
@@ -510,18 +512,39 @@ class JumpGate:
         return (0, math.nan) if self._held is None else (self._held.n, self._held.t0)
 
 
-    def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> tuple[float, float]:
+    def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
+                  points: FloatArray | None = None) -> tuple[float, float]:
         """``(near the prediction, at the fix)``: the best :func:`scan_agreement` within
-        :data:`NEIGHBOURHOOD_SIGMAS` of the prediction's covariance, and the agreement at the fix."""
-        pts = scan.points()
-        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
-        # the heading that moves the scan's median return by it
-        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
-        near = neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
-                             self.sigma_m / max(r_med, self.sigma_m) / 2)
+        :data:`NEIGHBOURHOOD_SIGMAS` of the prediction's covariance, and the agreement at the fix.
+        ``points``: ``scan.points()`` when the caller has them."""
+        pts = scan.points() if points is None else points
+        near = self._near(pred, pred_cov, pts)
         a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
                        self.sigma_m, pts)
         return float(np.max(a[:-1])), float(a[-1])
+
+    def _near(self, pred: FloatArray, pred_cov: FloatArray, pts: FloatArray) -> FloatArray:
+        """The poses near the prediction :meth:`agreement` judges (:func:`neighbourhood`, the prediction in
+        the middle)."""
+        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
+        # the heading that moves the scan's median return by it
+        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
+        return neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
+                             self.sigma_m / max(r_med, self.sigma_m) / 2)
+
+    def map_prefers_fix(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> bool:
+        """Whether the map explains ``scan`` better at the fix than anywhere near the prediction (``a_fix >
+        a_pred`` of :meth:`agreement`, or either not finite): judged first against the prediction itself,
+        where the answer is usually settled, then against the whole neighbourhood."""
+        pts = scan.points()
+        if len(pts):
+            near = self._near(pred, pred_cov, pts)
+            a = agreements(self.map, self.laser_mount, scan,
+                           np.vstack([near[len(near) // 2], np.asarray(fix.pose, dtype=float)]), self.sigma_m, pts)
+            if math.isfinite(float(a[0])) and math.isfinite(float(a[1])) and a[0] >= a[1]:
+                return False
+        a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)
+        return not (math.isfinite(a_pred) and math.isfinite(a_fix)) or a_fix > a_pred
 
     def map_confirms(self, a_pred: float, a_fix: float) -> bool:
         """Whether the map explains the scan clearly better at the fix than anywhere near the prediction

@@ -97,6 +97,7 @@ LOSS_CAUCHY = 1
 ALIAS_RANGE_M = 2.0
 ALIAS_STEP_M = 0.1
 ALIAS_SCORE_RATIO = 0.7
+ALIAS_STEPS = int(round(ALIAS_RANGE_M / ALIAS_STEP_M))
 
 
 # ----------------------------------------------------------------- numba kernels
@@ -623,6 +624,135 @@ def _alias_refines(lik, Ac, bc, stride, pose, c00, c01, c11, step, n, ratio, fie
     return poses, costs
 
 
+@njit(cache=True)
+def _wrap_exact(a):  # pragma: no cover - compiled
+    """:func:`fgloc.geometry.wrap_scalar`, compiled without fastmath (the same bits: fmod is exact)."""
+    w = np.fmod(a + math.pi, 2.0 * math.pi)
+    if w < 0:
+        w += 2.0 * math.pi
+    return w - math.pi
+
+
+@njit(cache=True)
+def _fix_cov(px, py, best, best_cost, wr2, sw, n_runs, Hinv, rposes, rcosts, sxy, syaw, lik, Ac, bc, stride, step, n,  # noqa: E501
+             ratio, field, A, b, far, ascales, aoutliers, loss, max_iter, tol, lx, ly, backcos, off, floor,
+             finish):  # pragma: no cover - compiled
+    """An accepted fix's covariance (the module's step 4): ``S s^2 (sum w / runs) H^-1 S`` (``sxy``,
+    ``syaw``: ``S``'s diagonal, diagonal: elementwise), widened by the spread of the refined
+    candidates ``rposes`` (costs ``rcosts``) and of the aliases (:func:`_alias_refines` from the
+    second annealing stage on: ``ascales``, ``aoutliers``) that explain the scan nearly as well;
+    with ``finish`` the ``floor`` matrix added and the result symmetrized.  Returns the covariance
+    and ``s^2``.  No fastmath: each operation rounded as numpy's array code rounds it."""
+    sigma2 = wr2 / max(sw - 3.0, 1.0)
+    per_run = sw / max(n_runs, 1)
+    k = sigma2 * per_run
+    cov = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            cov[i, j] = k * Hinv[i, j]
+    if not (sxy == 1.0 and syaw == 1.0):
+        S = np.array([sxy, sxy, syaw])
+        for i in range(3):
+            for j in range(3):
+                cov[i, j] = (S[i] * cov[i, j]) * S[j]
+    temp = max(k, 1e-12)
+    aposes, acosts = _alias_refines(lik, Ac, bc, stride, best, cov[0, 0], cov[0, 1], cov[1, 1], step, n, ratio,
+                                    field, A, b, far, px, py, ascales, aoutliers, loss, max_iter, tol, lx, ly,
+                                    backcos, off)
+    spread = np.zeros((3, 3))
+    widened = False
+    wsum = 1.0
+    d = np.empty(3)
+    m0 = rposes.shape[0]
+    for j in range(m0 + aposes.shape[0]):
+        if j < m0:
+            for i in range(3):
+                d[i] = rposes[j, i] - best[i]
+            ccost = rcosts[j]
+        else:
+            for i in range(3):
+                d[i] = aposes[j - m0, i] - best[i]
+            ccost = acosts[j - m0]
+        d[2] = _wrap_exact(d[2])
+        if math.hypot(d[0], d[1]) < 1e-3 and abs(d[2]) < 1e-4:
+            continue
+        dc = ccost - best_cost
+        wc = math.exp(-(dc if dc > 0.0 else 0.0) / temp)
+        if wc > 1e-4:
+            widened = True
+            for i in range(3):
+                for i2 in range(3):
+                    spread[i, i2] += wc * (d[i] * d[i2])
+            wsum += wc
+    if widened:
+        for i in range(3):
+            for j in range(3):
+                cov[i, j] = cov[i, j] + spread[i, j] / wsum
+    if finish:
+        c = np.empty((3, 3))
+        for i in range(3):
+            for j in range(3):
+                c[i, j] = cov[i, j] + floor[i, j]
+        for i in range(3):
+            for j in range(3):
+                cov[i, j] = 0.5 * (c[i, j] + c[j, i])
+    return cov, sigma2
+
+
+@njit(cache=True)
+def _track_fix(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, tol, lx, ly, backcos, off,  # noqa: E501
+               lik, Ac, bc, hstride, hwin, hstep, max_jump_m, max_jump, inlier, unk, trigger, min_inliers,
+               min_fraction, min_eigen_ratio, sxy, syaw, astride, astep, an, aratio, ascales, aoutliers, floor,
+               finish):  # pragma: no cover - compiled
+    """A tracked scan to its fix in one call: :func:`_track`, then, when its pose is within the jump
+    limits of ``guess`` and at least ``trigger`` of the points are inliers (no correlative search
+    wanted), the acceptance tests of :meth:`NativeMatcher._match` and :func:`_fix_cov`.
+
+    Returns :func:`_track`'s four values, whether the fix was accepted here, the accepted pose (yaw
+    wrapped), the unknown-space points counted (0 when the laser stands off the map's free space),
+    the covariance and ``s^2``.  Not accepted here: :meth:`NativeMatcher._match` goes on from
+    :func:`_track`'s values (a search, or a no-fix with its reason)."""
+    pose, cost, stats, cond = _track(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, tol, lx,
+                                     ly, backcos, off, lik, Ac, bc, hstride, hwin, hstep, max_jump_m, max_jump,
+                                     inlier, unk)
+    fpose = pose.copy()
+    no_cov = np.empty((3, 3))
+    n = px.shape[0]
+    H, wr2, sw, n_in, n_used, sr, n_runs, n_unk = stats
+    ev0, ev2, Hinv = cond
+    if not (math.hypot(pose[0] - guess[0], pose[1] - guess[1]) <= max_jump_m
+            and abs(_wrap_exact(pose[2] - guess[2])) <= max_jump and n_in / n >= trigger):
+        return pose, cost, stats, cond, False, fpose, n_unk, no_cov, 0.0
+    fpose[2] = _wrap_exact(fpose[2])
+    if n_unk > 0:  # NativeMatcher._laser_on_free
+        c = math.cos(fpose[2])
+        s = math.sin(fpose[2])
+        ox = fpose[0] + c * lx - s * ly
+        oy = fpose[1] + s * lx + c * ly
+        u = Ac[0, 0] * ox + Ac[0, 1] * oy + bc[0] + 0.5
+        v = Ac[1, 0] * ox + Ac[1, 1] * oy + bc[1] + 0.5
+        h, w = unk.shape
+        if not (0.0 <= u and u < w and 0.0 <= v and v < h and unk[int(v), int(u)] == 0):
+            n_unk = 0
+    nn = max(n - n_unk, (n + 1) // 2)
+    if n_in < min_inliers or n_in / nn < min_fraction:
+        return pose, cost, stats, cond, False, fpose, n_unk, no_cov, 0.0
+    if (math.hypot(fpose[0] - guess[0], fpose[1] - guess[1]) > max_jump_m
+            or abs(_wrap_exact(fpose[2] - guess[2])) > max_jump):
+        return pose, cost, stats, cond, False, fpose, n_unk, no_cov, 0.0
+    if not (math.isfinite(ev0) and math.isfinite(ev2) and ev0 > min_eigen_ratio * ev2 and ev2 > 0):
+        return pose, cost, stats, cond, False, fpose, n_unk, no_cov, 0.0
+    rposes = np.empty((1, 3))
+    rposes[0, 0] = pose[0]
+    rposes[0, 1] = pose[1]
+    rposes[0, 2] = pose[2]
+    rcosts = np.full(1, cost)
+    cov, sigma2 = _fix_cov(px, py, pose, cost, wr2, sw, n_runs, Hinv, rposes, rcosts, sxy, syaw, lik, Ac, bc, astride,
+                           astep, an, aratio, field, A, b, far, ascales, aoutliers, loss, max_iter, tol, lx, ly,
+                           backcos, off, floor, finish)
+    return pose, cost, stats, cond, True, fpose, n_unk, cov, sigma2
+
+
 @njit(cache=True, fastmath=True)
 def _conditioning(H, px, py):  # pragma: no cover - compiled
     """Smallest and largest eigenvalue of ``S H S`` (yaw scaled by the RMS point range, metres per
@@ -932,6 +1062,11 @@ class NativeMatcher(FrontendBase):
         self.map_accuracy_m = map_accuracy(occ_map, conf.map_accuracy_m, "native")
         self.floor_sigma_m = registration_sigma(self.map_accuracy_m, occ_map.resolution)
         self._lb = (float(self.pre.mount[0]), float(self.pre.mount[1]), float(conf.backface_cos))
+        first = 1 if len(self.scales) > 1 else 0  # aliases: from the second annealing stage on (_fix_cov)
+        self._alias_scales = np.ascontiguousarray(self.scales[first:])
+        self._alias_outliers = np.ascontiguousarray(self.outliers[first:])
+        kxy, kyaw = self.accept.cov_inflation
+        self._cov_scale = (math.sqrt(kxy), math.sqrt(kyaw))
 
         k = max(int(conf.field_upsample), 1)
         # the field is zero on the faces; the surface depth is added per residual (adaptive in auto mode)
@@ -990,27 +1125,52 @@ class NativeMatcher(FrontendBase):
         return _stats(self.field, self.A, self.b, self.far, px, py, pose, c, self.loss, out,  # type: ignore[no-any-return]
                       self.accept.inlier_dist, *self._lb, self.depth_m, self.cells, self.Ac, self.bc)
 
-    def _aliases(self, px: FloatArray, py: FloatArray, pose: FloatArray, cov: FloatArray
-                 ) -> list[tuple[FloatArray, float]]:
-        """Refined poses at other local maxima of the likelihood-field score along the fix's least
-        constrained direction (``ALIAS_RANGE_M``): a corridor's doors, a row of shelves.
+    def _fix_cov(self, px: FloatArray, py: FloatArray, best: FloatArray, best_cost: float, stats: tuple[Any, ...],
+                 Hinv: FloatArray, refined: list[tuple[FloatArray, float]]) -> tuple[FloatArray, float]:
+        """The covariance of the fix ``best`` (see :func:`_fix_cov`) and ``s^2``: registration floor and
+        ``cov_floor`` added.
 
-        Each from the second annealing stage on (when there are several): the first stage's wide
-        kernel (outliers out to ``outlier_schedule_m[0]``, 1 m) pulls a start 0.25-2 m off back into
-        the fix's own basin, which is no alias (on the office run with every scan matched, 156 of the
-        167 alias refinements that weighed in ended within 4 mm of the fix); from the second stage
-        the candidate settles where it is and is weighed by how well the scan fits there (aliases
-        0.2-0.9 m off that weighed in: 10 from the first stage, 11 from the second), in 27 passes
-        over the points instead of 37."""
-        stride = max(1, int(math.ceil(len(px) / max(self.search_max_points, 1))))
-        first = 1 if len(self.scales) > 1 else 0
-        poses, costs = _alias_refines(
-            self.lik, self.Ac, self.bc, stride, pose, float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1]),
-            ALIAS_STEP_M, int(round(ALIAS_RANGE_M / ALIAS_STEP_M)), ALIAS_SCORE_RATIO, self.field, self.A, self.b,
-            self.far, px, py, self.scales[first:], self.outliers[first:], self.loss, self.max_iterations,
-            self.tolerance, *self._lb, self.depth_m,
+        The aliases (other local maxima of the likelihood-field score along the fix's least
+        constrained direction, ``ALIAS_RANGE_M``: a corridor's doors, a row of shelves) are refined
+        from the second annealing stage on (when there are several): the first stage's wide kernel
+        (outliers out to ``outlier_schedule_m[0]``, 1 m) pulls a start 0.25-2 m off back into the
+        fix's own basin, which is no alias (on the office run with every scan matched, 156 of the 167
+        alias refinements that weighed in ended within 4 mm of the fix); from the second stage the
+        candidate settles where it is and is weighed by how well the scan fits there (aliases 0.2-0.9
+        m off that weighed in: 10 from the first stage, 11 from the second), in 27 passes over the
+        points instead of 37."""
+        rposes = np.array([p for p, _ in refined], dtype=float).reshape(-1, 3)
+        rcosts = np.array([c for _, c in refined], dtype=float)
+        cov, sigma2 = _fix_cov(
+            px, py, best, best_cost, stats[1], stats[2], int(stats[6]), Hinv, rposes, rcosts, *self._cov_scale,
+            self.lik, self.Ac, self.bc, self._alias_stride(len(px)), ALIAS_STEP_M, ALIAS_STEPS, ALIAS_SCORE_RATIO,
+            self.field, self.A, self.b, self.far, self._alias_scales, self._alias_outliers, self.loss,
+            self.max_iterations, self.tolerance, *self._lb, self.depth_m, self.accept.cov_floor,
+            self.floor_sigma_m <= 0,
         )
-        return [(poses[j], float(costs[j])) for j in range(len(costs))]
+        if self.floor_sigma_m > 0:
+            cov = self.accept.finish(cov + registration_floor(stats[0], self.floor_sigma_m))
+        return cov, float(sigma2)
+
+    def _alias_stride(self, n: int) -> int:
+        """Every how many points of ``n`` the alias profile scores (``search_max_points`` at most)."""
+        return max(1, int(math.ceil(n / max(self.search_max_points, 1))))
+
+    def _fixed(self, pose: FloatArray, cov: FloatArray, sigma2: float, n_in: int, n: int, sum_r: float,
+               info: dict[str, Any]) -> MatchResult:
+        """The accepted fix; the auto surface depth follows it."""
+        quality = n_in / n
+        info["sigma_m"] = math.sqrt(sigma2)
+        info["surface_depth_m"] = self.depth_m
+        if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:
+            # the mean signed inlier residual says how far the walls are from where the map puts
+            # them; a running mean over good fixes (a map property, kept across reset())
+            self._depth_updates += 1
+            est = self.depth_m - sum_r / n_in
+            self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
+            self.depth_m = min(max(self.depth_m, 0.0), float(self.map.resolution))  # np.clip's value
+        info["time_s"] = time.perf_counter() - info["time_s"]
+        return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
 
     def _match(self, points: FloatArray, guess: FloatArray, scan: LaserScan) -> MatchResult:
         t0 = time.perf_counter()
@@ -1025,13 +1185,23 @@ class NativeMatcher(FrontendBase):
         need_search = self.search == "always"
         refined: list[tuple[FloatArray, float]] = []  # refined poses within the jump limit, with costs
         if self.search != "always":
+            # the tracked scan: refined from the guess and, when no search is wanted and the fix
+            # passes every test below, its covariance, all in one compiled call
             hstride = max(1, int(math.ceil(2 * n / max(self.search_max_points, 1))))
-            pose, cost, stats, cond = _track(
-                self.field, self.A, self.b, self.far, px, py, np.asarray(guess, dtype=float), self.scales,
-                self.outliers, self.loss, self.max_iterations, self.tolerance, *self._lb, self.depth_m, self.lik,
-                self.Ac, self.bc, hstride, self.heading_window, self.heading_step, self.accept.max_jump_m,
-                self.accept.max_jump, self.accept.inlier_dist, self.cells,
+            a = self.accept
+            pose, cost, stats, cond, done, fpose, n_unk, cov, sigma2 = _track_fix(
+                self.field, self.A, self.b, self.far, px, py, guess, self.scales, self.outliers, self.loss,
+                self.max_iterations, self.tolerance, *self._lb, self.depth_m, self.lik, self.Ac, self.bc, hstride,
+                self.heading_window, self.heading_step, a.max_jump_m, a.max_jump, a.inlier_dist, self.cells,
+                self.search_trigger if self.search == "auto" else -1.0, a.min_inliers, a.min_inlier_fraction,
+                a.min_eigen_ratio, *self._cov_scale, self._alias_stride(n), ALIAS_STEP_M, ALIAS_STEPS,
+                ALIAS_SCORE_RATIO, self._alias_scales, self._alias_outliers, a.cov_floor, self.floor_sigma_m <= 0,
             )
+            if done:
+                if self.floor_sigma_m > 0:
+                    cov = a.finish(cov + registration_floor(stats[0], self.floor_sigma_m))
+                info = {"searched": False, "time_s": t0, "n_points": n, "n_unknown": int(n_unk)}
+                return self._fixed(fpose, cov, sigma2, int(stats[3]), n, stats[5], info)
             jump_ok = self.accept.within_jump(pose, guess)
             if jump_ok:
                 refined.append((pose, cost))
@@ -1085,46 +1255,12 @@ class NativeMatcher(FrontendBase):
                 f"native: degenerate geometry (Hessian eigenvalue ratio {ev0 / max(ev2, 1e-300):.1e})",
                 n_inliers=n_in, quality=quality, **info,
             )
-        sigma2 = wr2 / max(sw - 3.0, 1.0)
-        # beams of one run share its map error: sw / runs beams per independent error
-        per_run = sw / max(int(n_runs), 1)
-        cov = self.accept.inflate(sigma2 * per_run * Hinv)
-        # distinct refined candidates that explain the scan almost as well (a world changed since
-        # the map: moved furniture offers a second alignment) widen it to their spread; likelihood
-        # ratio exp(-dcost / T) with the same beams-per-run tempering, T = s^2 sw / runs
-        temp = max(sigma2 * per_run, 1e-12)
-        refined = refined + self._aliases(px, py, best, cov)
-        spread: FloatArray | None = None  # built at the first candidate that widens the covariance
-        wsum = 1.0
-        for cpose, ccost in refined:
-            d = cpose - best
-            d[YAW] = wrap_scalar(d[YAW])
-            if math.hypot(d[0], d[1]) < 1e-3 and abs(d[YAW]) < 1e-4:
-                continue
-            wc = math.exp(-max(ccost - best_cost, 0.0) / temp)
-            if wc > 1e-4:
-                if spread is None:
-                    spread = np.zeros((3, 3))
-                spread += wc * np.outer(d, d)
-                wsum += wc
-        # a zero spread or floor is not added: adding exact zeros changes no bit (finish's floor
-        # turns a -0.0 off the diagonal into +0.0 either way)
-        if spread is not None:
-            cov = cov + spread / wsum
-        if self.floor_sigma_m > 0:
-            cov = cov + registration_floor(H, self.floor_sigma_m)
-        cov = self.accept.finish(cov)
-        info["sigma_m"] = math.sqrt(sigma2)
-        info["surface_depth_m"] = self.depth_m
-        if self.auto_depth and quality >= self.depth_min_quality and n_in > 0:
-            # the mean signed inlier residual says how far the walls are from where the map puts
-            # them; a running mean over good fixes (a map property, kept across reset())
-            self._depth_updates += 1
-            est = self.depth_m - sum_r / n_in
-            self.depth_m += (est - self.depth_m) / min(self._depth_updates, self.depth_window)
-            self.depth_m = min(max(self.depth_m, 0.0), float(self.map.resolution))  # np.clip's value
-        info["time_s"] = time.perf_counter() - t0
-        return MatchResult(True, pose, cov, quality=float(quality), reason="", n_inliers=n_in, info=info)
+        # beams of one run share its map error (sw / runs beams per independent error); distinct
+        # refined candidates that explain the scan almost as well (a world changed since the map:
+        # moved furniture offers a second alignment) widen it to their spread
+        cov, sigma2 = self._fix_cov(px, py, best, best_cost, best_stats, Hinv, refined)
+        info["time_s"] = t0
+        return self._fixed(pose, cov, sigma2, n_in, n, sum_r, info)
 
 
 def warmup() -> None:

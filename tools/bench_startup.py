@@ -8,8 +8,8 @@ of what it adds:
 
 * ``python -c pass``: the interpreter and site;
 * ``import fgloc.cli``: typer and the command modules (every command, ``--help`` included);
-* ``fgloc run`` parsed: its arguments through typer (typer's coercion imports pydantic), up to
-  the command's first line;
+* ``fgloc run`` parsed: its arguments through typer (the plain values without typer's pydantic
+  coercion: ``fgloc.cli.PlainCoercion``), up to the command's first line;
 * ``+ import numpy``, ``+ numba``, ``+ gtsam``, ``+ fgloc.localization`` (the localizer's
   modules, the back-ends, the map, the front-ends' numba functions defined);
 * ``+ numba's first cached function``: a cached ``@njit`` function called once (numba's target
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[tuple[str, list[str], dict[str, str]]] = [
         ("python -c pass", py("pass"), env),
         ("import fgloc.cli", py("import fgloc.cli"), env),
-        ("fgloc run parsed (typer: pydantic)", py(STOP_AT_RUN) + run_args, env),
+        ("fgloc run parsed (typer)", py(STOP_AT_RUN) + run_args, env),
         ("+ import numpy", py("import fgloc.cli, numpy"), env),
         ("+ import numba", py("import fgloc.cli, numpy, numba"), env),
         ("+ import gtsam", py("import fgloc.cli, numpy, numba, gtsam"), env),

@@ -142,9 +142,21 @@ def covariance_ellipse(cov: FloatArray, sigmas: float = COVARIANCE_SIGMAS, n: in
     c = 0.5 * (c + c.T)
     w, v = np.linalg.eigh(c)
     w = np.sqrt(np.maximum(w, 0.0)) * sigmas
-    a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    unit = np.column_stack([np.cos(a) * w[0], np.sin(a) * w[1]])
+    cos_a, sin_a = _circle(n)
+    unit = np.column_stack([cos_a * w[0], sin_a * w[1]])
     return unit @ v.T
+
+
+_CIRCLES: dict[int, tuple[FloatArray, FloatArray]] = {}
+
+
+def _circle(n: int) -> tuple[FloatArray, FloatArray]:
+    """The cosines and sines of ``n`` angles evenly around the circle from 0 (made once per ``n``)."""
+    c = _CIRCLES.get(n)
+    if c is None:
+        a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        c = _CIRCLES[n] = (np.cos(a), np.sin(a))
+    return c
 
 
 def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:

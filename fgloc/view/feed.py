@@ -29,8 +29,7 @@ at the same stamp, as a ROS localizer publishes it.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -59,17 +58,43 @@ ODOM_ONLY = "odom_only"      # no map: scans only place keyframes
 ODOM_EXTRAPOLATE_MAX_S = 0.5  # carry the last odometry to a stamp at most this far
 
 
-@dataclass
 class ScanView:
-    """One scan as the view shows it."""
+    """One scan as the view shows it: ``fix`` the front-end's fix (accepted or rejected), if any;
+    ``fused`` the fused pose after this scan (None before start); ``transforms`` parent -> child at
+    ``fused.stamp``.
 
-    stamp: float
-    scan: LaserScan
-    status: str
-    reason: str
-    fix: PoseFix | None                 # the front-end's fix (accepted or rejected), if any
-    fused: PoseFix | None               # the fused pose after this scan (None before start)
-    transforms: list[StaticTransform] = field(default_factory=list)  # parent -> child at fused.stamp
+    ``transforms_of`` (instead of ``transforms``): what makes them, called at their first read (a
+    sink that skips the scan, as the recorder does most scans the front-end did not match, never
+    pays for them); the feed's maker works from the odometry it had when the view was made.  A
+    view pickles with its transforms made."""
+
+    __slots__ = ("_transforms", "_transforms_of", "fix", "fused", "reason", "scan", "stamp", "status")
+
+    def __init__(self, stamp: float, scan: LaserScan, status: str, reason: str, fix: PoseFix | None,
+                 fused: PoseFix | None, transforms: list[StaticTransform] | None = None,
+                 transforms_of: Callable[[], list[StaticTransform]] | None = None) -> None:
+        self.stamp = stamp
+        self.scan = scan
+        self.status = status
+        self.reason = reason
+        self.fix = fix
+        self.fused = fused
+        self._transforms = transforms if transforms is not None or transforms_of is not None else []
+        self._transforms_of = transforms_of
+
+    @property
+    def transforms(self) -> list[StaticTransform]:
+        if self._transforms is None:
+            make, self._transforms_of = self._transforms_of, None
+            self._transforms = make() if make is not None else []
+        return self._transforms
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return ScanView, (self.stamp, self.scan, self.status, self.reason, self.fix, self.fused, self.transforms)
+
+    def __repr__(self) -> str:
+        return (f"ScanView(stamp={self.stamp!r}, status={self.status!r}, reason={self.reason!r}, fix={self.fix!r}, "
+                f"fused={self.fused!r})")
 
 
 class ViewSink(Protocol):
@@ -234,16 +259,15 @@ class ViewFeed:
 
     def odom_pose_at(self, t: float) -> FloatArray | None:
         """``odom -> base_link`` at ``t`` (the last odometry carried on with its twist), or None."""
-        if self._odom_pose is None or self._odom_t is None:
-            return None
-        dt = t - self._odom_t
-        if dt == 0.0 or abs(dt) > ODOM_EXTRAPOLATE_MAX_S:
-            return self._odom_pose
-        tw = self._twist
-        return compose1(self._odom_pose, se2_exp(np.array((float(tw[0]) * dt, float(tw[1]) * dt, float(tw[2]) * dt))))
+        return _odom_at(self._odom_pose, self._odom_t, self._twist, t)
 
     def transforms(self, fused: PoseFix | None, stamp: float, laser_frame: str) -> list[StaticTransform]:
         """``map -> odom``, ``odom -> base_link`` (when known) and ``base_link -> laser``."""
+        return self._transforms_at((self._odom_pose, self._odom_t, self._twist), fused, stamp, laser_frame)
+
+    def _transforms_at(self, odometry: tuple[Any, float | None, Any], fused: PoseFix | None, stamp: float,
+                       laser_frame: str) -> list[StaticTransform]:
+        """:meth:`transforms` with the odometry ``(pose, stamp, twist)`` the feed had then."""
         base = self.mount.parent or BASE_FRAME
         out: list[StaticTransform] = []
         if fused is not None:
@@ -252,13 +276,13 @@ class ViewFeed:
             if self.odom_mode:
                 out.append(StaticTransform(ODOM_FRAME, base, pose))
             else:
-                odom = self.odom_pose_at(t)
+                odom = _odom_at(*odometry, t)
                 if odom is None:  # no odometry (scans only): the map holds base_link directly
                     out.append(StaticTransform(MAP_FRAME, base, pose))
                 else:
                     out.append(StaticTransform(MAP_FRAME, ODOM_FRAME, compose1(pose, inverse1(odom))))  # type: ignore[arg-type]
                     out.append(StaticTransform(ODOM_FRAME, base, odom))
-        elif (odom := self.odom_pose_at(stamp)) is not None:
+        elif (odom := _odom_at(*odometry, stamp)) is not None:
             out.append(StaticTransform(ODOM_FRAME, base, odom))
         laser = self._laser_tf
         if laser is None or laser.parent != base or laser.child != laser_frame:  # the same one every scan
@@ -334,8 +358,10 @@ class ViewFeed:
     def _view(self, scan: LaserScan, status: str, reason: str, fix: PoseFix | None,
               fused: PoseFix | None) -> ScanView:
         stamp = float(scan.stamp)
+        odometry = (self._odom_pose, self._odom_t, self._twist)  # (the feed's odometry moves on)
+        frame = scan.frame_id or self.mount.child
         return ScanView(stamp, scan, status, reason, fix, fused,
-                        self.transforms(fused, stamp, scan.frame_id or self.mount.child))
+                        transforms_of=lambda: self._transforms_at(odometry, fused, stamp, frame))
 
     def _particles(self, stamp: float) -> None:
         fe = self.loc.frontend
@@ -390,6 +416,18 @@ class ViewFeed:
             # the back-end's online calibration (compass offset, wheel scales, gyro biases, latency)
             "estimates": be.estimates().as_dict(),
         })
+
+
+def _odom_at(pose: FloatArray | None, pose_t: float | None, twist: Any, t: float) -> FloatArray | None:
+    """The odometry ``pose`` of stamp ``pose_t`` carried on to ``t`` with ``twist`` (at most
+    ``ODOM_EXTRAPOLATE_MAX_S``), or None."""
+    if pose is None or pose_t is None:
+        return None
+    dt = t - pose_t
+    if dt == 0.0 or abs(dt) > ODOM_EXTRAPOLATE_MAX_S:
+        return pose
+    tw = twist
+    return compose1(pose, se2_exp(np.array((float(tw[0]) * dt, float(tw[1]) * dt, float(tw[2]) * dt))))
 
 
 def json_ready(v: Any) -> Any:

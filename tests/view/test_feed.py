@@ -286,3 +286,32 @@ def test_view_channels_in_an_mcap_decode_with_their_schemas(short_sim, tmp_path)
     for p in decoded[ch.POSE]:
         q = online.interpolate(stamp(p.timestamp))[0]
         assert np.hypot(p.pose.position.x - q[0], p.pose.position.y - q[1]) < 0.005
+
+
+class Eager(Collect):
+    """A view sink that reads each scan's transforms when it is given the scan."""
+
+    def on_scan(self, view):
+        self.scans.append([(t.parent, t.child, np.array(t.pose), t.z) for t in view.transforms])
+
+
+def test_transforms_read_later_are_those_of_their_scan(short_sim):
+    # the feed makes a scan's transforms when a sink first reads them (the recorder skips most
+    # unmatched scans): read after the run, from the odometry of their scan, not the last one
+    import pickle
+
+    loc = Localizer(short_sim.map, short_sim.laser_mount, backend="smoother", frontend="native",
+                    initial_pose=short_sim.ground_truth.poses[0])
+    late, eager = Collect(), Eager()
+    Session(loc, sinks=[ViewFeed(loc, [late]), ViewFeed(loc, [eager])]).run(short_sim.messages)
+    assert len(late.scans) == len(eager.scans) > 50
+    moved = 0
+    for v, now in zip(late.scans, eager.scans, strict=True):
+        then = [(t.parent, t.child, t.pose, t.z) for t in v.transforms]
+        assert [f[:2] for f in then] == [f[:2] for f in now] and [f[3] for f in then] == [f[3] for f in now]
+        assert all(np.array_equal(a[2], b[2]) for a, b in zip(then, now, strict=True))
+        moved += not np.array_equal(then[0][2], late.scans[-1].transforms[0].pose)
+    assert moved > 50  # the scans' transforms differ from the last scan's
+    v = pickle.loads(pickle.dumps(late.scans[len(late.scans) // 2]))
+    assert [(t.parent, t.child) for t in v.transforms] == [f[:2] for f in eager.scans[len(eager.scans) // 2]]
+    assert np.array_equal(v.transforms[0].pose, eager.scans[len(eager.scans) // 2][0][2])

@@ -234,6 +234,9 @@ class JumpGate:
         self._anchor: _Previous | None = None  # the fix the fixes' departure from the odometry is measured from
         self._anchor_next: _Previous | None = None  # ... what it becomes when the fix just passed is used
         self._anchor_checked = -math.inf  # when the map last judged a fix against it
+        #: ``(anchor, stamp, odometry pose, motion, stamp, odometry pose)``: the odometry's motion since the anchor
+        #: up to the fix before the last one the departure test judged (in the anchor's frame), and the last one's
+        self._carry: tuple[_Previous, float, FloatArray, FloatArray, float, FloatArray] | None = None
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
@@ -247,6 +250,7 @@ class JumpGate:
         self._anchor = None
         self._anchor_next = None
         self._anchor_checked = -math.inf
+        self._carry = None
 
     def settled(self, used: bool, pose_confirmed: bool, scan: LaserScan) -> None:
         """What the back-end did with the fix :meth:`check` passed last (``scan``'s): :meth:`accepted` when it
@@ -437,9 +441,7 @@ class JumpGate:
         if anchor is None or not covered or not t > anchor.t:
             self._anchor_next = cur
             return None
-        delta = between1(anchor.odom, odom_pose)
-        if motion is not None:
-            delta = self._motion(motion, anchor.t, t, delta)
+        delta = self._carried_motion(anchor, odom_pose, t, motion)
         carried = compose1(anchor.pose, delta)
         s2 = self.sigma_m**2
         S = cur.cov[:2, :2] + anchor.cov[:2, :2]
@@ -467,6 +469,28 @@ class JumpGate:
                f"driven since {t - anchor.t:.1f} s (d2 {d2:.0f}), and the map does not side with them "
                f"(agreement {a_fix:.2f} at the fix, {a_odo:.2f} near the odometry's)")
         return a_odo, a_fix, why
+
+    def _carried_motion(self, anchor: _Previous, odom_pose: FloatArray, t: float, motion: Motion | None
+                        ) -> FloatArray:
+        """The odometry's motion from ``anchor`` to ``t`` (``odom_pose`` then) in the anchor's frame, as the
+        back-end believes it happened, carried on fix by fix: the motion up to the fix before the last one
+        judged against the same anchor, then the increment to the last one (asked again now: a gyro's readings
+        cover it since), then the one since (``motion`` of it: the caller's own, :attr:`known_motion`, when
+        the last fix judged was the last scan's)."""
+        c = self._carry
+        if c is None or c[0] is not anchor or not t > c[4]:
+            c = (anchor, anchor.t, anchor.odom, np.zeros(3), anchor.t, anchor.odom)
+        _, t0, odom0, before, t1, odom1 = c
+        if t1 > t0:  # the last increment settled
+            inc = between1(odom0, odom1)
+            if motion is not None:
+                inc = motion(t0, t1, inc)
+            t0, odom0, before = t1, odom1, compose1(before, inc)
+        inc = between1(odom0, odom_pose)
+        if motion is not None:
+            inc = self._motion(motion, t0, float(t), inc)
+        self._carry = (anchor, t0, odom0, before, float(t), odom_pose)
+        return compose1(before, inc)
 
     def _follows(self, prev: _Previous, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
                  covered: bool) -> bool:

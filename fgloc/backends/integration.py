@@ -12,7 +12,7 @@ Core maths only.
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections.abc import Sequence
 
 import numpy as np
@@ -161,13 +161,24 @@ def chord_step(u: tuple[float, float, float], cv: tuple[float, float, float, flo
 
 
 def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
-                   weights: dict[int, float] | None = None) -> float | None:
+                  weights: dict[int, float] | None = None, mark: list[float] | None = None) -> float | None:
     """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly
     interpolated between them, from reading ``i`` on (the one at or before ``t0``); None where two
     readings the interval needs are more than ``max_gap`` apart.  ``weights``: each reading's
-    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`)."""
+    weight in the integral is added there (for the variance of :meth:`SlidingWindowSmoother._gyro_increment`).
+
+    ``mark`` (without ``weights``): a list that receives ``[t, d]`` after the last reading interval that
+    ended inside ``[t0, t1]`` (``t`` its end stamp, ``d`` the sum up to it: those terms depend on no later
+    reading), and from which a later call with the same ``t0`` (the caller keeps one mark per ``t0``)
+    resumes when ``t`` is at or before ``t1`` and still a reading's stamp: the same terms added in the
+    same order, without summing the prefix again."""
     d = 0.0
     n = len(ts)
+    if mark and weights is None and mark[0] <= t1:
+        j = bisect_left(ts, mark[0])
+        if j < n and ts[j] == mark[0]:
+            i, d = j, mark[1]
+    done = None
     while i < n - 1 and ts[i] < t1:
         ta, tb = ts[i], ts[i + 1]
         a = t0 if t0 > ta else ta   # max(ta, t0), min(tb, t1) without the builtins' calls
@@ -184,7 +195,11 @@ def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int
             if weights is not None:
                 weights[i] = weights.get(i, 0.0) + wi
                 weights[i + 1] = weights.get(i + 1, 0.0) + wj
+        if tb <= t1:
+            done = tb, d
         i += 1
+    if mark is not None and weights is None and done is not None:
+        mark[:] = done
     return d
 
 

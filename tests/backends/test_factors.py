@@ -124,3 +124,43 @@ def test_kernel_cache_bounded_when_the_scale_varies_per_factor():
     m = fx.robust(base, "huber", 2.5).robust()      # past the cache: made for this factor
     assert m.weight(1.0) == pytest.approx(1.0)
     assert m.weight(5.0) == pytest.approx(2.5 / 5.0)
+
+
+def test_rate_integral_resumed_from_its_mark_is_the_fresh_sum():
+    """A gyro integral from the same start to later and later stamps, resumed from its mark, gives the
+    fresh sum's exact float (the readings growing at the end and trimmed at the front meanwhile), and a
+    gap beyond ``max_gap`` still gives None."""
+    from bisect import bisect_right
+
+    from fgloc.backends.integration import rate_integral
+
+    rng = np.random.default_rng(3)
+    ts = np.cumsum(rng.uniform(0.005, 0.015, 1000)).tolist()
+    rs = rng.normal(0.0, 0.5, 1000).tolist()
+    t0 = ts[10] + 0.0031
+    mark: list[float] = []
+    n = 200
+    checked = 0
+    for t1 in np.linspace(t0 + 0.001, ts[-1] - 0.01, 150).tolist():
+        while n < len(ts) and ts[n - 1] < t1 + 0.05:
+            n += 1
+        view_t, view_r = ts[:n], rs[:n]
+        i = max(bisect_right(view_t, t0) - 1, 0)
+        fresh = rate_integral(view_t, view_r, t0, t1, i, 0.25)
+        resumed = rate_integral(view_t, view_r, t0, t1, i, 0.25, mark=mark)
+        assert resumed == fresh
+        checked += 1
+    assert checked == 150 and mark and mark[0] > ts[900]
+    # an earlier end than the mark's: summed from the start, the same answer
+    t1 = ts[100] + 0.002
+    assert rate_integral(ts, rs, t0, t1, 10, 0.25, mark=mark) == rate_integral(ts, rs, t0, t1, 10, 0.25)
+    # the readings before the mark trimmed (indices shift): resumed by the mark's stamp
+    k = 5
+    t1 = ts[-5]
+    full = rate_integral(ts, rs, t0, t1, 10, 0.25)
+    rate_integral(ts, rs, t0, ts[800], 10, 0.25, mark=mark)
+    assert rate_integral(ts[k:], rs[k:], t0, t1, 10 - k, 0.25, mark=mark) == full
+    # a gap after the mark: None, resumed or not
+    gap_t = ts[:900] + [t + 1.0 for t in ts[900:]]
+    assert rate_integral(gap_t, rs, t0, gap_t[-3], 10, 0.25, mark=mark) is None
+    assert rate_integral(gap_t, rs, t0, gap_t[-3], 10, 0.25) is None

@@ -78,7 +78,17 @@ class Streams(SmootherState):
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
         if not want_var:
-            d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap)
+            # predictions and motion corrections integrate from the same starts (the newest keyframe, an anchor
+            # fix tens of seconds back) to later and later stamps: resumed (the least recently used start dropped)
+            marks = self._rate_marks
+            mark = marks.pop((name, t0), None)
+            if mark is None:
+                mark = []
+                if len(marks) >= 8:
+                    del marks[next(iter(marks))]
+            marks[(name, t0)] = mark
+            i0 = bisect_right(ts, t0) - 1
+            d = rate_integral(ts, rs, t0, t1, 0 if 0 > i0 else i0, max_gap, mark=mark)
             return None if d is None else (d - self.gyro_bias_of(name) * (t1 - t0), 0.0)
         n = len(ts)
         w: dict[int, float] = {}

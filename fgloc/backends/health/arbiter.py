@@ -156,7 +156,7 @@ class Arbiter:
             t = t0
             n = len(ts)
             while t < t1 - 1e-12 and i < n:
-                tn = min(ts[i], t1)
+                tn = t1 if t1 < ts[i] else ts[i]   # min(ts[i], t1)
                 dt = tn - t
                 if dt > self.max_gap_s:
                     return None
@@ -178,7 +178,8 @@ class Arbiter:
             w_prev = 0.0   # the weight reading i has so far
             while i < n - 1 and ts[i] < t1:
                 ta, tb = ts[i], ts[i + 1]
-                a, b = max(ta, t0), min(tb, t1)
+                a = t0 if t0 > ta else ta   # max(ta, t0), min(tb, t1) without the builtins' calls
+                b = t1 if t1 < tb else tb
                 wj = 0.0
                 if b > a:
                     h = tb - ta
@@ -264,7 +265,7 @@ class Arbiter:
         for name, (_, v) in inc.items():
             s = self.streams[name]
             s.n_claimed += 1
-            s.claimed_mean += (v - s.claimed_mean) / min(s.n_claimed, 240)
+            s.claimed_mean += (v - s.claimed_mean) / (240 if 240 < s.n_claimed else s.n_claimed)
         mag = _median_abs(inc)
         names = sorted(inc)
         for i, a in enumerate(names):
@@ -405,8 +406,15 @@ def _median_abs(inc: dict[str, tuple[float, float]]) -> float:
 def _still_stat(st: list[float], r: float, claimed: float, cap: float, a: float) -> None:
     """One still block's squared pair difference ``r^2`` into the EW mean ``st = [mean, n]``
     (at most ``cap`` times the current mean or the claim: a disturbance moves it little)."""
-    ref = max(st[0], claimed, 1e-12) if st[1] else claimed + 1e-12
-    z = min(r * r, cap * ref)
+    # max / min in conditionals (the builtins' calls cost more than the rest: every block, every pair)
+    if st[1]:
+        ref = claimed if claimed > st[0] else st[0]
+        ref = 1e-12 if 1e-12 > ref else ref
+    else:
+        ref = claimed + 1e-12
+    z, zc = r * r, cap * ref
+    z = zc if zc < z else z
     st[1] += 1
-    w = max(a, 1.0 / st[1])
+    w = 1.0 / st[1]
+    w = w if w > a else a
     st[0] += w * (z - st[0])

@@ -380,9 +380,10 @@ class KeyframeGraph(FurtherSourceFactors):
     def _fix_cov_list(self, cov: FloatArray) -> list[float]:
         """A fix's covariance with its floors, row by row as 9 floats (scalar maths: once per keyframe)."""
         a = np.asarray(cov, dtype=float).reshape(9).tolist()
-        a[0] = max(a[0], self.cfg.fix_min_sigma_xy**2)
-        a[4] = max(a[4], self.cfg.fix_min_sigma_xy**2)
-        a[8] = max(a[8], self.cfg.fix_min_sigma_theta**2)
+        fxy, fth = self.cfg.fix_min_sigma_xy**2, self.cfg.fix_min_sigma_theta**2
+        a[0] = fxy if fxy > a[0] else a[0]   # max(a[0], fxy), ... as conditionals
+        a[4] = fxy if fxy > a[4] else a[4]
+        a[8] = fth if fth > a[8] else a[8]
         return a
 
     def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,

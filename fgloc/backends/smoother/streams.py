@@ -104,14 +104,18 @@ class Streams(SmootherState):
                 before = after if after is not None else 0.0
             if after is None:
                 after = before
-            var += vs[m] * ww * max(0.5 * (min(before, max_gap) + min(after, max_gap)), ww)
+            # max(0.5 * (min(before, max_gap) + min(after, max_gap)), ww) without the builtins' calls
+            h = 0.5 * ((max_gap if max_gap < before else before) + (max_gap if max_gap < after else after))
+            var += vs[m] * ww * (ww if ww > h else h)
         return d - self.gyro_bias_of(name) * (t1 - t0), var
 
     def _gyro_rate_at(self, t: float) -> float | None:
         """The first gyro's bias-corrected rate at ``t`` (interpolated), or None."""
         for name, (ts, rs, _) in self.gyro.items():
             if ts and ts[0] <= t <= ts[-1]:
-                i = min(max(bisect_left(ts, t), 1), len(ts) - 1)
+                i = bisect_left(ts, t)
+                i = 1 if 1 > i else i
+                i = len(ts) - 1 if len(ts) - 1 < i else i
                 ta, tb = ts[i - 1], ts[i]
                 f = (t - ta) / (tb - ta) if tb > ta else 1.0
                 return rs[i - 1] + f * (rs[i] - rs[i - 1]) - self.gyro_bias_of(name)
@@ -128,8 +132,10 @@ class Streams(SmootherState):
         if memo is not None and memo[0] == key:
             return memo[1]
         # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
-        i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
-        i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
+        i0 = bisect_right(self.odo_t, t0) - 1
+        i0 = 0 if 0 > i0 else i0
+        i1 = bisect_left(self.odo_t, t1) + 1
+        i1 = len(self.odo_t) if len(self.odo_t) < i1 else i1
         # the predictions integrate from the newest keyframe again and again (~4 times per keyframe,
         # to later and later stamps): each resumes from the last one's completed steps
         mark = self._int_marks.get(t0)
@@ -186,8 +192,10 @@ class Streams(SmootherState):
         if len(ts) < 2 or not math.isfinite(tol):
             return 0.0
         out = 0.0
-        i = max(bisect_right(ts, t0) - 1, 0)
-        hi = min(bisect_left(ts, t1), len(ts) - 1)
+        i = bisect_right(ts, t0) - 1
+        i = 0 if 0 > i else i
+        hi = bisect_left(ts, t1)
+        hi = len(ts) - 1 if len(ts) - 1 < hi else hi
         while i < hi:
             a, b = ts[i] + tol, ts[i + 1]   # max(a, t0), min(b, t1) without the builtins' calls
             if t0 > a:
@@ -468,14 +476,16 @@ class Streams(SmootherState):
             if r is None:
                 return None
             turn = r[0]
-        return turn + self._wheel_turn(max(last, t0), t1)
+        return turn + self._wheel_turn(t0 if t0 > last else last, t1)
 
     def _wheel_turn(self, a: float, b: float) -> float:
         """The odometry's heading change over ``(a, b]`` times its yaw-rate gain (``a <= b``)."""
         if not self.odo_t or b <= a:
             return 0.0
-        i0 = max(bisect_right(self.odo_t, a) - 1, 0)
-        i1 = min(bisect_left(self.odo_t, b) + 1, len(self.odo_t))
+        i0 = bisect_right(self.odo_t, a) - 1
+        i0 = 0 if 0 > i0 else i0
+        i1 = bisect_left(self.odo_t, b) + 1
+        i1 = len(self.odo_t) if len(self.odo_t) < i1 else i1
         th = integrate_heading(self.odo_t, self.odo_u, i0, i1, a, b)
         return th * float(self._gains[1])
 

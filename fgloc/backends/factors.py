@@ -94,9 +94,9 @@ def body_covariance(pose: FloatArray, cov_map: FloatArray) -> FloatArray:
     o20 = c * m2[0] + s * m2[1]
     o21 = -s * m2[0] + c * m2[1]
     o22 = m2[2]
-    return np.array([[o00, 0.5 * (o01 + o10), 0.5 * (o02 + o20)],
-                     [0.5 * (o10 + o01), o11, 0.5 * (o12 + o21)],
-                     [0.5 * (o20 + o02), 0.5 * (o21 + o12), o22]])
+    return np.fromiter((o00, 0.5 * (o01 + o10), 0.5 * (o02 + o20),
+                        0.5 * (o10 + o01), o11, 0.5 * (o12 + o21),
+                        0.5 * (o20 + o02), 0.5 * (o21 + o12), o22), float, 9).reshape(3, 3)
 
 
 def fix_factor(key: int, pose: FloatArray, cov_map: FloatArray, kernel: str = "huber",

@@ -116,7 +116,8 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
         i += 1
     if done is not None:
         mark[:] = done  # type: ignore[index]
-    cov = np.array([[p00, p01, p02], [p01, p11, p12], [p02, p12, p22]])
+    # (a flat fromiter, reshaped: a nested list costs numpy's shape discovery, ~4x the time)
+    cov = np.fromiter((p00, p01, p02, p01, p11, p12, p02, p12, p22), float, 9).reshape(3, 3)
     return np.array([x, y, wrap_scalar(th)]), cov
 
 

@@ -41,7 +41,7 @@ def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArra
     a11 = p11 + 2.0 * dx * p12 + dx * dx * p22 + sn * sn * c00 + 2.0 * cs * sn * c01 + cs * cs * c11
     a12 = p12 + dx * p22 + sn * c02 + cs * c12
     a22 = p22 + c22
-    return np.array([[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]])
+    return np.fromiter((a00, a01, a02, a01, a11, a12, a02, a12, a22), float, 9).reshape(3, 3)
 
 
 def timing_covariance(var_s2: float, twist: FloatArray, yaw: float) -> FloatArray:

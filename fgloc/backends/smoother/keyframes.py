@@ -145,7 +145,7 @@ class KeyframeGraph(FurtherSourceFactors):
                                                             chord[2]]))
             d = np.array([chord[0], chord[1], d[2]])
             # its translation's covariance is the chord's, uncorrelated with the wheels' yaw
-            c = np.array([[p00, p01, 0.0], [p01, p11, 0.0], [0.0, 0.0, float(c[2, 2])]])
+            c = np.fromiter((p00, p01, 0.0, p01, p11, 0.0, 0.0, 0.0, float(c[2, 2])), float, 9).reshape(3, 3)
         graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=got is None))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point

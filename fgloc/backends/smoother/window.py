@@ -216,7 +216,7 @@ class FixedLagWindow(Calibration):
         except (RuntimeError, IndexError):
             return
         c, s_ = math.cos(self.kf_pose[k][2]), math.sin(self.kf_pose[k][2])
-        R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        R = np.fromiter((c, -s_, 0.0, s_, c, 0.0, 0.0, 0.0, 1.0), float, 9).reshape(3, 3)
         self._last_cov = R @ body @ R.T
 
     def current(self, covariance: bool = True) -> tuple[float, FloatArray, FloatArray] | None:

@@ -118,7 +118,7 @@ class Calibration(Streams):
             graph.add(gtsam.BetweenFactorPose2(self.cur_o, o, gtsam.Pose2(0.0, 0.0, 0.0),
                                                gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
             ts[self.cur_o] = float(t)
-        vals.insert(o, offset_pose(guess))
+        vals.insert(o, pose2=offset_pose(guess))
         ts[o] = float(t)
         self.cur_o, self.cur_o_t = o, float(t)
 

@@ -148,8 +148,9 @@ class KeyframeGraph(FurtherSourceFactors):
             c = np.fromiter((p00, p01, 0.0, p01, p11, 0.0, 0.0, 0.0, float(c[2, 2])), float, 9).reshape(3, 3)
         graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=got is None))
         pairs.append(((k_prev, k), graph.size() - 1))
-        # initial value: the odometry prediction, so robust weights start from a consistent point
-        vals.insert(k, pose2(pred))
+        # initial value: the odometry prediction, so robust weights start from a consistent point (by the
+        # overload's name: pybind11 tries Values.insert's overloads in turn, the Pose2 one is the ninth)
+        vals.insert(k, pose2=pose2(pred))
         if t - self.cur_o_t >= self.cfg.offset_interval_s:
             self._next_offset(t, graph, vals, ts)
         # compass readings since the previous keyframe (late ones go to this keyframe too)

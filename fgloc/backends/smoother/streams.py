@@ -158,12 +158,11 @@ class Streams(SmootherState):
             if n < 3:
                 tol, top = math.inf, math.nan
             else:
-                # one stamp appended to a full window: its longest step, unless the step leaving it was
-                # that longest one (then searched again)
-                top = memo[2]
-                if memo[0] == (n - 1, ts[-2]) and n > ODOM_GAP_WINDOW + 1 \
-                        and ts[-ODOM_GAP_WINDOW - 1] - ts[-ODOM_GAP_WINDOW - 2] < top:
-                    step = ts[-1] - ts[-2]
+                # stamps appended to a full window since: its longest step unless a leaving one was (then searched)
+                top, m, w = memo[2], (memo[0][0] if memo[0] else 0), ODOM_GAP_WINDOW
+                if w + 1 < m < n <= m + w and ts[m - 1] == memo[0][1] \
+                        and max(map(sub, ts[m - w:n - w], ts[m - w - 1:n - w - 1])) < top:
+                    step = max(map(sub, ts[m:], ts[m - 1:n - 1]))
                     if step > top:
                         top = step
                 else:

@@ -41,7 +41,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fgloc.config.schema import radians, setting
-from fgloc.geometry import wrap_angle
 
 FloatArray = NDArray[np.float64]
 
@@ -63,6 +62,35 @@ VELOCITY_FREE_VAR = 100.0
 SCALE_EVIDENCE_SIGMAS = 3.0
 
 
+_TWO_PI = 2.0 * math.pi
+
+
+_IX: dict[tuple[int, ...], tuple[np.ndarray, ...]] = {}
+_EYE: dict[int, FloatArray] = {}
+
+
+def _ix(idx: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+    """``np.ix_(idx, idx)``, made once per index tuple (a few per encoder update otherwise)."""
+    got = _IX.get(idx)
+    if got is None:
+        got = _IX[idx] = np.ix_(idx, idx)
+    return got
+
+
+def _eye(n: int) -> FloatArray:
+    """A fresh ``np.eye(n)`` (a copy of one made once)."""
+    e = _EYE.get(n)
+    if e is None:
+        e = _EYE[n] = np.eye(n)
+    return e.copy()
+
+
+def _wrap1(a: float) -> float:
+    """:func:`~fgloc.geometry.wrap_angle` of one angle in Python floats (the same remainder as numpy's,
+    the same double; the EKF wraps its heading at every prediction step and update)."""
+    return (a + math.pi) % _TWO_PI - math.pi
+
+
 def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray:
     """Constant-velocity motion ``f(X)`` over ``dt`` seconds (unicycle or omni)."""
     s = np.array(state, dtype=float)
@@ -72,12 +100,12 @@ def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray
         vx, vy, w = s[OVX], s[OVY], s[OW]
         s[OX] += (vx * c - vy * sn) * dt
         s[OY] += (vx * sn + vy * c) * dt
-        s[OTH] = wrap_angle(th + w * dt)
+        s[OTH] = _wrap1(float(th + w * dt))
     else:
         v, w = s[V], s[W]
         s[X] += v * dt * c
         s[Y] += v * dt * sn
-        s[TH] = wrap_angle(th + w * dt)
+        s[TH] = _wrap1(float(th + w * dt))
     return s
 
 
@@ -87,7 +115,7 @@ def motion_jacobian(state: FloatArray, dt: float, omni: bool = False) -> FloatAr
     c, sn = np.cos(th), np.sin(th)
     if omni:
         vx, vy = float(state[OVX]), float(state[OVY])
-        F = np.eye(6)
+        F = _eye(6)
         F[OX, OTH] = (-vx * sn - vy * c) * dt
         F[OY, OTH] = (vx * c - vy * sn) * dt
         F[OX, OVX] = c * dt
@@ -97,7 +125,7 @@ def motion_jacobian(state: FloatArray, dt: float, omni: bool = False) -> FloatAr
         F[OTH, OW] = dt
         return F
     v = float(state[V])
-    F = np.eye(5)
+    F = _eye(5)
     F[X, TH] = -v * dt * sn
     F[X, V] = dt * c
     F[Y, TH] = v * dt * c
@@ -228,7 +256,7 @@ class EKF:
         self.t = float(t)
         self.x = np.zeros(n)
         self.x[:3] = pose
-        self.x[TH] = wrap_angle(self.x[TH])
+        self.x[TH] = _wrap1(float(self.x[TH]))
         self.P = np.eye(n) * vel_sigma**2
         self.P[:3, :3] = pose_cov if pose_cov is not None else np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2])
         for k, i in self.aug.items():
@@ -303,7 +331,7 @@ class EKF:
         Fb = motion_jacobian(x, dt, self.omni)
         if not self.aug:
             return Fb
-        F = np.eye(self.n)
+        F = _eye(self.n)
         F[:self.n_base, :self.n_base] = Fb
         return F
 
@@ -347,7 +375,7 @@ class EKF:
         states in ``frozen`` enter the innovation's covariance but are not updated."""
         y = np.asarray(z, dtype=float) - np.asarray(hx, dtype=float)
         for i in wrap_rows:
-            y[i] = wrap_angle(y[i])
+            y[i] = _wrap1(float(y[i]))
         S = H @ self.P @ H.T + R
         # one row (a gyro's, a compass's): LAPACK's solve and inverse of a 1x1 are the division (the
         # same numbers), without their ~10 us per call each
@@ -370,7 +398,7 @@ class EKF:
             PHt = self.P @ H.T
             self.P = self.P - K @ PHt.T - PHt @ K.T + K @ S @ K.T
         self.x = self.x + K @ y
-        self.x[TH] = wrap_angle(self.x[TH])
+        self.x[TH] = _wrap1(float(self.x[TH]))
         for name, (lo, hi) in self.bounds.items():
             i = self.aug[name]
             self.x[i] = min(max(float(self.x[i]), lo), hi)
@@ -423,10 +451,10 @@ class EKF:
         t_meas, dt = self.t, float(t) - self.t
         quiet = tuple(i for i in ((OVX, OVY) if self.omni else (V,)) + (() if keep_w_noise else (self.w_index,)))
         q = np.diag(self.process_noise(dt))
-        keep = self.P[np.ix_(quiet, quiet)].copy()
+        keep = self.P[_ix(quiet)].copy()
         self.P[quiet, :] = 0.0
         self.P[:, quiet] = 0.0
-        self.P[np.ix_(quiet, quiet)] = keep
+        self.P[_ix(quiet)] = keep
         for i in quiet:
             self.P[i, i] += VELOCITY_FREE_VAR if sole else q[i]
         before = self.x.copy()
@@ -454,7 +482,7 @@ class EKF:
             if self.omni:
                 return self.update(t, tw, [OVX, OVY, OW], cov, self.config.gate_encoder, "encoder")
             idx = [0, 2]
-            return self.update(t, tw[idx], [V, W], cov[np.ix_(idx, idx)], self.config.gate_encoder, "encoder")
+            return self.update(t, tw[idx], [V, W], cov[_ix((0, 2))], self.config.gate_encoder, "encoder")
         assert self.t is not None, "EKF not initialized"
         self.predict(t)
         rows = [OVX, OVY, OW] if self.omni else [V, W]
@@ -475,7 +503,7 @@ class EKF:
         if z_w * w > 0.0 and min(abs(z_w), abs(sw * w)) > floor:
             H[-1, yaw_log_scale_index] = sw * w
             frozen = ()
-        return self.update_h(tw[comp], hx, H, cov[np.ix_(comp, comp)], self.config.gate_encoder, "encoder",
+        return self.update_h(tw[comp], hx, H, cov[_ix(tuple(comp))], self.config.gate_encoder, "encoder",
                              frozen=frozen)
 
     def update_gyro(self, t: float, rate: float, var: float, bias_index: int | None, gate: float | None) -> bool:

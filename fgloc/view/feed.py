@@ -122,39 +122,44 @@ class TrajectoryDecimator:
 
     ``due(stamp)``: time to publish it again: ``period_s`` of log time after the last time,
     or longer as it grows (``len / poses_per_s``), so a long run's messages stay small in sum.
+    :meth:`poses` converts only the poses added since its last call (into an array it keeps).
     """
 
     def __init__(self, min_step_m: float = 0.05, min_turn_rad: float = math.radians(2.0), max_gap_s: float = 1.0,
                  period_s: float = 1.0, poses_per_s: float = 200.0) -> None:
         self.min_step_m, self.min_turn_rad, self.max_gap_s = min_step_m, min_turn_rad, max_gap_s
         self.period_s, self.poses_per_s = period_s, poses_per_s
-        self._stamps: list[float] = []
-        self._poses: list[tuple[float, float, float]] = []
+        self._rows = np.zeros((0, 3))  # the poses converted so far
+        self._new: list[tuple[float, float, float]] = []  # and those added since
+        self._last: tuple[float, float, float, float] | None = None  # stamp, x, y, yaw of the last pose kept
         self._last_pub = -math.inf
 
     def __len__(self) -> int:
-        return len(self._poses)
+        return len(self._rows) + len(self._new)
 
     def add(self, stamp: float, pose: FloatArray) -> None:
         x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
-        if self._poses:
-            lx, ly, lyaw = self._poses[-1]
+        if self._last is not None:
+            lt, lx, ly, lyaw = self._last
             dyaw = abs(math.remainder(yaw - lyaw, 2.0 * math.pi))
             if math.hypot(x - lx, y - ly) < self.min_step_m and dyaw < self.min_turn_rad and \
-                    stamp - self._stamps[-1] < self.max_gap_s:
+                    stamp - lt < self.max_gap_s:
                 return
-        self._stamps.append(float(stamp))
-        self._poses.append((x, y, yaw))
+        self._new.append((x, y, yaw))
+        self._last = (float(stamp), x, y, yaw)
 
     def due(self, stamp: float) -> bool:
-        period = max(self.period_s, len(self._poses) / self.poses_per_s)
+        period = max(self.period_s, (len(self._rows) + len(self._new)) / self.poses_per_s)
         if stamp - self._last_pub >= period:
             self._last_pub = stamp
             return True
         return False
 
     def poses(self) -> FloatArray:
-        return np.asarray(self._poses, dtype=float).reshape(-1, 3)
+        if self._new:
+            self._rows = np.concatenate([self._rows, np.asarray(self._new, dtype=float).reshape(-1, 3)])
+            self._new = []
+        return self._rows.copy()
 
 
 class ViewFeed:

@@ -71,7 +71,8 @@ class MatchResult:
             return None
         pose = np.asarray(self.pose, dtype=float)
         cov = np.asarray(self.cov, dtype=float)
-        if not (np.isfinite(pose).all() and np.isfinite(cov).all()):  # the methods: no np.all dispatch per call
+        # in scalar maths: numpy's isfinite and its reduction were most of this per-fix call
+        if not (all(map(math.isfinite, pose.ravel().tolist())) and all(map(math.isfinite, cov.ravel().tolist()))):
             return None
         return PoseFix(float(stamp), pose, cov, quality=float(self.quality), source=source)
 

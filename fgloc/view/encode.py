@@ -164,7 +164,8 @@ def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:
     cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
     x, y, yaw = (float(v) for v in fused.pose)
     color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
-    ell = covariance_ellipse(cov) if np.all(np.isfinite(cov)) else np.zeros((0, 2))
+    finite = all(map(math.isfinite, cov.ravel().tolist()))  # scalar maths: a numpy reduction costs more
+    ell = covariance_ellipse(cov) if finite else np.zeros((0, 2))
     lines = []
     if len(ell):
         pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in (ell + (x, y)).tolist()]

@@ -280,7 +280,7 @@ def body_covariance_scene(fused: Any, base_frame: str = BASE_FRAME) -> Any:
     body = rotate_covariance(cov, -float(fused.pose[2]))  # map axes -> the robot's
     color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
     lines = []
-    if np.all(np.isfinite(cov)):
+    if all(map(math.isfinite, cov.ravel().tolist())):  # scalar maths: a numpy reduction costs more
         ell = encode.covariance_ellipse(body)
         pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in ell.tolist()]
         lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,

@@ -50,6 +50,14 @@ def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserS
     pts = scan.points() if points is None else points
     if len(pts) < max(min_beams, 1):
         return np.full(len(poses), np.nan)
+    return np.asarray(np.mean(beam_agreements(occ_map, laser_mount, poses, sigma_m, pts), axis=1), dtype=float)
+
+
+def beam_agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, poses: FloatArray, sigma_m: float,
+                    pts: FloatArray) -> FloatArray:
+    """Each beam's share of :func:`agreements`: ``exp(-d^2 / 2 sigma^2)`` of the endpoints ``pts`` (the scan's
+    valid ones in the laser frame, ``(N, 2)``) at each of ``poses`` ``(K, 3)``, ``(K, N)``."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     m = np.asarray(laser_mount.pose, dtype=float)
     cb, sb = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     ox = poses[:, 0] + cb * m[0] - sb * m[1]  # the laser in the map frame, per pose
@@ -60,7 +68,7 @@ def agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserS
     qy = oy[:, None] + s * pts[None, :, 0] + c * pts[None, :, 1]
     d = occ_map.distance_at(np.column_stack([qx.ravel(), qy.ravel()]), outside=OFF_GRID_M)
     d = np.where(np.isfinite(d), d, OFF_GRID_M).reshape(len(poses), len(pts))
-    return np.asarray(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2), axis=1), dtype=float)
+    return np.exp(-0.5 * (d / sigma_m) ** 2)
 
 
 @lru_cache(maxsize=16)
@@ -122,6 +130,45 @@ def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, f
     return np.asarray(out, dtype=float)
 
 
+def finest_steps(sigma_m: float, pts: FloatArray) -> tuple[float, float]:
+    """The finest steps :func:`scan_agreement` (distance scale ``sigma_m``) tells apart: half its distance
+    scale, and the heading that moves the scan's median return (of its endpoints ``pts``) by it."""
+    r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
+    return sigma_m / 2, sigma_m / max(r_med, sigma_m) / 2
+
+
+def climb(occ_map: OccupancyMap, laser_mount: StaticTransform, start: FloatArray, reach_m: float, sigma_m: float,
+          pts: FloatArray, steps: tuple[float, float], max_steps: int) -> FloatArray:
+    """The pose the agreement of the scan's endpoints ``pts`` climbs to from ``start``: each step to the best
+    of the neighbourhood ``steps`` (metres, radians: :func:`finest_steps`) around the last, at most
+    ``max_steps``, its position within ``reach_m`` of ``start``'s."""
+    here = np.asarray(start, dtype=float).reshape(3)
+    a_here = float(np.mean(beam_agreements(occ_map, laser_mount, here, sigma_m, pts)))
+    for _ in range(max_steps):
+        cand = neighbourhood(here, np.zeros((3, 3)), 0.0, *steps)
+        cand = cand[np.hypot(cand[:, 0] - start[0], cand[:, 1] - start[1]) <= reach_m]
+        if not len(cand):
+            break
+        a = np.mean(beam_agreements(occ_map, laser_mount, cand, sigma_m, pts), axis=1)
+        k = int(np.argmax(a))
+        if not a[k] > a_here:
+            break
+        here, a_here = cand[k], float(a[k])
+    return here
+
+
+def tied_agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, poses: FloatArray, other: FloatArray,
+                    sigma_m: float, pts: FloatArray, sigmas: float) -> tuple[float, float, float]:
+    """``(the best agreement of poses, the agreement at other, the tie)``: the tie is ``sigmas`` standard
+    errors of the beams' mean difference between ``other`` and the best of ``poses`` (a difference within it
+    the map cannot tell apart).  ``pts``: the scan's valid endpoints (at least 2)."""
+    beams = beam_agreements(occ_map, laser_mount, np.vstack([poses, np.asarray(other, dtype=float)]), sigma_m, pts)
+    a = np.mean(beams, axis=1)
+    best = int(np.argmax(a[:-1]))
+    diff = beams[-1] - beams[best]
+    return float(a[best]), float(a[-1]), sigmas * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
+
+
 def agreement_sigma(occ_map: OccupancyMap, configured_m: float | None) -> float:
     """The distance scale of :func:`scan_agreement`: the configured one, else the map's cell (a wall
     known to its cell) or its declared accuracy, whichever is larger."""
@@ -132,4 +179,5 @@ def agreement_sigma(occ_map: OccupancyMap, configured_m: float | None) -> float:
     return max(float(occ_map.resolution), acc)
 
 
-__all__ = ["OFF_GRID_M", "agreement_sigma", "agreements", "neighbourhood", "scan_agreement"]
+__all__ = ["OFF_GRID_M", "agreement_sigma", "agreements", "beam_agreements", "climb", "finest_steps", "neighbourhood",
+           "scan_agreement", "tied_agreements"]

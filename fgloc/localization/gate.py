@@ -87,7 +87,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fgloc.geometry import between1, between_values, compose1, wrap_scalar
-from fgloc.localization.agreement import agreement_sigma, agreements, neighbourhood, scan_agreement
+from fgloc.localization.agreement import (
+    agreement_sigma,
+    agreements,
+    climb,
+    finest_steps,
+    neighbourhood,
+    scan_agreement,
+    tied_agreements,
+)
+from fgloc.localization.odometry_coverage import OdometryCoverage
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
@@ -105,6 +114,11 @@ SURE_SIGMAS = 2.0
 VELOCITY_SPAN_S = 0.25
 #: ... when they span at least this long
 VELOCITY_MIN_SPAN_S = 0.1
+#: a fix that departed from the odometry's path is taken only where the map explains the scan better at it than
+#: near the path by more than this many standard errors of the beams' mean difference (less is a tie)
+TIE_SIGMAS = 2.0
+#: ... each judged at the best pose the agreement climbs to from it in at most this many steps
+CLIMB_STEPS = 4
 #: the anchor of the fixes' departure from the odometry moves to a fix the map sides with at most this often
 ANCHOR_REFRESH_S = 1.0
 
@@ -165,48 +179,6 @@ class _HeldRun:
 
 
 Motion = Callable[[float, float, FloatArray], FloatArray]
-
-
-class OdometryCoverage:
-    """Which spans of log time the odometry's stamps cover (not their arrival): consecutive stamps at
-    most ``max_gap_s`` apart.  The motion between two fixes is known only where the odometry covers
-    the whole span between them: odometry that arrives late (its newest stamp behind the scan's),
-    stopped (a dead wheel driver) or was absent for a stretch leaves the motion there unknown."""
-
-    MAX_GAPS = 256  # the long gaps remembered (the oldest forgotten first)
-
-    def __init__(self, max_gap_s: float) -> None:
-        self.max_gap_s = float(max_gap_s)
-        self.first: float | None = None
-        self.last: float | None = None
-        self._gaps: list[tuple[float, float]] = []  # (last stamp before, first stamp after) a gap > max_gap_s
-
-    def add(self, t: float) -> None:
-        """An odometry message stamped ``t`` (stamps of one stream only grow)."""
-        t = float(t)
-        if self.first is None:
-            self.first = t
-        elif self.last is not None and t - self.last > self.max_gap_s:
-            self._gaps.append((self.last, t))
-            if len(self._gaps) > self.MAX_GAPS:
-                del self._gaps[0]
-        self.last = t if self.last is None else max(self.last, t)
-
-    def covers(self, t0: float, t1: float) -> bool:
-        """Whether the stamps cover ``[t0, t1]``: one within ``max_gap_s`` of each end and no longer
-        stretch without one between."""
-        g = self.max_gap_s
-        if self.first is None or self.last is None or self.first > t0 + g or self.last < t1 - g:
-            return False
-        return not self._gaps or not any(min(b, t1) - max(a, t0) > g for a, b in self._gaps)
-
-    def uncovered_s(self, t0: float, t1: float) -> float:
-        """How long of ``[t0, t1]`` the stamps leave uncovered (the gaps, before the first and after the last)."""
-        if self.first is None or self.last is None:
-            return max(0.0, t1 - t0)
-        out = max(0.0, min(t1, self.first) - t0) + max(0.0, t1 - max(t0, self.last))
-        out += sum(max(0.0, min(b, t1) - max(a, t0)) for a, b in self._gaps)
-        return out
 
 
 class JumpGate:
@@ -460,14 +432,15 @@ class JumpGate:
             if self.map_prefers_fix(fix, carried, near_cov, scan):
                 self._anchor_next = cur
             return None
-        a_odo, a_fix = self.agreement(fix, carried, near_cov, scan)
-        if not (math.isfinite(a_odo) and math.isfinite(a_fix)) or a_fix > a_odo:
+        a_odo, a_fix, tie = self._sided(fix, carried, near_cov, scan)
+        if not (math.isfinite(a_odo) and math.isfinite(a_fix)) or a_fix > a_odo + tie:
             self._anchor_next = cur
             return None
         dist = math.hypot(float(delta[0]), float(delta[1]))
+        side = "does not side with them" if a_fix <= a_odo else "cannot tell them from it"
         why = (f"held back: the fixes left the odometry's path by {math.hypot(ex, ey):.2f} m over {dist:.1f} m "
-               f"driven since {t - anchor.t:.1f} s (d2 {d2:.0f}), and the map does not side with them "
-               f"(agreement {a_fix:.2f} at the fix, {a_odo:.2f} near the odometry's)")
+               f"driven since {t - anchor.t:.1f} s (d2 {d2:.0f}), and the map {side} "
+               f"(agreement {a_fix:.2f} near the fix, {a_odo:.2f} near the odometry's)")
         return a_odo, a_fix, why
 
     def _carried_motion(self, anchor: _Previous, odom_pose: FloatArray, t: float, motion: Motion | None
@@ -547,14 +520,31 @@ class JumpGate:
                        self.sigma_m, pts)
         return float(np.max(a[:-1])), float(a[-1])
 
+    def _sided(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan
+               ) -> tuple[float, float, float]:
+        """The map's agreement with the scan ``(near the prediction, near the fix)`` and what the two cannot be
+        told apart within (:func:`tied_agreements`, :data:`TIE_SIGMAS`).  Near the prediction: the best of
+        :meth:`agreement`'s neighbourhood and of the pose the agreement climbs to from it (:func:`climb`); near
+        the fix: where it climbs to from the fix; each no further than halfway to the other (the coarse
+        neighbourhood of a large slip allowance misses an odometry's pose a few centimetres off)."""
+        pts = scan.points()
+        if len(pts) < 2:
+            a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)
+            return a_pred, a_fix, 0.0
+        pred, fix_pose = np.asarray(pred, dtype=float), np.asarray(fix.pose, dtype=float)
+        reach = 0.5 * math.hypot(float(fix_pose[0] - pred[0]), float(fix_pose[1] - pred[1]))
+        steps = finest_steps(self.sigma_m, pts)
+        odo, at_fix = (climb(self.map, self.laser_mount, p, reach, self.sigma_m, pts, steps, CLIMB_STEPS)
+                       for p in (pred, fix_pose))
+        return tied_agreements(self.map, self.laser_mount, np.vstack([self._near(pred, pred_cov, pts), odo]),
+                               at_fix, self.sigma_m, pts, TIE_SIGMAS)
+
     def _near(self, pred: FloatArray, pred_cov: FloatArray, pts: FloatArray) -> FloatArray:
         """The poses near the prediction :meth:`agreement` judges (:func:`neighbourhood`, the prediction in
         the middle)."""
-        # the neighbourhood at least as fine as the agreement can tell apart: its distance scale, and
-        # the heading that moves the scan's median return by it
-        r_med = float(np.median(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 1.0
-        return neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS, self.sigma_m / 2,
-                             self.sigma_m / max(r_med, self.sigma_m) / 2)
+        # the neighbourhood at least as fine as the agreement can tell apart
+        return neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS,
+                             *finest_steps(self.sigma_m, pts))
 
     def map_prefers_fix(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> bool:
         """Whether the map explains ``scan`` better at the fix than anywhere near the prediction (``a_fix >

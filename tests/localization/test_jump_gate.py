@@ -347,3 +347,25 @@ def test_fixes_the_map_sides_with_are_taken_off_a_drifting_odometrys_path(room):
         v = gate.check(_fix(truth, t=t), truth, pred_cov, make_scan(room, truth), np.array([0.1 * k, 0.0, 0.0]), t)
         assert v.take, k
         gate.accepted()
+
+
+def test_a_fix_the_odometrys_path_explains_better_once_climbed_to_is_held(room):
+    """The odometry says the robot slid 4 cm sideways (it did not) while a wrong fix lands 0.1 m ahead of the
+    truth: it departs from the odometry's path. The map explains the scan better at the fix than at the
+    odometry's pose and in the coarse neighbourhood of its slip allowance (0.5 m driven), but better at the
+    pose it climbs to from the odometry's (the truth nearby) than at the one it climbs to from the fix (each
+    no further than halfway to the other): held, the anchor stays."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    pred_cov = np.diag([0.004**2, 0.004**2, 1e-6])
+    start, truth = np.array([7.5, 5.0, 0.0]), np.array([8.0, 5.0, 0.0])
+    assert gate.check(_fix(start), start, pred_cov, make_scan(room, start), np.zeros(3), 1.0).take
+    gate.accepted()
+    scan = make_scan(room, truth)
+    wrong = truth + [0.1, 0.0, 0.0]
+    odom = np.array([0.5, -0.04, 0.0])
+    at = agreements(room, MOUNT, scan, np.vstack([start + odom, wrong, truth]), gate.sigma_m)
+    assert at[0] < at[1] < at[2]  # measured 0.80 / 0.82 / 0.89
+    v = gate.check(_fix(wrong, t=1.5), wrong, pred_cov, scan, odom, 1.5)
+    assert not v.take and "left the odometry's path" in v.why
+    assert v.agree_pred is not None and v.agree_fix is not None and v.agree_pred > v.agree_fix  # 0.89 / 0.87
+    assert gate.check(_fix(truth, t=1.6), truth, pred_cov, scan, odom, 1.6).take  # 4 cm: no departure

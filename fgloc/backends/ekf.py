@@ -67,6 +67,7 @@ _TWO_PI = 2.0 * math.pi
 
 _IX: dict[tuple[int, ...], tuple[np.ndarray, ...]] = {}
 _EYE: dict[int, FloatArray] = {}
+_DIAG: dict[tuple[float, ...], FloatArray] = {}
 
 
 def _ix(idx: tuple[int, ...]) -> tuple[np.ndarray, ...]:
@@ -313,7 +314,13 @@ class EKF:
             q[i] = self.q_aug[k]
         for i in quiet:
             q[i] = 0.0
-        return np.diag(q) * dt
+        key = tuple(q)
+        d = _DIAG.get(key)
+        if d is None:   # np.diag of the same densities, made once (every prediction step asks)
+            if len(_DIAG) > 64:
+                _DIAG.clear()
+            d = _DIAG[key] = np.diag(q)
+        return d * dt
 
     def _propagate(self, x: FloatArray, P: FloatArray, dt: float,
                    quiet: tuple[int, ...] = ()) -> tuple[FloatArray, FloatArray]:

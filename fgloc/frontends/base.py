@@ -248,14 +248,15 @@ class ScanPreprocessor:
             od = odom_delta if isinstance(odom_delta, np.ndarray) and odom_delta.ndim == 1 and \
                 odom_delta.dtype == np.float64 else np.asarray(odom_delta, dtype=float).reshape(-1)
             interval = (stamp - prev) if (prev is not None and math.isfinite(stamp)) else float(scan.scan_time or 0.0)
+            o = od.tolist() if od.shape == (3,) else None  # as Python floats (float() of each element)
             if (
-                od.shape == (3,)
-                and math.isfinite(float(od[0]) + float(od[1]) + float(od[2]))
+                o is not None
+                and math.isfinite(o[0] + o[1] + o[2])
                 and math.isfinite(interval)
                 and 0 < interval <= opt.max_deskew_interval_s
             ):
                 # the twist in scalar maths (the same operations element by element as on the arrays)
-                lx, ly, lw = (float(v) for v in se2_log(od))
+                lx, ly, lw = se2_log(o).tolist()
                 twist = (lx / interval, ly / interval, lw / interval)
                 mid = stamp - 0.5 * interval
                 self._last_twist = (mid, twist)
@@ -264,8 +265,9 @@ class ScanPreprocessor:
                             0 < mid - prev_twist[0] <= opt.max_deskew_interval_s:
                         dt_prev = mid - prev_twist[0]
                         ahead = stamp + 0.5 * (n - 1) * t_inc - mid
-                        twist = tuple(v + (v - p) / dt_prev * ahead  # type: ignore[assignment]
-                                      for v, p in zip(twist, prev_twist[1], strict=True))
+                        (v0, v1, v2), (p0, p1, p2) = twist, prev_twist[1]
+                        twist = (v0 + (v0 - p0) / dt_prev * ahead, v1 + (v1 - p1) / dt_prev * ahead,
+                                 v2 + (v2 - p2) / dt_prev * ahead)
                     _deskew_in_place(pts, twist, tau_used)
         if opt.voxel_size_m > 0:
             pts = voxel_downsample(pts, opt.voxel_size_m)

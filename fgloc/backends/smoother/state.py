@@ -77,7 +77,7 @@ class SmootherState(Backend):
         self._odo_speed_max = 0.0
         self._odo_rate_max = 0.0
         self._odo_lateral_max = 0.0
-        self._gap_memo: tuple[tuple, float, float] = ((), math.inf, math.nan)   # Streams._odom_gap_s's memory
+        self._gap_memo: tuple[tuple, float, float, int] = ((), math.inf, math.nan, -1)   # _odom_gap_s's memory
         self._turned = 0.0
         #: the odometry's stamps cannot be placed against the scans' (set by the localizer: a slow
         #: odometry written in bursts, which its OdometryClock cannot shift): its timing variance is

@@ -156,20 +156,21 @@ class Streams(SmootherState):
         memo = self._gap_memo
         if memo[0] != key:
             if n < 3:
-                tol, top = math.inf, math.nan
+                tol, top, ti = math.inf, math.nan, -1
             else:
-                # stamps appended to a full window since: its longest step unless a leaving one was (then searched)
-                top, m, w = memo[2], (memo[0][0] if memo[0] else 0), ODOM_GAP_WINDOW
-                if w + 1 < m < n <= m + w and ts[m - 1] == memo[0][1] \
-                        and max(map(sub, ts[m - w:n - w], ts[m - w - 1:n - w - 1])) < top:
-                    step = max(map(sub, ts[m:], ts[m - 1:n - 1]))
-                    if step > top:
-                        top = step
+                # stamps appended since: the window's longest step stays while its last occurrence (ending at ti) does
+                top, ti, m, w = memo[2], memo[3], (memo[0][0] if memo[0] else 0), ODOM_GAP_WINDOW
+                if w + 1 < m < n <= m + w and ts[m - 1] == memo[0][1] and ti >= n - w:
+                    for j in range(m, n):
+                        step = ts[j] - ts[j - 1]
+                        if step >= top:
+                            top, ti = step, j
                 else:
-                    last = ts[-ODOM_GAP_WINDOW - 1:]
-                    top = max(map(sub, last[1:], last[:-1]))
+                    last = ts[-w - 1:]
+                    d = list(map(sub, last[1:], last[:-1]))
+                    ti = n - 1 - d[::-1].index(top := max(d))
                 tol = max(ODOM_GAP_S, ODOM_GAP_STEPS * top)
-            self._gap_memo = memo = (key, tol, top)
+            self._gap_memo = memo = (key, tol, top, ti)
         return memo[1]
 
     def _unmeasured_tail(self, t0: float, t1: float, tol: float | None = None) -> float:

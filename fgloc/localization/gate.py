@@ -552,11 +552,17 @@ class JumpGate:
         where the answer is usually settled, then against the whole neighbourhood."""
         pts = scan.points()
         if len(pts):
-            near = self._near(pred, pred_cov, pts)
             a = agreements(self.map, self.laser_mount, scan,
-                           np.vstack([near[len(near) // 2], np.asarray(fix.pose, dtype=float)]), self.sigma_m, pts)
-            if math.isfinite(float(a[0])) and math.isfinite(float(a[1])) and a[0] >= a[1]:
-                return False
+                           np.vstack([np.asarray(pred, dtype=float), np.asarray(fix.pose, dtype=float)]), self.sigma_m,
+                           pts)
+            a_pred, a_fix = float(a[0]), float(a[1])
+            if math.isfinite(a_pred) and math.isfinite(a_fix):
+                if a_pred >= a_fix:
+                    return False
+                near = self._near(pred, pred_cov, pts)  # the prediction in the middle: asked already
+                others = np.delete(near, len(near) // 2, axis=0)
+                a_near = float(np.max(agreements(self.map, self.laser_mount, scan, others, self.sigma_m, pts)))
+                return not math.isfinite(a_near) or a_fix > a_near
         a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)
         return not (math.isfinite(a_pred) and math.isfinite(a_fix)) or a_fix > a_pred
 

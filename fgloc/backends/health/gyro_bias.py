@@ -82,7 +82,9 @@ class GyroSeries:
         n = self._b - self._a
         if n < 2:
             return 0, 0
-        lo = max(min(bisect_right(self._t, t, self._a, self._b) - 1 - self._a, n - 2), 0)
+        lo = bisect_right(self._t, t, self._a, self._b) - 1 - self._a   # max(min(lo, n - 2), 0) as conditionals
+        lo = n - 2 if n - 2 < lo else lo
+        lo = 0 if 0 > lo else lo
         return lo, lo + 1
 
 
@@ -310,9 +312,12 @@ class GyroBias:
         st = self._vif.get(source)
         if st is None:
             st = self._vif[source] = [0.0, 0.0, 0.0, 0.0, t, 0.0, 1.0, 0.0]
-        yn = min(max(yn, -self.huber_k), self.huber_k)  # an outlier does not make the source correlated
+        # an outlier does not make the source correlated: min(max(yn, -k), k) as conditionals
+        yn = -self.huber_k if -self.huber_k > yn else yn
+        yn = self.huber_k if self.huber_k < yn else yn
         st[7] += 1.0
-        st[0] += max(0.01, 1.0 / st[7]) * (yn * yn - st[0])
+        w = 1.0 / st[7]
+        st[0] += (w if w > 0.01 else 0.01) * (yn * yn - st[0])
         st[2] += yn
         st[3] += 1.0
         if t - st[4] >= self.window_s:

@@ -38,8 +38,9 @@ class FixedLagWindow(Calibration):
         for k, t in ts.items():
             tsm.insert((k, stamp(t)))
         if ts:
-            self._capture_leaving(max(ts.values()))
-            self._t_latest = max(self._t_latest, max(ts.values()))
+            t_new = max(ts.values())
+            self._capture_leaving(t_new)
+            self._t_latest = t_new if t_new > self._t_latest else self._t_latest
         self._stamp_chains(ts, tsm)
         n = graph.size()
         graph, vals = self._with_ballast(graph, vals, tsm)
@@ -243,7 +244,8 @@ class FixedLagWindow(Calibration):
         that have no factor of it yet: starting at a keyframe >= ``done`` (the end of its last interval)
         and inside the window (never on a keyframe about to be marginalized)."""
         horizon = t_now - self.cfg.lag_s + 0.25
-        i = max(bisect_right(self.kf_t, max(done, horizon) - 1e-9), 1)
+        i = bisect_right(self.kf_t, (horizon if horizon > done else done) - 1e-9)   # max(..., 1) as conditionals
+        i = 1 if 1 > i else i
         while i < len(self.kf_t):
             ta, tb = self.kf_t[i - 1], self.kf_t[i]
             if tb > last_t + 1e-9:

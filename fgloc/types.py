@@ -7,10 +7,11 @@ Frames follow REP 105: ``map`` (global, fixed), ``odom`` (continuous, drifting),
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from fgloc.geometry import interpolate_poses, quaternion_to_yaw, wrap_angle
 
@@ -19,6 +20,15 @@ FloatArray = NDArray[np.float64]
 # Indices into a body twist vector.
 VX, VY, WZ = 0, 1, 2
 
+
+
+def all_finite(*arrays: ArrayLike) -> bool:
+    """Every entry of the (small) arrays finite: a pose, a covariance.  In scalar maths: numpy's
+    ``isfinite`` and its reduction cost several times as much on arrays this small."""
+    for a in arrays:
+        if not all(map(math.isfinite, np.asarray(a, dtype=float).ravel().tolist())):
+            return False
+    return True
 
 @dataclass
 class Odometry:

@@ -28,7 +28,7 @@ from fgloc.geometry import YAW, X, Y, exp_along, wrap_scalar
 from fgloc.geometry import log as se2_log
 from fgloc.gridmath import njit
 from fgloc.maps import OccupancyMap
-from fgloc.types import LaserScan, PoseFix, StaticTransform
+from fgloc.types import LaserScan, PoseFix, StaticTransform, all_finite
 
 FloatArray = NDArray[np.float64]
 
@@ -71,8 +71,7 @@ class MatchResult:
             return None
         pose = np.asarray(self.pose, dtype=float)
         cov = np.asarray(self.cov, dtype=float)
-        # in scalar maths: numpy's isfinite and its reduction were most of this per-fix call
-        if not (all(map(math.isfinite, pose.ravel().tolist())) and all(map(math.isfinite, cov.ravel().tolist()))):
+        if not all_finite(pose, cov):
             return None
         return PoseFix(float(stamp), pose, cov, quality=float(self.quality), source=source)
 

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from fgloc.geometry import yaw_to_quaternion
 from fgloc.io.ros import stamp_to_sec_nsec
-from fgloc.types import LaserScan, PoseFix, StaticTransform
+from fgloc.types import LaserScan, PoseFix, StaticTransform, all_finite
 
 FloatArray = NDArray[np.float64]
 
@@ -164,8 +164,7 @@ def covariance_scene(fused: PoseFix, frame_id: str | None = None) -> Any:
     cov = np.asarray(fused.cov, dtype=float).reshape(3, 3)
     x, y, yaw = (float(v) for v in fused.pose)
     color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
-    finite = all(map(math.isfinite, cov.ravel().tolist()))  # scalar maths: a numpy reduction costs more
-    ell = covariance_ellipse(cov) if finite else np.zeros((0, 2))
+    ell = covariance_ellipse(cov) if all_finite(cov) else np.zeros((0, 2))
     lines = []
     if len(ell):
         pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in (ell + (x, y)).tolist()]

@@ -40,6 +40,7 @@ import numpy as np
 from fgloc.geometry import rotate_covariance
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.ros import stamp_to_ns
+from fgloc.types import all_finite
 from fgloc.view import channels as ch
 from fgloc.view.channels import BASE_FRAME
 from fgloc.view.feed import ACCEPTED, PREDICTED, REJECTED, ScanView, json_ready
@@ -280,7 +281,7 @@ def body_covariance_scene(fused: Any, base_frame: str = BASE_FRAME) -> Any:
     body = rotate_covariance(cov, -float(fused.pose[2]))  # map axes -> the robot's
     color = fm.Color(r=1.0, g=0.55, b=0.0, a=1.0)
     lines = []
-    if all(map(math.isfinite, cov.ravel().tolist())):  # scalar maths: a numpy reduction costs more
+    if all_finite(cov):
         ell = encode.covariance_ellipse(body)
         pts = [fm.Point3(x=px, y=py, z=0.02) for px, py in ell.tolist()]
         lines.append(fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,

@@ -25,10 +25,9 @@ from fgloc.backends.health import ANGLE_ABSOLUTE
 from fgloc.backends.integration import integrate_twist_lists
 from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound, timing_covariance
 from fgloc.backends.smoother.further import FurtherSourceFactors
-from fgloc.backends.smoother.streams import all_finite
 from fgloc.geometry import compose1, wrap_scalar
 from fgloc.geometry import exp as se2_exp
-from fgloc.types import PoseFix
+from fgloc.types import PoseFix, all_finite
 
 #: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
 GYRO_LIVE_S = 0.25

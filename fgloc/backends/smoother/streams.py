@@ -37,11 +37,6 @@ LATERAL_SPEED = 0.05
 SIDEWAYS_REPORTED_MPS = 1e-4
 
 
-def all_finite(*arrays: FloatArray) -> bool:
-    """Every entry of the (small) arrays finite (scalar checks: np.all(np.isfinite(...)) costs ~4 us each)."""
-    return all(math.isfinite(v) for a in arrays for v in np.asarray(a, dtype=float).ravel().tolist())
-
-
 class Streams(SmootherState):
     """Queries on the sensor buffers (no graph change)."""
 

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fgloc.config.schema import radians, setting
+from fgloc.geometry import wrap_scalar
 
 FloatArray = NDArray[np.float64]
 
@@ -60,9 +61,6 @@ VELOCITY_FREE_VAR = 100.0
 #: the odometry's yaw-rate scale is updated only by a reported and a predicted yaw rate both this many
 #: of the twist's yaw-rate sigmas away from zero (and of one sign): within, the rate is the noise's
 SCALE_EVIDENCE_SIGMAS = 3.0
-
-
-_TWO_PI = 2.0 * math.pi
 
 
 _IX: dict[tuple[int, ...], tuple[np.ndarray, ...]] = {}
@@ -86,12 +84,6 @@ def _eye(n: int) -> FloatArray:
     return e.copy()
 
 
-def _wrap1(a: float) -> float:
-    """:func:`~fgloc.geometry.wrap_angle` of one angle in Python floats (the same remainder as numpy's,
-    the same double; the EKF wraps its heading at every prediction step and update)."""
-    return (a + math.pi) % _TWO_PI - math.pi
-
-
 def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray:
     """Constant-velocity motion ``f(X)`` over ``dt`` seconds (unicycle or omni)."""
     s = np.array(state, dtype=float)
@@ -101,12 +93,12 @@ def motion_model(state: FloatArray, dt: float, omni: bool = False) -> FloatArray
         vx, vy, w = s[OVX], s[OVY], s[OW]
         s[OX] += (vx * c - vy * sn) * dt
         s[OY] += (vx * sn + vy * c) * dt
-        s[OTH] = _wrap1(float(th + w * dt))
+        s[OTH] = wrap_scalar(float(th + w * dt))
     else:
         v, w = s[V], s[W]
         s[X] += v * dt * c
         s[Y] += v * dt * sn
-        s[TH] = _wrap1(float(th + w * dt))
+        s[TH] = wrap_scalar(float(th + w * dt))
     return s
 
 
@@ -257,7 +249,7 @@ class EKF:
         self.t = float(t)
         self.x = np.zeros(n)
         self.x[:3] = pose
-        self.x[TH] = _wrap1(float(self.x[TH]))
+        self.x[TH] = wrap_scalar(float(self.x[TH]))
         self.P = np.eye(n) * vel_sigma**2
         self.P[:3, :3] = pose_cov if pose_cov is not None else np.diag([0.1**2, 0.1**2, np.deg2rad(5) ** 2])
         for k, i in self.aug.items():
@@ -382,7 +374,7 @@ class EKF:
         states in ``frozen`` enter the innovation's covariance but are not updated."""
         y = np.asarray(z, dtype=float) - np.asarray(hx, dtype=float)
         for i in wrap_rows:
-            y[i] = _wrap1(float(y[i]))
+            y[i] = wrap_scalar(float(y[i]))
         S = H @ self.P @ H.T + R
         # one row (a gyro's, a compass's): LAPACK's solve and inverse of a 1x1 are the division (the
         # same numbers), without their ~10 us per call each
@@ -405,7 +397,7 @@ class EKF:
             PHt = self.P @ H.T
             self.P = self.P - K @ PHt.T - PHt @ K.T + K @ S @ K.T
         self.x = self.x + K @ y
-        self.x[TH] = _wrap1(float(self.x[TH]))
+        self.x[TH] = wrap_scalar(float(self.x[TH]))
         for name, (lo, hi) in self.bounds.items():
             i = self.aug[name]
             self.x[i] = min(max(float(self.x[i]), lo), hi)

@@ -161,6 +161,15 @@ def chord_step(u: tuple[float, float, float], cv: tuple[float, float, float, flo
     return x, y, th, p00, p01, p11
 
 
+def covering(ts: Sequence[float], t0: float, t1: float) -> tuple[int, int]:
+    """``(i0, i1)``: the samples of the sorted stamps ``ts`` that cover ``(t0, t1]``, ``ts[i0:i1]``: from
+    the last one at or before ``t0`` to the first one at or after ``t1`` (as far as ``ts`` reaches)."""
+    i0 = bisect_right(ts, t0) - 1
+    i1 = bisect_left(ts, t1) + 1
+    n = len(ts)
+    return (0 if 0 > i0 else i0), (n if n < i1 else i1)   # max(i0, 0), min(i1, n) without the builtins' calls
+
+
 def rate_integral(ts: list[float], rs: list[float], t0: float, t1: float, i: int, max_gap: float,
                   weights: dict[int, float] | None = None, mark: list[float] | None = None) -> float | None:
     """The integral over ``[t0, t1]`` of the rate readings ``rs`` at stamps ``ts``, linearly

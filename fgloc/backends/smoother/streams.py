@@ -13,7 +13,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import scaled_delta
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
-from fgloc.backends.integration import chord_step, integrate_heading, integrate_twist_lists, rate_integral
+from fgloc.backends.integration import chord_step, covering, integrate_heading, integrate_twist_lists, rate_integral
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import adjoint, between1, compose1, exp_coefficients, inverse1, wrap_scalar
@@ -126,11 +126,7 @@ class Streams(SmootherState):
         memo = self._integrate_memo
         if memo is not None and memo[0] == key:
             return memo[1]
-        # only the samples that cover (t0, t1]: from the last one <= t0 to the first one >= t1
-        i0 = bisect_right(self.odo_t, t0) - 1
-        i0 = 0 if 0 > i0 else i0
-        i1 = bisect_left(self.odo_t, t1) + 1
-        i1 = len(self.odo_t) if len(self.odo_t) < i1 else i1
+        i0, i1 = covering(self.odo_t, t0, t1)
         # the predictions integrate from the newest keyframe again and again (~4 times per keyframe,
         # to later and later stamps): each resumes from the last one's completed steps
         mark = self._int_marks.get(t0)
@@ -477,10 +473,7 @@ class Streams(SmootherState):
         """The odometry's heading change over ``(a, b]`` times its yaw-rate gain (``a <= b``)."""
         if not self.odo_t or b <= a:
             return 0.0
-        i0 = bisect_right(self.odo_t, a) - 1
-        i0 = 0 if 0 > i0 else i0
-        i1 = bisect_left(self.odo_t, b) + 1
-        i1 = len(self.odo_t) if len(self.odo_t) < i1 else i1
+        i0, i1 = covering(self.odo_t, a, b)
         th = integrate_heading(self.odo_t, self.odo_u, i0, i1, a, b)
         return th * float(self._gains[1])
 

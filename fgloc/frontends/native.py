@@ -566,9 +566,10 @@ def heading_probe(lik, A, b, px, py, stride, pose, win, step):  # pragma: no cov
     return best[0].copy(), score[0], here[0]
 
 
-@njit(cache=True, fastmath=True)
-def _wrap(a):  # pragma: no cover - compiled
-    """:func:`fgloc.geometry.wrap_scalar`, compiled."""
+@njit(cache=True)
+def _wrap_exact(a):  # pragma: no cover - compiled
+    """:func:`fgloc.geometry.wrap_scalar`, compiled without fastmath (the same bits: fmod is exact, and
+    fastmath could fold the ``+ 2 pi`` and ``- pi`` into one rounding)."""
     w = np.fmod(a + math.pi, 2.0 * math.pi)
     if w < 0:
         w += 2.0 * math.pi
@@ -592,11 +593,11 @@ def _track(field, A, b, far, px, py, guess, scales, outliers, loss, max_iter, to
                             backcos, off)
     if hwin > 0.0:
         best, score, here = heading_probe(lik, Ac, bc, px, py, hstride, pose, hwin, hstep)
-        if not abs(_wrap(best[2] - pose[2])) < 1.5 * hstep and score > here:
+        if not abs(_wrap_exact(best[2] - pose[2])) < 1.5 * hstep and score > here:
             pose2, _, cost2 = _refine(field, A, b, far, px, py, best, scales, outliers, loss, max_iter, tol, lx,
                                       ly, backcos, off)
             if (cost2 < cost and math.hypot(pose2[0] - guess[0], pose2[1] - guess[1]) <= max_jump_m
-                    and abs(_wrap(pose2[2] - guess[2])) <= max_jump):
+                    and abs(_wrap_exact(pose2[2] - guess[2])) <= max_jump):
                 pose = pose2
                 cost = cost2
     m = scales.shape[0] - 1
@@ -622,15 +623,6 @@ def _alias_refines(lik, Ac, bc, stride, pose, c00, c01, c11, step, n, ratio, fie
         poses[j, 2] = p[2]
         costs[j] = c
     return poses, costs
-
-
-@njit(cache=True)
-def _wrap_exact(a):  # pragma: no cover - compiled
-    """:func:`fgloc.geometry.wrap_scalar`, compiled without fastmath (the same bits: fmod is exact)."""
-    w = np.fmod(a + math.pi, 2.0 * math.pi)
-    if w < 0:
-        w += 2.0 * math.pi
-    return w - math.pi
 
 
 @njit(cache=True)

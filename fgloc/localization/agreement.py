@@ -11,6 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from fgloc.gridmath import njit
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -63,12 +64,43 @@ def beam_agreements(occ_map: OccupancyMap, laser_mount: StaticTransform, poses: 
     ox = poses[:, 0] + cb * m[0] - sb * m[1]  # the laser in the map frame, per pose
     oy = poses[:, 1] + sb * m[0] + cb * m[1]
     yaw = poses[:, 2] + m[2]
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    qx = ox[:, None] + c * pts[None, :, 0] - s * pts[None, :, 1]
-    qy = oy[:, None] + s * pts[None, :, 0] + c * pts[None, :, 1]
-    d = occ_map.distance_at(np.column_stack([qx.ravel(), qy.ravel()]), outside=OFF_GRID_M)
-    d = np.where(np.isfinite(d), d, OFF_GRID_M).reshape(len(poses), len(pts))
+    origin = occ_map.origin
+    d = _endpoint_distances(ox, oy, np.cos(yaw), np.sin(yaw), np.ascontiguousarray(pts, dtype=float),
+                            occ_map.distance_field, float(origin[0]), float(origin[1]), float(np.cos(origin[2])),
+                            float(np.sin(origin[2])), float(occ_map.resolution), OFF_GRID_M)
     return np.exp(-0.5 * (d / sigma_m) ** 2)
+
+
+@njit(cache=True)
+def _endpoint_distances(ox, oy, c, s, pts, df, x0, y0, co, so, res, outside):  # pragma: no cover - compiled
+    """The distance field at the endpoints ``pts`` ``(N, 2)`` of a laser at ``(ox[k], oy[k])`` looking along
+    ``(c[k], s[k])``, ``(K, N)``: :meth:`OccupancyMap.distance_at` (bilinear between cell centres, the grid's
+    origin ``(x0, y0)`` turned by ``(co, so)``, ``res`` m per cell), ``outside`` off the grid or where the field
+    is not finite; the same operations in the same order, the same bits."""
+    h, w = df.shape
+    cmax = w - 2 if w > 1 else 0
+    rmax = h - 2 if h > 1 else 0
+    out = np.empty((ox.shape[0], pts.shape[0]))
+    for k in range(ox.shape[0]):
+        for j in range(pts.shape[0]):
+            px, py = pts[j, 0], pts[j, 1]
+            dx = ox[k] + c[k] * px - s[k] * py - x0
+            dy = oy[k] + s[k] * px + c[k] * py - y0
+            u = (co * dx + so * dy) / res - 0.5
+            v = (-so * dx + co * dy) / res - 0.5
+            d = outside
+            if u >= 0 and v >= 0 and u <= w - 1 and v <= h - 1:
+                c0 = min(int(math.floor(u)), cmax)
+                r0 = min(int(math.floor(v)), rmax)
+                c1 = min(c0 + 1, w - 1)
+                r1 = min(r0 + 1, h - 1)
+                fu, fv = u - c0, v - r0
+                d = (df[r0, c0] * (1 - fu) * (1 - fv) + df[r0, c1] * fu * (1 - fv) + df[r1, c0] * (1 - fu) * fv
+                     + df[r1, c1] * fu * fv)
+                if not math.isfinite(d):
+                    d = outside
+            out[k, j] = d
+    return out
 
 
 @lru_cache(maxsize=16)

@@ -65,7 +65,7 @@ from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, nj
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
-from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix
+from .base import MatchResult, PreprocessOptions, ScanPreprocessor, _grid_cell, check_guess, no_fix
 from .native import distance_m, map_distance_field
 
 FloatArray = NDArray[np.float64]
@@ -349,14 +349,28 @@ def sample_motion(particles: FloatArray, delta: FloatArray, model: str, alphas: 
         sd_t = math.sqrt(a3 * trans**2 + a1 * dth**2)
         sd_r = math.sqrt(a4 * dth**2 + a2 * trans**2)
         sd_s = math.sqrt(a1 * dth**2 + a5 * trans**2)
-        t_hat = trans + rng.normal(0.0, 1.0, n) * sd_t
-        r_hat = dth + rng.normal(0.0, 1.0, n) * sd_r
-        s_hat = rng.normal(0.0, 1.0, n) * sd_s
+        # in place, each operation as the expressions trans + z sd_t, ..., x + (t cb + s sb), y + (t sb - s cb),
+        # wrap(yaw + r) round it (a sum or product in either order is the same number)
+        t_hat = rng.normal(0.0, 1.0, n)
+        t_hat *= sd_t
+        t_hat += trans
+        r_hat = rng.normal(0.0, 1.0, n)
+        r_hat *= sd_r
+        r_hat += dth
+        s_hat = rng.normal(0.0, 1.0, n)
+        s_hat *= sd_s
         b = yaw + bearing
         cb, sb = np.cos(b), np.sin(b)
-        out[:, 0] += t_hat * cb + s_hat * sb
-        out[:, 1] += t_hat * sb - s_hat * cb
-        out[:, 2] = wrap_angle(yaw + r_hat)
+        tmp = t_hat * sb
+        t_hat *= cb
+        sb *= s_hat
+        t_hat += sb
+        out[:, 0] += t_hat
+        s_hat *= cb
+        tmp -= s_hat
+        out[:, 1] += tmp
+        r_hat += yaw
+        out[:, 2] = _wrap_in_place(r_hat)
         return out
     rot1 = 0.0 if trans < 0.01 else math.atan2(dy, dx)
     rot2 = float(wrap_angle(dth - rot1))
@@ -385,10 +399,48 @@ def kld_limit(k: NDArray[Any] | int, pf_err: float, pf_z: float, n_min: int, n_m
 
 def systematic_resample(weights: FloatArray, n: int, rng: np.random.Generator) -> NDArray[np.int64]:
     """Low-variance (systematic) resampling: ``n`` indices drawn with one random offset."""
+    return _systematic(_normalized_cdf(weights), n, rng.random())
+
+
+def _normalized_cdf(weights: FloatArray) -> FloatArray:
+    """The cumulative sum of ``weights`` divided by its last value (what :func:`systematic_resample` draws from)."""
     c = np.cumsum(weights)
     c /= c[-1]
-    u = (rng.random() + np.arange(n)) / n
-    return np.minimum(np.searchsorted(c, u, side="right"), len(weights) - 1).astype(np.int64)
+    return c
+
+
+@njit(cache=True)
+def _systematic(cdf, n, offset):  # pragma: no cover - compiled
+    """:func:`systematic_resample`'s ``n`` indices into the normalized ``cdf`` for the random ``offset`` in [0, 1):
+    ``min(searchsorted(cdf, (k + offset) / n, side="right"), len(cdf) - 1)`` for ``k < n``, the keys rising, in
+    one walk along ``cdf`` (a NaN in it, where the cumulative sum overflowed, compares as numpy's search
+    orders it: above every number)."""
+    m = cdf.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    i = 0
+    for k in range(n):
+        u = (float(k) + offset) / n
+        while i < m and cdf[i] <= u:
+            i += 1
+        out[k] = i if i < m - 1 else m - 1
+    return out
+
+
+def _on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
+    """``occ_map.in_bounds`` of one point in scalar maths (a point that is not finite is off the grid)."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return False
+    row, col = _grid_cell(occ_map, x, y)
+    return 0 <= row < occ_map.height and 0 <= col < occ_map.width
+
+
+def _wrap_in_place(a: FloatArray) -> FloatArray:
+    """``a`` (a float array of its own) wrapped to ``[-pi, pi)`` in place: :func:`fgloc.geometry.wrap_angle`'s
+    operations, without its temporaries."""
+    a += np.pi
+    np.remainder(a, 2.0 * np.pi, out=a)
+    a -= np.pi
+    return a
 
 
 def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: float, depth_m: float = 0.0,
@@ -661,21 +713,25 @@ class AMCL:
         # nav2 likelihood_field: w = 1 + sum pz^3; likelihood_field_prob: tempered sum of log pz
         return acc + 1.0 if model == 0 else acc / self.beam_correlation
 
-    def _resample(self) -> None:
-        w = self.weights
+    def _bins(self, particles: FloatArray) -> NDArray[np.int64]:
+        """Each particle's KLD histogram bin ``floor(p / kld_bin)`` (heading not wrapped)."""
+        return np.floor(particles / self.kld_bin).astype(np.int64)
+
+    def _resample(self, bins: NDArray[np.int64] | None = None) -> None:
+        """KLD resampling; ``bins``: :meth:`_bins` of the particles when the caller has them."""
+        cdf = _normalized_cdf(self.weights)
         cap = self.global_particles if self._global else self.max_particles
         cap = max(cap, self.min_particles)
         # KLD: draw cap candidates, visit them in random order and stop once the count
         # reaches the limit for the histogram bins seen so far (nav2 pf_update_resample)
-        cand = self.particles[systematic_resample(w, cap, self.rng)]
-        cand = cand[self.rng.permutation(cap)]
-        keys = np.floor(cand / self.kld_bin).astype(np.int64)
+        cand = _systematic(cdf, cap, self.rng.random())[self.rng.permutation(cap)]
+        keys = (self._bins(self.particles) if bins is None else bins)[cand]
         n_min = self.max_particles if self._global else self.min_particles
         n, k_n = _kld_count(keys, self.pf_err, self.pf_z, n_min, cap)
         if n < n_min:  # (the limit is clipped to n_min, so this only guards the rule's contract)
             n = n_min
         self.last_kld_k = int(k_n)
-        new = self.particles[systematic_resample(w, n, self.rng)]
+        new = self.particles[_systematic(cdf, n, self.rng.random())]
         if self.alpha_slow > 0 and self.alpha_fast > 0 and self._w_slow > 0:
             p_rand = max(0.0, 1.0 - self._w_fast / self._w_slow)
             if p_rand > 0:
@@ -712,7 +768,7 @@ class AMCL:
         od = None
         if odom_delta is not None:
             od = np.asarray(odom_delta, dtype=float).reshape(-1)
-            if od.shape != (3,) or not np.all(np.isfinite(od)):
+            if od.shape != (3,) or not all(math.isfinite(v) for v in od.tolist()):
                 return no_fix("odometry delta is not a finite [dx, dy, dyaw]")
             # the filter moves with the odometry even when the scan is unusable
             self._acc = compose1(self._acc, od)
@@ -727,46 +783,55 @@ class AMCL:
                               f"{self.update_min_a:g} rad not reached: moved {moved_d:.3f} m, {moved_a:.3f} rad since "
                               "the last update)", n_inliers=len(pts))
             mask, share = self._cluster(self.particles, self.weights)
-            mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+            mean, cov = self._cluster_mean_cov(mask)
             return self._result(compose1(mean, self._acc), cov, share, len(pts), updated=False)
         moved = self._acc
-        if np.any(self._acc != 0):
+        a0, a1, a2 = self._acc.tolist()
+        if a0 != 0 or a1 != 0 or a2 != 0:
             self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
                                            self.rng)
         self._acc = np.zeros(3)
         self._force_update = False
         lik = self._likelihood(pts, float(scan.range_max))
+        recovery = self.alpha_slow > 0 and self.alpha_fast > 0
+        mean_lik = 0.0
         if self.laser_model_type == "likelihood_field":
             w_raw = self.weights * lik
-            mean_lik = float(np.mean(lik))
+            if recovery:
+                mean_lik = float(np.mean(lik))
         else:
             mx = float(np.max(lik))
-            w_raw = self.weights * np.exp(lik - mx)
-            mean_lik = float(np.mean(np.exp(lik / max(len(pts), 1))))  # per-beam geometric mean
+            w_raw = lik - mx
+            np.exp(w_raw, out=w_raw)
+            w_raw *= self.weights
+            if recovery:
+                mean_lik = float(np.mean(np.exp(lik / max(len(pts), 1))))  # per-beam geometric mean
         total = float(w_raw.sum())
-        if not np.isfinite(total) or total <= 0:
+        if not math.isfinite(total) or total <= 0:
             self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
         else:
-            self.weights = w_raw / total
-        if self.alpha_slow > 0 and self.alpha_fast > 0:
+            w_raw /= total
+            self.weights = w_raw
+        if recovery:
             if self._w_slow == 0.0:
                 self._w_slow = self._w_fast = mean_lik
             else:
                 self._w_slow += self.alpha_slow * (mean_lik - self._w_slow)
                 self._w_fast += self.alpha_fast * (mean_lik - self._w_fast)
         # the estimate: the heaviest connected cluster of the weighted cloud (nav2 publishes the same)
-        mask, share = self._cluster(self.particles, self.weights)
-        mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+        bins = self._bins(self.particles)
+        mask, share = self._cluster(self.particles, self.weights, bins)
+        mean, cov = self._cluster_mean_cov(mask)
         was_global = self._global
         self._n_updates += 1
         if self._n_updates % self.resample_interval == 0:
-            self._resample()
+            self._resample(bins)
         refined = False
         if self.estimate == "refined" and not self._global:
             # also on the update that ended the global phase: its cluster was weighed with global_sigma_hit
             if was_global:
                 mask, share = self._cluster(self.particles, self.weights)
-                mean, cov = weighted_mean_cov(self.particles[mask], self.weights[mask])
+                mean, cov = self._cluster_mean_cov(mask)
             mean, refined = self._refine(mean, cov, pts, float(scan.range_max))
         res = self._result(mean, cov, share, len(pts), updated=True, refined=refined)
         if self._settle and res.ok:
@@ -801,14 +866,22 @@ class AMCL:
         self._settling, self._settle = None, False
         return res
 
-    def _cluster(self, particles: FloatArray, weights: FloatArray) -> tuple[NDArray[np.bool_], float]:
-        """The particles of the heaviest connected cluster of KLD bins and its share of the weight."""
-        keys = np.floor(particles / self.kld_bin).astype(np.int64)
+    def _cluster(self, particles: FloatArray, weights: FloatArray, bins: NDArray[np.int64] | None = None
+                 ) -> tuple[NDArray[np.bool_], float]:
+        """The particles of the heaviest connected cluster of KLD bins and its share of the weight;
+        ``bins``: :meth:`_bins` of ``particles`` when the caller has them (left unchanged)."""
+        keys = self._bins(particles) if bins is None else bins.copy()
         keys[:, 2] %= self._n_yaw_bins
         labels, wsum = bin_clusters(keys, weights, self._n_yaw_bins)
         best = int(np.argmax(wsum))
         total = float(wsum.sum())
         return labels == best, (float(wsum[best]) / total if total > 0 else 0.0)
+
+    def _cluster_mean_cov(self, mask: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+        """:func:`weighted_mean_cov` of the particles in ``mask`` (all of them without a copy when it holds all)."""
+        if mask.all():
+            return weighted_mean_cov(self.particles, self.weights)
+        return weighted_mean_cov(self.particles[mask], self.weights[mask])
 
     def _refine(self, mean: FloatArray, cov: FloatArray, pts: FloatArray, range_max: float
                 ) -> tuple[FloatArray, bool]:
@@ -893,7 +966,7 @@ class AMCL:
                 "particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
                 "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined,
                 "estimate": np.array(mean, dtype=float), "estimate_cov": np.array(cov, dtype=float)}
-        if not bool(self.map.in_bounds(mean[None, :2])[0]):
+        if not _on_grid(self.map, float(mean[0]), float(mean[1])):
             return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
         if self._global:
             return no_fix(f"not converged (global localization: cloud std {sx:.2f} m, {math.degrees(sa):.0f} deg)",

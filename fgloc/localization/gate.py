@@ -560,7 +560,16 @@ class JumpGate:
                 if a_pred >= a_fix:
                     return False
                 near = self._near(pred, pred_cov, pts)  # the prediction in the middle: asked already
-                others = np.delete(near, len(near) // 2, axis=0)
+                mid = len(near) // 2
+                if self.sigma_m > 0:
+                    # every agreement finite: one pose near the prediction at least as good as the fix settles it,
+                    # usually the prediction turned (next to it in the neighbourhood), asked first
+                    turned = near[[mid - 2, mid - 1, mid + 1, mid + 2]]
+                    if float(np.max(agreements(self.map, self.laser_mount, scan, turned, self.sigma_m, pts))) >= a_fix:
+                        return False
+                    others = np.delete(near, np.s_[mid - 2:mid + 3], axis=0)
+                else:
+                    others = np.delete(near, mid, axis=0)
                 a_near = float(np.max(agreements(self.map, self.laser_mount, scan, others, self.sigma_m, pts)))
                 return not math.isfinite(a_near) or a_fix > a_near
         a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)

@@ -206,9 +206,11 @@ class JumpGate:
         self._anchor: _Previous | None = None  # the fix the fixes' departure from the odometry is measured from
         self._anchor_next: _Previous | None = None  # ... what it becomes when the fix just passed is used
         self._anchor_checked = -math.inf  # when the map last judged a fix against it
-        #: ``(anchor, stamp, odometry pose, motion, stamp, odometry pose)``: the odometry's motion since the anchor
-        #: up to the fix before the last one the departure test judged (in the anchor's frame), and the last one's
-        self._carry: tuple[_Previous, float, FloatArray, FloatArray, float, FloatArray] | None = None
+        #: ``(anchor, stamp, odometry pose, motion, stamp, odometry pose, increment)``: the odometry's motion since
+        #: the anchor up to the fix before the last one the departure test judged (in the anchor's frame), and the
+        #: last one's stamp, odometry pose and increment since (as the odometry reported it)
+        self._carry: tuple[_Previous, float, FloatArray, FloatArray, float, FloatArray,
+                           tuple[float, float, float]] | None = None
 
     def reset(self) -> None:
         """No previous fix to follow (the pose was started anew, or the last fix was not used)."""
@@ -408,24 +410,25 @@ class JumpGate:
         near the anchor carried on, at the fix, why)``: the fix is held.  None: it may be taken (the anchor
         becomes the fix where the map sided with it, or where no odometry covers the time since).
         ``odom_pose``: :meth:`check`'s copy of the odometry pose (read, never written: the anchor keeps it)."""
-        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float), odom_pose, float(t))
         anchor = self._anchor
         if anchor is None or not covered or not t > anchor.t:
-            self._anchor_next = cur
+            self._anchor_next = self._as_previous(fix, odom_pose, t)
             return None
         delta = self._carried_motion(anchor, odom_pose, t, motion)
         carried = compose1(anchor.pose, delta)
         s2 = self.sigma_m**2
-        S = cur.cov[:2, :2] + anchor.cov[:2, :2]
+        (f00, f01), (f10, f11) = np.asarray(fix.cov, dtype=float)[:2, :2].tolist()
+        (a00, a01), (a10, a11) = anchor.cov[:2, :2].tolist()
         ex, ey = float(fix.pose[0]) - float(carried[0]), float(fix.pose[1]) - float(carried[1])
         # beyond what the map's agreement tells apart (half its distance scale, as agreement()'s neighbourhood):
         # the map, not the floor, judges a departure
         q = s2 / 4.0
-        d2 = mahalanobis2_2x2(ex, ey, float(S[0, 0]) + q, float(S[0, 1]), float(S[1, 0]), float(S[1, 1]) + q)
+        d2 = mahalanobis2_2x2(ex, ey, (f00 + a00) + q, f01 + a01, f10 + a10, (f11 + a11) + q)
         departed = d2 > self.cfg.gate_chi2
         if not departed and t - max(anchor.t, self._anchor_checked) < ANCHOR_REFRESH_S:
             return None
         self._anchor_checked = float(t)
+        cur = self._as_previous(fix, odom_pose, t)
         # the pose the odometry says, within what it may have slipped since the anchor
         near_cov = anchor.cov + slip_allowance(delta, self.cfg.odometry_slip)
         if not departed:
@@ -443,6 +446,12 @@ class JumpGate:
                f"(agreement {a_fix:.2f} near the fix, {a_odo:.2f} near the odometry's)")
         return a_odo, a_fix, why
 
+    @staticmethod
+    def _as_previous(fix: PoseFix, odom_pose: FloatArray, t: float) -> _Previous:
+        """``fix`` as an anchor or previous fix (its own copies of the pose and covariance; ``odom_pose`` shared:
+        :meth:`check`'s copy, read, never written)."""
+        return _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float), odom_pose, float(t))
+
     def _carried_motion(self, anchor: _Previous, odom_pose: FloatArray, t: float, motion: Motion | None
                         ) -> FloatArray:
         """The odometry's motion from ``anchor`` to ``t`` (``odom_pose`` then) in the anchor's frame, as the
@@ -452,17 +461,18 @@ class JumpGate:
         the last fix judged was the last scan's)."""
         c = self._carry
         if c is None or c[0] is not anchor or not t > c[4]:
-            c = (anchor, anchor.t, anchor.odom, np.zeros(3), anchor.t, anchor.odom)
-        _, t0, odom0, before, t1, odom1 = c
+            c = (anchor, anchor.t, anchor.odom, np.zeros(3), anchor.t, anchor.odom, (0.0, 0.0, 0.0))
+        _, t0, odom0, before, t1, odom1, last = c
         if t1 > t0:  # the last increment settled
-            inc = between1(odom0, odom1)
+            inc = np.array(last)
             if motion is not None:
                 inc = motion(t0, t1, inc)
             t0, odom0, before = t1, odom1, compose1(before, inc)
-        inc = between1(odom0, odom_pose)
+        raw = between_values(odom0, odom_pose)
+        inc = np.array(raw)
         if motion is not None:
             inc = self._motion(motion, t0, float(t), inc)
-        self._carry = (anchor, t0, odom0, before, float(t), odom_pose)
+        self._carry = (anchor, t0, odom0, before, float(t), odom_pose, raw)
         return compose1(before, inc)
 
     def _follows(self, prev: _Previous, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,

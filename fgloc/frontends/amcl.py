@@ -66,7 +66,7 @@ from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
 from .base import MatchResult, PreprocessOptions, ScanPreprocessor, _grid_cell, check_guess, no_fix
-from .native import distance_m, map_distance_field
+from .native import _signed_field, distance_m, map_distance_field
 
 FloatArray = NDArray[np.float64]
 #: EM rounds of the refinement with the measured sigma at most (``refine_scale: measured``)
@@ -456,16 +456,19 @@ def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: fl
     surface that far into the walls (half a cell: through the boundary cells' centres).  ``distance``: the
     distance (m) from each cell centre to the nearest wall cell centre when the caller has it (the map's
     distance field, when the walls are its occupied cells).  The distances are the native matcher's exact
-    transform (:func:`fgloc.frontends.native.distance_m`: scipy's ``distance_transform_edt`` bit for bit).
+    transform (:func:`fgloc.frontends.native.distance_m`: scipy's ``distance_transform_edt`` bit for bit); the
+    inside, the signs and the clip in one pass over the wall cells (:func:`fgloc.frontends.native._signed_field`:
+    a wall is a few cells thick, the transform of the free cells would visit the whole grid).
     """
-    w = np.asarray(walls, dtype=bool)
+    w = np.ascontiguousarray(walls, dtype=bool)
     if not w.any():
         return np.full(w.shape, float(max_dist))
-    half = 0.5 * resolution
-    outside = (distance_m(w, resolution) if distance is None else distance) - half
-    inside = distance_m(~w, resolution) - half if not w.all() else np.full(w.shape, float(max_dist))
-    d = np.where(w, -inside, outside) + float(depth_m)
-    return np.ascontiguousarray(np.clip(d, -max_dist, max_dist))
+    if w.all():
+        return np.full(w.shape, float(np.clip(-float(max_dist) + float(depth_m), -max_dist, max_dist)))
+    dist = distance_m(w, resolution) if distance is None else np.ascontiguousarray(distance, dtype=float)
+    out = np.empty(w.shape)
+    _signed_field(w, dist, out, float(resolution), float(depth_m), float(max_dist))
+    return out
 
 
 def weighted_mean_cov(p: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:

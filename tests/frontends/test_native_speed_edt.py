@@ -128,3 +128,34 @@ def test_amcl_wall_field_equals_its_scipy_form() -> None:
 
     got = wall_surface_field(m.occupied, 0.05, 1.0, distance=map_distance_field(m))
     assert np.array_equal(got, scipy_form(m.occupied, 0.05, 1.0, 0.0))
+
+
+def test_edt_below_a_bound_is_exact_below_it_and_at_least_it_beyond() -> None:
+    from fgloc.frontends.native import edt_squared_below
+
+    rng = np.random.default_rng(5)
+    for density in (0.0003, 0.003, 0.05):
+        for _ in range(8):
+            h, w = (int(v) for v in rng.integers(20, 160, 2))
+            feat = rng.random((h, w)) < density
+            feat[rng.integers(h), rng.integers(w)] = True
+            exact = np.round(distance_transform_edt(~feat) ** 2)  # exact integers
+            for bound in (1.0, 4.0, 9.0, 30.0, 400.0, np.inf):
+                got = edt_squared_below(feat, bound)
+                below = exact < bound
+                assert np.array_equal(got[below], exact[below])
+                assert np.all(got[~below] >= bound)
+
+
+def test_fine_field_on_open_maps_equals_scipy() -> None:
+    """Rooms wider than the clip distance: the fine field's transform skips what lies beyond it."""
+    rng = np.random.default_rng(8)
+    for _ in range(4):
+        h, w = (int(v) for v in rng.integers(40, 120, 2))
+        data = np.zeros((h, w), dtype=np.int16)
+        data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+        data[rng.integers(1, h - 1, 6), rng.integers(1, w - 1, 6)] = 100  # pillars
+        data[rng.integers(1, h - 1), 1:w // 2] = 100
+        m = OccupancyMap(data, 0.05)
+        for k, max_d, depth in ((2, 1.0, 0.0), (2, 0.5, 0.025), (3, 0.3, -0.02), (2, 0.04, 0.0)):
+            assert np.array_equal(surface_distance_field(m, k, max_d, depth), _scipy_field(m, k, max_d, depth))

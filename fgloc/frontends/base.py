@@ -172,8 +172,8 @@ class ScanPreprocessor:
     transforms the valid beams (:func:`_beam_points`, with each used beam's time for the de-skew)
     and one more de-skews them (:func:`_deskew_apply`): the same operations on the same values,
     each rounded as numpy's array code over the full sweep rounds it (no fused multiply-add), so
-    the same points, bit for bit; the beams' rotation during the sweep takes numpy's cosines and
-    sines.
+    the same points, bit for bit; the beams' rotation during the sweep takes the C library's cosines
+    and sines, which numpy's float64 ``cos`` and ``sin`` are.
     """
 
     def __init__(self, laser_mount: StaticTransform | np.ndarray | None, options: PreprocessOptions | None = None):
@@ -325,32 +325,34 @@ def _beam_points(ranges, rmin, rmax, min_valid, max_beams, cos_a, sin_a, t_inc, 
 
 
 @njit(cache=True)
-def _deskew_apply(pts, c, s, tau, vx, vy, w):  # pragma: no cover - compiled
+def _deskew_apply(pts, tau, vx, vy, w):  # pragma: no cover - compiled
     """``pts`` (at each beam's time ``tau`` after the first) moved into the base frame at the first
-    beam in place: ``exp_along([vx, vy, w], tau)`` applied point by point, with ``c, s`` the cosine
-    and sine of ``w tau`` (numpy's); each operation rounded as numpy's array code rounds it."""
+    beam in place: ``exp_along([vx, vy, w], tau)`` applied point by point, each operation rounded as
+    numpy's array code rounds it (no fastmath); the rotation ``w tau``'s cosine and sine are the C
+    library's, which numpy's float64 ``cos`` and ``sin`` call (the same values)."""
     small = abs(w) < 1e-12
     for i in range(pts.shape[0]):
+        th = w * tau[i]
+        c = math.cos(th)
+        s = math.sin(th)
         if small:
             ox = vx * tau[i]
             oy = vy * tau[i]
         else:
-            c1 = 1.0 - c[i]
-            ox = (vx * s[i] - vy * c1) / w
-            oy = (vx * c1 + vy * s[i]) / w
+            c1 = 1.0 - c
+            ox = (vx * s - vy * c1) / w
+            oy = (vx * c1 + vy * s) / w
         x = pts[i, 0]
         y = pts[i, 1]
-        pts[i, 0] = ox + c[i] * x - s[i] * y
-        pts[i, 1] = oy + s[i] * x + c[i] * y
+        pts[i, 0] = ox + c * x - s * y
+        pts[i, 1] = oy + s * x + c * y
 
 
 def _deskew_in_place(pts: FloatArray, twist: tuple[float, float, float], tau: FloatArray) -> None:
     """``pts`` (at each beam's time ``tau`` after the first) moved into the base frame at the first
-    beam: ``exp_along(twist, tau)`` applied point by point (the rotation's cosine and sine are numpy's,
-    computed once: the same values :func:`deskew_offsets_twist` gives)."""
-    vx, vy, w = float(twist[0]), float(twist[1]), float(twist[2])
-    th = w * tau
-    _deskew_apply(pts, np.cos(th), np.sin(th), tau, vx, vy, w)
+    beam: ``exp_along(twist, tau)`` applied point by point (:func:`_deskew_apply`: the same values
+    :func:`deskew_offsets_twist` gives)."""
+    _deskew_apply(pts, tau, float(twist[0]), float(twist[1]), float(twist[2]))
 
 
 UNKNOWN_GUESS_RADIUS_M = 0.4  # a guess in unknown space this close to free space is still matched

@@ -143,13 +143,24 @@ def _nearest_agreement(occ_map: OccupancyMap, laser_mount: StaticTransform,
     gx, gy = (co * dx + so * dy) * inv, (co * dy - so * dx) * inv
     th = yaw + myaw - oyaw
     c, s = math.cos(th) * inv, math.sin(th) * inv
-    cols = np.floor(gx + r * (c * ca - s * sa)).astype(np.intp)
-    rows = np.floor(gy + r * (s * ca + c * sa)).astype(np.intp)
-    # inside the grid: 0 <= col < w and 0 <= row < h (a negative index is a huge one unsigned); the cells
-    # looked up in the flat field (numpy's clip costs more than the rest of the measurement)
-    inside = (cols.view(np.uintp) < w) & (rows.view(np.uintp) < h)
-    d = np.where(inside, df.ravel().take(np.where(inside, rows * w + cols, 0)), OFF_GRID_M)
-    return float(np.dot(np.exp(d * d * (-0.5 / sigma_m**2)), ok)) / n_ok
+    z = _cell_exponents(df, gx, gy, c, s, r, ca, sa, -0.5 / sigma_m**2, OFF_GRID_M)
+    return float(np.dot(np.exp(z), ok)) / n_ok
+
+
+@njit(cache=True)
+def _cell_exponents(df, gx, gy, c, s, r, ca, sa, k, outside):  # pragma: no cover - compiled
+    """``d * d * k`` of the distance field ``df`` at the cell of each endpoint ``(gx + r (c ca - s sa), gy + r (s ca
+    + c sa))`` (grid units), ``d = outside`` off the grid: :func:`_nearest_agreement`'s exponents."""
+    h, w = df.shape
+    out = np.empty(r.shape[0])
+    for i in range(r.shape[0]):
+        col = np.floor(gx + r[i] * (c * ca[i] - s * sa[i]))
+        row = np.floor(gy + r[i] * (s * ca[i] + c * sa[i]))
+        d = outside
+        if 0 <= col < w and 0 <= row < h:  # NaN compares false
+            d = df[int(row), int(col)]
+        out[i] = d * d * k
+    return out
 
 
 def neighbourhood(pose: FloatArray, cov: FloatArray, k: float, floor_m: float, floor_rad: float) -> FloatArray:

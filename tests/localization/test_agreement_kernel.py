@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fgloc.localization.agreement import OFF_GRID_M, agreements, beam_agreements
+from fgloc.localization.agreement import OFF_GRID_M, agreements, beam_agreements, scan_agreement
 from fgloc.maps import OccupancyMap
-from fgloc.types import StaticTransform
+from fgloc.types import LaserScan, StaticTransform
 
 
 def reference(occ: OccupancyMap, mount: StaticTransform, poses: np.ndarray, sigma_m: float,
@@ -58,3 +58,44 @@ def test_the_agreement_is_the_maps_distance_field_bit_for_bit(origin, walls):
     # the mean per pose, as any number of poses at once
     one = np.array([agreements(occ, mount, None, p[None], 0.1, pts)[0] for p in poses[:5]])
     assert np.array_equal(one, agreements(occ, mount, None, poses, 0.1, pts)[:5])
+
+
+def nearest_reference(occ: OccupancyMap, mount: StaticTransform, scan: LaserScan, pose: np.ndarray, sigma_m: float,
+                      max_beams: int) -> float:
+    """The monitor's cheaper agreement by numpy: every ceil(n / max_beams)-th beam, the field at each valid
+    endpoint's cell (OccupancyMap.world_to_grid), off the grid OFF_GRID_M."""
+    n = len(scan.ranges)
+    idx = np.arange(0, n, -(-n // max_beams))
+    r = np.asarray(scan.ranges, dtype=float)[idx]
+    ok = (r >= scan.range_min) & (r <= scan.range_max)
+    a = scan.angle_min + scan.angle_increment * idx[ok]
+    m = np.asarray(mount.pose, dtype=float)
+    x, y, yaw = pose
+    lx, ly = x + np.cos(yaw) * m[0] - np.sin(yaw) * m[1], y + np.sin(yaw) * m[0] + np.cos(yaw) * m[1]
+    th = yaw + m[2] + a
+    rc = occ.world_to_grid(np.column_stack([lx + r[ok] * np.cos(th), ly + r[ok] * np.sin(th)]))
+    inside = (rc[:, 0] >= 0) & (rc[:, 0] < occ.height) & (rc[:, 1] >= 0) & (rc[:, 1] < occ.width)
+    d = np.full(len(rc), OFF_GRID_M)
+    d[inside] = occ.distance_field[rc[inside, 0], rc[inside, 1]]
+    return float(np.mean(np.exp(-0.5 * (d / sigma_m) ** 2)))
+
+
+@pytest.mark.parametrize("origin", [[0.0, 0.0, 0.0], [0.4, -3.1, 0.7]])
+def test_the_monitors_agreement_reads_the_field_at_each_endpoints_cell(origin):
+    rng = np.random.default_rng(11)
+    occ = OccupancyMap(grid(rng), 0.05, origin=np.array(origin))
+    mount = StaticTransform("base_link", "laser", np.array([0.21, -0.07, 0.3]))
+    ranges = rng.uniform(0.1, 6.0, 721).astype(np.float32)
+    ranges[rng.random(721) < 0.1] = np.nan
+    scan = LaserScan(0.0, -2.3, 4.6 / 721, 0.05, 5.0, ranges)
+    values = []
+    for _ in range(30):
+        pose = np.array([origin[0] + rng.uniform(0.0, 6.5), origin[1] + rng.uniform(0.0, 4.5), rng.uniform(-3, 3)])
+        got = scan_agreement(occ, mount, scan, pose, 0.1, max_beams=64)
+        assert got == pytest.approx(nearest_reference(occ, mount, scan, pose, 0.1, 64), abs=1e-12)
+        values.append(got)
+    assert min(values) < 0.3 < max(values)
+    nowhere = np.array([origin[0] - 50.0, origin[1] - 50.0, 0.0])  # every endpoint off the grid
+    assert scan_agreement(occ, mount, scan, nowhere, 0.1, max_beams=64) == pytest.approx(0.0, abs=1e-12)
+    # a pose not a number: no endpoint on the grid either
+    assert scan_agreement(occ, mount, scan, np.array([np.nan, 1.0, 0.0]), 0.1, max_beams=64) == pytest.approx(0.0)

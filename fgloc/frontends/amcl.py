@@ -127,13 +127,14 @@ def beam_term_table(model: int, z_hit: float, z_rand_mult: float, sigma: float, 
 
 
 @njit(cache=True)
-def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
+def _kld_count(bins, draws, order, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
     """nav2 ``pf_update_resample``'s stopping rule over candidates in visiting order.
 
-    ``keys (cap, 3)``: histogram bin of each candidate.  Returns ``(n, k)``: the first
-    count ``n`` that exceeds the KLD limit for the ``k`` distinct bins among the first
-    ``n`` candidates (``cap`` when never), and ``k``.  Distinct bins are counted with an
-    open-addressing hash set.
+    Candidate ``j`` is particle ``draws[order[j]]``, its histogram bin ``bins[draws[order[j]]]``
+    (``bins (N, 3)``), read as the count goes (most of the ``cap`` candidates are never visited).
+    Returns ``(n, k)``: the first count ``n`` that exceeds the KLD limit for the ``k`` distinct bins
+    among the first ``n`` candidates (``cap`` when never), and ``k``.  Distinct bins are counted with
+    an open-addressing hash set.
     """
     size = 1
     while size < 2 * cap:
@@ -144,7 +145,8 @@ def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
     k = 0
     n = cap
     for j in range(cap):
-        a, b, c = keys[j, 0], keys[j, 1], keys[j, 2]
+        i = draws[order[j]]
+        a, b, c = bins[i, 0], bins[i, 1], bins[i, 2]
         h = (a * 73856093) ^ (b * 19349663) ^ (c * 83492791)
         slot = h & mask
         while True:
@@ -174,6 +176,17 @@ def _kld_count(keys, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
             n = j + 1
             break
     return n, k
+
+
+@njit(cache=True)
+def _bin_keys(p, size):  # pragma: no cover - compiled
+    """``floor(p / size).astype(int64)`` for particles ``p (N, 3)`` and bin sizes ``size (3,)``."""
+    n = p.shape[0]
+    out = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        for k in range(3):
+            out[i, k] = np.int64(math.floor(p[i, k] / size[k]))
+    return out
 
 
 @njit(cache=True)
@@ -432,6 +445,12 @@ def _on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
         return False
     row, col = _grid_cell(occ_map, x, y)
     return 0 <= row < occ_map.height and 0 <= col < occ_map.width
+
+
+def _wrap1(a: float) -> float:
+    """:func:`fgloc.geometry.wrap_angle` of one angle, in Python floats (the same operations: ``%`` is
+    numpy's remainder)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _wrap_in_place(a: FloatArray) -> FloatArray:
@@ -718,7 +737,7 @@ class AMCL:
 
     def _bins(self, particles: FloatArray) -> NDArray[np.int64]:
         """Each particle's KLD histogram bin ``floor(p / kld_bin)`` (heading not wrapped)."""
-        return np.floor(particles / self.kld_bin).astype(np.int64)
+        return _bin_keys(np.ascontiguousarray(particles, dtype=float), self.kld_bin)  # type: ignore[no-any-return]
 
     def _resample(self, bins: NDArray[np.int64] | None = None) -> None:
         """KLD resampling; ``bins``: :meth:`_bins` of the particles when the caller has them."""
@@ -727,10 +746,11 @@ class AMCL:
         cap = max(cap, self.min_particles)
         # KLD: draw cap candidates, visit them in random order and stop once the count
         # reaches the limit for the histogram bins seen so far (nav2 pf_update_resample)
-        cand = _systematic(cdf, cap, self.rng.random())[self.rng.permutation(cap)]
-        keys = (self._bins(self.particles) if bins is None else bins)[cand]
+        draws = _systematic(cdf, cap, self.rng.random())
+        order = self.rng.permutation(cap)
         n_min = self.max_particles if self._global else self.min_particles
-        n, k_n = _kld_count(keys, self.pf_err, self.pf_z, n_min, cap)
+        n, k_n = _kld_count(self._bins(self.particles) if bins is None else bins, draws, order, self.pf_err,
+                            self.pf_z, n_min, cap)
         if n < n_min:  # (the limit is clipped to n_min, so this only guards the rule's contract)
             n = n_min
         self.last_kld_k = int(k_n)
@@ -891,11 +911,12 @@ class AMCL:
         """``mean`` moved to the maximum of the configured sensor model's score of this scan
         (:func:`_refine_kernel`); kept only within 3 sigma (chi2, 3 dof, 99.7 %) of the cluster."""
         rmax = self.laser_max_range if self.laser_max_range > 0 else range_max
-        z_rand_mult = self.z_rand / rmax if np.isfinite(rmax) and rmax > 0 else 0.0
-        o = self.map.origin
-        c, s = math.cos(o[2]), math.sin(o[2])
-        dx, dy = mean[0] - o[0], mean[1] - o[1]
-        start = np.array([c * dx + s * dy, -s * dx + c * dy, mean[2] - o[2]])  # grid-aligned frame
+        z_rand_mult = self.z_rand / rmax if math.isfinite(rmax) and rmax > 0 else 0.0
+        o0, o1, o2 = self.map.origin.tolist()
+        m0, m1, m2 = mean.tolist()
+        c, s = math.cos(o2), math.sin(o2)
+        dx, dy = m0 - o0, m1 - o1
+        start = np.array([c * dx + s * dy, -s * dx + c * dy, m2 - o2])  # grid-aligned frame
         model = 0 if self.laser_model_type == "likelihood_field" else 1
         bx, by = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
         p, H, wr2, sw, n_runs, swf = _refine_kernel(self._field, self.depth_m, 0.0, 0.0, 1.0 / self.map.resolution,
@@ -904,11 +925,12 @@ class AMCL:
         if self.refine_scale == "measured" and model == 1:  # EM needs the likelihood (prod pz) model
             p, H, wr2, sw, n_runs, swf = self._refit_measured(bx, by, z_rand_mult, model,
                                                               (p, H, wr2, sw, n_runs, swf))
-        out = np.array([o[0] + c * p[0] - s * p[1], o[1] + s * p[0] + c * p[1], wrap_angle(p[2] + o[2])])
-        d = out - mean
-        d[2] = wrap_angle(d[2])
-        if not np.all(np.isfinite(out)):
+        p0, p1, p2 = p.tolist()
+        x, y, yaw = o0 + c * p0 - s * p1, o1 + s * p0 + c * p1, _wrap1(p2 + o2)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
             return mean, False
+        out = np.array([x, y, yaw])
+        d = np.array([x - m0, y - m1, _wrap1(yaw - m2)])
         try:
             m2 = float(d @ np.linalg.solve(cov + 1e-12 * np.eye(3), d))
         except np.linalg.LinAlgError:
@@ -926,7 +948,7 @@ class AMCL:
         var = wr2 / (sw - 3.0) + self.map.resolution ** 2 / 12.0
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         cov_r = var * (sw / n_runs) * (rot @ Hinv @ rot.T)
-        if not (np.all(np.isfinite(cov_r)) and np.all(np.linalg.eigvalsh(0.5 * (cov_r + cov_r.T)) > 0)):
+        if not (np.isfinite(cov_r).all() and (np.linalg.eigvalsh(0.5 * (cov_r + cov_r.T)) > 0).all()):
             return mean, False
         self._refined_cov = 0.5 * (cov_r + cov_r.T)
         if self.auto_depth:

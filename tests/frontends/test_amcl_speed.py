@@ -105,3 +105,42 @@ def test_filter_on_a_corridor_keeps_the_cluster_mean_without_the_gather() -> Non
     mean, cov = amcl._cluster_mean_cov(mask)
     want = weighted_mean_cov(amcl.particles[mask], amcl.weights[mask])
     assert np.array_equal(mean, want[0]) and np.array_equal(cov, want[1])
+
+
+def test_bin_keys_equal_numpy_floor() -> None:
+    from fgloc.frontends.amcl import _bin_keys
+
+    gen = np.random.default_rng(4)
+    p = np.column_stack([gen.uniform(-30, 30, 999), gen.uniform(-30, 30, 999), gen.uniform(-np.pi, np.pi, 999)])
+    p[:4] = [[0.0, -0.0, 0.5], [-0.5, 0.5, -np.pi], [1e-300, -1e-300, 0.17453292519943295], [-1.0, 1.0, 3.14]]
+    size = np.array([0.5, 0.5, np.radians(10.0)])
+    assert np.array_equal(_bin_keys(p, size), np.floor(p / size).astype(np.int64))
+
+
+def test_kld_count_reads_the_drawn_candidates_in_order() -> None:
+    """The stopping rule over ``bins[draws[order[j]]]`` against the rule written out in Python."""
+    from fgloc.frontends.amcl import _kld_count
+
+    def reference(keys: np.ndarray, pf_err: float, pf_z: float, n_min: int, cap: int) -> tuple[int, int]:
+        seen: set[tuple[int, ...]] = set()
+        for j in range(cap):
+            seen.add(tuple(int(v) for v in keys[j]))
+            k = len(seen)
+            if k <= 1:
+                lim = cap
+            else:
+                km1 = k - 1.0
+                bb = 2.0 / (9.0 * km1)
+                x = 1.0 - bb + math.sqrt(bb) * pf_z
+                lim = min(max(int(math.ceil(km1 / (2.0 * pf_err) * x * x * x)), n_min), cap)
+            if j + 1 > lim:
+                return j + 1, k
+        return cap, len(seen)
+
+    gen = np.random.default_rng(9)
+    for spread, n_particles, cap, n_min in ((3, 700, 2000, 500), (40, 3000, 2000, 100), (1, 50, 300, 20)):
+        bins = gen.integers(-spread, spread + 1, (n_particles, 3))
+        draws = gen.integers(0, n_particles, cap)
+        order = gen.permutation(cap)
+        got = _kld_count(bins, draws, order, 0.05, 0.99, n_min, cap)
+        assert tuple(int(v) for v in got) == reference(bins[draws[order]], 0.05, 0.99, n_min, cap)

@@ -80,18 +80,23 @@ def _endpoint_distances(ox, oy, c, s, pts, df, x0, y0, co, so, res, outside):  #
     h, w = df.shape
     cmax = w - 2 if w > 1 else 0
     rmax = h - 2 if h > 1 else 0
-    out = np.empty((ox.shape[0], pts.shape[0]))
+    n = pts.shape[0]
+    px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+    gu, gv = np.empty(n), np.empty(n)
+    out = np.empty((ox.shape[0], n))
     for k in range(ox.shape[0]):
-        for j in range(pts.shape[0]):
-            px, py = pts[j, 0], pts[j, 1]
-            dx = ox[k] + c[k] * px - s[k] * py - x0
-            dy = oy[k] + s[k] * px + c[k] * py - y0
-            u = (co * dx + so * dy) / res - 0.5
-            v = (-so * dx + co * dy) / res - 0.5
+        oxk, oyk, ck, sk = ox[k], oy[k], c[k], s[k]
+        for j in range(n):  # the grid coordinates first: a loop without branches the compiler vectorizes
+            dx = oxk + ck * px[j] - sk * py[j] - x0
+            dy = oyk + sk * px[j] + ck * py[j] - y0
+            gu[j] = (co * dx + so * dy) / res - 0.5
+            gv[j] = (-so * dx + co * dy) / res - 0.5
+        for j in range(n):
+            u, v = gu[j], gv[j]
             d = outside
             if u >= 0 and v >= 0 and u <= w - 1 and v <= h - 1:
-                c0 = min(int(math.floor(u)), cmax)
-                r0 = min(int(math.floor(v)), rmax)
+                c0 = min(int(u), cmax)  # u >= 0: truncation is the floor
+                r0 = min(int(v), rmax)
                 c1 = min(c0 + 1, w - 1)
                 r1 = min(r0 + 1, h - 1)
                 fu, fv = u - c0, v - r0

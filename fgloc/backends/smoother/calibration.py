@@ -11,7 +11,7 @@ import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.factors import offset_pose, pose_offset
+from fgloc.backends.factors import offset_pose, pose_offset, scaled_delta
 from fgloc.backends.smoother.keys import O, symbol
 from fgloc.backends.smoother.state import Chain
 from fgloc.backends.smoother.streams import Streams
@@ -86,6 +86,31 @@ class Calibration(Streams):
                     self._drift = (float(ch.estimate[0]) if lat else 0.0, float(ch.estimate[1]))
             elif name.startswith("gyro_bias:"):
                 self.inputs.arb.set_correction(name.split(":", 1)[1], bias=float(ch.estimate[0]))
+
+    def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
+        """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`),
+        less the drift per metre forward (``self._drift``: the sideways creep, and the turn where no gyro
+        gives it)."""
+        ly, lw = self._drift
+        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8 \
+                and ly == 0.0 and lw == 0.0:
+            return d
+        for name in self.gyro:  # the first gyro that covers the interval turns it
+            r = self._gyro_turn(name, t0, t1)
+            if r is not None and abs(d[2]) > 1e-9:
+                out = scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
+                out[1] -= ly * out[0]
+                return out
+            if r is not None:
+                out = scaled_delta(d, self._gains, jacobian=False)[0]
+                out[1] -= ly * out[0]
+                out[2] = r
+                return out
+        out = scaled_delta(d, self._gains, jacobian=False)[0]
+        if ly != 0.0 or lw != 0.0:
+            out[1] -= ly * out[0]
+            out[2] -= lw * out[0]
+        return out
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""

@@ -11,7 +11,6 @@ from operator import sub
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.factors import scaled_delta
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
 from fgloc.backends.integration import chord_step, covering, integrate_heading, integrate_twist_lists, rate_integral
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
@@ -481,31 +480,6 @@ class Streams(SmootherState):
         """Whether the odometry has a sideways axis: a differential drive's reports no sideways speed and
         cannot creep sideways per metre (its drift's sideways part stays at 0)."""
         return self._odo_lateral_max > SIDEWAYS_REPORTED_MPS
-
-    def _corrected(self, d: FloatArray, t0: float, t1: float) -> FloatArray:
-        """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`),
-        less the drift per metre forward (``self._drift``: the sideways creep, and the turn where no gyro
-        gives it)."""
-        ly, lw = self._drift
-        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8 \
-                and ly == 0.0 and lw == 0.0:
-            return d
-        for name in self.gyro:  # the first gyro that covers the interval turns it
-            r = self._gyro_turn(name, t0, t1)
-            if r is not None and abs(d[2]) > 1e-9:
-                out = scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
-                out[1] -= ly * out[0]
-                return out
-            if r is not None:
-                out = scaled_delta(d, self._gains, jacobian=False)[0]
-                out[1] -= ly * out[0]
-                out[2] = r
-                return out
-        out = scaled_delta(d, self._gains, jacobian=False)[0]
-        if ly != 0.0 or lw != 0.0:
-            out[1] -= ly * out[0]
-            out[2] -= lw * out[0]
-        return out
 
     def _compass_measurement(self, t_k: float, readings: list[tuple[float, float, float, str]]
                              ) -> tuple[float, float] | None:

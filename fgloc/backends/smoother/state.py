@@ -145,6 +145,7 @@ class SmootherState(Backend):
         self._pred_cache: tuple | None = None
         self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
         self._rate_marks: dict[tuple[str, float], list[float]] = {}   # _gyro_increment's, by (gyro, start)
+        self._gyro_memo: dict[tuple, tuple[float | None, float]] = {}   # _gyro_increment's answers (before the bias)
         self._integrate_memo: tuple[tuple, tuple[FloatArray, FloatArray]] | None = None   # its last answer
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
         self.heading_check.restart()

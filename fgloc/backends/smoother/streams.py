@@ -71,6 +71,17 @@ class Streams(SmootherState):
         ts, rs, vs = got
         if not ts or ts[-1] < t1 - 1e-9 or ts[0] > t0 + 1e-9:
             return None
+        # the same interval over the same readings again (a keyframe's relative-yaw increment, then its
+        # gyro factor; the predictions' and the compass's rotations): the same integral (the lists only
+        # grow at their end or lose their oldest: length and end stamps tell); the bias, which may have
+        # moved in between, is taken off anew
+        key = (name, t0, t1, max_gap, want_var, len(ts), ts[0], ts[-1])
+        memo = self._gyro_memo
+        raw = memo.get(key)
+        if raw is not None:
+            return None if raw[0] is None else (raw[0] - self.gyro_bias_of(name) * (t1 - t0), raw[1])
+        if len(memo) >= 16:
+            memo.clear()
         if not want_var:
             # predictions and motion corrections integrate from the same starts (the newest keyframe, an anchor
             # fix tens of seconds back) to later and later stamps: resumed (the least recently used start dropped)
@@ -83,11 +94,13 @@ class Streams(SmootherState):
             marks[(name, t0)] = mark
             i0 = bisect_right(ts, t0) - 1
             d = rate_integral(ts, rs, t0, t1, 0 if 0 > i0 else i0, max_gap, mark=mark)
+            memo[key] = (d, 0.0)
             return None if d is None else (d - self.gyro_bias_of(name) * (t1 - t0), 0.0)
         n = len(ts)
         w: dict[int, float] = {}
         d = rate_integral(ts, rs, t0, t1, max(bisect_right(ts, t0) - 1, 0), max_gap, w)
         if d is None:
+            memo[key] = (None, 0.0)
             return None
         var = 0.0
         for m, ww in w.items():
@@ -101,6 +114,7 @@ class Streams(SmootherState):
             # max(0.5 * (min(before, max_gap) + min(after, max_gap)), ww) without the builtins' calls
             h = 0.5 * ((max_gap if max_gap < before else before) + (max_gap if max_gap < after else after))
             var += vs[m] * ww * (ww if ww > h else h)
+        memo[key] = (d, var)
         return d - self.gyro_bias_of(name) * (t1 - t0), var
 
     def _gyro_rate_at(self, t: float) -> float | None:

@@ -58,6 +58,25 @@ def _floor(min_sigma: float) -> FloatArray:
     return f
 
 
+_HEADING_NOISE: dict[float, gtsam.noiseModel.Diagonal] = {}
+#: heading noise models kept at most (a compass's sigma takes a few values: its reading's, averaged
+#: over one or two readings per keyframe; a sigma computed per factor is made for that factor only)
+HEADING_NOISE_KEPT = 32
+
+
+def heading_noise(sigma: float) -> gtsam.noiseModel.Diagonal:
+    """The diagonal noise ``[inf, inf, sigma]`` of a heading-only ``Pose2`` factor (its translation rows
+    weigh nothing), made once per sigma (noise models are immutable: factors share them), the first
+    :data:`HEADING_NOISE_KEPT` sigmas kept."""
+    sigma = float(sigma)
+    m = _HEADING_NOISE.get(sigma)
+    if m is None:
+        m = gtsam.noiseModel.Diagonal.Sigmas(np.array([np.inf, np.inf, sigma]))
+        if len(_HEADING_NOISE) < HEADING_NOISE_KEPT:
+            _HEADING_NOISE[sigma] = m
+    return m
+
+
 def kernels_cached() -> int:
     """How many robust kernels :func:`robust` keeps (at most :data:`KERNELS_KEPT`)."""
     return len(_KERNELS)
@@ -129,7 +148,7 @@ def compass_factor(pose_key: int, offset_key: int, z_compass: float, sigma: floa
     compass reports, so the factor is a C++ ``BetweenFactorPose2`` from ``o`` to ``x`` measuring
     ``(0, 0, z)`` whose translation rows have infinite sigmas (they weigh nothing).  (A Python
     ``CustomFactor`` on a ``Rot2`` offset cost ~11 us per linearization.)"""
-    noise = robust(gtsam.noiseModel.Diagonal.Sigmas(np.array([np.inf, np.inf, float(sigma)])), kernel, k)
+    noise = robust(heading_noise(sigma), kernel, k)
     return gtsam.BetweenFactorPose2(int(offset_key), int(pose_key), gtsam.Pose2(0.0, 0.0, float(z_compass)), noise)
 
 
@@ -138,7 +157,7 @@ def heading_factor(pose_key: int, z_yaw: float, sigma: float, kernel: str = "hub
     """A heading in the map frame on a ``Pose2`` keyframe, error ``wrap(theta - z)`` (a compass
     whose offset to the map is known): a C++ ``PriorFactorPose2`` on ``(0, 0, z)`` whose translation
     rows have infinite sigmas (the rotation row of its error is the heading difference alone)."""
-    noise = robust(gtsam.noiseModel.Diagonal.Sigmas(np.array([np.inf, np.inf, float(sigma)])), kernel, k)
+    noise = robust(heading_noise(sigma), kernel, k)
     return gtsam.PriorFactorPose2(int(pose_key), gtsam.Pose2(0.0, 0.0, float(z_yaw)), noise)
 
 

@@ -84,3 +84,26 @@ def test_latency_estimator_keeps_max_rows_in_one_array_and_fits_the_newest():
     d, s = est.estimate()
     assert (d, s) == fresh.estimate()
     assert abs(d - 0.03) < 3 * s and s < 0.002
+
+
+def test_step_median_is_the_median_period_of_a_growing_list():
+    """The running median of a stamp list that grows at its end (one to a few stamps at a time, now and
+    then more than the window) and loses its oldest (now and then, or all but a few) is, at every call,
+    the median spacing of its last stamps as computed from scratch."""
+    from fgloc.backends.health.latency import PERIOD_STAMPS, StepMedian, median_period
+
+    rng = np.random.default_rng(5)
+    ts: list[float] = []
+    sm = StepMedian()
+    t = 0.0
+    calls = 0
+    for _ in range(3000):
+        for _ in range(int(rng.choice([0, 1, 1, 2, 3, PERIOD_STAMPS + 10]))):
+            t += float(rng.choice([0.02, 0.02, 0.0201, 0.019, float(rng.uniform(1e-6, 0.05))]))
+            ts.append(t)
+        if rng.random() < 0.03 and len(ts) > 10:
+            del ts[:int(rng.integers(1, len(ts) - 2))]
+        got, want = sm.of(ts), median_period(ts)
+        assert got == want or (math.isinf(got) and math.isinf(want))
+        calls += 1
+    assert calls == 3000 and len(ts) > PERIOD_STAMPS

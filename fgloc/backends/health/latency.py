@@ -6,7 +6,7 @@ helpers it uses (:func:`median_period`, :func:`bracket`, :func:`fix_speed`)."""
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right
+from bisect import bisect_left, bisect_right, insort
 from collections import deque
 from operator import itemgetter, sub
 from typing import Any, Protocol
@@ -188,14 +188,57 @@ def bracket(series: deque, t: float) -> tuple[int, int]:
 _time = itemgetter(0)
 
 
+#: :func:`median_period`'s window: the spacings of its last this many stamps
+PERIOD_STAMPS = 50
+
+
 def median_period(ts: list[float]) -> float:
     """Median spacing of the last (50) stamps ``ts`` (inf with fewer than 3)."""
     if len(ts) < 3:
         return math.inf
-    last = ts[-50:]
+    last = ts[-PERIOD_STAMPS:]
     d = sorted(map(sub, last[1:], last[:-1]))  # np.median's, without numpy's overhead
     m = len(d) // 2
     return float(d[m]) if len(d) % 2 else float((d[m - 1] + d[m]) / 2.0)
+
+
+class StepMedian:
+    """:func:`median_period` of one growing stamp list (strictly increasing; it only grows at its end
+    and loses its oldest), kept up to date: each stamp appended since the last call swaps its spacing
+    for the window's oldest in a sorted copy of the window (the same spacings, the same median,
+    without sorting the window again at every call)."""
+
+    __slots__ = ("ts", "last", "recent", "ordered")
+
+    def __init__(self) -> None:
+        self.ts: list[float] | None = None   # the list followed, its newest stamp at the last call
+        self.last = math.nan
+        self.recent: deque[float] = deque()  # the window's spacings, oldest first
+        self.ordered: list[float] = []       # the same, sorted
+
+    def of(self, ts: list[float]) -> float:
+        """:func:`median_period` of ``ts``."""
+        n = len(ts)
+        w = PERIOD_STAMPS - 1
+        if n < PERIOD_STAMPS:
+            self.ts = None
+            return median_period(ts)
+        if self.ts is ts:
+            j = bisect_left(ts, self.last)
+            if j < n and ts[j] == self.last and n - 1 - j < w:
+                recent, ordered = self.recent, self.ordered
+                for i in range(j + 1, n):
+                    d = ts[i] - ts[i - 1]
+                    del ordered[bisect_left(ordered, recent.popleft())]
+                    insort(ordered, d)
+                    recent.append(d)
+                self.last = ts[-1]
+                return float(ordered[w // 2])
+        last = ts[-PERIOD_STAMPS:]
+        self.recent = deque(map(sub, last[1:], last[:-1]))
+        self.ordered = sorted(self.recent)
+        self.ts, self.last = ts, ts[-1]
+        return float(self.ordered[w // 2])
 
 
 class LatencyReference(Protocol):

@@ -16,6 +16,7 @@ from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import SourceNoise
 from fgloc.backends.health import Arbiter, SourceHealth
+from fgloc.backends.health.latency import StepMedian
 from fgloc.backends.inputs import InputBook
 from fgloc.backends.smoother.config import SmootherConfig
 from fgloc.backends.smoother.consistency import HeadingConsistency
@@ -71,6 +72,7 @@ class SmootherState(Backend):
         self.inputs = InputBook(Arbiter(long_blocks=(4, 16)), self.cfg.adapt_noise, self.cfg.latency,
                                 self.cfg.latency_s)
         self._periods: dict[tuple, tuple[list[float], float]] = {}   # _period_of's memory
+        self._step_medians: dict[int, StepMedian] = {}   # _period_of's running medians, per stamp list
         self._gains = np.ones(2)
         self._drift = (0.0, 0.0)   # the odometry's sideways creep and turn per metre forward (KeyframeGraph)
         # the fastest speed (m/s) and turn rate (rad/s) the odometry has reported (kept across restarts)

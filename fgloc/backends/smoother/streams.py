@@ -11,7 +11,7 @@ from operator import sub
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.health.latency import MAX_REF_PERIOD_S, median_period
+from fgloc.backends.health.latency import MAX_REF_PERIOD_S, StepMedian
 from fgloc.backends.integration import chord_step, covering, integrate_heading, integrate_twist_lists, rate_integral
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
@@ -47,7 +47,12 @@ class Streams(SmootherState):
         if got is None or got[0] is not ts:
             if len(self._periods) > 8:
                 self._periods.clear()
-            got = self._periods[key] = (ts, median_period(ts))
+            sm = self._step_medians.get(id(ts))
+            if sm is None:
+                if len(self._step_medians) > 8:
+                    self._step_medians.clear()
+                sm = self._step_medians[id(ts)] = StepMedian()
+            got = self._periods[key] = (ts, sm.of(ts))
         return got[1]
 
     def _gyro_increment(self, name: str, t0: float, t1: float, max_gap: float = 0.25, want_var: bool = True

@@ -186,14 +186,15 @@ class KeyframeGraph(FurtherSourceFactors):
         self._add_relative_yaw_factors(k, t, pred, graph, vals, ts)
         if used:
             assert fix is not None
-            graph.add(self._fix_factor(k, t, fix, graph, vals, ts))
-            self._fix_floor = (t, np.asarray(fix.pose, dtype=float), self._fix_cov(fix.cov))
+            floored = self._fix_cov_list(fix.cov)   # (the factor's, the floor's and the heading's: once)
+            graph.add(self._fix_factor(k, t, fix, graph, vals, ts, floored))
+            self._fix_floor = (t, np.asarray(fix.pose, dtype=float), np.array(floored).reshape(3, 3))
             self.stats["fixes_used"] += 1
             self.inputs.source("scan", "pose").accepted += 1
             lat = self.latency_estimate()
             yaw_fix = float(fix.pose[2])
             self.calib.add_fix(t - lat, yaw_fix)
-            var_yaw = self._fix_cov_list(fix.cov)[8]
+            var_yaw = floored[8]
             absolute["scan"] = (yaw_fix, var_yaw)
             self.inputs.heading("scan", t - lat, yaw_fix, var_yaw)
             self.inputs.reading("scan", ANGLE_ABSOLUTE, 0.005, t - lat, yaw_fix, var_yaw)
@@ -359,14 +360,15 @@ class KeyframeGraph(FurtherSourceFactors):
         d2 = mahalanobis2_3x3(float(e[0]), float(e[1]), float(e[2]), S.reshape(9).tolist())
         return math.isfinite(d2) and d2 <= self.cfg.fix_gate
 
-    def _fix_weighted_cov(self, cov: FloatArray) -> FloatArray:
+    def _fix_weighted_cov(self, cov: FloatArray, floored: list[float] | None = None) -> FloatArray:
         """A fix's covariance as its factor uses it: floored (:meth:`_fix_cov`), its heading
         weighted by the noise the fixes' headings show against the other yaw sources (the arbiter's
         :meth:`~fgloc.backends.health.Arbiter.shown_k`: over 0.125 s blocks and, for slowly varying
         errors, over 0.5 s and 2 s blocks).  Without it, a front-end whose headings are 5-10x better
         than the floor would leave the heading to the relative sources between fixes over a long
-        window (the gyro's random walk, the wheels' drift on straight legs)."""
-        a = self._fix_cov_list(cov)
+        window (the gyro's random walk, the wheels' drift on straight legs).  ``floored``: ``cov``'s
+        :meth:`_fix_cov_list` when the caller has it (not changed here)."""
+        a = self._fix_cov_list(cov) if floored is None else list(floored)
         if self.cfg.adapt_noise:
             k = self.inputs.arb.shown_k("scan")
             if k != 1.0:  # the heading's row, then its column, times k
@@ -387,10 +389,10 @@ class KeyframeGraph(FurtherSourceFactors):
         return a
 
     def _fix_factor(self, k: int, t: float, fix: PoseFix, graph: gtsam.NonlinearFactorGraph,
-                    vals: gtsam.Values, ts: dict) -> gtsam.NonlinearFactor:
+                    vals: gtsam.Values, ts: dict, floored: list[float] | None = None) -> gtsam.NonlinearFactor:
         """The scan-to-map fix on keyframe ``k`` (at the scan stamp): with its latency estimated,
-        configured, or none."""
-        cov = self._fix_weighted_cov(fix.cov)
+        configured, or none (``floored``: as :meth:`_fix_weighted_cov`'s)."""
+        cov = self._fix_weighted_cov(fix.cov, floored)
         pose = np.asarray(fix.pose, dtype=float)
         # a fix stamped late is the pose that long before its stamp: carried forward by the motion
         lat = self.latency_estimate()

@@ -215,13 +215,7 @@ def scaled_delta(delta: FloatArray, gains: FloatArray | tuple[float, float],
     """
     dx, dy, th0 = float(delta[0]), float(delta[1]), float(delta[2])
     gv, gw = float(gains[0]), float(gains[1])
-    h0 = 0.5 * th0
-    s0 = _sinc(h0)
-    rho = gv * _sinc(gw * h0) / s0
-    phi = (gw - 1.0) * h0
-    c, s = math.cos(phi), math.sin(phi)
-    tx, ty = rho * (c * dx - s * dy), rho * (s * dx + c * dy)
-    th = gw * th0
+    tx, ty, th, h0, s0, rho, c, s = _scaled_parts(dx, dy, th0, gv, gw)
     if not jacobian:
         return np.array([tx, ty, th]), _ZERO32
     # d t / d g_v = t / g_v;  d t / d g_w = (d rho/d g_w) R t0 + rho R' t0 h0
@@ -234,6 +228,24 @@ def scaled_delta(delta: FloatArray, gains: FloatArray | tuple[float, float],
                   [-st * (tx / gv) + ct * (ty / gv), -st * dtw_x + ct * dtw_y],
                   [0.0, th0]]) if gv != 0 else np.zeros((3, 2))
     return np.array([tx, ty, th]), J
+
+
+def scaled_delta_values(dx: float, dy: float, th0: float, gv: float, gw: float) -> tuple[float, float, float]:
+    """:func:`scaled_delta`'s pose ``(x, y, yaw)`` of the increment ``(dx, dy, th0)`` under the gains
+    ``(gv, gw)``, as floats (no array, no Jacobian: the smoother corrects every prediction with it)."""
+    return _scaled_parts(dx, dy, th0, gv, gw)[:3]
+
+
+def _scaled_parts(dx: float, dy: float, th0: float, gv: float, gw: float
+                  ) -> tuple[float, float, float, float, float, float, float, float]:
+    """:func:`scaled_delta`'s pose ``(x, y, yaw)`` and the terms its Jacobian reuses: the half
+    angle, its sinc, the chord's length ratio and the cosine and sine of its turn."""
+    h0 = 0.5 * th0
+    s0 = _sinc(h0)
+    rho = gv * _sinc(gw * h0) / s0
+    phi = (gw - 1.0) * h0
+    c, s = math.cos(phi), math.sin(phi)
+    return rho * (c * dx - s * dy), rho * (s * dx + c * dy), gw * th0, h0, s0, rho, c, s
 
 
 def pose2_log_and_derivative(x: float, y: float, w: float) -> tuple[float, float, float, tuple]:

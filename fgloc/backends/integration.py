@@ -49,13 +49,40 @@ def upper6(c: FloatArray) -> tuple[float, float, float, float, float, float]:
     return r[0], r[1], r[2], r[4], r[5], r[8]
 
 
+#: :func:`integrate_twist_values`' answer: ``(x, y, yaw, p00, p01, p02, p11, p12, p22)``
+TwistValues = tuple[float, float, float, float, float, float, float, float, float]
+_NO_MOTION: TwistValues = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
 def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
                           cs: Sequence[tuple[float, float, float, float, float, float]], lo: int, hi: int,
                           t0: float, t1: float, q_slip: FloatArray | None = None,
                           mark: list[float] | None = None) -> tuple[FloatArray, FloatArray]:
     """:func:`integrate_twist` over the samples ``lo:hi`` of plain lists (stamps, ``(vx, vy, w)``
     twists, :func:`upper6` covariances): the same arithmetic, without numpy's per-element
-    overhead (the smoother integrates its odometry several times per keyframe).
+    overhead (the smoother integrates its odometry several times per keyframe); ``mark`` as
+    :func:`integrate_twist_values`'."""
+    return twist_arrays(integrate_twist_values(ts, us, cs, lo, hi, t0, t1, q_slip, mark))
+
+
+def twist_arrays(v: TwistValues) -> tuple[FloatArray, FloatArray]:
+    """:func:`integrate_twist_values`' answer as :func:`integrate_twist`'s: the increment and its 3x3 covariance."""
+    return np.array(v[:3]), twist_covariance_array(v)
+
+
+def twist_covariance_array(v: TwistValues) -> FloatArray:
+    """The 3x3 covariance of :func:`integrate_twist_values`' answer."""
+    _, _, _, p00, p01, p02, p11, p12, p22 = v
+    # (a flat fromiter, reshaped: a nested list costs numpy's shape discovery, ~4x the time)
+    return np.fromiter((p00, p01, p02, p01, p11, p12, p02, p12, p22), float, 9).reshape(3, 3)
+
+
+def integrate_twist_values(ts: Sequence[float], us: Sequence[Sequence[float]],
+                           cs: Sequence[tuple[float, float, float, float, float, float]], lo: int, hi: int,
+                           t0: float, t1: float, q_slip: FloatArray | None = None,
+                           mark: list[float] | None = None) -> TwistValues:
+    """:func:`integrate_twist_lists` as floats: the increment ``(x, y, yaw)`` (yaw wrapped) and its
+    covariance's upper triangle (no arrays: the smoother's predictions read them as floats).
 
     ``mark``: a list that receives the integration's state after its last step that ended on a
     sample's stamp (``[t, x, y, yaw, p00, p01, p02, p11, p12, p22]``: those steps depend on no
@@ -63,7 +90,7 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
     ``t0``) and samples only appended since resumes when it is at or before ``t1``: the same steps,
     the same numbers, without integrating the prefix again."""
     if t1 <= t0 or hi <= lo:
-        return np.zeros(3), np.zeros((3, 3))
+        return _NO_MOTION
     qx, qy, qt = (0.0, 0.0, 0.0) if q_slip is None else (float(q_slip[0]), float(q_slip[1]), float(q_slip[2]))
     if mark and mark[0] <= t1:
         t, x, y, th, p00, p01, p02, p11, p12, p22 = mark
@@ -116,9 +143,7 @@ def integrate_twist_lists(ts: Sequence[float], us: Sequence[Sequence[float]],
         i += 1
     if done is not None:
         mark[:] = done  # type: ignore[index]
-    # (a flat fromiter, reshaped: a nested list costs numpy's shape discovery, ~4x the time)
-    cov = np.fromiter((p00, p01, p02, p01, p11, p12, p02, p12, p22), float, 9).reshape(3, 3)
-    return np.array([x, y, wrap_scalar(th)]), cov
+    return x, y, wrap_scalar(th), p00, p01, p02, p11, p12, p22
 
 
 def integrate_heading(ts: Sequence[float], us: Sequence[Sequence[float]], lo: int, hi: int, t0: float,

@@ -11,7 +11,7 @@ import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
-from fgloc.backends.factors import offset_pose, pose_offset, scaled_delta
+from fgloc.backends.factors import offset_pose, pose_offset, scaled_delta_values
 from fgloc.backends.smoother.keys import O, symbol
 from fgloc.backends.smoother.state import Chain
 from fgloc.backends.smoother.streams import Streams
@@ -91,26 +91,34 @@ class Calibration(Streams):
         """An odometry increment with the current gains (and the gyro's rotation, :meth:`_gyro_turn`),
         less the drift per metre forward (``self._drift``: the sideways creep, and the turn where no gyro
         gives it)."""
-        ly, lw = self._drift
-        if not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8 \
-                and ly == 0.0 and lw == 0.0:
+        if self._uncorrected():
             return d
+        return np.array(self._corrected_values(float(d[0]), float(d[1]), float(d[2]), t0, t1))
+
+    def _uncorrected(self) -> bool:
+        """No gyro, unit gains, no drift: :meth:`_corrected` leaves an increment as it is."""
+        ly, lw = self._drift
+        return not self.gyro and abs(self._gains[0] - 1.0) <= 1e-8 and abs(self._gains[1] - 1.0) <= 1e-8 \
+            and ly == 0.0 and lw == 0.0
+
+    def _corrected_values(self, dx: float, dy: float, dth: float, t0: float, t1: float) -> tuple[float, float, float]:
+        """:meth:`_corrected` of the increment ``(dx, dy, dth)``, as floats."""
+        if self._uncorrected():
+            return dx, dy, dth
+        ly, lw = self._drift
+        gv = float(self._gains[0])
         for name in self.gyro:  # the first gyro that covers the interval turns it
             r = self._gyro_turn(name, t0, t1)
-            if r is not None and abs(d[2]) > 1e-9:
-                out = scaled_delta(d, (float(self._gains[0]), r / d[2]), jacobian=False)[0]
-                out[1] -= ly * out[0]
-                return out
+            if r is not None and abs(dth) > 1e-9:
+                tx, ty, th = scaled_delta_values(dx, dy, dth, gv, r / dth)
+                return tx, ty - ly * tx, th
             if r is not None:
-                out = scaled_delta(d, self._gains, jacobian=False)[0]
-                out[1] -= ly * out[0]
-                out[2] = r
-                return out
-        out = scaled_delta(d, self._gains, jacobian=False)[0]
+                tx, ty, _ = scaled_delta_values(dx, dy, dth, gv, float(self._gains[1]))
+                return tx, ty - ly * tx, r
+        tx, ty, th = scaled_delta_values(dx, dy, dth, gv, float(self._gains[1]))
         if ly != 0.0 or lw != 0.0:
-            out[1] -= ly * out[0]
-            out[2] -= lw * out[0]
-        return out
+            ty, th = ty - ly * tx, th - lw * tx
+        return tx, ty, th
 
     def gains(self) -> FloatArray:
         """The odometry's current ``[speed, yaw-rate]`` gains (true / reported = 1 / scale)."""

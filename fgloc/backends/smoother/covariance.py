@@ -30,10 +30,16 @@ def carried_covariance(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArra
     along, its heading's uncertainty swept over the distance from ``pose0`` to ``pose1``, plus the
     increment's covariance ``inc_cov`` (frame of ``pose0``, as :func:`~fgloc.backends.factors.integrate_twist`
     gives it) rotated into the map."""
+    c00, c01, c02, _, c11, c12, _, _, c22 = np.asarray(inc_cov, dtype=float).reshape(9).tolist()
+    return carried_covariance_upper(cov0_map, pose0, pose1, c00, c01, c02, c11, c12, c22)
+
+
+def carried_covariance_upper(cov0_map: FloatArray, pose0: FloatArray, pose1: FloatArray, c00: float, c01: float,
+                             c02: float, c11: float, c12: float, c22: float) -> FloatArray:
+    """:func:`carried_covariance` with the increment's covariance as its upper triangle (floats)."""
     # J P J^T (J = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]) plus R c R^T, in scalars (at every prediction)
     dx, dy = float(pose1[0]) - float(pose0[0]), float(pose1[1]) - float(pose0[1])
     p00, p01, p02, _, p11, p12, _, _, p22 = np.asarray(cov0_map, dtype=float).reshape(9).tolist()
-    c00, c01, c02, _, c11, c12, _, _, c22 = np.asarray(inc_cov, dtype=float).reshape(9).tolist()
     cs, sn = math.cos(float(pose0[2])), math.sin(float(pose0[2]))
     a00 = p00 - 2.0 * dy * p02 + dy * dy * p22 + cs * cs * c00 - 2.0 * cs * sn * c01 + sn * sn * c11
     a01 = p01 + dx * p02 - dy * p12 - dx * dy * p22 + cs * sn * (c00 - c11) + (cs * cs - sn * sn) * c01

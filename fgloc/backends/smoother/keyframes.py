@@ -22,7 +22,7 @@ from fgloc.backends.factors import (
     yaw_increment_factor,
 )
 from fgloc.backends.health import ANGLE_ABSOLUTE
-from fgloc.backends.integration import integrate_twist_lists
+from fgloc.backends.integration import integrate_twist_values, twist_covariance_array
 from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound, timing_covariance
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.geometry import compose1, wrap_scalar
@@ -265,14 +265,15 @@ class KeyframeGraph(FurtherSourceFactors):
             return self._motion(t0, t1)[1]
         memo = self._integrate_memo   # the prediction's integral from the same keyframe: the same numbers
         if memo is not None and memo[0] == (t0, t1, len(self.odo_t), self.odo_t[0], self.odo_t[-1]):
-            return memo[1][1]
+            return twist_covariance_array(memo[1])
         mark = self._floor_mark
         if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:
             mark.clear()
             self._floor_mark_t0 = t0
         i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
         i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
-        return integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)[1]
+        return twist_covariance_array(integrate_twist_values(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1,
+                                                             self._q_slip, mark))
 
     def _relative_yaw_increments(self, t0: float, t1: float, d_odom: float) -> dict[str, tuple[float, float]]:
         """Each relative yaw source's increment over ``(t0, t1]`` and its variance as its factor

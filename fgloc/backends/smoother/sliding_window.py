@@ -15,7 +15,13 @@ from fgloc.backends.contract import Capability
 from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE
 from fgloc.backends.inputs import twist_covariance_values
 from fgloc.backends.integration import upper6
-from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, bounded_covariance, carried_covariance, prior_covariance
+from fgloc.backends.smoother.covariance import (
+    TWIST_VAR_MAX,
+    bounded_covariance,
+    carried_covariance,
+    carried_covariance_upper,
+    prior_covariance,
+)
 from fgloc.backends.smoother.keyframes import KeyframeGraph
 from fgloc.geometry import compose1
 from fgloc.types import Trajectory
@@ -245,11 +251,18 @@ class SlidingWindowSmoother(KeyframeGraph):
         key = (k, float(t), len(self.odo_t))
         if self._pred_cache is not None and self._pred_cache[0] == key:
             return self._pred_cache[1], self._pred_cache[2]
-        d, c = self._motion(self.kf_t[-1], t)
-        d = self._corrected(d, self.kf_t[-1], t)
+        t0 = self.kf_t[-1]
         p0 = self.kf_pose[k]
-        pose = compose1(p0, d)
-        cov = carried_covariance(self._last_cov, p0, pose, c)
+        tol = self._odom_gap_s()
+        if self.odo_t and self._unmeasured_tail(t0, t, tol) <= 0.0 and self._gap_s(t0, t, tol) <= 0.0:
+            # the odometry measures the whole interval (_motion's own integral): in floats, no arrays between
+            x, y, th, c00, c01, c02, c11, c12, c22 = self._integrate_values(t0, t)
+            pose = compose1(p0, self._corrected_values(x, y, th, t0, t))  # type: ignore[arg-type]
+            cov = carried_covariance_upper(self._last_cov, p0, pose, c00, c01, c02, c11, c12, c22)
+        else:
+            d, c = self._motion(t0, t)
+            pose = compose1(p0, self._corrected(d, t0, t))
+            cov = carried_covariance(self._last_cov, p0, pose, c)
         self._pred_cache = (key, pose, cov)
         return pose, cov
 

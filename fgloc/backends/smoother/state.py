@@ -18,6 +18,7 @@ from fgloc.backends.contract import SourceNoise
 from fgloc.backends.health import Arbiter, SourceHealth
 from fgloc.backends.health.latency import StepMedian
 from fgloc.backends.inputs import InputBook
+from fgloc.backends.integration import TwistValues
 from fgloc.backends.smoother.config import SmootherConfig
 from fgloc.backends.smoother.consistency import HeadingConsistency
 from fgloc.backends.smoother.keys import BALLAST
@@ -148,7 +149,7 @@ class SmootherState(Backend):
         self._int_marks: dict[float, list[float]] = {}   # _integrate's resumable states, by start
         self._rate_marks: dict[tuple[str, float], list[float]] = {}   # _gyro_increment's, by (gyro, start)
         self._gyro_memo: dict[tuple, tuple[float | None, float]] = {}   # _gyro_increment's answers (before the bias)
-        self._integrate_memo: tuple[tuple, tuple[FloatArray, FloatArray]] | None = None   # its last answer
+        self._integrate_memo: tuple[tuple, TwistValues] | None = None   # its last answer
         self._acc: tuple | None = None  # factors of keyframes not yet given to iSAM2
         self.heading_check.restart()
         self._heading_inputs = ({}, {})

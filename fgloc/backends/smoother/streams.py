@@ -12,7 +12,15 @@ import numpy as np
 
 from fgloc.backends.base import FloatArray
 from fgloc.backends.health.latency import MAX_REF_PERIOD_S, StepMedian
-from fgloc.backends.integration import chord_step, covering, integrate_heading, integrate_twist_lists, rate_integral
+from fgloc.backends.integration import (
+    TwistValues,
+    chord_step,
+    covering,
+    integrate_heading,
+    integrate_twist_values,
+    rate_integral,
+    twist_arrays,
+)
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import adjoint, between1, compose1, exp_coefficients, inverse1, wrap_scalar
@@ -137,6 +145,10 @@ class Streams(SmootherState):
     def _integrate(self, t0: float, t1: float) -> tuple[FloatArray, FloatArray]:
         if not self.odo_t:
             return np.zeros(3), np.diag(np.square(self.cfg.encoder_sigmas)) * max(t1 - t0, 1e-3) ** 2
+        return twist_arrays(self._integrate_values(t0, t1))
+
+    def _integrate_values(self, t0: float, t1: float) -> TwistValues:
+        """:meth:`_integrate` as floats (:func:`integrate_twist_values`; the odometry has samples)."""
         # the same interval over the same samples again (the output floor's increment from the fix's
         # keyframe after the prediction from it): the same answer (the lists only grow at their end or
         # lose their oldest: length and end stamps tell)
@@ -152,7 +164,7 @@ class Streams(SmootherState):
             if len(self._int_marks) >= 4:
                 del self._int_marks[next(iter(self._int_marks))]
             mark = self._int_marks[t0] = []
-        out = integrate_twist_lists(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
+        out = integrate_twist_values(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)
         self._integrate_memo = (key, out)
         return out
 

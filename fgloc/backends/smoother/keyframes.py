@@ -23,7 +23,12 @@ from fgloc.backends.factors import (
 )
 from fgloc.backends.health import ANGLE_ABSOLUTE
 from fgloc.backends.integration import integrate_twist_values, twist_covariance_array
-from fgloc.backends.smoother.covariance import carried_covariance, covariance_bound, timing_covariance
+from fgloc.backends.smoother.covariance import (
+    carried_covariance,
+    carried_covariance_upper,
+    covariance_bound,
+    timing_covariance,
+)
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.geometry import compose1, wrap_scalar
 from fgloc.geometry import exp as se2_exp
@@ -240,40 +245,42 @@ class KeyframeGraph(FurtherSourceFactors):
             own = cov + timing_covariance(s2, u1, float(pose[2]))
         if t == fl[0]:
             floor = fl[2]
+        elif s2 <= 0.0:
+            floor = carried_covariance_upper(fl[2], fl[1], pose, *self._floor_increment(fl[0], t))
         else:
-            inc = self._floor_increment_cov(fl[0], t)
-            if s2 > 0.0:
-                # the timing at each end of the increment (frame of the fix's pose); the start's turn
-                # w0 dt turns the whole increment: its end moves by w0 dt across the chord
-                y0 = float(fl[1][2])
-                c0, s0 = math.cos(y0), math.sin(y0)
-                ex, ey = float(pose[0]) - float(fl[1][0]), float(pose[1]) - float(fl[1][1])
-                cx, cy = c0 * ex + s0 * ey, -s0 * ex + c0 * ey
-                u0 = self._twist_at(fl[0])
-                u0 = np.array([float(u0[0]) - float(u0[2]) * cy, float(u0[1]) + float(u0[2]) * cx, float(u0[2])])
-                inc = inc + timing_covariance(s2, u0, 0.0) + timing_covariance(s2, u1, float(pose[2]) - y0)
+            inc = twist_covariance_array((0.0, 0.0, 0.0, *self._floor_increment(fl[0], t)))
+            # the timing at each end of the increment (frame of the fix's pose); the start's turn
+            # w0 dt turns the whole increment: its end moves by w0 dt across the chord
+            y0 = float(fl[1][2])
+            c0, s0 = math.cos(y0), math.sin(y0)
+            ex, ey = float(pose[0]) - float(fl[1][0]), float(pose[1]) - float(fl[1][1])
+            cx, cy = c0 * ex + s0 * ey, -s0 * ex + c0 * ey
+            u0 = self._twist_at(fl[0])
+            u0 = np.array([float(u0[0]) - float(u0[2]) * cy, float(u0[1]) + float(u0[2]) * cx, float(u0[2])])
+            inc = inc + timing_covariance(s2, u0, 0.0) + timing_covariance(s2, u1, float(pose[2]) - y0)
             floor = carried_covariance(fl[2], fl[1], pose, inc)
         out = covariance_bound(own, floor)
         self._output_cov_memo = (t, pose, cov, fl, out)
         return out
 
-    def _floor_increment_cov(self, t0: float, t1: float) -> FloatArray:
-        """The odometry increment's covariance over ``(t0, t1]`` (as :meth:`_integrate`), resumed from
-        its own mark (the fix's stamp stays, the end grows): the predictions' marks stay theirs."""
+    def _floor_increment(self, t0: float, t1: float) -> tuple[float, float, float, float, float, float]:
+        """The upper triangle of the odometry increment's covariance over ``(t0, t1]`` (as :meth:`_motion`,
+        whose upper triangle is what it carries), resumed from its own mark (the fix's stamp stays, the end
+        grows): the predictions' marks stay theirs."""
         tol = self._odom_gap_s()
         if not self.odo_t or self._unmeasured_tail(t0, t1, tol) > 0.0 or self._gap_s(t0, t1, tol) > 0.0:
-            return self._motion(t0, t1)[1]
+            c = self._motion(t0, t1)[1].reshape(9).tolist()
+            return c[0], c[1], c[2], c[4], c[5], c[8]
         memo = self._integrate_memo   # the prediction's integral from the same keyframe: the same numbers
         if memo is not None and memo[0] == (t0, t1, len(self.odo_t), self.odo_t[0], self.odo_t[-1]):
-            return twist_covariance_array(memo[1])
+            return memo[1][3:]
         mark = self._floor_mark
         if not mark or mark[0] < t0 - 1e-12 or self._floor_mark_t0 != t0:
             mark.clear()
             self._floor_mark_t0 = t0
         i0 = max(bisect_right(self.odo_t, t0) - 1, 0)
         i1 = min(bisect_left(self.odo_t, t1) + 1, len(self.odo_t))
-        return twist_covariance_array(integrate_twist_values(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1,
-                                                             self._q_slip, mark))
+        return integrate_twist_values(self.odo_t, self.odo_u, self.odo_c, i0, i1, t0, t1, self._q_slip, mark)[3:]
 
     def _relative_yaw_increments(self, t0: float, t1: float, d_odom: float) -> dict[str, tuple[float, float]]:
         """Each relative yaw source's increment over ``(t0, t1]`` and its variance as its factor

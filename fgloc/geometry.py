@@ -275,6 +275,16 @@ def rotate_covariance(cov: ArrayLike, yaw: float) -> FloatArray:
     return r @ c @ r.T
 
 
+def mahalanobis2_2x2(e0: float, e1: float, s00: float, s01: float, s10: float, s11: float) -> float:
+    """``e^T S^-1 e`` for ``e = (e0, e1)``, ``S = [[s00, s01], [s10, s11]]``; inf when ``S`` is singular
+    or the result is not a finite non-negative number."""
+    det = s00 * s11 - s01 * s10
+    if det == 0.0 or not math.isfinite(det):
+        return math.inf
+    d2 = (e0 * (s11 * e0 - s01 * e1) + e1 * (s00 * e1 - s10 * e0)) / det
+    return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
+
+
 def interpolate_poses(stamps: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
     """Linear interpolation of poses at times ``t`` (yaw interpolated on the circle).
 

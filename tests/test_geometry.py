@@ -7,6 +7,7 @@ from fgloc.geometry import (
     from_matrix,
     interpolate_poses,
     inverse,
+    mahalanobis2_2x2,
     quaternion_to_yaw,
     to_matrix,
     transform_points,
@@ -94,3 +95,16 @@ def test_with_rotation_keeps_the_arc_and_replaces_the_turn():
     out = with_rotation(d, 0.3, speed_gain=0.5)
     assert np.allclose(log(out), [0.5, 0.05, 0.3], atol=1e-12)
     assert np.allclose(with_rotation(d, 0.6), d, atol=1e-12)
+
+
+def test_mahalanobis_2x2_is_the_solved_one_and_inf_when_singular():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        a = rng.normal(size=(2, 2))
+        S = a @ a.T + np.diag(rng.uniform(1e-6, 1.0, 2))
+        e = rng.normal(size=2)
+        want = float(e @ np.linalg.solve(S, e))
+        assert mahalanobis2_2x2(e[0], e[1], S[0, 0], S[0, 1], S[1, 0], S[1, 1]) == pytest.approx(want, rel=1e-9)
+    assert mahalanobis2_2x2(1.0, 0.0, 1.0, 1.0, 1.0, 1.0) == np.inf      # singular
+    assert mahalanobis2_2x2(1.0, 0.0, np.nan, 0.0, 0.0, 1.0) == np.inf   # not finite
+    assert mahalanobis2_2x2(1.0, 0.0, -1.0, 0.0, 0.0, 1.0) == np.inf     # indefinite: negative

@@ -86,7 +86,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fgloc.geometry import between1, between_values, compose1, wrap_scalar
+from fgloc.geometry import between1, between_values, compose1, mahalanobis2_2x2, wrap_scalar
 from fgloc.localization.agreement import (
     agreement_sigma,
     agreements,
@@ -593,19 +593,8 @@ class JumpGate:
 
 def _mahalanobis2(e: FloatArray, S: FloatArray) -> float:
     """The squared Mahalanobis distance of the position part of ``e`` under the position block of ``S``."""
-    return mahalanobis2_2x2(float(e[0]), float(e[1]), float(S[0, 0]), float(S[0, 1]), float(S[1, 0]),
-                             float(S[1, 1]))
-
-
-def mahalanobis2_2x2(e0: float, e1: float, s00: float, s01: float, s10: float, s11: float) -> float:
-    """``e^T S^-1 e`` for ``e = (e0, e1)``, ``S = [[s00, s01], [s10, s11]]``; inf when ``S`` is singular
-    or the result is not a finite non-negative number."""
-    det = s00 * s11 - s01 * s10
-    if det == 0.0 or not math.isfinite(det):
-        return math.inf
-    d2 = (e0 * (s11 * e0 - s01 * e1) + e1 * (s00 * e1 - s10 * e0)) / det
-    return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
+    return mahalanobis2_2x2(float(e[0]), float(e[1]), float(S[0, 0]), float(S[0, 1]), float(S[1, 0]), float(S[1, 1]))
 
 
 __all__ = ["GateVerdict", "JumpGate", "OdometryCoverage", "agreement_sigma", "agreements", "innovation",
-           "mahalanobis2_2x2", "neighbourhood", "scan_agreement", "slip_allowance"]
+           "neighbourhood", "scan_agreement", "slip_allowance"]

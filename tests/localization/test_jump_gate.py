@@ -16,7 +16,6 @@ from fgloc.localization import Localizer, Session
 from fgloc.localization.gate import (
     JumpGate,
     agreements,
-    mahalanobis2_2x2,
     neighbourhood,
     scan_agreement,
     slip_allowance,
@@ -83,19 +82,6 @@ def test_slip_allowance_grows_with_the_motion():
     a = slip_allowance(np.array([0.3, 0.4, 0.2]), 0.5)
     np.testing.assert_allclose(np.diag(a), [0.25**2, 0.25**2, 0.1**2])
     assert not slip_allowance(None, 0.5).any()
-
-
-def test_mahalanobis_2x2_is_the_solved_one_and_inf_when_singular():
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        a = rng.normal(size=(2, 2))
-        S = a @ a.T + np.diag(rng.uniform(1e-6, 1.0, 2))
-        e = rng.normal(size=2)
-        want = float(e @ np.linalg.solve(S, e))
-        assert mahalanobis2_2x2(e[0], e[1], S[0, 0], S[0, 1], S[1, 0], S[1, 1]) == pytest.approx(want, rel=1e-9)
-    assert mahalanobis2_2x2(1.0, 0.0, 1.0, 1.0, 1.0, 1.0) == np.inf      # singular
-    assert mahalanobis2_2x2(1.0, 0.0, np.nan, 0.0, 0.0, 1.0) == np.inf   # not finite
-    assert mahalanobis2_2x2(1.0, 0.0, -1.0, 0.0, 0.0, 1.0) == np.inf     # indefinite: negative
 
 
 def test_gate_holds_a_jump_the_map_does_not_refute_and_takes_one_it_confirms(room):

@@ -65,8 +65,8 @@ from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, nj
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
-from .base import MatchResult, PreprocessOptions, ScanPreprocessor, _grid_cell, check_guess, no_fix
-from .native import _signed_field, distance_m, map_distance_field
+from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, grid_cell, no_fix
+from .native import distance_m, map_distance_field, signed_field
 
 FloatArray = NDArray[np.float64]
 #: EM rounds of the refinement with the measured sigma at most (``refine_scale: measured``)
@@ -127,7 +127,7 @@ def beam_term_table(model: int, z_hit: float, z_rand_mult: float, sigma: float, 
 
 
 @njit(cache=True)
-def _kld_count(bins, draws, order, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
+def kld_count(bins, draws, order, pf_err, pf_z, n_min, cap):  # pragma: no cover - compiled
     """nav2 ``pf_update_resample``'s stopping rule over candidates in visiting order.
 
     Candidate ``j`` is particle ``draws[order[j]]``, its histogram bin ``bins[draws[order[j]]]``
@@ -179,7 +179,7 @@ def _kld_count(bins, draws, order, pf_err, pf_z, n_min, cap):  # pragma: no cove
 
 
 @njit(cache=True)
-def _bin_keys(p, size):  # pragma: no cover - compiled
+def bin_keys(p, size):  # pragma: no cover - compiled
     """``floor(p / size).astype(int64)`` for particles ``p (N, 3)`` and bin sizes ``size (3,)``."""
     n = p.shape[0]
     out = np.empty((n, 3), dtype=np.int64)
@@ -439,11 +439,11 @@ def _systematic(cdf, n, offset):  # pragma: no cover - compiled
     return out
 
 
-def _on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
+def on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
     """``occ_map.in_bounds`` of one point in scalar maths (a point that is not finite is off the grid)."""
     if not (math.isfinite(x) and math.isfinite(y)):
         return False
-    row, col = _grid_cell(occ_map, x, y)
+    row, col = grid_cell(occ_map, x, y)
     return 0 <= row < occ_map.height and 0 <= col < occ_map.width
 
 
@@ -476,7 +476,7 @@ def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: fl
     distance (m) from each cell centre to the nearest wall cell centre when the caller has it (the map's
     distance field, when the walls are its occupied cells).  The distances are the native matcher's exact
     transform (:func:`fgloc.frontends.native.distance_m`: scipy's ``distance_transform_edt`` bit for bit); the
-    inside, the signs and the clip in one pass over the wall cells (:func:`fgloc.frontends.native._signed_field`:
+    inside, the signs and the clip in one pass over the wall cells (:func:`fgloc.frontends.native.signed_field`:
     a wall is a few cells thick, the transform of the free cells would visit the whole grid).
     """
     w = np.ascontiguousarray(walls, dtype=bool)
@@ -486,7 +486,7 @@ def wall_surface_field(walls: NDArray[np.bool_], resolution: float, max_dist: fl
         return np.full(w.shape, float(np.clip(-float(max_dist) + float(depth_m), -max_dist, max_dist)))
     dist = distance_m(w, resolution) if distance is None else np.ascontiguousarray(distance, dtype=float)
     out = np.empty(w.shape)
-    _signed_field(w, dist, out, float(resolution), float(depth_m), float(max_dist))
+    signed_field(w, dist, out, float(resolution), float(depth_m), float(max_dist))
     return out
 
 
@@ -737,7 +737,7 @@ class AMCL:
 
     def _bins(self, particles: FloatArray) -> NDArray[np.int64]:
         """Each particle's KLD histogram bin ``floor(p / kld_bin)`` (heading not wrapped)."""
-        return _bin_keys(np.ascontiguousarray(particles, dtype=float), self.kld_bin)  # type: ignore[no-any-return]
+        return bin_keys(np.ascontiguousarray(particles, dtype=float), self.kld_bin)  # type: ignore[no-any-return]
 
     def _resample(self, bins: NDArray[np.int64] | None = None) -> None:
         """KLD resampling; ``bins``: :meth:`_bins` of the particles when the caller has them."""
@@ -749,7 +749,7 @@ class AMCL:
         draws = _systematic(cdf, cap, self.rng.random())
         order = self.rng.permutation(cap)
         n_min = self.max_particles if self._global else self.min_particles
-        n, k_n = _kld_count(self._bins(self.particles) if bins is None else bins, draws, order, self.pf_err,
+        n, k_n = kld_count(self._bins(self.particles) if bins is None else bins, draws, order, self.pf_err,
                             self.pf_z, n_min, cap)
         if n < n_min:  # (the limit is clipped to n_min, so this only guards the rule's contract)
             n = n_min
@@ -991,7 +991,7 @@ class AMCL:
                 "particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
                 "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined,
                 "estimate": np.array(mean, dtype=float), "estimate_cov": np.array(cov, dtype=float)}
-        if not _on_grid(self.map, float(mean[0]), float(mean[1])):
+        if not on_grid(self.map, float(mean[0]), float(mean[1])):
             return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
         if self._global:
             return no_fix(f"not converged (global localization: cloud std {sx:.2f} m, {math.degrees(sa):.0f} deg)",

@@ -44,6 +44,7 @@ __all__ = [
     "voxel_downsample",
     "FixAcceptance",
     "registration_sigma",
+    "grid_cell",
 ]
 
 
@@ -421,7 +422,7 @@ def map_accuracy(occ_map: OccupancyMap, value: float | str, where: str) -> float
 _ORIGIN_TRIG: tuple[float, float, float] = (0.0, 1.0, 0.0)  # (yaw, cos, sin) of the last map origin seen
 
 
-def _grid_cell(occ_map: OccupancyMap, x: float, y: float) -> tuple[int, int]:
+def grid_cell(occ_map: OccupancyMap, x: float, y: float) -> tuple[int, int]:
     """``occ_map.world_to_grid`` of one point in scalar maths: the same operations on the same
     values (numpy's cos / sin of the origin's yaw), ``(row, col)``; a numpy call per operation on
     a 1x2 array was most of :func:`check_guess`."""
@@ -447,7 +448,7 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
     x, y, yaw = float(g[0]), float(g[1]), float(g[2])
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
         return None, "guess is not finite"
-    i_c, j_c = _grid_cell(occ_map, x, y)
+    i_c, j_c = grid_cell(occ_map, x, y)
     h, w = occ_map.data.shape
     if not (0 <= i_c < h and 0 <= j_c < w):
         return None, f"guess ({x:.2f}, {y:.2f}) is off the map"

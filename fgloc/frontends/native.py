@@ -870,7 +870,7 @@ def _edt(feature, bound2):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _signed_field(occ, dist_m, out, cell_m, depth_m, max_m):  # pragma: no cover - compiled
+def signed_field(occ, dist_m, out, cell_m, depth_m, max_m):  # pragma: no cover - compiled
     """:func:`surface_distance_field`'s last steps in one pass, into ``out`` (may be ``dist_m``):
     ``dist_m - cell_m / 2`` off the obstacles (``dist_m``: the distance to the nearest occupied cell
     centre), minus the distance to the nearest free cell less half a cell on them, plus ``depth_m``,
@@ -992,7 +992,7 @@ def surface_distance_field(
         # a free cell at least max - depth + half a cell from the walls is clipped to max: only the
         # distances below that (and two cells more) need to be exact
         dist = out = distance_m(occ, fine, float(max_dist_m) - float(surface_depth_m) + 2.0 * fine)
-    _signed_field(occ, dist, out, fine, float(surface_depth_m), float(max_dist_m))
+    signed_field(occ, dist, out, fine, float(surface_depth_m), float(max_dist_m))
     return out
 
 
@@ -1304,4 +1304,4 @@ def warmup() -> None:
 
 
 __all__ = ["NativeMatcher", "distance_m", "edt_squared", "edt_squared_below", "map_distance_field",
-           "registration_floor", "surface_distance_field", "warmup"]
+           "registration_floor", "signed_field", "surface_distance_field", "warmup"]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.frontends.amcl import AMCL, _on_grid, sample_motion, systematic_resample
+from fgloc.frontends.amcl import AMCL, on_grid, sample_motion, systematic_resample
 from fgloc.geometry import wrap_angle
 from fgloc.maps import OccupancyMap
 
@@ -84,7 +84,7 @@ def test_on_grid_is_in_bounds_of_one_point() -> None:
                    [-1e-300, 0.5], [4.0, 3.5]]
         want = m.in_bounds(np.nan_to_num(pts, nan=1e308, posinf=1e308, neginf=-1e308))
         want[:3] = False  # not finite: off the grid
-        got = np.array([_on_grid(m, float(x), float(y)) for x, y in pts])
+        got = np.array([on_grid(m, float(x), float(y)) for x, y in pts])
         assert np.array_equal(got, want)
 
 
@@ -108,18 +108,18 @@ def test_filter_on_a_corridor_keeps_the_cluster_mean_without_the_gather() -> Non
 
 
 def test_bin_keys_equal_numpy_floor() -> None:
-    from fgloc.frontends.amcl import _bin_keys
+    from fgloc.frontends.amcl import bin_keys
 
     gen = np.random.default_rng(4)
     p = np.column_stack([gen.uniform(-30, 30, 999), gen.uniform(-30, 30, 999), gen.uniform(-np.pi, np.pi, 999)])
     p[:4] = [[0.0, -0.0, 0.5], [-0.5, 0.5, -np.pi], [1e-300, -1e-300, 0.17453292519943295], [-1.0, 1.0, 3.14]]
     size = np.array([0.5, 0.5, np.radians(10.0)])
-    assert np.array_equal(_bin_keys(p, size), np.floor(p / size).astype(np.int64))
+    assert np.array_equal(bin_keys(p, size), np.floor(p / size).astype(np.int64))
 
 
 def test_kld_count_reads_the_drawn_candidates_in_order() -> None:
     """The stopping rule over ``bins[draws[order[j]]]`` against the rule written out in Python."""
-    from fgloc.frontends.amcl import _kld_count
+    from fgloc.frontends.amcl import kld_count
 
     def reference(keys: np.ndarray, pf_err: float, pf_z: float, n_min: int, cap: int) -> tuple[int, int]:
         seen: set[tuple[int, ...]] = set()
@@ -142,5 +142,5 @@ def test_kld_count_reads_the_drawn_candidates_in_order() -> None:
         bins = gen.integers(-spread, spread + 1, (n_particles, 3))
         draws = gen.integers(0, n_particles, cap)
         order = gen.permutation(cap)
-        got = _kld_count(bins, draws, order, 0.05, 0.99, n_min, cap)
+        got = kld_count(bins, draws, order, 0.05, 0.99, n_min, cap)
         assert tuple(int(v) for v in got) == reference(bins[draws[order]], 0.05, 0.99, n_min, cap)

@@ -294,7 +294,7 @@ class Streams(SmootherState):
         return d, c
 
     def _chord_along_gyro(self, t0: float, t1: float
-                          ) -> tuple[FloatArray, tuple[float, float, float]] | None:
+                          ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
         """The odometry's translation over ``(t0, t1]`` integrated along the first gyro's
         (bias-corrected) heading, ``[x, y, gyro yaw]`` in the frame at ``t0``, and the
         translation's covariance ``(p_xx, p_xy, p_yy)`` from the odometry's speed variances alone
@@ -359,7 +359,7 @@ class Streams(SmootherState):
                 p11 += s_ * s_ * s00 + 2.0 * c * s_ * s01 + c * c * s11
             t = tn
             i += 1
-        return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
+        return (x, y, wrap_scalar(th)), (p00, p01, p11)
 
     def _add_heading_reading(self, t: float, yaw: float, var: float, source: str) -> None:
         """Keep the first absolute heading source's readings (unwrapped) for :meth:`_chord_along_heading`."""
@@ -430,7 +430,7 @@ class Streams(SmootherState):
                 math.sqrt(self._heading_var * (f * f + (1.0 - f) ** 2)))
 
     def _chord_along_heading(self, t0: float, t1: float
-                             ) -> tuple[FloatArray, tuple[float, float, float]] | None:
+                             ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
         """:meth:`_chord_along_gyro`'s chord and covariance, the odometry's translation integrated
         along the absolute heading readings (a compass, an IMU's orientation: linearly interpolated)
         where no gyro covers the interval (:meth:`_heading_chord`); None when the
@@ -461,7 +461,7 @@ class Streams(SmootherState):
                                                      x, y, th, p00, p01, p11)
             t = tn
             i += 1
-        return np.array([x, y, wrap_scalar(th)]), (p00, p01, p11)
+        return (x, y, wrap_scalar(th)), (p00, p01, p11)
 
     def _rotation_between(self, t0: float, t1: float) -> float:
         """Heading change from ``t0`` to ``t1`` (negative if ``t1 < t0``): a gyro's when it covers

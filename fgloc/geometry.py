@@ -64,7 +64,7 @@ def wrap_scalar(a: float) -> float:
     return w - math.pi
 
 
-def compose1(a: FloatArray, b: FloatArray) -> FloatArray:
+def compose1(a: Any, b: Any) -> FloatArray:
     """``a (+) b`` for single poses (scalar maths: fast for per-message hot paths)."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
     b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])

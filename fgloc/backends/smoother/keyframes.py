@@ -145,7 +145,7 @@ class KeyframeGraph(FurtherSourceFactors):
         else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
             chord, (p00, p01, p11) = got
             gv = float(self._gains[0])
-            pred = compose1(self.kf_pose[k_prev], (chord[0] * gv, (chord[1] - self._drift[0] * chord[0]) * gv,  # type: ignore[arg-type]
+            pred = compose1(self.kf_pose[k_prev], (chord[0] * gv, (chord[1] - self._drift[0] * chord[0]) * gv,
                                                    chord[2]))
             d = np.array([chord[0], chord[1], d[2]])
             # its translation's covariance is the chord's, uncorrelated with the wheels' yaw

@@ -257,7 +257,7 @@ class SlidingWindowSmoother(KeyframeGraph):
         if self.odo_t and self._unmeasured_tail(t0, t, tol) <= 0.0 and self._gap_s(t0, t, tol) <= 0.0:
             # the odometry measures the whole interval (_motion's own integral): in floats, no arrays between
             x, y, th, c00, c01, c02, c11, c12, c22 = self._integrate_values(t0, t)
-            pose = compose1(p0, self._corrected_values(x, y, th, t0, t))  # type: ignore[arg-type]
+            pose = compose1(p0, self._corrected_values(x, y, th, t0, t))
             cov = carried_covariance_upper(self._last_cov, p0, pose, c00, c01, c02, c11, c12, c22)
         else:
             d, c = self._motion(t0, t)

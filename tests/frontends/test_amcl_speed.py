@@ -41,6 +41,7 @@ def _numpy_omni(particles: np.ndarray, delta: np.ndarray, alphas: np.ndarray, rn
     return out
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")  # all-zero weights: 0 / 0
 @pytest.mark.parametrize("n_w, n", [(1, 5), (7, 7), (500, 2000), (2000, 500), (3000, 3000)])
 def test_systematic_resample_equals_searchsorted(n_w: int, n: int) -> None:
     gen = np.random.default_rng(n_w + n)
@@ -58,6 +59,7 @@ def test_systematic_resample_equals_searchsorted(n_w: int, n: int) -> None:
         assert got.dtype == np.int64 and np.array_equal(got, want), kind
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered in divide:RuntimeWarning")  # all-zero weights: 0 / 0
 def test_systematic_resample_nan_tail_as_numpy() -> None:
     w = np.array([0.2, 0.3, np.inf, 0.1, 0.4])  # the cumulative sum ends in inf: inf / inf NaNs after zeros
     got = systematic_resample(w, 9, np.random.default_rng(3))
@@ -75,6 +77,7 @@ def test_omni_motion_equals_numpy_expressions(delta: list[float]) -> None:
     assert np.all(got[:, 2] >= -np.pi) and np.all(got[:, 2] < np.pi)
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered in divide:RuntimeWarning")  # the 1e300 point
 def test_on_grid_is_in_bounds_of_one_point() -> None:
     gen = np.random.default_rng(2)
     for yaw in (0.0, 0.3, -2.0):

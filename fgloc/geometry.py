@@ -57,11 +57,9 @@ def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
 
 
 def wrap_scalar(a: float) -> float:
-    """Wrap one angle in radians to ``[-pi, pi)`` (scalar maths: fast on hot paths)."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w < 0:
-        w += 2.0 * math.pi
-    return w - math.pi
+    """Wrap one angle in radians to ``[-pi, pi)`` (scalar maths: fast on hot paths): :func:`wrap_angle`'s
+    value bit for bit (Python's float ``%`` is numpy's remainder), NaN for an angle that is not finite."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def compose1(a: Any, b: Any) -> FloatArray:

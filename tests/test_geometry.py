@@ -12,6 +12,7 @@ from fgloc.geometry import (
     to_matrix,
     transform_points,
     wrap_angle,
+    wrap_scalar,
     yaw_to_quaternion,
 )
 
@@ -108,3 +109,17 @@ def test_mahalanobis_2x2_is_the_solved_one_and_inf_when_singular():
     assert mahalanobis2_2x2(1.0, 0.0, 1.0, 1.0, 1.0, 1.0) == np.inf      # singular
     assert mahalanobis2_2x2(1.0, 0.0, np.nan, 0.0, 0.0, 1.0) == np.inf   # not finite
     assert mahalanobis2_2x2(1.0, 0.0, -1.0, 0.0, 0.0, 1.0) == np.inf     # indefinite: negative
+
+
+def test_wrap_scalar_is_wrap_angle_bit_for_bit():
+    rng = np.random.default_rng(5)
+    vals = np.concatenate([rng.normal(0.0, 10.0, 20000), rng.uniform(-1e17, 1e17, 2000),
+                           np.arange(-40, 41) * np.pi / 2,
+                           [0.0, -0.0, np.pi, -np.pi, 1e300, -1e300, 5e-324, -5e-324,
+                            np.nextafter(np.pi, 0.0), np.nextafter(-np.pi, 0.0)]])
+    want = wrap_angle(vals)
+    got = np.array([wrap_scalar(float(v)) for v in vals])
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    with np.errstate(invalid="ignore"):
+        assert np.isnan(wrap_angle(np.inf))
+    assert np.isnan(wrap_scalar(np.inf)) and np.isnan(wrap_scalar(-np.inf)) and np.isnan(wrap_scalar(np.nan))

@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 
 from fgloc.config.schema import parse, setting, to_dict, with_overrides
 from fgloc.errors import ConfigError
-from fgloc.geometry import compose1, wrap_angle
+from fgloc.geometry import compose1, wrap_angle, wrap_scalar
 from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, njit, run_step
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
@@ -445,12 +445,6 @@ def on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
         return False
     row, col = grid_cell(occ_map, x, y)
     return 0 <= row < occ_map.height and 0 <= col < occ_map.width
-
-
-def _wrap1(a: float) -> float:
-    """:func:`fgloc.geometry.wrap_angle` of one angle, in Python floats (the same operations: ``%`` is
-    numpy's remainder)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _wrap_in_place(a: FloatArray) -> FloatArray:
@@ -926,11 +920,11 @@ class AMCL:
             p, H, wr2, sw, n_runs, swf = self._refit_measured(bx, by, z_rand_mult, model,
                                                               (p, H, wr2, sw, n_runs, swf))
         p0, p1, p2 = p.tolist()
-        x, y, yaw = o0 + c * p0 - s * p1, o1 + s * p0 + c * p1, _wrap1(p2 + o2)
+        x, y, yaw = o0 + c * p0 - s * p1, o1 + s * p0 + c * p1, wrap_scalar(p2 + o2)
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
             return mean, False
         out = np.array([x, y, yaw])
-        d = np.array([x - m0, y - m1, _wrap1(yaw - m2)])
+        d = np.array([x - m0, y - m1, wrap_scalar(yaw - m2)])
         try:
             m2 = float(d @ np.linalg.solve(cov + 1e-12 * np.eye(3), d))
         except np.linalg.LinAlgError:

@@ -109,12 +109,10 @@ class Calibration(Streams):
         gv = float(self._gains[0])
         for name in self.gyro:  # the first gyro that covers the interval turns it
             r = self._gyro_turn(name, t0, t1)
-            if r is not None and abs(dth) > 1e-9:
-                tx, ty, th = scaled_delta_values(dx, dy, dth, gv, r / dth)
-                return tx, ty - ly * tx, th
-            if r is not None:
-                tx, ty, _ = scaled_delta_values(dx, dy, dth, gv, float(self._gains[1]))
-                return tx, ty - ly * tx, r
+            if r is not None:   # the chord turned as the gyro turned (where the wheels turned), its heading the gyro's
+                turned = abs(dth) > 1e-9
+                tx, ty, th = scaled_delta_values(dx, dy, dth, gv, r / dth if turned else float(self._gains[1]))
+                return tx, ty - ly * tx, (th if turned else r)
         tx, ty, th = scaled_delta_values(dx, dy, dth, gv, float(self._gains[1]))
         if ly != 0.0 or lw != 0.0:
             ty, th = ty - ly * tx, th - lw * tx

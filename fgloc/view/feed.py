@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,9 @@ from fgloc.geometry import exp as se2_exp
 from fgloc.io.yamlio import yaml_ready
 from fgloc.types import LaserScan, Odometry, PoseFix, StaticTransform
 from fgloc.view.channels import BASE_FRAME, MAP_FRAME, ODOM_FRAME
+
+if TYPE_CHECKING:
+    from fgloc.localization.stats import LiveCounts
 
 FloatArray = NDArray[np.float64]
 
@@ -53,10 +56,6 @@ SKIPPED = "skipped"          # the localizer refused the scan (bad or repeated s
 ODOM_ONLY = "odom_only"      # no map: scans only place keyframes
 
 ODOM_EXTRAPOLATE_MAX_S = 0.5  # carry the last odometry to a stamp at most this far
-
-#: the localizer's counters a scan's status compares, taken before and after it: scans, fixes, no_fix,
-#: rejected, global_searches, relocalizations (``Localizer.stats``) and ``len(Localizer.fixes)``
-_Snapshot = tuple[int, int, int, int, int, int, int]
 
 
 class ScanView:
@@ -190,7 +189,7 @@ class ViewFeed:
         self.counts: dict[str, int] = {"scan": 0, "odom": 0, "imu": 0}
         self.status_counts: dict[str, int] = {}
         self._rate_mark: tuple[float, dict[str, int]] | None = None
-        self._pending: tuple[LaserScan, _Snapshot] | None = None
+        self._pending: tuple[LaserScan, tuple[LiveCounts, int]] | None = None
         self._odom_pose: FloatArray | None = None
         self._odom_t: float | None = None
         self._twist = np.zeros(3)
@@ -298,37 +297,34 @@ class ViewFeed:
         return out
 
     # ------------------------------------------------------------------ scans
-    def _snapshot(self) -> _Snapshot:
-        """The localizer's counters a scan's status compares (:data:`_Snapshot`), now: a plain tuple,
-        read twice per scan."""
-        g = self.loc.stats.get
-        return (g("scans", 0), g("fixes", 0), g("no_fix", 0), g("rejected", 0), g("global_searches", 0),
-                g("relocalizations", 0), len(self.loc.fixes))
+    def _snapshot(self) -> tuple[LiveCounts, int]:
+        """The localizer's counters and how many fixes it has made, now."""
+        return self._counts(self.loc.stats), len(self.loc.fixes)
 
-    def _status(self, before: _Snapshot, what: PoseFix | str | None) -> tuple[str, str, PoseFix | None]:
-        scans0, fixes0, no_fix0, rejected0, global0, reloc0, n_fixes0 = before
-        scans, fixes, no_fix, rejected, global_, reloc, n_fixes = self._snapshot()
+    def _status(self, before: tuple[LiveCounts, int], what: PoseFix | str | None) -> tuple[str, str, PoseFix | None]:
+        c0, n_fixes0 = before
+        c, n_fixes = self._snapshot()
         fix = what if isinstance(what, PoseFix) else None
         told = what if isinstance(what, str) else str(self.loc.last_reason or "")
-        if scans == scans0:
+        if c.scans == c0.scans:
             return SKIPPED, told or "scan skipped (bad or repeated stamp)", None
         if self.odom_mode:
             return ODOM_ONLY, told or "no map", None
         if fix is None and n_fixes > n_fixes0:
             fix = self.loc.fixes[-1]
-        if fix is not None and fixes > fixes0:
-            if rejected > rejected0:
+        if fix is not None and c.fixes > c0.fixes:
+            if c.rejected > c0.rejected:
                 return REJECTED, told or "fix rejected by the back-end", fix
-            if global_ > global0:
+            if c.global_searches > c0.global_searches:
                 return ACCEPTED, "global localization", fix
-            if reloc > reloc0:
+            if c.relocalizations > c0.relocalizations:
                 return ACCEPTED, "relocalization", fix
             return ACCEPTED, "", fix
-        if no_fix > no_fix0:
+        if c.no_fix > c0.no_fix:
             return NO_FIX, told or "no fix", None
-        if global_ > global0 or told.startswith("global") or told.startswith("initial"):
+        if c.global_searches > c0.global_searches or told.startswith("global") or told.startswith("initial"):
             return SEARCHING, told or "global localization: no candidate yet", None
-        if reloc > reloc0:
+        if c.relocalizations > c0.relocalizations:
             return SEARCHING, told or "lost: global localization restarted", None
         return PREDICTED, told or "not matched (frontend_every): odometry prediction", None
 

@@ -283,6 +283,20 @@ def mahalanobis2_2x2(e0: float, e1: float, s00: float, s01: float, s10: float, s
     return d2 if math.isfinite(d2) and d2 >= 0 else math.inf
 
 
+def mahalanobis2_3x3(e0: float, e1: float, e2: float, s: list[float]) -> float:
+    """``e^T S^-1 e`` for the 3x3 matrix ``S`` (its 9 entries row by row) by its adjugate, in scalars (a
+    gate per keyframe: ``np.linalg.solve`` costs ~10 us of overhead); inf when ``S`` is singular."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = s
+    c00, c01, c02 = a4 * a8 - a5 * a7, a2 * a7 - a1 * a8, a1 * a5 - a2 * a4
+    c10, c11, c12 = a5 * a6 - a3 * a8, a0 * a8 - a2 * a6, a2 * a3 - a0 * a5
+    c20, c21, c22 = a3 * a7 - a4 * a6, a1 * a6 - a0 * a7, a0 * a4 - a1 * a3
+    det = a0 * c00 + a1 * c10 + a2 * c20
+    if det == 0.0 or not math.isfinite(det):
+        return math.inf
+    return (e0 * (c00 * e0 + c01 * e1 + c02 * e2) + e1 * (c10 * e0 + c11 * e1 + c12 * e2)
+            + e2 * (c20 * e0 + c21 * e1 + c22 * e2)) / det
+
+
 def interpolate_poses(stamps: ArrayLike, poses: ArrayLike, t: ArrayLike) -> FloatArray:
     """Linear interpolation of poses at times ``t`` (yaw interpolated on the circle).
 

@@ -8,6 +8,7 @@ from fgloc.geometry import (
     interpolate_poses,
     inverse,
     mahalanobis2_2x2,
+    mahalanobis2_3x3,
     quaternion_to_yaw,
     to_matrix,
     transform_points,
@@ -123,3 +124,15 @@ def test_wrap_scalar_is_wrap_angle_bit_for_bit():
     with np.errstate(invalid="ignore"):
         assert np.isnan(wrap_angle(np.inf))
     assert np.isnan(wrap_scalar(np.inf)) and np.isnan(wrap_scalar(-np.inf)) and np.isnan(wrap_scalar(np.nan))
+
+
+def test_mahalanobis_3x3_is_the_solved_one_and_inf_when_singular():
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3))
+        S = a @ a.T + np.diag(rng.uniform(1e-6, 1.0, 3))
+        e = rng.normal(size=3)
+        want = float(e @ np.linalg.solve(S, e))
+        assert mahalanobis2_3x3(e[0], e[1], e[2], S.reshape(9).tolist()) == pytest.approx(want, rel=1e-9)
+    assert mahalanobis2_3x3(1.0, 0.0, 0.0, [1.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0]) == np.inf  # singular
+    assert mahalanobis2_3x3(1.0, 0.0, 0.0, [np.nan, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]) == np.inf  # not finite

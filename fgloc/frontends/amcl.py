@@ -65,7 +65,7 @@ from fgloc.gridmath import add_normal, bilinear, bilinear_grad, mirror_upper, nj
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
-from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, grid_cell, no_fix
+from .base import MatchResult, PreprocessOptions, ScanPreprocessor, check_guess, no_fix, on_grid
 from .native import distance_m, map_distance_field, signed_field
 
 FloatArray = NDArray[np.float64]
@@ -437,14 +437,6 @@ def _systematic(cdf, n, offset):  # pragma: no cover - compiled
             i += 1
         out[k] = i if i < m - 1 else m - 1
     return out
-
-
-def on_grid(occ_map: OccupancyMap, x: float, y: float) -> bool:
-    """``occ_map.in_bounds`` of one point in scalar maths (a point that is not finite is off the grid)."""
-    if not (math.isfinite(x) and math.isfinite(y)):
-        return False
-    row, col = grid_cell(occ_map, x, y)
-    return 0 <= row < occ_map.height and 0 <= col < occ_map.width
 
 
 def _wrap_in_place(a: FloatArray) -> FloatArray:
@@ -985,7 +977,7 @@ class AMCL:
                 "particles": len(self.particles), "updated": updated, "std_xy": sx, "std_yaw": sa,
                 "kld_bins": self.last_kld_k, "cluster_share": share, "refined": refined,
                 "estimate": np.array(mean, dtype=float), "estimate_cov": np.array(cov, dtype=float)}
-        if not on_grid(self.map, float(mean[0]), float(mean[1])):
+        if on_grid(self.map, float(mean[0]), float(mean[1])) is None:
             return no_fix(f"estimate ({mean[0]:.2f}, {mean[1]:.2f}) is off the map", n_inliers=n_pts, **info)
         if self._global:
             return no_fix(f"not converged (global localization: cloud std {sx:.2f} m, {math.degrees(sa):.0f} deg)",

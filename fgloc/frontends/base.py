@@ -40,6 +40,7 @@ __all__ = [
     "ScanPreprocessor",
     "no_fix",
     "check_guess",
+    "on_grid",
     "deskew_offsets",
     "voxel_downsample",
     "FixAcceptance",
@@ -436,6 +437,15 @@ def grid_cell(occ_map: OccupancyMap, x: float, y: float) -> tuple[int, int]:
     return math.floor((-s * dx + c * dy) / res), math.floor((c * dx + s * dy) / res)
 
 
+def on_grid(occ_map: OccupancyMap, x: float, y: float) -> tuple[int, int] | None:
+    """The grid cell ``(row, col)`` of one point (:func:`grid_cell`), or None where ``occ_map.in_bounds``
+    is false or the point is not finite."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return None
+    row, col = grid_cell(occ_map, x, y)
+    return (row, col) if 0 <= row < occ_map.height and 0 <= col < occ_map.width else None
+
+
 def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatArray | None, str]:
     """Validate a prior guess: finite, on the map and not deep in unknown space (more than
     ``UNKNOWN_GUESS_RADIUS_M`` from free space). ``(pose, "")`` or ``(None, reason)``."""
@@ -448,10 +458,10 @@ def check_guess(occ_map: OccupancyMap, guess: np.ndarray | None) -> tuple[FloatA
     x, y, yaw = float(g[0]), float(g[1]), float(g[2])
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
         return None, "guess is not finite"
-    i_c, j_c = grid_cell(occ_map, x, y)
-    h, w = occ_map.data.shape
-    if not (0 <= i_c < h and 0 <= j_c < w):
+    cell = on_grid(occ_map, x, y)
+    if cell is None:
         return None, f"guess ({x:.2f}, {y:.2f}) is off the map"
+    i_c, j_c = cell
     if occ_map.data[i_c, j_c] < 0:  # unknown (the cell alone: .unknown builds the whole grid)
         # a map built by SLAM leaves unknown specks and ragged edges where the robot drove
         # (doorways, glass, the edge of what one half of a log saw): a guess there is fine

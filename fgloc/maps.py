@@ -370,21 +370,33 @@ def _pixels_to_grid(pix: NDArray[np.uint8], negate: bool, occ_t: float, free_t: 
     return out
 
 
+#: PIL's name of each image format a map is written in
+IMAGE_FORMATS = {"pgm": "PPM", "png": "PNG"}
+
+
 def save_map(m: OccupancyMap, yaml_path: str | Path, image_format: str = "pgm") -> Path:
     """Write a map_server map (trinary: occupied 0, free 254, unknown 205)."""
-    from PIL import Image
-
     yaml_path = Path(yaml_path)
-    if image_format not in ("pgm", "png"):
+    if image_format not in IMAGE_FORMATS:
         raise MapError(f"{yaml_path}: image format must be pgm or png, got {image_format}")
     yaml_path.parent.mkdir(parents=True, exist_ok=True)
     image_path = yaml_path.with_suffix("." + image_format)
+    write_map_files(m, yaml_path, image_path, image_path.name, image_format)
+    return yaml_path
+
+
+def write_map_files(m: OccupancyMap, yaml_path: Path, image_path: Path, image_name: str,
+                    image_format: str = "pgm") -> None:
+    """The map's YAML at ``yaml_path`` naming its image ``image_name``, and the image at ``image_path``
+    (``pgm`` or ``png``, whatever the file's own name: a staged output's is ``NAME.partial``)."""
+    from PIL import Image
+
     pix = np.full(m.data.shape, 205, dtype=np.uint8)
     pix[m.free] = 254
     pix[m.occupied] = 0
-    Image.fromarray(np.flipud(pix), mode="L").save(image_path)
+    Image.fromarray(np.flipud(pix), mode="L").save(image_path, format=IMAGE_FORMATS[image_format])
     meta = {
-        "image": image_path.name,
+        "image": image_name,
         "mode": "trinary",
         "resolution": float(m.resolution),
         "origin": [float(v) for v in m.origin],
@@ -395,4 +407,3 @@ def save_map(m: OccupancyMap, yaml_path: str | Path, image_format: str = "pgm") 
     if m.accuracy_m is not None:
         meta["accuracy_m"] = float(m.accuracy_m)
     yaml_path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    return yaml_path

@@ -375,20 +375,66 @@ def eval_cmd(
 def export_cmd(
     src: Annotated[str, typer.Argument(help="a log[:TOPIC] (MCAP, rosbag2, ROS 1 bag), a CARMEN log or a TUM file",
                                        metavar="LOG[:TOPIC]")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="the TUM file to write")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="the TUM file to write, or a map's YAML (NAME.yaml: "
+                                          "its image NAME.pgm beside it)")],
     topic: Annotated[str | None, typer.Option("--topic", help="the topic (instead of LOG:TOPIC)")] = None,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing file")] = False,
 ) -> None:
     """Write a log's Odometry / PoseWithCovarianceStamped topic (or a CARMEN log's laser poses) as a
-    TUM file, as evo reads it."""
-    from fgloc.eval.trajectories import read_trajectory
+    TUM file, as evo reads it; or the map a log carries (nav_msgs/OccupancyGrid, its last message) as a
+    map_server map."""
+    from fgloc.eval.trajectories import read_trajectory, split_spec
     from fgloc.io.outputs import OutputFile
     from fgloc.io.tum import write_tum
 
+    path, named = split_spec(src)
+    if _exports_map(path, named or topic, output):
+        _export_map(path, named or topic, output, force)
+        return
     tr, where = read_trajectory(src, topic)
     with OutputFile(output, command="export", inputs=[where.path], force=force, what=".tum") as out:
         write_tum(out.path, tr)
     print(f"wrote {output}: {len(tr)} poses of {where.label} ({tr.frame_id} frame, {tr.duration:.1f} s)")
+
+
+MAP_SUFFIXES = (".yaml", ".yml")
+
+
+def _exports_map(path: Path, topic: str | None, output: Path) -> bool:
+    """Whether ``fgloc export`` writes a map: the output is a YAML file, or the topic is a map topic
+    (the YAML name the output needs is then a one-line error)."""
+    from fgloc.app.logmap import OCCUPANCY_GRID, log_topic_type
+    from fgloc.errors import LogError
+    from fgloc.io.topics import resolve_name
+
+    if output.suffix.lower() in MAP_SUFFIXES:
+        return True
+    if topic is None or log_topic_type(path, resolve_name(topic)) != OCCUPANCY_GRID:
+        return False
+    raise LogError(f"{path}:{resolve_name(topic)}: a map (nav_msgs/OccupancyGrid): write it as a map_server "
+                   f"map, -o {output.with_suffix('.yaml').name}")
+
+
+def _export_map(path: Path, topic: str | None, output: Path, force: bool) -> None:
+    """The map the log carries as ``output`` (YAML) and its ``.pgm`` image beside it."""
+    from fgloc.app.logmap import read_log_map
+    from fgloc.io.outputs import OutputFile
+    from fgloc.io.topics import resolve_name
+    from fgloc.maps import write_map_files
+
+    image = output.with_suffix(".pgm")
+    outs = [OutputFile(output, command="export", inputs=[path], force=force, what="map YAML"),
+            OutputFile(image, command="export", inputs=[path], force=force, what="map image")]
+    for o in outs:
+        o.check()  # both refusals before the log is read
+    lm = read_log_map(path, None if topic is None else resolve_name(topic))
+    with outs[0] as y, outs[1] as im:
+        write_map_files(lm.map, y.path, im.path, image.name)
+    m = lm.map
+    xmin, xmax, ymin, ymax = m.extent
+    print(f"wrote {output}, {image.name}: the map on {path}:{lm.topic} ({m.width} x {m.height} cells at "
+          f"{m.resolution:g} m, {xmax - xmin:.1f} m x {ymax - ymin:.1f} m; the last of {lm.count} message(s), "
+          f"log time {lm.stamp_s:.3f})")
 
 
 def register(app: typer.Typer) -> None:

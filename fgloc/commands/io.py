@@ -78,6 +78,10 @@ def register(app: typer.Typer) -> None:
         width = max((len(t) for t in s["topics"]), default=5)
         for topic, ti in s["topics"].items():
             print(f"  {topic:<{width}}  {ti['count']:>8}  {ti['type']}")
+        from fgloc.app.logmap import grid_topics
+
+        for topic in grid_topics({t: ti["type"] for t, ti in s["topics"].items() if ti["count"]}):
+            print(f"map: {topic} carries a map; as a map_server map: fgloc export {log_path}:{topic} -o map.yaml")
         if s["truncated"]:
             print(f"TRUNCATED: {s['truncated']}")
         damage = r.damage()

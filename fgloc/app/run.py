@@ -380,8 +380,9 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
                           if kinds else f"its topics: {topics_line(summ)}"))
     if req.map_yaml is None and n_odom == 0 and n_imu == 0 and not configured:
         raise LogError(f"{log}: the log has laser scans only ({n_scan} on {scan_topic}), no odometry or IMU: "
-                       f"localize them on a map with --map MAP.yaml (fgloc map needs odometry too), or name the "
-                       f"odometry / IMU topic with --odom-topic / --imu-topic; its topics: {topics_line(summ)}")
+                       f"localize them on a map with --map MAP.yaml (fgloc map {log} builds one from the scans), "
+                       f"or name the odometry / IMU topic with --odom-topic / --imu-topic; its topics: "
+                       f"{topics_line(summ)}")
     if req.map_yaml is None and n_odom == 0 and not configured:
         # an IMU turns the robot but never moves it: every pose would stay at the start
         raise LogError(f"{log}: no odometry, and the IMU ({n_imu} on {imu_topic}) gives heading only: without a "

@@ -18,6 +18,14 @@ Pipeline (core maths; no I/O, no printing — progress goes to a callback):
    with batch Levenberg-Marquardt at the end.
 4. Every scan's pose is its keyframe's optimized pose composed with the
    tracked offset from that keyframe.
+
+Scans only (a log without odometry, ``scans_only``): each scan's guess is the
+last tracked pose moved on at the velocity of the last tracked step (constant
+velocity, at most ``odom_max_speed`` and ``scan_only_max_turn_dps``), every scan
+that refines poorly from it gets the correlative search, and a keyframe's
+"odometry" factor is its tracked motion (so a scan that did not fit keeps its
+keyframe attached, loosely).  A robot standing still is not skipped: there is no
+odometry to say so.
 """
 
 from __future__ import annotations
@@ -70,6 +78,9 @@ class MapperConfig:
     kf_search_below: float = 0.85     # ... searched only when refining from odometry leaves fewer inliers
     odom_jump_m: float = 1.0          # an odometry step longer than this + max_speed * dt is a jump ...
     odom_max_speed: float = 3.0       # ... (m/s) and is ignored (the scan matching bridges it)
+    scan_only_max_turn_dps: float = 180.0  # scans only: the constant-velocity guess turns at most this (deg/s)
+    scan_only_search_m: float = 0.3        # ... and a scan it leaves poorly fitted is searched for this far
+    scan_only_search_deg: float = 25.0     # ... and turned this far (a robot that starts or stops turning)
     odom_sigma_xy: tuple[float, float] = (0.05, 0.2)     # sigma = a + b * distance (loose: real odometry is biased)
     odom_sigma_yaw: tuple[float, float] = (0.05, 0.5)    # sigma = a + b * |dyaw|
     loop_radius_m: float = 5.0        # candidates within this distance of the estimate
@@ -156,8 +167,10 @@ class SlamResult:
 class GraphSlam:
     """Incremental pose-graph SLAM; feed :class:`ScanRecord` in order, then :meth:`finish`."""
 
-    def __init__(self, mount: StaticTransform, config: MapperConfig | None = None):
+    def __init__(self, mount: StaticTransform, config: MapperConfig | None = None, scans_only: bool = False):
         self.cfg = config or MapperConfig()
+        self.scans_only = scans_only  # no odometry: constant-velocity guesses (module doc)
+        self._vel = np.zeros(3)       # scans only: the last tracked step's body velocity (m/s, rad/s)
         self.mount = np.asarray(mount.pose, dtype=float)
         self.keyframes: list[Keyframe] = []
         self.loops: list[LoopClosure] = []
@@ -185,7 +198,7 @@ class GraphSlam:
         self._last_loop_kf = -(10**9)
         self.stats = {"scans": 0, "tracked": 0, "track_fail": 0, "stationary": 0, "keyframes": 0,
                       "kf_searches": 0, "loop_tries": 0, "loops": 0, "loops_corridor": 0, "loop_rejected": 0,
-                      "odom_jumps": 0, "empty_scans": 0}
+                      "odom_jumps": 0, "empty_scans": 0, "scans_only": int(scans_only)}
 
     # ------------------------------------------------------------ helpers
     def _scan_points(self, rec: ScanRecord) -> FloatArray:
@@ -227,7 +240,9 @@ class GraphSlam:
         cfg = self.cfg
         self.stats["scans"] += 1
         raw = np.asarray(rec.odom, dtype=float)
-        if not np.all(np.isfinite(raw)):  # no usable odometry: carry the last one on
+        if self.scans_only:  # the "odometry": the last tracked pose moved on at its velocity
+            raw = self._constant_velocity(rec.stamp)
+        elif not np.all(np.isfinite(raw)):  # no usable odometry: carry the last one on
             raw = self._odom_prev if self._odom_prev is not None else np.zeros(3)
         odom = compose1(self._odom_fix, raw)
         if self._pose is None or self._odom_prev is None:
@@ -259,7 +274,8 @@ class GraphSlam:
         rel_pred = compose1(self._kf_inv, pred)
         is_kf = (np.hypot(rel_pred[0], rel_pred[1]) >= cfg.kf_dist_m
                  or abs(rel_pred[2]) >= np.radians(cfg.kf_angle_deg))
-        stationary = np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5 and not jumped
+        stationary = (np.hypot(d_odom[0], d_odom[1]) < 1e-4 and abs(d_odom[2]) < 1e-5 and not jumped
+                      and not self.scans_only)
         info = None
         assert self._grid is not None
         if stationary and not is_kf:  # standing still: the scan is not even read
@@ -279,9 +295,11 @@ class GraphSlam:
             self.stats["track_fail"] += 1
         else:
             rr = refine(self._grid, mpts, pred, cfg.huber_m)
-            if is_kf and rr.inlier_frac < cfg.kf_search_below:
+            if (is_kf or self.scans_only) and rr.inlier_frac < cfg.kf_search_below:
                 self.stats["kf_searches"] += 1
-                sr = correlative_search(self._grid, mpts, pred, cfg.kf_search_m, np.radians(cfg.kf_search_deg),
+                win_m, win_deg = ((cfg.scan_only_search_m, cfg.scan_only_search_deg) if self.scans_only
+                                  else (cfg.kf_search_m, cfg.kf_search_deg))
+                sr = correlative_search(self._grid, mpts, pred, win_m, np.radians(win_deg),
                                         0.03, np.radians(1.0), 0.05)
                 rs = refine(self._grid, mpts, sr.pose, cfg.huber_m)
                 if rs.inlier_frac > rr.inlier_frac:
@@ -293,6 +311,9 @@ class GraphSlam:
             else:
                 pose = pred
                 self.stats["track_fail"] += 1
+        if self.scans_only:
+            self._track_velocity(pose, dt, info is not None)
+            odom = pose  # a keyframe's "odometry" factor: its tracked motion
         self._pose = pose
         rel = compose1(self._kf_inv, pose)
         if np.hypot(rel[0], rel[1]) >= cfg.kf_dist_m or abs(rel[2]) >= np.radians(cfg.kf_angle_deg):
@@ -303,6 +324,30 @@ class GraphSlam:
             self.scan_stamps.append(rec.stamp)
             if cfg.final_refine:
                 self.scan_points.append(mpts)
+
+    def _constant_velocity(self, stamp: float) -> FloatArray:
+        """Scans only: the pose the robot reaches at ``stamp`` from the last tracked pose at the last
+        tracked step's velocity (the first scan: the origin)."""
+        if self._pose is None or self._stamp_prev is None:
+            return np.zeros(3)
+        dt = min(max(stamp - self._stamp_prev, 0.0), 1.0)
+        return compose1(self._pose, self._vel * dt)
+
+    def _track_velocity(self, pose: FloatArray, dt: float, tracked: bool) -> None:
+        """Scans only: the velocity of the step from the last pose to ``pose`` over ``dt`` (kept when
+        the scan did not fit: the guess goes on as it was), bounded by ``odom_max_speed`` and
+        ``scan_only_max_turn_dps``; ``pose`` is the next scan's "previous odometry"."""
+        assert self._pose is not None
+        if tracked and 0.0 < dt <= 1.0:
+            v = between(self._pose, pose) / dt
+            speed = float(np.hypot(v[0], v[1]))
+            if speed > self.cfg.odom_max_speed:
+                v[:2] *= self.cfg.odom_max_speed / speed
+            wmax = float(np.radians(self.cfg.scan_only_max_turn_dps))
+            v[2] = min(max(float(v[2]), -wmax), wmax)
+            self._vel = v
+        self._odom_prev = np.array(pose, dtype=float)
+        self._odom_prev_inv = inverse(self._odom_prev)
 
     def _new_keyframe(self, rec: ScanRecord, pts: FloatArray, mpts: FloatArray, info: FloatArray | None,
                       odom: FloatArray) -> None:
@@ -490,20 +535,24 @@ class GraphSlam:
         read = st["scans"] - st["stationary"]  # scans looked at (standing still, they are not read)
         n = max(read, 1)
         t0 = self.scan_stamps[0] if self.scan_stamps else 0.0
+        guess = "a constant-velocity guess" if self.scans_only else "the odometry"
         out = []
+        if self.scans_only:
+            out.append("no odometry in the log: the scans were matched to each other alone (a scan that does not "
+                       "fit the local map is placed by a constant-velocity guess)")
         if read > 0 and st["empty_scans"] == read:
             out.append("no scan has a return within range (every beam at max range or invalid): the map has "
-                       "no walls, only the free space the beams carve, and the trajectory is the odometry")
+                       f"no walls, only the free space the beams carve, and the trajectory is {guess}")
         elif st["empty_scans"] > 0.2 * n:
             out.append(f"{100 * st['empty_scans'] / n:.0f} % of the scans have no return within range: "
-                       "the trajectory follows the odometry there")
+                       f"the trajectory follows {guess} there")
         if st["scans"] < 50 or st["keyframes"] < 5:
             out.append(f"only {st['scans']} scans ({st['keyframes']} keyframes): too short a log for loop closures "
                        "or a self-check")
         matched = read - st["empty_scans"] - (1 if st["scans"] else 0)
         if st["empty_scans"] < read and matched > 0 and st["track_fail"] - st["empty_scans"] > 0.2 * matched:
             out.append(f"{100 * (st['track_fail'] - st['empty_scans']) / matched:.0f} % of the scans did not fit "
-                       "the local map: the trajectory follows the odometry there")
+                       f"the local map: the trajectory follows {guess} there")
         if self.jumps:
             big = max(self.jumps, key=lambda j: j[1])
             out.append(f"the odometry jumped {len(self.jumps)} time(s) (largest {big[1]:.1f} m at "
@@ -516,8 +565,11 @@ class GraphSlam:
 
 def run_slam(records: Sequence[ScanRecord], mount: StaticTransform, config: MapperConfig | None = None,
              progress: Callable[[int], None] | None = None) -> SlamResult:
-    """Run :class:`GraphSlam` over ``records``; ``progress(n)`` is called after each scan."""
-    slam = GraphSlam(mount, config)
+    """Run :class:`GraphSlam` over ``records``; ``progress(n)`` is called after each scan.  Records
+    without any odometry pose (a log with scans only) are mapped from the scans alone."""
+    from fgloc.mapping.source import scans_only
+
+    slam = GraphSlam(mount, config, scans_only=scans_only(records))
     for rec in records:
         slam.add(rec)
         if progress is not None:

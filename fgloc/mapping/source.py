@@ -6,7 +6,8 @@ Messages are taken in file order; a scan's odometry is interpolated between
 the odometry messages just before and just after it in the file when their
 stamps bracket the scan stamp, else the latest earlier one is used (real logs,
 e.g. intel, have stamps that jump backwards).  Odometry without a pose is
-dead-reckoned from its twist.
+dead-reckoned from its twist.  A log without any odometry (or ``odom_topic`` "") gives scans with
+no odometry pose (NaN): the mapper then matches the scans to each other alone.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import math
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from fgloc.geometry import compose, wrap_angle
 from fgloc.io.topics import pick_topics
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
 
+DEFAULT_ODOM = "/odom"
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
 
 
@@ -70,7 +73,9 @@ def log_messages(
     ``static_transforms``: mounts the log lacks (``fgloc map --static-transform``); the one to the
     scans' frame wins over the log's (:func:`planar_mount`: an upside-down laser's scans mirrored).
     A default topic the log lacks is its only topic of that type (:func:`pick_topics`: a name other
-    than the default is the user's, kept).  No odometry is a one-line :class:`LogError`.
+    than the default is the user's, kept).  A log without odometry (none of type nav_msgs/Odometry),
+    or ``odom_topic`` "", gives the scans alone; a named odometry topic the log lacks, or a default
+    one beside other Odometry topics, is a one-line :class:`LogError`.
     """
     from fgloc.io import open_log
     from fgloc.io.topics import Topics
@@ -98,16 +103,21 @@ def log_messages(
                 it = with_mount(it, *planar_mount(mine))
         yield from it
         return
-    src = open_log(p, Topics(scan=scan_topic, odom=odom_topic))
-    picked = pick_topics(src, p, {"scan": (scan_topic, False), "odom": (odom_topic, False)})
+    scans_only = not odom_topic
+    src = open_log(p, Topics(scan=scan_topic, odom=odom_topic or DEFAULT_ODOM))
+    picked = pick_topics(src, p, {"scan": (scan_topic, False), "odom": (odom_topic or DEFAULT_ODOM, False)})
     scan_topic, odom_topic = picked["scan"], picked["odom"]
     src.topics = Topics(scan=scan_topic, odom=odom_topic)
     src.require(scan_topic)
-    if not src.has(odom_topic):
+    if not scans_only and not src.has(odom_topic):
         have = ", ".join(f"{t} ({v['type']}, {v['count']})" for t, v in sorted(src.summary()["topics"].items()))
-        raise LogError(f"{p}: no odometry on {odom_topic}: fgloc map pairs every scan with wheel odometry (name "
-                       f"its topic with --odom-topic); its topics: {have or 'none'}")
-    skew = src.clock_skew([scan_topic, odom_topic]) if src.has(odom_topic) else None
+        if odom_topic != DEFAULT_ODOM or _odometry_topics(src):
+            raise LogError(f"{p}: no odometry on {odom_topic}: name the wheel odometry's topic with --odom-topic "
+                           f"(or map the scans alone with --odom-topic ''); its topics: {have or 'none'}")
+        scans_only = True  # no odometry at all: the scans are matched to each other alone
+    if scans_only:
+        odom_topic = ""
+    skew = src.clock_skew([scan_topic, odom_topic]) if odom_topic and src.has(odom_topic) else None
     if skew is not None:  # scans would be paired with odometry from another time
         raise LogError(f"{p}: {skew}")
     mine = mount_of(src.scan_frame(), static_transforms)
@@ -121,6 +131,13 @@ def log_messages(
         return
     yield "/tf_static", [src.laser_mount()]
     yield from msgs
+
+
+def _odometry_topics(src: Any) -> list[str]:
+    """The log's topics of nav_msgs/Odometry that hold messages."""
+    from fgloc.io.topics import ODOMETRY, normalize_type
+
+    return [t for t, ty in src.topic_types().items() if src.has(t) and normalize_type(ty) == ODOMETRY]
 
 
 def _check_mount_frames(static_transforms: Sequence[StaticTransform], scan_frame: str, path: Path) -> None:
@@ -193,8 +210,12 @@ def pair_scans(messages: Iterable[tuple[str, object]],
     scan_frame = next((m.frame_id.lstrip("/") for k, m in events if k == 1 and isinstance(m, LaserScan)), None)
     if scan_frame is not None and scan_frame in by_child:
         mount = by_child[scan_frame]
-    if not odo_stamps:
-        raise LogError(f"{name}: no odometry messages: fgloc map pairs every scan with wheel odometry")
+    if not scans_found(events):
+        raise LogError(f"{name}: no laser scans")
+    if not odo_stamps:  # scans only: no odometry pose (the mapper matches the scans to each other alone)
+        recs = [ScanRecord(float(m.stamp), np.full(3, np.nan), m, k)
+                for k, m in enumerate(m for kind, m in events if kind == 1 and isinstance(m, LaserScan))]
+        return recs, mount
     st = np.asarray(odo_stamps)
     po = np.asarray(odo_poses)
     # each scan between the odometry messages before and after it in the file: interpolated when
@@ -228,6 +249,15 @@ def pair_scans(messages: Iterable[tuple[str, object]],
         pose[inter] = interpolate_pairs(s0[inter], po[i0[inter]], s1[inter], po[i1[inter]], t[inter])
     recs = [ScanRecord(float(t[k]), pose[k], sc, k) for k, sc in enumerate(scans)]
     return recs, mount
+
+
+def scans_found(events: Iterable[tuple[int, object]]) -> bool:
+    return any(kind == 1 for kind, _ in events)
+
+
+def scans_only(records: Sequence[ScanRecord]) -> bool:
+    """Whether the records carry no odometry at all (a log with scans only)."""
+    return bool(records) and not any(np.all(np.isfinite(r.odom)) for r in records)
 
 
 def scan_problem(scan: LaserScan) -> str | None:

@@ -47,21 +47,26 @@ def _cli(args, capsys):
     return rc, o, e
 
 
-def test_a_scan_only_log_is_refused_up_front(tmp_path, capsys):
+def test_a_scan_only_log_is_refused_up_front_without_a_map(tmp_path, capsys):
     log = _write(tmp_path / "scans.mcap", odom_topic=None)
     out = tmp_path / "run"
     rc, _, err = _cli(["run", str(log), "-o", str(out), "-q"], capsys)
     assert rc == 2                         # was: outputs written, then rc 3 "no pose was estimated"
     assert err.strip() == (
         f"fgloc: error: {log}: the log has laser scans only (60 on /scan), no odometry or IMU: localize them on "
-        "a map with --map MAP.yaml (fgloc map needs odometry too), or name the odometry / IMU topic with "
-        "--odom-topic / --imu-topic; its topics: /scan (sensor_msgs/msg/LaserScan, 60)")
+        f"a map with --map MAP.yaml (fgloc map {log} builds one from the scans), or name the odometry / IMU "
+        "topic with --odom-topic / --imu-topic; its topics: /scan (sensor_msgs/msg/LaserScan, 60)")
     assert not out.exists()
-    rc, _, err = _cli(["map", str(log), "-o", str(tmp_path / "map"), "--no-progress"], capsys)
-    assert rc == 2                         # was: "fgloc: error: log has no odometry messages"
+
+
+def test_an_odometry_topic_that_is_not_there_is_an_error_not_scans_alone(tmp_path, capsys):
+    log = _write(tmp_path / "scans.mcap", odom_topic=None)
+    rc, _, err = _cli(["map", str(log), "-o", str(tmp_path / "map"), "--no-progress", "--odom-topic", "/wheels"],
+                      capsys)
+    assert rc == 2
     assert err.strip() == (
-        f"fgloc: error: {log}: no odometry on /odom: fgloc map pairs every scan with wheel odometry (name its "
-        "topic with --odom-topic); its topics: /scan (sensor_msgs/msg/LaserScan, 60)")
+        f"fgloc: error: {log}: no odometry on /wheels: name the wheel odometry's topic with --odom-topic (or map "
+        "the scans alone with --odom-topic ''); its topics: /scan (sensor_msgs/msg/LaserScan, 60)")
 
 
 def test_scans_and_an_imu_without_odometry_are_refused_without_a_map(tmp_path, capsys):

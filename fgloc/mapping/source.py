@@ -23,9 +23,10 @@ import numpy as np
 from fgloc.errors import ConfigError, LogError
 from fgloc.frames.tf import mount_of, planar_mount
 from fgloc.geometry import compose, wrap_angle
-from fgloc.io.topics import pick_topics
+from fgloc.io.topics import LASER_SCAN, MULTI_ECHO_SCAN, ODOMETRY, pick_topics
 from fgloc.types import FloatArray, LaserScan, Odometry, StaticTransform
 
+DEFAULT_SCAN = "/scan"
 DEFAULT_ODOM = "/odom"
 CARMEN_SUFFIXES = (".clf", ".log", ".clf.gz", ".log.gz", ".clf.bz2", ".log.bz2", ".gfs", ".carmen")
 
@@ -108,10 +109,15 @@ def log_messages(
     picked = pick_topics(src, p, {"scan": (scan_topic, False), "odom": (odom_topic or DEFAULT_ODOM, False)})
     scan_topic, odom_topic = picked["scan"], picked["odom"]
     src.topics = Topics(scan=scan_topic, odom=odom_topic)
+    if not src.has(scan_topic) and scan_topic == DEFAULT_SCAN:
+        lasers = _topics_of(src, (LASER_SCAN, MULTI_ECHO_SCAN))
+        if len(lasers) > 1:  # several lasers, none the default: which one is the user's to say
+            raise LogError(f"{p}: no {scan_topic}; the log has {len(lasers)} laser scan topics: name the one to map "
+                           f"with --scan-topic {' | '.join(lasers)}")
     src.require(scan_topic)
     if not scans_only and not src.has(odom_topic):
         have = ", ".join(f"{t} ({v['type']}, {v['count']})" for t, v in sorted(src.summary()["topics"].items()))
-        if odom_topic != DEFAULT_ODOM or _odometry_topics(src):
+        if odom_topic != DEFAULT_ODOM or _topics_of(src, (ODOMETRY,)):
             raise LogError(f"{p}: no odometry on {odom_topic}: name the wheel odometry's topic with --odom-topic "
                            f"(or map the scans alone with --odom-topic ''); its topics: {have or 'none'}")
         scans_only = True  # no odometry at all: the scans are matched to each other alone
@@ -133,11 +139,11 @@ def log_messages(
     yield from msgs
 
 
-def _odometry_topics(src: Any) -> list[str]:
-    """The log's topics of nav_msgs/Odometry that hold messages."""
-    from fgloc.io.topics import ODOMETRY, normalize_type
+def _topics_of(src: Any, types: tuple[str, ...]) -> list[str]:
+    """The log's topics of these types that hold messages, sorted."""
+    from fgloc.io.topics import normalize_type
 
-    return [t for t, ty in src.topic_types().items() if src.has(t) and normalize_type(ty) == ODOMETRY]
+    return sorted(t for t, ty in src.topic_types().items() if src.has(t) and normalize_type(ty) in types)
 
 
 def _check_mount_frames(static_transforms: Sequence[StaticTransform], scan_frame: str, path: Path) -> None:

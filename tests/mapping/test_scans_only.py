@@ -101,3 +101,21 @@ def test_several_odometry_topics_and_none_named_is_an_error(tmp_path, capsys):
                            "--odom-topic (or map the scans alone with --odom-topic ''); its topics: ")
     assert "/odometry/filtered (nav_msgs/msg/Odometry, 20)" in line and "/wheel/odom" in line
     assert not (tmp_path / "map").exists()
+
+
+def test_several_lasers_and_no_scan_topic_name_the_choice(tmp_path, capsys):
+    """A leg tracker's bag: /left_scan, /right_scan, /rear_scan and nothing else (was: "topic '/scan' not
+    in log")."""
+    world = synth.world_grid()
+    log = tmp_path / "three_lasers.mcap"
+    with LogWriter(log) as w:
+        for k in range(10):
+            for topic in ("/left_scan", "/right_scan", "/rear_scan"):
+                w.write(topic, synth.scan_at(world, [3.0, 1.5, 0.0], 1000.0 + 0.1 * k))
+    rc, _, err = _cli(["map", log, "-o", tmp_path / "map", "-q"], capsys)
+    assert rc == 2
+    assert err.strip() == (f"fgloc: error: {log}: no /scan; the log has 3 laser scan topics: name the one to map "
+                           "with --scan-topic /left_scan | /rear_scan | /right_scan")
+    rc, _, err = _cli(["map", log, "-o", tmp_path / "map", "-q", "--no-check", "--scan-topic", "/rear_scan"], capsys)
+    assert rc == 0, err
+    assert len(read_tum(tmp_path / "map" / "trajectory.tum")) == 10

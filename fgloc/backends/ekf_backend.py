@@ -134,6 +134,8 @@ class EKFBackend(Backend):
         self.motion = MotionIntegrals()
         self._turned = 0.0
         self._last_odom_t: float | None = None
+        self._odom_before_start: float | None = None  # the last odometry stamp before the filter started
+        self._start_t: float | None = None
         self._odom_steps: deque[float] = deque(maxlen=BURST_WINDOW)  # the last odometry stamp steps (s)
         self.stats["omni"] = bool(self.ekf.omni)
 
@@ -171,6 +173,7 @@ class EKFBackend(Backend):
 
     def initialize(self, t: float, pose: FloatArray, cov: FloatArray | None = None) -> None:
         self.ekf.initialize(t, pose, cov)
+        self._start_t = float(t)
         self.order.clear()
         self._consecutive_rejects = 0
         self._record_online(t, self.ekf.pose(), self.ekf.pose_cov())
@@ -231,6 +234,7 @@ class EKFBackend(Backend):
         self.motion.add_odometry(t, float(np.hypot(tw[0], tw[1])),
                                  None if self._has_gyro() else float(tw[2]) * gain)
         if not self.initialized:
+            self._odom_before_start = float(t)
             return
         # the scale's evidence floor from the twist's own yaw noise (the arbiter's weight may shrink
         # it below the flicker of a yaw rate differenced from ticks)
@@ -255,6 +259,11 @@ class EKFBackend(Backend):
             # ported configs are tuned so, takes it)
             if self.cfg.odom_held_back and (sole or step > max(GAP_FACTOR * typical, GAP_MIN_S)):
                 held_from = self._last_odom_t
+        elif self.cfg.odom_held_back and sole and self._odom_before_start is not None and self._start_t is not None:
+            # the first message since the start: its twist is the mean since the message before the start,
+            # of which the part after the start moved the robot from the start pose (a slow odometry's first
+            # interval, crossed with no velocity, would turn the whole path by its turn)
+            held_from = max(self._odom_before_start, self._start_t)
         if held_from is not None and any(d < BURST_STEP_S for d in self._odom_steps):
             # stamps in bursts: the localizer hands velocities it estimated over the last poses, not
             # the twist of each increment (OdometryTracker.velocity_measurement): measured at their stamps

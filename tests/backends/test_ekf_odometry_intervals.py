@@ -129,3 +129,29 @@ def test_a_gap_in_the_odometry_while_a_gyro_carries_the_filter() -> None:
         t_end = float(be.ekf.t or 0.0)
         want = truth + 0.3 * (t_end - prev)  # the last message's velocity carried to the filter time
         assert lo < float(be.ekf.x[0]) - want < hi, (held, float(be.ekf.x[0]), want)
+
+
+def test_first_interval_after_the_start_is_not_lost() -> None:
+    """The localizer starts the filter after the odometry's first messages (odom frame: at the second):
+    the first message after the start is the mean twist since the one before it, and moves the start
+    pose by that whole increment.  Slow odometry (0.64 s, a CARMEN log's laser-line poses) turning 0.7 rad
+    per step: crossed with no velocity, the first interval turned the whole path by its turn (0.42 m off
+    after 30 steps; 0.008 m now)."""
+    cov = np.diag([0.01**2, 0.01**2, 0.02**2])
+    be = EKFBackend(EKFConfig())
+    dt, t = 0.64, 100.0
+    be.add_odometry(t - dt, np.zeros(3), cov)   # before the start
+    be.add_odometry(t, np.array([1.0, 0.0, 0.5]), cov)
+    be.initialize(t, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]))
+    rng = np.random.default_rng(4)
+    pose = np.zeros(3)
+    for _ in range(30):
+        v, w = float(rng.uniform(0.8, 1.2)), float(rng.uniform(-1.1, 1.1))
+        t += dt
+        pose = compose1(pose, se2_exp(np.array([v * dt, 0.0, w * dt])))
+        be.add_odometry(t, np.array([v, 0.0, w]), cov)
+    got = be.current()
+    assert got is not None
+    err = float(np.hypot(*(got[1][:2] - pose[:2])))
+    assert err < 0.1, err
+    assert abs(math.degrees(wrap_scalar(float(got[1][2] - pose[2])))) < 0.5

@@ -99,6 +99,7 @@ class Localizer(Recovery):
         self.laser_mount = laser_mount
         self.backend_name = backend
         self.backend: Backend = make_backend(backend, config)
+        self._measures_velocity = Capability.MEASURES_VELOCITY in self.backend.capabilities  # (the EKF's; asked once)
         self.frontend: Any = None
         if occ_map is not None:
             from fgloc.frontends import make_frontend
@@ -235,8 +236,7 @@ class Localizer(Recovery):
         if self.odom.from_poses:
             self.stats["odometry_from_poses"] = self.odom.from_poses
         vm: tuple[FloatArray, FloatArray | None] | None = (tw, cov)
-        if Capability.MEASURES_VELOCITY in self.backend.capabilities:
-            # the EKF's velocity state: a bursty source's velocity (a smoother integrates its increments)
+        if self._measures_velocity:  # the EKF: a bursty source's velocity (a smoother integrates its increments)
             vm = self.odom.velocity_measurement()
             if vm is None:  # the first burst of a stream: no velocity known, none measured
                 self.stats["odometry_burst_skipped"] = self.stats.get("odometry_burst_skipped", 0) + 1
@@ -290,7 +290,7 @@ class Localizer(Recovery):
         self._last_scan_t = t
         if self._first_scan_t is None:
             self._first_scan_t = t
-        if self.backend.initialized and Capability.MEASURES_VELOCITY not in self.backend.capabilities:
+        if self.backend.initialized and not self._measures_velocity:
             # after a burst of odometry stamps a back-end that integrates the increments (the smoother)
             # is handed the plausible velocity up to this scan: its prediction here, its gate on this
             # scan's fix and its online pose hold that, not the burst's twist

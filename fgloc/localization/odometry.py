@@ -38,7 +38,7 @@ LONG_RATE_WINDOW_S = 5.0
 VELOCITY_SPAN_MAX_S = 0.25
 
 
-def _carried(pose: FloatArray, tw: FloatArray, dt: float) -> FloatArray:
+def _carried(pose: FloatArray | list[float], tw: FloatArray, dt: float) -> FloatArray:
     """``compose1(pose, exp(tw * dt))``: ``pose`` carried on with the twist ``tw`` for ``dt``."""
     return compose1(pose, exp_values(tw, dt))  # type: ignore[arg-type]
 
@@ -60,7 +60,7 @@ class OdometryTracker:
         self.first_t: float | None = None
         self.twist = np.zeros(3)           # the last twist integrated (held until the next message)
         self.from_poses = 0                # twists taken from pose increments
-        self._prev_pose: tuple[float, FloatArray] | None = None
+        self._prev_pose: tuple[float, FloatArray | list[float]] | None = None  # (stamp, pose) of the last message
         self._scale_sig = np.asarray(cfg.pose_delta_sigmas, dtype=float)
         # auto mode's agreement window: (t, pose increment, twist increment, poses moved) and sums
         self._window: deque[tuple[float, tuple[float, ...], bool]] = deque()
@@ -257,12 +257,13 @@ class OdometryTracker:
         the driver (an AR.Drone's odometry leaves them at zero): the twist is kept.
         """
         prev = self._prev_pose
-        self._prev_pose = None if pose is None else (t, pose)
+        pv = None if pose is None else pose.tolist()  # (the pose's floats: read here and by the next message)
+        self._prev_pose = None if pv is None else (t, pv)
         self._increment = None
         self._short = False
         self._derived = False
         mode = self.cfg.pose_deltas
-        if pose is None or prev is None or mode == "never":
+        if pv is None or prev is None or mode == "never":
             return tw, cov
         dt = t - prev[0]
         if not dt > 0:
@@ -276,8 +277,8 @@ class OdometryTracker:
             unused = self._unused(cov)
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
-        delta = between_values(prev[1], pose)
-        d_tw = exp_values(tw, dt)
+        delta = between_values(prev[1], pv)
+        d_tw = exp_values(tw.tolist(), dt)
         self._increment = (tw, dt, d_tw)  # step() carries the odom pose by the same increment
         if mode != "always" and self._agrees(t, delta, d_tw, unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
@@ -307,33 +308,44 @@ class OdometryTracker:
             return MAX_BASELINE_S
         return min(BASELINE_FRACTION * (st[-1] - st[0]) / (len(st) - 1), MAX_BASELINE_S)
 
-    def _agrees(self, t: float, delta: FloatArray | tuple[float, float, float],
-                d_tw: FloatArray | tuple[float, float, float],
+    def _agrees(self, t: float, delta: tuple[float, float, float], d_tw: tuple[float, float, float],
                 unused: tuple[bool, bool, bool]) -> bool:
         """Whether the twist's increments and the poses' agree, summed over the window ending at ``t``
         (running sums in Python floats: this runs for every odometry message that carries a pose)."""
         win = self._window
-        d0, d1, d2 = float(delta[0]), float(delta[1]), float(delta[2])
-        e0, e1, e2 = float(d_tw[0]), float(d_tw[1]), float(d_tw[2])
+        d0, d1, d2 = delta
+        e0, e1, e2 = d_tw
         moved = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
-        row = (d0, d1, d2, e0, e1, e2, math.hypot(d0, d1), abs(d2))
-        win.append((t, row, moved))
-        sums = self._sums
-        for i in range(8):
-            sums[i] += row[i]
+        lin_d, rot_d = math.hypot(d0, d1), abs(d2)
+        win.append((t, (d0, d1, d2, e0, e1, e2, lin_d, rot_d), moved))
+        s = self._sums
+        s[0] += d0
+        s[1] += d1
+        s[2] += d2
+        s[3] += e0
+        s[4] += e1
+        s[5] += e2
+        s[6] += lin_d
+        s[7] += rot_d
         self._moved += moved
         while len(win) > 1 and win[0][0] <= t - AGREEMENT_WINDOW_S:
             _, old, m0 = win.popleft()
-            for i in range(8):
-                sums[i] -= old[i]
+            s[0] -= old[0]
+            s[1] -= old[1]
+            s[2] -= old[2]
+            s[3] -= old[3]
+            s[4] -= old[4]
+            s[5] -= old[5]
+            s[6] -= old[6]
+            s[7] -= old[7]
             self._moved -= m0
         if not self._moved:
             return True  # poses frozen: not filled in by the driver (or standing still: both agree)
-        lin, rot = max(sums[6], 0.0), max(sums[7], 0.0)
+        lin, rot = max(s[6], 0.0), max(s[7], 0.0)
         tol_lin = self.cfg.pose_delta_tolerance_m + 0.1 * lin
         tol_rot = math.radians(self.cfg.pose_delta_tolerance_deg) + 0.1 * rot
-        lin_ok = bool(unused[0] and unused[1]) or math.hypot(sums[3] - sums[0], sums[4] - sums[1]) <= tol_lin
-        rot_ok = bool(unused[2]) or abs(sums[5] - sums[2]) <= tol_rot
+        lin_ok = bool(unused[0] and unused[1]) or math.hypot(s[3] - s[0], s[4] - s[1]) <= tol_lin
+        rot_ok = bool(unused[2]) or abs(s[5] - s[2]) <= tol_rot
         return lin_ok and rot_ok
 
     @staticmethod

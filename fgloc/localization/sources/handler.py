@@ -77,13 +77,10 @@ class SourceHandler:
     def __init__(self, spec: SourceSpec, ctx: SourceContext, fused: bool = True, second: bool = False) -> None:
         self.spec = spec
         self.ctx = ctx
+        self.loc: Any = ctx.loc  # (the session's localizer: every message reaches it)
         self.state = SourceState(SourceHealth(spec.name, spec.type), fused=fused)
         if second:
             self.state.extra["second"] = True
-
-    @property
-    def loc(self) -> Any:
-        return self.ctx.loc
 
     def __call__(self, msg: object) -> None:
         st = self.state

@@ -88,6 +88,7 @@ class ImuHandler(SourceHandler):
         # what the source uses, asked once (every message reads them)
         self.uses_yaw, self.uses_vyaw, self.uses_roll = spec.uses("yaw"), spec.uses("vyaw"), spec.uses("roll")
         self.whole = (self.uses_yaw or self.uses_roll) and self.uses_vyaw  # needed() keeps the message as it is
+        self.message_variances = spec.covariance == "message"  # spec.variance of a used component is the message's
 
     def handle(self, msg: Imu | CompassHeading) -> None:
         spec, st, ctx, mounts = self.spec, self.state, self.ctx, self.ctx.mounts
@@ -166,11 +167,13 @@ class ImuHandler(SourceHandler):
                     rate, rate_var = d_rate, (var + prev_var) * (t - prev[0])
             yaw = None
         if yaw is not None and self.uses_yaw:
-            yaw_var = spec.variance("yaw", yaw_var)
+            if not self.message_variances:
+                yaw_var = spec.variance("yaw", yaw_var)
         else:
             yaw = None
         if rate is not None and self.uses_vyaw:
-            rate_var = spec.variance("vyaw", rate_var)
+            if not self.message_variances:
+                rate_var = spec.variance("vyaw", rate_var)
         elif not (spec.differential and rate is not None):
             rate = None
         if yaw is None and rate is None:

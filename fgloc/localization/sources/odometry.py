@@ -37,6 +37,12 @@ MAX_TILT_RAD = math.radians(30.0)
 NOT_ESTIMATED_VAR = 1e3
 
 
+def usable_diagonal(d0: float, d1: float, d2: float) -> bool:
+    """Whether a twist covariance's three variances are all usable as the message gives them (none
+    0, negative, NaN or at least :data:`NOT_ESTIMATED_VAR`)."""
+    return 0.0 < d0 < NOT_ESTIMATED_VAR and 0.0 < d1 < NOT_ESTIMATED_VAR and 0.0 < d2 < NOT_ESTIMATED_VAR
+
+
 def usable_twist_cov(cov: np.ndarray | None, default_sigmas: tuple[float, float, float] | list[float],
                      diag: tuple[float, float, float] | None = None) -> np.ndarray:
     """A twist covariance (3x3) with each unusable diagonal entry (0, negative, NaN, at least
@@ -47,7 +53,7 @@ def usable_twist_cov(cov: np.ndarray | None, default_sigmas: tuple[float, float,
     if cov is None:
         return np.diag(np.square(default_sigmas))
     d0, d1, d2 = diag if diag is not None else (float(cov[0, 0]), float(cov[1, 1]), float(cov[2, 2]))
-    if 0.0 < d0 < NOT_ESTIMATED_VAR and 0.0 < d1 < NOT_ESTIMATED_VAR and 0.0 < d2 < NOT_ESTIMATED_VAR:
+    if usable_diagonal(d0, d1, d2):
         return cov
     bad = [i for i, v in enumerate((d0, d1, d2)) if not 0.0 < v < NOT_ESTIMATED_VAR]  # NaN too
     out = np.array(cov, dtype=float).reshape(3, 3)
@@ -99,11 +105,13 @@ class OdometryHandler(SourceHandler):
         # (the EKF's add_velocity; the smoothers' integrate them into a factor of their own); a
         # back-end without add_velocity integrates one twist source and skips it
         be = self.loc.backend
-        velocity = not st.fused and Capability.VELOCITY in be.capabilities
-        if not st.fused and not velocity:
-            self.skip("a second odometry source (this back-end integrates one twist source; the EKF fuses "
-                       "its velocities)")
-            return
+        velocity = False
+        if not st.fused:
+            velocity = Capability.VELOCITY in be.capabilities
+            if not velocity:
+                self.skip("a second odometry source (this back-end integrates one twist source; the EKF fuses "
+                          "its velocities)")
+                return
         # the twist's covariance copied once; its entries as floats serve every check below
         tc = msg.twist_cov
         cov_copy = None if tc is None else np.array(tc, dtype=float)
@@ -155,14 +163,17 @@ class OdometryHandler(SourceHandler):
                     cov[i, i] = float(cov_msg[i, i]) if ok and cov_msg is not None else float(dflt[i])
         else:
             comps = ("vx", "vy", "vyaw")
-        default = be.encoder_sigmas
         # each component on its own: a usable variance kept, an unusable one (an AR.Drone's yaw rate
         # 0 with variance 0 beside vx / vy 0.09) its own default
         message_cov = cov is not None and cov is cov_msg
-        cov = usable_twist_cov(cov, default, (cl[0], cl[4], cl[8]) if message_cov and cl is not None else None)
-        if whole_twist:
+        if whole_twist and cov is not None and message_cov and cl is not None and usable_diagonal(cl[0], cl[4], cl[8]):
             out = cov  # all three velocities as the message says: its whole covariance, correlations kept
+        elif whole_twist:
+            out = cov = usable_twist_cov(cov, be.encoder_sigmas,
+                                         (cl[0], cl[4], cl[8]) if message_cov and cl is not None else None)
         else:
+            default = be.encoder_sigmas
+            cov = usable_twist_cov(cov, default, (cl[0], cl[4], cl[8]) if message_cov and cl is not None else None)
             out = np.zeros((3, 3))
             for i, c in enumerate(comps):
                 v = spec.variance(c, float(cov[i, i]))
@@ -170,17 +181,18 @@ class OdometryHandler(SourceHandler):
             # a diff drive that does not report vy: 0 with the message's (small) variance
             if comps[1] == "vy" and not spec.uses("vy"):
                 out[1, 1] = float(cov[1, 1])
-        tw, out = self.levelled(float(msg.stamp), tw, out)
+        t = float(msg.stamp)
+        tw, out = self.levelled(t, tw, out)
         if velocity:
             used = tuple(spec.uses(p) or spec.uses(v) for p, v in (("x", "vx"), ("y", "vy"), ("yaw", "vyaw")))
-            be.add_velocity(float(msg.stamp), tw, out, used, spec.name)
+            be.add_velocity(t, tw, out, used, spec.name)
             h.accepted += 1
             return
         h.accepted += 1
         # the localizer's checks on the values at hand: the covariance's finiteness from its entries when
         # it is the message's as copied above
         out_ok = math.isfinite(sum(cl)) if message_cov and out is cov and cl is not None else None
-        self.loc.odometry_values(float(msg.stamp), tw, out, None if spec.differential else pose, out_ok)
+        self.loc.odometry_values(t, tw, out, None if spec.differential else pose, out_ok)
 
     def levelled(self, t: float, tw: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The body twist projected onto the ground plane through the levelling IMU's latest

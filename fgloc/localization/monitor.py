@@ -31,6 +31,7 @@ import math
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass
+from statistics import median
 from typing import Any
 
 import numpy as np
@@ -191,7 +192,8 @@ class DeadReckoning:
     configuration whose heading comes from relative yaw or a gyro alone: nothing independent to
     compare with).  Started at the fused start pose (:meth:`start`)."""
 
-    MAX_DT_S = 0.5  # an odometry gap longer than this is not integrated (its twist is unknown over it)
+    MAX_DT_S = 0.5  # an odometry gap longer than this is not integrated (its twist is unknown over it) ...
+    GAP_STEPS = 3.0  # ... unless within this many of the odometry's typical step (a slow odometry's, 1-2 Hz)
 
     def __init__(self) -> None:
         self.t: float | None = None
@@ -203,6 +205,8 @@ class DeadReckoning:
         self._offset: float | None = None  # compass yaw - fused yaw at the start
         self.compass_readings = 0  # absolute yaw readings since the start
         self.turned = False  # the odometry reported a turn
+        self._steps: deque[float] = deque(maxlen=16)  # the last odometry stamp steps (s)
+        self._seen: float | None = None  # the last odometry stamp
 
     def start(self, t: float, pose: Any) -> None:
         p = np.asarray(pose, dtype=float).reshape(3)
@@ -220,11 +224,18 @@ class DeadReckoning:
             self.compass_readings += 1
 
     def odometry(self, t: float, twist: Any) -> None:
+        t = float(t)
+        seen, self._seen = self._seen, t
+        max_dt = self.MAX_DT_S
+        if self._steps and self.t is not None and t - self.t > max_dt:  # the odometry's typical step before this one
+            max_dt = max(max_dt, self.GAP_STEPS * median(self._steps))
+        if seen is not None and t > seen:
+            self._steps.append(t - seen)  # also before the start: the first step after it is judged by them
         if self.t is None or self.wheels is None or self.compassed is None:
             return
-        dt = float(t) - self.t
-        self.t = float(t)
-        if not 0 < dt <= self.MAX_DT_S:
+        dt = t - self.t
+        self.t = t
+        if not 0.0 < dt <= max_dt:
             return
         vx, vy, w = (float(v) for v in np.asarray(twist, dtype=float).reshape(3))
         self.distance_m += math.hypot(vx, vy) * dt

@@ -111,6 +111,44 @@ def test_the_same_log_rightly_configured_stays_ok(tmp_path, imu_log, backend, ca
     assert {r[4] for r in rows} == {"ok"}
 
 
+def _slow_turning_odometry(n: int = 200, dt_s: float = 0.64) -> list:
+    """Odometry poses every ``dt_s`` (jittered down to 0.42 s and up to 1.9 s), 0.3-0.7 m and up to 60 deg a
+    step, twist zero: a CARMEN log's laser-line odometry (tv = rv = 0), as a 1.6 Hz wheel driver writes it."""
+    from fgloc.types import Odometry
+
+    rng = np.random.default_rng(5)
+    x = y = th = 0.0
+    t = 1000.0
+    msgs = []
+    for _ in range(n):
+        msgs.append(("/odom", Odometry(stamp=t, twist=np.zeros(3), pose=np.array([x, y, th]))))
+        d, dth = float(rng.uniform(0.3, 0.7)), float(np.radians(rng.uniform(-60.0, 60.0)))
+        x, y = x + d * np.cos(th + dth / 2), y + d * np.sin(th + dth / 2)
+        th = float(np.arctan2(np.sin(th + dth), np.cos(th + dth)))
+        t += float(rng.choice([0.42, dt_s, dt_s, dt_s, 0.86, 1.9]))
+    return msgs
+
+
+@pytest.mark.parametrize("backend", ["smoother", "ekf"])
+def test_a_slow_odometry_alone_is_followed_and_stays_ok(backend):
+    """Dead reckoning dropped every odometry step over 0.5 s: a 1.6 Hz odometry "drove" a fraction of its
+    path and the fused path, which follows it, was declared diverged (100 m apart on a CARMEN log)."""
+    msgs = _slow_turning_odometry()
+    loc = Localizer(None, None, backend=backend, frontend="native", config=load_config(None, {}))
+    traj = Session(loc).run(msgs)
+    assert loc.monitor.verdicts == []
+    assert set(loc.monitor.status) == {"ok"}
+    odo = {round(m.stamp, 6): m.pose for _, m in msgs}
+    p0, q0 = traj.poses[0], odo[round(float(traj.stamps[0]), 6)]
+    c, s_ = np.cos(q0[2] - p0[2]), np.sin(q0[2] - p0[2])
+    errs = []
+    for t, p in zip(traj.stamps, traj.poses, strict=True):
+        q = odo[round(float(t), 6)]
+        dx, dy = p[0] - p0[0], p[1] - p0[1]
+        errs.append(np.hypot(q0[0] + c * dx - s_ * dy - q[0], q0[1] + s_ * dx + c * dy - q[1]))
+    assert max(errs) < 0.5, max(errs)
+
+
 @pytest.fixture(scope="module")
 def hall(tmp_path_factory):
     """The paper's hall, 6 m along its first leg (9 s): the log, its first 2.5 s (before a run that matches

@@ -90,10 +90,15 @@ class Arbiter:
             self.streams[name] = _Stream(kind, rel_prior=float(rel_prior))
 
     def add_reading(self, name: str, kind: str, rel_prior: float, t: float, value: float, var: float) -> None:
-        """A sample of source ``name``, registered (:meth:`add_source`) at its first one."""
-        if name not in self.streams:
+        """A sample of source ``name`` into the inbox (as :meth:`add`), the source registered
+        (:meth:`add_source`) at its first one."""
+        s = self.streams.get(name)
+        if s is None:
             self.add_source(name, kind, rel_prior)
-        self.add(name, t, value, var)
+            s = self.streams[name]
+        self._inbox.append((s, t, value, var))
+        if len(self._inbox) >= INBOX_MAX:
+            self._take_inbox()
 
     def add(self, name: str, t: float, value: float, var: float) -> None:
         """A sample of a registered source: a rate (rate sources) or an absolute value (absolute /

@@ -133,17 +133,18 @@ class SlidingWindowSmoother(KeyframeGraph):
             self.add_gyro(t, rate, rate_var, source)
         if yaw is None:
             return
-        h = self.inputs.source(f"{source}.yaw", "heading")
+        name = f"{source}.yaw"
+        h = self.inputs.source(name, "heading")
         self.calib.add_compass(t, yaw, rate)
         var = self.inputs.variance(yaw_var, self.cfg.compass_sigma)
-        self.inputs.heading(f"{source}.yaw", float(t), float(yaw),
-                            float(var) * self.inputs.noise(f"{source}.yaw")[0] ** 2)
+        tf, yf, vf = float(t), float(yaw), float(var)
+        self.inputs.heading(name, tf, yf, vf * self.inputs.noise(name)[0] ** 2)
         h.accepted += 1
-        self.inputs.reading(f"{source}.yaw", ANGLE_ABSOLUTE, 0.02, float(t), float(yaw), float(var))
-        self.compass_pending.append((float(t), float(yaw), float(var), source))
-        self._add_heading_reading(float(t), float(yaw), float(var), source)
+        self.inputs.reading(name, ANGLE_ABSOLUTE, 0.02, tf, yf, vf)
+        self.compass_pending.append((tf, yf, vf, source))
+        self._add_heading_reading(tf, yf, vf, source)
         if self.pending_kf:
-            self._process_pending(float(t))
+            self._process_pending(tf)
 
     def add_gyro(self, t: float, rate: float, rate_var: float, source: str = "imu") -> None:
         """A yaw rate (rad/s, base_link z) from a gyro: integrated between keyframes, bias estimated."""
@@ -159,15 +160,16 @@ class SlidingWindowSmoother(KeyframeGraph):
             return
         var = self.inputs.variance(rate_var, self.cfg.gyro_sigma_radps)
         h.accepted += 1
+        tf, rf, vf = float(t), float(rate), float(var)
         if not self.cfg.gyro_bias_in_graph:
             gb = self.inputs.gyro(name, self.cfg.gyro_bias_prior_radps, self.cfg.gyro_bias_rw_radps)
-            gb.add_rate(float(t), float(rate), float(var))
+            gb.add_rate(tf, rf, vf)
             self.inputs.arb.set_correction(name, bias=gb.value())
-        buf[0].append(float(t))
-        buf[1].append(float(rate))
-        buf[2].append(float(var))
+        buf[0].append(tf)
+        buf[1].append(rf)
+        buf[2].append(vf)
         self._gyro_done.setdefault(name, -np.inf)
-        self.inputs.reading(name, INSTANT_RATE, 0.01, float(t), float(rate), float(var))
+        self.inputs.reading(name, INSTANT_RATE, 0.01, tf, rf, vf)
         if len(buf[0]) > 8192 and self.kf_t:
             horizon = self.kf_t[-1] - self.cfg.lag_s - 2.0
             i = bisect_left(buf[0], horizon)

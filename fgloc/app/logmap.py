@@ -62,16 +62,20 @@ def read_log_map(path: str | Path, topic: str | None = None) -> LogMap:
     if kind == "carmen":
         raise LogError(f"{path}: a CARMEN log carries no map (nav_msgs/OccupancyGrid)")
     src = open_log(path)
-    types = {t: ty for t, ty in src.topic_types().items() if src.has(t)}
+    every = src.topic_types()
+    types = {t: ty for t, ty in every.items() if src.has(t)}
     grids = grid_topics(types)
     listing = ", ".join(grids) or "none"
     if topic is None:
         if len(grids) != 1:
             raise LogError(f"{path}: which map? name its topic as {path}:TOPIC (its map topics: {listing})"
-                           if grids else f"{path}: no nav_msgs/OccupancyGrid topic to read a map from")
+                           if grids else f"{path}: no nav_msgs/OccupancyGrid topic with messages to read a map from")
         topic = grids[0]
+    elif topic in every and topic not in types:
+        raise LogError(f"{path}: {topic} has no messages (the recording holds its type only; its map topics: "
+                       f"{listing})")
     elif topic not in types:
-        raise LogError(f"{path}: no topic {topic} with messages (its map topics: {listing})")
+        raise LogError(f"{path}: no topic {topic} (its map topics: {listing})")
     elif topic not in grids:
         raise LogError(f"{path}: {topic} is {types[topic]}, not nav_msgs/OccupancyGrid (its map topics: {listing})")
     src.keep_other_types = True  # the readers hand over a type fgloc does not read as its CDR bytes

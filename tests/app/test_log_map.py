@@ -129,7 +129,7 @@ def test_wrong_outputs_and_topics_are_one_line_errors(tmp_path):
     assert rc == 2
     assert one_error(err).endswith("/odom is nav_msgs/msg/Odometry, not nav_msgs/OccupancyGrid (its map topics: /map)")
     rc, _, err = cli("export", f"{log}:/nope", "-o", tmp_path / "x.yaml")
-    assert rc == 2 and "no topic /nope with messages (its map topics: /map)" in one_error(err)
+    assert rc == 2 and one_error(err).endswith(": no topic /nope (its map topics: /map)")
 
 
 def test_an_existing_map_is_not_overwritten_without_force(tmp_path):
@@ -143,3 +143,22 @@ def test_an_existing_map_is_not_overwritten_without_force(tmp_path):
     rc, _, err = cli("export", f"{log}:/map", "-o", tmp_path / "map.yaml", "--force")
     assert rc == 0, err
     assert_same_map(load_map(tmp_path / "map.yaml"), room())
+
+
+def test_a_map_topic_without_messages_says_so(tmp_path):
+    """A recording stopped before the map was published (IR2121's loose .db3 files: /map 0 messages)."""
+    from fgloc.io.mcap_writer import LogWriter
+    from fgloc.io.msgdefs import full_text
+    from fgloc.ros2.codec import OCCUPANCY_GRID
+
+    log = tmp_path / "early.mcap"
+    with LogWriter(log) as w:
+        w.raw_writer("/map", OCCUPANCY_GRID, full_text(OCCUPANCY_GRID).encode())  # the channel only
+        for k in range(5):
+            w.write("/odom", Odometry(stamp=T0 + 0.1 * k, twist=np.zeros(3), pose=np.zeros(3)))
+    rc, _, err = cli("export", f"{log}:/map", "-o", tmp_path / "map.yaml")
+    assert rc == 2
+    assert one_error(err).endswith(": /map has no messages (the recording holds its type only; its map topics: none)")
+    rc, _, err = cli("export", log, "-o", tmp_path / "map.yaml")
+    assert rc == 2 and one_error(err).endswith(": no nav_msgs/OccupancyGrid topic with messages to read a map from")
+    assert not (tmp_path / "map.yaml").exists() and not (tmp_path / "map.pgm").exists()

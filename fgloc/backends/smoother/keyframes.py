@@ -128,6 +128,7 @@ class KeyframeGraph(FurtherSourceFactors):
             got = self._chord_along_heading(t_prev, t)
         if got is None:
             pred = compose1(self.kf_pose[k_prev], self._corrected(d, t_prev, t))
+            cl = c.reshape(9).tolist()
         else:  # the translation along the gyro's heading, the gyro's rotation; the wheels' yaw in the factor
             chord, (p00, p01, p11) = got
             gv = float(self._gains[0])
@@ -135,8 +136,8 @@ class KeyframeGraph(FurtherSourceFactors):
                                                    chord[2]))
             d = np.array([chord[0], chord[1], d[2]])
             # its translation's covariance is the chord's, uncorrelated with the wheels' yaw
-            c = np.fromiter((p00, p01, 0.0, p01, p11, 0.0, 0.0, 0.0, float(c[2, 2])), float, 9).reshape(3, 3)
-        graph.add(self._odometry_factor(k_prev, k, d, c, t, graph, vals, ts, bend=got is None))
+            cl = [p00, p01, 0.0, p01, p11, 0.0, 0.0, 0.0, float(c[2, 2])]
+        graph.add(self._odometry_factor(k_prev, k, d, cl, t, graph, vals, ts, bend=got is None))
         pairs.append(((k_prev, k), graph.size() - 1))
         # initial value: the odometry prediction, so robust weights start from a consistent point (by the
         # overload's name: pybind11 tries Values.insert's overloads in turn, the Pose2 one is the ninth)
@@ -203,7 +204,8 @@ class KeyframeGraph(FurtherSourceFactors):
             self._flush_acc()
         else:  # online estimate until the next solver update: the odometry prediction
             self.stats["keyframes"] += 1
-            self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred, c))
+            self._record_online(t, pred, carried_covariance(self._last_cov, self.kf_pose[k_prev], pred,
+                                                            np.array(cl).reshape(3, 3)))
 
     def _record_online(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
         """The online pose with its output covariance: the marginal (or the prediction's), but never
@@ -296,14 +298,15 @@ class KeyframeGraph(FurtherSourceFactors):
             return k
         return k * math.sqrt(1.0 + q / (sigma * sigma))
 
-    def _odometry_factor(self, ki: int, kj: int, d: FloatArray, c: FloatArray, t: float,
+    def _odometry_factor(self, ki: int, kj: int, d: FloatArray, cl: list[float], t: float,
                          graph: gtsam.NonlinearFactorGraph, vals: gtsam.Values, ts: dict,
                          bend: bool = True) -> gtsam.NonlinearFactor:
-        """The integrated-odometry factor: yaw noise as the odometry showed it, gains estimated
+        """The integrated-odometry factor on the increment ``d`` with covariance ``cl`` (its 9 entries
+        row by row, as floats): yaw noise as the odometry showed it, gains estimated
         (``bend=False``: ``d``'s translation was integrated along the gyro's heading)."""
         # the yaw row and column times k_yaw, the yaw variance plus (rel * yaw)^2 and the timing's: as
         # floats (the same operations as on the array), one array made at the end
-        a = np.asarray(c, dtype=float).reshape(9).tolist()
+        a = list(cl)
         k_yaw, rel = self.inputs.noise("odom")
         if k_yaw != 1.0 or rel > 0.0:
             a[6], a[7], a[8] = a[6] * k_yaw, a[7] * k_yaw, a[8] * k_yaw

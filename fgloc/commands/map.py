@@ -68,7 +68,8 @@ def map_cmd(
     scan_topic: Annotated[str, typer.Option(help="sensor_msgs/LaserScan topic (a log without /scan: its only "
                                             "LaserScan topic)")] = "/scan",
     odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
-                                            "Odometry topic)")] = "/odom",
+                                            "Odometry topic; without any, or \"\": the scans are matched "
+                                            "to each other alone)")] = "/odom",
     no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (none either when stderr is not a "
                                         "terminal)")] = False,

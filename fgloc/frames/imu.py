@@ -92,7 +92,7 @@ def _cov_ok(a: list[float] | None) -> str | None:
     """None if the covariance (:func:`_cov_values`) is usable (or absent), else why not."""
     if a is None:
         return None
-    d0, d1, d2 = float(a[0]), float(a[4]), float(a[8])
+    d0, d1, d2 = a[0], a[4], a[8]
     if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
         return "covariance with a NaN/inf diagonal"
     if d0 < 0 or d1 < 0 or d2 < 0:

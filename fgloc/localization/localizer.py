@@ -207,7 +207,8 @@ class Localizer(Recovery):
                         cov_finite: bool | None = None) -> None:
         """:meth:`on_odometry` on a message's values (``cov_finite``: whether ``cov`` is all finite, if known)."""
         t_raw = t
-        if tw.shape != (3,) or not math.isfinite(sum(tw.tolist())):
+        twl = tw.tolist() if tw.shape == (3,) else None
+        if twl is None or not math.isfinite(sum(twl)):
             self._skip("odometry: non-finite twist")
             return
         if not self._monotonic("odometry", t):
@@ -220,12 +221,7 @@ class Localizer(Recovery):
             # at or before the stamp carried to after a burst (carry_to): the next increment covers it
             self.stats["odometry_folded"] = self.stats.get("odometry_folded", 0) + 1
             return
-        if pose is not None and (pose.shape != (3,) or not math.isfinite(sum(pose.tolist()))):
-            pose = None  # finiteness by the sum of the values (one scalar test, as for the twist)
-        if cov is not None and not (math.isfinite(float(np.asarray(cov, dtype=float).sum())) if cov_finite is None
-                                    else cov_finite):
-            cov = None
-        tw, cov = self.odom.step(t, tw, cov, pose)
+        tw, cov = self.odom.step(t, tw, cov, pose, cov_finite, twl)  # (the pose's and covariance's checks)
         if self.clock is not None:
             self.clock.add_odometry(t_raw, float(self.odom.pose[2]))
             # stamps in bursts: no offset places them, the back-end carries their timing variance

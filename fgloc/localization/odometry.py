@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
 
@@ -63,7 +64,7 @@ class OdometryTracker:
         self._prev_pose: tuple[float, FloatArray | list[float]] | None = None  # (stamp, pose) of the last message
         self._scale_sig = np.asarray(cfg.pose_delta_sigmas, dtype=float)
         # auto mode's agreement window: (t, pose increment, twist increment, poses moved) and sums
-        self._window: deque[tuple[float, tuple[float, ...], bool]] = deque()
+        self._window: deque[tuple[Any, ...]] = deque()  # (t, pose increment, twist increment, length, |turn|, moved)
         self._sums = [0.0] * 8  # pose increments (3), twist increments (3), path length, |turn|
         self._moved = 0
         # stamps of the last RATE_WINDOW poses (the source's mean period), the recent odom poses, and
@@ -80,9 +81,13 @@ class OdometryTracker:
         #: ``(twist, dt, exp_values(twist, dt))`` of the message being taken, when _twist computed it
         self._increment: tuple[FloatArray, float, tuple[float, float, float]] | None = None
 
-    def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None
+    def step(self, t: float, twist: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
+             cov_finite: bool | None = None, twist_values: list[float] | None = None
              ) -> tuple[FloatArray, FloatArray | None]:
-        """Take one (checked) odometry message; returns the twist and covariance to integrate.
+        """Take one odometry message (its stamp and twist checked); returns the twist and covariance
+        to integrate.  A pose or covariance that is not all finite is dropped (``cov_finite``:
+        whether ``cov`` is, when the caller knows; ``twist_values``: ``twist.tolist()``, when it has
+        them).
 
         A component the source does not fuse (variance ``UNUSED_VAR``) is handed to the back-end as
         0 (with that variance): its value must not shape the others either (a skid steer's wheel yaw
@@ -92,8 +97,16 @@ class OdometryTracker:
         Scalar maths per message (called at the odometry's rate): no temporary arrays but the
         pose and twist handed on.
         """
+        pv = None  # the pose's floats
+        if pose is not None:
+            pv = pose.tolist() if pose.shape == (3,) else None
+            if pv is None or not math.isfinite(sum(pv)):
+                pv = None  # finiteness by the sum of the values (one scalar test, as for the twist)
+        if cov is not None and not (math.isfinite(float(np.asarray(cov, dtype=float).sum())) if cov_finite is None
+                                    else cov_finite):
+            cov = None
         unused = self._unused(cov)
-        tw, cov = self._twist(t, twist, cov, pose, unused)
+        tw, cov = self._twist(t, twist, cov, pv, unused, twist_values)
         if cov is not None and tw is not twist:
             unused = self._unused(cov)  # a pose-derived twist's covariance keeps the unused ones
         # dead-reckoned odom pose (for the front-end's odom_delta); twist held backwards
@@ -109,7 +122,8 @@ class OdometryTracker:
         self._recent.append((t, self.pose))
         if self.first_t is None:
             self.first_t = t
-        tw = _zero_unused(tw, unused)
+        if unused[0] or unused[1] or unused[2]:
+            tw = _zero_unused(tw, unused)
         self._last_out = (tw, cov)
         return tw, cov
 
@@ -235,8 +249,9 @@ class OdometryTracker:
                 return se2_log(between1(pj, p1)) / (t1 - tj)
         return None
 
-    def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: FloatArray | None,
-               unused: tuple[bool, bool, bool] | None = None) -> tuple[FloatArray, FloatArray | None]:
+    def _twist(self, t: float, tw: FloatArray, cov: FloatArray | None, pose: list[float] | None,
+               unused: tuple[bool, bool, bool] | None = None, tw_values: list[float] | None = None
+               ) -> tuple[FloatArray, FloatArray | None]:
         """The body twist to integrate: the message's, or the dead-reckoned pose's differential.
 
         robot_localization's differential mode: when the source carries poses and its twist
@@ -257,7 +272,7 @@ class OdometryTracker:
         the driver (an AR.Drone's odometry leaves them at zero): the twist is kept.
         """
         prev = self._prev_pose
-        pv = None if pose is None else pose.tolist()  # (the pose's floats: read here and by the next message)
+        pv = pose  # (the pose's floats: read here and by the next message)
         self._prev_pose = None if pv is None else (t, pv)
         self._increment = None
         self._short = False
@@ -278,7 +293,7 @@ class OdometryTracker:
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
         delta = between_values(prev[1], pv)
-        d_tw = exp_values(tw.tolist(), dt)
+        d_tw = exp_values(tw.tolist() if tw_values is None else tw_values, dt)
         self._increment = (tw, dt, d_tw)  # step() carries the odom pose by the same increment
         if mode != "always" and self._agrees(t, delta, d_tw, unused):
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
@@ -317,7 +332,7 @@ class OdometryTracker:
         e0, e1, e2 = d_tw
         moved = d0 != 0.0 or d1 != 0.0 or d2 != 0.0
         lin_d, rot_d = math.hypot(d0, d1), abs(d2)
-        win.append((t, (d0, d1, d2, e0, e1, e2, lin_d, rot_d), moved))
+        win.append((t, d0, d1, d2, e0, e1, e2, lin_d, rot_d, moved))
         s = self._sums
         s[0] += d0
         s[1] += d1
@@ -329,16 +344,16 @@ class OdometryTracker:
         s[7] += rot_d
         self._moved += moved
         while len(win) > 1 and win[0][0] <= t - AGREEMENT_WINDOW_S:
-            _, old, m0 = win.popleft()
-            s[0] -= old[0]
-            s[1] -= old[1]
-            s[2] -= old[2]
-            s[3] -= old[3]
-            s[4] -= old[4]
-            s[5] -= old[5]
-            s[6] -= old[6]
-            s[7] -= old[7]
-            self._moved -= m0
+            old = win.popleft()
+            s[0] -= old[1]
+            s[1] -= old[2]
+            s[2] -= old[3]
+            s[3] -= old[4]
+            s[4] -= old[5]
+            s[5] -= old[6]
+            s[6] -= old[7]
+            s[7] -= old[8]
+            self._moved -= old[9]
         if not self._moved:
             return True  # poses frozen: not filled in by the driver (or standing still: both agree)
         lin, rot = max(s[6], 0.0), max(s[7], 0.0)

@@ -22,13 +22,15 @@ class OdometryCoverage:
     def add(self, t: float) -> None:
         """An odometry message stamped ``t`` (stamps of one stream only grow)."""
         t = float(t)
+        last = self.last
         if self.first is None:
             self.first = t
-        elif self.last is not None and t - self.last > self.max_gap_s:
-            self._gaps.append((self.last, t))
+        elif last is not None and t - last > self.max_gap_s:
+            self._gaps.append((last, t))
             if len(self._gaps) > self.MAX_GAPS:
                 del self._gaps[0]
-        self.last = t if self.last is None else max(self.last, t)
+        if last is None or t > last:  # (the later of the two)
+            self.last = t
 
     def covers(self, t0: float, t1: float) -> bool:
         """Whether the stamps cover ``[t0, t1]``: one within ``max_gap_s`` of each end and no longer

@@ -201,11 +201,12 @@ class OdometryHandler(SourceHandler):
         if tilt is None or abs(t - tilt[0]) > MAX_TILT_AGE_S:
             return tw, cov
         _, r, p = tilt
-        if not (abs(r) <= MAX_TILT_RAD and abs(p) <= MAX_TILT_RAD):  # NaN too
-            st.extra["tilt_implausible"] = st.extra.get("tilt_implausible", 0) + 1
+        ar, ap, ex = abs(r), abs(p), st.extra
+        if not (ar <= MAX_TILT_RAD and ap <= MAX_TILT_RAD):  # NaN too
+            ex["tilt_implausible"] = ex.get("tilt_implausible", 0) + 1
             return tw, cov
-        st.extra["levelled"] = st.extra.get("levelled", 0) + 1
-        st.extra["tilt_max_rad"] = max(st.extra.get("tilt_max_rad", 0.0), abs(r), abs(p))
+        ex["levelled"] = ex.get("levelled", 0) + 1
+        ex["tilt_max_rad"] = max(ex.get("tilt_max_rad", 0.0), ar, ap)
         if r == 0.0 and p == 0.0:  # level (a flat IMU's exact zeros): the projection is the identity
             return tw, cov
         cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)

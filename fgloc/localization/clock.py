@@ -126,7 +126,7 @@ class OdometryClock:
     def stamp(self, t_raw: float) -> float:
         """The message stamped ``t_raw`` (checked, later than the previous one) on the scans' clock;
         the offset in use moves towards the estimate here."""
-        target = self.estimate_s if self.applies else 0.0
+        target = self.estimate_s if self.confident and self.applies else 0.0
         if self._last_raw is not None and target != self.offset_s:
             step = SLEW * max(t_raw - self._last_raw, 0.0)
             self.offset_s += max(-step, min(step, target - self.offset_s))

@@ -40,6 +40,17 @@ def values_bad(d: list[float]) -> bool:
     return not all(math.isfinite(v) and v >= 0 for v in d)
 
 
+_F64 = np.dtype(np.float64)
+
+
+def flat_floats(v: Any) -> np.ndarray:
+    """``np.asarray(v, dtype=float).reshape(-1)``, and ``v`` itself when it is a 1-D float64 array
+    already (a message's twist or pose as every reader gives it: no conversion per message)."""
+    if type(v) is np.ndarray and v.ndim == 1 and v.dtype is _F64:
+        return v
+    return np.asarray(v, dtype=float).reshape(-1)
+
+
 @dataclass
 class SourceState:
     """One source's running state (its health, the previous message of a differential source)."""

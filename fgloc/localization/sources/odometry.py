@@ -20,7 +20,7 @@ from fgloc.backends.contract import Capability
 from fgloc.geometry import between, rotate_covariance
 from fgloc.geometry import log as se2_log
 from fgloc.io.topics import ODOMETRY
-from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad, values_bad
+from fgloc.localization.sources.handler import SourceContext, SourceHandler, cov_bad, flat_floats, values_bad
 from fgloc.localization.sources.spec import COMPONENTS, OUT_OF_ORDER, SourceSpec, SourceType
 from fgloc.types import Odometry
 
@@ -119,14 +119,14 @@ class OdometryHandler(SourceHandler):
         if (cl is not None and values_bad(cl)) or (spec.differential and cov_bad(msg.pose_cov)):
             self.skip("covariance with a NaN or negative diagonal")
             return
-        tw = np.asarray(msg.twist, dtype=float).reshape(-1)
-        cov = None if cov_copy is None else cov_copy.reshape(3, 3)
+        tw = flat_floats(msg.twist)
+        cov = None if cov_copy is None else cov_copy if cov_copy.shape == (3, 3) else cov_copy.reshape(3, 3)
         tw_msg, cov_msg = tw, cov  # (read, never written)
         if tw.shape == (3,):
-            vy = abs(float(tw[1]))
+            vy = abs(tw.item(1))
             if vy > st.vy_max:  # (a NaN never is)
                 st.vy_max = vy
-        pose = None if msg.pose is None else np.asarray(msg.pose, dtype=float).reshape(-1)
+        pose = None if msg.pose is None else flat_floats(msg.pose)
         velocities, whole_twist = self.velocities, self.whole_twist
         if spec.differential or not velocities:
             # robot_localization's differential mode: the twist of the pose increments

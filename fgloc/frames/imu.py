@@ -54,6 +54,9 @@ class BaseImu:
     #: the heading's rate (rad/s) when tilted: ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``
     #: (the ZYX Euler yaw rate; ``w_z`` on level ground), None without orientation and rates
     heading_rate_radps: float | None = None
+    #: the base's roll and pitch variances (rad^2: ``R_bi C R_bi^T``'s first two diagonal entries of the
+    #: orientation covariance), None without an orientation covariance or a usable orientation
+    roll_pitch_var: tuple[float, float] | None = None
 
 
 def _unit_floats(v: object, n: int) -> list[float] | None:
@@ -116,6 +119,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
     yaw: float | None = None
     yaw_var = math.nan
     tilt: tuple[float, float] | None = None
+    tilt_var: tuple[float, float] | None = None
     b = R_bi if isinstance(R_bi, list) else np.asarray(R_bi, dtype=float).ravel().tolist()   # R_bi row-major
     b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
     planar = b2 == 0.0 and b5 == 0.0 and b6 == 0.0 and b7 == 0.0 and b8 == 1.0  # a yaw-only mount (or none)
@@ -153,6 +157,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
                 yaw_var = _zz((b6, b7, b8), oc)
                 if not yaw_var > 0:
                     yaw_var = math.nan
+                tilt_var = (_zz((b0, b1, b2), oc), _zz((b3, b4, b5), oc))
     rate: float | None = None
     rate_var = math.nan
     heading_rate: float | None = None
@@ -180,7 +185,7 @@ def imu_in_base(msg: Imu, R_bi: FloatArray | list[float]) -> tuple[BaseImu, list
                 rate_var = _zz((b6, b7, b8), wc)
                 if not rate_var > 0:
                     rate_var = math.nan
-    return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate), problems
+    return BaseImu(float(msg.stamp), yaw, yaw_var, rate, rate_var, tilt, heading_rate, tilt_var), problems
 
 
 def imu_message(stamp: float, R_world_base: FloatArray, w_base: FloatArray, R_bi: FloatArray,

@@ -15,10 +15,11 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from fgloc.app.run import RunRequest, run_log
+from fgloc.frames.imu import imu_in_base
 from fgloc.io.mcap_writer import LogWriter
 from fgloc.io.tum import read_tum
 from fgloc.localization.sources import parse_sources
-from fgloc.localization.sources.imu import tilt_estimated
+from fgloc.localization.sources.imu import tilt_usable
 from fgloc.types import Imu, Odometry
 
 SPEED_MPS = 1.0
@@ -99,6 +100,13 @@ def test_tilts_no_ground_robot_has_and_unestimated_ones_are_not_used(tmp_path: P
     r = run_log(RunRequest(log=vague, outdir=tmp_path / "v", backend="ekf", force=True, view_channels=False))
     assert r.stats.sources["odom"].levelled == 0
     assert r.stats.sources["imu"].tilt_unusable == int(DURATION_S * RATE_HZ) + 1
+
+
+def tilt_estimated(cov: np.ndarray | None, R_bi: list[float]) -> bool:
+    """The handler's verdict on a level reading's orientation covariance through the mount ``R_bi``."""
+    base, problems = imu_in_base(Imu(0.0, np.array([0.0, 0.0, 0.0, 1.0]), None, cov, None, frame_id="imu"), R_bi)
+    assert not problems and base.roll_pitch_rad is not None
+    return tilt_usable(base.roll_pitch_var)
 
 
 def test_which_covariances_carry_a_tilt() -> None:

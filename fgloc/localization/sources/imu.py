@@ -17,7 +17,7 @@ The first IMU gives the heading (and its rate) to the localizer; a second one on
 (its heading is in another world frame).  ``use: [..., roll, pitch]``: its attitude levels the
 odometry and its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``
 (the default layout's IMU does so unless ``sources.level_by_imu`` is off); a reading whose roll /
-pitch variance says they are not estimated (:func:`tilt_estimated`) does neither, counted.
+pitch variance says they are not estimated (:func:`tilt_usable`) does neither, counted.
 ``differential``: orientation increments, as a heading with the source's own offset for a
 back-end that takes them (``add_relative_yaw``), else as a yaw rate.
 """
@@ -58,23 +58,16 @@ def needed(spec: SourceSpec, msg: Imu) -> Imu:
                    angular_velocity_cov=msg.angular_velocity_cov if rates else None)
 
 
-def tilt_estimated(cov: object, R_bi: list[float]) -> bool:
-    """Whether an orientation covariance (the sensor frame's, 3x3 or 9 entries; None: not given)
-    lets its roll and pitch level the odometry: the base's roll / pitch variances (``R_bi C R_bi^T``,
-    ``R_bi`` row by row) at most :data:`MAX_TILT_RAD` squared.  Larger is a driver's "not
-    estimated" placeholder (1e6, 99999): a sigma that allows any tilt a ground robot has.  Zero
-    (REP 145's "unknown") is taken, as robot_localization takes it; a NaN or negative diagonal has
-    already dropped the orientation (:func:`~fgloc.frames.imu.imu_in_base`)."""
-    if cov is None:
+def tilt_usable(roll_pitch_var: tuple[float, float] | None) -> bool:
+    """Whether the base's roll and pitch variances (:attr:`~fgloc.frames.imu.BaseImu.roll_pitch_var`;
+    None: no covariance given) let them level the odometry: both at most :data:`MAX_TILT_RAD` squared.
+    Larger is a driver's "not estimated" placeholder (1e6, 99999): a sigma that allows any tilt a
+    ground robot has.  Zero (REP 145's "unknown") is taken, as robot_localization takes it; a NaN or
+    negative diagonal has already dropped the orientation (:func:`~fgloc.frames.imu.imu_in_base`)."""
+    if roll_pitch_var is None:
         return True
-    a = np.asarray(cov, dtype=float).reshape(9).tolist()
     bound = MAX_TILT_RAD * MAX_TILT_RAD
-    for r0, r1, r2 in ((R_bi[0], R_bi[1], R_bi[2]), (R_bi[3], R_bi[4], R_bi[5])):
-        v = ((r0 * a[0] + r1 * a[3] + r2 * a[6]) * r0 + (r0 * a[1] + r1 * a[4] + r2 * a[7]) * r1
-             + (r0 * a[2] + r1 * a[5] + r2 * a[8]) * r2)
-        if not v <= bound:
-            return False
-    return True
+    return roll_pitch_var[0] <= bound and roll_pitch_var[1] <= bound  # (NaN: not)
 
 
 class ImuHandler(SourceHandler):
@@ -105,7 +98,7 @@ class ImuHandler(SourceHandler):
                 self.skip(p)
             yaw, yaw_var, rate, rate_var = base.yaw_rad, base.yaw_var, base.yaw_rate_radps, base.yaw_rate_var
             if self.uses_roll and base.roll_pitch_rad is not None:
-                if not tilt_estimated(msg.orientation_cov, Rv):
+                if not tilt_usable(base.roll_pitch_var):
                     st.extra["tilt_unusable"] = st.extra.get("tilt_unusable", 0) + 1
                 else:
                     if ctx.tilt_source in (None, spec.name):  # the first levelling IMU levels

@@ -564,6 +564,8 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
     result.warnings = scale_warnings(result.stats, mount_assumed=(
         inputs.n_scan > 0 and mode == "map" and not config.sources.static_transforms
         and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
+    if mode == "map":
+        result.warnings += unused_frontend_settings(config, loc.frontend_name)
     return result
 
 
@@ -622,6 +624,28 @@ def scale_warnings(stats: RunStats, mount_assumed: bool) -> list[str]:
                "mount with --static-transform PARENT CHILD X Y Z ROLL PITCH YAW (an upside-down laser is ROLL 180)"
                if mount_assumed else "check the laser mount and the odometry's units")
         out.append(f"{name}: the wheels report {float(sc):.2f}x the distance the scan fixes moved: {why}")
+    return out
+
+
+def unused_frontend_settings(config: FglocConfig, frontend: str) -> list[str]:
+    """One line per ``frontends.NAME`` section the config sets (any value off its default) for a
+    front-end other than ``frontend``, the one that ran: those settings did nothing (a config
+    ported with ``fgloc config from-nav2`` holds AMCL's, and the default front-end is native)."""
+    from fgloc.config.schema import to_dict
+    from fgloc.frontends.factory import FRONTENDS, FrontendsConfig, canonical_name
+
+    used = canonical_name(frontend)
+    defaults = FrontendsConfig()
+    out = []
+    for name in FRONTENDS:
+        if name == used:
+            continue
+        base = to_dict(getattr(defaults, name))
+        changed = [k for k, v in to_dict(getattr(config.frontends, name)).items() if v != base.get(k)]
+        if changed:
+            keys = ", ".join(changed[:4]) + (f" and {len(changed) - 4} more" if len(changed) > 4 else "")
+            out.append(f"frontends.{name} sets {keys}: unused, the front-end is {used} (pass --frontend {name} "
+                       "to localize with it)")
     return out
 
 

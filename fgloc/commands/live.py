@@ -124,6 +124,12 @@ def register(app: typer.Typer) -> None:
         from fgloc.live.app import LiveRequest, run_live
         from fgloc.live.publish import dumps
 
+        if config is not None:  # a ported nav2 config's AMCL settings do nothing with the native front-end
+            from fgloc.app.run import unused_frontend_settings
+            from fgloc.config import load_config
+
+            for w in unused_frontend_settings(load_config(config), frontend):
+                sys.stderr.write(f"fgloc live: warning: {w}\n")
         if ros2:
             from fgloc.errors import ConfigError
             from fgloc.ros2.live import live_ros2

@@ -43,6 +43,7 @@ def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[s
     what = "robot_localization" if kind == "rl" else "nav2 amcl"
     head = [f"fgloc config converted from {what} parameters: {path.name}"]
     head += [f"WARNING: {w}" for w in conversion_warnings(kind, cfg)]
+    head += usage_notes(cfg)
     head += [f"not carried over: {n}" for n in notes]
     text = "\n".join(f"# {line}" for line in head) + "\n" + (yaml.safe_dump(cfg, sort_keys=False) if cfg else "{}\n")
     return cfg, notes, text
@@ -71,6 +72,15 @@ def conversion_warnings(kind: str, cfg: dict[str, Any]) -> list[str]:
     return out
 
 
+def usage_notes(cfg: dict[str, Any]) -> list[str]:
+    """How to use what was converted when a flag, not the config, picks it: AMCL's settings take
+    effect with ``--frontend amcl`` (the default front-end is native)."""
+    if "amcl" in (cfg.get("frontends") or {}):
+        return ["frontends.amcl is used with --frontend amcl (fgloc run, fgloc live); the default front-end, "
+                "native, does not read it"]
+    return []
+
+
 def _write(kind: str, path: Path, output: Path | None, node: str | None, force: bool) -> None:
     import sys
 
@@ -92,6 +102,8 @@ def _write(kind: str, path: Path, output: Path | None, node: str | None, force: 
     else:
         write_text_output(output, text, force=force, what="config", command="config")
         print(f"wrote {output} ({len(notes)} parameter(s) not carried over)")
+        for n in usage_notes(cfg):  # printed to stdout, the same line heads the YAML as a comment
+            print(n)
 
 
 def register(app: typer.Typer) -> None:

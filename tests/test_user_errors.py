@@ -181,6 +181,12 @@ def test_latency_line_is_not_contradictory():
     rep.latency_s, rep.latency_not_applied = 0.1196, None
     line = next(ln for ln in summary_lines(RunStats(sources={"scan": rep})) if "latency" in ln)
     assert "latency 119.6 +- 11.3 ms (estimated)" in line
+    # five fixes: an estimate of -25463.5 +- 29575301.7 ms is no number to print
+    rep.latency_s, rep.latency_estimate_s, rep.latency_sigma_s = 0.0, -25.4635, 29575.3017
+    rep.latency_not_applied = "not significant yet"
+    line = next(ln for ln in summary_lines(RunStats(sources={"scan": rep})) if "latency" in ln)
+    assert "latency 0.0 ms in use; too few fixes to measure it" in line
+    assert "25463" not in line
 
 
 # ------------------------------------------------------------------ the table of docs/user-errors.md

@@ -25,6 +25,8 @@ if TYPE_CHECKING:
 #: stream (``odom``, a pose source's name) is ``noise``, an IMU's ``NAME.yaw`` / ``NAME.gyro``
 #: are ``yaw`` / ``gyro``
 STREAM_KEYS = ("noise", "yaw", "gyro")
+#: ms: an unapplied latency estimate this uncertain measures nothing yet (a handful of fixes); not printed as a number
+UNMEASURED_LATENCY_MS = 1000.0
 
 
 @dataclass
@@ -206,7 +208,9 @@ def summary_lines(stats: RunStats) -> list[str]:
             est.append(f"gyro bias {d.gyro_bias_radps:.5f} rad/s")
         if d.latency_s is not None:
             used, sig = 1000 * d.latency_s, 1000 * (d.latency_sigma_s or 0)
-            if d.latency_not_applied and d.latency_estimate_s is not None:
+            if d.latency_not_applied and d.latency_estimate_s is not None and sig > UNMEASURED_LATENCY_MS:
+                s = f"latency {used:.1f} ms in use; too few fixes to measure it"
+            elif d.latency_not_applied and d.latency_estimate_s is not None:
                 # the estimate is not the value in use: say which is which, and why
                 s = (f"latency {used:.1f} ms in use; measured {1000 * d.latency_estimate_s:.1f} +- {sig:.1f} ms, "
                      f"not applied ({d.latency_not_applied})")

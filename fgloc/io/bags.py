@@ -43,11 +43,12 @@ class BagSource(LogSource):
         self._cdr_store: Any = None  # the ROS 2 type store a ROS 1 bag's other types are converted with
         reader = self._open_reader()
         try:
-            self._conns = list(reader.connections)
-            for c in self._conns:
+            conns = list(reader.connections)
+            for c in conns:
                 info = self._topic_info.setdefault(resolved_topic(c.topic), TopicInfo(normalize_type(c.msgtype)))
                 info.count += int(c.msgcount)
-            self._n = sum(int(c.msgcount) for c in self._conns)
+            self._n = sum(int(c.msgcount) for c in conns)
+            self._conns = self._storage_connections(reader, conns)
             if self._n:
                 self._start_ns, self._end_ns = int(reader.start_time), int(reader.end_time)
         finally:
@@ -61,6 +62,10 @@ class BagSource(LogSource):
 
     def _reader_errors(self) -> tuple[type[Exception], ...]:
         raise NotImplementedError
+
+    def _storage_connections(self, reader: Any, conns: list[Any]) -> list[Any]:
+        """The connections to read by (a format whose index can disagree with its files adds to them)."""
+        return conns
 
     def _open_reader(self) -> Any:
         try:

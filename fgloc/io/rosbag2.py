@@ -9,7 +9,9 @@ A recording that did not end cleanly (killed, power lost) leaves a folder withou
 ``<file>.db3-wal`` beside the database.  A lone ``.db3`` is read without the metadata, and a
 ``-wal`` file's messages are read from a copy the log is merged into (``rosbags`` opens
 databases immutable, which leaves the ``-wal`` out); where that cannot be done (split or
-compressed bags) a warning says how many bytes are left out.
+compressed bags) a warning says how many bytes are left out.  A ``metadata.yaml`` that disagrees
+with the files is read with a warning: a database renamed after recording is read alone, a topic
+whose QoS, serialization or type hash differ from the file's is read by topic and type.
 
 ``fgloc info`` calls a folder *indexed* when it is read through its ``metadata.yaml`` with nothing
 left in a ``-wal`` (a clean recording, whose counts and time span the recorder wrote); one read
@@ -70,7 +72,13 @@ class Rosbag2Source(BagSource):
         ``metadata.yaml``, or a copy of that file with its ``-wal`` merged in (see the module doc)."""
         dbs = [p] if p.is_file() else sorted(p.glob("*.db3"))
         meta = p.is_dir() and (p / "metadata.yaml").is_file()
-        if p.is_dir() and not meta:
+        if meta and len(dbs) == 1:
+            listed = _listed_files(p)
+            if listed and not any((p / f).exists() for f in listed):  # the database renamed after recording
+                log.warning("%s: metadata.yaml names %s, not in the folder; reading %s alone", p,
+                            ", ".join(listed), dbs[0].name)
+                meta = False
+        elif p.is_dir() and not meta:
             n = len(dbs) + len(list(p.glob("*.mcap")))
             if n > 1:
                 raise LogError(f"{p}: no metadata.yaml beside its {n} storage files (a split recording that "
@@ -108,6 +116,30 @@ class Rosbag2Source(BagSource):
                     "cleanly); read from a merged copy: %d messages", db, _wal(db).name, after - before, after)
         return copy
 
+    def _storage_connections(self, reader: Any, conns: list[Any]) -> list[Any]:
+        """``conns`` (the metadata's topics) and, for each storage file's topic that none of them
+        matches as ``rosbags`` matches (topic, type, serialization and QoS, type hash when both have
+        one) but one names with the same type, that one again with the file's serialization, QoS and
+        hash: without it a ``metadata.yaml`` rewritten by a tool (a Jazzy bag's converted for Humble)
+        or edited by hand would read none of that topic's messages, silently."""
+        def same(y: Any, x: Any) -> bool:
+            return (y.topic == x.topic and y.msgtype == x.msgtype and y.ext == x.ext
+                    and (not x.digest or not y.digest or y.digest == x.digest))
+
+        extra: list[Any] = []
+        folder = getattr(reader, "storage", reader)  # rosbags' Reader wraps the folder's reader
+        for storage in getattr(folder, "storages", None) or ():
+            for x in getattr(storage, "connections", None) or ():
+                if any(same(y, x) for y in (*conns, *extra)):
+                    continue
+                y = next((y for y in conns if y.topic == x.topic and y.msgtype == x.msgtype), None)
+                if y is not None:
+                    extra.append(y._replace(ext=x.ext, digest=x.digest))
+        if extra:
+            log.warning("%s: metadata.yaml's QoS / serialization / type hash of %s differ from the storage "
+                        "files'; read by topic and type", self.path, ", ".join(sorted({c.topic for c in extra})))
+        return [*conns, *extra]
+
     def _reader(self) -> Any:
         from rosbags.rosbag2 import Reader
 
@@ -117,6 +149,17 @@ class Rosbag2Source(BagSource):
         from rosbags.rosbag2.errors import ReaderError
 
         return (ReaderError,)
+
+
+def _listed_files(folder: Path) -> list[str]:
+    """The storage files a folder's metadata.yaml names ([] when it cannot be read)."""
+    import yaml
+
+    try:
+        info = yaml.safe_load((folder / "metadata.yaml").read_text(errors="replace"))["rosbag2_bagfile_information"]
+        return [str(f) for f in info.get("relative_file_paths") or ()]
+    except (OSError, yaml.YAMLError, TypeError, KeyError):
+        return []
 
 
 def compressed_bag(folder: Path) -> bool:

@@ -12,8 +12,8 @@ lack (r_l's own ``test1.bag``: the IMU mount).  :func:`read_launch` returns
   ``sources.static_transforms`` entries (:mod:`fgloc.frames.static`), each on the frame it is
   published from: a mount on the robot's base (``base_link``, ``base_footprint`` or a node's own
   name for it, robot_localization's ``base_link_frame`` / amcl's ``base_frame_id``, e.g.
-  ``mustang_base``, which the converter carries over as ``sources.base_frame``) or a link of a
-  chain to one (``base_link -> plate``);
+  ``mustang_base``; the robot_localization converter carries its own over as
+  ``sources.base_frame``) or a link of a chain to one (``base_link -> plate``);
 * notes: what could not be read (a ``<rosparam command="load" file=...>``, transforms from or to
   a world frame such as ``odom -> wheel_odometry``).
 

@@ -39,6 +39,7 @@ class LocalizeOutcome:
     heading_rmse_deg: float | None = None
     note: str | None = None        # e.g. why the ground-truth evaluation was skipped
     written: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # what ``fgloc run`` warns the result may be wrong about
 
 
 @dataclass
@@ -99,7 +100,8 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
                            initial_pose=pose, config=config_path, scan_topic=scan_topic, odom_topic=odom_topic,
                            imu_topic=imu_topic))
     out = LocalizeOutcome(mode=r.mode, poses=int(r.poses), log_s=float(r.log_s), wall_s=float(r.wall_s),
-                          lost_s=float(r.lost_s), failure=r.failure(), note=r.eval_error, written=list(r.written))
+                          lost_s=float(r.lost_s), failure=r.failure(), note=r.eval_error, written=list(r.written),
+                          warnings=list(r.warnings))
     if r.metrics is not None:
         out.position_rmse_m = float(r.metrics.position_rmse_m)
         out.heading_rmse_deg = float(r.metrics.heading_rmse_deg)

@@ -275,7 +275,8 @@ def _run_kind(job: Job, inputs: dict[str, Path], outdir: Path) -> dict[str, Any]
                                  p.get("scan_topic"), p.get("odom_topic"), p.get("imu_topic"))
         row = {"duration_s": r.log_s, "poses": r.poses, "x_real_time": _ratio(r.log_s, r.wall_s),
                "lost_time_s": r.lost_s if r.mode == "map" else None, "rmse_m": r.position_rmse_m,
-               "heading_rmse_deg": r.heading_rmse_deg, "mode": r.mode, "note": r.note}
+               "heading_rmse_deg": r.heading_rmse_deg, "mode": r.mode,
+               "note": "; ".join(x for x in (r.note, *r.warnings) if x) or None}  # as `fgloc run` warns
         if r.failure:
             # what makes `fgloc run` exit 3 (the outputs are written); a lost run with poses may be
             # accepted (--allow-lost: Job.accept_lost, judged by the summary), a run without any not

@@ -97,3 +97,22 @@ def test_fgloc_run_with_a_ported_nav2_config_warns_that_amcl_did_not_run(short_l
     # the effective config written beside the outputs still holds the ported settings
     written = yaml.safe_load((tmp_path / "out" / "config.yaml").read_text())
     assert written["frontends"]["amcl"]["max_particles"] == 2000 and written["run"]["frontend"] == "native"
+
+
+def test_a_batch_job_keeps_the_runs_warnings(short_log, tmp_path: Path) -> None:
+    """`fgloc batch run` calls the same run: its summary row says what `fgloc run` warns about."""
+    from fgloc.batch import adapter
+    from fgloc.batch.jobs import Job, execute
+
+    d, pose0 = short_log
+    cfg = _ported(tmp_path)
+    out = adapter.localize_log(d / "log.mcap", tmp_path / "a", d / "map.yaml", list(pose0), cfg, "smoother", "native",
+                               None, None, None)
+    want = unused_frontend_settings(load_config(cfg), "native")
+    assert out.warnings == want and len(want) == 1
+    job = Job(name="log", kind="run", inputs={"log": str(d / "log.mcap"), "map": str(d / "map.yaml"),
+                                              "config": str(cfg)},
+              outdir=str(tmp_path / "b"), params={"initial_pose": list(pose0)})
+    res = execute(job)
+    assert res.ok, res.error
+    assert want[0] in res.row["note"]

@@ -64,10 +64,15 @@ def wrap_scalar(a: float) -> float:
 
 def compose1(a: Any, b: Any) -> FloatArray:
     """``a (+) b`` for single poses (scalar maths: fast for per-message hot paths)."""
+    return np.array(compose_values(a, b))
+
+
+def compose_values(a: Any, b: Any) -> tuple[float, float, float]:
+    """:func:`compose1` as a tuple of floats (no array: a pose carried on per message)."""
     a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
     b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
     c, s = math.cos(a2), math.sin(a2)
-    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, wrap_scalar(a2 + b2)])
+    return a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, wrap_scalar(a2 + b2)
 
 
 def inverse1(p: Any) -> tuple[float, float, float]:

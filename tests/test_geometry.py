@@ -72,10 +72,11 @@ def test_interpolate_across_wrap():
 
 
 def test_scalar_variants_give_the_array_versions_bits():
-    """The scalar variants for hot paths (inverse1, between_values / between1, exp_values) are the
+    """The scalar variants for hot paths (inverse1, between_values / between1, compose_values / compose1,
+    exp_values) are the
     array functions' operations in the same order: the same numbers (bit for bit here, where
     numpy's and libm's cos / sin agree; to 1e-12 at worst)."""
-    from fgloc.geometry import between1, between_values, exp, exp_values, inverse1
+    from fgloc.geometry import between1, between_values, compose1, compose_values, exp, exp_values, inverse1
 
     rng = np.random.default_rng(3)
     for _ in range(200):
@@ -84,6 +85,8 @@ def test_scalar_variants_give_the_array_versions_bits():
         assert np.allclose(inverse1(a), inverse(a), atol=1e-12, rtol=0)
         assert np.allclose(between_values(a, b), between(a, b), atol=1e-12, rtol=0)
         assert np.array_equal(between1(a, b), np.array(between_values(a, b)))
+        assert np.array_equal(compose1(a, b), np.array(compose_values(a, b)))
+        assert np.allclose(compose_values(a, b), compose(a, b), atol=1e-12, rtol=0)
         tw, dt = rng.uniform(-2, 2, 3), float(rng.uniform(0.001, 0.5))
         assert np.array_equal(np.array(exp_values(tw, dt)), exp(tw * dt))
 

@@ -4,8 +4,9 @@ A trajectory is named ``FILE`` or ``FILE:TOPIC`` (``run.mcap:/fused_pose``, ``lo
 file's kind is found by its content:
 
 * a TUM file (``timestamp x y z qx qy qz qw`` lines): its poses;
-* a log (ROS 2 MCAP, rosbag2 folder, ROS 1 bag): the poses of a ``nav_msgs/Odometry`` or
-  ``geometry_msgs/PoseWithCovarianceStamped`` topic, at their header stamps.  Without a topic:
+* a log (ROS 2 MCAP, rosbag2 folder, ROS 1 bag): the poses of a ``nav_msgs/Odometry``,
+  ``geometry_msgs/PoseWithCovarianceStamped`` or ``geometry_msgs/PoseStamped`` topic (a motion-capture
+  system's, as vrpn_client_ros publishes it), at their header stamps.  Without a topic:
   ``/fused_pose`` (what ``fgloc run`` writes), else ``/ground_truth``, else the log's only topic of
   those types; several candidates are a one-line error naming them;
 * a CARMEN log (raw or a SLAM-corrected one): the pose each laser line carries (``x y theta``, the
@@ -17,17 +18,21 @@ Errors are one-line :class:`~fgloc.errors.LogError` naming the file.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fgloc.errors import LogError
-from fgloc.types import Trajectory
+from fgloc.types import PoseFix, Trajectory
 
 #: topics taken without being named, in this order
 PREFERRED_TOPICS = ("/fused_pose", "/ground_truth")
 CARMEN_LASER = "laser"  # the CARMEN pseudo-topic of the laser lines' poses
+#: a pose without covariance (motion capture): fgloc's readers do not decode it, this module does
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 
 
 @dataclass
@@ -116,7 +121,7 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
 
     src = open_log(path)
     types = {t: normalize_type(ty) for t, ty in src.topic_types().items() if src.has(t)}
-    posed = [t for t, ty in sorted(types.items()) if ty in (ODOMETRY, POSE_COV_STAMPED)]
+    posed = [t for t, ty in sorted(types.items()) if ty in (ODOMETRY, POSE_COV_STAMPED, POSE_STAMPED)]
     listing = ", ".join(f"{t} ({types[t]})" for t in posed) or "none"
     if topic is None:
         topic = next((t for t in PREFERRED_TOPICS if t in posed), None)
@@ -124,19 +129,19 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
             if len(posed) != 1:
                 raise LogError(f"{path}: which trajectory? name a topic as {path}:TOPIC (its pose topics: "
                                f"{listing})" if posed else
-                               f"{path}: no nav_msgs/Odometry or geometry_msgs/PoseWithCovarianceStamped topic to "
-                               f"read a trajectory from (its topics: {', '.join(sorted(types)) or 'none'})")
+                               f"{path}: no nav_msgs/Odometry, geometry_msgs/PoseWithCovarianceStamped or PoseStamped "
+                               f"topic to read a trajectory from (its topics: {', '.join(sorted(types)) or 'none'})")
             topic = posed[0]
     elif topic not in types:
         raise LogError(f"{path}: no topic {topic} (its pose topics: {listing})")
     elif topic not in posed:
-        raise LogError(f"{path}: {topic} is {types[topic]}, not nav_msgs/Odometry or "
-                       f"geometry_msgs/PoseWithCovarianceStamped (its pose topics: {listing})")
+        raise LogError(f"{path}: {topic} is {types[topic]}, not nav_msgs/Odometry, "
+                       f"geometry_msgs/PoseWithCovarianceStamped or PoseStamped (its pose topics: {listing})")
     stamps: list[float] = []
     poses: list[np.ndarray] = []
     covs: list[np.ndarray] = []
     frames: set[str] = set()
-    for _t, msg in src.messages([topic]):
+    for _t, msg in (_pose_stamped(src, topic) if types[topic] == POSE_STAMPED else src.messages([topic])):
         pose = getattr(msg, "pose", None)
         if pose is None:
             continue
@@ -151,6 +156,30 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
         raise LogError(f"{path}: {topic} has no finite poses")
     frame = next(iter(frames)) if len(frames) == 1 and "" not in frames else "map"
     return _sorted(np.asarray(stamps), np.asarray(poses), np.asarray(covs), frame), TrajectorySource(path, kind, topic)
+
+
+def _pose_stamped(src: Any, topic: str) -> Iterator[tuple[str, PoseFix]]:
+    """A ``geometry_msgs/PoseStamped`` topic's messages as planar :class:`PoseFix` es without a covariance
+    (the readers hand its messages over as CDR, rosbags' typestore decodes them; one that does not
+    decode is skipped)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from fgloc.geometry import quaternion_to_yaw
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    src.keep_other_types = True  # the readers hand over a type fgloc does not read as its CDR bytes
+    nan = np.full((3, 3), np.nan)
+    for rec in src.records([topic]):
+        if rec.data is None:
+            continue
+        try:
+            m: Any = store.deserialize_cdr(bytes(rec.data), POSE_STAMPED)
+        except Exception:  # noqa: BLE001 - a message that does not decode is no pose
+            continue
+        q, p = m.pose.orientation, m.pose.position
+        yaw = float(quaternion_to_yaw(q.x, q.y, q.z, q.w))
+        stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+        yield topic, PoseFix(stamp, np.array([p.x, p.y, yaw], dtype=float), nan, frame_id=str(m.header.frame_id))
 
 
 def _pose_cov(msg: object) -> np.ndarray:

@@ -64,8 +64,9 @@ def test_topic_choice_and_its_errors(run_dir):
     assert src.topic == "/odom" and len(odom) > 100
     rc, _, err = fgloc("eval", run_dir / "out" / "trajectory.tum", log, "--topic", "/scan")
     assert rc == 2 and err.strip() == (f"fgloc: error: {log}: /scan is sensor_msgs/msg/LaserScan, not "
-                                       "nav_msgs/Odometry or geometry_msgs/PoseWithCovarianceStamped (its pose "
-                                       "topics: /ground_truth (nav_msgs/msg/Odometry), /odom (nav_msgs/msg/Odometry))")
+                                       "nav_msgs/Odometry, geometry_msgs/PoseWithCovarianceStamped or PoseStamped (its "
+                                       "pose topics: /ground_truth (nav_msgs/msg/Odometry), "
+                                       "/odom (nav_msgs/msg/Odometry))")
     rc, _, err = fgloc("eval", run_dir / "out" / "trajectory.tum", f"{log}:/nope")
     assert rc == 2 and "no topic /nope (its pose topics: /ground_truth" in err
     rc, _, err = fgloc("eval", run_dir / "out" / "trajectory.tum", f"{run_dir / 'sim' / 'ground_truth.tum'}:/x")

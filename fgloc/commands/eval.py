@@ -226,8 +226,8 @@ def eval_cmd(
         list[Path],
         typer.Argument(
             help="EST [EST2 ...] REF (the last is the reference), or one TRAJ with --relations / --reference; "
-            "each a TUM file, a log[:TOPIC] (MCAP, rosbag2, ROS 1 bag: Odometry or PoseWithCovarianceStamped "
-            "poses; default /fused_pose, /ground_truth or the only such topic) or a CARMEN log",
+            "each a TUM file, a log[:TOPIC] (MCAP, rosbag2, ROS 1 bag: Odometry, PoseWithCovarianceStamped or "
+            "PoseStamped poses; default /fused_pose, /ground_truth or the only such topic) or a CARMEN log",
             show_default=False,
             metavar="FILES",
         ),
@@ -380,7 +380,7 @@ def export_cmd(
     topic: Annotated[str | None, typer.Option("--topic", help="the topic (instead of LOG:TOPIC)")] = None,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing file")] = False,
 ) -> None:
-    """Write a log's Odometry / PoseWithCovarianceStamped topic (or a CARMEN log's laser poses) as a
+    """Write a log's Odometry / PoseWithCovarianceStamped / PoseStamped topic (or a CARMEN log's laser poses) as a
     TUM file, as evo reads it; or the map a log carries (nav_msgs/OccupancyGrid, its last message) as a
     map_server map."""
     from fgloc.eval.trajectories import read_trajectory, split_spec

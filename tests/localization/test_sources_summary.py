@@ -93,6 +93,9 @@ def test_a_configured_source_the_log_never_feeds_is_a_warning(caplog: pytest.Log
     with caplog.at_level(logging.WARNING):
         router.finish()
     assert not [r for r in caplog.records if r.levelno == logging.WARNING]
+    # ... and its summary line says the IMU never came, rather than "0 accepted" alone
+    line = next(x for x in summary_lines(RunStats.of(loc.stats)) if x.startswith("imu "))
+    assert "0 accepted, no message on the topic in the whole log" in line, line
 
 
 def _imu(t: float, yaw_base: float, R_bi: np.ndarray) -> Imu:

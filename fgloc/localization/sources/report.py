@@ -69,7 +69,7 @@ class SourceReport:
     vy_max_mps: float | None = None  # the largest lateral velocity the odometry reported
     speed_scale: float | None = None  # the odometry's, reported / true
     yaw_rate_scale: float | None = None
-    silent: bool = False  # a configured source the log never fed
+    silent: bool = False  # a source the log never fed (the default layout's /imu on a wheels-only log too)
     gyro_bias_radps: float | None = None
     latency_s: float | None = None  # the scans' latency in use
     latency_estimate_s: float | None = None
@@ -113,7 +113,7 @@ class SourceReport:
         return d
 
 
-def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> SourceReport:
+def source_report(h: SourceHandler, loc: Any) -> SourceReport:
     """One source's health: counts, checks, and what the back-end estimated about it."""
     s, st = h.spec, h.state
     be = loc.backend
@@ -149,8 +149,8 @@ def source_report(h: SourceHandler, loc: Any, configured_inputs: bool) -> Source
                 round(noise.k_claimed, 3), round(c, 3) if c > 0 else 0.0,
                 round(shown / claimed, 3) if shown is not None and claimed else None)
     h.report_estimates(r)
-    if configured_inputs and not st.messages:
-        r.silent = True  # a configured source the log never fed
+    if not st.messages:
+        r.silent = True  # a source the log never fed (a configured one is also warned about: SourceRouter.finish)
     return r
 
 

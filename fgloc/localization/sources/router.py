@@ -107,7 +107,7 @@ class SourceRouter:
     # ------------------------------------------------------------------ health
     def health(self) -> dict[str, SourceReport]:
         """Per source: counts, and what the back-end estimated about it (:mod:`.report`)."""
-        out = {s.name: source_report(self.handlers[s.name], self.loc, self.configured_inputs) for s in self.specs}
+        out = {s.name: source_report(self.handlers[s.name], self.loc) for s in self.specs}
         scan = scan_report(self.loc)
         if scan is not None:
             out["scan"] = scan

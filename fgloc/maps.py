@@ -292,9 +292,22 @@ def _read_image(path: Path) -> NDArray[np.uint8]:
         raise MapError(f"{path}: cannot read map image ({e.__class__.__name__}: {msg})") from None
 
 
+#: the map file of the folder ``fgloc map -o FOLDER`` writes
+MAP_FOLDER_FILE = "map.yaml"
+
+
+def map_file(path: str | Path) -> Path:
+    """The map_server YAML that ``path`` names: the path itself, or ``path/map.yaml`` when ``path``
+    is a folder holding one (the folder ``fgloc map -o FOLDER`` writes)."""
+    path = Path(path)
+    inside = path / MAP_FOLDER_FILE
+    return inside if path.is_dir() and inside.is_file() else path
+
+
 def load_map(yaml_path: str | Path) -> OccupancyMap:
-    """Load a ROS map_server map. Errors are :class:`MapError` naming the file and the problem."""
-    yaml_path = Path(yaml_path)
+    """Load a ROS map_server map (a YAML file, or a folder holding ``map.yaml``: :func:`map_file`).
+    Errors are :class:`MapError` naming the file and the problem."""
+    yaml_path = map_file(yaml_path)
     text = read_user_text(yaml_path, "map file", MapError)
     try:
         meta = load_yaml(text)

@@ -249,6 +249,12 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
     A stop requested by a signal (:mod:`fgloc.io.stop`) ends the run between two messages.
     """
     t_start = PHASE_CLOCK()
+    if req.map_yaml is not None:  # fgloc map's output folder: its map.yaml (an input, recorded as such)
+        import dataclasses
+
+        from fgloc.maps import map_file
+
+        req = dataclasses.replace(req, map_yaml=map_file(req.map_yaml))
     config = _effective_config(req)
     inputs = _open_inputs(req, config)
     session, mirror_scans = _build_session(req, config, inputs)

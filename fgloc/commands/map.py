@@ -87,9 +87,11 @@ def map_cmd(
 
     from fgloc.config.schema import load_yaml
     from fgloc.errors import ConfigError
-    from fgloc.mapping.build import build_map
+    from fgloc.io.outputs import refuse_file_name
+    from fgloc.mapping.build import MAP_FILES, build_map
     from fgloc.mapping.slam import MapperConfig
 
+    refuse_file_name(outdir, MAP_FILES, "map")
     transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
 
     opts: dict = {}
@@ -164,7 +166,9 @@ def map_check_cmd(
     it flags something."""
     from fgloc.io.topics import resolve_name
     from fgloc.mapping.build import map_check
+    from fgloc.maps import map_file
 
+    map_yaml = map_file(map_yaml)  # fgloc map's output folder: its map.yaml
     transforms = mounts.static_transforms(static_transform, static_transform_xyzw)
     from fgloc.io import stop
 

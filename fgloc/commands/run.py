@@ -165,8 +165,11 @@ def register(app: typer.Typer) -> None:
 
         pause_gc()  # until run_log's set-up is done (imports, map, localizer): fgloc.app.startup
         try:
+            from fgloc.app.run import OUTPUT_FILES
             from fgloc.backends import check_backend
+            from fgloc.io.outputs import refuse_file_name
 
+            refuse_file_name(outdir, OUTPUT_FILES, "run")
             req = RunRequest(log=log, outdir=outdir, map_yaml=map_yaml, backend=check_backend(backend),
                              frontend=frontend,
                              initial_pose=pose_arg(initial_pose),

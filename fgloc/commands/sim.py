@@ -45,10 +45,11 @@ FORCE_HELP = "overwrite output files that fgloc did not write"
 def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: str, out: Path, force: bool = False,
                         inputs: tuple[str, ...] = ()) -> None:
     from fgloc.io import stop
-    from fgloc.io.outputs import Outputs
+    from fgloc.io.outputs import Outputs, refuse_file_name
     from fgloc.sim import write_sim
     from fgloc.sim.simulate import SIM_FILES
 
+    refuse_file_name(out, SIM_FILES, "simulate")
     outs = Outputs(out, SIM_FILES, command="simulate", inputs=inputs, force=force)
     outs.check()  # before simulating: a folder holding someone else's map.yaml is refused at once
     t0 = time.perf_counter()

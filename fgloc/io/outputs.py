@@ -99,6 +99,22 @@ def confined(root: str | Path, rel: str | os.PathLike[str], folder: bool = False
     return root.joinpath(*parts)
 
 
+def refuse_file_name(folder: str | Path, names: Iterable[str], command: str, option: str = "-o") -> None:
+    """A new output folder named like one of the command's own files (``fgloc map -o map.yaml``,
+    ``fgloc run -o run.tum``) is a file name typed where a folder goes: :class:`OutputError`, one
+    line naming the folder to give instead.  An existing folder of any name is used as it is."""
+    f = Path(folder)
+    names = tuple(names)
+    kinds = {PurePosixPath(n).suffix.lower() for n in names} - {""}
+    if ".yaml" in kinds:
+        kinds.add(".yml")
+    if f.exists() or f.suffix.lower() not in kinds:
+        return
+    shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+    raise OutputError(f"{f}: {option} takes a folder (fgloc {command} writes {shown} in it), not a "
+                      f"{f.suffix} file name; give a folder, e.g. {option} {f.with_suffix('')}")
+
+
 def same_file(a: str | Path, b: str | Path) -> bool:
     """Whether two paths name the same existing file (symlinks, hard links, ``..`` resolved)."""
     try:

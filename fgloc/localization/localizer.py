@@ -61,9 +61,12 @@ COMPASS_TRUST_FIXES = 3  # accepted tracking fixes before the compass offset fil
 AGREEMENT_MONITOR_SCALE = 2.0
 MAX_REASON_KINDS = 8  # the no-fix summary lists at most this many kinds, the rest as "other"
 def reason_kind(reason: str) -> str:
-    """The kind of a no-fix reason: details in parentheses dropped, numbers as N
+    """The kind of a no-fix reason: details in parentheses dropped (nested ones whole), numbers as N
     ("update thresholds not met (moved 0.064 m ...)" -> "update thresholds not met")."""
-    r = re.sub(r"\([^)]*\)?", "", str(reason))
+    r = str(reason)
+    while (inner := re.sub(r"\([^()]*\)", "", r)) != r:  # the innermost first
+        r = inner
+    r = re.sub(r"\(.*", "", r).replace(")", "")  # an unclosed one: to the end
     r = re.sub(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", "N", r)
     r = re.sub(r"\s+", " ", r)
     r = re.sub(r" ([,;:])", r"\1", r).strip(" :,;.")

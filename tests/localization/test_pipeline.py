@@ -376,6 +376,22 @@ def test_no_fix_reasons_grouped_by_kind():
     assert len(g) == MAX_REASON_KINDS + 1 and sum(g.values()) == sum(many.values())
 
 
+@pytest.mark.parametrize("why", [
+    "native: no pose within 0.50 m / 20 deg of the guess explains the scan",
+    "native: degenerate geometry (Hessian eigenvalue ratio 1.2e-03)",
+    "native: 12 inliers (of 300) (quality 0.04)",
+    "native: too few points (3 (of 541) valid",
+])
+def test_a_reason_with_nested_details_is_one_kind(why):
+    """Outside the map, the front-end's own reason (with details in parentheses of its own) is dropped whole:
+    one kind in the summary whatever the front-end said."""
+    from fgloc.localization.localizer import reason_kind
+
+    r = f"outside the map: the beams end in unmapped space (62 %), dead reckoning ({why})"
+    assert reason_kind(r) == "outside the map: the beams end in unmapped space, dead reckoning"
+    assert reason_kind("moved 3 m) then (stopped (for 2 s") == "moved N m then"
+
+
 def _run(argv, capsys):
     from fgloc.cli import main
 

@@ -156,6 +156,9 @@ class EKFBackend(Backend):
 
     def motion_summary(self, vy_max_mps: float | None = None) -> str:
         """The filter's state (differential or omni) and why."""
+        if self.initialized and "odom" not in self.inputs.health:   # it ran without odometry
+            state = "omni [x, y, yaw, vx, vy, w]" if self.ekf.omni else "differential [x, y, yaw, v, w]"
+            return f"no odometry: the filter's own velocity carries the pose from fix to fix; {state}"
         v = self.cfg.omni_vy_mps
         if self.stats.get("omni_since") is not None:
             return ("omni [x, y, yaw, vx, vy, w]: the odometry reported lateral velocity"

@@ -82,6 +82,9 @@ class SmootherConfig:
         0.5, "where the odometry's stamps do not reach (it stopped or dropped a stretch): how fast the speed "
         "may change ((m/s)^2/s; the EKF's q_v); the graph's own recent motion is carried on there", gt=0)
     unmeasured_turn_q: float = setting(1.0, "... and the turn rate ((rad/s)^2/s; the EKF's q_w)", gt=0)
+    scans_only_twist_sigma: tuple[float, float, float] = setting(
+        (1.0, 1.0, 1.0), "a log without odometry (scans on a map): how fast the robot may move [vx m/s, vy m/s, "
+        "w rad/s] before the graph's keyframes show its velocity (then carried on from keyframe to keyframe)", gt=0)
     slow_odom_timing: bool = setting(
         False, "an odometry slower than ~17 Hz carries its timing in the keyframe factor's yaw, (period * w)^2 "
         "at each end: better heading in turns on a fully mapped route (CARMEN fr079 / intel), but off by "

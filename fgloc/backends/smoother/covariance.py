@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from fgloc.backends.base import FloatArray
+from fgloc.geometry import exp as se2_exp
 
 #: a twist variance above this ((m/s)^2, (rad/s)^2) is "not measured" (a source's unused component,
 #: robot_localization's 1e6): bounded to it, a weak prior, so the integrated odometry factor stays
@@ -121,3 +122,20 @@ def covariance_bound(p: FloatArray, q: FloatArray) -> FloatArray:
         return a
     M = L @ v
     return (M * np.maximum(w, 1.0)) @ M.T
+
+
+def carried_motion(twist: tuple[FloatArray, FloatArray] | None, sigma: tuple[float, float, float], qv: float,
+                   qw: float, dt: float) -> tuple[FloatArray, FloatArray]:
+    """The motion over ``dt`` seconds without any odometry (scans on a map): ``twist`` (the body
+    twist ``[vx, vy, w]`` the graph's keyframes moved with and its variances) carried on at constant
+    velocity, its variance over the time plus a random walk of the velocity over it (``qv``
+    (m/s)^2/s, ``qw`` (rad/s)^2/s); without a twist (the keyframes show none yet), none, with the
+    sigmas ``sigma``."""
+    if not dt > 0.0:
+        return np.zeros(3), np.zeros((3, 3))
+    if twist is None:
+        tw, var = np.zeros(3), np.square(np.asarray(sigma, dtype=float))
+    else:
+        tw, var = twist
+    return se2_exp(tw * dt), np.diag(var * dt * dt + np.array([qv, qv, qw]) * dt ** 3 / 3.0)
+

@@ -36,6 +36,8 @@ from fgloc.types import PoseFix, all_finite
 
 #: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
 GYRO_LIVE_S = 0.25
+#: s, no odometry this long after the start: none is waited for (a log of scans on a map, an IMU at most)
+SCANS_ONLY_AFTER_S = 1.0
 
 
 class KeyframeGraph(FurtherSourceFactors):
@@ -89,6 +91,8 @@ class KeyframeGraph(FurtherSourceFactors):
         while self.pending_kf:
             t = self.pending_kf[0][0]
             have_odo = bool(self.odo_t) and self.odo_t[-1] >= t - 1e-9 and self._gyros_cover(t)
+            if not self.odo_t and t - float(self.t0 or t) >= SCANS_ONLY_AFTER_S:
+                have_odo = self._gyros_cover(t)   # no odometry to wait for: scans on a map
             if not (have_odo or now - t >= self.cfg.max_wait_s):
                 return
             t, fix = self.pending_kf.pop(0)
@@ -315,7 +319,7 @@ class KeyframeGraph(FurtherSourceFactors):
         a[8] += self._timing_var(self.kf_t[-1], t)
         self._odom_factor_yaw_var = a[8]
         c = np.array(a).reshape(3, 3)
-        if not self.cfg.odom_gains:
+        if not self.cfg.odom_gains or not self.odo_t:   # no odometry: no scales to estimate
             return between_factor(ki, kj, d, c, kernel=self.cfg.odom_kernel, k=self.cfg.odom_kernel_k)
         # a scale is estimated only once something else observes it (held at its estimate until
         # then): the speed scale from positions (fixes), the yaw-rate scale from any other yaw source

@@ -268,6 +268,15 @@ class SlidingWindowSmoother(KeyframeGraph):
         self._pred_cache = (key, pose, cov)
         return pose, cov
 
+    def motion_summary(self, vy_max_mps: float | None = None) -> str:
+        """The odometry's twist as integrated (:meth:`Backend.motion_summary`); without odometry, the
+        graph's own velocity carried on."""
+        if self.initialized and "odom" not in self.inputs.health:   # it ran without odometry
+            turn = "; the gyro's yaw rate turns it" if self.gyro else ""
+            return ("no odometry: the graph's own velocity is carried from keyframe to keyframe (constant "
+                    f"velocity, a random walk of it between the scans' fixes){turn}")
+        return super().motion_summary(vy_max_mps)
+
     def motion_correction(self, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """The odometry increment with the estimated gains and the gyro's rotation where it covers it."""
         if t1 <= t0:

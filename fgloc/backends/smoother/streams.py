@@ -21,7 +21,7 @@ from fgloc.backends.integration import (
     rate_integral,
     twist_arrays,
 )
-from fgloc.backends.smoother.covariance import TWIST_VAR_MAX
+from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, carried_motion
 from fgloc.backends.smoother.state import SmootherState
 from fgloc.geometry import adjoint, between1, compose1, exp_coefficients, inverse1, wrap_scalar
 from fgloc.geometry import exp as se2_exp
@@ -248,7 +248,7 @@ class Streams(SmootherState):
         var_v = 2.0 * 0.5 * float(fc[0, 0] + fc[1, 1]) / (dt * dt) + self.cfg.unmeasured_accel_q * since
         var_w = 2.0 * float(fc[2, 2]) / (dt * dt) + self.cfg.unmeasured_turn_q * since
         tw = se2_log(between1(pa, pb)) / dt
-        if self._odo_lateral_max > LATERAL_SPEED:
+        if self._odo_lateral_max > LATERAL_SPEED or not self.odo_c:   # no odometry: any base
             var_vy = var_v
         else:
             tw[1] = 0.0
@@ -262,6 +262,9 @@ class Streams(SmootherState):
         of the velocity over it; over a stretch it dropped, the first twist after it with its variance
         up to the fastest the odometry has shown.  Integrated as measured, a stopped odometry's last
         twist with its small covariance outweighs the fixes and drags the path on."""
+        if not self.odo_t:   # none at all (scans on a map): the graph's own velocity carried on
+            return carried_motion(self._graph_twist(t0), self.cfg.scans_only_twist_sigma,
+                                  self.cfg.unmeasured_accel_q, self.cfg.unmeasured_turn_q, t1 - t0)
         tol = self._odom_gap_s()
         tail = self._unmeasured_tail(t0, t1, tol)
         gap = self._gap_s(t0, t1 - tail, tol)

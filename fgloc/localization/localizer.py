@@ -264,10 +264,10 @@ class Localizer(Recovery):
         if not self._monotonic("compass", t):
             return
         self.stats["compass"] += 1
+        if self.dead_reckoning is not None:
+            self.dead_reckoning.reading(t, yaw, rate)
         if yaw is not None:
             self._last_compass = (t, float(yaw))
-            if self.dead_reckoning is not None:
-                self.dead_reckoning.compass(t, float(yaw))
             if self.reloc is not None:
                 self.reloc.last_compass = self._last_compass
         self.backend.add_compass(t, yaw, float(yaw_var), rate, float(rate_var))

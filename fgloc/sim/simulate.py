@@ -39,6 +39,8 @@ Robots beyond the paper's (every key in the scenario):
   the true one times a factor growing from ``lo`` (driving straight) to ``hi`` (turning at
   ``odom.scrub_ref_radps`` or faster), while the messages keep claiming ``twist_sigma``;
   ``odom.speed_scale`` makes every wheel report that much more speed than the ground moves;
+* ``odom.wheel_noise`` (any drive): each wheel's turn between two odometry readings off by a random share
+  of it (1 sigma, white; the messages keep claiming ``twist_sigma``): a noisier odometry;
 * ``imu:`` - a ``sensor_msgs/Imu`` (:class:`~fgloc.types.Imu`) instead of the compass: a
   9-axis unit mounted with ``mount_rpy_deg`` (``/tf_static`` base_link -> ``frame_id`` as a
   :class:`~fgloc.types.Transform3D`), orientation = base orientation + north offset +
@@ -103,7 +105,7 @@ DEFAULT_SCENARIO: dict[str, Any] = {
     "strafe_legs": [],               # legs driven sideways keeping the heading (mecanum)
     "robot": {"wheel_radius_m": 0.076, "half_wheelbase_m": 0.25, "half_track_m": 0.28},
     "odom": {"rate_hz": 50.0, "pulses_per_rev": 500, "wheel_radius_error": 0.003, "twist_sigma": [0.01, 0.01, 0.03],
-             "scrub_factor": None, "scrub_ref_radps": 0.8, "speed_scale": 1.0},
+             "scrub_factor": None, "scrub_ref_radps": 0.8, "speed_scale": 1.0, "wheel_noise": 0.0},
     # distortion_deg: amplitude of a smooth position-dependent heading error (indoor magnetic
     # fields from steel and cables bend the compass by a degree or more).
     "compass": {"rate_hz": 20.0, "offset_deg": None, "sigma_deg": 0.3, "distortion_deg": 1.0,
@@ -413,6 +415,11 @@ def _odometry(sc: dict, plan: Plan, rng: np.random.Generator) -> list[tuple[str,
     t_odom = plan.t[0] + rng.uniform(0, 1 / rate) + np.arange(0, plan.t[-1] - plan.t[0], 1 / rate)
     t_odom = t_odom[t_odom <= plan.t[-1]]
     ang = np.column_stack([np.interp(t_odom, plan.t, angle[:, i]) for i in range(kin.n_wheels)])
+    noise = float(sc["odom"].get("wheel_noise") or 0.0)
+    if noise > 0 and len(ang) > 1:
+        # each wheel's turn between two readings off by a random share (uneven floor, tyre slip)
+        d = np.diff(ang, axis=0) * (1.0 + rng.normal(0.0, noise, (len(ang) - 1, kin.n_wheels)))
+        ang = np.vstack([ang[:1], ang[0] + np.cumsum(d, axis=0)])
     counts = enc.angle_to_counts(ang)
     sig = np.asarray(sc["odom"]["twist_sigma"], dtype=float)
     cov = np.diag(sig**2)

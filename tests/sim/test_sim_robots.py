@@ -121,3 +121,19 @@ def test_shipped_robot_scenarios_load():
         assert sc["laser"]["rate_hz"] == 25.0
     assert load_scenario(SCEN / "skid_steer.yaml")["imu"]["mount_rpy_deg"] == [0.0, 0.0, 90.0]
     assert load_scenario(SCEN / "skid_steer_imu_x90.yaml")["imu"]["mount_rpy_deg"] == [90.0, 0.0, 0.0]
+
+
+def test_wheel_noise_makes_a_noisier_odometry_that_claims_the_same():
+    """``odom.wheel_noise``: each wheel's turn between two readings off by a random share of it; 0 (the
+    default) draws nothing, so every other message is as before."""
+    base = {"route": SHORT, "laser": {"enabled": False}}
+    quiet, same = run_scenario(base, seed=3), run_scenario({**base, "odom": {"wheel_noise": 0.0}}, seed=3)
+    noisy = run_scenario({**base, "odom": {"wheel_noise": 0.1}}, seed=3)
+    q, s, n = (np.array([o.twist for o in r.topic("/odom")]) for r in (quiet, same, noisy))
+    assert np.array_equal(q, s) and len(q) == len(n)
+    assert np.array_equal([m.yaw_rad for m in quiet.topic("/imu")], [m.yaw_rad for m in noisy.topic("/imu")])
+    moving = np.abs(q[:, 0]) > 0.5
+    rel = (n[moving, 0] - q[moving, 0]) / q[moving, 0]
+    assert 0.04 < float(np.std(rel)) < 0.1  # four wheels' shares averaged: about 0.1 / 2
+    pairs = zip(quiet.topic("/odom"), noisy.topic("/odom"), strict=True)
+    assert all(np.array_equal(a.twist_cov, b.twist_cov) for a, b in pairs)

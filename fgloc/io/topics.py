@@ -77,6 +77,19 @@ def role_reads(role: str, type_name: str) -> bool:
     return t == ROLE_TYPES[role] or t in ROLE_ALSO.get(role, ())
 
 
+def estimator_output(topic: str) -> bool:
+    """Whether ``topic`` is named as a state estimator's output rather than a sensor's: robot_localization's
+    ``odometry/filtered`` (``_map``), its dual-EKF ``odometry/local`` / ``odometry/global`` and
+    navsat_transform's ``odometry/gps``, ``odom/filtered``, ``odom_filtered``, robot_pose_ekf's
+    ``odom_combined``.  A log that recorded such a filter with its inputs has two Odometry topics; the
+    wheels' own is the one to fuse (the filter's already holds the IMU), the filter's the peer to compare with."""
+    parts = resolve_name(topic).strip("/").split("/")
+    last = parts[-1]
+    if last == "filtered" or last.startswith("filtered_") or last.endswith("_filtered") or last == "odom_combined":
+        return True
+    return len(parts) >= 2 and parts[-2] == "odometry" and last in ("local", "global", "gps")
+
+
 def normalize_type(name: str) -> str:
     """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``; an alias
     (``tf/tfMessage``) -> the type fgloc reads it as (``TYPE_ALIASES``)."""
@@ -122,6 +135,8 @@ def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -
             continue  # never guessed
         same = [t for t, ty in available.items()
                 if role_reads(role, ty) and t not in chosen and t not in named]
+        if role == "odom" and len(same) > 1:  # the wheels' odometry beside a filter's output (robot_localization's)
+            same = [t for t in same if not estimator_output(t)]
         if len(same) == 1:
             log.info("using %s (%s) as the %s topic", same[0], want, role)
             chosen[same[0]] = role
@@ -142,6 +157,16 @@ def pick_topics(src: Any, path: str | Path, wanted: dict[str, tuple[str, bool]])
         if named or src.has(topic) or topic != getattr(default, role) or g is None or g == topic:
             out[role] = topic
             continue
-        log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
+        others = [t for t, ty in types.items() if t != g and role_reads(role, ty)]
+        if others:  # the others are filters' outputs (choose_topics)
+            log.warning("%s: no %s topic; using %s (%s); the log's other topics of that type are named as filters' "
+                        "outputs (%s), to compare with: fgloc eval OUT/trajectory.tum %s:%s", path, topic, g, types[g],
+                        ", ".join(sorted(others)), path, sorted(others)[0])
+        elif estimator_output(g):
+            log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type, named as a filter's "
+                        "output (robot_localization's?): an estimate that may hold the IMU already, not the wheels' "
+                        "own odometry", path, topic, g, types[g])
+        else:
+            log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
         out[role] = g
     return out

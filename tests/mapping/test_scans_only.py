@@ -111,14 +111,25 @@ def test_odom_topic_empty_maps_the_scans_alone_beside_odometry(tmp_path, capsys)
 def test_several_odometry_topics_and_none_named_is_an_error(tmp_path, capsys):
     full = synth.ring_drive(laps=1, dt=0.1)
     log = tmp_path / "two_odoms.mcap"
-    _write(log, Trajectory(full.stamps[:20], full.poses[:20]), odom_topics=("/wheel/odom", "/odometry/filtered"))
+    _write(log, Trajectory(full.stamps[:20], full.poses[:20]), odom_topics=("/wheel/odom", "/visual/odom"))
     rc, _, err = _cli(["map", log, "-o", tmp_path / "map", "-q"], capsys)
     assert rc == 2
     line = err.strip()
     assert line.startswith(f"fgloc: error: {log}: no odometry on /odom: name the wheel odometry's topic with "
                            "--odom-topic (or map the scans alone with --odom-topic ''); its topics: ")
-    assert "/odometry/filtered (nav_msgs/msg/Odometry, 20)" in line and "/wheel/odom" in line
+    assert "/visual/odom (nav_msgs/msg/Odometry, 20)" in line and "/wheel/odom" in line
     assert not (tmp_path / "map").exists()
+
+
+def test_the_wheels_beside_a_filters_output_are_mapped_on(tmp_path, capsys, caplog):
+    """robot_localization's output recorded with its inputs: the wheels' topic is the odometry."""
+    full = synth.ring_drive(laps=1, dt=0.1)
+    log = tmp_path / "wheels_and_filter.mcap"
+    _write(log, Trajectory(full.stamps[:20], full.poses[:20]), odom_topics=("/wheel/odom", "/odometry/filtered"))
+    with caplog.at_level("WARNING"):
+        rc, _, err = _cli(["map", log, "-o", tmp_path / "map", "-q", "--no-check"], capsys)
+    assert rc == 0, err
+    assert "using /wheel/odom" in caplog.text and "named as filters' outputs (/odometry/filtered)" in caplog.text
 
 
 def test_several_lasers_and_no_scan_topic_name_the_choice(tmp_path, capsys):

@@ -1,0 +1,96 @@
+"""A log that recorded a state estimator (robot_localization's ``/odometry/filtered``) with its inputs
+has two nav_msgs/Odometry topics.  Without a configuration fgloc used neither ("no odometry ... name the
+odometry topic"); it now fuses the wheels' own odometry and names the filter's output as the peer to
+compare with.  A log whose only Odometry topic is a filter's output is used, and said to be one."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+
+from fgloc.io.topics import ODOMETRY, Topics, choose_topics, estimator_output
+
+T0 = 1_700_000_000
+N = 200  # 10 s at 20 Hz
+
+
+@pytest.mark.parametrize("topic", ["/odometry/filtered", "/odometry/filtered_map", "odometry/filtered",
+                                   "/odom/filtered", "/odom_filtered", "/filtered_odom", "/odometry/local",
+                                   "/odometry/global", "/odometry/gps", "/robot_pose_ekf/odom_combined",
+                                   "/jackal0/odometry/filtered"])
+def test_filter_outputs_by_name(topic):
+    assert estimator_output(topic)
+
+
+@pytest.mark.parametrize("topic", ["/odom", "/wheel/odometry", "/husky_velocity_controller/odom", "/odometry",
+                                   "/odometry/wheel", "/camera/odom/sample", "/pose", "/ground_truth"])
+def test_sensor_odometry_by_name(topic):
+    assert not estimator_output(topic)
+
+
+def test_the_wheels_are_chosen_beside_a_filter():
+    two = {"/wheel/odometry": ODOMETRY, "/odometry/filtered": ODOMETRY, "/odometry/gps": ODOMETRY}
+    assert choose_topics(two, Topics(), "x.bag") == {"/wheel/odometry": "odom"}
+    both_raw = {"/wheel/odometry": ODOMETRY, "/visual/odometry": ODOMETRY, "/odometry/filtered": ODOMETRY}
+    assert choose_topics(both_raw, Topics(), "x.bag") == {}  # two sensors: the user names one
+    assert choose_topics({"/odometry/filtered": ODOMETRY}, Topics(), "x.bag") == {"/odometry/filtered": "odom"}
+
+
+def _write(path, topics: dict[str, tuple[float, float]]) -> None:
+    """A ROS 1 bag: each topic a straight 0.5 m/s drive from the origin in direction (dx, dy)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    T = ts.types
+    with Writer(path) as w:
+        conns = {t: w.add_connection(t, "nav_msgs/msg/Odometry", typestore=ts) for t in topics}
+        for i in range(N):
+            ns = T0 * 10**9 + i * 50_000_000
+            for t, (dx, dy) in topics.items():
+                yaw = math.atan2(dy, dx)
+                d = 0.5 * i * 0.05
+                hdr = T["std_msgs/msg/Header"](seq=i, stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9,
+                                               nanosec=ns % 10**9), frame_id="odom")
+                pose = T["geometry_msgs/msg/Pose"](
+                    position=T["geometry_msgs/msg/Point"](x=d * dx, y=d * dy, z=0.0),
+                    orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2),
+                                                                  w=math.cos(yaw / 2)))
+                cov = np.diag([1e-3, 1e-3, 1e6, 1e6, 1e6, 1e-3]).ravel()
+                vec = T["geometry_msgs/msg/Vector3"]
+                twist = T["geometry_msgs/msg/Twist"](linear=vec(x=0.5, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0))
+                msg = T["nav_msgs/msg/Odometry"](
+                    header=hdr, child_frame_id="base_link",
+                    pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+                    twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=cov))
+                w.write(conns[t], ns, ts.serialize_ros1(msg, "nav_msgs/msg/Odometry"))
+
+
+def _run(log, out, caplog) -> tuple[np.ndarray, str]:
+    from fgloc.cli import main
+
+    with caplog.at_level(logging.WARNING):
+        rc = main(["run", str(log), "-o", str(out), "-q", "--backend", "ekf"])
+    assert rc == 0, caplog.text
+    return np.loadtxt(out / "trajectory.tum"), caplog.text
+
+
+def test_run_fuses_the_wheels_and_names_the_filter(tmp_path, caplog):
+    log = tmp_path / "rl.bag"
+    _write(log, {"/wheel/odometry": (1.0, 0.0), "/odometry/filtered": (0.0, 1.0)})
+    tr, said = _run(log, tmp_path / "o", caplog)
+    end = tr[-1, 1:3]
+    assert end[0] > 4.5 and abs(end[1]) < 0.05, end  # along x, as the wheels went (the filter's copy went along y)
+    assert "using /wheel/odometry" in said and "named as filters' outputs (/odometry/filtered)" in said
+    assert f"fgloc eval OUT/trajectory.tum {log}:/odometry/filtered" in said
+
+
+def test_a_filter_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog):
+    log = tmp_path / "fused_only.bag"
+    _write(log, {"/odometry/filtered": (0.0, 1.0)})
+    tr, said = _run(log, tmp_path / "o", caplog)
+    assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5  # it drove on the filter's odometry
+    assert "using /odometry/filtered" in said and "named as a filter's output" in said

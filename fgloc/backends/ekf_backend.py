@@ -21,7 +21,8 @@ Beyond the paper, all switchable in ``ekf:``:
   agree it is healthy re-opens the heading (the filter had drifted, not the compass);
 * the scans' latency is estimated (:class:`~fgloc.backends.health.LatencyEstimator`) and a
   fix applied at ``stamp - latency`` (carried forward by the filter's velocities);
-* ``omni: null``: the state becomes omni as soon as the odometry reports lateral velocity;
+* ``omni: null``: the state becomes omni as soon as the odometry reports lateral velocity (without
+  odometry: as soon as the fixes move sideways, :mod:`fgloc.backends.sideways`);
 * ``odom_held_back`` (default): an odometry twist is the mean over the interval since the previous
   message (how fgloc's odometry tracker and the smoother integrate it, and what a pose-increment
   twist is), so it measures the velocity at the interval's start and the filter crosses the interval
@@ -43,29 +44,12 @@ import numpy as np
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
 from fgloc.backends.contract import Capability, SourceNoise
-from fgloc.backends.ekf import (
-    CHI2_999,
-    EKF,
-    OVX,
-    OVY,
-    OW,
-    SCALE_EVIDENCE_SIGMAS,
-    TH,
-    EKFConfig,
-    V,
-    W,
-    motion_model,
-)
+from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, SCALE_EVIDENCE_SIGMAS, TH, EKFConfig, V, W, motion_model
 from fgloc.backends.ekf_history import InOrder
-from fgloc.backends.health import (
-    ANGLE_ABSOLUTE,
-    INSTANT_RATE,
-    RATE,
-    Arbiter,
-    SourceHealth,
-)
+from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, SourceHealth
 from fgloc.backends.inputs import InputBook, twist_covariance
 from fgloc.backends.motion_integrals import MotionIntegrals
+from fgloc.backends.sideways import SidewaysEvidence
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import with_rotation, wrap_scalar
 from fgloc.types import PoseFix, Trajectory
@@ -136,6 +120,7 @@ class EKFBackend(Backend):
         self._last_odom_t: float | None = None
         self._odom_before_start: float | None = None  # the last odometry stamp before the filter started
         self._start_t: float | None = None
+        self._sideways = SidewaysEvidence()   # without odometry: whether the fixes move sideways
         self._odom_steps: deque[float] = deque(maxlen=BURST_WINDOW)  # the last odometry stamp steps (s)
         self.stats["omni"] = bool(self.ekf.omni)
 
@@ -157,7 +142,9 @@ class EKFBackend(Backend):
     def motion_summary(self, vy_max_mps: float | None = None) -> str:
         """The filter's state (differential or omni) and why."""
         if self.initialized and "odom" not in self.inputs.health:   # it ran without odometry
-            state = "omni [x, y, yaw, vx, vy, w]" if self.ekf.omni else "differential [x, y, yaw, v, w]"
+            om = self.ekf.omni
+            why = "configured" if self.cfg.omni is not None else f"the fixes {'' if om else 'never '}moved sideways"
+            state = f"{'omni [x, y, yaw, vx, vy, w]' if om else 'differential [x, y, yaw, v, w]'} ({why})"
             return f"no odometry: the filter's own velocity carries the pose from fix to fix; {state}"
         v = self.cfg.omni_vy_mps
         if self.stats.get("omni_since") is not None:
@@ -533,6 +520,9 @@ class EKFBackend(Backend):
         used = False
         if self.cfg.adapt_noise:
             self.inputs.arb.update(t)
+        if fix is not None and self.cfg.omni is None and not self.ekf.omni and "odom" not in self.inputs.health \
+                and self._sideways.add(t, fix.pose):
+            self.ekf.to_omni()   # scans alone, and the fixes move sideways (fgloc.backends.sideways)
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
             pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)

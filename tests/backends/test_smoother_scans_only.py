@@ -105,7 +105,7 @@ def test_the_motion_model_line_says_what_is_used():
     assert lines["smoother"] == ("no odometry: the graph's own velocity is carried from keyframe to keyframe "
                                  "(constant velocity, a random walk of it between the scans' fixes)")
     assert lines["ekf"] == ("no odometry: the filter's own velocity carries the pose from fix to fix; "
-                            "differential [x, y, yaw, v, w]")
+                            "differential [x, y, yaw, v, w] (the fixes never moved sideways)")
     _, _, loc, _ = localize_sim(_scans_only(simulate_paper(seed=2, route=[[2.5, 3.0], [6.0, 3.0]]), keep_imu=True),
                                 "smoother", "native")
     assert loc.stats["motion_model"].endswith("; the gyro's yaw rate turns it")

@@ -76,6 +76,38 @@ def _fmt(v: Any, fmt: str) -> str:
     return format(v, fmt)
 
 
+#: the --max-gap values a note suggests for a sparse reference, smallest first
+_GAP_STEPS_S = (1.0, 2.0, 5.0)
+
+
+def gap_note(label: str, stamps: Any, ref_stamps: Any, max_gap: float) -> str | None:
+    """A note when most poses of an estimate fall in gaps of the reference longer than ``max_gap``
+    (a reference published on updates only, as AMCL's ``/amcl_pose`` or a slow motion capture),
+    with the smallest ``--max-gap`` of :data:`_GAP_STEPS_S` that pairs 90 % of those inside its span."""
+    import numpy as np
+
+    ts, gs = np.asarray(stamps, dtype=float), np.asarray(ref_stamps, dtype=float)
+    if len(ts) == 0 or len(gs) < 2:
+        return None
+    inside = ts[(ts >= gs[0]) & (ts <= gs[-1])]
+    if len(inside) == 0:
+        return None
+    i1 = np.clip(np.searchsorted(gs, inside, side="right"), 1, len(gs) - 1)
+    span = gs[i1] - gs[i1 - 1]
+    exact = (np.abs(gs[i1] - inside) <= 1e-6) | (np.abs(gs[i1 - 1] - inside) <= 1e-6)  # paired at any gap
+    lost = int(np.sum((span > max_gap) & ~exact))
+    if lost <= 0.5 * len(ts):
+        return None
+    spacing = float(np.median(np.diff(gs)))
+    note = (f"{lost} of {len(ts)} poses of {label} fall in gaps of the reference longer than --max-gap {max_gap:g} s "
+            f"(its median spacing {spacing:.2f} s: a pose published on updates, as AMCL's /amcl_pose?)")
+    for step in _GAP_STEPS_S:
+        paired = int(np.sum((span <= step) | exact))
+        if step > max_gap and paired >= 0.9 * len(inside):
+            return note + f"; --max-gap {step:g} pairs {paired}, interpolating across its gaps"
+    return note
+
+
 def _labels(paths: list[Path]) -> list[str]:
     stems = [p.stem for p in paths]
     if len(set(stems)) == len(stems):
@@ -328,6 +360,9 @@ def eval_cmd(
             )
         except AssociationError as e:
             raise LogError(f"{p} vs {gt_src.label}: {e}") from None
+        note = gap_note(lab, est.stamps, gt.stamps, max_gap)
+        if note is not None:
+            typer.echo(f"note: {note}", err=True)
     nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap) if nees else {}
 
     written: list[Path] = []

@@ -108,6 +108,44 @@ def gap_note(label: str, stamps: Any, ref_stamps: Any, max_gap: float) -> str | 
     return note
 
 
+def frame_note(label: str, est: Any, gt: Any, max_gap: float) -> str | None:
+    """A note when an estimate's position errors are mostly one constant offset, or a scale, metres
+    large: the estimate and the reference in different frames (a simulator's world frame and the map's,
+    a motion capture's room frame), what ``--align`` (one rigid transform) removes."""
+    import numpy as np
+
+    from fgloc.eval.metrics import AssociationError, associate
+
+    try:
+        a = associate(est, gt, max_gap=max_gap)
+    except AssociationError:
+        return None
+    e = a.est[:, :2] - a.gt[:, :2]
+    rms = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+    mean = e.mean(axis=0)
+    rest = float(np.sqrt(np.mean(np.sum((e - mean) ** 2, axis=1))))
+    if rms < 0.5 or len(a) < 10:
+        return None
+    if rest < 0.2 * rms:
+        return (f"the errors of {label} are mostly one offset ({mean[0]:+.2f}, {mean[1]:+.2f}) m (RMSE {rms:.2f} m, "
+                f"{rest:.2f} m about it): the estimate and the reference in different frames? --align fits one "
+                "rigid transform")
+    g0, e0 = a.gt[:, :2] - a.gt[:, :2].mean(axis=0), a.est[:, :2] - a.est[:, :2].mean(axis=0)
+    var = float(np.mean(np.sum(g0**2, axis=1)))
+    if var < 1.0:
+        return None
+    u, sv, vt = np.linalg.svd(e0.T @ g0 / len(a))  # Umeyama: est ~ scale R gt + t
+    d = np.diag([1.0, float(np.sign(np.linalg.det(u @ vt)))])
+    r = u @ d @ vt
+    scale = float(np.trace(np.diag(sv) @ d)) / var
+    fit = float(np.sqrt(np.mean(np.sum((e0 - scale * g0 @ r.T) ** 2, axis=1))))
+    if abs(scale - 1.0) > 0.02 and fit < 0.2 * rms:
+        return (f"{label} is the reference scaled by {scale:.3f} (RMSE {rms:.2f} m, {fit:.2f} m after a fit with a "
+                "scale): a map scaled against the reference's world (a simulator's bitmap fitted to a size, a "
+                "wrong map resolution)?")
+    return None
+
+
 def _labels(paths: list[Path]) -> list[str]:
     stems = [p.stem for p in paths]
     if len(set(stems)) == len(stems):
@@ -360,9 +398,10 @@ def eval_cmd(
             )
         except AssociationError as e:
             raise LogError(f"{p} vs {gt_src.label}: {e}") from None
-        note = gap_note(lab, est.stamps, gt.stamps, max_gap)
-        if note is not None:
-            typer.echo(f"note: {note}", err=True)
+        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap), None if align else frame_note(lab, est, gt, max_gap)]
+        for note in notes:
+            if note is not None:
+                typer.echo(f"note: {note}", err=True)
     nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap) if nees else {}
 
     written: list[Path] = []

@@ -60,7 +60,8 @@ class HeadingConsistency:
         self._v: list[dict[str, _Value]] = []
         self._cum: dict[str, _Value] = {}
         self._relative: set[str] = set()
-        self._since: dict[str, float] = {}   # per source: the first keyframe of its current unbroken run
+        self._since: dict[str, float] = {}   # per relative source: the first keyframe of its current unbroken run
+        self._abs_last: dict[str, float] = {}   # per absolute source: its last reading, unwrapped
         self._fused: float | None = None
         self._last_yaw = 0.0
         self.latest: HeadingDivergence | None = None
@@ -89,12 +90,15 @@ class HeadingConsistency:
             self._relative.add(name)
             c, cv = self._cum.get(name, (0.0, 0.0)) if name in prev else (0.0, 0.0)
             row[name] = self._cum[name] = (c + float(d), cv + float(v))
-        for name, (y, v) in readings.items():
-            p = prev.get(name)
-            row[name] = (float(y) if p is None else p[0] + wrap_scalar(float(y) - p[0]), float(v))
         for name in row:
-            if name not in prev:   # a source that missed the previous keyframe: no gap is bridged
+            if name not in prev:   # a relative source that missed the previous keyframe: no gap is bridged
                 self._since[name] = t
+        for name, (y, v) in readings.items():
+            # an absolute source's change between any two of its readings holds across a keyframe it missed
+            p = self._abs_last.get(name)
+            row[name] = (float(y) if p is None else p + wrap_scalar(float(y) - p), float(v))
+            self._abs_last[name] = row[name][0]
+            self._since.setdefault(name, t)
         self._t.append(t)
         self._f.append(self._fused)
         self._v.append(row)
@@ -134,13 +138,27 @@ class HeadingConsistency:
         df = (self._fused or 0.0) - f0
         floor2 = self.floor_rad * self.floor_rad
         best: tuple[float, str, float] | None = None
-        for name, (y1, v1) in row.items():
+        for name in (*row, *(n for n in self._abs_last if n not in row)):
             got = row0.get(name)
-            if got is None or self._since.get(name, t) > t0:
-                continue
-            y0, v0 = got
-            var = (v1 - v0) if name in self._relative else (v1 + v0)
-            off = df - (y1 - y0)
+            if name in self._relative:
+                if got is None or self._since.get(name, t) > t0:
+                    continue
+                y1, v1 = row[name]
+                var, d0 = v1 - got[1], df
+            else:   # an absolute source: from its first reading in the window to its last
+                j0, j1 = i, len(self._t) - 1
+                while got is None and j0 < j1:
+                    j0 += 1
+                    got = self._v[j0].get(name)
+                last = self._v[j1].get(name)
+                while last is None and j1 > j0:
+                    j1 -= 1
+                    last = self._v[j1].get(name)
+                if got is None or last is None or j1 <= j0:
+                    continue
+                (y1, v1), var = last, last[1] + got[1]
+                d0 = self._f[j1] - self._f[j0]
+            off = d0 - (y1 - got[0])
             score = abs(off) / math.sqrt(max(var, 0.0) + floor2)
             if best is None or score < best[0]:
                 best = (score, name, off)
@@ -156,6 +174,7 @@ class HeadingConsistency:
         self._v.clear()
         self._cum.clear()
         self._since.clear()
+        self._abs_last.clear()
         self._fused = None
         self._checked = -math.inf
         self.latest = None

@@ -71,6 +71,9 @@ class FurtherSourceFactors(FixedLagWindow):
             self._rel_gated[source] = 0
             kc = self._chain_key(ch, t, graph, vals, ts)
             graph.add(relative_yaw_factor(k, kc, z, sigma, "huber", self.cfg.compass_kernel_k))
+            # its changes are a heading source's for the consistency check (a new anchor: a new source)
+            n = self.stats.get("relative_yaw_reanchored", 0)
+            self._heading_inputs[1][f"{name}#{n}" if n else name] = (z, sigma * sigma)
             h.accepted += len(readings)
             self.stats["relative_yaw_factors"] = self.stats.get("relative_yaw_factors", 0) + 1
 

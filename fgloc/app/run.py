@@ -572,7 +572,20 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
         and not (reader.has(topics.tf_static) or reader.has(topics.tf))))
     if mode == "map":
         result.warnings += unused_frontend_settings(config, loc.frontend_name)
+    else:
+        result.warnings += unused_log_maps(inputs.log, inputs.summary)
     return result
+
+
+def unused_log_maps(log: Path, summary: dict[str, Any]) -> list[str]:
+    """A run without ``--map`` on a log that carries its own map (a SLAM's or nav2 map_server's
+    ``/map``): said, with the two commands that localize on it, once per map topic."""
+    from fgloc.app.logmap import grid_topics
+
+    topics = summary.get("topics") or {}
+    grids = [t for t in grid_topics({t: v["type"] for t, v in topics.items()}) if topics[t].get("count")]
+    return [f"the log's own map on {t} was not used (no --map): fgloc export {log}:{t} -o map.yaml, then "
+            f"fgloc run {log} --map map.yaml" for t in grids]
 
 
 def _write_status(path: Path, final: Any, online: Any, monitor: Any) -> Path:

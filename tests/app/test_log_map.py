@@ -162,3 +162,18 @@ def test_a_map_topic_without_messages_says_so(tmp_path):
     rc, _, err = cli("export", log, "-o", tmp_path / "map.yaml")
     assert rc == 2 and one_error(err).endswith(": no nav_msgs/OccupancyGrid topic with messages to read a map from")
     assert not (tmp_path / "map.yaml").exists() and not (tmp_path / "map.pgm").exists()
+
+
+def test_a_run_without_map_names_the_logs_own_map(tmp_path):
+    """A SLAM or nav2 log's /map is not used without --map: the run says so and how to use it."""
+    log = tmp_path / "slam.mcap"
+    write_mcap(log, [room()])
+    rc, out, err = cli("run", log, "-o", tmp_path / "o", "-q")
+    assert rc == 0, err
+    assert (f"warning: the log's own map on /map was not used (no --map): fgloc export {log}:/map -o map.yaml, "
+            f"then fgloc run {log} --map map.yaml") in out + err
+    rc, out, err = cli("export", f"{log}:/map", "-o", tmp_path / "map.yaml")
+    assert rc == 0, err
+    rc, out, err = cli("run", log, "--map", tmp_path / "map.yaml", "--initial-pose", "1", "1", "0",
+                       "-o", tmp_path / "m", "-q", "--allow-lost")
+    assert "own map" not in out + err

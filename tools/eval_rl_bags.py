@@ -378,7 +378,7 @@ def run_fgloc(bag: Path, config: Path, backend: str, odom_topic: str | None, imu
         fgloc_log.setLevel(level)
     traj = read_tum(outdir / "trajectory.tum")
     final = np.asarray(traj.poses[-1], dtype=float)
-    return {"final": final, "stats": r.stats, "wall_s": r.wall_s}
+    return {"final": final, "stats": r.stats, "wall_s": r.wall_s, "failure": r.failure()}
 
 
 def source_line(stats: Any) -> str:

@@ -296,6 +296,7 @@ class Cell:
     wall_s: float = 0.0
     note: str = ""
     stats: dict[str, Any] = field(default_factory=dict)
+    failure: str | None = None  # what `fgloc run` says when it calls the run unusable (it exits 3)
 
     @property
     def passed(self) -> bool:
@@ -354,7 +355,8 @@ def run_matrix(cases: Iterable[Any], backends: list[str], work: Path, only_varia
                 else:
                     f = res["final"]
                     cell = Cell(label, v.name, be, case.tolerance_m, math.hypot(f[0] - ex, f[1] - ey),
-                                (float(f[0]), float(f[1])), wall_s=wall, stats=res["stats"])
+                                (float(f[0]), float(f[1])), wall_s=wall, stats=res["stats"],
+                                failure=res.get("failure"))
                     if gps is not None:
                         tr = read_tum(work / f"{slug}-{be}" / "trajectory.tum")
                         cell.gps_m = gps_end_error(tr.stamps, tr.poses[:, :2], gps)
@@ -387,6 +389,13 @@ def _diverged(c: Cell) -> float | None:
     return None if v is None else float(v)
 
 
+def _exit(c: Cell | None) -> str:
+    """What `fgloc run` exits with: 0, or 3 when it calls the run unusable; - when it did not run."""
+    if c is None or c.error_m is None:
+        return "-"
+    return "3" if c.failure else "0"
+
+
 def table(cells: list[Cell], markdown: bool = True) -> str:
     """The matrix, one row per (log, configuration), a column per back-end."""
     backends = list(dict.fromkeys(c.backend for c in cells))
@@ -396,6 +405,7 @@ def table(cells: list[Cell], markdown: bool = True) -> str:
         head += [f"{b}: GPS m" for b in backends]
     div = [b for b in backends if any(c.backend == b and _diverged(c) is not None for c in cells)]
     head += [f"{b}: heading diverged s" for b in div]
+    head.append("exit " + " / ".join(backends))
     rows = []
     for (log, var), by in paired(cells).items():
         any_cell = next(iter(by.values()))
@@ -405,6 +415,7 @@ def table(cells: list[Cell], markdown: bool = True) -> str:
         for b in div:
             d = _diverged(by[b]) if b in by else None
             row.append("-" if d is None else f"{d:.0f}")
+        row.append(" / ".join(_exit(by.get(b)) for b in backends))
         rows.append(row)
     if markdown:
         lines = ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * 2 + ["--:"] * (len(head) - 2)) + "|"]
@@ -488,6 +499,9 @@ def main(argv: list[str] | None = None) -> int:
     if {"ekf", "smoother"} <= set(a.backends):
         for line in verdict(cells).lines():
             print(line)
+    for c in cells:
+        if c.failure:
+            print(f"exit 3: {c.log}, {c.variant}, {c.backend}: {c.failure}")
     failed = [c for c in cells if c.error_m is None]
     for c in failed:
         print(f"run failed: {c.log}, {c.variant}, {c.backend}: {c.note}")

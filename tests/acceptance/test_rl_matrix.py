@@ -130,3 +130,12 @@ def test_smoother_median_at_most_the_ekfs(matrix: dict, request: pytest.FixtureR
     v = tool.verdict(list(matrix.values()))
     assert v.cells >= 10
     assert v.median["smoother"] <= v.median["ekf"], v.lines()
+
+
+def test_a_run_within_tolerance_is_not_called_unusable(matrix: dict) -> None:
+    """Where ``fgloc run`` ends within r_l's tolerance it does not exit 3 (a false "diverged" or
+    "suspect" verdict on a good run is a wrong answer too)."""
+    good = [c for c in matrix.values() if c.passed]
+    assert len(good) >= 10
+    called = [f"{c.log}, {c.variant}, {c.backend}: {c.failure}" for c in good if c.failure]
+    assert not called, called

@@ -19,6 +19,7 @@ CARMEN log (its laser lines' poses): :mod:`fgloc.eval.trajectories`.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -139,11 +140,44 @@ def frame_note(label: str, est: Any, gt: Any, max_gap: float) -> str | None:
     r = u @ d @ vt
     scale = float(np.trace(np.diag(sv) @ d)) / var
     fit = float(np.sqrt(np.mean(np.sum((e0 - scale * g0 @ r.T) ** 2, axis=1))))
-    if abs(scale - 1.0) > 0.02 and fit < 0.2 * rms:
+    if fit >= 0.2 * rms:
+        return None
+    if abs(scale - 1.0) > 0.02:
         return (f"{label} is the reference scaled by {scale:.3f} (RMSE {rms:.2f} m, {fit:.2f} m after a fit with a "
                 "scale): a map scaled against the reference's world (a simulator's bitmap fitted to a size, a "
                 "wrong map resolution)?")
-    return None
+    turn = math.degrees(math.atan2(r[1, 0], r[0, 0]))
+    return (f"the errors of {label} are mostly one rigid transform (a turn of {turn:+.1f} deg; RMSE {rms:.2f} m, "
+            f"{fit:.2f} m after it): the estimate and the reference in different frames? --align fits it, "
+            "--align-start moves the estimate's start onto the reference's")
+
+
+def start_aligned(est: Any, gt: Any, max_gap: float, path: Path) -> Any:
+    """``est`` moved rigidly so that its first pose paired with the reference is the reference's pose
+    there (SE(2)): two trajectories in frames that differ by where each started."""
+    from fgloc.eval.metrics import AssociationError, associate
+    from fgloc.geometry import compose, inverse
+    from fgloc.types import Trajectory
+
+    try:
+        a = associate(est, gt, max_gap=max_gap)
+    except AssociationError as e:
+        raise LogError(f"{path}: --align-start: {e}") from None
+    move = compose(a.gt[0], inverse(a.est[0]))
+    return Trajectory(est.stamps, compose(move, est.poses), est.frame_id)
+
+
+def end_error(est: Any, gt: Any, max_gap: float) -> float | None:
+    """The distance between the estimate's last pose paired with the reference and the reference there (m)."""
+    import numpy as np
+
+    from fgloc.eval.metrics import AssociationError, associate
+
+    try:
+        a = associate(est, gt, max_gap=max_gap)
+    except AssociationError:
+        return None
+    return float(np.hypot(*(a.est[-1, :2] - a.gt[-1, :2])))
 
 
 def _labels(paths: list[Path]) -> list[str]:
@@ -318,6 +352,11 @@ def eval_cmd(
     align: Annotated[
         bool, typer.Option("--align", help="Rigidly align (SE(2), Umeyama) before computing errors")
     ] = False,
+    align_start: Annotated[
+        bool, typer.Option("--align-start", help="Move each estimate so its first pose is the reference's there "
+                           "(two odometry frames: a run without a map against robot_localization's output); "
+                           "the end error is then the drift")
+    ] = False,
     rpe_delta: Annotated[float, typer.Option("--rpe-delta", help="RPE distance between poses (m)")] = 1.0,
     rpe_delta_s: Annotated[float, typer.Option("--rpe-delta-s", help="RPE time between poses (s)")] = 1.0,
     fixes: Annotated[
@@ -390,7 +429,12 @@ def eval_cmd(
     ests = {lab: tr for lab, (tr, _src) in zip(labels, read, strict=True)}
     if t_offset:
         ests = {lab: Trajectory(tr.stamps + t_offset, tr.poses, tr.frame_id) for lab, tr in ests.items()}
+    if align_start:
+        if align:
+            raise ConfigError("fgloc eval: --align or --align-start, not both")
+        ests = {lab: start_aligned(tr, gt, max_gap, p) for (lab, tr), p in zip(ests.items(), est_paths, strict=True)}
     results = {}
+    ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
     for (lab, est), p in zip(ests.items(), est_paths, strict=True):
         try:
             results[lab] = evaluate(
@@ -398,7 +442,10 @@ def eval_cmd(
             )
         except AssociationError as e:
             raise LogError(f"{p} vs {gt_src.label}: {e}") from None
-        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap), None if align else frame_note(lab, est, gt, max_gap)]
+        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap),
+                 None if align or align_start else frame_note(lab, est, gt, max_gap)]
+        if align_start:
+            ends[lab] = end_error(est, gt, max_gap)
         for note in notes:
             if note is not None:
                 typer.echo(f"note: {note}", err=True)
@@ -421,7 +468,7 @@ def eval_cmd(
         written = [outs.final(p.name) for p in staged]
 
     if as_json:
-        docs = [
+        docs: list[dict[str, Any]] = [
             {"label": lab, "estimate": str(p), "reference": gt_src.label, "metrics": m.to_dict()}
             for (lab, m), p in zip(results.items(), est_paths, strict=True)
         ]
@@ -432,6 +479,8 @@ def eval_cmd(
         for d in docs:
             if d["label"] in nees_results:
                 d["nees"] = nees_results[str(d["label"])].to_dict()
+            if d["label"] in ends:
+                d["end_error_m"] = ends[str(d["label"])]
         print(json.dumps(out, indent=2))
         return
 
@@ -442,6 +491,9 @@ def eval_cmd(
                                  paper))
     if nees_results:
         console.print(_nees_table(nees_results))
+    for lab, end in ends.items():
+        if end is not None:
+            console.print(f"end error (aligned at the start): {lab} {end:.3f} m")
     if written:
         console.print(f"plots: {len(written)} PNG files in {plots}")
 

@@ -9,6 +9,7 @@ import io
 import math
 
 import numpy as np
+import pytest
 
 from fgloc.commands.eval import frame_note
 from fgloc.types import Trajectory
@@ -57,3 +58,46 @@ def test_a_different_path_or_small_errors_are_not_noted():
     drift = xy + np.c_[0.05 * t, -0.04 * t]  # odometry drifting away: neither one offset nor a scale
     assert frame_note("est", _traj(t, drift), _traj(t, xy), 0.5) is None
     assert frame_note("est", _traj(t, xy + 0.1), _traj(t, xy), 0.5) is None  # an offset, but 0.14 m
+
+
+def _write_tum(path, tr: Trajectory) -> None:
+    with open(path, "w") as f:
+        for s, (x, y, yaw) in zip(tr.stamps, tr.poses, strict=True):
+            f.write(f"{s:.6f} {x:.6f} {y:.6f} 0 0 0 {math.sin(yaw / 2):.9f} {math.cos(yaw / 2):.9f}\n")
+
+
+def _moved(tr: Trajectory, pose) -> Trajectory:
+    from fgloc.geometry import compose
+
+    return Trajectory(tr.stamps, compose(np.asarray(pose, dtype=float), tr.poses))
+
+
+def test_a_rigid_transform_is_noted():
+    t, xy = _loop()
+    ref = _traj(t, xy)
+    note = frame_note("est", _moved(ref, [2.0, -1.0, math.radians(30.0)]), ref, 0.5)
+    assert note is not None and note.startswith("the errors of est are mostly one rigid transform (a turn of +30.0 deg")
+
+
+def test_align_start_moves_the_start_and_gives_the_end_error(tmp_path):
+    """Two odometry frames (fgloc's run without a map, robot_localization's output): the estimate drifts
+    0.5 m by the end; in its own frame it starts 3 m and 40 deg away from the reference."""
+    import json
+
+    t, xy = _loop()
+    ref = _traj(t, xy)
+    drifted = _traj(t, xy + np.c_[0.5 * t / t[-1], np.zeros_like(t)])
+    _write_tum(tmp_path / "ref.tum", ref)
+    _write_tum(tmp_path / "est.tum", _moved(drifted, [3.0, 0.0, math.radians(40.0)]))
+    from fgloc.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["eval", str(tmp_path / "est.tum"), str(tmp_path / "ref.tum"), "--align-start", "--json"]) == 0
+    doc = json.loads(out.getvalue())
+    assert doc["end_error_m"] == pytest.approx(0.5, abs=0.01)
+    assert doc["metrics"]["position_rmse_m"] < 0.4  # the drift, not the 3 m / 40 deg between the frames
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(["eval", str(tmp_path / "est.tum"), str(tmp_path / "ref.tum"), "--align-start", "--align"]) == 2
+    assert "--align or --align-start, not both" in err.getvalue()

@@ -394,30 +394,10 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
         raise LogError(f"{log}: no odometry, and the IMU ({n_imu} on {imu_topic}) gives heading only: without a "
                        f"map every pose would stay at the start; localize on a map with --map MAP.yaml, or name "
                        f"the odometry topic with --odom-topic; its topics: {topics_line(summ)}")
-    if req.map_yaml is not None and n_odom == 0 and n_imu == 0 and not configured and n_scan > 0:
-        _check_scans_alone(req, log, n_scan, scan_topic)
     if req.map_yaml is not None and n_scan == 0:
         raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
                        f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "
                        f"{topics_line(summ)}")
-
-
-def _check_scans_alone(req: RunRequest, log: Path, n_scan: int, scan_topic: str) -> None:
-    """Scans alone on a map need a back-end with a velocity state to carry the robot from one scan to
-    the next (a filter's constant velocity); one without it guesses every scan where the last fix was,
-    and along a corridor the fixes slide with the robot while fitting the map (a synthetic corridor
-    drive: 16.5 m median error, every pose "ok"; three real Jackal runs: heading 60-90 deg off)."""
-    from fgloc.backends import REGISTRY, backend_names
-    from fgloc.backends.contract import Capability
-
-    cls = REGISTRY.get(str(req.backend).strip().lower())
-    if cls is None or Capability.MEASURES_VELOCITY in cls.capabilities:
-        return
-    ok = " or ".join(f"--backend {n}" for n in backend_names(Capability.MEASURES_VELOCITY))
-    raise ConfigError(f"{log}: the log has laser scans only ({n_scan} on {scan_topic}), no odometry or IMU: the "
-                      f"{req.backend} back-end has no motion of its own between scans (each guess stays where the "
-                      f"last fix was, and along a corridor the fixes slide); localize them with {ok}, a filter "
-                      "that carries its velocity from scan to scan")
 
 
 def _build_session(req: RunRequest, config: FglocConfig, inputs: _Inputs) -> tuple[Any, bool]:

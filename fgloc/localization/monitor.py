@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from fgloc.config.schema import setting
+from fgloc.geometry import wrap_scalar
 from fgloc.localization.coverage import UNMAPPED_SHARE, unmapped_share
 from fgloc.localization.gate import scan_agreement
 
@@ -189,8 +190,9 @@ class DeadReckoning:
     configuration that makes the back-end diverge): the odometry's twist integrated along the
     compass / IMU heading (its absolute yaw, aligned with the fused heading at the start) when there
     is one, else along the odometry's own turn when it reports one, or along the gyro's (an IMU's yaw
-    rate), whichever the fused path is nearer; none when the odometry reports no turn (a configuration
-    whose heading comes from relative yaw or a gyro alone: nothing independent to compare with).
+    rate, or the increments of an orientation used differentially), whichever the fused path is nearer;
+    none when the odometry reports no turn (a configuration whose heading comes from relative yaw or a
+    gyro alone: nothing independent to compare with).
     Started at the fused start pose (:meth:`start`).
 
     Wheels and gyro may disagree by a scale (a skid steer's wheels scrub sideways when it turns and
@@ -223,6 +225,8 @@ class DeadReckoning:
         self._bias_sum = 0.0  # the gyro's readings while the wheels said straight, and how many
         self._bias_n = 0
         self.gyro_agreement = 0.0  # sum of gyro x wheels' rates over the wheels' turns
+        self.gyro_readings = 0  # gyro rates and relative yaw increments so far
+        self._yaw: tuple[float, float] | None = None  # (stamp, yaw) of the last relative yaw reading
 
     def start(self, t: float, pose: Any) -> None:
         p = np.asarray(pose, dtype=float).reshape(3)
@@ -273,20 +277,35 @@ class DeadReckoning:
         if rate is not None:
             self.gyro(t, rate)
 
+    def relative_yaw(self, t: float, yaw: float) -> None:
+        """An orientation whose increments are used (a differential IMU yaw): its turn since the last reading on
+        the gyro's track as it is (increments add up without a bias to learn: a yaw's noise does not accumulate)."""
+        t, last, self._yaw = float(t), self._yaw, (float(t), float(yaw))
+        if last is not None and 0.0 < t - last[0] <= self.MAX_DT_S:
+            turn = wrap_scalar(float(yaw) - last[1])
+            self._agree(t, turn / (t - last[0]))
+            if self.gyroed is not None:
+                self.gyroed[2] = float(self.gyroed[2]) + turn
+
     def gyro(self, t: float, rate: float) -> None:
         """A gyro's yaw rate (rad/s) at ``t``: its turn since the last reading (less its bias) on the gyro's
         track; its bias and its agreement with the wheels' turn learnt (the class's docstring)."""
         t, rate = float(t), float(rate)
         last, self._gyro = self._gyro, (t, rate)
         wr = self._wheel_rate
-        if wr is not None and abs(t - wr[0]) <= self.MAX_DT_S:
-            if abs(wr[1]) < self.STRAIGHT_RADPS:
-                self._bias_sum += rate
-                self._bias_n += 1
-            elif abs(wr[1]) > self.TURN_RADPS:
-                self.gyro_agreement += (rate - self.gyro_bias()) * wr[1]
+        if wr is not None and abs(t - wr[0]) <= self.MAX_DT_S and abs(wr[1]) < self.STRAIGHT_RADPS:
+            self._bias_sum += rate
+            self._bias_n += 1
+        self._agree(t, rate - self.gyro_bias())
         if self.gyroed is not None and last is not None and 0.0 < t - last[0] <= self.MAX_DT_S:
             self.gyroed[2] = float(self.gyroed[2]) + (last[1] - self.gyro_bias()) * (t - last[0])
+
+    def _agree(self, t: float, rate: float) -> None:
+        """The gyro's turn ``rate`` against the wheels' (when they turn): :attr:`gyro_agreement`."""
+        self.gyro_readings += 1
+        wr = self._wheel_rate
+        if wr is not None and abs(t - wr[0]) <= self.MAX_DT_S and abs(wr[1]) > self.TURN_RADPS:
+            self.gyro_agreement += rate * wr[1]
 
     def gyro_bias(self) -> float:
         """The gyro's bias (rad/s): the mean of its readings while the wheels said straight (0 before any)."""
@@ -304,7 +323,7 @@ class DeadReckoning:
         if self.compass_readings > 0:
             tracks = [self.compassed]
         elif self.turned:
-            tracks = [self.wheels] + ([self.gyroed] if self._gyro is not None and self.gyro_agreement >= 0 else [])
+            tracks = [self.wheels] + ([self.gyroed] if self.gyro_readings and self.gyro_agreement >= 0 else [])
         else:
             return None
         p = np.asarray(pose, dtype=float).reshape(3)

@@ -144,6 +144,8 @@ class ImuHandler(SourceHandler):
             st.prev_yaw = (t, yaw)
             be.add_relative_yaw(t, float(yaw), spec.variance("yaw", yaw_var),
                                 "imu" if not st.extra.get("second") else spec.name)
+            if self.loc.dead_reckoning is not None and not st.extra.get("second"):
+                self.loc.dead_reckoning.relative_yaw(t, float(yaw))
             h.accepted += 1
             return
         if spec.differential and yaw is not None:

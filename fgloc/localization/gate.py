@@ -96,6 +96,7 @@ from fgloc.localization.agreement import (
     scan_agreement,
     tied_agreements,
 )
+from fgloc.localization.gate_records import FixRecord, HeldRun
 from fgloc.localization.odometry_coverage import OdometryCoverage
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -157,27 +158,6 @@ class GateVerdict:
     covered: bool = True           # the odometry's stamps covered the time since the previous fix
 
 
-@dataclass
-class _Previous:
-    """The previous fix, taken and sure: its pose and covariance, the odometry pose and stamp then."""
-
-    pose: FloatArray
-    cov: FloatArray
-    odom: FloatArray
-    t: float
-
-
-@dataclass
-class _HeldRun:
-    """A run of held fixes that follow each other as the odometry says: the last one, how many, the first's
-    stamp and the prediction's position covariance when the first was judged."""
-
-    last: _Previous
-    n: int
-    t0: float
-    pred_pos_cov: FloatArray
-
-
 Motion = Callable[[float, float, FloatArray], FloatArray]
 
 
@@ -192,24 +172,24 @@ class JumpGate:
         self.map = occ_map
         self.laser_mount = laser_mount
         self.sigma_m = agreement_sigma(occ_map, cfg.agreement_sigma_m)
-        self.previous: _Previous | None = None
-        self._pending: _Previous | None = None  # what the fix just passed becomes when the back-end takes it
+        self.previous: FixRecord | None = None
+        self._pending: FixRecord | None = None  # what the fix just passed becomes when the back-end takes it
         self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
         self._taken: tuple[float, FloatArray] | None = None  # the fix just passed (stamp, pose)
         self._recent: deque[tuple[float, FloatArray]] = deque()  # fixes passed and used over VELOCITY_SPAN_S
-        self._held: _HeldRun | None = None  # the current run of held fixes
+        self._held: HeldRun | None = None  # the current run of held fixes
         #: the fix passed last, its motion, coverage, the prediction and its covariance, and the run of held
         #: fixes it followed (for rejected())
-        self._judged: tuple[_Previous, Motion | None, bool, FloatArray, FloatArray, _HeldRun | None] | None = None
+        self._judged: tuple[FixRecord, Motion | None, bool, FloatArray, FloatArray, HeldRun | None] | None = None
         #: ``(t0, t1, delta bytes, corrected)``: the caller's ``motion(t0, t1, delta)`` for the scan being judged
         self.known_motion: tuple[float, float, bytes, FloatArray] | None = None
-        self._anchor: _Previous | None = None  # the fix the fixes' departure from the odometry is measured from
-        self._anchor_next: _Previous | None = None  # ... what it becomes when the fix just passed is used
+        self._anchor: FixRecord | None = None  # the fix the fixes' departure from the odometry is measured from
+        self._anchor_next: FixRecord | None = None  # ... what it becomes when the fix just passed is used
         self._anchor_checked = -math.inf  # when the map last judged a fix against it
         #: ``(anchor, stamp, odometry pose, motion, stamp, odometry pose, increment)``: the odometry's motion since
         #: the anchor up to the fix before the last one the departure test judged (in the anchor's frame), and the
         #: last one's stamp, odometry pose and increment since (as the odometry reported it)
-        self._carry: tuple[_Previous, float, FloatArray, FloatArray, float, FloatArray,
+        self._carry: tuple[FixRecord, float, FloatArray, FloatArray, float, FloatArray,
                            tuple[float, float, float]] | None = None
 
     def reset(self) -> None:
@@ -363,7 +343,7 @@ class JumpGate:
             # SURE_SIGMAS^2 (P + allowance) - R positive semi-definite (its lower triangle, as eigvalsh reads it)
             k2 = SURE_SIGMAS**2
             m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
-            cur = _Previous(pose_c, R.copy(), odom_c, float(t))
+            cur = FixRecord(pose_c, R.copy(), odom_c, float(t))
             self._judged = (cur, motion, covered, np.array(pred, dtype=float), P.copy(), run if follows_run else None)
             if m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
@@ -390,7 +370,7 @@ class JumpGate:
             self._held = None
             pose_c = np.array(fix.pose, dtype=float)
             self._taken = (float(t), pose_c)
-            self._pending = _Previous(pose_c, R.copy(), odom_c, float(t))
+            self._pending = FixRecord(pose_c, R.copy(), odom_c, float(t))
             if motion_known:
                 self._anchor_next = self._pending
             self._judged = (self._pending, motion, covered, np.array(pred, dtype=float), P.copy(),
@@ -447,12 +427,12 @@ class JumpGate:
         return a_odo, a_fix, why
 
     @staticmethod
-    def _as_previous(fix: PoseFix, odom_pose: FloatArray, t: float) -> _Previous:
+    def _as_previous(fix: PoseFix, odom_pose: FloatArray, t: float) -> FixRecord:
         """``fix`` as an anchor or previous fix (its own copies of the pose and covariance; ``odom_pose`` shared:
         :meth:`check`'s copy, read, never written)."""
-        return _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float), odom_pose, float(t))
+        return FixRecord(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float), odom_pose, float(t))
 
-    def _carried_motion(self, anchor: _Previous, odom_pose: FloatArray, t: float, motion: Motion | None
+    def _carried_motion(self, anchor: FixRecord, odom_pose: FloatArray, t: float, motion: Motion | None
                         ) -> FloatArray:
         """The odometry's motion from ``anchor`` to ``t`` (``odom_pose`` then) in the anchor's frame, as the
         back-end believes it happened, carried on fix by fix: the motion up to the fix before the last one
@@ -475,7 +455,7 @@ class JumpGate:
         self._carry = (anchor, t0, odom0, before, float(t), odom_pose, raw)
         return compose1(before, inc)
 
-    def _follows(self, prev: _Previous, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
+    def _follows(self, prev: FixRecord, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None,
                  covered: bool) -> bool:
         """Whether ``fix`` follows ``prev`` as the odometry says (``prev`` carried on by it, the slip allowance
         and the map's resolution as in the previous-fix test)."""
@@ -492,18 +472,18 @@ class JumpGate:
         return d2 <= self.cfg.gate_chi2
 
     def _held_follows(self, fix: PoseFix, odom_pose: FloatArray, t: float, motion: Motion | None, covered: bool,
-                      pred_pos_cov: FloatArray, run: _HeldRun | None, follows: bool | None = None) -> _HeldRun:
+                      pred_pos_cov: FloatArray, run: HeldRun | None, follows: bool | None = None) -> HeldRun:
         """The run of held fixes (:attr:`held_run`) after ``fix`` was held: lengthened when it follows the last
         held one as the odometry says (:meth:`_follows`; ``follows`` when already known), else a new one
         starting at it with the prediction's position covariance ``pred_pos_cov``."""
-        cur = _Previous(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float),
+        cur = FixRecord(np.array(fix.pose, dtype=float), np.array(fix.cov, dtype=float),
                         np.array(odom_pose, dtype=float), float(t))
         if run is not None:
             if follows is None:
                 follows = self._follows(run.last, fix, odom_pose, t, motion, covered)
             if follows:
-                return _HeldRun(cur, run.n + 1, run.t0, run.pred_pos_cov)
-        return _HeldRun(cur, 1, float(t), pred_pos_cov)
+                return HeldRun(cur, run.n + 1, run.t0, run.pred_pos_cov)
+        return HeldRun(cur, 1, float(t), pred_pos_cov)
 
     def _motion(self, motion: Motion, t0: float, t1: float, delta: FloatArray) -> FloatArray:
         """``motion(t0, t1, delta)``; :attr:`known_motion`'s answer when it is for the same."""

@@ -114,6 +114,7 @@ DEFAULT_SCENARIO: dict[str, Any] = {
               "range_min_m": 0.5, "range_max_m": 50.0, "range_sigma_m": 0.004, "range_sigma_far_m": 0.005,
               "angle_sigma_deg": 0.02, "enabled": True, "stamp_delay_s": 0.0},
     "imu": None,                     # a sensor_msgs/Imu section (see IMU_DEFAULTS) replaces the compass
+    #                                  (compass: null and no imu: a robot with neither, no /imu at all)
     "ground_truth_rate_hz": 100.0,
     "faults": {},
 }
@@ -599,7 +600,7 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
     plan = true_motion(sc)
     if sc["map"] == "hall" and not world.is_free(plan.poses[::25, :2], clearance=0.3).all():
         raise ConfigError("scenario route runs into an obstacle")
-    off_deg = sc["compass"].get("offset_deg")
+    off_deg = (sc["compass"] or {}).get("offset_deg")
     offset = float(np.deg2rad(off_deg)) if off_deg is not None else float(
         np.deg2rad(rngs[0].uniform(5.0, 25.0) * rngs[0].choice([-1.0, 1.0])))
     mount = StaticTransform("base_link", "laser", np.asarray(sc["laser"]["mount"], dtype=float), z=0.2)
@@ -620,7 +621,7 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
         timed += [(float(m.stamp) + late, topic, m) for topic, m in odom]  # type: ignore[attr-defined]
     else:
         msgs += odom
-    if sc.get("imu") is None:
+    if sc.get("imu") is None and sc.get("compass") is not None:
         msgs += _compass(sc, plan, offset, rngs[2])
     msgs += _laser(sc, plan, world, rngs[3], progress)
     gt_rate = float(sc["ground_truth_rate_hz"])

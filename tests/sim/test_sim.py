@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fgloc.geometry import compose, wrap_angle
-from fgloc.sim import run_scenario, simulate_paper
+from fgloc.sim import load_scenario, run_scenario, simulate_paper
 
 SCEN = Path(str(resources.files("fgloc.config") / "scenarios"))  # shipped in the package
 
@@ -283,3 +283,13 @@ def test_odometry_dropout_and_late_delivery():
         elif topic == "/scan" and m.stamp > 1.0:
             behind.append(m.stamp - newest)
     assert 0.28 < float(np.median(behind)) < 0.32
+
+
+def test_a_robot_without_compass_or_imu():
+    """``compass: null`` (and no ``imu``): a robot with neither (a Stage Pioneer): no /imu at all, the rest as
+    with one."""
+    base = {"route": LEG, "laser": {"enabled": False}}
+    bare, full = run_scenario({**base, "compass": None}, seed=2), run_scenario(base, seed=2)
+    assert not bare.topic("/imu") and full.topic("/imu")
+    assert [m.stamp for m in bare.topic("/odom")] == [m.stamp for m in full.topic("/odom")]
+    assert load_scenario({"compass": None})["compass"] is None

@@ -35,6 +35,10 @@ from fgloc.types import PoseFix, Trajectory
 
 FloatArray = NDArray[np.float64]
 
+#: s, no odometry this long after the start: a log of scans alone (on a map; an IMU at most), the
+#: back-end carries its own velocity between the fixes and waits for no odometry
+SCANS_ALONE_AFTER_S = 1.0
+
 
 class Capability(Enum):
     """What a back-end does beyond the inputs every back-end takes."""

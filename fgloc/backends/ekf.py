@@ -158,6 +158,9 @@ class EKFConfig:
     q_theta: float = setting(1e-4, "process noise spectral density of the heading (rad^2/s)", min=0)
     q_v: float = setting(0.5, "how fast the speed may change ((m/s)^2/s)", min=0)
     q_w: float = setting(1.0, "how fast the yaw rate may change ((rad/s)^2/s)", min=0)
+    scans_alone_q: tuple[float, float] = setting(
+        (2.0, 4.0), "without odometry (scans alone on a map): q_v and q_w instead, the velocity known from the "
+        "fixes alone (a Jackal's turns start faster than q_w 1.0 follows)", min=0)
     gate_map: float | None = setting(16.27, "chi-square 99.9 % (3 dof) Mahalanobis gate on map fixes; null = none",
                                      gt=0)
     gate_encoder: float | None = setting(None, "Mahalanobis gate on the encoder twist; null = none", gt=0)
@@ -277,8 +280,9 @@ class EKF:
         self.x, self.P = x, P
         return i
 
-    def to_omni(self) -> None:
-        """Switch to the omni state ``[x, y, th, vx, vy, w, ...]`` (vy = 0, sigma ``q_v``)."""
+    def to_omni(self, vy_var: float | None = None) -> None:
+        """Switch to the omni state ``[x, y, th, vx, vy, w, ...]`` (vy = 0, variance ``vy_var``, default
+        ``q_v``; at least 0.01)."""
         if self.omni:
             return
         n_old = self.n
@@ -288,7 +292,7 @@ class EKF:
         new_idx = [0, 1, 2, 3, 5] + list(range(6, n_old + 1))
         x[new_idx] = self.x[keep]
         P[np.ix_(new_idx, new_idx)] = self.P[np.ix_(keep, keep)]
-        P[OVY, OVY] = max(self.config.q_v, 0.01)
+        P[OVY, OVY] = max(self.config.q_v if vy_var is None else vy_var, 0.01)
         self.x, self.P = x, P
         self.omni = True
         self.aug = {k: i + 1 for k, i in self.aug.items()}

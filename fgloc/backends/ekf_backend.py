@@ -37,13 +37,14 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray
 from fgloc.backends.compass import CompassCalibrator
-from fgloc.backends.contract import Capability, SourceNoise
+from fgloc.backends.contract import SCANS_ALONE_AFTER_S, Capability, SourceNoise
 from fgloc.backends.ekf import CHI2_999, EKF, OVX, OVY, OW, SCALE_EVIDENCE_SIGMAS, TH, EKFConfig, V, W, motion_model
 from fgloc.backends.ekf_history import InOrder
 from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, SourceHealth
@@ -520,9 +521,12 @@ class EKFBackend(Backend):
         used = False
         if self.cfg.adapt_noise:
             self.inputs.arb.update(t)
+        if "odom" not in self.inputs.health and t - (self._start_t or t) >= SCANS_ALONE_AFTER_S \
+                and self.ekf.config is self.cfg:   # scans alone: the velocity is the fixes' alone
+            self.ekf.config = replace(self.cfg, q_v=self.cfg.scans_alone_q[0], q_w=self.cfg.scans_alone_q[1])
         if fix is not None and self.cfg.omni is None and not self.ekf.omni and "odom" not in self.inputs.health \
                 and self._sideways.add(t, fix.pose):
-            self.ekf.to_omni()   # scans alone, and the fixes move sideways (fgloc.backends.sideways)
+            self.ekf.to_omni(self.cfg.q_v)   # scans alone, and the fixes move sideways (fgloc.backends.sideways)
         if fix is not None:
             force = self._consecutive_rejects >= self.max_rejections
             pose, cov = np.asarray(fix.pose, dtype=float), np.asarray(fix.cov, dtype=float)

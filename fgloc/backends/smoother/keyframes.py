@@ -11,6 +11,7 @@ import gtsam
 import numpy as np
 
 from fgloc.backends.base import FloatArray
+from fgloc.backends.contract import SCANS_ALONE_AFTER_S
 from fgloc.backends.factors import (
     between_factor,
     compass_factor,
@@ -36,8 +37,6 @@ from fgloc.types import PoseFix, all_finite
 
 #: s, a gyro whose last reading is older than this is not waited for (it stopped, or is that slow)
 GYRO_LIVE_S = 0.25
-#: s, no odometry this long after the start: none is waited for (a log of scans on a map, an IMU at most)
-SCANS_ONLY_AFTER_S = 1.0
 
 
 class KeyframeGraph(FurtherSourceFactors):
@@ -91,7 +90,7 @@ class KeyframeGraph(FurtherSourceFactors):
         while self.pending_kf:
             t = self.pending_kf[0][0]
             have_odo = bool(self.odo_t) and self.odo_t[-1] >= t - 1e-9 and self._gyros_cover(t)
-            if not self.odo_t and t - float(self.t0 or t) >= SCANS_ONLY_AFTER_S:
+            if not self.odo_t and t - float(self.t0 or t) >= SCANS_ALONE_AFTER_S:
                 have_odo = self._gyros_cover(t)   # no odometry to wait for: scans on a map
             if not (have_odo or now - t >= self.cfg.max_wait_s):
                 return

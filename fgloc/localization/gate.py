@@ -8,7 +8,9 @@ A fix is taken when it agrees with what the odometry says since the last fix it 
 * with the previous fix, when the gate passed it (and the back-end used it, or its own tighter gate held
   it before any fix had confirmed the back-end's pose) and it was sure of its position (its position
   sigma, in every direction, within twice the prediction's and the allowance below for the motion since
-  the fix before), carried on by the odometry's motion since (:meth:`Backend.motion_correction`: a
+  the fix before; and, when the prediction took it, within the gate of the prediction's covariance and
+  that allowance alone: a fix the prediction took only for its own vagueness, a matcher unsure between
+  two places, is no position to follow), carried on by the odometry's motion since (:meth:`Backend.motion_correction`: a
   gyro's turn where it covers it), with an allowance for an odometry that slips or scrubs beyond what it
   reports: ``integrity.odometry_slip`` times the distance and the turn it reported in between (the
   odometry motion model of AMCL and most particle filters).  A back-end whose online estimate lags the
@@ -345,7 +347,11 @@ class JumpGate:
             m00, m10, m11 = k2 * (p00 + allow) - r00, k2 * p10 - r10, k2 * (p11 + allow) - r11
             cur = FixRecord(pose_c, R.copy(), odom_c, float(t))
             self._judged = (cur, motion, covered, np.array(pred, dtype=float), P.copy(), run if follows_run else None)
-            if m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
+            # ... and, when the prediction took it, not only by its own vagueness (a matcher unsure between two
+            # places, 0.3 m off with a 0.1 m sigma: within the prediction's covariance and the allowance alone)
+            near = d2_prev is not None or mahalanobis2_2x2(e0, e1, p00 + s2 + allow, p01, p10, p11 + s2 + allow) \
+                <= self.cfg.gate_chi2
+            if near and m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
                 # to follow; after a vaguer one (a matcher unsure between two places) the next has none
                 self._pending = cur

@@ -154,6 +154,28 @@ def test_a_vague_fix_is_used_but_not_followed(room):
     assert gate.previous is None
 
 
+def test_a_fix_taken_only_for_its_vagueness_is_not_followed_at_speed(room):
+    """At 1.5 m/s (0.12 m between two fixes) the slip allowance made a vague fix 0.35 m off "sure": the next,
+    sure one the same 0.35 m off followed it in and the back-end jumped there.  Only a fix within the gate of
+    the prediction's covariance and the allowance alone is followed; it is still used."""
+    gate = JumpGate(IntegrityConfig(), room, MOUNT)
+    pred_cov = np.diag([0.004**2, 0.004**2, np.radians(0.2) ** 2])
+    p0 = np.array([4.0, 3.0, 0.0])
+    assert gate.check(_fix(p0), p0, pred_cov, make_scan(room, p0), np.zeros(3), 1.0).take
+    gate.accepted()
+    p1 = p0 + [0.12, 0.0, 0.0]
+    wide = np.diag([0.005**2, 0.1**2, np.radians(0.05) ** 2])  # a matcher unsure between two places
+    v = gate.check(_fix(p1 + [0.0, 0.35, 0.0], cov=wide, t=1.08), p1, pred_cov, make_scan(room, p1),
+                   np.array([0.12, 0.0, 0.0]), 1.08)
+    assert v.take
+    gate.accepted()
+    assert gate.previous is None
+    p2 = p1 + [0.12, 0.0, 0.0]
+    v = gate.check(_fix(p2 + [0.0, 0.35, 0.0], t=1.16), p2, pred_cov, make_scan(room, p2),
+                   np.array([0.24, 0.0, 0.0]), 1.16)
+    assert not v.take
+
+
 def _short_changed_world():
     from fgloc.sim import load_scenario, run_scenario
 

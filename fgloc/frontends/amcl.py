@@ -26,6 +26,10 @@ A particle filter over ``base_link`` poses ``[x_m, y_m, yaw_rad]`` in ``map``:
   ``max(0, 1 - w_fast/w_slow)`` a resampled particle is replaced by a random free-space pose;
 * **update thresholds** ``update_min_d`` / ``update_min_a``: the filter updates only
   after that much odometry motion (the first scan after a reset always updates);
+* **no odometry** (``odom_delta`` None after the first scan: a log of scans alone): the motion is
+  unknown, so the cloud is spread by a random walk of ``unknown_motion_sigma`` (m/s, rad/s) times
+  the time since its last update, and it updates once that time lets the robot have moved
+  ``update_min_d`` at that speed;
 * **global localization** (``reset(None)``): ``global_particles`` poses uniform over the
   map's free cells.  The filter stays in its global phase (KLD cap ``global_particles``, floor
   ``max_particles``, the wider ``global_sigma_hit``: sparse particles are rarely within
@@ -344,6 +348,16 @@ def _refine_kernel(field, depth, ox, oy, inv_res, zmax, bx, by, pose0, z_hit, z_
 
 
 # ------------------------------------------------------------------ motion models
+def diffuse(particles: FloatArray, dt_s: float, sigma: tuple[float, ...], rng: np.random.Generator) -> FloatArray:
+    """``particles (N, 3)`` spread by a random walk of ``sigma`` (m/s, rad/s) over ``dt_s`` (the motion
+    of a robot without odometry is unknown). Returns a new array."""
+    n = len(particles)
+    out = particles.copy()
+    out[:, :2] += rng.normal(0.0, float(sigma[0]) * dt_s, (n, 2))
+    out[:, 2] = wrap_angle(out[:, 2] + rng.normal(0.0, float(sigma[1]) * dt_s, n))
+    return out
+
+
 def sample_motion(particles: FloatArray, delta: FloatArray, model: str, alphas: FloatArray,
                   rng: np.random.Generator) -> FloatArray:
     """Propagate ``particles (N, 3)`` by the base-frame odometry ``delta`` with nav2's noise.
@@ -551,6 +565,9 @@ class AMCLConfig:
     cov_floor: tuple[float, float, float] = setting((0.0, 0.0, 0.0), "m^2, m^2, rad^2 added", min=0)
     min_valid_beams: int = setting(10, "fewer valid beams -> no fix", min=1)
     deskew: bool = setting(True, "per-beam de-skew from the odometry motion")
+    unknown_motion_sigma: tuple[float, float] = setting(
+        (1.0, 1.0), "without odometry (scans alone): the cloud's random walk between updates (m/s, rad/s); it "
+        "updates every update_min_d / the first of them seconds", gt=0)
     seed: int = setting(0, "random seed of the filter")
 
 
@@ -602,6 +619,7 @@ class AMCL:
         self.resample_interval = int(conf.resample_interval)
         self.alpha_slow, self.alpha_fast = float(conf.recovery_alpha_slow), float(conf.recovery_alpha_fast)
         self.update_min_d, self.update_min_a = float(conf.update_min_d), float(conf.update_min_a)
+        self.unknown_motion_sigma = tuple(float(v) for v in conf.unknown_motion_sigma)
         self.init_cov = np.diag(np.asarray(conf.init_cov, dtype=float).reshape(3))
         self.converged_cluster_weight = float(conf.converged_cluster_weight)
         self.estimate = conf.estimate
@@ -647,6 +665,8 @@ class AMCL:
         self._w_slow = 0.0
         self._w_fast = 0.0
         self._acc = np.zeros(3)
+        self._blind_s = 0.0  # s since the last update with no odometry (unknown motion)
+        self._scan_t: float | None = None  # the previous scan's stamp
         self._force_update = True
         self._n_updates = 0
         self.last_kld_k = 0
@@ -669,6 +689,7 @@ class AMCL:
         self.pre.reset()
         self._w_slow = self._w_fast = 0.0
         self._acc = np.zeros(3)
+        self._blind_s = 0.0
         self._force_update = True
         self._n_updates = 0
         self._settling, self._settle = None, False
@@ -781,12 +802,17 @@ class AMCL:
                 return no_fix("odometry delta is not a finite [dx, dy, dyaw]")
             # the filter moves with the odometry even when the scan is unusable
             self._acc = compose1(self._acc, od)
+        elif self._scan_t is not None and float(scan.stamp) > self._scan_t:
+            self._blind_s += float(scan.stamp) - self._scan_t  # no odometry: motion unknown for this long
+        self._scan_t = float(scan.stamp)
         pts, why = self.pre(scan, od)
         if pts is None:
             return no_fix(why)
         moved_d = math.hypot(self._acc[0], self._acc[1])
         moved_a = abs(float(self._acc[2]))
-        if not (self._force_update or moved_d >= self.update_min_d or moved_a >= self.update_min_a):
+        blind = self._blind_s
+        if not (self._force_update or moved_d >= self.update_min_d or moved_a >= self.update_min_a
+                or blind * self.unknown_motion_sigma[0] >= self.update_min_d):
             if not self.fix_without_update:
                 return no_fix(f"waiting for motion (update_min_d {self.update_min_d:g} m / update_min_a "
                               f"{self.update_min_a:g} rad not reached: moved {moved_d:.3f} m, {moved_a:.3f} rad since "
@@ -799,7 +825,10 @@ class AMCL:
         if a0 != 0 or a1 != 0 or a2 != 0:
             self.particles = sample_motion(self.particles, self._acc, self.robot_model_type, self.alphas,
                                            self.rng)
+        if blind > 0:
+            self.particles = diffuse(self.particles, blind, self.unknown_motion_sigma, self.rng)
         self._acc = np.zeros(3)
+        self._blind_s = 0.0
         self._force_update = False
         lik = self._likelihood(pts, float(scan.range_max))
         recovery = self.alpha_slow > 0 and self.alpha_fast > 0
@@ -844,10 +873,10 @@ class AMCL:
             mean, refined = self._refine(mean, cov, pts, float(scan.range_max))
         res = self._result(mean, cov, share, len(pts), updated=True, refined=refined)
         if self._settle and res.ok:
-            return self._confirmed(res, moved)
+            return self._confirmed(res, moved, blind)
         return res
 
-    def _confirmed(self, res: MatchResult, moved: FloatArray) -> MatchResult:
+    def _confirmed(self, res: MatchResult, moved: FloatArray, blind_s: float = 0.0) -> MatchResult:
         """After the global phase the cloud can still hold two nearby modes in one connected cluster (KLD bins
         apart): a fix is given once two consecutive ones (refined, with ``estimate: refined``) agree as the
         odometry says (chi-square, 3 dof, 99.7 %, over both fixes' covariances and the motion model's noise for
@@ -864,6 +893,9 @@ class AMCL:
         a1, a2, a3, a4, _a5 = (float(a) for a in self.alphas)
         trans, rot = math.hypot(float(moved[0]), float(moved[1])), abs(float(wrap_angle(moved[2])))
         var_xy, var_yaw = a3 * trans**2 + a4 * rot**2, a1 * rot**2 + a2 * trans**2
+        if blind_s > 0:  # no odometry: the random walk the cloud was spread by
+            var_xy += (self.unknown_motion_sigma[0] * blind_s) ** 2
+            var_yaw += (self.unknown_motion_sigma[1] * blind_s) ** 2
         d = res.pose - compose1(prev[0], moved)
         d[2] = wrap_angle(d[2])
         s = prev[1] + res.cov + np.diag([var_xy, var_xy, var_yaw]) + 1e-12 * np.eye(3)

@@ -315,8 +315,8 @@ class Localizer(Recovery):
         # odometry motion since the previous front-end call (for its de-skew / motion model): a particle filter
         # keeps it as it came (its motion model and thresholds were tuned on that), the others at the scan stamp
         odom_now = self.odom.pose if fe.is_particle_filter else self.odom.pose_at(t)
-        odom_delta = None
-        if self._odom_at_last_scan is not None:
+        odom_delta = None  # a particle filter without any odometry yet: its motion is unknown (None)
+        if self._odom_at_last_scan is not None and (self.stats["odometry"] or not fe.is_particle_filter):
             odom_delta = between1(self._odom_at_last_scan, odom_now)
             if not fe.is_particle_filter and self._last_matched_t is not None:
                 # as the back-end believes it moved (the odometry's scales, a gyro's rotation)

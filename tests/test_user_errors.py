@@ -4,29 +4,12 @@ holds it)."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 from pathlib import Path
 
 import pytest
 
-
-def fgloc(*args) -> tuple[int, str, str]:
-    """``fgloc ARGS`` in this process: (exit status, stdout, stderr)."""
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
-
-
-def one_error_line(err: str) -> str:
-    """The ``fgloc: error: ...`` line of stderr (warnings may come before it), checked to be the last."""
-    lines = [ln for ln in err.strip().splitlines() if ln]
-    assert lines and lines[-1].startswith("fgloc: error: "), err
-    assert "Traceback" not in err
-    return lines[-1].removeprefix("fgloc: error: ")
+from fgloc.testing.cli import last_error_line as one_error_line
+from fgloc.testing.cli import run_cli as fgloc
 
 
 @pytest.fixture(scope="module")

@@ -4,28 +4,13 @@ created: a user who maps a log and then localizes on it types what map_server ta
 
 from __future__ import annotations
 
-import contextlib
-import io
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-
-def fgloc(*args) -> tuple[int, str, str]:
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
-
-
-def error_line(err: str) -> str:
-    lines = [ln for ln in err.strip().splitlines() if ln]
-    assert lines and lines[-1].startswith("fgloc: error: "), err
-    assert "Traceback" not in err
-    return lines[-1].removeprefix("fgloc: error: ")
+from fgloc.testing.cli import last_error_line as error_line
+from fgloc.testing.cli import run_cli as fgloc
 
 
 @pytest.fixture(scope="module")

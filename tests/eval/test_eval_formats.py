@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 
 import numpy as np
@@ -12,15 +10,7 @@ import pytest
 
 from fgloc.eval.trajectories import read_trajectory
 from fgloc.io.tum import read_tum
-
-
-def fgloc(*args) -> tuple[int, str, str]:
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
+from fgloc.testing.cli import run_cli as fgloc
 
 
 @pytest.fixture(scope="module")

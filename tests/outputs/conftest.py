@@ -3,9 +3,7 @@ fill up (tmpfs) or fail (a loop device whose backing store runs out), the CLI in
 
 from __future__ import annotations
 
-import contextlib
 import errno
-import io
 import os
 import shutil
 import signal
@@ -42,15 +40,6 @@ def longer(tmp_path_factory) -> Path:
     """The same files for a 12 s drive."""
     return _sim(tmp_path_factory, "longer", LONGER)
 
-
-def cli(*args: str) -> tuple[int, str, str]:
-    """``fgloc ARGS`` in this process: (exit code, stdout, stderr)."""
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
 
 
 def error_line(err: str) -> str:

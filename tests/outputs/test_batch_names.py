@@ -8,7 +8,9 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from .conftest import START, cli, snapshot
+from fgloc.testing.cli import run_cli as cli
+
+from .conftest import START, snapshot
 
 
 def _tree_outside(root: Path, outdir: Path) -> dict[str, bytes]:

@@ -12,7 +12,9 @@ import shutil
 import signal
 import subprocess
 
-from .conftest import FGLOC, START, cli, error_line, fill, snapshot, staging_left
+from fgloc.testing.cli import run_cli as cli
+
+from .conftest import FGLOC, START, error_line, fill, snapshot, staging_left
 
 NOSPACE = "no space left on device"
 

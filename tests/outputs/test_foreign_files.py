@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import START, cli, error_line
+from fgloc.testing.cli import run_cli as cli
+
+from .conftest import START, error_line
 
 
 def _cases(tiny: Path, d: Path) -> dict[str, tuple[list, Path, str]]:

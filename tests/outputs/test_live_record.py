@@ -7,7 +7,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .conftest import LONGER, cli, error_line
+from fgloc.testing.cli import run_cli as cli
+
+from .conftest import LONGER, error_line
 
 
 class LiveFeed:

@@ -19,7 +19,6 @@ CARMEN log (its laser lines' poses): :mod:`fgloc.eval.trajectories`.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -75,109 +74,6 @@ def _fmt(v: Any, fmt: str) -> str:
     if isinstance(v, float) and v != v:  # NaN
         return "-"
     return format(v, fmt)
-
-
-#: the --max-gap values a note suggests for a sparse reference, smallest first
-_GAP_STEPS_S = (1.0, 2.0, 5.0)
-
-
-def gap_note(label: str, stamps: Any, ref_stamps: Any, max_gap: float) -> str | None:
-    """A note when most poses of an estimate fall in gaps of the reference longer than ``max_gap``
-    (a reference published on updates only, as AMCL's ``/amcl_pose`` or a slow motion capture),
-    with the smallest ``--max-gap`` of :data:`_GAP_STEPS_S` that pairs 90 % of those inside its span."""
-    import numpy as np
-
-    ts, gs = np.asarray(stamps, dtype=float), np.asarray(ref_stamps, dtype=float)
-    if len(ts) == 0 or len(gs) < 2:
-        return None
-    inside = ts[(ts >= gs[0]) & (ts <= gs[-1])]
-    if len(inside) == 0:
-        return None
-    i1 = np.clip(np.searchsorted(gs, inside, side="right"), 1, len(gs) - 1)
-    span = gs[i1] - gs[i1 - 1]
-    exact = (np.abs(gs[i1] - inside) <= 1e-6) | (np.abs(gs[i1 - 1] - inside) <= 1e-6)  # paired at any gap
-    lost = int(np.sum((span > max_gap) & ~exact))
-    if lost <= 0.5 * len(ts):
-        return None
-    spacing = float(np.median(np.diff(gs)))
-    note = (f"{lost} of {len(ts)} poses of {label} fall in gaps of the reference longer than --max-gap {max_gap:g} s "
-            f"(its median spacing {spacing:.2f} s: a pose published on updates, as AMCL's /amcl_pose?)")
-    for step in _GAP_STEPS_S:
-        paired = int(np.sum((span <= step) | exact))
-        if step > max_gap and paired >= 0.9 * len(inside):
-            return note + f"; --max-gap {step:g} pairs {paired}, interpolating across its gaps"
-    return note
-
-
-def frame_note(label: str, est: Any, gt: Any, max_gap: float) -> str | None:
-    """A note when an estimate's position errors are mostly one constant offset, or a scale, metres
-    large: the estimate and the reference in different frames (a simulator's world frame and the map's,
-    a motion capture's room frame), what ``--align`` (one rigid transform) removes."""
-    import numpy as np
-
-    from fgloc.eval.metrics import AssociationError, associate
-
-    try:
-        a = associate(est, gt, max_gap=max_gap)
-    except AssociationError:
-        return None
-    e = a.est[:, :2] - a.gt[:, :2]
-    rms = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
-    mean = e.mean(axis=0)
-    rest = float(np.sqrt(np.mean(np.sum((e - mean) ** 2, axis=1))))
-    if rms < 0.5 or len(a) < 10:
-        return None
-    if rest < 0.2 * rms:
-        return (f"the errors of {label} are mostly one offset ({mean[0]:+.2f}, {mean[1]:+.2f}) m (RMSE {rms:.2f} m, "
-                f"{rest:.2f} m about it): the estimate and the reference in different frames? --align fits one "
-                "rigid transform")
-    g0, e0 = a.gt[:, :2] - a.gt[:, :2].mean(axis=0), a.est[:, :2] - a.est[:, :2].mean(axis=0)
-    var = float(np.mean(np.sum(g0**2, axis=1)))
-    if var < 1.0:
-        return None
-    u, sv, vt = np.linalg.svd(e0.T @ g0 / len(a))  # Umeyama: est ~ scale R gt + t
-    d = np.diag([1.0, float(np.sign(np.linalg.det(u @ vt)))])
-    r = u @ d @ vt
-    scale = float(np.trace(np.diag(sv) @ d)) / var
-    fit = float(np.sqrt(np.mean(np.sum((e0 - scale * g0 @ r.T) ** 2, axis=1))))
-    if fit >= 0.2 * rms:
-        return None
-    if abs(scale - 1.0) > 0.02:
-        return (f"{label} is the reference scaled by {scale:.3f} (RMSE {rms:.2f} m, {fit:.2f} m after a fit with a "
-                "scale): a map scaled against the reference's world (a simulator's bitmap fitted to a size, a "
-                "wrong map resolution)?")
-    turn = math.degrees(math.atan2(r[1, 0], r[0, 0]))
-    return (f"the errors of {label} are mostly one rigid transform (a turn of {turn:+.1f} deg; RMSE {rms:.2f} m, "
-            f"{fit:.2f} m after it): the estimate and the reference in different frames? --align fits it, "
-            "--align-start moves the estimate's start onto the reference's")
-
-
-def start_aligned(est: Any, gt: Any, max_gap: float, path: Path) -> Any:
-    """``est`` moved rigidly so that its first pose paired with the reference is the reference's pose
-    there (SE(2)): two trajectories in frames that differ by where each started."""
-    from fgloc.eval.metrics import AssociationError, associate
-    from fgloc.geometry import compose, inverse
-    from fgloc.types import Trajectory
-
-    try:
-        a = associate(est, gt, max_gap=max_gap)
-    except AssociationError as e:
-        raise LogError(f"{path}: --align-start: {e}") from None
-    move = compose(a.gt[0], inverse(a.est[0]))
-    return Trajectory(est.stamps, compose(move, est.poses), est.frame_id)
-
-
-def end_error(est: Any, gt: Any, max_gap: float) -> float | None:
-    """The distance between the estimate's last pose paired with the reference and the reference there (m)."""
-    import numpy as np
-
-    from fgloc.eval.metrics import AssociationError, associate
-
-    try:
-        a = associate(est, gt, max_gap=max_gap)
-    except AssociationError:
-        return None
-    return float(np.hypot(*(a.est[-1, :2] - a.gt[-1, :2])))
 
 
 def _labels(paths: list[Path]) -> list[str]:
@@ -411,6 +307,7 @@ def eval_cmd(
         raise ConfigError(f"{files[0]}: fgloc eval needs an estimate and a reference (the reference last), e.g. "
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
+    from fgloc.eval.checks import end_error, frame_note, gap_note, start_aligned
     from fgloc.eval.metrics import AssociationError, evaluate
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
@@ -432,7 +329,11 @@ def eval_cmd(
     if align_start:
         if align:
             raise ConfigError("fgloc eval: --align or --align-start, not both")
-        ests = {lab: start_aligned(tr, gt, max_gap, p) for (lab, tr), p in zip(ests.items(), est_paths, strict=True)}
+        for (lab, tr), p in zip(list(ests.items()), est_paths, strict=True):
+            try:
+                ests[lab] = start_aligned(tr, gt, max_gap)
+            except AssociationError as e:
+                raise LogError(f"{p}: --align-start: {e}") from None
     results = {}
     ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
     for (lab, est), p in zip(ests.items(), est_paths, strict=True):

@@ -6,6 +6,8 @@
 * :mod:`fgloc.eval.paper` -- the paper's reported numbers and :func:`comparison_table`.
 * :mod:`fgloc.eval.relations` -- the relations metric (Kuemmerle et al. 2009).
 * :mod:`fgloc.eval.nees` -- :func:`~fgloc.eval.nees.evaluate_nees`: how honest per-pose covariances are.
+* :mod:`fgloc.eval.checks` -- notes on what the numbers may hide (a sparse reference, two frames), the
+  start alignment of two odometry frames.
 
 Only the metrics are imported here so that ``import fgloc.eval`` stays cheap (no matplotlib).
 """

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.commands.eval import frame_note
+from fgloc.eval.checks import frame_note
 from fgloc.types import Trajectory
 
 

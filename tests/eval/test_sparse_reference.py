@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from fgloc.commands.eval import gap_note
+from fgloc.eval.checks import gap_note
 
 
 def _tum(path, stamps, xs) -> None:

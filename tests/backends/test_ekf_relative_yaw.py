@@ -84,6 +84,7 @@ class _RelBackend:
 class _Loc:
     odom_mode = True
     frontend = None
+    dead_reckoning = None  # the localizer's odometry + IMU dead reckoning (none in odom mode here)
 
     def __init__(self) -> None:
         self.backend = _RelBackend()

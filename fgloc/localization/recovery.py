@@ -16,7 +16,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray
 from fgloc.localization.gate import GateVerdict, JumpGate
 from fgloc.localization.monitor import LOST, MapAgreement
-from fgloc.localization.relocalization import Relocalizer
+from fgloc.localization.relocalization import Relocalizer, close
 from fgloc.localization.status import PoseStatus
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -201,6 +201,17 @@ class Recovery(PoseStatus):
         self.stats["fixes_used"] = self.stats.get("fixes_used", 0) + 1
         return fix
 
+    def _start_confirmed(self, msg: LaserScan, fix: PoseFix) -> bool:
+        """Whether the scan matcher, matching ``msg`` from the start pose, finds a fix within three sigma of the
+        start prior of ``fix`` (a particle filter's first fix from that start)."""
+        from fgloc.frontends import make_frontend
+
+        assert self.initial_pose is not None and self.map is not None
+        matcher = make_frontend("native", self.map, self.laser_mount, self.config)
+        check = matcher.match(msg, self.initial_pose, None).to_fix(float(msg.stamp), matcher.name)
+        return check is not None and close(check.pose, fix.pose, 3 * self.pcfg.initial_sigma_xy_m,
+                                           math.radians(3 * self.pcfg.initial_sigma_yaw_deg))
+
     def _localize_globally(self, msg: LaserScan, odom_delta: FloatArray | None) -> PoseFix | None:
         fe = self.frontend
         t = float(msg.stamp)
@@ -208,6 +219,16 @@ class Recovery(PoseStatus):
             reinit, self._reinit = self._reinit, None
             res = fe.match(msg, self.initial_pose, odom_delta)
             fix = res.to_fix(t, fe.name)
+            if fix is not None and fe.is_particle_filter and fe.supports_global and \
+                    not self._start_confirmed(msg, fix):
+                # a particle filter seeded at the start finds its seed whether or not the scan fits there:
+                # a start the scan matcher does not confirm is searched for globally, and its poses are lost
+                # until the search converges (where it is not the start: the start did not fit the map)
+                self.last_reason = "initial pose: the scan does not confirm it, searching the map"
+                self._start(t, self.initial_pose, self._initial_cov() if reinit is None else reinit, converged=False)
+                self._declare_lost(t)
+                fe.reset(None)
+                return None
             if fix is not None:
                 self._accept(fix)
                 self._start(t, fix.pose, np.maximum(fix.cov, 0) + EPS_COV)

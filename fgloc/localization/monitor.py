@@ -355,6 +355,9 @@ class MapAgreement:
     MIN_SAMPLES = 8
     QUANTILE = 0.25  # the expectation: this quantile of them (the clutter, the doors, the people it passed)
     REFRESH = 8  # ... recomputed every this many new ones
+    #: a measurement this low lies the scan nowhere near the map's walls (a right map, a changed world with
+    #: people and moved furniture: 0.5 and more at the median; another building: 0.05)
+    MISFIT = 0.25
 
     def __init__(self, cfg: IntegrityConfig, occ_map: Any, laser_mount: Any, sigma_m: float) -> None:
         self.cfg = cfg
@@ -374,6 +377,8 @@ class MapAgreement:
         self.checks = 0
         self.low_checks = 0
         self.unmapped_checks = 0  # low measurements the map could not judge
+        self.judged_checks = 0  # measurements at MISFIT or above, or below it where the map has the space
+        self.misfit_checks = 0  # ... of them below MISFIT
 
     def due(self, t: float) -> bool:
         return t - self._t >= self.cfg.agreement_period_s or t < self._t
@@ -400,6 +405,11 @@ class MapAgreement:
             return None
         self.last = a
         self.checks += 1
+        if a >= self.MISFIT:
+            self.judged_checks += 1
+        elif unmapped_share(self.map, self.laser_mount, scan, pose) <= UNMAPPED_SHARE:
+            self.judged_checks += 1
+            self.misfit_checks += 1
         self.after_start = False
         exp_ = self._expected
         if exp_ is not None and a < self.cfg.agreement_low * exp_:
@@ -422,6 +432,12 @@ class MapAgreement:
             if n >= self.MIN_SAMPLES and (self._expected is None or self._added % self.REFRESH == 0):
                 self._expected = float(np.quantile(np.fromiter(self._good, float, n), self.QUANTILE))
         return a
+
+    def never_fit(self, min_checks: int = 2 * MIN_SAMPLES) -> bool:
+        """Whether most of the run's measurements the map could judge (at least ``min_checks``; not those
+        where most beams end in space it does not have) lay the scan nowhere near its walls (:data:`MISFIT`):
+        the map is not of this building, wherever the front-end put the pose."""
+        return self.judged_checks >= min_checks and self.misfit_checks > 0.5 * self.judged_checks
 
     def low_for(self, t: float) -> float:
         """How long (s) the measurements have been low up to ``t`` (0: the last was not)."""

@@ -298,6 +298,7 @@ class PoseStatus:
             self._last_scan_t is not None else 0.0
         lost_share = self.lost_time_s() / span if span > 0 else 0.0
         matched = max(scans / self.pcfg.frontend_every, 1.0)
+        ag = self.agreement
         if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
             # the fixes it did accept were places in another building: no pose of the run is known
             self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
@@ -305,3 +306,11 @@ class PoseStatus:
                 "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
                 f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "
                 f"{100 * lost_share:.0f} % of the run (is it the map of this building, its right version?)", True)
+        elif ag is not None and ag.never_fit():
+            # a front-end that converges anywhere (a particle filter) gave fixes the back-end took, but the scan
+            # lay nowhere near the map's walls at the poses they made: places in another building
+            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: the scan lay on its walls (agreement "
+                f"{ag.MISFIT:.2f} or more) in {ag.judged_checks - ag.misfit_checks} of {ag.judged_checks} checks at "
+                "the fused pose (is it the map of this building, its right version?)", True)

@@ -75,6 +75,31 @@ def test_a_right_initial_pose_with_a_particle_filter_is_taken_at_once(leg):
     assert status[0] == "ok" and "lost" not in status
 
 
+@pytest.mark.parametrize("backend", ["smoother", "ekf"])
+def test_another_buildings_map_with_a_particle_filter_is_said_and_every_pose_lost(leg, backend):
+    """AMCL converges somewhere in any map: on another building's map the smoother took its fixes (829 ok poses
+    up to 20 m off, no map finding).  The scan lies nowhere near that map's walls at the fused poses (agreement
+    0.05 at the median; 0.8 in a changed world): the map-mismatch finding, every pose lost, exit 3."""
+    from fgloc.config import resource
+    from fgloc.maps import load_map
+
+    sim = leg
+    msgs = [(t, m) for t, m in sim.messages if t != "/ground_truth"]
+    other = load_map(str(resource("maps", "willow-2010-02-18-0.10.yaml")))
+    loc = Localizer(other, sim.laser_mount, backend, "amcl", initial_pose=sim.ground_truth.poses[0],
+                    config=load_config())
+    est = Session(loc).run(msgs)
+    (v,) = [v for v in loc.stats["status"]["verdicts"] if v["kind"] == "map_mismatch"]
+    assert v["message"].startswith("this map does not fit this log") and v["unusable"]
+    assert set(loc.monitor.at(est.stamps)[0]) == {"lost"}
+    # the right map: no such finding
+    right = Localizer(sim.map, sim.laser_mount, backend, "amcl", initial_pose=sim.ground_truth.poses[0],
+                      config=load_config())
+    Session(right).run(msgs)
+    assert not [v for v in right.stats["status"]["verdicts"] if v["kind"] == "map_mismatch"]
+    assert right.agreement is not None and right.agreement.misfit_checks == 0
+
+
 @pytest.mark.parametrize("amcl_seed", [0, 3])
 def test_global_localization_marks_the_poses_before_it_converged(leg, amcl_seed):
     """Without --initial-pose AMCL publishes its cloud's mean before it converges: those poses are lost and

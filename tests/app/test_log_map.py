@@ -4,25 +4,15 @@ writes its last message as a map_server map that ``fgloc run --map`` loads."""
 
 from __future__ import annotations
 
-import contextlib
-import io
-
 import numpy as np
 import pytest
 
 from fgloc.maps import FREE, OCCUPIED, UNKNOWN, OccupancyMap, load_map
+from fgloc.testing.cli import run_cli as cli
 from fgloc.types import Odometry
 
 T0 = 1_700_000_000
 
-
-def cli(*args: object) -> tuple[int, str, str]:
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
 
 
 def one_error(err: str) -> str:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 from pathlib import Path
+
+from fgloc.testing.cli import run_cli as fgloc_cli
 
 #: short legs along the paper route's first side, all starting at (2.5, 3.0) heading east
 ROUTES = {"alpha": [[2.5, 3.0], [7.5, 3.0]], "bravo": [[2.5, 3.0], [8.5, 3.0]], "charlie": [[2.5, 3.0], [6.5, 3.0]]}
@@ -12,15 +12,6 @@ START = (2.5, 3.0, 0.0)
 CORRUPT = "delta"
 OUTPUTS = ("trajectory.tum", "online.tum", "fixes.tum", "run.mcap", "config.yaml")
 
-
-def fgloc_cli(*args) -> tuple[int, str, str]:
-    """``fgloc ARGS`` in this process: (exit status, stdout, stderr)."""
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
 
 
 def _differences(outdir: Path, ref: Path, names) -> list[str]:

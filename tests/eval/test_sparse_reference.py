@@ -4,12 +4,10 @@ the table to say so.  ``fgloc eval`` now notes it and the --max-gap that pairs t
 
 from __future__ import annotations
 
-import contextlib
-import io
-
 import numpy as np
 
 from fgloc.eval.checks import gap_note
+from fgloc.testing.cli import run_cli as _eval
 
 
 def _tum(path, stamps, xs) -> None:
@@ -17,14 +15,6 @@ def _tum(path, stamps, xs) -> None:
         for t, x in zip(stamps, xs, strict=True):
             f.write(f"{t:.6f} {x:.6f} 0 0 0 0 0 1\n")
 
-
-def _eval(*args) -> tuple[int, str, str]:
-    from fgloc.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main([str(a) for a in args])
-    return rc, out.getvalue(), err.getvalue()
 
 
 def test_a_sparse_reference_is_noted_with_the_gap_that_pairs(tmp_path):

@@ -132,7 +132,7 @@ _NEES_ROWS: list[tuple[str, str, str, str]] = [
 
 
 def _nees_results(ests: dict[str, Any], read: list[Any], gt: Any, gt_label: str, cov: Path | None,
-                  max_gap: float) -> dict[str, Any]:
+                  max_gap: float, pairs: dict[str, Any]) -> dict[str, Any]:
     """Each estimate's :class:`~fgloc.eval.nees.NeesMetrics`: its poses' covariances from ``cov``, else
     the ``trajectory_status.csv`` beside a TUM file, else the log topic's own."""
     from fgloc.eval.metrics import AssociationError
@@ -150,7 +150,7 @@ def _nees_results(ests: dict[str, Any], read: list[Any], gt: Any, gt_label: str,
             raise LogError(f"{src.label}: no per-pose covariance for --nees (a TUM file needs {STATUS_FILE} beside "
                            "it or --cov FILE; a log topic its messages' covariance)")
         try:
-            out[lab] = evaluate_nees(est, gt, covs, max_gap=max_gap)
+            out[lab] = evaluate_nees(est, gt, covs, max_gap=max_gap, association=pairs[lab])
         except AssociationError as e:
             raise LogError(f"{src.label} vs {gt_label}: {e}") from None
     return out
@@ -308,7 +308,7 @@ def eval_cmd(
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
     from fgloc.eval.checks import end_error, frame_note, gap_note, start_aligned
-    from fgloc.eval.metrics import AssociationError, evaluate
+    from fgloc.eval.metrics import AssociationError, associate, association_metrics
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
 
@@ -326,31 +326,27 @@ def eval_cmd(
     ests = {lab: tr for lab, (tr, _src) in zip(labels, read, strict=True)}
     if t_offset:
         ests = {lab: Trajectory(tr.stamps + t_offset, tr.poses, tr.frame_id) for lab, tr in ests.items()}
-    if align_start:
-        if align:
-            raise ConfigError("fgloc eval: --align or --align-start, not both")
-        for (lab, tr), p in zip(list(ests.items()), est_paths, strict=True):
-            try:
-                ests[lab] = start_aligned(tr, gt, max_gap)
-            except AssociationError as e:
-                raise LogError(f"{p}: --align-start: {e}") from None
+    if align_start and align:
+        raise ConfigError("fgloc eval: --align or --align-start, not both")
     results = {}
+    pairs: dict[str, Any] = {}  # each estimate's association with the reference, made once
     ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
-    for (lab, est), p in zip(ests.items(), est_paths, strict=True):
+    for (lab, est), p in zip(list(ests.items()), est_paths, strict=True):
         try:
-            results[lab] = evaluate(
-                est, gt, max_gap=max_gap, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s
-            )
+            a = associate(est, gt, max_gap=max_gap)
         except AssociationError as e:
-            raise LogError(f"{p} vs {gt_src.label}: {e}") from None
-        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap),
-                 None if align or align_start else frame_note(lab, est, gt, max_gap)]
+            raise LogError(f"{p}{': --align-start' if align_start else ' vs ' + gt_src.label}: {e}") from None
         if align_start:
-            ends[lab] = end_error(est, gt, max_gap)
+            ests[lab], a = start_aligned(est, a)
+            ends[lab] = end_error(a)
+        pairs[lab] = a
+        results[lab] = association_metrics(a, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
+        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap),
+                 None if align or align_start else frame_note(lab, a)]
         for note in notes:
             if note is not None:
                 typer.echo(f"note: {note}", err=True)
-    nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap) if nees else {}
+    nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap, pairs) if nees else {}
 
     written: list[Path] = []
     if plots is not None:

@@ -40,18 +40,13 @@ def gap_note(label: str, stamps: Any, ref_stamps: Any, max_gap: float) -> str | 
     return note
 
 
-def frame_note(label: str, est: Any, gt: Any, max_gap: float) -> str | None:
+def frame_note(label: str, a: Any) -> str | None:
     """A note when an estimate's position errors are mostly one constant offset, or a scale, metres
     large: the estimate and the reference in different frames (a simulator's world frame and the map's,
-    a motion capture's room frame), what ``--align`` (one rigid transform) removes."""
+    a motion capture's room frame), what ``--align`` (one rigid transform) removes.  ``a``: the
+    estimate's :class:`~fgloc.eval.metrics.Association` with the reference."""
     import numpy as np
 
-    from fgloc.eval.metrics import AssociationError, associate
-
-    try:
-        a = associate(est, gt, max_gap=max_gap)
-    except AssociationError:
-        return None
     e = a.est[:, :2] - a.gt[:, :2]
     rms = float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
     mean = e.mean(axis=0)
@@ -83,26 +78,23 @@ def frame_note(label: str, est: Any, gt: Any, max_gap: float) -> str | None:
             "--align-start moves the estimate's start onto the reference's")
 
 
-def start_aligned(est: Any, gt: Any, max_gap: float) -> Any:
+def start_aligned(est: Any, a: Any) -> tuple[Any, Any]:
     """``est`` moved rigidly so that its first pose paired with the reference is the reference's pose
-    there (SE(2)): two trajectories in frames that differ by where each started."""
-    from fgloc.eval.metrics import associate
+    there (SE(2)): two trajectories in frames that differ by where each started.  ``a``: the estimate's
+    :class:`~fgloc.eval.metrics.Association` with the reference; returns the moved estimate and its
+    association (the same pairs: a rigid move keeps the stamps)."""
+    from dataclasses import replace
+
     from fgloc.geometry import compose, inverse
     from fgloc.types import Trajectory
 
-    a = associate(est, gt, max_gap=max_gap)  # AssociationError when nothing pairs
     move = compose(a.gt[0], inverse(a.est[0]))
-    return Trajectory(est.stamps, compose(move, est.poses), est.frame_id)
+    return Trajectory(est.stamps, compose(move, est.poses), est.frame_id), replace(a, est=compose(move, a.est))
 
 
-def end_error(est: Any, gt: Any, max_gap: float) -> float | None:
-    """The distance between the estimate's last pose paired with the reference and the reference there (m)."""
+def end_error(a: Any) -> float:
+    """The distance between the estimate's last pose paired with the reference and the reference there
+    (m); ``a``: their :class:`~fgloc.eval.metrics.Association`."""
     import numpy as np
 
-    from fgloc.eval.metrics import AssociationError, associate
-
-    try:
-        a = associate(est, gt, max_gap=max_gap)
-    except AssociationError:
-        return None
     return float(np.hypot(*(a.est[-1, :2] - a.gt[-1, :2])))

@@ -360,7 +360,17 @@ def evaluate(
     paper evaluates without it.  Raises :class:`AssociationError` on no overlap in time
     or fewer than 2 associated poses.
     """
-    a = associate(est, gt, max_gap=max_gap)
+    return association_metrics(associate(est, gt, max_gap=max_gap), align=align, rpe_delta_m=rpe_delta_m,
+                               rpe_delta_s=rpe_delta_s)
+
+
+def association_metrics(
+    a: Association,
+    align: bool = False,
+    rpe_delta_m: float = DEFAULT_RPE_DELTA_M,
+    rpe_delta_s: float = DEFAULT_RPE_DELTA_S,
+) -> Metrics:
+    """:func:`evaluate` of poses already paired by :func:`associate` (one association, several uses)."""
     if align:
         a = _aligned(a)
     s = _series(a)

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 from numpy.typing import NDArray
 
-from fgloc.eval.metrics import DEFAULT_MAX_GAP_S, associate, nees_summary
+from fgloc.eval.metrics import DEFAULT_MAX_GAP_S, Association, associate, nees_summary
 from fgloc.geometry import YAW, wrap_angle
 from fgloc.types import Trajectory
 
@@ -106,20 +106,22 @@ def nees_metrics(err: FloatArray, cov: FloatArray) -> NeesMetrics:
         position_rmse_m=s["rmse_m"], heading_rmse_deg=s["rmse_deg"])
 
 
-def pose_errors(est: Trajectory, gt: Trajectory, max_gap: float = DEFAULT_MAX_GAP_S
-                ) -> tuple[FloatArray, NDArray[np.int64]]:
+def pose_errors(est: Trajectory, gt: Trajectory, max_gap: float = DEFAULT_MAX_GAP_S,
+                association: Association | None = None) -> tuple[FloatArray, NDArray[np.int64]]:
     """``(err, index)``: the errors ``[ex_m, ey_m, eyaw_rad]`` of the poses of ``est`` the reference
-    ``gt`` covers (see :func:`fgloc.eval.metrics.associate`) and their indices in ``est``."""
-    a = associate(est, gt, max_gap=max_gap, min_poses=1)
+    ``gt`` covers (see :func:`fgloc.eval.metrics.associate`; ``association``: those pairs, already
+    made) and their indices in ``est``."""
+    a = associate(est, gt, max_gap=max_gap, min_poses=1) if association is None else association
     e = a.est - a.gt
     e[:, YAW] = wrap_angle(e[:, YAW])
     return e, a.index
 
 
 def evaluate_nees(est: Trajectory, gt: Trajectory, covs: FloatArray | None = None,
-                  max_gap: float = DEFAULT_MAX_GAP_S) -> NeesMetrics:
+                  max_gap: float = DEFAULT_MAX_GAP_S, association: Association | None = None) -> NeesMetrics:
     """:class:`NeesMetrics` of the poses of ``est`` against the reference ``gt``, each weighed by its
-    covariance: ``covs`` (N x 3 x 3, one per pose of ``est``; NaN: none) or else ``est.covs``.  Raises
+    covariance: ``covs`` (N x 3 x 3, one per pose of ``est``; NaN: none) or else ``est.covs``;
+    ``association``: their pairs when already made by :func:`~fgloc.eval.metrics.associate`.  Raises
     :class:`~fgloc.eval.metrics.AssociationError` when no pose can be paired and ``ValueError``
     when there are no covariances or not one per pose."""
     c = est.covs if covs is None else covs
@@ -128,7 +130,7 @@ def evaluate_nees(est: Trajectory, gt: Trajectory, covs: FloatArray | None = Non
     C = np.asarray(c, dtype=float).reshape(-1, 3, 3)
     if len(C) != len(est):
         raise ValueError(f"{len(C)} covariances for {len(est)} poses")
-    e, idx = pose_errors(est, gt, max_gap=max_gap)
+    e, idx = pose_errors(est, gt, max_gap=max_gap, association=association)
     return nees_metrics(e, C[idx])
 
 

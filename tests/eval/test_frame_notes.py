@@ -11,8 +11,13 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.eval.checks import frame_note
+from fgloc.eval.checks import frame_note as _frame_note
+from fgloc.eval.metrics import associate
 from fgloc.types import Trajectory
+
+
+def frame_note(label: str, est: Trajectory, ref: Trajectory, max_gap: float) -> str | None:
+    return _frame_note(label, associate(est, ref, max_gap=max_gap))
 
 
 def _loop(n: int = 400) -> tuple[np.ndarray, np.ndarray]:

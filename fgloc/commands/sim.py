@@ -69,8 +69,17 @@ def _simulate_and_write(run: Callable[[Callable[[float], None]], Any], label: st
     gt = result.ground_truth
     print(f"{out}: {gt.duration:.1f} s, {gt.path_length():.1f} m, "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
-          + f"; compass offset {float(result.compass_offset_rad) * 57.29577951308232:.2f} deg"
+          + _heading_offset(result)
           + f"; simulated in {t_sim:.1f} s")
+
+
+def _heading_offset(result: Any) -> str:
+    """The simulated heading source's offset from the map's north, as a summary clause ("" without one)."""
+    sc = result.scenario
+    source = "IMU yaw" if sc.get("imu") is not None else "compass" if sc.get("compass") is not None else None
+    if source is None:
+        return ""
+    return f"; {source} offset {float(result.compass_offset_rad) * 57.29577951308232:.2f} deg"
 
 
 @simulate_app.command("paper")

@@ -9,10 +9,10 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from fgloc.io import open_log
+from fgloc.testing import rosmsgs
 from fgloc.types import LaserScan, Odometry
 
 N = 20
@@ -28,29 +28,14 @@ def _write(folder: Path) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    T = ts.types
-    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
-    V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
     with Writer(folder, version=8) as w:
         cs = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
         co = w.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts)
         for i in range(N):
             ns = T0 + i * 50_000_000
-            stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
-            odom = T["nav_msgs/msg/Odometry"](
-                header=Header(stamp=stamp, frame_id="odom"), child_frame_id="base_footprint",
-                pose=T["geometry_msgs/msg/PoseWithCovariance"](
-                    pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.01 * i, y=0.0, z=0.0),
-                                                     orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0)),
-                    covariance=np.zeros(36)),
-                twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=T["geometry_msgs/msg/Twist"](linear=V3(x=0.2, y=0.0, z=0.0), angular=V3(x=0.0, y=0.0, z=0.0)),
-                    covariance=np.zeros(36)))
+            odom = rosmsgs.odometry(ts.types, ns, 0.01 * i)
             w.write(co, ns, ts.serialize_cdr(odom, odom.__msgtype__))
-            scan = T["sensor_msgs/msg/LaserScan"](
-                header=Header(stamp=stamp, frame_id="base_scan"), angle_min=0.0, angle_max=6.26,
-                angle_increment=0.0175, time_increment=0.0, scan_time=0.2, range_min=0.12, range_max=3.5,
-                ranges=np.full(360, 1.0, np.float32), intensities=np.zeros(0, np.float32))
+            scan = rosmsgs.laser_scan(ts.types, ns, 1.0)
             w.write(cs, ns + 1000, ts.serialize_cdr(scan, scan.__msgtype__))
 
 

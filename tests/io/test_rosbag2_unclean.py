@@ -13,11 +13,11 @@ import logging
 import shutil
 import sqlite3
 
-import numpy as np
 import pytest
 
 from fgloc.cli import main
 from fgloc.io import open_log
+from fgloc.testing import rosmsgs
 from fgloc.types import LaserScan, Odometry
 
 N = 20      # scans and odometry messages the database holds
@@ -30,22 +30,10 @@ def _write(folder):
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
-    T = ts.types
-    Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
-    V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
 
     def odom(i):
         ns = T0 + i * 50_000_000
-        return ns, T["nav_msgs/msg/Odometry"](
-            header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="odom"),
-            child_frame_id="base_footprint",
-            pose=T["geometry_msgs/msg/PoseWithCovariance"](
-                pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.01 * i, y=0.0, z=0.0),
-                                                 orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0)),
-                covariance=np.zeros(36)),
-            twist=T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=V3(x=0.2, y=0.0, z=0.0), angular=V3(x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36)))
+        return ns, rosmsgs.odometry(ts.types, ns, 0.01 * i)
 
     with Writer(folder, version=8) as w:
         cs = w.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=ts)
@@ -53,11 +41,7 @@ def _write(folder):
         for i in range(N):
             ns, msg = odom(i)
             w.write(co, ns, ts.serialize_cdr(msg, msg.__msgtype__))
-            scan = T["sensor_msgs/msg/LaserScan"](
-                header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="base_scan"),
-                angle_min=0.0, angle_max=6.26, angle_increment=0.0175, time_increment=0.0, scan_time=0.2,
-                range_min=0.12, range_max=3.5, ranges=np.full(360, 1.0 + 0.01 * i, np.float32),
-                intensities=np.zeros(0, np.float32))
+            scan = rosmsgs.laser_scan(ts.types, ns, 1.0 + 0.01 * i)
             w.write(cs, ns + 1000, ts.serialize_cdr(scan, scan.__msgtype__))
     return [odom(i) for i in range(N, N + EXTRA)], ts
 

@@ -90,6 +90,38 @@ def estimator_output(topic: str) -> bool:
     return len(parts) >= 2 and parts[-2] == "odometry" and last in ("local", "global", "gps")
 
 
+#: name parts of a simulator's or a motion capture's truth published as nav_msgs/Odometry: Gazebo's p3d
+#: plugin (``/ground_truth/state``, ``/ground_truth_odom``, ``/gazebo_odom``), Stage's
+#: ``/base_pose_ground_truth``, ``/odom_gt``, a motion capture's odometry (``/vicon/...``, ``/mocap/...``)
+_TRUTH_PARTS = ("ground_truth", "groundtruth", "gazebo_odom", "odom_gazebo", "mocap", "vicon", "optitrack", "vrpn")
+
+
+def truth_output(topic: str) -> bool:
+    """Whether ``topic`` is named as a simulator's or a motion capture's truth rather than a sensor's:
+    a name part holding ``ground_truth`` (Gazebo's p3d ``/ground_truth/state``, ``/ground_truth_odom``,
+    Stage's ``/base_pose_ground_truth``), ``gazebo_odom``, ``gt`` (``/odom_gt``, ``/gt/odom``,
+    ``/gt_odom``), or a motion capture's name (mocap, vicon, optitrack, vrpn).  A simulated log that
+    recorded the truth beside the wheels has two Odometry topics; the wheels' is the one to fuse, the
+    truth the reference to evaluate against."""
+    for part in resolve_name(topic).strip("/").lower().split("/"):
+        if any(k in part for k in _TRUTH_PARTS):
+            return True
+        words = part.split("_")
+        if "gt" in words or "truth" in words:
+            return True
+    return False
+
+
+def peer_output(topic: str) -> str | None:
+    """What a topic named as no sensor's is: ``"a filter's output"`` (:func:`estimator_output`), ``"a
+    ground truth"`` (:func:`truth_output`), else None."""
+    if estimator_output(topic):
+        return "a filter's output"
+    if truth_output(topic):
+        return "a ground truth"
+    return None
+
+
 def normalize_type(name: str) -> str:
     """``sensor_msgs/LaserScan`` (ROS 1 style) -> ``sensor_msgs/msg/LaserScan``; an alias
     (``tf/tfMessage``) -> the type fgloc reads it as (``TYPE_ALIASES``)."""
@@ -135,8 +167,8 @@ def choose_topics(available: dict[str, str], topics: Topics, path: str | Path) -
             continue  # never guessed
         same = [t for t, ty in available.items()
                 if role_reads(role, ty) and t not in chosen and t not in named]
-        if role == "odom" and len(same) > 1:  # the wheels' odometry beside a filter's output (robot_localization's)
-            same = [t for t in same if not estimator_output(t)]
+        if role == "odom" and len(same) > 1:  # the wheels' odometry beside a filter's output or a ground truth
+            same = [t for t in same if peer_output(t) is None]
         if len(same) == 1:
             log.info("using %s (%s) as the %s topic", same[0], want, role)
             chosen[same[0]] = role
@@ -157,15 +189,23 @@ def pick_topics(src: Any, path: str | Path, wanted: dict[str, tuple[str, bool]])
         if named or src.has(topic) or topic != getattr(default, role) or g is None or g == topic:
             out[role] = topic
             continue
-        others = [t for t, ty in types.items() if t != g and role_reads(role, ty)]
-        if others:  # the others are filters' outputs (choose_topics)
-            log.warning("%s: no %s topic; using %s (%s); the log's other topics of that type are named as filters' "
-                        "outputs (%s), to compare with: fgloc eval OUT/trajectory.tum %s:%s", path, topic, g, types[g],
-                        ", ".join(sorted(others)), path, sorted(others)[0])
+        others = sorted(t for t, ty in types.items() if t != g and role_reads(role, ty))
+        if others:  # the others are filters' outputs or ground truths (choose_topics)
+            kinds = sorted({str(peer_output(t)) for t in others})
+            named_as = ("filters' outputs" if kinds == ["a filter's output"] else
+                        "ground truths" if kinds == ["a ground truth"] else "filters' outputs or ground truths")
+            ref = next((t for t in others if truth_output(t)), others[0])
+            log.warning("%s: no %s topic; using %s (%s); the log's other topics of that type are named as %s "
+                        "(%s), to compare with: fgloc eval OUT/trajectory.tum %s:%s%s", path, topic, g, types[g],
+                        named_as, ", ".join(others), path, ref, " --align-start" if truth_output(ref) else "")
         elif estimator_output(g):
             log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type, named as a filter's "
                         "output (robot_localization's?): an estimate that may hold the IMU already, not the wheels' "
                         "own odometry", path, topic, g, types[g])
+        elif truth_output(g):
+            log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type, named as a ground "
+                        "truth (a simulator's or a motion capture's): not the wheels' own odometry, an error-free "
+                        "motion", path, topic, g, types[g])
         else:
             log.warning("%s: no %s topic; using %s (%s), the log's only topic of that type", path, topic, g, types[g])
         out[role] = g

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.io.topics import ODOMETRY, Topics, choose_topics, estimator_output
+from fgloc.io.topics import ODOMETRY, Topics, choose_topics, estimator_output, peer_output, truth_output
 
 T0 = 1_700_000_000
 N = 200  # 10 s at 20 Hz
@@ -94,3 +94,44 @@ def test_a_filter_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog):
     tr, said = _run(log, tmp_path / "o", caplog)
     assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5  # it drove on the filter's odometry
     assert "using /odometry/filtered" in said and "named as a filter's output" in said
+
+
+@pytest.mark.parametrize("topic", ["/gazebo_odom", "/ground_truth/state", "/base_pose_ground_truth",
+                                   "/ground_truth_odom", "/odom_gt", "/gt/odom", "/vicon/jackal/odom",
+                                   "/mocap_node/robot/odom", "/odom/truth"])
+def test_ground_truths_by_name(topic):
+    assert truth_output(topic) and peer_output(topic) == "a ground truth"
+
+
+@pytest.mark.parametrize("topic", ["/odom", "/wheel/odometry", "/husky_velocity_controller/odom",
+                                   "/elektron/mobile_base_controller/odom", "/rf2o/odom", "/t265/odom/sample",
+                                   "/tgt_odom", "/odometry/filtered"])
+def test_sensor_or_filter_odometry_is_no_truth(topic):
+    assert not truth_output(topic)
+
+
+def test_the_wheels_are_chosen_beside_a_ground_truth():
+    """A simulated log with the simulator's truth beside the wheels (Gazebo's p3d plugin, as a course's
+    Elektron bags record /gazebo_odom beside /elektron/mobile_base_controller/odom)."""
+    sim = {"/elektron/mobile_base_controller/odom": ODOMETRY, "/gazebo_odom": ODOMETRY}
+    assert choose_topics(sim, Topics(), "x.bag") == {"/elektron/mobile_base_controller/odom": "odom"}
+    three = {"/wheel/odom": ODOMETRY, "/ground_truth/state": ODOMETRY, "/odometry/filtered": ODOMETRY}
+    assert choose_topics(three, Topics(), "x.bag") == {"/wheel/odom": "odom"}
+
+
+def test_run_fuses_the_wheels_and_names_the_ground_truth(tmp_path, caplog):
+    log = tmp_path / "sim.bag"
+    _write(log, {"/mobile_base_controller/odom": (1.0, 0.0), "/gazebo_odom": (0.0, 1.0)})
+    tr, said = _run(log, tmp_path / "o", caplog)
+    end = tr[-1, 1:3]
+    assert end[0] > 4.5 and abs(end[1]) < 0.05, end  # along x, as the wheels went (the truth's copy went along y)
+    assert "using /mobile_base_controller/odom" in said and "named as ground truths (/gazebo_odom)" in said
+    assert f"fgloc eval OUT/trajectory.tum {log}:/gazebo_odom --align-start" in said
+
+
+def test_a_ground_truth_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog):
+    log = tmp_path / "truth_only.bag"
+    _write(log, {"/ground_truth/state": (0.0, 1.0)})
+    tr, said = _run(log, tmp_path / "o", caplog)
+    assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5
+    assert "using /ground_truth/state" in said and "named as a ground truth" in said

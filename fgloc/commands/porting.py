@@ -1,9 +1,10 @@
-"""``fgloc config from-robot-localization`` / ``fgloc config from-nav2``: port a ROS parameter file.
+"""``fgloc config from-robot-localization`` / ``from-fuse`` / ``from-nav2``: port a ROS parameter file.
 
 Usage::
 
     fgloc config from-robot-localization ekf.yaml -o fgloc.yaml [--node ekf_filter_node]
     fgloc config from-robot-localization robot.launch -o fgloc.yaml   # ROS 1 launch XML: + its static tfs
+    fgloc config from-fuse fuse_params.yaml -o fgloc.yaml
     fgloc config from-nav2 nav2_params.yaml -o fgloc.yaml
 
 The converted config is checked (``fgloc.config.parse_config``) and written with one comment
@@ -19,12 +20,14 @@ import typer
 
 
 def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[str, Any], list[str], str]:
-    """``(config sections, notes, YAML text)`` of a robot_localization (``kind='rl'``) or nav2 file."""
+    """``(config sections, notes, YAML text)`` of a robot_localization (``kind='rl'``), fuse (``'fuse'``)
+    or nav2 file."""
     import yaml
 
     from fgloc.config import parse_config
     from fgloc.config.loader import read_yaml
-    from fgloc.porting import from_nav2, from_robot_localization
+    from fgloc.errors import ConfigError
+    from fgloc.porting import from_fuse, from_nav2, from_robot_localization
     from fgloc.porting.launch import is_launch_xml, read_launch
 
     tfs: list[dict[str, Any]] = []
@@ -34,19 +37,39 @@ def convert_file(kind: str, path: Path, node: str | None = None) -> tuple[dict[s
         data, tfs, launch_notes = read_launch(path, text)
     else:
         data = read_yaml(path)
-    conv = from_robot_localization if kind == "rl" else from_nav2
-    cfg, notes = conv(data, node=node, source=str(path))
+    conv = {"rl": from_robot_localization, "fuse": from_fuse}.get(kind, from_nav2)
+    try:
+        cfg, notes = conv(data, node=node, source=str(path))
+    except ConfigError:
+        if kind == "fuse" or not _is_fuse(data):
+            raise
+        raise ConfigError(f"{path}: a fuse configuration (fuse_optimizers' sensor_models), not "
+                          f"{'robot_localization' if kind == 'rl' else 'nav2 amcl'}'s: fgloc config from-fuse "
+                          f"{path} converts it") from None
     notes += launch_notes
     if tfs:  # static_transform_publisher mounts: the logs recorded with this launch file lack them
         cfg.setdefault("sources", {})["static_transforms"] = tfs
     parse_config(cfg, source=f"{path} (converted)")  # every value must be a valid fgloc setting
-    what = "robot_localization" if kind == "rl" else "nav2 amcl"
+    what = {"rl": "robot_localization", "fuse": "fuse"}.get(kind, "nav2 amcl")
     head = [f"fgloc config converted from {what} parameters: {path.name}"]
     head += [f"WARNING: {w}" for w in conversion_warnings(kind, cfg)]
     head += usage_notes(cfg)
     head += [f"not carried over: {n}" for n in notes]
     text = "\n".join(f"# {line}" for line in head) + "\n" + (yaml.safe_dump(cfg, sort_keys=False) if cfg else "{}\n")
     return cfg, notes, text
+
+
+def _is_fuse(data: Any) -> bool:
+    """Whether a parameter file holds a fuse optimizer's parameters (another converter's input)."""
+    from fgloc.errors import ConfigError
+    from fgloc.porting.common import find_params
+    from fgloc.porting.fuse import looks_like_fuse
+
+    try:
+        find_params(data, looks_like_fuse)
+    except ConfigError:
+        return False
+    return True
 
 
 def _used(cfg: dict[str, Any]) -> set[str]:
@@ -62,7 +85,7 @@ def _moves(cfg: dict[str, Any]) -> bool:
 
 def conversion_warnings(kind: str, cfg: dict[str, Any]) -> list[str]:
     """What the converted config cannot do that the ROS node did: no source of heading left."""
-    if kind != "rl":
+    if kind not in ("rl", "fuse"):
         return []
     inputs = ((cfg.get("sources") or {}).get("inputs") or {}).values()
     used = _used(cfg)
@@ -90,7 +113,7 @@ def _write(kind: str, path: Path, output: Path | None, node: str | None, force: 
     cfg, notes, text = convert_file(kind, path, node)
     for n in notes:
         print(f"not carried over: {n}")
-    if kind == "rl" and not _moves(cfg):  # nothing written: a config that cannot move the robot
+    if kind in ("rl", "fuse") and not _moves(cfg):  # nothing written: a config that cannot move the robot
         why = [n for n in notes if "skipped" in n or "did you mean" in n or "not read by fgloc" in n]
         raise ConfigError(f"{path}: the converted config has no source of motion (no input fgloc reads gives x, y, "
                           "vx or vy)" + (f": {why[0]}" if why else "")
@@ -122,6 +145,17 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Convert robot_localization parameters into an fgloc config (sources, noise, start)."""
         _write("rl", params, output, node, force)
+
+    @group.command("from-fuse")
+    def from_fuse_cmd(
+        params: Path = typer.Argument(..., help="fuse parameter YAML (ROS 1 or ROS 2): a fixed-lag smoother's "
+                                      "sensor_models, motion_models and publishers"),
+        output: Path | None = typer.Option(None, "-o", "--output", help="fgloc config to write (default: print)"),
+        node: str | None = typer.Option(None, "--node", help="which optimizer node, when the file has several"),
+        force: bool = typer.Option(False, "--force", help="overwrite an existing file"),
+    ) -> None:
+        """Convert fuse (fuse_models) parameters into an fgloc config (sources, noise, start)."""
+        _write("fuse", params, output, node, force)
 
     @group.command("from-nav2")
     def from_nav2_cmd(

@@ -257,6 +257,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         req = dataclasses.replace(req, map_yaml=map_file(req.map_yaml))
     config = _effective_config(req)
     inputs = _open_inputs(req, config)
+    config = _with_tilted_imu_mounts(config, inputs)
     session, mirror_scans = _build_session(req, config, inputs)
     with inputs.outputs as outs:
         loop = _localize(req, outs.dir, session, inputs, mirror_scans, t_start, progress, announce)
@@ -293,6 +294,25 @@ class _Inputs:
         not only the first of each."""
         t = self.topics
         return {x for x in (t.scan, t.odom, t.imu, t.tf_static, *self.sources) if self.reader.has(x)}
+
+
+def _with_tilted_imu_mounts(config: FglocConfig, inputs: _Inputs) -> FglocConfig:
+    """``config`` with a mount for each IMU frame the log and the config leave unmounted while its
+    readings show it tilted on the robot (:mod:`fgloc.app.imutilt`); the same config otherwise."""
+    import dataclasses
+
+    from fgloc.app.imutilt import tilted_imu_mounts
+
+    t = inputs.topics
+    imus = [x for x in (t.imu, *(x for x, k in inputs.sources.items() if k == "imu")) if inputs.reader.has(x)]
+    if not imus:
+        return config
+    entries = tilted_imu_mounts(inputs.reader, imus, config.sources.static_transforms, config.sources.base_frame,
+                                inputs.log)
+    if not entries:
+        return config
+    sources = dataclasses.replace(config.sources, static_transforms=[*config.sources.static_transforms, *entries])
+    return dataclasses.replace(config, sources=sources)
 
 
 def _effective_config(req: RunRequest) -> FglocConfig:

@@ -1,0 +1,140 @@
+"""An IMU whose mount the log lacks and whose own readings say it is not level on the robot.
+
+A log without ``/tf_static`` (fuse's TurtleBot3 tutorial bag, a driver's own recording) leaves the
+IMU unmounted: its axes are taken as the robot's.  For an IMU mounted upside down or on its side
+(robot_localization's Husky test bags: rolled 90 deg) that makes its yaw rate the wrong axis, or the
+wrong sign, and the run a wrong answer with every pose ``ok``.  Gravity says where the robot's up is in
+the sensor's frame: the IMU's orientation (the world's z axis in the sensor's axes) or, without one,
+its accelerometer (at rest and on average, the reaction to gravity points up).  When the median of
+those over the log's first messages lies more than :data:`TILT_DEG` from the sensor's z axis (no
+ground robot drives on such a slope; :mod:`fgloc.localization.sources` levels the odometry only
+below it), the rotation that brings it onto z is used as the IMU's mount, and said.  The mount's
+turn about the vertical stays unknown: it does not move the yaw rate, and the IMU's heading offset
+is estimated anyway.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+#: deg: a median up direction further than this from the sensor's z axis is a mount, not a slope
+TILT_DEG = 30.0
+#: IMU messages read to find the up direction
+N_MESSAGES = 400
+#: tf messages read to find the log's own mount (as the laser's lookup does)
+N_TF = 2000
+
+
+def up_direction(messages: list[Any]) -> Any:
+    """The median (normalised) up direction in the sensor's frame of ``messages``
+    (:class:`~fgloc.types.Imu`): from their orientation where they carry one, else from their linear
+    acceleration; None when neither gives one."""
+    import numpy as np
+
+    from fgloc.geometry import quaternion_matrix
+
+    ups = []
+    for m in messages:
+        q = getattr(m, "orientation_xyzw", None)
+        if q is None:
+            continue
+        qa = np.asarray(q, dtype=float).reshape(-1)
+        n = float(np.linalg.norm(qa)) if qa.shape == (4,) else 0.0
+        if math.isfinite(n) and abs(n - 1.0) < 0.1:
+            r = np.array(quaternion_matrix(*(qa / n))).reshape(3, 3)  # sensor -> world
+            ups.append(r[2, :])  # the world's z axis in the sensor's axes
+    if len(ups) < max(3, len(messages) // 2):
+        ups = []
+        for m in messages:
+            a = getattr(m, "linear_acceleration_mps2", None)
+            if a is None:
+                continue
+            v = np.asarray(a, dtype=float).reshape(-1)
+            n = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
+            if math.isfinite(n) and 5.0 < n < 15.0:  # about g: a reading, not zeros or a shock
+                ups.append(v / n)
+    if len(ups) < 3:
+        return None
+    med = np.median(np.asarray(ups), axis=0)
+    n = float(np.linalg.norm(med))
+    return med / n if n > 1e-6 else None
+
+
+def levelling_quaternion(up: Any) -> list[float]:
+    """``[qx, qy, qz, qw]`` of the smallest rotation taking the sensor's ``up`` onto z (the mount
+    ``base -> sensor``: a vector in the sensor's axes turned into the base's); upside down (up along
+    -z): a roll of 180 deg."""
+    import numpy as np
+
+    u = np.asarray(up, dtype=float)
+    axis = np.cross(u, [0.0, 0.0, 1.0])
+    s, c = float(np.linalg.norm(axis)), float(u[2])
+    if s < 1e-9:
+        return [0.0, 0.0, 0.0, 1.0] if c > 0 else [1.0, 0.0, 0.0, 0.0]
+    angle = math.atan2(s, c)
+    k = axis / s * math.sin(angle / 2)
+    return [float(k[0]), float(k[1]), float(k[2]), math.cos(angle / 2)]
+
+
+def tilted_imu_mounts(reader: Any, imu_topics: list[str], configured: list[dict], base_frame: str,
+                      path: Any) -> list[dict[str, Any]]:
+    """``sources.static_transforms`` entries for the IMU topics whose frame neither the config nor the
+    log's tf mounts and whose readings are tilted more than :data:`TILT_DEG` (see the module), each
+    said in a warning; ``[]`` for the others."""
+    import logging
+
+    import numpy as np
+
+    from fgloc.frames.mounts import OWN_FRAMES, MountTable
+    from fgloc.frames.static import parse_static_transforms
+    from fgloc.frames.tf import frame_name
+
+    log = logging.getLogger("fgloc.app.run")
+    firsts: dict[str, list[Any]] = {}
+    for t in dict.fromkeys(imu_topics):
+        if not reader.has(t):
+            continue
+        msgs = []
+        for _topic, m in reader.messages([t]):
+            msgs.append(m)
+            if len(msgs) >= N_MESSAGES:
+                break
+        frame = frame_name(str(getattr(msgs[0], "frame_id", "") or "")) if msgs else ""
+        if frame and frame not in OWN_FRAMES and frame != base_frame and frame not in firsts:
+            firsts[frame] = msgs
+    if not firsts:
+        return []
+    table = MountTable(parse_static_transforms(configured), base_frame)
+    tf_topics = [t for t in (reader.topics.tf_static, reader.topics.tf) if reader.has(t)]
+    for t in tf_topics:
+        for n, (_topic, m) in enumerate(reader.messages([t])):
+            table.add_tf(m)
+            if n >= N_TF:
+                break
+    out = []
+    for frame, msgs in firsts.items():
+        if table.chain(frame) is not None:
+            continue
+        up = up_direction(msgs)
+        if up is None:
+            continue
+        tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(up[2])))))
+        if tilt <= TILT_DEG:
+            continue
+        q = levelling_quaternion(up)
+        parent = base_frame or "base_link"
+        out.append({"parent": parent, "child": frame, "xyz": [0.0, 0.0, 0.0], "xyzw": q})
+        roll, pitch = (round(math.degrees(v)) + 0 for v in _roll_pitch(np.asarray(q)))
+        log.warning("%s: no mount of the IMU frame %s in the log, and its readings put the robot's up %.0f deg from "
+                    "its z axis (not a slope: a sensor mounted %s): used mounted rolled %.0f deg, pitched %.0f deg "
+                    "(give the mount to override: --static-transform %s %s X Y Z ROLL PITCH YAW)", path, frame, tilt,
+                    "upside down" if tilt > 150 else "on its side", roll, pitch, parent, frame)
+    return out
+
+
+def _roll_pitch(q: Any) -> tuple[float, float]:
+    x, y, z, w = (float(v) for v in q)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+    return roll, pitch

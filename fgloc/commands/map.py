@@ -38,6 +38,31 @@ class _Bar:
         self.bar.refresh()
 
 
+def _is_run_config(opts: dict) -> bool:
+    """Whether a ``--config`` file is an fgloc run's config (``fgloc run --config``): sections of
+    :class:`~fgloc.config.FglocConfig` at its top."""
+    import dataclasses
+
+    from fgloc.config import FglocConfig
+
+    return bool(set(opts) & {f.name for f in dataclasses.fields(FglocConfig)})
+
+
+def _with_run_config_mounts(config: Path, opts: dict, transforms: list) -> list:
+    """The mounts for the mapper: a run config's ``sources.static_transforms`` (the same file
+    ``fgloc run --config`` reads), under the command line's ``--static-transform`` of the same frame."""
+    if not _is_run_config(opts):
+        return transforms
+    from fgloc.frames.static import parse_static_transforms
+    from fgloc.frames.tf import frame_name
+
+    entries = (opts.get("sources") or {}).get("static_transforms") or []
+    given = {frame_name(t.child) for t in transforms}
+    mine = [t for t in parse_static_transforms(entries, source=f"{config}: sources.static_transforms")
+            if frame_name(t.child) not in given]
+    return [*mine, *transforms]
+
+
 def _bars(quiet: bool):
     """``(bars, factory)``: one tqdm bar per stage (mapping, self-check / map-check) with its total, on
     a terminal only (a pipe or a log file gets no carriage-return lines)."""
@@ -102,7 +127,8 @@ def map_cmd(
             raise ConfigError(f"{config}: cannot read mapping config ({e.__class__.__name__})") from None
         if not isinstance(opts, dict):
             raise ConfigError(f"{config}: mapping config must be a mapping")
-        opts = opts.get("mapping", opts)
+        transforms = _with_run_config_mounts(config, opts, transforms)
+        opts = opts.get("mapping", {} if _is_run_config(opts) else opts)
     opts["resolution"] = resolution
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")

@@ -127,8 +127,9 @@ def tilted_imu_mounts(reader: Any, imu_topics: list[str], configured: list[dict]
         out.append({"parent": parent, "child": frame, "xyz": [0.0, 0.0, 0.0], "xyzw": q})
         roll, pitch = (round(math.degrees(v)) + 0 for v in _roll_pitch(np.asarray(q)))
         log.warning("%s: no mount of the IMU frame %s in the log, and its readings put the robot's up %.0f deg from "
-                    "its z axis (not a slope: a sensor mounted %s): used mounted rolled %.0f deg, pitched %.0f deg "
-                    "(give the mount to override: --static-transform %s %s X Y Z ROLL PITCH YAW)", path, frame, tilt,
+                    "its z axis (not a slope: a sensor mounted %s): used mounted rolled %.0f deg, pitched %.0f deg; "
+                    "its turn about the vertical is unknown, so the run's heading may be off by a constant (give "
+                    "the mount to override: --static-transform %s %s X Y Z ROLL PITCH YAW)", path, frame, tilt,
                     "upside down" if tilt > 150 else "on its side", roll, pitch, parent, frame)
     return out
 

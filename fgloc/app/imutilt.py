@@ -29,34 +29,40 @@ N_TF = 2000
 def up_direction(messages: list[Any]) -> Any:
     """The median (normalised) up direction in the sensor's frame of ``messages``
     (:class:`~fgloc.types.Imu`): from their orientation where they carry one, else from their linear
-    acceleration; None when neither gives one."""
+    acceleration; None when neither gives one, or when the two disagree by more than
+    :data:`TILT_DEG` (an orientation referenced to another world frame than the axes it rotates, NED
+    over FLU: no telling which is the sensor's)."""
     import numpy as np
 
     from fgloc.geometry import quaternion_matrix
 
-    ups = []
+    by_orientation, by_gravity = [], []
     for m in messages:
         q = getattr(m, "orientation_xyzw", None)
-        if q is None:
-            continue
-        qa = np.asarray(q, dtype=float).reshape(-1)
-        n = float(np.linalg.norm(qa)) if qa.shape == (4,) else 0.0
-        if math.isfinite(n) and abs(n - 1.0) < 0.1:
-            r = np.array(quaternion_matrix(*(qa / n))).reshape(3, 3)  # sensor -> world
-            ups.append(r[2, :])  # the world's z axis in the sensor's axes
-    if len(ups) < max(3, len(messages) // 2):
-        ups = []
-        for m in messages:
-            a = getattr(m, "linear_acceleration_mps2", None)
-            if a is None:
-                continue
+        if q is not None:
+            qa = np.asarray(q, dtype=float).reshape(-1)
+            n = float(np.linalg.norm(qa)) if qa.shape == (4,) else 0.0
+            if math.isfinite(n) and abs(n - 1.0) < 0.1:
+                r = np.array(quaternion_matrix(*(qa / n))).reshape(3, 3)  # sensor -> world
+                by_orientation.append(r[2, :])  # the world's z axis in the sensor's axes
+        a = getattr(m, "linear_acceleration_mps2", None)
+        if a is not None:
             v = np.asarray(a, dtype=float).reshape(-1)
             n = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
             if math.isfinite(n) and 5.0 < n < 15.0:  # about g: a reading, not zeros or a shock
-                ups.append(v / n)
-    if len(ups) < 3:
+                by_gravity.append(v / n)
+    ups = [_median_unit(u) for u in (by_orientation, by_gravity)
+           if len(u) >= max(3, len(messages) // 2)]
+    ups = [u for u in ups if u is not None]
+    if len(ups) == 2 and float(ups[0] @ ups[1]) < math.cos(math.radians(TILT_DEG)):
         return None
-    med = np.median(np.asarray(ups), axis=0)
+    return ups[0] if ups else None
+
+
+def _median_unit(vectors: list[Any]) -> Any:
+    import numpy as np
+
+    med = np.median(np.asarray(vectors), axis=0)
     n = float(np.linalg.norm(med))
     return med / n if n > 1e-6 else None
 

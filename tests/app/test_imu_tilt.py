@@ -133,3 +133,13 @@ def test_a_mount_in_the_log_or_a_level_imu_is_left_alone(tmp_path, caplog):
         caplog.clear()
         _tr, said = _run(tmp_path / name, tmp_path / name.replace(".bag", ""), caplog)
         assert "no mount of the IMU frame" not in said
+
+
+def test_an_orientation_that_disagrees_with_gravity_is_no_mount():
+    """NED orientation over FLU axes (the accelerometer says up is +z, the orientation -z): no telling
+    which is the sensor's, so no mount is guessed."""
+    from scipy.spatial.transform import Rotation
+
+    msgs = [Imu(0.0, (Rotation.from_euler("z", y) * _rot((180, 0, 0))).as_quat(), np.zeros(3),
+                linear_acceleration_mps2=np.array([0.0, 0.0, 9.81])) for y in np.linspace(0.0, 1.0, 10)]
+    assert up_direction(msgs) is None

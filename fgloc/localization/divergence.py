@@ -22,6 +22,18 @@ drove is judged.  Beyond the odometry's newest stamp (odometry late, stalled or 
 carries its own velocity on: the path length stays, the covariance it reports grows with its
 extrapolation and is the allowance.
 
+The map's placements against the odometry: a map that does not fit.  Every pose the map put the
+back-end at (a fix it took, a relocalization) is a placement; between two, the odometry says how the
+robot moved.  :class:`MapJumps` compares the placements' change with it: the position change against the
+odometry's displacement turned onto the earlier placement's heading (a wheel odometry's distance is
+good to a few % ...), the heading change against the odometry's turn (... its turn less so: a skid
+steer's wheels report 1.4-2.5 times the true one).  A change beyond what a slipping, scrubbing
+odometry explains is a jump the wheels did not drive.  A kidnapping makes one; a map that is not this
+building's geometry (mirrored, at the wrong scale, another building) makes them again and again:
+each relocalization lands somewhere else, or turns the robot where its wheels went straight.  Two
+within :attr:`MapJumps.WINDOW_S` of each other is no kidnapping (nobody carries a robot twice in a minute),
+and no rare bad relocalization of a long run either.
+
 Core maths only: no I/O.
 """
 
@@ -89,4 +101,74 @@ class PathDivergence:
         return self.diverged
 
 
-__all__ = ["PathDivergence"]
+class MapJumps:
+    """The map's placements against the odometry's motion between them (module docstring): :meth:`place` at
+    every pose the map put the back-end at, :meth:`odometry` at every pose (the odometry's pose then, for its
+    path length and turn); :attr:`events` the jumps the odometry does not explain."""
+
+    #: a jump: the position off the odometry's displacement by more than ``slip`` of its path (the jump gate's
+    #: ``integrity.odometry_slip``: a wheel odometry's distance is good to a few %) plus this (m) ...
+    MIN_M = 2.0
+    #: ... or the heading off the odometry's turn by more than TURN_SLIP of its turns plus MIN_RAD
+    TURN_SLIP = 1.5  # a skid steer's wheels report up to 2.5 times the turn
+    MIN_RAD = math.radians(45.0)
+    WINDOW_S = 60.0  # two jumps this close (log s): the map does not fit (:attr:`repeated`)
+
+    def __init__(self, slip: float) -> None:
+        self.slip = float(slip)
+        self._last: tuple[float, FloatArray, FloatArray] | None = None  # (t, placed pose, odometry pose) then
+        self._odom: FloatArray | None = None  # the odometry's pose at the last step
+        self.path_m = 0.0  # the odometry's path length and its turns' sum, either way (rad), since the last placement
+        self.turned_rad = 0.0
+        self.events = 0
+        #: the largest jump: (t, m off the odometry's displacement, rad off its turn, m driven)
+        self.worst: tuple[float, float, float, float] | None = None
+        self._jump_t: float | None = None  # the last jump's stamp
+        #: the shortest time between two jumps (s; None before the second)
+        self.closest_s: float | None = None
+
+    @property
+    def repeated(self) -> bool:
+        """Two jumps within :data:`WINDOW_S`: the map keeps putting the robot where its odometry did not go."""
+        return self.closest_s is not None and self.closest_s <= self.WINDOW_S
+
+    def odometry(self, odom_pose: FloatArray) -> None:
+        o = np.asarray(odom_pose, dtype=float)
+        if self._odom is not None:
+            self.path_m += math.hypot(float(o[0] - self._odom[0]), float(o[1] - self._odom[1]))
+            self.turned_rad += abs(math.remainder(float(o[2] - self._odom[2]), math.tau))
+        self._odom = o.copy()
+
+    def place(self, t: float, pose: FloatArray, odom_pose: FloatArray) -> bool:
+        """The map put the back-end at ``pose`` at ``t`` (the odometry's pose then: ``odom_pose``); whether
+        that was a jump from the last placement the odometry does not explain."""
+        self.odometry(odom_pose)
+        p = np.asarray(pose, dtype=float).copy()
+        o = np.asarray(odom_pose, dtype=float).copy()
+        last, self._last = self._last, (float(t), p, o)
+        path, turned = self.path_m, self.turned_rad
+        self.path_m = self.turned_rad = 0.0
+        if last is None:
+            return False
+        _, p0, o0 = last
+        dx, dy = float(o[0] - o0[0]), float(o[1] - o0[1])
+        c, s = math.cos(float(o0[2])), math.sin(float(o0[2]))
+        bx, by = c * dx + s * dy, -s * dx + c * dy  # the odometry's displacement in its own body frame then
+        c, s = math.cos(float(p0[2])), math.sin(float(p0[2]))
+        ex = float(p[0] - p0[0]) - (c * bx - s * by)
+        ey = float(p[1] - p0[1]) - (s * bx + c * by)
+        e_m = math.hypot(ex, ey)
+        e_rad = abs(math.remainder(float(p[2] - p0[2]) - float(o[2] - o0[2]), math.tau))
+        if e_m <= self.slip * path + self.MIN_M and e_rad <= self.TURN_SLIP * turned + self.MIN_RAD:
+            return False
+        self.events += 1
+        if self._jump_t is not None:
+            gap = float(t) - self._jump_t
+            self.closest_s = gap if self.closest_s is None else min(self.closest_s, gap)
+        self._jump_t = float(t)
+        if self.worst is None or e_m > self.worst[1]:
+            self.worst = (float(t), e_m, e_rad, path)
+        return True
+
+
+__all__ = ["MapJumps", "PathDivergence"]

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.localization.divergence import PathDivergence
+from fgloc.localization.divergence import MapJumps, PathDivergence
 from fgloc.localization.gate import agreement_sigma
 from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning, MapAgreement
 
@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from fgloc.localization.monitor import IntegrityConfig
     from fgloc.localization.odometry import OdometryTracker
     from fgloc.maps import OccupancyMap
+    from fgloc.types import PoseFix
 
 #: the map does not fit the log: lost at least this share of the run, and fixes accepted on fewer than
 #: this share of the scans matched (a right map with a wrong start relocalizes and tracks; a building
@@ -54,6 +55,9 @@ class PoseStatus:
     map: OccupancyMap | None
     #: the fused path against the odometry's since the last fix taken (divergence.py; made at the first pose)
     path_divergence: PathDivergence | None = None
+    #: the map's placements against the odometry's motion between them (divergence.py; made at the first pose)
+    map_jumps: MapJumps | None = None
+    fixes: list[PoseFix]
     _divergence: tuple[float, float, float] | None
     _worst_divergence: tuple[float, float, float, float, float] | None
     _divergence_t: float
@@ -113,6 +117,7 @@ class PoseStatus:
 
     def _record_status(self, t: float) -> None:
         """The status of the pose at scan stamp ``t`` (monitor.py)."""
+        self._map_placement(t)
         status, why = self.pose_status(t)
         self.monitor.record(t, status, why)
 
@@ -136,6 +141,10 @@ class PoseStatus:
         if not self._converged:
             return LOST, "not converged: the start pose is not confirmed by the map yet"
         since = t - (self._t_used if self._t_used is not None else t)
+        mj = self.map_jumps
+        if mj is not None and mj.repeated:
+            return SUSPECT, (f"the map does not fit: it put the robot {mj.events} times where its odometry did not "
+                             "take it")
         div = self._path_diverged(t)
         if div is not None:
             d, path, s = div
@@ -160,6 +169,29 @@ class PoseStatus:
         if since >= self.icfg.degraded_after_s:
             return DEGRADED, f"dead reckoning for {since:.1f} s: {self.last_reason or 'no fix'}"
         return OK, ""
+
+    def _map_placement(self, t: float) -> None:
+        """The pose at ``t`` against the odometry (divergence.py :class:`MapJumps`): a placement when the back-end
+        took a fix or was (re)started on one at ``t``."""
+        if self.map is None or self.odom_mode or self.stats["odometry"] == 0:
+            return
+        mj = self.map_jumps
+        if mj is None:
+            mj = self.map_jumps = MapJumps(self.icfg.odometry_slip)
+        odom = self.odom.pose_at(t)
+        if self._t_used is None or self._t_used != t:
+            mj.odometry(odom)
+            return
+        pose: FloatArray | None = None
+        if self._t_started != t and self.fixes and self.fixes[-1].stamp == t:
+            pose = self.fixes[-1].pose
+        else:
+            cur = self.backend.current(covariance=False)
+            pose = None if cur is None else cur[1]
+        if pose is None:
+            mj.odometry(odom)
+        else:
+            mj.place(t, pose, odom)
 
     def _path_diverged(self, t: float) -> tuple[float, float, float] | None:
         """The fused pose at ``t`` further from the last fix the back-end took than the odometry drove since
@@ -299,6 +331,7 @@ class PoseStatus:
         lost_share = self.lost_time_s() / span if span > 0 else 0.0
         matched = max(scans / self.pcfg.frontend_every, 1.0)
         ag = self.agreement
+        mj = self.map_jumps
         if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
             # the fixes it did accept were places in another building: no pose of the run is known
             self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
@@ -314,3 +347,15 @@ class PoseStatus:
                 "map_mismatch", f"this map does not fit this log: the scan lay on its walls (agreement "
                 f"{ag.MISFIT:.2f} or more) in {ag.judged_checks - ag.misfit_checks} of {ag.judged_checks} checks at "
                 "the fused pose (is it the map of this building, its right version?)", True)
+        elif mj is not None and mj.repeated and mj.worst is not None and mj.closest_s is not None:
+            # a kidnapping moves the robot once; a map whose geometry is not the building's (mirrored, at another
+            # scale, another building) relocalizes it again and again, or turns it where its wheels went straight
+            tj, e_m, e_rad, path = mj.worst
+            into = tj - (self._first_scan_t if self._first_scan_t is not None else tj)
+            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: it put the robot {mj.events} times where its "
+                f"odometry did not take it, two of them {mj.closest_s:.1f} s apart (a kidnapping does it once; worst "
+                f"{e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s into the run, "
+                f"{path:.1f} m driven since the placement before) (is it the map of this building, its right "
+                "version, at its scale?)", True)

@@ -99,3 +99,6 @@ def test_amcl_and_the_smoother_recover_from_a_kidnapping(kidnapped):
     bad = np.nonzero(after & (on_err >= 0.2))[0]
     assert len(bad) and bad[-1] + 1 < len(on.stamps)
     assert float(on.stamps[bad[-1] + 1]) - 6.0 < 5.0  # recovered (the online pose within 0.2 m for good)
+    # one placement the odometry did not drive to: a kidnapping, not a map that does not fit
+    assert loc.map_jumps is not None and loc.map_jumps.events == 1
+    assert not [v for v in loc.stats["status"]["verdicts"] if v["kind"] == "map_mismatch"]

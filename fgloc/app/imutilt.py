@@ -84,10 +84,11 @@ def levelling_quaternion(up: Any) -> list[float]:
 
 
 def tilted_imu_mounts(reader: Any, imu_topics: list[str], configured: list[dict], base_frame: str,
-                      path: Any) -> list[dict[str, Any]]:
+                      path: Any, odom_topics: list[str] | None = None) -> list[dict[str, Any]]:
     """``sources.static_transforms`` entries for the IMU topics whose frame neither the config nor the
     log's tf mounts and whose readings are tilted more than :data:`TILT_DEG` (see the module), each
-    said in a warning; ``[]`` for the others."""
+    said in a warning; ``[]`` for the others.  ``odom_topics``: the odometry the run reads, whose
+    ``child_frame_id`` names the robot's base (REP 105), as the session's mounts take it."""
     import logging
 
     import numpy as np
@@ -111,7 +112,16 @@ def tilted_imu_mounts(reader: Any, imu_topics: list[str], configured: list[dict]
             firsts[frame] = msgs
     if not firsts:
         return []
+    given = {frame_name(str(e.get("child", ""))) for e in configured if isinstance(e, dict)}
+    firsts = {f: m for f, m in firsts.items() if f not in given}
+    if not firsts:
+        return []
     table = MountTable(parse_static_transforms(configured), base_frame)
+    for t in dict.fromkeys(odom_topics or ()):
+        if reader.has(t):
+            first = next(iter(reader.messages([t])), None)
+            if first is not None and hasattr(first[1], "child_frame_id"):
+                table.add_odometry_frames(str(getattr(first[1], "frame_id", "odom")), str(first[1].child_frame_id))
     tf_topics = [t for t in (reader.topics.tf_static, reader.topics.tf) if reader.has(t)]
     for t in tf_topics:
         for n, (_topic, m) in enumerate(reader.messages([t])):

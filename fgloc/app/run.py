@@ -307,8 +307,9 @@ def _with_tilted_imu_mounts(config: FglocConfig, inputs: _Inputs) -> FglocConfig
     imus = [x for x in (t.imu, *(x for x, k in inputs.sources.items() if k == "imu")) if inputs.reader.has(x)]
     if not imus:
         return config
+    odoms = [t.odom, *(x for x, k in inputs.sources.items() if k == "odometry")]
     entries = tilted_imu_mounts(inputs.reader, imus, config.sources.static_transforms, config.sources.base_frame,
-                                inputs.log)
+                                inputs.log, odoms)
     if not entries:
         return config
     sources = dataclasses.replace(config.sources, static_transforms=[*config.sources.static_transforms, *entries])

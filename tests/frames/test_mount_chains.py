@@ -1,7 +1,8 @@
 """A sensor's mount is the transform chain from the robot's base frame (REP 105: the odometry's
 child_frame_id or sources.base_frame, whatever its name) to the sensor's frame, through
 intermediate frames and links given either way round, from the log's tf, the config or the
-command line; a frame no chain connects is used unmounted and said so."""
+command line; a frame no chain connects is used unmounted and said so (an IMU whose own orientation
+says it is tilted is levelled instead: fgloc.app.imutilt)."""
 
 from __future__ import annotations
 
@@ -78,10 +79,12 @@ def test_the_bases_motion_in_the_world_is_never_a_mount() -> None:
     assert table.unconnected(IMU) == f"no transform chain {BASE} -> {IMU} (the frames its links reach: odom)"
 
 
-def _imu(t: float, yaw: float, mount: Rotation) -> Imu:
+def _imu(t: float, yaw: float, mount: Rotation, orientation: bool = True) -> Imu:
     """The base at ``yaw`` turning at YAW_RATE, seen by an IMU mounted by ``mount`` (base -> imu)."""
     r_wi = Rotation.from_euler("z", yaw) * mount
     w_i = mount.inv().apply([0.0, 0.0, YAW_RATE])
+    if not orientation:  # a gyro alone: nothing says where up is
+        return Imu(t, None, w_i, None, np.diag([1e-4] * 3), frame_id=IMU)
     return Imu(t, r_wi.as_quat(), w_i, np.diag([1e-4] * 3), np.diag([1e-4] * 3), frame_id=IMU)
 
 
@@ -91,7 +94,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("chains")
     mount = Rotation.from_matrix(_rot(parse_static_transforms([DIRECT])[0]))
     out = {}
-    for name, tf in (("tf", LINKS), ("half", LINKS[:1]), ("bare", [])):
+    for name, tf in (("tf", LINKS), ("half", LINKS[:1]), ("bare", []), ("gyro", [])):
         with LogWriter(d / f"{name}.mcap") as w:
             if tf:
                 w.write("/tf_static", parse_static_transforms(tf), stamp=99.99)
@@ -99,7 +102,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
                 t = 100.0 + 0.05 * i
                 w.write("/wheels", Odometry(t, np.array([1.0, 0.0, YAW_RATE]), np.diag([1e-3] * 3), None, None,
                                             "odom", BASE))
-                w.write("/imu", _imu(t + 0.01, 0.3 + YAW_RATE * (0.05 * i + 0.01), mount))
+                w.write("/imu", _imu(t + 0.01, 0.3 + YAW_RATE * (0.05 * i + 0.01), mount, name != "gyro"))
         out[name] = d / f"{name}.mcap"
     return out
 
@@ -129,9 +132,18 @@ def test_mount_in_tf_static_in_the_config_or_on_the_command_line_gives_one_traje
         np.testing.assert_allclose(poses, ref, atol=1e-6, err_msg=name)
     # the heading followed the base's: 0.3 rad + 9.9 s (the last keyframe) at 0.2 rad/s
     assert ref[-1, 2] == pytest.approx(2.28, abs=0.005)
-    # no chain from the base to the IMU: used unmounted, said once, counted on the source
+    # no chain from the base to the IMU, its orientation upside down: levelled (rolled 180 deg), said; it
+    # turns the base's way (its turn about the vertical unknown: the heading is off by a constant)
     with caplog.at_level(logging.WARNING):
-        poses, r = _run(logs["bare"], tmp_path / "e", {})
+        poses, r = _run(logs["bare"], tmp_path / "f", {})
+    assert any("no mount of the IMU frame imu_sensor" in m.getMessage() for m in caplog.records)
+    assert r.stats.sources["imu0"].unmounted == 0
+    turned = math.remainder((poses[-1, 2] - poses[0, 2]) - (ref[-1, 2] - ref[0, 2]), 2 * math.pi)
+    assert abs(turned) < 0.01
+    caplog.clear()
+    # a gyro alone (nothing says where up is) with no chain: used unmounted, said once, counted on the source
+    with caplog.at_level(logging.WARNING):
+        poses, r = _run(logs["gyro"], tmp_path / "e", {})
     warned = [m.getMessage() for m in caplog.records if "no transform chain" in m.getMessage()]
     assert warned == [f"no transform chain {BASE} -> {IMU} (no transform names it); the IMU is used unmounted (as "
                       "if its axes were the base's): set sources.base_frame or give the mount "

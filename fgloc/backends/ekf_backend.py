@@ -50,6 +50,7 @@ from fgloc.backends.ekf_history import InOrder
 from fgloc.backends.health import ANGLE_ABSOLUTE, INSTANT_RATE, RATE, Arbiter, SourceHealth
 from fgloc.backends.inputs import InputBook, twist_covariance
 from fgloc.backends.motion_integrals import MotionIntegrals
+from fgloc.backends.relative_yaw import ANCHORED, GATED, REOPENED, RelativeYaw
 from fgloc.backends.sideways import SidewaysEvidence
 from fgloc.geometry import log as se2_log
 from fgloc.geometry import with_rotation, wrap_scalar
@@ -112,7 +113,7 @@ class EKFBackend(Backend):
         self._consecutive_rejects = 0
         self._compass_gated_run = 0
         self._gyro_gated_run = 0
-        self._rel_gated: dict[str, int] = {}   # per differential orientation source: gated in a row
+        self._rel: dict[str, RelativeYaw] = {}   # the differential orientation sources
         self.inputs = InputBook(Arbiter(), c.adapt_noise, c.latency, c.latency_s)
         # motion integrals for the latency estimate: (t, yaw, w) from the gyro (or the odometry),
         # (t, distance, v) from the odometry, each at its own stamps
@@ -452,8 +453,8 @@ class EKFBackend(Backend):
         0.2 ms apart) that rate spikes to several rad/s, its claimed variance ``(C1 + C2) dt``
         shrinks as it grows, the gate drops it and its increment is lost (r_l's groovy
         test_bag1: 3130 of 12954 such rates gated).  As a heading the increments enter whole,
-        whatever the stamps.  Gated ``compass_recover_after`` times in a row (a re-initialized
-        AHRS), the offset is re-anchored."""
+        whatever the stamps.  Gated as :mod:`fgloc.backends.relative_yaw` says (a jump is gated, then
+        re-anchored; a heading that crept off re-opened)."""
         name = f"{source}.yaw"
         h = self.inputs.source(name, "heading")
         if not self.inputs.finite(h, t, yaw):
@@ -465,53 +466,29 @@ class EKFBackend(Backend):
         self.inputs.heading(name, t, float(yaw), v)
         if not self.initialized:
             return
-        key = f"yaw_offset:{source}"
-
-        def anchor() -> None:
-            i = self.ekf.add_state(key, 0.0, 1.0, self.cfg.relative_yaw_q)
-            # c = z - theta: correlated with the heading (and through it with the rest)
-            P = self.ekf.P
-            P[i, :] = -P[TH, :]
-            P[:, i] = -P[:, TH]
-            P[i, i] = P[TH, TH] + v
-            self.ekf.x[i] = wrap_scalar(float(yaw) - float(self.ekf.x[TH]))
-
-        def update(gate: float | None) -> bool:
-            i = self.ekf.aug[key]
-            H = np.zeros((1, self.ekf.n))
-            H[0, TH] = 1.0
-            H[0, i] = 1.0
-            hx = np.array([float(self.ekf.x[TH]) + float(self.ekf.x[i])])
-            if self.ekf.update_h(np.array([float(yaw)]), hx, H, np.array([[v]]), gate, "relative_yaw", (0,)):
-                self.ekf.x[i] = wrap_scalar(float(self.ekf.x[i]))
-                return True
-            return False
+        rel = self._rel.get(source)
+        if rel is None:
+            rel = self._rel[source] = RelativeYaw(f"yaw_offset:{source}", self.cfg.relative_yaw_q,
+                                                  self.cfg.gate_compass, self.cfg.compass_recover_after)
+        y = float(yaw)
 
         def first() -> str:
-            """What was applied: ``anchored``, ``used`` or ``gated``."""
             self.ekf.predict(t)
-            i = self.ekf.aug.get(key)
-            if i is None or self._rel_gated.get(source, 0) >= self.cfg.compass_recover_after:
-                if i is not None:
-                    self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
-                anchor()
-                self._rel_gated[source] = 0
+            reanchor = rel.key in self.ekf.aug
+            how = rel.first(self.ekf, y, v)
+            if how == GATED:
+                h.gated += 1
+            else:
                 h.accepted += 1
-                return "anchored"
-            if update(self.cfg.gate_compass):
-                h.accepted += 1
-                self._rel_gated[source] = 0
-                return "used"
-            h.gated += 1
-            self._rel_gated[source] = self._rel_gated.get(source, 0) + 1
-            return "gated"
+            if how == ANCHORED and reanchor:
+                self.stats["relative_yaw_reanchored"] = self.stats.get("relative_yaw_reanchored", 0) + 1
+            elif how == REOPENED:
+                self.stats["relative_yaw_reopened"] = self.stats.get("relative_yaw_reopened", 0) + 1
+            return how
 
         def again(how: str) -> None:
             self.ekf.predict(t)
-            if how == "anchored":
-                anchor()
-            elif how == "used":
-                update(None)
+            rel.again(self.ekf, how, y, v)
 
         self.order.apply(t, first, again)
 

@@ -120,3 +120,38 @@ def test_the_router_hands_a_differential_orientation_as_a_heading_through_its_mo
     router.on_message(specs[2], Imu(2.0, Rotation.from_euler("z", 0.1).as_quat(), np.array([0.0, 0.0, 0.4]),
                                     np.eye(3) * 1e-4, np.eye(3) * 1e-4, frame_id="base_link"))
     assert len(loc.backend.rel) == 4
+
+
+def _skid_steer_turns(scrub: float) -> tuple[EKFBackend, float]:
+    """Four 90 deg turns at 0.7 rad/s between straights; the wheels report ``scrub`` times the turn
+    and claim 0.01 rad/s; a differential AHRS (100 Hz) reads the true heading plus its own offset.
+    Returns the back-end and the true final heading."""
+    be = EKFBackend()
+    be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    rng = np.random.default_rng(1)
+    th, t, dt = 0.0, 0.0, 0.01
+    plan = [(3.0, 0.0), (math.pi / 2 / 0.7, 0.7)] * 4 + [(3.0, 0.0)]
+    k = 0
+    for dur, w in plan:
+        for _ in range(round(dur / dt)):
+            k += 1
+            t = k * dt
+            th += w * dt
+            if k % 5 == 0:
+                be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
+            be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
+    return be, th
+
+
+def test_a_heading_that_creeps_off_on_scrubbing_wheels_is_reopened_not_reanchored():
+    """A skid steer's wheels report 2.5x the turn: the filter's heading creeps past the gate in a
+    turn.  The AHRS's increments are smooth (no jump), so the heading is re-opened to it; re-anchoring
+    its offset after the gated run would keep the wheels' extra turn for good (~1.2 rad a turn)."""
+    be, th = _skid_steer_turns(2.5)
+    assert be.stats.get("relative_yaw_reanchored", 0) == 0
+    assert be.stats.get("relative_yaw_reopened", 0) > 0
+    assert abs(math.remainder(float(be.ekf.x[2]) - th, 2 * math.pi)) < 0.02
+    # honest wheels: nothing gated, nothing re-opened
+    be, th = _skid_steer_turns(1.0)
+    assert be.stats.get("relative_yaw_reopened", 0) == 0 and be.source_health()["ahrs.yaw"].gated == 0
+    assert abs(math.remainder(float(be.ekf.x[2]) - th, 2 * math.pi)) < 0.01

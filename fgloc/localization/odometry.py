@@ -24,6 +24,14 @@ from fgloc.localization.sources import UNUSED_VAR
 #: s: pose_deltas auto compares the twist with the pose increments summed over this long (stamp
 #: jitter and a noisy twist cancel out over it; a missing or partial twist does not)
 AGREEMENT_WINDOW_S = 1.0
+#: pose_deltas auto: a twist whose increments match the pose increments one message earlier or later
+#: than its own (a simulator that publishes with each pose the velocity of the step that follows it:
+#: Stage) is offset in time; mixing its increments with pose increments counts one message's motion
+#: twice or not at all at each switch.  It is offset once its mismatch at that shift, summed over the
+#: run, is at most OFFSET_RATIO of the mismatch at its own stamp, by at least OFFSET_EVIDENCE
+#: tolerances (``pose_delta_tolerance_m`` / ``_deg``): the pose increments are then taken
+OFFSET_RATIO = 0.5
+OFFSET_EVIDENCE = 50.0
 #: a pose-derived twist is a velocity to extrapolate with only over a time baseline of at least
 #: this fraction of the source's mean period (over its last :data:`RATE_WINDOW` poses), at most (and
 #: until that is known) :data:`MAX_BASELINE_S`: loggers that stamp late and in bursts deliver
@@ -51,6 +59,52 @@ def _zero_unused(tw: FloatArray, unused: tuple[bool, bool, bool]) -> FloatArray:
     return tw
 
 
+class TwistOffset:
+    """Whether a source's twist is one message ahead of or behind its pose increments (see
+    :data:`OFFSET_RATIO`): each pose increment's mismatch with the increments of the twists of the
+    message before it, its own and the one after it, summed over the run in units of the agreement
+    tolerances (the three sums over the same increments: a twist that is always 0 gives three equal
+    sums)."""
+
+    def __init__(self, tol_m: float, tol_deg: float) -> None:
+        self.tol_m = tol_m
+        self.tol_rad = math.radians(tol_deg)
+        self.err = [0.0, 0.0, 0.0]   # twist of message k-1, k, k+1 against the pose increment k
+        self.shift = 0               # -1: the twist leads its poses, +1: it lags them, 0: neither
+        # the last three messages: (previous pose's stamp, stamp, twist values, pose increment, twist increment)
+        self._last: deque[tuple[float, float, list[float], tuple[float, float, float],
+                                tuple[float, float, float]]] = deque(maxlen=3)
+
+    def _mismatch(self, a: tuple[float, float, float], b: tuple[float, float, float],
+                  unused: tuple[bool, bool, bool]) -> float:
+        lin = 0.0 if unused[0] and unused[1] else math.hypot(a[0] - b[0], a[1] - b[1]) / self.tol_m
+        rot = 0.0 if unused[2] else abs(math.remainder(a[2] - b[2], math.tau)) / self.tol_rad
+        return lin + rot
+
+    def add(self, t_prev: float, t: float, tw: list[float], delta: tuple[float, float, float],
+            d_tw: tuple[float, float, float], unused: tuple[bool, bool, bool]) -> int:
+        """One message's pose increment over ``(t_prev, t]`` and its twist; returns :attr:`shift`
+        (the previous message's increment is scored once this one's twist is known)."""
+        last = self._last
+        if last and last[-1][1] != t_prev:
+            last.clear()  # a message without a pose in between: the neighbours are not known
+        last.append((t_prev, t, tw, delta, d_tw))
+        if len(last) < 3:
+            return self.shift
+        before, (tp, tm, _, dm, d_own) = last[0], last[1]
+        if dm[0] == 0.0 and dm[1] == 0.0 and dm[2] == 0.0:
+            return self.shift  # poses frozen or standing still: no evidence
+        dt = tm - tp
+        self.err[0] += self._mismatch(exp_values(before[2], dt), dm, unused)
+        self.err[1] += self._mismatch(d_own, dm, unused)
+        self.err[2] += self._mismatch(exp_values(tw, dt), dm, unused)
+        e_lead, e0, e_lag = self.err
+        best = min(e_lead, e_lag)
+        self.shift = (-1 if e_lead <= e_lag else 1) \
+            if best <= OFFSET_RATIO * e0 and e0 - best >= OFFSET_EVIDENCE else 0
+        return self.shift
+
+
 class OdometryTracker:
     """The dead-reckoned odom pose and the twist to integrate (see the module docstring)."""
 
@@ -63,6 +117,7 @@ class OdometryTracker:
         self.from_poses = 0                # twists taken from pose increments
         self._prev_pose: tuple[float, FloatArray | list[float]] | None = None  # (stamp, pose) of the last message
         self._scale_sig = np.asarray(cfg.pose_delta_sigmas, dtype=float)
+        self.offset = TwistOffset(cfg.pose_delta_tolerance_m, cfg.pose_delta_tolerance_deg)
         # auto mode's agreement window: (t, pose increment, twist increment, poses moved) and sums
         self._window: deque[tuple[Any, ...]] = deque()  # (t, pose increment, twist increment, length, |turn|, moved)
         self._sums = [0.0] * 8  # pose increments (3), twist increments (3), path length, |turn|
@@ -268,6 +323,8 @@ class OdometryTracker:
         variance is :data:`~fgloc.localization.sources.UNUSED_VAR` (not in the source's ``use``)
         keeps the message's value and that variance, and plays no part in the ``auto`` agreement
         test (an odometry fusing only vx, vy never brings its wheel yaw in through its poses).
+        A twist offset in time from its poses by one message (:class:`TwistOffset`) is not taken:
+        its increments would agree only where the velocity does not change.
         Poses that do not move at all over the window while the twist does are not filled in by
         the driver (an AR.Drone's odometry leaves them at zero): the twist is kept.
         """
@@ -293,9 +350,11 @@ class OdometryTracker:
         if unused[0] and unused[1] and unused[2]:
             return tw, cov
         delta = between_values(prev[1], pv)
-        d_tw = exp_values(tw.tolist() if tw_values is None else tw_values, dt)
+        tv = tw.tolist() if tw_values is None else tw_values
+        d_tw = exp_values(tv, dt)
         self._increment = (tw, dt, d_tw)  # step() carries the odom pose by the same increment
-        if mode != "always" and self._agrees(t, delta, d_tw, unused):
+        offset = mode == "auto" and self.offset.add(prev[0], t, tv, delta, d_tw, unused) != 0
+        if mode != "always" and self._agrees(t, delta, d_tw, unused) and not offset:
             # auto: keep the twist while it agrees with the pose increments (a simulator, a good
             # driver); CARMEN logs leave tv = rv = 0 (intel, aces) or rv = 0 (fr079)
             if self._moved:

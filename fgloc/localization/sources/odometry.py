@@ -231,7 +231,11 @@ class OdometryHandler(SourceHandler):
             if n_poses:
                 r.from_poses = n_poses
                 mode = getattr(getattr(loc, "pcfg", None), "pose_deltas", "auto")
+                tracker = getattr(loc, "odom", None)
+                shift = tracker.offset.shift if tracker is not None and hasattr(tracker, "offset") else 0
                 r.from_poses_why = "pipeline.pose_deltas: always" if mode == "always" else \
+                    f"the twist {'leads' if shift < 0 else 'lags'} its poses by one message " \
+                    "(pipeline.pose_deltas: auto)" if shift else \
                     "the twist disagreed with the poses (pipeline.pose_deltas: auto)"
             if st.messages:
                 r.vy_max_mps = round(st.vy_max, 4)

@@ -78,22 +78,30 @@ def _run(log, out, caplog) -> tuple[np.ndarray, str]:
     return np.loadtxt(out / "trajectory.tum"), caplog.text
 
 
-def test_run_fuses_the_wheels_and_names_the_filter(tmp_path, caplog):
-    log = tmp_path / "rl.bag"
-    _write(log, {"/wheel/odometry": (1.0, 0.0), "/odometry/filtered": (0.0, 1.0)})
+@pytest.mark.parametrize("wheels, peer, said_peer, hint", [
+    ("/wheel/odometry", "/odometry/filtered", "named as filters' outputs (/odometry/filtered)", ""),
+    ("/mobile_base_controller/odom", "/gazebo_odom", "named as ground truths (/gazebo_odom)", " --align-start"),
+])
+def test_run_fuses_the_wheels_and_names_the_peer(tmp_path, caplog, wheels, peer, said_peer, hint):
+    """A filter's output (r_l's /odometry/filtered) or a simulator's truth (Gazebo's /gazebo_odom) beside the
+    wheels: the wheels are fused, the other is named as the reference to compare with."""
+    log = tmp_path / "peer.bag"
+    _write(log, {wheels: (1.0, 0.0), peer: (0.0, 1.0)})
     tr, said = _run(log, tmp_path / "o", caplog)
     end = tr[-1, 1:3]
-    assert end[0] > 4.5 and abs(end[1]) < 0.05, end  # along x, as the wheels went (the filter's copy went along y)
-    assert "using /wheel/odometry" in said and "named as filters' outputs (/odometry/filtered)" in said
-    assert f"fgloc eval OUT/trajectory.tum {log}:/odometry/filtered" in said
+    assert end[0] > 4.5 and abs(end[1]) < 0.05, end  # along x, as the wheels went (the peer's copy went along y)
+    assert f"using {wheels}" in said and said_peer in said
+    assert f"fgloc eval OUT/trajectory.tum {log}:{peer}{hint}" in said
 
 
-def test_a_filter_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog):
-    log = tmp_path / "fused_only.bag"
-    _write(log, {"/odometry/filtered": (0.0, 1.0)})
+@pytest.mark.parametrize("topic, kind", [("/odometry/filtered", "a filter's output"),
+                                         ("/ground_truth/state", "a ground truth")])
+def test_a_peer_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog, topic, kind):
+    log = tmp_path / "only.bag"
+    _write(log, {topic: (0.0, 1.0)})
     tr, said = _run(log, tmp_path / "o", caplog)
-    assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5  # it drove on the filter's odometry
-    assert "using /odometry/filtered" in said and "named as a filter's output" in said
+    assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5  # it drove on that odometry
+    assert f"using {topic}" in said and f"named as {kind}" in said
 
 
 @pytest.mark.parametrize("topic", ["/gazebo_odom", "/ground_truth/state", "/base_pose_ground_truth",
@@ -117,21 +125,3 @@ def test_the_wheels_are_chosen_beside_a_ground_truth():
     assert choose_topics(sim, Topics(), "x.bag") == {"/elektron/mobile_base_controller/odom": "odom"}
     three = {"/wheel/odom": ODOMETRY, "/ground_truth/state": ODOMETRY, "/odometry/filtered": ODOMETRY}
     assert choose_topics(three, Topics(), "x.bag") == {"/wheel/odom": "odom"}
-
-
-def test_run_fuses_the_wheels_and_names_the_ground_truth(tmp_path, caplog):
-    log = tmp_path / "sim.bag"
-    _write(log, {"/mobile_base_controller/odom": (1.0, 0.0), "/gazebo_odom": (0.0, 1.0)})
-    tr, said = _run(log, tmp_path / "o", caplog)
-    end = tr[-1, 1:3]
-    assert end[0] > 4.5 and abs(end[1]) < 0.05, end  # along x, as the wheels went (the truth's copy went along y)
-    assert "using /mobile_base_controller/odom" in said and "named as ground truths (/gazebo_odom)" in said
-    assert f"fgloc eval OUT/trajectory.tum {log}:/gazebo_odom --align-start" in said
-
-
-def test_a_ground_truth_as_the_only_odometry_is_said_to_be_one(tmp_path, caplog):
-    log = tmp_path / "truth_only.bag"
-    _write(log, {"/ground_truth/state": (0.0, 1.0)})
-    tr, said = _run(log, tmp_path / "o", caplog)
-    assert math.hypot(*(tr[-1, 1:3] - tr[0, 1:3])) > 4.5
-    assert "using /ground_truth/state" in said and "named as a ground truth" in said

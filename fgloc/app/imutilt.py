@@ -10,7 +10,8 @@ those over the log's first messages lies more than :data:`TILT_DEG` from the sen
 ground robot drives on such a slope; :mod:`fgloc.localization.sources` levels the odometry only
 below it), the rotation that brings it onto z is used as the IMU's mount, and said.  The mount's
 turn about the vertical stays unknown: it does not move the yaw rate, and the IMU's heading offset
-is estimated anyway.
+is estimated anyway.  The gravity maths (the up direction, the levelling rotation) is
+:mod:`fgloc.frames.imu`'s; this module reads the log and says what it did.
 """
 
 from __future__ import annotations
@@ -18,69 +19,12 @@ from __future__ import annotations
 import math
 from typing import Any
 
-#: deg: a median up direction further than this from the sensor's z axis is a mount, not a slope
-TILT_DEG = 30.0
+from fgloc.frames.imu import TILT_DEG, levelling_quaternion, up_direction
+
 #: IMU messages read to find the up direction
 N_MESSAGES = 400
 #: tf messages read to find the log's own mount (as the laser's lookup does)
 N_TF = 2000
-
-
-def up_direction(messages: list[Any]) -> Any:
-    """The median (normalised) up direction in the sensor's frame of ``messages``
-    (:class:`~fgloc.types.Imu`): from their orientation where they carry one, else from their linear
-    acceleration; None when neither gives one, or when the two disagree by more than
-    :data:`TILT_DEG` (an orientation referenced to another world frame than the axes it rotates, NED
-    over FLU: no telling which is the sensor's)."""
-    import numpy as np
-
-    from fgloc.geometry import quaternion_matrix
-
-    by_orientation, by_gravity = [], []
-    for m in messages:
-        q = getattr(m, "orientation_xyzw", None)
-        if q is not None:
-            qa = np.asarray(q, dtype=float).reshape(-1)
-            n = float(np.linalg.norm(qa)) if qa.shape == (4,) else 0.0
-            if math.isfinite(n) and abs(n - 1.0) < 0.1:
-                r = np.array(quaternion_matrix(*(qa / n))).reshape(3, 3)  # sensor -> world
-                by_orientation.append(r[2, :])  # the world's z axis in the sensor's axes
-        a = getattr(m, "linear_acceleration_mps2", None)
-        if a is not None:
-            v = np.asarray(a, dtype=float).reshape(-1)
-            n = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
-            if math.isfinite(n) and 5.0 < n < 15.0:  # about g: a reading, not zeros or a shock
-                by_gravity.append(v / n)
-    ups = [_median_unit(u) for u in (by_orientation, by_gravity)
-           if len(u) >= max(3, len(messages) // 2)]
-    ups = [u for u in ups if u is not None]
-    if len(ups) == 2 and float(ups[0] @ ups[1]) < math.cos(math.radians(TILT_DEG)):
-        return None
-    return ups[0] if ups else None
-
-
-def _median_unit(vectors: list[Any]) -> Any:
-    import numpy as np
-
-    med = np.median(np.asarray(vectors), axis=0)
-    n = float(np.linalg.norm(med))
-    return med / n if n > 1e-6 else None
-
-
-def levelling_quaternion(up: Any) -> list[float]:
-    """``[qx, qy, qz, qw]`` of the smallest rotation taking the sensor's ``up`` onto z (the mount
-    ``base -> sensor``: a vector in the sensor's axes turned into the base's); upside down (up along
-    -z): a roll of 180 deg."""
-    import numpy as np
-
-    u = np.asarray(up, dtype=float)
-    axis = np.cross(u, [0.0, 0.0, 1.0])
-    s, c = float(np.linalg.norm(axis)), float(u[2])
-    if s < 1e-9:
-        return [0.0, 0.0, 0.0, 1.0] if c > 0 else [1.0, 0.0, 0.0, 0.0]
-    angle = math.atan2(s, c)
-    k = axis / s * math.sin(angle / 2)
-    return [float(k[0]), float(k[1]), float(k[2]), math.cos(angle / 2)]
 
 
 def tilted_imu_mounts(reader: Any, imu_topics: list[str], configured: list[dict], base_frame: str,

@@ -16,7 +16,10 @@ upside down, turned 90 deg about x (the IMU's y axis then measures the base's ya
 
 Bad input is never an exception: a quaternion of zeros or not of unit length (beyond
 ``QUATERNION_NORM_TOLERANCE``) drops the orientation, a covariance with a NaN or negative
-diagonal drops its field, and :func:`imu_in_base` says why.  Core maths only: no I/O.
+diagonal drops its field, and :func:`imu_in_base` says why.  An IMU whose mount nobody gave:
+:func:`up_direction` (where gravity says up is in its axes) and :func:`levelling_quaternion` (the
+mount that levels it; ``fgloc.app.imutilt`` uses them when a log lacks the mount).  Core maths
+only: no I/O.
 """
 
 from __future__ import annotations
@@ -202,3 +205,56 @@ def imu_message(stamp: float, R_world_base: FloatArray, w_base: FloatArray, R_bi
     wc = None if angular_velocity_cov_base is None else R_bi.T @ np.asarray(angular_velocity_cov_base) @ R_bi
     return Imu(float(stamp), None if q is None else np.asarray(q, dtype=float), w_imu,
                None if q is None else oc, wc, frame_id=frame_id)
+
+#: deg: a median up direction further than this from an IMU's z axis is a mount, not a slope
+#: (:func:`up_direction`; no ground robot drives on such a slope)
+TILT_DEG = 30.0
+
+
+def up_direction(messages: list[Imu]) -> FloatArray | None:
+    """The median (normalised) up direction in the sensor's frame of ``messages``
+    (:class:`~fgloc.types.Imu`): from their orientation where they carry one, else from their linear
+    acceleration; None when neither gives one, or when the two disagree by more than
+    :data:`TILT_DEG` (an orientation referenced to another world frame than the axes it rotates, NED
+    over FLU: no telling which is the sensor's)."""
+    by_orientation, by_gravity = [], []
+    for m in messages:
+        q = getattr(m, "orientation_xyzw", None)
+        if q is not None:
+            qa = np.asarray(q, dtype=float).reshape(-1)
+            n = float(np.linalg.norm(qa)) if qa.shape == (4,) else 0.0
+            if math.isfinite(n) and abs(n - 1.0) < 0.1:
+                r = np.array(quaternion_matrix(*(qa / n))).reshape(3, 3)  # sensor -> world
+                by_orientation.append(r[2, :])  # the world's z axis in the sensor's axes
+        a = getattr(m, "linear_acceleration_mps2", None)
+        if a is not None:
+            v = np.asarray(a, dtype=float).reshape(-1)
+            n = float(np.linalg.norm(v)) if v.shape == (3,) else 0.0
+            if math.isfinite(n) and 5.0 < n < 15.0:  # about g: a reading, not zeros or a shock
+                by_gravity.append(v / n)
+    medians = [_median_unit(u) for u in (by_orientation, by_gravity)
+               if len(u) >= max(3, len(messages) // 2)]
+    ups = [u for u in medians if u is not None]
+    if len(ups) == 2 and float(ups[0] @ ups[1]) < math.cos(math.radians(TILT_DEG)):
+        return None
+    return ups[0] if ups else None
+
+
+def _median_unit(vectors: list[FloatArray]) -> FloatArray | None:
+    med = np.median(np.asarray(vectors), axis=0)
+    n = float(np.linalg.norm(med))
+    return med / n if n > 1e-6 else None
+
+
+def levelling_quaternion(up: FloatArray) -> list[float]:
+    """``[qx, qy, qz, qw]`` of the smallest rotation taking the sensor's ``up`` onto z (the mount
+    ``base -> sensor``: a vector in the sensor's axes turned into the base's); upside down (up along
+    -z): a roll of 180 deg."""
+    u = np.asarray(up, dtype=float)
+    axis = np.cross(u, [0.0, 0.0, 1.0])
+    s, c = float(np.linalg.norm(axis)), float(u[2])
+    if s < 1e-9:
+        return [0.0, 0.0, 0.0, 1.0] if c > 0 else [1.0, 0.0, 0.0, 0.0]
+    angle = math.atan2(s, c)
+    k = axis / s * math.sin(angle / 2)
+    return [float(k[0]), float(k[1]), float(k[2]), math.cos(angle / 2)]

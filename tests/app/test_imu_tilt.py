@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from fgloc.app.imutilt import levelling_quaternion, up_direction
+from fgloc.frames.imu import levelling_quaternion, up_direction
 from fgloc.types import Imu
 
 T0 = 1_700_000_000

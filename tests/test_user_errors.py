@@ -54,7 +54,7 @@ def test_relative_topic_names_resolve_as_ros_does_and_empty_is_none(short_log, t
     assert (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
     rc, out, err = fgloc("run", short_log["log"], "-o", c, *common, "--imu-topic", "")
     assert rc == 0, err
-    assert "compass 0," in out and "compass 0," not in fgloc("run", short_log["log"], "-o", a, *common)[1]
+    assert "imu 0," in out and "imu 0," not in fgloc("run", short_log["log"], "-o", a, *common)[1]
     rc, _, err = fgloc("run", short_log["log"], "-o", c, *common, "--scan-topic", "laser_scan")
     assert rc == 2 and one_error_line(err).startswith(f"{short_log['log']}: --scan-topic /laser_scan: no such topic")
 

@@ -66,8 +66,9 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
     speed = r.log_s / r.wall_s if r.wall_s > 0 else float("inf")
     say(f"{_styled('fgloc run', '1', tty)}: {r.backend} back-end, {r.frontend} front-end, "
         f"{r.mode} frame; {r.poses} poses over {r.log_s:.1f} s in {r.wall_s:.1f} s ({speed:.0f}x real time)")
+    heading = "imu" if any(d.kind == "imu" for d in st.sources.values()) else "compass"  # the heading source's kind
     say(f"  scans {st.scans}, fixes {st.fixes}, no fix {st.no_fix}, rejected {st.rejected}, "
-        f"odometry {st.odometry}, compass {st.compass}, skipped {st.skipped}, "
+        f"odometry {st.odometry}, {heading} {st.compass}, skipped {st.skipped}, "
         f"relocalizations {st.relocalizations}")
     if r.mode == "map":
         say(f"  lost {r.lost_s:.1f} s ({100 * r.lost_share:.0f} % of the run, {st.lost_events} "

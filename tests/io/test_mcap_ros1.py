@@ -126,7 +126,7 @@ def test_run_on_ros1_encoded_mcap(tmp_path, capsys):
     _converted(bag, mcap)
     assert main(["run", str(mcap), "-o", str(tmp_path / "out"), "-q"]) == 0
     out = capsys.readouterr().out
-    assert f"scans {N}, " in out and f"odometry {N}, compass {N}, " in out
+    assert f"scans {N}, " in out and f"odometry {N}, imu {N}, " in out
     from mcap.reader import make_reader
 
     with (tmp_path / "out" / "run.mcap").open("rb") as f:

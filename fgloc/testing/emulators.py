@@ -96,13 +96,15 @@ class _TcpSink:
         self.client = c
 
     def write(self, data: bytes) -> None:
-        if self.client is None:
+        client = self.client  # the emulator's thread; drop_connection may clear it meanwhile
+        if client is None:
             return
         try:
-            self.client.sendall(data)
+            client.sendall(data)
         except OSError:
-            self.client.close()
-            self.client = None
+            client.close()
+            if self.client is client:
+                self.client = None
 
     def close(self) -> None:
         if self.client is not None:
@@ -200,13 +202,16 @@ class Stm32Emulator:
 
     def drop_connection(self) -> None:
         """TCP mode: close the client's connection (it may connect again)."""
-        if self._tcp is not None and self._tcp.client is not None:
+        client = self._tcp.client if self._tcp is not None else None
+        if self._tcp is not None and client is not None:
+            # the emulator's thread may see the shutdown first and clear the sink's client: close this one
             try:
-                self._tcp.client.shutdown(socket.SHUT_RDWR)
+                client.shutdown(socket.SHUT_RDWR)
             except OSError:
                 pass
-            self._tcp.client.close()
-            self._tcp.client = None
+            client.close()
+            if self._tcp.client is client:
+                self._tcp.client = None
             self.stats.dropped_connections += 1
 
     def start(self) -> None:

@@ -24,6 +24,12 @@ from fgloc.geometry import wrap_scalar
 ANCHORED, REOPENED, USED, GATED = "anchored", "reopened", "used", "gated"
 
 
+def jumped(innov: float, prev: float, width: float) -> bool:
+    """Whether an innovation got past a gate of ``width`` (rad) by a jump from the previous one
+    (a re-initialized source, an outlier) rather than by creeping there reading by reading."""
+    return abs(wrap_scalar(innov - prev)) > width
+
+
 class RelativeYaw:
     """One differential orientation source's offset state and gating in an :class:`EKF`."""
 
@@ -53,7 +59,7 @@ class RelativeYaw:
             self.gated_run = 0
             return USED
         if self.gated_run == 0:
-            self.jumped = abs(wrap_scalar(innov - prev)) > math.sqrt((self.gate or 0.0) * max(s, 0.0))
+            self.jumped = jumped(innov, prev, math.sqrt((self.gate or 0.0) * max(s, 0.0)))
             if not self.jumped:
                 self.reopen(ekf, yaw, var)
                 self.update(ekf, yaw, var, None)

@@ -118,3 +118,65 @@ def test_the_heading_check_counts_a_differential_orientation_as_a_source():
     assert be.stats["relative_yaw_factors"] > 1000
     assert be.stats["heading_diverged_s"] == 0.0 and be.stats["heading_divergence_spans"] == 0
     assert be.stats["heading_divergence_worst_deg"] < 10.0   # measured 6.6
+
+
+def _skid_steer_turns(scrub: float, every: int = 10, drift: float | None = None) -> tuple[SlidingWindowSmoother,
+                                                                                          float, float]:
+    """Four 90 deg turns at 0.7 rad/s between straights; the wheels (20 Hz) report ``scrub`` times
+    the turn and claim 0.01 rad/s; a differential AHRS (100 Hz) reads the true heading plus its own
+    offset; a keyframe every ``every`` readings (``drift``: a second one, its heading drifting at that
+    rate, rad/s).  Returns the back-end, the final smoothed heading's
+    error and the online heading's largest (rad)."""
+    be = SlidingWindowSmoother()
+    be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    rng = np.random.default_rng(1)
+    th, dt, worst = 0.0, 0.01, 0.0
+    plan = [(3.0, 0.0), (math.pi / 2 / 0.7, 0.7)] * 4 + [(3.0, 0.0)]
+    k = 0
+    for dur, w in plan:
+        for _ in range(round(dur / dt)):
+            k += 1
+            t = k * dt
+            th += w * dt
+            if k % 5 == 0:
+                be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
+            be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
+            if drift is not None:
+                be.add_relative_yaw(t, th - 1.0 + drift * t + float(rng.normal(0.0, 0.002)), 1e-4, "drifting")
+            if k % every == 0:
+                be.add_keyframe(t, None)
+                cur = be.current(False)
+                assert cur is not None
+                worst = max(worst, abs(math.remainder(float(cur[1][2]) - th, 2 * math.pi)))
+    traj = be.finish()
+    return be, abs(math.remainder(float(traj.poses[-1][2]) - th, 2 * math.pi)), worst
+
+
+@pytest.mark.parametrize(("scrub", "every"), [(2.5, 10), (4.0, 10), (4.0, 20), (-1.0, 10)])
+def test_a_heading_that_creeps_off_on_scrubbing_wheels_is_reopened_not_reanchored(scrub: float, every: int):
+    """Wheels that report 2.5 or 4 times the turn (or turn the other way): in a turn the graph's
+    heading creeps past the gate away from the AHRS.  Its increments are smooth (no jump), so the
+    keyframe's heading is re-opened to it; gating it and re-anchoring its offset after
+    :data:`REANCHOR_AFTER` keyframes kept the wheels' extra turn for good (measured before: 56, 163,
+    171 and 61 deg off at the end)."""
+    be, err, worst = _skid_steer_turns(scrub, every)
+    assert be.stats.get("relative_yaw_reanchored", 0) == 0 and be.source_health()["ahrs.yaw"].gated == 0
+    assert be.stats.get("relative_yaw_reopened", 0) > 0
+    assert err < math.radians(1.0)       # 0.2-0.4 deg measured
+    assert worst < math.radians(40.0)    # online, in the turns: 30-36 deg measured
+
+
+def test_honest_wheels_leave_the_differential_heading_alone():
+    be, err, worst = _skid_steer_turns(1.0)
+    assert be.stats.get("relative_yaw_reopened", 0) == 0 and be.source_health()["ahrs.yaw"].gated == 0
+    assert err < math.radians(0.5) and worst < math.radians(2.0)   # 0.08 / 1.5 deg measured
+
+
+def test_a_second_differential_source_that_drifts_away_is_not_followed():
+    """Two differential sources that disagree (one drifts 11 deg/s away) beside honest wheels: the
+    one that crept past the gate while the other agreed with the graph is gated and re-anchored, not
+    followed (re-opening the heading to it ended 119 deg off)."""
+    be, err, worst = _skid_steer_turns(1.0, drift=0.2)
+    assert be.stats.get("relative_yaw_reopened", 0) == 0
+    assert be.source_health()["drifting.yaw"].gated > 0 and be.source_health()["ahrs.yaw"].gated == 0
+    assert err < math.radians(6.0) and worst < math.radians(10.0)   # 3.9 / 3.9 deg measured

@@ -12,6 +12,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray
 from fgloc.backends.factors import aligned_between_factor, between_factor, relative_yaw_factor
 from fgloc.backends.integration import integrate_twist
+from fgloc.backends.relative_yaw import jumped
 from fgloc.backends.smoother.covariance import TWIST_VAR_MAX, bounded_covariance
 from fgloc.backends.smoother.window import FixedLagWindow
 from fgloc.geometry import wrap_scalar
@@ -21,7 +22,8 @@ from fgloc.geometry import wrap_scalar
 MAX_TWIST_GAP_S = 0.5
 
 
-#: a differential orientation gated at this many keyframes in a row is anchored again (re-initialized AHRS)
+#: a differential orientation that jumped past the gate (a re-initialized AHRS) and stayed gated at this
+#: many keyframes in a row is anchored again; one that crept past it re-opens the heading at once
 REANCHOR_AFTER = 5
 
 
@@ -44,21 +46,38 @@ class FurtherSourceFactors(FixedLagWindow):
         now = [r for r in self.rel_pending if r[0] <= t + 1e-9]
         self.rel_pending = [r for r in self.rel_pending if r[0] > t + 1e-9]
         horizon = t - self.cfg.lag_s
+        gate = self.cfg.fix_gate_theta
+        got = []
         for source in dict.fromkeys(r[3] for r in now):
             readings = [r for r in now if r[3] == source and r[0] >= horizon]
             m = self._compass_measurement(t, readings)
             if m is None:
                 continue
-            z, sigma = m
+            ch = self._chain(f"relative_yaw:{source}", "r", [0.0], [RELATIVE_YAW_PRIOR_SIGMA],
+                             [self.cfg.relative_yaw_rw_sigma])
+            e = None
+            if ch.key is not None and ch.estimate is not None:
+                e = wrap_scalar(float(pred[2]) + float(ch.estimate[0]) - m[0])
+            got.append((source, readings, m, ch, e))
+        # another differential source that agrees with the prediction: the sources disagree, and one
+        # that crept away is not followed
+        agreed = sum(1 for g in got if g[4] is not None and gate is not None and abs(g[4]) <= gate)
+        for source, readings, (z, sigma), ch, e in got:
             name = f"{source}.yaw"
             h = self.inputs.source(name, "heading")
             sigma *= self.inputs.noise(name)[0]
-            ch = self._chain(f"relative_yaw:{source}", "r", [0.0], [RELATIVE_YAW_PRIOR_SIGMA],
-                             [self.cfg.relative_yaw_rw_sigma])
-            gate = self.cfg.fix_gate_theta
-            if ch.key is not None and ch.estimate is not None and gate is not None:
-                e = wrap_scalar(float(pred[2]) + float(ch.estimate[0]) - z)
-                if abs(e) > gate:
+            if e is not None and gate is not None:
+                prev = self._rel_innov.get(source, e)
+                self._rel_innov[source] = e
+                crept = self._rel_gated.get(source, 0) == 0 and not jumped(e, prev, gate)
+                if abs(e) > gate and crept and agreed == 0:
+                    # crept past the gate (the other yaw sources' turn lies): the heading re-opened to
+                    # the source's, as its initial value; a re-anchor later would keep the drift
+                    pred[2] = wrap_scalar(float(pred[2]) - e)   # z - c
+                    vals.update(k, pose2=gtsam.Pose2(float(pred[0]), float(pred[1]), float(pred[2])))
+                    self.stats["relative_yaw_reopened"] = self.stats.get("relative_yaw_reopened", 0) + 1
+                    agreed = 1
+                elif abs(e) > gate:
                     h.gated += len(readings)
                     n = self._rel_gated[source] = self._rel_gated.get(source, 0) + 1
                     if n < REANCHOR_AFTER:
@@ -68,6 +87,7 @@ class FurtherSourceFactors(FixedLagWindow):
             if ch.key is None:  # anchored here: c = z - theta (the source's frame is its own)
                 ch.prior_mean = np.array([wrap_scalar(z - float(pred[2]))])
                 ch.estimate = ch.prior_mean.copy()
+                self._rel_innov[source] = 0.0
             self._rel_gated[source] = 0
             kc = self._chain_key(ch, t, graph, vals, ts)
             graph.add(relative_yaw_factor(k, kc, z, sigma, "huber", self.cfg.compass_kernel_k))

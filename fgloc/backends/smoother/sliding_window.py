@@ -186,9 +186,11 @@ class SlidingWindowSmoother(KeyframeGraph):
 
         Not as the rate ``d_yaw / d_t`` between stamps: with jittered stamps (two messages 0.2 ms
         apart) that rate spikes to several rad/s; as a heading the increments enter whole, whatever
-        the stamps.  A reading beyond ``fix_gate_theta`` of the graph's heading plus the offset is
-        not used; :data:`REANCHOR_AFTER` keyframes of it in a row (a re-initialized AHRS) and the
-        offset is anchored again."""
+        the stamps.  A reading that jumped beyond ``fix_gate_theta`` of the graph's heading plus the
+        offset is not used; :data:`REANCHOR_AFTER` keyframes of it in a row (a re-initialized AHRS)
+        and the offset is anchored again.  One that crept there (the wheels' turn lies: a skid
+        steer's scrub) re-opens the keyframe's heading to the source's at once
+        (:func:`~fgloc.backends.relative_yaw.jumped` tells the two apart, as in the EKF)."""
         name = f"{source}.yaw"
         h = self.inputs.source(name, "heading")
         if not self.inputs.finite(h, t, yaw):

@@ -89,6 +89,7 @@ class SmootherState(Backend):
         # differential orientation sources (readings until their keyframe) and further twist sources
         self.rel_pending: list[tuple[float, float, float, str]] = []
         self._rel_gated: dict[str, int] = {}
+        self._rel_innov: dict[str, float] = {}   # each source's last innovation (jumped or crept)
         self.vel: dict[str, tuple[list[float], list[FloatArray], list[FloatArray]]] = {}
         self._vel_done: dict[str, float] = {}
         self._vel_translates: dict[str, bool] = {}

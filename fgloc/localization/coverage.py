@@ -21,7 +21,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
+from fgloc.gridmath import raycast_grid
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
 
@@ -30,6 +32,8 @@ MARCH_STEP_CELLS = 0.5
 #: a scan whose beams, cast from the pose, mostly end in the map's unknown space (crossing no mapped wall) is
 #: one the map cannot judge
 UNMAPPED_SHARE = 0.5
+#: a beam whose ray-cast range is within this of the measured one in log (10 %) fits the map (range_fit)
+RANGE_FIT_LOG = 0.1
 
 
 def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan,
@@ -73,4 +77,43 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     return float(np.count_nonzero(clear)) / n
 
 
-__all__ = ["MARCH_STEP_CELLS", "UNMAPPED_SHARE", "unmapped_share"]
+def range_fit(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: np.ndarray,
+              max_beams: int = 64, min_beams: int = 10, blocked: NDArray[np.bool_] | None = None
+              ) -> tuple[float, float]:
+    """How the map's ranges compare with the laser's at the ``base_link`` pose ``pose``: over at most
+    ``max_beams`` of ``scan``'s returns (evenly spread) that end on a wall within ``range_max``, ``log(cast /
+    measured)`` with ``cast`` the range ray-cast in the map from the laser to its first occupied cell (beams
+    whose cast leaves the grid or ``range_max`` are not counted).  Returns its median and the share of those
+    beams within :data:`RANGE_FIT_LOG` of 0 (NaN, NaN with fewer than ``min_beams`` beams).  On the map of this
+    building at the right pose most beams fit (people, glass, moved furniture move some beams, not most); on a
+    map whose cells are read at another size few do, wherever the pose.  ``blocked``: the map's occupied grid
+    (C-contiguous), when the caller keeps it (made anew otherwise: most of the cost on a large map)."""
+    r = np.asarray(scan.ranges, dtype=float)
+    with np.errstate(invalid="ignore"):
+        hit = np.isfinite(r) & (r >= max(scan.range_min, 0.0)) & (r < 0.99 * scan.range_max) & (r > 0)
+    idx = np.nonzero(hit)[0]
+    if len(idx) < min_beams:
+        return math.nan, math.nan
+    if len(idx) > max_beams:
+        idx = idx[np.linspace(0, len(idx) - 1, max_beams).round().astype(np.int64)]
+    m = np.asarray(laser_mount.pose, dtype=float)
+    p = np.asarray(pose, dtype=float).reshape(3)
+    cb, sb = math.cos(float(p[2])), math.sin(float(p[2]))
+    ox = float(p[0]) + cb * float(m[0]) - sb * float(m[1])
+    oy = float(p[1]) + sb * float(m[0]) + cb * float(m[1])
+    ang = float(p[2]) + float(m[2]) + scan.angle_min + scan.angle_increment * idx.astype(float)
+    if blocked is None:
+        blocked = np.ascontiguousarray(occ_map.occupied)
+    g = occ_map.world_to_grid_continuous([[ox, oy]])[0]
+    local = ang - float(occ_map.origin[2])
+    n = len(local)
+    cast = raycast_grid(blocked, np.full(n, float(g[0])), np.full(n, float(g[1])), np.cos(local), np.sin(local),
+                        float(scan.range_max) / occ_map.resolution) * occ_map.resolution
+    keep = np.isfinite(cast) & (cast > 0) & (cast < 0.99 * scan.range_max)
+    if np.count_nonzero(keep) < min_beams:
+        return math.nan, math.nan
+    lr = np.log(cast[keep] / r[idx][keep])
+    return float(np.median(lr)), float(np.mean(np.abs(lr) < RANGE_FIT_LOG))
+
+
+__all__ = ["MARCH_STEP_CELLS", "UNMAPPED_SHARE", "RANGE_FIT_LOG", "range_fit", "unmapped_share"]

@@ -38,7 +38,7 @@ import numpy as np
 
 from fgloc.config.schema import setting
 from fgloc.geometry import wrap_scalar
-from fgloc.localization.coverage import UNMAPPED_SHARE, unmapped_share
+from fgloc.localization.coverage import UNMAPPED_SHARE, range_fit, unmapped_share
 from fgloc.localization.gate import scan_agreement
 
 OK = "ok"
@@ -358,6 +358,14 @@ class MapAgreement:
     #: a measurement this low lies the scan nowhere near the map's walls (a right map, a changed world with
     #: people and moved furniture: 0.5 and more at the median; another building: 0.05)
     MISFIT = 0.25
+    #: the ranges check (:meth:`range_misfit`): at a good measurement at most this often (log s), the map's
+    #: ranges ray-cast against the laser's (coverage.py :func:`range_fit`) ...
+    RANGE_PERIOD_S = 1.0
+    RANGE_MIN_SAMPLES = 10  # ... judged after this many
+    #: ... the map does not fit when the median over them of the share of beams that fit is below this (the
+    #: paper hall with people, moved furniture, glass: 0.8 and more at the median, 0.6 at the lower decile;
+    #: its map at twice its cell size: 0.15)
+    RANGE_FIT_LOW = 0.35
 
     def __init__(self, cfg: IntegrityConfig, occ_map: Any, laser_mount: Any, sigma_m: float) -> None:
         self.cfg = cfg
@@ -379,6 +387,10 @@ class MapAgreement:
         self.unmapped_checks = 0  # low measurements the map could not judge
         self.judged_checks = 0  # measurements at MISFIT or above, or below it where the map has the space
         self.misfit_checks = 0  # ... of them below MISFIT
+        self._range_t = -math.inf
+        self._blocked: np.ndarray | None = None  # the map's occupied grid, for range_fit (made at its first use)
+        #: the last samples of range_fit at good measurements: (median log(cast / measured), share that fit)
+        self.range_samples: deque[tuple[float, float]] = deque(maxlen=4 * self.SAMPLES)
 
     def due(self, t: float) -> bool:
         return t - self._t >= self.cfg.agreement_period_s or t < self._t
@@ -426,12 +438,36 @@ class MapAgreement:
         self.low_since = None
         self._t_fit = t
         if good:
+            self._range_sample(t, scan, pose)
             self._good.append(a)
             n = len(self._good)
             self._added += 1
             if n >= self.MIN_SAMPLES and (self._expected is None or self._added % self.REFRESH == 0):
                 self._expected = float(np.quantile(np.fromiter(self._good, float, n), self.QUANTILE))
         return a
+
+    def _range_sample(self, t: float, scan: Any, pose: Any) -> None:
+        if t - self._range_t < self.RANGE_PERIOD_S and t >= self._range_t:
+            return
+        self._range_t = t
+        if self._blocked is None:
+            self._blocked = np.ascontiguousarray(self.map.occupied)
+        lr, share = range_fit(self.map, self.laser_mount, scan, pose, self.MAX_BEAMS, self.MIN_BEAMS, self._blocked)
+        if math.isfinite(share):
+            self.range_samples.append((lr, share))
+
+    def range_misfit(self) -> tuple[float, float] | None:
+        """Whether the laser's ranges fit the map's at the poses the localizer called good: None when they do
+        (or fewer than :data:`RANGE_MIN_SAMPLES` samples), else the medians over the samples of the share of
+        beams that fit and of ``cast / measured`` (a map.yaml with a wrong ``resolution``: every wall at
+        another distance than measured, wherever the front-end put the pose)."""
+        n = len(self.range_samples)
+        if n < self.RANGE_MIN_SAMPLES:
+            return None
+        share = median(s for _, s in self.range_samples)
+        if share >= self.RANGE_FIT_LOW:
+            return None
+        return share, math.exp(median(r for r, _ in self.range_samples))
 
     def never_fit(self, min_checks: int = 2 * MIN_SAMPLES) -> bool:
         """Whether most of the run's measurements the map could judge (at least ``min_checks``; not those

@@ -359,3 +359,14 @@ class PoseStatus:
                 f"{e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s into the run, "
                 f"{path:.1f} m driven since the placement before) (is it the map of this building, its right "
                 "version, at its scale?)", True)
+        elif ag is not None and (rm := ag.range_misfit()) is not None:
+            # the front-end fit the scan somewhere (a particle filter converges anywhere), but ray-cast from the
+            # poses the localizer called ok most of the map's ranges are not the laser's
+            share, k = rm
+            ratio = f"its distances are {k:.1f} times the laser's: " if abs(math.log(k)) > math.log(1.5) else ""
+            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: {ratio}ray-cast in it from the poses called ok, "
+                f"{100 * share:.0f} % of the laser's ranges are within 10 % of the map's (median over "
+                f"{len(ag.range_samples)} scans; a right map: 60 % and more): check the map's resolution (is it "
+                "the map of this building?)", True)

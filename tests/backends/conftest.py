@@ -192,3 +192,14 @@ def route(loc, spec_dict: dict, msgs) -> None:
     by_topic = {s.topic: s for s in specs}
     for _, topic, m in msgs:
         router.on_message(by_topic[topic], m)
+
+
+def skid_steer_turns(dt: float = 0.01):
+    """The drive of the relative-yaw runaway tests: four 90 deg turns at 0.7 rad/s between 3 s straights,
+    stepped every ``dt``; yields ``(k, t, true heading, true turn rate)`` per step (k from 1)."""
+    th, k = 0.0, 0
+    for dur, w in [(3.0, 0.0), (math.pi / 2 / 0.7, 0.7)] * 4 + [(3.0, 0.0)]:
+        for _ in range(round(dur / dt)):
+            k += 1
+            th += w * dt
+            yield k, k * dt, th, w

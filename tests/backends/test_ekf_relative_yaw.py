@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import AHRS_SPECS, differential_ahrs_log, route, without_capability
+from conftest import AHRS_SPECS, differential_ahrs_log, route, skid_steer_turns, without_capability
 from scipy.spatial.transform import Rotation
 
 from fgloc.backends.contract import Capability
@@ -129,17 +129,11 @@ def _skid_steer_turns(scrub: float) -> tuple[EKFBackend, float]:
     be = EKFBackend()
     be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
     rng = np.random.default_rng(1)
-    th, t, dt = 0.0, 0.0, 0.01
-    plan = [(3.0, 0.0), (math.pi / 2 / 0.7, 0.7)] * 4 + [(3.0, 0.0)]
-    k = 0
-    for dur, w in plan:
-        for _ in range(round(dur / dt)):
-            k += 1
-            t = k * dt
-            th += w * dt
-            if k % 5 == 0:
-                be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
-            be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
+    th = 0.0
+    for k, t, th, w in skid_steer_turns():
+        if k % 5 == 0:
+            be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
+        be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
     return be, th
 
 

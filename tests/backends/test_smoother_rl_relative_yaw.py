@@ -9,7 +9,7 @@ import math
 import gtsam
 import numpy as np
 import pytest
-from conftest import AHRS_SPECS, differential_ahrs_log, route, without_capability
+from conftest import AHRS_SPECS, differential_ahrs_log, route, skid_steer_turns, without_capability
 
 from fgloc.backends.contract import Capability
 from fgloc.backends.factors import relative_yaw_error, relative_yaw_factor
@@ -130,24 +130,18 @@ def _skid_steer_turns(scrub: float, every: int = 10, drift: float | None = None)
     be = SlidingWindowSmoother()
     be.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
     rng = np.random.default_rng(1)
-    th, dt, worst = 0.0, 0.01, 0.0
-    plan = [(3.0, 0.0), (math.pi / 2 / 0.7, 0.7)] * 4 + [(3.0, 0.0)]
-    k = 0
-    for dur, w in plan:
-        for _ in range(round(dur / dt)):
-            k += 1
-            t = k * dt
-            th += w * dt
-            if k % 5 == 0:
-                be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
-            be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
-            if drift is not None:
-                be.add_relative_yaw(t, th - 1.0 + drift * t + float(rng.normal(0.0, 0.002)), 1e-4, "drifting")
-            if k % every == 0:
-                be.add_keyframe(t, None)
-                cur = be.current(False)
-                assert cur is not None
-                worst = max(worst, abs(math.remainder(float(cur[1][2]) - th, 2 * math.pi)))
+    th, worst = 0.0, 0.0
+    for k, t, th, w in skid_steer_turns():
+        if k % 5 == 0:
+            be.add_odometry(t, np.array([0.7, 0.0, scrub * w]), np.diag([1e-4, 1e-4, 1e-4]))
+        be.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
+        if drift is not None:
+            be.add_relative_yaw(t, th - 1.0 + drift * t + float(rng.normal(0.0, 0.002)), 1e-4, "drifting")
+        if k % every == 0:
+            be.add_keyframe(t, None)
+            cur = be.current(False)
+            assert cur is not None
+            worst = max(worst, abs(math.remainder(float(cur[1][2]) - th, 2 * math.pi)))
     traj = be.finish()
     return be, abs(math.remainder(float(traj.poses[-1][2]) - th, 2 * math.pi)), worst
 

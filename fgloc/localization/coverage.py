@@ -23,6 +23,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from fgloc.geometry import compose_values
 from fgloc.gridmath import raycast_grid
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, StaticTransform
@@ -36,6 +37,15 @@ UNMAPPED_SHARE = 0.5
 RANGE_FIT_LOG = 0.1
 
 
+def _laser_in_map(laser_mount: StaticTransform, pose: np.ndarray) -> tuple[float, float, float]:
+    """The laser's position and heading in the map frame at the ``base_link`` pose ``pose`` (the heading
+    not wrapped: the beams' angles are taken from it)."""
+    m = np.asarray(laser_mount.pose, dtype=float)
+    p = np.asarray(pose, dtype=float).reshape(3)
+    ox, oy, _ = compose_values(p, m)
+    return ox, oy, float(p[2]) + float(m[2])
+
+
 def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan,
                    pose: np.ndarray) -> float:
     """Share (0..1) of ``scan``'s valid beams that, cast from the ``base_link`` pose ``pose`` (map
@@ -45,12 +55,7 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     n = len(pts)
     if n == 0:
         return 0.0
-    m = np.asarray(laser_mount.pose, dtype=float)
-    p = np.asarray(pose, dtype=float).reshape(3)
-    cb, sb = math.cos(float(p[2])), math.sin(float(p[2]))
-    ox = float(p[0]) + cb * float(m[0]) - sb * float(m[1])  # the laser in the map frame
-    oy = float(p[1]) + sb * float(m[0]) + cb * float(m[1])
-    yaw = float(p[2]) + float(m[2])
+    ox, oy, yaw = _laser_in_map(laser_mount, pose)
     c, s = math.cos(yaw), math.sin(yaw)
     qx = ox + c * pts[:, 0] - s * pts[:, 1]
     qy = oy + s * pts[:, 0] + c * pts[:, 1]
@@ -96,12 +101,8 @@ def range_fit(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserSc
         return math.nan, math.nan
     if len(idx) > max_beams:
         idx = idx[np.linspace(0, len(idx) - 1, max_beams).round().astype(np.int64)]
-    m = np.asarray(laser_mount.pose, dtype=float)
-    p = np.asarray(pose, dtype=float).reshape(3)
-    cb, sb = math.cos(float(p[2])), math.sin(float(p[2]))
-    ox = float(p[0]) + cb * float(m[0]) - sb * float(m[1])
-    oy = float(p[1]) + sb * float(m[0]) + cb * float(m[1])
-    ang = float(p[2]) + float(m[2]) + scan.angle_min + scan.angle_increment * idx.astype(float)
+    ox, oy, yaw = _laser_in_map(laser_mount, pose)
+    ang = yaw + scan.angle_min + scan.angle_increment * idx.astype(float)
     if blocked is None:
         blocked = np.ascontiguousarray(occ_map.occupied)
     g = occ_map.world_to_grid_continuous([[ox, oy]])[0]

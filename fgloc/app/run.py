@@ -110,6 +110,9 @@ class RunResult:
     # the poses' statuses (fgloc.localization.monitor): counts of trajectory.tum's poses, the share suspect or
     # lost, the run-level verdicts (kind, message, unusable)
     status: dict[str, Any] = field(default_factory=dict)
+    # the default layout's sources the log has no topic of their type for (a wheels-only log's IMU): name ->
+    # one quiet line, said in place of the source's health line
+    absent: dict[str, str] = field(default_factory=dict)
 
     @property
     def lost_share(self) -> float:
@@ -575,7 +578,27 @@ def _write_outputs(req: RunRequest, outdir: Path, config: FglocConfig, loc: Any,
         result.warnings += unused_frontend_settings(config, loc.frontend_name)
     else:
         result.warnings += unused_log_maps(inputs.log, inputs.summary)
+    result.absent = absent_default_sources(config, result.stats, inputs.summary)
     return result
+
+
+def absent_default_sources(config: FglocConfig, stats: RunStats, summary: dict[str, Any]) -> dict[str, str]:
+    """The default layout's sources that got no message because the log has no topic of their type at
+    all (no IMU on a wheels-only log): ``{name: line}``, one quiet line each.  A configured source
+    (``sources.inputs``) that stays silent is a mistake to warn about, and a log with topics of the
+    type under other names keeps the source's health line (which topic is the robot's is the user's
+    to name)."""
+    from fgloc.io.topics import IMU, ODOMETRY, normalize_type
+
+    if config.sources.inputs:
+        return {}
+    types = {normalize_type(v.get("type") or "") for v in (summary.get("topics") or {}).values() if v.get("count")}
+    out = {}
+    for name, d in stats.sources.items():
+        what = {"imu": ("IMU", IMU), "odometry": ("odometry", ODOMETRY)}.get(d.kind)
+        if d.silent and what is not None and what[1] not in types:
+            out[name] = f"no {what[0]} in the log"
+    return out
 
 
 def unused_log_maps(log: Path, summary: dict[str, Any]) -> list[str]:

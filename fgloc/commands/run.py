@@ -80,10 +80,16 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
         say("  pose status: " + ", ".join(f"{k} {v} ({100 * v / n:.0f} %)" for k, v in counts.items()))
     for v in status.get("verdicts") or ():
         say(f"  {_styled('integrity:', '1;31' if v['unusable'] else '33', tty)} {v['message']}")
+    from dataclasses import replace
+
     from fgloc.localization.sources import summary_lines
 
-    for line in summary_lines(st):  # the motion model and each input source's health
+    # the motion model and each input source's health; a default source the log has nothing for: one quiet line
+    shown = replace(st, sources={k: d for k, d in st.sources.items() if k not in r.absent}) if r.absent else st
+    for line in summary_lines(shown):
         say(f"  {line}")
+    for name, why in r.absent.items():
+        say(f"  {name}: {why}")
     be = st.backend
     if be.get("solver_failures"):  # the smoother restarted from its prediction: the estimate is not smoothed there
         say(f"  {_styled('back-end:', '33', tty)} {be['solver_failures']} solver failure(s), each a restart from "

@@ -326,7 +326,38 @@ def _effective_config(req: RunRequest) -> FglocConfig:
     config = req.config if isinstance(req.config, FglocConfig) else load_config(req.config)
     if req.static_transforms:
         config = _with_static_transforms(config, req.static_transforms)
-    return config
+    return _named_topics_over_inputs(config, _named_topics(req))
+
+
+def _named_topics_over_inputs(config: FglocConfig, named: dict[str, str | None]) -> FglocConfig:
+    """``--odom-topic`` / ``--imu-topic`` with a config that lists ``sources.inputs`` (a converted
+    robot_localization file names its own robot's topics; the log at hand has others): the config's one
+    input of that type reads the named topic, said on stderr.  With no input of the type, or several,
+    a one-line :class:`ConfigError` says which key to set."""
+    import dataclasses
+    import logging
+
+    inputs = config.sources.inputs
+    if not inputs:
+        return config
+    new = dict(inputs)
+    for role, typ, option in (("odom", "odometry", "--odom-topic"), ("imu", "imu", "--imu-topic")):
+        topic = named[role]
+        if not topic:  # not named ("" is no input of that role: left to the sources as configured)
+            continue
+        of_type = [k for k, v in inputs.items() if isinstance(v, dict) and v.get("type") == typ]
+        if len(of_type) != 1:
+            listed = (f"{len(of_type)} {typ} sources ({', '.join(of_type)}): set the one to read in "
+                      f"sources.inputs.NAME.topic" if of_type else
+                      f"no {typ} source: add one, sources.inputs.NAME: {{type: {typ}, topic: {topic}}}")
+            raise ConfigError(f"{option} {topic}: the config's sources.inputs list {listed}")
+        name = of_type[0]
+        was = inputs[name].get("topic")
+        if was != topic:
+            new[name] = {**inputs[name], "topic": topic}
+            logging.getLogger("fgloc.app.run").warning("%s %s: sources.inputs.%s reads it (the config names %s)",
+                                                       option, topic, name, was)
+    return dataclasses.replace(config, sources=dataclasses.replace(config.sources, inputs=new))
 
 
 def _open_inputs(req: RunRequest, config: FglocConfig) -> _Inputs:
@@ -415,9 +446,11 @@ def _check_localizable(req: RunRequest, inputs: _Inputs) -> None:
                        f"{topics_line(summ)}")
     if req.map_yaml is None and n_odom == 0 and not configured:
         # an IMU turns the robot but never moves it: every pose would stay at the start
-        raise LogError(f"{log}: no odometry, and the IMU ({n_imu} on {imu_topic}) gives heading only: without a "
-                       f"map every pose would stay at the start; localize on a map with --map MAP.yaml, or name "
-                       f"the odometry topic with --odom-topic; its topics: {topics_line(summ)}")
+        absent = (f" (the config's odometry source reads {odom_topic}, not in the log)"
+                  if src.get(odom_topic) == "odometry" else "")
+        raise LogError(f"{log}: no odometry{absent}, and the IMU ({n_imu} on {imu_topic}) gives heading only: "
+                       f"without a map every pose would stay at the start; localize on a map with --map MAP.yaml, or "
+                       f"name the odometry topic with --odom-topic; its topics: {topics_line(summ)}")
     if req.map_yaml is not None and n_scan == 0:
         raise LogError(f"{log}: --map needs laser scans, but the log has none on {scan_topic} (name the scan "
                        f"topic with --scan-topic, or leave out --map for odometry alone); its topics: "

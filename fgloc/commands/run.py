@@ -148,9 +148,11 @@ def register(app: typer.Typer) -> None:
                                               "(scan is /scan) [default: /scan, else the log's only LaserScan topic; "
                                               "a name given must exist; \"\": none]"),
         odom_topic: str | None = typer.Option(None, "--odom-topic", help="nav_msgs/Odometry topic [/odom, else "
-                                              "the log's only Odometry topic; \"\": none]"),
+                                              "the log's only Odometry topic; \"\": none]; with a config's "
+                                              "sources.inputs: its odometry source reads it"),
         imu_topic: str | None = typer.Option(None, "--imu-topic", help="sensor_msgs/Imu (compass) topic [/imu, "
-                                             "else the log's only Imu topic; \"\": none]"),
+                                             "else the log's only Imu topic; \"\": none]; with a config's "
+                                             "sources.inputs: its IMU source reads it"),
         static_transform: tuple[str, str, float, float, float, float, float, float] | None = typer.Option(
             None, "--static-transform", help=mounts.RPY_HELP + "; more in the config's sources.static_transforms"),
         static_transform_xyzw: tuple[str, str, float, float, float, float, float, float, float] | None = typer.Option(

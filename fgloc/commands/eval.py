@@ -307,7 +307,7 @@ def eval_cmd(
         raise ConfigError(f"{files[0]}: fgloc eval needs an estimate and a reference (the reference last), e.g. "
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
-    from fgloc.eval.checks import end_error, frame_note, gap_note, start_aligned
+    from fgloc.eval.checks import clock_note, end_error, frame_note, gap_note, start_aligned
     from fgloc.eval.metrics import AssociationError, associate, association_metrics
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
@@ -331,11 +331,13 @@ def eval_cmd(
     results = {}
     pairs: dict[str, Any] = {}  # each estimate's association with the reference, made once
     ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
-    for (lab, est), p in zip(list(ests.items()), est_paths, strict=True):
+    for (lab, est), p, (_tr, src) in zip(list(ests.items()), est_paths, read, strict=True):
         try:
             a = associate(est, gt, max_gap=max_gap)
         except AssociationError as e:
-            raise LogError(f"{p}{': --align-start' if align_start else ' vs ' + gt_src.label}: {e}") from None
+            hint = clock_note(est, src, gt, gt_src, t_offset) if "do not overlap" in str(e) else None
+            raise LogError(f"{p}{': --align-start' if align_start else ' vs ' + gt_src.label}: {e}"
+                           + (f"; {hint}" if hint else "")) from None
         if align_start:
             ests[lab], a = start_aligned(est, a)
             ends[lab] = end_error(a)

@@ -98,3 +98,19 @@ def end_error(a: Any) -> float:
     import numpy as np
 
     return float(np.hypot(*(a.est[-1, :2] - a.gt[-1, :2])))
+
+
+def clock_note(est: Any, est_src: Any, gt: Any, gt_src: Any, t_offset: float = 0.0) -> str | None:
+    """For two trajectories that do not overlap in time (``est`` already shifted by ``t_offset``): when
+    both are topics of logs, whose log times put their stamps on one clock (a simulator's clock in
+    one header, the wall clock in the other, or a recorder's clock), the ``--t-offset`` that does,
+    as a clause; None when the log times say nothing (a TUM file) or would not make them overlap."""
+    a, b = getattr(est_src, "clock_offset_s", None), getattr(gt_src, "clock_offset_s", None)
+    if a is None or b is None or not len(est.stamps) or not len(gt.stamps):
+        return None
+    shift = float(a) - float(b)  # the estimate's stamp + shift = the reference's stamp of the same log time
+    lo, hi = est.stamps[0] - t_offset + shift, est.stamps[-1] - t_offset + shift
+    if hi < gt.stamps[0] or lo > gt.stamps[-1] or abs(shift) < 1e-3:
+        return None
+    return (f"their log times put them on one clock: --t-offset {shift:.3f} moves the estimate's stamps onto "
+            "the reference's")

@@ -42,6 +42,9 @@ class TrajectorySource:
     path: Path
     kind: str  # "tum", "carmen" or a log format ("mcap", "rosbag1", "rosbag2")
     topic: str | None = None
+    #: a log's topic: the median of (log time - header stamp), s; two topics of one log whose stamps are on two
+    #: clocks (a simulator's, the wall clock) differ by it (None: a file without log times)
+    clock_offset_s: float | None = None
 
     @property
     def label(self) -> str:
@@ -141,7 +144,10 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
     poses: list[np.ndarray] = []
     covs: list[np.ndarray] = []
     frames: set[str] = set()
-    for _t, msg in (_pose_stamped(src, topic) if types[topic] == POSE_STAMPED else src.messages([topic])):
+    logged: list[float] = []  # the accepted messages' log times, s
+    records = _pose_stamped(src, topic) if types[topic] == POSE_STAMPED else \
+        ((r.log_time_ns, r.msg) for r in src.records([topic]))
+    for log_ns, msg in records:
         pose = getattr(msg, "pose", None)
         if pose is None:
             continue
@@ -149,16 +155,19 @@ def _log_topic(path: Path, kind: str, topic: str | None) -> tuple[Trajectory, Tr
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             continue
         stamps.append(float(msg.stamp))  # type: ignore[attr-defined]
+        logged.append(1e-9 * log_ns)
         poses.append(p)
         covs.append(_pose_cov(msg))
         frames.add(str(getattr(msg, "frame_id", "") or ""))
     if not stamps:
         raise LogError(f"{path}: {topic} has no finite poses")
     frame = next(iter(frames)) if len(frames) == 1 and "" not in frames else "map"
-    return _sorted(np.asarray(stamps), np.asarray(poses), np.asarray(covs), frame), TrajectorySource(path, kind, topic)
+    offset = float(np.median(np.asarray(logged) - np.asarray(stamps)))
+    return (_sorted(np.asarray(stamps), np.asarray(poses), np.asarray(covs), frame),
+            TrajectorySource(path, kind, topic, clock_offset_s=offset))
 
 
-def _pose_stamped(src: Any, topic: str) -> Iterator[tuple[str, PoseFix]]:
+def _pose_stamped(src: Any, topic: str) -> Iterator[tuple[int, PoseFix]]:
     """A ``geometry_msgs/PoseStamped`` topic's messages as planar :class:`PoseFix` es without a covariance
     (the readers hand its messages over as CDR, rosbags' typestore decodes them; one that does not
     decode is skipped)."""
@@ -179,7 +188,8 @@ def _pose_stamped(src: Any, topic: str) -> Iterator[tuple[str, PoseFix]]:
         q, p = m.pose.orientation, m.pose.position
         yaw = float(quaternion_to_yaw(q.x, q.y, q.z, q.w))
         stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
-        yield topic, PoseFix(stamp, np.array([p.x, p.y, yaw], dtype=float), nan, frame_id=str(m.header.frame_id))
+        yield rec.log_time_ns, PoseFix(stamp, np.array([p.x, p.y, yaw], dtype=float), nan,
+                                       frame_id=str(m.header.frame_id))
 
 
 def _pose_cov(msg: object) -> np.ndarray:

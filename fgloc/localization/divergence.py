@@ -32,7 +32,10 @@ odometry explains is a jump the wheels did not drive.  A kidnapping makes one; a
 building's geometry (mirrored, at the wrong scale, another building) makes them again and again:
 each relocalization lands somewhere else, or turns the robot where its wheels went straight.  Two
 within :attr:`MapJumps.WINDOW_S` of each other is no kidnapping (nobody carries a robot twice in a minute),
-and no rare bad relocalization of a long run either.
+and no rare bad relocalization of a long run either.  Each jump remembers whether it ended a global
+search (the localizer did not know where the robot was: the search settled on a place): a right map
+with places alike (a symmetric room) makes such jumps too, out of global searches that settle on a
+look-alike place (status.py tells the two apart by how well the map's ranges fit the laser's).
 
 Core maths only: no I/O.
 """
@@ -40,6 +43,7 @@ Core maths only: no I/O.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -124,6 +128,8 @@ class MapJumps:
         #: the largest jump: (t, m off the odometry's displacement, rad off its turn, m driven)
         self.worst: tuple[float, float, float, float] | None = None
         self._jump_t: float | None = None  # the last jump's stamp
+        #: the last jumps: (t, whether a global search placed it)
+        self.jumps: deque[tuple[float, bool]] = deque(maxlen=64)
         #: the shortest time between two jumps (s; None before the second)
         self.closest_s: float | None = None
 
@@ -139,9 +145,10 @@ class MapJumps:
             self.turned_rad += abs(math.remainder(float(o[2] - self._odom[2]), math.tau))
         self._odom = o.copy()
 
-    def place(self, t: float, pose: FloatArray, odom_pose: FloatArray) -> bool:
+    def place(self, t: float, pose: FloatArray, odom_pose: FloatArray, searched: bool = False) -> bool:
         """The map put the back-end at ``pose`` at ``t`` (the odometry's pose then: ``odom_pose``); whether
-        that was a jump from the last placement the odometry does not explain."""
+        that was a jump from the last placement the odometry does not explain.  ``searched``: a global search
+        placed it (the pose before was lost; kept in :attr:`jumps`)."""
         self.odometry(odom_pose)
         p = np.asarray(pose, dtype=float).copy()
         o = np.asarray(odom_pose, dtype=float).copy()
@@ -166,6 +173,7 @@ class MapJumps:
             gap = float(t) - self._jump_t
             self.closest_s = gap if self.closest_s is None else min(self.closest_s, gap)
         self._jump_t = float(t)
+        self.jumps.append((float(t), bool(searched)))
         if self.worst is None or e_m > self.worst[1]:
             self.worst = (float(t), e_m, e_rad, path)
         return True

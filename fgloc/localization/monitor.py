@@ -92,7 +92,8 @@ class IntegrityConfig:
 class Verdict:
     """A run-level finding: a one-line message, and whether it makes the run unusable."""
 
-    kind: str  # no_fix, map_mismatch, initial_pose, global_start, diverging, heading_diverged, agreement, path_diverged
+    kind: str  # no_fix, map_mismatch, ambiguous, initial_pose, global_start, diverging, heading_diverged, agreement,
+    # path_diverged
     message: str
     unusable: bool
 

@@ -33,6 +33,11 @@ MISMATCH_MATCHED_SHARE = 0.1
 #: a back-end's heading_diverged_s counter that grew within this long (log s): its heading diverges now
 HEADING_CHECK_S = 1.0
 HEADING_DIVERGED = "heading diverged: the fused heading follows none of its heading sources"
+#: placements the odometry did not drive to, each ending a global search, while at least this share of the laser's
+#: ranges fit the map's at the poses called ok (the median over the run, coverage.py range_fit): a map with places
+#: alike, not a map that does not fit (the right map: 0.75-0.98 in simulation, Radish and Stage logs; a mirrored or
+#: rescaled map whose placements jump: 0.12-0.51)
+AMBIGUOUS_FIT = 0.7
 
 
 class PoseStatus:
@@ -57,6 +62,8 @@ class PoseStatus:
     path_divergence: PathDivergence | None = None
     #: the map's placements against the odometry's motion between them (divergence.py; made at the first pose)
     map_jumps: MapJumps | None = None
+    #: the localizer was searching the whole map (lost) at the last pose recorded
+    _searching: bool = False
     fixes: list[PoseFix]
     _divergence: tuple[float, float, float] | None
     _worst_divergence: tuple[float, float, float, float, float] | None
@@ -120,6 +127,7 @@ class PoseStatus:
         self._map_placement(t)
         status, why = self.pose_status(t)
         self.monitor.record(t, status, why)
+        self._searching = self._lost or not self.backend.initialized
 
     def pose_status(self, t: float) -> tuple[str, str]:
         """``(status, why)`` of the pose now (``t``: the newest stamp), see :mod:`fgloc.localization.monitor`."""
@@ -172,7 +180,7 @@ class PoseStatus:
 
     def _map_placement(self, t: float) -> None:
         """The pose at ``t`` against the odometry (divergence.py :class:`MapJumps`): a placement when the back-end
-        took a fix or was (re)started on one at ``t``."""
+        took a fix or was (re)started on one at ``t`` (out of a global search when the pose before was lost)."""
         if self.map is None or self.odom_mode or self.stats["odometry"] == 0:
             return
         mj = self.map_jumps
@@ -191,7 +199,21 @@ class PoseStatus:
         if pose is None:
             mj.odometry(odom)
         else:
-            mj.place(t, pose, odom)
+            mj.place(t, pose, odom, self._searching)
+
+    def _places_alike(self) -> tuple[float, int] | None:
+        """Whether the map's jumps (divergence.py :class:`MapJumps`) are a map with places alike: every one ended a
+        global search, and the map's ranges fit the laser's at the poses called ok (coverage.py range_fit, the
+        median share of the beams that fit at least :data:`AMBIGUOUS_FIT`): that share and how many scans; else
+        None."""
+        mj, ag = self.map_jumps, self.agreement
+        if mj is None or ag is None or not mj.jumps or not all(searched for _, searched in mj.jumps):
+            return None
+        n = len(ag.range_samples)
+        if n < ag.RANGE_MIN_SAMPLES:
+            return None
+        share = float(np.median([s for _, s in ag.range_samples]))
+        return (share, n) if share >= AMBIGUOUS_FIT else None
 
     def _path_diverged(self, t: float) -> tuple[float, float, float] | None:
         """The fused pose at ``t`` further from the last fix the back-end took than the odometry drove since
@@ -352,6 +374,20 @@ class PoseStatus:
             # scale, another building) relocalizes it again and again, or turns it where its wheels went straight
             tj, e_m, e_rad, path = mj.worst
             into = tj - (self._first_scan_t if self._first_scan_t is not None else tj)
+            alike = self._places_alike()
+            if alike is not None:
+                # every jump ended a global search, and the map fits the scans where the poses were right: a map
+                # with places alike (a symmetric room) the search could not tell apart, not a map that does not fit
+                share, n = alike
+                self.monitor.amend(-math.inf, math.inf, LOST, "lost: could not tell where in the map the robot is")
+                self.monitor.verdict(
+                    "ambiguous", f"could not tell where in the map the robot is: its global search settled "
+                    f"{mj.events} times where the odometry did not take the robot, two of them {mj.closest_s:.1f} s "
+                    f"apart (worst {e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s "
+                    f"into the run), while the map fits the laser where the poses were ok ({100 * share:.0f} % of "
+                    f"its ranges within 10 % of the map's, median over {n} scans): the map has places alike; give "
+                    "an initial pose (--initial-pose)", True)
+                return
             self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
             self.monitor.verdict(
                 "map_mismatch", f"this map does not fit this log: it put the robot {mj.events} times where its "

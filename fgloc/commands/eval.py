@@ -307,7 +307,7 @@ def eval_cmd(
         raise ConfigError(f"{files[0]}: fgloc eval needs an estimate and a reference (the reference last), e.g. "
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
-    from fgloc.eval.checks import clock_note, end_error, frame_note, gap_note, start_aligned
+    from fgloc.eval.checks import clock_note, end_error, frame_note, gap_note, heading_note, start_aligned
     from fgloc.eval.metrics import AssociationError, associate, association_metrics
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
@@ -343,8 +343,9 @@ def eval_cmd(
             ends[lab] = end_error(a)
         pairs[lab] = a
         results[lab] = association_metrics(a, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
-        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap),
-                 None if align or align_start else frame_note(lab, a)]
+        frames = None if align or align_start else frame_note(lab, a)
+        notes = [gap_note(lab, est.stamps, gt.stamps, max_gap), frames,
+                 None if align_start or frames is not None else heading_note(lab, a, align)]
         for note in notes:
             if note is not None:
                 typer.echo(f"note: {note}", err=True)

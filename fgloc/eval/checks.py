@@ -114,3 +114,34 @@ def clock_note(est: Any, est_src: Any, gt: Any, gt_src: Any, t_offset: float = 0
         return None
     return (f"their log times put them on one clock: --t-offset {shift:.3f} moves the estimate's stamps onto "
             "the reference's")
+
+
+def heading_note(label: str, a: Any, align: bool = False) -> str | None:
+    """A note when an estimate's heading errors are mostly one constant offset, tens of degrees large,
+    while its positions agree with the reference (``align``: after ``--align``'s rigid fit, which
+    the positions alone decide): the reference's body axes turned from the robot's (a motion-capture
+    rigid body defined off the robot's axes), an offset no position metric shows.  ``a``: the
+    estimate's :class:`~fgloc.eval.metrics.Association` with the reference."""
+    import numpy as np
+
+    from fgloc.geometry import wrap_angle
+
+    if len(a) < 10:
+        return None
+    est = np.asarray(a.est, dtype=float)
+    if align:
+        from fgloc.eval.metrics import align_se2
+        from fgloc.geometry import compose
+
+        est = np.asarray(compose(align_se2(est[:, :2], a.gt[:, :2]), est), dtype=float)
+    if float(np.sqrt(np.mean(np.sum((est[:, :2] - a.gt[:, :2]) ** 2, axis=1)))) >= 0.5:
+        return None  # the positions disagree too: frame_note's case, or a wrong estimate
+    e = np.asarray(wrap_angle(est[:, 2] - a.gt[:, 2]), dtype=float)
+    mean = math.atan2(float(np.mean(np.sin(e))), float(np.mean(np.cos(e))))
+    spread = math.degrees(float(np.sqrt(np.mean(np.asarray(wrap_angle(e - mean), dtype=float) ** 2))))
+    off = math.degrees(mean)
+    if abs(off) < 20.0 or spread > min(10.0, 0.2 * abs(off)):
+        return None
+    return (f"the heading errors of {label} are mostly one offset ({off:+.1f} deg, {spread:.1f} deg about it) where "
+            "the positions agree: the reference's body axes turned from the robot's (a motion-capture rigid body "
+            "defined off the robot's axes)? The heading metrics hold that offset; the position metrics do not")

@@ -332,7 +332,8 @@ def _effective_config(req: RunRequest) -> FglocConfig:
 def _named_topics_over_inputs(config: FglocConfig, named: dict[str, str | None]) -> FglocConfig:
     """``--odom-topic`` / ``--imu-topic`` with a config that lists ``sources.inputs`` (a converted
     robot_localization file names its own robot's topics; the log at hand has others): the config's one
-    input of that type reads the named topic, said on stderr.  With no input of the type, or several,
+    input of that type reads the named topic, said on stderr; ``""`` (none of that input) leaves the
+    config's inputs of that type out, said too.  With no input of the type, or several, or none left,
     a one-line :class:`ConfigError` says which key to set."""
     import dataclasses
     import logging
@@ -340,12 +341,20 @@ def _named_topics_over_inputs(config: FglocConfig, named: dict[str, str | None])
     inputs = config.sources.inputs
     if not inputs:
         return config
+    say = logging.getLogger("fgloc.app.run").warning
     new = dict(inputs)
     for role, typ, option in (("odom", "odometry", "--odom-topic"), ("imu", "imu", "--imu-topic")):
         topic = named[role]
-        if not topic:  # not named ("" is no input of that role: left to the sources as configured)
+        if topic is None:
             continue
         of_type = [k for k, v in inputs.items() if isinstance(v, dict) and v.get("type") == typ]
+        if topic == "":
+            for k in of_type:
+                del new[k]
+                say('%s "": sources.inputs.%s (%s) is not read', option, k, inputs[k].get("topic"))
+            if not new:
+                raise ConfigError(f'{option} "": the config\'s sources.inputs list nothing else to localize with')
+            continue
         if len(of_type) != 1:
             listed = (f"{len(of_type)} {typ} sources ({', '.join(of_type)}): set the one to read in "
                       f"sources.inputs.NAME.topic" if of_type else
@@ -355,8 +364,7 @@ def _named_topics_over_inputs(config: FglocConfig, named: dict[str, str | None])
         was = inputs[name].get("topic")
         if was != topic:
             new[name] = {**inputs[name], "topic": topic}
-            logging.getLogger("fgloc.app.run").warning("%s %s: sources.inputs.%s reads it (the config names %s)",
-                                                       option, topic, name, was)
+            say("%s %s: sources.inputs.%s reads it (the config names %s)", option, topic, name, was)
     return dataclasses.replace(config, sources=dataclasses.replace(config.sources, inputs=new))
 
 

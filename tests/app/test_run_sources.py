@@ -132,3 +132,20 @@ def test_a_named_topic_with_no_or_several_configured_inputs_of_its_type_is_an_er
     with pytest.raises(ConfigError) as e:
         _summary(tmp_path, tmp_path / "log", config=two, odom_topic="/odom")
     assert "2 odometry sources (odom0, odom1): set the one to read in sources.inputs.NAME.topic" in str(e.value)
+
+
+def test_no_imu_named_leaves_the_configs_imu_out(tmp_path, caplog):
+    """--imu-topic "" ("none") was ignored with a config that lists an IMU: the run read it anyway."""
+    from fgloc.errors import ConfigError
+
+    _write(tmp_path / "log", ("/imu",))
+    with caplog.at_level(logging.WARNING):
+        r = run_log(RunRequest(log=tmp_path / "log", outdir=tmp_path / "out", odom_topic="/odom", imu_topic="",
+                               config=_ported_config(tmp_path / "c.yaml"), view_channels=False))
+    assert '--imu-topic "": sources.inputs.imu0 (/imu) is not read' in caplog.text
+    assert set(r.stats.sources) == {"odom0"} and r.stats.sources["odom0"].accepted == N
+    imu_only = tmp_path / "imu.yaml"
+    imu_only.write_text("sources:\n  inputs:\n    imu0: {type: imu, topic: /imu, use: [vyaw]}\n")
+    with pytest.raises(ConfigError) as e:
+        _summary(tmp_path, tmp_path / "log", config=imu_only, imu_topic="")
+    assert str(e.value) == '--imu-topic "": the config\'s sources.inputs list nothing else to localize with'

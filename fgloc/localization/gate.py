@@ -72,7 +72,11 @@ moves to it when the map sides with it, so the odometry's drift since the anchor
 Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of
 :func:`scan_agreement`) to the covariances: a jump smaller than the map can tell apart is no jump
 (an odometry whose stamps come in bursts, as in the Radish logs, is often a few centimetres off
-between two scans while its covariance claims millimetres). The gate judges positions: a heading
+between two scans while its covariance claims millimetres).  Not for a particle filter's fix whose scan fit
+was not kept (the fit's maximum lies beyond the cloud, ``estimate: refined``): that is the cloud's mean and its
+spread, no place the scan fits the map, and where a cloud moves from a wrong place to the right one its mean
+passes between the two: a jump the map's floor would pass (0.15-0.2 m from a sure prediction) that pulls the
+back-end the wrong way.  The prediction judges it by the covariances alone.  The gate judges positions: a heading
 the fixes correct (an odometry that turned a few degrees wrong, as real wheels do in every turn) is
 left to the back-end's own weighting.
 
@@ -269,7 +273,7 @@ class JumpGate:
 
     def check(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
               odom_pose: FloatArray, t: float, motion: Motion | None = None,
-              motion_known: bool = True, motion_covered: bool = True) -> GateVerdict:
+              motion_known: bool = True, motion_covered: bool = True, fitted: bool = True) -> GateVerdict:
         """Take or hold ``fix`` (stamp ``t``) against the back-end's prediction ``(pred, pred_cov)`` there
         and the previous fix; ``odom_pose``: the dead-reckoned odometry pose at ``t``;
         ``motion(t0, t1, delta)``: the odometry's increment as the back-end believes it happened;
@@ -278,7 +282,9 @@ class JumpGate:
         prediction to it.  ``motion_covered`` False: the odometry's stamps do not cover the time since
         the previous fix (odometry late, stopped or absent for a while: :class:`OdometryCoverage`), so
         the fix follows the previous one as the fixes used last moved (:meth:`fix_velocity`), not as
-        the odometry's extrapolated or frozen pose says."""
+        the odometry's extrapolated or frozen pose says.  ``fitted`` False: the fix is a particle filter's
+        cloud mean whose scan fit was not kept (module docstring): the prediction judges it without the map's
+        resolution."""
 
         self._pending = None
         self._taken = None
@@ -301,7 +307,8 @@ class JumpGate:
         (p00, p01), (p10, p11) = P_pos.tolist()
         fx, fy, fyaw = np.asarray(fix.pose, dtype=float).reshape(3).tolist()
         e0, e1 = fx - float(pred[0]), fy - float(pred[1])
-        d2 = mahalanobis2_2x2(e0, e1, (p00 + s2) + r00, p01 + r01, p10 + r10, (p11 + s2) + r11)
+        f2 = s2 if fitted else 0.0  # a cloud's mean is no place the map put the robot (module docstring)
+        d2 = mahalanobis2_2x2(e0, e1, (p00 + f2) + r00, p01 + r01, p10 + r10, (p11 + f2) + r11)
         jump_m = float(math.hypot(e0, e1))
         jump_deg = math.degrees(abs(wrap_scalar(fyaw - float(pred[2]))))
         take = d2 <= self.cfg.gate_chi2

@@ -154,8 +154,7 @@ class Localizer(Recovery):
         self._heading_diverged_s = 0.0  # the back-end's heading_diverged_s counter when last seen growing
         self._heading_diverged_t = -math.inf  # ... and the stamp then
         self.stats["held_jumps"] = self.stats["confirmed_jumps"] = 0
-        #: called with the stamp of each pose added without a scan (a silent laser, a log without scans):
-        #: the session tells its sinks (Session sets it)
+        #: called with the stamp of each pose added without a scan (a silent laser): Session tells its sinks
         self.pose_listener: Callable[[float], None] | None = None
         self._last_stamp: dict[str, float] = {}
         self._odom_at_last_scan: FloatArray | None = None
@@ -174,8 +173,7 @@ class Localizer(Recovery):
         self._lost_since: float | None = None  # start of the current lost interval
         self._lost_total_s = 0.0
         self._used_fixes = 0  # fixes the back-end accepted while tracking
-        # a fix accepted since the pose was last (re)started: only a pose the map has confirmed may
-        # dead-reckon through space the map does not have (a wrong map or initial pose is lost)
+        # a fix accepted since the last (re)start: only a confirmed pose dead-reckons through unmapped space
         self._pose_confirmed = False
         self._t_started: float | None = None  # when the pose was last (re)started
         self._last_scan_t: float | None = None
@@ -380,7 +378,8 @@ class Localizer(Recovery):
             self.no_fix_reasons[kind] = self.no_fix_reasons.get(kind, 0) + 1
         held = False
         if fix is not None and self.gate is not None:
-            verdict = self._gate(t, fix, msg, None if fe.is_particle_filter else odom_now)
+            fitted = not (fe.is_particle_filter and fe.estimate == "refined" and not res.info.get("refined"))
+            verdict = self._gate(t, fix, msg, None if fe.is_particle_filter else odom_now, fitted)
             if not verdict.take:
                 held = True
                 self.stats["held_jumps"] += 1
@@ -480,7 +479,8 @@ class Localizer(Recovery):
                     self._start(t, found.pose, found.cov + EPS_COV)
         return fix
 
-    def _gate(self, t: float, fix: PoseFix, msg: LaserScan, odom_pose: FloatArray | None = None) -> GateVerdict:
+    def _gate(self, t: float, fix: PoseFix, msg: LaserScan, odom_pose: FloatArray | None = None,
+              fitted: bool = True) -> GateVerdict:
         """The jump gate's verdict on ``fix`` at scan stamp ``t`` (gate.py); ``odom_pose``: the odometry's there."""
         assert self.gate is not None
         guessed, self._guess_prediction = self._guess_prediction, None
@@ -501,7 +501,7 @@ class Localizer(Recovery):
             odom_pose = self.odom.pose_at(t)
         verdict = self.gate.check(fix, pred, pred_cov, msg, odom_pose, t, self.backend.motion_correction,
                                   motion_known=self.stats["odometry"] > 0,
-                                  motion_covered=self.odometry_coverage.covers(min(t_from, t), t))
+                                  motion_covered=self.odometry_coverage.covers(min(t_from, t), t), fitted=fitted)
         self.last_gate = verdict
         return verdict
 

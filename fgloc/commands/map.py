@@ -63,6 +63,20 @@ def _with_run_config_mounts(config: Path, opts: dict, transforms: list) -> list:
     return [*mine, *transforms]
 
 
+def _run_config_odometry(config: Path, opts: dict) -> str | None:
+    """A run config's one odometry source's topic (``sources.inputs``: what ``fgloc run --config``
+    reads), said on stderr; None: not a run config, or none or several odometry sources."""
+    if not _is_run_config(opts):
+        return None
+    inputs = (opts.get("sources") or {}).get("inputs") or {}
+    odo = [(k, v.get("topic")) for k, v in inputs.items() if isinstance(v, dict) and v.get("type") == "odometry"]
+    if len(odo) != 1 or not isinstance(odo[0][1], str) or not odo[0][1]:
+        return None
+    typer.echo(f"fgloc: {config}: the odometry of sources.inputs.{odo[0][0]}, {odo[0][1]} (as fgloc run reads it)",
+               err=True)
+    return odo[0][1]
+
+
 def _bars(quiet: bool):
     """``(bars, factory)``: one tqdm bar per stage (mapping, self-check / map-check) with its total, on
     a terminal only (a pipe or a log file gets no carriage-return lines)."""
@@ -92,9 +106,10 @@ def map_cmd(
     end: Annotated[float | None, typer.Option(help="last fraction of the scans to use (0..1)")] = None,
     scan_topic: Annotated[str, typer.Option(help="sensor_msgs/LaserScan topic (a log without /scan: its only "
                                             "LaserScan topic)")] = "/scan",
-    odom_topic: Annotated[str, typer.Option(help="nav_msgs/Odometry topic (a log without /odom: its only "
-                                            "Odometry topic; without any, or \"\": the scans are matched "
-                                            "to each other alone)")] = "/odom",
+    odom_topic: Annotated[str | None, typer.Option(help="nav_msgs/Odometry topic [/odom, or a run config's one "
+                                                   "odometry source; a log without it: its only Odometry topic; "
+                                                   "without any, or \"\": the scans are matched to each other "
+                                                   "alone]")] = None,
     no_check: Annotated[bool, typer.Option("--no-check", help="skip the self-check")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar (none either when stderr is not a "
                                         "terminal)")] = False,
@@ -128,7 +143,11 @@ def map_cmd(
         if not isinstance(opts, dict):
             raise ConfigError(f"{config}: mapping config must be a mapping")
         transforms = _with_run_config_mounts(config, opts, transforms)
+        if odom_topic is None:
+            odom_topic = _run_config_odometry(config, opts)
         opts = opts.get("mapping", {} if _is_run_config(opts) else opts)
+    if odom_topic is None:
+        odom_topic = "/odom"
     opts["resolution"] = resolution
     if not (resolution > 0):
         raise ConfigError(f"resolution must be positive, got {resolution}")

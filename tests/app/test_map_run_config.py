@@ -34,3 +34,24 @@ def test_a_run_config_mounts_the_laser_for_the_mapper(tmp_path):
     both = mapped("both", "--config", run_cfg, "--static-transform", "base_link", "laser", "0.5", "0", "0.2",
                   "0", "0", "10")
     assert np.array_equal(both, with_cli)
+
+
+def test_a_run_configs_odometry_source_is_the_mappers(tmp_path):
+    """A run config whose one odometry source reads another topic than /odom: fgloc map read /odom
+    regardless (fgloc run reads the config's); now the config's, said, unless --odom-topic names one."""
+    scen = tmp_path / "short.yaml"
+    scen.write_text("route: [[3.0, 3.0], [8.0, 3.0], [8.0, 6.0]]\n")
+    rc, _out, err = run_cli("simulate", "scenario", scen, "-o", tmp_path / "sim", "--seed", "2")
+    assert rc == 0, err
+    log = tmp_path / "sim" / "log.mcap"
+    cfg = tmp_path / "robot.yaml"
+    cfg.write_text("sources:\n  inputs:\n    wheels: {type: odometry, topic: /wheels/odom, use: [vx, vyaw]}\n")
+    rc, _out, err = run_cli("map", log, "-o", tmp_path / "a", "-q", "--no-check", "--config", cfg)
+    assert rc == 2 and "the odometry of sources.inputs.wheels, /wheels/odom (as fgloc run reads it)" in err, err
+    assert "no odometry on /wheels/odom" in err, err
+    rc, _out, err = run_cli("map", log, "-o", tmp_path / "b", "-q", "--no-check", "--config", cfg,
+                            "--odom-topic", "/odom")
+    assert rc == 0 and "sources.inputs" not in err, err
+    rc, _out, err = run_cli("map", log, "-o", tmp_path / "c", "-q", "--no-check")
+    assert rc == 0, err
+    assert np.array_equal(np.loadtxt(tmp_path / "b" / "trajectory.tum"), np.loadtxt(tmp_path / "c" / "trajectory.tum"))

@@ -82,23 +82,21 @@ def unmapped_share(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: La
     return float(np.count_nonzero(clear)) / n
 
 
-def range_fit(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: np.ndarray,
-              max_beams: int = 64, min_beams: int = 10, blocked: NDArray[np.bool_] | None = None
-              ) -> tuple[float, float]:
-    """How the map's ranges compare with the laser's at the ``base_link`` pose ``pose``: over at most
-    ``max_beams`` of ``scan``'s returns (evenly spread) that end on a wall within ``range_max``, ``log(cast /
-    measured)`` with ``cast`` the range ray-cast in the map from the laser to its first occupied cell (beams
-    whose cast leaves the grid or ``range_max`` are not counted).  Returns its median and the share of those
-    beams within :data:`RANGE_FIT_LOG` of 0 (NaN, NaN with fewer than ``min_beams`` beams).  On the map of this
-    building at the right pose most beams fit (people, glass, moved furniture move some beams, not most); on a
-    map whose cells are read at another size few do, wherever the pose.  ``blocked``: the map's occupied grid
-    (C-contiguous), when the caller keeps it (made anew otherwise: most of the cost on a large map)."""
+def range_residuals(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: np.ndarray,
+                    max_beams: int = 64, min_beams: int = 10, blocked: NDArray[np.bool_] | None = None
+                    ) -> NDArray[np.float64] | None:
+    """The map's ranges against the laser's at the ``base_link`` pose ``pose``: over at most ``max_beams`` of
+    ``scan``'s returns (evenly spread) that end on a wall within ``range_max``, ``log(cast / measured)`` with
+    ``cast`` the range ray-cast in the map from the laser to its first occupied cell (beams whose cast leaves the
+    grid or ``range_max`` are not counted); None with fewer than ``min_beams`` beams.  ``blocked``: the map's
+    occupied grid (C-contiguous), when the caller keeps it (made anew otherwise: most of the cost on a large
+    map)."""
     r = np.asarray(scan.ranges, dtype=float)
     with np.errstate(invalid="ignore"):
         hit = np.isfinite(r) & (r >= max(scan.range_min, 0.0)) & (r < 0.99 * scan.range_max) & (r > 0)
     idx = np.nonzero(hit)[0]
     if len(idx) < min_beams:
-        return math.nan, math.nan
+        return None
     if len(idx) > max_beams:
         idx = idx[np.linspace(0, len(idx) - 1, max_beams).round().astype(np.int64)]
     ox, oy, yaw = _laser_in_map(laser_mount, pose)
@@ -112,9 +110,31 @@ def range_fit(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserSc
                         float(scan.range_max) / occ_map.resolution) * occ_map.resolution
     keep = np.isfinite(cast) & (cast > 0) & (cast < 0.99 * scan.range_max)
     if np.count_nonzero(keep) < min_beams:
+        return None
+    return np.log(cast[keep] / r[idx][keep])
+
+
+def range_fit(occ_map: OccupancyMap, laser_mount: StaticTransform, scan: LaserScan, pose: np.ndarray,
+              max_beams: int = 64, min_beams: int = 10, blocked: NDArray[np.bool_] | None = None
+              ) -> tuple[float, float]:
+    """How the map's ranges compare with the laser's at the ``base_link`` pose ``pose`` (:func:`range_residuals`
+    ``log(cast / measured)``): its median and the share of the beams within :data:`RANGE_FIT_LOG` of 0 (NaN, NaN
+    with fewer than ``min_beams`` beams).  On the map of this building at the right pose most beams fit (people,
+    glass, moved furniture move some beams, not most); on a map whose cells are read at another size few do,
+    wherever the pose."""
+    lr = range_residuals(occ_map, laser_mount, scan, pose, max_beams, min_beams, blocked)
+    if lr is None:
         return math.nan, math.nan
-    lr = np.log(cast[keep] / r[idx][keep])
     return float(np.median(lr)), float(np.mean(np.abs(lr) < RANGE_FIT_LOG))
 
 
-__all__ = ["MARCH_STEP_CELLS", "UNMAPPED_SHARE", "RANGE_FIT_LOG", "range_fit", "unmapped_share"]
+def beyond_walls(lr: NDArray[np.float64]) -> float:
+    """The share of beams whose measured range ends beyond the map's wall by more than :data:`RANGE_FIT_LOG`
+    (of :func:`range_residuals`' ``lr``): the laser saw through where the map has a wall.  What the map lacks
+    (people, pallets, moved furniture) shortens beams; only a wall the building does not have there (an open
+    door, furniture gone, or a map whose walls are elsewhere: mirrored, of another version) lengthens them."""
+    return float(np.mean(lr < -RANGE_FIT_LOG)) if len(lr) else math.nan
+
+
+__all__ = ["MARCH_STEP_CELLS", "UNMAPPED_SHARE", "RANGE_FIT_LOG", "beyond_walls", "range_fit", "range_residuals",
+           "unmapped_share"]

@@ -38,7 +38,7 @@ import numpy as np
 
 from fgloc.config.schema import setting
 from fgloc.geometry import wrap_scalar
-from fgloc.localization.coverage import UNMAPPED_SHARE, range_fit, unmapped_share
+from fgloc.localization.coverage import RANGE_FIT_LOG, UNMAPPED_SHARE, beyond_walls, range_residuals, unmapped_share
 from fgloc.localization.gate import scan_agreement
 
 OK = "ok"
@@ -367,6 +367,11 @@ class MapAgreement:
     #: paper hall with people, moved furniture, glass: 0.8 and more at the median, 0.6 at the lower decile;
     #: its map at twice its cell size: 0.15)
     RANGE_FIT_LOW = 0.35
+    #: ... or when the median share of beams that end beyond the map's wall (coverage.py :func:`beyond_walls`) is
+    #: above this (the right map, people, pallets, moved furniture, glass, open doors: 0.09 and less in simulation,
+    #: 0.05 and less on the Radish and Stage logs; the paper hall's map mirrored, where AMCL tracks 0.3 m off: 0.25
+    #: and more)
+    RANGE_BEYOND_HIGH = 0.15
 
     def __init__(self, cfg: IntegrityConfig, occ_map: Any, laser_mount: Any, sigma_m: float) -> None:
         self.cfg = cfg
@@ -392,6 +397,8 @@ class MapAgreement:
         self._blocked: np.ndarray | None = None  # the map's occupied grid, for range_fit (made at its first use)
         #: the last samples of range_fit at good measurements: (median log(cast / measured), share that fit)
         self.range_samples: deque[tuple[float, float]] = deque(maxlen=4 * self.SAMPLES)
+        #: ... and of the share of beams that end beyond the map's wall (coverage.py beyond_walls)
+        self.beyond_samples: deque[float] = deque(maxlen=4 * self.SAMPLES)
 
     def due(self, t: float) -> bool:
         return t - self._t >= self.cfg.agreement_period_s or t < self._t
@@ -453,9 +460,10 @@ class MapAgreement:
         self._range_t = t
         if self._blocked is None:
             self._blocked = np.ascontiguousarray(self.map.occupied)
-        lr, share = range_fit(self.map, self.laser_mount, scan, pose, self.MAX_BEAMS, self.MIN_BEAMS, self._blocked)
-        if math.isfinite(share):
-            self.range_samples.append((lr, share))
+        lr = range_residuals(self.map, self.laser_mount, scan, pose, self.MAX_BEAMS, self.MIN_BEAMS, self._blocked)
+        if lr is not None:
+            self.range_samples.append((float(np.median(lr)), float(np.mean(np.abs(lr) < RANGE_FIT_LOG))))
+            self.beyond_samples.append(beyond_walls(lr))
 
     def range_misfit(self) -> tuple[float, float] | None:
         """Whether the laser's ranges fit the map's at the poses the localizer called good: None when they do
@@ -469,6 +477,17 @@ class MapAgreement:
         if share >= self.RANGE_FIT_LOW:
             return None
         return share, math.exp(median(r for r, _ in self.range_samples))
+
+    def beyond_walls(self) -> tuple[float, int] | None:
+        """Whether the laser saw through the map's walls at the poses the localizer called good: None when not (or
+        fewer than :data:`RANGE_MIN_SAMPLES` samples), else the median over the samples of the share of beams that
+        end beyond the map's wall (above :data:`RANGE_BEYOND_HIGH`: the map's walls are not the building's where
+        the front-end put the pose) and how many samples."""
+        n = len(self.beyond_samples)
+        if n < self.RANGE_MIN_SAMPLES:
+            return None
+        share = median(self.beyond_samples)
+        return (share, n) if share > self.RANGE_BEYOND_HIGH else None
 
     def never_fit(self, min_checks: int = 2 * MIN_SAMPLES) -> bool:
         """Whether most of the run's measurements the map could judge (at least ``min_checks``; not those

@@ -406,3 +406,13 @@ class PoseStatus:
                 f"{100 * share:.0f} % of the laser's ranges are within 10 % of the map's (median over "
                 f"{len(ag.range_samples)} scans; a right map: 60 % and more): check the map's resolution (is it "
                 "the map of this building?)", True)
+        elif ag is not None and (bw := ag.beyond_walls()) is not None:
+            # the front-end tracked a place where the scan fits in part (a near-symmetric building's map mirrored:
+            # the corridors fit), but where the map has walls the laser kept seeing further: they are not there
+            share, n = bw
+            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
+            self.monitor.verdict(
+                "map_mismatch", f"this map does not fit this log: ray-cast in it from the poses called ok, "
+                f"{100 * share:.0f} % of the laser's ranges end more than 10 % beyond the map's walls (median over "
+                f"{n} scans; a right map with people and moved furniture: 10 % or less): the laser sees through "
+                "walls the map has (is it the map of this building, not mirrored, its right version?)", True)

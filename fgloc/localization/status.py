@@ -30,6 +30,9 @@ if TYPE_CHECKING:
 #: the map lacks is dead-reckoned, not lost)
 MISMATCH_LOST_SHARE = 0.5
 MISMATCH_MATCHED_SHARE = 0.1
+#: a no-fix reason (its kind, localizer.reason_kind) of a particle filter that did not update for its motion
+#: thresholds (AMCL's update_min_d / update_min_a): no match was tried on that scan
+WAITING_FOR_MOTION = "waiting for motion"
 #: a back-end's heading_diverged_s counter that grew within this long (log s): its heading diverges now
 HEADING_CHECK_S = 1.0
 HEADING_DIVERGED = "heading diverged: the fused heading follows none of its heading sources"
@@ -65,6 +68,7 @@ class PoseStatus:
     #: the localizer was searching the whole map (lost) at the last pose recorded
     _searching: bool = False
     fixes: list[PoseFix]
+    no_fix_reasons: dict[str, int]
     _divergence: tuple[float, float, float] | None
     _worst_divergence: tuple[float, float, float, float, float] | None
     _divergence_t: float
@@ -352,15 +356,23 @@ class PoseStatus:
             self._last_scan_t is not None else 0.0
         lost_share = self.lost_time_s() / span if span > 0 else 0.0
         matched = max(scans / self.pcfg.frontend_every, 1.0)
+        # scans a particle filter waited for motion on (nav2's update_min_d 0.25 m: most of a slow robot's) tried
+        # no match: they say nothing about the map
+        waiting = sum(n for kind, n in self.no_fix_reasons.items() if WAITING_FOR_MOTION in kind)
+        where = f"{scans} scans ({100 * used / matched:.1f} % of those matched)"
+        if waiting:
+            matched = max(float(self.stats["fixes"]) + float(self.stats["no_fix"]) - waiting, 1.0)
+            where = (f"the {matched:.0f} of {scans} scans a match was tried on ({100 * used / matched:.1f} %; the "
+                     f"front-end waited for motion on {waiting})")
         ag = self.agreement
         mj = self.map_jumps
         if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
             # the fixes it did accept were places in another building: no pose of the run is known
             self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
             self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {scans} "
-                f"scans ({100 * used / matched:.1f} % of those matched) and the localizer was lost "
-                f"{100 * lost_share:.0f} % of the run (is it the map of this building, its right version?)", True)
+                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {where} and "
+                f"the localizer was lost {100 * lost_share:.0f} % of the run (is it the map of this building, its "
+                "right version?)", True)
         elif ag is not None and ag.never_fit():
             # a front-end that converges anywhere (a particle filter) gave fixes the back-end took, but the scan
             # lay nowhere near the map's walls at the poses they made: places in another building

@@ -17,7 +17,8 @@ The first IMU gives the heading (and its rate) to the localizer; a second one on
 (its heading is in another world frame).  ``use: [..., roll, pitch]``: its attitude levels the
 odometry and its yaw rate is the heading's rate ``(sin(roll) w_y + cos(roll) w_z) / cos(pitch)``
 (the default layout's IMU does so unless ``sources.level_by_imu`` is off); a reading whose roll /
-pitch variance says they are not estimated (:func:`tilt_usable`) does neither, counted.
+pitch variance says they are not estimated (:func:`tilt_usable`) does neither, counted; so is a
+yaw whose variance says it is not estimated (:func:`yaw_usable`): not a heading, absolute or differential.
 ``differential``: orientation increments, as a heading with the source's own offset for a
 back-end that takes them (``add_relative_yaw``), else as a yaw rate.
 """
@@ -68,6 +69,19 @@ def tilt_usable(roll_pitch_var: tuple[float, float] | None) -> bool:
         return True
     bound = MAX_TILT_RAD * MAX_TILT_RAD
     return roll_pitch_var[0] <= bound and roll_pitch_var[1] <= bound  # (NaN: not)
+
+
+#: rad: a yaw sigma of a quarter turn or more allows any heading (a driver's "not estimated"; an xsens
+#: claiming 10 rad^2 while its yaw ran against the turn): such a yaw is no heading.  Taken as one,
+#: its readings' errors (one drift, not independent) add up over a hundred readings a second to a
+#: heading the filter trusts
+MAX_YAW_SIGMA_RAD = math.pi / 2
+
+
+def yaw_usable(yaw_var: float) -> bool:
+    """Whether a yaw's variance (after the source's covariance policy; NaN: none claimed, the
+    back-end's default) lets it be a heading: at most :data:`MAX_YAW_SIGMA_RAD` squared."""
+    return not yaw_var > MAX_YAW_SIGMA_RAD * MAX_YAW_SIGMA_RAD
 
 
 class ImuHandler(SourceHandler):
@@ -134,6 +148,9 @@ class ImuHandler(SourceHandler):
                         rate = rate * float(np.sign(R[2, 2]))
         t = float(msg.stamp)
         be = self.loc.backend
+        if yaw is not None and self.uses_yaw and not yaw_usable(spec.variance("yaw", yaw_var)):
+            st.extra["yaw_unusable"] = st.extra.get("yaw_unusable", 0) + 1
+            yaw = None
         if spec.differential and yaw is not None and self.uses_yaw and not self.uses_vyaw \
                 and Capability.RELATIVE_YAW in be.capabilities:
             # orientation increments as a heading with the source's own offset (a back-end that

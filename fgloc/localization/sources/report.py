@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from fgloc.backends.contract import Capability
 from fgloc.localization.sources.handler import SourceHandler
+from fgloc.localization.sources.imu import MAX_YAW_SIGMA_RAD
 from fgloc.localization.sources.odometry import MAX_TILT_RAD
 
 if TYPE_CHECKING:
@@ -61,6 +62,7 @@ class SourceReport:
     tilt_max_deg: float = 0.0
     tilt_implausible: int = 0  # odometry messages not levelled (tilt beyond MAX_TILT_RAD, or NaN)
     tilt_unusable: int = 0  # IMU readings whose roll / pitch variance says they are not estimated
+    yaw_unusable: int = 0  # IMU readings whose yaw variance says it is not estimated
     #: the back-end's gated measurements by stream: ``backend`` (the source's own), ``yaw``, ``gyro``
     stream_gated: dict[str, int] = field(default_factory=dict)
     noise: dict[str, StreamNoise] = field(default_factory=dict)  # by :data:`STREAM_KEYS`
@@ -94,8 +96,8 @@ class SourceReport:
                 d[k] = v
         if self.topic is not None:
             d["use"] = list(self.use)
-        for k in ("mount_late", "unmounted", "levelled", "tilt_implausible", "tilt_unusable", "from_poses",
-                  "silent"):
+        for k in ("mount_late", "unmounted", "levelled", "tilt_implausible", "tilt_unusable", "yaw_unusable",
+                  "from_poses", "silent"):
             if getattr(self, k):
                 d[k] = getattr(self, k)
         if self.levelled:
@@ -136,6 +138,8 @@ def source_report(h: SourceHandler, loc: Any) -> SourceReport:
         r.tilt_implausible = int(st.extra["tilt_implausible"])
     if st.extra.get("tilt_unusable"):
         r.tilt_unusable = int(st.extra["tilt_unusable"])
+    if st.extra.get("yaw_unusable"):
+        r.yaw_unusable = int(st.extra["yaw_unusable"])
     bhs = be.source_health()
     for n in h.backend_streams():
         bh = bhs.get(n)
@@ -235,6 +239,9 @@ def summary_lines(stats: RunStats) -> list[str]:
                        "check the IMU mount)")
         if d.tilt_unusable:
             est.append(f"roll / pitch of {d.tilt_unusable} readings not used (variance says not estimated)")
+        if d.yaw_unusable:
+            est.append(f"yaw of {d.yaw_unusable} readings not used (sigma > {math.degrees(MAX_YAW_SIGMA_RAD):.0f} deg: "
+                       "not estimated)")
         out.append(f"{head}: {', '.join(parts)}" + (f"; {'; '.join(est)}" if est else ""))
     clock = stats.odom_clock or {}
     if clock.get("slow"):  # a slow odometry's clock against the scans' (localization/clock.py)

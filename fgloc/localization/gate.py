@@ -2,42 +2,40 @@
 
 A fix is taken when it agrees with what the odometry says since the last fix it passed, either way:
 
-* with the back-end's prediction at the scan stamp (the fused pose carried on by the odometry,
-  with its covariance): ``d2 = e^T (P_pred + R_fix)^-1 e`` of the position within
-  ``integrity.gate_chi2``; or
-* with the previous fix, when the gate passed it (and the back-end used it, or its own tighter gate held
-  it before any fix had confirmed the back-end's pose) and it was sure of its position (its position
-  sigma, in every direction, within twice the prediction's and the allowance below for the motion since
-  the fix before; and, when the prediction took it, within the gate of the prediction's covariance and
-  that allowance alone, and not where its own covariance covers an offset the prediction's and the map's
-  resolution do not: a fix the prediction took only for its own vagueness, a matcher unsure between two
-  places, is no position to follow, however far a slow laser's robot moved between two fixes), carried on
-  by the odometry's motion since (:meth:`Backend.motion_correction`: a gyro's turn where it covers it),
-  with an allowance for an odometry that slips or scrubs beyond what it reports:
-  ``integrity.odometry_slip`` times the distance and the turn it reported in between (the odometry
-  motion model of AMCL and most particle filters).  A back-end whose online estimate lags the
-  fixes (a smoother outvoted by odometry that slips 30 %) does not make the fixes that follow each other
-  as the wheels roughly say look like jumps; nor does a back-end that rejects fixes (an EKF sure of a
-  start it has not moved from) make a run of fixes that agree with each other look like one: a gate that
-  held them all would lose the robot.
+* with the back-end's prediction at the scan stamp (the fused pose carried on by the odometry, with its
+  covariance): ``d2 = e^T (P_pred + R_fix)^-1 e`` of the position within ``integrity.gate_chi2``; or
+* with the previous fix, when the gate passed it (and the back-end used it, or its own tighter gate held it
+  before any fix had confirmed the back-end's pose) and it was sure of its position (its position sigma, in
+  every direction, within twice the prediction's and the allowance below for the motion since the fix before;
+  and, when the prediction took it, within the gate of the prediction's covariance and that allowance alone,
+  and not where its own covariance covers an offset the prediction's and the map's resolution do not: a fix
+  the prediction took only for its own vagueness, a matcher unsure between two places, is no position to
+  follow, however far a slow laser's robot moved between two fixes), carried on by the odometry's motion since
+  (:meth:`Backend.motion_correction`: a gyro's turn where it covers it), with an allowance for an odometry that
+  slips or scrubs beyond what it reports: ``integrity.odometry_slip`` times the distance and the turn it
+  reported in between (the odometry motion model of AMCL and most particle filters).  A back-end whose online
+  estimate lags the fixes (a smoother outvoted by odometry that slips 30 %) does not make the fixes that follow
+  each other as the wheels roughly say look like jumps; nor does a back-end that rejects fixes (an EKF sure of
+  a start it has not moved from) make a run of fixes that agree with each other look like one: a gate that held
+  them all would lose the robot.
 
-The odometry's motion counts only where its stamps (not their arrival) cover the time since the
-previous fix (:class:`OdometryCoverage`, no gap over ``integrity.odometry_gap_s``).  Odometry that
-arrives late (its newest stamp behind the scan's), stops (a dead wheel driver) or is absent for a
-stretch leaves the odometry pose extrapolated or frozen there: a wrong fix must not pass as explained
-by a motion nobody measured, nor a right one be held because the frozen odometry says the robot
-stood still.  Then the fix follows the previous one as the fixes used over the last quarter second moved
-(their own velocity, :meth:`JumpGate.fix_velocity`), with the same slip allowance; the prediction and
-the map's confirmation judge it as always.
+The odometry's motion counts only where its stamps (not their arrival) cover the time since the previous fix
+(:class:`OdometryCoverage`, no gap over ``integrity.odometry_gap_s``). Odometry that arrives late (its newest stamp
+behind the scan's), stops (a dead wheel driver) or is absent for a stretch leaves the odometry pose extrapolated or
+frozen there: a wrong fix must not pass as explained by a motion nobody measured, nor a right one be held because
+the frozen odometry says the robot stood still. Then the fix follows the previous one as the fixes used over the
+last quarter second moved (their own velocity, :meth:`JumpGate.fix_velocity`), with the same slip allowance; the
+prediction and the map's confirmation judge it as always.
 
-A fix that agrees with neither is a jump the odometry does not explain.  It is taken only on
-evidence the matcher did not produce itself: the scan's agreement with the map
-(:func:`scan_agreement`, the mean Gaussian likelihood of its beam endpoints on the map's distance
-field) must be clearly better at the fix than anywhere near the prediction
-(``integrity.confirm_agreement``; the best of a few poses within 3 sigma of the prediction's
-covariance, :func:`neighbourhood`): the map itself says the odometry is wrong.  Otherwise the fix is
-held back (the back-end dead-reckons), and the next fix has no previous one to follow: it must
-agree with the prediction, or the map must confirm it.
+A fix that agrees with neither is a jump the odometry does not explain. It is taken only on evidence the matcher did
+not produce itself: the scan's agreement with the map (:func:`scan_agreement`, the mean Gaussian likelihood of its
+beam endpoints on the map's distance field) must be clearly better at the fix than anywhere near the prediction
+(``integrity.confirm_agreement``; the best of a few poses within 3 sigma of the prediction's covariance,
+:func:`neighbourhood`): the map itself says the odometry is wrong, unless the agreement climbs from the prediction
+(halfway to the fix at most) to a place it explains the scan as well as at the fix: a prediction further off than it
+claims (dead reckoning past held fixes) beside a place alike. The fix is then taken there. Otherwise the fix is held
+back (the back-end dead-reckons), and the next fix has no previous one to follow: it must agree with the prediction,
+or the map must confirm it.
 
 So a run of consistent wrong fixes does not pull the trajectory: in a world that changed since its
 map (a row of shelves along a mapped wall, seen 0.3 m closer) the matcher lands on the same wrong
@@ -69,16 +67,14 @@ the map explains the scan worse than at a right fix, and the anchor moves to the
 held as a jump.  At most once a second the map judges a fix that did not depart as well, and the anchor
 moves to it when the map sides with it, so the odometry's drift since the anchor stays small.
 
-Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of
-:func:`scan_agreement`) to the covariances: a jump smaller than the map can tell apart is no jump
-(an odometry whose stamps come in bursts, as in the Radish logs, is often a few centimetres off
-between two scans while its covariance claims millimetres).  Not for a particle filter's fix whose scan fit
-was not kept (the fit's maximum lies beyond the cloud, ``estimate: refined``): that is the cloud's mean and its
-spread, no place the scan fits the map, and where a cloud moves from a wrong place to the right one its mean
-passes between the two: a jump the map's floor would pass (0.15-0.2 m from a sure prediction) that pulls the
-back-end the wrong way.  The prediction judges it by the covariances alone.  The gate judges positions: a heading
-the fixes correct (an odometry that turned a few degrees wrong, as real wheels do in every turn) is
-left to the back-end's own weighting.
+Both tests add the map's own resolution (its cell or declared accuracy, the distance scale of :func:`scan_agreement`)
+to the covariances: a jump smaller than the map can tell apart is no jump (an odometry whose stamps come in bursts,
+as in the Radish logs, is often a few centimetres off between two scans while its covariance claims millimetres).
+Not for a particle filter's fix whose scan fit was not kept (``estimate: refined``, the fit's maximum beyond the
+cloud): the cloud's mean and spread, no place the scan fits the map; a cloud moving from a wrong place to the right
+one passes between the two, a jump the floor would pass (0.15-0.2 m from a sure prediction): the prediction judges
+it by the covariances alone.  The gate judges positions: a heading the fixes correct (an odometry that turned a
+few degrees wrong, as real wheels do in every turn) is left to the back-end's own weighting.
 
 One gate for every back-end: the localizer applies it before :meth:`Backend.add_keyframe`.
 Core maths only: no I/O.
@@ -106,6 +102,7 @@ from fgloc.localization.agreement import (
 )
 from fgloc.localization.gate_records import FixRecord, HeldRun
 from fgloc.localization.odometry_coverage import OdometryCoverage
+from fgloc.localization.relocalization import place_near
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
 
@@ -382,6 +379,10 @@ class JumpGate:
             v.take = v.confirmed = True
             v.why = (f"a jump of {jump_m:.2f} m / {jump_deg:.1f} deg the map confirms (agreement {a_fix:.2f} at "
                      f"the fix, at most {a_pred:.2f} near the odometry's prediction)")
+            there, a_there = place_near(self.map, self.laser_mount, scan, pred, self.sigma_m, 0.5 * jump_m)
+            if a_there >= a_fix:  # a prediction off by more than it claims: the place near it (module docstring)
+                v.why = f"taken {math.hypot(*(there - pred)[:2]):.2f} m from the prediction where the map fits as well"
+                fix.pose = there
         else:
             v.why = (f"held back: a jump of {jump_m:.2f} m / {jump_deg:.1f} deg from the odometry's prediction "
                      f"(d2 {d2:.0f}) that the map does not confirm (agreement {a_fix:.2f} at the fix, "
@@ -517,7 +518,6 @@ class JumpGate:
         """``(fixes, first stamp)`` of the current run of held fixes that follow each other as the odometry
         says (``(0, nan)``: none; a fix taken ends it)."""
         return (0, math.nan) if self._held is None else (self._held.n, self._held.t0)
-
 
     def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
                   points: FloatArray | None = None) -> tuple[float, float]:

@@ -16,7 +16,7 @@ import numpy as np
 from fgloc.backends.base import FloatArray
 from fgloc.localization.gate import GateVerdict, JumpGate
 from fgloc.localization.monitor import LOST, MapAgreement
-from fgloc.localization.relocalization import Relocalizer, close
+from fgloc.localization.relocalization import Relocalizer, close, place_near
 from fgloc.localization.status import PoseStatus
 from fgloc.maps import OccupancyMap
 from fgloc.types import LaserScan, PoseFix, StaticTransform
@@ -139,6 +139,17 @@ class Recovery(PoseStatus):
         relocalizer looks for a confirmed better place (``res``, ``odom_delta``: the scan's match and motion).
         Whether the pose was started anew (or the search begun)."""
         assert self.agreement is not None and self.reloc is not None
+        if self.backend.initialized and self.gate is not None and self.map is not None:
+            # a pose that drifted a few centimetres off beside a place alike (dead reckoning past held fixes), not a
+            # kidnapping: the agreement climbs from it to a place the scan fits as well as the run's good stretch
+            pose, cov = self.backend.predict(t)
+            near, a = place_near(self.map, self.laser_mount, msg, pose, self.gate.sigma_m)
+            good = self.agreement.expected()
+            if good is not None and a >= self.icfg.agreement_low * good:
+                self.stats["agreement_reacquired"] = self.stats.get("agreement_reacquired", 0) + 1
+                s2 = self.gate.sigma_m**2  # the map's resolution over what the pose claimed
+                self._start(t, near, np.asarray(cov, dtype=float) + np.diag([s2, s2, 0.0]) + EPS_COV)
+                return True
         self.stats["agreement_lost"] = self.stats.get("agreement_lost", 0) + 1
         since = self.agreement.wrong_since
         if self.frontend.supports_global:

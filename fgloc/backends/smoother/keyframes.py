@@ -30,6 +30,7 @@ from fgloc.backends.smoother.covariance import (
     covariance_bound,
     timing_covariance,
 )
+from fgloc.backends.ekf import SCALE_EVIDENCE_SIGMAS
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.geometry import compose1, mahalanobis2_3x3, wrap_scalar
 from fgloc.geometry import exp as se2_exp
@@ -329,8 +330,12 @@ class KeyframeGraph(FurtherSourceFactors):
                              [self.cfg.odom_scale_rw])
             ks_v = self._chain_key(ch, t, graph, vals, ts)
         self._turned += abs(float(d[2]))
-        if (self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0)) \
-                or "odom_yaw_scale" in self.chains:
+        # the yaw-rate scale only where the wheels report a turn: a reported yaw within its noise of zero
+        # says nothing of it (linked there, the fixes' heading jitter at a standstill is explained by a
+        # scale going to zero); the EKF's evidence rule
+        turning = abs(float(d[2])) > SCALE_EVIDENCE_SIGMAS * math.sqrt(max(a[8], 0.0))
+        if turning and ((self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0))
+                        or "odom_yaw_scale" in self.chains):
             # observable once the robot has turned (a radian) with another yaw source to compare (a
             # barely observable scale adds noise)
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])

@@ -12,6 +12,7 @@ import numpy as np
 
 from fgloc.backends.base import FloatArray
 from fgloc.backends.contract import SCANS_ALONE_AFTER_S
+from fgloc.backends.ekf import SCALE_EVIDENCE_SIGMAS
 from fgloc.backends.factors import (
     between_factor,
     compass_factor,
@@ -30,7 +31,6 @@ from fgloc.backends.smoother.covariance import (
     covariance_bound,
     timing_covariance,
 )
-from fgloc.backends.ekf import SCALE_EVIDENCE_SIGMAS
 from fgloc.backends.smoother.further import FurtherSourceFactors
 from fgloc.geometry import compose1, mahalanobis2_3x3, wrap_scalar
 from fgloc.geometry import exp as se2_exp

@@ -205,6 +205,11 @@ class PoseStatus:
         else:
             mj.place(t, pose, odom, self._searching)
 
+    def _unusable(self, kind: str, lost_why: str, message: str) -> None:
+        """A finding that makes the run unusable: every pose lost (``lost_why``), the verdict ``kind``."""
+        self.monitor.amend(-math.inf, math.inf, LOST, lost_why)
+        self.monitor.verdict(kind, message, True)
+
     def _places_alike(self) -> tuple[float, int] | None:
         """Whether the map's jumps (divergence.py :class:`MapJumps`) are a map with places alike: every one ended a
         global search, and the map's ranges fit the laser's at the poses called ok (coverage.py range_fit, the
@@ -368,19 +373,17 @@ class PoseStatus:
         mj = self.map_jumps
         if lost_share >= MISMATCH_LOST_SHARE and used < MISMATCH_MATCHED_SHARE * matched:
             # the fixes it did accept were places in another building: no pose of the run is known
-            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: the scans matched it {used} times in {where} and "
+            self._unusable("map_mismatch", "lost: this map does not fit this log",
+                f"this map does not fit this log: the scans matched it {used} times in {where} and "
                 f"the localizer was lost {100 * lost_share:.0f} % of the run (is it the map of this building, its "
-                "right version?)", True)
+                "right version?)")
         elif ag is not None and ag.never_fit():
             # a front-end that converges anywhere (a particle filter) gave fixes the back-end took, but the scan
             # lay nowhere near the map's walls at the poses they made: places in another building
-            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: the scan lay on its walls (agreement "
+            self._unusable("map_mismatch", "lost: this map does not fit this log",
+                f"this map does not fit this log: the scan lay on its walls (agreement "
                 f"{ag.MISFIT:.2f} or more) in {ag.judged_checks - ag.misfit_checks} of {ag.judged_checks} checks at "
-                "the fused pose (is it the map of this building, its right version?)", True)
+                "the fused pose (is it the map of this building, its right version?)")
         elif mj is not None and mj.repeated and mj.worst is not None and mj.closest_s is not None:
             # a kidnapping moves the robot once; a map whose geometry is not the building's (mirrored, at another
             # scale, another building) relocalizes it again and again, or turns it where its wheels went straight
@@ -391,40 +394,36 @@ class PoseStatus:
                 # every jump ended a global search, and the map fits the scans where the poses were right: a map
                 # with places alike (a symmetric room) the search could not tell apart, not a map that does not fit
                 share, n = alike
-                self.monitor.amend(-math.inf, math.inf, LOST, "lost: could not tell where in the map the robot is")
-                self.monitor.verdict(
-                    "ambiguous", f"could not tell where in the map the robot is: its global search settled "
+                self._unusable("ambiguous", "lost: could not tell where in the map the robot is",
+                    f"could not tell where in the map the robot is: its global search settled "
                     f"{mj.events} times where the odometry did not take the robot, two of them {mj.closest_s:.1f} s "
                     f"apart (worst {e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s "
                     f"into the run), while the map fits the laser where the poses were ok ({100 * share:.0f} % of "
                     f"its ranges within 10 % of the map's, median over {n} scans): the map has places alike; give "
-                    "an initial pose (--initial-pose)", True)
+                    "an initial pose (--initial-pose)")
                 return
-            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: it put the robot {mj.events} times where its "
+            self._unusable("map_mismatch", "lost: this map does not fit this log",
+                f"this map does not fit this log: it put the robot {mj.events} times where its "
                 f"odometry did not take it, two of them {mj.closest_s:.1f} s apart (a kidnapping does it once; worst "
                 f"{e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s into the run, "
                 f"{path:.1f} m driven since the placement before) (is it the map of this building, its right "
-                "version, at its scale?)", True)
+                "version, at its scale?)")
         elif ag is not None and (rm := ag.range_misfit()) is not None:
             # the front-end fit the scan somewhere (a particle filter converges anywhere), but ray-cast from the
             # poses the localizer called ok most of the map's ranges are not the laser's
             share, k = rm
             ratio = f"its distances are {k:.1f} times the laser's: " if abs(math.log(k)) > math.log(1.5) else ""
-            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: {ratio}ray-cast in it from the poses called ok, "
+            self._unusable("map_mismatch", "lost: this map does not fit this log",
+                f"this map does not fit this log: {ratio}ray-cast in it from the poses called ok, "
                 f"{100 * share:.0f} % of the laser's ranges are within 10 % of the map's (median over "
                 f"{len(ag.range_samples)} scans; a right map: 60 % and more): check the map's resolution (is it "
-                "the map of this building?)", True)
+                "the map of this building?)")
         elif ag is not None and (bw := ag.beyond_walls()) is not None:
             # the front-end tracked a place where the scan fits in part (a near-symmetric building's map mirrored:
             # the corridors fit), but where the map has walls the laser kept seeing further: they are not there
             share, n = bw
-            self.monitor.amend(-math.inf, math.inf, LOST, "lost: this map does not fit this log")
-            self.monitor.verdict(
-                "map_mismatch", f"this map does not fit this log: ray-cast in it from the poses called ok, "
+            self._unusable("map_mismatch", "lost: this map does not fit this log",
+                f"this map does not fit this log: ray-cast in it from the poses called ok, "
                 f"{100 * share:.0f} % of the laser's ranges end more than 10 % beyond the map's walls (median over "
                 f"{n} scans; a right map with people and moved furniture: 10 % or less): the laser sees through "
-                "walls the map has (is it the map of this building, not mirrored, its right version?)", True)
+                "walls the map has (is it the map of this building, not mirrored, its right version?)")

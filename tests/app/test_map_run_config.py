@@ -9,12 +9,17 @@ import numpy as np
 from fgloc.testing.cli import run_cli
 
 
-def test_a_run_config_mounts_the_laser_for_the_mapper(tmp_path):
+def _short_log(tmp_path):
+    """A simulated log along three corners (odometry on /odom, scans, no config)."""
     scen = tmp_path / "short.yaml"
     scen.write_text("route: [[3.0, 3.0], [8.0, 3.0], [8.0, 6.0]]\n")
     rc, _out, err = run_cli("simulate", "scenario", scen, "-o", tmp_path / "sim", "--seed", "2")
     assert rc == 0, err
-    log = tmp_path / "sim" / "log.mcap"
+    return tmp_path / "sim" / "log.mcap"
+
+
+def test_a_run_config_mounts_the_laser_for_the_mapper(tmp_path):
+    log = _short_log(tmp_path)
     run_cfg = tmp_path / "robot.yaml"
     run_cfg.write_text("sources:\n  static_transforms:\n"
                        "    - {parent: base_link, child: laser, xyz: [0.5, 0.0, 0.2], rpy_deg: [0, 0, 10]}\n"
@@ -39,11 +44,7 @@ def test_a_run_config_mounts_the_laser_for_the_mapper(tmp_path):
 def test_a_run_configs_odometry_source_is_the_mappers(tmp_path):
     """A run config whose one odometry source reads another topic than /odom: fgloc map read /odom
     regardless (fgloc run reads the config's); now the config's, said, unless --odom-topic names one."""
-    scen = tmp_path / "short.yaml"
-    scen.write_text("route: [[3.0, 3.0], [8.0, 3.0], [8.0, 6.0]]\n")
-    rc, _out, err = run_cli("simulate", "scenario", scen, "-o", tmp_path / "sim", "--seed", "2")
-    assert rc == 0, err
-    log = tmp_path / "sim" / "log.mcap"
+    log = _short_log(tmp_path)
     cfg = tmp_path / "robot.yaml"
     cfg.write_text("sources:\n  inputs:\n    wheels: {type: odometry, topic: /wheels/odom, use: [vx, vyaw]}\n")
     rc, _out, err = run_cli("map", log, "-o", tmp_path / "a", "-q", "--no-check", "--config", cfg)

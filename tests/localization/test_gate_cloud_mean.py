@@ -62,20 +62,11 @@ def test_a_cloud_leaving_the_shelves_wrong_place_does_not_pull_the_ekf():
     """changed_world seed 11, EKF + AMCL, up to 84 s: a wrong AMCL run along the north-wall shelves is held 13 s,
     then two cloud means between it and the truth reach the gate (measured: max error 0.078 m, largest step 0.084
     m, no pose lost; 0.113 m, 0.129 m and 49 lost when the map's floor passed them)."""
-    from importlib import resources
-
-    from fgloc.config import load_config
     from fgloc.eval.metrics import position_errors_and_steps
-    from fgloc.localization import Localizer, Session
-    from fgloc.sim import load_scenario, run_scenario
+    from fgloc.testing.scenario_runs import localize_until
 
-    sim = run_scenario(load_scenario(Path(str(resources.files("fgloc.config") / "scenarios")) / "changed_world.yaml"),
-                       seed=11)
-    msgs = [(k, m) for k, m in sim.messages if k != "/ground_truth" and (isinstance(m, list) or m.stamp <= 84.0)]
-    loc = Localizer(sim.map, sim.laser_mount, "ekf", "amcl", initial_pose=sim.ground_truth.poses[0],
-                    config=load_config(None))
-    est = Session(loc).run(msgs)
-    err, step = position_errors_and_steps(est, sim.ground_truth)
+    run = localize_until("changed_world", 11, "ekf", "amcl", until_s=84.0)
+    err, step = position_errors_and_steps(run.estimate, run.sim.ground_truth)
     assert float(step.max()) <= 0.1
     assert float(err.max()) <= 0.1
-    assert loc.monitor.counts(est.stamps)["lost"] == 0
+    assert run.localizer.monitor.counts(run.estimate.stamps)["lost"] == 0

@@ -92,8 +92,12 @@ class RunResult:
     outdir: Path
     written: list[str]
     truncated: str | None = None
-    metrics: Any = None  # fgloc.eval.metrics.Metrics of the final trajectory vs /ground_truth
+    metrics: Any = None  # fgloc.eval.metrics.Metrics of the final trajectory vs /ground_truth (every pose)
     metrics_online: Any = None
+    # fgloc.eval.metrics.StatusSplit of each: the metrics over the poses the run vouches for (ok, degraded) and
+    # the errors of those it does not (suspect, lost); what the summary prints
+    by_status: Any = None
+    by_status_online: Any = None
     eval_error: str | None = None
     config: FglocConfig = field(default_factory=_default_config)
     log: Path = field(default_factory=Path)
@@ -266,7 +270,7 @@ def run_log(req: RunRequest, progress: Callable[[int | None], Any] | None = None
         loop = _localize(req, outs.dir, session, inputs, mirror_scans, t_start, progress, announce)
         result = _write_outputs(req, outs.dir, config, session.loc, inputs, loop)
     result.outdir = outs.folder
-    _evaluate(result, inputs, loop.final, session.loc.online_trajectory())
+    _evaluate(result, inputs, loop.final, session.loc.online_trajectory(), session.loc.monitor)
     result.timings = loop.timings(PHASE_CLOCK())
     return result
 
@@ -662,16 +666,23 @@ def _write_status(path: Path, final: Any, online: Any, monitor: Any) -> Path:
     return path
 
 
-def _evaluate(result: RunResult, inputs: _Inputs, final: Any, online: Any) -> None:
-    """The final and online trajectories against the log's ``/ground_truth``, when it has one."""
+def _evaluate(result: RunResult, inputs: _Inputs, final: Any, online: Any, monitor: Any) -> None:
+    """The final and online trajectories against the log's ``/ground_truth``, when it has one: over every
+    pose, and split by the poses' statuses (``monitor``: the run's, as ``trajectory_status.csv`` has them)."""
     reader, mode = inputs.reader, result.mode
     gt = reader.ground_truth() if reader.has(inputs.topics.ground_truth) else None
     if gt is not None and len(final) > 1:
-        from fgloc.eval.metrics import evaluate
+        from fgloc.eval.metrics import associate, association_metrics, split_by_status
 
+        align = mode == "odom"
         try:
-            result.metrics = evaluate(final, gt, align=(mode == "odom"))
-            result.metrics_online = evaluate(online, gt, align=(mode == "odom")) if len(online) > 1 else None
+            a = associate(final, gt)
+            result.metrics = association_metrics(a, align=align)
+            result.by_status = split_by_status(a, monitor.at(final.stamps)[0], align=align)
+            if len(online) > 1:
+                a = associate(online, gt)
+                result.metrics_online = association_metrics(a, align=align)
+                result.by_status_online = split_by_status(a, monitor.at(online.stamps)[0], align=align)
         except LogError as e:
             result.eval_error = str(e)
 

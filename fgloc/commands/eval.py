@@ -169,6 +169,38 @@ def _nees_table(results: dict[str, Any]):
     return table
 
 
+def _statuses(tr: Any, src: Any, given: Path | None) -> tuple[Path, list[str]] | None:
+    """The status file for an estimate and one status per pose of ``tr`` (the estimate as read): ``given``
+    (--status; a file of another trajectory is a one-line error), else the ``trajectory_status.csv`` beside
+    a TUM estimate when it has every one of its stamps (``fgloc run``'s; online.tum's poses are not in it)."""
+    from fgloc.eval.trajectories import STATUS_FILE, read_statuses, statuses_at
+
+    path = given if given is not None else src.path.parent / STATUS_FILE if src.kind == "tum" else None
+    if path is None or (given is None and not path.is_file()):
+        return None
+    known = statuses_at(tr, *read_statuses(path))
+    if known is None and given is not None:
+        raise LogError(f"{given}: not the status file of {src.label} (a pose of it has no row at its stamp)")
+    return None if known is None else (path, known)
+
+
+def status_note(label: str, path: Path, sp: Any) -> str:
+    """One line on what a :class:`~fgloc.eval.metrics.StatusSplit` left out of the table, or that it left
+    none (``path``: the status file)."""
+    from fgloc.eval.metrics import VOUCHED_STATUSES
+
+    vouched = " or ".join(VOUCHED_STATUSES)
+    if not sp.n_left_out:
+        return f"{label}: every paired pose is {vouched} ({path})"
+    counts = ", ".join(f"{n} {k}" for k, n in sp.left_out.items())
+    if sp.metrics is None:
+        return (f"{label}: {path} calls fewer than 2 paired poses {vouched} ({counts}): the table is over every "
+                f"pose, {sp.all_rmse_m:.4f} m RMSE")
+    return (f"{label}: over the {sp.n_vouched} poses {path} calls {vouched}; left out {counts} pose(s), "
+            f"{sp.left_out_rmse_m:.4f} m RMSE, up to {sp.left_out_max_m:.3f} m off (over every pose "
+            f"{sp.all_rmse_m:.4f} m RMSE; --all-poses for the table over every pose)")
+
+
 def _relations_cmd(
     traj_path: Path, relations: Path | None, reference: Path | None, max_assoc_dt: float, as_json: bool,
     min_dt: float = 1.0, max_dt: float = 2.0,
@@ -288,6 +320,14 @@ def eval_cmd(
         Path | None, typer.Option("--cov", help="--nees: the estimate's per-pose covariances (a "
                                   "trajectory_status.csv; default: the one beside a TUM estimate)")
     ] = None,
+    status: Annotated[
+        Path | None, typer.Option("--status", help="the estimate's per-pose statuses (a trajectory_status.csv; "
+                                  "default: the one beside a TUM estimate when it has its stamps): the metrics "
+                                  "over the poses it calls ok or degraded, the others counted with their errors")
+    ] = None,
+    all_poses: Annotated[
+        bool, typer.Option("--all-poses", help="the metrics over every pose, whatever the statuses say")
+    ] = False,
 ) -> None:
     """Evaluate trajectories: the paper's RMSE (eq. 11/12), max, along/cross-track, p95, APE, RPE; with
     --nees, how honest their per-pose covariances are (NEES).
@@ -308,7 +348,7 @@ def eval_cmd(
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
     from fgloc.eval.checks import clock_note, end_error, frame_note, gap_note, heading_note, start_aligned
-    from fgloc.eval.metrics import AssociationError, associate, association_metrics
+    from fgloc.eval.metrics import AssociationError, associate, association_metrics, split_by_status
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
 
@@ -317,6 +357,8 @@ def eval_cmd(
         raise ConfigError("fgloc eval: --nees weighs the errors in the estimate's own frame: not with --align")
     if cov is not None and (not nees or len(est_paths) != 1):
         raise ConfigError("fgloc eval: --cov goes with --nees and one estimate")
+    if status is not None and (all_poses or len(est_paths) != 1):
+        raise ConfigError("fgloc eval: --status goes with one estimate, not with --all-poses")
     gt, gt_src = read_trajectory(gt_path, topic)
     read = [read_trajectory(p, topic) for p in est_paths]
     labels = [f"{lab}:{r[1].topic}" if r[1].topic else lab for lab, r in zip(_labels([r[1].path for r in read]), read,
@@ -331,6 +373,7 @@ def eval_cmd(
     results = {}
     pairs: dict[str, Any] = {}  # each estimate's association with the reference, made once
     ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
+    splits: dict[str, Any] = {}  # the metrics by the poses' statuses (a trajectory_status.csv)
     for (lab, est), p, (_tr, src) in zip(list(ests.items()), est_paths, read, strict=True):
         try:
             a = associate(est, gt, max_gap=max_gap)
@@ -343,6 +386,13 @@ def eval_cmd(
             ends[lab] = end_error(a)
         pairs[lab] = a
         results[lab] = association_metrics(a, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
+        known = None if all_poses else _statuses(_tr, src, status)
+        if known is not None:
+            sp = split_by_status(a, known[1], align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
+            splits[lab] = sp
+            typer.echo(f"note: {status_note(lab, known[0], sp)}", err=True)
+            if sp.metrics is not None:
+                results[lab] = sp.metrics
         frames = None if align or align_start else frame_note(lab, a)
         notes = [gap_note(lab, est.stamps, gt.stamps, max_gap), frames,
                  None if align_start or frames is not None else heading_note(lab, a, align)]
@@ -381,6 +431,8 @@ def eval_cmd(
                 d["nees"] = nees_results[str(d["label"])].to_dict()
             if d["label"] in ends:
                 d["end_error_m"] = ends[str(d["label"])]
+            if d["label"] in splits:
+                d["by_status"] = splits[str(d["label"])].to_dict()
         print(json.dumps(out, indent=2))
         return
 

@@ -112,22 +112,49 @@ def run_summary_lines(r: RunResult, tty: bool = False) -> list[str]:
         say(f"  time: {tm['total_s']:.2f} s = setup {tm['setup_s']:.2f} + reading {tm['read_s']:.2f} + "
             f"localizing {tm['localize_s']:.2f} + writing {tm['write_s']:.2f} + view channels "
             f"{tm['view_s']:.2f} + final smoothing {tm['finish_s']:.2f} + outputs {tm['outputs_s']:.2f} s")
-    m = r.metrics
-    if m is not None:
-        from fgloc.eval.paper import comparison_cells, justified
-
-        rows = {f"{r.backend} (final)": [m]}
-        if r.metrics_online is not None:
-            rows[f"{r.backend} (online)"] = [r.metrics_online]
-        say("  vs /ground_truth" + (" (SE(2)-aligned, odom frame)" if r.mode == "odom" else "") + ":")
-        # no paper column: its numbers are the paper's robot's, not a reference for this log
-        # (fgloc eval --paper and fgloc bench paper put them beside a run of the paper's experiment)
-        header, body = comparison_cells(rows, extra=False, paper_column=False)
-        lines += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
+    lines += truth_lines(r)
     if r.eval_error:
         say(f"  evaluation skipped: {r.eval_error}")
     say(f"  wrote {r.outdir}/: {', '.join(r.written)}")
     return lines
+
+
+def truth_lines(r: RunResult) -> list[str]:
+    """The summary's errors against the log's ``/ground_truth``: a table over the poses the run vouches for
+    (``ok`` or ``degraded``, :data:`fgloc.eval.metrics.VOUCHED_STATUSES`), each other pose counted by status
+    with its error beside it; over every pose when the run vouches for fewer than 2."""
+    if r.metrics is None:
+        return []
+    from fgloc.eval.metrics import VOUCHED_STATUSES
+    from fgloc.eval.paper import comparison_cells, justified
+
+    cols = [(f"{r.backend} (final)", r.metrics, r.by_status)]
+    if r.metrics_online is not None:
+        cols.append((f"{r.backend} (online)", r.metrics_online, r.by_status_online))
+    split = all(sp is not None and sp.metrics is not None for _, _, sp in cols) and any(
+        sp.n_left_out for _, _, sp in cols)
+    where = " (SE(2)-aligned, odom frame)" if r.mode == "odom" else ""
+    out = []
+    if split:
+        sp0 = cols[0][2]
+        out.append(f"  vs /ground_truth{where}, over the poses the run vouches for ({' or '.join(VOUCHED_STATUSES)}: "
+                   f"{sp0.n_vouched} of {sp0.n_vouched + sp0.n_left_out} final):")
+    else:
+        sp0 = cols[0][2]
+        none = sp0 is not None and sp0.metrics is None
+        out.append(f"  vs /ground_truth{where}" + (", over every pose (the run vouches for fewer than 2)"
+                                                   if none else "") + ":")
+    rows = {lab: [sp.metrics if split else m] for lab, m, sp in cols}
+    # no paper column: its numbers are the paper's robot's, not a reference for this log
+    # (fgloc eval --paper and fgloc bench paper put them beside a run of the paper's experiment)
+    header, body = comparison_cells(rows, extra=False, paper_column=False)
+    out += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
+    for lab, _m, sp in cols:
+        if sp is not None and sp.n_left_out:
+            counts = ", ".join(f"{n} {k}" for k, n in sp.left_out.items())
+            out.append(f"    left out of {lab}: {counts} pose(s), {sp.left_out_rmse_m:.4f} m RMSE, up to "
+                       f"{sp.left_out_max_m:.3f} m off (over every pose {sp.all_rmse_m:.4f} m RMSE)")
+    return out
 
 
 # ---------------------------------------------------------------------- CLI

@@ -33,7 +33,9 @@ its heading is used as the direction of travel.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -426,6 +428,82 @@ def association_metrics(
         rpe_time_rot_mean_deg=_mean(tr_deg),
         rpe_time_rot_max_deg=_max(tr_deg),
     )
+
+
+# --------------------------------------------------------------------------- by status
+#: the statuses of the poses a run vouches for (``trajectory_status.csv``, :mod:`fgloc.localization.monitor`):
+#: ``ok`` (the map confirms the pose) and ``degraded`` (dead reckoning nothing contradicts); ``suspect`` and
+#: ``lost`` are the run saying the pose may be wrong or is not known
+VOUCHED_STATUSES = ("ok", "degraded")
+
+
+@dataclass
+class StatusSplit:
+    """A trajectory's errors split by its poses' statuses.
+
+    ``metrics``: over the paired poses the run vouches for (:data:`VOUCHED_STATUSES`; None when fewer
+    than 2); ``left_out``: the paired poses it does not vouch for, counted by status (in the order met);
+    ``left_out_rmse_m`` / ``left_out_max_m``: their position error's RMSE and largest value (NaN when
+    none); ``all_rmse_m``: the position RMSE over every paired pose (what a table over all of them says).
+    """
+
+    metrics: Metrics | None
+    left_out: dict[str, int]
+    left_out_rmse_m: float
+    left_out_max_m: float
+    all_rmse_m: float
+
+    @property
+    def n_vouched(self) -> int:
+        return 0 if self.metrics is None else self.metrics.n
+
+    @property
+    def n_left_out(self) -> int:
+        return sum(self.left_out.values())
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (NaN as None; ``metrics`` as :meth:`Metrics.to_dict`)."""
+        def num(v: float) -> float | None:
+            return v if math.isfinite(v) else None
+
+        return {"vouched_statuses": list(VOUCHED_STATUSES), "n_vouched": self.n_vouched,
+                "left_out": dict(self.left_out), "left_out_rmse_m": num(self.left_out_rmse_m),
+                "left_out_max_m": num(self.left_out_max_m), "all_rmse_m": num(self.all_rmse_m)}
+
+
+def split_by_status(
+    a: Association,
+    statuses: Sequence[str],
+    align: bool = False,
+    rpe_delta_m: float = DEFAULT_RPE_DELTA_M,
+    rpe_delta_s: float = DEFAULT_RPE_DELTA_S,
+) -> StatusSplit:
+    """:func:`association_metrics` over the poses whose status (``statuses``: one per pose of the
+    estimate, ``a.n_est``) the run vouches for, and what the others' errors are.  ``align``: the rigid
+    transform is fitted to the vouched poses (all paired poses when fewer than 2) and applied to every
+    pose.  Poses not paired with the reference are not counted as left out."""
+    st = np.asarray(list(statuses), dtype=object)
+    if len(st) != a.n_est:
+        raise ValueError(f"{len(st)} statuses for an estimate of {a.n_est} poses")
+    st = st[a.index]
+    keep = np.isin(st, VOUCHED_STATUSES)
+    if align:
+        fit = keep if np.count_nonzero(keep) >= 2 else np.ones(len(a), dtype=bool)
+        tf = align_se2(a.est[fit, :2], a.gt[fit, :2])
+        a = Association(a.stamps, compose(tf, a.est), a.gt, a.direction, a.index, a.n_est)
+    epos = _series(a).epos
+    out = ~keep
+    left: dict[str, int] = {}
+    for s in st[out]:
+        left[str(s)] = left.get(str(s), 0) + 1
+    metrics = None
+    if np.count_nonzero(keep) >= 2:
+        sub = Association(a.stamps[keep], a.est[keep], a.gt[keep], a.direction[keep], a.index[keep],
+                          a.n_est - int(np.count_nonzero(out)))
+        metrics = replace(association_metrics(sub, rpe_delta_m=rpe_delta_m, rpe_delta_s=rpe_delta_s),
+                          aligned=bool(align))
+    return StatusSplit(metrics=metrics, left_out=left, left_out_rmse_m=_rms(epos[out]),
+                       left_out_max_m=_max(epos[out]), all_rmse_m=_rms(epos))
 
 
 def position_errors_and_steps(est: Trajectory, gt: Trajectory) -> tuple[FloatArray, FloatArray]:

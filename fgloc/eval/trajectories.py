@@ -248,6 +248,45 @@ def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(stamps, dtype=float), np.asarray(covs, dtype=float).reshape(-1, 3, 3)
 
 
+def read_statuses(path: str | Path) -> tuple[np.ndarray, list[str]]:
+    """``(stamps_s, statuses)`` of a ``trajectory_status.csv`` (its ``t`` and ``status`` columns).
+    One-line :class:`LogError` for a file that is not one."""
+    import csv
+
+    from fgloc.errors import read_user_text
+
+    path = Path(path)
+    lines = [ln for ln in read_user_text(path, "status file").splitlines() if ln.strip() and not ln.startswith("#")]
+    rows = list(csv.reader(lines))
+    if not rows or not {"t", "status"} <= set(rows[0]):
+        raise LogError(f"{path}: not a pose status file (a column line with t and status)")
+    it, js = rows[0].index("t"), rows[0].index("status")
+    stamps, statuses = [], []
+    for k, r in enumerate(rows[1:], start=2):
+        try:
+            stamps.append(float(r[it]))
+            statuses.append(r[js].strip())
+        except (ValueError, IndexError):
+            raise LogError(f"{path}: row {k}: not a status row (t and a status)") from None
+    return np.asarray(stamps, dtype=float), statuses
+
+
+def statuses_at(traj: Trajectory, stamps: np.ndarray, statuses: list[str], tol_s: float = 1e-6) -> list[str] | None:
+    """One status per pose of ``traj``: the one of ``(stamps, statuses)`` at the pose's stamp (within
+    ``tol_s``); None when a pose has none (the file is another trajectory's)."""
+    st = np.asarray(stamps, dtype=float)
+    if not len(st) or not len(traj):
+        return None
+    order = np.argsort(st, kind="stable")
+    st, ss = st[order], [statuses[i] for i in order]
+    j = np.clip(np.searchsorted(st, traj.stamps), 0, len(st) - 1)
+    jm = np.clip(j - 1, 0, len(st) - 1)
+    j = np.where(np.abs(st[jm] - traj.stamps) < np.abs(st[j] - traj.stamps), jm, j)
+    if not np.all(np.abs(st[j] - traj.stamps) <= tol_s):
+        return None
+    return [ss[i] for i in j]
+
+
 def covariances_at(traj: Trajectory, stamps: np.ndarray, covs: np.ndarray, tol_s: float = 1e-6) -> np.ndarray:
     """One covariance per pose of ``traj``: the one of ``(stamps, covs)`` at the pose's stamp (within
     ``tol_s``), NaN where there is none."""

@@ -48,6 +48,12 @@ Robots beyond the paper's (every key in the scenario):
   bias about base_link z, covariances in its own frame; ``burst_period_s`` delivers the
   messages in bursts (their arrival order, the stamps stay true);
 * ``laser.stamp_delay_s`` stamps every scan that much after it was measured (a late driver);
+* mounted otherwise than the robot's tf says (``/tf_static`` keeps the declared mount): ``laser.mount_error``
+  ``[dx, dy, dyaw_deg]`` (the laser's true mount is the declared one composed with it),
+  ``laser.upside_down`` (rolled 180 deg about its x axis: its beams sweep clockwise about the robot's up axis),
+  ``imu.mount_error_rpy_deg`` (the IMU turned that much further, in its own axes, than its tf says: 180 deg of
+  roll is a unit upside down, its yaw rate negated);
+* ``odom.yaw_rate_sign: -1``: an odometry driver whose yaw rate (and so its pose's yaw) has the wrong sign;
 * ``turn_radii_m`` drives the corners on arcs instead of stop-turn-go; ``strafe_legs`` drives
   those legs sideways keeping the heading (mecanum).
 
@@ -105,14 +111,16 @@ DEFAULT_SCENARIO: dict[str, Any] = {
     "strafe_legs": [],               # legs driven sideways keeping the heading (mecanum)
     "robot": {"wheel_radius_m": 0.076, "half_wheelbase_m": 0.25, "half_track_m": 0.28},
     "odom": {"rate_hz": 50.0, "pulses_per_rev": 500, "wheel_radius_error": 0.003, "twist_sigma": [0.01, 0.01, 0.03],
-             "scrub_factor": None, "scrub_ref_radps": 0.8, "speed_scale": 1.0, "wheel_noise": 0.0},
+             "scrub_factor": None, "scrub_ref_radps": 0.8, "speed_scale": 1.0, "wheel_noise": 0.0,
+             "yaw_rate_sign": 1.0},
     # distortion_deg: amplitude of a smooth position-dependent heading error (indoor magnetic
     # fields from steel and cables bend the compass by a degree or more).
     "compass": {"rate_hz": 20.0, "offset_deg": None, "sigma_deg": 0.3, "distortion_deg": 1.0,
                 "gyro_sigma_radps": 0.005, "gyro_bias_radps": 0.002},
     "laser": {"mount": [0.25, 0.03, 0.0], "rate_hz": 25.0, "jitter": 0.05, "fov_deg": 270.0, "step_deg": 0.5,
               "range_min_m": 0.5, "range_max_m": 50.0, "range_sigma_m": 0.004, "range_sigma_far_m": 0.005,
-              "angle_sigma_deg": 0.02, "enabled": True, "stamp_delay_s": 0.0},
+              "angle_sigma_deg": 0.02, "enabled": True, "stamp_delay_s": 0.0,
+              "mount_error": [0.0, 0.0, 0.0], "upside_down": False},
     "imu": None,                     # a sensor_msgs/Imu section (see IMU_DEFAULTS) replaces the compass
     #                                  (compass: null and no imu: a robot with neither, no /imu at all)
     "ground_truth_rate_hz": 100.0,
@@ -125,6 +133,7 @@ IMU_DEFAULTS: dict[str, Any] = {
     "frame_id": "imu_link",
     "mount_xyz_m": [0.0, 0.0, 0.1],
     "mount_rpy_deg": [0.0, 0.0, 0.0],   # base_link -> imu_link, roll pitch yaw (fixed axes x, y, z)
+    "mount_error_rpy_deg": [0.0, 0.0, 0.0],  # the unit turned this much further (in its frame) than its tf says
     "orientation": True,                 # 9-axis (magnetometer): orientation published; false: -1 covariance
     "offset_deg": None,                  # IMU north vs map x axis; None: seeded 5-25 deg either sign
     "yaw_sigma_deg": 0.5,
@@ -424,11 +433,13 @@ def _odometry(sc: dict, plan: Plan, rng: np.random.Generator) -> list[tuple[str,
     counts = enc.angle_to_counts(ang)
     sig = np.asarray(sc["odom"]["twist_sigma"], dtype=float)
     cov = np.diag(sig**2)
+    yaw_sign = float(sc["odom"].get("yaw_rate_sign", 1.0))
     out: list[tuple[str, object]] = []
     pose = np.zeros(3)
     for k in range(1, len(t_odom)):
         dtk = t_odom[k] - t_odom[k - 1]
         tw = kin.forward(enc.counts_to_angle(counts[k] - counts[k - 1]) / dtk)
+        tw[2] *= yaw_sign
         # midpoint integration of the odom-frame pose
         th = pose[2] + 0.5 * tw[2] * dtk
         pose = np.array([pose[0] + (tw[0] * np.cos(th) - tw[1] * np.sin(th)) * dtk,
@@ -476,12 +487,15 @@ def scrub_factor(sc: dict, wz_radps: ArrayLike) -> FloatArray:
     return np.asarray(lo + (hi - lo) * np.clip(w / float(sc["odom"].get("scrub_ref_radps", 0.8)), 0.0, 1.0))
 
 
-def imu_mount_transform(sc: dict) -> Transform3D:
-    """``/tf_static`` base_link -> imu frame of the scenario's IMU."""
+def imu_mount_transform(sc: dict, true_mount: bool = False) -> Transform3D:
+    """``/tf_static`` base_link -> imu frame of the scenario's IMU (``true_mount``: where the unit is,
+    ``imu.mount_error_rpy_deg`` further)."""
     from scipy.spatial.transform import Rotation
 
     c = {**IMU_DEFAULTS, **(sc.get("imu") or {})}
     rot = Rotation.from_euler("xyz", np.deg2rad(np.asarray(c["mount_rpy_deg"], dtype=float)))
+    if true_mount:
+        rot = rot * Rotation.from_euler("xyz", np.deg2rad(np.asarray(c["mount_error_rpy_deg"], dtype=float)))
     R = rot.as_matrix()
     xyz = np.asarray(c["mount_xyz_m"], dtype=float)
     return Transform3D("base_link", str(c["frame_id"]), np.array([xyz[0], xyz[1], float(np.arctan2(R[1, 0], R[0, 0]))]),
@@ -550,7 +564,9 @@ def _laser(sc: dict, plan: Plan, world: Any, rng: np.random.Generator,
     L = sc["laser"]
     if not L.get("enabled", True):
         return []
-    mount = np.asarray(L["mount"], dtype=float)
+    err = np.asarray(L.get("mount_error") or (0.0, 0.0, 0.0), dtype=float).reshape(3)
+    mount = compose(np.asarray(L["mount"], dtype=float), np.array([err[0], err[1], np.deg2rad(err[2])]))
+    sweep = -1.0 if L.get("upside_down") else 1.0  # upside down: the scan's angles turn about the robot's -z
     rate = float(L["rate_hz"])
     n = int(round(float(L["fov_deg"]) / float(L["step_deg"]))) + 1
     inc = np.deg2rad(float(L["step_deg"]))
@@ -570,7 +586,7 @@ def _laser(sc: dict, plan: Plan, world: Any, rng: np.random.Generator,
         if not (blackout and _in_window(np.array([t]), blackout)[0]):
             base = interpolate_poses(plan.t, plan.poses, tb)
             lp = compose(base, mount)
-            ang = lp[:, 2] + beam_angles + rng.normal(0, np.deg2rad(float(L["angle_sigma_deg"])), n)
+            ang = lp[:, 2] + sweep * beam_angles + rng.normal(0, np.deg2rad(float(L["angle_sigma_deg"])), n)
             r = world.raycast(lp[:, :2], ang, rmax + 0.1, extra_circles=_moving_obstacles(sc, t))
             sig = np.where(r < 30.0, float(L["range_sigma_m"]), float(L["range_sigma_far_m"]))
             with np.errstate(invalid="ignore"):
@@ -613,7 +629,7 @@ def run_scenario(path_or_dict: str | Path | dict, seed: int = 0,
             offset = float(np.deg2rad(imu_off))
         imu_mount = imu_mount_transform(sc)
         tf.append(imu_mount)
-        timed += _imu(sc, plan, offset, imu_mount, rngs[2])
+        timed += _imu(sc, plan, offset, imu_mount_transform(sc, true_mount=True), rngs[2])
     msgs: list[tuple[str, object]] = [("/tf_static", tf)]
     odom = _odometry(sc, plan, rngs[1])
     late = float((sc.get("faults", {}).get("odometry_late") or {}).get("delay_s") or 0.0)

@@ -137,3 +137,40 @@ def test_wheel_noise_makes_a_noisier_odometry_that_claims_the_same():
     assert 0.04 < float(np.std(rel)) < 0.1  # four wheels' shares averaged: about 0.1 / 2
     pairs = zip(quiet.topic("/odom"), noisy.topic("/odom"), strict=True)
     assert all(np.array_equal(a.twist_cov, b.twist_cov) for a, b in pairs)
+
+
+def _mounted(**kw):
+    sc = {"route": SHORT, "laser": {"jitter": 0.0, "angle_sigma_deg": 0.0}}
+    for section, over in kw.items():
+        sc[section] = {**sc.get(section, {}), **over}
+    return run_scenario(sc, seed=2)
+
+
+def test_sensors_mounted_otherwise_than_the_tf_says():
+    """The tf keeps the declared mount; the sensor measures from where it really is."""
+    from fgloc.geometry import compose
+
+    right = _mounted()
+    yawed = _mounted(laser={"mount_error": [0.0, 0.0, 5.0]})
+    moved = _mounted(laser={"mount": compose(np.array([0.25, 0.03, 0.0]), np.array([0.0, 0.0, np.deg2rad(5.0)])
+                                             ).tolist()})
+    assert yawed.laser_mount.pose == pytest.approx(right.laser_mount.pose)  # the tf: as declared
+    for a, b in zip(yawed.topic("/scan")[::50], moved.topic("/scan")[::50], strict=True):
+        np.testing.assert_array_equal(a.ranges, b.ranges)  # measured from the mount turned 5 deg
+    flipped = _mounted(laser={"upside_down": True})
+    r, f = right.topic("/scan")[30].ranges, flipped.topic("/scan")[30].ranges
+    both = np.isfinite(r) & np.isfinite(f[::-1])
+    # upside down: the same beams, swept the other way (range noise 4 mm)
+    assert np.median(np.abs(r - f[::-1])[both]) < 0.01 and both.mean() > 0.9
+    assert np.mean(np.abs(r - f)[np.isfinite(r) & np.isfinite(f)] > 0.2) > 0.3
+    w = np.array([o.twist for o in right.topic("/odom")])
+    wf = np.array([o.twist for o in _mounted(odom={"yaw_rate_sign": -1}).topic("/odom")])
+    np.testing.assert_array_equal(wf[:, :2], w[:, :2])
+    np.testing.assert_array_equal(wf[:, 2], -w[:, 2])
+    up = _mounted(imu={"offset_deg": 12.0}, laser={"enabled": False})
+    down = _mounted(imu={"offset_deg": 12.0, "mount_error_rpy_deg": [180.0, 0.0, 0.0]}, laser={"enabled": False})
+    assert down.imu_mount.rotation_xyzw == pytest.approx(up.imu_mount.rotation_xyzw)  # the tf: upright
+    gz_up = np.array([m.angular_velocity_radps[2] for m in up.topic("/imu")])
+    gz_down = np.array([m.angular_velocity_radps[2] for m in down.topic("/imu")])
+    assert np.abs(gz_up).max() > 0.5
+    assert np.abs(gz_up + gz_down).max() < 0.05  # the unit upside down: its z rate negated (noise 0.005 each)

@@ -155,6 +155,9 @@ class PoseStatus:
         since = t - (self._t_used if self._t_used is not None else t)
         mj = self.map_jumps
         if mj is not None and mj.repeated:
+            if self._places_alike() is not None:  # what the run's verdict will say (_assess)
+                return SUSPECT, (f"could not tell where in the map the robot is: its global search settled "
+                                 f"{mj.events} times where the odometry did not take the robot")
             return SUSPECT, (f"the map does not fit: it put the robot {mj.events} times where its odometry did not "
                              "take it")
         div = self._path_diverged(t)

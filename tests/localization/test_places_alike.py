@@ -34,9 +34,9 @@ def _run(sim, occ_map) -> Localizer:
     return loc
 
 
-def _jumped(loc: Localizer, searched: tuple[bool, bool]) -> dict:
-    """The run's verdicts had the map put the robot twice, 7 s apart, 9 m from where its odometry (standing)
-    took it: each placement out of a global search or not (``searched``)."""
+def _jumps(loc: Localizer, searched: tuple[bool, bool]) -> None:
+    """The map put the robot twice, 7 s apart, 9 m from where its odometry (standing) took it: each placement
+    out of a global search or not (``searched``)."""
     mj = MapJumps(loc.icfg.odometry_slip)
     still = np.zeros(3)
     mj.place(10.0, np.array([5.0, 3.0, 0.0]), still, True)
@@ -44,6 +44,11 @@ def _jumped(loc: Localizer, searched: tuple[bool, bool]) -> dict:
     assert mj.place(24.0, np.array([5.0, 3.0, 0.0]), still, searched[1])
     assert mj.repeated and [s for _, s in mj.jumps] == list(searched)
     loc.map_jumps = mj
+
+
+def _jumped(loc: Localizer, searched: tuple[bool, bool]) -> dict:
+    """The run's verdicts had the map put the robot as :func:`_jumps` says."""
+    _jumps(loc, searched)
     loc.monitor.verdicts.clear()
     loc._assess()
     (v,) = [v for v in loc.monitor.verdicts if v.kind in ("ambiguous", "map_mismatch")]
@@ -63,6 +68,23 @@ def test_global_searches_that_settle_on_places_alike_are_not_a_wrong_map(leg):
     # a jump while tracking (a fix the back-end took, a relocalization it had not searched for): a wrong map
     v = _jumped(loc, (True, False))
     assert v["kind"] == "map_mismatch" and v["message"].startswith("this map does not fit this log: it put the robot")
+
+
+def test_the_live_status_says_what_the_verdict_will(leg):
+    """While the run goes on, the poses after repeated jumps read as the final verdict will: global searches
+    on places alike "could not tell where in the map the robot is" (they read "the map does not fit" before),
+    a jump while tracking "the map does not fit"."""
+    loc = _run(leg, leg.map)
+    t = float(loc.monitor.t[-1])
+    _jumps(loc, (True, True))
+    status, why = loc.pose_status(t)
+    assert status == "suspect"
+    assert why == ("could not tell where in the map the robot is: its global search settled 2 times where the "
+                   "odometry did not take the robot")
+    _jumps(loc, (True, False))
+    status, why = loc.pose_status(t)
+    assert (status, why) == ("suspect", "the map does not fit: it put the robot 2 times where its odometry did not "
+                             "take it")
 
 
 def test_jumps_on_a_map_whose_ranges_do_not_fit_are_a_wrong_map(leg):

@@ -3,15 +3,16 @@ poses' errors against their statuses; one table.
 
     python tools/eval_integrity.py [--scenarios wheel_slip compass_disturbance changed_world blackout kidnap]
         [--seeds 0] [--backends smoother ekf] [--frontends native amcl] [--global] [--off-m 0.25]
-        [--config FILE] [--set KEY=VALUE ...] [--map-variant {mirror,shift,scale,other}] [--map-shift-m 1.5]
-        [--initial-offset DX DY DYAW_DEG]
+        [--off-deg 3] [--config FILE] [--set KEY=VALUE ...] [--map-variant {mirror,shift,scale,other}]
+        [--map-shift-m 1.5] [--initial-offset DX DY DYAW_DEG]
 
 Each run is the shipped scenario (fgloc/config/scenarios/) localized from its true start pose (``--global``:
 without one) as ``fgloc run`` does (a ``Localizer`` in a ``Session``; ``changed_world`` on the old map).
 Per run: position RMSE and max error of the final trajectory, the largest pose step (the change of the
 error between consecutive poses), the poses by status, the largest error of an ``ok`` pose and how many
 ``ok`` poses are more than ``--off-m`` off (a silent wrong answer: each must be accurate or marked
-non-ok), whether ``fgloc run`` would exit 3 (a finding that makes the run unusable, or more than
+non-ok), the same for the heading (``--off-deg``: a laser yawed on its bracket moves the position little and
+turns the heading), whether ``fgloc run`` would exit 3 (a finding that makes the run unusable, or more than
 ``integrity.max_bad_share`` of the poses suspect or lost), and after a teleport (kidnap) how long until the
 online pose stays within 0.2 m (``fgloc.bench.kidnap_recovery``), and the run's verdicts (``fgloc run``'s
 one-line findings; ``*``: one that makes the run unusable).
@@ -78,7 +79,7 @@ def scenario(name: str, sets: list[str]) -> dict:
 
 def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float, config: str | None = None,
              map_variant: str | None = None, initial_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-             map_shift_m: float = 1.5) -> dict:
+             map_shift_m: float = 1.5, off_deg: float = 3.0) -> dict:
     from fgloc.bench import kidnap_recovery
     from fgloc.config import load_config
     from fgloc.eval.metrics import position_errors_and_steps
@@ -96,6 +97,7 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float,
     est = Session(loc).run(msgs)
     wall = time.perf_counter() - t0
     err, step = position_errors_and_steps(est, sim.ground_truth)
+    yaw_err = np.degrees(np.abs(wrap_angle(est.poses[:, 2] - sim.ground_truth.interpolate(est.stamps)[:, 2])))
     status, _ = loc.monitor.at(est.stamps)
     ok = np.array([s == "ok" for s in status], dtype=bool)
     summary = loc.stats["status"]
@@ -104,6 +106,8 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float,
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max": float(err.max()),
             "step": float(step.max()) if len(step) else 0.0, "counts": loc.monitor.counts(est.stamps),
             "ok_max": float(err[ok].max()) if ok.any() else float("nan"), "ok_off": int(np.sum(err[ok] > off_m)),
+            "ok_max_deg": float(yaw_err[ok].max()) if ok.any() else float("nan"),
+            "ok_off_deg": int(np.sum(yaw_err[ok] > off_deg)),
             "exit3": unusable or summary["bad_share"] > cfg.integrity.max_bad_share, "wall": wall,
             "recovery_s": recovery,
             "verdicts": ", ".join(v["kind"] + ("*" if v["unusable"] else "") for v in summary["verdicts"])}
@@ -119,6 +123,8 @@ def main() -> None:
     ap.add_argument("--frontends", nargs="+", default=["native", "amcl"])
     ap.add_argument("--global", dest="global_start", action="store_true", help="no initial pose")
     ap.add_argument("--off-m", type=float, default=0.25, help="an ok pose further off than this is a silent error")
+    ap.add_argument("--off-deg", type=float, default=3.0, help="an ok pose's heading further off than this (deg) is "
+                    "a silent error")
     ap.add_argument("--config", help="a configuration file over the defaults (as fgloc run --config)")
     ap.add_argument("--set", dest="sets", nargs="+", default=[], metavar="KEY=VALUE",
                     help="scenario keys over each scenario (dotted, YAML values)")
@@ -130,20 +136,21 @@ def main() -> None:
     runs = [(s, seed, b, f) for s in args.scenarios for seed in args.seeds for b in args.backends
             for f in args.frontends]
     print(f"| scenario | seed | back-end | front-end | RMSE m | max m | largest step m | poses ok / degraded / "
-          f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | exit 3 | kidnap recovered s "
-          "| verdicts |")
-    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|---|--:|---|")
+          f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | ok poses' max heading error deg "
+          f"| ok poses > {args.off_deg} deg off | exit 3 | kidnap recovered s | verdicts |")
+    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|---|")
     sims: dict[tuple[str, int], object] = {}
     for name, seed, backend, frontend in tqdm(runs, file=sys.stderr, desc="runs"):
         if (name, seed) not in sims:
             sims.clear()
             sims[(name, seed)] = run_scenario(scenario(name, args.sets), seed=seed)
         r = localize(sims[(name, seed)], backend, frontend, args.global_start, args.off_m, args.config,
-                     args.map_variant, tuple(args.initial_offset), args.map_shift_m)
+                     args.map_variant, tuple(args.initial_offset), args.map_shift_m, args.off_deg)
         c = r["counts"]
         rec = "-" if r["recovery_s"] is None else f"{r['recovery_s']:.2f}"
         tqdm.write(f"| {name} | {seed} | {backend} | {frontend} | {r['rmse']:.4f} | {r['max']:.3f} | {r['step']:.3f} | "
                    f"{c['ok']} / {c['degraded']} / {c['suspect']} / {c['lost']} | {r['ok_max']:.3f} | {r['ok_off']} | "
+                   f"{r['ok_max_deg']:.2f} | {r['ok_off_deg']} | "
                    f"{'yes' if r['exit3'] else 'no'} | {rec} | {r['verdicts']} |", file=sys.stdout)
         sys.stdout.flush()
 

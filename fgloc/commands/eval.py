@@ -172,9 +172,14 @@ def _nees_table(results: dict[str, Any]):
 def _statuses(tr: Any, src: Any, given: Path | None) -> tuple[Path, list[str]] | None:
     """The status file for an estimate and one status per pose of ``tr`` (the estimate as read): ``given``
     (--status; a file of another trajectory is a one-line error), else the ``trajectory_status.csv`` beside
-    a TUM estimate when it has every one of its stamps (``fgloc run``'s; online.tum's poses are not in it)."""
-    from fgloc.eval.trajectories import STATUS_FILE, read_statuses, statuses_at
+    a TUM estimate when it has every one of its stamps (``fgloc run``'s; online.tum's poses are not in it),
+    or for ``run.mcap:/fused_pose`` the status the run published with each pose (``/fgloc/pose/status``)."""
+    from fgloc.eval.trajectories import RUN_STATUS_TOPIC, STATUS_FILE, read_run_statuses, read_statuses, statuses_at
 
+    if given is None and src.kind == "mcap" and src.topic == "/fused_pose":  # fgloc run's run.mcap
+        found = read_run_statuses(src.path)
+        known = None if found is None else statuses_at(tr, *found)
+        return None if known is None else (Path(f"{src.path}:{RUN_STATUS_TOPIC}"), known)
     path = given if given is not None else src.path.parent / STATUS_FILE if src.kind == "tum" else None
     if path is None or (given is None and not path.is_file()):
         return None
@@ -322,8 +327,9 @@ def eval_cmd(
     ] = None,
     status: Annotated[
         Path | None, typer.Option("--status", help="the estimate's per-pose statuses (a trajectory_status.csv; "
-                                  "default: the one beside a TUM estimate when it has its stamps): the metrics "
-                                  "over the poses it calls ok or degraded, the others counted with their errors")
+                                  "default: the one beside a TUM estimate when it has its stamps; for "
+                                  "run.mcap:/fused_pose its /fgloc/pose/status): the metrics over the poses called ok "
+                                  "or degraded, the others counted with their errors")
     ] = None,
     all_poses: Annotated[
         bool, typer.Option("--all-poses", help="the metrics over every pose, whatever the statuses say")

@@ -271,6 +271,36 @@ def read_statuses(path: str | Path) -> tuple[np.ndarray, list[str]]:
     return np.asarray(stamps, dtype=float), statuses
 
 
+#: the channel of each fused pose's status in ``fgloc run``'s ``run.mcap`` (JSON: stamp, status, why, frame_id)
+RUN_STATUS_TOPIC = "/fgloc/pose/status"
+
+
+def read_run_statuses(path: str | Path) -> tuple[np.ndarray, list[str]] | None:
+    """``(stamps_s, statuses)`` of an MCAP file's :data:`RUN_STATUS_TOPIC` (``fgloc run``'s ``run.mcap``: the
+    status of each ``/fused_pose``, as known online), the last of each stamp; None when it has no such
+    messages."""
+    import json
+
+    from mcap.reader import make_reader
+
+    stamps: dict[float, str] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        if summary is not None and all(c.topic != RUN_STATUS_TOPIC for c in summary.channels.values()):
+            return None
+        for _schema, _channel, message in reader.iter_messages(topics=[RUN_STATUS_TOPIC]):
+            try:
+                d = json.loads(message.data)
+                stamps[float(d["stamp"])] = str(d["status"])
+            except (ValueError, KeyError, TypeError):
+                continue
+    if not stamps:
+        return None
+    t = np.asarray(sorted(stamps), dtype=float)
+    return t, [stamps[float(x)] for x in t]
+
+
 def statuses_at(traj: Trajectory, stamps: np.ndarray, statuses: list[str], tol_s: float = 1e-6) -> list[str] | None:
     """One status per pose of ``traj``: the one of ``(stamps, statuses)`` at the pose's stamp (within
     ``tol_s``); None when a pose has none (the file is another trajectory's)."""

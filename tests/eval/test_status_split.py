@@ -113,3 +113,25 @@ def test_run_summary_prints_the_vouched_poses_and_says_what_it_left_out():
     r.by_status = split_by_status(a, ["ok"] * n)  # nothing left out: the table as it always was
     text = "\n".join(truth_lines(r))
     assert "  vs /ground_truth:" in text and "left out" not in text
+
+
+def test_eval_of_a_run_mcap_takes_the_status_published_with_each_pose(tmp_path, capsys):
+    from fgloc.eval.trajectories import RUN_STATUS_TOPIC
+    from fgloc.io.mcap_writer import LogWriter
+    from fgloc.types import PoseFix
+
+    est, gt, statuses = _lost_start()
+    write_tum(tmp_path / "gt.tum", gt)
+    with LogWriter(tmp_path / "run.mcap") as w:
+        for t, p, s in zip(est.stamps, est.poses, statuses, strict=True):
+            ns = int(round(float(t) * 1e9))
+            w.write("/fused_pose", PoseFix(float(t), p, np.eye(3) * 1e-4), log_time_ns=ns)
+            w.write_raw(RUN_STATUS_TOPIC, "fgloc.PoseStatus", b"{}", json.dumps(
+                {"stamp": float(t), "status": s, "why": "", "frame_id": "map"}).encode(), ns,
+                schema_encoding="jsonschema", message_encoding="json")
+    assert main(["eval", str(tmp_path / "run.mcap"), str(tmp_path / "gt.tum"), "--json"]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert doc["metrics"]["position_rmse_m"] == pytest.approx(0.01, abs=1e-6)
+    assert doc["by_status"]["left_out"] == {"lost": N_LOST}
+    assert RUN_STATUS_TOPIC in cap.err

@@ -103,6 +103,7 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float,
     summary = loc.stats["status"]
     unusable = any(v["unusable"] for v in summary["verdicts"])
     recovery = kidnap_recovery(sim, loc.online_trajectory()).get("recovery_s")
+    course = None if loc.fix_course is None else loc.fix_course.offset()
     return {"rmse": float(np.sqrt(np.mean(err**2))), "max": float(err.max()),
             "step": float(step.max()) if len(step) else 0.0, "counts": loc.monitor.counts(est.stamps),
             "ok_max": float(err[ok].max()) if ok.any() else float("nan"), "ok_off": int(np.sum(err[ok] > off_m)),
@@ -110,6 +111,7 @@ def localize(sim, backend: str, frontend: str, global_start: bool, off_m: float,
             "ok_off_deg": int(np.sum(yaw_err[ok] > off_deg)),
             "exit3": unusable or summary["bad_share"] > cfg.integrity.max_bad_share, "wall": wall,
             "recovery_s": recovery,
+            "course": "-" if course is None else f"{np.degrees(course[0]):+.2f} ({course[1]})",
             "verdicts": ", ".join(v["kind"] + ("*" if v["unusable"] else "") for v in summary["verdicts"])}
 
 
@@ -137,8 +139,9 @@ def main() -> None:
             for f in args.frontends]
     print(f"| scenario | seed | back-end | front-end | RMSE m | max m | largest step m | poses ok / degraded / "
           f"suspect / lost | ok poses' max error m | ok poses > {args.off_m} m off | ok poses' max heading error deg "
-          f"| ok poses > {args.off_deg} deg off | exit 3 | kidnap recovered s | verdicts |")
-    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|---|")
+          f"| ok poses > {args.off_deg} deg off | exit 3 | kidnap recovered s | fixes' course deg (stretches) "
+          "| verdicts |")
+    print("|---|--:|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|--:|---|")
     sims: dict[tuple[str, int], object] = {}
     for name, seed, backend, frontend in tqdm(runs, file=sys.stderr, desc="runs"):
         if (name, seed) not in sims:
@@ -151,7 +154,7 @@ def main() -> None:
         tqdm.write(f"| {name} | {seed} | {backend} | {frontend} | {r['rmse']:.4f} | {r['max']:.3f} | {r['step']:.3f} | "
                    f"{c['ok']} / {c['degraded']} / {c['suspect']} / {c['lost']} | {r['ok_max']:.3f} | {r['ok_off']} | "
                    f"{r['ok_max_deg']:.2f} | {r['ok_off_deg']} | "
-                   f"{'yes' if r['exit3'] else 'no'} | {rec} | {r['verdicts']} |", file=sys.stdout)
+                   f"{'yes' if r['exit3'] else 'no'} | {rec} | {r['course']} | {r['verdicts']} |", file=sys.stdout)
         sys.stdout.flush()
 
 

@@ -37,6 +37,16 @@ search (the localizer did not know where the robot was: the search settled on a 
 with places alike (a symmetric room) makes such jumps too, out of global searches that settle on a
 look-alike place (status.py tells the two apart by how well the map's ranges fit the laser's).
 
+The fixes' course against the odometry's: a laser mounted otherwise than its tf says.  A laser turned by
+``a`` on its bracket (the tf says it looks straight ahead) gives fixes whose heading is the robot's turned by
+``a``, and whose positions follow the laser: driving straight ahead, they move at ``-a`` to their own heading,
+while the odometry (base_link's, by definition) drove along its heading.  The position stays within the
+mount's lever arm times ``a`` (centimetres), the heading is ``a`` off at every pose, and nothing else
+contradicts it: a compass offset is estimated against the map.  :class:`FixCourse` measures the angle
+between the fixes' displacement (in the first fix's frame) and the odometry's (in its body frame) over
+stretches of at least :attr:`FixCourse.MIN_M` driven with little turning (each chord against the heading halfway
+along it: the fixes and the odometry may disagree on a slow turn), and its median over the run.
+
 Core maths only: no I/O.
 """
 
@@ -179,4 +189,63 @@ class MapJumps:
         return True
 
 
-__all__ = ["MapJumps", "PathDivergence"]
+class FixCourse:
+    """The fixes' course against the odometry's (module docstring): :meth:`fix` at every fix the back-end took
+    (with the odometry's pose then), :meth:`restart` where the pose was restarted; :meth:`offset` the median
+    angle (rad, the fixes' course minus the odometry's: a laser turned by ``a`` gives ``-a``)."""
+
+    MIN_M = 1.0  # a stretch: at least this far driven (the odometry's displacement) ...
+    MAX_TURN_RAD = math.radians(3.0)  # ... turning at most this much, by the odometry and by the fixes
+    LENGTH_SLIP = 0.5  # the fixes' displacement within this share of the odometry's (else a jump: no stretch)
+    MIN_STRETCHES = 20  # judged after this many stretches
+
+    def __init__(self) -> None:
+        self._anchor: tuple[FloatArray, FloatArray] | None = None  # (fix pose, odometry pose) at the stretch's start
+        self.angles: deque[float] = deque(maxlen=512)  # each stretch's angle (rad), the newest last
+        self._added = 0
+        self._offset: tuple[int, tuple[float, int] | None] = (0, None)  # (stretches added then, offset())
+
+    def restart(self) -> None:
+        """The pose was restarted (or jumped): the next fix starts a stretch."""
+        self._anchor = None
+
+    def fix(self, pose: FloatArray, odom_pose: FloatArray) -> None:
+        """A fix the back-end took at ``pose`` (map) while the odometry was at ``odom_pose`` (odom)."""
+        p = np.asarray(pose, dtype=float)
+        o = np.asarray(odom_pose, dtype=float)
+        if self._anchor is None:
+            self._anchor = (p.copy(), o.copy())
+            return
+        p0, o0 = self._anchor
+        turn = math.remainder(float(o[2] - o0[2]), math.tau)
+        fturn = math.remainder(float(p[2] - p0[2]), math.tau)
+        if abs(turn) > self.MAX_TURN_RAD or abs(fturn) > self.MAX_TURN_RAD:
+            self._anchor = (p.copy(), o.copy())
+            return
+        c, s = math.cos(float(o0[2])), math.sin(float(o0[2]))
+        dx, dy = float(o[0] - o0[0]), float(o[1] - o0[1])
+        bx, by = c * dx + s * dy, -s * dx + c * dy
+        d = math.hypot(bx, by)
+        if d < self.MIN_M:
+            return
+        c, s = math.cos(float(p0[2])), math.sin(float(p0[2]))
+        dx, dy = float(p[0] - p0[0]), float(p[1] - p0[1])
+        fx, fy = c * dx + s * dy, -s * dx + c * dy
+        self._anchor = (p.copy(), o.copy())
+        if abs(math.hypot(fx, fy) - d) > self.LENGTH_SLIP * d:
+            return
+        # each chord against the heading halfway along it (an arc's chord turns by half the arc's turn)
+        self.angles.append(math.remainder((math.atan2(fy, fx) - 0.5 * fturn) - (math.atan2(by, bx) - 0.5 * turn),
+                                          math.tau))
+        self._added += 1
+
+    def offset(self) -> tuple[float, int] | None:
+        """``(median angle rad, stretches)`` once :attr:`MIN_STRETCHES` were measured, else None."""
+        if self._offset[0] != self._added:
+            n = len(self.angles)
+            med = (float(np.median(np.fromiter(self.angles, float, n))), n) if n >= self.MIN_STRETCHES else None
+            self._offset = (self._added, med)
+        return self._offset[1]
+
+
+__all__ = ["FixCourse", "MapJumps", "PathDivergence"]

@@ -93,7 +93,7 @@ class Verdict:
     """A run-level finding: a one-line message, and whether it makes the run unusable."""
 
     kind: str  # no_fix, map_mismatch, ambiguous, initial_pose, global_start, diverging, heading_diverged, agreement,
-    # path_diverged
+    # path_diverged, laser_mount
     message: str
     unusable: bool
 

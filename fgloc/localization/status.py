@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import Backend, FloatArray
-from fgloc.localization.divergence import MapJumps, PathDivergence
+from fgloc.localization.divergence import FixCourse, MapJumps, PathDivergence
 from fgloc.localization.gate import agreement_sigma
 from fgloc.localization.monitor import DEGRADED, LOST, OK, SUSPECT, ConsistencyMonitor, DeadReckoning, MapAgreement
 
@@ -41,6 +41,9 @@ HEADING_DIVERGED = "heading diverged: the fused heading follows none of its head
 #: alike, not a map that does not fit (the right map: 0.75-0.98 in simulation, Radish and Stage logs; a mirrored or
 #: rescaled map whose placements jump: 0.12-0.51)
 AMBIGUOUS_FIT = 0.7
+#: the fixes' course off the odometry's by more than this (deg, the median over the run's straight stretches,
+#: divergence.py FixCourse): the laser is mounted turned from where its tf says
+COURSE_OFF_DEG = 2.0
 
 
 class PoseStatus:
@@ -65,6 +68,8 @@ class PoseStatus:
     path_divergence: PathDivergence | None = None
     #: the map's placements against the odometry's motion between them (divergence.py; made at the first pose)
     map_jumps: MapJumps | None = None
+    #: the fixes' course against the odometry's (divergence.py; made at the first pose)
+    fix_course: FixCourse | None = None
     #: the localizer was searching the whole map (lost) at the last pose recorded
     _searching: bool = False
     fixes: list[PoseFix]
@@ -129,6 +134,7 @@ class PoseStatus:
     def _record_status(self, t: float) -> None:
         """The status of the pose at scan stamp ``t`` (monitor.py)."""
         self._map_placement(t)
+        self._fix_course(t)
         status, why = self.pose_status(t)
         self.monitor.record(t, status, why)
         self._searching = self._lost or not self.backend.initialized
@@ -171,6 +177,11 @@ class PoseStatus:
                              f"{ag.last or 0.0:.2f}, {ag.expected() or 0.0:.2f} while it was right)")
         if self._t_held_since is not None and t - self._t_held_since >= self.icfg.suspect_after_s:
             return SUSPECT, f"the map has pointed elsewhere for {t - self._t_held_since:.1f} s"
+        turned = self._laser_turned()
+        if turned is not None:
+            a, n = turned
+            return SUSPECT, (f"the laser looks turned {a:+.1f} deg from its tf: the fixes move at {-a:+.1f} deg to "
+                             f"the odometry's course (median over {n} straight stretches)")
         if self._heading_diverging(t):
             return SUSPECT, HEADING_DIVERGED
         if silent:
@@ -207,6 +218,27 @@ class PoseStatus:
             mj.odometry(odom)
         else:
             mj.place(t, pose, odom, self._searching)
+
+    def _fix_course(self, t: float) -> None:
+        """A fix the back-end took at ``t`` against the odometry's motion (divergence.py :class:`FixCourse`)."""
+        if self.map is None or self.odom_mode or self.stats["odometry"] == 0 or self._t_used != t:
+            return
+        fc = self.fix_course
+        if fc is None:
+            fc = self.fix_course = FixCourse()
+        if self._t_started == t:
+            fc.restart()
+        elif self.fixes and self.fixes[-1].stamp == t:
+            fc.fix(self.fixes[-1].pose, self.odom.pose_at(t))
+
+    def _laser_turned(self) -> tuple[float, int] | None:
+        """``(deg, stretches)``: how far the laser looks turned from its tf (the fixes' course against the
+        odometry's, beyond :data:`COURSE_OFF_DEG`), else None."""
+        fc = self.fix_course
+        off = None if fc is None else fc.offset()
+        if off is None or abs(math.degrees(off[0])) <= COURSE_OFF_DEG:
+            return None
+        return -math.degrees(off[0]), off[1]
 
     def _unusable(self, kind: str, lost_why: str, message: str) -> None:
         """A finding that makes the run unusable: every pose lost (``lost_why``), the verdict ``kind``."""
@@ -430,3 +462,14 @@ class PoseStatus:
                 f"{100 * share:.0f} % of the laser's ranges end more than 10 % beyond the map's walls (median over "
                 f"{n} scans; a right map with people and moved furniture: 10 % or less): the laser sees through "
                 "walls the map has (is it the map of this building, not mirrored, its right version?)")
+        turned = self._laser_turned()
+        if turned is not None and not any(v.unusable for v in self.monitor.verdicts):
+            # the map confirmed the positions, but the heading of every one is the laser's, turned on its bracket
+            a, n = turned
+            self.monitor.amend(-math.inf, math.inf, SUSPECT,
+                               f"suspect: the laser looks turned {a:+.1f} deg from its tf")
+            self.monitor.verdict(
+                "laser_mount", f"the laser's mount does not fit its tf: driving straight, the fixes moved at "
+                f"{-a:+.1f} deg to the odometry's course (median over {n} stretches of {FixCourse.MIN_M:.0f} m or "
+                f"more): the laser looks turned {a:+.1f} deg (counter-clockwise +) from where the tf base_link -> "
+                "laser says, every pose's heading as far off (check the mount: --static-transform, the URDF)", True)

@@ -179,7 +179,8 @@ class EKFConfig:
     gyro_bias_prior_radps: float = setting(0.02, "prior sigma of a gyro's bias", gt=0)
     gyro_bias_q: float = setting(4e-10, "bias random walk ((rad/s)^2/s)", min=0)
     odom_yaw_scale: bool = setting(True, "estimate the odometry's yaw-rate scale (reported / true) as a state "
-                                   "once a gyro is there")
+                                   "once another source measures the turn (a gyro, an absolute or a "
+                                   "differential yaw)")
     odom_yaw_scale_prior: float = setting(1.0, "prior sigma of the yaw-rate scale's logarithm around 0 (the "
                                           "scale is estimated as its log: it stays positive)", gt=0)
     odom_yaw_scale_q: float = setting(1e-5, "its random walk (1/s)", min=0)

@@ -12,7 +12,8 @@ Beyond the paper, all switchable in ``ekf:``:
 * a gyro's yaw rate (an IMU's, or the compass module's) measures ``w + b``; its bias ``b`` is
   estimated beside the filter (:class:`~fgloc.backends.health.GyroBias`: from the absolute
   headings and standstill, never from the wheels, whose scrub would be read as a bias);
-* once a gyro is there, the odometry's yaw-rate scale (reported / true, a skid steer's
+* once another source measures the turn (a gyro, a compass's or an IMU's absolute yaw, a
+  differential orientation), the odometry's yaw-rate scale (reported / true, a skid steer's
   scrub) is a state, as its logarithm (a scale cannot change sign) kept in a physical range
   (:data:`SCALE_MIN`, :data:`SCALE_MAX`): the encoder's yaw rate measures ``s_w * w``;
 * the yaw sources are weighted by the noise they show against each other
@@ -261,8 +262,9 @@ class EKFBackend(Backend):
             # the twist of each increment (OdometryTracker.velocity_measurement): measured at their stamps
             held_from = None
         self._last_odom_t = float(t)
-        if self.cfg.odom_yaw_scale and si is None and self._has_gyro() and self._turned > 0.3:
-            # observable once turning beside a gyro (early: the bias state would take its error)
+        if self.cfg.odom_yaw_scale and si is None and self._turned > 0.3 and self._heading_measured():
+            # observable once turning beside another yaw source (early: a gyro's bias state would take
+            # its error)
             si = self.ekf.add_state(YAW_SCALE_STATE, 0.0, self.cfg.odom_yaw_scale_prior**2, self.cfg.odom_yaw_scale_q,
                                     bounds=(math.log(SCALE_MIN), math.log(SCALE_MAX)))
         h.accepted += 1
@@ -321,6 +323,14 @@ class EKFBackend(Backend):
 
     def _has_gyro(self) -> bool:
         return bool(self.inputs.gyro_bias)
+
+    def _heading_measured(self) -> bool:
+        """Whether a source besides the wheels measures the turn: a gyro (the yaw rate), a compass's or
+        an IMU's absolute yaw in use (the heading), a differential orientation (its increments).  The
+        wheels' yaw-rate scale is observable against any of them through the yaw rate the heading
+        integrates."""
+        return self._has_gyro() or bool(self._rel) or (
+            self.use_compass_yaw and self.calib.calibrated and self.calib.has_readings)
 
     def _odometry_sole(self) -> bool:
         """Whether the odometry is the only source of the velocities (no gyro, no second odometry)."""

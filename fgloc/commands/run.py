@@ -139,17 +139,19 @@ def truth_lines(r: RunResult) -> list[str]:
         sp0 = cols[0][2]
         out.append(f"  vs /ground_truth{where}, over the poses the run vouches for ({' or '.join(VOUCHED_STATUSES)}: "
                    f"{sp0.n_vouched} of {sp0.n_vouched + sp0.n_left_out} final):")
-    else:
-        sp0 = cols[0][2]
-        none = sp0 is not None and sp0.metrics is None
-        out.append(f"  vs /ground_truth{where}" + (", over every pose (the run vouches for fewer than 2)"
-                                                   if none else "") + ":")
+    else:  # nothing left out, or too few vouched poses in a column to make one: every pose, said so
+        few = [f"{lab}: {sp.n_vouched} of {sp.n_vouched + sp.n_left_out} ("
+               + ", ".join(f"{n} {k}" for k, n in sp.left_out.items()) + ")"
+               for lab, _m, sp in cols if sp is not None and sp.metrics is None]
+        out.append(f"  vs /ground_truth{where}" + (f", over every pose (the run vouches for fewer than 2; "
+                                                   f"{' or '.join(VOUCHED_STATUSES)}: {'; '.join(few)})"
+                                                   if few else "") + ":")
     rows = {lab: [sp.metrics if split else m] for lab, m, sp in cols}
     # no paper column: its numbers are the paper's robot's, not a reference for this log
     # (fgloc eval --paper and fgloc bench paper put them beside a run of the paper's experiment)
     header, body = comparison_cells(rows, extra=False, paper_column=False)
     out += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
-    for lab, _m, sp in cols:
+    for lab, _m, sp in cols if split else ():  # the poses not in the table, beside it
         if sp is not None and sp.n_left_out:
             counts = ", ".join(f"{n} {k}" for k, n in sp.left_out.items())
             out.append(f"    left out of {lab}: {counts} pose(s), {sp.left_out_rmse_m:.4f} m RMSE, up to "

@@ -113,6 +113,13 @@ def test_run_summary_prints_the_vouched_poses_and_says_what_it_left_out():
     r.by_status = split_by_status(a, ["ok"] * n)  # nothing left out: the table as it always was
     text = "\n".join(truth_lines(r))
     assert "  vs /ground_truth:" in text and "left out" not in text
+    r.by_status = split_by_status(a, ["lost"] * n)  # every pose lost (a map that does not fit): every pose, said
+    text = "\n".join(truth_lines(r))
+    said = f"over every pose (the run vouches for fewer than 2; ok or degraded: smoother (final): 0 of {n} ({n} lost))"
+    assert said in text
+    assert "left out" not in text  # the table has them all
+    rmse = next(ln for ln in text.splitlines() if "position RMSE" in ln)
+    assert float(rmse.split()[-1]) > 2.0
 
 
 def test_eval_of_a_run_mcap_takes_the_status_published_with_each_pose(tmp_path, capsys):

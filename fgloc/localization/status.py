@@ -44,6 +44,8 @@ AMBIGUOUS_FIT = 0.7
 #: the fixes' course off the odometry's by more than this (deg, the median over the run's straight stretches,
 #: divergence.py FixCourse): the laser is mounted turned from where its tf says
 COURSE_OFF_DEG = 2.0
+#: what a map that does not fit may also be: a laser mounted upside down (its scan mirrored) fits no map either
+MOUNT_HINT = " Or is the laser mounted as its tf says (not upside down: its scan would be mirrored)?"
 
 
 class PoseStatus:
@@ -241,9 +243,10 @@ class PoseStatus:
         return -math.degrees(off[0]), off[1]
 
     def _unusable(self, kind: str, lost_why: str, message: str) -> None:
-        """A finding that makes the run unusable: every pose lost (``lost_why``), the verdict ``kind``."""
+        """A finding that makes the run unusable: every pose lost (``lost_why``), the verdict ``kind`` (a map that
+        does not fit with :data:`MOUNT_HINT`)."""
         self.monitor.amend(-math.inf, math.inf, LOST, lost_why)
-        self.monitor.verdict(kind, message, True)
+        self.monitor.verdict(kind, message + (MOUNT_HINT if kind == "map_mismatch" else ""), True)
 
     def _places_alike(self) -> tuple[float, int] | None:
         """Whether the map's jumps (divergence.py :class:`MapJumps`) are a map with places alike: every one ended a

@@ -91,15 +91,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fgloc.geometry import between1, between_values, compose1, mahalanobis2_2x2, wrap_scalar
-from fgloc.localization.agreement import (
-    agreement_sigma,
-    agreements,
-    climb,
-    finest_steps,
-    neighbourhood,
-    scan_agreement,
-    tied_agreements,
-)
+from fgloc.localization.agreement import agreement_sigma, agreements, neighbourhood, scan_agreement
+from fgloc.localization.gate_map import MapJudge
 from fgloc.localization.gate_records import FixRecord, HeldRun
 from fgloc.localization.odometry_coverage import OdometryCoverage
 from fgloc.localization.relocalization import place_near
@@ -111,8 +104,6 @@ if TYPE_CHECKING:
 
 FloatArray = np.ndarray
 
-#: the prediction's agreement is the best within this many sigmas of its covariance (neighbourhood())
-NEIGHBOURHOOD_SIGMAS = 3.0
 #: a fix whose position sigma is within this many of the prediction's (and the slip allowance) is sure
 #: enough for the next fix to follow it
 SURE_SIGMAS = 2.0
@@ -120,11 +111,6 @@ SURE_SIGMAS = 2.0
 VELOCITY_SPAN_S = 0.25
 #: ... when they span at least this long
 VELOCITY_MIN_SPAN_S = 0.1
-#: a fix that departed from the odometry's path is taken only where the map explains the scan better at it than
-#: near the path by more than this many standard errors of the beams' mean difference (less is a tie)
-TIE_SIGMAS = 2.0
-#: ... each judged at the best pose the agreement climbs to from it in at most this many steps
-CLIMB_STEPS = 4
 #: the anchor of the fixes' departure from the odometry moves to a fix the map sides with at most this often
 ANCHOR_REFRESH_S = 1.0
 
@@ -166,17 +152,14 @@ class GateVerdict:
 Motion = Callable[[float, float, FloatArray], FloatArray]
 
 
-class JumpGate:
+class JumpGate(MapJudge):
     """Holds back fixes that jump further than odometry and covariance allow (module docstring).
 
     The localizer calls :meth:`check` for every fix while tracking, :meth:`accepted` when it handed the
     fix the gate passed to the back-end, and :meth:`reset` when it (re)starts the pose or a fix was not used."""
 
     def __init__(self, cfg: IntegrityConfig, occ_map: OccupancyMap, laser_mount: StaticTransform) -> None:
-        self.cfg = cfg
-        self.map = occ_map
-        self.laser_mount = laser_mount
-        self.sigma_m = agreement_sigma(occ_map, cfg.agreement_sigma_m)
+        super().__init__(cfg, occ_map, laser_mount)
         self.previous: FixRecord | None = None
         self._pending: FixRecord | None = None  # what the fix just passed becomes when the back-end takes it
         self._last_odom: FloatArray | None = None  # the odometry pose at the last fix judged
@@ -518,77 +501,6 @@ class JumpGate:
         """``(fixes, first stamp)`` of the current run of held fixes that follow each other as the odometry
         says (``(0, nan)``: none; a fix taken ends it)."""
         return (0, math.nan) if self._held is None else (self._held.n, self._held.t0)
-
-    def agreement(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan,
-                  points: FloatArray | None = None) -> tuple[float, float]:
-        """``(near the prediction, at the fix)``: the best :func:`scan_agreement` within
-        :data:`NEIGHBOURHOOD_SIGMAS` of the prediction's covariance, and the agreement at the fix.
-        ``points``: ``scan.points()`` when the caller has them."""
-        pts = scan.points() if points is None else points
-        near = self._near(pred, pred_cov, pts)
-        a = agreements(self.map, self.laser_mount, scan, np.vstack([near, np.asarray(fix.pose, dtype=float)]),
-                       self.sigma_m, pts)
-        return float(np.max(a[:-1])), float(a[-1])
-
-    def _sided(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan
-               ) -> tuple[float, float, float]:
-        """The map's agreement with the scan ``(near the prediction, near the fix)`` and what the two cannot be
-        told apart within (:func:`tied_agreements`, :data:`TIE_SIGMAS`).  Near the prediction: the best of
-        :meth:`agreement`'s neighbourhood and of the pose the agreement climbs to from it (:func:`climb`); near
-        the fix: where it climbs to from the fix; each no further than halfway to the other (the coarse
-        neighbourhood of a large slip allowance misses an odometry's pose a few centimetres off)."""
-        pts = scan.points()
-        if len(pts) < 2:
-            a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)
-            return a_pred, a_fix, 0.0
-        pred, fix_pose = np.asarray(pred, dtype=float), np.asarray(fix.pose, dtype=float)
-        reach = 0.5 * math.hypot(float(fix_pose[0] - pred[0]), float(fix_pose[1] - pred[1]))
-        steps = finest_steps(self.sigma_m, pts)
-        odo, at_fix = (climb(self.map, self.laser_mount, p, reach, self.sigma_m, pts, steps, CLIMB_STEPS)
-                       for p in (pred, fix_pose))
-        return tied_agreements(self.map, self.laser_mount, np.vstack([self._near(pred, pred_cov, pts), odo]),
-                               at_fix, self.sigma_m, pts, TIE_SIGMAS)
-
-    def _near(self, pred: FloatArray, pred_cov: FloatArray, pts: FloatArray) -> FloatArray:
-        """The poses near the prediction :meth:`agreement` judges (:func:`neighbourhood`, the prediction in
-        the middle)."""
-        # the neighbourhood at least as fine as the agreement can tell apart
-        return neighbourhood(pred, np.asarray(pred_cov, dtype=float), NEIGHBOURHOOD_SIGMAS,
-                             *finest_steps(self.sigma_m, pts))
-
-    def map_prefers_fix(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray, scan: LaserScan) -> bool:
-        """Whether the map explains ``scan`` better at the fix than anywhere near the prediction (``a_fix >
-        a_pred`` of :meth:`agreement`, or either not finite): judged first against the prediction itself,
-        where the answer is usually settled, then against the whole neighbourhood."""
-        pts = scan.points()
-        if len(pts):
-            a = agreements(self.map, self.laser_mount, scan,
-                           np.vstack([np.asarray(pred, dtype=float), np.asarray(fix.pose, dtype=float)]), self.sigma_m,
-                           pts)
-            a_pred, a_fix = float(a[0]), float(a[1])
-            if math.isfinite(a_pred) and math.isfinite(a_fix):
-                if a_pred >= a_fix:
-                    return False
-                near = self._near(pred, pred_cov, pts)  # the prediction in the middle: asked already
-                mid = len(near) // 2
-                if self.sigma_m > 0:
-                    # every agreement finite: one pose near the prediction at least as good as the fix settles it,
-                    # usually the prediction turned (next to it in the neighbourhood), asked first
-                    turned = near[[mid - 2, mid - 1, mid + 1, mid + 2]]
-                    if float(np.max(agreements(self.map, self.laser_mount, scan, turned, self.sigma_m, pts))) >= a_fix:
-                        return False
-                    others = np.delete(near, np.s_[mid - 2:mid + 3], axis=0)
-                else:
-                    others = np.delete(near, mid, axis=0)
-                a_near = float(np.max(agreements(self.map, self.laser_mount, scan, others, self.sigma_m, pts)))
-                return not math.isfinite(a_near) or a_fix > a_near
-        a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan, pts)
-        return not (math.isfinite(a_pred) and math.isfinite(a_fix)) or a_fix > a_pred
-
-    def map_confirms(self, a_pred: float, a_fix: float) -> bool:
-        """Whether the map explains the scan clearly better at the fix than anywhere near the prediction
-        (``integrity.confirm_agreement``): evidence the matcher did not produce itself."""
-        return bool(a_pred <= a_fix * (1.0 - self.cfg.confirm_agreement))
 
 
 def _mahalanobis2(e: FloatArray, S: FloatArray) -> float:

@@ -437,8 +437,9 @@ class PoseStatus:
                     f"{mj.events} times where the odometry did not take the robot, two of them {mj.closest_s:.1f} s "
                     f"apart (worst {e_m:.1f} m / {math.degrees(e_rad):.0f} deg off the odometry's motion {into:.1f} s "
                     f"into the run), while the map fits the laser where the poses were ok ({100 * share:.0f} % of "
-                    f"its ranges within 10 % of the map's, median over {n} scans): the map has places alike; give "
-                    "an initial pose (--initial-pose)")
+                    f"its ranges within 10 % of the map's, median over {n} scans): the map has places alike; "
+                    + ("give an initial pose (--initial-pose)" if self.initial_pose is None else
+                       "the robot was lost after its initial pose, and a global search cannot tell them apart"))
                 return
             self._unusable("map_mismatch", "lost: this map does not fit this log",
                 f"this map does not fit this log: it put the robot {mj.events} times where its "

@@ -222,9 +222,9 @@ STATUS_FILE = "trajectory_status.csv"
 _COV_COLUMNS = ("cov_xx", "cov_xy", "cov_xyaw", "cov_yy", "cov_yyaw", "cov_yawyaw")
 
 
-def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """``(stamps_s, covs)`` of a ``trajectory_status.csv`` (its ``t`` and ``cov_*`` columns; a
-    covariance NaN where the file has none).  One-line :class:`LogError` for a file that is not one."""
+def _status_rows(path: str | Path, columns: tuple[str, ...], need: str) -> tuple[Path, list[int], list[list[str]]]:
+    """A ``trajectory_status.csv``'s column indices of ``columns`` and its data rows (comment and blank
+    lines skipped); one-line :class:`LogError` unless its column line has them (``need``: what it lacks)."""
     import csv
 
     from fgloc.errors import read_user_text
@@ -232,12 +232,17 @@ def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     lines = [ln for ln in read_user_text(path, "status file").splitlines() if ln.strip() and not ln.startswith("#")]
     rows = list(csv.reader(lines))
-    if not rows or "t" not in rows[0] or not set(_COV_COLUMNS) <= set(rows[0]):
-        raise LogError(f"{path}: not a pose status file (a column line with t and {', '.join(_COV_COLUMNS)})")
-    head = rows[0]
-    it, ic = head.index("t"), [head.index(c) for c in _COV_COLUMNS]
+    if not rows or not set(columns) <= set(rows[0]):
+        raise LogError(f"{path}: not a pose status file (a column line with {need})")
+    return path, [rows[0].index(c) for c in columns], rows[1:]
+
+
+def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(stamps_s, covs)`` of a ``trajectory_status.csv`` (its ``t`` and ``cov_*`` columns; a
+    covariance NaN where the file has none).  One-line :class:`LogError` for a file that is not one."""
+    path, (it, *ic), rows = _status_rows(path, ("t", *_COV_COLUMNS), f"t and {', '.join(_COV_COLUMNS)}")
     stamps, covs = [], []
-    for k, r in enumerate(rows[1:], start=2):
+    for k, r in enumerate(rows, start=2):
         try:
             t = float(r[it])
             xx, xy, xa, yy, ya, aa = (float(r[i]) for i in ic)
@@ -251,18 +256,9 @@ def read_status_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 def read_statuses(path: str | Path) -> tuple[np.ndarray, list[str]]:
     """``(stamps_s, statuses)`` of a ``trajectory_status.csv`` (its ``t`` and ``status`` columns).
     One-line :class:`LogError` for a file that is not one."""
-    import csv
-
-    from fgloc.errors import read_user_text
-
-    path = Path(path)
-    lines = [ln for ln in read_user_text(path, "status file").splitlines() if ln.strip() and not ln.startswith("#")]
-    rows = list(csv.reader(lines))
-    if not rows or not {"t", "status"} <= set(rows[0]):
-        raise LogError(f"{path}: not a pose status file (a column line with t and status)")
-    it, js = rows[0].index("t"), rows[0].index("status")
+    path, (it, js), rows = _status_rows(path, ("t", "status"), "t and status")
     stamps, statuses = [], []
-    for k, r in enumerate(rows[1:], start=2):
+    for k, r in enumerate(rows, start=2):
         try:
             stamps.append(float(r[it]))
             statuses.append(r[js].strip())
@@ -301,34 +297,33 @@ def read_run_statuses(path: str | Path) -> tuple[np.ndarray, list[str]] | None:
     return t, [stamps[float(x)] for x in t]
 
 
-def statuses_at(traj: Trajectory, stamps: np.ndarray, statuses: list[str], tol_s: float = 1e-6) -> list[str] | None:
-    """One status per pose of ``traj``: the one of ``(stamps, statuses)`` at the pose's stamp (within
-    ``tol_s``); None when a pose has none (the file is another trajectory's)."""
+def _rows_at(traj: Trajectory, stamps: np.ndarray, tol_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """For each pose of ``traj``, the index into ``stamps`` of the stamp nearest its own, and whether that
+    one is within ``tol_s`` (``stamps`` non-empty, in any order)."""
     st = np.asarray(stamps, dtype=float)
-    if not len(st) or not len(traj):
-        return None
     order = np.argsort(st, kind="stable")
-    st, ss = st[order], [statuses[i] for i in order]
+    st = st[order]
     j = np.clip(np.searchsorted(st, traj.stamps), 0, len(st) - 1)
     jm = np.clip(j - 1, 0, len(st) - 1)
     j = np.where(np.abs(st[jm] - traj.stamps) < np.abs(st[j] - traj.stamps), jm, j)
-    if not np.all(np.abs(st[j] - traj.stamps) <= tol_s):
+    return order[j], np.abs(st[j] - traj.stamps) <= tol_s
+
+
+def statuses_at(traj: Trajectory, stamps: np.ndarray, statuses: list[str], tol_s: float = 1e-6) -> list[str] | None:
+    """One status per pose of ``traj``: the one of ``(stamps, statuses)`` at the pose's stamp (within
+    ``tol_s``); None when a pose has none (the file is another trajectory's)."""
+    if not len(stamps) or not len(traj):
         return None
-    return [ss[i] for i in j]
+    idx, hit = _rows_at(traj, stamps, tol_s)
+    return [statuses[i] for i in idx] if np.all(hit) else None
 
 
 def covariances_at(traj: Trajectory, stamps: np.ndarray, covs: np.ndarray, tol_s: float = 1e-6) -> np.ndarray:
     """One covariance per pose of ``traj``: the one of ``(stamps, covs)`` at the pose's stamp (within
     ``tol_s``), NaN where there is none."""
     out = np.full((len(traj), 3, 3), np.nan)
-    st = np.asarray(stamps, dtype=float)
-    if not len(st) or not len(traj):
+    if not len(stamps) or not len(traj):
         return out
-    order = np.argsort(st, kind="stable")
-    st, cv = st[order], np.asarray(covs, dtype=float)[order]
-    j = np.clip(np.searchsorted(st, traj.stamps), 0, len(st) - 1)
-    jm = np.clip(j - 1, 0, len(st) - 1)
-    j = np.where(np.abs(st[jm] - traj.stamps) < np.abs(st[j] - traj.stamps), jm, j)
-    hit = np.abs(st[j] - traj.stamps) <= tol_s
-    out[hit] = cv[j[hit]]
+    idx, hit = _rows_at(traj, stamps, tol_s)
+    out[hit] = np.asarray(covs, dtype=float)[idx[hit]]
     return out

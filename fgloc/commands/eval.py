@@ -189,6 +189,15 @@ def _statuses(tr: Any, src: Any, given: Path | None) -> tuple[Path, list[str]] |
     return None if known is None else (path, known)
 
 
+def _first_true(mask: Any) -> int:
+    """The index of the first true entry of ``mask`` (0 when None or none is)."""
+    import numpy as np
+
+    if mask is None or not np.any(mask):
+        return 0
+    return int(np.argmax(mask))
+
+
 def status_note(label: str, path: Path, sp: Any) -> str:
     """One line on what a :class:`~fgloc.eval.metrics.StatusSplit` left out of the table, or that it left
     none (``path``: the status file)."""
@@ -197,13 +206,11 @@ def status_note(label: str, path: Path, sp: Any) -> str:
     vouched = " or ".join(VOUCHED_STATUSES)
     if not sp.n_left_out:
         return f"{label}: every paired pose is {vouched} ({path})"
-    counts = ", ".join(f"{n} {k}" for k, n in sp.left_out.items())
     if sp.metrics is None:
-        return (f"{label}: {path} calls fewer than 2 paired poses {vouched} ({counts}): the table is over every "
-                f"pose, {sp.all_rmse_m:.4f} m RMSE")
-    return (f"{label}: over the {sp.n_vouched} poses {path} calls {vouched}; left out {counts} pose(s), "
-            f"{sp.left_out_rmse_m:.4f} m RMSE, up to {sp.left_out_max_m:.3f} m off (over every pose "
-            f"{sp.all_rmse_m:.4f} m RMSE; --all-poses for the table over every pose)")
+        return (f"{label}: {path} calls fewer than 2 paired poses {vouched} ({sp.left_out_counts()}): the table is "
+                f"over every pose, {sp.all_rmse_m:.4f} m RMSE")
+    return (f"{label}: over the {sp.n_vouched} poses {path} calls {vouched}; left out {sp.left_out_errors()}; "
+            "--all-poses for the table over every pose)")
 
 
 def _relations_cmd(
@@ -288,7 +295,8 @@ def eval_cmd(
     align_start: Annotated[
         bool, typer.Option("--align-start", help="Move each estimate so its first pose is the reference's there "
                            "(two odometry frames: a run without a map against robot_localization's output); "
-                           "the end error is then the drift")
+                           "the end error is then the drift; with statuses (--status), its first pose called ok "
+                           "or degraded")
     ] = False,
     rpe_delta: Annotated[float, typer.Option("--rpe-delta", help="RPE distance between poses (m)")] = 1.0,
     rpe_delta_s: Annotated[float, typer.Option("--rpe-delta-s", help="RPE time between poses (s)")] = 1.0,
@@ -319,7 +327,8 @@ def eval_cmd(
     ] = False,
     nees: Annotated[
         bool, typer.Option("--nees", help="Also the NEES of each estimate's poses against its per-pose covariance "
-                           "(trajectory_status.csv beside a TUM file, --cov, or a log topic's covariance)")
+                           "(trajectory_status.csv beside a TUM file, --cov, or a log topic's covariance); over the "
+                           "poses the table is over (ok or degraded when the statuses are known)")
     ] = False,
     cov: Annotated[
         Path | None, typer.Option("--cov", help="--nees: the estimate's per-pose covariances (a "
@@ -354,7 +363,7 @@ def eval_cmd(
                           "fgloc eval out/trajectory.tum GT.tum, or --relations / --reference with one trajectory")
 
     from fgloc.eval.checks import clock_note, end_error, frame_note, gap_note, heading_note, start_aligned
-    from fgloc.eval.metrics import AssociationError, associate, association_metrics, split_by_status
+    from fgloc.eval.metrics import AssociationError, associate, association_metrics, split_by_status, vouched_pairs
     from fgloc.eval.trajectories import read_trajectory
     from fgloc.types import Trajectory
 
@@ -380,6 +389,7 @@ def eval_cmd(
     pairs: dict[str, Any] = {}  # each estimate's association with the reference, made once
     ends: dict[str, float | None] = {}  # --align-start: the last paired pose's distance from the reference
     splits: dict[str, Any] = {}  # the metrics by the poses' statuses (a trajectory_status.csv)
+    nees_pairs: dict[str, Any] = {}  # --nees: the pairs it weighs (the vouched ones, when the statuses are known)
     for (lab, est), p, (_tr, src) in zip(list(ests.items()), est_paths, read, strict=True):
         try:
             a = associate(est, gt, max_gap=max_gap)
@@ -387,25 +397,28 @@ def eval_cmd(
             hint = clock_note(est, src, gt, gt_src, t_offset) if "do not overlap" in str(e) else None
             raise LogError(f"{p}{': --align-start' if align_start else ' vs ' + gt_src.label}: {e}"
                            + (f"; {hint}" if hint else "")) from None
-        if align_start:
-            ests[lab], a = start_aligned(est, a)
+        known = None if all_poses else _statuses(_tr, src, status)
+        vouched = None if known is None else vouched_pairs(a, known[1])
+        if align_start:  # on the first pose the run vouches for (a lost pose is where the run says it is not)
+            ests[lab], a = start_aligned(est, a, first=_first_true(vouched))
             ends[lab] = end_error(a)
         pairs[lab] = a
         results[lab] = association_metrics(a, align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
-        known = None if all_poses else _statuses(_tr, src, status)
         if known is not None:
             sp = split_by_status(a, known[1], align=align, rpe_delta_m=rpe_delta, rpe_delta_s=rpe_delta_s)
             splits[lab] = sp
             typer.echo(f"note: {status_note(lab, known[0], sp)}", err=True)
             if sp.metrics is not None:
                 results[lab] = sp.metrics
+                if nees and vouched is not None:  # the NEES over the same poses as the table
+                    nees_pairs[lab] = a.subset(vouched)
         frames = None if align or align_start else frame_note(lab, a)
         notes = [gap_note(lab, est.stamps, gt.stamps, max_gap), frames,
                  None if align_start or frames is not None else heading_note(lab, a, align)]
         for note in notes:
             if note is not None:
                 typer.echo(f"note: {note}", err=True)
-    nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap, pairs) if nees else {}
+    nees_results = _nees_results(ests, read, gt, gt_src.label, cov, max_gap, {**pairs, **nees_pairs}) if nees else {}
 
     written: list[Path] = []
     if plots is not None:

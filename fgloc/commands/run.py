@@ -140,8 +140,7 @@ def truth_lines(r: RunResult) -> list[str]:
         out.append(f"  vs /ground_truth{where}, over the poses the run vouches for ({' or '.join(VOUCHED_STATUSES)}: "
                    f"{sp0.n_vouched} of {sp0.n_vouched + sp0.n_left_out} final):")
     else:  # nothing left out, or too few vouched poses in a column to make one: every pose, said so
-        few = [f"{lab}: {sp.n_vouched} of {sp.n_vouched + sp.n_left_out} ("
-               + ", ".join(f"{n} {k}" for k, n in sp.left_out.items()) + ")"
+        few = [f"{lab}: {sp.n_vouched} of {sp.n_vouched + sp.n_left_out} ({sp.left_out_counts()})"
                for lab, _m, sp in cols if sp is not None and sp.metrics is None]
         out.append(f"  vs /ground_truth{where}" + (f", over every pose (the run vouches for fewer than 2; "
                                                    f"{' or '.join(VOUCHED_STATUSES)}: {'; '.join(few)})"
@@ -153,9 +152,7 @@ def truth_lines(r: RunResult) -> list[str]:
     out += ["    " + "  ".join(cells).rstrip() for cells in justified([header, *body])]
     for lab, _m, sp in cols if split else ():  # the poses not in the table, beside it
         if sp is not None and sp.n_left_out:
-            counts = ", ".join(f"{n} {k}" for k, n in sp.left_out.items())
-            out.append(f"    left out of {lab}: {counts} pose(s), {sp.left_out_rmse_m:.4f} m RMSE, up to "
-                       f"{sp.left_out_max_m:.3f} m off (over every pose {sp.all_rmse_m:.4f} m RMSE)")
+            out.append(f"    left out of {lab}: {sp.left_out_errors()})")
     return out
 
 

@@ -78,17 +78,17 @@ def frame_note(label: str, a: Any) -> str | None:
             "--align-start moves the estimate's start onto the reference's")
 
 
-def start_aligned(est: Any, a: Any) -> tuple[Any, Any]:
-    """``est`` moved rigidly so that its first pose paired with the reference is the reference's pose
-    there (SE(2)): two trajectories in frames that differ by where each started.  ``a``: the estimate's
-    :class:`~fgloc.eval.metrics.Association` with the reference; returns the moved estimate and its
-    association (the same pairs: a rigid move keeps the stamps)."""
+def start_aligned(est: Any, a: Any, first: int = 0) -> tuple[Any, Any]:
+    """``est`` moved rigidly so that its pose of pair ``first`` (by default the first paired with the
+    reference) is the reference's pose there (SE(2)): two trajectories in frames that differ by where each
+    started.  ``a``: the estimate's :class:`~fgloc.eval.metrics.Association` with the reference; returns
+    the moved estimate and its association (the same pairs: a rigid move keeps the stamps)."""
     from dataclasses import replace
 
     from fgloc.geometry import compose, inverse
     from fgloc.types import Trajectory
 
-    move = compose(a.gt[0], inverse(a.est[0]))
+    move = compose(a.gt[first], inverse(a.est[first]))
     return Trajectory(est.stamps, compose(move, est.poses), est.frame_id), replace(a, est=compose(move, a.est))
 
 

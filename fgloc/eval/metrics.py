@@ -78,6 +78,12 @@ class Association:
     def __len__(self) -> int:
         return len(self.stamps)
 
+    def subset(self, keep: NDArray[np.bool_]) -> Association:
+        """The pairs where ``keep`` (one per pair) is true; the poses left out no longer count in
+        ``n_est``."""
+        return Association(self.stamps[keep], self.est[keep], self.gt[keep], self.direction[keep], self.index[keep],
+                           self.n_est - int(np.count_nonzero(~keep)))
+
 
 @dataclass
 class ErrorSeries:
@@ -461,6 +467,16 @@ class StatusSplit:
     def n_left_out(self) -> int:
         return sum(self.left_out.values())
 
+    def left_out_counts(self) -> str:
+        """The left-out poses by status, e.g. ``"90 lost, 3 suspect"`` (in the order met)."""
+        return ", ".join(f"{n} {k}" for k, n in self.left_out.items())
+
+    def left_out_errors(self) -> str:
+        """The left-out poses and their errors beside the all-pose RMSE, as a clause: ``"90 lost pose(s),
+        12.3800 m RMSE, up to 17.512 m off (over every pose 3.0733 m RMSE"`` (the caller closes it)."""
+        return (f"{self.left_out_counts()} pose(s), {self.left_out_rmse_m:.4f} m RMSE, up to {self.left_out_max_m:.3f} "
+                f"m off (over every pose {self.all_rmse_m:.4f} m RMSE")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN as None; ``metrics`` as :meth:`Metrics.to_dict`)."""
         def num(v: float) -> float | None:
@@ -469,6 +485,20 @@ class StatusSplit:
         return {"vouched_statuses": list(VOUCHED_STATUSES), "n_vouched": self.n_vouched,
                 "left_out": dict(self.left_out), "left_out_rmse_m": num(self.left_out_rmse_m),
                 "left_out_max_m": num(self.left_out_max_m), "all_rmse_m": num(self.all_rmse_m)}
+
+
+def paired_statuses(a: Association, statuses: Sequence[str]) -> NDArray[np.object_]:
+    """The status of each pair of ``a``, from ``statuses``: one per pose of the estimate (``a.n_est``)."""
+    st = np.asarray(list(statuses), dtype=object)
+    if len(st) != a.n_est:
+        raise ValueError(f"{len(st)} statuses for an estimate of {a.n_est} poses")
+    return st[a.index]
+
+
+def vouched_pairs(a: Association, statuses: Sequence[str]) -> NDArray[np.bool_]:
+    """Which pairs of ``a`` are of a pose the run vouches for (:data:`VOUCHED_STATUSES`); ``statuses``: one
+    per pose of the estimate."""
+    return np.isin(paired_statuses(a, statuses), VOUCHED_STATUSES)
 
 
 def split_by_status(
@@ -482,10 +512,7 @@ def split_by_status(
     estimate, ``a.n_est``) the run vouches for, and what the others' errors are.  ``align``: the rigid
     transform is fitted to the vouched poses (all paired poses when fewer than 2) and applied to every
     pose.  Poses not paired with the reference are not counted as left out."""
-    st = np.asarray(list(statuses), dtype=object)
-    if len(st) != a.n_est:
-        raise ValueError(f"{len(st)} statuses for an estimate of {a.n_est} poses")
-    st = st[a.index]
+    st = paired_statuses(a, statuses)
     keep = np.isin(st, VOUCHED_STATUSES)
     if align:
         fit = keep if np.count_nonzero(keep) >= 2 else np.ones(len(a), dtype=bool)
@@ -498,9 +525,7 @@ def split_by_status(
         left[str(s)] = left.get(str(s), 0) + 1
     metrics = None
     if np.count_nonzero(keep) >= 2:
-        sub = Association(a.stamps[keep], a.est[keep], a.gt[keep], a.direction[keep], a.index[keep],
-                          a.n_est - int(np.count_nonzero(out)))
-        metrics = replace(association_metrics(sub, rpe_delta_m=rpe_delta_m, rpe_delta_s=rpe_delta_s),
+        metrics = replace(association_metrics(a.subset(keep), rpe_delta_m=rpe_delta_m, rpe_delta_s=rpe_delta_s),
                           aligned=bool(align))
     return StatusSplit(metrics=metrics, left_out=left, left_out_rmse_m=_rms(epos[out]),
                        left_out_max_m=_max(epos[out]), all_rmse_m=_rms(epos))

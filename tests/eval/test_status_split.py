@@ -59,12 +59,14 @@ def test_fewer_than_two_vouched_poses_give_no_metrics():
     assert sp.metrics is None and sp.left_out == {"lost": len(gt)}
 
 
-def _run_folder(folder: Path) -> tuple[Path, Path]:
+def _run_folder(folder: Path, sigma: float | None = None) -> tuple[Path, Path]:
+    """trajectory.tum, its trajectory_status.csv (covariances ``sigma``^2 on x, y and yaw, or none) and gt.tum."""
     est, gt, statuses = _lost_start()
     write_tum(folder / "trajectory.tum", est)
     write_tum(folder / "gt.tum", gt)
-    nan = float("nan")
-    rows = [[float(t), *map(float, p), s, nan, nan, nan, nan, nan, nan, "" if s == "ok" else "why"]
+    v = float("nan") if sigma is None else sigma**2
+    z = float("nan") if sigma is None else 0.0
+    rows = [[float(t), *map(float, p), s, v, z, z, v, z, v, "" if s == "ok" else "why"]
             for t, p, s in zip(est.stamps, est.poses, statuses, strict=True)]
     (folder / "trajectory_status.csv").write_text(status_csv(rows))
     return folder / "trajectory.tum", folder / "gt.tum"
@@ -82,6 +84,28 @@ def test_eval_takes_the_status_file_beside_the_trajectory(tmp_path, capsys):
     assert main(["eval", str(est), str(gt), "--json", "--all-poses"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["metrics"]["position_rmse_m"] > 2.0 and "by_status" not in doc
+
+
+def test_eval_nees_is_over_the_poses_the_table_is_over(tmp_path, capsys):
+    est, gt = _run_folder(tmp_path, sigma=0.01)
+    assert main(["eval", str(est), str(gt), "--json", "--nees"]) == 0
+    nees = json.loads(capsys.readouterr().out)["nees"]
+    n = len(_lost_start()[1])
+    assert nees["n"] == n - N_LOST
+    assert nees["nees_mean"] == pytest.approx(1.0, rel=1e-6)  # 1 cm off with a 1 cm sigma; the lost 1e6 left out
+    assert main(["eval", str(est), str(gt), "--json", "--nees", "--all-poses"]) == 0
+    nees = json.loads(capsys.readouterr().out)["nees"]
+    assert nees["n"] == n and nees["nees_mean"] > 1e4
+
+
+def test_eval_align_start_aligns_on_the_first_vouched_pose(tmp_path, capsys):
+    est, gt = _run_folder(tmp_path)
+    assert main(["eval", str(est), str(gt), "--json", "--align-start"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["end_error_m"] < 1e-6  # the 1 cm offset is the first ok pose's: aligned away
+    assert doc["metrics"]["position_rmse_m"] < 1e-6
+    assert main(["eval", str(est), str(gt), "--json", "--align-start", "--all-poses"]) == 0
+    assert json.loads(capsys.readouterr().out)["end_error_m"] == pytest.approx(10.0, abs=0.01)  # on a lost pose
 
 
 def test_eval_refuses_the_status_file_of_another_trajectory(tmp_path, capsys):

@@ -102,9 +102,13 @@ def localize_log(log: Path, outdir: Path, map_yaml: Path | None, initial_pose: l
     out = LocalizeOutcome(mode=r.mode, poses=int(r.poses), log_s=float(r.log_s), wall_s=float(r.wall_s),
                           lost_s=float(r.lost_s), failure=r.failure(), note=r.eval_error, written=list(r.written),
                           warnings=list(r.warnings))
-    if r.metrics is not None:
-        out.position_rmse_m = float(r.metrics.position_rmse_m)
-        out.heading_rmse_deg = float(r.metrics.heading_rmse_deg)
+    sp = r.by_status  # over the poses the run vouches for, as fgloc run's table; every pose if too few
+    m = sp.metrics if sp is not None and sp.metrics is not None else r.metrics
+    if m is not None:
+        out.position_rmse_m = float(m.position_rmse_m)
+        out.heading_rmse_deg = float(m.heading_rmse_deg)
+    if sp is not None and sp.metrics is not None and sp.n_left_out:
+        out.warnings.append(f"RMSE over the {sp.n_vouched} poses the run vouches for; left out {sp.left_out_errors()})")
     return out
 
 

@@ -6,7 +6,8 @@ Columns: log, status (``ok``, ``done`` = finished by an earlier run and skipped,
 ``not run`` = interrupted before it ran), duration (s of log time), poses, x real time
 (log time / localization wall time, as ``fgloc run`` prints it), lost time (s the localizer
 was lost, :attr:`fgloc.app.run.RunResult.lost_s`; map-frame runs only), position and heading RMSE
-(when the log has ``/ground_truth``), the one-line error, and the worker that ran it.
+(when the log has ``/ground_truth``; over the poses the run vouches for, as ``fgloc run``'s table),
+the one-line error, and the worker that ran it.
 """
 
 from __future__ import annotations

@@ -8,12 +8,13 @@ A fix is taken when it agrees with what the odometry says since the last fix it 
   before any fix had confirmed the back-end's pose) and it was sure of its position (its position sigma, in
   every direction, within twice the prediction's and the allowance below for the motion since the fix before;
   and, when the prediction took it, within the gate of the prediction's covariance and that allowance alone,
-  and not where its own covariance covers an offset the prediction's and the map's resolution do not: a fix
-  the prediction took only for its own vagueness, a matcher unsure between two places, is no position to
-  follow, however far a slow laser's robot moved between two fixes), carried on by the odometry's motion since
-  (:meth:`Backend.motion_correction`: a gyro's turn where it covers it), with an allowance for an odometry that
-  slips or scrubs beyond what it reports: ``integrity.odometry_slip`` times the distance and the turn it
-  reported in between (the odometry motion model of AMCL and most particle filters).  A back-end whose online
+  and not where its own covariance, vaguer along the offset than the map's resolution, covers it with that
+  resolution where the prediction's with it does not: a fix the prediction took only for its own vagueness, a
+  matcher unsure between two places, is no position to follow, however far a slow laser's robot moved between
+  two fixes), carried on by the odometry's motion since (:meth:`Backend.motion_correction`: a gyro's turn where
+  it covers it), with an allowance for an odometry that slips or scrubs beyond what it reports:
+  ``integrity.odometry_slip`` times the distance and the turn it reported in between (the odometry motion model
+  of AMCL and most particle filters).  A back-end whose online
   estimate lags the fixes (a smoother outvoted by odometry that slips 30 %) does not make the fixes that follow
   each other as the wheels roughly say look like jumps; nor does a back-end that rejects fixes (an EKF sure of
   a start it has not moved from) make a run of fixes that agree with each other look like one: a gate that held
@@ -338,13 +339,17 @@ class JumpGate(MapJudge):
             self._judged = (cur, motion, covered, np.array(pred, dtype=float), P.copy(), run if follows_run else None)
             # ... and, when the prediction took it, not only by its own vagueness (a matcher unsure between two
             # places, 0.3 m off with a 0.1 m sigma: within the prediction's covariance and the allowance alone,
-            # and not where its own covariance covers an offset the prediction's and the map's resolution do not:
+            # and not where its own covariance covers an offset the prediction's does not, each with the map's
+            # resolution, while the fix is vaguer along its offset than that resolution (the matcher's vagueness,
+            # not the map's, covers it: a fix 0.33 m off along a 0.175 m sigma and 0.036 m across a 5 mm one):
             # a slow laser's longer motion between two fixes widens the allowance, not what such a fix knows)
             chi2 = self.cfg.gate_chi2
+            ee = e0 * e0 + e1 * e1
+            vague = ee > 0.0 and (e0 * e0 * r00 + e0 * e1 * (r01 + r10) + e1 * e1 * r11) > s2 * ee
             near = d2_prev is not None or (
                 mahalanobis2_2x2(e0, e1, p00 + s2 + allow, p01, p10, p11 + s2 + allow) <= chi2
-                and not (mahalanobis2_2x2(e0, e1, p00 + s2, p01, p10, p11 + s2) > chi2
-                         and mahalanobis2_2x2(e0, e1, r00, r01, r10, r11) <= chi2))
+                and not (vague and mahalanobis2_2x2(e0, e1, p00 + s2, p01, p10, p11 + s2) > chi2
+                         and mahalanobis2_2x2(e0, e1, r00 + s2, r01, r10, r11 + s2) <= chi2))
             if near and m00 >= 0.0 and m11 >= 0.0 and m00 * m11 - m10 * m10 >= 0.0:
                 # a fix about as sure of its position as the prediction in every direction is the next one's
                 # to follow; after a vaguer one (a matcher unsure between two places) the next has none

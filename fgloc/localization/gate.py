@@ -51,7 +51,7 @@ the odometry since, so what the prediction's covariance grew by dead reckoning m
 for them (else a run 0.2 m off passes after a few seconds, once the covariance has grown by a centimetre).
 And a fix the gate passed that a back-end whose pose fixes had confirmed rejects (its own, tighter gate:
 the EKF's has no map-resolution floor) is held with the run it followed unless the map explains the scan
-better at the fix than anywhere near the prediction (:meth:`JumpGate.rejected`); the fixes after it do
+better at the fix than anywhere near the prediction, beyond a tie (:meth:`JumpGate.rejected`); the fixes after it do
 not follow it in (else each of them is rejected in turn, and a particle filter front-end whose fixes the
 back-end keeps rejecting is searched for globally, which in a building that looks alike in several places
 can end in the wrong one).  Where the map sides with the fix, the back-end may be the one that drifted
@@ -206,8 +206,10 @@ class JumpGate(MapJudge):
 
     def rejected(self, scan: LaserScan) -> bool:
         """The back-end, confirmed by the fixes it took before, rejected the fix :meth:`check` passed last
-        (``scan``'s).  Unless the map explains the scan better at the fix than anywhere near the prediction
-        (then the back-end may be the one that drifted: as :meth:`accepted`), the fix counts as held: the next
+        (``scan``'s).  Unless the map explains the scan better at the fix than anywhere near the prediction by
+        more than a tie (each side climbed, :meth:`MapJudge._sided`: a hair's difference at a place alike is not
+        the map siding with the fix; where it sides, the back-end may be the one that drifted: as
+        :meth:`accepted`), the fix counts as held: the next
         fix has none to follow, and one that follows it as the odometry says continues the run of held fixes
         it followed, judged as that run's first fix was.  Whether it was held."""
         judged = self._judged
@@ -216,8 +218,8 @@ class JumpGate(MapJudge):
             return False
         cur, motion, covered, pred, pred_cov, run = judged
         fix = PoseFix(cur.t, cur.pose, cur.cov)
-        a_pred, a_fix = self.agreement(fix, pred, pred_cov, scan)
-        if math.isfinite(a_pred) and math.isfinite(a_fix) and a_fix > a_pred:
+        a_pred, a_fix, tie = self._sided(fix, pred, pred_cov, scan)
+        if math.isfinite(a_pred) and math.isfinite(a_fix) and a_fix > a_pred + tie:
             self.accepted()
             return False
         self._judged = None

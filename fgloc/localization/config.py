@@ -45,6 +45,11 @@ class PipelineConfig:
     global_max_sigma_yaw_deg: float = setting(5.0, "... and than this in heading", gt=0)
     global_compass_tolerance_deg: float = setting(30.0, "global candidates further from the compass heading are "
                                                   "dropped", gt=0)
+    global_retry_move_m: float = setting(0.25, "front-ends without a global mode: after a global search found "
+                                         "nothing, the next one waits until the odometry moved this far ...", min=0)
+    global_retry_turn_deg: float = setting(10.0, "... or turned this much ...", min=0)
+    global_retry_s: float = setting(1.0, "... or this long passed (the same scan from the same place finds the same: "
+                                    "nothing)", min=0)
     global_search: GlobalSearchConfig = section(GlobalSearchConfig, "coarse correlative global search (front-ends "
                                                 "without a global mode of their own)")
     # odometry

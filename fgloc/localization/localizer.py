@@ -161,6 +161,7 @@ class Localizer(Recovery):
         self._last_matched_t: float | None = None
         self._bad_streak = 0
         self._global_tries = 0
+        self._failed_search = None
         self._last_compass: tuple[float, float] | None = None
         self._last_kf_t = -math.inf
         self._last_dr_t = -math.inf

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from fgloc.backends.base import FloatArray
+from fgloc.geometry import between1
 from fgloc.localization.gate import GateVerdict, JumpGate
 from fgloc.localization.monitor import LOST, MapAgreement
 from fgloc.localization.relocalization import Relocalizer, close, place_near
@@ -45,6 +46,7 @@ class Recovery(PoseStatus):
     _keep_fix: Callable[[PoseFix], None]
     _reinit: FloatArray | None
     _global_tries: int
+    _failed_search: tuple[float, FloatArray] | None  # (t, odometry pose) of the last global search that found nothing
     _bad_streak: int
     _t_bad_since: float | None
     _dead_reckoned_since: float | None
@@ -77,6 +79,7 @@ class Recovery(PoseStatus):
         self.map = occ_map
         self.frontend = frontend
         self.reloc = Relocalizer(self.pcfg, occ_map, self.laser_mount, frontend, self.backend, self.stats)
+        self._failed_search = None  # a new map: search it at once
         if self._lost and frontend.supports_global:
             frontend.reset(None)
         self.stats["map_changes"] = self.stats.get("map_changes", 0) + 1
@@ -92,6 +95,7 @@ class Recovery(PoseStatus):
             self.agreement.reset()
         self._reacquiring = False
         self._global_tries = 0
+        self._failed_search = None
         self.stats["lost_events"] += 1
         if self._lost_since is None:
             self._lost_since = self._t_bad_since if self._t_bad_since is not None else t
@@ -275,12 +279,29 @@ class Recovery(PoseStatus):
                     self.backend.initialize(t, np.asarray(pose, dtype=float), np.asarray(cov, dtype=float) + EPS_COV)
             return None
         assert self.reloc is not None
-        gfix = self.reloc.search(msg)
-        if gfix is not None:
-            self._accept(gfix)
-            self._start(t, gfix.pose, gfix.cov + EPS_COV)
-            return gfix
-        self.last_reason = "global localization: no candidate good enough"
+        if self._search_waits(t):
+            self.last_reason = "global localization: the last search found nothing, waiting for motion"
+        else:
+            gfix = self.reloc.search(msg)
+            if gfix is not None:
+                self._failed_search = None
+                self._accept(gfix)
+                self._start(t, gfix.pose, gfix.cov + EPS_COV)
+                return gfix
+            self._failed_search = (t, np.array(self.odom.pose_at(t), dtype=float))
+            self.last_reason = "global localization: no candidate good enough"
         if self.backend.initialized:
             self.backend.add_keyframe(t, None)
         return None
+
+    def _search_waits(self, t: float) -> bool:
+        """Whether a global search would see what the last one, which found nothing, saw: the odometry has
+        moved less than ``global_retry_move_m`` and turned less than ``global_retry_turn_deg`` since, and
+        less than ``global_retry_s`` passed (a wrong map searched on every scan took 5 s per second of log)."""
+        if self._failed_search is None:
+            return False
+        t0, odom0 = self._failed_search
+        cfg = self.pcfg
+        d = between1(odom0, np.asarray(self.odom.pose_at(t), dtype=float))
+        return bool(t - t0 < cfg.global_retry_s and math.hypot(d[0], d[1]) < cfg.global_retry_move_m
+                    and abs(d[2]) < math.radians(cfg.global_retry_turn_deg))

@@ -334,10 +334,14 @@ class KeyframeGraph(FurtherSourceFactors):
         # says nothing of it (linked there, the fixes' heading jitter at a standstill is explained by a
         # scale going to zero); the EKF's evidence rule
         turning = abs(float(d[2])) > SCALE_EVIDENCE_SIGMAS * math.sqrt(max(a[8], 0.0))
-        if turning and ((self._turned > 1.0 and (self.gyro or self.calib.has_readings or self.stats["fixes_used"] > 0))
-                        or "odom_yaw_scale" in self.chains):
-            # observable once the robot has turned (a radian) with another yaw source to compare (a
-            # barely observable scale adds noise)
+        other = bool(self.gyro) or self.calib.has_readings or self.stats["fixes_used"] > 0
+        if turning and ((self.calib.has_readings and not self.gyro) or "odom_yaw_scale" in self.chains
+                        or (self._turned > 1.0 and other)):
+            # observable once another yaw source measures the turn: at once beside an absolute yaw (a
+            # compass's, an IMU's orientation) without a gyro (nothing else takes the wheels' excess
+            # turn: waited for, a skid steer's first turns overshoot), after a radian of turning beside
+            # a gyro (early, its bias would take the scale's error) or the fixes (a barely observable
+            # scale adds noise)
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
             ks_w = self._chain_key(ch, t, graph, vals, ts)
         kd = None

@@ -1,0 +1,46 @@
+"""The smoother learns the wheels' yaw-rate scale (reported / true) beside an absolute yaw (a
+compass's, an IMU's orientation) without a gyro at once, not after a radian of turning.  A skid
+steer's wheels report twice the turn; unlearnt, each first turn's extra wheel yaw throws the online
+heading off until the heading source pulls it back."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import skid_steer_turns
+
+from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
+
+SCRUB = 2.0                  # the wheels report twice the turn
+YAW_SIGMA = math.radians(0.5)
+V = 0.7                      # m/s on the straights
+
+
+def test_the_smoothers_wheel_yaw_rate_scale_is_learnt_beside_an_absolute_yaw() -> None:
+    """The four turns: odometry at 50 Hz (the scrubbed yaw rate), the absolute yaw at 100 Hz, a
+    keyframe at 25 Hz; the largest online heading error from the second turn on.  Before (the scale
+    waited for a radian of turning): 30.4 deg off, scale 4.74; now 0.32 deg, 2.00."""
+    rng = np.random.default_rng(2)
+    sm = SlidingWindowSmoother(SmootherConfig(latency=False))
+    sm.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
+    sm.set_compass_offset(0.0)   # an odometry-frame run: the compass's frame is the frame
+    odom_cov = np.diag([1e-4, 1e-4, 0.02**2])
+    worst, turns, prev_w = 0.0, 0, 0.0
+    for k, t, th, w in skid_steer_turns():
+        if w > 0.0 and prev_w == 0.0:
+            turns += 1
+        prev_w = w
+        sm.add_compass(t, th + float(rng.normal(0.0, YAW_SIGMA)), YAW_SIGMA**2, None, 0.0)
+        if k % 2 == 0:
+            sm.add_odometry(t, np.array([0.0 if w else V, 0.0, SCRUB * w + float(rng.normal(0.0, 0.02))]), odom_cov)
+        if k % 4 == 0:
+            sm.add_keyframe(t, None)
+            cur = sm.current(covariance=False)
+            if cur is not None and turns >= 2:
+                worst = max(worst, abs(math.degrees(math.remainder(float(cur[1][2]) - th, math.tau))))
+    sm.finish()
+    scale = float(sm.odom_scales()[1])
+    assert scale == pytest.approx(SCRUB, rel=0.1), scale
+    assert worst < 3.0, worst

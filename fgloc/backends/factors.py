@@ -390,6 +390,10 @@ def _scaled_between(cx: float, cy: float, cth: float, sv: float, sw: float,
     return v1, v2, v3, (hi, hj, hv, hw)
 
 
+#: the yaw-rate scale (reported / true) used in the odometry's factor stays in the EKF's bounds
+YAW_SCALE_MIN, YAW_SCALE_MAX = 0.1, 10.0
+
+
 def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, delta: FloatArray,
                           cov: FloatArray, fixed_scales: tuple[float, float] = (1.0, 1.0), min_sigma: float = 1e-4,
                           kernel: str = "none", k: float = 1.345, bend: bool = True,
@@ -419,6 +423,11 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list | None) -> FloatArray:
         sv = float(values.atVector(kv)[0]) if kv is not None else sv0
         sw = float(values.atVector(kw)[0]) if kw is not None else sw0
+        sw_held = kw is not None and not (YAW_SCALE_MIN <= sw <= YAW_SCALE_MAX)
+        if sw_held:
+            # held at the bound, its gradient zero: wheels that report the turn reversed otherwise run
+            # the scale away (to 7-12 beside a differential heading and the turn per metre)
+            sw = min(max(sw, YAW_SCALE_MIN), YAW_SCALE_MAX)
         dr = None
         if kdr is not None:
             vd = values.atVector(kdr)
@@ -434,7 +443,7 @@ def scaled_between_factor(ki: int, kj: int, ks_v: int | None, ks_w: int | None, 
                 H[n] = np.array(hv).reshape(3, 1)
                 n += 1
             if kw is not None:
-                H[n] = np.array(hw).reshape(3, 1)
+                H[n] = np.zeros((3, 1)) if sw_held else np.array(hw).reshape(3, 1)
                 n += 1
             if kdr is not None:
                 hd = np.array(jac[4]).reshape(3, 2)

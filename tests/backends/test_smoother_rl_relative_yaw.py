@@ -152,10 +152,12 @@ def test_a_heading_that_creeps_off_on_scrubbing_wheels_is_reopened_not_reanchore
     heading creeps past the gate away from the AHRS.  Its increments are smooth (no jump), so the
     keyframe's heading is re-opened to it; gating it and re-anchoring its offset after
     :data:`REANCHOR_AFTER` keyframes kept the wheels' extra turn for good (measured before: 56, 163,
-    171 and 61 deg off at the end)."""
+    171 and 61 deg off at the end).  With the wheels' yaw-rate scale learnt beside the differential
+    heading the 2.5x and 4x turns (a keyframe every 10) no longer creep past the gate (5 and 12 deg
+    online at most): nothing to re-open there."""
     be, err, worst = _skid_steer_turns(scrub, every)
     assert be.stats.get("relative_yaw_reanchored", 0) == 0 and be.source_health()["ahrs.yaw"].gated == 0
-    assert be.stats.get("relative_yaw_reopened", 0) > 0
+    assert be.stats.get("relative_yaw_reopened", 0) > 0 or worst < math.radians(15.0)
     assert err < math.radians(1.0)       # 0.2-0.4 deg measured
     assert worst < math.radians(40.0)    # online, in the turns: 30-36 deg measured
 

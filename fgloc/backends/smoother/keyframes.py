@@ -334,20 +334,23 @@ class KeyframeGraph(FurtherSourceFactors):
         # says nothing of it (linked there, the fixes' heading jitter at a standstill is explained by a
         # scale going to zero); the EKF's evidence rule
         turning = abs(float(d[2])) > SCALE_EVIDENCE_SIGMAS * math.sqrt(max(a[8], 0.0))
-        other = bool(self.gyro) or self.calib.has_readings or self.stats["fixes_used"] > 0
-        if turning and ((self.calib.has_readings and not self.gyro) or "odom_yaw_scale" in self.chains
-                        or (self._turned > 1.0 and other)):
-            # observable once another yaw source measures the turn: at once beside an absolute yaw (a
-            # compass's, an IMU's orientation) without a gyro (nothing else takes the wheels' excess
-            # turn: waited for, a skid steer's first turns overshoot), after a radian of turning beside
-            # a gyro (early, its bias would take the scale's error) or the fixes (a barely observable
-            # scale adds noise)
+        heading = self._heading_measured()
+        if turning and ((heading and not self.gyro) or "odom_yaw_scale" in self.chains
+                        or (self._turned > 1.0 and (heading or self.gyro or self.stats["fixes_used"] > 0))):
+            # observable once another source measures the turn: at once beside a heading of the
+            # robot's own (nothing else takes the wheels' excess turn: waited for, a skid steer's first
+            # turns overshoot), after a radian of turning beside a gyro (early, its bias would take the
+            # scale's error) or the fixes (a barely observable scale adds noise)
             ch = self._chain("odom_yaw_scale", "k", [1.0], [self.cfg.odom_yaw_scale_prior], [self.cfg.odom_scale_rw])
             ks_w = self._chain_key(ch, t, graph, vals, ts)
         kd = None
-        if self.cfg.odom_drift and (self.stats["fixes_used"] > 0 or "odom_drift" in self.chains):
+        beside_relative = not self.gyro and self._relative_heading()
+        if "odom_drift" in self.chains or ((self.cfg.odom_drift and self.stats["fixes_used"] > 0) or beside_relative):
             # the sideways creep and turn per metre forward: observed by the fixes' positions (a scan
-            # latency moves them along the track, not across it: not waited for, unlike the speed scale)
+            # latency moves them along the track, not across it: not waited for, unlike the speed scale);
+            # the turn, always, by a differential orientation without a gyro: unmodelled, the wheels'
+            # turn on straights (unequal wheel radii) is split between the heading and the orientation's
+            # walking offset in their noises' ratio, and the offset's share stays in the heading
             ch = self._chain("odom_drift", "d", [0.0, 0.0], list(self.cfg.odom_drift_prior),
                              list(self.cfg.odom_drift_rw))
             kd = self._chain_key(ch, t, graph, vals, ts)
@@ -355,6 +358,15 @@ class KeyframeGraph(FurtherSourceFactors):
         return scaled_between_factor(ki, kj, ks_v, ks_w, d, c, fixed, kernel=self.cfg.odom_kernel,
                                      k=self.cfg.odom_kernel_k, bend=bend, kd=kd,
                                      lateral=self._reports_sideways())
+
+    def _relative_heading(self) -> bool:
+        """Whether a differential orientation is in the graph (its own offset chain, a random walk)."""
+        return any(name.startswith("relative_yaw:") for name in self.chains)
+
+    def _heading_measured(self) -> bool:
+        """Whether a heading source of the robot's own measures the turn: an absolute yaw (a
+        compass's, an IMU's orientation) or a differential orientation (its increments)."""
+        return self.calib.has_readings or self._relative_heading()
 
     def _gate(self, fix: PoseFix, pred: FloatArray, pred_cov: FloatArray) -> bool:
         e = fix.pose - pred

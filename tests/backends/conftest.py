@@ -203,3 +203,26 @@ def skid_steer_turns(dt: float = 0.01):
             k += 1
             th += w * dt
             yield k, k * dt, th, w
+
+
+def drive_skid_turns(backend, feed_heading, scrub: float, speed: float, rng) -> tuple[float, float]:
+    """:func:`skid_steer_turns` into ``backend``: ``feed_heading(t, true heading)`` at every step (100 Hz),
+    the odometry at 50 Hz (``speed`` on the straights, ``scrub`` times the turn rate, 0.02 rad/s noise from
+    ``rng``), a keyframe at 25 Hz.  Returns the largest online heading error (deg) from the second turn on
+    and the true heading at the end (rad)."""
+    odom_cov = np.diag([1e-4, 1e-4, 0.02**2])
+    worst, turns, prev_w, th = 0.0, 0, 0.0, 0.0
+    for k, t, th, w in skid_steer_turns():
+        if w > 0.0 and prev_w == 0.0:
+            turns += 1
+        prev_w = w
+        feed_heading(t, th)
+        if k % 2 == 0:
+            backend.add_odometry(t, np.array([0.0 if w else speed, 0.0, scrub * w + float(rng.normal(0.0, 0.02))]),
+                                 odom_cov)
+        if k % 4 == 0:
+            backend.add_keyframe(t, None)
+            cur = backend.current(covariance=False)
+            if cur is not None and turns >= 2:
+                worst = max(worst, abs(math.degrees(math.remainder(float(cur[1][2]) - th, math.tau))))
+    return worst, th

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import skid_steer_turns
+from conftest import drive_skid_turns
 
 from fgloc.backends.smoother import SlidingWindowSmoother, SmootherConfig
 
@@ -26,20 +26,9 @@ def test_the_smoothers_wheel_yaw_rate_scale_is_learnt_beside_an_absolute_yaw() -
     sm = SlidingWindowSmoother(SmootherConfig(latency=False))
     sm.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
     sm.set_compass_offset(0.0)   # an odometry-frame run: the compass's frame is the frame
-    odom_cov = np.diag([1e-4, 1e-4, 0.02**2])
-    worst, turns, prev_w = 0.0, 0, 0.0
-    for k, t, th, w in skid_steer_turns():
-        if w > 0.0 and prev_w == 0.0:
-            turns += 1
-        prev_w = w
-        sm.add_compass(t, th + float(rng.normal(0.0, YAW_SIGMA)), YAW_SIGMA**2, None, 0.0)
-        if k % 2 == 0:
-            sm.add_odometry(t, np.array([0.0 if w else V, 0.0, SCRUB * w + float(rng.normal(0.0, 0.02))]), odom_cov)
-        if k % 4 == 0:
-            sm.add_keyframe(t, None)
-            cur = sm.current(covariance=False)
-            if cur is not None and turns >= 2:
-                worst = max(worst, abs(math.degrees(math.remainder(float(cur[1][2]) - th, math.tau))))
+    worst, _ = drive_skid_turns(
+        sm, lambda t, th: sm.add_compass(t, th + float(rng.normal(0.0, YAW_SIGMA)), YAW_SIGMA**2, None, 0.0),
+        SCRUB, V, rng)
     sm.finish()
     scale = float(sm.odom_scales()[1])
     assert scale == pytest.approx(SCRUB, rel=0.1), scale
@@ -53,20 +42,9 @@ def _differential_run(scrub: float) -> tuple[float, float]:
     rng = np.random.default_rng(2)
     sm = SlidingWindowSmoother(SmootherConfig(latency=False))
     sm.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
-    odom_cov = np.diag([1e-4, 1e-4, 0.02**2])
-    worst, turns, prev_w, th = 0.0, 0, 0.0, 0.0
-    for k, t, th, w in skid_steer_turns():
-        if w > 0.0 and prev_w == 0.0:
-            turns += 1
-        prev_w = w
-        sm.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs")
-        if k % 2 == 0:
-            sm.add_odometry(t, np.array([0.0 if w else V, 0.0, scrub * w + float(rng.normal(0.0, 0.02))]), odom_cov)
-        if k % 4 == 0:
-            sm.add_keyframe(t, None)
-            cur = sm.current(covariance=False)
-            if cur is not None and turns >= 2:
-                worst = max(worst, abs(math.degrees(math.remainder(float(cur[1][2]) - th, math.tau))))
+    worst, th = drive_skid_turns(
+        sm, lambda t, th: sm.add_relative_yaw(t, th + 0.4 + float(rng.normal(0.0, 0.002)), 1e-4, "ahrs"),
+        scrub, V, rng)
     traj = sm.finish()
     return worst, abs(math.degrees(math.remainder(float(traj.poses[-1][2]) - th, math.tau)))
 

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import skid_steer_turns
+from conftest import drive_skid_turns
 
 from fgloc.backends.ekf_backend import EKFBackend
 
@@ -26,26 +26,15 @@ def _drive(backend, heading: str) -> tuple[float, float]:
     backend.initialize(0.0, np.zeros(3), np.diag([1e-4, 1e-4, 1e-4]))
     if heading == "absolute":
         backend.set_compass_offset(0.0)   # an odometry-frame run: the compass's frame is the frame
-    odom_cov = np.diag([1e-4, 1e-4, 0.02**2])
-    worst, turns = 0.0, 0
-    prev_w = 0.0
-    for k, t, th, w in skid_steer_turns():
-        if w > 0.0 and prev_w == 0.0:
-            turns += 1
-        prev_w = w
+
+    def feed(t: float, th: float) -> None:
         z = th + float(rng.normal(0.0, YAW_SIGMA))
         if heading == "absolute":
             backend.add_compass(t, z, YAW_SIGMA**2, None, 0.0)
         else:
             backend.add_relative_yaw(t, z + AHRS_OFFSET, YAW_SIGMA**2, "ahrs")
-        if k % 2 == 0:
-            backend.add_odometry(t, np.array([0.0 if w else 0.5, 0.0, SCRUB * w + float(rng.normal(0.0, 0.02))]),
-                                 odom_cov)
-        if k % 4 == 0:
-            backend.add_keyframe(t, None)
-            cur = backend.current(covariance=False)
-            if cur is not None and turns >= 2:
-                worst = max(worst, abs(math.degrees(math.remainder(float(cur[1][2]) - th, math.tau))))
+
+    worst, _ = drive_skid_turns(backend, feed, SCRUB, 0.5, rng)
     backend.finish()
     return worst, float(backend.odom_scales()[1])
 

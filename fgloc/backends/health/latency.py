@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from bisect import bisect_left, bisect_right, insort
 from collections import deque
-from itertools import islice
 from operator import itemgetter, sub
 from typing import Any, Protocol
 
@@ -26,20 +25,13 @@ MAX_REF_PERIOD_S = 0.06
 FixPair = tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray]
 #: s: consecutive fixes at most this far apart make a latency pair (turns starting / ending)
 SHORT_PAIR_S = 0.3
-#: s: once a second, a fix and one this far before it (a yaw pair across a turn)
+#: s: once a second, a fix and one this far before it (a start from standstill: the lag is v * latency)
 LONG_PAIR_S = (0.8, 1.2)
 #: s: a pair is evaluated once its later fix is this much older than the newest fix (the fixes'
 #: own speed around it is known)
 SETTLE_S = 0.25
-#: s: a distance pair's fixes this far apart (a start or a stop within: a front-end that filters, as AMCL,
-#: shows a lag of its fixes along the track only over a second or two)
-DISTANCE_PAIR_S = (1.6, 2.4)
-#: the recent fixes kept (a distance pair's span at 60 scans a second)
-RECENT_FIXES = 160
-#: s: distance pairs end at least this far apart (a front-end's along-track noise decorrelates over a few fixes)
-DISTANCE_PAIR_EVERY_S = 0.25
-#: m: the reference moved less than this over a fix speed's window: the robot stood still
-STILL_M = 0.005
+#: s: distance pairs only this long or longer: a consecutive pair's few cm cannot tell a lag from slip
+MIN_DISTANCE_PAIR_S = 0.5
 
 
 class LatencyEstimator:
@@ -53,21 +45,18 @@ class LatencyEstimator:
     so a compass offset or a map bias never does.  A scale error of the reference (``beta *
     d_ref``) is fitted alongside, so a wheel-radius error is not taken for a latency.  The fit
     is robust (Huber weights, iterated): wheel slip or a kidnapping makes a few pairs wrong, not
-    the lag.  The latency used is the distance pairs' own fit once significant (``significance``
-    sigmas from zero, with at least ``min_pairs`` pairs, ``min_position_pairs`` of them distances):
-    an undetectable latency is taken as none rather than as the noise of its estimate, and the yaw
-    pairs alone never make one (AMCL's heading lags ~1 deg at the start and end of a turn, its
-    positions do not: the yaw pairs read that as 20-50 ms).
+    the lag.  The latency is used once significant (``significance`` sigmas from zero, with at
+    least ``min_pairs`` pairs): an undetectable latency is taken as none rather than as the
+    noise of its estimate.
     """
 
     def __init__(self, min_pairs: int = 50, significance: float = 3.0, huber_k: float = 2.0,
                  var_floor: tuple[float, float] = (math.radians(0.1) ** 2, 0.003**2),
                  max_latency_s: float = 0.3, max_rows: int = 20000, refit_every: int = 25,
-                 refit_share: float = 0.025, min_position_pairs: int = 10) -> None:
+                 refit_share: float = 0.025) -> None:
         self.var_floor = (float(var_floor[0]), float(var_floor[1]))
         self.max_latency_s = float(max_latency_s)
         self.min_pairs = int(min_pairs)
-        self.min_position_pairs = int(min_position_pairs)
         self.significance = float(significance)
         self.huber_k = float(huber_k)
         self.refit_every = int(refit_every)
@@ -86,8 +75,6 @@ class LatencyEstimator:
         self._fit: tuple[int, float, float] | None = None   # (n, delta, sigma)
         self._fit_n = 0
         self._refit_after: float = 0   # refit once n - _fit_n reaches this (0: no fit yet)
-        self._pos_fit: tuple[float, float] = (0.0, math.inf)   # the distance pairs' own fit
-        self._n_pos = 0
 
     def add(self, x: float, r: float, var: float, ref: float = 0.0, kind: int = 0) -> None:
         """One pair: regressor ``x = -(rate_b - rate_a)``, residual ``r``, its variance, and the
@@ -121,22 +108,9 @@ class LatencyEstimator:
         if not self._nrows:
             return 0.0, math.inf
         a = self._buf[self._nbuf - self._nrows:self._nbuf]
-        kind = a[:, 4].astype(int)
-        d, sig = self._fit_rows(a, kind)
-        pos = kind == 1
-        self._n_pos = int(np.count_nonzero(pos))
-        self._pos_fit = self._fit_rows(a[pos], kind[pos]) if self._n_pos >= 3 else (0.0, math.inf)
-        self._fit = (self.n, d, sig)
-        self._fit_n = self.n
-        # the fit holds until refit_every / refit_share new pairs; below min_pairs until any new one
-        self._refit_after = max(self.refit_every, self.refit_share * min(self.n, self.max_rows)) \
-            if self.n >= self.min_pairs else 1
-        return self._fit[1], self._fit[2]
-
-    def _fit_rows(self, a: FloatArray, kind: NDArray[np.int_]) -> tuple[float, float]:
-        """The robust fit ``(delta, sigma)`` of rows ``a`` (of kinds ``kind``)."""
         A = np.zeros((len(a), 3))
         A[:, 0] = a[:, 0]
+        kind = a[:, 4].astype(int)
         A[kind == 0, 1] = a[kind == 0, 3]
         A[kind == 1, 2] = a[kind == 1, 3]
         y = a[:, 1]
@@ -159,31 +133,28 @@ class LatencyEstimator:
         res = (y - A @ sol) / s * w
         scale2 = max(float(res @ res) / max(len(a) - 3, 1), 1.0)
         sig = math.sqrt(scale2 * float(np.linalg.inv(N)[0, 0])) if N[0, 0] > 1e-8 else math.inf
-        return float(sol[0]), sig
+        self._fit = (self.n, float(sol[0]), sig)
+        self._fit_n = self.n
+        # the fit holds until refit_every / refit_share new pairs; below min_pairs until any new one
+        self._refit_after = max(self.refit_every, self.refit_share * min(self.n, self.max_rows)) \
+            if self.n >= self.min_pairs else 1
+        return self._fit[1], self._fit[2]
 
     def estimate(self) -> tuple[float, float]:
         """``(delta_s, sigma_s)`` of the robust fit (inf sigma before any information)."""
         return self._refit()
 
-    def position_estimate(self) -> tuple[float, float]:
-        """``(delta_s, sigma_s)`` of the distance pairs alone (inf sigma with fewer than 3)."""
-        self._refit()
-        return self._pos_fit
-
     def value(self) -> float:
-        """The latency to correct for: the distance pairs' own estimate (:meth:`position_estimate`) once
-        significant, else 0.  A front-end whose heading lags at the start and end of turns moves the
-        yaw pairs as a latency would, and not the distances driven: a clock moves both."""
-        self._refit()
-        dp, sp = self._pos_fit
-        if self.n >= self.min_pairs and self._n_pos >= self.min_position_pairs and abs(dp) > self.significance * sp:
-            return dp
+        """The latency to correct for: the estimate once significant, else 0."""
+        d, s = self.estimate()
+        if self.n >= self.min_pairs and abs(d) > self.significance * s:
+            return d
         return 0.0
 
     def settled(self, sigma_s: float = 0.005) -> bool:
-        """Enough evidence to decide (:meth:`value` non-zero, or the latency known to within ``sigma_s``)."""
+        """Enough evidence to decide (significant, or known to within ``sigma_s``)."""
         d, s = self.estimate()
-        return self.n >= self.min_pairs and (self.value() != 0.0 or s < sigma_s)
+        return self.n >= self.min_pairs and (abs(d) > self.significance * s or s < sigma_s)
 
 
 def fix_speed(fixes: Any, t: float, half_s: float = 0.2) -> float | None:
@@ -299,14 +270,10 @@ class ScanLatency:
         self.on = bool(on)
         self.latency_s = latency_s
         self.est = LatencyEstimator()
-        self.recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=RECENT_FIXES)
+        self.recent_fixes: deque[tuple[float, FloatArray, FloatArray]] = deque(maxlen=64)
         self._fixes_in_order = True   # every recent fix later than the one before it (bisection finds them)
         self.pairs: list[FixPair] = []
         self._long_pair_t = -math.inf
-        # distance pairs: at every fix, one with a fix DISTANCE_PAIR_S before it; the first whose speeds
-        # are known is used, then none ending within DISTANCE_PAIR_EVERY_S of it
-        self.distance_pairs: list[FixPair] = []
-        self._distance_t = -math.inf
 
     @property
     def estimated(self) -> bool:
@@ -320,14 +287,13 @@ class ScanLatency:
         return self.est.value() if self.on else 0.0
 
     def fit(self) -> tuple[float, float] | None:
-        """The estimate :meth:`value` uses, ``(estimate s, sigma s)``, once its sigma is finite, else None."""
-        est, sig = self.est.position_estimate()
+        """The estimator's ``(estimate s, sigma s)`` once its sigma is finite, else None."""
+        est, sig = self.est.estimate()
         return (float(est), float(sig)) if math.isfinite(sig) else None
 
     def add_fix(self, t: float, pose: FloatArray, cov: FloatArray) -> None:
-        """A fix used at scan stamp ``t``: a pair with the previous fix (within :data:`SHORT_PAIR_S`),
-        once a second one with a fix :data:`LONG_PAIR_S` before it, and a distance pair with one
-        :data:`DISTANCE_PAIR_S` before it."""
+        """A fix used at scan stamp ``t``: a pair with the previous fix (within :data:`SHORT_PAIR_S`)
+        and, once a second, with one :data:`LONG_PAIR_S` before it."""
         if not self.estimated:
             return
         pose, cov = np.array(pose, dtype=float), np.array(cov, dtype=float)
@@ -341,11 +307,6 @@ class ScanLatency:
                 f = old[0]
                 self.pairs.append((f[0], t, f[1], pose, f[2], cov))
                 self._long_pair_t = t
-        i = bisect_left(recent, t - DISTANCE_PAIR_S[1], key=_time) if self._fixes_in_order else 0
-        old = [f for f in islice(recent, i, None) if DISTANCE_PAIR_S[0] <= t - f[0] <= DISTANCE_PAIR_S[1]]
-        if old:
-            f = old[0]
-            self.distance_pairs.append((f[0], t, f[1], pose, f[2], cov))
         if recent and not t >= recent[-1][0]:
             self._fixes_in_order = False
         recent.append((t, pose, cov))
@@ -368,12 +329,11 @@ class ScanLatency:
     def evaluate(self, ref: LatencyReference) -> None:
         """The pairs the reference now covers into the estimator: a yaw pair (the fixes' yaw change
         against the reference's) where the yaw reference is fast enough, and a distance pair (the
-        regressor from the fixes' own speeds: immune to wheel slip) every DISTANCE_PAIR_EVERY_S."""
+        regressor from the fixes' own speeds: immune to wheel slip) where the pair is long enough."""
         if not self.estimated:
             self.pairs.clear()
-            self.distance_pairs.clear()
             return
-        if not self.pairs and not self.distance_pairs:
+        if not self.pairs:
             return
         covered = ref.reference_covered_until()
         last_fix = self.recent_fixes[-1][0] if self.recent_fixes else -math.inf
@@ -386,44 +346,23 @@ class ScanLatency:
                 continue
             if periods is None:
                 periods = ref.reference_periods()
-            if periods[0] > MAX_REF_PERIOD_S or periods[1] > MAX_REF_PERIOD_S:
-                continue
-            y = ref.reference_yaw(ta, tb)
-            if y is not None:
-                d_ref, x, var = y
-                r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
-                self.est.add(x, r, float(ca[2, 2] + cb[2, 2]) + var, d_ref, 0)
-        self.pairs = keep
-        keep = []
-        for pair in self.distance_pairs:
-            ta, tb, pa, pb, ca, cb = pair
-            if tb > covered or tb > last_fix - SETTLE_S:
-                keep.append(pair)
-                continue
-            if tb - self._distance_t < DISTANCE_PAIR_EVERY_S:
-                continue
-            if periods is None:
-                periods = ref.reference_periods()
             if periods[0] > MAX_REF_PERIOD_S:
                 continue
+            if periods[1] <= MAX_REF_PERIOD_S:
+                y = ref.reference_yaw(ta, tb)
+                if y is not None:
+                    d_ref, x, var = y
+                    r = wrap_scalar(float(pb[2] - pa[2]) - d_ref)
+                    self.est.add(x, r, float(ca[2, 2] + cb[2, 2]) + var, d_ref, 0)
+            if tb - ta < MIN_DISTANCE_PAIR_S:
+                continue
             dist = ref.reference_distance(ta, tb)
-            va, vb = self._speed(ta, ref, covered), self._speed(tb, ref, covered)
-            if dist is None or va is None or vb is None:
+            if dist is None:
                 continue
             dist_ref, var = dist
             dist_fix = float(np.hypot(pb[0] - pa[0], pb[1] - pa[1]))
             var_d = float(ca[0, 0] + ca[1, 1] + cb[0, 0] + cb[1, 1]) / 2 + var
-            self.est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
-            self._distance_t = tb
-        self.distance_pairs = keep
-
-    def _speed(self, t: float, ref: LatencyReference, covered: float, half_s: float = 0.2) -> float | None:
-        """The fixes' own speed around ``t``, or 0 where they cannot tell and the reference stood still
-        (a front-end that gives no fix while the robot stands: the start from standstill), else None."""
-        v = self._fix_speed(t, half_s)
-        if v is not None:
-            return v
-        if t + half_s > covered:
-            return None
-        d = ref.reference_distance(t - half_s, t + half_s)
-        return 0.0 if d is not None and d[0] < STILL_M else None
+            va, vb = self._fix_speed(ta), self._fix_speed(tb)
+            if va is not None and vb is not None:
+                self.est.add(-(vb - va), dist_fix - dist_ref, var_d, dist_ref, 1)
+        self.pairs = keep

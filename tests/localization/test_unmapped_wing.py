@@ -173,10 +173,11 @@ def test_global_search_takes_no_ambiguous_candidate(asymmetric):
     rng = np.random.default_rng(5)
     loc = Localizer(m, MOUNT, "smoother", "native", config=load_config())
     fixes = [loc.on_scan(cast(m, pose, rng, stamp=0.1 * k)) for k in range(1, 4)]
-    assert loc.stats["global_searches"] == 3 or asymmetric
+    # the same scan from the same place is searched once (pipeline.global_retry_*: the next waits for motion)
+    assert loc.stats["global_searches"] == 1
     if asymmetric:
         assert fixes[0] is not None and np.hypot(*(fixes[0].pose[:2] - pose[:2])) < 0.05
         assert not loc.lost
     else:
         assert all(f is None for f in fixes) and loc.lost
-        assert loc.stats["ambiguous_relocalizations"] >= 3
+        assert loc.stats["ambiguous_relocalizations"] >= 1
